@@ -1,0 +1,1 @@
+"""voxwarp application layer: volume I/O, scene, camera, transfer functions, renderer, CLI."""

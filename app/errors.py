@@ -1,0 +1,27 @@
+"""Errors raised by voxwarp for bad input.
+
+Every error names the problem and the fix in its message, so a user never has to
+read a traceback from deep inside numpy or OpenGL.
+"""
+
+from __future__ import annotations
+
+
+class VoxwarpError(Exception):
+    """Base class of every error voxwarp raises on purpose."""
+
+
+class VolumeError(VoxwarpError, ValueError):
+    """A volume cannot be read or is not usable (format, dtype, NaN, size)."""
+
+
+class VolumeTooLargeError(VolumeError):
+    """A volume exceeds the GPU's 3D texture size or the memory budget."""
+
+
+class SceneError(VoxwarpError, ValueError):
+    """A scene description (Python arguments or scene JSON) is invalid."""
+
+
+class RenderError(VoxwarpError, RuntimeError):
+    """The renderer could not draw (no GL context, shader failure, ...)."""

@@ -1,0 +1,1 @@
+"""voxwarp desktop GUI (PySide6). Only this package may import Qt."""
