@@ -45,9 +45,7 @@ def _triple(value: float | Sequence[float] | None, default: float, what: str) ->
     if arr.size == 1:
         arr = np.repeat(arr, 3)
     if arr.size != 3:
-        raise VolumeError(
-            f"{what} must be one number or three numbers (x, y, z); got {list(arr)}."
-        )
+        raise VolumeError(f"{what} must be one number or three numbers (x, y, z); got {list(arr)}.")
     if not np.all(np.isfinite(arr)):
         raise VolumeError(f"{what} must be finite; got {list(arr)}.")
     return tuple(float(v) for v in arr)
@@ -211,12 +209,16 @@ class Volume:
         if f.size == 1:
             f = np.repeat(f, 3)
         if f.size != 3 or np.any(f < 1):
-            raise VolumeError(f"downsample factor must be a positive integer (or three); got {factor}.")
+            raise VolumeError(
+                f"downsample factor must be a positive integer (or three); got {factor}."
+            )
         if np.all(f == 1):
             return self
         n = np.asarray(self.shape) // f
         if np.any(n < 1):
-            raise VolumeError(f"downsample factor {tuple(f)} is larger than the volume {self.shape}.")
+            raise VolumeError(
+                f"downsample factor {tuple(f)} is larger than the volume {self.shape}."
+            )
         d = self.data[: n[0] * f[0], : n[1] * f[1], : n[2] * f[2]].astype(np.float32)
         d = d.reshape(n[0], f[0], n[1], f[1], n[2], f[2]).mean(axis=(1, 3, 5))
         if self.dtype.kind in "iu":

@@ -1,0 +1,488 @@
+"""The raycasting renderer (moderngl) and the headless :class:`OffscreenRenderer`.
+
+:class:`Renderer` draws a :class:`~app.scene.Scene` into a framebuffer it is given,
+on a ``moderngl.Context`` it is given (the GUI passes Qt's, scripts pass an EGL
+standalone context); it never creates a window. GPU resources (volume texture,
+block min/max grid, transfer-function table, compiled programs) are cached per
+volume / transfer function / program variant and freed by :meth:`Renderer.release`.
+
+See ``shaders/raycast.frag.glsl`` for the technique (warp chain, empty-space skipping,
+early ray termination, jitter).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import weakref
+from typing import Any
+
+import numpy as np
+
+import shaders
+from app.camera import Camera
+from app.errors import RenderError, VolumeTooLargeError
+from app.scene import Scene
+from app.transfer_function import TABLE_SIZE, TransferFunction
+from app.volume import Volume
+from deform.warp import compose_glsl, fold_affine
+
+#: Voxels per block edge of the empty-space-skipping grid.
+BLOCK = 8
+#: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
+DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
+#: Blinn-Phong ambient, diffuse, specular, shininess.
+LIGHT = (0.25, 0.7, 0.3, 32.0)
+
+_TEX_FORMAT = {
+    # dtype: (moderngl dtype, scale, offset) so that value = texel * scale + offset
+    np.dtype(np.uint8): ("f1", 255.0, 0.0),
+    np.dtype(np.uint16): ("nu2", 65535.0, 0.0),
+    np.dtype(np.int16): ("nu2", 65535.0, -32768.0),  # stored as uint16 + 32768: exact
+    np.dtype(np.float32): ("f4", 1.0, 0.0),
+}
+
+
+def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
+    """Per-block (min, max) of ``data`` (nx, ny, nz) with a one-voxel apron.
+
+    Block ``b`` along an axis covers voxels ``[b*block - 1, (b+1)*block]`` (clamped), the
+    voxels trilinear interpolation reads for any sample inside the block. Returns two
+    float32 arrays of shape ``ceil(n / block)`` per axis, in data units.
+    """
+    lo = np.asarray(data)
+    hi = lo
+    for axis in range(3):
+        lo = _reduce_axis(lo, axis, block, np.minimum)
+        hi = _reduce_axis(hi, axis, block, np.maximum)
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
+    n = a.shape[axis]
+    nb = -(-n // block)
+    pad = nb * block - n
+    a = np.moveaxis(a, axis, 0)
+    if pad:
+        a = np.concatenate([a, np.repeat(a[-1:], pad, axis=0)], axis=0)
+    r = op.reduce(a.reshape(nb, block, *a.shape[1:]), axis=1)
+    if nb > 1:
+        # apron: last voxel of the previous block and first voxel of the next one
+        prev_last = a[block - 1 : (nb - 1) * block : block]
+        next_first = a[block : nb * block : block]
+        r[1:] = op(r[1:], prev_last)
+        r[:-1] = op(r[:-1], next_first)
+    return np.moveaxis(r, 0, axis)
+
+
+class _VolumeGPU:
+    """GPU copy of one volume: texture + block min/max grid."""
+
+    def __init__(self, ctx: Any, volume: Volume) -> None:
+        fmt, scale, offset = _TEX_FORMAT[volume.dtype]
+        arr = volume.texture_array()
+        if volume.dtype == np.int16:
+            arr = (arr.astype(np.int32) + 32768).astype(np.uint16)
+        nx, ny, nz = volume.shape
+        self.texture = ctx.texture3d((nx, ny, nz), 1, arr.tobytes(), dtype=fmt, alignment=1)
+        self.texture.filter = (ctx.LINEAR, ctx.LINEAR)
+        self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
+        self.value_map = (scale, offset)
+        bmin, bmax = block_min_max(volume.data, BLOCK)
+        self.block_min, self.block_max = bmin, bmax
+        self.blocks = bmin.shape
+        mm = np.stack([bmin, bmax], axis=-1)  # (bx, by, bz, 2)
+        mm = np.ascontiguousarray(mm.transpose(2, 1, 0, 3))  # x fastest
+        self.minmax = ctx.texture3d(self.blocks, 2, mm.tobytes(), dtype="f4")
+        self.minmax.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.visible: Any = None
+        self.visible_key: Any = None
+        self.nbytes = arr.nbytes
+
+    def release(self) -> None:
+        for tex in (self.texture, self.minmax, self.visible):
+            if tex is not None:
+                tex.release()
+        self.texture = self.minmax = self.visible = None  # type: ignore[assignment]
+
+
+def _tf_key(tf: TransferFunction) -> tuple:
+    return tuple(tf.points)
+
+
+class Renderer:
+    """Raycasts scenes into framebuffers on a given moderngl context.
+
+    Parameters
+    ----------
+    ctx
+        A ``moderngl.Context`` (OpenGL 4.3+); the caller owns it.
+    texture_budget_bytes
+        Largest volume texture accepted; default 2 GiB or ``VOXWARP_TEXTURE_BUDGET_MB``.
+    """
+
+    def __init__(self, ctx: Any, *, texture_budget_bytes: int | None = None) -> None:
+        if ctx.version_code < 430:
+            raise RenderError(
+                f"voxwarp needs OpenGL 4.3 or newer; this context offers {ctx.version_code}"
+            )
+        self.ctx = ctx
+        env = os.environ.get("VOXWARP_TEXTURE_BUDGET_MB")
+        if texture_budget_bytes is None:
+            texture_budget_bytes = int(float(env) * 2**20) if env else DEFAULT_TEXTURE_BUDGET
+        self.texture_budget_bytes = int(texture_budget_bytes)
+        self.max_texture_size = int(ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
+        self._volumes: dict[int, tuple[weakref.ref, _VolumeGPU]] = {}
+        self._programs: dict[tuple, Any] = {}
+        self._tf_tex: Any = None
+        self._tf_key: Any = None
+        self._vao: dict[int, Any] = {}
+        self._released = False
+
+    # ------------------------------------------------------------------ resources
+    def check_volume(self, volume: Volume) -> None:
+        """Raise :class:`VolumeTooLargeError` if ``volume`` cannot become a texture here."""
+        fmt_bytes = {"f1": 1, "nu2": 2, "f4": 4}[_TEX_FORMAT[volume.dtype][0]]
+        need = int(np.prod(volume.shape)) * fmt_bytes
+        too_big_dim = max(volume.shape) > self.max_texture_size
+        if too_big_dim or need > self.texture_budget_bytes:
+            f_dim = max(volume.shape) / self.max_texture_size
+            f_mem = (need / self.texture_budget_bytes) ** (1 / 3)
+            factor = max(2, math.ceil(max(f_dim, f_mem)))
+            if too_big_dim:
+                what = (
+                    f"volume {volume.shape} exceeds the GPU's maximum 3D texture size"
+                    f" {self.max_texture_size} per axis"
+                )
+            else:
+                what = (
+                    f"volume {volume.shape} needs {need / 2**20:.0f} MB of texture memory, over"
+                    f" the budget of {self.texture_budget_bytes / 2**20:.0f} MB"
+                    " (VOXWARP_TEXTURE_BUDGET_MB)"
+                )
+            raise VolumeTooLargeError(
+                f"{what}. Downsample it: load_volume(..., downsample={factor}) or"
+                f" `voxwarp render ... --downsample {factor}`."
+            )
+
+    def _volume_gpu(self, volume: Volume) -> _VolumeGPU:
+        key = id(volume)
+        hit = self._volumes.get(key)
+        if hit is not None and hit[0]() is volume:
+            return hit[1]
+        if hit is not None:  # a dead volume reused the id
+            hit[1].release()
+        self.check_volume(volume)
+        self.ctx.error  # noqa: B018 - clear any stale error flag
+        try:
+            gpu = _VolumeGPU(self.ctx, volume)
+        except Exception as exc:  # moderngl raises plain Error on GL failures
+            raise VolumeTooLargeError(
+                f"the GPU could not allocate the texture for volume {volume.shape}"
+                f" ({exc}); downsample it (load_volume(..., downsample=2))"
+            ) from exc
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            gpu.release()
+            raise VolumeTooLargeError(
+                f"OpenGL reported {err} while uploading volume {volume.shape};"
+                " downsample it (load_volume(..., downsample=2))"
+            )
+        self._volumes[key] = (weakref.ref(volume), gpu)
+        return gpu
+
+    def _tf_texture(self, tf: TransferFunction) -> Any:
+        key = _tf_key(tf)
+        if self._tf_tex is None or self._tf_key != key:
+            if self._tf_tex is not None:
+                self._tf_tex.release()
+            table = np.ascontiguousarray(tf.table(TABLE_SIZE))
+            self._tf_tex = self.ctx.texture((TABLE_SIZE, 1), 4, table.tobytes(), dtype="f4")
+            self._tf_tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            self._tf_tex.repeat_x = self._tf_tex.repeat_y = False
+            self._tf_key = key
+        return self._tf_tex
+
+    def _visibility(self, gpu: _VolumeGPU, tf: TransferFunction) -> Any:
+        key = _tf_key(tf)
+        if gpu.visible is None or gpu.visible_key != key:
+            vis = tf.visible_ranges(gpu.block_min, gpu.block_max).astype(np.uint8) * 255
+            data = np.ascontiguousarray(vis.transpose(2, 1, 0))
+            if gpu.visible is None:
+                gpu.visible = self.ctx.texture3d(gpu.blocks, 1, data.tobytes(), dtype="f1")
+                gpu.visible.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            else:
+                gpu.visible.write(data.tobytes())
+            gpu.visible_key = key
+        return gpu.visible
+
+    def _program(self, scene: Scene, linear: bool) -> Any:
+        warps = [] if linear else scene.warps
+        key = (scene.mode, linear, scene.use_shading(), tuple(w.signature() for w in warps))
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
+        defines = [f"#define BLOCK {BLOCK}"]
+        if linear:
+            defines.append("#define LINEAR_PATH")
+        if scene.use_shading():
+            defines.append("#define SHADING")
+        frag = shaders.source(
+            "raycast.frag.glsl",
+            extra={
+                "mode.glsl": shaders.read(f"mode_{scene.mode}.glsl"),
+                "warps.glsl": compose_glsl(warps),
+            },
+        )
+        head, _, rest = frag.partition("\n")
+        frag = "\n".join([head, *defines, rest])
+        try:
+            prog = self.ctx.program(
+                vertex_shader=shaders.read("fullscreen.vert.glsl"), fragment_shader=frag
+            )
+        except Exception as exc:
+            raise RenderError(f"raycast shader failed to compile/link for {key}: {exc}") from exc
+        self._programs[key] = prog
+        return prog
+
+    # ------------------------------------------------------------------ drawing
+    def draw(
+        self,
+        scene: Scene,
+        framebuffer: Any,
+        viewport: tuple[int, int, int, int] | None = None,
+        camera: Camera | None = None,
+    ) -> None:
+        """Raycast ``scene`` into ``framebuffer`` (moderngl.Framebuffer) within ``viewport``.
+
+        ``camera`` overrides the scene's (e.g. the GUI's interactive camera).
+        """
+        if self._released:
+            raise RenderError("this Renderer was released")
+        vol = scene.volume
+        gpu = self._volume_gpu(vol)
+        if viewport is None:
+            viewport = (0, 0, *framebuffer.size)
+        x, y, w, h = (int(v) for v in viewport)
+        if w <= 0 or h <= 0:
+            raise RenderError(f"viewport must have a positive size; got {viewport}")
+        cam = camera or scene.resolved_camera()
+        fold = fold_affine(scene.warps)
+        linear = fold is not None
+        prog = self._program(scene, linear)
+
+        tf = scene.transfer_function
+        lo, hi = scene.ray_bounds()
+        level, width = scene.window
+        sp = np.asarray(vol.spacing)
+        step_mm = scene.sample_distance_mm
+        diag = float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
+        max_steps = int(min(diag / step_mm + 4, 1_000_000))
+        bg = np.asarray(scene.background, float)
+        bg_premul = (*(bg[:3] * bg[3]), bg[3])
+        iso = scene.resolved_iso_value()
+        iso_rgb = tf(iso)[:3]
+        if float(np.max(iso_rgb)) < 0.2:
+            iso_rgb = np.array([0.9, 0.85, 0.8])
+
+        vp = cam.view_projection(w / h)
+        values: dict[str, Any] = {
+            "u_inv_view_proj": np.linalg.inv(vp),
+            "u_viewport": (x, y, w, h),
+            "u_bounds_lo": tuple(lo),
+            "u_bounds_hi": tuple(hi),
+            "u_step": step_mm,
+            "u_max_steps": max_steps,
+            "u_jitter": int(scene.jitter),
+            "u_seed": scene.seed & 0xFFFFFFFF,
+            "u_background": bg_premul,
+            "u_value_limits": vol.value_range,
+            "u_dims": tuple(float(s) for s in vol.shape),
+            "u_inv_dims": tuple(1.0 / s for s in vol.shape),
+            "u_value_map": gpu.value_map,
+            "u_spacing": tuple(sp),
+            "u_origin": tuple(vol.origin),
+            "u_tf_range": tf.value_range,
+            "u_tf_size": float(TABLE_SIZE),
+            "u_alpha_exponent": step_mm / scene.opacity_reference_mm,
+            "u_window": (level - width / 2, level + width / 2),
+            "u_light": LIGHT,
+            "u_blocks": tuple(int(b) for b in gpu.blocks),
+            "u_threshold": scene.resolved_flm_threshold(),
+            "u_iso": iso,
+            "u_iso_color": tuple(float(c) for c in iso_rgb),
+            "u_volume": 0,
+            "u_tf": 1,
+            "u_block_minmax": 2,
+            "u_block_visible": 3,
+        }
+        if linear:
+            to_texel = np.eye(4)
+            to_texel[:3, :3] = np.diag(1.0 / sp)
+            to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
+            values["u_world_to_texel"] = to_texel @ fold
+            values["u_jacobian"] = fold[:3, :3]
+        for name, value in values.items():
+            _set_uniform(prog, name, value)
+
+        gpu.texture.use(0)
+        self._tf_texture(tf).use(1)
+        gpu.minmax.use(2)
+        self._visibility(gpu, tf).use(3)
+        unit = 4
+        if not linear:
+            for i, warp in enumerate(scene.warps):
+                for name, value in warp.uniforms().items():
+                    _set_uniform(prog, f"w{i}_{name}", value)
+                for name, tex in warp.textures(self.ctx).items():
+                    tex.use(unit)
+                    _set_uniform(prog, f"w{i}_{name}", unit)
+                    unit += 1
+
+        framebuffer.use()
+        framebuffer.viewport = (x, y, w, h)
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
+        vao = self._vao.get(id(prog))
+        if vao is None:
+            vao = self.ctx.vertex_array(prog, [])
+            self._vao[id(prog)] = vao
+        vao.render(mode=self.ctx.TRIANGLES, vertices=3)
+
+    def release(self) -> None:
+        """Free every GPU resource this renderer made; idempotent."""
+        if self._released:
+            return
+        for _, gpu in self._volumes.values():
+            gpu.release()
+        self._volumes.clear()
+        for vao in self._vao.values():
+            vao.release()
+        self._vao.clear()
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+        if self._tf_tex is not None:
+            self._tf_tex.release()
+            self._tf_tex = None
+        self._released = True
+
+
+def _set_uniform(prog: Any, name: str, value: Any) -> None:
+    if name not in prog:
+        return  # optimised out or not used by this variant
+    u = prog[name]
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        # GLSL matrices are column-major
+        u.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())
+    elif isinstance(value, np.ndarray):
+        u.value = tuple(float(v) for v in value)
+    else:
+        u.value = value
+
+
+def create_context() -> Any:
+    """A standalone headless OpenGL 4.3+ context through EGL (the caller owns it)."""
+    import moderngl
+
+    try:
+        return moderngl.create_standalone_context(backend="egl", require=430)
+    except Exception as exc:
+        raise RenderError(
+            "could not create a headless OpenGL 4.3 context through EGL"
+            f" ({exc}). Install Mesa's EGL and GL libraries (Debian: libegl1 libgl1"
+            " libegl-mesa0 libgl1-mesa-dri; run `sudo scripts/install-system-deps.sh`)."
+        ) from exc
+
+
+class OffscreenRenderer:
+    """Headless rendering into an offscreen framebuffer.
+
+    Parameters
+    ----------
+    width, height
+        Image size in pixels.
+    ctx
+        Optional existing context; by default an EGL standalone context is created and
+        owned (released with the renderer).
+    dtype
+        ``"u1"`` for (H, W, 4) uint8 images, ``"f4"`` for float32 (tests, HDR/EXR output).
+
+    Use as a context manager; :meth:`render` returns the image with row 0 at the top.
+    """
+
+    def __init__(
+        self, width: int = 512, height: int = 512, *, ctx: Any = None, dtype: str = "u1"
+    ) -> None:
+        if int(width) < 1 or int(height) < 1 or int(width) > 16384 or int(height) > 16384:
+            raise RenderError(f"image size must be 1..16384 pixels per side; got {width}x{height}")
+        if dtype not in ("u1", "f4"):
+            raise RenderError(f"dtype must be 'u1' or 'f4'; got {dtype!r}")
+        self._owns_ctx = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self.size = (int(width), int(height))
+        self.dtype = dtype
+        self._gl_dtype = "f1" if dtype == "u1" else "f4"
+        self.renderer = Renderer(self.ctx)
+        self._fbo: Any = None
+        self._color: Any = None
+        self._make_fbo()
+        self._released = False
+
+    def _make_fbo(self) -> None:
+        if self._fbo is not None:
+            self._fbo.release()
+            self._color.release()
+        # moderngl "f1" is normalised RGBA8 ("u1" would be an integer format)
+        self._color = self.ctx.renderbuffer(self.size, 4, dtype=self._gl_dtype)
+        self._fbo = self.ctx.framebuffer(color_attachments=[self._color])
+
+    def resize(self, width: int, height: int) -> None:
+        """Change the image size."""
+        self.size = (int(width), int(height))
+        self._make_fbo()
+
+    @property
+    def framebuffer(self) -> Any:
+        """The moderngl framebuffer images are drawn into."""
+        return self._fbo
+
+    def render(self, scene: Scene, camera: Camera | None = None) -> np.ndarray:
+        """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top."""
+        self.renderer.draw(scene, self._fbo, camera=camera)
+        w, h = self.size
+        raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
+        img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
+        return img.reshape(h, w, 4)[::-1].copy()
+
+    def time_frames(
+        self, scene: Scene, frames: int = 10, warmup: int = 2, camera: Camera | None = None
+    ) -> list[float]:
+        """Milliseconds per frame (``ctx.finish()`` bound) after ``warmup`` frames."""
+        for _ in range(warmup):
+            self.renderer.draw(scene, self._fbo, camera=camera)
+        self.ctx.finish()
+        times = []
+        for _ in range(frames):
+            t = time.perf_counter()
+            self.renderer.draw(scene, self._fbo, camera=camera)
+            self.ctx.finish()
+            times.append((time.perf_counter() - t) * 1000)
+        return times
+
+    def release(self) -> None:
+        """Free GPU resources (and the context if this renderer created it); idempotent."""
+        if getattr(self, "_released", True):
+            return
+        self.renderer.release()
+        self._fbo.release()
+        self._color.release()
+        if self._owns_ctx:
+            self.ctx.release()
+        self._released = True
+
+    def __enter__(self) -> OffscreenRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()

@@ -1,0 +1,579 @@
+"""The :class:`Scene`: everything needed to reproduce an image, serialisable to JSON.
+
+A scene holds a volume, a compositing mode, a transfer function, a view, the sample
+distance and a chain of warps. It never touches the GPU; the renderer reads it.
+Scene JSON refers to the volume by path (relative to the JSON file when possible),
+by bundled sample name, or embeds a small array (base64, no pickle).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from app.camera import PROJECTIONS, Camera, Projection, View, view_rotation
+from app.errors import SceneError, VolumeError
+from app.transfer_function import TransferFunction
+from app.volume import Volume
+from deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
+
+Mode = Literal["dvr", "mip", "minip", "average", "flm", "iso"]
+MODES: tuple[str, ...] = ("dvr", "mip", "minip", "average", "flm", "iso")
+
+#: Largest volume (bytes) a scene JSON embeds instead of referring to a file.
+EMBED_LIMIT_BYTES = 8 * 1024 * 1024
+SCENE_FORMAT = "voxwarp-scene"
+SCENE_VERSION = 1
+
+
+def _finite(x: Any, what: str, positive: bool = False) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{what} must be a number; got {x!r}") from exc
+    if not math.isfinite(v) or (positive and v <= 0):
+        raise SceneError(f"{what} must be {'positive and ' if positive else ''}finite; got {x!r}")
+    return v
+
+
+def _vec(x: Any, n: int, what: str) -> tuple[float, ...]:
+    try:
+        a = np.asarray(x, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{what} must be {n} numbers; got {x!r}") from exc
+    if a.size != n or not np.all(np.isfinite(a)):
+        raise SceneError(f"{what} must be {n} finite numbers; got {x!r}")
+    return tuple(float(v) for v in a)
+
+
+class Scene:
+    """A renderable scene description.
+
+    Parameters
+    ----------
+    volume
+        The :class:`~app.volume.Volume` to render.
+    mode
+        Compositing mode: ``dvr`` (emission-absorption), ``mip``, ``minip``,
+        ``average`` (X-ray like), ``flm`` (first local maximum) or ``iso`` (shaded
+        isosurface).
+    transfer_function
+        Preset name (see :data:`app.transfer_function.PRESETS`), a list of
+        ``(value, r, g, b, a)`` control points in data units, or a
+        :class:`~app.transfer_function.TransferFunction`.
+    view
+        ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"`` (the side the camera is
+        on) or ``(azimuth, elevation)`` in degrees.
+    projection
+        ``"perspective"`` or ``"orthographic"``.
+    step
+        Sample distance in voxels (of the smallest spacing).
+    warps
+        Chain of :class:`deform.warp.Warp` applied in order (deformed -> original).
+    window
+        ``(level, width)`` in data units for the grey-value modes; default from the
+        volume's 0.5-99.5 percentiles.
+    clip_box
+        ``((x0, y0, z0), (x1, y1, z1))`` in deformed world mm; rays are cut to it.
+    jitter
+        Jitter ray starts per pixel (deterministic hash of pixel and ``seed``) against
+        wood-grain artefacts.
+    seed
+        Jitter seed.
+    shading
+        Blinn-Phong shading from gradients; ``None`` means on for ``iso``/``flm`` and off
+        for ``dvr``.
+    iso_value
+        Isovalue for ``iso``; default where the transfer function's opacity first
+        reaches a quarter of its maximum.
+    flm_threshold
+        Threshold for ``flm``; default the lowest value the transfer function shows.
+    background
+        RGBA background in [0, 1].
+    camera
+        An explicit :class:`~app.camera.Camera`; ``None`` fits one to the volume from
+        ``view``, ``projection``, ``fov`` and ``zoom``.
+    zoom, fov
+        Magnification and vertical field of view (degrees) of the fitted camera.
+    """
+
+    def __init__(
+        self,
+        volume: Volume,
+        mode: Mode = "dvr",
+        transfer_function: Any = "ct-bone",
+        view: View = "-y",
+        projection: Projection = "perspective",
+        step: float = 1.0,
+        warps: Sequence[Warp] | None = None,
+        *,
+        window: tuple[float, float] | None = None,
+        clip_box: tuple[Sequence[float], Sequence[float]] | None = None,
+        jitter: bool = True,
+        seed: int = 0,
+        shading: bool | None = None,
+        iso_value: float | None = None,
+        flm_threshold: float | None = None,
+        background: Sequence[float] = (0.0, 0.0, 0.0, 1.0),
+        camera: Camera | None = None,
+        zoom: float = 1.0,
+        fov: float = 30.0,
+    ) -> None:
+        if not isinstance(volume, Volume):
+            raise SceneError(
+                f"Scene needs a Volume (from app.load_volume); got {type(volume).__name__}"
+            )
+        self.volume = volume
+        self.mode = mode
+        self.transfer_function = TransferFunction.coerce(transfer_function, volume)
+        self.view = view
+        self.projection = projection
+        self.step = step
+        self.warps: list[Warp] = list(warps or [])
+        self.window = window
+        self.clip_box = clip_box
+        self.jitter = bool(jitter)
+        self.seed = int(seed)
+        self.shading = shading
+        self.iso_value = iso_value
+        self.flm_threshold = flm_threshold
+        self.background = background
+        self.camera = camera
+        self.zoom = zoom
+        self.fov = fov
+
+    # ------------------------------------------------------------------ validated attributes
+    @property
+    def mode(self) -> str:
+        """Compositing mode, one of :data:`MODES`."""
+        return self._mode
+
+    @mode.setter
+    def mode(self, value: str) -> None:
+        if value not in MODES:
+            raise SceneError(f"mode must be one of {', '.join(MODES)}; got {value!r}")
+        self._mode = value
+
+    @property
+    def view(self) -> View:
+        """Standard view name or (azimuth, elevation)."""
+        return self._view
+
+    @view.setter
+    def view(self, value: View) -> None:
+        if not isinstance(value, str):
+            value = tuple(float(v) for v in value)  # type: ignore[assignment]
+        view_rotation(value)  # validates
+        self._view = value
+
+    @property
+    def projection(self) -> str:
+        """``perspective`` or ``orthographic``."""
+        return self._projection
+
+    @projection.setter
+    def projection(self, value: str) -> None:
+        if value not in PROJECTIONS:
+            raise SceneError(f"projection must be one of {', '.join(PROJECTIONS)}; got {value!r}")
+        self._projection = value
+
+    @property
+    def step(self) -> float:
+        """Sample distance in voxels of the smallest spacing."""
+        return self._step
+
+    @step.setter
+    def step(self, value: float) -> None:
+        v = _finite(value, "step", positive=True)
+        if not 0.01 <= v <= 100:
+            raise SceneError(f"step must be between 0.01 and 100 voxels; got {v}")
+        self._step = v
+
+    @property
+    def window(self) -> tuple[float, float]:
+        """``(level, width)`` for grey-value modes."""
+        return self._window if self._window is not None else self.volume.default_window()
+
+    @window.setter
+    def window(self, value: tuple[float, float] | None) -> None:
+        if value is None:
+            self._window = None
+            return
+        level, width = _vec(value, 2, "window (level, width)")
+        if width <= 0:
+            raise SceneError(f"window width must be positive; got {width}")
+        self._window = (level, width)
+
+    @property
+    def clip_box(self) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+        """Clipping box in deformed world mm, or None."""
+        return self._clip_box
+
+    @clip_box.setter
+    def clip_box(self, value: Any) -> None:
+        if value is None:
+            self._clip_box = None
+            return
+        try:
+            lo, hi = value
+        except (TypeError, ValueError) as exc:
+            raise SceneError("clip_box must be ((x0, y0, z0), (x1, y1, z1))") from exc
+        lo, hi = _vec(lo, 3, "clip_box low corner"), _vec(hi, 3, "clip_box high corner")
+        if any(h <= lo_ for lo_, h in zip(lo, hi, strict=True)):
+            raise SceneError(f"clip_box high corner must exceed the low corner; got {lo}, {hi}")
+        self._clip_box = (lo, hi)
+
+    @property
+    def background(self) -> tuple[float, float, float, float]:
+        """RGBA background in [0, 1]."""
+        return self._background
+
+    @background.setter
+    def background(self, value: Sequence[float]) -> None:
+        v = (
+            _vec(value, 4, "background (r, g, b, a)")
+            if len(value) == 4
+            else (
+                *_vec(value, 3, "background (r, g, b)"),
+                1.0,
+            )
+        )
+        if any(c < 0 or c > 1 for c in v):
+            raise SceneError(f"background components must lie in [0, 1]; got {v}")
+        self._background = v  # type: ignore[assignment]
+
+    @property
+    def zoom(self) -> float:
+        """Magnification of the fitted camera."""
+        return self._zoom
+
+    @zoom.setter
+    def zoom(self, value: float) -> None:
+        self._zoom = _finite(value, "zoom", positive=True)
+
+    @property
+    def fov(self) -> float:
+        """Vertical field of view (degrees) of the fitted camera."""
+        return self._fov
+
+    @fov.setter
+    def fov(self, value: float) -> None:
+        v = _finite(value, "fov", positive=True)
+        if v >= 179:
+            raise SceneError(f"fov must be below 179 degrees; got {v}")
+        self._fov = v
+
+    # ------------------------------------------------------------------ derived values
+    @property
+    def sample_distance_mm(self) -> float:
+        """Sample distance along rays in mm."""
+        return self.step * min(self.volume.spacing)
+
+    @property
+    def opacity_reference_mm(self) -> float:
+        """Distance (mm) that transfer-function opacities refer to: one smallest voxel."""
+        return min(self.volume.spacing)
+
+    def use_shading(self) -> bool:
+        """Whether this scene shades (resolves ``shading=None``)."""
+        if self.shading is None:
+            return self.mode in ("iso", "flm")
+        return bool(self.shading)
+
+    def resolved_iso_value(self) -> float:
+        """The isovalue used by ``iso``."""
+        if self.iso_value is not None:
+            return _finite(self.iso_value, "iso_value")
+        tf = self.transfer_function
+        pts = np.asarray(tf.points)
+        amax = pts[:, 4].max()
+        if amax <= 0:
+            return float(self.window[0])
+        v = np.linspace(*tf.value_range, 4096)
+        a = tf(v)[:, 3]
+        return float(v[np.argmax(a >= 0.25 * amax)])
+
+    def resolved_flm_threshold(self) -> float:
+        """The first-local-maximum threshold used by ``flm``."""
+        if self.flm_threshold is not None:
+            return _finite(self.flm_threshold, "flm_threshold")
+        return self.transfer_function.first_visible_value()
+
+    def deformed_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Box in deformed space holding the warped volume (before clipping)."""
+        lo, hi = self.volume.bounds
+        return chain_deformed_bounds(self.warps, lo, hi)
+
+    def ray_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Deformed-space box the rays march in: warped volume box ∩ clipping box."""
+        lo, hi = self.deformed_bounds()
+        if self.clip_box is not None:
+            lo = np.maximum(lo, self.clip_box[0])
+            hi = np.minimum(hi, self.clip_box[1])
+        return lo, hi
+
+    def resolved_camera(self) -> Camera:
+        """The explicit camera, or one fitted to the (warped) volume."""
+        if self.camera is not None:
+            return self.camera
+        lo, hi = self.deformed_bounds()
+        return Camera.fit(lo, hi, self.view, self.projection, fov=self.fov, zoom=self.zoom)
+
+    def copy(self, **changes: Any) -> Scene:
+        """A shallow copy with some constructor arguments changed."""
+        kw = self._kwargs()
+        kw.update(changes)
+        return Scene(**kw)
+
+    def _kwargs(self) -> dict[str, Any]:
+        return {
+            "volume": self.volume,
+            "mode": self.mode,
+            "transfer_function": self.transfer_function,
+            "view": self.view,
+            "projection": self.projection,
+            "step": self.step,
+            "warps": list(self.warps),
+            "window": self._window,
+            "clip_box": self.clip_box,
+            "jitter": self.jitter,
+            "seed": self.seed,
+            "shading": self.shading,
+            "iso_value": self.iso_value,
+            "flm_threshold": self.flm_threshold,
+            "background": self.background,
+            "camera": self.camera,
+            "zoom": self.zoom,
+            "fov": self.fov,
+        }
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self, base_dir: str | os.PathLike | None = None) -> dict[str, Any]:
+        """JSON-serialisable description; volume paths relative to ``base_dir`` if given."""
+        d: dict[str, Any] = {
+            "format": SCENE_FORMAT,
+            "version": SCENE_VERSION,
+            "volume": _volume_to_dict(self.volume, base_dir),
+            "mode": self.mode,
+            "transfer_function": self.transfer_function.to_dict(),
+            "view": self.view if isinstance(self.view, str) else list(self.view),
+            "projection": self.projection,
+            "step": self.step,
+            "warps": [w.to_dict() for w in self.warps],
+            "window": list(self._window) if self._window is not None else None,
+            "clip_box": [list(c) for c in self.clip_box] if self.clip_box else None,
+            "jitter": self.jitter,
+            "seed": self.seed,
+            "shading": self.shading,
+            "iso_value": self.iso_value,
+            "flm_threshold": self.flm_threshold,
+            "background": list(self.background),
+            "camera": self.camera.to_dict() if self.camera is not None else None,
+            "zoom": self.zoom,
+            "fov": self.fov,
+        }
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], base_dir: str | os.PathLike | None = None) -> Scene:
+        """Rebuild a scene from :meth:`to_dict` output; raises :class:`SceneError`."""
+        if not isinstance(d, Mapping):
+            raise SceneError("a scene must be a JSON object")
+        if d.get("format", SCENE_FORMAT) != SCENE_FORMAT:
+            raise SceneError(f"not a voxwarp scene (format {d.get('format')!r})")
+        version = d.get("version", SCENE_VERSION)
+        if not isinstance(version, int) or version > SCENE_VERSION:
+            raise SceneError(
+                f"scene version {version!r} is newer than this voxwarp understands"
+                f" ({SCENE_VERSION}); upgrade voxwarp"
+            )
+        if "volume" not in d:
+            raise SceneError("the scene has no 'volume' entry")
+        volume = _volume_from_dict(d["volume"], base_dir)
+        try:
+            warps = [warp_from_dict(w) for w in (d.get("warps") or [])]
+        except WarpError as exc:
+            raise SceneError(f"invalid warp in scene: {exc}") from exc
+        tf = d.get("transfer_function", "ct-bone")
+        if isinstance(tf, Mapping):
+            tf = TransferFunction.from_dict(tf, volume)
+        camera = d.get("camera")
+        if camera is not None:
+            if not isinstance(camera, Mapping):
+                raise SceneError("scene 'camera' must be an object")
+            camera = Camera.from_dict(dict(camera))
+        view = d.get("view", "-y")
+        if isinstance(view, list):
+            view = tuple(view)
+        kwargs: dict[str, Any] = {
+            "mode": d.get("mode", "dvr"),
+            "transfer_function": tf,
+            "view": view,
+            "projection": d.get("projection", "perspective"),
+            "step": d.get("step", 1.0),
+            "warps": warps,
+            "window": d.get("window"),
+            "clip_box": d.get("clip_box"),
+            "jitter": d.get("jitter", True),
+            "seed": d.get("seed", 0),
+            "shading": d.get("shading"),
+            "iso_value": d.get("iso_value"),
+            "flm_threshold": d.get("flm_threshold"),
+            "background": d.get("background", (0, 0, 0, 1)),
+            "camera": camera,
+            "zoom": d.get("zoom", 1.0),
+            "fov": d.get("fov", 30.0),
+        }
+        for key in ("jitter",):
+            if not isinstance(kwargs[key], bool):
+                raise SceneError(f"scene '{key}' must be true or false")
+        if not isinstance(kwargs["seed"], int) or isinstance(kwargs["seed"], bool):
+            raise SceneError("scene 'seed' must be an integer")
+        if kwargs["shading"] is not None and not isinstance(kwargs["shading"], bool):
+            raise SceneError("scene 'shading' must be true, false or null")
+        try:
+            return cls(volume, **kwargs)
+        except SceneError:
+            raise
+        except (TypeError, ValueError) as exc:
+            raise SceneError(f"invalid scene: {exc}") from exc
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the scene as JSON, atomically (temp file + rename)."""
+        path = Path(path)
+        text = json.dumps(self.to_dict(base_dir=path.parent.resolve()), indent=2)
+        atomic_write_text(path, text)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Scene:
+        """Read a scene JSON written by :meth:`save`; raises :class:`SceneError`."""
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError as exc:
+            raise SceneError(f"no such scene file: {path}") from exc
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SceneError(f"cannot read scene file {path}: {exc}") from exc
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise SceneError(f"{path} is not valid JSON: {exc}") from exc
+        return cls.from_dict(d, base_dir=path.parent.resolve())
+
+    def __repr__(self) -> str:
+        return (
+            f"Scene(volume={self.volume.name!r}, mode={self.mode!r},"
+            f" tf={self.transfer_function.name!r}, view={self.view!r},"
+            f" projection={self.projection!r}, step={self.step}, warps={len(self.warps)})"
+        )
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temp file in the same folder and ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[str, Any]:
+    d: dict[str, Any] = {
+        "spacing": list(volume.spacing),
+        "origin": list(volume.origin),
+        "name": volume.name,
+        "units": volume.units,
+    }
+    src = volume.source
+    if src is not None and src.startswith("sample:"):
+        d["sample"] = src.split(":", 1)[1]
+        d["shape"] = list(volume.shape)
+        return d
+    if src is not None and os.path.exists(src):
+        p = Path(src).resolve()
+        if base_dir is not None:
+            try:
+                d["path"] = os.path.relpath(p, Path(base_dir).resolve())
+            except ValueError:
+                d["path"] = str(p)
+        else:
+            d["path"] = str(p)
+        return d
+    if volume.nbytes > EMBED_LIMIT_BYTES:
+        raise SceneError(
+            f"volume {volume.name!r} ({volume.nbytes / 2**20:.1f} MB) has no file and is too"
+            f" large to embed in scene JSON (limit {EMBED_LIMIT_BYTES / 2**20:.0f} MB); save it"
+            " first with app.save_volume(volume, 'vol.nrrd') and load it from there"
+        )
+    d["embedded"] = {
+        "dtype": str(volume.dtype),
+        "shape": list(volume.shape),
+        "order": "F",
+        "data": base64.b64encode(volume.data.tobytes(order="F")).decode("ascii"),
+    }
+    return d
+
+
+def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
+    if not isinstance(d, Mapping):
+        raise SceneError("scene 'volume' must be an object with 'path', 'sample' or 'embedded'")
+    spacing = d.get("spacing")
+    origin = d.get("origin")
+    try:
+        if "embedded" in d:
+            e = d["embedded"]
+            if not isinstance(e, Mapping):
+                raise SceneError("scene volume 'embedded' must be an object")
+            try:
+                dtype = np.dtype(str(e["dtype"]))
+                shape = tuple(int(s) for s in e["shape"])
+                raw = base64.b64decode(str(e["data"]), validate=True)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise SceneError(f"scene volume 'embedded' is malformed: {exc}") from exc
+            if dtype.kind not in "uif" or dtype.hasobject:
+                raise SceneError(f"embedded volume dtype {dtype} is not a numeric type")
+            if len(shape) != 3 or min(shape) < 1:
+                raise SceneError(f"embedded volume shape must be 3 positive ints; got {shape}")
+            if len(raw) != dtype.itemsize * int(np.prod(shape)):
+                raise SceneError(
+                    f"embedded volume holds {len(raw)} bytes; shape {shape} of {dtype}"
+                    f" needs {dtype.itemsize * int(np.prod(shape))}"
+                )
+            data = np.frombuffer(raw, dtype=dtype).reshape(shape, order="F")
+            return Volume(
+                data,
+                spacing if spacing is not None else (1, 1, 1),
+                origin if origin is not None else (0, 0, 0),
+                name=str(d.get("name", "embedded")),
+                units=str(d.get("units", "")),
+            )
+        if "sample" in d:
+            from app.samples import load_sample
+
+            return load_sample(str(d["sample"]), spacing=spacing, origin=origin)
+        if "path" in d:
+            from app.io import load_volume
+
+            p = Path(str(d["path"]))
+            if not p.is_absolute() and base_dir is not None:
+                p = Path(base_dir) / p
+            return load_volume(p, spacing=spacing, origin=origin)
+    except VolumeError as exc:
+        raise SceneError(f"scene volume: {exc}") from exc
+    raise SceneError("scene 'volume' needs one of 'path', 'sample' or 'embedded'")

@@ -1,0 +1,350 @@
+"""Warps: the one interface between deformation models and the raycaster.
+
+About this technique
+--------------------
+A *warp* maps a point ``p`` of the deformed (displayed) space to the point ``q`` of
+the original volume whose value is seen at ``p``: the raycaster marches its rays in
+deformed space and samples the unchanged volume texture at ``warp(p)``, so the volume
+is never resampled. On the GPU a warp is a GLSL file defining
+
+.. code-block:: glsl
+
+    vec3 warp(vec3 p);            // deformed world (mm) -> original world (mm)
+    mat3 warp_jacobian(vec3 p);   // d warp / d p
+
+plus its uniforms and textures. Shading normals are carried into deformed space by
+the Jacobian: for ``f_def(p) = f(warp(p))``, ``grad f_def = J^T grad f``.
+
+A scene holds a *chain* of warps ``[w0, w1, ...]`` applied in order,
+``q = ... w1(w0(p))`` — nested deformations compose like scene-graph transforms.
+Uniform names in a warp's GLSL file carry the prefix ``WARP_``; :func:`compose_glsl`
+renames ``WARP_`` to ``w{i}_`` and ``warp``/``warp_jacobian`` to ``w{i}_warp``/
+``w{i}_warp_jacobian`` for the i-th warp, so two warps of one kind never clash.
+
+Each warp also has a CPU reference (:meth:`Warp.apply`, :meth:`Warp.jacobian`) used by
+tests, picking and bounds computation.
+"""
+
+from __future__ import annotations
+
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+import shaders
+
+
+class WarpError(ValueError):
+    """A warp was given invalid parameters (message names the fix)."""
+
+
+_REGISTRY: dict[str, type[Warp]] = {}
+
+
+def register_warp(cls: type[Warp]) -> type[Warp]:
+    """Class decorator: make a warp kind loadable by :func:`warp_from_dict`."""
+    _REGISTRY[cls.kind] = cls
+    return cls
+
+
+def warp_from_dict(d: Mapping[str, Any]) -> Warp:
+    """Rebuild a warp from its :meth:`Warp.to_dict` form (scene JSON)."""
+    if not isinstance(d, Mapping) or "type" not in d:
+        raise WarpError(f"a warp entry must be an object with a 'type' key; got {d!r:.80}")
+    kind = d["type"]
+    if kind not in _REGISTRY:
+        raise WarpError(f"unknown warp type {kind!r}; known types: {sorted(_REGISTRY)}")
+    return _REGISTRY[kind].from_dict(d)
+
+
+def known_warps() -> list[str]:
+    """Names of the registered warp kinds."""
+    return sorted(_REGISTRY)
+
+
+class Warp(ABC):
+    """Base class of all warps (see the module docstring)."""
+
+    #: registry name, used in scene JSON
+    kind: ClassVar[str] = ""
+    #: GLSL file in :mod:`shaders` defining ``warp`` and ``warp_jacobian``
+    glsl_file: ClassVar[str] = ""
+
+    # ---------------------------------------------------------------- CPU side
+    @abstractmethod
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Map deformed-space points (N, 3) in mm to original-space points (N, 3)."""
+
+    def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+        """Jacobians (N, 3, 3) of :meth:`apply`; default by central differences."""
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        out = np.empty((p.shape[0], 3, 3))
+        for a in range(3):
+            e = np.zeros(3)
+            e[a] = eps
+            out[:, :, a] = (self.apply(p + e) - self.apply(p - e)) / (2 * eps)
+        return out
+
+    @property
+    def is_affine(self) -> bool:
+        """True when the warp is an affine map (the raycaster then folds it into the ray)."""
+        return False
+
+    def affine_matrix(self) -> np.ndarray:
+        """4x4 matrix of the warp (deformed -> original) when :attr:`is_affine`."""
+        raise WarpError(f"{type(self).__name__} is not affine")
+
+    def deformed_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Box in deformed space that contains every point mapped into [lo, hi].
+
+        The raycaster marches only inside this box. The default assumes the warp moves
+        nothing outside the original box.
+        """
+        return np.asarray(lo, float), np.asarray(hi, float)
+
+    # ---------------------------------------------------------------- GPU side
+    def uniforms(self) -> dict[str, Any]:
+        """Uniform values by unprefixed name (``WARP_name`` in GLSL -> ``name``)."""
+        return {}
+
+    def textures(self, ctx: Any) -> dict[str, Any]:
+        """moderngl textures by unprefixed sampler name; created on first use on ``ctx``."""
+        return {}
+
+    def release(self) -> None:  # noqa: B027 - optional hook
+        """Free GPU resources; idempotent."""
+
+    def signature(self) -> str:
+        """Identifies the GLSL variant (programs are cached per chain signature)."""
+        return self.kind
+
+    # ---------------------------------------------------------------- serialisation
+    @abstractmethod
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable description, with ``"type": kind``."""
+
+    @classmethod
+    @abstractmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Warp:
+        """Inverse of :meth:`to_dict`."""
+
+
+@register_warp
+class IdentityWarp(Warp):
+    """The identity map: ``warp(p) = p``. Used as an oracle in tests."""
+
+    kind = "identity"
+    glsl_file = "warp_identity.glsl"
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Return the points unchanged (as float64 (N, 3))."""
+        return np.atleast_2d(np.asarray(points, dtype=np.float64)).copy()
+
+    def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+        """Identity matrices."""
+        n = np.atleast_2d(points).shape[0]
+        return np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+
+    @property
+    def is_affine(self) -> bool:
+        """Always True."""
+        return True
+
+    def affine_matrix(self) -> np.ndarray:
+        """The 4x4 identity."""
+        return np.eye(4)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"type": "identity"}``."""
+        return {"type": self.kind}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> IdentityWarp:
+        """Build from ``{"type": "identity"}``."""
+        return cls()
+
+
+def _as_matrix4(m: Any, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(m, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise WarpError(f"{what} must be a 4x4 (or 3x4) matrix of numbers") from exc
+    if a.shape == (3, 4):
+        a = np.vstack([a, [0, 0, 0, 1]])
+    if a.shape != (4, 4):
+        raise WarpError(f"{what} must be a 4x4 (or 3x4) matrix; got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise WarpError(f"{what} has NaN/Inf entries")
+    if not np.allclose(a[3], [0, 0, 0, 1]):
+        raise WarpError(f"{what}: the last row must be (0, 0, 0, 1) for an affine map")
+    if abs(np.linalg.det(a[:3, :3])) < 1e-12:
+        raise WarpError(f"{what} is singular (determinant 0); an affine warp must be invertible")
+    return a
+
+
+@register_warp
+class AffineWarp(Warp):
+    """An affine deformation given by a 4x4 matrix.
+
+    Parameters
+    ----------
+    matrix
+        The *forward* transform, original -> deformed, in world mm: the object appears
+        moved by this matrix. The GLSL warp applies its inverse (deformed -> original).
+    """
+
+    kind = "affine"
+    glsl_file = "warp_affine.glsl"
+
+    def __init__(self, matrix: Any) -> None:
+        self.forward = _as_matrix4(matrix, "AffineWarp matrix")
+        self.inverse = np.linalg.inv(self.forward)
+
+    @classmethod
+    def translation(cls, offset: Sequence[float]) -> AffineWarp:
+        """Move the object by ``offset`` (mm)."""
+        m = np.eye(4)
+        m[:3, 3] = np.asarray(offset, float).reshape(3)
+        return cls(m)
+
+    @classmethod
+    def scaling(
+        cls, factors: float | Sequence[float], center: Sequence[float] = (0, 0, 0)
+    ) -> AffineWarp:
+        """Scale the object by ``factors`` (one or three) about ``center``."""
+        f = np.broadcast_to(np.asarray(factors, float), (3,))
+        return cls(_about(np.diag([*f, 1.0]), center))
+
+    @classmethod
+    def rotation(
+        cls, axis: Sequence[float], degrees: float, center: Sequence[float] = (0, 0, 0)
+    ) -> AffineWarp:
+        """Rotate the object by ``degrees`` about ``axis`` through ``center`` (right-handed)."""
+        a = np.asarray(axis, float)
+        n = np.linalg.norm(a)
+        if n == 0:
+            raise WarpError("rotation axis must be non-zero")
+        x, y, z = a / n
+        t = np.radians(degrees)
+        c, s, cc = np.cos(t), np.sin(t), 1 - np.cos(t)
+        r = np.array(
+            [
+                [c + x * x * cc, x * y * cc - z * s, x * z * cc + y * s],
+                [y * x * cc + z * s, c + y * y * cc, y * z * cc - x * s],
+                [z * x * cc - y * s, z * y * cc + x * s, c + z * z * cc],
+            ]
+        )
+        m = np.eye(4)
+        m[:3, :3] = r
+        return cls(_about(m, center))
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Deformed -> original: the inverse matrix applied to (N, 3) points."""
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        return p @ self.inverse[:3, :3].T + self.inverse[:3, 3]
+
+    def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+        """The constant linear part of the inverse."""
+        n = np.atleast_2d(points).shape[0]
+        return np.broadcast_to(self.inverse[:3, :3], (n, 3, 3)).copy()
+
+    @property
+    def is_affine(self) -> bool:
+        """Always True."""
+        return True
+
+    def affine_matrix(self) -> np.ndarray:
+        """The deformed -> original matrix (inverse of the forward matrix)."""
+        return self.inverse.copy()
+
+    def deformed_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Box around the forward image of the 8 corners of [lo, hi]."""
+        c = box_corners(lo, hi)
+        f = c @ self.forward[:3, :3].T + self.forward[:3, 3]
+        return f.min(axis=0), f.max(axis=0)
+
+    def uniforms(self) -> dict[str, Any]:
+        """``matrix``: the deformed -> original 4x4 matrix (column-major for GL)."""
+        return {"matrix": self.inverse}
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"type": "affine", "matrix": 4x4 nested list}`` (forward matrix)."""
+        return {"type": self.kind, "matrix": self.forward.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> AffineWarp:
+        """Build from ``{"type": "affine", "matrix": [[...], ...]}``."""
+        if "matrix" not in d:
+            raise WarpError("an affine warp entry needs a 'matrix' (4x4 nested list)")
+        return cls(d["matrix"])
+
+
+def _about(m: np.ndarray, center: Sequence[float]) -> np.ndarray:
+    c = np.asarray(center, float).reshape(3)
+    t1, t2 = np.eye(4), np.eye(4)
+    t1[:3, 3] = -c
+    t2[:3, 3] = c
+    return t2 @ m @ t1
+
+
+def box_corners(lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
+    """The 8 corners (8, 3) of the axis-aligned box [lo, hi]."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    idx = np.array([[i, j, k] for k in (0, 1) for j in (0, 1) for i in (0, 1)], dtype=float)
+    return lo + idx * (hi - lo)
+
+
+def chain_apply(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:
+    """CPU reference of a warp chain: ``q = w_{n-1}(... w_0(p))``."""
+    q = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    for w in warps:
+        q = w.apply(q)
+    return q
+
+
+def chain_deformed_bounds(
+    warps: Sequence[Warp], lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Deformed-space box of a chain: bounds pushed back through the warps, last first."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    for w in reversed(list(warps)):
+        lo, hi = w.deformed_bounds(lo, hi)
+    return lo, hi
+
+
+def fold_affine(warps: Sequence[Warp]) -> np.ndarray | None:
+    """One 4x4 deformed -> original matrix for an all-affine chain, else ``None``."""
+    m = np.eye(4)
+    for w in warps:
+        if not w.is_affine:
+            return None
+        m = w.affine_matrix() @ m
+    return m
+
+
+_PREFIX = re.compile(r"\bWARP_")
+_FN = re.compile(r"\bwarp(_jacobian)?\b(?=\s*\()")
+
+
+def compose_glsl(warps: Sequence[Warp], loader: Callable[[str], str] = shaders.read) -> str:
+    """GLSL text defining ``warp_chain(p)`` and ``warp_chain_jacobian(p)`` for ``warps``.
+
+    Each warp's file is inserted with its names prefixed ``w{i}_``; the chain's
+    Jacobian is the product ``J_{n-1}(q_{n-1}) ... J_0(p)`` (chain rule).
+    """
+    parts: list[str] = []
+    for i, w in enumerate(warps):
+        src = loader(w.glsl_file)
+        src = _PREFIX.sub(f"w{i}_", src)
+        src = _FN.sub(lambda m, i=i: f"w{i}_warp{m.group(1) or ''}", src)
+        parts.append(f"// ---- warp {i}: {w.kind}\n{src}")
+    body = ["vec3 warp_chain(vec3 p) {"]
+    body += [f"    p = w{i}_warp(p);" for i in range(len(warps))]
+    body += ["    return p;", "}", "mat3 warp_chain_jacobian(vec3 p) {", "    mat3 J = mat3(1.0);"]
+    for i in range(len(warps)):
+        body += [f"    J = w{i}_warp_jacobian(p) * J;", f"    p = w{i}_warp(p);"]
+    body += ["    return J;", "}"]
+    return "\n".join([*parts, *body]) + "\n"

@@ -1,0 +1,35 @@
+// First local maximum (Knoche 2008): the first maximum along the ray above the
+// threshold u_threshold, coloured by the transfer function (opaque) and shaded.
+uniform float u_threshold;
+struct State { float prev; vec3 prev_u; float prev_t; bool hit; vec4 color; };
+void mode_init(inout State s) { s.prev = -3.0e38; s.hit = false; s.color = vec4(0.0); }
+bool flm_emit(inout State s) {
+    vec4 c = transfer(s.prev);
+    vec3 rgb = c.rgb;
+#ifdef SHADING
+    rgb = shade(rgb, gradient_deformed(s.prev_u, s.prev_t), g_rd);
+#endif
+    s.color = vec4(rgb, 1.0);
+    s.hit = true;
+    return true;
+}
+bool block_visible(ivec3 b, inout State s) { return block_range(b).y >= u_threshold; }
+// a skipped region lies below the threshold: a maximum pending above it is final
+bool mode_skip(inout State s) {
+    if (s.prev >= u_threshold) return flm_emit(s);
+    s.prev = -3.0e38;
+    return false;
+}
+bool mode_sample(inout State s, float v, vec3 u, float t) {
+    if (s.prev >= u_threshold && v < s.prev) return flm_emit(s);
+    s.prev = v;
+    s.prev_u = u;
+    s.prev_t = t;
+    return false;
+}
+vec4 mode_finish(State s) {
+    if (!s.hit && s.prev >= u_threshold) {
+        flm_emit(s);   // ray left the volume while still rising
+    }
+    return s.color;
+}

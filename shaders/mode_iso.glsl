@@ -1,0 +1,30 @@
+// Isosurface at u_iso: first crossing from below, refined by bisection between the
+// two samples around it, Blinn-Phong shaded from the (warped) gradient.
+uniform float u_iso;
+uniform vec3 u_iso_color;
+struct State { float prev; float prev_t; bool hit; vec4 color; };
+void mode_init(inout State s) { s.prev = -3.0e38; s.prev_t = 0.0; s.hit = false; s.color = vec4(0.0); }
+bool block_visible(ivec3 b, inout State s) { return block_range(b).y >= u_iso; }
+bool mode_skip(inout State s) { s.prev = -3.0e38; return false; }
+bool mode_sample(inout State s, float v, vec3 u, float t) {
+    if (v < u_iso) {
+        s.prev = v;
+        s.prev_t = t;
+        return false;
+    }
+    float th = t;
+    if (s.prev > -1.0e38) {
+        float ta = s.prev_t;
+        float tb = t;
+        for (int i = 0; i < 6; ++i) {
+            float tm = 0.5 * (ta + tb);
+            if (sample_value(texel_at(tm)) >= u_iso) tb = tm; else ta = tm;
+        }
+        th = tb;
+    }
+    vec3 uh = texel_at(th);
+    s.color = vec4(shade(u_iso_color, gradient_deformed(uh, th), g_rd), 1.0);
+    s.hit = true;
+    return true;
+}
+vec4 mode_finish(State s) { return s.color; }

@@ -1,0 +1,148 @@
+#version 430
+// voxwarp raycaster. About this technique:
+// One fragment per pixel casts a ray in *deformed* (display) space through the box
+// u_bounds_lo..hi (the volume box pushed through the warp chain, clipped by the
+// clipping box). Samples lie at t = t0 + (k + j) * step, j being a per-pixel jitter in
+// [0, 1) (or 0.5 without jitter). Each sample position p is mapped by the warp chain to
+// the original volume (the volume is never resampled) and classified by the
+// compositing mode included as "mode.glsl" (dvr, mip, minip, average, flm, iso).
+//
+// Two paths, chosen at compile time:
+// * LINEAR_PATH: every warp is affine; the chain folds into one matrix, so the ray is a
+//   straight line in texel space. Empty-space skipping walks the min/max block grid
+//   (BLOCK³ voxels per block, with a one-voxel apron): a block whose values the mode
+//   cannot see is jumped over to its exit, on the same sample lattice, so skipping
+//   never changes the image.
+// * otherwise: each sample goes through warp_chain(p); invisible blocks still save the
+//   volume fetch and classification.
+// Early ray termination: the mode returns true from mode_sample when nothing further
+// can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
+
+#include "common.glsl"
+#include "volume_sample.glsl"
+#include "transfer_function.glsl"
+#include "shading.glsl"
+
+uniform mat4 u_inv_view_proj;   // clip -> deformed world (mm)
+uniform vec4 u_viewport;        // x, y, width, height in pixels
+uniform vec3 u_bounds_lo;       // deformed-space box the rays march in
+uniform vec3 u_bounds_hi;
+uniform float u_step;           // sample distance in deformed space, mm
+uniform int u_max_steps;
+uniform int u_jitter;           // 0: samples at (k + 0.5) * step; 1: hashed jitter
+uniform uint u_seed;
+uniform vec4 u_background;      // premultiplied
+uniform vec2 u_value_limits;    // min and max data value of the volume
+
+uniform sampler3D u_block_minmax;   // RG32F: block min, max (data units), apron included
+uniform sampler3D u_block_visible;  // R8: 1 where the transfer function sees the block
+uniform ivec3 u_blocks;             // blocks per axis
+
+out vec4 f_color;
+
+vec3 g_ro;   // ray origin (deformed world)
+vec3 g_rd;   // unit ray direction (deformed world)
+
+#ifdef LINEAR_PATH
+uniform mat4 u_world_to_texel;  // deformed world -> texel coordinates (folded chain)
+uniform mat3 u_jacobian;        // d(original world) / d(deformed world)
+vec3 g_u0;
+vec3 g_du;
+vec3 texel_at(float t) { return g_u0 + t * g_du; }
+mat3 jacobian_at(float t) { return u_jacobian; }
+#else
+#include "warps.glsl"
+vec3 texel_at(float t) { return world_to_texel(warp_chain(g_ro + t * g_rd)); }
+mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
+#endif
+
+// Gradient of the deformed field at the sample (texel u, ray parameter t).
+vec3 gradient_deformed(vec3 u, float t) {
+    return transpose(jacobian_at(t)) * gradient_original(u);
+}
+
+bool block_in_grid(ivec3 b) {
+    return all(greaterThanEqual(b, ivec3(0))) && all(lessThan(b, u_blocks));
+}
+vec2 block_range(ivec3 b) { return texelFetch(u_block_minmax, b, 0).rg; }
+bool block_tf_visible(ivec3 b) { return texelFetch(u_block_visible, b, 0).r > 0.0; }
+
+#include "mode.glsl"
+
+void main() {
+    vec2 frag = gl_FragCoord.xy - u_viewport.xy;
+    vec2 ndc = frag / u_viewport.zw * 2.0 - 1.0;
+    vec4 a = u_inv_view_proj * vec4(ndc, -1.0, 1.0);
+    vec4 b = u_inv_view_proj * vec4(ndc, 1.0, 1.0);
+    g_ro = a.xyz / a.w;
+    vec3 far_point = b.xyz / b.w;
+    float t_far = length(far_point - g_ro);
+    g_rd = (far_point - g_ro) / t_far;
+
+    vec2 tb = intersect_box(g_ro, g_rd, u_bounds_lo, u_bounds_hi);
+    float t0 = max(tb.x, 0.0);
+    float t1 = min(tb.y, t_far);
+#ifdef LINEAR_PATH
+    g_u0 = (u_world_to_texel * vec4(g_ro, 1.0)).xyz;
+    g_du = mat3(u_world_to_texel) * g_rd;
+    // keep direction components away from 0 so 1/du stays finite
+    g_du = mix(g_du, sign(g_du) * 1e-12 + vec3(1e-30), lessThan(abs(g_du), vec3(1e-12)));
+    vec2 tt = intersect_box(g_u0, g_du, vec3(0.0), u_dims);
+    t0 = max(t0, tt.x);
+    t1 = min(t1, tt.y);
+#endif
+    if (t1 <= t0) {
+        f_color = u_background;
+        return;
+    }
+    float j = u_jitter != 0 ? hash01(uvec2(gl_FragCoord.xy), u_seed) : 0.5;
+    int n = int(ceil((t1 - t0) / u_step - j));
+    n = clamp(n, 0, u_max_steps);
+
+    State s;
+    mode_init(s);
+    int k = 0;
+#ifdef LINEAR_PATH
+    vec3 inv_du = 1.0 / g_du;
+    vec3 face = step(vec3(0.0), g_du);   // 1 where the ray leaves a block through its upper face
+    while (k < n) {
+        vec3 u = texel_at(t0 + (float(k) + j) * u_step);
+        ivec3 blk = ivec3(floor(u * (1.0 / float(BLOCK))));
+        vec3 te = ((vec3(blk) + face) * float(BLOCK) - g_u0) * inv_du;
+        float t_exit = min(min(te.x, te.y), te.z);
+        int k_exit = clamp(int(ceil((t_exit - t0) / u_step - j)), k + 1, n);
+        if (!block_in_grid(blk) || !block_visible(blk, s)) {
+            if (mode_skip(s)) break;
+            k = k_exit;
+            continue;
+        }
+        bool done = false;
+        for (; k < k_exit; ++k) {
+            float t = t0 + (float(k) + j) * u_step;
+            vec3 uk = texel_at(t);
+            if (mode_sample(s, sample_value(uk), uk, t)) {
+                done = true;
+                break;
+            }
+        }
+        if (done) break;
+    }
+#else
+    for (; k < n; ++k) {
+        float t = t0 + (float(k) + j) * u_step;
+        vec3 u = texel_at(t);
+        if (!inside_texels(u)) {
+            if (mode_skip(s)) break;
+            continue;
+        }
+        ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
+        if (!block_visible(blk, s)) {
+            if (mode_skip(s)) break;
+            continue;
+        }
+        if (mode_sample(s, sample_value(u), u, t)) break;
+    }
+#endif
+    vec4 c = mode_finish(s);
+    f_color = c + (1.0 - c.a) * u_background;
+}

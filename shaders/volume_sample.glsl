@@ -1,0 +1,28 @@
+// The volume texture and its sampling in texel coordinates u (voxel i spans [i, i+1],
+// its centre is at i + 0.5), returning values in data units.
+uniform sampler3D u_volume;
+uniform vec3 u_dims;          // voxels per axis (nx, ny, nz)
+uniform vec3 u_inv_dims;      // 1 / u_dims
+uniform vec2 u_value_map;     // data value = texel * x + y (undoes normalised formats)
+uniform vec3 u_spacing;       // voxel size in mm
+uniform vec3 u_origin;        // world position of voxel (0, 0, 0)'s centre, mm
+
+float sample_value(vec3 u) {
+    return texture(u_volume, u * u_inv_dims).r * u_value_map.x + u_value_map.y;
+}
+
+// Original-world point (mm) -> texel coordinates.
+vec3 world_to_texel(vec3 q) { return (q - u_origin) / u_spacing + 0.5; }
+
+bool inside_texels(vec3 u) {
+    return all(greaterThanEqual(u, vec3(0.0))) && all(lessThanEqual(u, u_dims));
+}
+
+// Gradient of the data in original world units (per mm), central differences.
+vec3 gradient_original(vec3 u) {
+    vec3 g;
+    g.x = sample_value(u + vec3(1, 0, 0)) - sample_value(u - vec3(1, 0, 0));
+    g.y = sample_value(u + vec3(0, 1, 0)) - sample_value(u - vec3(0, 1, 0));
+    g.z = sample_value(u + vec3(0, 0, 1)) - sample_value(u - vec3(0, 0, 1));
+    return 0.5 * g / u_spacing;
+}
