@@ -192,14 +192,14 @@ class Renderer:
         self._volumes[key] = (weakref.ref(volume), gpu)
         return gpu
 
-    def _tf_texture(self, tf: TransferFunction) -> Any:
-        key = _tf_key(tf)
+    def _tf_texture(self, tf: TransferFunction, ratio: float) -> Any:
+        key = (_tf_key(tf), ratio)
         if self._tf_tex is None or self._tf_key != key:
             if self._tf_tex is not None:
                 self._tf_tex.release()
-            table = np.ascontiguousarray(tf.table(TABLE_SIZE))
-            self._tf_tex = self.ctx.texture((TABLE_SIZE, 1), 4, table.tobytes(), dtype="f4")
-            self._tf_tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            table = np.ascontiguousarray(tf.gpu_table(ratio, TABLE_SIZE))
+            self._tf_tex = self.ctx.texture((TABLE_SIZE, 2), 4, table.tobytes(), dtype="f4")
+            self._tf_tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
             self._tf_tex.repeat_x = self._tf_tex.repeat_y = False
             self._tf_key = key
         return self._tf_tex
@@ -286,6 +286,8 @@ class Renderer:
         if float(np.max(iso_rgb)) < 0.2:
             iso_rgb = np.array([0.9, 0.85, 0.8])
 
+        tf_lo, tf_hi = tf.value_range
+        tf_scale = (TABLE_SIZE - 1) / (tf_hi - tf_lo)
         vp = cam.view_projection(w / h)
         values: dict[str, Any] = {
             "u_inv_view_proj": np.linalg.inv(vp),
@@ -303,9 +305,8 @@ class Renderer:
             "u_value_map": gpu.value_map,
             "u_spacing": tuple(sp),
             "u_origin": tuple(vol.origin),
-            "u_tf_range": tf.value_range,
+            "u_tf_map": (tf_scale, 0.5 - tf_lo * tf_scale),
             "u_tf_size": float(TABLE_SIZE),
-            "u_alpha_exponent": step_mm / scene.opacity_reference_mm,
             "u_window": (level - width / 2, level + width / 2),
             "u_light": LIGHT,
             "u_blocks": tuple(int(b) for b in gpu.blocks),
@@ -327,7 +328,7 @@ class Renderer:
             _set_uniform(prog, name, value)
 
         gpu.texture.use(0)
-        self._tf_texture(tf).use(1)
+        self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
         gpu.minmax.use(2)
         self._visibility(gpu, tf).use(3)
         unit = 4

@@ -84,7 +84,7 @@ _RELATIVE_PRESETS: dict[str, list[ControlPoint]] = {
 PRESETS: tuple[str, ...] = (*_HU_PRESETS, *_RELATIVE_PRESETS)
 
 #: Number of entries of the GPU lookup table.
-TABLE_SIZE = 1024
+TABLE_SIZE = 4096
 
 
 def _points(points: Iterable[Sequence[float]]) -> list[ControlPoint]:
@@ -187,6 +187,18 @@ class TransferFunction:
         """RGBA float32 table (size, 4) sampling :attr:`value_range` uniformly."""
         lo, hi = self.value_range
         return self(np.linspace(lo, hi, size)).astype(np.float32)
+
+    def gpu_table(self, ratio: float = 1.0, size: int = TABLE_SIZE) -> np.ndarray:
+        """The raycaster's (2, size, 4) float32 table over :attr:`value_range`.
+
+        Row 0 is premultiplied colour with opacity corrected for a sample distance of
+        ``ratio`` reference distances (``1 - (1 - a) ** ratio``); row 1 is the straight
+        colour and opacity.
+        """
+        straight = self.table(size)
+        a = 1.0 - np.power(np.clip(1.0 - straight[:, 3], 0.0, 1.0), ratio)
+        premul = np.concatenate([straight[:, :3] * a[:, None], a[:, None]], axis=1)
+        return np.stack([premul, straight]).astype(np.float32)
 
     def visible_ranges(self, lo: np.ndarray, hi: np.ndarray, size: int = TABLE_SIZE) -> np.ndarray:
         """True where the table has non-zero opacity anywhere in ``[lo, hi]`` (conservative).

@@ -4,10 +4,10 @@ uniform float u_threshold;
 struct State { float prev; vec3 prev_u; float prev_t; bool hit; vec4 color; };
 void mode_init(inout State s) { s.prev = -3.0e38; s.hit = false; s.color = vec4(0.0); }
 bool flm_emit(inout State s) {
-    vec4 c = transfer(s.prev);
+    vec4 c = transfer_straight(s.prev);
     vec3 rgb = c.rgb;
 #ifdef SHADING
-    rgb = shade(rgb, gradient_deformed(s.prev_u, s.prev_t), g_rd);
+    rgb = shade(rgb, 1.0, gradient_deformed(s.prev_u, s.prev_t), g_rd);
 #endif
     s.color = vec4(rgb, 1.0);
     s.hit = true;

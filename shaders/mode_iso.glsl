@@ -23,7 +23,7 @@ bool mode_sample(inout State s, float v, vec3 u, float t) {
         th = tb;
     }
     vec3 uh = texel_at(th);
-    s.color = vec4(shade(u_iso_color, gradient_deformed(uh, th), g_rd), 1.0);
+    s.color = vec4(shade(u_iso_color, 1.0, gradient_deformed(uh, th), g_rd), 1.0);
     s.hit = true;
     return true;
 }

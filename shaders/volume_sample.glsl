@@ -8,7 +8,7 @@ uniform vec3 u_spacing;       // voxel size in mm
 uniform vec3 u_origin;        // world position of voxel (0, 0, 0)'s centre, mm
 
 float sample_value(vec3 u) {
-    return texture(u_volume, u * u_inv_dims).r * u_value_map.x + u_value_map.y;
+    return textureLod(u_volume, u * u_inv_dims, 0.0).r * u_value_map.x + u_value_map.y;
 }
 
 // Original-world point (mm) -> texel coordinates.
