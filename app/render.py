@@ -120,14 +120,25 @@ class Renderer:
         A ``moderngl.Context`` (OpenGL 4.3+); the caller owns it.
     texture_budget_bytes
         Largest volume texture accepted; default 2 GiB or ``VOXWARP_TEXTURE_BUDGET_MB``.
+    empty_space_skipping
+        Jump over blocks the compositing mode cannot see (default). Turning it off
+        never changes the image, only the time; benchmarks use it as a reference.
     """
 
-    def __init__(self, ctx: Any, *, texture_budget_bytes: int | None = None) -> None:
+    def __init__(
+        self,
+        ctx: Any,
+        *,
+        texture_budget_bytes: int | None = None,
+        empty_space_skipping: bool = True,
+    ) -> None:
         if ctx.version_code < 430:
             raise RenderError(
                 f"voxwarp needs OpenGL 4.3 or newer; this context offers {ctx.version_code}"
             )
         self.ctx = ctx
+        #: skip blocks the mode cannot see (off only to measure what it buys)
+        self.empty_space_skipping = bool(empty_space_skipping)
         env = os.environ.get("VOXWARP_TEXTURE_BUDGET_MB")
         if texture_budget_bytes is None:
             texture_budget_bytes = int(float(env) * 2**20) if env else DEFAULT_TEXTURE_BUDGET
@@ -219,7 +230,13 @@ class Renderer:
 
     def _program(self, scene: Scene, linear: bool) -> Any:
         warps = [] if linear else scene.warps
-        key = (scene.mode, linear, scene.use_shading(), tuple(w.signature() for w in warps))
+        key = (
+            scene.mode,
+            linear,
+            scene.use_shading(),
+            self.empty_space_skipping,
+            tuple(w.signature() for w in warps),
+        )
         prog = self._programs.get(key)
         if prog is not None:
             return prog
@@ -228,6 +245,8 @@ class Renderer:
             defines.append("#define LINEAR_PATH")
         if scene.use_shading():
             defines.append("#define SHADING")
+        if not self.empty_space_skipping:
+            defines.append("#define NO_SKIPPING")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={

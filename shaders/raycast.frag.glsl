@@ -111,7 +111,11 @@ void main() {
         vec3 te = ((vec3(blk) + face) * float(BLOCK) - g_u0) * inv_du;
         float t_exit = min(min(te.x, te.y), te.z);
         int k_exit = clamp(int(ceil((t_exit - t0) / u_step - j)), k + 1, n);
-        if (!block_in_grid(blk) || !block_visible(blk, s)) {
+        bool visible = block_in_grid(blk) && block_visible(blk, s);
+#ifdef NO_SKIPPING
+        visible = true;   // reference runs: measure what skipping buys
+#endif
+        if (!visible) {
             if (mode_skip(s)) break;
             k = k_exit;
             continue;
@@ -136,7 +140,11 @@ void main() {
             continue;
         }
         ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
-        if (!block_visible(blk, s)) {
+        bool visible = block_visible(blk, s);
+#ifdef NO_SKIPPING
+        visible = true;
+#endif
+        if (!visible) {
             if (mode_skip(s)) break;
             continue;
         }

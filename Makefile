@@ -1,0 +1,46 @@
+# voxwarp — quick start: `make run` and `make test` (each sets everything up on first use).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-dev
+BENCH_STAMP := $(VENV)/.installed-bench
+
+.PHONY: setup run test lint format bench clean
+
+$(STAMP): pyproject.toml scripts/install-system-deps.sh
+	@bash scripts/install-system-deps.sh
+	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "voxwarp needs Python >= 3.11; set PYTHON=python3.11"'
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[dev]'
+	@touch $(STAMP)
+
+setup: $(STAMP)
+
+## render the bundled real CT in every compositing mode into out/
+run: $(STAMP)
+	$(VENV)/bin/voxwarp demo --out out
+
+## lint + the whole test suite, headless
+test: $(STAMP) lint
+	$(PY) -m pytest
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/lint-imports
+
+format: $(STAMP)
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
+
+$(BENCH_STAMP): $(STAMP)
+	$(PY) -m pip install -q -e '.[dev,bench]'
+	@touch $(BENCH_STAMP)
+
+## raycaster benchmark against VTK (writes docs/bench-render.md)
+bench: $(BENCH_STAMP)
+	$(VENV)/bin/voxwarp bench render --markdown docs/bench-render.md
+
+clean:
+	rm -rf out .pytest_cache tests/_failures

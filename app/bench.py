@@ -1,0 +1,206 @@
+"""``voxwarp bench render``: raycaster speed against references measured in the same run.
+
+Renders one 256³ volume (by default the bundled real CT ``stent``, upsampled x2 in x
+and y to 256³) at 512x512 in ``dvr`` and ``mip``, and reports the median of ``frames``
+frames after warm-up, each bound by ``ctx.finish()``. References in the same process:
+
+* voxwarp with empty-space skipping off (what skipping buys);
+* VTK's ``vtkFixedPointVolumeRayCastMapper`` (CPU) and ``vtkGPUVolumeRayCastMapper``
+  (on whatever OpenGL the machine has), when ``vtk`` is installed (extra ``[bench]``),
+  with the same array, transfer function, sample distance, image size and camera.
+
+Ratios are ``reference time / voxwarp time`` (above 1: voxwarp is faster).
+"""
+
+from __future__ import annotations
+
+import platform
+import statistics
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from app.camera import Camera
+from app.render import OffscreenRenderer
+from app.scene import Scene
+from app.volume import Volume
+
+
+@dataclass
+class BenchRow:
+    """One timed configuration."""
+
+    renderer: str
+    mode: str
+    median_ms: float
+    min_ms: float
+    note: str = ""
+
+
+@dataclass
+class BenchReport:
+    """All rows of one benchmark run plus its setting."""
+
+    volume: str
+    shape: tuple[int, int, int]
+    size: tuple[int, int]
+    step: float
+    frames: int
+    gl_renderer: str
+    rows: list[BenchRow] = field(default_factory=list)
+
+    def find(self, renderer: str, mode: str) -> BenchRow | None:
+        """The row of ``renderer`` in ``mode`` (None if absent or skipped)."""
+        for r in self.rows:
+            if r.renderer == renderer and r.mode == mode and r.median_ms > 0:
+                return r
+        return None
+
+    def ratio(self, reference: str, mode: str) -> float | None:
+        """``reference`` median / voxwarp median for ``mode``."""
+        ours, ref = self.find("voxwarp", mode), self.find(reference, mode)
+        if ours is None or ref is None:
+            return None
+        return ref.median_ms / ours.median_ms
+
+    def markdown(self, command: str) -> str:
+        """A markdown table of the run, headed by the command that produced it."""
+        lines = [
+            f"Command: `{command}`",
+            "",
+            f"Volume: {self.volume} {self.shape[0]}x{self.shape[1]}x{self.shape[2]},"
+            f" image {self.size[0]}x{self.size[1]}, sample distance {self.step} voxel,"
+            f" median of {self.frames} frames after warm-up; GL: {self.gl_renderer};"
+            f" CPU: {platform.processor() or platform.machine()}",
+            "",
+            "| renderer | mode | median ms | min ms | voxwarp speed-up | note |",
+            "|---|---|---:|---:|---:|---|",
+        ]
+        for r in self.rows:
+            ratio = self.ratio(r.renderer, r.mode) if r.renderer != "voxwarp" else 1.0
+            med = f"{r.median_ms:.1f}" if r.median_ms > 0 else "—"
+            mn = f"{r.min_ms:.1f}" if r.min_ms > 0 else "—"
+            rs = f"{ratio:.2f}x" if ratio else "—"
+            lines.append(f"| {r.renderer} | {r.mode} | {med} | {mn} | {rs} | {r.note} |")
+        return "\n".join(lines) + "\n"
+
+
+def benchmark_volume(volume: Volume | None = None) -> Volume:
+    """The benchmark volume: ``volume``, or the real CT ``stent`` upsampled to 256³."""
+    if volume is not None:
+        return volume
+    from scipy.ndimage import zoom
+
+    from app.samples import load_sample
+
+    stent = load_sample("stent")
+    factors = [256 / s for s in stent.shape]
+    data = zoom(stent.data.astype(np.float32), factors, order=1)
+    data = np.clip(np.rint(data), 0, 255).astype(np.uint8)
+    spacing = tuple(sp / f for sp, f in zip(stent.spacing, factors, strict=True))
+    return Volume(data, spacing, name="stent CT (real scan, trilinearly upsampled to 256³)")
+
+
+def bench_camera(volume: Volume) -> Camera:
+    """Oblique perspective camera (30° field of view) with the volume filling the image."""
+    lo, hi = volume.bounds
+    return Camera.fit(lo, hi, view=(30.0, 20.0), projection="perspective", fov=30.0, zoom=1.6)
+
+
+def bench_render(
+    volume: Volume | None = None,
+    *,
+    size: tuple[int, int] = (512, 512),
+    frames: int = 10,
+    warmup: int = 2,
+    modes: tuple[str, ...] = ("dvr", "mip"),
+    step: float = 1.0,
+    transfer_function: Any = "ct-bone",
+    use_vtk: bool = True,
+    log: Any = print,
+) -> BenchReport:
+    """Time voxwarp and the references on one volume (see the module docstring)."""
+    vol = benchmark_volume(volume)
+    cam = bench_camera(vol)
+    scenes = {
+        m: Scene(vol, mode=m, transfer_function=transfer_function, step=step, camera=cam)
+        for m in modes
+    }
+    with OffscreenRenderer(*size) as r:
+        report = BenchReport(
+            volume=vol.name,
+            shape=vol.shape,
+            size=size,
+            step=step,
+            frames=frames,
+            gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
+        )
+        for m, scene in scenes.items():
+            t = r.time_frames(scene, frames=frames, warmup=warmup)
+            report.rows.append(BenchRow("voxwarp", m, statistics.median(t), min(t)))
+            log(f"voxwarp {m}: {statistics.median(t):.1f} ms")
+        r.renderer.empty_space_skipping = False
+        for m, scene in scenes.items():
+            t = r.time_frames(scene, frames=frames, warmup=warmup)
+            row = BenchRow("voxwarp, no skipping", m, statistics.median(t), min(t))
+            report.rows.append(row)
+            log(f"voxwarp without skipping {m}: {statistics.median(t):.1f} ms")
+        r.renderer.empty_space_skipping = True
+    if use_vtk:
+        _bench_vtk(report, vol, scenes, cam, size, frames, warmup, log)
+    return report
+
+
+def _bench_vtk(
+    report: BenchReport,
+    vol: Volume,
+    scenes: dict[str, Scene],
+    cam: Camera,
+    size: tuple[int, int],
+    frames: int,
+    warmup: int,
+    log: Any,
+) -> None:
+    from app import bench_vtk
+
+    names = {"fixed_point": "VTK fixed-point (CPU)", "gpu": "VTK GPU raycaster"}
+    if not bench_vtk.vtk_available():
+        for name in names.values():
+            report.rows.append(BenchRow(name, "-", 0, 0, "skipped: pip install '.[bench]'"))
+        log("vtk not installed: VTK rows skipped (pip install '.[bench]')")
+        return
+    near, far = cam.near_far()
+    spec = bench_vtk.CameraSpec(
+        position=tuple(cam.eye),
+        focal_point=tuple(cam.center),
+        view_up=tuple(cam.rotation[:, 1]),
+        view_angle_deg=cam.fov,
+        parallel=False,
+        parallel_scale=cam.ortho_height / 2,
+        near=near,
+        far=far,
+    )
+    for mapper, name in names.items():
+        for m, scene in scenes.items():
+            try:
+                res = bench_vtk.render_vtk(
+                    vol.data,
+                    vol.spacing,
+                    vol.origin,
+                    list(scene.transfer_function.points),
+                    mapper=mapper,  # type: ignore[arg-type]
+                    mode=m,  # type: ignore[arg-type]
+                    sample_distance_mm=scene.sample_distance_mm,
+                    opacity_unit_distance_mm=scene.opacity_reference_mm,
+                    size=size,
+                    camera=spec,
+                    frames=frames,
+                    warmup=warmup,
+                )
+            except (RuntimeError, ValueError) as exc:
+                report.rows.append(BenchRow(name, m, 0, 0, f"skipped: {exc}"))
+                log(f"{name} {m}: skipped ({exc})")
+                continue
+            report.rows.append(BenchRow(name, m, res.median_ms, res.min_ms))
+            log(f"{name} {m}: {res.median_ms:.1f} ms")
