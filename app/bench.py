@@ -116,12 +116,16 @@ def bench_render(
     warmup: int = 2,
     modes: tuple[str, ...] = ("dvr", "mip"),
     step: float = 1.0,
-    transfer_function: Any = "ct-bone",
+    transfer_function: Any = None,
     use_vtk: bool = True,
     log: Any = print,
 ) -> BenchReport:
     """Time voxwarp and the references on one volume (see the module docstring)."""
     vol = benchmark_volume(volume)
+    if transfer_function is None:
+        from app.samples import suggested_transfer_function
+
+        transfer_function = suggested_transfer_function("stent" if volume is None else vol.name)
     cam = bench_camera(vol)
     scenes = {
         m: Scene(vol, mode=m, transfer_function=transfer_function, step=step, camera=cam)

@@ -121,6 +121,14 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
     return Scene(obj, **kw)
 
 
+def _tf_arg(tf: str | None) -> Any:
+    from app.transfer_function import TransferFunction
+
+    if tf is not None and tf.endswith(".json"):
+        return TransferFunction.load(tf)
+    return tf
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     """``voxwarp info INPUT``: dims, dtype, spacing, value range, histogram."""
     from app.io import volume_info, volume_summary
@@ -162,17 +170,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """``voxwarp demo``: render the default sample in every mode into a folder."""
     from app.image_io import write_image
     from app.render import OffscreenRenderer
-    from app.samples import DEFAULT_SAMPLE
+    from app.samples import DEFAULT_SAMPLE, suggested_transfer_function
     from app.scene import Scene
 
     spec = args.input or f"sample:{DEFAULT_SAMPLE}"
     obj = load_input(spec)
     vol = obj.volume if isinstance(obj, Scene) else obj
     out = Path(args.out)
+    tf = _tf_arg(args.tf)
+    if tf is None:
+        tf = suggested_transfer_function(vol.name) if spec.startswith("sample:") else "ct-bone"
     paths = []
     with OffscreenRenderer(*args.size) as r:
         for mode in MODES:
-            scene = Scene(vol, mode=mode, transfer_function=args.tf, view=args.view, zoom=1.3)
+            scene = Scene(vol, mode=mode, transfer_function=tf, view=args.view, zoom=1.3)
             img = r.render(scene)
             paths.append(write_image(out / f"{vol.name}_{mode}.png", img))
         scene.save(out / f"{vol.name}_scene.json")
@@ -206,7 +217,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         warmup=args.warmup,
         use_vtk=not args.no_vtk,
         step=args.step,
-        transfer_function=args.tf,
+        transfer_function=_tf_arg(args.tf),
         log=lambda s: print(s, file=sys.stderr),
     )
     command = (
@@ -259,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
     pd.add_argument("input", nargs="?", help="volume (default: the bundled real CT)")
     pd.add_argument("--out", default="out")
     pd.add_argument("--size", type=_size, default=(512, 512))
-    pd.add_argument("--tf", default="ct-bone")
+    pd.add_argument("--tf", help="preset or tf.json (default: suits the sample)")
     pd.add_argument("--view", type=_view, default="-y")
     pd.set_defaults(func=cmd_demo)
 
@@ -274,7 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     pbr.add_argument("--frames", type=int, default=10)
     pbr.add_argument("--warmup", type=int, default=2)
     pbr.add_argument("--step", type=float, default=1.0)
-    pbr.add_argument("--tf", default="ct-bone")
+    pbr.add_argument("--tf", help="preset or tf.json (default: suits the bench volume)")
     pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
     pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbr.set_defaults(func=cmd_bench)

@@ -15,6 +15,29 @@ from app.volume import Volume
 #: The sample `make run` and `voxwarp demo` render by default.
 DEFAULT_SAMPLE = "stent"
 
+#: Transfer functions that suit each sample (presets or control points in its units).
+#: The stent CT is stored as 0..32 (not HU): soft tissue 0..6, contrast-filled vessels
+#: and bone around 10..20, the stent graft's metal at the top of the range.
+SUGGESTED_TRANSFER_FUNCTIONS: dict[str, Any] = {
+    "stent": [
+        (0.0, 0.0, 0.0, 0.0, 0.0),
+        (4.0, 0.7, 0.2, 0.15, 0.0),
+        (6.0, 0.85, 0.35, 0.25, 0.03),
+        (10.0, 0.95, 0.7, 0.55, 0.25),
+        (20.0, 1.0, 0.95, 0.9, 0.7),
+        (32.0, 1.0, 1.0, 1.0, 0.95),
+    ],
+    "colin27": "mri",
+    "fish": "ct-bone",
+    "tubes": "ct-soft",
+    "head": "ct-bone",
+}
+
+
+def suggested_transfer_function(name: str) -> Any:
+    """A transfer function (preset name or points) that shows sample ``name`` well."""
+    return SUGGESTED_TRANSFER_FUNCTIONS.get(name, "ct-bone")
+
 
 def sample_names() -> list[str]:
     """Names accepted by :func:`load_sample`."""

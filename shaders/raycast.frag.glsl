@@ -80,7 +80,10 @@ void main() {
     g_rd = (far_point - g_ro) / t_far;
 
     vec2 tb = intersect_box(g_ro, g_rd, u_bounds_lo, u_bounds_hi);
-    float t0 = max(tb.x, 0.0);
+    // The sample lattice is anchored at the entry into the deformed-space box, so both
+    // paths (and skipping on or off) sample at exactly the same positions.
+    float t_lattice = max(tb.x, 0.0);
+    float t0 = t_lattice;
     float t1 = min(tb.y, t_far);
 #ifdef LINEAR_PATH
     g_u0 = (u_world_to_texel * vec4(g_ro, 1.0)).xyz;
@@ -96,12 +99,12 @@ void main() {
         return;
     }
     float j = u_jitter != 0 ? hash01(uvec2(gl_FragCoord.xy), u_seed) : 0.5;
-    int n = int(ceil((t1 - t0) / u_step - j));
-    n = clamp(n, 0, u_max_steps);
+    int n = clamp(int(ceil((t1 - t_lattice) / u_step - j)), 0, u_max_steps);
+    int k = clamp(int(ceil((t0 - t_lattice) / u_step - j)), 0, n);
+    t0 = t_lattice;
 
     State s;
     mode_init(s);
-    int k = 0;
 #ifdef LINEAR_PATH
     vec3 inv_du = 1.0 / g_du;
     vec3 face = step(vec3(0.0), g_du);   // 1 where the ray leaves a block through its upper face
