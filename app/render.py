@@ -168,8 +168,8 @@ class Renderer:
                 )
             else:
                 what = (
-                    f"volume {volume.shape} needs {need / 2**20:.0f} MB of texture memory, over"
-                    f" the budget of {self.texture_budget_bytes / 2**20:.0f} MB"
+                    f"volume {volume.shape} needs {need / 2**20:.3g} MB of texture memory, over"
+                    f" the budget of {self.texture_budget_bytes / 2**20:.3g} MB"
                     " (VOXWARP_TEXTURE_BUDGET_MB)"
                 )
             raise VolumeTooLargeError(
@@ -178,6 +178,7 @@ class Renderer:
             )
 
     def _volume_gpu(self, volume: Volume) -> _VolumeGPU:
+        self._evict_dead()
         key = id(volume)
         hit = self._volumes.get(key)
         if hit is not None and hit[0]() is volume:
@@ -202,6 +203,12 @@ class Renderer:
             )
         self._volumes[key] = (weakref.ref(volume), gpu)
         return gpu
+
+    def _evict_dead(self) -> None:
+        # textures of garbage-collected volumes are freed here, while the context is
+        # current, rather than from a weakref callback that may run at any time
+        for key in [k for k, (ref, _) in self._volumes.items() if ref() is None]:
+            self._volumes.pop(key)[1].release()
 
     def _tf_texture(self, tf: TransferFunction, ratio: float) -> Any:
         key = (_tf_key(tf), ratio)

@@ -22,8 +22,11 @@ bool mode_sample(inout State s, float v, vec3 u, float t) {
         }
         th = tb;
     }
-    vec3 uh = texel_at(th);
-    s.color = vec4(shade(u_iso_color, 1.0, gradient_deformed(uh, th), g_rd), 1.0);
+    vec3 rgb = u_iso_color;
+#ifdef SHADING
+    rgb = shade(rgb, 1.0, gradient_deformed(texel_at(th), th), g_rd);
+#endif
+    s.color = vec4(rgb, 1.0);
     s.hit = true;
     return true;
 }
