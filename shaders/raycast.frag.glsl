@@ -10,9 +10,10 @@
 // Two paths, chosen at compile time:
 // * LINEAR_PATH: every warp is affine; the chain folds into one matrix, so the ray is a
 //   straight line in texel space. Empty-space skipping walks the min/max block grid
-//   (BLOCK³ voxels per block, with a one-voxel apron): a block whose values the mode
-//   cannot see is jumped over to its exit, on the same sample lattice, so skipping
-//   never changes the image.
+//   (BLOCK³ voxels per block, with a one-voxel apron). Each block stores its chessboard
+//   distance d to the nearest block the mode can see; a ray in an invisible block jumps
+//   out of the whole (2d-1)³ cube of invisible blocks around it in one step, landing on
+//   the same sample lattice, so skipping never changes the image.
 // * otherwise: each sample goes through warp_chain(p); invisible blocks still save the
 //   volume fetch and classification.
 // Early ray termination: the mode returns true from mode_sample when nothing further
@@ -35,7 +36,8 @@ uniform vec4 u_background;      // premultiplied
 uniform vec2 u_value_limits;    // min and max data value of the volume
 
 uniform sampler3D u_block_minmax;   // RG32F: block min, max (data units), apron included
-uniform sampler3D u_block_visible;  // R8: 1 where the transfer function sees the block
+uniform sampler3D u_block_skip;     // R8 (x255): chessboard distance in blocks to the
+                                    // nearest block the mode may see; 0 = visible
 uniform ivec3 u_blocks;             // blocks per axis
 
 out vec4 f_color;
@@ -65,7 +67,7 @@ bool block_in_grid(ivec3 b) {
     return all(greaterThanEqual(b, ivec3(0))) && all(lessThan(b, u_blocks));
 }
 vec2 block_range(ivec3 b) { return texelFetch(u_block_minmax, b, 0).rg; }
-bool block_tf_visible(ivec3 b) { return texelFetch(u_block_visible, b, 0).r > 0.0; }
+float block_skip(ivec3 b) { return texelFetch(u_block_skip, b, 0).r * 255.0; }
 
 #include "mode.glsl"
 
@@ -106,33 +108,37 @@ void main() {
     State s;
     mode_init(s);
 #ifdef LINEAR_PATH
+    // One flat loop (no nested per-block loop): SIMD lanes of a CPU rasteriser stay in
+    // step whether they sample or skip. The block's visibility is looked up only when
+    // a sample enters a new block; an invisible block is jumped to its exit, on the
+    // sample lattice.
     vec3 inv_du = 1.0 / g_du;
     vec3 face = step(vec3(0.0), g_du);   // 1 where the ray leaves a block through its upper face
+    ivec3 cur = ivec3(-1000000);
     while (k < n) {
-        vec3 u = texel_at(t0 + (float(k) + j) * u_step);
+        float t = t0 + (float(k) + j) * u_step;
+        vec3 u = texel_at(t);
         ivec3 blk = ivec3(floor(u * (1.0 / float(BLOCK))));
-        vec3 te = ((vec3(blk) + face) * float(BLOCK) - g_u0) * inv_du;
-        float t_exit = min(min(te.x, te.y), te.z);
-        int k_exit = clamp(int(ceil((t_exit - t0) / u_step - j)), k + 1, n);
-        bool visible = block_in_grid(blk) && block_visible(blk, s);
+        if (blk != cur) {
+            cur = blk;
+            float d = block_in_grid(blk) ? block_skip(blk) : 1.0;
+            bool visible = d < 0.5 && block_visible(blk, s);
 #ifdef NO_SKIPPING
-        visible = true;   // reference runs: measure what skipping buys
+            visible = true;   // reference runs: measure what skipping buys
 #endif
-        if (!visible) {
-            if (mode_skip(s)) break;
-            k = k_exit;
-            continue;
-        }
-        bool done = false;
-        for (; k < k_exit; ++k) {
-            float t = t0 + (float(k) + j) * u_step;
-            vec3 uk = texel_at(t);
-            if (mode_sample(s, sample_value(uk), uk, t)) {
-                done = true;
-                break;
+            if (!visible) {
+                if (mode_skip(s)) break;
+                // leave the cube of blocks within distance d - 1: all invisible
+                float r = max(d, 1.0) - 1.0;
+                vec3 bound = vec3(blk) + face + (2.0 * face - 1.0) * r;
+                vec3 te = (bound * float(BLOCK) - g_u0) * inv_du;
+                float t_exit = min(min(te.x, te.y), te.z);
+                k = clamp(int(ceil((t_exit - t0) / u_step - j)), k + 1, n);
+                continue;
             }
         }
-        if (done) break;
+        if (mode_sample(s, sample_value(u), u, t)) break;
+        ++k;
     }
 #else
     for (; k < n; ++k) {
@@ -143,7 +149,7 @@ void main() {
             continue;
         }
         ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
-        bool visible = block_visible(blk, s);
+        bool visible = block_skip(blk) < 0.5 && block_visible(blk, s);
 #ifdef NO_SKIPPING
         visible = true;
 #endif
