@@ -42,6 +42,7 @@ uniform ivec3 u_blocks;             // blocks per axis
 
 out vec4 f_color;
 
+bool g_inside = false;   // some sample of this ray lies inside the volume
 vec3 g_ro;   // ray origin (deformed world)
 vec3 g_rd;   // unit ray direction (deformed world)
 
@@ -115,6 +116,7 @@ void main() {
     vec3 inv_du = 1.0 / g_du;
     vec3 face = step(vec3(0.0), g_du);   // 1 where the ray leaves a block through its upper face
     ivec3 cur = ivec3(-1000000);
+    g_inside = k < n;
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
         vec3 u = texel_at(t);
@@ -148,6 +150,7 @@ void main() {
             if (mode_skip(s)) break;
             continue;
         }
+        g_inside = true;
         ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
         bool visible = block_skip(blk) < 0.5 && block_visible(blk, s);
 #ifdef NO_SKIPPING
