@@ -116,8 +116,23 @@ class Camera:
         self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
         if not (0 < self.fov < 179):
             raise SceneError(f"fov must be in (0, 179) degrees; got {self.fov}")
-        if self.distance <= 0 or self.ortho_height <= 0 or self.radius <= 0:
-            raise SceneError("camera distance, ortho_height and radius must be positive")
+        for name in ("distance", "ortho_height", "radius"):
+            v = float(getattr(self, name))
+            if not (np.isfinite(v) and v > 0):
+                raise SceneError(f"camera {name} must be positive and finite; got {v}")
+            setattr(self, name, v)
+        if not np.all(np.isfinite(self.center)):
+            raise SceneError(f"camera center must be finite; got {self.center}")
+        r = self.rotation
+        if not (
+            np.all(np.isfinite(r))
+            and np.allclose(r.T @ r, np.eye(3), atol=1e-6)
+            and np.linalg.det(r) > 0
+        ):
+            raise SceneError(
+                "camera rotation must be a proper rotation matrix (orthonormal columns"
+                " right, up, back with determinant +1)"
+            )
 
     # ------------------------------------------------------------------ construction
     @classmethod

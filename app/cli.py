@@ -110,13 +110,13 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
         "transfer_function": tf if tf is not None else "ct-bone",
         "view": args.view or "-y",
         "projection": args.projection or "perspective",
-        "step": args.step or 1.0,
+        "step": args.step if args.step is not None else 1.0,
         "window": args.window,
         "jitter": True if args.jitter is None else args.jitter,
-        "seed": args.seed or 0,
+        "seed": args.seed if args.seed is not None else 0,
         "shading": args.shading,
         "iso_value": args.iso_value,
-        "zoom": args.zoom or 1.0,
+        "zoom": args.zoom if args.zoom is not None else 1.0,
     }
     return Scene(obj, **kw)
 
@@ -292,19 +292,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _join_negative_views(argv: list[str]) -> list[str]:
+    # "--view -y" / "--view -30,20": argparse would take the value for an option
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--view" and i + 1 < len(argv) and argv[i + 1].startswith("-"):
+            out.append(f"--view={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``voxwarp`` console script."""
     parser = build_parser()
-    args = parser.parse_args(argv)
-    warnings.simplefilter("default")
-    warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
-    try:
-        return int(args.func(args) or 0)
-    except VoxwarpError as exc:
-        print(f"voxwarp: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+    args = parser.parse_args(_join_negative_views(list(sys.argv[1:] if argv is None else argv)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        old_format = warnings.formatwarning
+        warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
+        try:
+            return int(args.func(args) or 0)
+        except VoxwarpError as exc:
+            print(f"voxwarp: error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            return 130
+        finally:
+            warnings.formatwarning = old_format
 
 
 if __name__ == "__main__":

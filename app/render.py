@@ -12,6 +12,7 @@ early ray termination, jitter).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -496,18 +497,60 @@ def _set_uniform(prog: Any, name: str, value: Any) -> None:
         u.value = value
 
 
-def create_context() -> Any:
-    """A standalone headless OpenGL 4.3+ context through EGL (the caller owns it)."""
-    import moderngl
+def _egl_current() -> tuple | None:
+    """The current EGL (display, draw, read, context), or None (no EGL or none current)."""
+    import ctypes
 
     try:
-        return moderngl.create_standalone_context(backend="egl", require=430)
+        lib = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return None
+    for name in ("eglGetCurrentContext", "eglGetCurrentDisplay", "eglGetCurrentSurface"):
+        getattr(lib, name).restype = ctypes.c_void_p
+    lib.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+    context = lib.eglGetCurrentContext()
+    if not context:
+        return None
+    display = lib.eglGetCurrentDisplay()
+    return (
+        lib,
+        display,
+        lib.eglGetCurrentSurface(0x3059),
+        lib.eglGetCurrentSurface(0x305A),
+        context,
+    )
+
+
+def _egl_restore(saved: tuple | None) -> None:
+    if saved is None:
+        return
+    import ctypes
+
+    lib, display, draw, read, context = saved
+    lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    lib.eglMakeCurrent(display, draw, read, context)
+
+
+def create_context() -> Any:
+    """A standalone headless OpenGL 4.3+ context through EGL (the caller owns it).
+
+    Whatever EGL context was current before stays current (a new context is left
+    current only when none was).
+    """
+    import moderngl
+
+    saved = _egl_current()
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl", require=430)
     except Exception as exc:
         raise RenderError(
             "could not create a headless OpenGL 4.3 context through EGL"
             f" ({exc}). Install Mesa's EGL and GL libraries (Debian: libegl1 libgl1"
             " libegl-mesa0 libgl1-mesa-dri; run `sudo scripts/install-system-deps.sh`)."
         ) from exc
+    finally:
+        _egl_restore(saved)
+    return ctx
 
 
 class OffscreenRenderer:
@@ -538,14 +581,37 @@ class OffscreenRenderer:
         self.size = (int(width), int(height))
         self.dtype = dtype
         self._gl_dtype = "f1" if dtype == "u1" else "f4"
-        self.renderer = Renderer(self.ctx)
         self._fbo: Any = None
         self._color: Any = None
-        self._make_fbo()
+        with self._current():
+            self.renderer = Renderer(self.ctx)
+            self._make_fbo()
         self._released = False
+
+    @contextlib.contextmanager
+    def _current(self) -> Any:
+        """Make an owned context current for a block, then restore the previous one."""
+        if not self._owns_ctx:
+            yield
+            return
+        saved = _egl_current()
+        self.ctx.mglo.__enter__()  # eglMakeCurrent(this context)
+        try:
+            yield
+        finally:
+            if saved is not None:
+                _egl_restore(saved)
+
+    def _unbind_fbo(self) -> None:
+        # never delete the bound framebuffer: moderngl would re-bind the dead name later
+        try:
+            self.ctx.detect_framebuffer(0).use()
+        except Exception:
+            pass
 
     def _make_fbo(self) -> None:
         if self._fbo is not None:
+            self._unbind_fbo()
             self._fbo.release()
             self._color.release()
         # moderngl "f1" is normalised RGBA8 ("u1" would be an integer format)
@@ -555,7 +621,8 @@ class OffscreenRenderer:
     def resize(self, width: int, height: int) -> None:
         """Change the image size."""
         self.size = (int(width), int(height))
-        self._make_fbo()
+        with self._current():
+            self._make_fbo()
 
     @property
     def framebuffer(self) -> Any:
@@ -564,9 +631,10 @@ class OffscreenRenderer:
 
     def render(self, scene: Scene, camera: Camera | None = None) -> np.ndarray:
         """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top."""
-        self.renderer.draw(scene, self._fbo, camera=camera)
+        with self._current():
+            self.renderer.draw(scene, self._fbo, camera=camera)
+            raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
         w, h = self.size
-        raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
         img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
         return img.reshape(h, w, 4)[::-1].copy()
 
@@ -574,6 +642,12 @@ class OffscreenRenderer:
         self, scene: Scene, frames: int = 10, warmup: int = 2, camera: Camera | None = None
     ) -> list[float]:
         """Milliseconds per frame (``ctx.finish()`` bound) after ``warmup`` frames."""
+        with self._current():
+            return self._time_frames(scene, frames, warmup, camera)
+
+    def _time_frames(
+        self, scene: Scene, frames: int, warmup: int, camera: Camera | None
+    ) -> list[float]:
         for _ in range(warmup):
             self.renderer.draw(scene, self._fbo, camera=camera)
         self.ctx.finish()
@@ -589,11 +663,15 @@ class OffscreenRenderer:
         """Free GPU resources (and the context if this renderer created it); idempotent."""
         if getattr(self, "_released", True):
             return
-        self.renderer.release()
-        self._fbo.release()
-        self._color.release()
+        with self._current():
+            self.renderer.release()
+            self._unbind_fbo()
+            self._fbo.release()
+            self._color.release()
         if self._owns_ctx:
+            saved = _egl_current()  # releasing may clear the current context
             self.ctx.release()
+            _egl_restore(saved)
         self._released = True
 
     def __enter__(self) -> OffscreenRenderer:

@@ -22,7 +22,7 @@ import numpy as np
 from app.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from app.errors import SceneError, VolumeError
 from app.transfer_function import TransferFunction
-from app.volume import Volume
+from app.volume import Volume, check_finite
 from deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
 
 Mode = Literal["dvr", "mip", "minip", "average", "flm", "iso"]
@@ -30,6 +30,8 @@ MODES: tuple[str, ...] = ("dvr", "mip", "minip", "average", "flm", "iso")
 
 #: Largest volume (bytes) a scene JSON embeds instead of referring to a file.
 EMBED_LIMIT_BYTES = 8 * 1024 * 1024
+#: Samples made by generators (their shape is stored in scene JSON).
+GENERATED_SAMPLES = ("fish", "tubes", "head")
 SCENE_FORMAT = "voxwarp-scene"
 SCENE_VERSION = 1
 
@@ -170,7 +172,13 @@ class Scene:
     @view.setter
     def view(self, value: View) -> None:
         if not isinstance(value, str):
-            value = tuple(float(v) for v in value)  # type: ignore[assignment]
+            try:
+                value = tuple(float(v) for v in value)  # type: ignore[assignment]
+            except (TypeError, ValueError) as exc:
+                raise SceneError(
+                    "view must be one of +x, -x, +y, -y, +z, -z or (azimuth, elevation)"
+                    f" degrees; got {value!r}"
+                ) from exc
         view_rotation(value)  # validates
         self._view = value
 
@@ -238,6 +246,10 @@ class Scene:
 
     @background.setter
     def background(self, value: Sequence[float]) -> None:
+        if not hasattr(value, "__len__") or len(value) not in (3, 4):
+            raise SceneError(
+                f"background must be (r, g, b) or (r, g, b, a) in [0, 1]; got {value!r}"
+            )
         v = (
             _vec(value, 4, "background (r, g, b, a)")
             if len(value) == 4
@@ -390,7 +402,9 @@ class Scene:
         if d.get("format", SCENE_FORMAT) != SCENE_FORMAT:
             raise SceneError(f"not a voxwarp scene (format {d.get('format')!r})")
         version = d.get("version", SCENE_VERSION)
-        if not isinstance(version, int) or version > SCENE_VERSION:
+        if not isinstance(version, int) or isinstance(version, bool):
+            raise SceneError(f"scene 'version' must be an integer; got {version!r}")
+        if version > SCENE_VERSION:
             raise SceneError(
                 f"scene version {version!r} is newer than this voxwarp understands"
                 f" ({SCENE_VERSION}); upgrade voxwarp"
@@ -400,7 +414,7 @@ class Scene:
         volume = _volume_from_dict(d["volume"], base_dir)
         try:
             warps = [warp_from_dict(w) for w in (d.get("warps") or [])]
-        except WarpError as exc:
+        except (WarpError, TypeError) as exc:
             raise SceneError(f"invalid warp in scene: {exc}") from exc
         tf = d.get("transfer_function", "ct-bone")
         if isinstance(tf, Mapping):
@@ -550,12 +564,16 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
                 raise SceneError(f"embedded volume dtype {dtype} is not a numeric type")
             if len(shape) != 3 or min(shape) < 1:
                 raise SceneError(f"embedded volume shape must be 3 positive ints; got {shape}")
-            if len(raw) != dtype.itemsize * int(np.prod(shape)):
+            need = dtype.itemsize * math.prod(shape)
+            if len(raw) != need:
                 raise SceneError(
-                    f"embedded volume holds {len(raw)} bytes; shape {shape} of {dtype}"
-                    f" needs {dtype.itemsize * int(np.prod(shape))}"
+                    f"embedded volume holds {len(raw)} bytes; shape {shape} of {dtype} needs {need}"
                 )
-            data = np.frombuffer(raw, dtype=dtype).reshape(shape, order="F")
+            data = check_finite(
+                np.frombuffer(raw, dtype=dtype).reshape(shape, order="F"),
+                "raise",
+                "embedded volume",
+            )
             return Volume(
                 data,
                 spacing if spacing is not None else (1, 1, 1),
@@ -566,7 +584,11 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
         if "sample" in d:
             from app.samples import load_sample
 
-            return load_sample(str(d["sample"]), spacing=spacing, origin=origin)
+            name = str(d["sample"])
+            kwargs: dict[str, Any] = {}
+            if name in GENERATED_SAMPLES and d.get("shape") is not None:
+                kwargs["shape"] = tuple(int(v) for v in d["shape"])
+            return load_sample(name, spacing=spacing, origin=origin, **kwargs)
         if "path" in d:
             from app.io import load_volume
 
@@ -574,6 +596,6 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
             if not p.is_absolute() and base_dir is not None:
                 p = Path(base_dir) / p
             return load_volume(p, spacing=spacing, origin=origin)
-    except VolumeError as exc:
+    except (VolumeError, TypeError, ValueError, OverflowError) as exc:
         raise SceneError(f"scene volume: {exc}") from exc
     raise SceneError("scene 'volume' needs one of 'path', 'sample' or 'embedded'")

@@ -232,7 +232,7 @@ class TransferFunction:
     def from_dict(cls, d: Mapping[str, Any], volume: Volume | None = None) -> TransferFunction:
         """Inverse of :meth:`to_dict`; ``{"preset": name}`` is resolved against ``volume``."""
         if "points" in d:
-            return cls(list(d["points"]), name=str(d.get("name", "custom")))
+            return cls(d["points"], name=str(d.get("name", "custom")))
         if "preset" in d:
             return cls.preset(str(d["preset"]), volume)
         raise SceneError("a transfer function entry needs 'points' or 'preset'")
@@ -247,7 +247,7 @@ class TransferFunction:
                 d = json.load(fh)
         except FileNotFoundError as exc:
             raise SceneError(f"no such transfer function file: {path}") from exc
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, ValueError) as exc:  # ValueError: bad JSON or not UTF-8
             raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
         if isinstance(d, list):
             return cls(d)

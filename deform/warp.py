@@ -55,7 +55,7 @@ def warp_from_dict(d: Mapping[str, Any]) -> Warp:
     if not isinstance(d, Mapping) or "type" not in d:
         raise WarpError(f"a warp entry must be an object with a 'type' key; got {d!r:.80}")
     kind = d["type"]
-    if kind not in _REGISTRY:
+    if not isinstance(kind, str) or kind not in _REGISTRY:
         raise WarpError(f"unknown warp type {kind!r}; known types: {sorted(_REGISTRY)}")
     return _REGISTRY[kind].from_dict(d)
 
