@@ -116,6 +116,7 @@ class Volume:
     source: str | None = None
     units: str = ""
     _range: tuple[float, float] | None = field(default=None, repr=False)
+    _window: tuple[float, float] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         data = np.asarray(self.data)
@@ -182,14 +183,17 @@ class Volume:
         return self._range
 
     def default_window(self) -> tuple[float, float]:
-        """A ``(level, window)`` from the 0.5 and 99.5 percentiles of the values."""
+        """A ``(level, window)`` from the 0.5 and 99.5 percentiles of the values (cached)."""
+        if self._window is not None:
+            return self._window
         sample = self.data[:: max(1, self.shape[0] // 64), :: max(1, self.shape[1] // 64), ::]
         lo, hi = np.percentile(sample, [0.5, 99.5])
         if hi <= lo:
             lo, hi = self.value_range
         if hi <= lo:
             hi = lo + 1.0
-        return float(0.5 * (lo + hi)), float(hi - lo)
+        self._window = (float(0.5 * (lo + hi)), float(hi - lo))
+        return self._window
 
     @property
     def nbytes(self) -> int:
