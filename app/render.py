@@ -157,19 +157,17 @@ class _VolumeGPU:
         bmin, bmax = block_min_max(volume.data, BLOCK)
         self.block_min, self.block_max = bmin, bmax
         self.blocks = bmin.shape
-        mm = np.stack([bmin, bmax], axis=-1)  # (bx, by, bz, 2)
-        mm = np.ascontiguousarray(mm.transpose(2, 1, 0, 3))  # x fastest
-        self.minmax = ctx.texture3d(self.blocks, 2, mm.tobytes(), dtype="f4")
-        self.minmax.filter = (ctx.NEAREST, ctx.NEAREST)
-        self.visible: Any = None
-        self.visible_key: Any = None
+        # block info texture (skip distance, min, max, 0), written once a mode is known
+        self.info = ctx.texture3d(self.blocks, 4, dtype="f4")
+        self.info.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.info_key: Any = None
         self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
 
     def release(self) -> None:
-        for tex in (self.texture, self.minmax, self.visible):
+        for tex in (self.texture, self.info):
             if tex is not None:
                 tex.release()
-        self.texture = self.minmax = self.visible = None  # type: ignore[assignment]
+        self.texture = self.info = None  # type: ignore[assignment]
 
 
 def _tf_key(tf: TransferFunction) -> tuple:
@@ -306,20 +304,24 @@ class Renderer:
             self._tf_key = key
         return self._tf_tex
 
-    def _skip_map(self, gpu: _VolumeGPU, scene: Scene) -> Any:
+    def _block_info(self, gpu: _VolumeGPU, scene: Scene) -> Any:
         key = skip_map_key(scene)
-        if gpu.visible is None or gpu.visible_key != key:
+        if gpu.info_key != key:
             dist = block_skip_distances(
                 static_block_visibility(scene, gpu.block_min, gpu.block_max)
             )
-            data = np.ascontiguousarray(dist.transpose(2, 1, 0))
-            if gpu.visible is None:
-                gpu.visible = self.ctx.texture3d(gpu.blocks, 1, data.tobytes(), dtype="f1")
-                gpu.visible.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            else:
-                gpu.visible.write(data.tobytes())
-            gpu.visible_key = key
-        return gpu.visible
+            info = np.stack(
+                [
+                    dist.astype(np.float32),
+                    gpu.block_min,
+                    gpu.block_max,
+                    np.zeros_like(gpu.block_min),
+                ],
+                axis=-1,
+            )
+            gpu.info.write(np.ascontiguousarray(info.transpose(2, 1, 0, 3)).tobytes())
+            gpu.info_key = key
+        return gpu.info
 
     def _program(self, scene: Scene, linear: bool) -> Any:
         warps = [] if linear else scene.warps
@@ -430,8 +432,7 @@ class Renderer:
             "u_iso_color": tuple(float(c) for c in iso_rgb),
             "u_volume": 0,
             "u_tf": 1,
-            "u_block_minmax": 2,
-            "u_block_skip": 3,
+            "u_block_info": 2,
         }
         if linear:
             to_texel = np.eye(4)
@@ -444,9 +445,8 @@ class Renderer:
 
         gpu.texture.use(0)
         self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
-        gpu.minmax.use(2)
-        self._skip_map(gpu, scene).use(3)
-        unit = 4
+        self._block_info(gpu, scene).use(2)
+        unit = 3
         if not linear:
             for i, warp in enumerate(scene.warps):
                 for name, value in warp.uniforms().items():

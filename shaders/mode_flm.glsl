@@ -18,7 +18,7 @@ bool flm_emit(inout State s) {
     s.hit = true;
     return true;
 }
-bool block_visible(ivec3 b, inout State s) { return block_range(b).y >= u_threshold; }
+bool block_visible(vec2 range, inout State s) { return range.y >= u_threshold; }
 // a skipped region lies below the threshold: a maximum pending above it is final
 bool mode_skip(inout State s) {
     if (s.prev >= u_threshold) return flm_emit(s);

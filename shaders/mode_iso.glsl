@@ -4,7 +4,7 @@ uniform float u_iso;
 uniform vec3 u_iso_color;
 struct State { float prev; float prev_t; bool hit; vec4 color; };
 void mode_init(inout State s) { s.prev = -3.0e38; s.prev_t = 0.0; s.hit = false; s.color = vec4(0.0); }
-bool block_visible(ivec3 b, inout State s) { return block_range(b).y >= u_iso; }
+bool block_visible(vec2 range, inout State s) { return range.y >= u_iso; }
 bool mode_skip(inout State s) { s.prev = -3.0e38; return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {
     if (v < u_iso) {

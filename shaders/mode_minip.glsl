@@ -1,8 +1,8 @@
 // Minimum intensity projection, shown through the window (grey values).
 struct State { float m; };
 void mode_init(inout State s) { s.m = 3.0e38; }
-bool block_visible(ivec3 b, inout State s) {
-    return block_range(b).x < min(s.m, u_window.y);
+bool block_visible(vec2 range, inout State s) {
+    return range.x < min(s.m, u_window.y);
 }
 bool mode_skip(inout State s) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {

@@ -2,8 +2,8 @@
 struct State { float m; };
 void mode_init(inout State s) { s.m = -3.0e38; }
 // a block can only matter if its maximum beats both the current maximum and the window low
-bool block_visible(ivec3 b, inout State s) {
-    return block_range(b).y > max(s.m, u_window.x);
+bool block_visible(vec2 range, inout State s) {
+    return range.y > max(s.m, u_window.x);
 }
 bool mode_skip(inout State s) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {

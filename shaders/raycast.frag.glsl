@@ -35,9 +35,10 @@ uniform uint u_seed;
 uniform vec4 u_background;      // premultiplied
 uniform vec2 u_value_limits;    // min and max data value of the volume
 
-uniform sampler3D u_block_minmax;   // RG32F: block min, max (data units), apron included
-uniform sampler3D u_block_skip;     // R8 (x255): chessboard distance in blocks to the
-                                    // nearest block the mode may see; 0 = visible
+// RGBA32F per block: x = chessboard distance in blocks to the nearest block the mode
+// may see (0 = visible), y, z = min and max of the block's values (apron included).
+// One fetch per block change.
+uniform sampler3D u_block_info;
 uniform ivec3 u_blocks;             // blocks per axis
 
 out vec4 f_color;
@@ -67,8 +68,7 @@ vec3 gradient_deformed(vec3 u, float t) {
 bool block_in_grid(ivec3 b) {
     return all(greaterThanEqual(b, ivec3(0))) && all(lessThan(b, u_blocks));
 }
-vec2 block_range(ivec3 b) { return texelFetch(u_block_minmax, b, 0).rg; }
-float block_skip(ivec3 b) { return texelFetch(u_block_skip, b, 0).r * 255.0; }
+vec4 block_info(ivec3 b) { return texelFetch(u_block_info, b, 0); }
 
 #include "mode.glsl"
 
@@ -123,8 +123,9 @@ void main() {
         ivec3 blk = ivec3(floor(u * (1.0 / float(BLOCK))));
         if (blk != cur) {
             cur = blk;
-            float d = block_in_grid(blk) ? block_skip(blk) : 1.0;
-            bool visible = d < 0.5 && block_visible(blk, s);
+            vec4 info = block_in_grid(blk) ? block_info(blk) : vec4(1.0, 0.0, 0.0, 0.0);
+            float d = info.x;
+            bool visible = d < 0.5 && block_visible(info.yz, s);
 #ifdef NO_SKIPPING
             visible = true;   // reference runs: measure what skipping buys
 #endif
@@ -152,7 +153,8 @@ void main() {
         }
         g_inside = true;
         ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
-        bool visible = block_skip(blk) < 0.5 && block_visible(blk, s);
+        vec4 info = block_info(blk);
+        bool visible = info.x < 0.5 && block_visible(info.yz, s);
 #ifdef NO_SKIPPING
         visible = true;
 #endif
