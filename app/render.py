@@ -77,6 +77,23 @@ def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
     return np.moveaxis(r, 0, axis)
 
 
+def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per trilinear cell (min, max) of its 8 corner voxels, shape ``n + 1`` per axis.
+
+    Cell ``c`` covers texel coordinates ``[c - 1/2, c + 1/2]`` per axis, whose samples
+    interpolate voxels ``c - 1`` and ``c`` (clamped to the edge). float32, data units.
+    """
+    p = np.pad(np.asarray(data), 1, mode="edge")
+    lo = hi = None
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                v = p[i : i + p.shape[0] - 1, j : j + p.shape[1] - 1, k : k + p.shape[2] - 1]
+                lo = v if lo is None else np.minimum(lo, v)
+                hi = v if hi is None else np.maximum(hi, v)
+    return lo.astype(np.float32), hi.astype(np.float32)  # type: ignore[union-attr]
+
+
 def static_block_visibility(
     scene: Scene, block_min: np.ndarray, block_max: np.ndarray
 ) -> np.ndarray:
@@ -161,13 +178,17 @@ class _VolumeGPU:
         self.info = ctx.texture3d(self.blocks, 4, dtype="f4")
         self.info.filter = (ctx.NEAREST, ctx.NEAREST)
         self.info_key: Any = None
+        self.volume_data = volume.data
+        self.cell_range: tuple[np.ndarray, np.ndarray] | None = None
+        self.cell_skip: Any = None
+        self.cell_key: Any = None
         self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
 
     def release(self) -> None:
-        for tex in (self.texture, self.info):
+        for tex in (self.texture, self.info, self.cell_skip):
             if tex is not None:
                 tex.release()
-        self.texture = self.info = None  # type: ignore[assignment]
+        self.texture = self.info = self.cell_skip = None  # type: ignore[assignment]
 
 
 def _tf_key(tf: TransferFunction) -> tuple:
@@ -209,6 +230,8 @@ class Renderer:
         self.ctx = ctx
         #: skip blocks the mode cannot see (off only to measure what it buys)
         self.empty_space_skipping = bool(empty_space_skipping)
+        #: skip at the resolution of trilinear cells (affine chains only)
+        self.cell_skipping = True
         if sampling not in ("auto", "texture3d", "slice_pairs"):
             raise RenderError(
                 f"sampling must be 'auto', 'texture3d' or 'slice_pairs'; got {sampling!r}"
@@ -323,13 +346,49 @@ class Renderer:
             gpu.info_key = key
         return gpu.info
 
+    def _skip_kind(self, scene: Scene, linear: bool) -> str:
+        """Which empty-space skipping a draw uses: "cells", "blocks" or "none".
+
+        Straight rays (affine chains) skip at trilinear-cell resolution for the modes
+        whose visibility is sparse (dvr, iso, flm). mip, minip and average must look
+        at (nearly) every sample along the ray; on the benchmark CT their skip checks
+        cost more than they saved (no skipping: 1.3x faster), so they march plainly.
+        Warped (non-affine) rays test their 4³ block per sample.
+        """
+        if not self.empty_space_skipping:
+            return "none"
+        if not linear:
+            return "blocks"
+        if scene.mode in ("dvr", "iso", "flm") and self.cell_skipping:
+            return "cells"
+        if scene.mode in ("mip", "minip", "average"):
+            return "none"
+        return "blocks"
+
+    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene) -> Any:
+        key = skip_map_key(scene)
+        if gpu.cell_key != key:
+            if gpu.cell_range is None:
+                gpu.cell_range = cell_min_max(gpu.volume_data)
+            vis = static_block_visibility(scene, *gpu.cell_range)
+            dist = np.ascontiguousarray(block_skip_distances(vis).transpose(2, 1, 0))
+            if gpu.cell_skip is None:
+                gpu.cell_skip = self.ctx.texture3d(
+                    vis.shape, 1, dist.tobytes(), dtype="f1", alignment=1
+                )
+                gpu.cell_skip.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            else:
+                gpu.cell_skip.write(dist.tobytes(), alignment=1)
+            gpu.cell_key = key
+        return gpu.cell_skip
+
     def _program(self, scene: Scene, linear: bool) -> Any:
         warps = [] if linear else scene.warps
         key = (
             scene.mode,
             linear,
             scene.use_shading(),
-            self.empty_space_skipping,
+            self._skip_kind(scene, linear),
             self.sampling,
             tuple(w.signature() for w in warps),
         )
@@ -341,10 +400,13 @@ class Renderer:
             defines.append("#define LINEAR_PATH")
         if scene.use_shading():
             defines.append("#define SHADING")
-        if not self.empty_space_skipping:
+        kind = self._skip_kind(scene, linear)
+        if kind == "none":
             defines.append("#define NO_SKIPPING")
         if self.sampling == "slice_pairs":
             defines.append("#define SLICE_PAIRS")
+        if kind == "cells":
+            defines.append("#define CELL_SKIP")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -433,6 +495,7 @@ class Renderer:
             "u_volume": 0,
             "u_tf": 1,
             "u_block_info": 2,
+            "u_cell_skip": 3,
         }
         if linear:
             to_texel = np.eye(4)
@@ -446,7 +509,9 @@ class Renderer:
         gpu.texture.use(0)
         self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
         self._block_info(gpu, scene).use(2)
-        unit = 3
+        if self._skip_kind(scene, linear) == "cells":
+            self._cell_skip(gpu, scene).use(3)
+        unit = 4
         if not linear:
             for i, warp in enumerate(scene.warps):
                 for name, value in warp.uniforms().items():

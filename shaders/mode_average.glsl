@@ -2,7 +2,7 @@
 struct State { float sum; float count; };
 void mode_init(inout State s) { s.sum = 0.0; s.count = 0.0; }
 bool block_visible(vec2 range, inout State s) { return true; }
-bool mode_skip(inout State s) { return false; }
+bool mode_skip(inout State s, float t_clear) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {
     s.sum += v;
     s.count += 1.0;

@@ -4,7 +4,7 @@ struct State { vec4 acc; };
 void mode_init(inout State s) { s.acc = vec4(0.0); }
 // the transfer function's visibility is in the static skip map
 bool block_visible(vec2 range, inout State s) { return true; }
-bool mode_skip(inout State s) { return false; }
+bool mode_skip(inout State s, float t_clear) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {
     vec4 c = transfer(v);
     if (c.a <= 0.0) return false;

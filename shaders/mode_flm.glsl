@@ -20,7 +20,7 @@ bool flm_emit(inout State s) {
 }
 bool block_visible(vec2 range, inout State s) { return range.y >= u_threshold; }
 // a skipped region lies below the threshold: a maximum pending above it is final
-bool mode_skip(inout State s) {
+bool mode_skip(inout State s, float t_clear) {
     if (s.prev >= u_threshold) return flm_emit(s);
     s.prev = -3.0e38;
     return false;

@@ -5,7 +5,13 @@ uniform vec3 u_iso_color;
 struct State { float prev; float prev_t; bool hit; vec4 color; };
 void mode_init(inout State s) { s.prev = -3.0e38; s.prev_t = 0.0; s.hit = false; s.color = vec4(0.0); }
 bool block_visible(vec2 range, inout State s) { return range.y >= u_iso; }
-bool mode_skip(inout State s) { s.prev = -3.0e38; return false; }
+// everything up to t_clear lies below the isovalue: bisection may start there
+// (t_clear < 0: the ray was outside the volume, no known value to start from)
+bool mode_skip(inout State s, float t_clear) {
+    s.prev = t_clear < 0.0 ? -3.0e38 : u_iso - 1.0;
+    s.prev_t = t_clear;
+    return false;
+}
 bool mode_sample(inout State s, float v, vec3 u, float t) {
     if (v < u_iso) {
         s.prev = v;

@@ -5,7 +5,7 @@ void mode_init(inout State s) { s.m = -3.0e38; }
 bool block_visible(vec2 range, inout State s) {
     return range.y > max(s.m, u_window.x);
 }
-bool mode_skip(inout State s) { return false; }
+bool mode_skip(inout State s, float t_clear) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {
     s.m = max(s.m, v);
     return s.m >= min(u_window.y, u_value_limits.y);   // cannot get brighter

@@ -70,6 +70,10 @@ bool block_in_grid(ivec3 b) {
 }
 vec4 block_info(ivec3 b) { return texelFetch(u_block_info, b, 0); }
 
+// R8 (x255) per trilinear cell: chessboard distance in cells to the nearest cell the
+// mode may see (0 = visible). Cell c spans texel coordinates [c - 1/2, c + 1/2].
+uniform sampler3D u_cell_skip;
+
 #include "mode.glsl"
 
 void main() {
@@ -115,8 +119,29 @@ void main() {
     // sample lattice.
     vec3 inv_du = 1.0 / g_du;
     vec3 face = step(vec3(0.0), g_du);   // 1 where the ray leaves a block through its upper face
-    ivec3 cur = ivec3(-1000000);
     g_inside = k < n;
+#ifdef CELL_SKIP
+    // Empty-space skipping at cell resolution: one nearest fetch per sample; an
+    // invisible cell at distance d lets the ray leave the whole (2d-1)³ cube of
+    // invisible cells around it in one step, landing on the sample lattice.
+    while (k < n) {
+        float t = t0 + (float(k) + j) * u_step;
+        vec3 u = texel_at(t);
+        ivec3 c = ivec3(floor(u + 0.5));
+        float d = texelFetch(u_cell_skip, c, 0).r * 255.0;
+        if (d > 0.5) {
+            vec3 bound = vec3(c) - 0.5 + face + (2.0 * face - 1.0) * (d - 1.0);
+            vec3 te = (bound - g_u0) * inv_du;
+            float t_exit = min(min(te.x, te.y), te.z);
+            if (mode_skip(s, min(t_exit, t0 + (float(n) - 1.0 + j) * u_step))) break;
+            k = clamp(int(ceil((t_exit - t0) / u_step - j)), k + 1, n);
+            continue;
+        }
+        if (mode_sample(s, sample_value(u), u, t)) break;
+        ++k;
+    }
+#else
+    ivec3 cur = ivec3(-1000000);
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
         vec3 u = texel_at(t);
@@ -130,12 +155,13 @@ void main() {
             visible = true;   // reference runs: measure what skipping buys
 #endif
             if (!visible) {
-                if (mode_skip(s)) break;
                 // leave the cube of blocks within distance d - 1: all invisible
                 float r = max(d, 1.0) - 1.0;
                 vec3 bound = vec3(blk) + face + (2.0 * face - 1.0) * r;
                 vec3 te = (bound * float(BLOCK) - g_u0) * inv_du;
                 float t_exit = min(min(te.x, te.y), te.z);
+                // (dynamic skips of mip/minip have d = 0: only this block is clear)
+                if (mode_skip(s, min(t_exit, t0 + (float(n) - 1.0 + j) * u_step))) break;
                 k = clamp(int(ceil((t_exit - t0) / u_step - j)), k + 1, n);
                 continue;
             }
@@ -143,12 +169,13 @@ void main() {
         if (mode_sample(s, sample_value(u), u, t)) break;
         ++k;
     }
+#endif
 #else
     for (; k < n; ++k) {
         float t = t0 + (float(k) + j) * u_step;
         vec3 u = texel_at(t);
         if (!inside_texels(u)) {
-            if (mode_skip(s)) break;
+            if (mode_skip(s, -1.0)) break;
             continue;
         }
         g_inside = true;
@@ -159,7 +186,7 @@ void main() {
         visible = true;
 #endif
         if (!visible) {
-            if (mode_skip(s)) break;
+            if (mode_skip(s, t)) break;
             continue;
         }
         if (mode_sample(s, sample_value(u), u, t)) break;

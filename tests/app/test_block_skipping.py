@@ -196,3 +196,19 @@ def test_texture_budget_from_the_environment(gl_ctx: Any, monkeypatch: pytest.Mo
     r.check_volume(Volume(np.zeros(shape, np.uint8)))  # fits exactly
     with pytest.raises(VolumeTooLargeError, match="budget"):
         r.check_volume(Volume(np.zeros((64, 64, 129), np.uint8)))
+
+
+def test_cell_min_max_matches_brute_force() -> None:
+    """Cell c covers texel coordinates [c - 1/2, c + 1/2]: its range is that of voxels
+    c - 1 and c per axis (clamped to the edge)."""
+    from app.render import cell_min_max
+
+    rng = np.random.default_rng(3)
+    data = rng.integers(-50, 50, size=(5, 4, 6)).astype(np.int16)
+    lo, hi = cell_min_max(data)
+    assert lo.shape == (6, 5, 7)
+    n = data.shape
+    for c in np.ndindex(lo.shape):
+        sl = tuple(slice(max(ci - 1, 0), min(ci, ni - 1) + 1) for ci, ni in zip(c, n, strict=True))
+        assert lo[c] == data[sl].min()
+        assert hi[c] == data[sl].max()

@@ -553,3 +553,19 @@ def test_slice_pair_sampling_matches_texture3d(gl_ctx: Any, mode: str) -> None:
             images.append(r.render(scene))
     assert np.abs(images[0] - images[1]).max() <= 2 / 255
     assert np.abs(images[0] - np.asarray(PHANTOM_BG, np.float32)).max() > 0.05  # not empty
+
+
+@pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
+def test_cell_block_and_no_skipping_give_the_same_image(gl_ctx: Any, mode: str) -> None:
+    """Every empty-space-skipping strategy renders the same image (tolerance 1/255):
+    skipping only jumps over samples that cannot contribute, on the same lattice."""
+    scene = phantom_scene(mode=mode)
+    images = {}
+    for kind in ("cells", "blocks", "none"):
+        with OffscreenRenderer(64, 64, ctx=gl_ctx, dtype="f4") as r:
+            r.renderer.cell_skipping = kind == "cells"
+            r.renderer.empty_space_skipping = kind != "none"
+            images[kind] = r.render(scene)
+    assert np.abs(images["cells"] - images["none"]).max() <= 1 / 255
+    assert np.abs(images["blocks"] - images["none"]).max() <= 1 / 255
+    assert np.abs(images["none"] - np.asarray(PHANTOM_BG, np.float32)).max() > 0.05
