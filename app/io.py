@@ -52,6 +52,8 @@ import numpy as np
 
 from app.errors import VolumeError
 from app.volume import Volume, check_finite
+from app.volume import parse_triple as _triple
+from app.volume import short_repr as _short
 
 __all__ = [
     "LOAD_EXTENSIONS",
@@ -171,37 +173,8 @@ def _warn(message: str) -> None:
     warnings.warn(message, UserWarning, stacklevel=level)
 
 
-def _short(value: Any, limit: int = 80) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
 def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _triple(
-    value: Any, what: str, *, positive: bool = False, where: str = ""
-) -> tuple[float, float, float]:
-    """Parse one number or three numbers into a finite ``(x, y, z)`` tuple."""
-    suffix = f" in {where}" if where else ""
-    try:
-        arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise VolumeError(
-            f"{what}{suffix} must be one number or three numbers (x, y, z); got {_short(value)}."
-        ) from exc
-    if arr.size == 1:
-        arr = np.repeat(arr, 3)
-    if arr.size != 3:
-        raise VolumeError(
-            f"{what}{suffix} must be one number or three numbers (x, y, z); got {_short(value)}."
-        )
-    if not np.all(np.isfinite(arr)):
-        raise VolumeError(f"{what}{suffix} must be finite; got {_short(value)}.")
-    if positive and np.any(arr <= 0):
-        raise VolumeError(f"{what}{suffix} must be positive in every axis; got {_short(value)}.")
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
 def _json_triple(

@@ -38,17 +38,41 @@ SUPPORTED_DTYPES: tuple[np.dtype, ...] = (
 NanPolicy = Literal["raise", "mask"]
 
 
-def _triple(value: float | Sequence[float] | None, default: float, what: str) -> tuple:
-    if value is None:
-        return (float(default),) * 3
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+def short_repr(value: object, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for error messages."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def parse_triple(
+    value: object, what: str, *, positive: bool = False, where: str = ""
+) -> tuple[float, float, float]:
+    """Parse one number or three numbers into a finite ``(x, y, z)`` tuple.
+
+    Raises :class:`VolumeError` naming ``what`` (and ``where`` it came from) otherwise.
+    """
+    suffix = f" in {where}" if where else ""
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise VolumeError(
+            f"{what}{suffix} must be one number or three numbers (x, y, z);"
+            f" got {short_repr(value)}."
+        ) from exc
     if arr.size == 1:
         arr = np.repeat(arr, 3)
     if arr.size != 3:
-        raise VolumeError(f"{what} must be one number or three numbers (x, y, z); got {list(arr)}.")
+        raise VolumeError(
+            f"{what}{suffix} must be one number or three numbers (x, y, z);"
+            f" got {short_repr(value)}."
+        )
     if not np.all(np.isfinite(arr)):
-        raise VolumeError(f"{what} must be finite; got {list(arr)}.")
-    return tuple(float(v) for v in arr)
+        raise VolumeError(f"{what}{suffix} must be finite; got {short_repr(value)}.")
+    if positive and np.any(arr <= 0):
+        raise VolumeError(
+            f"{what}{suffix} must be positive in every axis; got {short_repr(value)}."
+        )
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
 def coerce_dtype(data: np.ndarray) -> np.ndarray:
@@ -129,10 +153,10 @@ class Volume:
             raise VolumeError(f"the volume is empty: shape {data.shape}.")
         data = coerce_dtype(data)
         self.data = np.asfortranarray(data)
-        self.spacing = _triple(self.spacing, 1.0, "spacing")
-        if min(self.spacing) <= 0:
-            raise VolumeError(f"spacing must be positive in every axis; got {self.spacing}.")
-        self.origin = _triple(self.origin, 0.0, "origin")
+        self.spacing = parse_triple(
+            1.0 if self.spacing is None else self.spacing, "spacing", positive=True
+        )
+        self.origin = parse_triple(0.0 if self.origin is None else self.origin, "origin")
 
     # ------------------------------------------------------------------ geometry
     @property
