@@ -204,7 +204,7 @@ def cmd_samples(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     """``voxwarp bench render``: timings against references (see app.bench)."""
     from app.bench import bench_render
-    from app.scene import atomic_write_text
+    from app.files import atomic_write_text
 
     vol = None
     if args.input:

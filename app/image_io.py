@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from app.errors import VoxwarpError
+from app.files import atomic_write
 
 #: Extensions that keep float data (an ``f4`` render is written as float).
 FLOAT_FORMATS = (".exr", ".hdr", ".tif", ".tiff")
@@ -33,10 +33,9 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
         img = np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
     fmt = oiio.FLOAT if img.dtype == np.float32 else oiio.UINT8
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=ext, dir=path.parent)
-    os.close(fd)
-    try:
-        out = oiio.ImageOutput.create(tmp)
+
+    def write(tmp: Path) -> None:
+        out = oiio.ImageOutput.create(str(tmp))
         if out is None:
             raise VoxwarpError(
                 f"OpenImageIO cannot write {ext} files ({oiio.geterror()}); use .png, .exr or .tif"
@@ -44,15 +43,13 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
         spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], fmt)
         if img.shape[2] == 4:
             spec.alpha_channel = 3
-        ok = out.open(tmp, spec) and out.write_image(img)
+        ok = out.open(str(tmp), spec) and out.write_image(img)
         err = out.geterror()
         out.close()
         if not ok:
             raise VoxwarpError(f"could not write {path}: {err}")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+
+    atomic_write(path, ext, write)
     return path
 
 

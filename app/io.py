@@ -40,10 +40,9 @@ import json
 import math
 import os
 import re
-import secrets
 import sys
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -51,6 +50,8 @@ from typing import Any, Literal
 import numpy as np
 
 from app.errors import VolumeError
+from app.files import atomic_write as _atomic
+from app.files import temp_name as _temp_name
 from app.volume import Volume, check_finite
 from app.volume import parse_triple as _triple
 from app.volume import short_repr as _short
@@ -1279,21 +1280,6 @@ def _format_from_name(name: str) -> str | None:
         if lower.endswith(extensions):
             return fmt
     return None
-
-
-def _temp_name(final: Path, suffix: str) -> Path:
-    return final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
-
-
-def _atomic(final: Path, suffix: str, write: Callable[[Path], None]) -> None:
-    """Write through ``write(tmp)`` to a temporary file, then rename it to ``final``."""
-    tmp = _temp_name(final, suffix)
-    try:
-        write(tmp)
-        os.replace(tmp, final)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def _write_npz(volume: Volume, tmp: Path) -> None:

@@ -12,7 +12,6 @@ import base64
 import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -21,6 +20,7 @@ import numpy as np
 
 from app.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from app.errors import SceneError, VolumeError
+from app.files import atomic_write_text
 from app.transfer_function import TransferFunction
 from app.volume import Volume, check_finite
 from deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
@@ -489,22 +489,6 @@ class Scene:
             f" tf={self.transfer_function.name!r}, view={self.view!r},"
             f" projection={self.projection!r}, step={self.step}, warps={len(self.warps)})"
         )
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temp file in the same folder and ``os.replace``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[str, Any]:
