@@ -18,6 +18,7 @@ from typing import Literal
 import numpy as np
 
 from app.errors import SceneError
+from deform.warp import rotation_matrix
 
 Projection = Literal["perspective", "orthographic"]
 PROJECTIONS: tuple[str, ...] = ("perspective", "orthographic")
@@ -62,19 +63,6 @@ def view_rotation(view: View) -> np.ndarray:
     right /= np.linalg.norm(right)
     up = np.cross(back, right)
     return np.column_stack([right, up, back])
-
-
-def _rotate(axis: np.ndarray, degrees: float) -> np.ndarray:
-    x, y, z = axis / np.linalg.norm(axis)
-    t = np.radians(degrees)
-    c, s, cc = np.cos(t), np.sin(t), 1 - np.cos(t)
-    return np.array(
-        [
-            [c + x * x * cc, x * y * cc - z * s, x * z * cc + y * s],
-            [y * x * cc + z * s, c + y * y * cc, y * z * cc - x * s],
-            [z * x * cc - y * s, z * y * cc + x * s, c + z * z * cc],
-        ]
-    )
 
 
 @dataclass
@@ -214,9 +202,9 @@ class Camera:
     # ------------------------------------------------------------------ interaction
     def orbit(self, d_azimuth: float, d_elevation: float) -> None:
         """Rotate about ``center``: degrees about the camera's up, then its right axis."""
-        r = _rotate(self.rotation[:, 1], -d_azimuth)
+        r = rotation_matrix(self.rotation[:, 1], -d_azimuth)
         rot = r @ self.rotation
-        r2 = _rotate(rot[:, 0], d_elevation)
+        r2 = rotation_matrix(rot[:, 0], d_elevation)
         rot = r2 @ rot
         u, _, vt = np.linalg.svd(rot)  # re-orthonormalise against drift
         self.rotation = u @ vt

@@ -223,20 +223,7 @@ class AffineWarp(Warp):
         cls, axis: Sequence[float], degrees: float, center: Sequence[float] = (0, 0, 0)
     ) -> AffineWarp:
         """Rotate the object by ``degrees`` about ``axis`` through ``center`` (right-handed)."""
-        a = np.asarray(axis, float)
-        n = np.linalg.norm(a)
-        if n == 0:
-            raise WarpError("rotation axis must be non-zero")
-        x, y, z = a / n
-        t = np.radians(degrees)
-        c, s, cc = np.cos(t), np.sin(t), 1 - np.cos(t)
-        r = np.array(
-            [
-                [c + x * x * cc, x * y * cc - z * s, x * z * cc + y * s],
-                [y * x * cc + z * s, c + y * y * cc, y * z * cc - x * s],
-                [z * x * cc - y * s, z * y * cc + x * s, c + z * z * cc],
-            ]
-        )
+        r = rotation_matrix(axis, degrees)
         m = np.eye(4)
         m[:3, :3] = r
         return cls(_about(m, center))
@@ -280,6 +267,24 @@ class AffineWarp(Warp):
         if "matrix" not in d:
             raise WarpError("an affine warp entry needs a 'matrix' (4x4 nested list)")
         return cls(d["matrix"])
+
+
+def rotation_matrix(axis: Sequence[float], degrees: float) -> np.ndarray:
+    """3x3 right-handed rotation by ``degrees`` about ``axis`` (Rodrigues' formula)."""
+    a = np.asarray(axis, float).reshape(3)
+    n = np.linalg.norm(a)
+    if n == 0:
+        raise WarpError("rotation axis must be non-zero")
+    x, y, z = a / n
+    t = np.radians(degrees)
+    c, s, cc = np.cos(t), np.sin(t), 1 - np.cos(t)
+    return np.array(
+        [
+            [c + x * x * cc, x * y * cc - z * s, x * z * cc + y * s],
+            [y * x * cc + z * s, c + y * y * cc, y * z * cc - x * s],
+            [z * x * cc - y * s, z * y * cc + x * s, c + z * z * cc],
+        ]
+    )
 
 
 def _about(m: np.ndarray, center: Sequence[float]) -> np.ndarray:
