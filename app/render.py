@@ -13,6 +13,7 @@ early ray termination, jitter).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import os
 import time
@@ -460,10 +461,6 @@ class Renderer:
         max_steps = int(min(diag / step_mm + 4, 1_000_000))
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
-        iso = scene.resolved_iso_value()
-        iso_rgb = tf(iso)[:3]
-        if float(np.max(iso_rgb)) < 0.2:
-            iso_rgb = np.array([0.9, 0.85, 0.8])
 
         tf_lo, tf_hi = tf.value_range
         tf_scale = (TABLE_SIZE - 1) / (tf_hi - tf_lo)
@@ -489,14 +486,21 @@ class Renderer:
             "u_window": (level - width / 2, level + width / 2),
             "u_light": LIGHT,
             "u_blocks": tuple(int(b) for b in gpu.blocks),
-            "u_threshold": scene.resolved_flm_threshold(),
-            "u_iso": iso,
-            "u_iso_color": tuple(float(c) for c in iso_rgb),
             "u_volume": 0,
             "u_tf": 1,
             "u_block_info": 2,
             "u_cell_skip": 3,
         }
+        # mode parameters, resolved only for the mode that reads them
+        if scene.mode == "flm":
+            values["u_threshold"] = scene.resolved_flm_threshold()
+        if scene.mode == "iso":
+            iso = scene.resolved_iso_value()
+            iso_rgb = tf(iso)[:3]
+            if float(np.max(iso_rgb)) < 0.2:  # a dark TF colour: use a neutral surface
+                iso_rgb = np.array([0.9, 0.85, 0.8])
+            values["u_iso"] = iso
+            values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
         if linear:
             to_texel = np.eye(4)
             to_texel[:3, :3] = np.diag(1.0 / sp)
@@ -562,8 +566,9 @@ def _set_uniform(prog: Any, name: str, value: Any) -> None:
         u.value = value
 
 
-def _egl_current() -> tuple | None:
-    """The current EGL (display, draw, read, context), or None (no EGL or none current)."""
+@functools.cache
+def _egl_library() -> Any:
+    """libEGL through ctypes with the few entry points used here typed, or None."""
     import ctypes
 
     try:
@@ -573,27 +578,29 @@ def _egl_current() -> tuple | None:
     for name in ("eglGetCurrentContext", "eglGetCurrentDisplay", "eglGetCurrentSurface"):
         getattr(lib, name).restype = ctypes.c_void_p
     lib.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+    lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    return lib
+
+
+def _egl_current() -> tuple | None:
+    """The current EGL (display, draw, read, context), or None (no EGL or none current)."""
+    lib = _egl_library()
+    if lib is None:
+        return None
     context = lib.eglGetCurrentContext()
     if not context:
         return None
-    display = lib.eglGetCurrentDisplay()
     return (
-        lib,
-        display,
-        lib.eglGetCurrentSurface(0x3059),
-        lib.eglGetCurrentSurface(0x305A),
+        lib.eglGetCurrentDisplay(),
+        lib.eglGetCurrentSurface(0x3059),  # EGL_DRAW
+        lib.eglGetCurrentSurface(0x305A),  # EGL_READ
         context,
     )
 
 
 def _egl_restore(saved: tuple | None) -> None:
-    if saved is None:
-        return
-    import ctypes
-
-    lib, display, draw, read, context = saved
-    lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
-    lib.eglMakeCurrent(display, draw, read, context)
+    if saved is not None:
+        _egl_library().eglMakeCurrent(*saved)
 
 
 def create_context() -> Any:
