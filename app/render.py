@@ -26,16 +26,29 @@ import shaders
 from app.camera import Camera
 from app.errors import RenderError, VolumeTooLargeError
 from app.scene import Scene
+from app.skipping import (
+    BLOCK,
+    OCTANT_EPS,
+    Octant,
+    block_min_max,
+    block_skip_distances,
+    cell_min_max,
+    octant_regions,
+    octant_skip_distances,
+    ray_direction_coefficients,
+    skip_map_key,
+    static_block_visibility,
+)
 from app.transfer_function import TABLE_SIZE, TransferFunction
 from app.volume import Volume
 from deform.warp import compose_glsl, fold_affine
 
-#: Voxels per block edge of the empty-space-skipping grid.
-BLOCK = 4
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
 DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
 #: Blinn-Phong ambient, diffuse, specular, shininess.
 LIGHT = (0.25, 0.7, 0.3, 32.0)
+#: Corners of the NDC polygons a draw is made of (u_polygon in polygon.vert.glsl).
+MAX_POLYGON = 8
 
 _TEX_FORMAT = {
     # dtype: (moderngl dtype, scale, offset) so that value = texel * scale + offset
@@ -44,110 +57,6 @@ _TEX_FORMAT = {
     np.dtype(np.int16): ("nu2", 65535.0, -32768.0),  # stored as uint16 + 32768: exact
     np.dtype(np.float32): ("f4", 1.0, 0.0),
 }
-
-
-def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
-    """Per-block (min, max) of ``data`` (nx, ny, nz) with a one-voxel apron.
-
-    Block ``b`` along an axis covers voxels ``[b*block - 1, (b+1)*block]`` (clamped), the
-    voxels trilinear interpolation reads for any sample inside the block. Returns two
-    float32 arrays of shape ``ceil(n / block)`` per axis, in data units.
-    """
-    lo = np.asarray(data)
-    hi = lo
-    for axis in range(3):
-        lo = _reduce_axis(lo, axis, block, np.minimum)
-        hi = _reduce_axis(hi, axis, block, np.maximum)
-    return lo.astype(np.float32), hi.astype(np.float32)
-
-
-def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
-    n = a.shape[axis]
-    nb = -(-n // block)
-    pad = nb * block - n
-    a = np.moveaxis(a, axis, 0)
-    if pad:
-        a = np.concatenate([a, np.repeat(a[-1:], pad, axis=0)], axis=0)
-    r = op.reduce(a.reshape(nb, block, *a.shape[1:]), axis=1)
-    if nb > 1:
-        # apron: last voxel of the previous block and first voxel of the next one
-        prev_last = a[block - 1 : (nb - 1) * block : block]
-        next_first = a[block : nb * block : block]
-        r[1:] = op(r[1:], prev_last)
-        r[:-1] = op(r[:-1], next_first)
-    return np.moveaxis(r, 0, axis)
-
-
-def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per trilinear cell (min, max) of its 8 corner voxels, shape ``n + 1`` per axis.
-
-    Cell ``c`` covers texel coordinates ``[c - 1/2, c + 1/2]`` per axis, whose samples
-    interpolate voxels ``c - 1`` and ``c`` (clamped to the edge). float32, data units.
-    """
-    p = np.pad(np.asarray(data), 1, mode="edge")
-    lo = hi = None
-    for i in (0, 1):
-        for j in (0, 1):
-            for k in (0, 1):
-                v = p[i : i + p.shape[0] - 1, j : j + p.shape[1] - 1, k : k + p.shape[2] - 1]
-                lo = v if lo is None else np.minimum(lo, v)
-                hi = v if hi is None else np.maximum(hi, v)
-    return lo.astype(np.float32), hi.astype(np.float32)  # type: ignore[union-attr]
-
-
-def static_block_visibility(
-    scene: Scene, block_min: np.ndarray, block_max: np.ndarray
-) -> np.ndarray:
-    """Blocks the scene's mode may need, from their value ranges alone (bool grid).
-
-    dvr: the transfer function is non-zero somewhere in the block's range; mip: the
-    block's maximum is above the window's low end; minip: its minimum is below the
-    window's high end; iso / flm: its maximum reaches the isovalue / threshold;
-    average: every block. (mip and minip also skip dynamically in the shader.)
-    """
-    mode = scene.mode
-    level, width = scene.window
-    if mode == "dvr":
-        return scene.transfer_function.visible_ranges(block_min, block_max)
-    if mode == "mip":
-        return block_max > level - width / 2
-    if mode == "minip":
-        return block_min < level + width / 2
-    if mode == "iso":
-        return block_max >= scene.resolved_iso_value()
-    if mode == "flm":
-        return block_max >= scene.resolved_flm_threshold()
-    return np.ones(block_min.shape, dtype=bool)
-
-
-def block_skip_distances(visible: np.ndarray) -> np.ndarray:
-    """Chessboard distance (in blocks, capped at 255) from each block to a visible one.
-
-    0 marks a visible block. A ray in a block at distance d may jump out of the cube of
-    (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8.
-    """
-    from scipy.ndimage import distance_transform_cdt
-
-    if not visible.any():
-        return np.full(visible.shape, 255, dtype=np.uint8)
-    if visible.all():
-        return np.zeros(visible.shape, dtype=np.uint8)
-    d = distance_transform_cdt(~visible, metric="chessboard")
-    return np.clip(d, 0, 255).astype(np.uint8)
-
-
-def skip_map_key(scene: Scene) -> tuple:
-    """What the static block visibility of ``scene`` depends on (cache key)."""
-    mode = scene.mode
-    if mode == "dvr":
-        return (mode, _tf_key(scene.transfer_function))
-    if mode in ("mip", "minip"):
-        return (mode, scene.window)
-    if mode == "iso":
-        return (mode, scene.resolved_iso_value())
-    if mode == "flm":
-        return (mode, scene.resolved_flm_threshold())
-    return (mode,)
 
 
 class _VolumeGPU:
@@ -181,15 +90,18 @@ class _VolumeGPU:
         self.info_key: Any = None
         self.volume_data = volume.data
         self.cell_range: tuple[np.ndarray, np.ndarray] | None = None
-        self.cell_skip: Any = None
+        self.cell_visible: np.ndarray | None = None
+        #: octant -> R8 texture of octant skip distances, for the scene key cell_key
+        self.cell_skip: dict[Octant, Any] = {}
         self.cell_key: Any = None
         self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
 
     def release(self) -> None:
-        for tex in (self.texture, self.info, self.cell_skip):
+        for tex in (self.texture, self.info, *self.cell_skip.values()):
             if tex is not None:
                 tex.release()
-        self.texture = self.info = self.cell_skip = None  # type: ignore[assignment]
+        self.cell_skip.clear()
+        self.texture = self.info = None  # type: ignore[assignment]
 
 
 def _tf_key(tf: TransferFunction) -> tuple:
@@ -366,22 +278,30 @@ class Renderer:
             return "none"
         return "blocks"
 
-    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene) -> Any:
+    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
+        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
+
+        Computed on first use per (mode visibility, octant) and cached on the volume;
+        a change of what the mode can see (transfer function, isovalue, ...) drops all.
+        """
         key = skip_map_key(scene)
         if gpu.cell_key != key:
+            for tex in gpu.cell_skip.values():
+                tex.release()
+            gpu.cell_skip.clear()
             if gpu.cell_range is None:
                 gpu.cell_range = cell_min_max(gpu.volume_data)
-            vis = static_block_visibility(scene, *gpu.cell_range)
-            dist = np.ascontiguousarray(block_skip_distances(vis).transpose(2, 1, 0))
-            if gpu.cell_skip is None:
-                gpu.cell_skip = self.ctx.texture3d(
-                    vis.shape, 1, dist.tobytes(), dtype="f1", alignment=1
-                )
-                gpu.cell_skip.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            else:
-                gpu.cell_skip.write(dist.tobytes(), alignment=1)
+            gpu.cell_visible = static_block_visibility(scene, *gpu.cell_range)
             gpu.cell_key = key
-        return gpu.cell_skip
+        tex = gpu.cell_skip.get(octant)
+        if tex is None:
+            assert gpu.cell_visible is not None
+            dist = octant_skip_distances(gpu.cell_visible, octant)
+            data = np.ascontiguousarray(dist.transpose(2, 1, 0))
+            tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            gpu.cell_skip[octant] = tex
+        return tex
 
     def _program(self, scene: Scene, linear: bool) -> Any:
         warps = [] if linear else scene.warps
@@ -396,7 +316,7 @@ class Renderer:
         prog = self._programs.get(key)
         if prog is not None:
             return prog
-        defines = [f"#define BLOCK {BLOCK}"]
+        defines = [f"#define BLOCK {BLOCK}", f"#define OCTANT_EPS {OCTANT_EPS:e}"]
         if linear:
             defines.append("#define LINEAR_PATH")
         if scene.use_shading():
@@ -419,7 +339,7 @@ class Renderer:
         frag = "\n".join([head, *defines, rest])
         try:
             prog = self.ctx.program(
-                vertex_shader=shaders.read("fullscreen.vert.glsl"), fragment_shader=frag
+                vertex_shader=shaders.read("polygon.vert.glsl"), fragment_shader=frag
             )
         except Exception as exc:
             raise RenderError(f"raycast shader failed to compile/link for {key}: {exc}") from exc
@@ -513,8 +433,16 @@ class Renderer:
         gpu.texture.use(0)
         self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
         self._block_info(gpu, scene).use(2)
+        # The image is drawn as convex polygons in NDC: one covering the viewport, or,
+        # with octant skip maps, one per ray-direction octant present in the image
+        # (the shader discards the other octants' pixels along the shared borders).
+        regions: list[tuple[Octant | None, list[tuple[float, float]]]]
+        regions = [(None, [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])]
         if self._skip_kind(scene, linear) == "cells":
-            self._cell_skip(gpu, scene).use(3)
+            coefficients = ray_direction_coefficients(
+                values["u_inv_view_proj"], values["u_world_to_texel"]
+            )
+            regions = list(octant_regions(coefficients, (w, h)))
         unit = 4
         if not linear:
             for i, warp in enumerate(scene.warps):
@@ -527,12 +455,20 @@ class Renderer:
 
         framebuffer.use()
         framebuffer.viewport = (x, y, w, h)
+        # rays that miss the volume (or see nothing) discard: background first
+        framebuffer.clear(*bg_premul, viewport=(x, y, w, h))
         self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
         vao = self._vao.get(id(prog))
         if vao is None:
             vao = self.ctx.vertex_array(prog, [])
             self._vao[id(prog)] = vao
-        vao.render(mode=self.ctx.TRIANGLES, vertices=3)
+        for octant, polygon in regions:
+            if octant is not None:
+                self._cell_skip(gpu, scene, octant).use(3)
+                _set_uniform(prog, "u_octant", tuple(float(c) for c in octant))
+            corners = [*polygon, *[(0.0, 0.0)] * (MAX_POLYGON - len(polygon))]
+            prog["u_polygon"].value = corners
+            vao.render(mode=self.ctx.TRIANGLE_FAN, vertices=len(polygon))
 
     def release(self) -> None:
         """Free every GPU resource this renderer made; idempotent."""

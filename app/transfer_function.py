@@ -208,10 +208,24 @@ class TransferFunction:
         alpha = self.table(size)[:, 3]
         tlo, thi = self.value_range
         scale = (size - 1) / (thi - tlo)
-        i0 = np.clip(np.floor((np.asarray(lo) - tlo) * scale), 0, size - 1).astype(np.int64)
-        i1 = np.clip(np.ceil((np.asarray(hi) - tlo) * scale), 0, size - 1).astype(np.int64)
         # prefix count of visible entries answers "any visible in [i0, i1]" in O(1)
         csum = np.concatenate([[0], np.cumsum(alpha > 0)])
+        lo, hi = np.asarray(lo), np.asarray(hi)
+        if lo.dtype.kind in "ui" and lo.dtype.itemsize <= 2 and lo.dtype == hi.dtype:
+            # integer data: per possible value, a lookup table (two gathers per element
+            # instead of float arithmetic on every element)
+            info = np.iinfo(lo.dtype)
+            values = np.arange(info.min, info.max + 1, dtype=np.float64)
+            i0 = np.clip(np.floor((values - tlo) * scale), 0, size - 1).astype(np.int64)
+            i1 = np.clip(np.ceil((values - tlo) * scale), 0, size - 1).astype(np.int64)
+            before_lo = csum[i0].astype(np.int32)  # visible entries below lo's index
+            through_hi = csum[i1 + 1].astype(np.int32)  # visible entries up to hi's index
+            if info.min:
+                lo = lo.astype(np.int32) - info.min
+                hi = hi.astype(np.int32) - info.min
+            return through_hi[hi] > before_lo[lo]
+        i0 = np.clip(np.floor((lo - tlo) * scale), 0, size - 1).astype(np.int64)
+        i1 = np.clip(np.ceil((hi - tlo) * scale), 0, size - 1).astype(np.int64)
         return (csum[i1 + 1] - csum[i0]) > 0
 
     def first_visible_value(self) -> float:

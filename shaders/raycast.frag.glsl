@@ -14,12 +14,15 @@
 //   distance d to the nearest block the mode can see; a ray in an invisible block jumps
 //   out of the whole (2d-1)³ cube of invisible blocks around it in one step, landing on
 //   the same sample lattice, so skipping never changes the image. With CELL_SKIP
-//   (dvr, iso, flm) the same distance map is kept per trilinear cell instead of per
-//   block: one nearest fetch per sample, much tighter around visible structures.
+//   (dvr, iso, flm) the map is kept per trilinear cell instead of per block, and per
+//   ray-direction octant: the cube a ray may jump through starts at its cell and
+//   extends ahead of it (app/skipping.py). One nearest fetch per sample.
 // * otherwise: each sample goes through warp_chain(p); invisible blocks still save the
 //   volume fetch and classification.
 // Early ray termination: the mode returns true from mode_sample when nothing further
 // can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
+// The renderer clears the viewport to u_background first; rays that miss the volume
+// (or, with CELL_SKIP, meet nothing visible) discard instead of writing it.
 
 #include "common.glsl"
 #include "volume_sample.glsl"
@@ -72,9 +75,13 @@ bool block_in_grid(ivec3 b) {
 }
 vec4 block_info(ivec3 b) { return texelFetch(u_block_info, b, 0); }
 
-// R8 (x255) per trilinear cell: chessboard distance in cells to the nearest cell the
-// mode may see (0 = visible). Cell c spans texel coordinates [c - 1/2, c + 1/2].
+// R8 (x255) per trilinear cell, for rays in the octant u_octant (signs of the texel-space
+// direction, 0 counting as +): edge d of the largest cube of cells the mode cannot see
+// that starts at the cell and extends in the octant's direction (0 = visible cell).
+// Cell c spans texel coordinates [c - 1/2, c + 1/2]. The image is drawn once per
+// octant present; pixels of other octants are discarded.
 uniform sampler3D u_cell_skip;
+uniform vec3 u_octant;
 
 #include "mode.glsl"
 
@@ -112,6 +119,14 @@ void main() {
 #ifdef LINEAR_PATH
     g_u0 = (u_world_to_texel * vec4(g_ro, 1.0)).xyz;
     g_du = mat3(u_world_to_texel) * g_rd;
+#ifdef CELL_SKIP
+    // This pass draws the rays of octant u_octant only (each pixel exactly once). A
+    // component counts as negative only below -OCTANT_EPS * max|du|, so directions
+    // along an axis (components ~0 of either sign) agree with app/skipping.py.
+    float du_max = max(max(abs(g_du.x), abs(g_du.y)), abs(g_du.z));
+    vec3 ray_octant = mix(vec3(1.0), vec3(-1.0), lessThan(g_du, vec3(-OCTANT_EPS * du_max)));
+    if (any(notEqual(ray_octant, u_octant))) discard;
+#endif
     // keep direction components away from 0 so 1/du stays finite
     g_du = mix(g_du, sign(g_du) * 1e-12 + vec3(1e-30), lessThan(abs(g_du), vec3(1e-12)));
     vec2 tt = intersect_box(g_u0, g_du, vec3(0.0), u_dims);
@@ -119,8 +134,10 @@ void main() {
     t1 = min(t1, tt.y);
 #endif
     if (t1 <= t0) {
-        f_color = u_background;
-        return;
+        // The renderer clears the viewport to the background before drawing. On a CPU
+        // rasteriser discard is the one real early exit: SIMD groups whose lanes all
+        // miss skip the rest of the shader (loops run at least once otherwise).
+        discard;
     }
     float j = u_jitter != 0 ? hash01(uvec2(gl_FragCoord.xy), u_seed) : 0.5;
     int n = clamp(int(ceil((t1 - t_lattice) / u_step - j)), 0, u_max_steps);
@@ -139,19 +156,48 @@ void main() {
     g_inside = k < n;
     float t_last = t0 + (float(n) - 1.0 + j) * u_step;   // last sample on the lattice
 #ifdef CELL_SKIP
-    // Empty-space skipping at cell resolution: one nearest fetch per sample; an
-    // invisible cell at distance d lets the ray leave the whole (2d-1)³ cube of
-    // invisible cells around it in one step, landing on the sample lattice.
+    // Empty-space skipping at cell resolution: one nearest fetch per sample. An
+    // invisible cell with edge d lets the ray leave the cube of d³ invisible cells
+    // starting at the cell (towards u_octant) in one jump, to the next lattice sample.
+    // The cube spans [c - 1/2, c + 1/2] per axis, widened by d - 1 cells on the side
+    // u_octant points to; the ray leaves through the face it travels towards.
+    vec3 exit_offset = face - 0.5;
+    vec3 exit_widen = face * max(u_octant, 0.0) - (1.0 - face) * max(-u_octant, 0.0);
+    // Leading empty space first, in a loop that only jumps (no volume or transfer
+    // function fetch: on a CPU rasteriser every iteration of the main loop pays for
+    // both branches), up to the first sample in a visible cell.
+    bool finished = false;
+    while (k < n) {
+        float t = t0 + (float(k) + j) * u_step;
+        vec3 u = texel_at(t);
+        ivec3 c = ivec3(floor(u + 0.5));
+        float d = texelFetch(u_cell_skip, c, 0).r * 255.0;
+        if (d < 0.5) break;
+        vec3 te = (vec3(c) + exit_offset + exit_widen * (d - 1.0) - g_u0) * inv_du;
+        k = lattice_after(min(min(te.x, te.y), te.z), t0, j, k, n);
+        // the last skipped sample lies in the invisible cube: where bisection may start
+        if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) {
+            finished = true;
+            break;
+        }
+    }
+    // A ray that met nothing visible leaves the background (cleared) untouched.
+    if (k >= n && !finished) discard;
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
         vec3 u = texel_at(t);
         ivec3 c = ivec3(floor(u + 0.5));
         float d = texelFetch(u_cell_skip, c, 0).r * 255.0;
         if (d > 0.5) {
-            float t_exit = cube_exit(vec3(c), d - 1.0, 1.0, -0.5, face, inv_du);
-            if (mode_skip(s, min(t_exit, t_last))) break;
-            k = lattice_after(t_exit, t0, j, k, n);
-            continue;
+            vec3 te = (vec3(c) + exit_offset + exit_widen * (d - 1.0) - g_u0) * inv_du;
+            k = lattice_after(min(min(te.x, te.y), te.z), t0, j, k, n);
+            if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) break;
+            if (k >= n) break;
+            // Sample the landing position in the same iteration (a CPU rasteriser
+            // runs both sides of a branch anyway): if its cell is invisible too, the
+            // sample cannot contribute (zero opacity, below the isovalue/threshold).
+            t = t0 + (float(k) + j) * u_step;
+            u = texel_at(t);
         }
         if (mode_sample(s, sample_value(u), u, t)) break;
         ++k;

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from app.errors import VolumeTooLargeError
-from app.render import BLOCK, Renderer, block_min_max
+from app.render import Renderer
+from app.skipping import BLOCK, block_min_max
 from app.volume import Volume
 
 
@@ -201,7 +202,7 @@ def test_texture_budget_from_the_environment(gl_ctx: Any, monkeypatch: pytest.Mo
 def test_cell_min_max_matches_brute_force() -> None:
     """Cell c covers texel coordinates [c - 1/2, c + 1/2]: its range is that of voxels
     c - 1 and c per axis (clamped to the edge)."""
-    from app.render import cell_min_max
+    from app.skipping import cell_min_max
 
     rng = np.random.default_rng(3)
     data = rng.integers(-50, 50, size=(5, 4, 6)).astype(np.int16)

@@ -1,0 +1,256 @@
+"""Tests of the directional (octant) empty-space-skipping maps and of the split of the
+image into ray-direction octants (app.skipping), plus their use by the renderer.
+
+Oracles: a brute-force search for the largest invisible cube ahead of each cell; the
+isotropic chessboard distance (a cube centred on the cell is never larger than the best
+one starting at it); a per-pixel classification of the shader's ray directions; and
+renders with skipping off, which must be identical (skipping only jumps over samples
+that cannot contribute, on the same sample lattice).
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app.camera import Camera
+from app.render import OffscreenRenderer
+from app.scene import Scene
+from app.skipping import (
+    block_skip_distances,
+    octant_of,
+    octant_regions,
+    octant_skip_distances,
+    ray_direction_coefficients,
+)
+from app.transfer_function import TransferFunction
+from app.volume import Volume
+from deform.warp import AffineWarp
+
+OCTANTS = list(itertools.product((1, -1), repeat=3))
+
+
+def brute_force_octant(
+    visible: np.ndarray, signs: tuple[int, int, int], cap: int = 255
+) -> np.ndarray:
+    """Edge of the largest invisible cube starting at each cell towards ``signs``."""
+    out = np.zeros(visible.shape, dtype=np.int64)
+    pts = np.argwhere(visible)
+    s = np.asarray(signs)
+    for c in np.ndindex(visible.shape):
+        if visible[c]:
+            continue
+        delta = (pts - np.asarray(c)) * s
+        ahead = delta[(delta >= 0).all(axis=1)]
+        out[c] = min(cap, int(ahead.max(axis=1).min())) if len(ahead) else cap
+    return out
+
+
+def cube_is_invisible(visible: np.ndarray, c: tuple, signs: tuple, edge: int) -> bool:
+    sl = []
+    for ci, si, n in zip(c, signs, visible.shape, strict=True):
+        lo, hi = (ci, ci + edge) if si > 0 else (ci - edge + 1, ci + 1)
+        sl.append(slice(max(lo, 0), min(hi, n)))
+    return not visible[tuple(sl)].any()
+
+
+@pytest.mark.parametrize("signs", OCTANTS)
+def test_octant_distances_are_exact_without_cap(signs: tuple[int, int, int]) -> None:
+    rng = np.random.default_rng(abs(hash(signs)) % 1000)
+    visible = rng.random((11, 9, 13)) < 0.03
+    d = octant_skip_distances(visible, signs, cell_cap=255)
+    assert d.dtype == np.uint8
+    assert d.shape == visible.shape
+    np.testing.assert_array_equal(d, brute_force_octant(visible, signs))
+
+
+@pytest.mark.parametrize(("cell_cap", "block"), [(2, 2), (3, 4), (8, 4), (4, 3)])
+@pytest.mark.parametrize("signs", [(1, 1, 1), (-1, 1, -1), (1, -1, -1)])
+def test_capped_octant_distances_are_safe_and_exact_up_to_the_cap(
+    cell_cap: int, block: int, signs: tuple[int, int, int]
+) -> None:
+    rng = np.random.default_rng(cell_cap * 10 + block)
+    visible = rng.random((17, 12, 10)) < 0.01
+    d = octant_skip_distances(visible, signs, cell_cap=cell_cap, block=block).astype(int)
+    exact = brute_force_octant(visible, signs)
+    assert (d <= exact).all(), "a jump would leave the invisible cube"
+    assert (d >= np.minimum(exact, cell_cap)).all(), "exact below the cap"
+    assert ((d == 0) == visible).all()
+    # beyond the cap the block level still lets rays jump further than the cap
+    assert (d > cell_cap).any()
+    for c in zip(*np.nonzero(d), strict=True):
+        assert cube_is_invisible(visible, c, signs, int(d[c]))
+
+
+def test_octant_cube_is_at_least_the_centred_cube() -> None:
+    # The isotropic map lets a ray leave the cube of edge 2d - 1 centred on its cell;
+    # the directional cube of edge d starting at the cell lies inside it, so the best
+    # directional cube is never smaller than d.
+    rng = np.random.default_rng(5)
+    visible = rng.random((20, 20, 20)) < 0.004
+    iso = block_skip_distances(visible).astype(int)
+    for signs in OCTANTS:
+        d = octant_skip_distances(visible, signs, cell_cap=255).astype(int)
+        assert (d >= np.minimum(iso, 255)).all()
+        assert d.mean() > 1.2 * iso.mean()  # and usually much larger
+
+
+def test_octant_distances_reject_bad_input() -> None:
+    with pytest.raises(ValueError, match="3D"):
+        octant_skip_distances(np.zeros((3, 3), bool), (1, 1, 1))
+    with pytest.raises(ValueError, match="signs"):
+        octant_skip_distances(np.zeros((3, 3, 3), bool), (1, 0, 1))
+
+
+def test_octant_of_treats_rounding_noise_as_positive() -> None:
+    assert octant_of(np.array([-1.0, 2.0, -3.0])) == (-1, 1, -1)
+    assert octant_of(np.array([0.0, -1e-12, -1.0])) == (1, 1, -1)
+
+
+# ---------------------------------------------------------------------- image regions
+def _cameras() -> list[tuple[str, Camera, tuple[int, int]]]:
+    lo, hi = np.zeros(3), np.array([40.0, 30.0, 20.0])
+    cams = []
+    for view in ["+z", "-x", "+y", (30.0, 20.0), (135.0, -60.0)]:
+        for projection in ("perspective", "orthographic"):
+            cam = Camera.fit(lo, hi, view=view, projection=projection, fov=60.0)
+            cams.append((f"{view}-{projection}", cam, (48, 32)))
+    inside = Camera.fit(lo, hi, view=(20.0, 10.0), projection="perspective", fov=90.0, zoom=8)
+    cams.append(("inside", inside, (40, 40)))
+    return cams
+
+
+def _pixel_directions(cam: Camera, size: tuple[int, int], to_texel: np.ndarray) -> np.ndarray:
+    """Texel-space ray direction per pixel centre, in float32 like the shader."""
+    w, h = size
+    inv = np.linalg.inv(cam.view_projection(w / h)).astype(np.float32)
+    xs = (np.arange(w, dtype=np.float32) + 0.5) / w * 2 - 1
+    ys = (np.arange(h, dtype=np.float32) + 0.5) / h * 2 - 1
+    x, y = np.meshgrid(xs, ys)
+    one = np.ones_like(x)
+    a = np.stack([x, y, -one, one], -1) @ inv.T
+    b = np.stack([x, y, one, one], -1) @ inv.T
+    rd = b[..., :3] / b[..., 3:] - a[..., :3] / a[..., 3:]
+    return rd @ to_texel[:3, :3].astype(np.float32).T
+
+
+def _inside(poly: list[tuple[float, float]], p: tuple[float, float]) -> bool:
+    sign = 0.0
+    for (x0, y0), (x1, y1) in zip(poly, poly[1:] + poly[:1], strict=True):
+        cross = (x1 - x0) * (p[1] - y0) - (y1 - y0) * (p[0] - x0)
+        if cross != 0:
+            if sign and np.sign(cross) != sign:
+                return False
+            sign = np.sign(cross)
+    return True
+
+
+@pytest.mark.parametrize(("name", "cam", "size"), _cameras(), ids=lambda v: str(v))
+def test_octant_regions_cover_every_pixel_of_its_octant(
+    name: str, cam: Camera, size: tuple[int, int]
+) -> None:
+    to_texel = np.diag([1 / 0.5, 1 / 1.0, 1 / 2.0, 1.0])  # anisotropic voxels
+    coeff = ray_direction_coefficients(
+        np.linalg.inv(cam.view_projection(size[0] / size[1])), to_texel
+    )
+    regions = dict(octant_regions(coeff, size))
+    dirs = _pixel_directions(cam, size, to_texel)
+    w, h = size
+    for j, i in itertools.product(range(h), range(w)):
+        octant = octant_of(dirs[j, i])
+        assert octant in regions, f"{name}: pixel ({i}, {j}) in octant {octant} is never drawn"
+        ndc = ((i + 0.5) / w * 2 - 1, (j + 0.5) / h * 2 - 1)
+        assert _inside(regions[octant], ndc), f"{name}: pixel ({i}, {j}) outside its polygon"
+    if name.startswith("+z-persp") or name == "inside":
+        assert len(regions) >= 4  # the image really is split
+
+
+# ---------------------------------------------------------------------- rendering
+def _volume() -> Volume:
+    rng = np.random.default_rng(7)
+    data = np.zeros((24, 20, 16), np.float32)
+    for _ in range(12):  # scattered blobs: fragmented empty space in every direction
+        c = rng.uniform((2, 2, 2), (22, 18, 14))
+        r = rng.uniform(1.5, 3.5)
+        g = np.indices(data.shape).transpose(1, 2, 3, 0)
+        data += 100.0 * np.exp(-np.sum((g - c) ** 2, axis=-1) / r**2)
+    return Volume(data.astype(np.uint8), spacing=(1.0, 0.8, 1.3))
+
+
+TF = TransferFunction(
+    [(0, 0, 0, 0, 0), (30, 1, 0.5, 0.2, 0), (60, 1, 1, 0.8, 0.6), (255, 1, 1, 1, 0.9)]
+)
+
+
+@pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
+@pytest.mark.parametrize(
+    "where", ["+z", "inside", "rotated"], ids=["axis-view", "camera-inside", "rotated-warp"]
+)
+def test_octant_skipping_matches_no_skipping(gl_ctx: Any, mode: str, where: str) -> None:
+    vol = _volume()
+    lo, hi = vol.bounds
+    warps: list = []
+    if where == "inside":
+        cam = Camera.fit(lo, hi, view=(20.0, 10.0), projection="perspective", fov=90.0, zoom=6)
+    else:
+        cam = Camera.fit(lo, hi, view="+z", projection="perspective", fov=60.0)
+    if where == "rotated":
+        warps = [AffineWarp.rotation((1, 1, 0), 35.0, center=vol.center)]
+    scene = Scene(
+        vol, mode=mode, transfer_function=TF, camera=cam, warps=warps, iso_value=60.0, seed=3
+    )
+    images = {}
+    for skipping in (True, False):
+        with OffscreenRenderer(48, 40, ctx=gl_ctx, dtype="f4") as r:
+            r.renderer.empty_space_skipping = skipping
+            images[skipping] = r.render(scene)
+    assert np.abs(images[True] - images[False]).max() <= 1 / 255
+    background = np.asarray(scene.background, np.float32)
+    assert np.abs(images[False] - background).max(axis=-1).mean() > 0.02  # not empty
+
+
+def test_draw_touches_only_its_viewport(gl_ctx: Any) -> None:
+    vol = _volume()
+    scene = Scene(vol, mode="dvr", transfer_function=TF, view="+z", background=(0, 0, 1, 1))
+    with OffscreenRenderer(40, 40, ctx=gl_ctx, dtype="f4") as r:
+        fbo = r.framebuffer
+        fbo.use()
+        fbo.clear(1.0, 0.0, 0.0, 1.0)
+        r.renderer.draw(scene, fbo, viewport=(8, 4, 24, 30))
+        img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(40, 40, 4)
+    inside = img[4:34, 8:32]
+    outside = np.ones((40, 40), bool)
+    outside[4:34, 8:32] = False
+    np.testing.assert_array_equal(img[outside], np.tile([1.0, 0, 0, 1], (outside.sum(), 1)))
+    assert (inside[..., 2] > 0.5).mean() > 0.3  # the background of the scene ...
+    assert (np.abs(inside - [0, 0, 1, 1]).max(axis=-1) > 0.05).any()  # ... and the volume
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint16])
+def test_visible_ranges_integer_path_equals_float_path(dtype: Any) -> None:
+    rng = np.random.default_rng(1)
+    info = np.iinfo(dtype)
+    lo_v, hi_v = max(info.min, -1000), min(info.max, 3000)
+    a = rng.integers(lo_v, hi_v, size=(30, 20, 10)).astype(dtype)
+    b = rng.integers(lo_v, hi_v, size=(30, 20, 10)).astype(dtype)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    span = hi_v - lo_v
+    # opacity only in a narrow band in the middle: many ranges miss it, many include it
+    b0, b1, b2 = (lo_v + f * span for f in (0.45, 0.5, 0.55))
+    tf = TransferFunction(
+        [
+            (lo_v, 0, 0, 0, 0),
+            (b0, 1, 1, 1, 0),
+            (b1, 1, 1, 1, 0.5),
+            (b2, 1, 1, 1, 0),
+            (hi_v, 1, 1, 1, 0),
+        ]
+    )
+    fast = tf.visible_ranges(lo, hi)
+    slow = tf.visible_ranges(lo.astype(np.float64), hi.astype(np.float64))
+    np.testing.assert_array_equal(fast, slow)
+    assert fast.any()
+    assert not fast.all()
