@@ -6,8 +6,14 @@ standalone context); it never creates a window. GPU resources (volume texture,
 block min/max grid, transfer-function table, compiled programs) are cached per
 volume / transfer function / program variant and freed by :meth:`Renderer.release`.
 
+Each draw first clears its viewport to the scene's background, then draws one NDC
+polygon per ray-direction octant present in the image (one polygon covering the
+viewport unless octant skip maps are in use; see :mod:`app.skipping`). Rays that miss
+the volume, or see nothing visible, discard and leave the background.
+
 See ``shaders/raycast.frag.glsl`` for the technique (warp chain, empty-space skipping,
-early ray termination, jitter).
+early ray termination, jitter) and ``docs/benchmarks.md`` for what each part buys on a
+CPU rasteriser.
 """
 
 from __future__ import annotations
@@ -118,8 +124,12 @@ class Renderer:
     texture_budget_bytes
         Largest volume texture accepted; default 2 GiB or ``VOXWARP_TEXTURE_BUDGET_MB``.
     empty_space_skipping
-        Jump over blocks the compositing mode cannot see (default). Turning it off
+        Jump over space the compositing mode cannot see (default). Turning it off
         never changes the image, only the time; benchmarks use it as a reference.
+        Straight rays of dvr/iso/flm use per-octant cell maps (:mod:`app.skipping`):
+        one byte per trilinear cell per octant the camera needs, computed on the CPU
+        when first needed after a change of what the mode can see (~1 s per octant
+        for 256³ on 2 cores) and kept on the volume (at most 8).
     sampling
         ``"texture3d"``: one hardware-trilinear fetch per sample (best on GPUs);
         ``"slice_pairs"``: a 2D array texture whose layer k holds slices k and k+1,

@@ -100,6 +100,24 @@ int lattice_after(float t, float t0, float j, int k, int n) {
     return clamp(int(ceil((t - t0) / u_step - j)), k + 1, n);
 }
 
+#ifdef CELL_SKIP
+// Skip edge d of the cell c holding texel position u (0: the cell is visible).
+float cell_skip(vec3 u, out ivec3 c) {
+    c = ivec3(floor(u + 0.5));
+    return texelFetch(u_cell_skip, c, 0).r * 255.0;
+}
+
+// First lattice sample after the ray (at sample k) leaves the invisible cube of edge d
+// at cell c: the cube spans [c - 1/2, c + 1/2] per axis, widened by d - 1 cells on the
+// side u_octant points to (widen, per ray: +1, -1 or 0 per axis); the ray leaves
+// through the faces it travels towards (offset = face - 1/2).
+int after_cube(ivec3 c, float d, vec3 offset, vec3 widen, vec3 inv_du, float t0, float j,
+               int k, int n) {
+    vec3 te = (vec3(c) + offset + widen * (d - 1.0) - g_u0) * inv_du;
+    return lattice_after(min(min(te.x, te.y), te.z), t0, j, k, n);
+}
+#endif
+
 void main() {
     vec2 frag = gl_FragCoord.xy - u_viewport.xy;
     vec2 ndc = frag / u_viewport.zw * 2.0 - 1.0;
@@ -159,8 +177,6 @@ void main() {
     // Empty-space skipping at cell resolution: one nearest fetch per sample. An
     // invisible cell with edge d lets the ray leave the cube of d³ invisible cells
     // starting at the cell (towards u_octant) in one jump, to the next lattice sample.
-    // The cube spans [c - 1/2, c + 1/2] per axis, widened by d - 1 cells on the side
-    // u_octant points to; the ray leaves through the face it travels towards.
     vec3 exit_offset = face - 0.5;
     vec3 exit_widen = face * max(u_octant, 0.0) - (1.0 - face) * max(-u_octant, 0.0);
     // Leading empty space first, in a loop that only jumps (no volume or transfer
@@ -168,13 +184,10 @@ void main() {
     // both branches), up to the first sample in a visible cell.
     bool finished = false;
     while (k < n) {
-        float t = t0 + (float(k) + j) * u_step;
-        vec3 u = texel_at(t);
-        ivec3 c = ivec3(floor(u + 0.5));
-        float d = texelFetch(u_cell_skip, c, 0).r * 255.0;
+        ivec3 c;
+        float d = cell_skip(texel_at(t0 + (float(k) + j) * u_step), c);
         if (d < 0.5) break;
-        vec3 te = (vec3(c) + exit_offset + exit_widen * (d - 1.0) - g_u0) * inv_du;
-        k = lattice_after(min(min(te.x, te.y), te.z), t0, j, k, n);
+        k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
         // the last skipped sample lies in the invisible cube: where bisection may start
         if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) {
             finished = true;
@@ -186,11 +199,10 @@ void main() {
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
         vec3 u = texel_at(t);
-        ivec3 c = ivec3(floor(u + 0.5));
-        float d = texelFetch(u_cell_skip, c, 0).r * 255.0;
+        ivec3 c;
+        float d = cell_skip(u, c);
         if (d > 0.5) {
-            vec3 te = (vec3(c) + exit_offset + exit_widen * (d - 1.0) - g_u0) * inv_du;
-            k = lattice_after(min(min(te.x, te.y), te.z), t0, j, k, n);
+            k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
             if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) break;
             if (k >= n) break;
             // Sample the landing position in the same iteration (a CPU rasteriser
