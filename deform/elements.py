@@ -1,0 +1,488 @@
+"""The element grid of the mass-spring model: rest positions, constraints and materials.
+
+About this technique (Knoche 2008, 3.5, 3.6)
+--------------------------------------------
+An ``n_x x n_y x n_z`` grid of *elements* (point masses) is spread evenly over the
+volume's box, faces included: element ``(i, j, k)`` (indices along x, y, z) rests at
+``lo + (i, j, k) * spacing`` with ``spacing = (hi - lo) / (shape - 1)``. Each element
+carries a material (``stiffness`` in [0, 1], ``damping`` >= 0, ``mass`` > 0) and may be
+*fixed* (it never moves). The 8 corner elements are fixed by default so that the grid
+cannot drift away as a whole. Stiffness 1 means rigid: such an element does not move
+by itself either (:meth:`ElementGrid.pinned`).
+
+Materials can vary over the grid; :meth:`ElementGrid.materials_from_volume` derives the
+stiffness from the volume's values, e.g. bone stiffer than soft tissue.
+
+This module only describes the grid; :class:`deform.massspring.MassSpring` simulates it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+#: most elements along one axis
+MAX_ELEMENTS_PER_AXIS = 128
+#: fewest elements along one axis (one on each face)
+MIN_ELEMENTS_PER_AXIS = 2
+#: default material of every element
+DEFAULT_STIFFNESS = 0.5
+DEFAULT_DAMPING = 1.0
+DEFAULT_MASS = 1.0
+
+#: a selection of elements: bool mask of the grid shape, one (i, j, k), or (m, 3) indices
+Selection = Any
+
+
+class ElementGridError(ValueError):
+    """An element grid was given invalid parameters (the message names the fix)."""
+
+
+class ElementGrid:
+    """A regular grid of mass-spring elements over a box, with constraints and materials.
+
+    Parameters
+    ----------
+    volume_or_bounds
+        Either an object with a ``bounds`` attribute giving ``(lo, hi)`` corners in mm
+        (such as the app's ``Volume``), or the pair ``(lo, hi)`` itself.
+    shape
+        Elements per axis ``(n_x, n_y, n_z)``, each an int in
+        [2, :data:`MAX_ELEMENTS_PER_AXIS`]; one int means the same on all axes.
+
+    Attributes
+    ----------
+    shape : tuple[int, int, int]
+        Elements per axis.
+    lo, hi : numpy.ndarray
+        (3,) corners of the box in mm.
+    spacing : numpy.ndarray
+        (3,) rest distance between neighbouring elements per axis.
+    rest_positions : numpy.ndarray
+        (n_x, n_y, n_z, 3) float64 rest position of each element.
+    fixed : numpy.ndarray
+        (n_x, n_y, n_z) bool; True for elements that never move. Corners by default.
+    stiffness, damping, mass : numpy.ndarray
+        (n_x, n_y, n_z) float32 materials; defaults 0.5, 1.0 and 1.0.
+
+    Examples
+    --------
+    >>> grid = ElementGrid(((0, 0, 0), (100, 50, 50)), shape=(11, 6, 6))
+    >>> grid.spacing.tolist()
+    [10.0, 10.0, 10.0]
+    >>> int(grid.fixed.sum())
+    8
+    """
+
+    def __init__(self, volume_or_bounds: Any, shape: int | Sequence[int] = (16, 16, 16)) -> None:
+        lo, hi = _parse_bounds(volume_or_bounds)
+        self.shape: tuple[int, int, int] = _parse_shape(shape)
+        self.lo: np.ndarray = lo
+        self.hi: np.ndarray = hi
+        n = np.asarray(self.shape, dtype=np.float64)
+        self.spacing: np.ndarray = (hi - lo) / (n - 1)
+        idx = np.stack(np.indices(self.shape, dtype=np.float64), axis=-1)
+        self.rest_positions: np.ndarray = lo + idx * self.spacing
+        # the faces land exactly on the box, not off by round-off
+        for a in range(3):
+            sl: list[Any] = [slice(None)] * 3
+            sl[a] = -1
+            self.rest_positions[(*sl, a)] = hi[a]
+        self.fixed: np.ndarray = np.zeros(self.shape, dtype=bool)
+        self.stiffness: np.ndarray = np.full(self.shape, DEFAULT_STIFFNESS, dtype=np.float32)
+        self.damping: np.ndarray = np.full(self.shape, DEFAULT_DAMPING, dtype=np.float32)
+        self.mass: np.ndarray = np.full(self.shape, DEFAULT_MASS, dtype=np.float32)
+        self.fixed[self.corner_mask()] = True
+
+    # ------------------------------------------------------------------ selections
+    @property
+    def count(self) -> int:
+        """Total number of elements."""
+        return int(np.prod(self.shape))
+
+    def corner_mask(self) -> np.ndarray:
+        """Bool mask of the 8 corner elements.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n_x, n_y, n_z) bool, True at the corners.
+        """
+        m = np.zeros(self.shape, dtype=bool)
+        m[:: self.shape[0] - 1, :: self.shape[1] - 1, :: self.shape[2] - 1] = True
+        return m
+
+    def mask(self, sel: Selection) -> np.ndarray:
+        """Turn a selection into a bool mask of the grid shape.
+
+        Parameters
+        ----------
+        sel
+            A bool array of the grid shape, a single index ``(i, j, k)``, or an (m, 3)
+            int array (or list) of indices. ``None`` selects every element.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n_x, n_y, n_z) bool mask (a new array).
+
+        Raises
+        ------
+        ElementGridError
+            When the selection has the wrong shape or type, or an index is outside
+            the grid (negative indices are not wrapped around).
+        """
+        if sel is None:
+            return np.ones(self.shape, dtype=bool)
+        arr = np.asarray(sel)
+        if arr.dtype == bool:
+            if arr.shape != self.shape:
+                raise ElementGridError(
+                    f"a bool selection mask must have the grid shape {self.shape}; "
+                    f"got shape {arr.shape}"
+                )
+            return arr.copy()
+        out = np.zeros(self.shape, dtype=bool)
+        idx = self.indices(arr)
+        out[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        return out
+
+    def indices(self, sel: Selection) -> np.ndarray:
+        """Element indices (m, 3) int64 of a selection given as indices.
+
+        Parameters
+        ----------
+        sel
+            A single index ``(i, j, k)`` or an (m, 3) int array / list of indices.
+
+        Returns
+        -------
+        numpy.ndarray
+            (m, 3) int64 indices, validated to lie inside the grid.
+
+        Raises
+        ------
+        ElementGridError
+            When the selection is not made of integer triples, or an index is outside
+            the grid.
+        """
+        arr = np.asarray(sel)
+        if arr.size == 0:
+            return np.zeros((0, 3), dtype=np.int64)
+        if arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer):
+            if not (np.issubdtype(arr.dtype, np.floating) and np.all(arr == np.round(arr))):
+                raise ElementGridError(
+                    "element indices must be integers (i, j, k); got "
+                    f"{np.asarray(sel).tolist()!r:.80} of dtype {arr.dtype}"
+                )
+        idx = arr.astype(np.int64)
+        if idx.shape == (3,):
+            idx = idx.reshape(1, 3)
+        if idx.ndim != 2 or idx.shape[1] != 3:
+            raise ElementGridError(
+                "select elements by a bool mask of the grid shape "
+                f"{self.shape}, one index (i, j, k) or an (m, 3) index array; "
+                f"got an array of shape {arr.shape}"
+            )
+        bad = np.any((idx < 0) | (idx >= np.asarray(self.shape)), axis=1)
+        if np.any(bad):
+            first = tuple(int(v) for v in idx[np.argmax(bad)])
+            raise ElementGridError(
+                f"element index {first} is outside the grid of shape {self.shape}; "
+                f"indices run from (0, 0, 0) to {tuple(n - 1 for n in self.shape)}"
+            )
+        return idx
+
+    # ------------------------------------------------------------------ constraints
+    def fix(self, sel: Selection) -> None:
+        """Fix elements: they stay at their rest positions.
+
+        Parameters
+        ----------
+        sel
+            Bool mask of the grid shape, one index ``(i, j, k)`` or (m, 3) indices.
+        """
+        self.fixed |= self.mask(sel)
+
+    def free(self, sel: Selection) -> None:
+        """Unfix elements (they move again, unless their stiffness is 1).
+
+        Parameters
+        ----------
+        sel
+            Bool mask of the grid shape, one index ``(i, j, k)`` or (m, 3) indices.
+        """
+        self.fixed &= ~self.mask(sel)
+
+    def pinned(self) -> np.ndarray:
+        """Elements that do not move by themselves: fixed, or rigid (stiffness >= 1).
+
+        Returns
+        -------
+        numpy.ndarray
+            (n_x, n_y, n_z) bool mask (a new array).
+        """
+        return self.fixed | (self.stiffness >= 1.0)
+
+    # ------------------------------------------------------------------ materials
+    def set_material(
+        self,
+        sel: Selection = None,
+        stiffness: float | np.ndarray | None = None,
+        damping: float | np.ndarray | None = None,
+        mass: float | np.ndarray | None = None,
+    ) -> None:
+        """Set the material of some (default all) elements; ``None`` leaves a property.
+
+        Parameters
+        ----------
+        sel
+            Elements to change (see :meth:`mask`); ``None`` means all.
+        stiffness
+            In [0, 1]; 1 makes the elements rigid (pinned at rest).
+        damping
+            Velocity damping, >= 0 (force ``-damping * velocity``).
+        mass
+            Element mass, > 0.
+
+        Each value is a number, or an array of the grid shape whose selected entries
+        are used. Every value is validated before anything changes.
+
+        Raises
+        ------
+        ElementGridError
+            When a value is out of its range, not finite, or of a wrong shape.
+        """
+        m = self.mask(sel)
+        new = {}
+        for name, value, ok, rule in (
+            ("stiffness", stiffness, lambda a: (a >= 0) & (a <= 1), "in [0, 1]"),
+            ("damping", damping, lambda a: a >= 0, ">= 0"),
+            ("mass", mass, lambda a: a > 0, "> 0"),
+        ):
+            if value is None:
+                continue
+            a = self._material_values(name, value, m)
+            if not np.all(np.isfinite(a)) or not np.all(ok(a)):
+                bad = a[~(np.isfinite(a) & ok(a))][0]
+                raise ElementGridError(f"{name} must be {rule} (finite); got {float(bad)!r}")
+            new[name] = a
+        for name, a in new.items():
+            getattr(self, name)[m] = a
+
+    def _material_values(self, name: str, value: Any, m: np.ndarray) -> np.ndarray:
+        try:
+            a = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ElementGridError(f"{name} must be a number or an array of numbers") from exc
+        if a.ndim == 0:
+            return np.full(int(m.sum()), float(a))
+        if a.shape != self.shape:
+            raise ElementGridError(
+                f"{name} must be a number or an array of the grid shape {self.shape}; "
+                f"got shape {a.shape}"
+            )
+        return a[m]
+
+    def materials_from_volume(
+        self,
+        data: np.ndarray,
+        bounds: Sequence[Sequence[float]],
+        mapping: Callable[[np.ndarray], np.ndarray] | Sequence[Sequence[float]],
+    ) -> np.ndarray:
+        """Set every element's stiffness from the volume value at its rest position.
+
+        The volume is sampled trilinearly (clamped at the border) at each element's
+        rest position, and the sampled value is mapped to a stiffness.
+
+        Parameters
+        ----------
+        data
+            (X, Y, Z) voxel values covering ``bounds``: voxel ``i`` along x lies at
+            ``lo + i * (hi - lo) / (X - 1)`` (like the elements; an axis of size 1
+            lies at ``lo``).
+        bounds
+            ``(lo, hi)`` corners in mm of the box the voxel centres span.
+        mapping
+            A callable taking the sampled values (array) and returning stiffnesses,
+            or control points ``[(value, stiffness), ...]`` interpolated piecewise
+            linearly (constant beyond the first and last point, as ``numpy.interp``).
+
+        Returns
+        -------
+        numpy.ndarray
+            The new (n_x, n_y, n_z) float32 stiffness (also stored in ``stiffness``).
+
+        Raises
+        ------
+        ElementGridError
+            On malformed data, bounds or control points, or stiffnesses outside [0, 1].
+
+        Examples
+        --------
+        A CT-like volume, soft tissue around 40 HU and bone above 400 HU; bone is made
+        rigid-ish, soft tissue soft, with a ramp in between:
+
+        >>> data = np.zeros((20, 10, 10), np.float32)
+        >>> data[10:] = 1000.0                      # the upper half in x is bone
+        >>> grid = ElementGrid(((0, 0, 0), (19, 9, 9)), shape=(6, 3, 3))
+        >>> s = grid.materials_from_volume(data, ((0, 0, 0), (19, 9, 9)),
+        ...                                [(100.0, 0.2), (400.0, 0.95)])
+        >>> [round(float(v), 2) for v in s[:, 0, 0]]
+        [0.2, 0.2, 0.2, 0.95, 0.95, 0.95]
+        """
+        vol = np.asarray(data)
+        if vol.ndim != 3 or min(vol.shape) < 1:
+            raise ElementGridError(f"volume data must be a 3-D (X, Y, Z) array; got {vol.shape}")
+        if not np.issubdtype(vol.dtype, np.number) or np.iscomplexobj(vol):
+            raise ElementGridError(f"volume data must be real numbers; got dtype {vol.dtype}")
+        lo, hi = _parse_bounds(bounds)
+        size = np.asarray(vol.shape, dtype=np.float64)
+        # continuous voxel index of each element's rest position
+        coords = (self.rest_positions - lo) / (hi - lo) * (size - 1)
+        values = ndimage.map_coordinates(
+            vol.astype(np.float64),
+            coords.reshape(-1, 3).T,
+            order=1,
+            mode="nearest",
+        ).reshape(self.shape)
+        stiff = _apply_mapping(mapping, values)
+        self.set_material(stiffness=stiff)
+        return self.stiffness.copy()
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable description (plain lists and numbers).
+
+        Returns
+        -------
+        dict
+            ``lo``, ``hi``, ``shape``, ``fixed`` (list of fixed ``[i, j, k]``), and
+            ``stiffness``, ``damping``, ``mass``: a number when uniform, else a nested
+            list of the grid shape.
+        """
+        d: dict[str, Any] = {
+            "lo": self.lo.tolist(),
+            "hi": self.hi.tolist(),
+            "shape": list(self.shape),
+            "fixed": np.argwhere(self.fixed).tolist(),
+        }
+        for name in ("stiffness", "damping", "mass"):
+            a = getattr(self, name)
+            d[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ElementGrid:
+        """Rebuild a grid from its :meth:`to_dict` form.
+
+        Parameters
+        ----------
+        d
+            Mapping with ``lo``, ``hi`` and ``shape``; optionally ``fixed`` (list of
+            indices; default the corners) and ``stiffness``, ``damping``, ``mass``.
+
+        Returns
+        -------
+        ElementGrid
+
+        Raises
+        ------
+        ElementGridError
+            When a key is missing or a value is invalid.
+        """
+        if not isinstance(d, Mapping):
+            raise ElementGridError(f"an element grid entry must be an object; got {d!r:.80}")
+        missing = [k for k in ("lo", "hi", "shape") if k not in d]
+        if missing:
+            raise ElementGridError(f"an element grid entry needs the keys {missing}")
+        grid = cls((d["lo"], d["hi"]), shape=d["shape"])
+        if "fixed" in d:
+            grid.fixed[:] = False
+            grid.fix(np.asarray(d["fixed"], dtype=np.int64).reshape(-1, 3))
+        grid.set_material(
+            stiffness=d.get("stiffness"), damping=d.get("damping"), mass=d.get("mass")
+        )
+        return grid
+
+    def __repr__(self) -> str:
+        return (
+            f"ElementGrid(shape={self.shape}, lo={self.lo.tolist()}, hi={self.hi.tolist()}, "
+            f"fixed={int(self.fixed.sum())})"
+        )
+
+
+def _apply_mapping(mapping: Any, values: np.ndarray) -> np.ndarray:
+    if callable(mapping):
+        out = np.asarray(mapping(values), dtype=np.float64)
+        if out.shape != values.shape:
+            out = np.broadcast_to(out, values.shape)
+        return out
+    try:
+        pts = np.asarray(mapping, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ElementGridError(
+            "mapping must be a callable or a list of (value, stiffness) control points"
+        ) from exc
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 1:
+        raise ElementGridError(
+            "mapping control points must be a list of (value, stiffness) pairs; "
+            f"got an array of shape {pts.shape}"
+        )
+    if not np.all(np.isfinite(pts)):
+        raise ElementGridError("mapping control points must be finite numbers")
+    if np.any((pts[:, 1] < 0) | (pts[:, 1] > 1)):
+        raise ElementGridError("mapping stiffnesses must be in [0, 1]")
+    order = np.argsort(pts[:, 0], kind="stable")
+    xs, ys = pts[order, 0], pts[order, 1]
+    if np.any(np.diff(xs) == 0):
+        raise ElementGridError("mapping control points must have distinct values")
+    return np.interp(values, xs, ys)
+
+
+def _parse_shape(shape: Any) -> tuple[int, int, int]:
+    fix = (
+        f"give 1 or 3 ints in [{MIN_ELEMENTS_PER_AXIS}, {MAX_ELEMENTS_PER_AXIS}], "
+        "e.g. shape=(16, 16, 16)"
+    )
+    if isinstance(shape, bool | np.bool_):
+        raise ElementGridError(f"element grid shape must be ints; got {shape!r}; {fix}")
+    if isinstance(shape, int | np.integer):
+        shape = (int(shape),) * 3
+    try:
+        vals = list(shape)
+    except TypeError as exc:
+        raise ElementGridError(f"element grid shape must be ints; got {shape!r}; {fix}") from exc
+    if len(vals) != 3 or not all(
+        isinstance(v, int | np.integer) and not isinstance(v, bool | np.bool_) for v in vals
+    ):
+        raise ElementGridError(f"element grid shape must be 3 ints; got {shape!r}; {fix}")
+    if any(v < MIN_ELEMENTS_PER_AXIS or v > MAX_ELEMENTS_PER_AXIS for v in vals):
+        raise ElementGridError(f"element grid shape {tuple(vals)} is out of range; {fix}")
+    return tuple(int(v) for v in vals)  # type: ignore[return-value]
+
+
+def _parse_bounds(volume_or_bounds: Any) -> tuple[np.ndarray, np.ndarray]:
+    b = getattr(volume_or_bounds, "bounds", volume_or_bounds)
+    fix = "pass a volume (with .bounds) or (lo, hi) corners in mm, each 3 finite numbers"
+    try:
+        lo_in, hi_in = b
+        lo = np.asarray(lo_in, dtype=np.float64)
+        hi = np.asarray(hi_in, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ElementGridError(f"bad bounds {b!r:.80}; {fix}") from exc
+    if lo.shape != (3,) or hi.shape != (3,):
+        raise ElementGridError(
+            f"bounds corners must be 3-vectors; got shapes {lo.shape} and {hi.shape}; {fix}"
+        )
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ElementGridError(f"bounds must be finite; got lo={lo.tolist()}, hi={hi.tolist()}")
+    if np.any(hi <= lo):
+        raise ElementGridError(
+            f"bounds are empty: need hi > lo on every axis; got lo={lo.tolist()}, "
+            f"hi={hi.tolist()}; {fix}"
+        )
+    return lo, hi
