@@ -4,6 +4,11 @@ Each model has a CPU reference and a GPU backend and exposes its result as a war
 (:class:`deform.warp.Warp`) that the raycaster samples without resampling the volume.
 """
 
+from deform.elements import ElementGrid as ElementGrid
+from deform.elements import ElementGridError as ElementGridError
+from deform.massspring import CpuSpringSolver as CpuSpringSolver
+from deform.massspring import MassSpring as MassSpring
+from deform.offset_field import OffsetFieldWarp as OffsetFieldWarp
 from deform.warp import (
     AffineWarp,
     IdentityWarp,
