@@ -44,10 +44,11 @@ from app.skipping import (
     ray_direction_coefficients,
     skip_map_key,
     static_block_visibility,
+    warped_cell_visibility,
 )
 from app.transfer_function import TABLE_SIZE, TransferFunction
 from app.volume import Volume
-from deform.warp import compose_glsl, fold_affine
+from deform.warp import chain_displacement_bound, compose_glsl, fold_affine
 
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
 DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
@@ -100,13 +101,24 @@ class _VolumeGPU:
         #: octant -> R8 texture of octant skip distances, for the scene key cell_key
         self.cell_skip: dict[Octant, Any] = {}
         self.cell_key: Any = None
+        # deformed-space skip maps of warped rays (one warp state at a time)
+        self.warped_skip: dict[Octant, Any] = {}
+        self.warped_key: Any = None
+        self.warped_visible: np.ndarray | None = None
+        self.warped_offset = np.zeros(3, dtype=int)
         self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
 
     def release(self) -> None:
-        for tex in (self.texture, self.info, *self.cell_skip.values()):
+        for tex in (
+            self.texture,
+            self.info,
+            *self.cell_skip.values(),
+            *self.warped_skip.values(),
+        ):
             if tex is not None:
                 tex.release()
         self.cell_skip.clear()
+        self.warped_skip.clear()
         self.texture = self.info = None  # type: ignore[assignment]
 
 
@@ -276,24 +288,25 @@ class Renderer:
         whose visibility is sparse (dvr, iso, flm). mip, minip and average must look
         at (nearly) every sample along the ray; on the benchmark CT their skip checks
         cost more than they saved (no skipping: 1.3x faster), so they march plainly.
-        Warped (non-affine) rays test their 4³ block per sample.
+        Warped (non-affine) rays skip at cell resolution too, through deformed space,
+        when every warp of the chain bounds its displacement
+        (:meth:`deform.warp.Warp.displacement_bound`; see
+        :func:`app.skipping.warped_cell_visibility`); otherwise they test their 4³
+        block per sample.
         """
         if not self.empty_space_skipping:
             return "none"
+        sparse = scene.mode in ("dvr", "iso", "flm") and self.cell_skipping
         if not linear:
-            return "blocks"
-        if scene.mode in ("dvr", "iso", "flm") and self.cell_skipping:
+            return "cells" if sparse and _bounded(scene.warps) else "blocks"
+        if sparse:
             return "cells"
         if scene.mode in ("mip", "minip", "average"):
             return "none"
         return "blocks"
 
-    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
-        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
-
-        Computed on first use per (mode visibility, octant) and cached on the volume;
-        a change of what the mode can see (transfer function, isovalue, ...) drops all.
-        """
+    def _cell_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
+        """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
         key = skip_map_key(scene)
         if gpu.cell_key != key:
             for tex in gpu.cell_skip.values():
@@ -303,14 +316,62 @@ class Renderer:
                 gpu.cell_range = cell_min_max(gpu.volume_data)
             gpu.cell_visible = static_block_visibility(scene, *gpu.cell_range)
             gpu.cell_key = key
+        assert gpu.cell_visible is not None
+        return gpu.cell_visible
+
+    def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
+        dist = octant_skip_distances(visible, octant)
+        data = np.ascontiguousarray(dist.transpose(2, 1, 0))
+        tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
+        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        return tex
+
+    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
+        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
+
+        Computed on first use per (mode visibility, octant) and cached on the volume;
+        a change of what the mode can see (transfer function, isovalue, ...) drops all.
+        """
+        visible = self._cell_visibility(gpu, scene)
         tex = gpu.cell_skip.get(octant)
         if tex is None:
-            assert gpu.cell_visible is not None
-            dist = octant_skip_distances(gpu.cell_visible, octant)
-            data = np.ascontiguousarray(dist.transpose(2, 1, 0))
-            tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
-            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            gpu.cell_skip[octant] = tex
+            tex = gpu.cell_skip[octant] = self._octant_texture(visible, octant)
+        return tex
+
+    def _warped_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
+        """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
+        for one warp state; a change of the warps or of what the mode sees rebuilds it)."""
+        lo, hi = scene.ray_bounds()
+        key = (
+            skip_map_key(scene),
+            tuple(
+                (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
+                for w in scene.warps
+            ),
+            tuple(np.round(np.asarray(lo, float), 9)),
+            tuple(np.round(np.asarray(hi, float), 9)),
+        )
+        if gpu.warped_key != key:
+            for tex in gpu.warped_skip.values():
+                tex.release()
+            gpu.warped_skip.clear()
+            vol = scene.volume
+            result = warped_cell_visibility(
+                self._cell_visibility(gpu, scene), vol.spacing, vol.origin, scene.warps, lo, hi
+            )
+            if result is None:
+                raise RenderError("warped cell skipping needs warps that bound their offsets")
+            gpu.warped_visible, gpu.warped_offset = result
+            gpu.warped_key = key
+        assert gpu.warped_visible is not None
+        return gpu.warped_visible
+
+    def _warped_cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
+        """R8 octant skip map of the deformed-space cells (see :meth:`_warped_visibility`)."""
+        visible = self._warped_visibility(gpu, scene)
+        tex = gpu.warped_skip.get(octant)
+        if tex is None:
+            tex = gpu.warped_skip[octant] = self._octant_texture(visible, octant)
         return tex
 
     def _program(self, scene: Scene, linear: bool) -> Any:
@@ -437,6 +498,17 @@ class Renderer:
             to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
             values["u_world_to_texel"] = to_texel @ fold
             values["u_jacobian"] = fold[:3, :3]
+        skip_kind = self._skip_kind(scene, linear)
+        skip_to_texel = values.get("u_world_to_texel")
+        if skip_kind == "cells" and not linear:
+            # warped rays look up deformed-space cells: the volume's texel grid shifted
+            # by the skip map's padding
+            visible = self._warped_visibility(gpu, scene)
+            skip_to_texel = np.eye(4)
+            skip_to_texel[:3, :3] = np.diag(1.0 / sp)
+            skip_to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5 - gpu.warped_offset
+            values["u_skip_world_to_texel"] = skip_to_texel
+            values["u_cell_dims"] = tuple(int(c) for c in visible.shape)
         for name, value in values.items():
             _set_uniform(prog, name, value)
 
@@ -448,10 +520,8 @@ class Renderer:
         # (the shader discards the other octants' pixels along the shared borders).
         regions: list[tuple[Octant | None, list[tuple[float, float]]]]
         regions = [(None, [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])]
-        if self._skip_kind(scene, linear) == "cells":
-            coefficients = ray_direction_coefficients(
-                values["u_inv_view_proj"], values["u_world_to_texel"]
-            )
+        if skip_kind == "cells":
+            coefficients = ray_direction_coefficients(values["u_inv_view_proj"], skip_to_texel)
             regions = list(octant_regions(coefficients, (w, h)))
         unit = 4
         if not linear:
@@ -474,7 +544,10 @@ class Renderer:
             self._vao[id(prog)] = vao
         for octant, polygon in regions:
             if octant is not None:
-                self._cell_skip(gpu, scene, octant).use(3)
+                if linear:
+                    self._cell_skip(gpu, scene, octant).use(3)
+                else:
+                    self._warped_cell_skip(gpu, scene, octant).use(3)
                 _set_uniform(prog, "u_octant", tuple(float(c) for c in octant))
             corners = [*polygon, *[(0.0, 0.0)] * (MAX_POLYGON - len(polygon))]
             prog["u_polygon"].value = corners
@@ -497,6 +570,12 @@ class Renderer:
             self._tf_tex.release()
             self._tf_tex = None
         self._released = True
+
+
+def _bounded(warps: Any) -> bool:
+    """Whether every warp of the chain bounds its displacement (cheap probe)."""
+    probe = np.zeros((1, 3))
+    return chain_displacement_bound(warps, probe, probe) is not None
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:

@@ -93,6 +93,12 @@ class Warp(ABC):
         """True when the warp is an affine map (the raycaster then folds it into the ray)."""
         return False
 
+    @property
+    def revision(self) -> int:
+        """Counter that changes whenever the warp's mapping changes in place (e.g. an
+        offset field's :meth:`update`); caches of derived data (skip maps) key on it."""
+        return 0
+
     def affine_matrix(self) -> np.ndarray:
         """4x4 matrix of the warp (deformed -> original) when :attr:`is_affine`."""
         raise WarpError(f"{type(self).__name__} is not affine")
@@ -104,6 +110,24 @@ class Warp(ABC):
         nothing outside the original box.
         """
         return np.asarray(lo, float), np.asarray(hi, float)
+
+    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
+        """Per box and axis, a bound (mm) on ``|apply(p) - p|`` over p in the box.
+
+        Parameters
+        ----------
+        lo, hi
+            (N, 3) corners of N axis-aligned boxes in deformed space (mm).
+
+        Returns
+        -------
+        numpy.ndarray or None
+            (N, 3) bounds per axis, or ``None`` when the warp cannot bound its displacement (the
+            default). The raycaster uses the bounds to carry empty-space skipping into
+            deformed space: a deformed-space point can only sample original content
+            within the bound (see :func:`app.skipping.warped_cell_visibility`).
+        """
+        return None
 
     # ---------------------------------------------------------------- GPU side
     def uniforms(self) -> dict[str, Any]:
@@ -156,6 +180,10 @@ class IdentityWarp(Warp):
     def affine_matrix(self) -> np.ndarray:
         """The 4x4 identity."""
         return np.eye(4)
+
+    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Zero: the identity moves nothing."""
+        return np.zeros((np.atleast_2d(lo).shape[0], 3))
 
     def to_dict(self) -> dict[str, Any]:
         """``{"type": "identity"}``."""
@@ -253,6 +281,19 @@ class AffineWarp(Warp):
         f = c @ self.forward[:3, :3].T + self.forward[:3, 3]
         return f.min(axis=0), f.max(axis=0)
 
+    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Exact: each ``|(A p + t - p)_i|`` is convex in p, so its maximum over a box
+        lies at a corner; per axis, the largest of the 8 corners' displacements."""
+        lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
+        m = self.inverse[:3, :3] - np.eye(3)
+        out = np.zeros(lo.shape)
+        for corner in range(8):
+            pick = np.array([(corner >> a) & 1 for a in range(3)], dtype=bool)
+            p = np.where(pick, hi, lo)
+            d = p @ m.T + self.inverse[:3, 3]
+            np.maximum(out, np.abs(d), out=out)
+        return out
+
     def uniforms(self) -> dict[str, Any]:
         """``matrix``: the deformed -> original 4x4 matrix (column-major for GL)."""
         return {"matrix": self.inverse}
@@ -318,6 +359,26 @@ def chain_deformed_bounds(
     for w in reversed(list(warps)):
         lo, hi = w.deformed_bounds(lo, hi)
     return lo, hi
+
+
+def chain_displacement_bound(
+    warps: Sequence[Warp], lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray | None:
+    """Per box and axis, a bound (mm) on how far a chain moves any point of the box.
+
+    Warp ``i`` sees the box widened by the bounds of warps ``0 .. i-1`` (the points it
+    receives lie there); the chain's bound is the sum (triangle inequality). ``None``
+    when some warp gives no bound. ``lo``, ``hi``: (N, 3) box corners in deformed mm;
+    returns (N, 3).
+    """
+    lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
+    total = np.zeros(lo.shape)
+    for w in warps:
+        b = w.displacement_bound(lo - total, hi + total)
+        if b is None:
+            return None
+        total = total + np.asarray(b, dtype=float)
+    return total
 
 
 def fold_affine(warps: Sequence[Warp]) -> np.ndarray | None:

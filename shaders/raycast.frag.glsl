@@ -17,8 +17,12 @@
 //   (dvr, iso, flm) the map is kept per trilinear cell instead of per block, and per
 //   ray-direction octant: the cube a ray may jump through starts at its cell and
 //   extends ahead of it (app/skipping.py). One nearest fetch per sample.
-// * otherwise: each sample goes through warp_chain(p); invisible blocks still save the
-//   volume fetch and classification.
+// * otherwise: each sample goes through warp_chain(p). When every warp bounds its
+//   displacement (and the mode is dvr, iso or flm), CELL_SKIP applies in *deformed*
+//   space: the ray walks octant skip maps of the original cell visibility dilated by
+//   the local displacement bound (app/skipping.py warped_cell_visibility), so it jumps
+//   wherever no sample could land on visible content, again on the sample lattice.
+//   Without a bound, invisible blocks still save the volume fetch and classification.
 // Early ray termination: the mode returns true from mode_sample when nothing further
 // can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
 // The renderer clears the viewport to u_background first; rays that miss the volume
@@ -63,6 +67,19 @@ mat3 jacobian_at(float t) { return u_jacobian; }
 #include "warps.glsl"
 vec3 texel_at(float t) { return world_to_texel(warp_chain(g_ro + t * g_rd)); }
 mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
+#ifdef CELL_SKIP
+// Warped rays skip through *deformed* space: the skip map's cells are those of the
+// original cell grid padded to the ray box, their visibility the original one dilated
+// by the warps' local displacement bound (app/skipping.py warped_cell_visibility).
+uniform mat4 u_skip_world_to_texel;   // deformed world -> skip-map texel coordinates
+uniform ivec3 u_cell_dims;            // cells of the skip map
+vec3 g_u0;
+vec3 g_du;
+#endif
+#endif
+#if defined(LINEAR_PATH) || defined(CELL_SKIP)
+// Where the ray is in the skip map's cells (straight rays: the volume's texels).
+vec3 skip_at(float t) { return g_u0 + t * g_du; }
 #endif
 
 // Gradient of the deformed field at the sample (texel u, ray parameter t).
@@ -104,6 +121,10 @@ int lattice_after(float t, float t0, float j, int k, int n) {
 // Skip edge d of the cell c holding texel position u (0: the cell is visible).
 float cell_skip(vec3 u, out ivec3 c) {
     c = ivec3(floor(u + 0.5));
+#ifndef LINEAR_PATH
+    // the deformed-space map covers the ray box; guard against rounding at its faces
+    if (any(lessThan(c, ivec3(0))) || any(greaterThanEqual(c, u_cell_dims))) return 0.0;
+#endif
     return texelFetch(u_cell_skip, c, 0).r * 255.0;
 }
 
@@ -137,6 +158,10 @@ void main() {
 #ifdef LINEAR_PATH
     g_u0 = (u_world_to_texel * vec4(g_ro, 1.0)).xyz;
     g_du = mat3(u_world_to_texel) * g_rd;
+#elif defined(CELL_SKIP)
+    g_u0 = (u_skip_world_to_texel * vec4(g_ro, 1.0)).xyz;
+    g_du = mat3(u_skip_world_to_texel) * g_rd;
+#endif
 #ifdef CELL_SKIP
     // This pass draws the rays of octant u_octant only (each pixel exactly once). A
     // component counts as negative only below -OCTANT_EPS * max|du|, so directions
@@ -145,8 +170,11 @@ void main() {
     vec3 ray_octant = mix(vec3(1.0), vec3(-1.0), lessThan(g_du, vec3(-OCTANT_EPS * du_max)));
     if (any(notEqual(ray_octant, u_octant))) discard;
 #endif
+#if defined(LINEAR_PATH) || defined(CELL_SKIP)
     // keep direction components away from 0 so 1/du stays finite
     g_du = mix(g_du, sign(g_du) * 1e-12 + vec3(1e-30), lessThan(abs(g_du), vec3(1e-12)));
+#endif
+#ifdef LINEAR_PATH
     vec2 tt = intersect_box(g_u0, g_du, vec3(0.0), u_dims);
     t0 = max(t0, tt.x);
     t1 = min(t1, tt.y);
@@ -164,7 +192,7 @@ void main() {
 
     State s;
     mode_init(s);
-#ifdef LINEAR_PATH
+#if defined(LINEAR_PATH) || defined(CELL_SKIP)
     // One flat loop (no nested per-block loop): SIMD lanes of a CPU rasteriser stay in
     // step whether they sample or skip. The block's visibility is looked up only when
     // a sample enters a new block; an invisible block is jumped to its exit, on the
@@ -173,6 +201,7 @@ void main() {
     vec3 face = step(vec3(0.0), g_du);   // 1 where the ray leaves a block through its upper face
     g_inside = k < n;
     float t_last = t0 + (float(n) - 1.0 + j) * u_step;   // last sample on the lattice
+#endif
 #ifdef CELL_SKIP
     // Empty-space skipping at cell resolution: one nearest fetch per sample. An
     // invisible cell with edge d lets the ray leave the cube of d³ invisible cells
@@ -185,7 +214,7 @@ void main() {
     bool finished = false;
     while (k < n) {
         ivec3 c;
-        float d = cell_skip(texel_at(t0 + (float(k) + j) * u_step), c);
+        float d = cell_skip(skip_at(t0 + (float(k) + j) * u_step), c);
         if (d < 0.5) break;
         k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
         // the last skipped sample lies in the invisible cube: where bisection may start
@@ -198,9 +227,8 @@ void main() {
     if (k >= n && !finished) discard;
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
-        vec3 u = texel_at(t);
         ivec3 c;
-        float d = cell_skip(u, c);
+        float d = cell_skip(skip_at(t), c);
         if (d > 0.5) {
             k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
             if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) break;
@@ -209,12 +237,20 @@ void main() {
             // runs both sides of a branch anyway): if its cell is invisible too, the
             // sample cannot contribute (zero opacity, below the isovalue/threshold).
             t = t0 + (float(k) + j) * u_step;
-            u = texel_at(t);
         }
+        vec3 u = texel_at(t);
+#ifndef LINEAR_PATH
+        // a warped sample may land outside the volume: it shows nothing
+        if (!inside_texels(u)) {
+            if (mode_skip(s, -1.0)) break;
+            ++k;
+            continue;
+        }
+#endif
         if (mode_sample(s, sample_value(u), u, t)) break;
         ++k;
     }
-#else
+#elif defined(LINEAR_PATH)
     ivec3 cur = ivec3(-1000000);
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
@@ -241,7 +277,6 @@ void main() {
         if (mode_sample(s, sample_value(u), u, t)) break;
         ++k;
     }
-#endif
 #else
     for (; k < n; ++k) {
         float t = t0 + (float(k) + j) * u_step;

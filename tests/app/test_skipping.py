@@ -254,3 +254,117 @@ def test_visible_ranges_integer_path_equals_float_path(dtype: Any) -> None:
     np.testing.assert_array_equal(fast, slow)
     assert fast.any()
     assert not fast.all()
+
+
+# ---------------------------------------------------------------------- warped rays
+def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
+    from deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+
+    lo, hi = vol.bounds
+    field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (amount, -0.5 * amount, 1.0), 1.0)
+    return OffsetFieldWarp(lo, hi, field, shape=(7, 6, 5))
+
+
+def _random_boxes(rng: Any, lo: Any, hi: Any, n: int = 3000) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    a = rng.uniform(lo - 5, hi + 5, (n, 3))
+    return a, a + rng.uniform(0, 4, (n, 3))
+
+
+@pytest.mark.parametrize("chain", ["offset", "affine", "offset+affine"])
+def test_displacement_bound_holds_for_every_point_of_its_box(chain: str) -> None:
+    from deform.warp import chain_apply, chain_displacement_bound
+
+    vol = _volume()
+    warps = {
+        "offset": [_drag_warp(vol)],
+        "affine": [AffineWarp.rotation((1, 2, 0), 20.0, center=vol.center)],
+        "offset+affine": [
+            _drag_warp(vol),
+            AffineWarp.rotation((0, 0, 1), 10.0, center=vol.center),
+            _drag_warp(vol, -3.0),
+        ],
+    }[chain]
+    rng = np.random.default_rng(1)
+    a, b = _random_boxes(rng, *vol.bounds)
+    bound = chain_displacement_bound(warps, a, b)
+    assert bound is not None
+    assert bound.shape == (len(a), 3)
+    for _ in range(8):
+        p = a + (b - a) * rng.uniform(0, 1, a.shape)
+        moved = np.abs(chain_apply(warps, p) - p)
+        assert np.all(moved <= bound + 1e-9)
+    assert bound.max() > 1.0  # not vacuous: the warps do move points
+
+
+def test_offset_bound_is_local() -> None:
+    from deform.offset_field import OffsetFieldWarp
+
+    field = np.zeros((9, 9, 9, 3))
+    field[2, 2, 2] = (3.0, 0.0, 0.0)  # one dragged node in a corner region
+    w = OffsetFieldWarp((0, 0, 0), (80, 80, 80), field)
+    far = w.displacement_bound(np.array([[60.0, 60, 60]]), np.array([[70.0, 70, 70]]))
+    near = w.displacement_bound(np.array([[15.0, 15, 15]]), np.array([[25.0, 25, 25]]))
+    assert far.max() < 1e-6
+    assert near[0, 0] >= 3.0
+    assert near[0, 1] < 1e-6
+
+
+def test_gpu_owned_field_gives_no_bound() -> None:
+    from deform.offset_field import OffsetFieldWarp
+
+    w = OffsetFieldWarp((0, 0, 0), (1, 1, 1), shape=(2, 2, 2), texture_source=lambda ctx: None)
+    assert w.displacement_bound(np.zeros((1, 3)), np.ones((1, 3))) is None
+
+
+def test_warped_visibility_is_between_original_and_global_dilation() -> None:
+    from scipy.ndimage import maximum_filter
+
+    from app.skipping import cell_min_max, static_block_visibility, warped_cell_visibility
+
+    vol = _volume()
+    scene = Scene(vol, mode="dvr", transfer_function=TF, warps=[_drag_warp(vol)])
+    visible = static_block_visibility(scene, *cell_min_max(vol.data))
+    lo, hi = scene.ray_bounds()
+    out, offset = warped_cell_visibility(visible, vol.spacing, vol.origin, scene.warps, lo, hi)
+    inner = tuple(slice(-o, -o + n) for o, n in zip(offset, visible.shape, strict=True))
+    assert np.all(out[inner] >= visible)  # dilation keeps every visible cell
+    assert out.sum() > visible.sum()  # and the drag grows it
+    # never more than dilating everything by the largest displacement
+    reach = np.max(np.abs(scene.warps[0].displacements), axis=(0, 1, 2))
+    r = np.ceil(reach * 1.001 / np.asarray(vol.spacing)).astype(int)
+    padded = np.zeros(out.shape, bool)
+    padded[inner] = visible
+    assert not np.any(out & ~maximum_filter(padded, size=tuple(2 * r + 1)))
+    # no displacement: exactly the original visibility
+    from deform.offset_field import OffsetFieldWarp
+
+    still = [OffsetFieldWarp(*vol.bounds, np.zeros((3, 3, 3, 3)))]
+    same, offset0 = warped_cell_visibility(visible, vol.spacing, vol.origin, still, *vol.bounds)
+    np.testing.assert_array_equal(offset0, 0)
+    np.testing.assert_array_equal(same, visible)
+
+
+@pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
+@pytest.mark.parametrize("chain", ["offset", "offset+rotation"])
+def test_warped_cell_skipping_matches_block_path(gl_ctx: Any, mode: str, chain: str) -> None:
+    vol = _volume()
+    lo, hi = vol.bounds
+    warps: list = [_drag_warp(vol)]
+    if chain == "offset+rotation":
+        warps.append(AffineWarp.rotation((1, 1, 0), 25.0, center=vol.center))
+    cam = Camera.fit(lo, hi, view=(30.0, 25.0), projection="perspective", fov=50.0)
+    scene = Scene(
+        vol, mode=mode, transfer_function=TF, camera=cam, warps=warps, iso_value=60.0, seed=3
+    )
+    images = {}
+    with OffscreenRenderer(48, 40, ctx=gl_ctx, dtype="f4") as r:
+        assert r.renderer._skip_kind(scene, linear=False) == "cells"
+        images["cells"] = r.render(scene)
+        r.renderer.cell_skipping = False
+        assert r.renderer._skip_kind(scene, linear=False) == "blocks"
+        images["blocks"] = r.render(scene)
+        r.renderer.cell_skipping = True
+        images["rest"] = r.render(scene.copy(warps=warps[1:]))
+    assert np.abs(images["cells"] - images["blocks"]).max() <= 1 / 255
+    assert np.abs(images["cells"] - images["rest"]).max() > 0.1  # the drag shows
