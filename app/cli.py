@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from collections.abc import Sequence
@@ -40,6 +41,264 @@ def _view(text: str) -> Any:
             f"view must be one of +x,-x,+y,-y,+z,-z or AZIMUTH,ELEVATION degrees; got {text!r}"
         ) from exc
     return (az, el)
+
+
+# ---------------------------------------------------------------------- mass-spring options
+#: Steps ``render --massspring`` runs without ``--settle`` (and no ``--steps``). With the
+#: CLI's defaults (semi-implicit, shear springs, dt ~ 24 ms) an 8³ grid is settled after
+#: about 600 steps and a 16³ grid within ~5 % of the dragged distance after 1000.
+MASSSPRING_STEPS = 1000
+#: Most steps ``--settle`` runs when ``--steps`` is not given.
+MASSSPRING_SETTLE_MAX_STEPS = 20000
+#: ``--settle`` stops once every element is slower than this (mm/s).
+MASSSPRING_SETTLE_TOL = 1e-3
+
+
+class CliOptionError(VoxwarpError):
+    """Command-line options that parse but do not fit together or with INPUT."""
+
+
+class _Drag(tuple):
+    """One ``--drag I,J,K:DX,DY,DZ``: ``(text, (i, j, k), (dx, dy, dz))``."""
+
+    @property
+    def text(self) -> str:
+        return self[0]
+
+    @property
+    def index(self) -> tuple[int, int, int]:
+        return self[1]
+
+    @property
+    def offset(self) -> tuple[float, float, float]:
+        return self[2]
+
+
+def _grid_shape(text: str) -> tuple[int, int, int]:
+    from deform.elements import MAX_ELEMENTS_PER_AXIS as hi
+    from deform.elements import MIN_ELEMENTS_PER_AXIS as lo
+
+    form = f"N or NX,NY,NZ elements per axis ({lo}..{hi}), e.g. 16 or 16,8,8"
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(vals) == 1:
+        vals = vals * 3
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if any(not lo <= v <= hi for v in vals):
+        raise argparse.ArgumentTypeError(f"{text!r}: out of range; expected {form}")
+    return vals  # type: ignore[return-value]
+
+
+def _drag(text: str) -> _Drag:
+    form = "I,J,K:DX,DY,DZ (element index, then its offset in mm along x, y, z), e.g. 6,4,4:0,12,0"
+    try:
+        left, right = text.split(":")
+        idx = tuple(int(v) for v in left.split(","))
+        off = tuple(float(v) for v in right.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(idx) != 3 or len(off) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if not all(math.isfinite(v) for v in off):
+        raise argparse.ArgumentTypeError(f"{text!r}: offsets must be finite mm; expected {form}")
+    return _Drag((text, idx, off))
+
+
+def _fix(text: str) -> tuple[str, tuple[tuple[int, int], ...]]:
+    form = "I,J,K with each an index or a range A..B, e.g. 3,4,4 or 0..1,0..7,0..7"
+    ranges = []
+    try:
+        parts = text.split(",")
+        for part in parts:
+            a, _, b = part.partition("..")
+            lo, hi = int(a), int(b if b else a)
+            if lo < 0 or hi < lo:
+                raise ValueError(part)
+            ranges.append((lo, hi))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(ranges) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    return text, tuple(ranges)
+
+
+def _stiffness_points(text: str) -> list[tuple[float, float]]:
+    form = (
+        "VALUE:STIFFNESS[,VALUE:STIFFNESS...] in data units and 0..1, e.g. 100:0.2,400:0.95"
+        " (write --stiffness-from-volume=-500:0.1,... for a negative first value)"
+    )
+    try:
+        pts = [tuple(float(v) for v in pair.split(":")) for pair in text.split(",")]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if not pts or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if any(not 0.0 <= s <= 1.0 for _, s in pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: stiffnesses must be in 0..1; expected {form}")
+    if len({v for v, _ in pts}) != len(pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: values must differ; expected {form}")
+    return pts  # type: ignore[return-value]
+
+
+def _steps(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a step count >= 0, e.g. 1000")
+    return n
+
+
+def _grid_text(shape: Sequence[int]) -> str:
+    return "x".join(str(n) for n in shape)
+
+
+def _check_massspring_options(args: argparse.Namespace) -> None:
+    """Option checks that need no volume: mass-spring options without ``--massspring``,
+    drags and fixes outside the grid, drags of a fixed element or of one element twice."""
+    import numpy as np
+
+    if args.massspring is None:
+        used = [
+            opt
+            for opt, value in (
+                ("--drag", args.drag),
+                ("--fix", args.fix),
+                ("--settle", args.settle),
+                ("--steps", args.steps is not None),
+                ("--backend", args.backend),
+                ("--integrator", args.integrator),
+                ("--inverse", args.inverse),
+                ("--shear/--no-shear", args.shear is not None),
+                ("--bend", args.bend),
+                ("--stiffness-from-volume", args.stiffness_from_volume),
+            )
+            if value
+        ]
+        if used:
+            raise CliOptionError(
+                f"{used[0]} needs --massspring: add --massspring N (the element grid over"
+                " the volume, e.g. --massspring 16)"
+            )
+        return
+    shape = args.massspring
+    grid = _grid_text(shape)
+    if len(set(shape)) == 1:
+        ranges_text = f"indices run 0..{shape[0] - 1}"
+    else:
+        ranges_text = "indices run " + ", ".join(f"0..{n - 1}" for n in shape) + " (i, j, k)"
+    fixed = np.zeros(shape, dtype=bool)
+    fixed[:: shape[0] - 1, :: shape[1] - 1, :: shape[2] - 1] = True
+    for text, ranges in args.fix or []:
+        if any(hi >= n for (_, hi), n in zip(ranges, shape, strict=True)):
+            raise CliOptionError(f"--fix {text}: reaches outside the {grid} grid; {ranges_text}")
+        fixed[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+    seen: dict[tuple[int, int, int], str] = {}
+    for d in args.drag or []:
+        if any(not 0 <= v < n for v, n in zip(d.index, shape, strict=True)):
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is outside the {grid} grid; {ranges_text}"
+            )
+        if fixed[d.index]:
+            corner = all(v in (0, n - 1) for v, n in zip(d.index, shape, strict=True))
+            what = (
+                f"a corner of the {grid} grid (corners stay fixed)" if corner else "fixed by --fix"
+            )
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is {what}; drag an element that is not fixed"
+            )
+        if d.index in seen:
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is already dragged by --drag"
+                f" {seen[d.index]}; give each element once"
+            )
+        seen[d.index] = d.text
+
+
+def _massspring_grid(args: argparse.Namespace, volume: Any) -> Any:
+    """The element grid of ``render --massspring`` over ``volume``: fixed elements and
+    materials set, drags checked against rigid elements (before any GL work)."""
+    import numpy as np
+
+    from deform.elements import ElementGrid, ElementGridError
+
+    grid = ElementGrid(volume, shape=args.massspring)
+    for _, ranges in args.fix or []:
+        mask = np.zeros(grid.shape, dtype=bool)
+        mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+        grid.fix(mask)
+    if args.stiffness_from_volume:
+        # the voxel centres span origin .. origin + spacing * (shape - 1)
+        org = np.asarray(volume.origin, dtype=np.float64)
+        n = np.maximum(np.asarray(volume.shape) - 1, 1)
+        centres = (org, org + np.asarray(volume.spacing, dtype=np.float64) * n)
+        try:
+            grid.materials_from_volume(volume.data, centres, args.stiffness_from_volume)
+        except ElementGridError as exc:
+            raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
+    rigid = grid.pinned()
+    for d in args.drag or []:
+        if rigid[d.index]:
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is rigid (stiffness 1 from"
+                " --stiffness-from-volume) and cannot move; drag another element or map"
+                " its value to a stiffness below 1"
+            )
+    return grid
+
+
+def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
+    """Build, drag and run the mass-spring model of ``render --massspring`` on ``grid``.
+
+    Returns the :class:`~deform.massspring.MassSpring` and a one-line summary.
+    """
+    from deform.massspring import MassSpring, MassSpringError
+
+    backend = args.backend or "cpu"
+    try:
+        ms = MassSpring(
+            grid,
+            backend=backend,
+            ctx=ctx if backend == "gpu" else None,
+            integrator=args.integrator or "semi-implicit",
+            shear=True if args.shear is None else args.shear,
+            bend=bool(args.bend),
+        )
+    except MassSpringError as exc:
+        raise CliOptionError(f"--massspring: {exc}") from exc
+    try:
+        for d in args.drag or []:
+            ms.move(d.index, d.offset)
+        if args.settle:
+            limit = MASSSPRING_SETTLE_MAX_STEPS if args.steps is None else args.steps
+            steps = ms.settle(max_steps=limit, tol=MASSSPRING_SETTLE_TOL)
+            how = f"{steps} steps"
+            if steps >= limit and limit > 0:
+                warnings.warn(
+                    f"--settle stopped at the limit of {limit} steps; the grid may still"
+                    " be moving: raise --steps",
+                    RuntimeWarning,
+                    stacklevel=1,
+                )
+            else:
+                how += f" (settled: every element slower than {MASSSPRING_SETTLE_TOL:g} mm/s)"
+        else:
+            steps = MASSSPRING_STEPS if args.steps is None else args.steps
+            ms.step(steps)
+            how = f"{steps} steps"
+        ms.warp(inverse=args.inverse or "exact")
+    except BaseException:
+        ms.close()
+        raise
+    summary = (
+        f"massspring: {_grid_text(grid.shape)} {backend} {ms.integrator}, dt {ms.dt:.3g} s,"
+        f" {len(args.drag or [])} dragged, {how}"
+    )
+    return ms, summary
 
 
 def _is_scene_json(path: Path) -> bool:
@@ -150,17 +409,33 @@ def cmd_render(args: argparse.Namespace) -> int:
     from app.image_io import write_image
     from app.render import OffscreenRenderer
 
+    _check_massspring_options(args)
     obj = load_input(
         args.input, spacing=args.spacing, downsample=args.downsample, nan_policy=args.nan
     )
     scene = _scene_from_args(obj, args)
+    grid = None if args.massspring is None else _massspring_grid(args, scene.volume)
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
-        img = r.render(scene)
+        ms = None
+        # the GPU mass-spring backend runs on the renderer's context (made current here)
+        with r._current():
+            try:
+                if grid is not None:
+                    ms, summary = _run_massspring(args, grid, r.ctx)
+                    print(summary, file=sys.stderr)
+                    # last in the chain: it deforms the volume itself, before the
+                    # scene's own warps move the result
+                    scene = scene.copy(warps=[*scene.warps, ms.warp()])
+                img = r.render(scene)
+                if args.save_scene:  # inside: a GPU-owned field is read back to save it
+                    scene.save(args.save_scene)
+            finally:
+                if ms is not None:
+                    ms.close()
     write_image(out, img)
     if args.save_scene:
-        scene.save(args.save_scene)
         print(f"scene: {args.save_scene}")
     print(out)
     return 0
@@ -236,6 +511,143 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sizes(text: str) -> tuple[int, ...]:
+    try:
+        sizes = tuple(int(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"sizes must be comma-separated integers like 16,32,64; got {text!r}"
+        ) from exc
+    if not sizes or not all(2 <= n <= 128 for n in sizes):
+        raise argparse.ArgumentTypeError(f"each size must be 2..128 elements; got {text!r}")
+    return sizes
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a positive integer; got {text!r}") from exc
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer; got {text!r}")
+    return n
+
+
+def cmd_bench_massspring(args: argparse.Namespace) -> int:
+    """``voxwarp bench massspring``: solver steps/s (see app.bench_massspring)."""
+    from app.bench_massspring import bench_massspring
+    from app.files import atomic_write_text
+
+    report = bench_massspring(
+        args.sizes,
+        steps=args.steps,
+        repeats=args.repeats,
+        use_taichi=not args.no_taichi,
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    command = (
+        "voxwarp " + " ".join(sys.argv[1:])
+        if sys.argv[0].endswith("voxwarp")
+        else "voxwarp bench massspring"
+    )
+    text = report.markdown(command)
+    print(text)
+    for n in report.sizes:
+        ratio = report.ratio(n, "gpu", "taichi")
+        if ratio is not None:
+            print(f"{n}³: the GPU solver runs {ratio:.2f}x the steps/s of taichi on the CPU")
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
+def _add_massspring_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "mass-spring deformation",
+        "Deform the volume with a mass-spring model before rendering: an element grid"
+        " spans the volume's box (its 8 corners fixed), --drag holds elements at offsets"
+        " from rest, the springs pull the others along, and the resulting offset field"
+        " warps the volume at render time. With --save-scene the JSON keeps the field"
+        " and the model (grid, materials, held elements), so rendering it again gives"
+        " the same image. Example (bends the fish's tail sideways, head held):"
+        " voxwarp render sample:fish --view +z --massspring 8 --fix 0..2,0..7,0..7"
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png",
+    )
+    g.add_argument(
+        "--massspring",
+        type=_grid_shape,
+        metavar="N|NX,NY,NZ",
+        help="element grid over the volume's bounding box (2..128 per axis, e.g. 16)",
+    )
+    g.add_argument(
+        "--drag",
+        type=_drag,
+        action="append",
+        metavar="I,J,K:DX,DY,DZ",
+        help="hold element (i, j, k) at its rest position + (dx, dy, dz) mm (world x, y, z"
+        " axes); repeatable; indices run 0..N-1 along x, y, z; corners stay fixed",
+    )
+    g.add_argument(
+        "--fix",
+        type=_fix,
+        action="append",
+        metavar="I,J,K",
+        help="also fix these elements at rest (the 8 corners always are); each index may"
+        " be a range A..B, e.g. --fix 0..2,0..7,0..7 holds the x = low end; repeatable",
+    )
+    g.add_argument(
+        "--backend",
+        choices=("cpu", "gpu"),
+        help="simulate in numpy (cpu, default) or in shaders on the renderer's context",
+    )
+    g.add_argument(
+        "--settle",
+        action="store_true",
+        help=f"run until every element is slower than {MASSSPRING_SETTLE_TOL:g} mm/s, at"
+        f" most --steps steps (default {MASSSPRING_SETTLE_MAX_STEPS})",
+    )
+    g.add_argument(
+        "--steps",
+        type=_steps,
+        metavar="N",
+        help=f"time steps to run (default {MASSSPRING_STEPS}: a smooth, nearly settled"
+        " deformation); with --settle the most steps",
+    )
+    g.add_argument(
+        "--integrator",
+        choices=("explicit", "semi-implicit"),
+        help="semi-implicit (default; ~10x larger stable steps) or explicit Euler (the thesis')",
+    )
+    g.add_argument(
+        "--inverse",
+        choices=("approx", "exact"),
+        help="offset-field inverse: exact (default, fixed-point iteration) or approx"
+        " (one step, q = p - u(p))",
+    )
+    g.add_argument(
+        "--shear",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="face-diagonal shear springs (default on; without them the grid does not"
+        " resist shearing and a sideways drag tears it)",
+    )
+    g.add_argument(
+        "--bend",
+        action="store_true",
+        default=None,
+        help="second-neighbour bend springs (default off)",
+    )
+    g.add_argument(
+        "--stiffness-from-volume",
+        type=_stiffness_points,
+        metavar="V:S,...",
+        help="element stiffness from the volume value at each element, piecewise linear"
+        " through VALUE:STIFFNESS points (data units : 0..1; constant beyond the ends),"
+        " e.g. 100:0.2,400:0.95 makes CT bone stiff; stiffness 1 is rigid (default:"
+        " 0.5 everywhere)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``voxwarp`` command."""
     p = argparse.ArgumentParser(prog="voxwarp", description=__doc__.split("\n")[0])
@@ -264,6 +676,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None)
     pr.add_argument("--save-scene", metavar="JSON", help="also write the scene JSON")
     _add_volume_args(pr)
+    _add_massspring_args(pr)
     pr.set_defaults(func=cmd_render)
 
     pd = sub.add_parser("demo", help="render a sample in every mode into a folder")
@@ -289,6 +702,25 @@ def build_parser() -> argparse.ArgumentParser:
     pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
     pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbr.set_defaults(func=cmd_bench)
+    pbm = bsub.add_parser("massspring", help="mass-spring steps/s: numpy, GPU and taichi")
+    pbm.add_argument(
+        "--sizes",
+        type=_sizes,
+        default=(16, 32, 64, 128),
+        metavar="N,N,...",
+        help="grids of N³ elements (default 16,32,64,128)",
+    )
+    pbm.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=50,
+        metavar="N",
+        help="steps per timed block (fewer where a block would take over 2 s)",
+    )
+    pbm.add_argument("--repeats", type=_positive_int, default=5, help="timed blocks per solver")
+    pbm.add_argument("--no-taichi", action="store_true", help="skip the taichi reference")
+    pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    pbm.set_defaults(func=cmd_bench_massspring)
     return p
 
 
@@ -297,8 +729,9 @@ def _join_negative_views(argv: list[str]) -> list[str]:
     out: list[str] = []
     i = 0
     while i < len(argv):
-        if argv[i] == "--view" and i + 1 < len(argv) and argv[i + 1].startswith("-"):
-            out.append(f"--view={argv[i + 1]}")
+        negative = i + 1 < len(argv) and argv[i + 1].startswith("-")
+        if argv[i] in ("--view", "--stiffness-from-volume") and negative:
+            out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
             continue
         out.append(argv[i])

@@ -45,15 +45,18 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from deform.elements import ElementGrid, Selection
+from deform.elements import ElementGrid, ElementGridError, Selection
 from deform.spring_model import INTEGRATORS, SpringModel
 
 #: solver backends of :class:`MassSpring`
 BACKENDS: tuple[str, ...] = ("cpu", "gpu")
+#: ``"type"`` of a mass-spring model in scene JSON (an offset-field warp's ``"model"``)
+MODEL_TYPE = "massspring"
 
 #: safety factors of :meth:`MassSpring.stable_time_step` (see the module doc)
 _EXPLICIT_SAFETY = 0.9
@@ -590,19 +593,32 @@ class MassSpring:
         """Kinetic plus spring potential energy (see :func:`spring_energy`)."""
         return spring_energy(self._model, self.positions(), self._solver.velocities())
 
-    def warp(self) -> Any:
+    def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
         """The offset-field warp of the current displacements (one object, kept current).
+
+        Parameters
+        ----------
+        inverse, iterations
+            The warp's inverse mode (``"approx"`` or ``"exact"``) and fixed-point
+            iterations (see :class:`deform.offset_field.OffsetFieldWarp`); ``None``
+            keeps the warp's current setting (``"exact"``, default iterations, when
+            it is first made).
 
         Returns
         -------
         deform.offset_field.OffsetFieldWarp
             CPU backend: built from :meth:`displacements` and updated after every
             :meth:`step`, :meth:`settle` and :meth:`move`. GPU backend: reads the
-            solver's displacement texture directly (no read-back).
+            solver's displacement texture directly (no read-back). Either way its
+            ``to_dict()`` (scene JSON) also writes this model
+            (``"model": {"type": "massspring", **self.to_dict()}``) and the field that
+            is rendered (a GPU field is read back once, at save time), so that a saved
+            scene renders the same image and can resume the simulation
+            (:meth:`from_warp`).
         """
-        if self._warp is None:
-            from deform.offset_field import OffsetFieldWarp
+        from deform.offset_field import INVERSE_MODES, MAX_ITERATIONS, OffsetFieldWarp
 
+        if self._warp is None:
             lo, hi = self.grid.lo.copy(), self.grid.hi.copy()
             if self.backend == "gpu":
                 solver = self._solver
@@ -611,14 +627,250 @@ class MassSpring:
                     hi,
                     shape=self.grid.shape,
                     texture_source=lambda ctx=None: solver.displacement_texture(),
+                    model_source=self._model_snapshot,
                 )
             else:
-                self._warp = OffsetFieldWarp(lo, hi, self.displacements(), shape=self.grid.shape)
+                self._warp = OffsetFieldWarp(
+                    lo,
+                    hi,
+                    self.displacements(),
+                    shape=self.grid.shape,
+                    model_source=self._model_snapshot,
+                )
+        if inverse is not None:
+            if inverse not in INVERSE_MODES:
+                raise MassSpringError(
+                    f"inverse must be one of {list(INVERSE_MODES)}; got {inverse!r}"
+                )
+            self._warp.inverse = inverse
+        if iterations is not None:
+            ok = isinstance(iterations, int | np.integer) and not isinstance(iterations, bool)
+            if not ok or not 1 <= int(iterations) <= MAX_ITERATIONS:
+                raise MassSpringError(
+                    f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}"
+                )
+            self._warp.iterations = int(iterations)
         return self._warp
+
+    def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:
+        """The warp's ``model_source``: this model's dict and, on the GPU, the field.
+
+        The GPU field is read from the displacement texture the renderer samples
+        (RGBA16F), so the saved displacements are bit for bit the rendered ones.
+        """
+        model = {"type": MODEL_TYPE, **self.to_dict()}
+        if self.backend != "gpu":
+            return model, None
+        return model, self._rendered_field()
+
+    def _rendered_field(self) -> np.ndarray:
+        """(n_x, n_y, n_z, 3) float64 field the GPU warp renders (a read-back)."""
+        tex = self._solver.displacement_texture()
+        nx, ny, nz = self.grid.shape
+        try:
+            if tuple(tex.size) != (nx, ny, nz) or tex.components != 4 or tex.dtype != "f2":
+                raise TypeError("not an RGBA16F texture of the grid shape")
+            raw = np.frombuffer(tex.read(), dtype=np.float16).reshape(nz, ny, nx, 4)
+        except (AttributeError, TypeError, ValueError):
+            return self.displacements().astype(np.float64)  # e.g. a stand-in solver
+        return raw.transpose(2, 1, 0, 3)[..., :3].astype(np.float64)
 
     def _update_warp(self) -> None:
         if self._warp is not None and self.backend == "cpu":
             self._warp.update(self.displacements())
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self, include_positions: bool = False) -> dict[str, Any]:
+        """JSON-serialisable description of the model (plain lists and numbers).
+
+        Parameters
+        ----------
+        include_positions
+            Also write ``"positions"``, the current element positions (a GPU
+            read-back), so that :meth:`from_dict` resumes from this state.
+
+        Returns
+        -------
+        dict
+            ``grid`` (:meth:`ElementGrid.to_dict`: box, shape, fixed elements and the
+            materials the solver runs), ``integrator``, ``dt``, ``spring_constant``,
+            ``spring_damping``, ``shear``, ``bend``, ``max_step``, ``held`` (a list of
+            ``{"index": [i, j, k], "offset": [dx, dy, dz]}``: held elements and their
+            world-space offsets from rest in mm, see :meth:`move`) and, with
+            ``include_positions``, ``positions`` ((n_x, n_y, n_z, 3) nested list, mm).
+            The backend is not part of the model: :meth:`from_dict` chooses it.
+        """
+        m = self._model
+        grid = self.grid.to_dict()
+        for name in ("stiffness", "damping", "mass"):  # the materials the solver runs
+            a = np.asarray(getattr(m, name), dtype=np.float32)
+            grid[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
+        held = [
+            {"index": [int(v) for v in idx], "offset": self._offsets[tuple(idx)].tolist()}
+            for idx in np.argwhere(self._held)
+        ]
+        d: dict[str, Any] = {
+            "grid": grid,
+            "integrator": self.integrator,
+            "dt": self.dt,
+            "spring_constant": float(m.spring_constant),
+            "spring_damping": float(m.spring_damping),
+            "shear": bool(m.shear),
+            "bend": bool(m.bend),
+            "max_step": self.max_step,
+            "held": held,
+        }
+        if include_positions:
+            d["positions"] = self.positions().tolist()
+        return d
+
+    @classmethod
+    def from_dict(
+        cls,
+        d: Mapping[str, Any],
+        backend: str = "cpu",
+        ctx: Any = None,
+        positions: Any = None,
+    ) -> MassSpring:
+        """Rebuild a model from :meth:`to_dict`'s form.
+
+        Parameters
+        ----------
+        d
+            Mapping with ``grid`` (required) and optionally ``integrator``, ``dt``,
+            ``spring_constant``, ``spring_damping``, ``shear``, ``bend``, ``max_step``
+            (the constructor's defaults when absent), ``held`` and ``positions``. A
+            ``"type"`` key (scene JSON's ``"massspring"``) is accepted.
+        backend, ctx
+            Solver backend and, for ``"gpu"``, its moderngl context.
+        positions
+            (n_x, n_y, n_z, 3) positions (mm) to resume from; overrides
+            ``d["positions"]``. Velocities start at 0. Without positions the elements
+            start at rest. Held elements sit at ``rest + offset`` either way.
+
+        Returns
+        -------
+        MassSpring
+
+        Raises
+        ------
+        MassSpringError
+            On a missing or malformed key; the message names the key and the fix.
+        """
+        if not isinstance(d, Mapping):
+            raise MassSpringError(f"a massspring entry must be an object; got {d!r:.80}")
+        kind = d.get("type", MODEL_TYPE)
+        if kind != MODEL_TYPE:
+            raise MassSpringError(
+                f"a massspring entry has 'type' {kind!r}; expected {MODEL_TYPE!r}"
+            )
+        grid = _grid_from(d)
+        kwargs: dict[str, Any] = {}
+        for key in ("integrator", "dt", "spring_constant", "spring_damping", "max_step"):
+            if key in d:
+                kwargs[key] = d[key]
+        for key in ("shear", "bend"):
+            if key in d:
+                if not isinstance(d[key], bool):
+                    raise MassSpringError(
+                        f"massspring '{key}' must be true or false; got {d[key]!r:.40}"
+                    )
+                kwargs[key] = d[key]
+        held = _parse_held(d.get("held", []), grid)
+        if positions is None:
+            positions = d.get("positions")
+        ms = cls(grid, backend=backend, ctx=ctx, **kwargs)
+        try:
+            if positions is not None:
+                ms.set_state(positions)
+            for idx, off in held:
+                ms.move(idx, off)
+        except BaseException:
+            ms.close()
+            raise
+        return ms
+
+    @classmethod
+    def from_warp(cls, warp: Any, backend: str = "cpu", ctx: Any = None) -> MassSpring:
+        """Resume the simulation behind a warp loaded from scene JSON.
+
+        Parameters
+        ----------
+        warp
+            A :class:`deform.offset_field.OffsetFieldWarp` whose
+            :attr:`~deform.offset_field.OffsetFieldWarp.model_state` is a
+            ``"massspring"`` model (a scene saved with a mass-spring warp).
+        backend, ctx
+            As for :meth:`from_dict`.
+
+        Returns
+        -------
+        MassSpring
+            The model of ``warp.model_state`` with positions ``rest + displacements``
+            (the saved field) and velocities 0; its :meth:`warp` is a new warp, to be
+            put in the scene in place of ``warp``.
+
+        Raises
+        ------
+        MassSpringError
+            When the warp carries no mass-spring model, or the model and the field do
+            not fit together.
+        """
+        state = getattr(warp, "model_state", None)
+        if not isinstance(state, Mapping) or state.get("type") != MODEL_TYPE:
+            raise MassSpringError(
+                "this warp carries no mass-spring model (its model_state is not"
+                f" {{'type': {MODEL_TYPE!r}, ...}}); only warps saved from a MassSpring"
+                " can be resumed"
+            )
+        u = np.asarray(warp.displacements, dtype=np.float64)
+        grid = _grid_from(state)
+        if u.shape != (*grid.shape, 3):
+            raise MassSpringError(
+                f"the warp's field has shape {u.shape} but its model's grid is"
+                f" {grid.shape}; the scene entry is inconsistent"
+            )
+        return cls.from_dict(state, backend=backend, ctx=ctx, positions=grid.rest_positions + u)
+
+    def set_state(self, positions: Any, velocities: Any = None) -> None:
+        """Replace the element positions (and velocities; default 0).
+
+        Held, fixed and rigid elements are put back at their targets at once.
+
+        Parameters
+        ----------
+        positions
+            (n_x, n_y, n_z, 3) positions in world mm.
+        velocities
+            (n_x, n_y, n_z, 3) velocities in mm/s; ``None`` means at rest.
+
+        Raises
+        ------
+        MassSpringError
+            On a wrong shape or values that are not finite numbers.
+        """
+        shape = (*self.grid.shape, 3)
+        arrays = []
+        for name, value in (("positions", positions), ("velocities", velocities)):
+            if value is None and name == "velocities":
+                arrays.append(np.zeros(shape))
+                continue
+            try:
+                a = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise MassSpringError(
+                    f"{name} must be an array of numbers of shape {shape}"
+                ) from exc
+            if a.shape != shape:
+                raise MassSpringError(
+                    f"{name} must have shape {shape} (grid shape + xyz); got {a.shape}"
+                )
+            if not np.all(np.isfinite(a)):
+                raise MassSpringError(f"{name} must be finite numbers")
+            arrays.append(a)
+        self._solver.set_state(arrays[0], arrays[1])
+        self._sync_constraints()
+        self._update_warp()
 
     def close(self) -> None:
         """Free the solver's and the warp's GPU resources; idempotent."""
@@ -641,3 +893,63 @@ def _number(value: Any, what: str, *, positive: bool) -> float:
     if not math.isfinite(x) or (x <= 0 if positive else x < 0):
         raise MassSpringError(f"{what} must be {'> 0' if positive else '>= 0'}; got {x!r}")
     return x
+
+
+def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
+    """The ``"grid"`` of a massspring entry as an :class:`ElementGrid`."""
+    if "grid" not in d:
+        raise MassSpringError(
+            "a massspring entry needs the key 'grid' (an ElementGrid.to_dict() object"
+            " with 'lo', 'hi' and 'shape')"
+        )
+    try:
+        return ElementGrid.from_dict(d["grid"])
+    except ElementGridError as exc:
+        raise MassSpringError(f"massspring 'grid': {exc}") from exc
+
+
+def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[tuple[int, int, int], np.ndarray]]:
+    """Validate a ``"held"`` list: ``[{"index": [i, j, k], "offset": [dx, dy, dz]}, ...]``."""
+    form = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
+    if not isinstance(held, list | tuple):
+        raise MassSpringError(f"massspring 'held' must be a list; {form}; got {held!r:.80}")
+    pinned = grid.pinned()
+    out = []
+    for n, entry in enumerate(held):
+        where = f"massspring 'held'[{n}]"
+        if not isinstance(entry, Mapping):
+            raise MassSpringError(f"{where} must be an object; {form}; got {entry!r:.80}")
+        missing = [k for k in ("index", "offset") if k not in entry]
+        if missing:
+            raise MassSpringError(f"{where} needs the keys {missing}; {form}")
+        raw = entry["index"]
+        ok = (
+            isinstance(raw, list | tuple)
+            and len(raw) == 3
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
+        )
+        if not ok:
+            raise MassSpringError(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+        idx = tuple(int(v) for v in raw)
+        if any(v < 0 or v >= s for v, s in zip(idx, grid.shape, strict=True)):
+            raise MassSpringError(
+                f"{where} 'index' {idx} is outside the grid of shape {grid.shape}; indices"
+                f" run from (0, 0, 0) to {tuple(s - 1 for s in grid.shape)}"
+            )
+        if pinned[idx]:
+            why = "fixed" if grid.fixed[idx] else "rigid (stiffness 1)"
+            raise MassSpringError(
+                f"{where}: element {idx} is {why} and cannot be held; remove it from"
+                " 'held' or free it in 'grid'"
+            )
+        try:
+            off = np.asarray(entry["offset"], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise MassSpringError(f"{where} 'offset' must be 3 numbers [dx, dy, dz] (mm)") from exc
+        if off.shape != (3,) or not np.all(np.isfinite(off)):
+            raise MassSpringError(
+                f"{where} 'offset' must be 3 finite numbers [dx, dy, dz] (mm);"
+                f" got {entry['offset']!r:.80}"
+            )
+        out.append((idx, off))
+    return out

@@ -38,6 +38,9 @@ DEFAULT_ITERATIONS = 6
 #: Largest displacement a half-float texture holds (mm).
 MAX_DISPLACEMENT_MM = 6.0e4
 
+#: ``callable() -> (model dict, displacements or None)``: see :class:`OffsetFieldWarp`.
+ModelSource = Callable[[], tuple[Mapping[str, Any], Any]]
+
 
 def _vec3(x: Any, what: str) -> np.ndarray:
     try:
@@ -92,6 +95,18 @@ def _field(displacements: Any, shape: tuple[int, int, int] | None) -> np.ndarray
     return u
 
 
+def _model_dict(model: Any) -> dict[str, Any] | None:
+    """A model entry (``{"type": ..., ...}``) as a plain dict; ``None`` stays ``None``."""
+    if model is None:
+        return None
+    if not isinstance(model, Mapping) or not isinstance(model.get("type"), str):
+        raise WarpError(
+            "an offset_field warp's 'model' must be an object with a 'type' string,"
+            f' e.g. {{"type": "massspring", ...}}; got {model!r:.80}'
+        )
+    return dict(model)
+
+
 def _material(material: Any, grid: tuple[int, int, int]) -> np.ndarray | None:
     if material is None:
         return None
@@ -137,6 +152,30 @@ class OffsetFieldWarp(Warp):
     material
         Optional ``(nx, ny, nz)`` per-node material value, uploaded to the texture's
         alpha channel (0 without it).
+    model_source
+        Optional ``callable() -> (model, displacements)`` set by the deformation model
+        that drives this warp (:meth:`deform.massspring.MassSpring.warp` sets it), so
+        that :meth:`to_dict` saves the model with the field: ``model`` is a
+        JSON-serialisable dict with a ``"type"`` key, ``displacements`` the current
+        ``(nx, ny, nz, 3)`` field read back from the GPU (used only when this warp has
+        no CPU field; ``None`` otherwise). Called once per :meth:`to_dict`, never
+        while rendering.
+    model_state
+        The model dict a loaded scene entry carried (see :attr:`model_state`).
+
+    Attributes
+    ----------
+    model_state : dict or None
+        The ``"model"`` entry of the scene JSON this warp was loaded from (e.g.
+        ``{"type": "massspring", ...}``, :meth:`deform.massspring.MassSpring.to_dict`),
+        or ``None``. It describes the model that produced the saved field, so that an
+        application can resume the simulation: for ``"massspring"``,
+        :meth:`deform.massspring.MassSpring.from_warp` rebuilds the model with
+        positions ``rest + displacements`` and velocities 0. The warp itself renders
+        the saved field and never reads this dict; :meth:`to_dict` writes it back
+        unchanged (also after :meth:`update`).
+    model_source : callable or None
+        See the parameter of the same name.
 
     Notes
     -----
@@ -188,7 +227,13 @@ class OffsetFieldWarp(Warp):
         inverse: str = "exact",
         iterations: int | None = None,
         material: np.ndarray | None = None,
+        model_source: ModelSource | None = None,
+        model_state: Mapping[str, Any] | None = None,
     ) -> None:
+        if model_source is not None and not callable(model_source):
+            raise WarpError("model_source must be a callable () -> (model dict, displacements)")
+        self.model_source = model_source
+        self.model_state: dict[str, Any] | None = _model_dict(model_state)
         self.lo = _vec3(lo, "OffsetFieldWarp lo")
         self.hi = _vec3(hi, "OffsetFieldWarp hi")
         if np.any(self.lo >= self.hi):
@@ -297,6 +342,49 @@ class OffsetFieldWarp(Warp):
         """Largest displacement length ``max |u_ijk|`` in mm (CPU field only)."""
         u = self._cpu_field("max_displacement()")
         return float(np.sqrt(np.max(np.sum(u * u, axis=-1))))
+
+    @property
+    def revision(self) -> int:
+        """Bumped by every :meth:`update` (GPU-owned fields change without it)."""
+        return self._version
+
+    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
+        """Per box and axis, a bound (mm) on ``|warp(p) - p|`` for p in the box.
+
+        Every point the inverse visits is ``q = p - u(q')``, so ``warp(p) - p`` is
+        ``-u`` at some point within ``D = max |u|`` (per axis) of p; ``u`` there is a
+        trilinear blend of the nodes of the grid cells the box, widened by ``D``,
+        touches. The bound is, per axis, the largest node displacement of those cells
+        (widened by the RGBA16F rounding of the texture): local, so a drag bounds only
+        its neighbourhood. ``None`` for a GPU-owned field (no read-back).
+        """
+        if self._u is None:
+            return None
+        lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
+        # RGBA16F rounding: 2^-11 relative, or a subnormal step (6e-8); 0 stays 0
+        node = np.abs(self._u)
+        node = node * (1.0 + 2.0**-10) + np.where(node > 0, 6e-8, 0.0)  # (nx, ny, nz, 3)
+        reach = node.reshape(-1, 3).max(axis=0)
+        cells = np.maximum(np.asarray(self.shape) - 1, 1)
+        # per grid cell: the largest of its (up to) 8 corner nodes
+        cell = node
+        for axis in range(3):
+            if cell.shape[axis] > 1:
+                a = np.moveaxis(cell, axis, 0)
+                cell = np.moveaxis(np.maximum(a[:-1], a[1:]), 0, axis)
+        h = self.spacing
+        ilo = np.clip(np.floor((lo - reach - self.lo) / h), 0, cells - 1).astype(np.int64)
+        ihi = np.clip(np.floor((hi + reach - self.lo) / h), 0, cells - 1).astype(np.int64)
+        width = (ihi - ilo).max(axis=0) + 1 if len(lo) else np.ones(3, np.int64)
+        # forward window maximum: m[i] = max(cell[i : i + width]) per axis
+        m = cell
+        for axis in range(3):
+            a = np.moveaxis(m, axis, 0).copy()
+            out = a.copy()
+            for k in range(1, int(width[axis])):
+                np.maximum(out[:-k], a[k:], out=out[:-k])
+            m = np.moveaxis(out, 0, axis)
+        return m[ilo[:, 0], ilo[:, 1], ilo[:, 2]]
 
     # ---------------------------------------------------------------- CPU reference
     def _interpolate(self, q: np.ndarray, gradient: bool = False) -> Any:
@@ -449,9 +537,22 @@ class OffsetFieldWarp(Warp):
     def to_dict(self) -> dict[str, Any]:
         """JSON form: lo, hi, shape, inverse, iterations, displacements (nested lists).
 
-        A GPU-owned field is written with ``"displacements": None`` (its simulation
-        saves it); such an entry cannot be loaded by :meth:`from_dict`.
+        With a :attr:`model_source` (a warp driven by a model such as
+        :class:`~deform.massspring.MassSpring`) the entry also holds ``"model"``, the
+        model's own dict, and a GPU-owned field is read back once (through the
+        model source) so that ``"displacements"`` hold exactly the field that is
+        rendered; :meth:`from_dict` then rebuilds a warp that renders the same image.
+        A warp loaded with a :attr:`model_state` writes it back as ``"model"``.
+        A GPU-owned field without a model source is written with
+        ``"displacements": None``; such an entry cannot be loaded by :meth:`from_dict`.
         """
+        u = self._u
+        model = self.model_state
+        if self.model_source is not None:
+            model, field = self.model_source()
+            model = _model_dict(model)
+            if u is None and field is not None:
+                u = _field(field, self.shape)
         d: dict[str, Any] = {
             "type": self.kind,
             "lo": self.lo.tolist(),
@@ -459,15 +560,22 @@ class OffsetFieldWarp(Warp):
             "shape": list(self.shape),
             "inverse": self.inverse,
             "iterations": self.iterations,
-            "displacements": None if self._u is None else self._u.tolist(),
+            "displacements": None if u is None else u.tolist(),
         }
         if self._material is not None:
             d["material"] = self._material.tolist()
+        if model is not None:
+            d["model"] = model
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> OffsetFieldWarp:
-        """Build from :meth:`to_dict`'s form (``material`` optional)."""
+        """Build from :meth:`to_dict`'s form (``material`` and ``model`` optional).
+
+        The warp always holds a CPU field (the saved ``displacements``), also for an
+        entry a GPU simulation wrote, so it renders the saved image exactly. A
+        ``"model"`` entry is kept, unchanged, as :attr:`model_state`.
+        """
         missing = [k for k in ("lo", "hi", "shape") if k not in d]
         if missing:
             raise WarpError(f"an offset_field warp entry needs {missing}")
@@ -488,6 +596,7 @@ class OffsetFieldWarp(Warp):
             inverse=d.get("inverse", "exact"),
             iterations=d.get("iterations"),
             material=d.get("material"),
+            model_state=d.get("model"),
         )
 
     def __repr__(self) -> str:
