@@ -599,10 +599,11 @@ class MassSpring:
         Parameters
         ----------
         inverse, iterations
-            The warp's inverse mode (``"approx"`` or ``"exact"``) and fixed-point
-            iterations (see :class:`deform.offset_field.OffsetFieldWarp`); ``None``
-            keeps the warp's current setting (``"exact"``, default iterations, when
-            it is first made).
+            The warp's inverse mode (``"approx"``, ``"exact"`` or ``"baked"``) and
+            fixed-point iterations (see :class:`deform.offset_field.OffsetFieldWarp`);
+            ``None`` keeps the warp's current setting (``"baked"`` with its default
+            iterations when it is first made: the accuracy of ``"exact"`` at half the
+            texture fetches).
 
         Returns
         -------
@@ -628,6 +629,7 @@ class MassSpring:
                     shape=self.grid.shape,
                     texture_source=lambda ctx=None: solver.displacement_texture(),
                     model_source=self._model_snapshot,
+                    inverse="baked",
                 )
             else:
                 self._warp = OffsetFieldWarp(
@@ -636,6 +638,7 @@ class MassSpring:
                     self.displacements(),
                     shape=self.grid.shape,
                     model_source=self._model_snapshot,
+                    inverse="baked",
                 )
         if inverse is not None:
             if inverse not in INVERSE_MODES:

@@ -134,6 +134,14 @@ class Warp(ABC):
         """Uniform values by unprefixed name (``WARP_name`` in GLSL -> ``name``)."""
         return {}
 
+    def glsl_constants(self) -> dict[str, Any]:
+        """Compile-time constants by unprefixed name (``const`` ``WARP_NAME`` in GLSL).
+
+        ``int``, ``float`` or ``bool`` values; :meth:`signature` must change with them
+        (programs are cached per signature).
+        """
+        return {}
+
     def textures(self, ctx: Any) -> dict[str, Any]:
         """moderngl textures by unprefixed sampler name; created on first use on ``ctx``."""
         return {}
@@ -395,6 +403,20 @@ _PREFIX = re.compile(r"\bWARP_")
 _FN = re.compile(r"\bwarp(_jacobian)?\b(?=\s*\()")
 
 
+def _constants_glsl(constants: Mapping[str, Any]) -> str:
+    lines = []
+    for name, value in constants.items():
+        if isinstance(value, bool | np.bool_):
+            lines.append(f"const bool WARP_{name} = {'true' if value else 'false'};")
+        elif isinstance(value, int | np.integer):
+            lines.append(f"const int WARP_{name} = {int(value)};")
+        elif isinstance(value, float | np.floating):
+            lines.append(f"const float WARP_{name} = {float(value)!r};")
+        else:
+            raise WarpError(f"GLSL constant {name} must be bool, int or float; got {value!r}")
+    return "".join(line + "\n" for line in lines)
+
+
 def compose_glsl(warps: Sequence[Warp], loader: Callable[[str], str] = shaders.read) -> str:
     """GLSL text defining ``warp_chain(p)`` and ``warp_chain_jacobian(p)`` for ``warps``.
 
@@ -403,7 +425,7 @@ def compose_glsl(warps: Sequence[Warp], loader: Callable[[str], str] = shaders.r
     """
     parts: list[str] = []
     for i, w in enumerate(warps):
-        src = loader(w.glsl_file)
+        src = _constants_glsl(w.glsl_constants()) + loader(w.glsl_file)
         src = _PREFIX.sub(f"w{i}_", src)
         src = _FN.sub(lambda m, i=i: f"w{i}_warp{m.group(1) or ''}", src)
         parts.append(f"// ---- warp {i}: {w.kind}\n{src}")

@@ -2,26 +2,41 @@
 // X = lo + (i, j, k) * spacing and are displaced by u (mm), stored per node in the RGBA16F
 // 3D texture WARP_displacement (xyz = u, a = material); u is trilinear between nodes and
 // 0 outside the grid box [lo, lo + size]. The material point X is seen at X + u(X), so
-// the warp solves q + u(q) = p by the fixed point q <- p - u(q), starting from q = p,
-// WARP_iterations times (1 = the thesis' approximation q = p - u(p)).
+// the warp solves q + u(q) = p by the fixed point q <- p - u(q), WARP_ITERATIONS times,
+// starting from q = p (1 step = the thesis' approximation q = p - u(p)) or, when
+// WARP_SEEDED, from q = p - v(p), v the inverse offsets baked at the nodes
+// (WARP_inverse, same grid; shaders/offset_field_bake.comp.glsl).
+// WARP_ITERATIONS and WARP_SEEDED are compile-time constants prepended by the warp
+// (Warp.glsl_constants), so the iteration unrolls.
 uniform vec3 WARP_lo;          // grid box corner (node 0, 0, 0), mm
 uniform vec3 WARP_size;        // hi - lo, mm
 uniform vec3 WARP_shape;       // nodes per axis (n_x, n_y, n_z)
-uniform int WARP_iterations;   // fixed-point steps, 1..64
 uniform sampler3D WARP_displacement;
+uniform sampler3D WARP_inverse;   // baked inverse offsets (WARP_SEEDED only)
 
-// u(q): hardware trilinear filtering at node-centred texture coordinates (node i at the
-// centre of texel i), times a branch-free mask that is 0 outside the grid box.
-vec3 WARP_offset(vec3 q) {
+// Node-centred texture coordinates of q and a branch-free mask, 0 outside the grid box.
+vec3 WARP_coords(vec3 q, out float inside) {
     vec3 s = (q - WARP_lo) / WARP_size;   // [0, 1] inside the grid box
-    vec3 tc = (s * (WARP_shape - 1.0) + 0.5) / WARP_shape;
-    vec3 inside = step(vec3(0.0), s) * step(s, vec3(1.0));
-    return textureLod(WARP_displacement, tc, 0.0).xyz * (inside.x * inside.y * inside.z);
+    vec3 in3 = step(vec3(0.0), s) * step(s, vec3(1.0));
+    inside = in3.x * in3.y * in3.z;
+    return (s * (WARP_shape - 1.0) + 0.5) / WARP_shape;
+}
+
+// u(q): hardware trilinear filtering, 0 outside the grid box.
+vec3 WARP_offset(vec3 q) {
+    float inside;
+    vec3 tc = WARP_coords(q, inside);
+    return textureLod(WARP_displacement, tc, 0.0).xyz * inside;
 }
 
 vec3 warp(vec3 p) {
     vec3 q = p;
-    for (int i = 0; i < WARP_iterations; ++i) {
+    if (WARP_SEEDED) {  // a constant: the compiler keeps one branch
+        float inside;
+        vec3 tc = WARP_coords(p, inside);
+        q = p - textureLod(WARP_inverse, tc, 0.0).xyz * inside;
+    }
+    for (int i = 0; i < WARP_ITERATIONS; ++i) {
         q = p - WARP_offset(q);
     }
     return q;
