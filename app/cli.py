@@ -622,7 +622,7 @@ def _add_massspring_args(p: argparse.ArgumentParser) -> None:
         "--inverse",
         choices=("approx", "exact", "baked"),
         help="offset-field inverse: baked (default: fixed point seeded by the inverse baked"
-        " at the nodes, 4 fetches), exact (fixed point from p, 6 fetches) or approx (one"
+        " on a finer grid, 2 fetches), exact (fixed point from p, 6 fetches) or approx (one"
         " step, q = p - u(p), the thesis')",
     )
     g.add_argument(

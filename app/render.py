@@ -48,7 +48,7 @@ from app.skipping import (
 )
 from app.transfer_function import TABLE_SIZE, TransferFunction
 from app.volume import Volume
-from deform.warp import chain_displacement_bound, compose_glsl, fold_affine
+from deform.warp import chain_displacement_range, compose_glsl, fold_affine
 
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
 DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
@@ -290,7 +290,7 @@ class Renderer:
         cost more than they saved (no skipping: 1.3x faster), so they march plainly.
         Warped (non-affine) rays skip at cell resolution too, through deformed space,
         when every warp of the chain bounds its displacement
-        (:meth:`deform.warp.Warp.displacement_bound`; see
+        (:meth:`deform.warp.Warp.displacement_range`; see
         :func:`app.skipping.warped_cell_visibility`); otherwise they test their 4³
         block per sample.
         """
@@ -360,7 +360,7 @@ class Renderer:
                 self._cell_visibility(gpu, scene), vol.spacing, vol.origin, scene.warps, lo, hi
             )
             if result is None:
-                raise RenderError("warped cell skipping needs warps that bound their offsets")
+                raise RenderError("warped cell skipping needs warps that bound their displacement")
             gpu.warped_visible, gpu.warped_offset = result
             gpu.warped_key = key
         assert gpu.warped_visible is not None
@@ -575,7 +575,7 @@ class Renderer:
 def _bounded(warps: Any) -> bool:
     """Whether every warp of the chain bounds its displacement (cheap probe)."""
     probe = np.zeros((1, 3))
-    return chain_displacement_bound(warps, probe, probe) is not None
+    return chain_displacement_range(warps, probe, probe) is not None
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:

@@ -318,17 +318,18 @@ def warped_cell_visibility(
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Cell visibility in *deformed* space for a warp chain that bounds its displacement.
 
-    A deformed-space point p samples the original volume at ``warp(p)``, which lies
-    within ``b_i(p)`` mm of p along axis i (:meth:`deform.warp.Warp.displacement_bound`).
-    So a deformed-space cell can show something only if a visible original cell lies
-    within ``r_i = ceil(b_i / spacing_i)`` cells of it along every axis i: the deformed
-    visibility is the original one dilated by a box whose size varies over space with
-    the local displacement (bounded per block of ``block``³ cells; each cell of a
-    displaced block is tested exactly with a summed-area table). Cells far from any
-    displacement keep their original visibility, so a local drag costs skipping only
-    near the drag. Octant skip maps built on this grid (:func:`octant_skip_distances`)
-    let warped rays jump through deformed space as straight rays do through the
-    original, without changing the image.
+    A deformed-space point p samples the original volume at ``warp(p)``, and
+    ``warp(p) - p`` lies in an interval ``[a, b]`` per axis
+    (:meth:`deform.warp.Warp.displacement_range`, per block of ``block``³ cells). So a
+    deformed-space cell c can show something only if a visible original cell lies in
+    the box ``c + [floor(a / spacing), ceil(b / spacing)]``: the deformed visibility is
+    the original one spread by a window that follows the local displacement. A smooth
+    field that moves a region by ~d reads it through a window around -d one to two
+    cells wide, instead of a ball of radius d; cells where nothing moves keep their
+    original visibility. Each cell of a moved block is tested exactly with a
+    summed-area table. Octant skip maps built on this grid
+    (:func:`octant_skip_distances`) let warped rays jump through deformed space as
+    straight rays do through the original, without changing the image.
 
     Parameters
     ----------
@@ -341,7 +342,7 @@ def warped_cell_visibility(
     ray_lo, ray_hi
         Deformed-space box the rays march in (mm); the grid is padded to cover it.
     block
-        Cells per block edge of the displacement bound.
+        Cells per block edge of the displacement intervals.
 
     Returns
     -------
@@ -349,9 +350,9 @@ def warped_cell_visibility(
         Boolean grid of deformed-space cells and the index of its cell 0 in the
         original cell grid (per axis, <= 0; a deformed point with texel coordinate u
         lies in cell ``floor(u + 1/2) - offset``); ``None`` when a warp of the chain
-        gives no bound (e.g. a GPU-owned field).
+        gives no interval (e.g. a GPU-owned field).
     """
-    from deform.warp import chain_displacement_bound
+    from deform.warp import chain_displacement_range
 
     visible = np.asarray(visible, dtype=bool)
     sp = np.asarray(spacing, dtype=float)
@@ -364,21 +365,25 @@ def warped_cell_visibility(
     pad_hi = np.maximum(c_hi - (n - 1), 0)
     shape = n + pad_lo + pad_hi
     offset = -pad_lo
-    # displacement bound per block of cells (boxes in deformed world mm)
+    # displacement interval per block of cells (boxes in deformed world mm)
     nb = -(-shape // block)
     idx = np.stack(np.meshgrid(*(np.arange(k) for k in nb), indexing="ij"), -1).reshape(-1, 3)
     first = idx * block + offset  # original cell index of each block's first cell
     box_lo = org + (first - 1.0) * sp  # cell c spans texels [c - 1/2, c + 1/2]
     box_hi = org + (first + block - 1.0) * sp
-    bound = chain_displacement_bound(warps, box_lo, box_hi)
-    if bound is None:
+    rng = chain_displacement_range(warps, box_lo, box_hi)
+    if rng is None:
         return None
-    radius = np.ceil(np.asarray(bound, dtype=float) / sp)
-    radius = np.clip(radius, 0, float(shape.max())).astype(np.int64).reshape(*nb, 3)
+    big = float(shape.max())
+    # p in cell c: texel of warp(p) in [c - 1/2 + a, c + 1/2 + b], its cell in
+    # [c + floor(a), c + ceil(b)] (a, b in texels)
+    d_lo = np.clip(np.floor(np.asarray(rng[0], float) / sp), -big, big).astype(np.int64)
+    d_hi = np.clip(np.ceil(np.asarray(rng[1], float) / sp), -big, big).astype(np.int64)
+    d_lo, d_hi = d_lo.reshape(*nb, 3), d_hi.reshape(*nb, 3)
     out = np.zeros(tuple(shape), dtype=bool)
     inner = tuple(slice(pad_lo[a], pad_lo[a] + n[a]) for a in range(3))
     out[inner] = visible
-    moved = np.argwhere(radius.any(axis=-1))
+    moved = np.argwhere(np.any((d_lo != 0) | (d_hi != 0), axis=-1))
     if len(moved) == 0 or not visible.any():
         return out, offset
     # summed-area table of the padded visibility: sat[i, j, k] = count below (i, j, k)
@@ -388,6 +393,7 @@ def warped_cell_visibility(
     def count_visible(lo_cell: np.ndarray, hi_cell: np.ndarray) -> np.ndarray:
         """Visible cells in the boxes [lo_cell, hi_cell) (clipped to the grid)."""
         a, b = np.clip(lo_cell, 0, shape), np.clip(hi_cell, 0, shape)
+        b = np.maximum(a, b)
         count = np.zeros(len(a), dtype=np.int64)
         for corner in range(8):
             pick = [(corner >> ax) & 1 for ax in range(3)]
@@ -395,16 +401,20 @@ def warped_cell_visibility(
             count += (-1 if (3 - sum(pick)) % 2 else 1) * sat[ix[0], ix[1], ix[2]]
         return count
 
-    # blocks whose whole reach holds no visible cell stay invisible
-    r_blk = radius[moved[:, 0], moved[:, 1], moved[:, 2]]
-    near = count_visible(moved * block - r_blk, moved * block + block + r_blk) > 0
+    # moved blocks whose whole window holds no visible cell are invisible
+    blo = d_lo[moved[:, 0], moved[:, 1], moved[:, 2]]
+    bhi = d_hi[moved[:, 0], moved[:, 1], moved[:, 2]]
+    near = count_visible(moved * block + blo, moved * block + block + bhi) > 0
+    for m in moved[~near]:
+        out[tuple(slice(m[a] * block, (m[a] + 1) * block) for a in range(3))] = False
     moved = moved[near]
     local = np.stack(np.meshgrid(*(np.arange(block),) * 3, indexing="ij"), -1).reshape(-1, 3)
     for chunk in np.array_split(moved, max(1, len(moved) // 4096)) if len(moved) else []:
         cells = (chunk[:, None, :] * block + local[None]).reshape(-1, 3)
-        r = np.repeat(radius[chunk[:, 0], chunk[:, 1], chunk[:, 2]], len(local), axis=0)
+        lo_off = np.repeat(d_lo[chunk[:, 0], chunk[:, 1], chunk[:, 2]], len(local), axis=0)
+        hi_off = np.repeat(d_hi[chunk[:, 0], chunk[:, 1], chunk[:, 2]], len(local), axis=0)
         keep = np.all(cells < shape, axis=1)
-        cells, r = cells[keep], r[keep]
-        count = count_visible(cells - r, cells + r + 1)
+        cells, lo_off, hi_off = cells[keep], lo_off[keep], hi_off[keep]
+        count = count_visible(cells + lo_off, cells + hi_off + 1)
         out[cells[:, 0], cells[:, 1], cells[:, 2]] = count > 0
     return out, offset

@@ -36,13 +36,20 @@ MAX_ITERATIONS = 64
 #: Default number of fixed-point iterations of ``inverse="exact"``; see
 #: :class:`OffsetFieldWarp` for the measurement it comes from.
 DEFAULT_ITERATIONS = 6
-#: Default fixed-point corrections of ``inverse="baked"`` (after the baked seed): at
-#: least as accurate as ``"exact"`` with :data:`DEFAULT_ITERATIONS` on the error table,
-#: with 4 texture fetches instead of 6 (see :class:`OffsetFieldWarp`).
-DEFAULT_BAKED_ITERATIONS = 3
+#: Default fixed-point corrections of ``inverse="baked"`` after the baked seed, when the
+#: inverse is baked at least 3x finer than the field (grids up to 43 nodes per axis):
+#: more accurate than ``"exact"`` with :data:`DEFAULT_ITERATIONS` on the error table,
+#: with 2 texture fetches instead of 6; one more correction on coarser bakes (see
+#: :class:`OffsetFieldWarp`).
+DEFAULT_BAKED_ITERATIONS = 1
 #: Fixed-point steps that bake the inverse at the nodes (converged to float precision
 #: for fields without folds).
 BAKE_ITERATIONS = 32
+#: The baked inverse is sampled this many times finer than the field per axis (at most;
+#: see :attr:`OffsetFieldWarp.bake_factor`), its nodes capped at :data:`MAX_BAKE_NODES`.
+MAX_BAKE_FACTOR = 4
+#: Most baked-inverse nodes per axis (a 128³ RGBA16F texture is 16 MB).
+MAX_BAKE_NODES = 128
 #: Largest displacement a half-float texture holds (mm).
 MAX_DISPLACEMENT_MM = 6.0e4
 
@@ -155,8 +162,9 @@ class OffsetFieldWarp(Warp):
         the fixed point ``q_{n+1} = p - u(q_n)`` from ``q_0 = p``, ``iterations``
         times. ``"approx"`` is the same as ``"exact"`` with one iteration.
     iterations
-        Fixed-point steps of ``"exact"`` (1..64); ``None`` chooses
-        :data:`DEFAULT_ITERATIONS`. Ignored (1) for ``"approx"``.
+        Fixed-point steps of ``"exact"``, or corrections after the seed of
+        ``"baked"`` (1..64); ``None`` chooses :data:`DEFAULT_ITERATIONS` or
+        :data:`DEFAULT_BAKED_ITERATIONS`. Ignored (1) for ``"approx"``.
     material
         Optional ``(nx, ny, nz)`` per-node material value, uploaded to the texture's
         alpha channel (0 without it).
@@ -205,10 +213,10 @@ class OffsetFieldWarp(Warp):
     exact k=6   0.00509   1.9e-05
     exact k=8   0.00084   2.3e-06
     exact k=16  6.3e-07   8.0e-10
-    baked k=0   0.0741    1.1e-03
-    baked k=1   0.0171    1.5e-04
-    baked k=2   0.00498   2.9e-05
-    baked k=3   0.00193   7.2e-06
+    baked k=0   0.0150    9.2e-05
+    baked k=1   0.00330   1.2e-05
+    baked k=2   0.00113   2.3e-06
+    baked k=3   0.00039   5.6e-07
     ==========  ========  ========
 
     Each step shrinks the error about 2.5x (the contraction factor ~ max ``|du/dX|``).
@@ -219,17 +227,19 @@ class OffsetFieldWarp(Warp):
     texture limits the field to about ``|u| * 2**-11`` (0.0007 h for this drag) anyway.
 
     ``"baked"`` starts the same iteration from ``p - v(p)``, v the inverse offsets solved
-    at the nodes (:meth:`baked_inverse`; on the GPU a compute shader bakes them once
-    per field change) and interpolated trilinearly (baked k=0: the seed alone, one
-    fetch). Its error is the interpolation error of v (the inverse of a trilinear field
-    is not trilinear), not the size of the drag, and each correction shrinks it by the
-    contraction factor. Two corrections match ``exact k=6`` here; on a sharper
-    sinusoidal bump (9³ nodes, max ``|u|`` = h) they leave 0.010 h against exact k=6's
-    0.0018 h, three 0.0038 h. So the default is three (:data:`DEFAULT_BAKED_ITERATIONS`:
-    4 fetches instead of 6, 0.0019 h here). Where the plain iteration converges slowly
-    the seed wins outright: for a drag of 3 h (sigma 2 h), exact k=6 leaves 0.57 h,
-    baked k=2 0.018 h. ``"baked"`` is the default of
-    :meth:`deform.massspring.MassSpring.warp` and of ``voxwarp render --massspring``.
+    on a grid :attr:`bake_factor` times finer than the field (4x here, at most 128 nodes
+    per axis; :meth:`baked_inverse`; on the GPU a compute shader bakes them once per
+    field change) and interpolated trilinearly (baked k=0: the seed alone, one fetch).
+    Its error is the interpolation error of v (the inverse of a trilinear field is not
+    trilinear), not the size of the drag, and each correction shrinks it by the
+    contraction factor. One correction (2 fetches) beats ``exact k=6`` (6 fetches)
+    here; on a sharper sinusoidal bump (9³ nodes, max ``|u|`` = h) the error of q is
+    0.0048 h against exact k=6's 0.0018 h. With a 2x bake (grids of 44-64 nodes) the
+    seed is about 2.5x less accurate, so the default adds a correction there
+    (:attr:`iterations`). Where the plain iteration converges slowly the seed wins
+    outright: for a drag of 3 h (sigma 2 h), exact k=6 leaves 0.57 h. ``"baked"`` is
+    the default of :meth:`deform.massspring.MassSpring.warp` and of ``voxwarp render
+    --massspring``.
 
     Content cannot leave the grid box: outside the box ``u = 0``, so there the warp is
     the identity and shows the undeformed volume, whatever the field does near the
@@ -315,7 +325,9 @@ class OffsetFieldWarp(Warp):
         """
         if self._iterations is not None:
             return self._iterations
-        return DEFAULT_BAKED_ITERATIONS if self.inverse == "baked" else DEFAULT_ITERATIONS
+        if self.inverse == "baked":
+            return DEFAULT_BAKED_ITERATIONS + (1 if self.bake_factor < 3 else 0)
+        return DEFAULT_ITERATIONS
 
     @iterations.setter
     def iterations(self, value: int | None) -> None:
@@ -391,47 +403,48 @@ class OffsetFieldWarp(Warp):
         """Bumped by every :meth:`update` (GPU-owned fields change without it)."""
         return self._version
 
-    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
-        """Per box and axis, a bound (mm) on ``|warp(p) - p|`` for p in the box.
+    def displacement_range(
+        self, lo: np.ndarray, hi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per box and axis, an interval ``[a, b]`` holding ``warp(p) - p`` (mm).
 
-        Every point the inverse visits is ``q = p - u(q')``, so ``warp(p) - p`` is
-        ``-u`` at some point within ``D = max |u|`` (per axis) of p; ``u`` there is a
-        trilinear blend of the nodes of the grid cells the box, widened by ``D``,
-        touches. The bound is, per axis, the largest node displacement of those cells
-        (widened by the RGBA16F rounding of the texture): local, so a drag bounds only
-        its neighbourhood. ``None`` for a GPU-owned field (no read-back).
+        Every point the inverse visits is ``q = p - u(q')`` (the baked seed blends
+        values ``u(q(X))`` of nodes X within one node spacing), so ``warp(p) - p`` is
+        ``-u`` at some point within ``D = max |u|`` (per axis) of p, or 0 beyond the
+        grid box; ``u`` there is a trilinear blend of the nodes of the grid cells the
+        box, widened by ``D``, touches. The interval spans those nodes' ``-u`` (and 0
+        where the widened box leaves the grid box), widened by the RGBA16F rounding of
+        the textures. Local and signed: a drag bounds only its neighbourhood, and a
+        region moved one way reads from one side only. ``None`` for a GPU-owned
+        field (no read-back).
         """
         if self._u is None:
             return None
         lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
+        u = self._u
         # RGBA16F rounding: 2^-11 relative, or a subnormal step (6e-8); 0 stays 0
-        node = np.abs(self._u)
-        node = node * (1.0 + 2.0**-10) + np.where(node > 0, 6e-8, 0.0)  # (nx, ny, nz, 3)
-        reach = node.reshape(-1, 3).max(axis=0)
-        cells = np.maximum(np.asarray(self.shape) - 1, 1)
-        # per grid cell: the largest of its (up to) 8 corner nodes
-        cell = node
-        for axis in range(3):
-            if cell.shape[axis] > 1:
-                a = np.moveaxis(cell, axis, 0)
-                cell = np.moveaxis(np.maximum(a[:-1], a[1:]), 0, axis)
+        slack = np.abs(u) * 2.0**-10 + np.where(u != 0, 6e-8, 0.0)
+        neg_hi = -u + slack  # the largest -u a node can give (nx, ny, nz, 3)
+        neg_lo = -u - slack
+        reach = np.abs(u).max(axis=(0, 1, 2)) * (1.0 + 2.0**-10) + 1e-7
         h = self.spacing
         if self.inverse == "baked":
-            # the seed blends baked offsets u(q(X)) of the nodes X of p's cell, q(X)
-            # within reach of X: one more node spacing of reach
             reach = reach + h
-        ilo = np.clip(np.floor((lo - reach - self.lo) / h), 0, cells - 1).astype(np.int64)
-        ihi = np.clip(np.floor((hi + reach - self.lo) / h), 0, cells - 1).astype(np.int64)
+        n = np.asarray(self.shape)
+        cells = np.maximum(n - 1, 1)
+        wlo, whi = lo - reach, hi + reach
+        ilo = np.clip(np.floor((wlo - self.lo) / h), 0, cells - 1).astype(np.int64)
+        ihi = np.clip(np.floor((whi - self.lo) / h), 0, cells - 1).astype(np.int64)
         width = (ihi - ilo).max(axis=0) + 1 if len(lo) else np.ones(3, np.int64)
-        # forward window maximum: m[i] = max(cell[i : i + width]) per axis
-        m = cell
-        for axis in range(3):
-            a = np.moveaxis(m, axis, 0).copy()
-            out = a.copy()
-            for k in range(1, int(width[axis])):
-                np.maximum(out[:-k], a[k:], out=out[:-k])
-            m = np.moveaxis(out, 0, axis)
-        return m[ilo[:, 0], ilo[:, 1], ilo[:, 2]]
+        a = _window_reduce(_cell_reduce(neg_lo, np.minimum), width, np.minimum)
+        b = _window_reduce(_cell_reduce(neg_hi, np.maximum), width, np.maximum)
+        a = a[ilo[:, 0], ilo[:, 1], ilo[:, 2]]
+        b = b[ilo[:, 0], ilo[:, 1], ilo[:, 2]]
+        # q outside the grid box: u = 0 there
+        outside = np.any((wlo < self.lo) | (whi > self.hi), axis=1)
+        a[outside] = np.minimum(a[outside], 0.0)
+        b[outside] = np.maximum(b[outside], 0.0)
+        return a, b
 
     # ---------------------------------------------------------------- CPU reference
     def _interpolate(
@@ -439,10 +452,11 @@ class OffsetFieldWarp(Warp):
     ) -> Any:
         """Trilinear ``u(q)`` (N, 3), and with ``gradient`` also ``du/dq`` (N, 3, 3).
 
-        ``field``: another node field on the same grid (the baked inverse) instead of u.
+        ``field``: another node field over the same box (the baked inverse, on its own
+        node counts) instead of u; 0 outside the box as well.
         """
         u = self._cpu_field("the CPU reference") if field is None else field
-        n = np.asarray(self.shape)
+        n = np.asarray(u.shape[:3])
         s = (q - self.lo) / (self.hi - self.lo)
         inside = np.all((s >= 0.0) & (s <= 1.0), axis=1)
         x = np.clip(s, 0.0, 1.0) * (n - 1)
@@ -464,7 +478,7 @@ class OffsetFieldWarp(Warp):
         val[~inside] = 0.0
         if grad is None:
             return val
-        grad /= self.spacing[None, None, :]
+        grad /= ((self.hi - self.lo) / (n - 1.0))[None, None, :]
         grad[~inside] = 0.0
         return val, grad
 
@@ -492,24 +506,39 @@ class OffsetFieldWarp(Warp):
             q = p - self._interpolate(q)
         return q
 
-    def baked_inverse(self) -> np.ndarray:
-        """The inverse offsets at the nodes, ``v = X - q(X)`` (nx, ny, nz, 3), in mm.
+    @property
+    def bake_factor(self) -> int:
+        """How much finer than the field the inverse is baked: the largest factor up to
+        :data:`MAX_BAKE_FACTOR` that keeps :data:`MAX_BAKE_NODES` nodes per axis."""
+        f = min((MAX_BAKE_NODES - 1) // max(n - 1, 1) for n in self.shape)
+        return int(max(1, min(MAX_BAKE_FACTOR, f)))
 
-        ``q(X)`` solves ``q + u(q) = X`` for the node position X by
+    @property
+    def bake_shape(self) -> tuple[int, int, int]:
+        """Node counts of the baked inverse: ``(n - 1) * bake_factor + 1`` per axis."""
+        f = self.bake_factor
+        return tuple((n - 1) * f + 1 for n in self.shape)  # type: ignore[return-value]
+
+    def baked_inverse(self) -> np.ndarray:
+        """The inverse offsets ``v = X - q(X)`` at the baked nodes X (mm).
+
+        The baked nodes cover the grid box :attr:`bake_factor` times finer than the
+        field (:attr:`bake_shape`); ``q(X)`` solves ``q + u(q) = X`` by
         :data:`BAKE_ITERATIONS` fixed-point steps. ``"baked"`` seeds its iteration with
         ``q_0 = p - v(p)`` (v trilinear, 0 outside the grid box); the GPU bakes the same
         field with a compute shader (``shaders/offset_field_bake.comp.glsl``). Cached per
-        field version.
+        field version. Returns ``bake_shape + (3,)``.
         """
         u = self._cpu_field("baked_inverse()")
         if self._baked_cpu is not None and self._baked_cpu[0] == self._version:
             return self._baked_cpu[1]
-        axes = [np.linspace(a, b, n) for a, b, n in zip(self.lo, self.hi, self.shape, strict=True)]
+        shape = self.bake_shape
+        axes = [np.linspace(a, b, n) for a, b, n in zip(self.lo, self.hi, shape, strict=True)]
         x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         q = x.copy()
         for _ in range(BAKE_ITERATIONS):
             q = x - self._interpolate(q, field=u)
-        v = (x - q).reshape(*self.shape, 3)
+        v = (x - q).reshape(*shape, 3)
         self._baked_cpu = (self._version, v)
         return v
 
@@ -552,12 +581,16 @@ class OffsetFieldWarp(Warp):
 
     # ---------------------------------------------------------------- GPU side
     def uniforms(self) -> dict[str, Any]:
-        """``lo``, ``size`` (hi - lo), ``shape`` (node counts as floats)."""
-        return {
+        """``lo``, ``size`` (hi - lo), ``shape`` (node counts as floats); for
+        ``"baked"`` also ``inverse_shape`` (:attr:`bake_shape`)."""
+        out = {
             "lo": self.lo.copy(),
             "size": self.hi - self.lo,
             "shape": np.asarray(self.shape, dtype=np.float64),
         }
+        if self.inverse == "baked":
+            out["inverse_shape"] = np.asarray(self.bake_shape, dtype=np.float64)
+        return out
 
     def glsl_constants(self) -> dict[str, Any]:
         """``ITERATIONS`` (fixed-point steps) and ``SEEDED`` (start from the baked inverse).
@@ -596,14 +629,15 @@ class OffsetFieldWarp(Warp):
         entry = self._baked.get(id(ctx))
         if entry is not None and entry[0] is not ctx:
             entry = None  # a dead context's id reused
-        if entry is not None and tuple(entry[2].size) != self.shape:
+        if entry is not None and tuple(entry[2].size) != self.bake_shape:
+            entry[1].release()
             entry[2].release()
             entry = None
         if entry is None:
             import shaders
 
             prog = ctx.compute_shader(shaders.source("offset_field_bake.comp.glsl"))
-            tex = ctx.texture3d(self.shape, 4, dtype="f2")
+            tex = ctx.texture3d(self.bake_shape, 4, dtype="f2")
             tex.filter = (ctx.LINEAR, ctx.LINEAR)
             tex.repeat_x = tex.repeat_y = tex.repeat_z = False
         else:
@@ -612,11 +646,12 @@ class OffsetFieldWarp(Warp):
                 return tex
         field.use(0)
         prog["u_field"].value = 0
-        prog["u_shape"].value = tuple(int(n) for n in self.shape)
+        prog["u_shape"].value = tuple(int(n) for n in self.bake_shape)
+        prog["u_field_shape"].value = tuple(int(n) for n in self.shape)
         prog["u_size"].value = tuple(float(v) for v in self.hi - self.lo)
         prog["u_iterations"].value = BAKE_ITERATIONS
         tex.bind_to_image(0, read=False, write=True)
-        groups = [-(-int(n) // 4) for n in self.shape]
+        groups = [-(-int(n) // 4) for n in self.bake_shape]
         prog.run(*groups)
         ctx.memory_barrier()
         self._baked[id(ctx)] = (ctx, prog, tex, self._version)
@@ -761,6 +796,28 @@ def gaussian_drag_field(
     idx = np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), axis=-1)
     d2 = np.sum((idx - np.asarray(node)) ** 2, axis=-1)
     return np.exp(-d2 / (2.0 * sigma**2))[..., None] * np.asarray(displacement, float)
+
+
+def _cell_reduce(node: np.ndarray, op: Any) -> np.ndarray:
+    """Per grid cell, ``op`` over its (up to) 8 corner nodes; (cells..., 3)."""
+    cell = node
+    for axis in range(3):
+        if cell.shape[axis] > 1:
+            a = np.moveaxis(cell, axis, 0)
+            cell = np.moveaxis(op(a[:-1], a[1:]), 0, axis)
+    return cell
+
+
+def _window_reduce(cell: np.ndarray, width: np.ndarray, op: Any) -> np.ndarray:
+    """Forward window reduction: ``out[i] = op(cell[i : i + width])`` per axis."""
+    m = cell
+    for axis in range(3):
+        a = np.moveaxis(m, axis, 0).copy()
+        out = a.copy()
+        for k in range(1, int(width[axis])):
+            op(out[:-k], a[k:], out=out[:-k])
+        m = np.moveaxis(out, 0, axis)
+    return m
 
 
 def inverse_error_table(

@@ -111,8 +111,10 @@ class Warp(ABC):
         """
         return np.asarray(lo, float), np.asarray(hi, float)
 
-    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
-        """Per box and axis, a bound (mm) on ``|apply(p) - p|`` over p in the box.
+    def displacement_range(
+        self, lo: np.ndarray, hi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per box and axis, an interval ``[a, b]`` holding ``apply(p) - p`` for p in the box.
 
         Parameters
         ----------
@@ -121,11 +123,15 @@ class Warp(ABC):
 
         Returns
         -------
-        numpy.ndarray or None
-            (N, 3) bounds per axis, or ``None`` when the warp cannot bound its displacement (the
-            default). The raycaster uses the bounds to carry empty-space skipping into
-            deformed space: a deformed-space point can only sample original content
-            within the bound (see :func:`app.skipping.warped_cell_visibility`).
+        (a, b) or None
+            Two (N, 3) arrays (mm), ``a <= apply(p) - p <= b`` componentwise for every p
+            in box i; ``None`` when the warp cannot bound its displacement (the
+            default). The raycaster uses them to carry empty-space skipping into
+            deformed space: a deformed-space point samples original content only
+            within that interval of offsets (see
+            :func:`app.skipping.warped_cell_visibility`). Signed intervals matter: a
+            smooth field moves a region mostly one way, so the content a sample can
+            reach is a shifted window, not a ball.
         """
         return None
 
@@ -189,9 +195,10 @@ class IdentityWarp(Warp):
         """The 4x4 identity."""
         return np.eye(4)
 
-    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Zero: the identity moves nothing."""
-        return np.zeros((np.atleast_2d(lo).shape[0], 3))
+    def displacement_range(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``[0, 0]``: the identity moves nothing."""
+        z = np.zeros((np.atleast_2d(lo).shape[0], 3))
+        return z, z.copy()
 
     def to_dict(self) -> dict[str, Any]:
         """``{"type": "identity"}``."""
@@ -289,18 +296,19 @@ class AffineWarp(Warp):
         f = c @ self.forward[:3, :3].T + self.forward[:3, 3]
         return f.min(axis=0), f.max(axis=0)
 
-    def displacement_bound(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Exact: each ``|(A p + t - p)_i|`` is convex in p, so its maximum over a box
-        lies at a corner; per axis, the largest of the 8 corners' displacements."""
+    def displacement_range(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact: ``(A p + t - p)_i`` is linear in p, so its extremes over a box lie at
+        corners; per axis, the smallest and largest of the 8 corners' offsets."""
         lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
         m = self.inverse[:3, :3] - np.eye(3)
-        out = np.zeros(lo.shape)
+        a = np.full(lo.shape, np.inf)
+        b = np.full(lo.shape, -np.inf)
         for corner in range(8):
-            pick = np.array([(corner >> a) & 1 for a in range(3)], dtype=bool)
-            p = np.where(pick, hi, lo)
-            d = p @ m.T + self.inverse[:3, 3]
-            np.maximum(out, np.abs(d), out=out)
-        return out
+            pick = np.array([(corner >> k) & 1 for k in range(3)], dtype=bool)
+            d = np.where(pick, hi, lo) @ m.T + self.inverse[:3, 3]
+            np.minimum(a, d, out=a)
+            np.maximum(b, d, out=b)
+        return a, b
 
     def uniforms(self) -> dict[str, Any]:
         """``matrix``: the deformed -> original 4x4 matrix (column-major for GL)."""
@@ -369,24 +377,24 @@ def chain_deformed_bounds(
     return lo, hi
 
 
-def chain_displacement_bound(
+def chain_displacement_range(
     warps: Sequence[Warp], lo: np.ndarray, hi: np.ndarray
-) -> np.ndarray | None:
-    """Per box and axis, a bound (mm) on how far a chain moves any point of the box.
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per box and axis, an interval holding how far a chain moves any point of the box.
 
-    Warp ``i`` sees the box widened by the bounds of warps ``0 .. i-1`` (the points it
-    receives lie there); the chain's bound is the sum (triangle inequality). ``None``
-    when some warp gives no bound. ``lo``, ``hi``: (N, 3) box corners in deformed mm;
-    returns (N, 3).
+    Warp ``i`` sees the box moved by the intervals of warps ``0 .. i-1`` (the points it
+    receives lie there); the chain's interval is their sum. ``None`` when some warp
+    gives no interval. ``lo``, ``hi``: (N, 3) box corners in deformed mm; returns two
+    (N, 3) arrays ``(a, b)``.
     """
     lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
-    total = np.zeros(lo.shape)
+    a, b = np.zeros(lo.shape), np.zeros(lo.shape)
     for w in warps:
-        b = w.displacement_bound(lo - total, hi + total)
-        if b is None:
+        r = w.displacement_range(lo + a, hi + b)
+        if r is None:
             return None
-        total = total + np.asarray(b, dtype=float)
-    return total
+        a, b = a + np.asarray(r[0], float), b + np.asarray(r[1], float)
+    return a, b
 
 
 def fold_affine(warps: Sequence[Warp]) -> np.ndarray | None:

@@ -5,7 +5,7 @@
 // the warp solves q + u(q) = p by the fixed point q <- p - u(q), WARP_ITERATIONS times,
 // starting from q = p (1 step = the thesis' approximation q = p - u(p)) or, when
 // WARP_SEEDED, from q = p - v(p), v the inverse offsets baked at the nodes
-// (WARP_inverse, same grid; shaders/offset_field_bake.comp.glsl).
+// (WARP_inverse, a finer grid over the same box; shaders/offset_field_bake.comp.glsl).
 // WARP_ITERATIONS and WARP_SEEDED are compile-time constants prepended by the warp
 // (Warp.glsl_constants), so the iteration unrolls.
 uniform vec3 WARP_lo;          // grid box corner (node 0, 0, 0), mm
@@ -13,6 +13,7 @@ uniform vec3 WARP_size;        // hi - lo, mm
 uniform vec3 WARP_shape;       // nodes per axis (n_x, n_y, n_z)
 uniform sampler3D WARP_displacement;
 uniform sampler3D WARP_inverse;   // baked inverse offsets (WARP_SEEDED only)
+uniform vec3 WARP_inverse_shape;  // its nodes per axis (finer than WARP_shape)
 
 // Node-centred texture coordinates of q and a branch-free mask, 0 outside the grid box.
 vec3 WARP_coords(vec3 q, out float inside) {
@@ -32,9 +33,10 @@ vec3 WARP_offset(vec3 q) {
 vec3 warp(vec3 p) {
     vec3 q = p;
     if (WARP_SEEDED) {  // a constant: the compiler keeps one branch
-        float inside;
-        vec3 tc = WARP_coords(p, inside);
-        q = p - textureLod(WARP_inverse, tc, 0.0).xyz * inside;
+        vec3 s = (p - WARP_lo) / WARP_size;
+        vec3 in3 = step(vec3(0.0), s) * step(s, vec3(1.0));
+        vec3 tc = (s * (WARP_inverse_shape - 1.0) + 0.5) / WARP_inverse_shape;
+        q = p - textureLod(WARP_inverse, tc, 0.0).xyz * (in3.x * in3.y * in3.z);
     }
     for (int i = 0; i < WARP_ITERATIONS; ++i) {
         q = p - WARP_offset(q);

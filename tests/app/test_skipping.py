@@ -271,13 +271,16 @@ def _random_boxes(rng: Any, lo: Any, hi: Any, n: int = 3000) -> tuple[np.ndarray
     return a, a + rng.uniform(0, 4, (n, 3))
 
 
-@pytest.mark.parametrize("chain", ["offset", "affine", "offset+affine"])
-def test_displacement_bound_holds_for_every_point_of_its_box(chain: str) -> None:
-    from deform.warp import chain_apply, chain_displacement_bound
+@pytest.mark.parametrize("chain", ["offset", "baked", "affine", "offset+affine"])
+def test_displacement_range_holds_for_every_point_of_its_box(chain: str) -> None:
+    from deform.warp import chain_apply, chain_displacement_range
 
     vol = _volume()
+    baked = _drag_warp(vol)
+    baked.inverse = "baked"
     warps = {
         "offset": [_drag_warp(vol)],
+        "baked": [baked],
         "affine": [AffineWarp.rotation((1, 2, 0), 20.0, center=vol.center)],
         "offset+affine": [
             _drag_warp(vol),
@@ -287,58 +290,84 @@ def test_displacement_bound_holds_for_every_point_of_its_box(chain: str) -> None
     }[chain]
     rng = np.random.default_rng(1)
     a, b = _random_boxes(rng, *vol.bounds)
-    bound = chain_displacement_bound(warps, a, b)
-    assert bound is not None
-    assert bound.shape == (len(a), 3)
+    r = chain_displacement_range(warps, a, b)
+    assert r is not None
+    low, high = r
+    assert low.shape == high.shape == (len(a), 3)
     for _ in range(8):
         p = a + (b - a) * rng.uniform(0, 1, a.shape)
-        moved = np.abs(chain_apply(warps, p) - p)
-        assert np.all(moved <= bound + 1e-9)
-    assert bound.max() > 1.0  # not vacuous: the warps do move points
+        moved = chain_apply(warps, p) - p
+        assert np.all(moved >= low - 1e-9)
+        assert np.all(moved <= high + 1e-9)
+    assert np.abs(np.r_[low, high]).max() > 1.0  # not vacuous: the warps do move points
 
 
-def test_offset_bound_is_local() -> None:
+def test_offset_range_is_local_and_signed() -> None:
     from deform.offset_field import OffsetFieldWarp
 
     field = np.zeros((9, 9, 9, 3))
-    field[2, 2, 2] = (3.0, 0.0, 0.0)  # one dragged node in a corner region
+    field[2:5, 2:5, 2:5] = (3.0, 0.0, 0.0)  # a block of nodes dragged along +x
     w = OffsetFieldWarp((0, 0, 0), (80, 80, 80), field)
-    far = w.displacement_bound(np.array([[60.0, 60, 60]]), np.array([[70.0, 70, 70]]))
-    near = w.displacement_bound(np.array([[15.0, 15, 15]]), np.array([[25.0, 25, 25]]))
-    assert far.max() < 1e-6
-    assert near[0, 0] >= 3.0
-    assert near[0, 1] < 1e-6
+    far_lo, far_hi = w.displacement_range(np.array([[60.0, 60, 60]]), np.array([[70.0, 70, 70]]))
+    assert np.abs(np.r_[far_lo, far_hi]).max() < 1e-6
+    lo, hi = w.displacement_range(np.array([[28.0, 28, 28]]), np.array([[32.0, 32, 32]]))
+    # inside the dragged block the sample reads 3 mm towards -x, never towards +x
+    assert lo[0, 0] <= -3.0
+    assert hi[0, 0] <= 0.0
+    assert np.abs(np.r_[lo[0, 1:], hi[0, 1:]]).max() < 1e-6  # y, z untouched
 
 
-def test_gpu_owned_field_gives_no_bound() -> None:
+def test_gpu_owned_field_gives_no_range() -> None:
     from deform.offset_field import OffsetFieldWarp
 
     w = OffsetFieldWarp((0, 0, 0), (1, 1, 1), shape=(2, 2, 2), texture_source=lambda ctx: None)
-    assert w.displacement_bound(np.zeros((1, 3)), np.ones((1, 3))) is None
+    assert w.displacement_range(np.zeros((1, 3)), np.ones((1, 3))) is None
 
 
-def test_warped_visibility_is_between_original_and_global_dilation() -> None:
-    from scipy.ndimage import maximum_filter
-
+def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_truth() -> None:
     from app.skipping import cell_min_max, static_block_visibility, warped_cell_visibility
-
-    vol = _volume()
-    scene = Scene(vol, mode="dvr", transfer_function=TF, warps=[_drag_warp(vol)])
-    visible = static_block_visibility(scene, *cell_min_max(vol.data))
-    lo, hi = scene.ray_bounds()
-    out, offset = warped_cell_visibility(visible, vol.spacing, vol.origin, scene.warps, lo, hi)
-    inner = tuple(slice(-o, -o + n) for o, n in zip(offset, visible.shape, strict=True))
-    assert np.all(out[inner] >= visible)  # dilation keeps every visible cell
-    assert out.sum() > visible.sum()  # and the drag grows it
-    # never more than dilating everything by the largest displacement
-    reach = np.max(np.abs(scene.warps[0].displacements), axis=(0, 1, 2))
-    r = np.ceil(reach * 1.001 / np.asarray(vol.spacing)).astype(int)
-    padded = np.zeros(out.shape, bool)
-    padded[inner] = visible
-    assert not np.any(out & ~maximum_filter(padded, size=tuple(2 * r + 1)))
-    # no displacement: exactly the original visibility
     from deform.offset_field import OffsetFieldWarp
 
+    vol = _volume()
+    lo, hi = (np.asarray(b) for b in vol.bounds)
+    scene = Scene(vol, mode="dvr", transfer_function=TF)
+    visible = static_block_visibility(scene, *cell_min_max(vol.data))
+    # a field that translates everything by exactly 2 voxels along y (nodes far beyond
+    # the volume so the box edges do not matter): the window is one shifted cell
+    shift = 2 * vol.spacing[1]
+    field = np.zeros((3, 3, 3, 3))
+    field[..., 1] = shift
+    w = OffsetFieldWarp(lo - 40, hi + 40, field)
+    out, offset = warped_cell_visibility(visible, vol.spacing, vol.origin, [w], lo - 3, hi + 3)
+    assert np.all(offset <= 0)
+    inner = tuple(slice(-o, -o + n) for o, n in zip(offset, visible.shape, strict=True))
+    shifted = np.zeros_like(out)
+    region = list(inner)
+    region[1] = slice(-offset[1] + 2, -offset[1] + 2 + visible.shape[1])
+    shifted[tuple(region)] = visible  # content seen 2 cells further along +y
+    # half-float slack widens the window by at most one cell on the side it rounds to
+    assert np.all(out >= shifted)
+    grown = shifted | np.roll(shifted, 1, axis=1) | np.roll(shifted, -1, axis=1)
+    assert not np.any(out & ~grown)
+    # a drag: every deformed cell whose warped samples can land on visible content is
+    # kept (brute force at random points)
+    scene = Scene(vol, mode="dvr", transfer_function=TF, warps=[_drag_warp(vol)])
+    ray_lo, ray_hi = scene.ray_bounds()
+    out, offset = warped_cell_visibility(
+        visible, vol.spacing, vol.origin, scene.warps, ray_lo, ray_hi
+    )
+    rng = np.random.default_rng(5)
+    p = rng.uniform(ray_lo, ray_hi, (20000, 3))
+    q = scene.warps[0].apply(p)
+    texel_q = (q - vol.origin) / vol.spacing + 0.5
+    cell_q = np.floor(texel_q + 0.5).astype(int)
+    inside = np.all((cell_q >= 0) & (cell_q < visible.shape), axis=1)
+    lands = np.zeros(len(p), bool)
+    lands[inside] = visible[tuple(cell_q[inside].T)]
+    cell_p = np.floor((p - vol.origin) / vol.spacing + 1.0).astype(int) - offset
+    assert lands.any()
+    assert np.all(out[tuple(cell_p[lands].T)])
+    # no displacement: exactly the original visibility
     still = [OffsetFieldWarp(*vol.bounds, np.zeros((3, 3, 3, 3)))]
     same, offset0 = warped_cell_visibility(visible, vol.spacing, vol.origin, still, *vol.bounds)
     np.testing.assert_array_equal(offset0, 0)
@@ -346,11 +375,13 @@ def test_warped_visibility_is_between_original_and_global_dilation() -> None:
 
 
 @pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
-@pytest.mark.parametrize("chain", ["offset", "offset+rotation"])
+@pytest.mark.parametrize("chain", ["offset", "baked", "offset+rotation"])
 def test_warped_cell_skipping_matches_block_path(gl_ctx: Any, mode: str, chain: str) -> None:
     vol = _volume()
     lo, hi = vol.bounds
     warps: list = [_drag_warp(vol)]
+    if chain == "baked":
+        warps[0].inverse = "baked"
     if chain == "offset+rotation":
         warps.append(AffineWarp.rotation((1, 1, 0), 25.0, center=vol.center))
     cam = Camera.fit(lo, hi, view=(30.0, 25.0), projection="perspective", fov=50.0)
