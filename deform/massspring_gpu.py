@@ -4,48 +4,107 @@ About this technique (Knoche 2008, 3.5)
 ---------------------------------------
 :class:`GpuSpringSolver` integrates exactly the physics of :mod:`deform.spring_model`
 (the same as :class:`deform.massspring.CpuSpringSolver`, to float32 round-off) on a
-``moderngl`` context. One draw call is one integration step: one fragment per element
-reads the previous state of the element and of its spring neighbours with
-``texelFetch`` and writes the new position and velocity into two colour attachments
-(MRT) of the other framebuffer of a ping-pong pair. ``step(n)`` never reads back.
+``moderngl`` context. One draw call is one integration step: one fragment per *block*
+of elements (default 2 x 2 x 1) reads the previous state of the block's elements and
+of their spring neighbours with ``imageLoad`` and writes the new positions and
+velocities into the colour attachments (MRT, two per element: 8 for a block of 4) of
+the other framebuffer of a ping-pong pair. ``step(n)`` never reads back.
 
-Element atlas
--------------
-State and per-element constants live in 2D RGBA32F textures in which the
-``(nx, ny, nz)`` element grid is tiled by z-slices: ``tiles_x`` tiles per row, slice
-``k`` being the ``nx x ny`` tile at column ``k % tiles_x`` and row ``k // tiles_x``, so
-element ``(i, j, k)`` is texel
+Block atlas
+-----------
+The ``(nx, ny, nz)`` element grid is cut into blocks of ``block = (sx, sy, sz)``
+elements (:data:`DEFAULT_BLOCK`; at most :data:`MAX_BLOCK` = 4, the 8 draw buffers of
+GL holding a position and a velocity each), giving a ``(bx, by, bz) = ceil(n / s)``
+block grid (the last block along an axis may hold padding elements). Element
+``(i, j, k)`` is element ``e = ex + sx * (ey + sy * ez)`` of block
+``(I, J, K) = (i // sx, j // sy, k // sz)``, ``(ex, ey, ez)`` its remainders. Each of
+the ``sx * sy * sz`` elements of a block has its own textures, and in each of them the
+block grid is tiled by z-slices: ``tiles_x`` tiles per row, slice ``K`` being the
+``bx x by`` tile at column ``K % tiles_x`` and row ``K // tiles_x``, so block
+``(I, J, K)`` is texel
 
-    ``(u, v) = (i + (k % tiles_x) * nx,  j + (k // tiles_x) * ny)``
+    ``(u, v) = (I + (K % tiles_x) * bx,  J + (K // tiles_x) * by)``
 
-(``u`` = column/x, ``v`` = row/y of the texture). The atlas is
-``(tiles_x * nx) x (tiles_y * ny)`` texels with ``tiles_y = ceil(nz / tiles_x)``;
-``tiles_x`` is chosen to make it as square as possible within ``GL_MAX_TEXTURE_SIZE``
-(128³ elements: 11 x 12 tiles, 1408 x 1536 texels). Tiles past slice ``nz - 1`` are
-unused; the step draw covers only the used tiles. ``nx, ny, nz, tiles_x``, the spring
-offsets and rest lengths (``model.offsets``, ``model.rest_lengths()``, at most 24) are
-compile-time constants of the shaders (one program per solver, generated as
-``massspring_config.glsl``), so the spring loop unrolls and the atlas arithmetic
-folds; neighbours outside the grid are clamped into it and weighted 0 (no branches).
-The step reads its inputs with ``imageLoad`` (unfiltered, like ``texelFetch``); on
-llvmpipe this, the constant tables and the branch-free loop together make a step about
-twice as fast as ``texelFetch`` with uniform arrays. Textures:
+of every texture (``u`` = column/x, ``v`` = row/y). The atlas is
+``(tiles_x * bx) x (tiles_y * by)`` texels with ``tiles_y = ceil(bz / tiles_x)``;
+:func:`atlas_layout` makes it as square as possible within ``GL_MAX_TEXTURE_SIZE``
+(128³ elements in 2 x 2 x 1 blocks: 11 x 12 tiles, 704 x 768 texels), except that an
+atlas fitting in one 64 x 64 llvmpipe raster tile is laid out as one row instead, so
+that both rasterizer threads get work (16³: +20 %). The step draw covers only the used
+tiles. Textures (RGBA32F, ``NEAREST``), per element of a block:
 
-* position ``(x, y, z, stiffness)`` and velocity ``(vx, vy, vz, 0)``, two of each
-  (ping-pong); carrying the stiffness in the position's ``w`` saves one fetch per
-  spring;
-* material ``(damping, mass, 0, 0)`` and rest ``(x, y, z, 0)``, from the model;
-* target ``(x, y, z, pinned)`` from :meth:`GpuSpringSolver.set_constraints`.
+* position ``(x, y, z, stiffness)`` and velocity ``(vx, vy, vz, 1 / mass)``, two of
+  each (ping-pong), at image units / colour attachments ``2e`` and ``2e + 1``. The
+  stiffness rides in the position (a neighbour's spring constant needs it) and the
+  inverse mass in the velocity, which is **0 for pinned elements**: a pinned element
+  sits at its target with zero velocity, so with no acceleration it stays there
+  exactly, and the step needs no pin test and no target fetch;
+* rest ``(x, y, z, 0)`` (for the displacement texture) and target
+  ``(x, y, z, 1 / mass or -1 when pinned)`` (for the pin pass).
+
+plus one damping texture per solver holding the damping of block element ``e`` in
+channel ``e``. Padding elements have zero state and inverse mass 0 and are never a
+spring's end.
+
+The grid, block and atlas sizes are compile-time constants (``massspring_config.glsl``,
+generated per solver), and ``main()`` of the step (``massspring_pass.glsl``) is
+generated too: unrolled over the block's elements and the spring offsets, it loads
+each distinct neighbour texel once (a 2 x 2 x 1 block with the 6 structural springs:
+8 own + 32 neighbour + 1 damping loads for 4 elements, 10.25 per element instead of
+17), evaluates a spring between two elements of the same block once (+F on one end,
+-F on the other), clamps neighbours outside the grid into it and weights them 0 (no
+branches). :meth:`~GpuSpringSolver.set_constraints` writes the targets and runs one
+draw of the pin program (the same shader file with ``MS_PIN_PASS``): pinned elements
+go to their targets at rest, and every element's inverse mass is set from the target's
+``w``. :meth:`~GpuSpringSolver.set_state` keeps the given state of pinned elements
+(as the CPU solver does); the next :meth:`~GpuSpringSolver.step` then runs one step,
+the pin pass, and the remaining steps, matching the CPU solver step by step.
+
+Performance (llvmpipe, Mesa 22.3, 2 cores)
+------------------------------------------
+On llvmpipe every texel fetch is a per-lane gather and both sides of every branch run,
+so the step's cost is its loads and its memory traffic. Measured steps/s against a
+taichi CPU kernel of the same model (``ti.init(arch=ti.cpu)``, structural springs,
+explicit Euler, clamp on), same process, interleaved, medians, noisy shared machine:
+
+=====  ==================  ==============================  ===========================
+grid   taichi (steps/s)    one element per fragment (old)  2 x 2 x 1 blocks (this)
+=====  ==================  ==============================  ===========================
+16³    5000-5900           0.9-1.4x taichi                 1.5-1.8x taichi
+32³    ~800                ~1.4x                           ~2.4x
+64³    100-200 (by load)   0.6-1.2x                        1.4-1.6x
+128³   ~26                 ~0.55x                          1.0-1.2x
+=====  ==================  ==============================  ===========================
+
+(the taichi column is the faster of ``app.bench_taichi`` and an equivalent kernel; its
+absolute numbers vary by 2x with the load of the shared machine, the ratios less.)
+
+What was measured and kept: blocks of 4 elements per fragment (2 x 2 x 1, 2 x 1 x 2,
+1 x 2 x 2 and 4 x 1 x 1 are within noise of each other; 1 x 1 x 1 with the folded
+constants is ~1.4x the old step, blocks of 4 ~2.5x at 64³); folding the damping/mass/
+pinned material and the target out of the step (inverse mass in the velocity's ``w``,
+pinned = inverse mass 0); ``imageLoad`` rather than ``texelFetch`` (1.5x cheaper per
+load) or SSBO reads in the fragment shader (2x dearer than ``imageLoad`` in a
+17-load test, before any framebuffer-to-buffer copy, so not pursued); the one-row
+atlas for small grids. At 64³ a step is now close to the memory-bandwidth floor of
+this machine (~8 GB/s: a pass that only reads 8 and writes 8 RGBA32F 256 x 256
+textures takes ~2.3 ms of the ~3.2 ms step); the neighbour loads are ~1/3 and the
+spring arithmetic ~1/5 of it. Tried and not kept: ``d * (1 / |d|)`` instead of
+``d / |d|`` and ``restrict`` images (no measurable gain). Not tried: blocks of 8
+elements (would need ``imageStore`` for the 4 elements past the 8 draw buffers, about
+as dear as the loads saved); a compute-shader step (not the technique of the thesis).
+Not done on purpose: a compile-time damping when ``model.damping`` is uniform (it
+would save the one damping load per block, 7-10 % at 64³, but the taichi reference
+loads its damping too).
 
 Displacement texture
 --------------------
-After every :meth:`GpuSpringSolver.step` (and :meth:`~GpuSpringSolver.set_state`) a
-compute shader (one invocation per element, 8 x 8 x 1 groups) writes the
-``(nx, ny, nz)`` RGBA16F texture of :meth:`~GpuSpringSolver.displacement_texture` with
-``imageStore``: ``(x - rest, stiffness)``; a ``glMemoryBarrier`` follows, so the
-raycaster can sample it at once. Nothing is read back to the CPU.
-:meth:`~GpuSpringSolver.set_constraints` moves the pinned elements to their targets at
-once (as the CPU solver does) with one more draw of the step program that only pins.
+After every :meth:`GpuSpringSolver.step` (and :meth:`~GpuSpringSolver.set_state`,
+:meth:`~GpuSpringSolver.set_constraints`) a compute shader (one invocation per block,
+8 x 8 x 1 groups) writes the ``(nx, ny, nz)`` RGBA16F texture of
+:meth:`~GpuSpringSolver.displacement_texture` with ``imageStore``:
+``(x - rest, stiffness)`` per element; a ``glMemoryBarrier`` follows, so the raycaster
+can sample it at once. Nothing is read back to the CPU.
 
 The model's scalar parameters (``dt``, ``spring_constant``, ``spring_damping``,
 ``max_step``, ``integrator``) are read at every :meth:`~GpuSpringSolver.step`; its
@@ -54,8 +113,8 @@ per-element arrays (``rest``, ``stiffness``, ``damping``, ``mass``) and springs
 
 The solver draws on the context it is given and does not make it current: the caller
 does (as for :class:`app.render.Renderer`). GL state it changes (enable flags, bound
-framebuffer) is restored after each call; image units 0-3 are left bound to its
-textures.
+framebuffer) is restored after each call; image units from 0 up to twice the block
+size (at most 12) are left bound to its textures.
 """
 
 from __future__ import annotations
@@ -71,6 +130,12 @@ from deform.spring_model import INTEGRATORS, SpringModel
 
 #: Most springs per element the shaders accept (structural + shear + bend).
 MAX_SPRINGS = 24
+#: Most elements per block (one fragment writes 2 colour attachments per element).
+MAX_BLOCK = 4
+#: Elements per fragment along x, y, z by default (see module doc).
+DEFAULT_BLOCK = (2, 2, 1)
+#: llvmpipe's raster tile (pixels): each is shaded by one thread
+_RASTER_TILE = 64
 #: Work-group size of the displacement compute shader.
 _GROUP = (8, 8, 1)
 #: GL_RGBA16F, the image format of the displacement texture.
@@ -83,7 +148,7 @@ def atlas_layout(shape: tuple[int, int, int], max_size: int) -> tuple[int, int]:
     Parameters
     ----------
     shape
-        Elements per axis ``(nx, ny, nz)``.
+        Cells per axis ``(nx, ny, nz)`` (the solver passes its block grid).
     max_size
         Largest texture side allowed (``GL_MAX_TEXTURE_SIZE``).
 
@@ -116,6 +181,11 @@ def atlas_layout(shape: tuple[int, int, int], max_size: int) -> tuple[int, int]:
     return best[1]
 
 
+def block_shape(shape: tuple[int, int, int], block: tuple[int, int, int]) -> tuple[int, int, int]:
+    """Blocks per axis of a grid: ``ceil(n / b)`` (the last block may hold padding)."""
+    return tuple(-(-int(n) // int(b)) for n, b in zip(shape, block, strict=True))  # type: ignore[return-value]
+
+
 class GpuSpringSolver:
     """Mass-spring solver on the GPU (see module doc for the technique and layout).
 
@@ -126,16 +196,21 @@ class GpuSpringSolver:
     ctx
         A ``moderngl.Context`` (OpenGL 4.3+, for the compute shader); the caller owns it
         and makes it current.
+    block
+        Elements per fragment along x, y, z (at most 4 in all; default
+        :data:`DEFAULT_BLOCK`, the fastest measured on llvmpipe).
 
     Raises
     ------
     ValueError
         If ``ctx`` is None or too old, or the model is inconsistent (array shapes,
         non-positive mass, unknown integrator, more than 24 springs) or too large for
-        the context's textures.
+        the context's textures, or ``block`` is not 1 to 4 elements.
     """
 
-    def __init__(self, model: SpringModel, ctx: Any) -> None:
+    def __init__(
+        self, model: SpringModel, ctx: Any, *, block: tuple[int, int, int] = DEFAULT_BLOCK
+    ) -> None:
         if ctx is None:
             raise ValueError(
                 "GpuSpringSolver needs a moderngl.Context (OpenGL 4.3+); got None"
@@ -153,6 +228,18 @@ class GpuSpringSolver:
         shape = _check_model(model)
         self.shape: tuple[int, int, int] = shape
         nx, ny, nz = shape
+        blk = tuple(int(b) for b in block)
+        if len(blk) != 3 or min(blk) < 1 or math.prod(blk) > MAX_BLOCK:
+            raise ValueError(
+                f"block must be 3 sizes >= 1 with at most {MAX_BLOCK} elements; got {block}"
+            )
+        # no longer than the grid (a 1-element-thick grid gets 1 along that axis)
+        bs = tuple(min(b, n) for b, n in zip(blk, shape, strict=True))
+        #: elements per fragment along x, y, z
+        self.block: tuple[int, int, int] = bs  # type: ignore[assignment]
+        #: blocks per axis
+        self.blocks: tuple[int, int, int] = block_shape(shape, self.block)
+        self._n_block = math.prod(self.block)
         info = ctx.info
         max_2d = int(info.get("GL_MAX_TEXTURE_SIZE", 16384))
         max_3d = int(info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
@@ -160,12 +247,17 @@ class GpuSpringSolver:
             raise ValueError(
                 f"a grid of {nx}x{ny}x{nz} elements exceeds GL_MAX_3D_TEXTURE_SIZE {max_3d}"
             )
-        tx, ty = atlas_layout(shape, max_2d)
-        #: tiles per row and per column of the atlas
+        bx, by, nz_blocks = self.blocks
+        tx, ty = atlas_layout(self.blocks, max_2d)
+        if tx * bx <= _RASTER_TILE and ty * by <= _RASTER_TILE and nz_blocks * bx <= max_2d:
+            tx, ty = nz_blocks, 1  # one row: at least two raster tiles, so two threads
+        #: tiles per row and per column of the block atlas
         self.tiles: tuple[int, int] = (tx, ty)
         #: atlas size in texels (width, height)
-        self.atlas_size: tuple[int, int] = (tx * nx, ty * ny)
+        self.atlas_size: tuple[int, int] = (tx * bx, ty * by)
         self._n_springs = len(model.offsets)
+        self._pinned = np.zeros(shape, bool)
+        self._pin_pending = False
 
         try:
             self._create(model)
@@ -176,35 +268,58 @@ class GpuSpringSolver:
     # ------------------------------------------------------------------ setup
     def _create(self, model: SpringModel) -> None:
         ctx = self.ctx
-        tx, _ = self.tiles
-        extra = {"massspring_config.glsl": _config_glsl(self.shape, tx, model)}
+        config = _config_glsl(self.shape, self.block, self.tiles[0], model)
+        vert = shaders.source("massspring_step.vert.glsl")
         self._prog = self._keep(
             ctx.program(
-                vertex_shader=shaders.source("massspring_step.vert.glsl"),
-                fragment_shader=shaders.source("massspring_step.frag.glsl", extra),
+                vertex_shader=vert,
+                fragment_shader=shaders.source(
+                    "massspring_step.frag.glsl",
+                    {"massspring_config.glsl": config, "massspring_pass.glsl": _step_glsl(self)},
+                ),
+            )
+        )
+        self._pin_prog = self._keep(
+            ctx.program(
+                vertex_shader=vert,
+                fragment_shader=shaders.source(
+                    "massspring_step.frag.glsl",
+                    {
+                        "massspring_config.glsl": config + "#define MS_PIN_PASS\n",
+                        "massspring_pass.glsl": _pin_glsl(self),
+                    },
+                ),
             )
         )
         self._comp = self._keep(
-            ctx.compute_shader(shaders.source("massspring_displacement.comp.glsl", extra))
+            ctx.compute_shader(
+                shaders.source(
+                    "massspring_displacement.comp.glsl",
+                    {"massspring_config.glsl": config, "massspring_pass.glsl": _disp_glsl(self)},
+                )
+            )
         )
-        self._pos = [self._state_texture() for _ in range(2)]
-        self._vel = [self._state_texture() for _ in range(2)]
+        e = self._n_block
+        #: per ping-pong side: position textures (one per element of a block)
+        self._pos = [[self._state_texture() for _ in range(e)] for _ in range(2)]
+        #: per ping-pong side: velocity textures
+        self._vel = [[self._state_texture() for _ in range(e)] for _ in range(2)]
         self._fbo = [
-            self._keep(ctx.framebuffer(color_attachments=[self._pos[i], self._vel[i]]))
-            for i in range(2)
+            self._keep(ctx.framebuffer(color_attachments=self._state_list(i))) for i in range(2)
         ]
         self._cur = 0  # index of the textures holding the current state
         self._scope = self._keep(ctx.scope(self._fbo[0], enable_only=moderngl.NOTHING))
 
-        material = np.zeros((*self.shape, 4), np.float32)
-        material[..., 0] = model.damping
-        material[..., 1] = model.mass
-        self._material = self._state_texture(self._to_atlas(material))
+        inv_mass = 1.0 / np.asarray(model.mass, np.float64)
+        self._inv_mass = inv_mass
+        damping = np.zeros((*self.shape, 4), np.float32)
+        self._damping = self._state_texture(self._to_atlas(damping)[0])  # filled below
+        self._damping.write(self._packed(np.asarray(model.damping, np.float32)).tobytes())
         rest4 = np.zeros((*self.shape, 4), np.float32)
         rest4[..., :3] = model.rest
-        self._rest = self._state_texture(self._to_atlas(rest4))
-        rest4[..., 3] = 0.0  # target = rest, nothing pinned
-        self._target = self._state_texture(self._to_atlas(rest4))
+        self._rest = [self._state_texture(a) for a in self._to_atlas(rest4)]
+        rest4[..., 3] = inv_mass  # target = rest, nothing pinned
+        self._target = [self._state_texture(a) for a in self._to_atlas(rest4)]
 
         self._disp = self._keep(ctx.texture3d(self.shape, 4, dtype="f2"))
         self._disp.filter = (moderngl.LINEAR, moderngl.LINEAR)
@@ -212,13 +327,18 @@ class GpuSpringSolver:
 
         self._vbo = self._keep(ctx.buffer(self._tile_triangles().tobytes()))
         self._vao = self._keep(ctx.vertex_array(self._prog, [(self._vbo, "2f", "in_ndc")]))
-        self._groups = tuple(-(-n // g) for n, g in zip(self.shape, _GROUP, strict=True))
+        self._pin_vao = self._keep(ctx.vertex_array(self._pin_prog, [(self._vbo, "2f", "in_ndc")]))
+        self._groups = tuple(-(-n // g) for n, g in zip(self.blocks, _GROUP, strict=True))
 
         self.set_state(np.asarray(model.rest, np.float64), np.zeros((*self.shape, 3)))
 
     def _keep(self, obj: Any) -> Any:
         self._objects.append(obj)
         return obj
+
+    def _state_list(self, side: int) -> list[Any]:
+        """The state textures of one side in image-unit/attachment order (p0 v0 p1 v1 ...)."""
+        return [t for pv in zip(self._pos[side], self._vel[side], strict=True) for t in pv]
 
     def _state_texture(self, data: np.ndarray | None = None) -> Any:
         w, h = self.atlas_size
@@ -233,15 +353,15 @@ class GpuSpringSolver:
 
     def _tile_triangles(self) -> np.ndarray:
         """NDC triangles covering the used tiles of the atlas (at most two rectangles)."""
-        nx, ny, nz = self.shape
+        bx, by, bz = self.blocks
         tx, _ = self.tiles
         w, h = self.atlas_size
-        rows, rem = divmod(nz, tx)
+        rows, rem = divmod(bz, tx)
         rects = []
         if rows:
-            rects.append((0, 0, w, rows * ny))
+            rects.append((0, 0, w, rows * by))
         if rem:
-            rects.append((0, rows * ny, rem * nx, (rows + 1) * ny))
+            rects.append((0, rows * by, rem * bx, (rows + 1) * by))
         tris = []
         for x0, y0, x1, y1 in rects:
             a, b = 2.0 * x0 / w - 1.0, 2.0 * x1 / w - 1.0
@@ -249,21 +369,48 @@ class GpuSpringSolver:
             tris += [(a, c), (b, c), (b, d), (a, c), (b, d), (a, d)]
         return np.array(tris, np.float32)
 
-    def _to_atlas(self, grid: np.ndarray) -> np.ndarray:
-        """(nx, ny, nz, 4) -> (height, width, 4) float32 atlas (rows = texture y)."""
-        nx, ny, nz = self.shape
+    def _block_atlas(self, blocks: np.ndarray) -> np.ndarray:
+        """(bx, by, bz, 4) per-block values -> (height, width, 4) float32 atlas."""
+        bx, by, bz = self.blocks
         tx, ty = self.tiles
-        padded = np.zeros((nx, ny, tx * ty, 4), np.float32)
-        padded[:, :, :nz] = grid
-        tiles = padded.reshape(nx, ny, ty, tx, 4)  # k = row * tx + column
-        return np.ascontiguousarray(tiles.transpose(2, 1, 3, 0, 4)).reshape(ty * ny, tx * nx, 4)
+        padded = np.zeros((bx, by, tx * ty, 4), np.float32)
+        padded[:, :, :bz] = blocks
+        tiles = padded.reshape(bx, by, ty, tx, 4)  # k = row * tx + column
+        return np.ascontiguousarray(tiles.transpose(2, 1, 3, 0, 4)).reshape(ty * by, tx * bx, 4)
 
-    def _from_atlas(self, atlas: np.ndarray) -> np.ndarray:
-        """(height, width, 4) atlas -> (nx, ny, nz, 4)."""
+    def _split(self, grid: np.ndarray) -> list[np.ndarray]:
+        """(nx, ny, nz, c) -> one (bx, by, bz, c) array per element of a block (padded 0)."""
+        sx, sy, sz = self.block
+        bx, by, bz = self.blocks
+        padded = np.zeros((bx * sx, by * sy, bz * sz, grid.shape[3]), np.float32)
         nx, ny, nz = self.shape
+        padded[:nx, :ny, :nz] = grid
+        g = padded.reshape(bx, sx, by, sy, bz, sz, grid.shape[3])
+        return [g[:, ex, :, ey, :, ez] for ex, ey, ez in _block_elements(self.block)]
+
+    def _to_atlas(self, grid: np.ndarray) -> list[np.ndarray]:
+        """(nx, ny, nz, 4) -> one (height, width, 4) float32 atlas per element of a block."""
+        return [self._block_atlas(b) for b in self._split(grid)]
+
+    def _packed(self, scalars: np.ndarray) -> np.ndarray:
+        """(nx, ny, nz) -> atlas holding the scalar of block element e in channel e."""
+        parts = self._split(scalars[..., None])
+        blocks = np.zeros((*self.blocks, 4), np.float32)
+        for e, part in enumerate(parts):
+            blocks[..., e] = part[..., 0]
+        return self._block_atlas(blocks)
+
+    def _from_atlas(self, atlases: list[np.ndarray]) -> np.ndarray:
+        """One (height, width, 4) atlas per block element -> (nx, ny, nz, 4)."""
+        bx, by, bz = self.blocks
+        sx, sy, sz = self.block
         tx, ty = self.tiles
-        tiles = atlas.reshape(ty, ny, tx, nx, 4).transpose(3, 1, 0, 2, 4)  # (nx, ny, ty, tx)
-        return tiles.reshape(nx, ny, ty * tx, 4)[:, :, :nz]
+        out = np.zeros((bx, sx, by, sy, bz, sz, 4), np.float32)
+        for (ex, ey, ez), atlas in zip(_block_elements(self.block), atlases, strict=True):
+            tiles = atlas.reshape(ty, by, tx, bx, 4).transpose(3, 1, 0, 2, 4)
+            out[:, ex, :, ey, :, ez] = tiles.reshape(bx, by, ty * tx, 4)[:, :, :bz]
+        nx, ny, nz = self.shape
+        return out.reshape(bx * sx, by * sy, bz * sz, 4)[:nx, :ny, :nz]
 
     def _check_alive(self) -> None:
         if self._released:
@@ -284,6 +431,9 @@ class GpuSpringSolver:
     def set_state(self, positions: np.ndarray, velocities: np.ndarray) -> None:
         """Upload a new state (and update the displacement texture).
 
+        As in the CPU solver, pinned elements keep the given state until the next step,
+        which puts them back at their targets.
+
         Parameters
         ----------
         positions, velocities
@@ -302,15 +452,19 @@ class GpuSpringSolver:
         pos4[..., 3] = self.model.stiffness
         vel4 = np.zeros((*self.shape, 4), np.float32)
         vel4[..., :3] = v
-        self._pos[self._cur].write(self._to_atlas(pos4).tobytes())
-        self._vel[self._cur].write(self._to_atlas(vel4).tobytes())
+        vel4[..., 3] = np.where(self._pinned, 0.0, self._inv_mass)
+        for tex, data in zip(self._pos[self._cur], self._to_atlas(pos4), strict=True):
+            tex.write(data.tobytes())
+        for tex, data in zip(self._vel[self._cur], self._to_atlas(vel4), strict=True):
+            tex.write(data.tobytes())
+        self._pin_pending = bool(self._pinned.any())
         self._update_displacement()
 
     def set_constraints(self, pinned: np.ndarray, targets: np.ndarray) -> None:
         """Pin elements at targets.
 
         Pinned elements move to their targets at once, at rest (one GPU pass, no
-        readback), and are set there with zero velocity after every integration step.
+        readback), and stay there: their inverse mass is 0 from then on.
 
         Parameters
         ----------
@@ -329,9 +483,11 @@ class GpuSpringSolver:
         t = self._check_grid("targets", targets, 3)
         target4 = np.zeros((*self.shape, 4), np.float32)
         target4[..., :3] = t
-        target4[..., 3] = p
-        self._target.write(self._to_atlas(target4).tobytes())
-        self._passes(1, pin_only=True)
+        target4[..., 3] = np.where(p, -1.0, self._inv_mass)
+        for tex, data in zip(self._target, self._to_atlas(target4), strict=True):
+            tex.write(data.tobytes())
+        self._pinned = p.copy()
+        self._pin()
         self._update_displacement()
 
     def step(self, n: int = 1) -> None:
@@ -360,40 +516,57 @@ class GpuSpringSolver:
             raise ValueError(f"integrator must be one of {INTEGRATORS}; got {m.integrator!r}")
         prog = self._prog
         prog["u_dt"].value = float(m.dt)
-        prog["u_spring_constant"].value = float(m.spring_constant)
+        prog["u_half_k"].value = 0.5 * float(m.spring_constant)
         prog["u_spring_damping"].value = float(m.spring_damping)
         prog["u_max_step"].value = float(m.max_step)
         prog["u_semi_implicit"].value = int(m.integrator == "semi-implicit")
-        self._passes(n, pin_only=False)
+        if self._pin_pending:  # pinned elements given a state by set_state: one step, re-pin
+            self._passes(self._vao, 1, self._damping)
+            self._pin()
+            n -= 1
+        self._passes(self._vao, n, self._damping)
         self._update_displacement()
 
-    def _passes(self, n: int, pin_only: bool) -> None:
-        """``n`` ping-pong draws of the step program (one per step)."""
-        self._prog["u_pin_only"].value = pin_only
+    def _pin(self) -> None:
+        """Move the pinned elements to their targets, at rest, with inverse mass 0."""
+        self._passes(self._pin_vao, 1, None)
+        self._pin_pending = False
+
+    def _passes(self, vao: Any, n: int, damping: Any) -> None:
+        """``n`` ping-pong draws of a program (one per step)."""
+        if n <= 0:
+            return
         bound = self.ctx.fbo
+        units = len(self._state_list(0))
         with self._scope:  # blending etc. off; the bound framebuffer is restored after
-            self._material.bind_to_image(2, read=True, write=False)
-            self._target.bind_to_image(3, read=True, write=False)
+            if damping is not None:
+                damping.bind_to_image(units, read=True, write=False)
+            else:
+                for i, tex in enumerate(self._target):
+                    tex.bind_to_image(units + i, read=True, write=False)
             for _ in range(n):
                 src, dst = self._cur, 1 - self._cur
-                self._pos[src].bind_to_image(0, read=True, write=False)
-                self._vel[src].bind_to_image(1, read=True, write=False)
+                for i, tex in enumerate(self._state_list(src)):
+                    tex.bind_to_image(i, read=True, write=False)
                 self._fbo[dst].use()
-                self._vao.render(moderngl.TRIANGLES)
+                vao.render(moderngl.TRIANGLES)
                 self._cur = dst
         self.ctx.fbo = bound  # moderngl's record of the bound framebuffer, as GL has it
 
     def _update_displacement(self) -> None:
         self._disp.bind_to_image(0, read=False, write=True, format=_GL_RGBA16F)
-        self._pos[self._cur].bind_to_image(1, read=True, write=False)
-        self._rest.bind_to_image(2, read=True, write=False)
+        e = self._n_block
+        for i, tex in enumerate(self._pos[self._cur]):
+            tex.bind_to_image(1 + i, read=True, write=False)
+        for i, tex in enumerate(self._rest):
+            tex.bind_to_image(1 + e + i, read=True, write=False)
         self._comp.run(*self._groups)
         self.ctx.memory_barrier()
 
-    def _read(self, textures: list[Any]) -> np.ndarray:
+    def _read(self, textures: list[list[Any]]) -> np.ndarray:
         w, h = self.atlas_size
-        raw = np.frombuffer(textures[self._cur].read(), np.float32).reshape(h, w, 4)
-        return self._from_atlas(raw)
+        raws = [np.frombuffer(t.read(), np.float32).reshape(h, w, 4) for t in textures[self._cur]]
+        return self._from_atlas(raws)
 
     def positions(self) -> np.ndarray:
         """Read back the element positions.
@@ -456,18 +629,137 @@ class GpuSpringSolver:
         self._objects.clear()
 
 
-def _config_glsl(shape: tuple[int, int, int], tiles_x: int, model: SpringModel) -> str:
-    """``massspring_config.glsl``: grid and atlas constants and the spring tables."""
+def _block_elements(block: tuple[int, int, int]) -> list[tuple[int, int, int]]:
+    """Coordinates of the elements within a block, in texture order (x fastest)."""
+    sx, sy, sz = block
+    return [(ex, ey, ez) for ez in range(sz) for ey in range(sy) for ex in range(sx)]
+
+
+def _config_glsl(
+    shape: tuple[int, int, int], block: tuple[int, int, int], tiles_x: int, model: SpringModel
+) -> str:
+    """``massspring_config.glsl``: grid, block and atlas constants (see module doc)."""
     nx, ny, nz = shape
-    offsets = ", ".join(f"ivec3({a}, {b}, {c})" for a, b, c in model.offsets.tolist())
-    lengths = ", ".join(repr(float(x)) for x in model.rest_lengths())
-    m = len(model.offsets)
+    sx, sy, sz = block
+    bx, by, bz = block_shape(shape, block)
+    e = sx * sy * sz
     return (
-        f"#define NX {nx}\n#define NY {ny}\n#define NZ {nz}\n#define TX {tiles_x}\n"
-        f"#define M {m}\n"
-        f"const ivec3 MS_OFFSET[M] = ivec3[M]({offsets});\n"
-        f"const float MS_REST_LENGTH[M] = float[M]({lengths});\n"
+        f"#define NX {nx}\n#define NY {ny}\n#define NZ {nz}\n"
+        f"#define SX {sx}\n#define SY {sy}\n#define SZ {sz}\n"
+        f"#define BX {bx}\n#define BY {by}\n#define BZ {bz}\n#define TX {tiles_x}\n"
+        f"#define MS_E {e}\n#define MS_STATE {2 * e}\n#define MS_REST_BINDING {1 + e}\n"
+        f"#define MS_SPRINGS {len(model.offsets)}\n"
     )
+
+
+def _ivec3(v: Any) -> str:
+    return "ivec3({}, {}, {})".format(*(int(c) for c in v))
+
+
+def _inside(coords: list[tuple[int, int, int]], offset: Any) -> str:
+    """GLSL test that the elements at ``base + c`` (c in coords) are inside the grid,
+    checked only along the axes of ``offset`` (along the others they share the own
+    element's coordinate)."""
+    terms = []
+    for a, (axis, n) in enumerate(zip("xyz", ("NX", "NY", "NZ"), strict=True)):
+        if offset[a] == 0:
+            continue
+        lo = min(c[a] for c in coords)
+        hi = max(c[a] for c in coords)
+        if lo < 0:
+            terms.append(f"base.{axis} >= {-lo}")
+        if hi > 0:
+            terms.append(f"base.{axis} < {n} - {hi}")
+    return " && ".join(terms) or "true"
+
+
+def _step_glsl(solver: GpuSpringSolver) -> str:
+    """``massspring_pass.glsl`` of the step: ``main()`` unrolled over the block's
+    elements and springs (each distinct neighbour texel is loaded once; a spring
+    between two elements of the block is evaluated once, +F / -F)."""
+    block = solver.block
+    elems = _block_elements(block)
+    index = {c: i for i, c in enumerate(elems)}
+    offsets = [tuple(int(c) for c in o) for o in solver.model.offsets.tolist()]
+    lengths = [float(x) for x in solver.model.rest_lengths()]
+    lines = [
+        "void main() {",
+        "    ivec2 t = ivec2(gl_FragCoord.xy);",
+        "    ivec3 b = ms_block(t);",
+        "    ivec3 base = b * ivec3(SX, SY, SZ);",
+        "    const ivec3 blast = ivec3(BX - 1, BY - 1, BZ - 1);",
+    ]
+    for i in range(len(elems)):
+        lines.append(f"    vec4 p{i} = imageLoad(u_state[{2 * i}], t);")
+        lines.append(f"    vec4 v{i} = imageLoad(u_state[{2 * i + 1}], t);")
+        lines.append(f"    vec3 f{i} = vec3(0.0);")
+    loaded: dict[tuple[tuple[int, int, int], int], str] = {}
+    texels: dict[tuple[int, int, int], str] = {}
+    body: list[str] = []
+    for i, c in enumerate(elems):
+        for o, length in zip(offsets, lengths, strict=True):
+            n = tuple(c[a] + o[a] for a in range(3))
+            bo = tuple(n[a] // block[a] for a in range(3))
+            ec = tuple(n[a] - bo[a] * block[a] for a in range(3))
+            j = index[ec]
+            if bo == (0, 0, 0):  # inside the block: once per pair
+                if j > i:
+                    cond = _inside([c, n], o)
+                    body.append(
+                        f"    {{ vec3 F = ms_spring(p{i}, v{i}, p{j}, v{j}, {length!r}, {cond});"
+                        f" f{i} += F; f{j} -= F; }}"
+                    )
+                continue
+            if bo not in texels:
+                name = "t_" + "_".join(str(x).replace("-", "m") for x in bo)
+                texels[bo] = name
+                lines.append(
+                    f"    ivec2 {name} = ms_texel(clamp(b + {_ivec3(bo)}, ivec3(0), blast));"
+                )
+            tn = texels[bo]
+            key = (bo, j)
+            if key not in loaded:
+                name = f"{tn}_{j}"
+                loaded[key] = name
+                lines.append(f"    vec4 p{name} = imageLoad(u_state[{2 * j}], {tn});")
+                lines.append(f"    vec4 v{name} = imageLoad(u_state[{2 * j + 1}], {tn});")
+            name = loaded[key]
+            cond = _inside([n], o)
+            body.append(f"    f{i} += ms_spring(p{i}, v{i}, p{name}, v{name}, {length!r}, {cond});")
+    lines += body
+    lines.append("    vec4 damping = imageLoad(u_damping, t);")
+    for i in range(len(elems)):
+        lines.append(
+            f"    ms_integrate(p{i}, v{i}, f{i}, damping[{i}],"
+            f" ms_out[{2 * i}], ms_out[{2 * i + 1}]);"
+        )
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def _pin_glsl(solver: GpuSpringSolver) -> str:
+    """``massspring_pass.glsl`` of the pin pass: pinned elements (target ``w`` < 0) go
+    to their target at rest; every element's velocity ``w`` becomes the target's ``w``
+    clamped at 0 (its inverse mass, 0 when pinned)."""
+    lines = ["void main() {", "    ivec2 t = ivec2(gl_FragCoord.xy);"]
+    for i in range(solver._n_block):
+        lines.append(
+            f"    ms_pin(imageLoad(u_state[{2 * i}], t), imageLoad(u_state[{2 * i + 1}], t),"
+            f" imageLoad(u_target[{i}], t), ms_out[{2 * i}], ms_out[{2 * i + 1}]);"
+        )
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def _disp_glsl(solver: GpuSpringSolver) -> str:
+    """``massspring_pass.glsl`` of the displacement shader: one store per block element."""
+    lines = []
+    for i, c in enumerate(_block_elements(solver.block)):
+        lines.append(
+            f"    MS_DISPLACE(base + {_ivec3(c)}, imageLoad(u_pos[{i}], t),"
+            f" imageLoad(u_rest[{i}], t));"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _check_model(model: SpringModel) -> tuple[int, int, int]:

@@ -107,7 +107,10 @@ def _displacement(tex: Any) -> np.ndarray:
 # ---------------------------------------------------------------------- tests
 @pytest.mark.parametrize("integrator", ["explicit", "semi-implicit"])
 @pytest.mark.parametrize("max_step", [0.0, 0.05])
-def test_matches_cpu_reference(gl_ctx: Any, integrator: str, max_step: float) -> None:
+@pytest.mark.parametrize("block", [None, (1, 1, 1), (2, 1, 2), (4, 1, 1), (1, 2, 2)])
+def test_matches_cpu_reference(
+    gl_ctx: Any, integrator: str, max_step: float, block: tuple[int, int, int] | None
+) -> None:
     rng = np.random.default_rng(7)
     model = _model(rng, shear=True, bend=True, integrator=integrator, max_step=max_step, dt=0.01)
     x0 = model.rest + rng.normal(0.0, 0.3, model.rest.shape)
@@ -117,7 +120,7 @@ def test_matches_cpu_reference(gl_ctx: Any, integrator: str, max_step: float) ->
     targets = model.rest + 0.5
 
     ref = _reference_class()(model, None)
-    gpu = GpuSpringSolver(model, gl_ctx)
+    gpu = GpuSpringSolver(model, gl_ctx, **({} if block is None else {"block": block}))
     try:
         for solver in (ref, gpu):
             solver.set_state(x0, v0)
@@ -154,6 +157,32 @@ def test_pinned_elements_sit_at_targets(gl_ctx: Any) -> None:
         gpu.release()
 
 
+@pytest.mark.parametrize("steps", [1, 5])
+def test_set_state_after_constraints_matches_cpu(gl_ctx: Any, steps: int) -> None:
+    # pinned elements keep a state given by set_state until the next step puts them back
+    rng = np.random.default_rng(11)
+    model = _model(rng, shear=True, integrator="explicit", dt=0.01)
+    pinned = rng.random(SHAPE) < 0.25
+    targets = model.rest + rng.normal(0.0, 0.5, model.rest.shape)
+    x0 = model.rest + rng.normal(0.0, 0.3, model.rest.shape)
+    v0 = rng.normal(0.0, 1.0, model.rest.shape)
+    ref = _reference_class()(model, None)
+    gpu = GpuSpringSolver(model, gl_ctx)
+    try:
+        for solver in (ref, gpu):
+            solver.set_constraints(pinned, targets)
+            solver.set_state(x0, v0)
+        np.testing.assert_allclose(gpu.positions(), x0, atol=1e-5)  # as given, also pinned
+        np.testing.assert_allclose(gpu.velocities(), v0, atol=1e-5)
+        for solver in (ref, gpu):
+            solver.step(steps)
+        assert np.abs(gpu.positions() - ref.positions()).max() <= 1e-4
+        assert np.abs(gpu.velocities() - ref.velocities()).max() <= 1e-3
+        np.testing.assert_array_equal(gpu.velocities()[pinned], 0.0)
+    finally:
+        gpu.release()
+
+
 def test_displacement_texture_follows_steps_on_gpu(gl_ctx: Any, monkeypatch: Any) -> None:
     rng = np.random.default_rng(5)
     model = _model(rng, bend=True)
@@ -172,7 +201,7 @@ def test_displacement_texture_follows_steps_on_gpu(gl_ctx: Any, monkeypatch: Any
         gpu.set_state(model.rest + rng.normal(0.0, 0.5, model.rest.shape), np.zeros((*SHAPE, 3)))
 
         # step() must not read anything back: make every read of the state fail
-        for t in (*gpu._pos, *gpu._vel):
+        for t in (*gpu._pos[0], *gpu._pos[1], *gpu._vel[0], *gpu._vel[1]):
             monkeypatch.setattr(t, "read", _no_readback)
         gpu.step(20)
         monkeypatch.undo()
@@ -225,6 +254,8 @@ def test_bad_input(gl_ctx: Any) -> None:
             gpu.step(-1)
     finally:
         gpu.release()
+    with pytest.raises(ValueError, match="block"):
+        GpuSpringSolver(model, gl_ctx, block=(2, 2, 2))
     bad = _model(rng)
     bad.mass = np.zeros(SHAPE)
     with pytest.raises(ValueError, match="mass"):
