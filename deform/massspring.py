@@ -231,8 +231,10 @@ class CpuSpringSolver:
         for sa, sb, rest, k_avg in self._springs:
             d = x[sb] - x[sa]
             length = np.sqrt(np.einsum("...i,...i->...", d, d))
-            # d^ = d / |d|, and 0 where |d| < 1e-9
-            inv = np.divide(1.0, length, out=np.zeros_like(length), where=length >= 1e-9)
+            # d^ = d / |d|, and 0 where |d| < min_length
+            inv = np.divide(
+                1.0, length, out=np.zeros_like(length), where=length >= self.model.min_length
+            )
             dh = d * inv[..., None]
             along = np.einsum("...i,...i->...", v[sb] - v[sa], dh)
             mag = m.spring_constant * k_avg * (length - rest) + m.spring_damping * along

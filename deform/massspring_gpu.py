@@ -649,6 +649,7 @@ def _config_glsl(
         f"#define BX {bx}\n#define BY {by}\n#define BZ {bz}\n#define TX {tiles_x}\n"
         f"#define MS_E {e}\n#define MS_STATE {2 * e}\n#define MS_REST_BINDING {1 + e}\n"
         f"#define MS_SPRINGS {len(model.offsets)}\n"
+        f"#define MS_MIN_LENGTH {model.min_length!r}\n"
     )
 
 

@@ -17,7 +17,10 @@ float32 round-off:
   Rest length ``L = |o * spacing|``; spring constant
   ``k_ab = spring_constant * (stiffness_a + stiffness_b) / 2``.
 * Force on ``a``: ``sum_b [k_ab (|d| - L) d^ + spring_damping ((v_b - v_a) . d^) d^]
-  - damping_a v_a`` with ``d = x_b - x_a``, ``d^ = d / |d|`` (0 when ``|d| < 1e-9``).
+  - damping_a v_a`` with ``d = x_b - x_a``, ``d^ = d / |d|`` (0 when ``|d|`` is below
+  :attr:`SpringModel.min_length`, 1e-4 of the smallest spacing: far above float32
+  round-off of positions, so an element dragged onto its neighbour feels no spring on
+  every backend).
   Acceleration ``f / mass_a``.
 * Integrators: ``"explicit"`` (the thesis' choice): ``x' = x + dt v``,
   ``v' = v + dt a``; ``"semi-implicit"`` (symplectic Euler): ``v' = v + dt a``,
@@ -36,6 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 INTEGRATORS: tuple[str, ...] = ("explicit", "semi-implicit")
+#: A spring shorter than this fraction of the smallest element spacing has no direction.
+MIN_LENGTH_FRACTION = 1e-4
 
 
 def spring_offsets(shear: bool = False, bend: bool = False) -> np.ndarray:
@@ -97,6 +102,11 @@ class SpringModel:
     def shape(self) -> tuple[int, int, int]:
         """Elements per axis."""
         return tuple(int(n) for n in self.rest.shape[:3])  # type: ignore[return-value]
+
+    @property
+    def min_length(self) -> float:
+        """Springs shorter than this (mm) have no direction (``d^ = 0``)."""
+        return MIN_LENGTH_FRACTION * float(np.min(self.spacing))
 
     def rest_lengths(self) -> np.ndarray:
         """(m,) rest length of each spring offset."""

@@ -32,11 +32,11 @@ uniform int u_semi_implicit;     // 0: explicit Euler, 1: symplectic Euler
 
 layout(location = 0) out vec4 ms_out[MS_STATE];
 
-// force of the spring from a to b on a (0 if b is outside the grid or |d| < 1e-9)
+// force of the spring from a to b on a (0 if b is outside the grid or |d| < MS_MIN_LENGTH)
 vec3 ms_spring(vec4 pa, vec4 va, vec4 pb, vec4 vb, float rest_length, bool inside) {
     vec3 d = pb.xyz - pa.xyz;
     float len = length(d);
-    vec3 dh = (inside && len >= 1e-9) ? d / len : vec3(0.0);
+    vec3 dh = (inside && len >= MS_MIN_LENGTH) ? d / len : vec3(0.0);
     float k = u_half_k * (pa.w + pb.w);
     return (k * (len - rest_length) + u_spring_damping * dot(vb.xyz - va.xyz, dh)) * dh;
 }
