@@ -408,43 +408,56 @@ class OffsetFieldWarp(Warp):
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """Per box and axis, an interval ``[a, b]`` holding ``warp(p) - p`` (mm).
 
-        Every point the inverse visits is ``q = p - u(q')`` (the baked seed blends
-        values ``u(q(X))`` of nodes X within one node spacing), so ``warp(p) - p`` is
-        ``-u`` at some point within ``D = max |u|`` (per axis) of p, or 0 beyond the
-        grid box; ``u`` there is a trilinear blend of the nodes of the grid cells the
-        box, widened by ``D``, touches. The interval spans those nodes' ``-u`` (and 0
-        where the widened box leaves the grid box), widened by the RGBA16F rounding of
-        the textures. Local and signed: a drag bounds only its neighbourhood, and a
-        region moved one way reads from one side only. ``None`` for a GPU-owned
-        field (no read-back).
+        Interval arithmetic through the inverse as the shader runs it: the iterate
+        ``q_k = p + d_k`` has ``d_0 = 0`` (or, baked, ``-v(p)``: within the range of
+        the baked nodes of the cells the box touches) and ``d_{k+1} = -u(q_k)``, so
+        ``d_{k+1}`` lies in the range of ``-u`` over the nodes of the grid cells that
+        the box moved by ``d_k``'s interval touches (0 included where that region
+        leaves the grid box, where u = 0). Each range is widened by the RGBA16F
+        rounding of the textures. The result is local and signed: a drag bounds only
+        its neighbourhood, and a region moved by ~d reads through a window around -d
+        as wide as u varies there. ``None`` for a GPU-owned field (no read-back).
         """
         if self._u is None:
             return None
         lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
-        u = self._u
-        # RGBA16F rounding: 2^-11 relative, or a subnormal step (6e-8); 0 stays 0
-        slack = np.abs(u) * 2.0**-10 + np.where(u != 0, 6e-8, 0.0)
-        neg_hi = -u + slack  # the largest -u a node can give (nx, ny, nz, 3)
-        neg_lo = -u - slack
-        reach = np.abs(u).max(axis=(0, 1, 2)) * (1.0 + 2.0**-10) + 1e-7
-        h = self.spacing
+        a, b = np.zeros(lo.shape), np.zeros(lo.shape)
         if self.inverse == "baked":
-            reach = reach + h
-        n = np.asarray(self.shape)
-        cells = np.maximum(n - 1, 1)
-        wlo, whi = lo - reach, hi + reach
-        ilo = np.clip(np.floor((wlo - self.lo) / h), 0, cells - 1).astype(np.int64)
-        ihi = np.clip(np.floor((whi - self.lo) / h), 0, cells - 1).astype(np.int64)
-        width = (ihi - ilo).max(axis=0) + 1 if len(lo) else np.ones(3, np.int64)
-        a = _window_reduce(_cell_reduce(neg_lo, np.minimum), width, np.minimum)
-        b = _window_reduce(_cell_reduce(neg_hi, np.maximum), width, np.maximum)
-        a = a[ilo[:, 0], ilo[:, 1], ilo[:, 2]]
-        b = b[ilo[:, 0], ilo[:, 1], ilo[:, 2]]
-        # q outside the grid box: u = 0 there
-        outside = np.any((wlo < self.lo) | (whi > self.hi), axis=1)
-        a[outside] = np.minimum(a[outside], 0.0)
-        b[outside] = np.maximum(b[outside], 0.0)
+            a, b = self._negated_range(self.baked_inverse(), lo, hi)
+        for _ in range(self.steps):
+            a, b = self._negated_range(self._u, lo + a, hi + b)
         return a, b
+
+    def _negated_range(
+        self, field: np.ndarray, lo: np.ndarray, hi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per box [lo, hi] (mm), the range of ``-field`` (trilinear, 0 outside the grid
+        box) over the box, from the nodes of the cells it touches, with half-float
+        rounding slack."""
+        n = np.asarray(field.shape[:3])
+        cells = np.maximum(n - 1, 1)
+        h = (self.hi - self.lo) / np.maximum(n - 1, 1)
+        # RGBA16F rounding: 2^-11 relative, or a subnormal step (6e-8); 0 stays 0
+        slack = np.abs(field) * 2.0**-10 + np.where(field != 0, 6e-8, 0.0)
+        cell_lo = _cell_reduce(-field - slack, np.minimum)
+        cell_hi = _cell_reduce(-field + slack, np.maximum)
+        ilo = np.clip(np.floor((lo - self.lo) / h), 0, cells - 1).astype(np.int64)
+        ihi = np.clip(np.floor((hi - self.lo) / h), 0, cells - 1).astype(np.int64)
+        width = ihi - ilo + 1
+        out_lo = np.empty(lo.shape)
+        out_hi = np.empty(lo.shape)
+        # one forward-window reduction per distinct window size (few: boxes are alike)
+        sizes, which = np.unique(width, axis=0, return_inverse=True)
+        for s, size in enumerate(sizes):
+            sel = np.flatnonzero(which.ravel() == s)
+            i = ilo[sel]
+            out_lo[sel] = _window_reduce(cell_lo, size, np.minimum)[i[:, 0], i[:, 1], i[:, 2]]
+            out_hi[sel] = _window_reduce(cell_hi, size, np.maximum)[i[:, 0], i[:, 1], i[:, 2]]
+        # where the box leaves the grid box the field is 0
+        outside = np.any((lo < self.lo) | (hi > self.hi), axis=1)
+        out_lo[outside] = np.minimum(out_lo[outside], 0.0)
+        out_hi[outside] = np.maximum(out_hi[outside], 0.0)
+        return out_lo, out_hi
 
     # ---------------------------------------------------------------- CPU reference
     def _interpolate(
