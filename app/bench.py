@@ -208,3 +208,150 @@ def _bench_vtk(
                 continue
             report.rows.append(BenchRow(name, m, res.median_ms, res.min_ms))
             log(f"{name} {m}: {res.median_ms:.1f} ms")
+
+
+# ---------------------------------------------------------------------- deformed DVR
+@dataclass
+class WarpRenderReport:
+    """Deformed vs undeformed DVR timings of one run (see :func:`bench_warp_render`)."""
+
+    volume: str
+    shape: tuple[int, int, int]
+    size: tuple[int, int]
+    grid: tuple[int, int, int]
+    drag_mm: float
+    max_displacement_mm: float
+    frames: int
+    gl_renderer: str
+    rows: list[BenchRow] = field(default_factory=list)
+
+    def ratio(self, renderer: str) -> float | None:
+        """``renderer`` median / undeformed median (the cost of deforming; 1 = free)."""
+        ref = next((r for r in self.rows if r.renderer == "undeformed"), None)
+        row = next((r for r in self.rows if r.renderer == renderer), None)
+        if ref is None or row is None:
+            return None
+        return row.median_ms / ref.median_ms
+
+    def markdown(self, command: str) -> str:
+        """A markdown table of the run, headed by the command that produced it."""
+        lines = [
+            f"Command: `{command}`",
+            "",
+            f"Volume: {self.volume} {self.shape[0]}x{self.shape[1]}x{self.shape[2]},"
+            f" image {self.size[0]}x{self.size[1]}, dvr; mass-spring grid"
+            f" {'x'.join(map(str, self.grid))}, one element dragged {self.drag_mm:.1f} mm and"
+            f" settled (largest displacement {self.max_displacement_mm:.1f} mm); median of"
+            f" {self.frames} frames after warm-up; GL: {self.gl_renderer}",
+            "",
+            "| render | median ms | min ms | cost vs undeformed | note |",
+            "|---|---:|---:|---:|---|",
+        ]
+        for r in self.rows:
+            ratio = self.ratio(r.renderer)
+            rs = f"{ratio:.2f}x" if ratio else "—"
+            lines.append(f"| {r.renderer} | {r.median_ms:.1f} | {r.min_ms:.1f} | {rs} | {r.note} |")
+        return "\n".join(lines) + "\n"
+
+
+def bench_warp_render(
+    volume: Volume | None = None,
+    *,
+    size: tuple[int, int] = (512, 512),
+    frames: int = 10,
+    warmup: int = 2,
+    grid: int = 16,
+    drag_spacings: float = 1.5,
+    transfer_function: Any = None,
+    log: Any = print,
+) -> WarpRenderReport:
+    """Cost of rendering through the mass-spring offset-field warp (dvr).
+
+    A ``grid``³ :class:`~deform.massspring.MassSpring` (CPU; semi-implicit Euler, shear
+    springs, as ``voxwarp render --massspring``) over the benchmark volume has its
+    centre element dragged ``drag_spacings`` element spacings along x and
+    settled. Rows, in one process and on one context: the undeformed volume; the
+    offset warp with the ``approx`` inverse (the thesis' one fetch per sample), the
+    ``baked`` inverse (the default) and the ``exact`` inverse, each with deformed-space
+    empty-space skipping; and the ``exact`` warp with per-block checks only (what
+    skipping through deformed space buys).
+    """
+    from deform import ElementGrid, MassSpring
+    from deform.offset_field import OffsetFieldWarp
+
+    vol = benchmark_volume(volume)
+    if transfer_function is None:
+        from app.samples import suggested_transfer_function
+
+        transfer_function = suggested_transfer_function("stent" if volume is None else vol.name)
+    cam = bench_camera(vol)
+    elements = ElementGrid(vol, shape=(grid, grid, grid))
+    ms = MassSpring(elements, integrator="semi-implicit", shear=True)
+    drag = float(drag_spacings * elements.spacing[0])
+    centre = (grid // 2, grid // 2, grid // 2)
+    ms.move(centre, (drag, 0.0, 0.0))
+    ms.settle(max_steps=20000, tol=1e-3)
+    field_mm = ms.displacements()
+    base = Scene(vol, mode="dvr", transfer_function=transfer_function, camera=cam)
+    lo, hi = elements.lo, elements.hi
+    configs = [
+        ("undeformed", base, True, ""),
+        (
+            "offset warp, approx",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="approx")]),
+            True,
+            "1 field fetch per sample (thesis)",
+        ),
+        (
+            "offset warp, baked",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="baked")]),
+            True,
+            "default: seed from the inverse baked 4x finer + 1 step (2 fetches)",
+        ),
+        (
+            "offset warp, exact",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="exact")]),
+            True,
+            "fixed point from p, 6 steps (6 fetches)",
+        ),
+        (
+            "undeformed, no skipping",
+            base,
+            None,
+            "naive raycaster (reference)",
+        ),
+        (
+            "offset warp, approx, no skipping",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="approx")]),
+            None,
+            "naive raycaster + one field fetch per sample",
+        ),
+        (
+            "offset warp, exact, block checks only",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="exact")]),
+            False,
+            "no skipping through deformed space",
+        ),
+    ]
+    with OffscreenRenderer(*size) as r:
+        report = WarpRenderReport(
+            volume=vol.name,
+            shape=vol.shape,
+            size=size,
+            grid=elements.shape,
+            drag_mm=drag,
+            max_displacement_mm=float(np.sqrt((field_mm**2).sum(-1)).max()),
+            frames=frames,
+            gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
+        )
+        for name, scene, cells, note in configs:
+            # cells None: no empty-space skipping at all
+            r.renderer.empty_space_skipping = cells is not None
+            r.renderer.cell_skipping = bool(cells)
+            t = r.time_frames(scene, frames=frames, warmup=warmup)
+            report.rows.append(BenchRow(name, "dvr", statistics.median(t), min(t), note))
+            log(f"{name}: {statistics.median(t):.1f} ms")
+        r.renderer.cell_skipping = True
+        r.renderer.empty_space_skipping = True
+    ms.close()
+    return report

@@ -556,6 +556,18 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
         ratio = report.ratio(n, "gpu", "taichi")
         if ratio is not None:
             print(f"{n}³: the GPU solver runs {ratio:.2f}x the steps/s of taichi on the CPU")
+    if args.render:
+        from app.bench import bench_warp_render
+
+        warp_report = bench_warp_render(
+            frames=args.frames, warmup=2, log=lambda s: print(s, file=sys.stderr)
+        )
+        warp_text = warp_report.markdown(command)
+        print(warp_text)
+        cost = warp_report.ratio("offset warp, baked")
+        if cost is not None:
+            print(f"deformed dvr (offset warp, baked inverse) costs {cost:.2f}x undeformed")
+        text += "\n" + warp_text
     if args.markdown:
         atomic_write_text(Path(args.markdown), text)
     return 0
@@ -720,6 +732,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pbm.add_argument("--repeats", type=_positive_int, default=5, help="timed blocks per solver")
     pbm.add_argument("--no-taichi", action="store_true", help="skip the taichi reference")
+    pbm.add_argument(
+        "--render",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also time deformed vs undeformed dvr through the offset warp (default on)",
+    )
+    pbm.add_argument(
+        "--frames", type=_positive_int, default=10, help="timed frames per render (default 10)"
+    )
     pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbm.set_defaults(func=cmd_bench_massspring)
     return p
