@@ -344,6 +344,7 @@ def bench_warp_render(
             frames=frames,
             gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
         )
+        r.renderer.warped_skip_maps = "always"  # built in the warm-up frames
         for name, scene, cells, note in configs:
             # cells None: no empty-space skipping at all
             r.renderer.empty_space_skipping = cells is not None

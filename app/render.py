@@ -165,8 +165,15 @@ class Renderer:
         self.ctx = ctx
         #: skip blocks the mode cannot see (off only to measure what it buys)
         self.empty_space_skipping = bool(empty_space_skipping)
-        #: skip at the resolution of trilinear cells (affine chains only)
+        #: skip at the resolution of trilinear cells
         self.cell_skipping = True
+        #: deformed-space skip maps of warped rays (see :meth:`_skip_kind`): "auto"
+        #: builds them when a warp state is drawn a second time, "always" on first
+        #: use, "never" keeps per-block checks
+        self.warped_skip_maps = "auto"
+        self._warped_seen: dict[int, Any] = {}
+        #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
+        self.last_skip_kind = "none"
         if sampling not in ("auto", "texture3d", "slice_pairs"):
             raise RenderError(
                 f"sampling must be 'auto', 'texture3d' or 'slice_pairs'; got {sampling!r}"
@@ -281,7 +288,7 @@ class Renderer:
             gpu.info_key = key
         return gpu.info
 
-    def _skip_kind(self, scene: Scene, linear: bool) -> str:
+    def _skip_kind(self, scene: Scene, linear: bool, gpu: _VolumeGPU | None = None) -> str:
         """Which empty-space skipping a draw uses: "cells", "blocks" or "none".
 
         Straight rays (affine chains) skip at trilinear-cell resolution for the modes
@@ -292,13 +299,25 @@ class Renderer:
         when every warp of the chain bounds its displacement
         (:meth:`deform.warp.Warp.displacement_range`; see
         :func:`app.skipping.warped_cell_visibility`); otherwise they test their 4³
-        block per sample.
+        block per sample. Building those maps takes seconds on the CPU for a 256³
+        volume (a one-frame render costs less with block checks, and a warp that
+        changes every frame, as while dragging, would rebuild every frame), so with
+        :attr:`warped_skip_maps` "auto" they are built when the same warp state is
+        drawn a second time (``gpu`` given: the draw's volume, whose cache decides).
         """
         if not self.empty_space_skipping:
             return "none"
         sparse = scene.mode in ("dvr", "iso", "flm") and self.cell_skipping
         if not linear:
-            return "cells" if sparse and _bounded(scene.warps) else "blocks"
+            if not (sparse and _bounded(scene.warps)) or self.warped_skip_maps == "never":
+                return "blocks"
+            if self.warped_skip_maps == "always" or gpu is None:
+                return "cells"
+            key = self._warped_key(scene)
+            if gpu.warped_key == key or self._warped_seen.get(id(gpu)) == key:
+                return "cells"
+            self._warped_seen[id(gpu)] = key
+            return "blocks"
         if sparse:
             return "cells"
         if scene.mode in ("mip", "minip", "average"):
@@ -338,11 +357,10 @@ class Renderer:
             tex = gpu.cell_skip[octant] = self._octant_texture(visible, octant)
         return tex
 
-    def _warped_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
-        """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
-        for one warp state; a change of the warps or of what the mode sees rebuilds it)."""
+    def _warped_key(self, scene: Scene) -> tuple:
+        """What the deformed-space skip maps of ``scene`` depend on."""
         lo, hi = scene.ray_bounds()
-        key = (
+        return (
             skip_map_key(scene),
             tuple(
                 (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
@@ -351,6 +369,12 @@ class Renderer:
             tuple(np.round(np.asarray(lo, float), 9)),
             tuple(np.round(np.asarray(hi, float), 9)),
         )
+
+    def _warped_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
+        """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
+        for one warp state; a change of the warps or of what the mode sees rebuilds it)."""
+        lo, hi = scene.ray_bounds()
+        key = self._warped_key(scene)
         if gpu.warped_key != key:
             for tex in gpu.warped_skip.values():
                 tex.release()
@@ -374,13 +398,13 @@ class Renderer:
             tex = gpu.warped_skip[octant] = self._octant_texture(visible, octant)
         return tex
 
-    def _program(self, scene: Scene, linear: bool) -> Any:
+    def _program(self, scene: Scene, linear: bool, kind: str) -> Any:
         warps = [] if linear else scene.warps
         key = (
             scene.mode,
             linear,
             scene.use_shading(),
-            self._skip_kind(scene, linear),
+            kind,
             self.sampling,
             tuple(w.signature() for w in warps),
         )
@@ -392,7 +416,6 @@ class Renderer:
             defines.append("#define LINEAR_PATH")
         if scene.use_shading():
             defines.append("#define SHADING")
-        kind = self._skip_kind(scene, linear)
         if kind == "none":
             defines.append("#define NO_SKIPPING")
         if self.sampling == "slice_pairs":
@@ -441,7 +464,9 @@ class Renderer:
         cam = camera or scene.resolved_camera()
         fold = fold_affine(scene.warps)
         linear = fold is not None
-        prog = self._program(scene, linear)
+        skip_kind = self._skip_kind(scene, linear, gpu)
+        self.last_skip_kind = skip_kind
+        prog = self._program(scene, linear, skip_kind)
 
         tf = scene.transfer_function
         lo, hi = scene.ray_bounds()
@@ -498,7 +523,6 @@ class Renderer:
             to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
             values["u_world_to_texel"] = to_texel @ fold
             values["u_jacobian"] = fold[:3, :3]
-        skip_kind = self._skip_kind(scene, linear)
         skip_to_texel = values.get("u_world_to_texel")
         if skip_kind == "cells" and not linear:
             # warped rays look up deformed-space cells: the volume's texel grid shifted

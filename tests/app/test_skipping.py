@@ -390,12 +390,41 @@ def test_warped_cell_skipping_matches_block_path(gl_ctx: Any, mode: str, chain: 
     )
     images = {}
     with OffscreenRenderer(48, 40, ctx=gl_ctx, dtype="f4") as r:
-        assert r.renderer._skip_kind(scene, linear=False) == "cells"
+        r.renderer.warped_skip_maps = "always"
         images["cells"] = r.render(scene)
+        assert r.renderer.last_skip_kind == "cells"
         r.renderer.cell_skipping = False
-        assert r.renderer._skip_kind(scene, linear=False) == "blocks"
         images["blocks"] = r.render(scene)
+        assert r.renderer.last_skip_kind == "blocks"
         r.renderer.cell_skipping = True
         images["rest"] = r.render(scene.copy(warps=warps[1:]))
     assert np.abs(images["cells"] - images["blocks"]).max() <= 1 / 255
     assert np.abs(images["cells"] - images["rest"]).max() > 0.1  # the drag shows
+
+
+def test_warped_skip_maps_are_built_when_a_warp_state_is_drawn_again(gl_ctx: Any) -> None:
+    vol = _volume()
+    warp = _drag_warp(vol)
+    scene = Scene(vol, mode="dvr", transfer_function=TF, view="+z", warps=[warp])
+    with OffscreenRenderer(32, 32, ctx=gl_ctx, dtype="f4") as r:
+        kinds = []
+        for _ in range(3):
+            r.render(scene)
+            kinds.append(r.renderer.last_skip_kind)
+        assert kinds == ["blocks", "cells", "cells"]  # built on the second draw, kept
+        warp.update(warp.displacements * 0.5)  # a new warp state (as while dragging)
+        r.render(scene)
+        assert r.renderer.last_skip_kind == "blocks"
+        r.renderer.warped_skip_maps = "never"
+        r.render(scene)
+        assert r.renderer.last_skip_kind == "blocks"
+        r.renderer.warped_skip_maps = "always"
+        r.render(scene)
+        assert r.renderer.last_skip_kind == "cells"
+        # a warp without a displacement range (a GPU-owned field) keeps block checks
+        from deform.offset_field import OffsetFieldWarp
+
+        tex = warp.textures(gl_ctx)["displacement"]
+        owned = OffsetFieldWarp(warp.lo, warp.hi, shape=warp.shape, texture_source=lambda c: tex)
+        r.render(scene.copy(warps=[owned]))
+        assert r.renderer.last_skip_kind == "blocks"
