@@ -536,6 +536,9 @@ class Renderer:
         for name, value in values.items():
             _set_uniform(prog, name, value)
 
+        # the warps' textures first: making them may run GPU passes (an offset field
+        # bakes its inverse) that bind texture units of their own
+        warp_textures = [] if linear else [w.textures(self.ctx) for w in scene.warps]
         gpu.texture.use(0)
         self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
         self._block_info(gpu, scene).use(2)
@@ -552,7 +555,7 @@ class Renderer:
             for i, warp in enumerate(scene.warps):
                 for name, value in warp.uniforms().items():
                     _set_uniform(prog, f"w{i}_{name}", value)
-                for name, tex in warp.textures(self.ctx).items():
+                for name, tex in warp_textures[i].items():
                     tex.use(unit)
                     _set_uniform(prog, f"w{i}_{name}", unit)
                     unit += 1

@@ -321,9 +321,11 @@ class GpuSpringSolver:
         rest4[..., 3] = inv_mass  # target = rest, nothing pinned
         self._target = [self._state_texture(a) for a in self._to_atlas(rest4)]
 
-        self._disp = self._keep(ctx.texture3d(self.shape, 4, dtype="f2"))
+        # z-slices as layers of a 2D array: the offset-field warp samples it with two
+        # bilinear fetches, ~1.4x cheaper than one 3D trilinear fetch on llvmpipe
+        self._disp = self._keep(ctx.texture_array(self.shape, 4, dtype="f2"))
         self._disp.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._disp.repeat_x = self._disp.repeat_y = self._disp.repeat_z = False
+        self._disp.repeat_x = self._disp.repeat_y = False
 
         self._vbo = self._keep(ctx.buffer(self._tile_triangles().tobytes()))
         self._vao = self._keep(ctx.vertex_array(self._prog, [(self._vbo, "2f", "in_ndc")]))
@@ -602,13 +604,14 @@ class GpuSpringSolver:
         v = self._read(self._vel)[..., :3]
         return float(np.sqrt(np.max(np.einsum("...i,...i->...", v, v))))
 
-    def displacement_texture(self) -> moderngl.Texture3D:
-        """The offset field as a 3D texture, kept up to date on the GPU.
+    def displacement_texture(self) -> moderngl.TextureArray:
+        """The offset field as a 2D array texture (z-slices as layers), kept up to date
+        on the GPU.
 
         Returns
         -------
-        moderngl.Texture3D
-            Size ``(nx, ny, nz)``, RGBA16F; texel ``(i, j, k)`` holds the element's
+        moderngl.TextureArray
+            Size ``(nx, ny, nz)``, RGBA16F; texel ``(i, j)`` of layer ``k`` holds the element's
             displacement ``x - rest`` (world mm) in xyz and its stiffness in a. Linear
             filtering, clamped to edge. Owned by the solver (freed by :meth:`release`);
             the same object for the solver's lifetime.

@@ -13,10 +13,12 @@ approximation ``q = p - u(p)``. The iteration converges where the field is a
 contraction (``|grad u| < 1``: no folding), with error shrinking roughly like
 ``|grad u|^n``.
 
-On the GPU the field is an RGBA16F 3D texture (xyz = u in mm, a = material) sampled
-with hardware trilinear filtering at node-centred texture coordinates, so one fetch per
-iteration; the field can be owned by this warp (uploaded from numpy) or by a GPU
-simulation (``texture_source``).
+On the GPU the field is an RGBA16F 2D array texture whose layers are the z-slices of
+the node grid (xyz = u in mm, a = material), sampled at node-centred texture
+coordinates by two hardware-bilinear fetches (layers k and k + 1) and a lerp: the
+trilinear value, at ~0.6x the cost of one 3D trilinear fetch on llvmpipe (measured:
+the warp's share of a deformed frame 57 -> 35 ms). The field can be owned by this warp
+(uploaded from numpy) or by a GPU simulation (``texture_source``).
 """
 
 from __future__ import annotations
@@ -152,7 +154,8 @@ class OffsetFieldWarp(Warp):
         Node counts ``(nx, ny, nz)``, each >= 2; required with ``texture_source``, and
         must match ``displacements`` when both are given.
     texture_source
-        ``callable(ctx) -> moderngl.Texture3D`` returning an RGBA16F texture of
+        ``callable(ctx) -> moderngl.TextureArray`` returning an RGBA16F 2D array
+        texture (z-slices as layers) of
         ``shape`` texels (xyz = displacement in mm, a = material) owned by someone else,
         e.g. a GPU mass-spring simulation; this warp never releases it. Such a warp has
         no CPU field: :meth:`apply`, :meth:`forward`, :meth:`jacobian` and
@@ -626,7 +629,8 @@ class OffsetFieldWarp(Warp):
         """``{"displacement": texture}``: the uploaded field, or ``texture_source(ctx)``;
         with ``inverse="baked"`` also ``"inverse"``, the baked inverse offsets.
 
-        The CPU field becomes an RGBA16F 3D texture with linear filtering and
+        The CPU field becomes an RGBA16F 2D array texture (layers = z) with linear
+        filtering and
         clamp-to-edge, created on first use on ``ctx`` and rewritten after
         :meth:`update`. The inverse is baked on the GPU from that texture by a compute
         shader (once per field version; every call for a ``texture_source``, whose
@@ -650,9 +654,9 @@ class OffsetFieldWarp(Warp):
             import shaders
 
             prog = ctx.compute_shader(shaders.source("offset_field_bake.comp.glsl"))
-            tex = ctx.texture3d(self.bake_shape, 4, dtype="f2")
+            tex = ctx.texture_array(self.bake_shape, 4, dtype="f2")
             tex.filter = (ctx.LINEAR, ctx.LINEAR)
-            tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+            tex.repeat_x = tex.repeat_y = False
         else:
             _, prog, tex, version = entry
             if self._source is None and version == self._version:
@@ -680,9 +684,9 @@ class OffsetFieldWarp(Warp):
             entry[1].release()  # node counts changed (ctx is current: we are drawing)
             entry = None
         if entry is None:
-            tex = ctx.texture3d(self.shape, 4, self.texture_data().tobytes(), dtype="f2")
+            tex = ctx.texture_array(self.shape, 4, self.texture_data().tobytes(), dtype="f2")
             tex.filter = (ctx.LINEAR, ctx.LINEAR)
-            tex.repeat_x = tex.repeat_y = tex.repeat_z = False  # clamp to edge
+            tex.repeat_x = tex.repeat_y = False  # clamp to edge
         else:
             tex = entry[1]
             if entry[2] != self._version:

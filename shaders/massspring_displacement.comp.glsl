@@ -7,7 +7,7 @@
 
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
-layout(rgba16f, binding = 0) writeonly uniform image3D u_displacement;
+layout(rgba16f, binding = 0) writeonly uniform image2DArray u_displacement;  // layer = z
 layout(rgba32f, binding = 1) readonly uniform image2D u_pos[MS_E];   // xyz position (mm), w stiffness
 layout(rgba32f, binding = MS_REST_BINDING) readonly uniform image2D u_rest[MS_E];  // xyz rest (mm)
 

@@ -9,12 +9,12 @@
 // so the box corner and spacing drop out.
 layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
 
-uniform sampler3D u_field;     // RGBA16F, xyz = u (mm), linear filtering
+uniform sampler2DArray u_field;   // RGBA16F, layer = z-slice, xyz = u (mm), linear filtering
 uniform ivec3 u_field_shape;   // field nodes per axis
 uniform ivec3 u_shape;         // baked nodes per axis
 uniform vec3 u_size;           // grid box size (mm)
 uniform int u_iterations;
-layout(rgba16f, binding = 0) writeonly uniform image3D u_inverse;
+layout(rgba16f, binding = 0) writeonly uniform image2DArray u_inverse;  // layer = z
 
 void main() {
     ivec3 node = ivec3(gl_GlobalInvocationID);
@@ -27,7 +27,13 @@ void main() {
     for (int i = 0; i < u_iterations; ++i) {
         vec3 s = q / (field_shape - 1.0);   // [0, 1] inside the grid box
         vec3 in3 = step(vec3(0.0), s) * step(s, vec3(1.0));
-        vec3 u = textureLod(u_field, (q + 0.5) / field_shape, 0.0).xyz * (in3.x * in3.y * in3.z);
+        // trilinear u(q) from the z-slice layers, as the warp samples it
+        vec3 g = clamp(q, vec3(0.0), field_shape - 1.0);
+        vec2 tc = (g.xy + 0.5) / field_shape.xy;
+        float layer = min(floor(g.z), field_shape.z - 2.0);
+        vec3 ua = textureLod(u_field, vec3(tc, layer), 0.0).xyz;
+        vec3 ub = textureLod(u_field, vec3(tc, layer + 1.0), 0.0).xyz;
+        vec3 u = mix(ua, ub, g.z - layer) * (in3.x * in3.y * in3.z);
         q = x - u * to_grid;
     }
     imageStore(u_inverse, node, vec4((x - q) / to_grid, 0.0));

@@ -11,6 +11,7 @@ import importlib
 import importlib.util
 from typing import Any
 
+import moderngl
 import numpy as np
 import pytest
 
@@ -195,7 +196,7 @@ def test_displacement_texture_follows_steps_on_gpu(gl_ctx: Any, monkeypatch: Any
         assert tex.filter == (gl_ctx.LINEAR, gl_ctx.LINEAR)
         assert not tex.repeat_x
         assert not tex.repeat_y
-        assert not tex.repeat_z
+        assert isinstance(tex, moderngl.TextureArray)  # z-slices as layers
         np.testing.assert_array_equal(_displacement(tex)[..., :3], 0.0)  # at rest
 
         gpu.set_state(model.rest + rng.normal(0.0, 0.5, model.rest.shape), np.zeros((*SHAPE, 3)))

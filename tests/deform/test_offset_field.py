@@ -608,9 +608,9 @@ def test_texture_source_renders_like_the_cpu_field(
     offscreen: Callable[..., Any], gl_ctx: Any
 ) -> None:
     vol, cpu, window = oracle_setup()
-    tex = gl_ctx.texture3d(cpu.shape, 4, cpu.texture_data().tobytes(), dtype="f2")
+    tex = gl_ctx.texture_array(cpu.shape, 4, cpu.texture_data().tobytes(), dtype="f2")
     tex.filter = (gl_ctx.LINEAR, gl_ctx.LINEAR)
-    tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+    tex.repeat_x = tex.repeat_y = False
     calls: list[Any] = []
 
     def source(ctx: Any) -> Any:
