@@ -143,8 +143,9 @@ class Warp(ABC):
     def glsl_constants(self) -> dict[str, Any]:
         """Compile-time constants by unprefixed name (``const`` ``WARP_NAME`` in GLSL).
 
-        ``int``, ``float`` or ``bool`` values; :meth:`signature` must change with them
-        (programs are cached per signature).
+        ``int``, ``float`` or ``bool`` values become ``const`` declarations; a ``str``
+        becomes a macro (``#define WARP_NAME text``, e.g. an unrolled loop body).
+        :meth:`signature` must change with them (programs are cached per signature).
         """
         return {}
 
@@ -414,14 +415,18 @@ _FN = re.compile(r"\bwarp(_jacobian)?\b(?=\s*\()")
 def _constants_glsl(constants: Mapping[str, Any]) -> str:
     lines = []
     for name, value in constants.items():
-        if isinstance(value, bool | np.bool_):
+        if isinstance(value, str):
+            lines.append(f"#define WARP_{name} {value}")
+        elif isinstance(value, bool | np.bool_):
             lines.append(f"const bool WARP_{name} = {'true' if value else 'false'};")
         elif isinstance(value, int | np.integer):
             lines.append(f"const int WARP_{name} = {int(value)};")
         elif isinstance(value, float | np.floating):
             lines.append(f"const float WARP_{name} = {float(value)!r};")
         else:
-            raise WarpError(f"GLSL constant {name} must be bool, int or float; got {value!r}")
+            raise WarpError(
+                f"GLSL constant {name} must be bool, int, float or str; got {value!r}"
+            )
     return "".join(line + "\n" for line in lines)
 
 

@@ -7,8 +7,8 @@
 // approximation q = p - u(p)) or, when WARP_SEEDED, from q = p - v(p), v the inverse
 // offsets baked on a finer node grid over the same box (WARP_inverse, same layout;
 // shaders/offset_field_bake.comp.glsl).
-// WARP_ITERATIONS and WARP_SEEDED are compile-time constants prepended by the warp
-// (Warp.glsl_constants), so the iteration unrolls.
+// WARP_ITERATIONS, WARP_SEEDED and the macro WARP_ITERATE (the steps written out) are
+// prepended by the warp (Warp.glsl_constants): llvmpipe does not unroll the loop itself.
 uniform vec3 WARP_lo;          // grid box corner (node 0, 0, 0), mm
 uniform vec3 WARP_size;        // hi - lo, mm
 uniform vec3 WARP_shape;       // nodes per axis (n_x, n_y, n_z)
@@ -17,14 +17,16 @@ uniform sampler2DArray WARP_inverse;   // baked inverse offsets (WARP_SEEDED onl
 uniform vec3 WARP_inverse_shape;       // its nodes per axis (finer than WARP_shape)
 
 // Trilinear value of a node grid stored as z-slice layers, at s in [0, 1]³ of the grid
-// box (clamped to the box): two bilinear fetches (layers k, k + 1) and a lerp along z.
-vec3 WARP_trilinear(sampler2DArray field, vec3 shape, vec3 s) {
-    vec3 g = clamp(s, 0.0, 1.0) * (shape - 1.0);   // node coordinates
-    vec2 tc = (g.xy + 0.5) / shape.xy;
-    float layer = min(floor(g.z), shape.z - 2.0);
-    vec3 a = textureLod(field, vec3(tc, layer), 0.0).xyz;
-    vec3 b = textureLod(field, vec3(tc, layer + 1.0), 0.0).xyz;
-    return mix(a, b, g.z - layer);
+// box: two bilinear fetches (layers k, k + 1; x and y clamp to edge) and a lerp along z.
+// A macro, not a function: a sampler passed as a function argument costs llvmpipe
+// ~25 % of a deformed frame.
+#define WARP_TRILINEAR(FIELD, SHAPE, S, OUT) {                                  \
+    vec3 g_ = (S) * ((SHAPE) - 1.0);                                            \
+    vec2 tc_ = (g_.xy + 0.5) / (SHAPE).xy;                                      \
+    float z_ = clamp(g_.z, 0.0, (SHAPE).z - 1.0);                               \
+    float layer_ = min(floor(z_), (SHAPE).z - 2.0);                             \
+    OUT = mix(textureLod(FIELD, vec3(tc_, layer_), 0.0).xyz,                    \
+              textureLod(FIELD, vec3(tc_, layer_ + 1.0), 0.0).xyz, z_ - layer_); \
 }
 
 // 1 inside the grid box, 0 outside (branch-free).
@@ -36,18 +38,20 @@ float WARP_inside(vec3 s) {
 // u(q), 0 outside the grid box.
 vec3 WARP_offset(vec3 q) {
     vec3 s = (q - WARP_lo) / WARP_size;
-    return WARP_trilinear(WARP_displacement, WARP_shape, s) * WARP_inside(s);
+    vec3 u;
+    WARP_TRILINEAR(WARP_displacement, WARP_shape, s, u)
+    return u * WARP_inside(s);
 }
 
 vec3 warp(vec3 p) {
     vec3 q = p;
     if (WARP_SEEDED) {  // a constant: the compiler keeps one branch
         vec3 s = (p - WARP_lo) / WARP_size;
-        q = p - WARP_trilinear(WARP_inverse, WARP_inverse_shape, s) * WARP_inside(s);
+        vec3 v;
+        WARP_TRILINEAR(WARP_inverse, WARP_inverse_shape, s, v)
+        q = p - v * WARP_inside(s);
     }
-    for (int i = 0; i < WARP_ITERATIONS; ++i) {
-        q = p - WARP_offset(q);
-    }
+    WARP_ITERATE   // WARP_ITERATIONS times q = p - WARP_offset(q), unrolled
     return q;
 }
 

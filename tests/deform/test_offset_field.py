@@ -266,10 +266,16 @@ def test_signature_uniforms_and_constants() -> None:
     np.testing.assert_array_equal(un["lo"], LO)
     np.testing.assert_array_equal(un["size"], HI - LO)
     np.testing.assert_array_equal(un["shape"], SHAPE)
-    assert exact.glsl_constants() == {"ITERATIONS": DEFAULT_ITERATIONS, "SEEDED": False}
-    assert approx.glsl_constants() == {"ITERATIONS": 1, "SEEDED": False}
+    step = "q = p - WARP_offset(q);"
+    assert exact.glsl_constants() == {
+        "ITERATIONS": DEFAULT_ITERATIONS,
+        "SEEDED": False,
+        "ITERATE": " ".join([step] * DEFAULT_ITERATIONS),
+    }
+    assert approx.glsl_constants() == {"ITERATIONS": 1, "SEEDED": False, "ITERATE": step}
     assert baked.bake_factor >= 3  # small grid: baked 3-4x finer, one correction
-    assert baked.glsl_constants() == {"ITERATIONS": DEFAULT_BAKED_ITERATIONS, "SEEDED": True}
+    assert baked.glsl_constants()["ITERATIONS"] == DEFAULT_BAKED_ITERATIONS
+    assert baked.glsl_constants()["SEEDED"] is True
     assert approx.iterations == 9  # kept for a switch back to "exact"
     src = compose_glsl([exact, approx, baked])
     for i in (0, 1, 2):
