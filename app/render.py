@@ -48,7 +48,7 @@ from app.skipping import (
 )
 from app.transfer_function import TABLE_SIZE, TransferFunction
 from app.volume import Volume
-from deform.warp import chain_displacement_range, compose_glsl, fold_affine
+from deform.warp import compose_glsl, fold_affine
 
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
 DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
@@ -600,9 +600,8 @@ class Renderer:
 
 
 def _bounded(warps: Any) -> bool:
-    """Whether every warp of the chain bounds its displacement (cheap probe)."""
-    probe = np.zeros((1, 3))
-    return chain_displacement_range(warps, probe, probe) is not None
+    """Whether every warp of the chain bounds its displacement (no read-back)."""
+    return all(w.bounds_displacement for w in warps)
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:

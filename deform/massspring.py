@@ -632,6 +632,11 @@ class MassSpring:
                     texture_source=lambda ctx=None: solver.displacement_texture(),
                     model_source=self._model_snapshot,
                     inverse="baked",
+                    # lets the renderer bound the field for empty-space skipping: it
+                    # reads back only once a field state is drawn twice (not while
+                    # the simulation runs)
+                    field_reader=self.displacements,
+                    revision_source=lambda: solver.revision,
                 )
             else:
                 self._warp = OffsetFieldWarp(

@@ -308,6 +308,10 @@ class GpuSpringSolver:
             self._keep(ctx.framebuffer(color_attachments=self._state_list(i))) for i in range(2)
         ]
         self._cur = 0  # index of the textures holding the current state
+        #: bumped whenever the displacement texture changes (set_state,
+        #: set_constraints, step): lets a renderer tell one field state from the next
+        #: without reading anything back
+        self.revision = 0
         self._scope = self._keep(ctx.scope(self._fbo[0], enable_only=moderngl.NOTHING))
 
         inv_mass = 1.0 / np.asarray(model.mass, np.float64)
@@ -556,6 +560,7 @@ class GpuSpringSolver:
         self.ctx.fbo = bound  # moderngl's record of the bound framebuffer, as GL has it
 
     def _update_displacement(self) -> None:
+        self.revision += 1
         self._disp.bind_to_image(0, read=False, write=True, format=_GL_RGBA16F)
         e = self._n_block
         for i, tex in enumerate(self._pos[self._cur]):

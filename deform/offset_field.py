@@ -181,6 +181,14 @@ class OffsetFieldWarp(Warp):
         while rendering.
     model_state
         The model dict a loaded scene entry carried (see :attr:`model_state`).
+    field_reader, revision_source
+        For a ``texture_source`` field: ``field_reader()`` reads the current
+        ``(nx, ny, nz, 3)`` field back from the GPU and ``revision_source()`` returns a
+        counter that changes whenever the field does (no read-back). With both, the
+        warp can bound its displacement (:meth:`displacement_range`), so the renderer
+        can skip empty space through deformed space; it asks only when the same field
+        state is drawn again (app.render, ``warped_skip_maps``), so nothing is read
+        back while the field changes every frame.
 
     Attributes
     ----------
@@ -267,10 +275,21 @@ class OffsetFieldWarp(Warp):
         material: np.ndarray | None = None,
         model_source: ModelSource | None = None,
         model_state: Mapping[str, Any] | None = None,
+        field_reader: Callable[[], np.ndarray] | None = None,
+        revision_source: Callable[[], int] | None = None,
     ) -> None:
         if model_source is not None and not callable(model_source):
             raise WarpError("model_source must be a callable () -> (model dict, displacements)")
         self.model_source = model_source
+        if field_reader is not None and not callable(field_reader):
+            raise WarpError("field_reader must be a callable () -> (nx, ny, nz, 3) array")
+        if revision_source is not None and not callable(revision_source):
+            raise WarpError("revision_source must be a callable () -> int")
+        if (field_reader is None) != (revision_source is None):
+            raise WarpError("give field_reader and revision_source together")
+        self._field_reader = field_reader
+        self._revision_source = revision_source
+        self._read_cache: tuple[int, np.ndarray] | None = None
         self.model_state: dict[str, Any] | None = _model_dict(model_state)
         self.lo = _vec3(lo, "OffsetFieldWarp lo")
         self.hi = _vec3(hi, "OffsetFieldWarp hi")
@@ -403,8 +422,35 @@ class OffsetFieldWarp(Warp):
 
     @property
     def revision(self) -> int:
-        """Bumped by every :meth:`update` (GPU-owned fields change without it)."""
+        """Changes with every :meth:`update`, and for a GPU-owned field with its
+        ``revision_source`` (without one such a field changes unseen)."""
+        if self._revision_source is not None:
+            return self._version * 2**32 + int(self._revision_source())
         return self._version
+
+    @property
+    def bounds_displacement(self) -> bool:
+        """True when :meth:`displacement_range` gives intervals: a CPU field, or a
+        GPU-owned one with a ``field_reader``."""
+        return self._u is not None or self._field_reader is not None
+
+    def _range_field(self) -> np.ndarray | None:
+        """The field the displacement range is computed from (read back once per
+        revision for a GPU-owned field)."""
+        if self._u is not None:
+            return self._u
+        if self._field_reader is None:
+            return None
+        rev = self.revision
+        if self._read_cache is None or self._read_cache[0] != rev:
+            u = np.asarray(self._field_reader(), dtype=np.float64)
+            if u.shape != (*self.shape, 3) or not np.all(np.isfinite(u)):
+                raise WarpError(
+                    f"field_reader returned shape {u.shape} (or non-finite values);"
+                    f" expected {(*self.shape, 3)}"
+                )
+            self._read_cache = (rev, u)
+        return self._read_cache[1]
 
     def displacement_range(
         self, lo: np.ndarray, hi: np.ndarray
@@ -419,16 +465,18 @@ class OffsetFieldWarp(Warp):
         leaves the grid box, where u = 0). Each range is widened by the RGBA16F
         rounding of the textures. The result is local and signed: a drag bounds only
         its neighbourhood, and a region moved by ~d reads through a window around -d
-        as wide as u varies there. ``None`` for a GPU-owned field (no read-back).
+        as wide as u varies there. ``None`` for a GPU-owned field without a
+        ``field_reader``; with one, the field is read back once per revision.
         """
-        if self._u is None:
+        u = self._range_field()
+        if u is None:
             return None
         lo, hi = np.atleast_2d(lo).astype(float), np.atleast_2d(hi).astype(float)
         a, b = np.zeros(lo.shape), np.zeros(lo.shape)
         if self.inverse == "baked":
-            a, b = self._negated_range(self.baked_inverse(), lo, hi)
+            a, b = self._negated_range(self._baked_inverse_of(u), lo, hi)
         for _ in range(self.steps):
-            a, b = self._negated_range(self._u, lo + a, hi + b)
+            a, b = self._negated_range(u, lo + a, hi + b)
         return a, b
 
     def _negated_range(
@@ -545,8 +593,10 @@ class OffsetFieldWarp(Warp):
         field with a compute shader (``shaders/offset_field_bake.comp.glsl``). Cached per
         field version. Returns ``bake_shape + (3,)``.
         """
-        u = self._cpu_field("baked_inverse()")
-        if self._baked_cpu is not None and self._baked_cpu[0] == self._version:
+        return self._baked_inverse_of(self._cpu_field("baked_inverse()"))
+
+    def _baked_inverse_of(self, u: np.ndarray) -> np.ndarray:
+        if self._baked_cpu is not None and self._baked_cpu[0] == self.revision:
             return self._baked_cpu[1]
         shape = self.bake_shape
         axes = [np.linspace(a, b, n) for a, b, n in zip(self.lo, self.hi, shape, strict=True)]
@@ -555,7 +605,7 @@ class OffsetFieldWarp(Warp):
         for _ in range(BAKE_ITERATIONS):
             q = x - self._interpolate(q, field=u)
         v = (x - q).reshape(*shape, 3)
-        self._baked_cpu = (self._version, v)
+        self._baked_cpu = (self.revision, v)
         return v
 
     def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:

@@ -94,6 +94,12 @@ class Warp(ABC):
         return False
 
     @property
+    def bounds_displacement(self) -> bool:
+        """True when :meth:`displacement_range` gives intervals (cheap to ask; the
+        base class gives none)."""
+        return False
+
+    @property
     def revision(self) -> int:
         """Counter that changes whenever the warp's mapping changes in place (e.g. an
         offset field's :meth:`update`); caches of derived data (skip maps) key on it."""
@@ -196,6 +202,11 @@ class IdentityWarp(Warp):
         """The 4x4 identity."""
         return np.eye(4)
 
+    @property
+    def bounds_displacement(self) -> bool:
+        """Always True."""
+        return True
+
     def displacement_range(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``[0, 0]``: the identity moves nothing."""
         z = np.zeros((np.atleast_2d(lo).shape[0], 3))
@@ -296,6 +307,11 @@ class AffineWarp(Warp):
         c = box_corners(lo, hi)
         f = c @ self.forward[:3, :3].T + self.forward[:3, 3]
         return f.min(axis=0), f.max(axis=0)
+
+    @property
+    def bounds_displacement(self) -> bool:
+        """Always True."""
+        return True
 
     def displacement_range(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact: ``(A p + t - p)_i`` is linear in p, so its extremes over a box lie at
@@ -424,9 +440,7 @@ def _constants_glsl(constants: Mapping[str, Any]) -> str:
         elif isinstance(value, float | np.floating):
             lines.append(f"const float WARP_{name} = {float(value)!r};")
         else:
-            raise WarpError(
-                f"GLSL constant {name} must be bool, int, float or str; got {value!r}"
-            )
+            raise WarpError(f"GLSL constant {name} must be bool, int, float or str; got {value!r}")
     return "".join(line + "\n" for line in lines)
 
 

@@ -294,3 +294,42 @@ def test_element_dragged_onto_its_neighbour_agrees_on_cpu_and_gpu(gl_ctx: Any) -
             ms.close()
     cpu, gpu = results
     assert np.abs(gpu - cpu).max() <= 1e-4 * np.abs(cpu).max()
+
+
+def test_gpu_field_skips_through_deformed_space_once_it_holds_still(gl_ctx: Any) -> None:
+    """A GPU-owned warp is bounded by reading the field back, but only when the same
+    field state is drawn again: never while the simulation steps between frames."""
+    from app.render import OffscreenRenderer
+    from app.scene import Scene
+    from tests.app.test_render import phantom
+
+    vol = phantom()
+    grid = ElementGrid(vol, shape=(6, 5, 5))
+    ms = MassSpring(grid, backend="gpu", ctx=gl_ctx, integrator="semi-implicit")
+    try:
+        ms.move((3, 2, 2), (6.0, 0.0, 0.0))
+        ms.step(30)
+        warp = ms.warp()
+        reads: list[int] = []
+        reader = warp._field_reader
+        warp._field_reader = lambda: (reads.append(1), reader())[1]
+        scene = Scene(vol, mode="dvr", view=(30, 20), seed=0, warps=[warp])
+        with OffscreenRenderer(48, 48, ctx=gl_ctx, dtype="f4") as r:
+            kinds = []
+            for _ in range(3):  # stepping between frames: no read-back, block checks
+                ms.step(1)
+                r.render(scene)
+                kinds.append(r.renderer.last_skip_kind)
+            assert kinds == ["blocks"] * 3
+            assert reads == []
+            first = r.render(scene)  # same state drawn again: map built from one read
+            assert r.renderer.last_skip_kind == "cells"
+            assert len(reads) == 1
+            r.render(scene)
+            assert len(reads) == 1  # cached per revision
+            r.renderer.warped_skip_maps = "never"
+            reference = r.render(scene)
+        assert np.abs(first - reference).max() <= 1 / 255
+        assert np.abs(reference - first).max(axis=-1).mean() < 1e-4
+    finally:
+        ms.close()
