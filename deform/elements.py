@@ -289,9 +289,9 @@ class ElementGrid:
 
     def materials_from_volume(
         self,
-        data: np.ndarray,
-        bounds: Sequence[Sequence[float]],
-        mapping: Callable[[np.ndarray], np.ndarray] | Sequence[Sequence[float]],
+        data: Any,
+        bounds: Sequence[Sequence[float]] | None = None,
+        mapping: Callable[[np.ndarray], np.ndarray] | Sequence[Sequence[float]] | None = None,
     ) -> np.ndarray:
         """Set every element's stiffness from the volume value at its rest position.
 
@@ -303,9 +303,12 @@ class ElementGrid:
         data
             (X, Y, Z) voxel values covering ``bounds``: voxel ``i`` along x lies at
             ``lo + i * (hi - lo) / (X - 1)`` (like the elements; an axis of size 1
-            lies at ``lo``).
+            lies at ``lo``). Or a volume (an object with ``data``, ``spacing`` and
+            ``origin``, e.g. :class:`app.volume.Volume`), whose voxel centres give
+            the bounds.
         bounds
-            ``(lo, hi)`` corners in mm of the box the voxel centres span.
+            ``(lo, hi)`` corners in mm of the box the voxel centres span; ``None``
+            with a volume.
         mapping
             A callable taking the sampled values (array) and returning stiffnesses,
             or control points ``[(value, stiffness), ...]`` interpolated piecewise
@@ -334,6 +337,22 @@ class ElementGrid:
         >>> [round(float(v), 2) for v in s[:, 0, 0]]
         [0.2, 0.2, 0.2, 0.95, 0.95, 0.95]
         """
+        if mapping is None:
+            raise ElementGridError(
+                "materials_from_volume needs a mapping: control points [(value,"
+                " stiffness), ...] or a callable values -> stiffnesses"
+            )
+        if all(hasattr(data, a) for a in ("data", "spacing", "origin")):
+            if bounds is None:
+                origin = np.asarray(data.origin, dtype=np.float64)
+                n = np.maximum(np.asarray(np.shape(data.data)) - 1, 1)
+                bounds = (origin, origin + np.asarray(data.spacing, dtype=np.float64) * n)
+            data = data.data
+        if bounds is None:
+            raise ElementGridError(
+                "materials_from_volume needs bounds (lo, hi) of the voxel centres for a"
+                " plain array; pass a volume to take them from its spacing and origin"
+            )
         vol = np.asarray(data)
         if vol.ndim != 3 or min(vol.shape) < 1:
             raise ElementGridError(f"volume data must be a 3-D (X, Y, Z) array; got {vol.shape}")

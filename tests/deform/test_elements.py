@@ -229,3 +229,24 @@ def test_from_dict_errors() -> None:
         ElementGrid.from_dict({"lo": [0, 0, 0], "shape": [2, 2, 2]})
     with pytest.raises(ElementGridError, match="stiffness"):
         ElementGrid.from_dict({"lo": [0, 0, 0], "hi": [1, 1, 1], "shape": 2, "stiffness": 3})
+
+
+def test_materials_from_a_volume_object_take_its_voxel_centres() -> None:
+    from app.volume import Volume
+
+    data = np.zeros((20, 10, 10), np.float32)
+    data[10:] = 1000.0  # the upper half in x is "bone"
+    vol = Volume(data, spacing=(2.0, 1.0, 1.0), origin=(5.0, 0.0, 0.0))
+    grid = ElementGrid(vol, shape=(6, 3, 3))
+    points = [(100.0, 0.2), (400.0, 0.95)]
+    s = grid.materials_from_volume(vol, mapping=points)
+    lo = np.asarray(vol.origin)
+    hi = lo + np.asarray(vol.spacing) * (np.asarray(vol.shape) - 1)
+    expected = ElementGrid(vol, shape=(6, 3, 3)).materials_from_volume(data, (lo, hi), points)
+    np.testing.assert_array_equal(s, expected)
+    assert s[0, 0, 0] == pytest.approx(0.2)
+    assert s[-1, 0, 0] == pytest.approx(0.95)
+    with pytest.raises(ElementGridError, match="needs a mapping"):
+        grid.materials_from_volume(vol)
+    with pytest.raises(ElementGridError, match="needs bounds"):
+        grid.materials_from_volume(data, mapping=points)
