@@ -4,6 +4,9 @@ Each model has a CPU reference and a GPU backend and exposes its result as a war
 (:class:`deform.warp.Warp`) that the raycaster samples without resampling the volume.
 """
 
+from deform.chainmail import ChainMail as ChainMail
+from deform.chainmail import MoveStats as MoveStats
+from deform.chainmail_model import ChainMailError as ChainMailError
 from deform.elements import ElementGrid as ElementGrid
 from deform.elements import ElementGridError as ElementGridError
 from deform.massspring import CpuSpringSolver as CpuSpringSolver

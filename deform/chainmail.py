@@ -1,0 +1,1328 @@
+"""3D ChainMail volume deformation: the user API and the CPU solver.
+
+About this technique (Gibson 1997, "3D ChainMail"; Schill et al. 1998, "Enhanced
+ChainMail"; Knoche 2008, 2.4.2.2, 3.5.3)
+------------------------------------------------------------------------------------
+The elements of an :class:`~deform.elements.ElementGrid` are linked to their 6
+neighbours like the rings of a chain mail (:mod:`deform.chainmail_model` states the
+constraints exactly): per element and axis ``i`` a least and a largest distance
+``min_i <= d_i <= max_i`` and a largest shear ``|d_j| <= shear_i`` (``d = x_b - x_a``
+for ``b = a + e_i``, world mm; a link uses the mean of its two elements' limits). The
+user drags elements (:meth:`ChainMail.move`); a dragged element moves freely within
+the slack of its links and pulls or pushes its neighbours once a link is taut, and
+those their neighbours, so that after every move **every link satisfies its limits**
+and fixed elements have not moved. The displacements form an offset field that the
+raycaster inverts (:meth:`ChainMail.warp`), exactly as for
+:class:`~deform.massspring.MassSpring`.
+
+Limits from the material map
+----------------------------
+By default the limits follow the grid's stiffness ``k`` in [0, 1] (e.g. from
+:meth:`ElementGrid.materials_from_volume`), with ``slack = 1 - k`` per element and
+``s_i`` the rest spacing along axis ``i``::
+
+    min_i = s_i (1 - stretch * slack)     max_i = s_i (1 + stretch * slack)
+    shear_i = s_i * shear * slack
+
+``stretch = shear = 0.5`` by default: stiffness 0 stretches or compresses a link by
+half a spacing and shears it by half a spacing, the default stiffness 0.5 by a quarter;
+stiffness 1 is **rigid** (no slack: such material moves as a rigid body, it is not
+pinned as in the mass-spring model; only ``fixed`` elements never move).
+:meth:`ChainMail.set_limits` sets any limits, per element and per axis (anisotropic
+materials such as muscle, heterogeneous ones); the rest state must satisfy them.
+
+Moves
+-----
+:meth:`ChainMail.move` puts the dragged elements at ``rest + offset`` (as
+:meth:`MassSpring.move <deform.massspring.MassSpring.move>`) and **holds** them there
+until :meth:`ChainMail.release`: later moves and relaxation treat held elements like
+fixed ones. The constraints are then restored by moving every other element *as little
+as possible*. If that would need a fixed or held element to move (the drag pulls
+against them further than the slack between allows), the move is **limited**: the
+dragged elements go the largest fraction ``t`` of the way from their positions to their
+targets for which the propagation succeeds (found by bisection, to within
+``2**-LIMIT_BISECTIONS`` of the way) and are held where they stopped;
+:attr:`MoveStats.fraction` reports ``t``. A move that stays within the slack moves
+nothing else (:attr:`MoveStats.touched` is 1).
+
+Variants
+--------
+* ``"gibson"`` (Gibson 1997): the dragged element *sponsors* its neighbours. Six FIFO
+  candidate lists, one per neighbour direction (+x, -x, +y, -y, +z, -z), are processed
+  in rotation, each until empty. An element taken from a list is checked against its
+  sponsor only; if the link is violated, it moves to the nearest position within the
+  sponsor's constraint box and queues its neighbours: an element of an x list its
+  neighbour further along x and its y and z neighbours, one of a y list further along y
+  and its z neighbours, one of a z list further along z (never its sponsor). An element
+  is moved at most once per move; an element found inside its slack stops the wave.
+  For a homogeneous material this is exact; with heterogeneous limits, or with several
+  dragged or held elements, a single sponsor can leave a link to a *non*-sponsor
+  neighbour violated. The **cleanup** then continues with the priority queue of
+  ``"enhanced"`` from every violated link of a moved element (the element that moved
+  less follows), until no link is violated; :attr:`MoveStats.cleanup` counts its
+  corrections (0 in homogeneous materials; in the heterogeneous random drags of
+  ``tests/deform/test_chainmail.py`` a few per move).
+* ``"enhanced"`` (Schill et al. 1998): one priority queue of (element, coordinate)
+  entries ordered by how far the entry asks the element to move; the largest goes
+  first and moves the element to the nearest value allowed by *all* its links
+  (when they conflict, the side it was pushed to); neighbours whose link it then
+  violates are queued. Because the constraints are difference bounds per coordinate
+  (see :mod:`deform.chainmail_cpu`), this is Dijkstra's order for a single drag: every
+  element is settled by its most demanding neighbour first, also in heterogeneous
+  materials.
+
+For a single dragged element both variants end in the same state, the least motion of
+every element that satisfies the constraints (each coordinate of each element moves
+only in the direction of the drag, and no further than some chain of taut links
+demands); they differ in the work done (:attr:`MoveStats.checks`).
+
+Relaxation
+----------
+:meth:`ChainMail.relax` (or ``relax_steps`` after every move) runs Gauss-Seidel sweeps
+of *constrained Laplacian smoothing* of the displacement ``u = x - rest``: every free,
+non-held element moves, per coordinate, to ``rest + mean(u)`` of its linked neighbours,
+clamped into the interval its links allow with the neighbours where they are. That is
+the exact minimiser, within the constraints, of the smoothness energy
+``E = sum_links |u_b - u_a|^2`` (:meth:`ChainMail.smoothness_energy`) over that
+element, so ``E`` never grows and the constraints stay satisfied. A red-black
+colouring makes one step two parallel half-sweeps. The thesis shows 0, 1 and 4 steps.
+
+Cutting
+-------
+:meth:`ChainMail.cut` removes the links whose segment between the two elements'
+*current* positions crosses a plane (or a disk of radius ``extent`` on it);
+:meth:`ChainMail.cut_pairs` removes links between given neighbour pairs. The parts on
+either side then move independently. Removing a link never violates anything, so the
+state stays valid. Scene JSON stores the removed links (:attr:`ChainMail.cuts`).
+
+Why numba
+---------
+Propagation is a sequential, data-dependent queue walk that numpy cannot vectorise, and
+pure Python loops do not get a local drag on 128³ elements under 100 ms; the kernels
+in :mod:`deform.chainmail_cpu` are ``numba.njit(cache=True, nogil=True)``, imported on
+first use (so ``import deform`` does not pay for numba).
+
+Backends
+--------
+``backend="cpu"`` runs the kernels above (float64). ``backend="gpu"`` drives
+``deform.chainmail_gpu.GpuChainMailSolver`` (created lazily) through ``set_positions``,
+``enforce(held_mask, held_targets, max_passes) -> passes``, ``positions()``,
+``displacement_texture()``, ``revision`` and ``release()``; limits, cuts and fixed
+elements reach it by rebuilding the solver from the model.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from deform.chainmail_model import ChainMailError, ChainMailModel, check_limits
+from deform.elements import ElementGrid, ElementGridError, Selection
+
+__all__ = [
+    "BACKENDS",
+    "MODEL_TYPE",
+    "VARIANTS",
+    "ChainMail",
+    "ChainMailError",
+    "MoveStats",
+    "limits_from_stiffness",
+]
+
+#: propagation variants of :class:`ChainMail`
+VARIANTS: tuple[str, ...] = ("gibson", "enhanced")
+#: solver backends of :class:`ChainMail`
+BACKENDS: tuple[str, ...] = ("cpu", "gpu")
+#: ``"type"`` of a ChainMail model in scene JSON (an offset-field warp's ``"model"``)
+MODEL_TYPE = "chainmail"
+#: default largest relative stretch/compression of a stiffness-0 element's links
+DEFAULT_STRETCH = 0.5
+#: default largest shear, in spacings, of a stiffness-0 element's links
+DEFAULT_SHEAR = 0.5
+#: bisection steps of a limited move (the fraction is found to within 2**-14)
+LIMIT_BISECTIONS = 14
+#: the priority queue gives up (the move counts as infeasible) after this many pops
+#: per element and coordinate
+_POPS_PER_COORDINATE = 32
+#: tolerance of the rest-state check of :meth:`ChainMail.set_limits` (relative to the
+#: spacing; the last element layer sits on the box face, off by round-off)
+_REST_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class MoveStats:
+    """What one :meth:`ChainMail.move` did.
+
+    Attributes
+    ----------
+    touched
+        Elements whose position changed, the dragged ones included (-1 on the GPU
+        backend, which does not count them).
+    seconds
+        Wall time of the solve (propagation and, for a limited move, the bisection;
+        not the warp update nor ``relax_steps``).
+    fraction
+        Fraction of the way to their targets the dragged elements went: 1, or less
+        when fixed or held elements limited the move.
+    checks
+        Constraint checks: candidate-list entries and priority-queue pops.
+    cleanup
+        ``"gibson"``: element-coordinate corrections made by the cleanup after the
+        sponsor lists (0 when Gibson's single sponsors sufficed); ``"enhanced"``:
+        corrections made by the priority queue.
+    attempts
+        Propagations run (1, or 2 + the bisection steps for a limited move).
+    passes
+        GPU backend: constraint passes the solver ran (0 on the CPU).
+    """
+
+    touched: int
+    seconds: float
+    fraction: float = 1.0
+    checks: int = 0
+    cleanup: int = 0
+    attempts: int = 1
+    passes: int = 0
+
+    @property
+    def limited(self) -> bool:
+        """True when the dragged elements stopped short of their targets."""
+        return self.fraction < 1.0
+
+
+def limits_from_stiffness(
+    spacing: Any,
+    stiffness: Any,
+    stretch: float = DEFAULT_STRETCH,
+    shear: float = DEFAULT_SHEAR,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per element and axis ``(min_dist, max_dist, max_shear)`` from a stiffness map.
+
+    Parameters
+    ----------
+    spacing
+        (3,) rest spacing per axis (mm).
+    stiffness
+        (nx, ny, nz) stiffness in [0, 1]; ``slack = 1 - stiffness``.
+    stretch, shear
+        Relative stretch/compression and shear (in spacings) of a stiffness-0 element.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Three (nx, ny, nz, 3) float64 arrays: ``s (1 - stretch slack)``,
+        ``s (1 + stretch slack)`` and ``s shear slack``.
+    """
+    stretch = _number(stretch, "stretch", lo=0.0, hi=1.0)
+    shear = _number(shear, "shear", lo=0.0, hi=math.inf)
+    s = np.asarray(spacing, dtype=np.float64).reshape(3)
+    slack = (1.0 - np.clip(np.asarray(stiffness, dtype=np.float64), 0.0, 1.0))[..., None]
+    return s * (1.0 - stretch * slack), s * (1.0 + stretch * slack), s * (shear * slack)
+
+
+def _kernels() -> Any:
+    from deform import chainmail_cpu
+
+    return chainmail_cpu
+
+
+class ChainMail:
+    """Interactive 3D ChainMail deformation of a volume (see the module doc).
+
+    Parameters
+    ----------
+    grid
+        The elements: rest positions, fixed elements and the stiffness the default
+        limits come from. Fixing and freeing later goes through :meth:`fix` /
+        :meth:`free` (which also change ``grid.fixed``).
+    variant
+        ``"gibson"`` (sponsor lists) or ``"enhanced"`` (priority queue).
+    backend
+        ``"cpu"`` (numba kernels, float64) or ``"gpu"`` (needs ``ctx``).
+    ctx
+        moderngl context of the GPU backend.
+    stretch, shear
+        Default limits from the grid's stiffness (:func:`limits_from_stiffness`).
+    relax_steps
+        Relaxation steps (:meth:`relax`) run after every :meth:`move`.
+
+    Examples
+    --------
+    >>> grid = ElementGrid(((0, 0, 0), (70, 70, 70)), shape=8)   # 10 mm spacing
+    >>> cm = ChainMail(grid)
+    >>> stats = cm.move((4, 4, 4), (20.0, 0, 0))   # drag an element 20 mm along x
+    >>> stats.touched > 1, cm.violation() <= 1e-6
+    (True, True)
+    """
+
+    def __init__(
+        self,
+        grid: ElementGrid,
+        variant: str = "enhanced",
+        backend: str = "cpu",
+        ctx: Any = None,
+        stretch: float = DEFAULT_STRETCH,
+        shear: float = DEFAULT_SHEAR,
+        relax_steps: int = 0,
+    ) -> None:
+        if not isinstance(grid, ElementGrid):
+            raise ChainMailError(
+                f"grid must be a deform.elements.ElementGrid; got {type(grid).__name__}"
+            )
+        if backend not in BACKENDS:
+            raise ChainMailError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
+        if backend == "gpu" and ctx is None:
+            raise ChainMailError(
+                'backend="gpu" needs a moderngl context: pass ctx=..., or use backend="cpu"'
+            )
+        self.grid = grid
+        self.backend = backend
+        self._ctx = ctx
+        self._variant = _variant(variant)
+        self.relax_steps = relax_steps
+        mn, mx, sh = limits_from_stiffness(grid.spacing, grid.stiffness, stretch, shear)
+        self._model = ChainMailModel(
+            rest=grid.rest_positions.copy(),
+            spacing=grid.spacing.copy(),
+            min_dist=mn,
+            max_dist=mx,
+            max_shear=sh,
+            links=np.ones((*grid.shape, 3), dtype=bool),
+            fixed=grid.fixed.copy(),
+        )
+        self._check_rest()
+        n = grid.count
+        self._rest = self._model.rest.reshape(n, 3)
+        self._x = self._rest.copy()
+        self._held = np.zeros(n, dtype=bool)
+        self._offsets = np.zeros((n, 3), dtype=np.float64)
+        self._pinned = self._model.fixed.reshape(n).copy()
+        _, ny, nz = grid.shape
+        self._strides = np.array([ny * nz, nz, 1], dtype=np.int64)
+        # scratch of the kernels: never cleared (epochs), pages touched only when used
+        self._mark = np.zeros(n, dtype=np.int64)
+        self._slot = np.zeros(n, dtype=np.int64)
+        self._t_idx = np.empty(n, dtype=np.int64)
+        self._t_old = np.empty((n, 3), dtype=np.float64)
+        self._epoch = 0
+        self._recorded = 0
+        # [i0, i1, j0, j1, k0, k1) holding every displaced element; None: none is
+        self._box: np.ndarray | None = None
+        self._warp: Any = None
+        self._solver: Any = None
+        if backend == "gpu":
+            self._solver = self._make_gpu_solver()
+            self._solver.set_positions(self._model.rest.copy())
+
+    # ------------------------------------------------------------------ parameters
+    @property
+    def model(self) -> ChainMailModel:
+        """The :class:`~deform.chainmail_model.ChainMailModel` the solver runs (live;
+        change it through :meth:`set_limits`, :meth:`cut`, :meth:`fix`, :meth:`free`)."""
+        return self._model
+
+    @property
+    def variant(self) -> str:
+        """``"gibson"`` or ``"enhanced"``; may be changed between moves."""
+        return self._variant
+
+    @variant.setter
+    def variant(self, value: str) -> None:
+        self._variant = _variant(value)
+
+    @property
+    def relax_steps(self) -> int:
+        """Relaxation steps run after every :meth:`move` (0: none)."""
+        return self._relax_steps
+
+    @relax_steps.setter
+    def relax_steps(self, value: int) -> None:
+        self._relax_steps = _count(value, "relax_steps")
+
+    @property
+    def held(self) -> np.ndarray:
+        """(nx, ny, nz) bool copy: elements held by a drag (:meth:`move`)."""
+        return self._held.reshape(self.grid.shape).copy()
+
+    @property
+    def held_offsets(self) -> np.ndarray:
+        """(nx, ny, nz, 3) copy: where held elements are held, as offsets from rest."""
+        return self._offsets.reshape((*self.grid.shape, 3)).copy()
+
+    @property
+    def cuts(self) -> np.ndarray:
+        """(m, 4) int64 ``[i, j, k, axis]``: removed links from ``(i, j, k)`` to the next
+        element along ``axis``."""
+        possible = np.ones((*self.grid.shape, 3), dtype=bool)
+        for a in range(3):
+            idx: list[Any] = [slice(None)] * 3
+            idx[a] = -1
+            possible[(*idx, a)] = False
+        return np.argwhere(possible & ~self._model.links).astype(np.int64)
+
+    def _check_rest(self, model: ChainMailModel | None = None) -> None:
+        """Raise when the rest state violates the limits (naming a link and the fix)."""
+        m = self._model if model is None else model
+        x = m.rest
+        for axis in range(3):
+            mn, mx, _, _ = m.link_limits(axis)
+            d = np.diff(x, axis=axis)[..., axis]
+            tol = _REST_TOL * max(1.0, float(m.spacing[axis]))
+            for bad, what in (
+                (mn > d + tol, "min_dist"),
+                (mx < d - tol, "max_dist"),
+            ):
+                if np.any(bad):
+                    where = tuple(int(v) for v in np.argwhere(bad)[0])
+                    raise ChainMailError(
+                        f"{what} along axis {axis} at element {where} is"
+                        f" {float((mn if what == 'min_dist' else mx)[where]):g} mm but the"
+                        f" rest spacing is {float(d[where]):g} mm: the undeformed grid would"
+                        f" violate its own limits; use min_dist <= spacing <= max_dist"
+                        f" (spacing {self.grid.spacing.tolist()} mm)"
+                    )
+
+    # ------------------------------------------------------------------ limits
+    def set_limits(
+        self,
+        min_dist: Any = None,
+        max_dist: Any = None,
+        max_shear: Any = None,
+    ) -> None:
+        """Set the per element, per axis limits (world mm); ``None`` keeps a limit.
+
+        Parameters
+        ----------
+        min_dist, max_dist, max_shear
+            Each a number (all elements and axes), 3 numbers (per axis x, y, z), an
+            (nx, ny, nz) array (per element, all axes) or an (nx, ny, nz, 3) array.
+            ``min_dist[i]`` / ``max_dist[i]`` bound ``d_i`` of an element's links along
+            axis ``i``, ``max_shear[i]`` their ``|d_j|``, ``j != i``.
+
+        If the current deformation violates the new limits, the constraints are
+        restored (held and fixed elements staying put).
+
+        Raises
+        ------
+        ChainMailError
+            On NaN/Inf, negative limits, ``min_dist > max_dist``, limits the rest
+            state violates (``min_dist <= spacing <= max_dist`` is needed), a wrong
+            shape, or when the current deformation cannot be brought within the new
+            limits without moving held elements (release them first). Nothing changes
+            then.
+        """
+        m = self._model
+        new = {}
+        for name, value in (
+            ("min_dist", min_dist),
+            ("max_dist", max_dist),
+            ("max_shear", max_shear),
+        ):
+            new[name] = getattr(m, name) if value is None else self._limit_array(value, name)
+        check_limits(new["min_dist"], new["max_dist"], new["max_shear"])
+        trial = ChainMailModel(
+            rest=m.rest,
+            spacing=m.spacing,
+            min_dist=new["min_dist"],
+            max_dist=new["max_dist"],
+            max_shear=new["max_shear"],
+            links=m.links,
+            fixed=m.fixed,
+        )
+        self._check_rest(trial)
+        old = (m.min_dist, m.max_dist, m.max_shear)
+        m.min_dist, m.max_dist, m.max_shear = trial.min_dist, trial.max_dist, trial.max_shear
+        if self.backend == "gpu":
+            self._rebuild_gpu()
+            return
+        if not m.satisfied(self.positions()):
+            ok = self._repair()
+            if not ok:
+                m.min_dist, m.max_dist, m.max_shear = old
+                raise ChainMailError(
+                    "the current deformation violates the new limits and cannot be"
+                    " brought within them without moving held or fixed elements;"
+                    " release() the held elements (or reset()) before setting them"
+                )
+            self._update_warp()
+
+    def set_limits_from_stiffness(
+        self, stretch: float = DEFAULT_STRETCH, shear: float = DEFAULT_SHEAR
+    ) -> None:
+        """Set the limits from ``grid.stiffness`` again (:func:`limits_from_stiffness`),
+        e.g. after :meth:`ElementGrid.materials_from_volume`."""
+        mn, mx, sh = limits_from_stiffness(self.grid.spacing, self.grid.stiffness, stretch, shear)
+        self.set_limits(mn, mx, sh)
+
+    def _limit_array(self, value: Any, name: str) -> np.ndarray:
+        shape = self.grid.shape
+        form = (
+            f"a number, 3 numbers (per axis), an {shape} array (per element) or an"
+            f" {(*shape, 3)} array"
+        )
+        try:
+            a = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ChainMailError(f"{name} must be {form} in mm; got {value!r:.80}") from exc
+        if a.shape in ((), (3,), (*shape, 3)):
+            return np.broadcast_to(a, (*shape, 3)).copy()
+        if a.shape == shape:
+            return np.repeat(a[..., None], 3, axis=-1)
+        raise ChainMailError(f"{name} must be {form} in mm; got shape {a.shape}")
+
+    # ------------------------------------------------------------------ constraints
+    def fix(self, sel: Selection) -> None:
+        """Fix elements at their rest positions (see :meth:`ElementGrid.fix`).
+
+        Displaced elements are moved back to rest first, with propagation; fixed
+        elements that were held are released.
+
+        Raises
+        ------
+        ChainMailError
+            When moving them back to rest would move held or other fixed elements
+            (nothing changes then).
+        """
+        mask = self.grid.mask(sel) & ~self.grid.fixed
+        flat = np.flatnonzero(mask)
+        if flat.size and self.backend == "cpu":
+            was = self._pinned[flat].copy()
+            self._pinned[flat] = True
+            ok, *_ = self._attempt(flat, self._rest[flat], commit=True)
+            if ok:
+                self._grow_box()
+            else:
+                self._pinned[flat] = was
+                raise ChainMailError(
+                    f"cannot fix {flat.size} element(s) at rest: moving them back would"
+                    " move held or fixed elements; release() the held ones first"
+                )
+        self.grid.fix(mask)
+        self._model.fixed = self.grid.fixed.copy()
+        fixed = self._model.fixed.reshape(-1)
+        self._held &= ~fixed
+        self._offsets[fixed] = 0.0
+        self._pinned = fixed | self._held
+        if self.backend == "gpu":
+            self._rebuild_gpu()
+        self._update_warp()
+
+    def free(self, sel: Selection) -> None:
+        """Unfix elements (see :meth:`ElementGrid.free`); they stay where they are."""
+        self.grid.free(sel)
+        self._model.fixed = self.grid.fixed.copy()
+        self._pinned = self._model.fixed.reshape(-1) | self._held
+        if self.backend == "gpu":
+            self._rebuild_gpu()
+
+    def release(self, sel: Selection = None) -> None:
+        """Let held elements go: they stay where they are but may move again.
+
+        Parameters
+        ----------
+        sel
+            Elements to release (see :meth:`ElementGrid.mask`); ``None`` releases all.
+        """
+        mask = self.grid.mask(sel).reshape(-1)
+        self._held &= ~mask
+        self._offsets[mask] = 0.0
+        self._pinned = self._model.fixed.reshape(-1) | self._held
+
+    def reset(self) -> None:
+        """Put every element back at rest and release all held elements."""
+        self._held[:] = False
+        self._offsets[:] = 0.0
+        self._pinned = self._model.fixed.reshape(-1).copy()
+        self._box = None
+        if self.backend == "gpu":
+            self._solver.set_positions(self._model.rest.copy())
+        else:
+            self._x[:] = self._rest
+        self._update_warp()
+
+    # ------------------------------------------------------------------ moves
+    def move(self, sel: Selection, offsets: Any) -> MoveStats:
+        """Drag elements to ``rest + offset`` and hold them there; propagate.
+
+        Parameters
+        ----------
+        sel
+            A bool mask of the grid shape, one index ``(i, j, k)`` or (m, 3) indices.
+        offsets
+            World-space offsets (mm) from the *rest* positions: one (3,) offset for all
+            selected elements, or (m, 3) offsets, one per index of ``sel`` (an index
+            given twice takes its last offset).
+
+        Fixed elements in the selection are skipped (free them first to drag them).
+        When fixed or held elements block the move it is limited (see the module
+        doc): the elements are held where they stopped.
+
+        Returns
+        -------
+        MoveStats
+            Elements touched, time, the fraction of the way moved and more.
+
+        Raises
+        ------
+        ChainMailError
+            On offsets of the wrong shape or not finite.
+        deform.elements.ElementGridError
+            On an index outside the grid.
+        """
+        t0 = time.perf_counter()
+        flat, off = self._selection(sel, offsets)
+        self._held[flat] = True
+        self._offsets[flat] = off
+        self._pinned[flat] = True
+        goal = self._rest[flat] + off
+        if self.backend == "gpu":
+            passes = int(
+                self._solver.enforce(
+                    self.held, self._targets().reshape((*self.grid.shape, 3)), self.max_passes
+                )
+            )
+            stats = MoveStats(touched=-1, seconds=time.perf_counter() - t0, passes=passes)
+        else:
+            stats = self._move_cpu(flat, goal, t0)
+        if self._relax_steps:
+            self.relax(self._relax_steps)
+        else:
+            self._update_warp()
+        return stats
+
+    def _move_cpu(self, flat: np.ndarray, goal: np.ndarray, t0: float) -> MoveStats:
+        ok, moved, checks, fixes, _ = self._attempt(flat, goal, commit=True)
+        if ok:
+            self._grow_box()
+            return MoveStats(moved, time.perf_counter() - t0, 1.0, checks, fixes, 1)
+        start = self._x[flat].copy()
+        delta = goal - start
+        lo, hi, attempts = 0.0, 1.0, 1
+        for _ in range(LIMIT_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            ok, *_ = self._attempt(flat, start + mid * delta, commit=False)
+            attempts += 1
+            if ok:
+                lo = mid
+            else:
+                hi = mid
+        moved = checks = fixes = 0
+        if lo > 0.0:
+            ok, moved, checks, fixes, _ = self._attempt(flat, start + lo * delta, commit=True)
+            attempts += 1
+            if not ok:  # cannot happen: the same trial succeeded
+                raise ChainMailError("internal error: a limited ChainMail move did not repeat")
+            self._grow_box()
+        # held where they stopped
+        self._offsets[flat] = self._x[flat] - self._rest[flat]
+        return MoveStats(moved, time.perf_counter() - t0, lo, checks, fixes, attempts)
+
+    @property
+    def max_passes(self) -> int:
+        """Constraint passes the GPU backend may run per move: ``4 (nx + ny + nz)``
+        (each of the two monotone phases of a coordinate needs about ``nx + ny + nz``)."""
+        return 4 * int(sum(self.grid.shape))
+
+    def _flat_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        m = self._model
+        n = self.grid.count
+        return (
+            m.min_dist.reshape(n, 3),
+            m.max_dist.reshape(n, 3),
+            m.max_shear.reshape(n, 3),
+            m.links.reshape(n, 3),
+        )
+
+    def _attempt(
+        self,
+        seeds: np.ndarray,
+        targets: np.ndarray,
+        *,
+        commit: bool,
+        repair: bool = False,
+    ) -> tuple[bool, int, int, int, bool]:
+        """One propagation (see :func:`deform.chainmail_cpu.propagate`)."""
+        k = _kernels()
+        self._epoch += 1
+        if self._epoch >= 2**62:
+            self._mark[:] = 0
+            self._epoch = 1
+        mn, mx, sh, links = self._flat_limits()
+        max_pops = _POPS_PER_COORDINATE * 3 * self.grid.count + 4096
+        ok, moved, checks, fixes, capped, n_t = k.propagate(
+            self._x,
+            mn,
+            mx,
+            sh,
+            links,
+            self._pinned,
+            self._mark,
+            self._slot,
+            self._epoch,
+            self._strides,
+            np.ascontiguousarray(seeds, dtype=np.int64),
+            np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3),
+            self._variant == "gibson",
+            repair,
+            commit,
+            max_pops,
+            self._t_idx,
+            self._t_old,
+        )
+        self._recorded = int(n_t) if ok and commit else 0
+        return bool(ok), int(moved), int(checks), int(fixes), bool(capped)
+
+    def _repair(self) -> bool:
+        """Restore the constraints from the current state (held and fixed stay)."""
+        empty = np.zeros(0, dtype=np.int64)
+        ok, *_ = self._attempt(empty, np.zeros((0, 3)), commit=True, repair=True)
+        self._box = self._full_box()
+        return ok and self._model.satisfied(self.positions())
+
+    def _full_box(self) -> np.ndarray:
+        nx, ny, nz = self.grid.shape
+        return np.array([0, nx, 0, ny, 0, nz], dtype=np.int64)
+
+    def _grow_box(self) -> None:
+        """Add the elements the last committed propagation moved to :attr:`_box`."""
+        if self._recorded == 0:
+            return
+        idx = np.unravel_index(self._t_idx[: self._recorded], self.grid.shape)
+        box = np.array([v for a in idx for v in (int(a.min()), int(a.max()) + 1)], dtype=np.int64)
+        if self._box is not None:
+            box[0::2] = np.minimum(box[0::2], self._box[0::2])
+            box[1::2] = np.maximum(box[1::2], self._box[1::2])
+        self._box = box
+
+    def _selection(self, sel: Selection, offsets: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Flat indices (fixed ones dropped, duplicates: last wins) and (m, 3) offsets."""
+        try:
+            off = np.asarray(offsets, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ChainMailError("offsets must be numbers (mm)") from exc
+        if not np.all(np.isfinite(off)):
+            raise ChainMailError("offsets must be finite numbers (mm)")
+        sel_arr = np.asarray(sel)
+        if sel_arr.dtype == bool:
+            if off.shape != (3,):
+                raise ChainMailError(
+                    f"move with a bool mask takes one (3,) offset; got shape {off.shape}"
+                )
+            flat = np.flatnonzero(self.grid.mask(sel_arr))
+            off = np.broadcast_to(off, (flat.size, 3))
+        else:
+            idx = self.grid.indices(sel_arr)
+            if off.shape == (3,):
+                off = np.broadcast_to(off, idx.shape)
+            if off.shape != idx.shape:
+                raise ChainMailError(
+                    "offsets must be one (3,) offset or one per selected element"
+                    f" {idx.shape}; got shape {off.shape}"
+                )
+            flat = np.ravel_multi_index(tuple(idx.T), self.grid.shape).astype(np.int64)
+            # a repeated index takes its last offset
+            _, first_rev = np.unique(flat[::-1], return_index=True)
+            keep = np.sort(flat.size - 1 - first_rev)
+            flat, off = flat[keep], off[keep]
+        free = ~self._model.fixed.reshape(-1)[flat]
+        return flat[free], np.array(off[free], dtype=np.float64).reshape(-1, 3)
+
+    def _targets(self) -> np.ndarray:
+        """(N, 3) rest positions with the held elements at ``rest + offset``."""
+        t = self._rest.copy()
+        t[self._held] += self._offsets[self._held]
+        return t
+
+    # ------------------------------------------------------------------ relaxation
+    def relax(self, steps: int = 1) -> None:
+        """Run ``steps`` relaxation steps (constrained Laplacian smoothing, module doc).
+
+        Fixed and held elements do not move; the constraints stay satisfied and the
+        smoothness energy (:meth:`smoothness_energy`) does not grow. On the GPU
+        backend the positions are read back, relaxed on the CPU and written back.
+
+        Parameters
+        ----------
+        steps
+            Number of steps (>= 0); each is one red-black Gauss-Seidel sweep.
+        """
+        steps = _count(steps, "steps")
+        if steps == 0:
+            return
+        if self.backend == "gpu":
+            x = np.ascontiguousarray(self.positions().reshape(-1, 3))
+            self._box = self._full_box()
+        else:
+            x = self._x
+        self._relax_into(x, steps)
+        if self.backend == "gpu":
+            self._solver.set_positions(x.reshape((*self.grid.shape, 3)).copy())
+        self._update_warp()
+
+    def _relax_into(self, x: np.ndarray, steps: int) -> None:
+        """Relax ``x`` in place; only around the displaced elements (:attr:`_box`): an
+        element whose neighbours all rest stays at rest, so each step grows the box by
+        one element."""
+        if self._box is None:
+            return
+        k = _kernels()
+        mn, mx, sh, links = self._flat_limits()
+        shape = np.asarray(self.grid.shape, dtype=np.int64)
+        for _ in range(steps):
+            box = self._box.copy()
+            box[0::2] = np.maximum(box[0::2] - 1, 0)
+            box[1::2] = np.minimum(box[1::2] + 1, shape)
+            self._box = box
+            for colour in (0, 1):
+                k.relax_sweep(x, self._rest, mn, mx, sh, links, self._pinned, shape, box, colour)
+
+    def smoothness_energy(self) -> float:
+        """``sum over present links of |u_b - u_a|^2`` (mm²), ``u`` the displacements."""
+        u = self.displacements()
+        e = 0.0
+        for axis in range(3):
+            d = np.diff(u, axis=axis)
+            lo: list[Any] = [slice(None)] * 3
+            lo[axis] = slice(0, -1)
+            linked = self._model.links[(*lo, axis)]
+            e += float(np.sum(np.sum(d * d, axis=-1)[linked]))
+        return e
+
+    # ------------------------------------------------------------------ cutting
+    def cut(
+        self,
+        plane_point: Any,
+        plane_normal: Any,
+        extent: float | None = None,
+    ) -> int:
+        """Remove the links that cross a plane (or a disk on it).
+
+        A link crosses when its two elements' *current* positions lie on different
+        sides (signed distances ``s_a < 0 <= s_b`` or ``s_b < 0 <= s_a``: an element
+        on the plane counts as the positive side).
+
+        Parameters
+        ----------
+        plane_point, plane_normal
+            A point on the plane and its normal (mm; need not be unit length).
+        extent
+            ``None``: the whole plane. Otherwise only links whose segment meets the
+            plane within this distance (mm) of ``plane_point``: a disk.
+
+        Returns
+        -------
+        int
+            Links removed (not counting ones cut before).
+        """
+        p0 = _vec3(plane_point, "plane_point")
+        normal = _vec3(plane_normal, "plane_normal")
+        length = float(np.linalg.norm(normal))
+        if length == 0.0:
+            raise ChainMailError("plane_normal must not be the zero vector")
+        normal = normal / length
+        if extent is not None:
+            extent = _number(extent, "extent (None: the whole plane)", lo=0.0, hi=math.inf)
+        x = self.positions()
+        s = (x - p0) @ normal
+        cut = np.zeros_like(self._model.links)
+        for axis in range(3):
+            lo: list[Any] = [slice(None)] * 3
+            hi: list[Any] = [slice(None)] * 3
+            lo[axis] = slice(0, -1)
+            hi[axis] = slice(1, None)
+            lo_t, hi_t = tuple(lo), tuple(hi)
+            sa, sb = s[lo_t], s[hi_t]
+            cross = ((sa < 0) & (sb >= 0)) | ((sb < 0) & (sa >= 0))
+            if extent is not None and np.any(cross):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    t = np.where(cross, sa / (sa - sb), 0.0)
+                xa, xb = x[lo_t], x[hi_t]
+                hit = xa + t[..., None] * (xb - xa)
+                cross &= np.linalg.norm(hit - p0, axis=-1) <= extent
+            cut[(*lo_t, axis)] = cross
+        return self._remove_links(cut)
+
+    def cut_pairs(self, pairs: Any) -> int:
+        """Remove the links between given pairs of neighbouring elements.
+
+        Parameters
+        ----------
+        pairs
+            (m, 2, 3) integer indices: ``[[(i, j, k), (i2, j2, k2)], ...]``, each pair
+            6-neighbours (one index differing by 1).
+
+        Returns
+        -------
+        int
+            Links removed (not counting ones cut before).
+        """
+        try:
+            p = np.asarray(pairs, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ChainMailError(
+                "pairs must be (m, 2, 3) element indices [[(i, j, k), (i2, j2, k2)], ...]"
+            ) from exc
+        if p.size == 0:
+            return 0
+        if p.ndim != 3 or p.shape[1:] != (2, 3) or np.any(p != np.round(p)):
+            raise ChainMailError(
+                "pairs must be (m, 2, 3) integer element indices"
+                f" [[(i, j, k), (i2, j2, k2)], ...]; got shape {p.shape}"
+            )
+        a = self.grid.indices(p[:, 0].astype(np.int64))
+        b = self.grid.indices(p[:, 1].astype(np.int64))
+        diff = b - a
+        ok = np.sum(np.abs(diff), axis=1) == 1
+        if not np.all(ok):
+            n = int(np.argmin(ok))
+            raise ChainMailError(
+                f"pair {n} ({a[n].tolist()}, {b[n].tolist()}) are not neighbours; a link"
+                " joins elements whose indices differ by 1 along one axis"
+            )
+        low = np.minimum(a, b)
+        axis = np.argmax(np.abs(diff), axis=1)
+        cut = np.zeros_like(self._model.links)
+        cut[low[:, 0], low[:, 1], low[:, 2], axis] = True
+        return self._remove_links(cut)
+
+    def _remove_links(self, cut: np.ndarray) -> int:
+        newly = cut & self._model.links
+        self._model.links &= ~cut
+        if self.backend == "gpu" and np.any(newly):
+            self._rebuild_gpu()
+        return int(newly.sum())
+
+    # ------------------------------------------------------------------ results
+    def positions(self) -> np.ndarray:
+        """(nx, ny, nz, 3) float64 element positions (mm; a GPU read-back)."""
+        if self.backend == "gpu":
+            return np.asarray(self._solver.positions(), dtype=np.float64).reshape(
+                (*self.grid.shape, 3)
+            )
+        return self._x.reshape((*self.grid.shape, 3)).copy()
+
+    def displacements(self) -> np.ndarray:
+        """(nx, ny, nz, 3) float64 displacements from rest (mm; a GPU read-back).
+
+        float64 (unlike the mass-spring model's float32) so that a saved field
+        restores a state that satisfies the constraints exactly (:meth:`from_warp`).
+        """
+        return self.positions() - self._model.rest
+
+    def violation(self) -> float:
+        """Largest constraint violation (mm) at the current positions (0: none)."""
+        return self._model.violation(self.positions())
+
+    def set_state(self, positions: Any) -> None:
+        """Replace the element positions.
+
+        Fixed elements are put back at rest and held ones at ``rest + offset``; if the
+        result violates a link (e.g. positions saved in lower precision), the
+        constraints are restored by propagation.
+
+        Parameters
+        ----------
+        positions
+            (nx, ny, nz, 3) positions in world mm.
+
+        Raises
+        ------
+        ChainMailError
+            On a wrong shape, values that are not finite, or positions that cannot be
+            brought within the limits with the fixed and held elements where they are
+            (the state is then unchanged).
+        """
+        shape = (*self.grid.shape, 3)
+        try:
+            a = np.asarray(positions, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ChainMailError(f"positions must be an array of numbers of shape {shape}") from exc
+        if a.shape != shape:
+            raise ChainMailError(
+                f"positions must have shape {shape} (grid shape + xyz); got {a.shape}"
+            )
+        if not np.all(np.isfinite(a)):
+            raise ChainMailError("positions must be finite numbers")
+        x = a.reshape(-1, 3).copy()
+        fixed = self._model.fixed.reshape(-1)
+        x[fixed] = self._rest[fixed]
+        x[self._held] = self._rest[self._held] + self._offsets[self._held]
+        if self.backend == "gpu":
+            self._solver.set_positions(x.reshape(shape))
+            self._solver.enforce(self.held, self._targets().reshape(shape), self.max_passes)
+            return
+        old, old_box = self._x.copy(), self._box
+        self._x[:] = x
+        self._box = self._full_box()
+        if not self._model.satisfied(self.positions()) and not self._repair():
+            self._x[:] = old
+            self._box = old_box
+            raise ChainMailError(
+                "these positions violate the ChainMail limits and cannot be brought within"
+                " them with the fixed and held elements where they are"
+            )
+        self._update_warp()
+
+    # ------------------------------------------------------------------ warp
+    def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
+        """The offset-field warp of the current displacements (one object, kept current).
+
+        As :meth:`MassSpring.warp <deform.massspring.MassSpring.warp>`: CPU backend,
+        built from :meth:`displacements` and updated after every :meth:`move`,
+        :meth:`relax`, :meth:`set_state`, :meth:`reset` and :meth:`fix`; GPU backend,
+        reads the solver's displacement texture. Its ``to_dict()`` (scene JSON) also
+        writes this model (``"model": {"type": "chainmail", **self.to_dict()}``) and
+        the rendered field, so a saved scene renders the same image and can resume
+        (:meth:`from_warp`). ``inverse`` / ``iterations``: see
+        :class:`deform.offset_field.OffsetFieldWarp` (``"baked"`` when first made).
+        """
+        from deform.offset_field import INVERSE_MODES, MAX_ITERATIONS, OffsetFieldWarp
+
+        if self._warp is None:
+            lo, hi = self.grid.lo.copy(), self.grid.hi.copy()
+            if self.backend == "gpu":
+                self._warp = OffsetFieldWarp(
+                    lo,
+                    hi,
+                    shape=self.grid.shape,
+                    texture_source=lambda ctx=None: self._solver.displacement_texture(),
+                    model_source=self._model_snapshot,
+                    inverse="baked",
+                    field_reader=self.displacements,
+                    revision_source=lambda: self._solver.revision,
+                )
+            else:
+                self._warp = OffsetFieldWarp(
+                    lo,
+                    hi,
+                    self.displacements(),
+                    shape=self.grid.shape,
+                    model_source=self._model_snapshot,
+                    inverse="baked",
+                )
+        if inverse is not None:
+            if inverse not in INVERSE_MODES:
+                raise ChainMailError(
+                    f"inverse must be one of {list(INVERSE_MODES)}; got {inverse!r}"
+                )
+            self._warp.inverse = inverse
+        if iterations is not None:
+            ok = isinstance(iterations, int | np.integer) and not isinstance(iterations, bool)
+            if not ok or not 1 <= int(iterations) <= MAX_ITERATIONS:
+                raise ChainMailError(
+                    f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}"
+                )
+            self._warp.iterations = int(iterations)
+        return self._warp
+
+    def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:
+        model = {"type": MODEL_TYPE, **self.to_dict()}
+        if self.backend != "gpu":
+            return model, None
+        return model, self._rendered_field()
+
+    def _rendered_field(self) -> np.ndarray:
+        """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
+        tex = self._solver.displacement_texture()
+        nx, ny, nz = self.grid.shape
+        try:
+            if tuple(tex.size) != (nx, ny, nz) or tex.components != 4 or tex.dtype != "f2":
+                raise TypeError("not an RGBA16F texture of the grid shape")
+            raw = np.frombuffer(tex.read(), dtype=np.float16).reshape(nz, ny, nx, 4)
+        except (AttributeError, TypeError, ValueError):
+            return self.displacements()
+        return raw.transpose(2, 1, 0, 3)[..., :3].astype(np.float64)
+
+    def _update_warp(self) -> None:
+        if self._warp is not None and self.backend == "cpu":
+            self._warp.update(self.displacements())
+
+    # ------------------------------------------------------------------ GPU backend
+    def _make_gpu_solver(self) -> Any:
+        try:
+            from deform.chainmail_gpu import GpuChainMailSolver
+        except ImportError as exc:
+            raise ChainMailError(
+                'backend="gpu" needs deform.chainmail_gpu.GpuChainMailSolver, which could'
+                f' not be imported ({exc}); use backend="cpu"'
+            ) from exc
+        return GpuChainMailSolver(self._model, self._ctx)
+
+    def _rebuild_gpu(self) -> None:
+        """Make a new GPU solver for the changed model, keeping the positions."""
+        x = self.positions()
+        fixed = self._model.fixed
+        x[fixed] = self._model.rest[fixed]
+        self._solver.release()
+        self._solver = self._make_gpu_solver()
+        self._solver.set_positions(x)
+        self._solver.enforce(
+            self.held, self._targets().reshape((*self.grid.shape, 3)), self.max_passes
+        )
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self, include_positions: bool = False) -> dict[str, Any]:
+        """JSON-serialisable description of the model (plain lists and numbers).
+
+        Parameters
+        ----------
+        include_positions
+            Also write ``"positions"`` (a GPU read-back) so :meth:`from_dict` resumes
+            from this state.
+
+        Returns
+        -------
+        dict
+            ``grid`` (:meth:`ElementGrid.to_dict`), ``variant``, ``relax_steps``,
+            ``limits`` (``min_dist``, ``max_dist``, ``max_shear``: each a number when
+            uniform, 3 numbers when uniform per axis, else an (nx, ny, nz, 3) nested
+            list), ``cuts`` (removed links ``[i, j, k, axis]``, :attr:`cuts`), ``held``
+            (``{"index": [i, j, k], "offset": [dx, dy, dz]}``: where held elements are
+            held, mm from rest) and, with ``include_positions``, ``positions``.
+            The backend is not part of the model.
+        """
+        m = self._model
+        held = [
+            {"index": [int(v) for v in np.unravel_index(e, self.grid.shape)],
+             "offset": self._offsets[e].tolist()}
+            for e in np.flatnonzero(self._held)
+        ]  # fmt: skip
+        d: dict[str, Any] = {
+            "grid": self.grid.to_dict(),
+            "variant": self._variant,
+            "relax_steps": self._relax_steps,
+            "limits": {
+                name: _compact(getattr(m, name)) for name in ("min_dist", "max_dist", "max_shear")
+            },
+            "cuts": self.cuts.tolist(),
+            "held": held,
+        }
+        if include_positions:
+            d["positions"] = self.positions().tolist()
+        return d
+
+    @classmethod
+    def from_dict(
+        cls,
+        d: Mapping[str, Any],
+        backend: str = "cpu",
+        ctx: Any = None,
+        positions: Any = None,
+    ) -> ChainMail:
+        """Rebuild a model from :meth:`to_dict`'s form.
+
+        Parameters
+        ----------
+        d
+            Mapping with ``grid`` (required) and optionally ``variant``,
+            ``relax_steps``, ``limits`` (default: from the stiffness), ``cuts``,
+            ``held`` and ``positions``. A ``"type"`` key (``"chainmail"``) is accepted.
+        backend, ctx
+            Solver backend and, for ``"gpu"``, its moderngl context.
+        positions
+            (nx, ny, nz, 3) positions (mm) to resume from; overrides
+            ``d["positions"]``. With positions the held elements are held where the
+            entry says (:meth:`set_state`); without, the elements start at rest and
+            the held elements are dragged there again, one :meth:`move` each.
+
+        Raises
+        ------
+        ChainMailError
+            On a missing or malformed key; the message names the key and the fix.
+        """
+        if not isinstance(d, Mapping):
+            raise ChainMailError(f"a chainmail entry must be an object; got {d!r:.80}")
+        kind = d.get("type", MODEL_TYPE)
+        if kind != MODEL_TYPE:
+            raise ChainMailError(f"a chainmail entry has 'type' {kind!r}; expected {MODEL_TYPE!r}")
+        grid = _grid_from(d)
+        kwargs: dict[str, Any] = {}
+        for key in ("variant", "relax_steps"):
+            if key in d:
+                kwargs[key] = d[key]
+        limits = d.get("limits", {})
+        if not isinstance(limits, Mapping) or set(limits) - {"min_dist", "max_dist", "max_shear"}:
+            raise ChainMailError(
+                "chainmail 'limits' must be an object with keys among 'min_dist',"
+                f" 'max_dist', 'max_shear'; got {limits!r:.80}"
+            )
+        cuts = d.get("cuts", [])
+        held = _parse_held(d.get("held", []), grid)
+        if positions is None:
+            positions = d.get("positions")
+        cm = cls(grid, backend=backend, ctx=ctx, **kwargs)
+        try:
+            if limits:
+                cm.set_limits(**{k: v for k, v in limits.items()})
+            cm._cut_links(cuts)
+            if positions is not None:
+                for e, off in held:
+                    cm._held[e] = True
+                    cm._offsets[e] = off
+                cm._pinned = cm._model.fixed.reshape(-1) | cm._held
+                cm.set_state(positions)
+            else:
+                for e, off in held:
+                    cm.move(np.unravel_index(e, grid.shape), off)
+        except BaseException:
+            cm.close()
+            raise
+        return cm
+
+    def _cut_links(self, cuts: Any) -> None:
+        form = "chainmail 'cuts' must be a list of removed links [i, j, k, axis]"
+        try:
+            c = np.asarray(cuts, dtype=np.float64).reshape(-1, 4) if len(cuts) else None
+        except (TypeError, ValueError) as exc:
+            raise ChainMailError(f"{form}; got {cuts!r:.80}") from exc
+        if c is None:
+            return
+        if np.any(c != np.round(c)) or np.any(c[:, 3] < 0) or np.any(c[:, 3] > 2):
+            raise ChainMailError(f"{form} (integers, axis 0..2); got {cuts!r:.80}")
+        c = c.astype(np.int64)
+        a = self.grid.indices(c[:, :3])
+        b = a.copy()
+        b[np.arange(len(b)), c[:, 3]] += 1
+        if np.any(b >= np.asarray(self.grid.shape)):
+            raise ChainMailError(f"{form}: a link leaves the grid of shape {self.grid.shape}")
+        self.cut_pairs(np.stack([a, b], axis=1))
+
+    @classmethod
+    def from_warp(cls, warp: Any, backend: str = "cpu", ctx: Any = None) -> ChainMail:
+        """Resume the ChainMail model behind a warp loaded from scene JSON.
+
+        Parameters
+        ----------
+        warp
+            A :class:`deform.offset_field.OffsetFieldWarp` whose ``model_state`` is a
+            ``"chainmail"`` model.
+        backend, ctx
+            As for :meth:`from_dict`.
+
+        Returns
+        -------
+        ChainMail
+            The model with positions ``rest + displacements`` (the saved field); its
+            :meth:`warp` is a new warp, to be put in the scene in place of ``warp``.
+        """
+        state = getattr(warp, "model_state", None)
+        if not isinstance(state, Mapping) or state.get("type") != MODEL_TYPE:
+            raise ChainMailError(
+                "this warp carries no ChainMail model (its model_state is not"
+                f" {{'type': {MODEL_TYPE!r}, ...}}); only warps saved from a ChainMail"
+                " can be resumed"
+            )
+        u = np.asarray(warp.displacements, dtype=np.float64)
+        grid = _grid_from(state)
+        if u.shape != (*grid.shape, 3):
+            raise ChainMailError(
+                f"the warp's field has shape {u.shape} but its model's grid is"
+                f" {grid.shape}; the scene entry is inconsistent"
+            )
+        return cls.from_dict(state, backend=backend, ctx=ctx, positions=grid.rest_positions + u)
+
+    def close(self) -> None:
+        """Free the solver's and the warp's GPU resources; idempotent."""
+        if self._warp is not None:
+            self._warp.release()
+        if self._solver is not None:
+            self._solver.release()
+
+    def __repr__(self) -> str:
+        return (
+            f"ChainMail(shape={self.grid.shape}, variant={self._variant!r},"
+            f" backend={self.backend!r}, held={int(self._held.sum())},"
+            f" cuts={len(self.cuts)})"
+        )
+
+
+# ---------------------------------------------------------------------- helpers
+def _variant(value: Any) -> str:
+    if value not in VARIANTS:
+        raise ChainMailError(f"unknown variant {value!r}; valid variants: {VARIANTS}")
+    return str(value)
+
+
+def _count(value: Any, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+        raise ChainMailError(f"{what} must be an integer >= 0; got {value!r}")
+    return int(value)
+
+
+def _number(value: Any, what: str, *, lo: float, hi: float) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ChainMailError(f"{what} must be a number; got {value!r:.40}") from exc
+    if not math.isfinite(x) or not lo <= x <= hi:
+        raise ChainMailError(f"{what} must be in [{lo:g}, {hi:g}]; got {x!r}")
+    return x
+
+
+def _vec3(value: Any, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ChainMailError(f"{what} must be 3 numbers (mm); got {value!r:.80}") from exc
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ChainMailError(f"{what} must be 3 finite numbers (mm); got {value!r:.80}")
+    return a
+
+
+def _compact(a: np.ndarray) -> Any:
+    """A limit array as a number, 3 numbers (per axis) or a nested list."""
+    flat = a.reshape(-1, 3)
+    if np.all(flat == flat[0]):
+        if np.all(flat[0] == flat[0, 0]):
+            return float(flat[0, 0])
+        return flat[0].tolist()
+    return a.tolist()
+
+
+def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
+    if "grid" not in d:
+        raise ChainMailError(
+            "a chainmail entry needs the key 'grid' (an ElementGrid.to_dict() object"
+            " with 'lo', 'hi' and 'shape')"
+        )
+    try:
+        return ElementGrid.from_dict(d["grid"])
+    except ElementGridError as exc:
+        raise ChainMailError(f"chainmail 'grid': {exc}") from exc
+
+
+def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[int, np.ndarray]]:
+    """Validate a ``"held"`` list; returns (flat index, offset) pairs."""
+    form = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
+    if not isinstance(held, list | tuple):
+        raise ChainMailError(f"chainmail 'held' must be a list; {form}; got {held!r:.80}")
+    out = []
+    for n, entry in enumerate(held):
+        where = f"chainmail 'held'[{n}]"
+        if not isinstance(entry, Mapping) or not {"index", "offset"} <= set(entry):
+            raise ChainMailError(f"{where}: {form}; got {entry!r:.80}")
+        raw = entry["index"]
+        ok = (
+            isinstance(raw, list | tuple)
+            and len(raw) == 3
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
+        )
+        if not ok:
+            raise ChainMailError(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+        try:
+            idx = tuple(int(v) for v in grid.indices(raw)[0])
+        except ElementGridError as exc:
+            raise ChainMailError(f"{where}: {exc}") from exc
+        if grid.fixed[idx]:
+            raise ChainMailError(
+                f"{where}: element {idx} is fixed and cannot be held; remove it from"
+                " 'held' or free it in 'grid'"
+            )
+        off = _vec3(entry["offset"], f"{where} 'offset'")
+        out.append((int(np.ravel_multi_index(idx, grid.shape)), off))
+    return out
