@@ -1,0 +1,823 @@
+"""GPU solver of the 3D ChainMail model: fragment shaders ping-ponging between framebuffers.
+
+About this technique (Gibson 1997; Knoche 2008, 3.5.3.2)
+--------------------------------------------------------
+:class:`GpuChainMailSolver` enforces the link constraints of
+:class:`~deform.chainmail_model.ChainMailModel` on a ``moderngl`` context as the
+thesis does: every *pass* is one draw, one fragment per element, that reads the
+previous positions with ``imageLoad`` and writes the new ones into the other
+framebuffer of a ping-pong pair; passes repeat until none changes anything. It writes
+the same offset texture as :class:`deform.massspring_gpu.GpuSpringSolver`. The thesis
+drew every pass over the whole grid, which loses ChainMail's locality (a drag that
+moves 300 elements costs a full-grid pass per step of its wave); here a pass covers
+only the box that can still change, so the cost follows the affected region (see
+"Locality" and the measurements below).
+
+The iteration
+-------------
+The constraints separate by coordinate: for each coordinate ``c`` a link ``a -> b``
+is a *difference constraint* ``x_b,c - x_a,c in [l, h]`` (``[min, max]`` along the
+link's axis, ``[-shear, shear]`` across). Given its 6 neighbours, an element's
+feasible values are therefore an interval per coordinate, ``[lo, hi]`` = the
+intersection over its present links of ``[x_n + l, x_n + h]`` (neighbour ``n`` before
+it) or ``[x_n - h, x_n - l]`` (after it); absent links (cuts, faces) are stored as
+``(-1e30, 1e30)`` limits, so the shader has no branch per link. A plain Jacobi
+"clamp into [lo, hi]" can oscillate when intervals conflict (e.g. two held elements
+pulled apart), so a pass clamps in one direction only, per coordinate:
+
+* **lowering phase**: ``x > hi -> hi`` (every constraint read as an upper bound on its
+  free end);
+* **raising phase**: ``x < lo -> lo`` (every constraint read as a lower bound).
+
+Held and fixed elements never move. Each coordinate runs the lowering phase until a
+pass changes nothing, then the raising phase until a pass changes nothing (the three
+coordinates step their phases independently within the same passes).
+
+*Termination and correctness.* Each phase is a monotone Bellman-Ford relaxation. The
+lowering phase converges to ``y``, the greatest vector below the start that meets
+every constraint as an upper bound on its free end: values only decrease, bounded
+below by any solution, and with no negative cycle (any feasible configuration) it
+ends after at most as many passes as elements -- in practice after the hop distance
+the wave travels, about ``nx + ny + nz`` at most for uniform limits. The raising phase
+then converges to the *least* vector above ``y`` that meets every constraint as a
+lower bound on its free end. That vector satisfies all constraints if some solution
+``z >= y`` exists, and one does: the greatest solution of the whole system (the
+shortest-path solution from the held and fixed elements) is also the greatest of the
+constraints that ``y`` meets, so it is ``>= y``. Hence for feasible configurations both
+phases terminate with every link satisfied. Both results are unique (independent of
+the update order), which the tests' numpy oracle checks.
+
+When the previous enforce converged, the rest of the grid satisfies every link, so a
+coordinate in which the held elements (held before too, so their positions are known
+without a readback) only moved up needs only the raising phase, only down only the
+lowering phase, neither if they did not move; newly held elements, an upload
+(:meth:`~GpuChainMailSolver.set_positions`) or an unconverged enforce run both phases.
+This is ChainMail's behaviour: a push moves each element the least needed, away from
+the disturbance. In an *infeasible* configuration (a drag beyond what the fixed
+elements allow) the phases still end (or stop at ``max_passes``), held and fixed
+elements in place. With one phase, the free elements follow the held ones and the
+violation is left at the links of fixed elements; where both phases run, the raising
+phase has the last word (an element pushed down out of reach of a fixed one is
+pulled back up, leaving the violation at the held element instead).
+
+*Float32.* Moves smaller than ``max(1e-6 mm, 2^-19 x the largest coordinate)`` (8 to
+16 ulp of the coordinates) count as round-off: without this threshold, zero-weight
+cycles (rigid material: ``min = max``) can creep by an ulp per round trip and never
+settle. Links are satisfied to about that threshold (the tests
+ask for 1e-4 mm; measured 4e-7 mm at 32³ and 1.4e-5 mm at 128³ with 1 mm spacing).
+Coordinates are stored relative to the centre of the rest box, halving their
+magnitude.
+
+Layout
+------
+One element per texel of 2D RGBA32F textures: z-slice ``k`` is the ``nx x ny`` tile at
+column ``k % tiles_x``, row ``k // tiles_x`` (``massspring_atlas.glsl`` with blocks of
+one element; one row of tiles when the atlas fits one 64 x 64 llvmpipe raster tile,
+so that both threads get work). Textures: the position ``(x - origin, w)``, two of
+them (ping-pong; ``w`` 0 free, 1 fixed, 2 held), the targets ``(target - origin, 1
+if held)`` (read by the pin pass only), the rest positions (for the displacement
+texture) and the link limits, five per element: ``(min, max, shear)`` of its 3
+forward and 3 backward links packed in 18 floats (each link mean of its two
+elements' limits, :meth:`~deform.chainmail_model.ChainMailModel.link_limits`). A
+constraint pass loads 12 texels per element (own position, 6 neighbours, 5 limits).
+Grid and atlas sizes are compile-time constants (``chainmail_config.glsl``, generated
+per solver).
+
+:meth:`~GpuChainMailSolver.enforce` first uploads the targets of the bounding box of
+the held elements (old and new: released elements become free) as per-slice
+sub-rectangles, and runs the *pin pass* over that box twice, once into each buffer:
+held elements go to their targets, so both buffers agree again.
+
+Convergence detection
+---------------------
+Every fragment that moves its element does ``atomicOr`` of one bit per changed
+coordinate and ``atomicMin``/``atomicMax`` of its indices into a 64-byte SSBO
+(nothing for unchanged elements); after the draw a ``glMemoryBarrier`` and a 64-byte
+read give the CPU the changed coordinates and the bounding box of the changes: that
+is the only readback during ``enforce``. On llvmpipe a barrier is a ``glFinish``, so
+this is a sync per pass, but a ping-pong pass already flushes a scene (the next pass
+reads what this one rendered): measured per pass at 64³, a 1-element box costs
+~85 us with or without the barrier and read (the scene flush dominates), a 7³ box
+0.12 ms against 0.09 ms unsynchronised, a 31³ box 0.79 against 0.66 ms, the full
+grid 9.7 against 8.9 ms (noisy, 2 shared cores). A flag read every N passes would
+save little here and cannot steer the box. Changes are counted as such only above the
+float32 threshold above, so "no bit set" is an exact fixed point.
+
+Locality
+--------
+An element can change in a pass only if a linked neighbour changed in the previous
+pass (with its neighbours unchanged, its interval and hence its clamp are the same as
+last time), or if its coordinate just entered a new phase. So with ``local`` (the
+default) pass ``k + 1`` is drawn over the bounding box of pass ``k``'s changes grown
+by one element on each face and clipped to the grid (it grows by one per pass behind
+a spreading wave and stops growing, or shrinks, on faces where nothing changed); the
+first pass covers the held elements' box grown by one (or the whole grid after
+:meth:`~GpuChainMailSolver.set_positions` or an unconverged enforce), and a
+coordinate entering its raising phase adds the union of everything covered so far.
+An infeasible drag leaves violated links behind, which a later enforce must revisit
+although they are away from its held elements (the full passes would): so an element
+still violating a link in the direction its coordinate's last phase does not move
+(or in either, for a coordinate done) records its indices in a second box of the
+same record, and the next enforce's first box includes the union of those boxes.
+The box is drawn as one quad per z-slice (instanced, no vertex buffer; the vertex
+shader places the quads from the box uniforms). Ping-pong stays consistent although
+a pass writes only its box: every element changed by a pass lies in the next pass's
+box, which copies it into the other buffer, so outside the box both buffers always
+agree. ``local=False`` draws every pass over the whole grid (the thesis' scheme,
+same passes and result) for comparison.
+
+Measured (llvmpipe, Mesa 22.3, 2 shared cores; :func:`benchmark`): an n³ grid, 1 mm
+spacing, 10 % stretch slack and 0.1 mm shear, bottom face fixed, the centre of the top
+face held. *frame*: dragged by (0.05, 0, -0.02) mm per enforce (median of 10, from
+the last state); *jump*: moved by (2, 0, -1) mm in one enforce (median of 3). Times
+per enforce (pin pass, constraint passes, displacement texture), medians of two runs:
+
+=====  ========  ======  =====================  ==================  ===========
+grid   scenario  passes  box: elements / time   full: time          box speed-up
+=====  ========  ======  =====================  ==================  ===========
+32³    frame     3       289 / 0.5-1.0 ms       3.5-4.2 ms          ~5x
+32³    jump      20      165 k / 6.5-7.3 ms     12-18 ms            ~2x
+64³    frame     3       289 / 0.6-0.7 ms       22-57 ms            ~50x
+64³    jump      20      200 k / 8.8-10 ms      173-179 ms          ~18x
+128³   frame     3       289 / 0.9 ms           127-132 ms          ~145x
+128³   jump      20      200 k / 10.4-10.6 ms   919-940 ms          ~90x
+=====  ========  ======  =====================  ==================  ===========
+
+(the full variant shades 3 or 20 x n³ elements). The box variant's cost follows the
+disturbance, not the grid: the same at 64³ and 128³. Its floor is ~0.1 ms per pass
+(llvmpipe's scene flush of a ping-pong draw); a full-grid pass costs 22-30 ns per
+element (64³: ~8 ms; 128³: ~46 ms), about twice the mass-spring step's cost per
+element.
+
+What was tried: one element per fragment with clamped neighbour texels (kept; the x
+and y neighbours as the adjacent texels of the tile instead of recomputing the atlas
+address: no measurable change, kept as simpler); atomics only in changed fragments
+(an ``atomicMax`` in every fragment of a 1024² draw costs ~6x the draw); constant
+limits instead of the 5 limit loads (up to ~1.5x faster full passes in a noisy test;
+not kept: it would need a second shader path for uniform materials); skipping the
+phase not needed by the drag's direction (kept: 4 -> 3 passes per frame, 21 -> 20 per
+jump; "same targets again" -> 0 passes). Not tried: blocks of several elements per
+fragment as in :mod:`deform.massspring_gpu` (would cut the per-element cost of large
+passes, not the per-pass floor that dominates local drags); a tighter region than a
+bounding box (a jump's box holds the settled interior of its wave); in-place
+(Gauss-Seidel) updates with ``imageStore``, which the monotone phases would allow
+but which is not the ping-pong technique of the thesis.
+
+The solver draws on the context it is given and does not make it current. GL state it
+changes (enable flags, bound framebuffer) is restored after each call; image units 0
+to 5 and SSBO binding 0 are left bound to its objects.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import moderngl
+import numpy as np
+
+import shaders
+from deform.chainmail_model import ChainMailModel
+from deform.massspring_gpu import atlas_layout
+
+#: Limit of an absent link (cut, or past a face): its interval is (-BIG, BIG).
+_BIG = 1e30
+#: llvmpipe's raster tile (pixels): each is shaded by one thread
+_RASTER_TILE = 64
+#: Work-group size of the displacement compute shader.
+_GROUP = (8, 8, 1)
+#: GL_RGBA16F, the image format of the displacement texture.
+_GL_RGBA16F = 0x881A
+#: GL_SHADER_STORAGE_BARRIER_BIT
+_SSBO_BARRIER = 0x2000
+#: Moves below twice this fraction of the coordinates' magnitude count as float32
+#: round-off (8-16 ulp): see the module doc, "Float32".
+_REL_TOL = 2.0**-20
+#: ... and never below this (mm).
+_ABS_TOL = 1e-6
+#: The pass record's reset value: empty box of changes (lo > hi), no coordinate
+#: changed, empty box of violations.
+_RESET = np.array(([2**30] * 3 + [-1] * 3 + [0, 0]) * 2, np.int32).tobytes()
+
+Box = tuple[tuple[int, int, int], tuple[int, int, int]]
+
+
+def _union(a: Box | None, b: Box | None) -> Box | None:
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return (
+        tuple(min(p, q) for p, q in zip(a[0], b[0], strict=True)),  # type: ignore[return-value]
+        tuple(max(p, q) for p, q in zip(a[1], b[1], strict=True)),
+    )
+
+
+def _grow(box: Box | None, shape: tuple[int, int, int]) -> Box | None:
+    """The box grown by one element on every face, clipped to the grid."""
+    if box is None:
+        return None
+    lo = tuple(max(v - 1, 0) for v in box[0])
+    hi = tuple(min(v + 1, n) for v, n in zip(box[1], shape, strict=True))
+    return (lo, hi)  # type: ignore[return-value]
+
+
+def _volume(box: Box | None) -> int:
+    return 0 if box is None else math.prod(h - lo for lo, h in zip(*box, strict=True))
+
+
+class GpuChainMailSolver:
+    """ChainMail constraint enforcement on the GPU (see the module doc).
+
+    Parameters
+    ----------
+    model
+        Grid, limits, links and fixed elements; uploaded once, at construction.
+    ctx
+        A ``moderngl.Context`` (OpenGL 4.3+); the caller owns it and makes it current.
+    local
+        Restrict each pass to the box that can still change (default); False runs every
+        pass over the whole grid (the thesis' scheme, kept for comparison). Both give the
+        same result; the attribute can be changed between calls.
+
+    Raises
+    ------
+    ValueError
+        If ``ctx`` is None or older than OpenGL 4.3, or the grid does not fit the
+        context's textures.
+    """
+
+    def __init__(self, model: ChainMailModel, ctx: Any, *, local: bool = True) -> None:
+        if ctx is None:
+            raise ValueError(
+                "GpuChainMailSolver needs a moderngl.Context (OpenGL 4.3+); got None"
+                " (use the CPU ChainMail of deform.chainmail without a GL context)"
+            )
+        if getattr(ctx, "version_code", 0) < 430:
+            raise ValueError(
+                "GpuChainMailSolver needs an OpenGL 4.3+ context (compute shaders, SSBOs);"
+                f" got version {getattr(ctx, 'version_code', None)}"
+            )
+        self.model = model
+        self.ctx = ctx
+        #: restrict passes to the box that can still change (see the module doc)
+        self.local = bool(local)
+        self._released = False
+        self._objects: list[Any] = []
+        shape = model.shape
+        if len(shape) != 3 or min(shape) < 1:
+            raise ValueError(f"model.rest must have shape (nx, ny, nz, 3); got {model.rest.shape}")
+        #: elements per axis (nx, ny, nz)
+        self.shape: tuple[int, int, int] = shape
+        nx, ny, nz = shape
+        info = ctx.info
+        max_2d = int(info.get("GL_MAX_TEXTURE_SIZE", 16384))
+        max_3d = int(info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 2048))
+        if nz > max_3d or max(nx, ny) > max_2d:
+            raise ValueError(f"a grid of {nx}x{ny}x{nz} elements exceeds the context's textures")
+        tx, ty = atlas_layout(shape, max_2d)
+        if tx * nx <= _RASTER_TILE and ty * ny <= _RASTER_TILE and nz * nx <= max_2d:
+            tx, ty = nz, 1  # one row: at least two raster tiles, so two threads
+        #: tiles (z-slices) per row and per column of the atlas
+        self.tiles: tuple[int, int] = (tx, ty)
+        #: atlas size in texels (width, height)
+        self.atlas_size: tuple[int, int] = (tx * nx, ty * ny)
+        #: world origin of the stored coordinates (the rest box's centre, float64)
+        rest = np.asarray(model.rest, np.float64)
+        flat = rest.reshape(-1, 3)
+        self._origin = 0.5 * (flat.min(axis=0) + flat.max(axis=0))
+        self._magnitude = float(np.abs(flat - self._origin).max(initial=0.0))
+        self._fixed = np.asarray(model.fixed, bool).copy()
+        self._held_box: Box | None = None  # bounding box of the held elements
+        self._held_flat = np.zeros(0, np.int64)  # their flat indices (sorted)
+        self._held_rel = np.zeros((0, 3), np.float32)  # and targets - origin, as stored
+        self._dirty = True  # the state may violate constraints anywhere: check all
+        self._violated: Box | None = None  # else it may only here (infeasible drags)
+        #: bumped whenever the displacement texture changes (set_positions, enforce)
+        self.revision = 0
+        #: passes of the last :meth:`enforce`
+        self.last_passes = 0
+        #: whether the last :meth:`enforce` ran until nothing changed
+        self.converged = True
+        #: elements shaded by the constraint passes of the last :meth:`enforce`
+        self.last_elements = 0
+        try:
+            self._create(model)
+        except Exception:
+            self.release()
+            raise
+
+    # ------------------------------------------------------------------ setup
+    def _create(self, model: ChainMailModel) -> None:
+        ctx = self.ctx
+        nx, ny, nz = self.shape
+        w, h = self.atlas_size
+        config = (
+            f"#define NX {nx}\n#define NY {ny}\n#define NZ {nz}\n"
+            f"#define BX {nx}\n#define BY {ny}\n#define BZ {nz}\n#define TX {self.tiles[0]}\n"
+            f"#define CM_ATLAS_W {w}.0\n#define CM_ATLAS_H {h}.0\n"
+        )
+        vert = shaders.source("chainmail_box.vert.glsl", {"chainmail_config.glsl": config})
+        self._prog = self._keep(
+            ctx.program(
+                vertex_shader=vert,
+                fragment_shader=shaders.source(
+                    "chainmail_pass.frag.glsl", {"chainmail_config.glsl": config}
+                ),
+            )
+        )
+        self._pin_prog = self._keep(
+            ctx.program(
+                vertex_shader=vert,
+                fragment_shader=shaders.source(
+                    "chainmail_pass.frag.glsl",
+                    {"chainmail_config.glsl": config + "#define CM_PIN_PASS\n"},
+                ),
+            )
+        )
+        self._comp = self._keep(
+            ctx.compute_shader(
+                shaders.source(
+                    "chainmail_displacement.comp.glsl", {"chainmail_config.glsl": config}
+                )
+            )
+        )
+        self._vao = self._keep(ctx.vertex_array(self._prog, []))
+        self._pin_vao = self._keep(ctx.vertex_array(self._pin_prog, []))
+        self._pos = [self._texture() for _ in range(2)]
+        self._fbo = [self._keep(ctx.framebuffer(color_attachments=[t])) for t in self._pos]
+        self._cur = 0
+        self._scope = self._keep(ctx.scope(self._fbo[0], enable_only=moderngl.NOTHING))
+        self._links = [self._texture(a) for a in self._to_atlas(_link_data(model))]
+        self._target = self._texture()
+        rest4 = np.zeros((*self.shape, 4), np.float32)
+        rest4[..., :3] = np.asarray(model.rest, np.float64) - self._origin
+        self._rest = self._texture(self._to_atlas(rest4)[0])
+        self._changes = self._keep(ctx.buffer(_RESET))
+        # z-slices as layers of a 2D array, as GpuSpringSolver's (the offset-field warp
+        # samples it with two bilinear fetches)
+        self._disp = self._keep(ctx.texture_array(self.shape, 4, dtype="f2"))
+        self._disp.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._disp.repeat_x = self._disp.repeat_y = False
+        self.set_positions(np.asarray(model.rest, np.float64))
+
+    def _keep(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def _texture(self, data: np.ndarray | None = None) -> Any:
+        w, h = self.atlas_size
+        if data is None:
+            data = np.zeros((h, w, 4), np.float32)
+        tex = self._keep(self.ctx.texture((w, h), 4, data.tobytes(), dtype="f4"))
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        tex.repeat_x = tex.repeat_y = False
+        return tex
+
+    def _to_atlas(self, grid: np.ndarray) -> list[np.ndarray]:
+        """(nx, ny, nz, 4c) -> c (height, width, 4) float32 atlases (z-slice tiles)."""
+        nx, ny, nz = self.shape
+        tx, ty = self.tiles
+        out = []
+        for c in range(grid.shape[3] // 4):
+            padded = np.zeros((nx, ny, tx * ty, 4), np.float32)
+            padded[:, :, :nz] = grid[..., 4 * c : 4 * c + 4]
+            tiles = padded.reshape(nx, ny, ty, tx, 4)  # k = row * tx + column
+            out.append(
+                np.ascontiguousarray(tiles.transpose(2, 1, 3, 0, 4)).reshape(ty * ny, tx * nx, 4)
+            )
+        return out
+
+    def _from_atlas(self, atlas: np.ndarray) -> np.ndarray:
+        nx, ny, nz = self.shape
+        tx, ty = self.tiles
+        tiles = atlas.reshape(ty, ny, tx, nx, 4).transpose(3, 1, 0, 2, 4)
+        return tiles.reshape(nx, ny, ty * tx, 4)[:, :, :nz]
+
+    def _check_alive(self) -> None:
+        if self._released:
+            raise RuntimeError("GpuChainMailSolver used after release()")
+
+    def _check_grid(self, name: str, array: Any, channels: int | None) -> np.ndarray:
+        a = np.asarray(array)
+        want = self.shape if channels is None else (*self.shape, channels)
+        if a.shape != want:
+            raise ValueError(f"{name} must have shape {want}; got {a.shape}")
+        if channels is not None:
+            a = a.astype(np.float64, copy=False)
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} must be finite")
+        return a
+
+    # ------------------------------------------------------------------ public API
+    def set_positions(self, x: np.ndarray) -> None:
+        """Upload element positions (and update the displacement texture).
+
+        Clears the held elements (the next :meth:`enforce` holds its own); the next
+        :meth:`enforce` checks every link, since ``x`` may violate any.
+
+        Parameters
+        ----------
+        x
+            ``(nx, ny, nz, 3)`` positions, world mm.
+
+        Raises
+        ------
+        ValueError
+            On a wrong shape or non-finite values.
+        """
+        self._check_alive()
+        x = self._check_grid("positions", x, 3)
+        pos4 = np.zeros((*self.shape, 4), np.float32)
+        rel = x - self._origin
+        pos4[..., :3] = rel
+        pos4[..., 3] = np.where(self._fixed, 1.0, 0.0)
+        data = self._to_atlas(pos4)[0].tobytes()
+        for tex in self._pos:
+            tex.write(data)
+        self._held_box = None
+        self._held_flat = np.zeros(0, np.int64)
+        self._held_rel = np.zeros((0, 3), np.float32)
+        self._magnitude = max(self._magnitude, float(np.abs(rel).max(initial=0.0)))
+        self._dirty = True
+        self._update_displacement(((0, 0, 0), self.shape))
+
+    def enforce(
+        self, held_mask: np.ndarray, held_targets: np.ndarray, max_passes: int | None = None
+    ) -> int:
+        """Hold elements at targets and move the others until every link is satisfied.
+
+        Held elements are placed at their targets (where not fixed: fixed elements never
+        move) and kept there; then constraint passes run until a pass changes nothing
+        in either phase of every coordinate (see the module doc), or ``max_passes``.
+        Nothing is read back but the 64-byte record of each pass.
+
+        Parameters
+        ----------
+        held_mask
+            ``(nx, ny, nz)`` bool: the held elements.
+        held_targets
+            ``(nx, ny, nz, 3)`` world mm; only read where held.
+        max_passes
+            Most constraint passes; default ``4 * (nx + ny + nz)`` (each of the two
+            monotone phases of a coordinate needs at most about ``nx + ny + nz``).
+
+        Returns
+        -------
+        int
+            Constraint passes drawn (0 when nothing can have changed). :attr:`converged`
+            says whether they ended because nothing changed any more.
+
+        Raises
+        ------
+        ValueError
+            On a wrong shape, non-finite targets or a negative ``max_passes``.
+        """
+        self._check_alive()
+        mask = np.asarray(held_mask)
+        if mask.shape != self.shape:
+            raise ValueError(f"held_mask must have shape {self.shape}; got {mask.shape}")
+        targets = np.asarray(held_targets)
+        if targets.shape != (*self.shape, 3):
+            raise ValueError(
+                f"held_targets must have shape {(*self.shape, 3)}; got {targets.shape}"
+            )
+        if max_passes is None:
+            max_passes = 4 * sum(self.shape)
+        max_passes = int(max_passes)
+        if max_passes < 0:
+            raise ValueError(f"max_passes must be >= 0; got {max_passes}")
+        # O(held) from here on, but for one scan of the mask (a drag holds few elements)
+        flat = np.flatnonzero(mask)
+        flat = flat[~self._fixed.reshape(-1)[flat]]
+        idx = np.unravel_index(flat, self.shape)
+        rel = targets[idx].astype(np.float64) - self._origin
+        if not np.all(np.isfinite(rel)):
+            raise ValueError("held_targets must be finite where held")
+        held_box: Box | None = None
+        if rel.size:
+            held_box = (
+                tuple(int(i.min()) for i in idx),  # type: ignore[assignment]
+                tuple(int(i.max()) + 1 for i in idx),
+            )
+            self._magnitude = max(self._magnitude, float(np.abs(rel).max()))
+        # 8-16 ulp of the largest coordinate expected (module doc: Float32)
+        tol = max(_ABS_TOL, 2.0 * self._magnitude * _REL_TOL)
+        self._prog["u_tol"].value = tol
+
+        bound = self.ctx.fbo
+        with self._scope:
+            pin_box = _union(held_box, self._held_box)
+            if pin_box is not None:
+                self._pin(pin_box, idx, rel)
+            self._held_box = held_box
+            rel32 = rel.astype(np.float32)
+            if self._dirty:
+                start: Box | None = ((0, 0, 0), self.shape)
+                phase, then = [0, 0, 0], [1, 1, 1]
+            else:
+                start = _union(_grow(held_box, self.shape), self._violated)
+                phase, then = self._start_phases(flat, rel32)
+            self._held_flat, self._held_rel = flat, rel32
+            solved = self._solve(start, phase, then, max_passes)
+            passes, elements, converged, touched, violated = solved
+        self.ctx.fbo = bound  # moderngl's record of the bound framebuffer, as GL has it
+        self.last_passes, self.last_elements, self.converged = passes, elements, converged
+        self._dirty = not converged
+        self._violated = violated
+        self._update_displacement(_union(pin_box, touched))
+        return passes
+
+    def _pin(self, box: Box, idx: tuple[np.ndarray, ...], rel: np.ndarray) -> None:
+        """Upload the targets of ``box`` and run the pin pass into both buffers.
+
+        ``idx``: indices of the held elements, ``rel``: their targets - origin.
+        """
+        (x0, y0, z0), (x1, y1, z1) = box
+        nx, ny, _ = self.shape
+        tx = self.tiles[0]
+        sub = np.zeros((x1 - x0, y1 - y0, z1 - z0, 4), np.float32)
+        local = (idx[0] - x0, idx[1] - y0, idx[2] - z0)
+        sub[local] = np.concatenate([rel, np.ones((len(rel), 1))], axis=1)
+        for k in range(z0, z1):
+            data = np.ascontiguousarray(sub[:, :, k - z0].transpose(1, 0, 2))
+            col, row = k % tx, k // tx
+            viewport = (col * nx + x0, row * ny + y0, x1 - x0, y1 - y0)
+            self._target.write(data.tobytes(), viewport=viewport)
+        self._target.bind_to_image(1, read=True, write=False)
+        for _ in range(2):  # src -> dst, then back: both buffers agree again
+            self._draw(self._pin_vao, self._pin_prog, box)
+
+    def _draw(self, vao: Any, prog: Any, box: Box) -> None:
+        """One ping-pong draw over ``box``: reads the current buffer, writes the other."""
+        lo, hi = box
+        src, dst = self._cur, 1 - self._cur
+        self._pos[src].bind_to_image(0, read=True, write=False)
+        prog["u_box_lo"].value = lo
+        prog["u_box_hi"].value = hi
+        self._fbo[dst].use()
+        vao.render(moderngl.TRIANGLES, vertices=6, instances=hi[2] - lo[2])
+        self._cur = dst
+
+    def _start_phases(self, flat: np.ndarray, rel32: np.ndarray) -> tuple[list[int], list[int]]:
+        """Phases per coordinate after a converged enforce (see the module doc).
+
+        Returns the first phase and the one after the lowering phase (1 raising, 2
+        done). Where the elements held before and now moved only up along a coordinate,
+        it needs only the raising phase, only down only the lowering phase, not at all
+        neither; newly held elements (position unknown without a readback) need both.
+        """
+        _, new, old = np.intersect1d(flat, self._held_flat, return_indices=True)
+        step = rel32[new] - self._held_rel[old]
+        unknown = len(new) < len(flat)
+        phase, then = [], []
+        for c in range(3):
+            down = unknown or bool((step[:, c] < 0).any())
+            up = unknown or bool((step[:, c] > 0).any())
+            phase.append(0 if down else 1 if up else 2)
+            then.append(1 if up else 2)
+        return phase, then
+
+    def _solve(
+        self, start: Box | None, phase: list[int], then: list[int], max_passes: int
+    ) -> tuple[int, int, bool, Box | None, Box | None]:
+        """Constraint passes from the box ``start``; ``phase`` per coordinate: 0
+        lowering, 1 raising, 2 done; ``then``: the phase after 0 (see the module doc).
+
+        Returns (passes, elements shaded, converged, box of everything that changed,
+        box of the elements reported as violating a link at the end of their phases).
+        """
+        full: Box = ((0, 0, 0), self.shape)
+        box = start
+        region = start  # where a coordinate entering a new phase can find violations
+        touched: Box | None = None
+        violated: Box | None = None
+        passes = elements = 0
+        if start is None or phase == [2, 2, 2]:
+            return 0, 0, True, None, self._violated
+        for i, tex in enumerate(self._links):
+            tex.bind_to_image(1 + i, read=True, write=False)
+        self._changes.bind_to_storage_buffer(0)
+        prog = self._prog
+        while phase != [2, 2, 2]:
+            draw = box if self.local else full  # the thesis' scheme: always everything
+            if draw is None:
+                flags, changed = 0, None
+            else:
+                if passes >= max_passes:
+                    return passes, elements, False, touched, None
+                prog["u_lower"].value = tuple(int(p == 0) for p in phase)
+                prog["u_raise"].value = tuple(int(p == 1) for p in phase)
+                last = [p == 2 or p == 1 or then[c] == 2 for c, p in enumerate(phase)]
+                prog["u_report_below"].value = tuple(
+                    int(last[c] and p != 1) for c, p in enumerate(phase)
+                )
+                prog["u_report_above"].value = tuple(
+                    int(last[c] and p != 0) for c, p in enumerate(phase)
+                )
+                self._changes.write(_RESET)
+                self._draw(self._vao, prog, draw)
+                self.ctx.memory_barrier(_SSBO_BARRIER)  # the SSBO atomics, then read
+                record = np.frombuffer(self._changes.read(64), np.int32)
+                passes += 1
+                elements += _volume(draw)
+                flags = int(record[6])
+                changed = None
+                if flags:
+                    changed = (
+                        tuple(int(v) for v in record[0:3]),
+                        tuple(int(v) + 1 for v in record[3:6]),
+                    )
+                if record[11] >= 0:
+                    report = (
+                        tuple(int(v) for v in record[8:11]),
+                        tuple(int(v) + 1 for v in record[11:14]),
+                    )
+                    violated = _union(violated, report)  # type: ignore[arg-type]
+            entering = False
+            for c in range(3):
+                if phase[c] < 2 and not flags >> c & 1:
+                    phase[c] = then[c] if phase[c] == 0 else 2
+                    entering |= phase[c] == 1
+            touched = _union(touched, changed)
+            box = _grow(changed, self.shape)
+            region = _union(region, box)
+            if entering:
+                box = _union(box, region)
+        return passes, elements, True, touched, violated
+
+    def _update_displacement(self, box: Box | None) -> None:
+        self.revision += 1
+        if box is None:
+            return
+        lo, hi = box
+        self._disp.bind_to_image(0, read=False, write=True, format=_GL_RGBA16F)
+        self._pos[self._cur].bind_to_image(1, read=True, write=False)
+        self._rest.bind_to_image(2, read=True, write=False)
+        self._comp["u_lo"].value = lo
+        self._comp["u_hi"].value = hi
+        size = [h - v for v, h in zip(lo, hi, strict=True)]
+        self._comp.run(*(-(-n // g) for n, g in zip(size, _GROUP, strict=True)))
+        self.ctx.memory_barrier()
+
+    def positions(self) -> np.ndarray:
+        """Read back the element positions.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(nx, ny, nz, 3)`` float64, world mm.
+        """
+        self._check_alive()
+        w, h = self.atlas_size
+        raw = np.frombuffer(self._pos[self._cur].read(), np.float32).reshape(h, w, 4)
+        return self._from_atlas(raw)[..., :3].astype(np.float64) + self._origin
+
+    def displacement_texture(self) -> moderngl.TextureArray:
+        """The offset field as a 2D array texture (z-slices as layers), kept up to date
+        on the GPU.
+
+        Returns
+        -------
+        moderngl.TextureArray
+            Size ``(nx, ny, nz)``, RGBA16F; texel ``(i, j)`` of layer ``k`` holds the
+            element's displacement ``x - rest`` (world mm) in xyz and 0 in a. Linear
+            filtering, clamped to edge. Owned by the solver (freed by :meth:`release`);
+            the same object for the solver's lifetime.
+        """
+        self._check_alive()
+        return self._disp
+
+    def release(self) -> None:
+        """Free all GPU objects (textures, framebuffers, programs, buffer); idempotent."""
+        if self._released:
+            return
+        self._released = True
+        for obj in reversed(self._objects):
+            try:
+                obj.release()
+            except Exception:  # context already gone: nothing left to free
+                pass
+        self._objects.clear()
+
+
+def _link_data(model: ChainMailModel) -> np.ndarray:
+    """(nx, ny, nz, 20) float32: the packed link limits of the pass shader.
+
+    Per element ``fx fy fz`` (forward links, to ``e + e_i``) and ``bx by bz`` (backward,
+    from ``e - e_i``), each ``(min, max, shear)``, absent links ``(-BIG, BIG, BIG)``,
+    in the order of ``chainmail_pass.frag.glsl``.
+    """
+    shape = model.shape
+    absent = np.array([-_BIG, _BIG, _BIG])
+    fwd = [np.broadcast_to(absent, (*shape, 3)).copy() for _ in range(3)]
+    bwd = [np.broadcast_to(absent, (*shape, 3)).copy() for _ in range(3)]
+    for axis in range(3):
+        if shape[axis] < 2:
+            continue
+        mn, mx, sh, linked = model.link_limits(axis)
+        lim = np.where(linked[..., None], np.stack([mn, mx, sh], axis=-1), absent)
+        lo = [slice(None)] * 3
+        hi = [slice(None)] * 3
+        lo[axis] = slice(0, -1)
+        hi[axis] = slice(1, None)
+        fwd[axis][tuple(lo)] = lim
+        bwd[axis][tuple(hi)] = lim
+    fx, fy, fz = fwd
+    bx, by, bz = bwd
+    zero = np.zeros((*shape, 2))
+    packed = np.concatenate([fx, bx, fy, by, fz, bz, zero], axis=-1)
+    return packed.astype(np.float32)
+
+
+def _bench_model(n: int, spacing: float = 1.0) -> ChainMailModel:
+    """An n³ grid, 10 % stretch/compression slack and shear 0.1 spacing, bottom fixed."""
+    shape = (n, n, n)
+    idx = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), axis=-1)
+    fixed = np.zeros(shape, bool)
+    fixed[:, :, 0] = True
+    return ChainMailModel(
+        rest=idx * spacing,
+        spacing=np.full(3, spacing),
+        min_dist=0.9 * spacing,
+        max_dist=1.1 * spacing,
+        max_shear=0.1 * spacing,
+        links=np.ones((*shape, 3), bool),
+        fixed=fixed,
+    )
+
+
+def benchmark(
+    ctx: Any = None, sizes: tuple[int, ...] = (32, 64, 128), frames: int = 10, jumps: int = 3
+) -> list[dict[str, Any]]:
+    """Time local drags with the growing box (``local``) and with full-grid passes.
+
+    One element at the centre of the top face of an n³ grid (:func:`_bench_model`) is
+    held. ``frame``: it is dragged by (0.05, 0, -0.02) spacing per frame, one
+    :meth:`GpuChainMailSolver.enforce` each, from the last frame's state. ``jump``: it
+    is moved by (2, 0, -1) spacing in one enforce, from rest. Each enforce is timed to
+    the end of its GPU work; both variants run on the same solver and context, one
+    after the other, each from the same state (``set_positions`` plus one untimed
+    enforce that checks the whole grid).
+
+    Parameters
+    ----------
+    ctx
+        moderngl context (OpenGL 4.3+) to time on; ``None`` makes a standalone EGL one.
+    sizes, frames, jumps
+        Grid sizes n (n³ elements), timed frames and jumps per size.
+
+    Returns
+    -------
+    list of dict
+        Per size and scenario: median ms per enforce, passes and elements shaded of
+        both variants (``box_*``, ``full_*``) and the largest violation left.
+    """
+    own = ctx is None
+    if own:  # deform must not import app: a plain EGL context (the caller's otherwise)
+        ctx = moderngl.create_standalone_context(backend="egl")
+    rows = []
+    try:
+        for n in sizes:
+            model = _bench_model(n)
+            solver = GpuChainMailSolver(model, ctx)
+            held = np.zeros(model.shape, bool)
+            centre = (n // 2, n // 2, n - 1)
+            held[centre] = True
+            for scenario in ("frame", "jump"):
+                row: dict[str, Any] = {"n": n, "scenario": scenario}
+                for local in (True, False):
+                    solver.local = local
+                    times, passes, elements = [], [], []
+                    targets = model.rest.copy()
+                    for i in range(frames if scenario == "frame" else jumps):
+                        if scenario == "jump" or i == 0:
+                            solver.set_positions(model.rest)
+                            targets = model.rest.copy()
+                            solver.enforce(held, targets)
+                        step = (0.05, 0.0, -0.02) if scenario == "frame" else (2.0, 0.0, -1.0)
+                        targets[centre] += step
+                        ctx.finish()
+                        t0 = time.perf_counter()
+                        solver.enforce(held, targets)
+                        ctx.finish()
+                        times.append(time.perf_counter() - t0)
+                        passes.append(solver.last_passes)
+                        elements.append(solver.last_elements)
+                    key = "box" if local else "full"
+                    row[f"{key}_ms"] = round(1e3 * float(np.median(times)), 2)
+                    row[f"{key}_passes"] = float(np.median(passes))
+                    row[f"{key}_elements"] = float(np.median(elements))
+                    row[f"{key}_violation"] = model.violation(solver.positions())
+                rows.append(row)
+            solver.release()
+    finally:
+        if own:
+            ctx.release()
+    return rows
+
+
+if __name__ == "__main__":  # pragma: no cover - manual benchmark
+    for row in benchmark():
+        print(row)

@@ -1,0 +1,105 @@
+#version 430 core
+// One constraint pass of the GPU ChainMail (deform/chainmail_gpu.py): one fragment per
+// element of the z-slice atlas (massspring_atlas.glsl with one element per cell), drawn
+// only over the pass's box (chainmail_box.vert.glsl). Reads the previous state with
+// imageLoad and writes the new position into the other framebuffer of a ping-pong pair.
+//
+// Each link gives the element an interval per coordinate, relative to the linked
+// neighbour's position; lo/hi are the intersection of the 6 links' intervals. Per
+// coordinate c the pass either only lowers (u_lower[c]: x > hi -> hi) or only raises
+// (u_raise[c]: x < lo -> lo) -- the two monotone phases of the module doc. Held and
+// fixed elements (w != 0) never move. Changed elements record the bounding box of the
+// changes and one bit per changed coordinate in a tiny SSBO (read back per pass);
+// elements left violating a link in a coordinate's last phase record their box too.
+//
+// With CM_PIN_PASS defined the same file is the pin pass instead: held elements go to
+// their targets (w 2), released ones become free (w 0), fixed ones (w 1) stay.
+#include "chainmail_config.glsl"
+#include "massspring_atlas.glsl"
+
+// position - origin (x, y, z mm); w: 0 free, 1 fixed, 2 held
+layout(rgba32f, binding = 0) readonly uniform image2D u_pos;
+#ifdef CM_PIN_PASS
+// target - origin (x, y, z mm); w: 1 when held
+layout(rgba32f, binding = 1) readonly uniform image2D u_target;
+#else
+// per element, the limits (min, max, shear; mm) of its links: forward (to e + e_i) and
+// backward (from e - e_i), packed (fx fy fz: forward x y z, bx by bz: backward):
+// 0 (fx.min, fx.max, fx.sh, bx.min)  1 (bx.max, bx.sh, fy.min, fy.max)
+// 2 (fy.sh, by.min, by.max, by.sh)   3 (fz.min, fz.max, fz.sh, bz.min)  4 (bz.max, bz.sh)
+// An absent link (cut, or past a face) has min -CM_BIG, max +CM_BIG, shear +CM_BIG.
+layout(rgba32f, binding = 1) readonly uniform image2D u_link[5];
+layout(std430, binding = 0) buffer CmChanges {
+    int cm_lo[3];     // bounding box of the elements changed by this pass (inclusive)
+    int cm_hi[3];
+    uint cm_flags;    // bit c: coordinate c changed somewhere
+    uint cm_pad;
+    int cm_vlo[3];    // bounding box of the elements reported as violating
+    int cm_vhi[3];
+};
+uniform ivec3 u_lower;  // per coordinate: 1 in the lowering phase
+uniform ivec3 u_raise;  // per coordinate: 1 in the raising phase
+uniform ivec3 u_report_below;  // per coordinate: report x < lo (left by a last lowering)
+uniform ivec3 u_report_above;  // per coordinate: report x > hi (left by a last raising)
+uniform float u_tol;    // move only when off by more than this (mm): float round-off
+#endif
+
+layout(location = 0) out vec4 cm_out;
+
+void main() {
+    ivec2 t = ivec2(gl_FragCoord.xy);
+    vec4 p = imageLoad(u_pos, t);
+#ifdef CM_PIN_PASS
+    vec4 tg = imageLoad(u_target, t);
+    cm_out = p.w == 1.0 ? p : (tg.w > 0.0 ? vec4(tg.xyz, 2.0) : vec4(p.xyz, 0.0));
+#else
+    ivec3 e = ms_block(t);
+    vec3 x = p.xyz;
+    // neighbours, clamped into the grid (their links are absent there)
+    // (x and y neighbours are the next texels of the same tile)
+    vec3 xpx = imageLoad(u_pos, t + ivec2(int(e.x < NX - 1), 0)).xyz;
+    vec3 xmx = imageLoad(u_pos, t - ivec2(int(e.x > 0), 0)).xyz;
+    vec3 xpy = imageLoad(u_pos, t + ivec2(0, int(e.y < NY - 1))).xyz;
+    vec3 xmy = imageLoad(u_pos, t - ivec2(0, int(e.y > 0))).xyz;
+    vec3 xpz = imageLoad(u_pos, ms_texel(ivec3(e.xy, min(e.z + 1, NZ - 1)))).xyz;
+    vec3 xmz = imageLoad(u_pos, ms_texel(ivec3(e.xy, max(e.z - 1, 0)))).xyz;
+    vec4 l0 = imageLoad(u_link[0], t);
+    vec4 l1 = imageLoad(u_link[1], t);
+    vec4 l2 = imageLoad(u_link[2], t);
+    vec4 l3 = imageLoad(u_link[3], t);
+    vec4 l4 = imageLoad(u_link[4], t);
+    // forward link along i to n = e + e_i: n_i - x_i in [min, max], |n_j - x_j| <= shear
+    // backward link along i from n = e - e_i: x_i - n_i in [min, max], |x_j - n_j| <= shear
+    vec3 lo = max(xpx - vec3(l0.y, l0.z, l0.z), xmx + vec3(l0.w, -l1.y, -l1.y));
+    vec3 hi = min(xpx + vec3(-l0.x, l0.z, l0.z), xmx + vec3(l1.x, l1.y, l1.y));
+    lo = max(lo, max(xpy - vec3(l2.x, l1.w, l2.x), xmy + vec3(-l2.w, l2.y, -l2.w)));
+    hi = min(hi, min(xpy + vec3(l2.x, -l1.z, l2.x), xmy + vec3(l2.w, l2.z, l2.w)));
+    lo = max(lo, max(xpz - vec3(l3.z, l3.z, l3.y), xmz + vec3(-l4.y, -l4.y, l3.w)));
+    hi = min(hi, min(xpz + vec3(l3.z, l3.z, -l3.x), xmz + vec3(l4.y, l4.y, l4.x)));
+    ivec3 free_ = ivec3(p.w == 0.0);
+    ivec3 above = ivec3(greaterThan(x, hi + u_tol)) * free_;
+    ivec3 below = ivec3(lessThan(x, lo - u_tol)) * free_;
+    ivec3 down = above * u_lower;
+    ivec3 up = below * u_raise;
+    vec3 y = mix(mix(x, hi, bvec3(down)), lo, bvec3(up));
+    cm_out = vec4(y, p.w);
+    ivec3 moved = down + up;
+    if (moved != ivec3(0)) {
+        atomicOr(cm_flags, uint(moved.x | (moved.y << 1) | (moved.z << 2)));
+        atomicMin(cm_lo[0], e.x);
+        atomicMin(cm_lo[1], e.y);
+        atomicMin(cm_lo[2], e.z);
+        atomicMax(cm_hi[0], e.x);
+        atomicMax(cm_hi[1], e.y);
+        atomicMax(cm_hi[2], e.z);
+    }
+    if (below * u_report_below + above * u_report_above != ivec3(0)) {
+        atomicMin(cm_vlo[0], e.x);
+        atomicMin(cm_vlo[1], e.y);
+        atomicMin(cm_vlo[2], e.z);
+        atomicMax(cm_vhi[0], e.x);
+        atomicMax(cm_vhi[1], e.y);
+        atomicMax(cm_vhi[2], e.z);
+    }
+#endif
+}
