@@ -106,9 +106,13 @@ Backends
 --------
 ``backend="cpu"`` runs the kernels above (float64). ``backend="gpu"`` drives
 ``deform.chainmail_gpu.GpuChainMailSolver`` (created lazily) through ``set_positions``,
-``enforce(held_mask, held_targets, max_passes) -> passes``, ``positions()``,
-``displacement_texture()``, ``revision`` and ``release()``; limits, cuts and fixed
-elements reach it by rebuilding the solver from the model.
+``enforce(held_mask, held_targets, max_passes) -> passes``, ``feasible`` (a check pass
+over the region the enforce changed), ``snapshot()``/``restore()`` (GPU copies of the
+state), ``positions()``, ``displacement_texture()``, ``revision`` and ``release()``;
+limits, cuts and fixed elements reach it by rebuilding the solver from the model. A
+drag the GPU cannot satisfy is limited as on the CPU: the state is restored and the
+largest feasible fraction found by bisection (feasibility depends only on where the
+pinned elements are, so the GPU's result and the CPU's fraction agree).
 """
 
 from __future__ import annotations
@@ -581,12 +585,7 @@ class ChainMail:
         self._pinned[flat] = True
         goal = self._rest[flat] + off
         if self.backend == "gpu":
-            passes = int(
-                self._solver.enforce(
-                    self.held, self._targets().reshape((*self.grid.shape, 3)), self.max_passes
-                )
-            )
-            stats = MoveStats(touched=-1, seconds=time.perf_counter() - t0, passes=passes)
+            stats = self._move_gpu(flat, goal, t0)
         else:
             stats = self._move_cpu(flat, goal, t0)
         if self._relax_steps:
@@ -594,6 +593,47 @@ class ChainMail:
         else:
             self._update_warp()
         return stats
+
+    def _enforce_gpu(self) -> int:
+        shape = (*self.grid.shape, 3)
+        return int(self._solver.enforce(self.held, self._targets().reshape(shape), self.max_passes))
+
+    def _move_gpu(self, flat: np.ndarray, goal: np.ndarray, t0: float) -> MoveStats:
+        """The GPU enforces the constraints; a drag it cannot satisfy (fixed or held
+        elements in the way) is limited like on the CPU: the state before the move is
+        restored from a GPU copy and the largest feasible fraction of the way is found
+        by bisection (feasibility depends only on where the pinned elements are). Only
+        then are the dragged elements' previous positions read back."""
+        solver = self._solver
+        solver.snapshot()
+        passes = self._enforce_gpu()
+        if solver.feasible:
+            return MoveStats(touched=-1, seconds=time.perf_counter() - t0, passes=passes)
+        solver.restore()
+        start = solver.positions().reshape(-1, 3)[flat]
+        delta = goal - start
+        lo, hi, attempts = 0.0, 1.0, 1
+        for _ in range(LIMIT_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            self._offsets[flat] = start + mid * delta - self._rest[flat]
+            passes += self._enforce_gpu()
+            attempts += 1
+            if solver.feasible:
+                lo = mid
+            else:
+                hi = mid
+            solver.restore()
+        self._offsets[flat] = start + lo * delta - self._rest[flat]
+        passes += self._enforce_gpu()
+        if not solver.feasible:  # cannot happen: the same trial succeeded
+            raise ChainMailError("internal error: a limited ChainMail move did not repeat")
+        return MoveStats(
+            touched=-1,
+            seconds=time.perf_counter() - t0,
+            fraction=lo,
+            attempts=attempts,
+            passes=passes,
+        )
 
     def _move_cpu(self, flat: np.ndarray, goal: np.ndarray, t0: float) -> MoveStats:
         ok, moved, checks, fixes, _ = self._attempt(flat, goal, commit=True)

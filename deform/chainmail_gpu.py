@@ -294,6 +294,7 @@ class GpuChainMailSolver:
         self._held_rel = np.zeros((0, 3), np.float32)  # and targets - origin, as stored
         self._dirty = True  # the state may violate constraints anywhere: check all
         self._violated: Box | None = None  # else it may only here (infeasible drags)
+        self._check_box: Box | None = None  # where feasible checks (the last enforce's)
         #: bumped whenever the displacement texture changes (set_positions, enforce)
         self.revision = 0
         #: passes of the last :meth:`enforce`
@@ -513,6 +514,7 @@ class GpuChainMailSolver:
                 self._pin(pin_box, idx, rel)
             self._held_box = held_box
             rel32 = rel.astype(np.float32)
+            was_dirty = self._dirty
             if self._dirty:
                 start: Box | None = ((0, 0, 0), self.shape)
                 phase, then = [0, 0, 0], [1, 1, 1]
@@ -526,6 +528,11 @@ class GpuChainMailSolver:
         self.last_passes, self.last_elements, self.converged = passes, elements, converged
         self._dirty = not converged
         self._violated = violated
+        # where a link can be violated now: at changed or held elements (all others
+        # were satisfied before); checked by feasible
+        self._check_box = (
+            ((0, 0, 0), self.shape) if was_dirty else _grow(_union(pin_box, touched), self.shape)
+        )
         self._update_displacement(_union(pin_box, touched))
         return passes
 
@@ -600,6 +607,7 @@ class GpuChainMailSolver:
             tex.bind_to_image(1 + i, read=True, write=False)
         self._changes.bind_to_storage_buffer(0)
         prog = self._prog
+        prog["u_report_pinned"].value = 0
         while phase != [2, 2, 2]:
             draw = box if self.local else full  # the thesis' scheme: always everything
             if draw is None:
@@ -660,6 +668,76 @@ class GpuChainMailSolver:
         size = [h - v for v, h in zip(lo, hi, strict=True)]
         self._comp.run(*(-(-n // g) for n, g in zip(size, _GROUP, strict=True)))
         self.ctx.memory_barrier()
+
+    @property
+    def feasible(self) -> bool:
+        """False when the last :meth:`enforce` left violated links (a drag beyond what
+        fixed and held elements allow, or an unconverged run).
+
+        One check pass over the elements the enforce changed or held (grown by one):
+        every element there, held and fixed ones included, tests its links; nothing
+        moves, and a 64-byte record is read back.
+        """
+        self._check_alive()
+        if not self.converged or self._violated is not None:
+            return False
+        box = getattr(self, "_check_box", None)
+        if box is None:
+            return True
+        prog = self._prog
+        prog["u_lower"].value = (0, 0, 0)
+        prog["u_raise"].value = (0, 0, 0)
+        prog["u_report_below"].value = (1, 1, 1)
+        prog["u_report_above"].value = (1, 1, 1)
+        prog["u_report_pinned"].value = 1
+        bound = self.ctx.fbo
+        with self._scope:
+            for i, tex in enumerate(self._links):
+                tex.bind_to_image(1 + i, read=True, write=False)
+            self._changes.bind_to_storage_buffer(0)
+            self._changes.write(_RESET)
+            cur = self._cur
+            self._draw(self._vao, prog, box)  # writes x unchanged into the other buffer
+            self._cur = cur  # ... which stays the other one
+            self.ctx.memory_barrier(_SSBO_BARRIER)
+            record = np.frombuffer(self._changes.read(64), np.int32)
+        self.ctx.fbo = bound
+        prog["u_report_pinned"].value = 0
+        return bool(record[11] < 0)
+
+    def snapshot(self) -> None:
+        """Remember the current state on the GPU (a texture copy, no read-back), for
+        :meth:`restore`."""
+        self._check_alive()
+        if getattr(self, "_snap", None) is None:
+            self._snap = self._texture()
+            self._snap_fbo = self._keep(self.ctx.framebuffer([self._snap]))
+        self.ctx.copy_framebuffer(self._snap_fbo, self._fbo[self._cur])
+        self._snap_state = (
+            self._held_box,
+            self._held_flat.copy(),
+            self._held_rel.copy(),
+            self._dirty,
+            self._violated,
+        )
+
+    def restore(self) -> None:
+        """Go back to the state of the last :meth:`snapshot` (GPU copy)."""
+        self._check_alive()
+        if getattr(self, "_snap", None) is None:
+            raise ValueError("restore() needs a snapshot() first")
+        # both ping-pong buffers: a pass writes only its box into the other one
+        for fbo in self._fbo:
+            self.ctx.copy_framebuffer(fbo, self._snap_fbo)
+        (
+            self._held_box,
+            self._held_flat,
+            self._held_rel,
+            self._dirty,
+            self._violated,
+        ) = self._snap_state
+        self._held_flat, self._held_rel = self._held_flat.copy(), self._held_rel.copy()
+        self._update_displacement(((0, 0, 0), self.shape))
 
     def positions(self) -> np.ndarray:
         """Read back the element positions.

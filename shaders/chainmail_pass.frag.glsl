@@ -42,6 +42,7 @@ uniform ivec3 u_raise;  // per coordinate: 1 in the raising phase
 uniform ivec3 u_report_below;  // per coordinate: report x < lo (left by a last lowering)
 uniform ivec3 u_report_above;  // per coordinate: report x > hi (left by a last raising)
 uniform float u_tol;    // move only when off by more than this (mm): float round-off
+uniform int u_report_pinned;  // 1: report held and fixed elements too (the check pass)
 #endif
 
 layout(location = 0) out vec4 cm_out;
@@ -93,7 +94,10 @@ void main() {
         atomicMax(cm_hi[1], e.y);
         atomicMax(cm_hi[2], e.z);
     }
-    if (below * u_report_below + above * u_report_above != ivec3(0)) {
+    ivec3 any_ = ivec3(u_report_pinned != 0);
+    ivec3 report_below = below + (1 - free_) * any_ * ivec3(lessThan(x, lo - u_tol));
+    ivec3 report_above = above + (1 - free_) * any_ * ivec3(greaterThan(x, hi + u_tol));
+    if (report_below * u_report_below + report_above * u_report_above != ivec3(0)) {
         atomicMin(cm_vlo[0], e.x);
         atomicMin(cm_vlo[1], e.y);
         atomicMin(cm_vlo[2], e.z);

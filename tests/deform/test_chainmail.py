@@ -537,6 +537,14 @@ class _FakeGpuSolver:
         self.calls.append("positions")
         return self.x.copy()
 
+    feasible = True  # the real solver checks; the fake's moves always are
+
+    def snapshot(self) -> None:
+        self.calls.append("snapshot")
+
+    def restore(self) -> None:
+        self.calls.append("restore")
+
     def displacement_texture(self) -> str:
         return "texture"
 
