@@ -15,8 +15,10 @@ from deform.elements import ElementGrid
 
 pytestmark = pytest.mark.gl
 
-#: float32 positions on the GPU: links are checked to this many mm
-TOL = 1e-4
+#: float32 positions on the GPU (coordinates up to ~100 mm, 16 ulp ~1.2e-4 mm; the
+#: solver's feasibility check allows twice its move tolerance): links checked to this
+#: many mm; a blocked drag would leave millimetres
+TOL = 5e-4
 
 
 def _grid(shape: tuple[int, int, int], spacing: float = 10.0) -> ElementGrid:
