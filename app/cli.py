@@ -125,6 +125,64 @@ def _fix(text: str) -> tuple[str, tuple[tuple[int, int], ...]]:
     return text, tuple(ranges)
 
 
+class _Cut(tuple):
+    """One ``--cut PX,PY,PZ:NX,NY,NZ[:RADIUS]``: ``(text, point, normal, radius)``."""
+
+    @property
+    def text(self) -> str:
+        return self[0]
+
+    @property
+    def point(self) -> tuple[float, float, float]:
+        return self[1]
+
+    @property
+    def normal(self) -> tuple[float, float, float]:
+        return self[2]
+
+    @property
+    def radius(self) -> float | None:
+        return self[3]
+
+
+def _cut(text: str) -> _Cut:
+    form = (
+        "PX,PY,PZ:NX,NY,NZ[:RADIUS] (a point on the cutting plane in world mm, its normal,"
+        " optionally the radius in mm of the disk on it that cuts), e.g. 48,24,20:1,0,0"
+    )
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError(text)
+        point = tuple(float(v) for v in parts[0].split(","))
+        normal = tuple(float(v) for v in parts[1].split(","))
+        radius = float(parts[2]) if len(parts) == 3 else None
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(point) != 3 or len(normal) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    values = [*point, *normal, *([] if radius is None else [radius])]
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: numbers must be finite; expected {form}")
+    if not any(normal):
+        raise argparse.ArgumentTypeError(f"{text!r}: the normal must not be 0,0,0; expected {form}")
+    if radius is not None and radius <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the radius must be > 0 mm; expected {form}")
+    return _Cut((text, point, normal, radius))
+
+
+def _relax(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a number of relaxation steps >= 0, e.g. 4"
+        )
+    return n
+
+
 def _stiffness_points(text: str) -> list[tuple[float, float]]:
     form = (
         "VALUE:STIFFNESS[,VALUE:STIFFNESS...] in data units and 0..1, e.g. 100:0.2,400:0.95"
@@ -157,35 +215,90 @@ def _grid_text(shape: Sequence[int]) -> str:
     return "x".join(str(n) for n in shape)
 
 
-def _check_massspring_options(args: argparse.Namespace) -> None:
-    """Option checks that need no volume: mass-spring options without ``--massspring``,
-    drags and fixes outside the grid, drags of a fixed element or of one element twice."""
+#: the options of ``render``'s deformation models, in the order of ``--help``: (flag,
+#: attribute, the model that takes it: "both", "massspring" or "chainmail")
+_DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
+    ("--drag", "drag", "both"),
+    ("--fix", "fix", "both"),
+    ("--backend", "backend", "both"),
+    ("--inverse", "inverse", "both"),
+    ("--stiffness-from-volume", "stiffness_from_volume", "both"),
+    ("--settle", "settle", "massspring"),
+    ("--steps", "steps", "massspring"),
+    ("--integrator", "integrator", "massspring"),
+    ("--shear/--no-shear", "shear", "massspring"),
+    ("--bend", "bend", "massspring"),
+    ("--relax", "relax", "chainmail"),
+    ("--variant", "variant", "chainmail"),
+    ("--cut", "cut", "chainmail"),
+)
+#: why a mass-spring option does not apply to ChainMail
+_NOT_FOR_CHAINMAIL: dict[str, str] = {
+    "settle": "ChainMail settles each drag at once; --relax K smooths it",
+    "steps": "ChainMail settles each drag at once; --relax K smooths it",
+    "integrator": "ChainMail has no time steps",
+    "shear": "ChainMail's shear limits follow the stiffness",
+    "bend": "ChainMail has no bend springs",
+}
+
+
+def _given(args: argparse.Namespace, attr: str) -> bool:
+    return getattr(args, attr) is not None  # every deformation option defaults to None
+
+
+def _deform_model(args: argparse.Namespace) -> str | None:
+    """``"massspring"``, ``"chainmail"`` or None (no deformation)."""
+    if args.massspring is not None:
+        return "massspring"
+    if args.chainmail is not None:
+        return "chainmail"
+    return None
+
+
+def _check_deform_options(args: argparse.Namespace) -> None:
+    """Option checks that need no volume: deformation options without their model, both
+    models at once, options of the other model, drags and fixes outside the grid, drags
+    of a fixed element or of one element twice."""
     import numpy as np
 
-    if args.massspring is None:
-        used = [
-            opt
-            for opt, value in (
-                ("--drag", args.drag),
-                ("--fix", args.fix),
-                ("--settle", args.settle),
-                ("--steps", args.steps is not None),
-                ("--backend", args.backend),
-                ("--integrator", args.integrator),
-                ("--inverse", args.inverse),
-                ("--shear/--no-shear", args.shear is not None),
-                ("--bend", args.bend),
-                ("--stiffness-from-volume", args.stiffness_from_volume),
-            )
-            if value
-        ]
-        if used:
+    if args.massspring is not None and args.chainmail is not None:
+        raise CliOptionError(
+            "--massspring and --chainmail cannot be combined: deform with one model per"
+            " render (a scene JSON saved with --save-scene can be rendered again with the"
+            " other, which then deforms the result)"
+        )
+    model = _deform_model(args)
+    for opt, attr, owner in _DEFORM_OPTIONS:
+        if not _given(args, attr) or owner in ("both", model):
+            continue
+        if model is None and owner == "chainmail":
             raise CliOptionError(
-                f"{used[0]} needs --massspring: add --massspring N (the element grid over"
-                " the volume, e.g. --massspring 16)"
+                f"{opt} needs --chainmail: add --chainmail N (the element grid over the"
+                " volume, e.g. --chainmail 16)"
             )
+        if model is None:
+            raise CliOptionError(
+                f"{opt} needs --massspring: add --massspring N (the element grid over the"
+                " volume, e.g. --massspring 16)"
+            )
+        if model == "chainmail":
+            raise CliOptionError(
+                f"{opt} is a mass-spring option (--massspring) and does not apply to"
+                f" --chainmail: {_NOT_FOR_CHAINMAIL[attr]}"
+            )
+        raise CliOptionError(
+            f"{opt} is a ChainMail option (--chainmail) and does not apply to"
+            " --massspring; deform with --chainmail N instead to use it"
+        )
+    if model is None:
+        for opt, attr, _ in _DEFORM_OPTIONS:
+            if _given(args, attr):  # an option of both models
+                raise CliOptionError(
+                    f"{opt} needs --massspring: add --massspring N (the element grid over"
+                    " the volume, e.g. --massspring 16) or --chainmail N (3D ChainMail)"
+                )
         return
-    shape = args.massspring
+    shape = args.massspring if model == "massspring" else args.chainmail
     grid = _grid_text(shape)
     if len(set(shape)) == 1:
         ranges_text = f"indices run 0..{shape[0] - 1}"
@@ -219,14 +332,19 @@ def _check_massspring_options(args: argparse.Namespace) -> None:
         seen[d.index] = d.text
 
 
-def _massspring_grid(args: argparse.Namespace, volume: Any) -> Any:
-    """The element grid of ``render --massspring`` over ``volume``: fixed elements and
-    materials set, drags checked against rigid elements (before any GL work)."""
+def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
+    """The element grid of ``render --massspring`` / ``--chainmail`` over ``volume``
+    (None without either): fixed elements and materials set, drags checked against
+    rigid elements (mass-spring) and cutting planes against the grid (ChainMail), all
+    before any GL work."""
     import numpy as np
 
     from deform.elements import ElementGrid, ElementGridError
 
-    grid = ElementGrid(volume, shape=args.massspring)
+    model = _deform_model(args)
+    if model is None:
+        return None
+    grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
     for _, ranges in args.fix or []:
         mask = np.zeros(grid.shape, dtype=bool)
         mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
@@ -240,15 +358,50 @@ def _massspring_grid(args: argparse.Namespace, volume: Any) -> Any:
             grid.materials_from_volume(volume.data, centres, args.stiffness_from_volume)
         except ElementGridError as exc:
             raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
-    rigid = grid.pinned()
-    for d in args.drag or []:
-        if rigid[d.index]:
+    if model == "massspring":
+        rigid = grid.pinned()
+        for d in args.drag or []:
+            if rigid[d.index]:
+                raise CliOptionError(
+                    f"--drag {d.text}: element {d.index} is rigid (stiffness 1 from"
+                    " --stiffness-from-volume) and cannot move; drag another element or"
+                    " map its value to a stiffness below 1"
+                )
+    for c in args.cut or []:
+        if not _cut_crosses(grid, c):
+            lo, hi = grid.lo, grid.hi
+            box = ", ".join(f"{a} {lo[i]:g}..{hi[i]:g}" for i, a in enumerate("xyz"))
+            where = "plane" if c.radius is None else f"disk of radius {c.radius:g} mm"
             raise CliOptionError(
-                f"--drag {d.text}: element {d.index} is rigid (stiffness 1 from"
-                " --stiffness-from-volume) and cannot move; drag another element or map"
-                " its value to a stiffness below 1"
+                f"--cut {c.text}: the {where} crosses no link of the"
+                f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
+                " point inside that box (world mm, as --drag offsets)"
             )
     return grid
+
+
+def _cut_crosses(grid: Any, cut: _Cut) -> bool:
+    """Whether ``cut`` removes a link of ``grid`` at rest (the test of ChainMail.cut)."""
+    import numpy as np
+
+    p0 = np.asarray(cut.point, dtype=np.float64)
+    normal = np.asarray(cut.normal, dtype=np.float64)
+    x = grid.rest_positions
+    s = (x - p0) @ (normal / np.linalg.norm(normal))
+    for axis in range(3):
+        sa = np.moveaxis(s, axis, 0)[:-1]
+        sb = np.moveaxis(s, axis, 0)[1:]
+        cross = ((sa < 0) & (sb >= 0)) | ((sb < 0) & (sa >= 0))
+        if cut.radius is not None and np.any(cross):
+            xa = np.moveaxis(x, axis, 0)[:-1]
+            xb = np.moveaxis(x, axis, 0)[1:]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.where(cross, sa / (sa - sb), 0.0)
+            hit = xa + t[..., None] * (xb - xa)
+            cross &= np.linalg.norm(hit - p0, axis=-1) <= cut.radius
+        if np.any(cross):
+            return True
+    return False
 
 
 def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
@@ -299,6 +452,73 @@ def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any,
         f" {len(args.drag or [])} dragged, {how}"
     )
     return ms, summary
+
+
+def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
+    """Build, cut, drag and relax the ChainMail model of ``render --chainmail``.
+
+    Cuts come first (through the rest state), then all ``--drag`` elements move at once
+    (one :meth:`~deform.chainmail.ChainMail.move`), then ``--relax`` steps (also saved
+    as the model's ``relax_steps``). Returns the :class:`~deform.chainmail.ChainMail`
+    and a one-line summary.
+    """
+    import time
+
+    import numpy as np
+
+    from deform.chainmail import ChainMail, ChainMailError
+
+    backend = args.backend or "cpu"
+    relax = args.relax or 0
+    drags = args.drag or []
+    try:
+        cm = ChainMail(
+            grid,
+            variant=args.variant or "enhanced",
+            backend=backend,
+            ctx=ctx if backend == "gpu" else None,
+        )
+    except ChainMailError as exc:
+        raise CliOptionError(f"--chainmail: {exc}") from exc
+    try:
+        cut = sum(cm.cut(c.point, c.normal, c.radius) for c in args.cut or [])
+        if backend == "cpu":  # load the numba kernels outside the timed move: no element
+            cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
+        touched, solve_ms = 0, 0.0
+        if drags:
+            stats = cm.move([d.index for d in drags], [d.offset for d in drags])
+            touched, solve_ms = stats.touched, stats.seconds * 1000
+            if stats.limited:
+                what = f"--drag {drags[0].text}" if len(drags) == 1 else "the dragged elements"
+                warnings.warn(
+                    f"{what} went only {stats.fraction:.0%} of the way: the links between"
+                    " the dragged and the fixed elements (the 8 corners always are fixed)"
+                    " ran out of slack; fix fewer elements or drag less",
+                    RuntimeWarning,
+                    stacklevel=1,
+                )
+        t = time.perf_counter()
+        cm.relax(relax)
+        relax_ms = (time.perf_counter() - t) * 1000
+        cm.relax_steps = relax  # saved with the model: a resumed one relaxes alike
+        cm.warp(inverse=args.inverse or "baked")
+        displaced = int(np.count_nonzero(np.any(cm.displacements() != 0.0, axis=-1)))
+    except BaseException:
+        cm.close()
+        raise
+    moved = (
+        f"{touched} elements touched in {solve_ms:.1f} ms"
+        if backend == "cpu"
+        else f"solved in {solve_ms:.1f} ms"
+    )
+    summary = f"chainmail: {_grid_text(grid.shape)} {backend} {cm.variant}, {len(drags)} dragged"
+    summary += f", {moved}"
+    if relax:
+        summary += f", relax {relax} step{'s' * (relax != 1)} in {relax_ms:.1f} ms"
+    if args.cut:
+        summary += f", {cut} links cut"
+    summary += f"; {displaced} elements displaced"
+    return cm, summary
 
 
 def _is_scene_json(path: Path) -> bool:
@@ -409,31 +629,32 @@ def cmd_render(args: argparse.Namespace) -> int:
     from app.image_io import write_image
     from app.render import OffscreenRenderer
 
-    _check_massspring_options(args)
+    _check_deform_options(args)
     obj = load_input(
         args.input, spacing=args.spacing, downsample=args.downsample, nan_policy=args.nan
     )
     scene = _scene_from_args(obj, args)
-    grid = None if args.massspring is None else _massspring_grid(args, scene.volume)
+    grid = _deform_grid(args, scene.volume)
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
-        ms = None
-        # the GPU mass-spring backend runs on the renderer's context (made current here)
+        model = None
+        # the GPU backends run on the renderer's context (made current here)
         with r._current():
             try:
                 if grid is not None:
-                    ms, summary = _run_massspring(args, grid, r.ctx)
+                    run = _run_massspring if args.massspring is not None else _run_chainmail
+                    model, summary = run(args, grid, r.ctx)
                     print(summary, file=sys.stderr)
                     # last in the chain: it deforms the volume itself, before the
                     # scene's own warps move the result
-                    scene = scene.copy(warps=[*scene.warps, ms.warp()])
+                    scene = scene.copy(warps=[*scene.warps, model.warp()])
                 img = r.render(scene)
                 if args.save_scene:  # inside: a GPU-owned field is read back to save it
                     scene.save(args.save_scene)
             finally:
-                if ms is not None:
-                    ms.close()
+                if model is not None:
+                    model.close()
     write_image(out, img)
     if args.save_scene:
         print(f"scene: {args.save_scene}")
@@ -594,23 +815,59 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_massspring_args(p: argparse.ArgumentParser) -> None:
+def cmd_bench_chainmail(args: argparse.Namespace) -> int:
+    """``voxwarp bench chainmail``: time to settle one drag (see app.bench_chainmail)."""
+    from app.bench_chainmail import bench_chainmail
+    from app.files import atomic_write_text
+
+    report = bench_chainmail(
+        args.sizes,
+        repeats=args.repeats,
+        use_gpu=not args.no_gpu,
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    command = (
+        "voxwarp " + " ".join(sys.argv[1:])
+        if sys.argv[0].endswith("voxwarp")
+        else "voxwarp bench chainmail"
+    )
+    text = report.markdown(command)
+    print(text)
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
+def _add_deform_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
-        "mass-spring deformation",
-        "Deform the volume with a mass-spring model before rendering: an element grid"
-        " spans the volume's box (its 8 corners fixed), --drag holds elements at offsets"
-        " from rest, the springs pull the others along, and the resulting offset field"
-        " warps the volume at render time. With --save-scene the JSON keeps the field"
-        " and the model (grid, materials, held elements), so rendering it again gives"
-        " the same image. Example (bends the fish's tail sideways, head held):"
+        "deformation (--massspring or --chainmail)",
+        "Deform the volume before rendering: an element grid spans the volume's box (its"
+        " 8 corners fixed), --drag holds elements at offsets from rest, the model moves"
+        " the others along, and the resulting offset field warps the volume at render"
+        " time. --massspring runs a mass-spring simulation (springs pull the rest along"
+        " over time steps); --chainmail runs 3D ChainMail (links with slack: each drag is"
+        " settled at once, moving every other element as little as the links allow). With"
+        " --save-scene the JSON keeps the field and the model (grid, materials, held"
+        " elements; ChainMail also its limits and cuts), so rendering it again gives the"
+        " same image. Examples (bend the fish's tail sideways, head held):"
         " voxwarp render sample:fish --view +z --massspring 8 --fix 0..2,0..7,0..7"
-        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png",
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png;"
+        " voxwarp render sample:fish --view +z --chainmail 8 --fix 0..2,0..7,0..7"
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
     )
     g.add_argument(
         "--massspring",
         type=_grid_shape,
         metavar="N|NX,NY,NZ",
-        help="element grid over the volume's bounding box (2..128 per axis, e.g. 16)",
+        help="deform with a mass-spring model: its element grid over the volume's"
+        " bounding box (2..128 per axis, e.g. 16)",
+    )
+    g.add_argument(
+        "--chainmail",
+        type=_grid_shape,
+        metavar="N|NX,NY,NZ",
+        help="deform with 3D ChainMail: its element grid over the volume's bounding box"
+        " (2..128 per axis, e.g. 16)",
     )
     g.add_argument(
         "--drag",
@@ -631,25 +888,8 @@ def _add_massspring_args(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--backend",
         choices=("cpu", "gpu"),
-        help="simulate in numpy (cpu, default) or in shaders on the renderer's context",
-    )
-    g.add_argument(
-        "--settle",
-        action="store_true",
-        help=f"run until every element is slower than {MASSSPRING_SETTLE_TOL:g} mm/s, at"
-        f" most --steps steps (default {MASSSPRING_SETTLE_MAX_STEPS})",
-    )
-    g.add_argument(
-        "--steps",
-        type=_steps,
-        metavar="N",
-        help=f"time steps to run (default {MASSSPRING_STEPS}: a smooth, nearly settled"
-        " deformation); with --settle the most steps",
-    )
-    g.add_argument(
-        "--integrator",
-        choices=("explicit", "semi-implicit"),
-        help="semi-implicit (default; ~10x larger stable steps) or explicit Euler (the thesis')",
+        help="solve on the CPU (default: numpy for mass-spring, numba for ChainMail) or"
+        " in shaders on the renderer's context (gpu)",
     )
     g.add_argument(
         "--inverse",
@@ -659,26 +899,77 @@ def _add_massspring_args(p: argparse.ArgumentParser) -> None:
         " step, q = p - u(p), the thesis')",
     )
     g.add_argument(
-        "--shear",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="face-diagonal shear springs (default on; without them the grid does not"
-        " resist shearing and a sideways drag tears it)",
-    )
-    g.add_argument(
-        "--bend",
-        action="store_true",
-        default=None,
-        help="second-neighbour bend springs (default off)",
-    )
-    g.add_argument(
         "--stiffness-from-volume",
         type=_stiffness_points,
         metavar="V:S,...",
         help="element stiffness from the volume value at each element, piecewise linear"
         " through VALUE:STIFFNESS points (data units : 0..1; constant beyond the ends),"
         " e.g. 100:0.2,400:0.95 makes CT bone stiff; stiffness 1 is rigid (default:"
-        " 0.5 everywhere)",
+        " 0.5 everywhere); ChainMail's link slack is 1 - stiffness",
+    )
+
+    m = p.add_argument_group("mass-spring options (with --massspring)")
+    m.add_argument(
+        "--settle",
+        action="store_true",
+        default=None,
+        help=f"run until every element is slower than {MASSSPRING_SETTLE_TOL:g} mm/s, at"
+        f" most --steps steps (default {MASSSPRING_SETTLE_MAX_STEPS})",
+    )
+    m.add_argument(
+        "--steps",
+        type=_steps,
+        metavar="N",
+        help=f"time steps to run (default {MASSSPRING_STEPS}: a smooth, nearly settled"
+        " deformation); with --settle the most steps",
+    )
+    m.add_argument(
+        "--integrator",
+        choices=("explicit", "semi-implicit"),
+        help="semi-implicit (default; ~10x larger stable steps) or explicit Euler (the thesis')",
+    )
+    m.add_argument(
+        "--shear",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="face-diagonal shear springs (default on; without them the grid does not"
+        " resist shearing and a sideways drag tears it)",
+    )
+    m.add_argument(
+        "--bend",
+        action="store_true",
+        default=None,
+        help="second-neighbour bend springs (default off)",
+    )
+
+    c = p.add_argument_group(
+        "3D ChainMail options (with --chainmail)",
+        "Each link lets its two elements stretch or compress by up to half a spacing and"
+        " shear by up to half a spacing, each times 1 - stiffness (0.5 by default); a drag"
+        " moves other elements only once a link is taut, which leaves straight, sheared"
+        " blocks; --relax smooths them within the same limits.",
+    )
+    c.add_argument(
+        "--relax",
+        type=_relax,
+        metavar="K",
+        help="relaxation steps after each drag (default 0; the thesis shows 0, 1 and 4):"
+        " constrained Laplacian smoothing that keeps every link within its limits",
+    )
+    c.add_argument(
+        "--variant",
+        choices=("gibson", "enhanced"),
+        help="propagation: enhanced (default; Schill et al.'s priority queue) or gibson"
+        " (Gibson's sponsor lists); a single drag ends in the same state",
+    )
+    c.add_argument(
+        "--cut",
+        type=_cut,
+        action="append",
+        metavar="PX,PY,PZ:NX,NY,NZ[:R]",
+        help="before the drags, remove the links crossing the plane through point P (world"
+        " mm) with normal N, or only a disk of radius R mm on it; the two sides then move"
+        " independently; repeatable, e.g. --cut 48,24,20:1,0,0",
     )
 
 
@@ -710,7 +1001,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None)
     pr.add_argument("--save-scene", metavar="JSON", help="also write the scene JSON")
     _add_volume_args(pr)
-    _add_massspring_args(pr)
+    _add_deform_args(pr)
     pr.set_defaults(func=cmd_render)
 
     pd = sub.add_parser("demo", help="render a sample in every mode into a folder")
@@ -764,6 +1055,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbm.set_defaults(func=cmd_bench_massspring)
+    pbc = bsub.add_parser(
+        "chainmail", help="3D ChainMail: time to settle a local and a large drag vs grid size"
+    )
+    pbc.add_argument(
+        "--sizes",
+        type=_sizes,
+        default=(16, 32, 64, 128),
+        metavar="N,N,...",
+        help="grids of N³ elements (default 16,32,64,128)",
+    )
+    pbc.add_argument(
+        "--repeats", type=_positive_int, default=5, help="timed moves per solver (default 5)"
+    )
+    pbc.add_argument("--no-gpu", action="store_true", help="skip the GPU backend")
+    pbc.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    pbc.set_defaults(func=cmd_bench_chainmail)
     return p
 
 
@@ -773,7 +1080,7 @@ def _join_negative_views(argv: list[str]) -> list[str]:
     i = 0
     while i < len(argv):
         negative = i + 1 < len(argv) and argv[i + 1].startswith("-")
-        if argv[i] in ("--view", "--stiffness-from-volume") and negative:
+        if argv[i] in ("--view", "--stiffness-from-volume", "--cut") and negative:
             out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
             continue
