@@ -544,7 +544,8 @@ class ChainMail:
         self._pinned = self._model.fixed.reshape(-1).copy()
         self._box = None
         if self.backend == "gpu":
-            self._solver.set_positions(self._model.rest.copy())
+            # the rest state satisfies every link (set_limits checks it)
+            self._solver.set_positions(self._model.rest.copy(), valid=True)
         else:
             self._x[:] = self._rest
         self._update_warp()

@@ -414,16 +414,20 @@ class GpuChainMailSolver:
         return a
 
     # ------------------------------------------------------------------ public API
-    def set_positions(self, x: np.ndarray) -> None:
+    def set_positions(self, x: np.ndarray, valid: bool = False) -> None:
         """Upload element positions (and update the displacement texture).
 
         Clears the held elements (the next :meth:`enforce` holds its own); the next
-        :meth:`enforce` checks every link, since ``x`` may violate any.
+        :meth:`enforce` checks every link, since ``x`` may violate any -- unless
+        ``valid``.
 
         Parameters
         ----------
         x
             ``(nx, ny, nz, 3)`` positions, world mm.
+        valid
+            ``x`` is known to satisfy every link (e.g. the rest state): the next
+            :meth:`enforce` starts from its held elements, as after a converged one.
 
         Raises
         ------
@@ -443,7 +447,9 @@ class GpuChainMailSolver:
         self._held_flat = np.zeros(0, np.int64)
         self._held_rel = np.zeros((0, 3), np.float32)
         self._magnitude = max(self._magnitude, float(np.abs(rel).max(initial=0.0)))
-        self._dirty = True
+        self._dirty = not valid
+        if valid:
+            self._violated = None
         self._update_displacement(((0, 0, 0), self.shape))
 
     def enforce(

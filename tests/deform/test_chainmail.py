@@ -522,7 +522,7 @@ class _FakeGpuSolver:
         self.released = False
         _FakeGpuSolver.instances.append(self)
 
-    def set_positions(self, x: np.ndarray) -> None:
+    def set_positions(self, x: np.ndarray, valid: bool = False) -> None:
         self.calls.append("set_positions")
         self.x = np.array(x, dtype=np.float64)
         self.revision += 1
