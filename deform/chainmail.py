@@ -1022,43 +1022,18 @@ class ChainMail:
         (:meth:`from_warp`). ``inverse`` / ``iterations``: see
         :class:`deform.offset_field.OffsetFieldWarp` (``"baked"`` when first made).
         """
-        from deform.offset_field import INVERSE_MODES, MAX_ITERATIONS, OffsetFieldWarp
+        from deform.offset_field import element_model_warp
 
-        if self._warp is None:
-            lo, hi = self.grid.lo.copy(), self.grid.hi.copy()
-            if self.backend == "gpu":
-                self._warp = OffsetFieldWarp(
-                    lo,
-                    hi,
-                    shape=self.grid.shape,
-                    texture_source=lambda ctx=None: self._solver.displacement_texture(),
-                    model_source=self._model_snapshot,
-                    inverse="baked",
-                    field_reader=self.displacements,
-                    revision_source=lambda: self._solver.revision,
-                )
-            else:
-                self._warp = OffsetFieldWarp(
-                    lo,
-                    hi,
-                    self.displacements(),
-                    shape=self.grid.shape,
-                    model_source=self._model_snapshot,
-                    inverse="baked",
-                )
-        if inverse is not None:
-            if inverse not in INVERSE_MODES:
-                raise ChainMailError(
-                    f"inverse must be one of {list(INVERSE_MODES)}; got {inverse!r}"
-                )
-            self._warp.inverse = inverse
-        if iterations is not None:
-            ok = isinstance(iterations, int | np.integer) and not isinstance(iterations, bool)
-            if not ok or not 1 <= int(iterations) <= MAX_ITERATIONS:
-                raise ChainMailError(
-                    f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}"
-                )
-            self._warp.iterations = int(iterations)
+        self._warp = element_model_warp(
+            self._warp,
+            self.grid,
+            displacements=self.displacements,
+            solver=(lambda: self._solver) if self.backend == "gpu" else None,
+            model_source=self._model_snapshot,
+            inverse=inverse,
+            iterations=iterations,
+            error=ChainMailError,
+        )
         return self._warp
 
     def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:

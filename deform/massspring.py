@@ -619,47 +619,18 @@ class MassSpring:
             scene renders the same image and can resume the simulation
             (:meth:`from_warp`).
         """
-        from deform.offset_field import INVERSE_MODES, MAX_ITERATIONS, OffsetFieldWarp
+        from deform.offset_field import element_model_warp
 
-        if self._warp is None:
-            lo, hi = self.grid.lo.copy(), self.grid.hi.copy()
-            if self.backend == "gpu":
-                solver = self._solver
-                self._warp = OffsetFieldWarp(
-                    lo,
-                    hi,
-                    shape=self.grid.shape,
-                    texture_source=lambda ctx=None: solver.displacement_texture(),
-                    model_source=self._model_snapshot,
-                    inverse="baked",
-                    # lets the renderer bound the field for empty-space skipping: it
-                    # reads back only once a field state is drawn twice (not while
-                    # the simulation runs)
-                    field_reader=self.displacements,
-                    revision_source=lambda: solver.revision,
-                )
-            else:
-                self._warp = OffsetFieldWarp(
-                    lo,
-                    hi,
-                    self.displacements(),
-                    shape=self.grid.shape,
-                    model_source=self._model_snapshot,
-                    inverse="baked",
-                )
-        if inverse is not None:
-            if inverse not in INVERSE_MODES:
-                raise MassSpringError(
-                    f"inverse must be one of {list(INVERSE_MODES)}; got {inverse!r}"
-                )
-            self._warp.inverse = inverse
-        if iterations is not None:
-            ok = isinstance(iterations, int | np.integer) and not isinstance(iterations, bool)
-            if not ok or not 1 <= int(iterations) <= MAX_ITERATIONS:
-                raise MassSpringError(
-                    f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}"
-                )
-            self._warp.iterations = int(iterations)
+        self._warp = element_model_warp(
+            self._warp,
+            self.grid,
+            displacements=self.displacements,
+            solver=(lambda: self._solver) if self.backend == "gpu" else None,
+            model_source=self._model_snapshot,
+            inverse=inverse,
+            iterations=iterations,
+            error=MassSpringError,
+        )
         return self._warp
 
     def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:

@@ -871,6 +871,77 @@ def gaussian_drag_field(
     return np.exp(-d2 / (2.0 * sigma**2))[..., None] * np.asarray(displacement, float)
 
 
+def element_model_warp(
+    warp: OffsetFieldWarp | None,
+    grid: Any,
+    *,
+    displacements: Callable[[], np.ndarray],
+    solver: Callable[[], Any] | None,
+    model_source: ModelSource,
+    inverse: str | None,
+    iterations: int | None,
+    error: type[Exception] = WarpError,
+) -> OffsetFieldWarp:
+    """The offset-field warp of an element model (mass-spring, ChainMail): made once,
+    then reconfigured.
+
+    Parameters
+    ----------
+    warp
+        The model's warp so far (``None``: make it).
+    grid
+        The :class:`~deform.elements.ElementGrid` (``lo``, ``hi``, ``shape``).
+    displacements
+        ``() -> (nx, ny, nz, 3)`` the model's displacements (mm): the CPU field, or for
+        a GPU solver the read-back that bounds the field for empty-space skipping.
+    solver
+        ``() -> the model's current GPU solver`` (one with ``displacement_texture()`` and
+        ``revision``; a getter, since a model may rebuild its solver): the warp then
+        samples its texture and nothing is uploaded. ``None`` for a CPU field.
+    model_source
+        See :class:`OffsetFieldWarp` (the model's dict for scene JSON).
+    inverse, iterations
+        New inverse mode / iterations, or ``None`` to keep them (``"baked"`` with its
+        default iterations when the warp is made).
+    error
+        Exception class for bad ``inverse`` / ``iterations`` (the model's own).
+    """
+    if warp is None:
+        lo, hi = np.asarray(grid.lo, float).copy(), np.asarray(grid.hi, float).copy()
+        if solver is not None:
+            warp = OffsetFieldWarp(
+                lo,
+                hi,
+                shape=grid.shape,
+                texture_source=lambda ctx=None: solver().displacement_texture(),
+                model_source=model_source,
+                inverse="baked",
+                # lets the renderer bound the field for empty-space skipping: it reads
+                # back only once a field state is drawn twice (not while it changes)
+                field_reader=displacements,
+                revision_source=lambda: solver().revision,
+            )
+        else:
+            warp = OffsetFieldWarp(
+                lo,
+                hi,
+                displacements(),
+                shape=grid.shape,
+                model_source=model_source,
+                inverse="baked",
+            )
+    if inverse is not None:
+        if inverse not in INVERSE_MODES:
+            raise error(f"inverse must be one of {list(INVERSE_MODES)}; got {inverse!r}")
+        warp.inverse = inverse
+    if iterations is not None:
+        ok = isinstance(iterations, int | np.integer) and not isinstance(iterations, bool)
+        if not ok or not 1 <= int(iterations) <= MAX_ITERATIONS:
+            raise error(f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}")
+        warp.iterations = int(iterations)
+    return warp
+
+
 def _cell_reduce(node: np.ndarray, op: Any) -> np.ndarray:
     """Per grid cell, ``op`` over its (up to) 8 corner nodes; (cells..., 3)."""
     cell = node

@@ -78,3 +78,18 @@ def test_gpu_random_drags_with_fixed_elements_keep_every_link(gl_ctx: Any) -> No
                 cm.release()
     finally:
         cm.close()
+
+
+def test_gpu_warp_follows_a_rebuilt_solver(gl_ctx: Any) -> None:
+    """A cut rebuilds the GPU solver: the warp must sample the new solver's texture."""
+    cm = ChainMail(_grid((6, 4, 4)), backend="gpu", ctx=gl_ctx)
+    try:
+        warp = cm.warp()
+        first = warp.textures(gl_ctx)["displacement"]
+        cm.cut((25.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+        assert warp.textures(gl_ctx)["displacement"] is cm._solver.displacement_texture()
+        assert warp.textures(gl_ctx)["displacement"] is not first
+        cm.move((4, 2, 2), (3.0, 0.0, 0.0))
+        np.testing.assert_allclose(cm.displacements()[4, 2, 2], (3.0, 0.0, 0.0), atol=1e-5)
+    finally:
+        cm.close()
