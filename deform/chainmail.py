@@ -1055,8 +1055,19 @@ class ChainMail:
         return raw.transpose(2, 1, 0, 3)[..., :3].astype(np.float64)
 
     def _update_warp(self) -> None:
-        if self._warp is not None and self.backend == "cpu":
+        """Keep a CPU warp current: only the box of displaced elements (every element
+        that changed since the last reset lies in it) is rewritten, so a local drag on
+        a large grid does not re-upload the whole field."""
+        if self._warp is None or self.backend != "cpu":
+            return
+        box = self._box
+        n = self.grid.count
+        if box is None or int(np.prod(box[1::2] - box[0::2])) > n // 2:
             self._warp.update(self.displacements())
+            return
+        sl = tuple(slice(int(box[2 * a]), int(box[2 * a + 1])) for a in range(3))
+        x = self._x.reshape((*self.grid.shape, 3))[sl]
+        self._warp.update_region(box[0::2], x - self._model.rest[sl])
 
     # ------------------------------------------------------------------ GPU backend
     def _make_gpu_solver(self) -> Any:

@@ -578,3 +578,18 @@ def test_gpu_backend_drives_the_solver_interface(monkeypatch: pytest.MonkeyPatch
     assert new.calls[-1] == "set_positions"
     cm.close()
     assert new.released
+
+
+def test_cpu_warp_stays_current_through_local_updates() -> None:
+    """The CPU warp is rewritten only in the box of displaced elements: after moves,
+    relaxation, a cut and a reset its field still equals the displacements."""
+    cm = ChainMail(_grid((12, 10, 8)))
+    w = cm.warp()
+    cm.move((6, 5, 4), (4.0, -2.0, 1.0))
+    np.testing.assert_array_equal(w.displacements, cm.displacements())
+    cm.relax(2)
+    np.testing.assert_array_equal(w.displacements, cm.displacements())
+    cm.move((2, 2, 2), (-3.0, 0.0, 2.0))
+    np.testing.assert_array_equal(w.displacements, cm.displacements())
+    cm.reset()
+    np.testing.assert_array_equal(w.displacements, 0.0)

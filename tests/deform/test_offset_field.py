@@ -650,3 +650,42 @@ def test_bake_factor_and_default_corrections_follow_the_grid_size() -> None:
     assert big.bake_factor == 1
     assert big.bake_shape == (128, 4, 4)
     assert big.baked_inverse().shape == (128, 4, 4, 3)
+
+
+def test_update_region_rewrites_only_its_block(gl_ctx: Any) -> None:
+    rng = np.random.default_rng(4)
+    u = rng.normal(0.0, 1.0, (*SHAPE, 3))
+    w = OffsetFieldWarp(LO, HI, u)
+    try:
+        tex = w.textures(gl_ctx)["displacement"]
+        block = rng.normal(0.0, 1.0, (3, 4, 2, 3))
+        w.update_region((2, 5, 7), block)
+        u[2:5, 5:9, 7:9] = block
+        np.testing.assert_array_equal(w.displacements, u)
+        w.update_region((0, 0, 0), u[:1, :1, :1] * 2.0)
+        u[:1, :1, :1] *= 2.0
+        assert w.textures(gl_ctx)["displacement"] is tex  # rewritten in place
+        got = np.frombuffer(tex.read(), np.float16).reshape(SHAPE[2], SHAPE[1], SHAPE[0], 4)
+        np.testing.assert_array_equal(got, w.texture_data())  # the whole field is current
+        with pytest.raises(WarpError, match="leaves"):
+            w.update_region((12, 0, 0), np.zeros((2, 1, 1, 3)))
+        with pytest.raises(WarpError, match="NaN"):
+            w.update_region((0, 0, 0), np.full((1, 1, 1, 3), np.nan))
+    finally:
+        w.release()
+
+
+@pytest.mark.parametrize("width", [(1, 1, 1), (2, 4, 1), (3, 5, 2), (8, 2, 16)])
+def test_window_reduce_matches_brute_force(width: tuple[int, int, int]) -> None:
+    from deform.offset_field import _window_reduce
+
+    a = np.random.default_rng(9).normal(size=(9, 7, 6, 3))
+    cache: dict = {}
+    for op, red in ((np.maximum, np.max), (np.minimum, np.min)):
+        got = _window_reduce(a, width, op, cache if op is np.maximum else None)
+        want = np.empty_like(a)
+        for i, j, k in np.ndindex(a.shape[:3]):
+            block = a[i : i + width[0], j : j + width[1], k : k + width[2]]
+            want[i, j, k] = red(block.reshape(-1, 3), axis=0)
+        np.testing.assert_array_equal(got, want)
+    assert cache  # prefixes kept for the next window
