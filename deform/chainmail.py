@@ -126,7 +126,7 @@ from typing import Any
 import numpy as np
 
 from deform.chainmail_model import ChainMailError, ChainMailModel, check_limits
-from deform.elements import ElementGrid, ElementGridError, Selection
+from deform.elements import ElementGrid, ElementGridError, Selection, grid_from_entry
 
 __all__ = [
     "BACKENDS",
@@ -1044,15 +1044,10 @@ class ChainMail:
 
     def _rendered_field(self) -> np.ndarray:
         """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        tex = self._solver.displacement_texture()
-        nx, ny, nz = self.grid.shape
-        try:
-            if tuple(tex.size) != (nx, ny, nz) or tex.components != 4 or tex.dtype != "f2":
-                raise TypeError("not an RGBA16F texture of the grid shape")
-            raw = np.frombuffer(tex.read(), dtype=np.float16).reshape(nz, ny, nx, 4)
-        except (AttributeError, TypeError, ValueError):
-            return self.displacements()
-        return raw.transpose(2, 1, 0, 3)[..., :3].astype(np.float64)
+        from deform.offset_field import texture_field
+
+        field = texture_field(self._solver.displacement_texture(), self.grid.shape)
+        return self.displacements().astype(np.float64) if field is None else field
 
     def _update_warp(self) -> None:
         """Keep a CPU warp current: only the box of displaced elements (every element
@@ -1237,21 +1232,10 @@ class ChainMail:
             The model with positions ``rest + displacements`` (the saved field); its
             :meth:`warp` is a new warp, to be put in the scene in place of ``warp``.
         """
-        state = getattr(warp, "model_state", None)
-        if not isinstance(state, Mapping) or state.get("type") != MODEL_TYPE:
-            raise ChainMailError(
-                "this warp carries no ChainMail model (its model_state is not"
-                f" {{'type': {MODEL_TYPE!r}, ...}}); only warps saved from a ChainMail"
-                " can be resumed"
-            )
-        u = np.asarray(warp.displacements, dtype=np.float64)
-        grid = _grid_from(state)
-        if u.shape != (*grid.shape, 3):
-            raise ChainMailError(
-                f"the warp's field has shape {u.shape} but its model's grid is"
-                f" {grid.shape}; the scene entry is inconsistent"
-            )
-        return cls.from_dict(state, backend=backend, ctx=ctx, positions=grid.rest_positions + u)
+        from deform.offset_field import saved_model
+
+        state, positions = saved_model(warp, MODEL_TYPE, "ChainMail", "ChainMail", ChainMailError)
+        return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)
 
     def close(self) -> None:
         """Free the solver's and the warp's GPU resources; idempotent."""
@@ -1312,15 +1296,8 @@ def _compact(a: np.ndarray) -> Any:
 
 
 def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
-    if "grid" not in d:
-        raise ChainMailError(
-            "a chainmail entry needs the key 'grid' (an ElementGrid.to_dict() object"
-            " with 'lo', 'hi' and 'shape')"
-        )
-    try:
-        return ElementGrid.from_dict(d["grid"])
-    except ElementGridError as exc:
-        raise ChainMailError(f"chainmail 'grid': {exc}") from exc
+    """The ``"grid"`` of a chainmail entry as an :class:`ElementGrid`."""
+    return grid_from_entry(d, MODEL_TYPE, ChainMailError)
 
 
 def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[int, np.ndarray]]:

@@ -434,6 +434,20 @@ class ElementGrid:
         )
 
 
+def grid_from_entry(d: Mapping[str, Any], model: str, error: type[Exception]) -> ElementGrid:
+    """The ``"grid"`` of a saved element model (``model``: its name in messages) as an
+    :class:`ElementGrid`; problems raise ``error`` (the model's own exception)."""
+    if "grid" not in d:
+        raise error(
+            f"a {model} entry needs the key 'grid' (an ElementGrid.to_dict() object"
+            " with 'lo', 'hi' and 'shape')"
+        )
+    try:
+        return ElementGrid.from_dict(d["grid"])
+    except ElementGridError as exc:
+        raise error(f"{model} 'grid': {exc}") from exc
+
+
 def _apply_mapping(mapping: Any, values: np.ndarray) -> np.ndarray:
     if callable(mapping):
         out = np.asarray(mapping(values), dtype=np.float64)

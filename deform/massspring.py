@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from deform.elements import ElementGrid, ElementGridError, Selection
+from deform.elements import ElementGrid, Selection, grid_from_entry
 from deform.spring_model import INTEGRATORS, SpringModel
 
 #: solver backends of :class:`MassSpring`
@@ -645,16 +645,11 @@ class MassSpring:
         return model, self._rendered_field()
 
     def _rendered_field(self) -> np.ndarray:
-        """(n_x, n_y, n_z, 3) float64 field the GPU warp renders (a read-back)."""
-        tex = self._solver.displacement_texture()
-        nx, ny, nz = self.grid.shape
-        try:
-            if tuple(tex.size) != (nx, ny, nz) or tex.components != 4 or tex.dtype != "f2":
-                raise TypeError("not an RGBA16F texture of the grid shape")
-            raw = np.frombuffer(tex.read(), dtype=np.float16).reshape(nz, ny, nx, 4)
-        except (AttributeError, TypeError, ValueError):
-            return self.displacements().astype(np.float64)  # e.g. a stand-in solver
-        return raw.transpose(2, 1, 0, 3)[..., :3].astype(np.float64)
+        """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
+        from deform.offset_field import texture_field
+
+        field = texture_field(self._solver.displacement_texture(), self.grid.shape)
+        return self.displacements().astype(np.float64) if field is None else field
 
     def _update_warp(self) -> None:
         if self._warp is not None and self.backend == "cpu":
@@ -797,21 +792,12 @@ class MassSpring:
             When the warp carries no mass-spring model, or the model and the field do
             not fit together.
         """
-        state = getattr(warp, "model_state", None)
-        if not isinstance(state, Mapping) or state.get("type") != MODEL_TYPE:
-            raise MassSpringError(
-                "this warp carries no mass-spring model (its model_state is not"
-                f" {{'type': {MODEL_TYPE!r}, ...}}); only warps saved from a MassSpring"
-                " can be resumed"
-            )
-        u = np.asarray(warp.displacements, dtype=np.float64)
-        grid = _grid_from(state)
-        if u.shape != (*grid.shape, 3):
-            raise MassSpringError(
-                f"the warp's field has shape {u.shape} but its model's grid is"
-                f" {grid.shape}; the scene entry is inconsistent"
-            )
-        return cls.from_dict(state, backend=backend, ctx=ctx, positions=grid.rest_positions + u)
+        from deform.offset_field import saved_model
+
+        state, positions = saved_model(
+            warp, MODEL_TYPE, "mass-spring", "MassSpring", MassSpringError
+        )
+        return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)
 
     def set_state(self, positions: Any, velocities: Any = None) -> None:
         """Replace the element positions (and velocities; default 0).
@@ -878,15 +864,7 @@ def _number(value: Any, what: str, *, positive: bool) -> float:
 
 def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
     """The ``"grid"`` of a massspring entry as an :class:`ElementGrid`."""
-    if "grid" not in d:
-        raise MassSpringError(
-            "a massspring entry needs the key 'grid' (an ElementGrid.to_dict() object"
-            " with 'lo', 'hi' and 'shape')"
-        )
-    try:
-        return ElementGrid.from_dict(d["grid"])
-    except ElementGridError as exc:
-        raise MassSpringError(f"massspring 'grid': {exc}") from exc
+    return grid_from_entry(d, MODEL_TYPE, MassSpringError)
 
 
 def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[tuple[int, int, int], np.ndarray]]:

@@ -939,6 +939,58 @@ def gaussian_drag_field(
     return np.exp(-d2 / (2.0 * sigma**2))[..., None] * np.asarray(displacement, float)
 
 
+def texture_field(tex: Any, shape: Sequence[int]) -> np.ndarray | None:
+    """The ``(nx, ny, nz, 3)`` float64 field an RGBA16F 2D array texture of ``shape``
+    (layers = z) holds -- what the warp renders, read back -- or ``None`` when ``tex``
+    is not such a texture (e.g. a stand-in solver in tests)."""
+    nx, ny, nz = (int(n) for n in shape)
+    try:
+        if tuple(tex.size) != (nx, ny, nz) or tex.components != 4 or tex.dtype != "f2":
+            return None
+        raw = np.frombuffer(tex.read(), dtype=np.float16).reshape(nz, ny, nx, 4)
+    except (AttributeError, TypeError, ValueError):
+        return None
+    return raw.transpose(2, 1, 0, 3)[..., :3].astype(np.float64)
+
+
+def saved_model(
+    warp: Any, kind: str, label: str, owner: str, error: type[Exception]
+) -> tuple[Mapping[str, Any], np.ndarray]:
+    """The model entry and element positions behind a warp loaded from scene JSON.
+
+    Parameters
+    ----------
+    warp
+        An :class:`OffsetFieldWarp` whose :attr:`OffsetFieldWarp.model_state` has
+        ``"type": kind``.
+    kind, label, owner
+        The model's type name in scene JSON, its name in messages and its class.
+    error
+        The model's exception class.
+
+    Returns
+    -------
+    (state, positions)
+        The model dict and ``rest + displacements`` (the saved field) of its grid.
+    """
+    from deform.elements import grid_from_entry
+
+    state = getattr(warp, "model_state", None)
+    if not isinstance(state, Mapping) or state.get("type") != kind:
+        raise error(
+            f"this warp carries no {label} model (its model_state is not"
+            f" {{'type': {kind!r}, ...}}); only warps saved from a {owner} can be resumed"
+        )
+    u = np.asarray(warp.displacements, dtype=np.float64)
+    grid = grid_from_entry(state, kind, error)
+    if u.shape != (*grid.shape, 3):
+        raise error(
+            f"the warp's field has shape {u.shape} but its model's grid is"
+            f" {grid.shape}; the scene entry is inconsistent"
+        )
+    return state, grid.rest_positions + u
+
+
 def element_model_warp(
     warp: OffsetFieldWarp | None,
     grid: Any,
