@@ -179,6 +179,7 @@ import numpy as np
 
 import shaders
 from deform.chainmail_model import ChainMailModel
+from deform.gpu_grid import GpuGridSolver
 from deform.massspring_gpu import atlas_layout
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
@@ -229,7 +230,7 @@ def _volume(box: Box | None) -> int:
     return 0 if box is None else math.prod(h - lo for lo, h in zip(*box, strict=True))
 
 
-class GpuChainMailSolver:
+class GpuChainMailSolver(GpuGridSolver):
     """ChainMail constraint enforcement on the GPU (see the module doc).
 
     Parameters
@@ -265,8 +266,7 @@ class GpuChainMailSolver:
         self.ctx = ctx
         #: restrict passes to the box that can still change (see the module doc)
         self.local = bool(local)
-        self._released = False
-        self._objects: list[Any] = []
+        self._init_objects()
         shape = model.shape
         if len(shape) != 3 or min(shape) < 1:
             raise ValueError(f"model.rest must have shape (nx, ny, nz, 3); got {model.rest.shape}")
@@ -365,10 +365,6 @@ class GpuChainMailSolver:
         self._disp.repeat_x = self._disp.repeat_y = False
         self.set_positions(np.asarray(model.rest, np.float64))
 
-    def _keep(self, obj: Any) -> Any:
-        self._objects.append(obj)
-        return obj
-
     def _texture(self, data: np.ndarray | None = None) -> Any:
         w, h = self.atlas_size
         if data is None:
@@ -397,21 +393,6 @@ class GpuChainMailSolver:
         tx, ty = self.tiles
         tiles = atlas.reshape(ty, ny, tx, nx, 4).transpose(3, 1, 0, 2, 4)
         return tiles.reshape(nx, ny, ty * tx, 4)[:, :, :nz]
-
-    def _check_alive(self) -> None:
-        if self._released:
-            raise RuntimeError("GpuChainMailSolver used after release()")
-
-    def _check_grid(self, name: str, array: Any, channels: int | None) -> np.ndarray:
-        a = np.asarray(array)
-        want = self.shape if channels is None else (*self.shape, channels)
-        if a.shape != want:
-            raise ValueError(f"{name} must have shape {want}; got {a.shape}")
-        if channels is not None:
-            a = a.astype(np.float64, copy=False)
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"{name} must be finite")
-        return a
 
     # ------------------------------------------------------------------ public API
     def set_positions(self, x: np.ndarray, valid: bool = False) -> None:
@@ -781,18 +762,6 @@ class GpuChainMailSolver:
         """
         self._check_alive()
         return self._disp
-
-    def release(self) -> None:
-        """Free all GPU objects (textures, framebuffers, programs, buffer); idempotent."""
-        if self._released:
-            return
-        self._released = True
-        for obj in reversed(self._objects):
-            try:
-                obj.release()
-            except Exception:  # context already gone: nothing left to free
-                pass
-        self._objects.clear()
 
 
 def _link_data(model: ChainMailModel) -> np.ndarray:

@@ -126,6 +126,7 @@ import moderngl
 import numpy as np
 
 import shaders
+from deform.gpu_grid import GpuGridSolver
 from deform.spring_model import INTEGRATORS, SpringModel
 
 #: Most springs per element the shaders accept (structural + shear + bend).
@@ -186,7 +187,7 @@ def block_shape(shape: tuple[int, int, int], block: tuple[int, int, int]) -> tup
     return tuple(-(-int(n) // int(b)) for n, b in zip(shape, block, strict=True))  # type: ignore[return-value]
 
 
-class GpuSpringSolver:
+class GpuSpringSolver(GpuGridSolver):
     """Mass-spring solver on the GPU (see module doc for the technique and layout).
 
     Parameters
@@ -223,8 +224,7 @@ class GpuSpringSolver:
             )
         self.model = model
         self.ctx = ctx
-        self._released = False
-        self._objects: list[Any] = []
+        self._init_objects()
         shape = _check_model(model)
         self.shape: tuple[int, int, int] = shape
         nx, ny, nz = shape
@@ -338,10 +338,6 @@ class GpuSpringSolver:
 
         self.set_state(np.asarray(model.rest, np.float64), np.zeros((*self.shape, 3)))
 
-    def _keep(self, obj: Any) -> Any:
-        self._objects.append(obj)
-        return obj
-
     def _state_list(self, side: int) -> list[Any]:
         """The state textures of one side in image-unit/attachment order (p0 v0 p1 v1 ...)."""
         return [t for pv in zip(self._pos[side], self._vel[side], strict=True) for t in pv]
@@ -417,21 +413,6 @@ class GpuSpringSolver:
             out[:, ex, :, ey, :, ez] = tiles.reshape(bx, by, ty * tx, 4)[:, :, :bz]
         nx, ny, nz = self.shape
         return out.reshape(bx * sx, by * sy, bz * sz, 4)[:nx, :ny, :nz]
-
-    def _check_alive(self) -> None:
-        if self._released:
-            raise RuntimeError("GpuSpringSolver used after release()")
-
-    def _check_grid(self, name: str, array: Any, channels: int | None) -> np.ndarray:
-        a = np.asarray(array)
-        want = self.shape if channels is None else (*self.shape, channels)
-        if a.shape != want:
-            raise ValueError(f"{name} must have shape {want}; got {a.shape}")
-        if channels is not None:
-            a = a.astype(np.float64, copy=False)
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"{name} must be finite")
-        return a
 
     # ------------------------------------------------------------------ public API
     def set_state(self, positions: np.ndarray, velocities: np.ndarray) -> None:
@@ -623,18 +604,6 @@ class GpuSpringSolver:
         """
         self._check_alive()
         return self._disp
-
-    def release(self) -> None:
-        """Free all GPU objects (textures, framebuffers, programs); idempotent."""
-        if self._released:
-            return
-        self._released = True
-        for obj in reversed(self._objects):
-            try:
-                obj.release()
-            except Exception:  # context already gone: nothing left to free
-                pass
-        self._objects.clear()
 
 
 def _block_elements(block: tuple[int, int, int]) -> list[tuple[int, int, int]]:

@@ -1,0 +1,62 @@
+"""What the GPU solvers of the element models share: ownership of their GPU objects.
+
+:class:`~deform.massspring_gpu.GpuSpringSolver` and
+:class:`~deform.chainmail_gpu.GpuChainMailSolver` create textures, framebuffers and
+programs on a context they are given; each keeps them (:meth:`GpuGridSolver._keep`)
+and frees all of them, once, in :meth:`GpuGridSolver.release`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+class GpuGridSolver:
+    """Base of the GPU solvers on an ``(nx, ny, nz)`` element grid (see module doc).
+
+    Subclasses set :attr:`shape` and call :meth:`_init_objects` before making any GPU
+    object.
+    """
+
+    #: elements per axis
+    shape: tuple[int, int, int]
+
+    def _init_objects(self) -> None:
+        self._released = False
+        self._objects: list[Any] = []
+
+    def _keep(self, obj: Any) -> Any:
+        """Own a GPU object: it is freed by :meth:`release`."""
+        self._objects.append(obj)
+        return obj
+
+    def _check_alive(self) -> None:
+        if self._released:
+            raise RuntimeError(f"{type(self).__name__} used after release()")
+
+    def _check_grid(self, name: str, array: Any, channels: int | None) -> np.ndarray:
+        """``array`` checked to be ``shape`` (+ ``channels``) and, with channels,
+        finite float64; ``ValueError`` naming ``name`` otherwise."""
+        a = np.asarray(array)
+        want = self.shape if channels is None else (*self.shape, channels)
+        if a.shape != want:
+            raise ValueError(f"{name} must have shape {want}; got {a.shape}")
+        if channels is not None:
+            a = a.astype(np.float64, copy=False)
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} must be finite")
+        return a
+
+    def release(self) -> None:
+        """Free all GPU objects (textures, framebuffers, programs, buffers); idempotent."""
+        if self._released:
+            return
+        self._released = True
+        for obj in reversed(self._objects):
+            try:
+                obj.release()
+            except Exception:  # context already gone: nothing left to free
+                pass
+        self._objects.clear()
