@@ -86,6 +86,27 @@ class BenchReport:
         return "\n".join(lines) + "\n"
 
 
+def cpu_count() -> int:
+    """CPU cores this process may run on (for the benchmark reports)."""
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def load_average() -> float:
+    """The 1-minute load average (-1 where the platform has none): benchmark reports
+    record it before and after a run, since these machines are shared."""
+    import os
+
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):  # not available on this platform
+        return -1.0
+
+
 def benchmark_volume(volume: Volume | None = None) -> Volume:
     """The benchmark volume: ``volume``, or the real CT ``stent`` upsampled to 256³."""
     if volume is not None:

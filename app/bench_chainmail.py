@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from app.bench import cpu_count, load_average
+
 #: the benchmark's grid sizes (elements per axis)
 DEFAULT_SIZES: tuple[int, ...] = (16, 32, 64, 128)
 #: the box the element grid spans (mm)
@@ -147,7 +149,7 @@ class ChainBenchReport:
             " the move changed (GPU: elements displaced by more than"
             f" {GPU_MOVED_MM:g} mm after it). GL:"
             f" {self.gl_renderer}; CPU: {platform.processor() or platform.machine()},"
-            f" {_cpu_count()} cores; numpy {np.__version__}, numba {_numba_version()};"
+            f" {cpu_count()} cores; numpy {np.__version__}, numba {_numba_version()};"
             f" 1-minute load average before / after the run {self.load[0]:.2f} /"
             f" {self.load[1]:.2f}.",
             "",
@@ -186,24 +188,6 @@ class ChainBenchReport:
             lines += ["", *notes]
         lines += ["", self.target_line()]
         return "\n".join(lines) + "\n"
-
-
-def _cpu_count() -> int:
-    import os
-
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
-def _load() -> float:
-    import os
-
-    try:
-        return float(os.getloadavg()[0])
-    except (AttributeError, OSError):  # not available on this platform
-        return -1.0
 
 
 def _numba_version() -> str:
@@ -302,7 +286,7 @@ def bench_chainmail(
         Progress messages go here.
     """
     report = ChainBenchReport(sizes=tuple(int(n) for n in sizes), repeats=int(repeats))
-    load_start = _load()
+    load_start = load_average()
     own_ctx = False
     gpu_skip = "" if use_gpu else "skipped (not asked for)"
     if use_gpu and ctx is None:
@@ -326,7 +310,7 @@ def bench_chainmail(
     finally:
         if own_ctx:
             ctx.release()
-    report.load = (load_start, _load())
+    report.load = (load_start, load_average())
     return report
 
 

@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from app.bench import cpu_count, load_average
+
 #: the benchmark's grid sizes (elements per axis)
 DEFAULT_SIZES: tuple[int, ...] = (16, 32, 64, 128)
 #: the box the element grid spans (mm)
@@ -124,7 +126,7 @@ class SpringBenchReport:
             " block is `steps x blocks` steps (fewer steps per block where one block"
             " would take over 2 s); GPU blocks end with `ctx.finish()`, taichi blocks"
             f" with `ti.sync()`. GL: {self.gl_renderer}; CPU:"
-            f" {platform.processor() or platform.machine()}, {_cpu_count()} cores;"
+            f" {platform.processor() or platform.machine()}, {cpu_count()} cores;"
             f" numpy {np.__version__} (float64);"
             f" {taichi};"
             f" 1-minute load average before / after the run {self.load[0]:.2f} /"
@@ -151,24 +153,6 @@ class SpringBenchReport:
         if notes:
             lines += ["", *(f"* {s}" for s in notes)]
         return "\n".join(lines) + "\n"
-
-
-def _cpu_count() -> int:
-    import os
-
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
-def _load() -> float:
-    import os
-
-    try:
-        return float(os.getloadavg()[0])
-    except (AttributeError, OSError):  # not available on this platform
-        return -1.0
 
 
 def _rate(r: SpringBenchRow | None) -> str:
@@ -321,7 +305,7 @@ def bench_massspring(
         gl_renderer="not used",
         taichi="",
     )
-    load_start = _load()
+    load_start = load_average()
     own_ctx = False
     gpu_skip = "" if use_gpu else "skipped (not asked for)"
     if use_gpu and ctx is None:
@@ -348,7 +332,7 @@ def bench_massspring(
     finally:
         if own_ctx:
             ctx.release()
-    report.load = (load_start, _load())
+    report.load = (load_start, load_average())
     if taichi_skip:
         log(f"taichi rows {taichi_skip}")
     return report
