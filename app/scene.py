@@ -414,6 +414,8 @@ class Scene:
         volume = _volume_from_dict(d["volume"], base_dir)
         try:
             warps = [warp_from_dict(w) for w in (d.get("warps") or [])]
+            for w in warps:
+                w.bind_volume(volume)
         except (WarpError, TypeError) as exc:
             raise SceneError(f"invalid warp in scene: {exc}") from exc
         tf = d.get("transfer_function", "ct-bone")

@@ -23,6 +23,9 @@ from deform.warp import (
     register_warp,
     warp_from_dict,
 )
+from deform.wires import Wire as Wire
+from deform.wires import WireDeformer as WireDeformer
+from deform.wires import WireFieldWarp as WireFieldWarp
 
 __all__ = [
     "AffineWarp",

@@ -162,6 +162,13 @@ class Warp(ABC):
     def release(self) -> None:  # noqa: B027 - optional hook
         """Free GPU resources; idempotent."""
 
+    def bind_volume(self, volume: Any) -> None:  # noqa: B027 - optional hook
+        """Give the warp the original volume it deforms (called by scene loading).
+
+        Warps whose GPU data derive from the volume's values (the wire field classifies
+        objects by value) build them here; the others ignore it.
+        """
+
     def signature(self) -> str:
         """Identifies the GLSL variant (programs are cached per chain signature)."""
         return self.kind

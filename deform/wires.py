@@ -1,0 +1,1481 @@
+"""Volume wires: bend, twist and scale objects in a volume along curves, without resampling.
+
+About this technique (Journal of WSCG 14, 2006: non-linear, non-reconstructive volume
+deformation by sweeping, sections 4-9; an extension of Maya's wire deformer to volumes)
+------------------------------------------------------------------------------------------
+A :class:`Wire` is a *base* curve laid through an object and a *modified* copy of it
+(same curve type) that the user bends, plus a twist angle θ and a scale s keyed at any
+points along it. The object is *swept*: the cross-section of the object on the plane
+normal to the base wire at arc-length fraction u is shown on the plane normal to the
+modified wire at the same fraction u, rotated by θ(u) about the wire and scaled by s(u).
+Base and modified wire may differ in length (the object is compressed or stretched along
+it). The parameter of every key, table and the attribute field is that arc-length
+fraction u in [0, 1] (0 = first control point), the same on both curves: this is the
+paper's plane-to-plane mapping by t.
+
+Frames. Twist needs a frame on each curve that has no twist of its own: both curves
+carry rotation-minimising frames (double reflection, :meth:`deform.curves.Curve.frames`);
+the base frame starts from ``initial_normal`` (default: the world axis least aligned
+with the base tangent), the modified frame from that normal carried by the minimal
+rotation between the two start tangents. So a wire that is only translated or bent in
+a plane maps cross-sections without rotating them, and θ is exactly the rotation seen.
+
+Mapping (section 6). A deformed-space point p near the modified wire at fraction u has
+local coordinates ``(x, y, z) = F_m(u)^T (p - M(u))`` in the modified frame
+``F_m = (N_m, B_m, T_m)``. It shows the original point
+``q = B(u) + F_b(u) diag(1/s, 1/s, L_b/L_m) R_z(-θ) (x, y, z)`` on the base wire, i.e.
+``q = C(u) + A(u) (p - M(u))`` with ``C = B(u)`` and a 3x3 matrix ``A(u)``. The
+along-wire offset z is kept (scaled by the length ratio), so an error in u moves M and
+C together along straight parts and the mapping is first-order insensitive to it.
+``M``, ``C`` and ``A`` are tabulated at :data:`LUT_SIZE` equally spaced fractions ("wire
+point and frame lookup tables at integer t", section 7.2) and interpolated linearly;
+the CPU reference, the masks and the shader all use these same tables. The Jacobian of
+the warp is A(u) (the dependence of u on p is second order; section 6.1 carries the
+gradient by it).
+
+Attribute field (section 5). Each ray sample needs to know whether it is swept, by
+which wire, and its u. The field holds that per voxel of a grid ``field_scale`` times
+coarser than the volume per axis (1:1, 1:8, 1:64, 1:512, 1:4096 in voxels), over the
+volume's box grown to hold the modified wires' regions of influence (a bent object may
+leave the original box). It is built in deformed space:
+
+1. *Planes* (5, 7.1): one plane per ``mask_resolution`` of modified arc length, normal
+   to the modified wire, each carrying a square mask of ``mask_resolution`` pixels
+   covering the region of influence (a disc of ``radius``). Each pixel's point is mapped
+   to the base side (the mapping above) and classified there by β (a value range of the
+   volume by default; any callable on values works).
+2. *Plane masks* (7.1): on each plane a 2.5D seed fill of the β pixels from a seed found
+   by searching outward from the wire (the β pixel nearest to it), then ``dilation``
+   pixels of morphological dilation; planes with no object are dropped. Only the
+   connected cross-section of the object the wire runs through is swept, which solves
+   the delineation problem of two nearby objects (with ``masks=False`` every β pixel in
+   the disc is swept instead).
+3. *Voxel initialisation* (5.1): where the modified wire enters a field cell, its eight
+   voxels become seeds with (γ wire id, ε closest u, d distance), keeping the minimum d.
+4. *Propagation*: every voxel of the region takes (γ, ε) of its nearest seed, by an
+   exact Euclidean distance transform in OpenCL (:mod:`deform.propagation`, PoCL on the
+   CPU here, any OpenCL GPU elsewhere; scipy when no platform exists). Distances are
+   discarded.
+5. *Flags*: a voxel is swept where the mask bit of plane ε under its projection is set
+   (and within the region of influence); the rest of the field is the identity. The
+   original place of the swept object is *vacated*: the scatter of every mask pixel's
+   base-side point marks it, and samples landing there (unswept) show nothing, so the
+   bent object does not leave a copy behind.
+
+Storage (7.2). Two layouts, chosen by ``layout``:
+
+* ``"float"``: ``state`` uint8 per voxel (0 identity, 1 vacated, 2 + γ swept) and ``t``
+  float32 (u·255, trilinearly filtered by the hardware): 5 bytes per voxel.
+* ``"packed"``: the paper's 2 bytes per voxel: bit 15 the swept flag, bits 8-14 the
+  wire id γ, bits 0-7 the integer t = round(255 u) (the segment of that t is in the
+  wire's lookup table, :attr:`WireTables.segment_base` / ``segment_modified``); unswept
+  voxels keep their γ and t so that swept neighbours can interpolate t, and the code
+  ``0x7FFF`` marks a vacated voxel. The shader interpolates t itself from the 8
+  neighbours of the same wire.
+
+Rendering: per sample one field fetch decides identity / vacated / swept; a swept
+sample adds the t fetch (8 in the packed layout) and 4 fetches of the tiny lookup table.
+:meth:`WireFieldWarp.displacement_range` bounds ``warp(p) - p`` per box from the field,
+so the raycaster keeps skipping empty space through the deformed volume.
+
+Limits: at most :data:`MAX_WIRES` (128) wires per field (the packed layout's 7-bit id).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from deform.curves import Curve, minimal_rotation
+from deform.warp import Warp, WarpError, register_warp
+
+#: most wires in one attribute field (7-bit wire id of the packed layout)
+MAX_WIRES = 128
+#: entries of each wire's lookup tables ("integer t" 0..255 of the packed layout)
+LUT_SIZE = 256
+#: allowed field scales (per-axis reduction; 1:1, 1:8, 1:64, 1:512, 1:4096 in voxels)
+FIELD_SCALES = (1, 2, 4, 8, 16)
+#: attribute field layouts
+LAYOUTS = ("float", "packed")
+#: packed code of a vacated voxel (flag 0, wire 127, t 255)
+PACKED_VACATED = 0x7FFF
+#: a vacated sample is sent this far away (it then lies outside every volume)
+FAR = 1.0e20
+
+Beta = Callable[[np.ndarray], np.ndarray]
+
+
+# ---------------------------------------------------------------------- keys
+def _keys(keys: Any, what: str, default: float, positive: bool = False) -> np.ndarray:
+    """Parse ``[(u, value), ...]`` into a sorted (K, 2) float array (K >= 1)."""
+    if keys is None or (isinstance(keys, Sequence) and len(keys) == 0):
+        return np.array([[0.0, default]])
+    if isinstance(keys, int | float):
+        return np.array([[0.0, float(keys)]])
+    try:
+        a = np.asarray(keys, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise WarpError(
+            f"wire {what} must be a list of (t, value) pairs, t in [0, 1]; got {keys!r:.80}"
+        ) from exc
+    if a.ndim != 2 or a.shape[1] != 2:
+        raise WarpError(
+            f"wire {what} must be a list of (t, value) pairs, t in [0, 1]; got shape {a.shape}"
+        )
+    if not np.all(np.isfinite(a)):
+        raise WarpError(f"wire {what} keys contain NaN/Inf; give finite numbers")
+    if np.any((a[:, 0] < 0) | (a[:, 0] > 1)):
+        raise WarpError(f"wire {what} keys need t in [0, 1] (fraction of the wire's length)")
+    if positive and np.any(a[:, 1] <= 0):
+        raise WarpError(f"wire {what} values must be > 0; got {a[:, 1].min():g}")
+    return a[np.argsort(a[:, 0], kind="stable")]
+
+
+def _interp_keys(keys: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Linear interpolation of keys at fractions u (constant beyond the first/last key)."""
+    return np.interp(u, keys[:, 0], keys[:, 1])
+
+
+def _beta(beta: Any) -> tuple[float, float] | Beta | None:
+    if beta is None or callable(beta):
+        return beta
+    try:
+        lo, hi = (float(v) for v in beta)
+    except (TypeError, ValueError) as exc:
+        raise WarpError(
+            f"wire beta must be a value range (lo, hi), a callable or None; got {beta!r:.80}"
+        ) from exc
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+        raise WarpError(f"wire beta range needs finite lo <= hi; got ({lo}, {hi})")
+    return (lo, hi)
+
+
+# ---------------------------------------------------------------------- wires
+class Wire:
+    """A wire: base curve, modified curve, twist and scale keys, influence and β.
+
+    Parameters
+    ----------
+    base, modified
+        (N, 3) control points (world mm) of the base curve (laid through the object)
+        and of the modified curve (where the object goes). Same ``kind``; the counts
+        may differ.
+    kind
+        ``"catmull-rom"`` (interpolates its points) or ``"bezier"`` (3k + 1 points).
+    twist
+        ``[(t, radians), ...]``: twist about the wire at fractions t of its length,
+        linearly interpolated (constant beyond the ends); one number = constant.
+    scale
+        ``[(t, s), ...]`` (s > 0): scale of the cross-section, keyed the same way.
+    radius
+        Region of influence (mm): how far from the wire the object is swept (Maya's
+        dropoffDistance); the sweep is rigid inside it, nothing moves beyond.
+    beta
+        Object classification: a value range ``(lo, hi)`` of the volume, a callable
+        ``values -> bool array``, or ``None`` (everything inside the radius).
+    initial_normal
+        Normal of the base wire's frame at its start (default: the world axis least
+        aligned with the start tangent); twist angles are measured from it.
+    name
+        Optional label (saved in scene JSON).
+    """
+
+    def __init__(
+        self,
+        base: Any,
+        modified: Any = None,
+        kind: str = "catmull-rom",
+        twist: Any = None,
+        scale: Any = None,
+        radius: float = 10.0,
+        beta: Any = None,
+        initial_normal: Any = None,
+        name: str = "",
+    ) -> None:
+        self.base = base if isinstance(base, Curve) else Curve(base, kind)
+        if modified is None:
+            modified = self.base.control_points.copy()
+        self.modified = modified if isinstance(modified, Curve) else Curve(modified, kind)
+        if self.modified.kind != self.base.kind:
+            raise WarpError(
+                f"base and modified wire must be the same kind; got {self.base.kind!r} and"
+                f" {self.modified.kind!r}"
+            )
+        self.twist = _keys(twist, "twist", 0.0)
+        self.scale = _keys(scale, "scale", 1.0, positive=True)
+        try:
+            r = float(radius)
+        except (TypeError, ValueError) as exc:
+            raise WarpError(f"wire radius must be a number of mm; got {radius!r:.40}") from exc
+        if not math.isfinite(r) or r <= 0:
+            raise WarpError(f"wire radius must be a finite number of mm > 0; got {radius!r}")
+        self.radius = r
+        self.beta = _beta(beta)
+        if initial_normal is not None:
+            n = np.asarray(initial_normal, dtype=np.float64).reshape(-1)
+            if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+                raise WarpError("wire initial_normal must be a non-zero finite (x, y, z)")
+            initial_normal = n
+        self.initial_normal = initial_normal
+        self.name = str(name)
+
+    @property
+    def kind(self) -> str:
+        """Curve type of both curves."""
+        return self.base.kind
+
+    def twist_at(self, u: Any) -> np.ndarray:
+        """Twist angle (radians) at arc-length fractions u."""
+        return _interp_keys(self.twist, np.asarray(u, dtype=np.float64))
+
+    def scale_at(self, u: Any) -> np.ndarray:
+        """Cross-section scale at arc-length fractions u."""
+        return _interp_keys(self.scale, np.asarray(u, dtype=np.float64))
+
+    def classify(self, values: np.ndarray) -> np.ndarray:
+        """β: which volume values belong to the object (bool array like ``values``)."""
+        if self.beta is None:
+            return np.ones(np.shape(values), dtype=bool)
+        if callable(self.beta):
+            out = np.asarray(self.beta(values))
+            if out.shape != np.shape(values):
+                raise WarpError(
+                    f"wire beta callable must return one bool per value; got shape {out.shape}"
+                    f" for {np.shape(values)}"
+                )
+            return out.astype(bool)
+        lo, hi = self.beta
+        return (values >= lo) & (values <= hi)
+
+    def tables(self, n: int = LUT_SIZE, precision: float = 1e-4) -> WireTables:
+        """Lookup tables of the mapping at ``n`` equally spaced arc-length fractions."""
+        return WireTables.build(self, n, precision)
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (a callable β cannot be saved: give a value range instead)."""
+        if callable(self.beta):
+            raise WarpError(
+                "a wire with a callable beta cannot be saved; give beta as a value range (lo, hi)"
+            )
+        d: dict[str, Any] = {
+            "kind": self.kind,
+            "base": self.base.control_points.tolist(),
+            "modified": self.modified.control_points.tolist(),
+            "twist": self.twist.tolist(),
+            "scale": self.scale.tolist(),
+            "radius": self.radius,
+            "beta": None if self.beta is None else list(self.beta),
+        }
+        if self.initial_normal is not None:
+            d["initial_normal"] = self.initial_normal.tolist()
+        if self.name:
+            d["name"] = self.name
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Wire:
+        """Inverse of :meth:`to_dict` (``modified`` defaults to ``base``)."""
+        if not isinstance(d, Mapping):
+            raise WarpError(f"a wire must be a JSON object; got {d!r:.80}")
+        unknown = set(d) - {
+            "kind",
+            "base",
+            "modified",
+            "twist",
+            "scale",
+            "radius",
+            "beta",
+            "initial_normal",
+            "name",
+        }
+        if unknown:
+            raise WarpError(f"unknown wire keys {sorted(unknown)}; see deform.wires.Wire")
+        if "base" not in d:
+            raise WarpError("a wire needs 'base': its control points [[x, y, z], ...] in mm")
+        if "radius" not in d:
+            raise WarpError("a wire needs 'radius': its region of influence in mm")
+        return cls(
+            base=d["base"],
+            modified=d.get("modified"),
+            kind=d.get("kind", "catmull-rom"),
+            twist=d.get("twist"),
+            scale=d.get("scale"),
+            radius=d["radius"],
+            beta=d.get("beta"),
+            initial_normal=d.get("initial_normal"),
+            name=d.get("name", ""),
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"Wire(kind={self.kind!r}, points={len(self.base.control_points)},"
+            f" radius={self.radius:g}, beta={self.beta!r})"
+        )
+
+
+@dataclass
+class WireTables:
+    """A wire's mapping tabulated at ``n`` equally spaced arc-length fractions u_i.
+
+    ``q = C(u) + A(u) (p - M(u))`` maps deformed points near the modified wire to the
+    original volume (see the module docstring); M, C, A are interpolated linearly in u.
+    """
+
+    #: fractions u_i = i / (n - 1)
+    u: np.ndarray
+    #: modified wire points M(u_i) (n, 3)
+    modified_points: np.ndarray
+    #: modified wire frames (n, 3, 3), columns (N, B, T)
+    modified_frames: np.ndarray
+    #: base wire points C(u_i) (n, 3)
+    base_points: np.ndarray
+    #: base wire frames (n, 3, 3), columns (N, B, T)
+    base_frames: np.ndarray
+    #: the linear part A(u_i) (n, 3, 3)
+    matrices: np.ndarray
+    #: curve parameters of u_i on each curve, and their segment indices
+    t_base: np.ndarray
+    t_modified: np.ndarray
+    segment_base: np.ndarray
+    segment_modified: np.ndarray
+    #: arc lengths (mm)
+    length_base: float
+    length_modified: float
+
+    @classmethod
+    def build(cls, wire: Wire, n: int = LUT_SIZE, precision: float = 1e-4) -> WireTables:
+        """Tabulate ``wire`` (see the class docstring)."""
+        u = np.linspace(0.0, 1.0, n)
+        tb, sb = wire.base.arc_length_table(n, precision)
+        tm, sm = wire.modified.arc_length_table(n, precision)
+        lb, lm = float(sb[-1]), float(sm[-1])
+        tb_, nb_, bb_ = wire.base.frames(tb, initial_normal=wire.initial_normal)
+        rot = minimal_rotation(tb_[0], wire.modified.frames(np.array([0.0]))[0][0])
+        tm_, nm_, bm_ = wire.modified.frames(tm, initial_normal=rot @ nb_[0])
+        fb = np.stack([nb_, bb_, tb_], axis=-1)
+        fm = np.stack([nm_, bm_, tm_], axis=-1)
+        theta = wire.twist_at(u)
+        s = wire.scale_at(u)
+        c, si = np.cos(-theta), np.sin(-theta)
+        rz = np.zeros((n, 3, 3))
+        rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1] = c, -si, si, c
+        rz[:, 2, 2] = 1.0
+        d = np.zeros((n, 3, 3))
+        d[:, 0, 0] = d[:, 1, 1] = 1.0 / s
+        d[:, 2, 2] = lb / lm
+        a = fb @ d @ rz @ np.transpose(fm, (0, 2, 1))
+        return cls(
+            u=u,
+            modified_points=wire.modified.evaluate(tm),
+            modified_frames=fm,
+            base_points=wire.base.evaluate(tb),
+            base_frames=fb,
+            matrices=a,
+            t_base=tb,
+            t_modified=tm,
+            segment_base=wire.base.segment_of(tb)[0],
+            segment_modified=wire.modified.segment_of(tm)[0],
+            length_base=lb,
+            length_modified=lm,
+        )
+
+    @property
+    def size(self) -> int:
+        """Number of entries."""
+        return len(self.u)
+
+    def lookup(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, C, A) at continuous table coordinates t in [0, n - 1] (linear in t)."""
+        t = np.clip(np.asarray(t, dtype=np.float64), 0.0, self.size - 1)
+        i0 = np.minimum(np.floor(t).astype(np.int64), self.size - 2)
+        f = (t - i0)[:, None]
+        m = self.modified_points[i0] * (1 - f) + self.modified_points[i0 + 1] * f
+        c = self.base_points[i0] * (1 - f) + self.base_points[i0 + 1] * f
+        f3 = f[:, :, None]
+        a = self.matrices[i0] * (1 - f3) + self.matrices[i0 + 1] * f3
+        return m, c, a
+
+    def gpu_rows(self) -> np.ndarray:
+        """The 4 RGBA32F rows of the shader's lookup table, (4, n, 4) float32.
+
+        Row 0: (M.xyz, A00); row 1: (C.xyz, A01); row 2: (A02, A10, A11, A12);
+        row 3: (A20, A21, A22, 0).
+        """
+        a = self.matrices
+        out = np.zeros((4, self.size, 4), dtype=np.float32)
+        out[0, :, :3], out[0, :, 3] = self.modified_points, a[:, 0, 0]
+        out[1, :, :3], out[1, :, 3] = self.base_points, a[:, 0, 1]
+        out[2] = np.stack([a[:, 0, 2], a[:, 1, 0], a[:, 1, 1], a[:, 1, 2]], axis=-1)
+        out[3, :, :3] = a[:, 2, :]
+        return out
+
+
+def map_points(tables: WireTables, t: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The wire mapping ``q = C + A (p - M)`` at table coordinates t (deformed -> original)."""
+    m, c, a = tables.lookup(t)
+    return c + np.einsum("nij,nj->ni", a, p - m)
+
+
+# ---------------------------------------------------------------------- statistics
+@dataclass
+class WireFieldStats:
+    """What :meth:`WireDeformer.build` did (the paper's Tables 1-3 for preprocessing)."""
+
+    field_shape: tuple[int, int, int]
+    field_scale: int
+    layout: str
+    backend: str
+    planes: int
+    planes_dropped: int
+    seeds: int
+    region_voxels: int
+    swept: int
+    vacated: int
+    #: field voxels that render as the identity (not swept, not vacated)
+    ignored: int
+    #: seconds per stage: planes, masks, seeds, propagate, flags, store, total
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def voxels(self) -> int:
+        """Voxels of the attribute field."""
+        return int(np.prod(self.field_shape))
+
+    @property
+    def percent_ignored(self) -> float:
+        """Share of field voxels a sample ignores (identity), in %."""
+        return 100.0 * self.ignored / max(self.voxels, 1)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain dict (JSON-ready)."""
+        return {
+            "field_shape": list(self.field_shape),
+            "field_scale": self.field_scale,
+            "layout": self.layout,
+            "backend": self.backend,
+            "planes": self.planes,
+            "planes_dropped": self.planes_dropped,
+            "seeds": self.seeds,
+            "region_voxels": self.region_voxels,
+            "swept": self.swept,
+            "vacated": self.vacated,
+            "ignored": self.ignored,
+            "voxels": self.voxels,
+            "percent_ignored": self.percent_ignored,
+            "timings": dict(self.timings),
+        }
+
+
+@dataclass
+class WireField:
+    """A built attribute field (see the module docstring for the layouts)."""
+
+    lo: np.ndarray
+    spacing: np.ndarray
+    shape: tuple[int, int, int]
+    layout: str
+    #: float layout: state (0 identity, 1 vacated, 2 + wire) and t (u * (LUT_SIZE - 1))
+    state: np.ndarray | None
+    t: np.ndarray | None
+    #: packed layout: the uint16 codes
+    code: np.ndarray | None
+    tables: list[WireTables]
+    #: the propagated region (first voxel, shape): swept voxels lie inside it
+    region_lo: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
+    region_shape: tuple[int, int, int] = (0, 0, 0)
+
+    @property
+    def hi(self) -> np.ndarray:
+        """Upper corner of the field box (mm)."""
+        return self.lo + self.spacing * np.asarray(self.shape)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the per-voxel data."""
+        return sum(a.nbytes for a in (self.state, self.t, self.code) if a is not None)
+
+    def decode(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(state, wire, t) per voxel for either layout: state 0 identity, 1 vacated,
+        2 swept; wire id; t in table units (integer for the packed layout)."""
+        if self.layout == "float":
+            assert self.state is not None
+            assert self.t is not None
+            s = self.state
+            state = np.where(s >= 2, 2, s).astype(np.uint8)
+            wire = np.where(s >= 2, s.astype(np.int32) - 2, 0)
+            return state, wire, self.t
+        assert self.code is not None
+        c = self.code.astype(np.int32)
+        swept = (c & 0x8000) != 0
+        state = np.where(swept, 2, np.where(c == PACKED_VACATED, 1, 0)).astype(np.uint8)
+        return state, (c >> 8) & 0x7F, (c & 0xFF).astype(np.float32)
+
+
+# ---------------------------------------------------------------------- deformer
+def _volume_parts(volume: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    try:
+        data = volume.data
+        spacing = np.asarray(volume.spacing, dtype=np.float64).reshape(3)
+        origin = np.asarray(volume.origin, dtype=np.float64).reshape(3)
+    except (AttributeError, ValueError, TypeError) as exc:
+        raise WarpError(
+            "WireDeformer needs a volume with data, spacing and origin (app.load_volume or"
+            f" a sample); got {type(volume).__name__}"
+        ) from exc
+    if np.ndim(data) != 3:
+        raise WarpError(f"WireDeformer needs a 3D volume; got data of shape {np.shape(data)}")
+    return data, spacing, origin
+
+
+class WireDeformer:
+    """Builds the attribute field of a set of wires on a volume (paper sections 5, 7).
+
+    Parameters
+    ----------
+    volume
+        The original volume (``data`` indexed x, y, z; ``spacing``; ``origin``): β
+        classifies its values.
+    wires
+        Up to :data:`MAX_WIRES` :class:`Wire` objects.
+    field_scale
+        Per-axis reduction of the field against the volume: 1, 2, 4, 8 or 16
+        (1:1 ... 1:4096 in voxels).
+    ctx
+        Optional moderngl context: :meth:`warp` then uploads its textures at once.
+    layout
+        ``"float"`` or ``"packed"`` (2 bytes per voxel), see the module docstring.
+    masks
+        Sweep only the seed-filled cross-section of the object the wire runs through
+        (True, the paper's plane masks), or every β voxel in the region (False).
+    mask_resolution
+        Pixel size of the plane masks and spacing of the planes (mm); default the
+        volume's smallest voxel spacing.
+    dilation
+        Pixels of morphological dilation of each mask.
+    backend
+        Propagation backend of :func:`deform.propagation.nearest_seed`.
+    precision
+        Arc-length precision p (eq. 4) and closest-point precision (in t).
+    """
+
+    def __init__(
+        self,
+        volume: Any,
+        wires: Sequence[Wire],
+        field_scale: int = 2,
+        ctx: Any = None,
+        *,
+        layout: str = "float",
+        masks: bool = True,
+        mask_resolution: float | None = None,
+        dilation: int = 1,
+        backend: str = "auto",
+        precision: float = 1e-4,
+    ) -> None:
+        self.data, self.spacing, self.origin = _volume_parts(volume)
+        wires = list(wires)
+        if not wires:
+            raise WarpError("WireDeformer needs at least one Wire")
+        if len(wires) > MAX_WIRES:
+            raise WarpError(
+                f"at most {MAX_WIRES} wires fit one attribute field (7-bit wire id); got"
+                f" {len(wires)}: split them over several WireDeformers"
+            )
+        for i, w in enumerate(wires):
+            if not isinstance(w, Wire):
+                raise WarpError(f"wires[{i}] is a {type(w).__name__}, not a deform.Wire")
+        self.wires = wires
+        if field_scale not in FIELD_SCALES:
+            raise WarpError(
+                f"field_scale must be one of {FIELD_SCALES} (per-axis reduction);"
+                f" got {field_scale!r}"
+            )
+        self.field_scale = int(field_scale)
+        if layout not in LAYOUTS:
+            raise WarpError(f"layout must be one of {LAYOUTS}; got {layout!r}")
+        self.layout = layout
+        self.masks = bool(masks)
+        px = float(self.spacing.min()) if mask_resolution is None else float(mask_resolution)
+        if not math.isfinite(px) or px <= 0:
+            raise WarpError(f"mask_resolution must be a length in mm > 0; got {mask_resolution}")
+        self.mask_resolution = px
+        if int(dilation) != dilation or dilation < 0:
+            raise WarpError(f"dilation must be a whole number of pixels >= 0; got {dilation}")
+        self.dilation = int(dilation)
+        self.backend = backend
+        self.precision = float(precision)
+        self.ctx = ctx
+        self.field: WireField | None = None
+        self.stats: WireFieldStats | None = None
+        self.propagation_input: tuple[np.ndarray, tuple[float, ...]] | None = None
+        self._warp: WireFieldWarp | None = None
+        vlo = self.origin - 0.5 * self.spacing
+        vhi = self.origin + (np.asarray(self.data.shape) - 0.5) * self.spacing
+        self.volume_bounds = (vlo, vhi)
+        for i, w in enumerate(wires):
+            blo, bhi = _curve_box(w.base)
+            if np.any(bhi < vlo) or np.any(blo > vhi):
+                raise WarpError(
+                    f"wire {i}'s base curve lies entirely outside the volume box"
+                    f" {vlo.round(2).tolist()}..{vhi.round(2).tolist()} mm: lay it through"
+                    " the object (control points are world mm, not voxel indices)"
+                )
+
+    # ------------------------------------------------------------------ geometry
+    def _field_geometry(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
+        """Field box lo, voxel spacing and shape: the volume box grown (in whole field
+        voxels) to hold each modified wire's region of influence."""
+        h = self.spacing * self.field_scale
+        vlo, vhi = self.volume_bounds
+        lo, hi = vlo.copy(), vhi.copy()
+        for w in self.wires:
+            clo, chi = _curve_box(w.modified)
+            lo = np.minimum(lo, clo - w.radius * float(w.scale[:, 1].max()))
+            hi = np.maximum(hi, chi + w.radius * float(w.scale[:, 1].max()))
+        grow_lo = np.ceil((vlo - lo) / h - 1e-9)
+        lo = vlo - grow_lo * h
+        shape = np.maximum(np.ceil((hi - lo) / h - 1e-9).astype(int), 1)
+        return lo, h, (int(shape[0]), int(shape[1]), int(shape[2]))
+
+    # ------------------------------------------------------------------ build
+    def build(self) -> WireFieldStats:
+        """Build the attribute field (planes, masks, seeds, propagation, flags, storage).
+
+        Returns
+        -------
+        WireFieldStats
+            Field size, planes kept/dropped, seeds, swept/vacated/ignored voxel counts and
+            the time of each stage.
+        """
+        from deform.propagation import last_backend
+
+        t_all = time.perf_counter()
+        timings: dict[str, float] = {}
+        lo, h, shape = self._field_geometry()
+
+        t0 = time.perf_counter()
+        tables = [w.tables(LUT_SIZE, self.precision) for w in self.wires]
+        timings["tables"] = time.perf_counter() - t0
+
+        # 1-2. planes and their masks (per wire)
+        t0 = time.perf_counter()
+        masks: list[tuple[np.ndarray, int, float]] = []  # (planes, K, K) masks, K, half
+        dropped = 0
+        planes_total = 0
+        for w, tab in zip(self.wires, tables, strict=True):
+            mask, k_side, n_dropped = self._plane_masks(w, tab)
+            masks.append((mask, k_side, (k_side - 1) / 2.0))
+            dropped += n_dropped
+            planes_total += mask.shape[0]
+        timings["masks"] = time.perf_counter() - t0
+
+        # 3. seeds: the 8 voxels of every field cell the modified wire enters
+        t0 = time.perf_counter()
+        seeds_m = self._seeds(tables, lo, h, shape, "modified")
+        timings["seeds"] = time.perf_counter() - t0
+
+        # 4. propagation of (wire, u) from the seeds over the modified wires' region
+        t0 = time.perf_counter()
+        region_lo, rshape, r_wire, r_u, seed_count = self._propagate(
+            seeds_m, tables, lo, h, shape, "modified"
+        )
+        backend = last_backend()
+        timings["propagate"] = time.perf_counter() - t0
+
+        # 5. flags: the mask bit under each voxel's projection on its plane; the
+        # swept object's original place (the same masks seen from the base wires) is
+        # vacated
+        t0 = time.perf_counter()
+        swept = self._flags(tables, masks, lo, h, region_lo, rshape, r_wire, r_u, "modified")
+        # a field voxel is vacated when its footprint touches a mask, not only its
+        # centre: the masks grow by half a field voxel (else thin parts of the object,
+        # such as a fin's edge, would stay behind as a ghost)
+        grow = math.ceil(0.5 * float(h.max()) / self.mask_resolution)
+        ball = np.ones((3, 3, 3), dtype=bool)  # the footprint is a box
+        grown = [
+            (ndimage.binary_dilation(m, ball, iterations=grow), k, half) for m, k, half in masks
+        ]
+        seeds_b = self._seeds(tables, lo, h, shape, "base")
+        b_lo, b_shape, b_wire, b_u, _ = self._propagate(seeds_b, tables, lo, h, shape, "base")
+        gone = self._flags(tables, grown, lo, h, b_lo, b_shape, b_wire, b_u, "base")
+        region = _box_slices(region_lo, rshape)
+        vacated = np.zeros(shape, dtype=bool)
+        vacated[_box_slices(b_lo, b_shape)] = gone
+        vacated[region] &= ~swept
+        timings["flags"] = time.perf_counter() - t0
+
+        # 6. storage
+        t0 = time.perf_counter()
+        tscale = LUT_SIZE - 1
+        if self.layout == "float":
+            state = np.zeros(shape, dtype=np.uint8, order="F")
+            state[vacated] = 1
+            sub = state[region]
+            sub[swept] = (2 + r_wire[swept]).astype(np.uint8)
+            state[region] = sub
+            tf = np.zeros(shape, dtype=np.float32, order="F")
+            tf[region] = r_u * tscale
+            fld = WireField(lo, h, shape, "float", state, tf, None, tables, region_lo, rshape)
+        else:
+            code = np.zeros(shape, dtype=np.uint16, order="F")
+            ti = np.clip(np.rint(r_u * tscale), 0, tscale).astype(np.int32)
+            c = (r_wire.astype(np.int32) << 8) | ti
+            c = np.where(c == PACKED_VACATED, PACKED_VACATED - 1, c)
+            c = np.where(swept, c | 0x8000, c)
+            code[region] = c.astype(np.uint16)
+            code[vacated] = PACKED_VACATED
+            fld = WireField(lo, h, shape, "packed", None, None, code, tables, region_lo, rshape)
+        timings["store"] = time.perf_counter() - t0
+        timings["total"] = time.perf_counter() - t_all
+
+        n_swept = int(swept.sum())
+        n_vac = int(vacated.sum())
+        self.field = fld
+        self.stats = WireFieldStats(
+            field_shape=shape,
+            field_scale=self.field_scale,
+            layout=self.layout,
+            backend=backend,
+            planes=planes_total,
+            planes_dropped=dropped,
+            seeds=seed_count,
+            region_voxels=int(np.prod(rshape)),
+            swept=n_swept,
+            vacated=n_vac,
+            ignored=int(np.prod(shape)) - n_swept - n_vac,
+            timings=timings,
+        )
+        if self._warp is not None:
+            self._warp._set_field(fld)
+        return self.stats
+
+    def _propagate(
+        self,
+        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tables: list[WireTables],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        side: str,
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, int]:
+        """(wire, u) of the nearest seed for every voxel of the wires' region on one
+        side: the region's first voxel and shape, the two grids and the seed count."""
+        from deform.propagation import nearest_seed
+
+        seed_idx, seed_wire, seed_u = seeds
+        c_lo = np.full(3, np.iinfo(np.int64).max)
+        c_hi = np.full(3, -1)
+        for w, tab in zip(self.wires, tables, strict=True):
+            pts = tab.modified_points if side == "modified" else tab.base_points
+            smax = float(w.scale[:, 1].max()) if side == "modified" else 1.0
+            r = w.radius * smax + 2 * self.mask_resolution
+            a = np.floor((pts.min(0) - r - lo) / h - 0.5).astype(int) - 1
+            b = np.ceil((pts.max(0) + r - lo) / h - 0.5).astype(int) + 1
+            c_lo, c_hi = np.minimum(c_lo, a), np.maximum(c_hi, b)
+        c_lo = np.clip(c_lo, 0, np.asarray(shape) - 1)
+        c_hi = np.clip(c_hi, 0, np.asarray(shape) - 1)
+        rshape = (
+            int(c_hi[0] - c_lo[0] + 1),
+            int(c_hi[1] - c_lo[1] + 1),
+            int(c_hi[2] - c_lo[2] + 1),
+        )
+        grid = np.zeros(rshape, dtype=bool)
+        sidx = np.stack(np.unravel_index(seed_idx, shape), -1) - c_lo
+        inside = np.all((sidx >= 0) & (sidx < np.asarray(rshape)), axis=1)
+        sidx, s_wire, s_u = sidx[inside], seed_wire[inside], seed_u[inside]
+        if len(sidx) == 0:
+            raise WarpError(
+                f"no {side} wire passes through the attribute field: check the control points"
+            )
+        grid[sidx[:, 0], sidx[:, 1], sidx[:, 2]] = True
+        flat = np.ravel_multi_index(sidx.T, rshape)
+        wire_of = np.zeros(int(np.prod(rshape)), dtype=np.int16)
+        u_of = np.zeros(int(np.prod(rshape)), dtype=np.float32)
+        wire_of[flat], u_of[flat] = s_wire, s_u
+        sampling = tuple(float(v) for v in h)
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            nearest = nearest_seed(grid, sampling, backend=self.backend).ravel()
+        if side == "modified":
+            #: the propagation's input (seed mask over the region, voxel spacing), kept
+            #: for benchmarks that time other propagations on the same grid
+            self.propagation_input = (grid, sampling)
+        return (
+            c_lo,
+            rshape,
+            wire_of[nearest].reshape(rshape),
+            u_of[nearest].reshape(rshape),
+            len(sidx),
+        )
+
+    def _flags(
+        self,
+        tables: list[WireTables],
+        masks: list[tuple[np.ndarray, int, float]],
+        lo: np.ndarray,
+        h: np.ndarray,
+        region_lo: np.ndarray,
+        rshape: tuple[int, int, int],
+        r_wire: np.ndarray,
+        r_u: np.ndarray,
+        side: str,
+    ) -> np.ndarray:
+        """Mask bits of a region's voxels (refining ``r_u`` in place to the closest
+        point): swept voxels on the modified side, the object's place on the base side."""
+        out = np.zeros(rshape, dtype=bool)
+        centres = [lo[a] + (np.arange(n) + region_lo[a] + 0.5) * h[a] for a, n in enumerate(rshape)]
+        flat_wire = r_wire.ravel()
+        order = np.argsort(flat_wire, kind="stable")
+        bounds = np.searchsorted(flat_wire[order], np.arange(len(self.wires) + 1))
+        flat_u = r_u.reshape(-1)
+        flat_out = out.reshape(-1)
+        for wi in range(len(self.wires)):
+            sel = order[bounds[wi] : bounds[wi + 1]]
+            if len(sel) == 0:
+                continue
+            ii, jj, kk = np.unravel_index(sel, rshape)
+            p = np.stack([centres[0][ii], centres[1][jj], centres[2][kk]], -1)
+            u, bits = self._mask_bits(self.wires[wi], tables[wi], masks[wi], flat_u[sel], p, side)
+            flat_u[sel] = u
+            flat_out[sel] = bits
+        return out
+
+    def warp(self) -> WireFieldWarp:
+        """The warp that renders this deformer's field (built on first call if needed).
+
+        The same object follows later :meth:`build` calls (its revision changes).
+        """
+        if self.field is None:
+            self.build()
+        if self._warp is None:
+            self._warp = WireFieldWarp(self)
+            if self.ctx is not None:
+                self._warp.textures(self.ctx)
+        return self._warp
+
+    # ------------------------------------------------------------------ stages
+    def _plane_masks(self, wire: Wire, tab: WireTables) -> tuple[np.ndarray, int, int]:
+        """Masks (planes, K, K) of one wire, K and how many planes were dropped (no
+        object)."""
+        px = self.mask_resolution
+        n_planes = max(2, math.ceil(tab.length_modified / px) + 1)
+        smax = float(wire.scale[:, 1].max())
+        half = math.ceil(wire.radius * smax / px)
+        k = 2 * half + 1
+        ax = (np.arange(k) - half) * px
+        x, y = np.meshgrid(ax, ax, indexing="ij")
+        disc = x**2 + y**2 <= (wire.radius * smax) ** 2
+        # the radius is the region of influence on the base side: a scaled cross-section
+        # covers s * radius on the modified side
+        tt = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
+        _, c, a = tab.lookup(tt)
+        fm = _lerp_frames(tab.modified_frames, tt)
+        s_at = wire.scale_at(tt / (LUT_SIZE - 1))
+        in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.radius * s_at[:, None, None]) ** 2
+        # deformed points p = M + x N_m + y B_m -> base points q = C + A (p - M)
+        local = (
+            x[None, ..., None] * fm[:, None, None, :, 0]
+            + y[None, ..., None] * fm[:, None, None, :, 1]
+        )
+        q = c[:, None, None, :] + np.einsum("pij,pabj->pabi", a, local)
+        ijk = (q - self.origin) / self.spacing
+        vlo = np.zeros(3)
+        vhi = np.asarray(self.data.shape) - 1.0
+        inside_vol = np.all((ijk >= vlo - 0.5) & (ijk <= vhi + 0.5), axis=-1)
+        vals = ndimage.map_coordinates(
+            self.data, ijk.reshape(-1, 3).T, order=1, mode="nearest", prefilter=False
+        ).reshape(ijk.shape[:-1])
+        obj = wire.classify(vals) & inside_vol & in_disc & disc[None]
+        if self.masks:
+            # seed: the object pixel nearest the wire on each plane ("searching outward
+            # from the wire"); the fill is 2.5D: a plane's pixel joins when it connects,
+            # in its plane or through the masks of the neighbouring planes, to a seed, so
+            # an object that splits along the wire (a forked tail fin) stays whole,
+            # while an object that never touches the seeded one (a neighbouring vessel)
+            # stays out
+            r2 = np.where(obj, (x**2 + y**2)[None], np.inf)
+            flat = r2.reshape(n_planes, -1)
+            seed = flat.argmin(axis=1)
+            has = np.isfinite(flat[np.arange(n_planes), seed])
+            labels, _ = ndimage.label(obj, structure=ndimage.generate_binary_structure(3, 1))
+            seed_labels = np.unique(labels.reshape(n_planes, -1)[np.arange(n_planes), seed][has])
+            mask = np.isin(labels, seed_labels[seed_labels > 0])
+            has = mask.reshape(n_planes, -1).any(axis=1)
+        else:
+            mask = obj.copy()
+            has = mask.reshape(n_planes, -1).any(axis=1)
+        # cavities (a vessel's lumen, a swim bladder) move with their object
+        in_plane = np.zeros((3, 3, 3), dtype=bool)
+        in_plane[1] = ndimage.generate_binary_structure(2, 1)
+        mask = ndimage.binary_fill_holes(mask, structure=in_plane)
+        if self.dilation:
+            structure = np.zeros((3, 3, 3), dtype=bool)
+            structure[1] = ndimage.generate_binary_structure(2, 1)
+            mask = ndimage.binary_dilation(mask, structure=structure, iterations=self.dilation)
+            mask &= in_disc & disc[None]
+        mask[~has] = False
+        return mask, k, int((~has).sum())
+
+    def _seeds(
+        self,
+        tables: list[WireTables],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        side: str,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Seed voxels (flat indices), their wire and closest u (section 5.1): the 8
+        voxels of every field cell the wire of ``side`` enters, nearest wire first."""
+        shape_a = np.asarray(shape)
+        all_idx, all_d, all_w, all_u = [], [], [], []
+        for wi, (w, tab) in enumerate(zip(self.wires, tables, strict=True)):
+            curve = w.modified if side == "modified" else w.base
+            tparam = tab.t_modified if side == "modified" else tab.t_base
+            length = tab.length_modified if side == "modified" else tab.length_base
+            n = max(2, math.ceil(4 * length / float(h.min())) + 1)
+            pts = curve.evaluate(np.interp(np.linspace(0.0, 1.0, n), tab.u, tparam))
+            cell = np.floor((pts - lo) / h - 0.5).astype(np.int64)
+            corners = (cell[:, None, :] + _CORNERS[None]).reshape(-1, 3)
+            ok = np.all((corners >= 0) & (corners < shape_a), axis=1)
+            idx = np.unique(np.ravel_multi_index(corners[ok].T, shape))
+            if len(idx) == 0:
+                continue
+            centres = lo + (np.stack(np.unravel_index(idx, shape), -1) + 0.5) * h
+            tc, d = curve.closest_point(centres, precision=self.precision)
+            all_idx.append(idx)
+            all_d.append(d)
+            all_w.append(np.full(len(idx), wi))
+            all_u.append(np.interp(tc, tparam, tab.u))
+        if not all_idx:
+            raise WarpError(
+                f"no {side} wire passes through the attribute field: check the control points"
+            )
+        idx = np.concatenate(all_idx)
+        d = np.concatenate(all_d)
+        wire = np.concatenate(all_w)
+        u = np.concatenate(all_u)
+        # keep the minimum distance per voxel
+        order = np.lexsort((d, idx))
+        idx, wire, u = idx[order], wire[order], u[order]
+        first = np.ones(len(idx), dtype=bool)
+        first[1:] = idx[1:] != idx[:-1]
+        return idx[first], wire[first].astype(np.int16), u[first].astype(np.float32)
+
+    def _mask_bits(
+        self,
+        wire: Wire,
+        tab: WireTables,
+        mask_geom: tuple[np.ndarray, int, float],
+        u: np.ndarray,
+        p: np.ndarray,
+        side: str,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Refined closest-point fractions u of points p near ``wire`` (on ``side``) and
+        whether the plane mask at u covers them.
+
+        On the modified side the mask pixel is p's position in the modified frame; on
+        the base side p's base-frame position is turned and scaled as the sweep does
+        (``s R(θ)``) into the modified plane's pixels.
+        """
+        mask, k, half = mask_geom
+        n_planes = mask.shape[0]
+        px = self.mask_resolution
+        if side == "modified":
+            points, frames, length = tab.modified_points, tab.modified_frames, tab.length_modified
+        else:
+            points, frames, length = tab.base_points, tab.base_frames, tab.length_base
+        u = _refine_u(points, frames[:, :, 2], length, u, p)
+        # the nearest table entry: its spacing (length / 255) is far below a mask pixel
+        i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
+        f = frames.astype(np.float32)[i]
+        d = (p - points[i]).astype(np.float32)
+        x = np.einsum("ni,ni->n", d, f[:, :, 0])
+        y = np.einsum("ni,ni->n", d, f[:, :, 1])
+        z = np.einsum("ni,ni->n", d, f[:, :, 2])
+        if side == "base":
+            theta = wire.twist_at(u)
+            s = wire.scale_at(u)
+            c, si = np.cos(theta), np.sin(theta)
+            x, y = s * (c * x - si * y), s * (si * x + c * y)
+        plane = np.clip(np.rint(u * (n_planes - 1)).astype(np.int64), 0, n_planes - 1)
+        a = np.rint(x / px + half).astype(np.int64)
+        b = np.rint(y / px + half).astype(np.int64)
+        ok = (a >= 0) & (a < k) & (b >= 0) & (b < k)
+        # beyond the end planes nothing is swept (the along-wire offset stays within a
+        # field voxel of the plane)
+        cap = float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + px
+        ends = (u <= 0.0) | (u >= 1.0)
+        ok &= ~ends | (np.abs(z) <= cap)
+        out = np.zeros(len(u), dtype=bool)
+        out[ok] = mask[plane[ok], a[ok], b[ok]]
+        return u, out
+
+
+#: Newton steps that refine the propagated u to the closest point of the wire
+REFINE_STEPS = 2
+
+
+def _refine_u(
+    points: np.ndarray, tangents: np.ndarray, length: float, u: np.ndarray, p: np.ndarray
+) -> np.ndarray:
+    """Closest-point fractions u of points p, refined from the nearest seed's u.
+
+    The nearest seed voxel's u is off by up to about a voxel along the wire, and where
+    the wire twists fast that error turns the cross-section (by twist rate x error). Each
+    step moves u by the along-wire offset of p from the wire point at u (a Newton step of
+    the closest-point condition, ignoring curvature), using the nearest table entry of
+    the wire's ``points`` and unit ``tangents`` (equally spaced in arc length).
+    """
+    n = len(points) - 1
+    u = np.asarray(u, dtype=np.float64)
+    for _ in range(REFINE_STEPS):
+        i = np.clip(np.rint(u * n).astype(np.int64), 0, n)
+        z = np.einsum("ni,ni->n", p - points[i], tangents[i])
+        u = np.clip(i / n + z / length, 0.0, 1.0)
+    return u
+
+
+def _box_slices(first: np.ndarray, shape: tuple[int, int, int]) -> tuple[slice, slice, slice]:
+    return tuple(slice(int(first[a]), int(first[a]) + shape[a]) for a in range(3))  # type: ignore[return-value]
+
+
+_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int64)
+
+
+def _curve_box(curve: Curve) -> tuple[np.ndarray, np.ndarray]:
+    pts = curve.evaluate(np.linspace(0.0, 1.0, 257))
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def _lerp_frames(frames: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Frames (n, 3, 3) linearly interpolated at table coordinates t (not re-orthonormalised:
+    neighbouring table frames differ by well under a degree)."""
+    n = frames.shape[0]
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, n - 1)
+    i0 = np.minimum(np.floor(t).astype(np.int64), n - 2)
+    f = (t - i0)[:, None, None]
+    return frames[i0] * (1 - f) + frames[i0 + 1] * f
+
+
+# ---------------------------------------------------------------------- the warp
+def _sample_t_float(t_field: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Trilinear t at continuous voxel coordinates g (voxel i centred at i + 1/2), with
+    clamp-to-edge: what GL_LINEAR filtering of the t texture returns."""
+    shape = np.asarray(t_field.shape)
+    gc = np.clip(g - 0.5, 0.0, shape - 1.0)
+    i0 = np.minimum(np.floor(gc).astype(np.int64), np.maximum(shape - 2, 0))
+    f = gc - i0
+    out = np.zeros(len(g))
+    for c in _CORNERS:
+        idx = np.minimum(i0 + c, shape - 1)
+        w = np.prod(np.where(c == 1, f, 1.0 - f), axis=1)
+        out += w * t_field[idx[:, 0], idx[:, 1], idx[:, 2]]
+    return out
+
+
+def _sample_t_packed(code: np.ndarray, g: np.ndarray, wire: np.ndarray) -> np.ndarray:
+    """t at g from the 8 packed neighbours of the same wire (vacated ones excluded),
+    renormalised; the nearest voxel's integer t where none qualifies (as the shader)."""
+    shape = np.asarray(code.shape)
+    gc = np.clip(g - 0.5, 0.0, shape - 1.0)
+    i0 = np.floor(gc).astype(np.int64)
+    f = gc - i0
+    ts = np.zeros(len(g))
+    ws = np.zeros(len(g))
+    for c in _CORNERS:
+        idx = np.minimum(i0 + c, shape - 1)
+        v = code[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.int64)
+        ok = (((v >> 8) & 0x7F) == wire) & (v != PACKED_VACATED)
+        w = np.prod(np.where(c == 1, f, 1.0 - f), axis=1) * ok
+        ts += w * (v & 0xFF)
+        ws += w
+    near = np.floor(g).astype(np.int64)
+    own = code[near[:, 0], near[:, 1], near[:, 2]].astype(np.int64) & 0xFF
+    return np.where(ws > 0, ts / np.where(ws > 0, ws, 1.0), own)
+
+
+@register_warp
+class WireFieldWarp(Warp):
+    """The warp of a wire attribute field (see the module docstring).
+
+    Made by :meth:`WireDeformer.warp`; loaded from scene JSON it holds the wires and
+    field parameters only, and builds its field when the scene binds the volume
+    (:meth:`bind_volume`).
+    """
+
+    kind = "wires"
+    glsl_file = "warp_wire.glsl"
+
+    def __init__(
+        self, deformer: WireDeformer | None = None, spec: Mapping[str, Any] | None = None
+    ) -> None:
+        self._deformer = deformer
+        self._spec = dict(spec) if spec is not None else None
+        self._field: WireField | None = deformer.field if deformer is not None else None
+        self._revision = 0
+        self._gpu: dict[int, tuple[Any, int, dict[str, Any]]] = {}
+        self._ranges: tuple[int, Any] | None = None
+
+    # ------------------------------------------------------------------ state
+    @property
+    def deformer(self) -> WireDeformer:
+        """The :class:`WireDeformer` behind this warp (after :meth:`bind_volume`)."""
+        if self._deformer is None:
+            raise WarpError(
+                "this wire warp has no volume yet: load it through a scene (Scene.from_dict"
+                " binds the volume) or call bind_volume(volume)"
+            )
+        return self._deformer
+
+    @property
+    def wires(self) -> list[Wire]:
+        """The wires (live: edit them, then :meth:`rebuild`)."""
+        return self.deformer.wires
+
+    @property
+    def field(self) -> WireField:
+        """The current attribute field."""
+        if self._field is None:
+            self.deformer.build()
+            self._field = self.deformer.field
+        assert self._field is not None
+        return self._field
+
+    def _set_field(self, fld: WireField) -> None:
+        self._field = fld
+        self._revision += 1
+        self._ranges = None
+
+    def rebuild(self) -> WireFieldStats:
+        """Rebuild the field after editing :attr:`wires` (the revision changes)."""
+        return self.deformer.build()
+
+    def bind_volume(self, volume: Any) -> None:
+        """Build the field on ``volume`` (scene loading); no-op if already built on it."""
+        if self._deformer is not None and self._deformer.data is getattr(volume, "data", None):
+            return
+        spec = self._spec if self._spec is not None else _deformer_spec(self.deformer)
+        wires = [Wire.from_dict(w) for w in spec["wires"]]
+        self._deformer = WireDeformer(
+            volume,
+            wires,
+            field_scale=spec.get("field_scale", 2),
+            layout=spec.get("layout", "float"),
+            masks=spec.get("masks", True),
+            mask_resolution=spec.get("mask_resolution"),
+            dilation=spec.get("dilation", 1),
+        )
+        self._deformer._warp = self
+        self._deformer.build()
+
+    @property
+    def revision(self) -> int:
+        """Changes with every rebuild of the field."""
+        return self._revision
+
+    # ------------------------------------------------------------------ CPU reference
+    def _lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per point: state (0 identity, 1 vacated, 2 swept), wire id and table t."""
+        fld = self.field
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        g = (p - fld.lo) / fld.spacing
+        shape = np.asarray(fld.shape)
+        inside = np.all((g >= 0) & (g < shape), axis=1)
+        state = np.zeros(len(p), dtype=np.uint8)
+        wire = np.zeros(len(p), dtype=np.int64)
+        t = np.zeros(len(p))
+        gi = g[inside]
+        v = np.floor(gi).astype(np.int64)
+        if fld.layout == "float":
+            assert fld.state is not None
+            assert fld.t is not None
+            s = fld.state[v[:, 0], v[:, 1], v[:, 2]].astype(np.int64)
+            st = np.minimum(s, 2)
+            sw = s >= 2
+            w = np.where(sw, s - 2, 0)
+            tt = np.zeros(len(gi))
+            if sw.any():
+                tt[sw] = _sample_t_float(fld.t, gi[sw])
+        else:
+            assert fld.code is not None
+            c = fld.code[v[:, 0], v[:, 1], v[:, 2]].astype(np.int64)
+            sw = (c & 0x8000) != 0
+            st = np.where(sw, 2, np.where(c == PACKED_VACATED, 1, 0))
+            w = (c >> 8) & 0x7F
+            tt = np.zeros(len(gi))
+            if sw.any():
+                tt[sw] = _sample_t_packed(fld.code, gi[sw], w[sw])
+        state[inside], wire[inside], t[inside] = st, w, tt
+        return state, wire, t
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Deformed -> original, as the shader does (vacated points go to :data:`FAR`)."""
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        state, wire, t = self._lookup(p)
+        out = p.copy()
+        out[state == 1] = FAR
+        for wi in np.unique(wire[state == 2]):
+            sel = (state == 2) & (wire == wi)
+            out[sel] = map_points(self.field.tables[int(wi)], t[sel], p[sel])
+        return out
+
+    def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+        """A(t) where swept (section 6.1), the identity elsewhere."""
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        state, wire, t = self._lookup(p)
+        out = np.broadcast_to(np.eye(3), (len(p), 3, 3)).copy()
+        for wi in np.unique(wire[state == 2]):
+            sel = (state == 2) & (wire == wi)
+            out[sel] = self.field.tables[int(wi)].lookup(t[sel])[2]
+        return out
+
+    def swept(self, points: np.ndarray) -> np.ndarray:
+        """Which deformed-space points are swept by a wire (bool per point)."""
+        return self._lookup(points)[0] == 2
+
+    # ------------------------------------------------------------------ bounds
+    def deformed_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The original box grown by the field box (a swept object may leave the box)."""
+        fld = self.field
+        return np.minimum(lo, fld.lo), np.maximum(hi, fld.hi)
+
+    @property
+    def bounds_displacement(self) -> bool:
+        """True: intervals come from the field."""
+        return True
+
+    def displacement_range(
+        self, lo: np.ndarray, hi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per box, an interval holding ``apply(p) - p`` over the samples that can show
+        something (vacated samples show nothing and are left out).
+
+        Swept voxels contribute the displacement of the swept voxels around them (their
+        t is interpolated from those), grown by a quarter field voxel; identity voxels
+        and boxes reaching outside the propagated region contribute 0.
+        """
+        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+        query = self._range_query()
+        fld = self.field
+        a = np.floor((lo - fld.lo) / fld.spacing).astype(np.int64) - fld.region_lo
+        b = np.floor((hi - fld.lo) / fld.spacing).astype(np.int64) - fld.region_lo
+        rs = np.asarray(fld.region_shape)
+        empty = np.any((b < 0) | (a > rs - 1), axis=1)  # no voxel of the region
+        outside = np.any((a < 0) | (b > rs - 1), axis=1)  # some place outside it
+        a, b = np.clip(a, 0, rs - 1), np.clip(b, 0, rs - 1)
+        rlo, rhi = query(a, b)
+        rlo = np.where(empty[:, None], 0.0, rlo)
+        rhi = np.where(empty[:, None], 0.0, rhi)
+        rlo = np.where(outside[:, None], np.minimum(rlo, 0.0), rlo)
+        rhi = np.where(outside[:, None], np.maximum(rhi, 0.0), rhi)
+        none = rlo > rhi  # only vacated voxels: nothing shows; any interval is sound
+        rlo[none] = 0.0
+        rhi[none] = 0.0
+        return rlo, rhi
+
+    def _range_query(self) -> Any:
+        if self._ranges is not None and self._ranges[0] == self._revision:
+            return self._ranges[1]
+        fld = self.field
+        rs = fld.region_shape
+        r0 = fld.region_lo
+        region = tuple(slice(int(r0[a]), int(r0[a]) + rs[a]) for a in range(3))
+        st = fld.decode()[0][region]
+        idx = np.nonzero(st.ravel() == 2)[0]
+        ii = np.stack(np.unravel_index(idx, rs), -1)
+        centres = fld.lo + (ii + fld.region_lo + 0.5) * fld.spacing
+        # per swept voxel: its centre's displacement, and how far it can change within
+        # the voxel (|A - I| times half a voxel, row by row)
+        d = np.zeros((len(idx), 3))
+        e = np.zeros((len(idx), 3))
+        half = 0.5 * fld.spacing
+        for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200_000)):
+            if len(chunk):
+                c = centres[chunk]
+                d[chunk] = self.apply(c) - c
+                jm = self.jacobian(c) - np.eye(3)
+                e[chunk] = np.abs(jm) @ half
+        dlo = np.full((*rs, 3), np.inf, dtype=np.float32)
+        dhi = np.full((*rs, 3), -np.inf, dtype=np.float32)
+        for c in range(3):
+            dlo[..., c].reshape(-1)[idx] = d[:, c] - e[:, c]
+            dhi[..., c].reshape(-1)[idx] = d[:, c] + e[:, c]
+        # t is interpolated from the neighbours: their intervals count too, plus a
+        # quarter voxel for what interpolating the tables between them adds
+        margin = 0.25 * float(fld.spacing.max())
+        swept = st == 2
+        for c in range(3):
+            m_lo = ndimage.minimum_filter(dlo[..., c], size=3, mode="nearest") - margin
+            m_hi = ndimage.maximum_filter(dhi[..., c], size=3, mode="nearest") + margin
+            dlo[..., c] = np.where(swept, m_lo, np.where(st == 0, 0.0, np.inf))
+            dhi[..., c] = np.where(swept, m_hi, np.where(st == 0, 0.0, -np.inf))
+        query = _MinMaxPyramid(dlo, dhi)
+        self._ranges = (self._revision, query)
+        return query
+
+    # ------------------------------------------------------------------ GPU side
+    def glsl_constants(self) -> dict[str, Any]:
+        """The layout (``#define WARP_LAYOUT_PACKED 0|1``), table size and the far point."""
+        return {
+            "LAYOUT_PACKED": "1" if self.field.layout == "packed" else "0",
+            "LUT_SIZE": LUT_SIZE,
+            "FAR": FAR,
+        }
+
+    def signature(self) -> str:
+        """Kind and layout (the two layouts compile differently)."""
+        return f"{self.kind}:{self.field.layout}"
+
+    def uniforms(self) -> dict[str, Any]:
+        """Field box, shape and lookup-table rows."""
+        fld = self.field
+        return {
+            "lo": tuple(float(v) for v in fld.lo),
+            "size": tuple(float(v) for v in fld.hi - fld.lo),
+            "shape": tuple(float(v) for v in fld.shape),
+            "rows": float(4 * len(fld.tables)),
+        }
+
+    def textures(self, ctx: Any) -> dict[str, Any]:
+        """The field (``state`` + ``t``, or ``code``) and ``lut`` textures on ``ctx``,
+        uploaded on first use and after each rebuild."""
+        entry = self._gpu.get(id(ctx))
+        if entry is not None and entry[0] is ctx and entry[1] == self._revision:
+            return entry[2]
+        if entry is not None and entry[0] is ctx:
+            for tex in entry[2].values():
+                tex.release()
+        fld = self.field
+        texs: dict[str, Any] = {}
+
+        def tex3d(a: np.ndarray, dtype: str, linear: bool) -> Any:
+            t = ctx.texture3d(fld.shape, 1, np.asfortranarray(a).tobytes(order="F"), dtype=dtype)
+            f = ctx.LINEAR if linear else ctx.NEAREST
+            t.filter = (f, f)
+            t.repeat_x = t.repeat_y = t.repeat_z = False
+            return t
+
+        if fld.layout == "float":
+            assert fld.state is not None
+            assert fld.t is not None
+            texs["state"] = tex3d(fld.state, "u1", False)
+            texs["t"] = tex3d(fld.t, "f4", True)
+        else:
+            assert fld.code is not None
+            texs["code"] = tex3d(fld.code, "u2", False)
+        rows = np.concatenate([tab.gpu_rows() for tab in fld.tables], axis=0)
+        lut = ctx.texture((LUT_SIZE, rows.shape[0]), 4, rows.tobytes(), dtype="f4")
+        lut.filter = (ctx.LINEAR, ctx.LINEAR)
+        lut.repeat_x = lut.repeat_y = False
+        texs["lut"] = lut
+        self._gpu[id(ctx)] = (ctx, self._revision, texs)
+        return texs
+
+    def release(self) -> None:
+        """Free the GPU textures; idempotent."""
+        for _, _, texs in self._gpu.values():
+            for tex in texs.values():
+                tex.release()
+        self._gpu.clear()
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """The wires and field parameters (the field is rebuilt from the volume on load)."""
+        spec = self._spec if self._deformer is None else _deformer_spec(self._deformer)
+        assert spec is not None
+        return {"type": self.kind, **spec}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> WireFieldWarp:
+        """An unbuilt warp from :meth:`to_dict` output (validated now, built on
+        :meth:`bind_volume`)."""
+        wires = d.get("wires")
+        if not isinstance(wires, Sequence) or isinstance(wires, str) or not wires:
+            raise WarpError("a 'wires' warp needs 'wires': a non-empty list of wire objects")
+        if len(wires) > MAX_WIRES:
+            raise WarpError(f"at most {MAX_WIRES} wires fit one attribute field; got {len(wires)}")
+        unknown = set(d) - {"type", *_SPEC_KEYS}
+        if unknown:
+            raise WarpError(f"unknown keys {sorted(unknown)} in a 'wires' warp")
+        for w in wires:
+            Wire.from_dict(w)  # validate now: errors name the problem at load time
+        scale = d.get("field_scale", 2)
+        if scale not in FIELD_SCALES:
+            raise WarpError(f"field_scale must be one of {FIELD_SCALES}; got {scale!r}")
+        layout = d.get("layout", "float")
+        if layout not in LAYOUTS:
+            raise WarpError(f"layout must be one of {LAYOUTS}; got {layout!r}")
+        spec = {k: d[k] for k in _SPEC_KEYS if k in d}
+        return cls(spec=spec)
+
+
+_SPEC_KEYS = ("wires", "field_scale", "layout", "masks", "mask_resolution", "dilation")
+
+
+def _deformer_spec(deformer: WireDeformer) -> dict[str, Any]:
+    return {
+        "wires": [w.to_dict() for w in deformer.wires],
+        "field_scale": deformer.field_scale,
+        "layout": deformer.layout,
+        "masks": deformer.masks,
+        "mask_resolution": deformer.mask_resolution,
+        "dilation": deformer.dilation,
+    }
+
+
+class _MinMaxPyramid:
+    """Min/max of per-voxel (n, 3) intervals over index boxes, by a mip pyramid: a box
+    spanning e voxels is covered by at most 2 cells per axis at level ceil(log2 e)."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        self.levels = [(lo, hi)]
+        while max(lo.shape[:3]) > 1:
+            lo = _halve(lo, np.minimum, np.inf)
+            hi = _halve(hi, np.maximum, -np.inf)
+            self.levels.append((lo, hi))
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ext = np.max(b - a + 1, axis=1)
+        lev = np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64)
+        lev = np.minimum(lev, len(self.levels) - 1)
+        out_lo = np.full((len(a), 3), np.inf)
+        out_hi = np.full((len(a), 3), -np.inf)
+        for level in np.unique(lev):
+            sel = lev == level
+            lo_l, hi_l = self.levels[level]
+            top = np.asarray(lo_l.shape[:3]) - 1
+            ia, ib = np.minimum(a[sel] >> level, top), np.minimum(b[sel] >> level, top)
+            r_lo = np.full((int(sel.sum()), 3), np.inf)
+            r_hi = np.full((int(sel.sum()), 3), -np.inf)
+            for c in _CORNERS:
+                ix = np.where(c == 1, ib, ia)
+                r_lo = np.minimum(r_lo, lo_l[ix[:, 0], ix[:, 1], ix[:, 2]])
+                r_hi = np.maximum(r_hi, hi_l[ix[:, 0], ix[:, 1], ix[:, 2]])
+            out_lo[sel], out_hi[sel] = r_lo, r_hi
+        return out_lo, out_hi
+
+
+def _halve(a: np.ndarray, op: Any, fill: float) -> np.ndarray:
+    for axis in range(3):
+        n = a.shape[axis]
+        if n == 1:
+            continue
+        if n % 2:
+            pad = [(0, 0)] * a.ndim
+            pad[axis] = (0, 1)
+            a = np.pad(a, pad, constant_values=fill)
+        sl0 = [slice(None)] * a.ndim
+        sl1 = [slice(None)] * a.ndim
+        sl0[axis] = slice(0, None, 2)
+        sl1[axis] = slice(1, None, 2)
+        a = op(a[tuple(sl0)], a[tuple(sl1)])
+    return a

@@ -1,0 +1,103 @@
+// Wire-field warp (deform/wires.py; Journal of WSCG 2006 wire paper, section 6).
+// The attribute field covers the box [WARP_lo, WARP_lo + WARP_size] with WARP_shape voxels
+// (voxel i centred at i + 1/2). Per sample: the nearest voxel says identity, vacated (the
+// original place of a swept object: shows nothing) or swept by wire w; a swept sample
+// takes t (table units 0..WARP_LUT_SIZE-1) trilinearly and maps q = C(t) + A(t) (p - M(t))
+// with M, C, A read from the wire's 4 rows of the lookup table WARP_lut (linear in t):
+//   row 0: (M.xyz, A00)  row 1: (C.xyz, A01)  row 2: (A02, A10, A11, A12)  row 3: (A20, A21, A22, 0)
+// Layouts (WARP_LAYOUT_PACKED, a #define prepended by the warp):
+//   0: WARP_state (R8UI: 0 identity, 1 vacated, 2 + wire) and WARP_t (R32F, linear filter);
+//   1: WARP_code (R16UI: bit 15 swept, bits 8-14 wire, bits 0-7 integer t; 0x7FFF vacated),
+//      t interpolated here from the 8 neighbours of the same wire.
+uniform vec3 WARP_lo;
+uniform vec3 WARP_size;
+uniform vec3 WARP_shape;
+uniform float WARP_rows;      // rows of WARP_lut (4 per wire)
+uniform sampler2D WARP_lut;
+#if WARP_LAYOUT_PACKED
+uniform usampler3D WARP_code;
+#else
+uniform usampler3D WARP_state;
+uniform sampler3D WARP_t;
+#endif
+
+#if WARP_LAYOUT_PACKED
+// weight and t of neighbour OFF of the packed field, counted when it belongs to wire W
+#define WARP_CORNER(OFF, WT) {                                                    \
+    uint c_ = texelFetch(WARP_code, min(i0 + OFF, top), 0).r;                     \
+    float w_ = ((c_ >> 8u) & 0x7Fu) == wire && c_ != 0x7FFFu ? (WT) : 0.0;         \
+    ts += w_ * float(c_ & 0xFFu);                                                 \
+    ws += w_;                                                                     \
+}
+#endif
+
+// 0 identity (q = p), 1 vacated (q far away), 2 swept (q mapped, A its Jacobian).
+int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
+    q = p;
+    A = mat3(1.0);
+    vec3 g = (p - WARP_lo) / WARP_size * WARP_shape;
+    if (any(lessThan(g, vec3(0.0))) || any(greaterThanEqual(g, WARP_shape))) return 0;
+    ivec3 v = ivec3(g);
+    float t;
+    uint wire;
+#if WARP_LAYOUT_PACKED
+    uint c = texelFetch(WARP_code, v, 0).r;
+    if ((c & 0x8000u) == 0u) {
+        if (c == 0x7FFFu) { q = vec3(WARP_FAR); return 1; }
+        return 0;
+    }
+    wire = (c >> 8u) & 0x7Fu;
+    vec3 gc = clamp(g - 0.5, vec3(0.0), WARP_shape - 1.0);
+    ivec3 i0 = ivec3(floor(gc));
+    ivec3 top = ivec3(WARP_shape) - 1;
+    vec3 f = gc - vec3(i0);
+    vec3 e = 1.0 - f;
+    float ts = 0.0;
+    float ws = 0.0;
+    WARP_CORNER(ivec3(0, 0, 0), e.x * e.y * e.z)
+    WARP_CORNER(ivec3(1, 0, 0), f.x * e.y * e.z)
+    WARP_CORNER(ivec3(0, 1, 0), e.x * f.y * e.z)
+    WARP_CORNER(ivec3(1, 1, 0), f.x * f.y * e.z)
+    WARP_CORNER(ivec3(0, 0, 1), e.x * e.y * f.z)
+    WARP_CORNER(ivec3(1, 0, 1), f.x * e.y * f.z)
+    WARP_CORNER(ivec3(0, 1, 1), e.x * f.y * f.z)
+    WARP_CORNER(ivec3(1, 1, 1), f.x * f.y * f.z)
+    t = ws > 0.0 ? ts / ws : float(c & 0xFFu);
+#else
+    uint s = texelFetch(WARP_state, v, 0).r;
+    if (s < 2u) {
+        if (s == 1u) { q = vec3(WARP_FAR); return 1; }
+        return 0;
+    }
+    wire = s - 2u;
+    t = textureLod(WARP_t, g / WARP_shape, 0.0).r;
+#endif
+    float x = (t + 0.5) / float(WARP_LUT_SIZE);
+    float row = float(wire) * 4.0 + 0.5;
+    vec4 r0 = textureLod(WARP_lut, vec2(x, row / WARP_rows), 0.0);
+    vec4 r1 = textureLod(WARP_lut, vec2(x, (row + 1.0) / WARP_rows), 0.0);
+    vec4 r2 = textureLod(WARP_lut, vec2(x, (row + 2.0) / WARP_rows), 0.0);
+    vec4 r3 = textureLod(WARP_lut, vec2(x, (row + 3.0) / WARP_rows), 0.0);
+    // GLSL matrices are built column by column
+    A = mat3(r0.w, r2.y, r3.x,
+             r1.w, r2.z, r3.y,
+             r2.x, r2.w, r3.z);
+    q = r1.xyz + A * (p - r0.xyz);
+    return 2;
+}
+
+vec3 warp(vec3 p) {
+    vec3 q;
+    mat3 A;
+    WARP_lookup(p, q, A);
+    return q;
+}
+
+// d warp / d p = A(t) where swept (section 6.1: the gradient at the mapped point is
+// carried back by it), the identity elsewhere.
+mat3 warp_jacobian(vec3 p) {
+    vec3 q;
+    mat3 A;
+    WARP_lookup(p, q, A);
+    return A;
+}
