@@ -267,6 +267,7 @@ def _check_deform_options(args: argparse.Namespace) -> None:
             " render (a scene JSON saved with --save-scene can be rendered again with the"
             " other, which then deforms the result)"
         )
+    _check_wire_options(args)
     model = _deform_model(args)
     for opt, attr, owner in _DEFORM_OPTIONS:
         if not _given(args, attr) or owner in ("both", model):
@@ -330,6 +331,85 @@ def _check_deform_options(args: argparse.Namespace) -> None:
                 f" {seen[d.index]}; give each element once"
             )
         seen[d.index] = d.text
+
+
+_WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}
+_WIRE_FILE_NOTES = {"description", "sample", "type"}
+
+
+def _check_wire_options(args: argparse.Namespace) -> None:
+    """--wires cannot be combined with a model; its options need it."""
+    if args.wires is None:
+        for opt, attr in (("--field-scale", "field_scale"), ("--layout", "layout")):
+            if getattr(args, attr) is not None:
+                raise CliOptionError(f"{opt} needs --wires FILE (a wire file, see --help)")
+        if args.masks is not None:
+            raise CliOptionError("--masks/--no-masks needs --wires FILE (a wire file)")
+        return
+    if _deform_model(args) is not None:
+        raise CliOptionError(
+            "--wires cannot be combined with --massspring or --chainmail in one render:"
+            " save one with --save-scene and render that scene with the other"
+        )
+
+
+def load_wire_file(path: str | Path) -> dict[str, Any]:
+    """Read a wire file: JSON ``{"wires": [...], "field_scale": ..., ...}``.
+
+    The keys are those of a ``"wires"`` warp in scene JSON (see
+    :class:`deform.wires.WireFieldWarp`), plus the free-text notes ``description`` and
+    ``sample``. Returns the warp entry (``{"type": "wires", ...}``); raises
+    :class:`CliOptionError` naming the problem.
+    """
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise CliOptionError(f"--wires {path}: no such file") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CliOptionError(f"--wires {path}: cannot read it ({exc})") from exc
+    except ValueError as exc:
+        raise CliOptionError(f"--wires {path}: not valid JSON ({exc})") from exc
+    if not isinstance(d, dict) or "wires" not in d:
+        raise CliOptionError(
+            f"--wires {path}: a wire file is a JSON object with a 'wires' list (see"
+            " sample_volumes/fish_spine_wires.json)"
+        )
+    unknown = set(d) - _WIRE_FILE_KEYS - _WIRE_FILE_NOTES
+    if unknown:
+        raise CliOptionError(
+            f"--wires {path}: unknown keys {sorted(unknown)}; allowed:"
+            f" {sorted(_WIRE_FILE_KEYS | _WIRE_FILE_NOTES)}"
+        )
+    return {"type": "wires", **{k: v for k, v in d.items() if k in _WIRE_FILE_KEYS}}
+
+
+def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
+    """The wire warp of --wires on ``volume``, built, and a one-line summary."""
+    from deform.warp import WarpError
+    from deform.wires import WireFieldWarp
+
+    entry = load_wire_file(args.wires)
+    if args.field_scale is not None:
+        entry["field_scale"] = args.field_scale
+    if args.layout is not None:
+        entry["layout"] = args.layout
+    if args.masks is not None:
+        entry["masks"] = args.masks
+    try:
+        warp = WireFieldWarp.from_dict(entry)
+        warp.bind_volume(volume)
+    except WarpError as exc:
+        raise CliOptionError(f"--wires {args.wires}: {exc}") from exc
+    st = warp.deformer.stats
+    assert st is not None
+    summary = (
+        f"wires: {len(warp.wires)} wire(s), field {'x'.join(map(str, st.field_shape))}"
+        f" (1:{st.field_scale**3}, {st.layout}), {st.planes - st.planes_dropped} planes,"
+        f" {st.swept} voxels swept, {st.percent_ignored:.1f}% ignored,"
+        f" built in {st.timings['total']:.2f} s ({st.backend})"
+    )
+    return warp, summary
 
 
 def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
@@ -635,6 +715,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     )
     scene = _scene_from_args(obj, args)
     grid = _deform_grid(args, scene.volume)
+    wire_warp = None
+    if args.wires is not None:  # built before any GL work: bad wires fail fast
+        wire_warp, summary = _wire_warp(args, scene.volume)
+        print(summary, file=sys.stderr)
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
@@ -649,6 +733,8 @@ def cmd_render(args: argparse.Namespace) -> int:
                     # last in the chain: it deforms the volume itself, before the
                     # scene's own warps move the result
                     scene = scene.copy(warps=[*scene.warps, model.warp()])
+                if wire_warp is not None:
+                    scene = scene.copy(warps=[*scene.warps, wire_warp])
                 img = r.render(scene)
                 if args.save_scene:  # inside: a GPU-owned field is read back to save it
                     scene.save(args.save_scene)
@@ -838,6 +924,57 @@ def cmd_bench_chainmail(args: argparse.Namespace) -> int:
     return 0
 
 
+def _field_scale(text: str) -> int:
+    from deform.wires import FIELD_SCALES
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v not in FIELD_SCALES:
+        raise argparse.ArgumentTypeError(
+            f"field scale must be one of {', '.join(map(str, FIELD_SCALES))} (per-axis"
+            f" reduction of the attribute field); got {text!r}"
+        )
+    return v
+
+
+def _add_wire_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "wires (--wires FILE)",
+        "Bend, twist and scale objects along curves (the WSCG 2006 wire deformer for"
+        " volumes): each wire is a base curve laid through an object and a modified copy;"
+        " the object's cross-sections are swept from the base to the modified curve."
+        ' A wire file is JSON: {"wires": [{"kind": "catmull-rom"|"bezier", "base":'
+        ' [[x, y, z], ...], "modified": [...], "twist": [[t, radians], ...], "scale":'
+        ' [[t, s], ...], "radius": mm, "beta": [lo, hi]}], "field_scale": 2}'
+        " (points in world mm, t the fraction of the wire's length). Example:"
+        " voxwarp render sample:fish --view +z --wires"
+        " sample_volumes/fish_spine_wires.json -o bent.png",
+    )
+    g.add_argument("--wires", metavar="FILE", help="deform with the wires of this wire file")
+    g.add_argument(
+        "--field-scale",
+        type=_field_scale,
+        metavar="N",
+        help="attribute field N times coarser than the volume per axis: 1, 2, 4, 8 or 16"
+        " (1:1 ... 1:4096 voxels; default: the file's, else 2)",
+    )
+    g.add_argument(
+        "--layout",
+        choices=("float", "packed"),
+        help="attribute field storage: float (5 bytes/voxel, hardware-filtered t) or packed"
+        " (the paper's 2 bytes/voxel); default: the file's, else float",
+    )
+    g.add_argument(
+        "--masks",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="plane masks: sweep only the connected cross-section the wire runs through"
+        " (default on; --no-masks sweeps every object voxel within the radius)",
+    )
+
+
 def _add_deform_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "deformation (--massspring or --chainmail)",
@@ -1002,6 +1139,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--save-scene", metavar="JSON", help="also write the scene JSON")
     _add_volume_args(pr)
     _add_deform_args(pr)
+    _add_wire_args(pr)
     pr.set_defaults(func=cmd_render)
 
     pd = sub.add_parser("demo", help="render a sample in every mode into a folder")

@@ -694,15 +694,16 @@ class WireDeformer:
         # swept object's original place (the same masks seen from the base wires) is
         # vacated
         t0 = time.perf_counter()
-        swept = self._flags(tables, masks, lo, h, region_lo, rshape, r_wire, r_u, "modified")
-        # a field voxel is vacated when its footprint touches a mask, not only its
-        # centre: the masks grow by half a field voxel (else thin parts of the object,
-        # such as a fin's edge, would stay behind as a ghost)
+        # a field voxel counts when its footprint touches a mask, not only its centre:
+        # the masks grow by half a field voxel (else the object's edges would be cut at
+        # coarse field scales, and thin parts of it, such as a fin's edge, would stay
+        # behind as a ghost); what this adds is the background around the object
         grow = math.ceil(0.5 * float(h.max()) / self.mask_resolution)
-        ball = np.ones((3, 3, 3), dtype=bool)  # the footprint is a box
+        box = np.ones((3, 3, 3), dtype=bool)  # the footprint is a box
         grown = [
-            (ndimage.binary_dilation(m, ball, iterations=grow), k, half) for m, k, half in masks
+            (ndimage.binary_dilation(m, box, iterations=grow), k, half) for m, k, half in masks
         ]
+        swept = self._flags(tables, grown, lo, h, region_lo, rshape, r_wire, r_u, "modified")
         seeds_b = self._seeds(tables, lo, h, shape, "base")
         b_lo, b_shape, b_wire, b_u, _ = self._propagate(seeds_b, tables, lo, h, shape, "base")
         gone = self._flags(tables, grown, lo, h, b_lo, b_shape, b_wire, b_u, "base")
