@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml scripts/install-system-deps.sh
 
 setup: $(STAMP)
 
-## render the bundled real CT in every compositing mode, and bent by a mass-spring drag, into out/
+## render the bundled real CT in every compositing mode, and bent by a mass-spring drag and by a wire, into out/
 run: $(STAMP)
 	$(VENV)/bin/voxwarp demo --out out
 

@@ -774,6 +774,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
         dvr.warps.append(_demo_bend(vol))
         paths.append(write_image(out / f"{vol.name}_dvr_massspring.png", r.render(dvr)))
         dvr.save(out / f"{vol.name}_massspring_scene.json")
+        wired = Scene(vol, mode="dvr", transfer_function=tf, view=args.view, zoom=1.3)
+        wired.warps.append(_demo_wire(vol))
+        paths.append(write_image(out / f"{vol.name}_dvr_wires.png", r.render(wired)))
+        wired.save(out / f"{vol.name}_wires_scene.json")
     for p in paths:
         print(p)
     return 0
@@ -793,6 +797,28 @@ def _demo_bend(vol: Any) -> Any:
     ms.move([(i, j, k) for i in (3, 4) for j in (3, 4) for k in (6, 7)], (drag, 0.0, 0.0))
     ms.settle(max_steps=MASSSPRING_SETTLE_MAX_STEPS, tol=MASSSPRING_SETTLE_TOL)
     return ms.warp()  # a CPU model: nothing to release
+
+
+def _demo_wire(vol: Any) -> Any:
+    """A wire bend of ``vol``: a wire up the middle of the box (z from 10% to 95%), its
+    top half bent sideways by 25% of the box width and twisted by 60 degrees; it sweeps
+    the column of radius 30% of the box width around it (no value classification)."""
+    import numpy as np
+
+    from deform.wires import Wire, WireDeformer
+
+    lo, hi = vol.bounds
+    c = 0.5 * (lo + hi)
+    zs = lo[2] + (hi[2] - lo[2]) * np.array([0.1, 0.4, 0.7, 0.95])
+    base = [[c[0], c[1], z] for z in zs]
+    s = (zs - zs[0]) / (zs[-1] - zs[0])
+    shift = 0.25 * float(hi[0] - lo[0]) * s**2
+    modified = [[c[0] + dx, c[1], z] for dx, z in zip(shift, zs, strict=True)]
+    radius = 0.3 * float(min(hi[0] - lo[0], hi[1] - lo[1]))
+    wire = Wire(base, modified, twist=[(0.0, 0.0), (1.0, np.pi / 3)], radius=radius)
+    wd = WireDeformer(vol, [wire], field_scale=2)
+    wd.build()
+    return wd.warp()
 
 
 def cmd_samples(args: argparse.Namespace) -> int:

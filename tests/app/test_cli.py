@@ -390,12 +390,14 @@ def test_in_process_render_leaves_other_contexts_usable(
 @pytest.mark.gl
 def test_demo_writes_every_mode_and_a_mass_spring_bend(tmp_path: Path) -> None:
     """`voxwarp demo` (what `make run` does): every mode of the bundled CT, plus the same
-    dvr view bent by a settled mass-spring drag, and scenes that reproduce them."""
+    dvr view bent by a settled mass-spring drag and by a wire, and scenes that reproduce
+    them."""
     out = tmp_path / "out"
     assert main(["demo", "--out", str(out), "--size", "96x96"]) == 0
     images = {p.stem: read_image(p) for p in out.glob("*.png")}
     modes = ("dvr", "mip", "minip", "average", "flm", "iso")
-    assert set(images) == {f"stent_{m}" for m in modes} | {"stent_dvr_massspring"}
+    bends = {"stent_dvr_massspring", "stent_dvr_wires"}
+    assert set(images) == {f"stent_{m}" for m in modes} | bends
     for name, img in images.items():
         assert img.shape == (96, 96, 4), name
     for m in ("dvr", "mip", "average", "iso"):  # minip/flm may be dark by design
@@ -413,3 +415,12 @@ def test_demo_writes_every_mode_and_a_mass_spring_bend(tmp_path: Path) -> None:
     scene_path = out / "stent_massspring_scene.json"
     assert main(["render", str(scene_path), "--size", "96x96", "-o", str(again)]) == 0
     np.testing.assert_array_equal(read_image(again), images["stent_dvr_massspring"])
+    # the wire bend too: a different picture of the same object, saved as wires only
+    wired = images["stent_dvr_wires"].astype(float)
+    changed = np.abs(wired - plain).max(axis=-1) > 24
+    assert 0.01 < changed.mean() < 0.5
+    scene_path = out / "stent_wires_scene.json"
+    scene = json.loads(scene_path.read_text(encoding="utf-8"))
+    assert scene["warps"][0]["type"] == "wires"
+    assert main(["render", str(scene_path), "--size", "96x96", "-o", str(again)]) == 0
+    np.testing.assert_array_equal(read_image(again), images["stent_dvr_wires"])
