@@ -74,7 +74,8 @@ Storage (7.2). Two layouts, chosen by ``layout``:
   neighbours of the same wire.
 
 Rendering: per sample one field fetch decides identity / vacated / swept; a swept
-sample adds the t fetch (8 in the packed layout) and 4 fetches of the tiny lookup table.
+sample adds the t fetch (8 in the packed layout) and 3 fetches of the tiny lookup table
+(``q = A p + b``, A and b linear in t).
 :meth:`WireFieldWarp.displacement_range` bounds ``warp(p) - p`` per box from the field,
 so the raycaster keeps skipping empty space through the deformed volume.
 
@@ -392,36 +393,36 @@ class WireTables:
         """Number of entries."""
         return len(self.u)
 
-    def lookup(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(M, C, A) at continuous table coordinates t in [0, n - 1] (linear in t)."""
+    @property
+    def offsets(self) -> np.ndarray:
+        """b(u_i) = C - A M (n, 3): the mapping is ``q = A p + b``."""
+        return self.base_points - np.einsum("nij,nj->ni", self.matrices, self.modified_points)
+
+    def lookup(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b) at continuous table coordinates t in [0, n - 1], each linear in t (as
+        the shader's filtered lookup table)."""
         t = np.clip(np.asarray(t, dtype=np.float64), 0.0, self.size - 1)
         i0 = np.minimum(np.floor(t).astype(np.int64), self.size - 2)
         f = (t - i0)[:, None]
-        m = self.modified_points[i0] * (1 - f) + self.modified_points[i0 + 1] * f
-        c = self.base_points[i0] * (1 - f) + self.base_points[i0 + 1] * f
+        b_all = self.offsets
+        b = b_all[i0] * (1 - f) + b_all[i0 + 1] * f
         f3 = f[:, :, None]
         a = self.matrices[i0] * (1 - f3) + self.matrices[i0 + 1] * f3
-        return m, c, a
+        return a, b
 
     def gpu_rows(self) -> np.ndarray:
-        """The 4 RGBA32F rows of the shader's lookup table, (4, n, 4) float32.
-
-        Row 0: (M.xyz, A00); row 1: (C.xyz, A01); row 2: (A02, A10, A11, A12);
-        row 3: (A20, A21, A22, 0).
-        """
-        a = self.matrices
-        out = np.zeros((4, self.size, 4), dtype=np.float32)
-        out[0, :, :3], out[0, :, 3] = self.modified_points, a[:, 0, 0]
-        out[1, :, :3], out[1, :, 3] = self.base_points, a[:, 0, 1]
-        out[2] = np.stack([a[:, 0, 2], a[:, 1, 0], a[:, 1, 1], a[:, 1, 2]], axis=-1)
-        out[3, :, :3] = a[:, 2, :]
+        """The 3 RGBA32F rows of the shader's lookup table, (3, n, 4) float32: row r holds
+        (A[r, 0], A[r, 1], A[r, 2], b[r])."""
+        out = np.empty((3, self.size, 4), dtype=np.float32)
+        out[:, :, :3] = np.transpose(self.matrices, (1, 0, 2))
+        out[:, :, 3] = self.offsets.T
         return out
 
 
 def map_points(tables: WireTables, t: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """The wire mapping ``q = C + A (p - M)`` at table coordinates t (deformed -> original)."""
-    m, c, a = tables.lookup(t)
-    return c + np.einsum("nij,nj->ni", a, p - m)
+    """The wire mapping ``q = A p + b`` at table coordinates t (deformed -> original)."""
+    a, b = tables.lookup(t)
+    return np.einsum("nij,nj->ni", a, p) + b
 
 
 # ---------------------------------------------------------------------- statistics
@@ -877,7 +878,8 @@ class WireDeformer:
         # the radius is the region of influence on the base side: a scaled cross-section
         # covers s * radius on the modified side
         tt = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
-        _, c, a = tab.lookup(tt)
+        a, b = tab.lookup(tt)
+        m = _lerp_rows(tab.modified_points, tt)
         fm = _lerp_frames(tab.modified_frames, tt)
         s_at = wire.scale_at(tt / (LUT_SIZE - 1))
         in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.radius * s_at[:, None, None]) ** 2
@@ -886,7 +888,9 @@ class WireDeformer:
             x[None, ..., None] * fm[:, None, None, :, 0]
             + y[None, ..., None] * fm[:, None, None, :, 1]
         )
-        q = c[:, None, None, :] + np.einsum("pij,pabj->pabi", a, local)
+        q = (np.einsum("pij,pj->pi", a, m) + b)[:, None, None, :] + np.einsum(
+            "pij,pabj->pabi", a, local
+        )
         ijk = (q - self.origin) / self.spacing
         vlo = np.zeros(3)
         vhi = np.asarray(self.data.shape) - 1.0
@@ -1054,6 +1058,15 @@ _CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)],
 def _curve_box(curve: Curve) -> tuple[np.ndarray, np.ndarray]:
     pts = curve.evaluate(np.linspace(0.0, 1.0, 257))
     return pts.min(axis=0), pts.max(axis=0)
+
+
+def _lerp_rows(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Rows (n, 3) linearly interpolated at table coordinates t."""
+    n = rows.shape[0]
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, n - 1)
+    i0 = np.minimum(np.floor(t).astype(np.int64), n - 2)
+    f = (t - i0)[:, None]
+    return rows[i0] * (1 - f) + rows[i0 + 1] * f
 
 
 def _lerp_frames(frames: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -1235,7 +1248,7 @@ class WireFieldWarp(Warp):
         out = np.broadcast_to(np.eye(3), (len(p), 3, 3)).copy()
         for wi in np.unique(wire[state == 2]):
             sel = (state == 2) & (wire == wi)
-            out[sel] = self.field.tables[int(wi)].lookup(t[sel])[2]
+            out[sel] = self.field.tables[int(wi)].lookup(t[sel])[0]
         return out
 
     def swept(self, points: np.ndarray) -> np.ndarray:
@@ -1343,7 +1356,7 @@ class WireFieldWarp(Warp):
             "lo": tuple(float(v) for v in fld.lo),
             "size": tuple(float(v) for v in fld.hi - fld.lo),
             "shape": tuple(float(v) for v in fld.shape),
-            "rows": float(4 * len(fld.tables)),
+            "rows": float(3 * len(fld.tables)),
         }
 
     def textures(self, ctx: Any) -> dict[str, Any]:

@@ -2,9 +2,9 @@
 // The attribute field covers the box [WARP_lo, WARP_lo + WARP_size] with WARP_shape voxels
 // (voxel i centred at i + 1/2). Per sample: the nearest voxel says identity, vacated (the
 // original place of a swept object: shows nothing) or swept by wire w; a swept sample
-// takes t (table units 0..WARP_LUT_SIZE-1) trilinearly and maps q = C(t) + A(t) (p - M(t))
-// with M, C, A read from the wire's 4 rows of the lookup table WARP_lut (linear in t):
-//   row 0: (M.xyz, A00)  row 1: (C.xyz, A01)  row 2: (A02, A10, A11, A12)  row 3: (A20, A21, A22, 0)
+// takes t (table units 0..WARP_LUT_SIZE-1) trilinearly and maps q = A(t) p + b(t), where
+// A = d q / d p and b = C - A M (C, M the base and modified wire points) are read from the
+// wire's 3 rows of the lookup table WARP_lut (linear in t): row r = (A[r][0..2], b[r]).
 // Layouts (WARP_LAYOUT_PACKED, a #define prepended by the warp):
 //   0: WARP_state (R8UI: 0 identity, 1 vacated, 2 + wire) and WARP_t (R32F, linear filter);
 //   1: WARP_code (R16UI: bit 15 swept, bits 8-14 wire, bits 0-7 integer t; 0x7FFF vacated),
@@ -12,7 +12,7 @@
 uniform vec3 WARP_lo;
 uniform vec3 WARP_size;
 uniform vec3 WARP_shape;
-uniform float WARP_rows;      // rows of WARP_lut (4 per wire)
+uniform float WARP_rows;      // rows of WARP_lut (3 per wire)
 uniform sampler2D WARP_lut;
 #if WARP_LAYOUT_PACKED
 uniform usampler3D WARP_code;
@@ -73,29 +73,31 @@ int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
     t = textureLod(WARP_t, g / WARP_shape, 0.0).r;
 #endif
     float x = (t + 0.5) / float(WARP_LUT_SIZE);
-    float row = float(wire) * 4.0 + 0.5;
+    float row = float(wire) * 3.0 + 0.5;
     vec4 r0 = textureLod(WARP_lut, vec2(x, row / WARP_rows), 0.0);
     vec4 r1 = textureLod(WARP_lut, vec2(x, (row + 1.0) / WARP_rows), 0.0);
     vec4 r2 = textureLod(WARP_lut, vec2(x, (row + 2.0) / WARP_rows), 0.0);
-    vec4 r3 = textureLod(WARP_lut, vec2(x, (row + 3.0) / WARP_rows), 0.0);
-    // GLSL matrices are built column by column
-    A = mat3(r0.w, r2.y, r3.x,
-             r1.w, r2.z, r3.y,
-             r2.x, r2.w, r3.z);
-    q = r1.xyz + A * (p - r0.xyz);
+    A = transpose(mat3(r0.xyz, r1.xyz, r2.xyz));  // GLSL matrices are built by columns
+    q = A * p + vec3(r0.w, r1.w, r2.w);
     return 2;
 }
 
+// The raycaster asks for the Jacobian at the point it just warped (to shade it): the
+// last lookup is kept, so shading costs no second lookup.
+vec3 WARP_memo_p = vec3(1.0e30);
+mat3 WARP_memo_A = mat3(1.0);
+
 vec3 warp(vec3 p) {
     vec3 q;
-    mat3 A;
-    WARP_lookup(p, q, A);
+    WARP_lookup(p, q, WARP_memo_A);
+    WARP_memo_p = p;
     return q;
 }
 
 // d warp / d p = A(t) where swept (section 6.1: the gradient at the mapped point is
 // carried back by it), the identity elsewhere.
 mat3 warp_jacobian(vec3 p) {
+    if (p == WARP_memo_p) return WARP_memo_A;
     vec3 q;
     mat3 A;
     WARP_lookup(p, q, A);
