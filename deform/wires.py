@@ -558,7 +558,8 @@ class WireDeformer:
         (True, the paper's plane masks), or every β voxel in the region (False).
     mask_resolution
         Pixel size of the plane masks and spacing of the planes (mm); default the
-        volume's smallest voxel spacing.
+        volume's smallest voxel spacing for a 1:1 field, twice that for coarser fields
+        (whose voxels sample the masks no finer).
     dilation
         Pixels of morphological dilation of each mask.
     backend
@@ -604,7 +605,12 @@ class WireDeformer:
             raise WarpError(f"layout must be one of {LAYOUTS}; got {layout!r}")
         self.layout = layout
         self.masks = bool(masks)
-        px = float(self.spacing.min()) if mask_resolution is None else float(mask_resolution)
+        if mask_resolution is None:
+            # the volume's voxel for a 1:1 field; two of them for coarser fields, whose
+            # voxels sample the masks at most that finely (8x fewer mask pixels)
+            px = float(self.spacing.min()) * min(int(field_scale), 2)
+        else:
+            px = float(mask_resolution)
         if not math.isfinite(px) or px <= 0:
             raise WarpError(f"mask_resolution must be a length in mm > 0; got {mask_resolution}")
         self.mask_resolution = px
