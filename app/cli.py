@@ -1235,6 +1235,9 @@ def build_parser() -> argparse.ArgumentParser:
     pbc.add_argument("--no-gpu", action="store_true", help="skip the GPU backend")
     pbc.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbc.set_defaults(func=cmd_bench_chainmail)
+    from app.bench_wires import add_bench_wires_parser
+
+    add_bench_wires_parser(bsub)
     return p
 
 

@@ -442,7 +442,8 @@ class WireFieldStats:
     vacated: int
     #: field voxels that render as the identity (not swept, not vacated)
     ignored: int
-    #: seconds per stage: planes, masks, seeds, propagate, flags, store, total
+    #: seconds per stage: tables, masks, seeds, propagate, flags, store, total (seeds,
+    #: propagation and flags of both sides: the swept voxels and the vacated place)
     timings: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -684,15 +685,20 @@ class WireDeformer:
             planes_total += mask.shape[0]
         timings["masks"] = time.perf_counter() - t0
 
-        # 3. seeds: the 8 voxels of every field cell the modified wire enters
+        # 3. seeds: the 8 voxels of every field cell a wire enters; the modified wires
+        # for the swept voxels, the base wires for the place the object leaves
         t0 = time.perf_counter()
         seeds_m = self._seeds(tables, lo, h, shape, "modified")
+        seeds_b = self._seeds(tables, lo, h, shape, "base")
         timings["seeds"] = time.perf_counter() - t0
 
-        # 4. propagation of (wire, u) from the seeds over the modified wires' region
+        # 4. propagation of (wire, u) from the seeds over each side's region
         t0 = time.perf_counter()
-        region_lo, rshape, r_wire, r_u, seed_count = self._propagate(
+        region_lo, rshape, r_wire, r_u, r_near, seed_count = self._propagate(
             seeds_m, tables, lo, h, shape, "modified"
+        )
+        b_lo, b_shape, b_wire, b_u, b_near, _ = self._propagate(
+            seeds_b, tables, lo, h, shape, "base"
         )
         backend = last_backend()
         timings["propagate"] = time.perf_counter() - t0
@@ -710,10 +716,10 @@ class WireDeformer:
         grown = [
             (ndimage.binary_dilation(m, box, iterations=grow), k, half) for m, k, half in masks
         ]
-        swept = self._flags(tables, grown, lo, h, region_lo, rshape, r_wire, r_u, "modified")
-        seeds_b = self._seeds(tables, lo, h, shape, "base")
-        b_lo, b_shape, b_wire, b_u, _ = self._propagate(seeds_b, tables, lo, h, shape, "base")
-        gone = self._flags(tables, grown, lo, h, b_lo, b_shape, b_wire, b_u, "base")
+        swept = self._flags(
+            tables, grown, lo, h, region_lo, rshape, r_wire, r_u, r_near, "modified"
+        )
+        gone = self._flags(tables, grown, lo, h, b_lo, b_shape, b_wire, b_u, b_near, "base")
         region = _box_slices(region_lo, rshape)
         vacated = np.zeros(shape, dtype=bool)
         vacated[_box_slices(b_lo, b_shape)] = gone
@@ -773,9 +779,10 @@ class WireDeformer:
         h: np.ndarray,
         shape: tuple[int, int, int],
         side: str,
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, int]:
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
         """(wire, u) of the nearest seed for every voxel of the wires' region on one
-        side: the region's first voxel and shape, the two grids and the seed count."""
+        side: the region's first voxel and shape, the two grids, which voxels lie within
+        their wire's reach, and the seed count."""
         from deform.propagation import nearest_seed
 
         seed_idx, seed_wire, seed_u = seeds
@@ -816,11 +823,30 @@ class WireDeformer:
             #: the propagation's input (seed mask over the region, voxel spacing), kept
             #: for benchmarks that time other propagations on the same grid
             self.propagation_input = (grid, sampling)
+        # voxels farther from their nearest seed than that wire's reach cannot be
+        # flagged: only the others are refined and tested against the masks
+        reach = np.array(
+            [
+                w.radius * (float(w.scale[:, 1].max()) if side == "modified" else 1.0)
+                + 2 * self.mask_resolution
+                + float(np.linalg.norm(h))
+                for w in self.wires
+            ]
+        )
+        near = np.zeros(len(nearest), dtype=bool)
+        chunk = 1 << 21
+        for start in range(0, len(nearest), chunk):
+            idx = np.arange(start, min(start + chunk, len(nearest)))
+            own = np.stack(np.unravel_index(idx, rshape), -1)
+            seed = np.stack(np.unravel_index(nearest[idx], rshape), -1)
+            d2 = (((own - seed) * h) ** 2).sum(axis=1)
+            near[idx] = d2 <= reach[wire_of[nearest[idx]]] ** 2
         return (
             c_lo,
             rshape,
             wire_of[nearest].reshape(rshape),
             u_of[nearest].reshape(rshape),
+            near.reshape(rshape),
             len(sidx),
         )
 
@@ -834,15 +860,17 @@ class WireDeformer:
         rshape: tuple[int, int, int],
         r_wire: np.ndarray,
         r_u: np.ndarray,
+        r_near: np.ndarray,
         side: str,
     ) -> np.ndarray:
         """Mask bits of a region's voxels (refining ``r_u`` in place to the closest
         point): swept voxels on the modified side, the object's place on the base side."""
         out = np.zeros(rshape, dtype=bool)
         centres = [lo[a] + (np.arange(n) + region_lo[a] + 0.5) * h[a] for a, n in enumerate(rshape)]
-        flat_wire = r_wire.ravel()
-        order = np.argsort(flat_wire, kind="stable")
-        bounds = np.searchsorted(flat_wire[order], np.arange(len(self.wires) + 1))
+        near = np.nonzero(r_near.ravel())[0]
+        flat_wire = r_wire.ravel()[near]
+        order = near[np.argsort(flat_wire, kind="stable")]
+        bounds = np.searchsorted(r_wire.ravel()[order], np.arange(len(self.wires) + 1))
         flat_u = r_u.reshape(-1)
         flat_out = out.reshape(-1)
         for wi in range(len(self.wires)):
