@@ -109,6 +109,9 @@ LAYOUTS = ("float", "packed")
 PACKED_VACATED = 0x7FFF
 #: a vacated sample is sent this far away (it then lies outside every volume)
 FAR = 1.0e20
+#: what float32 arithmetic can add to a mapped point (mm): displacement bounds grow by it
+#: (the filtered lookups of t and of the tables need none, see _box_mapping_range)
+FLOAT32_MARGIN = 1e-4
 
 Beta = Callable[[np.ndarray], np.ndarray]
 
@@ -1171,6 +1174,7 @@ class WireFieldWarp(Warp):
         self._revision = 0
         self._gpu: dict[int, tuple[Any, int, dict[str, Any]]] = {}
         self._ranges: tuple[int, Any] | None = None
+        self._info: tuple[int, Any] | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -1201,6 +1205,7 @@ class WireFieldWarp(Warp):
         self._field = fld
         self._revision += 1
         self._ranges = None
+        self._info = None
 
     def rebuild(self) -> WireFieldStats:
         """Rebuild the field after editing :attr:`wires` (the revision changes)."""
@@ -1306,9 +1311,11 @@ class WireFieldWarp(Warp):
         """Per box, an interval holding ``apply(p) - p`` over the samples that can show
         something (vacated samples show nothing and are left out).
 
-        Swept voxels contribute the displacement of the swept voxels around them (their
-        t is interpolated from those), grown by a quarter field voxel; identity voxels
-        and boxes reaching outside the propagated region contribute 0.
+        A swept voxel contributes the displacement of every point of its box for every t
+        its samples can interpolate (the range of t over its 3³ neighbourhood): the
+        mapping is linear in p, and linear in t between table entries, so the extremes
+        lie at the box's corners and at the entries in that range. Identity voxels and
+        boxes reaching outside the propagated region contribute 0.
         """
         lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
         hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
@@ -1325,10 +1332,43 @@ class WireFieldWarp(Warp):
         rhi = np.where(empty[:, None], 0.0, rhi)
         rlo = np.where(outside[:, None], np.minimum(rlo, 0.0), rlo)
         rhi = np.where(outside[:, None], np.maximum(rhi, 0.0), rhi)
+        # boxes holding swept voxels of one wire: bound the mapping over the box itself
+        # (tighter than the union of its voxels' boxes, by the box's own size)
+        info_lo, info_hi = self._info_query()(a, b)
+        one = (~empty) & np.isfinite(info_lo[:, 1]) & (info_lo[:, 1] == info_hi[:, 1])
+        if one.any():
+            sel = np.nonzero(one)[0]
+            t_lo = np.maximum(info_lo[sel, 0], 0.0)
+            t_hi = np.minimum(info_hi[sel, 0], LUT_SIZE - 1.0)
+            tight_lo, tight_hi = _box_mapping_range(
+                fld.tables, info_lo[sel, 1].astype(np.int64), t_lo, t_hi, lo[sel], hi[sel]
+            )
+            keep0 = (outside[sel] | (info_hi[sel, 2] > 0))[:, None]
+            rlo[sel] = _grow(np.where(keep0, np.minimum(tight_lo, 0.0), tight_lo), -1.0)
+            rhi[sel] = _grow(np.where(keep0, np.maximum(tight_hi, 0.0), tight_hi), 1.0)
         none = rlo > rhi  # only vacated voxels: nothing shows; any interval is sound
         rlo[none] = 0.0
         rhi[none] = 0.0
         return rlo, rhi
+
+    def _info_query(self) -> Any:
+        """Pyramid of (t range over each voxel's 3³ neighbourhood, wire id of swept
+        voxels, whether a voxel is the identity) over the propagated region."""
+        if self._info is not None and self._info[0] == self._revision:
+            return self._info[1]
+        fld = self.field
+        region = _box_slices(fld.region_lo, fld.region_shape)
+        state, wire, t_all = fld.decode()
+        st, wr = state[region], wire[region].astype(np.float64)
+        tt = np.asarray(t_all[region], dtype=np.float64)
+        t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
+        t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
+        ident = (st == 0).astype(np.float64)
+        lo = np.stack([t_lo, np.where(st == 2, wr, np.inf), -ident], axis=-1)
+        hi = np.stack([t_hi, np.where(st == 2, wr, -np.inf), ident], axis=-1)
+        query = _MinMaxPyramid(lo, hi)
+        self._info = (self._revision, query)
+        return query
 
     def _range_query(self) -> Any:
         if self._ranges is not None and self._ranges[0] == self._revision:
@@ -1337,35 +1377,51 @@ class WireFieldWarp(Warp):
         rs = fld.region_shape
         r0 = fld.region_lo
         region = tuple(slice(int(r0[a]), int(r0[a]) + rs[a]) for a in range(3))
-        st = fld.decode()[0][region]
+        state, wire, t_all = fld.decode()
+        st, wr = state[region], wire[region]
+        tt = np.asarray(t_all[region], dtype=np.float32)
+        # a sample whose nearest voxel is v interpolates t from v's 3³ neighbourhood
+        t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest").ravel()
+        t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest").ravel()
         idx = np.nonzero(st.ravel() == 2)[0]
         ii = np.stack(np.unravel_index(idx, rs), -1)
         centres = fld.lo + (ii + fld.region_lo + 0.5) * fld.spacing
-        # per swept voxel: its centre's displacement, and how far it can change within
-        # the voxel (|A - I| times half a voxel, row by row)
-        d = np.zeros((len(idx), 3))
-        e = np.zeros((len(idx), 3))
+        d_lo = np.full((len(idx), 3), np.inf)
+        d_hi = np.full((len(idx), 3), -np.inf)
         half = 0.5 * fld.spacing
-        for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200_000)):
-            if len(chunk):
-                c = centres[chunk]
-                d[chunk] = self.apply(c) - c
-                jm = self.jacobian(c) - np.eye(3)
-                e[chunk] = np.abs(jm) @ half
-        dlo = np.full((*rs, 3), np.inf, dtype=np.float32)
-        dhi = np.full((*rs, 3), -np.inf, dtype=np.float32)
-        for c in range(3):
-            dlo[..., c].reshape(-1)[idx] = d[:, c] - e[:, c]
-            dhi[..., c].reshape(-1)[idx] = d[:, c] + e[:, c]
-        # t is interpolated from the neighbours: their intervals count too, plus a
-        # quarter voxel for what interpolating the tables between them adds
-        margin = 0.25 * float(fld.spacing.max())
-        swept = st == 2
-        for c in range(3):
-            m_lo = ndimage.minimum_filter(dlo[..., c], size=3, mode="nearest") - margin
-            m_hi = ndimage.maximum_filter(dhi[..., c], size=3, mode="nearest") + margin
-            dlo[..., c] = np.where(swept, m_lo, np.where(st == 0, 0.0, np.inf))
-            dhi[..., c] = np.where(swept, m_hi, np.where(st == 0, 0.0, -np.inf))
+        w_of = wr.ravel()[idx]
+        for wi in np.unique(w_of):
+            tab = fld.tables[int(wi)]
+            sel = np.nonzero(w_of == wi)[0]
+            lo_t, hi_t = t_lo[idx[sel]].astype(np.float64), t_hi[idx[sel]].astype(np.float64)
+            first = np.floor(lo_t)
+            last_all = np.minimum(np.ceil(hi_t), tab.size - 1)
+            count = (last_all - first).astype(np.int64) + 1
+            # q = A(t) p + b(t) with A, b linear in t between table entries: over t in
+            # [t_lo, t_hi] the displacement of a point is extreme at the entries inside
+            # and at the two ends; over the voxel's box, A - I bounds its change
+            for group in (count <= 64, count > 64):
+                g = sel[group]
+                if len(g) == 0:
+                    continue
+                glast, gfirst = last_all[group], first[group]
+                steps = int(count[group].max())
+                if steps > 64:  # t mixed across wires: bound over the whole table
+                    gfirst, glast = 0.0 * gfirst, 0.0 * glast + tab.size - 1
+                    steps = tab.size
+                c = centres[g]
+                for k in range(steps):
+                    tk = np.minimum(gfirst + k, glast)
+                    a_k, b_k = tab.lookup(tk)
+                    dk = np.einsum("nij,nj->ni", a_k, c) + b_k - c
+                    ek = np.abs(a_k - np.eye(3)) @ half
+                    d_lo[g] = np.minimum(d_lo[g], dk - ek)
+                    d_hi[g] = np.maximum(d_hi[g], dk + ek)
+        # identity voxels: [0, 0]; vacated ones: empty (they show nothing)
+        dlo = np.repeat(np.where(st == 0, 0.0, np.inf)[..., None], 3, axis=-1)
+        dhi = np.repeat(np.where(st == 0, 0.0, -np.inf)[..., None], 3, axis=-1)
+        dlo.reshape(-1, 3)[idx] = _grow(d_lo, -1.0)
+        dhi.reshape(-1, 3)[idx] = _grow(d_hi, 1.0)
         query = _MinMaxPyramid(dlo, dhi)
         self._ranges = (self._revision, query)
         return query
@@ -1478,6 +1534,47 @@ def _deformer_spec(deformer: WireDeformer) -> dict[str, Any]:
         "mask_resolution": deformer.mask_resolution,
         "dilation": deformer.dilation,
     }
+
+
+def _grow(bound: np.ndarray, sign: float) -> np.ndarray:
+    """A displacement bound moved outwards (``sign``) by :data:`FLOAT32_MARGIN`, except
+    where it is 0 up to float64 noise: an identity mapping is exact in float32 too (its
+    table holds exact ones and zeros), and a margin there would widen the skip maps'
+    windows by a whole cell."""
+    exact = np.abs(bound) < 1e-9
+    return np.where(exact, 0.0, bound + sign * FLOAT32_MARGIN)
+
+
+def _box_mapping_range(
+    tables: list[WireTables],
+    wire: np.ndarray,
+    t_lo: np.ndarray,
+    t_hi: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per box, the range of ``A(t) p + b(t) - p`` over p in [lo, hi] and t in
+    [t_lo, t_hi] of one wire: linear in p and, between table entries, in t, so the
+    extremes lie at the box's 8 corners and at the table entries from floor(t_lo) to
+    ceil(t_hi) (those also hold what the GPU's filtered, 8-bit-weighted lookups of t
+    and of the table can return)."""
+    out_lo = np.full((len(lo), 3), np.inf)
+    out_hi = np.full((len(lo), 3), -np.inf)
+    corners = np.stack([np.where(_CORNERS[c] == 1, hi, lo) for c in range(8)], axis=1)  # (N, 8, 3)
+    for wi in np.unique(wire):
+        tab = tables[int(wi)]
+        sel = np.nonzero(wire == wi)[0]
+        first = np.floor(t_lo[sel])
+        last = np.minimum(np.ceil(t_hi[sel]), tab.size - 1)
+        steps = int((last - first).max())
+        c = corners[sel]
+        for k in range(steps + 1):
+            tk = np.minimum(first + k, last)
+            a_k, b_k = tab.lookup(tk)
+            d = np.einsum("nij,ncj->nci", a_k, c) + b_k[:, None, :] - c
+            out_lo[sel] = np.minimum(out_lo[sel], d.min(axis=1))
+            out_hi[sel] = np.maximum(out_hi[sel], d.max(axis=1))
+    return out_lo, out_hi
 
 
 class _MinMaxPyramid:
