@@ -23,15 +23,15 @@ a plane maps cross-sections without rotating them, and θ is exactly the rotatio
 Mapping (section 6). A deformed-space point p near the modified wire at fraction u has
 local coordinates ``(x, y, z) = F_m(u)^T (p - M(u))`` in the modified frame
 ``F_m = (N_m, B_m, T_m)``. It shows the original point
-``q = B(u) + F_b(u) diag(1/s, 1/s, L_b/L_m) R_z(-θ) (x, y, z)`` on the base wire, i.e.
-``q = C(u) + A(u) (p - M(u))`` with ``C = B(u)`` and a 3x3 matrix ``A(u)``. The
+``q = C(u) + F_b(u) diag(1/s, 1/s, L_b/L_m) R_z(-θ) (x, y, z)`` near the base wire
+(C the base wire's point), i.e. ``q = C(u) + A(u) (p - M(u)) = A(u) p + b(u)``. The
 along-wire offset z is kept (scaled by the length ratio), so an error in u moves M and
 C together along straight parts and the mapping is first-order insensitive to it.
-``M``, ``C`` and ``A`` are tabulated at :data:`LUT_SIZE` equally spaced fractions ("wire
-point and frame lookup tables at integer t", section 7.2) and interpolated linearly;
-the CPU reference, the masks and the shader all use these same tables. The Jacobian of
-the warp is A(u) (the dependence of u on p is second order; section 6.1 carries the
-gradient by it).
+``A`` and ``b`` are tabulated at :data:`LUT_SIZE` equally spaced fractions ("wire point
+and frame lookup tables at integer t", section 7.2, 3 RGBA texels per entry) and
+interpolated linearly; the CPU reference, the masks and the shader all use these same
+tables. The Jacobian of the warp is A(u) (the dependence of u on p is second order;
+section 6.1 carries the gradient by it).
 
 Attribute field (section 5). Each ray sample needs to know whether it is swept, by
 which wire, and its u. The field holds that per voxel of a grid ``field_scale`` times
@@ -44,23 +44,29 @@ leave the original box). It is built in deformed space:
    covering the region of influence (a disc of ``radius``). Each pixel's point is mapped
    to the base side (the mapping above) and classified there by β (a value range of the
    volume by default; any callable on values works).
-2. *Plane masks* (7.1): on each plane a 2.5D seed fill of the β pixels from a seed found
-   by searching outward from the wire (the β pixel nearest to it), then ``dilation``
-   pixels of morphological dilation; planes with no object are dropped. Only the
-   connected cross-section of the object the wire runs through is swept, which solves
-   the delineation problem of two nearby objects (with ``masks=False`` every β pixel in
-   the disc is swept instead).
+2. *Plane masks* (7.1): a 2.5D seed fill of the β pixels from a seed on each plane,
+   found by searching outward from the wire (the β pixel nearest to it): a pixel joins
+   when it connects to a seed within its plane or through the neighbouring planes (so an
+   object that forks along the wire, like a tail fin, stays whole); holes are filled (a
+   vessel's lumen, a swim bladder move with their object); then ``dilation`` pixels of
+   morphological dilation; planes with no object are dropped. Only the object the wire
+   runs through is swept, which solves the delineation problem of two nearby objects
+   (with ``masks=False`` every β pixel in the disc is swept instead).
 3. *Voxel initialisation* (5.1): where the modified wire enters a field cell, its eight
    voxels become seeds with (γ wire id, ε closest u, d distance), keeping the minimum d.
 4. *Propagation*: every voxel of the region takes (γ, ε) of its nearest seed, by an
    exact Euclidean distance transform in OpenCL (:mod:`deform.propagation`, PoCL on the
-   CPU here, any OpenCL GPU elsewhere; scipy when no platform exists). Distances are
-   discarded.
-5. *Flags*: a voxel is swept where the mask bit of plane ε under its projection is set
-   (and within the region of influence); the rest of the field is the identity. The
-   original place of the swept object is *vacated*: the scatter of every mask pixel's
-   base-side point marks it, and samples landing there (unswept) show nothing, so the
-   bent object does not leave a copy behind.
+   CPU here, any OpenCL GPU elsewhere; scipy when no platform exists, with a warning).
+   Distances are discarded. ε is then refined to the closest point of the wire
+   (:data:`REFINE_STEPS` Newton steps): the nearest seed's u is off by up to a voxel
+   along the wire, which a fast twist would turn into a visible rotation error.
+5. *Flags*: a voxel is swept where the mask of its plane (at ε) covers its projection;
+   the rest of the field is the identity. The original place of the swept object is
+   *vacated*: the same propagation from the base wires, tested against the same masks
+   (turned and scaled as the sweep does), marks it, and samples landing there (unswept)
+   show nothing, so the bent object leaves no copy behind. A field voxel counts when its
+   footprint touches a mask (the masks grow by half a field voxel), so coarse fields
+   neither cut the object's edges nor leave thin parts of it behind.
 
 Storage (7.2). Two layouts, chosen by ``layout``:
 

@@ -266,6 +266,28 @@ def test_masks_solve_the_delineation_problem() -> None:
     assert moved.mean() > 0.15  # the part of it inside the wire's radius
 
 
+def test_masks_fill_cavities_and_keep_forks() -> None:
+    """A hollow tube whose wall forks into two prongs: the lumen moves with the wall
+    (holes are filled) and both prongs are swept (the 2.5D fill follows the object
+    through neighbouring planes), though on a prong's planes the two are apart."""
+    x, y, z = np.meshgrid(*(np.arange(n, dtype=np.float32) for n in N), indexing="ij")
+    r = np.hypot(y - AXIS_Y, z - AXIS_Z)
+    data = np.zeros(N, dtype=np.float32)
+    tube = (x >= 8) & (x < 34) & (r >= 3.5) & (r <= 6.0)
+    data[tube] = 100.0  # the wall; the lumen (r < 3.5) is 0, as the outside
+    for dz in (-4.5, 4.5):  # two prongs from x = 30 on, 9 mm apart (a 6 mm gap)
+        prong = (x >= 30) & (x <= 56) & (np.hypot(y - AXIS_Y, z - AXIS_Z - dz) <= 1.5)
+        data[prong] = 100.0
+    vol = Volume(np.asfortranarray(data), name="fork")
+    w = build(vol, [wire(modified=axis_points(dy=3.0), radius=9.0)])
+    swept = w.swept(voxel_centres(vol)).reshape(N)
+    lumen = (x >= 12) & (x < 30) & (r < 2.5)
+    assert swept[lumen].all()
+    for dz in (-4.5, 4.5):
+        prong = (x >= 40) & (x <= 52) & (np.hypot(y - AXIS_Y, z - AXIS_Z - dz) <= 1.0)
+        assert swept[prong].all(), dz
+
+
 def test_packed_layout_agrees_with_float() -> None:
     vol = cylinder()
     ws = [wire(modified=axis_points(dz=3.0), twist=[(0, 0), (1, math.pi / 2)])]
