@@ -103,6 +103,27 @@ class OpenCLUnavailableWarning(RuntimeWarning):
 _KERNELS = r"""
 #define MAXLEN %(maxlen)d
 
+/* Felzenszwalb-Huttenlocher: add the parabola of sample q (height fq, carried seed c of
+   type T) to the lower envelope v/cv/fv with boundaries z (k: its last index, -1 when
+   empty); used inside the loop over q of passes 2 and 3. */
+#define ENVELOPE_PUSH(T)                                                           \
+    if (k < 0) {                                                                   \
+        k = 0; v[0] = (ushort)q; cv[0] = (T)c; fv[0] = fq;                         \
+        z[0] = -INFINITY; z[1] = INFINITY;                                         \
+        continue;                                                                  \
+    }                                                                              \
+    {                                                                              \
+        float s;                                                                   \
+        for (;;) {                                                                 \
+            const int p = v[k];                                                    \
+            s = 0.5f * ((fq - fv[k]) / (float)(q - p) + (float)(q + p));           \
+            if (s > z[k]) break;                                                   \
+            --k;                                                                   \
+        }                                                                          \
+        ++k;                                                                       \
+        v[k] = (ushort)q; cv[k] = (T)c; fv[k] = fq; z[k] = s; z[k + 1] = INFINITY; \
+    }
+
 /* Pass 1, along the contiguous axis (length n2): nearest seed on the line. */
 __kernel void pass_contig(__global const uchar *seeds, __global short *near,
                           const int n2, const int n1, const int n0)
@@ -147,20 +168,7 @@ __kernel void pass_mid(__global const short *near, __global int *outp,
         if (c < 0) continue;
         const float d = (float)(i2 - c);
         const float fq = d * d * r2;
-        if (k < 0) {
-            k = 0; v[0] = (ushort)q; cv[0] = (short)c; fv[0] = fq;
-            z[0] = -INFINITY; z[1] = INFINITY;
-            continue;
-        }
-        float s;
-        for (;;) {
-            const int p = v[k];
-            s = 0.5f * ((fq - fv[k]) / (float)(q - p) + (float)(q + p));
-            if (s > z[k]) break;
-            --k;
-        }
-        ++k;
-        v[k] = (ushort)q; cv[k] = (short)c; fv[k] = fq; z[k] = s; z[k + 1] = INFINITY;
+        ENVELOPE_PUSH(short)
     }
     if (k < 0) {
         for (int q = 0; q < n1; ++q) o[(size_t)q * n2] = -1;
@@ -197,20 +205,7 @@ __kernel void pass_slow(__global const int *packed, __global int *outp,
         const float d1 = (float)(i1 - (c >> 16));
         const float d2 = (float)(i2 - (c & 0xffff));
         const float fq = d1 * d1 * r1 + d2 * d2 * r2;
-        if (k < 0) {
-            k = 0; v[0] = (ushort)q; cv[0] = c; fv[0] = fq;
-            z[0] = -INFINITY; z[1] = INFINITY;
-            continue;
-        }
-        float s;
-        for (;;) {
-            const int p = v[k];
-            s = 0.5f * ((fq - fv[k]) / (float)(q - p) + (float)(q + p));
-            if (s > z[k]) break;
-            --k;
-        }
-        ++k;
-        v[k] = (ushort)q; cv[k] = c; fv[k] = fq; z[k] = s; z[k + 1] = INFINITY;
+        ENVELOPE_PUSH(int)
     }
     if (k < 0) {
         for (int q = 0; q < n0; ++q) o[(size_t)q * os0] = -1;
