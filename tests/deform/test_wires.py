@@ -246,6 +246,26 @@ def test_opencl_field_equals_the_scipy_reference() -> None:
     assert dt.max() < 1.0
 
 
+def test_without_opencl_the_build_warns_and_uses_scipy(monkeypatch: pytest.MonkeyPatch) -> None:
+    from deform import propagation
+
+    vol = cylinder()
+    ws = [wire(modified=axis_points(dz=-2.0))]
+    reference = WireDeformer(vol, ws, backend="scipy")
+    reference.build()
+    monkeypatch.setenv(propagation.ENV_VAR, "0")
+    propagation._reset_opencl_cache()
+    try:
+        wd = WireDeformer(vol, ws)  # backend "auto"
+        with pytest.warns(propagation.OpenCLUnavailableWarning, match="pocl"):
+            stats = wd.build()
+        assert stats.backend == "scipy"
+        for a, b in zip(wd.field.decode(), reference.field.decode(), strict=True):
+            np.testing.assert_array_equal(a, b)
+    finally:
+        propagation._reset_opencl_cache()
+
+
 def test_masks_solve_the_delineation_problem() -> None:
     vol = cylinder(second=True)
     # the wire in the first cylinder; its radius reaches well into the second
