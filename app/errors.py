@@ -23,5 +23,9 @@ class SceneError(VoxwarpError, ValueError):
     """A scene description (Python arguments or scene JSON) is invalid."""
 
 
+class MeshError(VoxwarpError, ValueError):
+    """A mesh cannot be read or is not usable (format, empty, NaN, bad face indices)."""
+
+
 class RenderError(VoxwarpError, RuntimeError):
     """The renderer could not draw (no GL context, shader failure, ...)."""

@@ -11,6 +11,14 @@ polygon per ray-direction octant present in the image (one polygon covering the
 viewport unless octant skip maps are in use; see :mod:`app.skipping`). Rays that miss
 the volume, or see nothing visible, discard and leave the background.
 
+Mixed scenes (``Scene(..., meshes=[...])``): the mesh instances are drawn first by
+:class:`app.mesh_render.MeshRenderer` into an internal colour + depth target of the
+viewport's size, cleared to the background; the raycaster (``MESH_DEPTH``) then stops
+each ray at the mesh surface and composites the volume over that image (front to back,
+premultiplied: ``out = volume + (1 - volume.a) * mesh_over_background``). Opaque meshes
+are exact; translucent ones write no depth, so the whole ray's volume lies over them.
+Without meshes nothing of this runs (same programs, same images).
+
 See ``shaders/raycast.frag.glsl`` for the technique (warp chain, empty-space skipping,
 early ray termination, jitter) and ``docs/benchmarks.md`` for what each part buys on a
 CPU rasteriser.
@@ -19,6 +27,7 @@ CPU rasteriser.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import math
 import os
@@ -31,6 +40,8 @@ import numpy as np
 import shaders
 from app.camera import Camera
 from app.errors import RenderError, VolumeTooLargeError
+from app.mesh import mesh_instances_bounds
+from app.mesh_render import MeshRenderer
 from app.scene import Scene
 from app.skipping import (
     BLOCK,
@@ -48,7 +59,7 @@ from app.skipping import (
 )
 from app.transfer_function import TABLE_SIZE, TransferFunction
 from app.volume import Volume
-from deform.warp import compose_glsl, fold_affine
+from deform.warp import box_corners, compose_glsl, fold_affine
 
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
 DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
@@ -194,6 +205,10 @@ class Renderer:
         self._tf_tex: Any = None
         self._tf_key: Any = None
         self._vao: dict[int, Any] = {}
+        #: draws the meshes of mixed scenes (made on first use)
+        self._mesh_renderer: MeshRenderer | None = None
+        #: (size, colour texture, depth texture, framebuffer) of the mesh pass
+        self._mesh_target: tuple[tuple[int, int], Any, Any, Any] | None = None
         self._released = False
 
     # ------------------------------------------------------------------ resources
@@ -398,8 +413,42 @@ class Renderer:
             tex = gpu.warped_skip[octant] = self._octant_texture(visible, octant)
         return tex
 
+    def _mesh_pass(self, scene: Scene, cam: Camera, w: int, h: int, bg: tuple) -> np.ndarray:
+        """Draw ``scene.meshes`` into the internal (w, h) colour + depth target, over the
+        premultiplied background ``bg``; returns the mesh camera's inverse view-projection.
+
+        The mesh camera is ``cam`` with its near/far range widened to hold every mesh,
+        so meshes are not clipped by a camera fitted to the volume.
+        """
+        if self._mesh_renderer is None:
+            self._mesh_renderer = MeshRenderer(self.ctx)
+        if self._mesh_target is None or self._mesh_target[0] != (w, h):
+            self._release_mesh_target()
+            color = self.ctx.texture((w, h), 4, dtype="f4")
+            depth = self.ctx.depth_texture((w, h))
+            depth.compare_func = ""  # read depth values, not comparisons
+            for tex in (color, depth):
+                tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            fbo = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+            self._mesh_target = ((w, h), color, depth, fbo)
+        bounds = mesh_instances_bounds(scene.meshes)
+        assert bounds is not None
+        lo, hi = bounds
+        corners = box_corners(lo, hi)
+        reach = float(np.max(np.linalg.norm(corners - cam.center, axis=1)))
+        mesh_cam = dataclasses.replace(cam, radius=reach) if reach > cam.radius else cam
+        self._mesh_renderer.draw(scene.meshes, self._mesh_target[3], mesh_cam, clear=bg)
+        return np.linalg.inv(mesh_cam.view_projection(w / h))
+
+    def _release_mesh_target(self) -> None:
+        if self._mesh_target is not None:
+            for obj in self._mesh_target[1:][::-1]:
+                obj.release()
+            self._mesh_target = None
+
     def _program(self, scene: Scene, linear: bool, kind: str) -> Any:
         warps = [] if linear else scene.warps
+        meshes = bool(scene.meshes)
         key = (
             scene.mode,
             linear,
@@ -407,6 +456,7 @@ class Renderer:
             kind,
             self.sampling,
             tuple(w.signature() for w in warps),
+            meshes,
         )
         prog = self._programs.get(key)
         if prog is not None:
@@ -422,6 +472,8 @@ class Renderer:
             defines.append("#define SLICE_PAIRS")
         if kind == "cells":
             defines.append("#define CELL_SKIP")
+        if meshes:
+            defines.append("#define MESH_DEPTH")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -536,6 +588,8 @@ class Renderer:
         for name, value in values.items():
             _set_uniform(prog, name, value)
 
+        # meshes of a mixed scene first: the pass binds its own textures and framebuffer
+        mesh_inv_view_proj = self._mesh_pass(scene, cam, w, h, bg_premul) if scene.meshes else None
         # the warps' textures first: making them may run GPU passes (an offset field
         # bakes its inverse) that bind texture units of their own
         warp_textures = [] if linear else [w.textures(self.ctx) for w in scene.warps]
@@ -559,6 +613,13 @@ class Renderer:
                     tex.use(unit)
                     _set_uniform(prog, f"w{i}_{name}", unit)
                     unit += 1
+        if mesh_inv_view_proj is not None:
+            assert self._mesh_target is not None
+            self._mesh_target[1].use(unit)
+            self._mesh_target[2].use(unit + 1)
+            _set_uniform(prog, "u_mesh_color", unit)
+            _set_uniform(prog, "u_mesh_depth", unit + 1)
+            _set_uniform(prog, "u_mesh_inv_view_proj", mesh_inv_view_proj)
 
         framebuffer.use()
         framebuffer.viewport = (x, y, w, h)
@@ -596,6 +657,10 @@ class Renderer:
         if self._tf_tex is not None:
             self._tf_tex.release()
             self._tf_tex = None
+        if self._mesh_renderer is not None:
+            self._mesh_renderer.release()
+            self._mesh_renderer = None
+        self._release_mesh_target()
         self._released = True
 
 

@@ -1,7 +1,8 @@
 """The :class:`Scene`: everything needed to reproduce an image, serialisable to JSON.
 
 A scene holds a volume, a compositing mode, a transfer function, a view, the sample
-distance and a chain of warps. It never touches the GPU; the renderer reads it.
+distance, a chain of warps and optionally mesh instances (:mod:`app.mesh`), drawn
+depth-composited with the volume. It never touches the GPU; the renderer reads it.
 Scene JSON refers to the volume by path (relative to the JSON file when possible),
 by bundled sample name, or embeds a small array (base64, no pickle).
 """
@@ -19,8 +20,9 @@ from typing import Any, Literal
 import numpy as np
 
 from app.camera import PROJECTIONS, Camera, Projection, View, view_rotation
-from app.errors import SceneError, VolumeError
+from app.errors import MeshError, SceneError, VolumeError
 from app.files import atomic_write_text
+from app.mesh import MeshInstance, mesh_instances_bounds
 from app.transfer_function import TransferFunction
 from app.volume import Volume, check_finite
 from deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
@@ -105,6 +107,12 @@ class Scene:
         ``view``, ``projection``, ``fov`` and ``zoom``.
     zoom, fov
         Magnification and vertical field of view (degrees) of the fitted camera.
+    meshes
+        :class:`~app.mesh.MeshInstance` objects drawn with the volume, depth-composited
+        (rays stop at opaque mesh surfaces; the volume is composited over the meshes).
+        The fitted camera then frames the volume and the meshes. A mesh-only picture
+        still needs a volume: use a tiny empty one (e.g. ``Volume(np.zeros((2, 2, 2),
+        np.uint8))`` with a transfer function that shows nothing).
     """
 
     def __init__(
@@ -128,6 +136,7 @@ class Scene:
         camera: Camera | None = None,
         zoom: float = 1.0,
         fov: float = 30.0,
+        meshes: Sequence[MeshInstance] | None = None,
     ) -> None:
         if not isinstance(volume, Volume):
             raise SceneError(
@@ -151,6 +160,7 @@ class Scene:
         self.camera = camera
         self.zoom = zoom
         self.fov = fov
+        self.meshes = meshes
 
     # ------------------------------------------------------------------ validated attributes
     @property
@@ -283,6 +293,28 @@ class Scene:
             raise SceneError(f"fov must be below 179 degrees; got {v}")
         self._fov = v
 
+    @property
+    def meshes(self) -> list[MeshInstance]:
+        """Mesh instances drawn with the volume (a new list; assign to change)."""
+        return list(self._meshes)
+
+    @meshes.setter
+    def meshes(self, value: Sequence[MeshInstance] | None) -> None:
+        if value is None:
+            self._meshes: list[MeshInstance] = []
+            return
+        if isinstance(value, MeshInstance) or not isinstance(value, Sequence):
+            raise SceneError(
+                f"meshes must be a list of app.mesh.MeshInstance; got {type(value).__name__}"
+            )
+        for i, m in enumerate(value):
+            if not isinstance(m, MeshInstance):
+                raise SceneError(
+                    f"meshes[{i}] must be an app.mesh.MeshInstance (wrap a Mesh:"
+                    f" MeshInstance(mesh)); got {type(m).__name__}"
+                )
+        self._meshes = list(value)
+
     # ------------------------------------------------------------------ derived values
     @property
     def sample_distance_mm(self) -> float:
@@ -333,10 +365,13 @@ class Scene:
         return lo, hi
 
     def resolved_camera(self) -> Camera:
-        """The explicit camera, or one fitted to the (warped) volume."""
+        """The explicit camera, or one fitted to the (warped) volume and the meshes."""
         if self.camera is not None:
             return self.camera
         lo, hi = self.deformed_bounds()
+        if self._meshes:
+            mlo, mhi = mesh_instances_bounds(self._meshes)  # type: ignore[misc]
+            lo, hi = np.minimum(lo, mlo), np.maximum(hi, mhi)
         return Camera.fit(lo, hi, self.view, self.projection, fov=self.fov, zoom=self.zoom)
 
     def copy(self, **changes: Any) -> Scene:
@@ -365,6 +400,7 @@ class Scene:
             "camera": self.camera,
             "zoom": self.zoom,
             "fov": self.fov,
+            "meshes": list(self._meshes),
         }
 
     # ------------------------------------------------------------------ serialisation
@@ -392,6 +428,11 @@ class Scene:
             "zoom": self.zoom,
             "fov": self.fov,
         }
+        if self._meshes:  # absent without meshes: scene JSON stays as before
+            try:
+                d["meshes"] = [m.to_dict(base_dir) for m in self._meshes]
+            except MeshError as exc:
+                raise SceneError(f"cannot save the scene's meshes: {exc}") from exc
         return d
 
     @classmethod
@@ -429,6 +470,13 @@ class Scene:
         view = d.get("view", "-y")
         if isinstance(view, list):
             view = tuple(view)
+        meshes = d.get("meshes") or []
+        if not isinstance(meshes, list):
+            raise SceneError("scene 'meshes' must be a list of mesh instance objects")
+        try:
+            meshes = [MeshInstance.from_dict(m, base_dir) for m in meshes]
+        except (WarpError, TypeError, ValueError) as exc:  # MeshError is a ValueError
+            raise SceneError(f"invalid mesh in scene: {exc}") from exc
         kwargs: dict[str, Any] = {
             "mode": d.get("mode", "dvr"),
             "transfer_function": tf,
@@ -447,6 +495,7 @@ class Scene:
             "camera": camera,
             "zoom": d.get("zoom", 1.0),
             "fov": d.get("fov", 30.0),
+            "meshes": meshes,
         }
         for key in ("jitter",):
             if not isinstance(kwargs[key], bool):
@@ -489,7 +538,8 @@ class Scene:
         return (
             f"Scene(volume={self.volume.name!r}, mode={self.mode!r},"
             f" tf={self.transfer_function.name!r}, view={self.view!r},"
-            f" projection={self.projection!r}, step={self.step}, warps={len(self.warps)})"
+            f" projection={self.projection!r}, step={self.step}, warps={len(self.warps)}"
+            + (f", meshes={len(self._meshes)})" if self._meshes else ")")
         )
 
 

@@ -27,6 +27,11 @@
 // can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
 // The renderer clears the viewport to u_background first; rays that miss the volume
 // (or, with CELL_SKIP, meet nothing visible) discard instead of writing it.
+// MESH_DEPTH (mixed scenes, app/mesh_render.py): the meshes were drawn first into
+// u_mesh_color (premultiplied, over the background) and u_mesh_depth, at the viewport's
+// size. Each ray stops at the mesh surface (the depth value unprojected to a point on
+// the pixel's ray, which works for both projections) and the volume is composited over
+// the mesh image; rays that would discard write the mesh image instead.
 
 #include "common.glsl"
 #include "volume_sample.glsl"
@@ -51,6 +56,13 @@ uniform sampler3D u_block_info;
 uniform ivec3 u_blocks;             // blocks per axis
 
 out vec4 f_color;
+
+#ifdef MESH_DEPTH
+uniform sampler2D u_mesh_color;     // premultiplied mesh image over the background
+uniform sampler2D u_mesh_depth;     // its depth buffer (window depth in [0, 1])
+uniform mat4 u_mesh_inv_view_proj;  // clip -> world of the mesh pass
+vec4 g_under;                       // what the volume is composited over at this pixel
+#endif
 
 bool g_inside = false;   // some sample of this ray lies inside the volume
 vec3 g_ro;   // ray origin (deformed world)
@@ -179,7 +191,20 @@ void main() {
     t0 = max(t0, tt.x);
     t1 = min(t1, tt.y);
 #endif
+#ifdef MESH_DEPTH
+    ivec2 mesh_texel = ivec2(gl_FragCoord.xy - u_viewport.xy);
+    g_under = texelFetch(u_mesh_color, mesh_texel, 0);
+    float mesh_depth = texelFetch(u_mesh_depth, mesh_texel, 0).r;
+    if (mesh_depth < 1.0) {
+        vec4 hit = u_mesh_inv_view_proj * vec4(ndc, mesh_depth * 2.0 - 1.0, 1.0);
+        t1 = min(t1, dot(hit.xyz / hit.w - g_ro, g_rd));
+    }
+#endif
     if (t1 <= t0) {
+#ifdef MESH_DEPTH
+        f_color = g_under;
+        return;
+#endif
         // The renderer clears the viewport to the background before drawing. On a CPU
         // rasteriser discard is the one real early exit: SIMD groups whose lanes all
         // miss skip the rest of the shader (loops run at least once otherwise).
@@ -224,6 +249,12 @@ void main() {
         }
     }
     // A ray that met nothing visible leaves the background (cleared) untouched.
+#ifdef MESH_DEPTH
+    if (k >= n && !finished) {
+        f_color = g_under;
+        return;
+    }
+#endif
     if (k >= n && !finished) discard;
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
@@ -300,5 +331,9 @@ void main() {
     }
 #endif
     vec4 c = mode_finish(s);
+#ifdef MESH_DEPTH
+    f_color = c + (1.0 - c.a) * g_under;
+#else
     f_color = c + (1.0 - c.a) * u_background;
+#endif
 }
