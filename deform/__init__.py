@@ -9,9 +9,14 @@ from deform.chainmail import MoveStats as MoveStats
 from deform.chainmail_model import ChainMailError as ChainMailError
 from deform.elements import ElementGrid as ElementGrid
 from deform.elements import ElementGridError as ElementGridError
+from deform.lattice_warp import LatticeWarp as LatticeWarp
 from deform.massspring import CpuSpringSolver as CpuSpringSolver
 from deform.massspring import MassSpring as MassSpring
 from deform.offset_field import OffsetFieldWarp as OffsetFieldWarp
+from deform.scene_graph import SceneNode as SceneNode
+from deform.scene_graph import compose_scene as compose_scene
+from deform.trilinear import TrilinearGrid as TrilinearGrid
+from deform.trilinear import TrilinearTransform as TrilinearTransform
 from deform.warp import (
     AffineWarp,
     IdentityWarp,
