@@ -497,8 +497,8 @@ def load_mesh(path_or_trimesh: Any, name: str | None = None) -> Mesh:
 
 
 # ---------------------------------------------------------------------- generators
-def _generated(v: Any, f: Any, n: Any, name: str, **args: Any) -> Mesh:
-    return Mesh(v, f, n, name=name, recipe={"generator": name, "args": args})
+def _generated(v: Any, f: Any, normals: Any, generator: str, **args: Any) -> Mesh:
+    return Mesh(v, f, normals, name=generator, recipe={"generator": generator, "args": args})
 
 
 def box_mesh(
@@ -688,8 +688,106 @@ def tile_mesh(
     )
 
 
+def tube_mesh(length: float, radius: float, rings: int = 96, sections: int = 16) -> Mesh:
+    """An open tube along x from 0 to ``length``, axis y = z = 0, ``rings`` rings of
+    ``sections`` vertices (tessellated along its length, so a lattice can bend it)."""
+    x = np.linspace(0.0, length, rings)
+    phi = 2 * np.pi * np.arange(sections) / sections
+    xx, pp = np.meshgrid(x, phi, indexing="ij")
+    n = np.stack([np.zeros_like(pp), np.cos(pp), np.sin(pp)], -1)
+    v = np.stack([xx, radius * np.cos(pp), radius * np.sin(pp)], -1)
+    i, j = np.meshgrid(np.arange(rings - 1), np.arange(sections), indexing="ij")
+    a, b = i * sections + j, (i + 1) * sections + j
+    c, d = (i + 1) * sections + (j + 1) % sections, i * sections + (j + 1) % sections
+    f = np.concatenate(
+        [np.stack([a, c, b], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)]
+    )
+    return _generated(
+        v.reshape(-1, 3),
+        f,
+        n.reshape(-1, 3),
+        "tube_mesh",
+        length=float(length),
+        radius=float(radius),
+        rings=int(rings),
+        sections=int(sections),
+    )
+
+
+def height_tile(size: float, height: float, n: int = 24) -> Mesh:
+    """A square tile ``size`` wide on z = 0 with a raised rounded boss (up to ``height``)
+    and a ridge along its diagonal; its border is flat, so copies meet without gaps."""
+    g = np.linspace(0.0, size, n + 1)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    s = 2.0 * x / size - 1.0
+    t = 2.0 * y / size - 1.0
+    boss = np.clip(1.0 - (s * s + t * t) / 0.45, 0.0, None) ** 1.5
+    ridge = np.clip(1.0 - np.abs(s - t) / 0.25, 0.0, None) * (1.0 - np.maximum(s * s, t * t))
+    z = height * np.maximum(boss, 0.6 * ridge)
+    v = np.stack([x, y, z], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a, b = i * (n + 1) + j, (i + 1) * (n + 1) + j
+    c, d = (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
+    f = np.concatenate(
+        [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+    )
+    return _generated(
+        v, f, vertex_normals(v, f), "height_tile", size=float(size), height=float(height), n=int(n)
+    )
+
+
+def box_mesh_tessellated(
+    size: Sequence[float] = (1.0, 1.0, 1.0), cells: Sequence[int] = (4, 4, 4)
+) -> Mesh:
+    """A box [0, size] whose faces are split into ``cells`` quads per axis (so a lattice
+    can bend it; :func:`app.mesh.box_mesh` has 2 triangles per face)."""
+    size = [float(v) for v in size]
+    cells = [int(c) for c in cells]
+    if min(cells) < 1 or min(size) <= 0:
+        raise MeshError("box_mesh_tessellated needs cells >= 1 and sizes > 0 per axis")
+    verts, faces, norms = [], [], []
+    offset = 0
+    for axis in range(3):
+        a1, a2 = [d for d in range(3) if d != axis]
+        n1, n2 = cells[a1], cells[a2]
+        g1 = np.linspace(0.0, size[a1], n1 + 1)
+        g2 = np.linspace(0.0, size[a2], n2 + 1)
+        p1, p2 = np.meshgrid(g1, g2, indexing="ij")
+        for side in (0.0, 1.0):
+            v = np.zeros((n1 + 1, n2 + 1, 3))
+            v[..., a1], v[..., a2], v[..., axis] = p1, p2, side * size[axis]
+            nrm = np.zeros(3)
+            nrm[axis] = 1.0 if side else -1.0
+            i, j = np.meshgrid(np.arange(n1), np.arange(n2), indexing="ij")
+            a = i * (n2 + 1) + j
+            b, c, d = (i + 1) * (n2 + 1) + j, (i + 1) * (n2 + 1) + j + 1, i * (n2 + 1) + j + 1
+            tri = np.concatenate(
+                [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+            )
+            # orient each face outwards
+            e1 = v.reshape(-1, 3)[tri[0, 1]] - v.reshape(-1, 3)[tri[0, 0]]
+            e2 = v.reshape(-1, 3)[tri[0, 2]] - v.reshape(-1, 3)[tri[0, 0]]
+            if np.cross(e1, e2) @ nrm < 0:
+                tri = tri[:, ::-1]
+            verts.append(v.reshape(-1, 3))
+            faces.append(tri + offset)
+            norms.append(np.tile(nrm, ((n1 + 1) * (n2 + 1), 1)))
+            offset += (n1 + 1) * (n2 + 1)
+    return _generated(
+        np.concatenate(verts),
+        np.concatenate(faces),
+        np.concatenate(norms),
+        "box_mesh_tessellated",
+        size=size,
+        cells=cells,
+    )
+
+
 #: Mesh generators by name (scene JSON stores generated meshes as recipes).
 GENERATORS = {
+    "tube_mesh": tube_mesh,
+    "height_tile": height_tile,
+    "box_mesh_tessellated": box_mesh_tessellated,
     "box_mesh": box_mesh,
     "uv_sphere": uv_sphere,
     "cylinder_mesh": cylinder_mesh,
@@ -1018,13 +1116,16 @@ __all__ = [
     "MeshInstance",
     "MeshWarning",
     "box_mesh",
+    "box_mesh_tessellated",
     "cylinder_mesh",
     "default_box",
+    "height_tile",
     "instances_from_scene_graph",
     "load_mesh",
     "mesh_instances_bounds",
     "tile_mesh",
     "torus_mesh",
+    "tube_mesh",
     "uv_sphere",
     "vertex_normals",
 ]

@@ -1,0 +1,30 @@
+"""Write the trilinear-lattice demo scenes to sample_volumes/lattice_<name>.json.
+
+Run from the repository root: ``.venv/bin/python scripts/make_lattice_demos.py``. The
+scenes are built by :mod:`app.lattice_demos`; render one with
+``voxwarp render sample_volumes/lattice_torus_tubes.json -o tubes.png``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+from app.lattice_demos import DEMOS
+
+OUT = Path(__file__).resolve().parents[1] / "sample_volumes"
+
+
+def main() -> None:
+    """Build every demo scene and save it (atomically, through Scene.save)."""
+    for name, make in DEMOS.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # HU presets on the empty carrier volume
+            scene = make()
+        path = OUT / f"lattice_{name}.json"
+        scene.save(path)
+        print(path, f"{path.stat().st_size / 1024:.0f} KiB")
+
+
+if __name__ == "__main__":
+    main()
