@@ -688,7 +688,9 @@ def tile_mesh(
     )
 
 
-def tube_mesh(length: float, radius: float, rings: int = 96, sections: int = 16) -> Mesh:
+def tube_mesh(
+    length: float = 1.0, radius: float = 0.25, rings: int = 96, sections: int = 16
+) -> Mesh:
     """An open tube along x from 0 to ``length``, axis y = z = 0, ``rings`` rings of
     ``sections`` vertices (tessellated along its length, so a lattice can bend it)."""
     x = np.linspace(0.0, length, rings)
@@ -714,7 +716,7 @@ def tube_mesh(length: float, radius: float, rings: int = 96, sections: int = 16)
     )
 
 
-def height_tile(size: float, height: float, n: int = 24) -> Mesh:
+def height_tile(size: float = 1.0, height: float = 0.25, n: int = 24) -> Mesh:
     """A square tile ``size`` wide on z = 0 with a raised rounded boss (up to ``height``)
     and a ridge along its diagonal; its border is flat, so copies meet without gaps."""
     g = np.linspace(0.0, size, n + 1)
