@@ -268,6 +268,7 @@ def _check_deform_options(args: argparse.Namespace) -> None:
             " other, which then deforms the result)"
         )
     _check_wire_options(args)
+    _check_lattice_options(args)
     model = _deform_model(args)
     for opt, attr, owner in _DEFORM_OPTIONS:
         if not _given(args, attr) or owner in ("both", model):
@@ -335,6 +336,46 @@ def _check_deform_options(args: argparse.Namespace) -> None:
 
 _WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}
 _WIRE_FILE_NOTES = {"description", "sample", "type"}
+
+
+def _check_lattice_options(args: argparse.Namespace) -> None:
+    """--lattice deforms alone (one deformation per render on the command line)."""
+    if args.lattice is None:
+        return
+    if args.wires is not None or _deform_model(args) is not None:
+        raise CliOptionError(
+            "--lattice cannot be combined with --wires, --massspring or --chainmail in one"
+            " render: save one with --save-scene and render that scene with the other"
+        )
+
+
+def load_lattice_file(path: str | Path, volume: Any) -> Any:
+    """Read a lattice file (a ``"lattice"`` warp entry of scene JSON: ``grid`` with its
+    ``nodes``, optional ``box`` (default: the volume's box), ``inverse``, ``iterations``;
+    plus the free-text notes ``description`` and ``sample``) and build the warp."""
+    from deform.lattice_warp import LatticeWarp
+    from deform.warp import WarpError
+
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise CliOptionError(f"--lattice {path}: no such file") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CliOptionError(f"--lattice {path}: cannot read it ({exc})") from exc
+    except ValueError as exc:
+        raise CliOptionError(f"--lattice {path}: not valid JSON ({exc})") from exc
+    if not isinstance(d, dict) or "grid" not in d:
+        raise CliOptionError(
+            f"--lattice {path}: a lattice file is a JSON object with a 'grid' ({{'nodes':"
+            " [...]}}, see sample_volumes/fish_lattice_bend.json)"
+        )
+    entry = {k: v for k, v in d.items() if k not in _WIRE_FILE_NOTES}
+    entry.setdefault("box", [list(map(float, b)) for b in volume.bounds])
+    try:
+        return LatticeWarp.from_dict(entry)
+    except WarpError as exc:
+        raise CliOptionError(f"--lattice {path}: {exc}") from exc
 
 
 def _check_wire_options(args: argparse.Namespace) -> None:
@@ -719,6 +760,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.wires is not None:  # built before any GL work: bad wires fail fast
         wire_warp, summary = _wire_warp(args, scene.volume)
         print(summary, file=sys.stderr)
+    if args.lattice is not None:
+        wire_warp = load_lattice_file(args.lattice, scene.volume)
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
@@ -991,6 +1034,12 @@ def _add_wire_args(p: argparse.ArgumentParser) -> None:
         choices=("float", "packed"),
         help="attribute field storage: float (5 bytes/voxel, hardware-filtered t) or packed"
         " (the paper's 2 bytes/voxel); default: the file's, else float",
+    )
+    p.add_argument(
+        "--lattice",
+        metavar="FILE",
+        help="deform with a lattice of trilinear cells over the volume (a JSON 'lattice' warp"
+        " entry; e.g. sample_volumes/fish_lattice_bend.json on sample:fish)",
     )
     g.add_argument(
         "--masks",
