@@ -8,9 +8,17 @@
 """
 
 from app.camera import Camera
-from app.errors import RenderError, SceneError, VolumeError, VolumeTooLargeError, VoxwarpError
+from app.errors import (
+    MeshError,
+    RenderError,
+    SceneError,
+    VolumeError,
+    VolumeTooLargeError,
+    VoxwarpError,
+)
 from app.image_io import read_image, write_image
 from app.io import load_volume, save_volume, volume_info, volume_summary
+from app.mesh import Mesh, MeshInstance, instances_from_scene_graph, load_mesh
 from app.render import OffscreenRenderer, Renderer, create_context
 from app.samples import load_sample, sample_names
 from app.scene import MODES, Scene
@@ -21,6 +29,9 @@ __all__ = [
     "MODES",
     "PRESETS",
     "Camera",
+    "Mesh",
+    "MeshError",
+    "MeshInstance",
     "OffscreenRenderer",
     "RenderError",
     "Renderer",
@@ -32,6 +43,8 @@ __all__ = [
     "VolumeTooLargeError",
     "VoxwarpError",
     "create_context",
+    "instances_from_scene_graph",
+    "load_mesh",
     "load_sample",
     "load_volume",
     "read_image",
