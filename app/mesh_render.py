@@ -429,6 +429,9 @@ def bench_mesh_throughput(
     finally:
         for r in renderers.values():
             r.release()
+        # never delete the bound framebuffer: moderngl would bind the dead name again
+        # when the next framebuffer is made on this context (GL_INVALID_OPERATION)
+        ctx.detect_framebuffer(0).use()
         fbo.release()
         color.release()
         depth.release()
