@@ -338,6 +338,19 @@ _WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution",
 _WIRE_FILE_NOTES = {"description", "sample", "type"}
 
 
+def _read_json_option(option: str, path: str | Path) -> Any:
+    """The JSON in the file an option names; :class:`CliOptionError` naming the option,
+    the file and what is wrong with it otherwise."""
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise CliOptionError(f"{option} {path}: no such file") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CliOptionError(f"{option} {path}: cannot read it ({exc})") from exc
+    except ValueError as exc:
+        raise CliOptionError(f"{option} {path}: not valid JSON ({exc})") from exc
+
+
 def _check_lattice_options(args: argparse.Namespace) -> None:
     """--lattice deforms alone (one deformation per render on the command line)."""
     if args.lattice is None:
@@ -356,15 +369,7 @@ def load_lattice_file(path: str | Path, volume: Any) -> Any:
     from deform.lattice_warp import LatticeWarp
     from deform.warp import WarpError
 
-    p = Path(path)
-    try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise CliOptionError(f"--lattice {path}: no such file") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CliOptionError(f"--lattice {path}: cannot read it ({exc})") from exc
-    except ValueError as exc:
-        raise CliOptionError(f"--lattice {path}: not valid JSON ({exc})") from exc
+    d = _read_json_option("--lattice", path)
     if not isinstance(d, dict) or "grid" not in d:
         raise CliOptionError(
             f"--lattice {path}: a lattice file is a JSON object with a 'grid' ({{'nodes':"
@@ -402,15 +407,7 @@ def load_wire_file(path: str | Path) -> dict[str, Any]:
     ``sample``. Returns the warp entry (``{"type": "wires", ...}``); raises
     :class:`CliOptionError` naming the problem.
     """
-    p = Path(path)
-    try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise CliOptionError(f"--wires {path}: no such file") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CliOptionError(f"--wires {path}: cannot read it ({exc})") from exc
-    except ValueError as exc:
-        raise CliOptionError(f"--wires {path}: not valid JSON ({exc})") from exc
+    d = _read_json_option("--wires", path)
     if not isinstance(d, dict) or "wires" not in d:
         raise CliOptionError(
             f"--wires {path}: a wire file is a JSON object with a 'wires' list (see"
