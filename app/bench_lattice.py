@@ -9,8 +9,8 @@ version at 75-80 % of the linear frame rate. This benchmark measures the same tw
 things here, every ratio against a linear reference timed in the same run:
 
 1. *Vertex throughput*: one torus of about ``triangles`` triangles
-   (:func:`app.mesh.torus_mesh`, as :func:`app.mesh_render.bench_mesh_throughput`) drawn
-   at ``size`` under the twist + bend lattice of ``app.mesh_render._bend_grid`` at each
+   (:func:`app.mesh.torus_mesh`, as :func:`app.bench_lattice.bench_mesh_throughput`) drawn
+   at ``size`` under the twist + bend lattice of ``app.bench_lattice.bend_grid`` at each
    cell count (``cells`` per axis), against the same mesh drawn with a 4x4 (identity)
    matrix. Per cell count: both normal methods (``normal``: J^-T n; ``tangent``: two
    tangents through J) with exact positions, and ``normal`` with the hardware trilinear
@@ -19,7 +19,7 @@ things here, every ratio against a linear reference timed in the same run:
    reports the medians and FPS ratio = linear median / lattice median (= lattice FPS /
    linear FPS). The *vertex stage* rows repeat this with ``GL_RASTERIZER_DISCARD``
    (no rasterisation, no fragments). A cross-check row runs
-   :func:`app.mesh_render.bench_mesh_throughput` itself once (it times each case in a
+   :func:`app.bench_lattice.bench_mesh_throughput` itself once (it times each case in a
    block, not alternated).
 2. *Composition*: a scene graph of ``objects`` small meshes (one shared 48-triangle
    :func:`app.mesh.uv_sphere`) under nested nodes, root -> groups -> objects: the root
@@ -56,6 +56,10 @@ from typing import Any
 import numpy as np
 
 from app.bench import cpu_count, load_average
+from app.camera import Camera
+from app.mesh import MeshInstance
+from app.mesh_render import POSITIONS, MeshRenderer
+from deform.trilinear import TrilinearGrid
 
 #: the paper's scene size (triangles) and image
 DEFAULT_TRIANGLES = 1_500_000
@@ -138,7 +142,7 @@ class ThroughputRow:
 
 @dataclass
 class CrossCheck:
-    """:func:`app.mesh_render.bench_mesh_throughput`, run once as it is."""
+    """:func:`app.bench_lattice.bench_mesh_throughput`, run once as it is."""
 
     cells: tuple[int, int, int]
     size: int
@@ -317,7 +321,7 @@ class LatticeBenchReport:
             "",
             f"One `torus_mesh` of {self.triangles} triangles ({self.vertices} vertices), drawn"
             f" at {w}x{h} by `MeshRenderer.draw` (depth test, Blinn-Phong) under the twist +"
-            " bend lattice of `app.mesh_render._bend_grid` with the given cells per axis, vs"
+            " bend lattice of `app.bench_lattice.bend_grid` with the given cells per axis, vs"
             " the same mesh with a 4x4 (identity) matrix. Each row alternates lattice and"
             " linear frames (order flipped every frame, `ctx.finish()` after each); ms are"
             " median (min). FPS ratio = linear ms / lattice ms = lattice FPS / linear FPS."
@@ -348,7 +352,7 @@ class LatticeBenchReport:
         cc = self.crosscheck
         if cc is not None:
             lines += [
-                f"Cross-check: `app.mesh_render.bench_mesh_throughput` run as it is (cells"
+                f"Cross-check: `app.bench_lattice.bench_mesh_throughput` run as it is (cells"
                 f" {'x'.join(map(str, cc.cells))}, {cc.size}x{cc.size}, {cc.triangles}"
                 " triangles, same frame count; it times each case in a block after one warm-up"
                 " draw, not alternated, so load changes during the run skew it).",
@@ -433,7 +437,7 @@ class LatticeBenchReport:
 # ---------------------------------------------------------------------- section 1
 def torus_for(triangles: int) -> Any:
     """The torus of section 1: about ``triangles`` triangles (4 n² for n minor sections),
-    as :func:`app.mesh_render.bench_mesh_throughput` builds it."""
+    as :func:`app.bench_lattice.bench_mesh_throughput` builds it."""
     from app.mesh import torus_mesh
 
     nv = max(3, round((int(triangles) / 4) ** 0.5))
@@ -495,9 +499,6 @@ def bench_throughput(
     crosscheck: bool = True,
 ) -> None:
     """Section 1 (see the module docstring); appends to ``report.throughput``."""
-    from app.camera import Camera
-    from app.mesh import MeshInstance
-    from app.mesh_render import MeshRenderer, _bend_grid
 
     w, h = report.size
     box = (np.array(TORUS_BOX[0]), np.array(TORUS_BOX[1]))
@@ -513,7 +514,7 @@ def bench_throughput(
         linear_cov = _coverage(color)
         linear_img = _pixels(color).copy()
         for c in report.cells:
-            grid = _bend_grid(box, (c, c, c))
+            grid = bend_grid(box, (c, c, c))
             for stage, method, position in THROUGHPUT_CONFIGS:
                 r = renderers[position]
                 inst = MeshInstance(mesh, grid, box=box, normal_method=method)
@@ -569,8 +570,7 @@ def bench_throughput(
 def run_crosscheck(
     report: LatticeBenchReport, ctx: Any, log: Callable[[str], None]
 ) -> CrossCheck | None:
-    """:func:`app.mesh_render.bench_mesh_throughput` at the middle cell count."""
-    from app.mesh_render import bench_mesh_throughput
+    """:func:`app.bench_lattice.bench_mesh_throughput` at the middle cell count."""
 
     w, h = report.size
     c = sorted(report.cells)[len(report.cells) // 2]
@@ -635,9 +635,7 @@ def build_scene_graph(objects: int, lattice: bool, mesh: Any = None) -> tuple[An
     the same 4x4s in both (deterministic). Groups hold ``ceil(sqrt(objects))`` objects
     each (the last one the rest), in a cube of slots; groups lie side by side in a square.
     """
-    from app.mesh_render import _bend_grid
     from deform.scene_graph import SceneNode
-    from deform.trilinear import TrilinearGrid
 
     n = int(objects)
     if n < 1:
@@ -659,7 +657,7 @@ def build_scene_graph(objects: int, lattice: bool, mesh: Any = None) -> tuple[An
     # the root's box: where the groups' lattices put their content (the nodes' hull)
     group_grids = []
     for off in offsets:
-        bent = _bend_grid((g_lo, g_hi), (GROUP_CELLS,) * 3)
+        bent = bend_grid((g_lo, g_hi), (GROUP_CELLS,) * 3)
         group_grids.append(TrilinearGrid(bent.nodes + off))
     pts = np.concatenate([gg.nodes.reshape(-1, 3) for gg in group_grids])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -667,7 +665,7 @@ def build_scene_graph(objects: int, lattice: bool, mesh: Any = None) -> tuple[An
     root_box = (lo - pad, hi + pad)
     root = SceneNode(
         "root",
-        _bend_grid(root_box, (ROOT_CELLS,) * 3) if lattice else np.eye(4),
+        bend_grid(root_box, (ROOT_CELLS,) * 3) if lattice else np.eye(4),
         box=root_box,
     )
     count = 0
@@ -719,9 +717,7 @@ def wrap_instances(composed: Sequence[Any]) -> list[Any]:
 
 def bench_composition(report: LatticeBenchReport, ctx: Any, log: Callable[[str], None]) -> None:
     """Section 2 (see the module docstring); appends one row per variant."""
-    from app.camera import Camera
     from app.mesh import mesh_instances_bounds
-    from app.mesh_render import MeshRenderer
     from deform.scene_graph import compose_scene
 
     mesh = object_mesh()
@@ -864,7 +860,7 @@ def bench_lattice(
         ctx = create_context()
     else:
         # a shared context may still have a released framebuffer bound (e.g. after
-        # app.mesh_render.bench_mesh_throughput): making ours would re-bind that dead name
+        # app.bench_lattice.bench_mesh_throughput): making ours would re-bind that dead name
         _unbind_fbo(ctx)
     try:
         report.gl_renderer = str(ctx.info.get("GL_RENDERER", "?"))
@@ -1026,3 +1022,112 @@ __all__ = [
     "torus_for",
     "wrap_instances",
 ]
+
+
+# ---------------------------------------------------------------------- mesh throughput
+def bend_grid(box: tuple[np.ndarray, np.ndarray], cells: Any) -> TrilinearGrid:
+    """A smooth twist + bend of ``box`` sampled on ``cells`` (benchmark and demo lattice)."""
+    lo, hi = box
+    size = hi - lo
+
+    def f(u: np.ndarray) -> np.ndarray:
+        p = lo + u * size
+        c = (lo + hi) / 2
+        a = (u[:, 2] - 0.5) * 0.8  # twist about z
+        x, y = p[:, 0] - c[0], p[:, 1] - c[1]
+        out = p.copy()
+        out[:, 0] = c[0] + np.cos(a) * x - np.sin(a) * y
+        out[:, 1] = c[1] + np.sin(a) * x + np.cos(a) * y
+        out[:, 2] = p[:, 2] + 0.15 * size[2] * np.sin(np.pi * u[:, 0])  # bend
+        return out
+
+    return TrilinearGrid.from_function(f, cells)
+
+
+def bench_mesh_throughput(
+    triangles: int = 1_000_000,
+    cells: Any = (4, 4, 4),
+    size: int = 512,
+    frames: int = 5,
+    warmup: int = 1,
+    ctx: Any = None,
+) -> dict[str, Any]:
+    """Median frame times of one torus of ~``triangles`` triangles drawn linear vs lattice.
+
+    Draws a ``size`` x ``size`` image per frame (``ctx.finish()`` bound) with a 4x4
+    instance, then the same mesh under a twisted and bent lattice of ``cells`` (both
+    normal methods, exact and hardware positions), and once more with rasterisation
+    discarded (``GL_RASTERIZER_DISCARD``: the vertex stage alone). Returns milliseconds,
+    million vertices per second and the ratios lattice / linear (> 1: the lattice is
+    slower), for ``voxwarp bench lattice``.
+    """
+    from app.mesh import torus_mesh
+    from app.render import create_context
+
+    owns = ctx is None
+    if owns:
+        ctx = create_context()
+    nv = max(3, round((triangles / 4) ** 0.5))
+    mesh = torus_mesh(1.0, 0.35, 2 * nv, nv)
+    box = (np.array([-1.4, -1.4, -0.4]), np.array([1.4, 1.4, 0.4]))
+    grid = bend_grid(box, cells)
+    cam = Camera.fit(box[0] - 0.3, box[1] + 0.3, (30.0, 35.0), "perspective")
+    color = ctx.texture((size, size), 4, dtype="f1")
+    depth = ctx.depth_texture((size, size))
+    fbo = ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    renderers = {p: MeshRenderer(ctx, position=p) for p in POSITIONS}
+    cases = {
+        "linear": ("exact", MeshInstance(mesh, np.eye(4))),
+        "lattice_normal": ("exact", MeshInstance(mesh, grid, box=box, normal_method="normal")),
+        "lattice_tangent": ("exact", MeshInstance(mesh, grid, box=box, normal_method="tangent")),
+        "lattice_hardware": ("hardware", MeshInstance(mesh, grid, box=box)),
+    }
+
+    def median_ms(renderer: MeshRenderer, inst: MeshInstance, discard: bool) -> float:
+        if discard:
+            ctx.enable(ctx.RASTERIZER_DISCARD)
+        try:
+            for _ in range(warmup):
+                renderer.draw([inst], fbo, cam)
+            ctx.finish()
+            times = []
+            for _ in range(frames):
+                t = time.perf_counter()
+                renderer.draw([inst], fbo, cam)
+                ctx.finish()
+                times.append((time.perf_counter() - t) * 1000)
+        finally:
+            if discard:
+                ctx.disable(ctx.RASTERIZER_DISCARD)
+        return statistics.median(times)
+
+    try:
+        ms = {k: median_ms(renderers[p], inst, False) for k, (p, inst) in cases.items()}
+        vertex_ms = {
+            k: median_ms(renderers[p], inst, True)
+            for k, (p, inst) in cases.items()
+            if k in ("linear", "lattice_normal")
+        }
+    finally:
+        for r in renderers.values():
+            r.release()
+        # never delete the bound framebuffer: moderngl would bind the dead name again
+        # when the next framebuffer is made on this context (GL_INVALID_OPERATION)
+        ctx.detect_framebuffer(0).use()
+        fbo.release()
+        color.release()
+        depth.release()
+        if owns:
+            ctx.release()
+    return {
+        "triangles": mesh.n_faces,
+        "vertices": mesh.n_vertices,
+        "cells": tuple(grid.shape),
+        "size": size,
+        "frames": frames,
+        "ms": ms,
+        "vertex_stage_ms": vertex_ms,
+        "mvertices_per_s": {k: mesh.n_vertices / v / 1e3 for k, v in vertex_ms.items()},
+        "ratio": {k: v / ms["linear"] for k, v in ms.items() if k != "linear"},
+        "vertex_stage_ratio": vertex_ms["lattice_normal"] / vertex_ms["linear"],
+    }

@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from app.bench_lattice import bench_mesh_throughput, bend_grid
 from app.camera import Camera, view_rotation
 from app.errors import RenderError
 from app.mesh import MeshInstance, box_mesh, tile_mesh, torus_mesh, uv_sphere
-from app.mesh_render import MESH_LIGHT, MeshRenderer, _bend_grid, bench_mesh_throughput
+from app.mesh_render import MESH_LIGHT, MeshRenderer
 from app.scene import Scene
 from app.volume import Volume
 from deform.offset_field import OffsetFieldWarp
@@ -85,7 +86,7 @@ def on_cell_face(u: np.ndarray, cells: Any, eps: float = 1e-4) -> np.ndarray:
 def test_vertex_stage_matches_cpu_lattice(gl_ctx: Any, mesh_renderer: MeshRenderer) -> None:
     torus = torus_mesh(0.6, 0.2, 64, 32)
     box = (np.array([-0.9, -0.9, -0.25]), np.array([0.9, 0.9, 0.25]))
-    grid = _bend_grid(box, (4, 3, 2))
+    grid = bend_grid(box, (4, 3, 2))
     lo, hi = box
     u = (torus.vertices.astype(np.float64) - lo) / (hi - lo)
     jac = grid.jacobian(u) / (hi - lo)  # d world / d local
@@ -165,7 +166,7 @@ def test_normal_methods_agree_on_affine_and_bent_lattices(
     box = (np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0]))
     shear = np.array([[1.5, 0.6, 0.0], [0.0, 0.7, 0.3], [0.2, 0.0, 1.2]])
     affine = TrilinearGrid.from_function(lambda u: (2 * u - 1) @ shear.T, (2, 2, 2))
-    bent = _bend_grid(box, (4, 4, 4))
+    bent = bend_grid(box, (4, 4, 4))
     cam = ortho((30.0, 20.0), (0, 0, 0), 5.0)
     for grid in (affine, bent):
         a, b = (
