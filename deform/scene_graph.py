@@ -56,6 +56,7 @@ are not cached.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
@@ -566,6 +567,15 @@ def _unit_nodes(cells: np.ndarray) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
 
+@functools.lru_cache(maxsize=64)
+def _unit_nodes_flat(cells: tuple[int, int, int]) -> np.ndarray:
+    """:func:`_unit_nodes` flattened to (M, 3), cached (read-only): every leaf of a scene
+    needs the same few."""
+    out = _unit_nodes(np.asarray(cells)).reshape(-1, 3)
+    out.flags.writeable = False
+    return out
+
+
 def compose_path(
     path: Sequence[SceneNode], resolution: Any = None, strict: bool = True
 ) -> ComposedTransform:
@@ -617,7 +627,7 @@ def compose_path(
     cells = np.max([np.asarray(g.shape, dtype=int) for g in grids], axis=0)
     if cells_min is not None:
         cells = np.maximum(cells, cells_min)
-    u = _unit_nodes(cells).reshape(-1, 3)
+    u = _unit_nodes_flat(tuple(int(c) for c in cells))
     lo, hi = leaf.box
     if isinstance(leaf.transform, TrilinearGrid):
         # the leaf's own lattice: evaluate at the exact node coordinates (no box round trip)
@@ -625,8 +635,11 @@ def compose_path(
     else:
         x = leaf.apply(lo + u * (hi - lo))
     for child, node in zip(reversed(path[1:]), reversed(path[:-1]), strict=True):
-        if strict and isinstance(node.transform, TrilinearGrid):
-            un = node.to_unit(x)
+        if not isinstance(node.transform, TrilinearGrid):
+            x = node.apply(x)
+            continue
+        un = node.to_unit(x)
+        if strict:
             excess = float(np.max(np.maximum(-un, un - 1.0)))
             if excess > INSIDE_TOL:
                 raise WarpError(
@@ -635,7 +648,7 @@ def compose_path(
                     f"grid node {_label(node.name)}; enlarge that node's box to contain its "
                     "children's content (or compose with strict=False to extrapolate)"
                 )
-        x = node.apply(x)
+        x = np.asarray(node.transform(un), dtype=np.float64)
     nodes = x.reshape(cells[0] + 1, cells[1] + 1, cells[2] + 1, 3)
     return ComposedTransform(leaf, leaf.box, grid=TrilinearGrid(nodes), path=path)
 
