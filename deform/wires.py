@@ -359,6 +359,8 @@ class WireTables:
     #: arc lengths (mm)
     length_base: float
     length_modified: float
+    #: b(u_i) = C - A M (n, 3): the mapping is ``q = A p + b``
+    offsets: np.ndarray
 
     @classmethod
     def build(cls, wire: Wire, n: int = LUT_SIZE, precision: float = 1e-4) -> WireTables:
@@ -382,11 +384,12 @@ class WireTables:
         d[:, 0, 0] = d[:, 1, 1] = 1.0 / s
         d[:, 2, 2] = lb / lm
         a = fb @ d @ rz @ np.transpose(fm, (0, 2, 1))
+        m_pts, b_pts = wire.modified.evaluate(tm), wire.base.evaluate(tb)
         return cls(
             u=u,
-            modified_points=wire.modified.evaluate(tm),
+            modified_points=m_pts,
             modified_frames=fm,
-            base_points=wire.base.evaluate(tb),
+            base_points=b_pts,
             base_frames=fb,
             matrices=a,
             t_base=tb,
@@ -395,6 +398,7 @@ class WireTables:
             segment_modified=wire.modified.segment_of(tm)[0],
             length_base=lb,
             length_modified=lm,
+            offsets=b_pts - np.einsum("nij,nj->ni", a, m_pts),
         )
 
     @property
@@ -402,22 +406,10 @@ class WireTables:
         """Number of entries."""
         return len(self.u)
 
-    @property
-    def offsets(self) -> np.ndarray:
-        """b(u_i) = C - A M (n, 3): the mapping is ``q = A p + b``."""
-        return self.base_points - np.einsum("nij,nj->ni", self.matrices, self.modified_points)
-
     def lookup(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, b) at continuous table coordinates t in [0, n - 1], each linear in t (as
         the shader's filtered lookup table)."""
-        t = np.clip(np.asarray(t, dtype=np.float64), 0.0, self.size - 1)
-        i0 = np.minimum(np.floor(t).astype(np.int64), self.size - 2)
-        f = (t - i0)[:, None]
-        b_all = self.offsets
-        b = b_all[i0] * (1 - f) + b_all[i0 + 1] * f
-        f3 = f[:, :, None]
-        a = self.matrices[i0] * (1 - f3) + self.matrices[i0 + 1] * f3
-        return a, b
+        return _lerp_table(self.matrices, t), _lerp_table(self.offsets, t)
 
     def gpu_rows(self) -> np.ndarray:
         """The 3 RGBA32F rows of the shader's lookup table, (3, n, 4) float32: row r holds
@@ -922,8 +914,8 @@ class WireDeformer:
         # covers s * radius on the modified side
         tt = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
         a, b = tab.lookup(tt)
-        m = _lerp_rows(tab.modified_points, tt)
-        fm = _lerp_frames(tab.modified_frames, tt)
+        m = _lerp_table(tab.modified_points, tt)
+        fm = _lerp_table(tab.modified_frames, tt)
         s_at = wire.scale_at(tt / (LUT_SIZE - 1))
         in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.radius * s_at[:, None, None]) ** 2
         # deformed points p = M + x N_m + y B_m -> base points q = C + A (p - M)
@@ -1103,23 +1095,15 @@ def _curve_box(curve: Curve) -> tuple[np.ndarray, np.ndarray]:
     return pts.min(axis=0), pts.max(axis=0)
 
 
-def _lerp_rows(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Rows (n, 3) linearly interpolated at table coordinates t."""
-    n = rows.shape[0]
+def _lerp_table(table: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Entries of a table (n, ...) linearly interpolated at table coordinates t (clamped
+    to [0, n - 1]); frames come out not re-orthonormalised (neighbouring entries differ
+    by well under a degree)."""
+    n = table.shape[0]
     t = np.clip(np.asarray(t, dtype=np.float64), 0.0, n - 1)
     i0 = np.minimum(np.floor(t).astype(np.int64), n - 2)
-    f = (t - i0)[:, None]
-    return rows[i0] * (1 - f) + rows[i0 + 1] * f
-
-
-def _lerp_frames(frames: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Frames (n, 3, 3) linearly interpolated at table coordinates t (not re-orthonormalised:
-    neighbouring table frames differ by well under a degree)."""
-    n = frames.shape[0]
-    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, n - 1)
-    i0 = np.minimum(np.floor(t).astype(np.int64), n - 2)
-    f = (t - i0)[:, None, None]
-    return frames[i0] * (1 - f) + frames[i0 + 1] * f
+    f = (t - i0).reshape(-1, *([1] * (table.ndim - 1)))
+    return table[i0] * (1 - f) + table[i0 + 1] * f
 
 
 # ---------------------------------------------------------------------- the warp
@@ -1179,8 +1163,7 @@ class WireFieldWarp(Warp):
         self._field: WireField | None = deformer.field if deformer is not None else None
         self._revision = 0
         self._gpu: dict[int, tuple[Any, int, dict[str, Any]]] = {}
-        self._ranges: tuple[int, Any] | None = None
-        self._info: tuple[int, Any] | None = None
+        self._pyramids: tuple[int, tuple[Any, Any]] | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -1210,8 +1193,7 @@ class WireFieldWarp(Warp):
     def _set_field(self, fld: WireField) -> None:
         self._field = fld
         self._revision += 1
-        self._ranges = None
-        self._info = None
+        self._pyramids = None
 
     def rebuild(self) -> WireFieldStats:
         """Rebuild the field after editing :attr:`wires` (the revision changes)."""
@@ -1357,80 +1339,53 @@ class WireFieldWarp(Warp):
         rhi[none] = 0.0
         return rlo, rhi
 
+    def _range_query(self) -> Any:
+        """Pyramid of per-voxel displacement intervals over the propagated region."""
+        return self._bound_pyramids()[0]
+
     def _info_query(self) -> Any:
         """Pyramid of (t range over each voxel's 3³ neighbourhood, wire id of swept
         voxels, whether a voxel is the identity) over the propagated region."""
-        if self._info is not None and self._info[0] == self._revision:
-            return self._info[1]
+        return self._bound_pyramids()[1]
+
+    def _bound_pyramids(self) -> tuple[Any, Any]:
+        """Both pyramids of :meth:`displacement_range`, from one pass over the field (per
+        revision). A swept voxel's interval is that of its box for every t its samples
+        can interpolate (from its 3³ neighbourhood); identity voxels give [0, 0], vacated
+        ones nothing (they show nothing)."""
+        if self._pyramids is not None and self._pyramids[0] == self._revision:
+            return self._pyramids[1]
         fld = self.field
-        region = _box_slices(fld.region_lo, fld.region_shape)
+        rs = fld.region_shape
+        region = _box_slices(fld.region_lo, rs)
         state, wire, t_all = fld.decode()
-        st, wr = state[region], wire[region].astype(np.float64)
+        st, wr = state[region], wire[region]
         tt = np.asarray(t_all[region], dtype=np.float64)
         t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
         t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
-        ident = (st == 0).astype(np.float64)
-        lo = np.stack([t_lo, np.where(st == 2, wr, np.inf), -ident], axis=-1)
-        hi = np.stack([t_hi, np.where(st == 2, wr, -np.inf), ident], axis=-1)
-        query = _MinMaxPyramid(lo, hi)
-        self._info = (self._revision, query)
-        return query
-
-    def _range_query(self) -> Any:
-        if self._ranges is not None and self._ranges[0] == self._revision:
-            return self._ranges[1]
-        fld = self.field
-        rs = fld.region_shape
-        r0 = fld.region_lo
-        region = tuple(slice(int(r0[a]), int(r0[a]) + rs[a]) for a in range(3))
-        state, wire, t_all = fld.decode()
-        st, wr = state[region], wire[region]
-        tt = np.asarray(t_all[region], dtype=np.float32)
-        # a sample whose nearest voxel is v interpolates t from v's 3³ neighbourhood
-        t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest").ravel()
-        t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest").ravel()
         idx = np.nonzero(st.ravel() == 2)[0]
         ii = np.stack(np.unravel_index(idx, rs), -1)
         centres = fld.lo + (ii + fld.region_lo + 0.5) * fld.spacing
-        d_lo = np.full((len(idx), 3), np.inf)
-        d_hi = np.full((len(idx), 3), -np.inf)
         half = 0.5 * fld.spacing
-        w_of = wr.ravel()[idx]
-        for wi in np.unique(w_of):
-            tab = fld.tables[int(wi)]
-            sel = np.nonzero(w_of == wi)[0]
-            lo_t, hi_t = t_lo[idx[sel]].astype(np.float64), t_hi[idx[sel]].astype(np.float64)
-            first = np.floor(lo_t)
-            last_all = np.minimum(np.ceil(hi_t), tab.size - 1)
-            count = (last_all - first).astype(np.int64) + 1
-            # q = A(t) p + b(t) with A, b linear in t between table entries: over t in
-            # [t_lo, t_hi] the displacement of a point is extreme at the entries inside
-            # and at the two ends; over the voxel's box, A - I bounds its change
-            for group in (count <= 64, count > 64):
-                g = sel[group]
-                if len(g) == 0:
-                    continue
-                glast, gfirst = last_all[group], first[group]
-                steps = int(count[group].max())
-                if steps > 64:  # t mixed across wires: bound over the whole table
-                    gfirst, glast = 0.0 * gfirst, 0.0 * glast + tab.size - 1
-                    steps = tab.size
-                c = centres[g]
-                for k in range(steps):
-                    tk = np.minimum(gfirst + k, glast)
-                    a_k, b_k = tab.lookup(tk)
-                    dk = np.einsum("nij,nj->ni", a_k, c) + b_k - c
-                    ek = np.abs(a_k - np.eye(3)) @ half
-                    d_lo[g] = np.minimum(d_lo[g], dk - ek)
-                    d_hi[g] = np.maximum(d_hi[g], dk + ek)
-        # identity voxels: [0, 0]; vacated ones: empty (they show nothing)
+        d_lo, d_hi = _box_mapping_range(
+            fld.tables,
+            wr.ravel()[idx],
+            t_lo.ravel()[idx],
+            t_hi.ravel()[idx],
+            centres - half,
+            centres + half,
+        )
         dlo = np.repeat(np.where(st == 0, 0.0, np.inf)[..., None], 3, axis=-1)
         dhi = np.repeat(np.where(st == 0, 0.0, -np.inf)[..., None], 3, axis=-1)
         dlo.reshape(-1, 3)[idx] = _grow(d_lo, -1.0)
         dhi.reshape(-1, 3)[idx] = _grow(d_hi, 1.0)
-        query = _MinMaxPyramid(dlo, dhi)
-        self._ranges = (self._revision, query)
-        return query
+        ident = (st == 0).astype(np.float64)
+        wf = wr.astype(np.float64)
+        info_lo = np.stack([t_lo, np.where(st == 2, wf, np.inf), -ident], axis=-1)
+        info_hi = np.stack([t_hi, np.where(st == 2, wf, -np.inf), ident], axis=-1)
+        pyramids = (_MinMaxPyramid(dlo, dhi), _MinMaxPyramid(info_lo, info_hi))
+        self._pyramids = (self._revision, pyramids)
+        return pyramids
 
     # ------------------------------------------------------------------ GPU side
     def glsl_constants(self) -> dict[str, Any]:
@@ -1551,6 +1506,11 @@ def _grow(bound: np.ndarray, sign: float) -> np.ndarray:
     return np.where(exact, 0.0, bound + sign * FLOAT32_MARGIN)
 
 
+#: t ranges spanning more table entries than this mix wires (interpolation across a
+#: wire boundary): their bound is taken over the whole table
+MAX_T_STEPS = 64
+
+
 def _box_mapping_range(
     tables: list[WireTables],
     wire: np.ndarray,
@@ -1560,26 +1520,36 @@ def _box_mapping_range(
     hi: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per box, the range of ``A(t) p + b(t) - p`` over p in [lo, hi] and t in
-    [t_lo, t_hi] of one wire: linear in p and, between table entries, in t, so the
-    extremes lie at the box's 8 corners and at the table entries from floor(t_lo) to
-    ceil(t_hi) (those also hold what the GPU's filtered, 8-bit-weighted lookups of t
-    and of the table can return)."""
+    [t_lo, t_hi] of one wire.
+
+    For a fixed t the displacement is linear in p, so over the box it is its value at
+    the centre plus or minus ``|A - I|`` times the half extent; between table entries it
+    is linear in t, so its extremes lie at the table entries from floor(t_lo) to
+    ceil(t_hi) (which also hold what the GPU's filtered, 8-bit-weighted lookups of t and
+    of the table can return). Ranges over more than :data:`MAX_T_STEPS` entries take the
+    whole table.
+    """
     out_lo = np.full((len(lo), 3), np.inf)
     out_hi = np.full((len(lo), 3), -np.inf)
-    corners = np.stack([np.where(_CORNERS[c] == 1, hi, lo) for c in range(8)], axis=1)  # (N, 8, 3)
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    top = LUT_SIZE - 1.0
+    first = np.floor(t_lo)
+    last = np.minimum(np.ceil(t_hi), top)
+    wide = last - first > MAX_T_STEPS
+    first, last = np.where(wide, 0.0, first), np.where(wide, top, last)
     for wi in np.unique(wire):
         tab = tables[int(wi)]
-        sel = np.nonzero(wire == wi)[0]
-        first = np.floor(t_lo[sel])
-        last = np.minimum(np.ceil(t_hi[sel]), tab.size - 1)
-        steps = int((last - first).max())
-        c = corners[sel]
-        for k in range(steps + 1):
-            tk = np.minimum(first + k, last)
-            a_k, b_k = tab.lookup(tk)
-            d = np.einsum("nij,ncj->nci", a_k, c) + b_k[:, None, :] - c
-            out_lo[sel] = np.minimum(out_lo[sel], d.min(axis=1))
-            out_hi[sel] = np.maximum(out_hi[sel], d.max(axis=1))
+        for narrow in (True, False):
+            sel = np.nonzero((wire == wi) & (wide != narrow))[0]
+            if len(sel) == 0:
+                continue
+            c, h = centre[sel], half[sel]
+            for k in range(int((last[sel] - first[sel]).max()) + 1):
+                a_k, b_k = tab.lookup(np.minimum(first[sel] + k, last[sel]))
+                d = np.einsum("nij,nj->ni", a_k, c) + b_k - c
+                e = np.einsum("nij,nj->ni", np.abs(a_k - np.eye(3)), h)
+                out_lo[sel] = np.minimum(out_lo[sel], d - e)
+                out_hi[sel] = np.maximum(out_hi[sel], d + e)
     return out_lo, out_hi
 
 
