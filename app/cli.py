@@ -753,12 +753,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     )
     scene = _scene_from_args(obj, args)
     grid = _deform_grid(args, scene.volume)
-    wire_warp = None
+    file_warp = None  # --wires or --lattice (they exclude each other)
     if args.wires is not None:  # built before any GL work: bad wires fail fast
-        wire_warp, summary = _wire_warp(args, scene.volume)
+        file_warp, summary = _wire_warp(args, scene.volume)
         print(summary, file=sys.stderr)
     if args.lattice is not None:
-        wire_warp = load_lattice_file(args.lattice, scene.volume)
+        file_warp = load_lattice_file(args.lattice, scene.volume)
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
@@ -773,8 +773,8 @@ def cmd_render(args: argparse.Namespace) -> int:
                     # last in the chain: it deforms the volume itself, before the
                     # scene's own warps move the result
                     scene = scene.copy(warps=[*scene.warps, model.warp()])
-                if wire_warp is not None:
-                    scene = scene.copy(warps=[*scene.warps, wire_warp])
+                if file_warp is not None:
+                    scene = scene.copy(warps=[*scene.warps, file_warp])
                 img = r.render(scene)
                 if args.save_scene:  # inside: a GPU-owned field is read back to save it
                     scene.save(args.save_scene)
