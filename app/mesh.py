@@ -220,7 +220,8 @@ class Mesh:
         )
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the mesh (format from the extension, one of :data:`MESH_FORMATS`)."""
+        """Write the mesh atomically (format from the extension, one of
+        :data:`MESH_FORMATS`): a previous file of that name stays intact on failure."""
         path = Path(path)
         ext = path.suffix.lower()
         if ext not in MESH_FORMATS:
@@ -228,7 +229,11 @@ class Mesh:
                 f"cannot write {path}: unknown mesh format {ext!r}; use one of"
                 f" {', '.join(MESH_FORMATS)}"
             )
-        self.to_trimesh().export(path)
+        from app.files import atomic_write
+
+        mesh = self.to_trimesh()
+        # trimesh picks the format from the extension: the temporary file keeps it
+        atomic_write(path, ext, lambda tmp: mesh.export(tmp, file_type=ext[1:]))
         return path
 
     def to_dict(self, base_dir: str | os.PathLike | None = None) -> dict[str, Any]:

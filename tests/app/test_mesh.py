@@ -409,3 +409,22 @@ def test_fitted_camera_frames_volume_and_meshes() -> None:
     assert (
         Scene(vol, transfer_function=NOTHING, view="+z").resolved_camera().ortho_height < 5
     )  # volume only: small
+
+
+def test_save_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A failed write leaves the previous file intact and no temporary file behind."""
+    from app.mesh import torus_mesh
+
+    path = tmp_path / "ring.ply"
+    torus_mesh().save(path)
+    before = path.read_bytes()
+
+    def broken(self: object, file_obj: object = None, **kwargs: object) -> None:
+        Path(str(file_obj)).write_bytes(b"ply\nhalf")  # a write that dies half way
+        raise OSError("disk full")
+
+    monkeypatch.setattr(trimesh.Trimesh, "export", broken)
+    with pytest.raises(OSError, match="disk full"):
+        torus_mesh(major_sections=12).save(path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ring.ply"]
