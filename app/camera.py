@@ -232,6 +232,36 @@ class Camera:
         ndc = clip[:, :2] / clip[:, 3:4]
         return np.c_[(ndc[:, 0] + 1) * 0.5 * w, (1 - ndc[:, 1]) * 0.5 * h]
 
+    def ray(self, pixel: Sequence[float], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """The viewing ray through a pixel: ``(origin, unit direction)`` in world mm.
+
+        ``pixel`` is ``(x, y)`` with the origin top-left and y down, as :meth:`project`
+        returns; the inverse of :meth:`project` along the ray. Perspective rays start at
+        the eye; orthographic rays are parallel, starting on the plane through the eye.
+        """
+        w, h = size
+        x, y = float(pixel[0]), float(pixel[1])
+        ndc = np.array([2.0 * x / w - 1.0, 1.0 - 2.0 * y / h])
+        right, up, back = self.rotation[:, 0], self.rotation[:, 1], self.rotation[:, 2]
+        if self.projection == "perspective":
+            t = np.tan(np.radians(self.fov) / 2)
+            d = ndc[0] * t * (w / h) * right + ndc[1] * t * up - back
+            return self.eye.copy(), d / np.linalg.norm(d)
+        half_h = self.ortho_height / 2
+        origin = self.eye + ndc[0] * half_h * (w / h) * right + ndc[1] * half_h * up
+        return origin, -back.copy()
+
+    def point_on_view_plane(
+        self, pixel: Sequence[float], size: tuple[int, int], through: Sequence[float]
+    ) -> np.ndarray:
+        """Where the ray through ``pixel`` meets the plane parallel to the image through
+        the world point ``through``: what a drag in the view plane moves a point to."""
+        origin, d = self.ray(pixel, size)
+        back = self.rotation[:, 2]
+        p = np.asarray(through, dtype=np.float64).reshape(3)
+        denom = float(d @ back)  # never 0: every viewing ray runs against `back`
+        return origin + d * float((p - origin) @ back) / denom
+
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict:
         """JSON-serialisable form."""

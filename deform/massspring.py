@@ -591,6 +591,11 @@ class MassSpring:
         """(n_x, n_y, n_z, 3) float32 displacements from rest (mm; a GPU read-back)."""
         return (self.positions() - self._model.rest).astype(np.float32)
 
+    def velocities(self) -> np.ndarray:
+        """(n_x, n_y, n_z, 3) float64 element velocities (mm/s; a GPU read-back): with
+        :meth:`positions` the whole dynamic state, for :meth:`set_state` (undo)."""
+        return np.asarray(self._solver.velocities(), dtype=np.float64)
+
     def energy(self) -> float:
         """Kinetic plus spring potential energy (see :func:`spring_energy`)."""
         return spring_energy(self._model, self.positions(), self._solver.velocities())
