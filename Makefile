@@ -17,9 +17,9 @@ $(STAMP): pyproject.toml scripts/install-system-deps.sh
 
 setup: $(STAMP)
 
-## render the bundled real CT in every compositing mode, and bent by a mass-spring drag and by a wire, into out/
+## open the desktop window on the bundled CT; without a display, render it headless into out/ (every mode, bent by a mass-spring drag and by a wire)
 run: $(STAMP)
-	$(VENV)/bin/voxwarp demo --out out
+	$(VENV)/bin/voxwarp gui
 
 ## lint + the whole test suite, headless
 test: $(STAMP) lint

@@ -1305,9 +1305,13 @@ def _join_negative_views(argv: list[str]) -> list[str]:
     return out
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``voxwarp`` console script."""
-    parser = build_parser()
+def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
+    """Entry point of the ``voxwarp`` console script.
+
+    ``parser`` replaces :func:`build_parser`'s (the desktop GUI's entry point,
+    :func:`ui.cli.main`, adds its ``gui`` command to it: ``app`` never imports ``ui``).
+    """
+    parser = parser or build_parser()
     args = parser.parse_args(_join_negative_views(list(sys.argv[1:] if argv is None else argv)))
     with warnings.catch_warnings():
         warnings.simplefilter("default")

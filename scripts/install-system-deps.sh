@@ -3,6 +3,10 @@
 # As root it installs them with apt-get; otherwise it prints the command to run.
 #   OpenGL through EGL (headless rendering, Mesa llvmpipe on machines without a GPU):
 #     libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri
+#   The desktop GUI (PySide6 on X11/xcb) and its tests (a private Xvfb server):
+#     xvfb xauth libglib2.0-0 libxkbcommon0 libxkbcommon-x11-0 libfontconfig1 libfreetype6
+#     libdbus-1-3 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1
+#     libxcb-render-util0 libxcb-shape0 libxcb-xkb1 libxcb-randr0 libxcb-xfixes0 libx11-xcb1
 set -euo pipefail
 
 missing=()
@@ -12,6 +16,18 @@ have_lib 'libGL.so.1' || missing+=(libgl1)
 have_lib 'libEGL_mesa.so.0' || missing+=(libegl-mesa0)
 ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || ls /usr/lib/*/dri/libdril_dri.so >/dev/null 2>&1 \
   || missing+=(libgl1-mesa-dri)
+command -v Xvfb >/dev/null 2>&1 || missing+=(xvfb)
+command -v xauth >/dev/null 2>&1 || missing+=(xauth)
+have_lib 'libglib-2.0.so.0' || missing+=(libglib2.0-0)
+have_lib 'libxkbcommon.so.0' || missing+=(libxkbcommon0)
+have_lib 'libxkbcommon-x11.so.0' || missing+=(libxkbcommon-x11-0)
+have_lib 'libfontconfig.so.1' || missing+=(libfontconfig1)
+have_lib 'libfreetype.so.6' || missing+=(libfreetype6)
+have_lib 'libdbus-1.so.3' || missing+=(libdbus-1-3)
+have_lib 'libX11-xcb.so.1' || missing+=(libx11-xcb1)
+for pair in cursor:0 icccm:4 image:0 keysyms:1 render-util:0 shape:0 xkb:1 randr:0 xfixes:0; do
+  have_lib "libxcb-${pair%%:*}.so" || missing+=("libxcb-${pair%%:*}${pair##*:}")
+done
 
 if [ ${#missing[@]} -eq 0 ]; then
   exit 0

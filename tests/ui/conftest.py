@@ -1,0 +1,48 @@
+"""GUI tests: a real window on an X server this conftest starts itself (Xvfb).
+
+Qt's ``offscreen`` platform cannot host a ``QOpenGLWidget``, so these tests run the
+``xcb`` platform with EGL (``QT_XCB_GL_INTEGRATION=xcb_egl``, Mesa llvmpipe on machines
+without a GPU) against a private Xvfb display started here, before pytest-qt makes the
+``QApplication``. An existing ``DISPLAY`` is never used: tests must not pop windows on a
+developer's desktop nor depend on one. ``scripts/install-system-deps.sh`` installs Xvfb
+and the xcb libraries; without Xvfb the GUI tests fail with that instruction.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import shutil
+import subprocess
+
+import pytest
+
+
+def _start_xvfb() -> None:
+    """Start ``Xvfb`` on a free display (``-displayfd``) and point Qt at it."""
+    if shutil.which("Xvfb") is None:
+        raise pytest.UsageError(
+            "the GUI tests need Xvfb: run `bash scripts/install-system-deps.sh` as root"
+            " (Debian package xvfb and the xcb libraries it lists)"
+        )
+    read_fd, write_fd = os.pipe()
+    proc = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1600x1200x24", "-nolisten", "tcp"],
+        pass_fds=(write_fd,),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    os.close(write_fd)
+    with os.fdopen(read_fd) as f:
+        number = f.readline().strip()
+    if not number:
+        proc.kill()
+        raise pytest.UsageError("Xvfb did not start (no display number reported)")
+    atexit.register(proc.kill)
+    os.environ["DISPLAY"] = f":{number}"
+    os.environ["QT_QPA_PLATFORM"] = "xcb"
+    os.environ["QT_XCB_GL_INTEGRATION"] = "xcb_egl"
+    os.environ.pop("WAYLAND_DISPLAY", None)
+
+
+_start_xvfb()

@@ -1,0 +1,80 @@
+"""Start the desktop application: Qt settings for OpenGL 4.3+ and the main window."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from PySide6.QtCore import QTimer
+from PySide6.QtGui import QSurfaceFormat
+from PySide6.QtWidgets import QApplication
+
+from app.errors import VoxwarpError
+
+#: after the first frame, the time given to the docks to paint before a screenshot (ms)
+SCREENSHOT_SETTLE_MS = 300
+
+
+def configure_qt() -> None:
+    """Ask Qt for an OpenGL 4.5 core context with depth, through EGL on X11.
+
+    EGL is how Mesa's software rasteriser (llvmpipe) gives 4.5 core on machines without
+    a GPU, and works on GPU drivers too; ``QT_XCB_GL_INTEGRATION`` set by the user wins.
+    Must run before the ``QApplication`` is made.
+    """
+    os.environ.setdefault("QT_XCB_GL_INTEGRATION", "xcb_egl")
+    fmt = QSurfaceFormat()
+    fmt.setVersion(4, 5)
+    fmt.setProfile(QSurfaceFormat.OpenGLContextProfile.CoreProfile)
+    fmt.setDepthBufferSize(24)
+    fmt.setSwapInterval(0)
+    QSurfaceFormat.setDefaultFormat(fmt)
+
+
+def application() -> QApplication:
+    """The running ``QApplication``, made (after :func:`configure_qt`) if needed."""
+    app = QApplication.instance()
+    if app is None:
+        configure_qt()
+        app = QApplication(sys.argv[:1])
+        app.setApplicationName("voxwarp")
+        app.setOrganizationName("voxwarp")
+    return app  # type: ignore[return-value]
+
+
+def run_gui(
+    input_spec: str, screenshot: str | None = None, size: tuple[int, int] = (1280, 820)
+) -> int:
+    """Open the window on ``input_spec``; with ``screenshot``, save a PNG of the whole
+    window once the first frame is drawn and quit. Returns the exit code."""
+    from ui.main_window import MainWindow, load_session_input
+
+    app = application()
+    try:
+        session = load_session_input(input_spec)
+    except VoxwarpError as exc:
+        print(f"voxwarp: error: {exc}", file=sys.stderr)
+        return 2
+    window = MainWindow(session, input_spec)
+    window.resize(*size)
+    window.show()
+    status = {"code": 0}
+    if screenshot:
+        out = Path(screenshot)
+
+        def shoot() -> None:
+            if window.export_screenshot(out, whole_window=True) is None:
+                status["code"] = 1
+            else:
+                print(out)
+            window.close()
+            app.quit()
+
+        def first_frame(_ms: float) -> None:
+            window.viewport.frameDrawn.disconnect(first_frame)
+            QTimer.singleShot(SCREENSHOT_SETTLE_MS, shoot)
+
+        window.viewport.frameDrawn.connect(first_frame)
+    app.exec()
+    return status["code"]

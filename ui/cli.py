@@ -1,0 +1,66 @@
+"""The ``voxwarp`` console script: :mod:`app.cli`'s commands plus ``gui``.
+
+``voxwarp gui [INPUT] [--screenshot PATH]`` opens the desktop window on INPUT (a volume
+file, a scene JSON or ``sample:NAME``; default the bundled sample). With
+``--screenshot`` it waits for the first frame, saves a picture of the whole window and
+quits (for scripts and checks). Without a display it renders headless instead
+(``voxwarp demo``) and says so, unless ``--screenshot`` asked for the window.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+from app import cli as app_cli
+from app.samples import DEFAULT_SAMPLE
+
+
+def has_display() -> bool:
+    """Whether a window can open: an X11 or a Wayland display is set."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def cmd_gui(args: argparse.Namespace) -> int:
+    """``voxwarp gui``: the desktop window (see the module docstring)."""
+    if not has_display():
+        if args.screenshot:
+            raise app_cli.CliOptionError(
+                "gui --screenshot needs a display and none is set ($DISPLAY is empty); run"
+                " it under a virtual X server: xvfb-run -a voxwarp gui --screenshot PATH"
+            )
+        print(
+            "voxwarp: no display ($DISPLAY is not set), so no window: rendering the sample"
+            " headless into out/ instead (voxwarp demo --out out)",
+            file=sys.stderr,
+        )
+        return app_cli.main(["demo", "--out", args.fallback_out])
+    from ui.app import run_gui
+
+    return run_gui(args.input, screenshot=args.screenshot, size=args.size)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """:func:`app.cli.build_parser` plus the ``gui`` command."""
+    parser = app_cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    pg = sub.add_parser("gui", help="open the desktop window (INPUT: volume, scene or sample:NAME)")
+    pg.add_argument("input", nargs="?", default=f"sample:{DEFAULT_SAMPLE}")
+    pg.add_argument(
+        "--screenshot", metavar="PATH", help="save a PNG of the window after the first frame, quit"
+    )
+    pg.add_argument("--size", type=app_cli._size, default=(1280, 820), help="window WxH")
+    pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
+    pg.set_defaults(func=cmd_gui)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``voxwarp`` console script."""
+    return app_cli.main(argv, parser=build_parser())
+
+
+if __name__ == "__main__":
+    sys.exit(main())

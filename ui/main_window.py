@@ -1,0 +1,768 @@
+"""The main window: viewport, docks, menus, undo/redo, files, screenshots, status bar.
+
+Every edit goes through :meth:`MainWindow.edit`: a snapshot of the session before and
+after (:meth:`app.editor.EditSession.snapshot`) makes one :class:`SnapshotCommand` on the
+``QUndoStack``, so undo restores the previous state exactly. Work that can take longer
+than ~100 ms (opening a volume, rebuilding a wire field) runs off the GUI thread
+(:mod:`ui.tasks`). Errors from the core are shown as dialogs with their message.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from PySide6.QtCore import QPoint, QSettings, Qt, QTimer, Signal
+from PySide6.QtGui import (
+    QAction,
+    QDragEnterEvent,
+    QDropEvent,
+    QKeySequence,
+    QUndoCommand,
+    QUndoStack,
+)
+from PySide6.QtWidgets import (
+    QApplication,
+    QDialog,
+    QDockWidget,
+    QFileDialog,
+    QLabel,
+    QMainWindow,
+    QMenu,
+    QMessageBox,
+    QProgressBar,
+    QTextBrowser,
+    QVBoxLayout,
+)
+
+from app.camera import VIEWS, Camera
+from app.editor import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
+from app.errors import VoxwarpError
+from app.image_io import write_image
+from app.scene import Scene
+from app.volume import Volume
+from ui.tasks import Task, run_with_progress
+from ui.tf_editor import TransferFunctionEditor
+from ui.viewport import Viewport
+
+#: frames per second of the simulation timer
+SIM_FPS = 30
+MAX_RECENT = 8
+SCENE_FILTER = "voxwarp scene (*.json)"
+OPEN_FILTER = (
+    "Volumes and scenes (*.json *.nrrd *.nhdr *.nii *.nii.gz *.mha *.mhd *.tif *.tiff *.npy"
+    " *.npz *.dcm *.raw);;All files (*)"
+)
+
+SHORTCUTS: list[tuple[str, str]] = [
+    (
+        "Left drag on a handle",
+        "drag the selection in the view plane (reference follows the cursor)",
+    ),
+    ("Left drag elsewhere", "orbit"),
+    ("Shift + left click", "add a handle to the selection"),
+    ("Ctrl + left click", "toggle a handle in the selection"),
+    ("Shift + left drag elsewhere", "rubber-band selection (Ctrl: remove)"),
+    ("Middle drag / right drag", "pan"),
+    ("Wheel", "zoom"),
+    ("Right click", "context menu (fix, free, reference)"),
+    ("F / U", "fix / free the selected elements"),
+    ("Space", "run / pause the simulation"),
+    ("S", "one simulation step"),
+    ("Ctrl+A / Esc", "select all / clear the selection"),
+    ("1 … 6", "views from +x, -x, +y, -y, +z, -z"),
+    ("R", "reset the camera"),
+    ("P", "perspective / orthographic"),
+    ("W", "lay a new wire (click points; Enter finishes, Esc cancels)"),
+    ("Ctrl+Z / Ctrl+Shift+Z", "undo / redo"),
+    ("Ctrl+O / Ctrl+S / Ctrl+Shift+S", "open / save scene / save scene as"),
+    ("Ctrl+E", "export a screenshot (PNG or EXR)"),
+    ("F1", "this help"),
+]
+
+
+class SnapshotCommand(QUndoCommand):
+    """One undoable edit: the session's state before and after it."""
+
+    def __init__(
+        self,
+        window: MainWindow,
+        text: str,
+        before: Snapshot,
+        after: Snapshot,
+        merge: str | None = None,
+    ) -> None:
+        super().__init__(text)
+        self.window = window
+        self.before = before
+        self.after = after
+        self.merge = merge
+        self._first = True
+
+    def id(self) -> int:
+        """Commands with the same merge key merge (slider drags)."""
+        return -1 if self.merge is None else (hash(self.merge) & 0x3FFFFFFF)
+
+    def mergeWith(self, other: QUndoCommand) -> bool:
+        """Keep this command's *before* and the other's *after*."""
+        if (
+            not isinstance(other, SnapshotCommand)
+            or other.merge != self.merge
+            or self.merge is None
+        ):
+            return False
+        self.after = other.after
+        return True
+
+    def redo(self) -> None:
+        """Apply *after* (the first time the state is already there)."""
+        if self._first:
+            self._first = False
+            return
+        self.window.restore(self.after)
+
+    def undo(self) -> None:
+        """Back to *before*."""
+        self.window.restore(self.before)
+
+
+class MainWindow(QMainWindow):
+    """voxwarp's desktop window (see the module docstring)."""
+
+    sessionChanged = Signal()
+
+    def __init__(self, session: EditSession, path: str | Path | None = None) -> None:
+        super().__init__()
+        self.session = session
+        self.path: Path | None = (
+            Path(path) if path is not None and str(path).endswith(".json") else None
+        )
+        self.source: str | None = str(path) if path is not None else None
+        self.undo_stack = QUndoStack(self)
+        self.viewport = Viewport(session, self)
+        self.setCentralWidget(self.viewport)
+        self.setAcceptDrops(True)
+        self.resize(1280, 820)
+        self._pending_before: Snapshot | None = None
+        self._wire_task: Task | None = None
+        self._wire_job: WireBuild | None = None
+        self._fps_times: list[float] = []
+        self._panels: list[Any] = []
+        self.errors: list[str] = []  # every message shown to the user (tests read it)
+        self._make_docks()
+        self._make_actions()
+        self._make_status_bar()
+        self.viewport.editStarted.connect(self._begin_mouse_edit)
+        self.viewport.editFinished.connect(self._end_mouse_edit)
+        self.viewport.dragged.connect(self._dragged)
+        self.viewport.frameDrawn.connect(self._frame_drawn)
+        self.viewport.failed.connect(self.show_error)
+        self.viewport.contextMenuAt.connect(self._context_menu)
+        self.viewport.wirePointLaid.connect(self.refresh_panels)
+        self.undo_stack.cleanChanged.connect(self._clean_changed)
+        self.sim_timer = QTimer(self)
+        self.sim_timer.setInterval(int(1000 / SIM_FPS))
+        self.sim_timer.timeout.connect(self._tick)
+        self.sim_timer.start()
+        threading.Thread(
+            target=_quiet(warm_up_kernels), name="voxwarp-warm-up", daemon=True
+        ).start()
+        self._update_title()
+        self.refresh_panels()
+
+    # ------------------------------------------------------------------ docks
+    def _make_docks(self) -> None:
+        from ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
+
+        self.volume_panel = VolumePanel(self)
+        self.tf_editor = TransferFunctionEditor(
+            self.session.scene.transfer_function, self.session.volume
+        )
+        self.tf_editor.transferFunctionChanged.connect(self._tf_edited)
+        self.deformation_panel = DeformationPanel(self)
+        self.display_panel = DisplayPanel(self)
+        self.scene_panel = ScenePanel(self)
+        self._panels = [
+            self.volume_panel,
+            self.deformation_panel,
+            self.display_panel,
+            self.scene_panel,
+        ]
+        self.docks: dict[str, QDockWidget] = {}
+        left = Qt.DockWidgetArea.LeftDockWidgetArea
+        right = Qt.DockWidgetArea.RightDockWidgetArea
+        for name, widget, area in (
+            ("Volume", self.volume_panel, left),
+            ("Transfer function", self.tf_editor, left),
+            ("Deformation", self.deformation_panel, right),
+            ("Display", self.display_panel, right),
+            ("Scene", self.scene_panel, right),
+        ):
+            dock = QDockWidget(name, self)
+            dock.setObjectName(name)
+            dock.setWidget(widget)
+            self.addDockWidget(area, dock)
+            self.docks[name] = dock
+        self.tabifyDockWidget(self.docks["Display"], self.docks["Scene"])
+        self.docks["Display"].raise_()
+        # the viewport gets the room: docks at their compact widths
+        QTimer.singleShot(
+            0,
+            lambda: self.resizeDocks(
+                [self.docks["Volume"], self.docks["Deformation"]],
+                [300, 290],
+                Qt.Orientation.Horizontal,
+            ),
+        )
+
+    def refresh_panels(self) -> None:
+        """Update every panel from the session (after undo, open, edits)."""
+        for p in self._panels:
+            p.refresh()
+        self.tf_editor.set_transfer_function(self.session.scene.transfer_function)
+
+    # ------------------------------------------------------------------ actions
+    def _action(
+        self,
+        menu: QMenu,
+        text: str,
+        slot: Callable[[], Any],
+        shortcut: Any = None,
+        checkable: bool = False,
+    ) -> QAction:
+        a = QAction(text, self)
+        if shortcut is not None:
+            a.setShortcut(QKeySequence(shortcut))
+            a.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
+        a.setCheckable(checkable)
+        a.triggered.connect(lambda *_: slot())
+        menu.addAction(a)
+        self.addAction(a)
+        return a
+
+    def _make_actions(self) -> None:
+        mb = self.menuBar()
+        f = mb.addMenu("&File")
+        self._action(f, "&Open…", self.open_file_dialog, QKeySequence.StandardKey.Open)
+        self.recent_menu = f.addMenu("Open &Recent")
+        self.recent_menu.aboutToShow.connect(self._fill_recent)
+        self._action(f, "&Save Scene", self.save, QKeySequence.StandardKey.Save)
+        self._action(f, "Save Scene &As…", self.save_as, "Ctrl+Shift+S")
+        self._action(f, "&Export Screenshot…", self.export_dialog, "Ctrl+E")
+        f.addSeparator()
+        self._action(f, "&Quit", self.close, QKeySequence.StandardKey.Quit)
+
+        e = mb.addMenu("&Edit")
+        undo = self.undo_stack.createUndoAction(self, "&Undo")
+        undo.setShortcut(QKeySequence.StandardKey.Undo)
+        redo = self.undo_stack.createRedoAction(self, "&Redo")
+        redo.setShortcuts([QKeySequence.StandardKey.Redo, QKeySequence("Ctrl+Shift+Z")])
+        e.addAction(undo)
+        e.addAction(redo)
+        self.undo_action, self.redo_action = undo, redo
+        e.addSeparator()
+        self._action(e, "Select &All", self.select_all, QKeySequence.StandardKey.SelectAll)
+        self._action(e, "&Clear Selection", self.clear_selection, "Esc")
+        self._action(e, "&Fix Selected", lambda: self.fix_selected(True), "F")
+        self._action(e, "Fr&ee Selected", lambda: self.fix_selected(False), "U")
+
+        v = mb.addMenu("&View")
+        self._action(v, "&Reset Camera", self.viewport.reset_camera, "R")
+        for i, name in enumerate(VIEWS):
+            self._action(
+                v, f"View from {name}", lambda n=name: self.viewport.set_view(n), str(i + 1)
+            )
+        self._action(v, "&Perspective / Orthographic", self.toggle_projection, "P")
+        v.addSeparator()
+        for dock in self.docks.values():
+            v.addAction(dock.toggleViewAction())
+
+        d = mb.addMenu("&Deformation")
+        self.run_action = self._action(
+            d, "&Run", lambda: self.set_running(not self.session.running), "Space", checkable=True
+        )
+        self._action(d, "&Single Step", self.single_step, "S")
+        self._action(d, "Reset &Model", lambda: self.edit("Reset model", self.session.reset_model))
+        d.addSeparator()
+        self._action(d, "Lay a New &Wire", self.start_wire, "W")
+        self._action(d, "&Finish Wire", self.finish_wire, "Return")
+
+        h = mb.addMenu("&Help")
+        self._action(
+            h, "&Keyboard and Mouse…", self.show_help, QKeySequence.StandardKey.HelpContents
+        )
+        self._action(h, "&About voxwarp", self._about)
+
+    def _make_status_bar(self) -> None:
+        sb = self.statusBar()
+        self.fps_label = QLabel("")
+        self.mem_label = QLabel("")
+        self.progress = QProgressBar()
+        self.progress.setMaximumWidth(160)
+        self.progress.setRange(0, 1000)
+        self.progress.hide()
+        sb.addPermanentWidget(self.progress)
+        sb.addPermanentWidget(self.fps_label)
+        sb.addPermanentWidget(self.mem_label)
+
+    # ------------------------------------------------------------------ edits and undo
+    def edit(self, text: str, fn: Callable[[], Any], merge: str | None = None) -> Any:
+        """Run ``fn`` as one undoable edit (see the module docstring); errors become a
+        dialog and the state goes back to where it was."""
+        before = (
+            self.viewport.with_context(self.session.snapshot)
+            if self.viewport.ctx
+            else self.session.snapshot()
+        )
+        try:
+            result = self._in_context(fn)
+        except (VoxwarpError, ValueError) as exc:
+            self._in_context(lambda: self.session.restore(before))
+            self.show_error(str(exc))
+            self.refresh_panels()
+            return None
+        after = self._in_context(self.session.snapshot)
+        self.undo_stack.push(SnapshotCommand(self, text, before, after, merge))
+        if self.session.wire_field_stale:
+            self.request_wire_build()
+        self.refresh_panels()
+        self.viewport.update()
+        return result
+
+    def _in_context(self, fn: Callable[[], Any]) -> Any:
+        if self.viewport.ctx is None:
+            return fn()
+        return self.viewport.with_context(fn)
+
+    def restore(self, snap: Snapshot) -> None:
+        """Put the session in a snapshot's state (undo/redo)."""
+        self._cancel_wire_build()
+        try:
+            self._in_context(lambda: self.session.restore(snap))
+        except VoxwarpError as exc:
+            self.show_error(str(exc))
+        self.refresh_panels()
+        self.viewport.update()
+
+    def scene_changed(self) -> None:
+        """The scene's look changed outside :meth:`edit`: redraw."""
+        self.viewport.update()
+        self._update_title()
+
+    def _begin_mouse_edit(self, _text: str) -> None:
+        self._pending_before = self._in_context(self.session.snapshot)
+
+    def _end_mouse_edit(self, text: str) -> None:
+        before, self._pending_before = self._pending_before, None
+        if before is None:
+            return
+        after = self._in_context(self.session.snapshot)
+        if after.same_as(before):
+            return
+        if text == "Drag":
+            text = {
+                "massspring": "Drag elements",
+                "chainmail": "Drag elements",
+                "wires": "Drag wire points",
+                "lattice": "Drag lattice nodes",
+            }.get(self.session.kind, "Drag")
+        self.undo_stack.push(SnapshotCommand(self, text, before, after))
+        if self.session.wire_field_stale:
+            self.request_wire_build()
+        self.refresh_panels()
+
+    def _dragged(self) -> None:
+        if self.session.kind == "wires":
+            self.request_wire_build()
+
+    def _tf_edited(self, tf: Any) -> None:
+        self.edit(
+            "Transfer function",
+            lambda: setattr(self.session.scene, "transfer_function", tf),
+            merge="transfer function",
+        )
+
+    # ------------------------------------------------------------------ wires
+    def request_wire_build(self) -> None:
+        """Rebuild the wire field off the GUI thread (one at a time; a newer edit
+        starts the next build when this one is done)."""
+        if self.session.kind != "wires" or (self._wire_task and self._wire_task.running):
+            return
+        if not self.session.wire_field_stale:
+            return
+        job = self.session.wire_build()
+        task = Task(lambda progress, cancelled: job.run(progress), self)
+        self._wire_task, self._wire_job = task, job
+        self.progress.setValue(0)
+        self.progress.setFormat("wire field %p%")
+        self.progress.show()
+        task.progressed.connect(lambda f, _t: self.progress.setValue(int(1000 * f)))
+        task.succeeded.connect(lambda _w: self._wire_built(job))
+        task.failed.connect(self.show_error)
+        task.finished.connect(self._wire_task_done)
+        task.start()
+
+    def _wire_built(self, job: WireBuild) -> None:
+        if job is not self._wire_job:
+            return
+        self._in_context(lambda: self.session.install_wire_build(job))
+        self.refresh_panels()
+        self.viewport.update()
+
+    def _wire_task_done(self) -> None:
+        self.progress.hide()
+        self._wire_task = None
+        if self.session.wire_field_stale and not self.session.dragging:
+            QTimer.singleShot(0, self.request_wire_build)
+        elif self.session.wire_field_stale:
+            QTimer.singleShot(30, self.request_wire_build)
+
+    def _cancel_wire_build(self) -> None:
+        if self._wire_job is not None:
+            self._wire_job.cancel()
+        self._wire_job = None
+
+    def wait_for_wire_build(self, timeout: float = 60.0) -> bool:
+        """Process events until no wire build is running or due (tests, scripts)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            QApplication.processEvents()
+            if (
+                not (self._wire_task and self._wire_task.running)
+                and not self.session.wire_field_stale
+            ):
+                return True
+            time.sleep(0.01)
+        return False
+
+    def start_wire(self) -> None:
+        """Lay a new wire: the next clicks lay its control points."""
+        if self.session.kind != "wires":
+            self.edit("Wire field", lambda: self.session.set_deformation("wires"))
+        self.viewport.laying_wire = True
+        self.statusBar().showMessage("Click control points of the new wire; Enter finishes", 5000)
+        self.refresh_panels()
+
+    def finish_wire(self) -> None:
+        """Make the laid points a wire."""
+        if not self.viewport.laying_wire:
+            return
+        self.viewport.laying_wire = False
+        kind = self.deformation_panel.wire_kind()
+        radius = self.deformation_panel.wire_radius()
+        self.edit("New wire", lambda: self.session.finish_wire(kind, radius))
+
+    # ------------------------------------------------------------------ simulation
+    def set_running(self, running: bool) -> None:
+        """Run or pause the simulation."""
+        self.session.set_option("running", running)
+        self.run_action.setChecked(running)
+        self.refresh_panels()
+
+    def single_step(self) -> None:
+        """One step of the model (undoable)."""
+        self.edit("Single step", self.session.single_step)
+
+    def _tick(self) -> None:
+        if self.viewport.ctx is None or self.session.model is None:
+            return
+        if self.session.running:
+            ran = self.viewport.with_context(self.session.advance)
+            if ran:
+                self.viewport.update()
+
+    # ------------------------------------------------------------------ selection
+    def select_all(self) -> None:
+        """Select every handle."""
+        self.session.select(range(len(self.session.handles())))
+        self.viewport.update()
+
+    def clear_selection(self) -> None:
+        """Clear the selection (and stop laying a wire)."""
+        self.viewport.laying_wire = False
+        self.session.pending_wire = []
+        self.session.select([], "replace")
+        self.viewport.update()
+
+    def fix_selected(self, fixed: bool) -> None:
+        """Fix or free the selected elements."""
+        sel = list(self.session.selection)
+        if not sel:
+            self.statusBar().showMessage("Select elements first (click or Shift+drag)", 4000)
+            return
+        self.edit(
+            "Fix elements" if fixed else "Free elements", lambda: self.session.set_fixed(sel, fixed)
+        )
+
+    def _context_menu(self, pos: QPoint, hit: Any) -> None:
+        menu = QMenu(self)
+        if hit is not None and hit not in self.session.selection:
+            self.session.select([hit], "replace")
+        has_sel = bool(self.session.selection)
+        elements = self.session.kind in ("massspring", "chainmail")
+        a = menu.addAction("Fix", lambda: self.fix_selected(True))
+        a.setEnabled(has_sel and elements)
+        a = menu.addAction("Free", lambda: self.fix_selected(False))
+        a.setEnabled(has_sel and elements)
+        if hit is not None:
+            menu.addAction(
+                "Make Reference", lambda: (self.session.set_reference(hit), self.viewport.update())
+            )
+        menu.addSeparator()
+        menu.addAction("Select All", self.select_all)
+        menu.addAction("Clear Selection", self.clear_selection)
+        menu.addAction("Reset Camera", self.viewport.reset_camera)
+        self.viewport.update()
+        menu.popup(pos)
+
+    def toggle_projection(self) -> None:
+        """Perspective <-> orthographic."""
+        p = "orthographic" if self.viewport.camera.projection == "perspective" else "perspective"
+        self.viewport.set_projection(p)
+        self.refresh_panels()
+
+    # ------------------------------------------------------------------ files
+    def open_file_dialog(self) -> None:
+        """Choose a volume or scene file to open."""
+        path, _ = QFileDialog.getOpenFileName(
+            self, "Open volume or scene", self._last_dir(), OPEN_FILTER
+        )
+        if path:
+            self.open_path(path)
+
+    def open_path(self, path: str | Path, wait: bool = False) -> Task:
+        """Open a volume or a scene JSON off the GUI thread (progress, cancel)."""
+        spec = str(path)
+
+        def job(progress: Callable[[float, str], None], cancelled: Callable[[], bool]) -> Any:
+            progress(0.1, "reading")
+            return load_session_input(spec)
+
+        def done(result: Any) -> None:
+            self._in_context(self.session.close)
+            self.set_session(result, spec)
+
+        task = run_with_progress(self, f"Opening {Path(spec).name}", job, done, self.show_error)
+        if wait:
+            end = time.monotonic() + 120
+            while task.running and time.monotonic() < end:
+                QApplication.processEvents()
+                time.sleep(0.01)
+            for _ in range(5):  # deliver the queued result
+                QApplication.processEvents()
+        return task
+
+    def set_session(self, session: EditSession, source: str | None = None) -> None:
+        """Show another session (a file was opened); clears the undo history."""
+        self._cancel_wire_build()
+        session.running = self.session.running  # run/pause is the window's, not the file's
+        self.session = session
+        self.viewport.set_session(session, keep_camera=session.scene.camera is not None)
+        if session.scene.camera is not None:
+            self.viewport.camera = session.scene.camera
+        self.undo_stack.clear()
+        self.source = source
+        self.path = Path(source) if source and source.endswith(".json") else None
+        if source and not source.startswith("sample:"):
+            _add_recent(source)
+        self.tf_editor.set_volume(session.volume)
+        self.refresh_panels()
+        self.sessionChanged.emit()
+        self._update_title()
+
+    def save(self) -> bool:
+        """Save the scene to its file (asks for one the first time)."""
+        if self.path is None:
+            return self.save_as()
+        return self.save_to(self.path)
+
+    def save_as(self) -> bool:
+        """Save the scene under a new name."""
+        path, _ = QFileDialog.getSaveFileName(self, "Save scene", self._last_dir(), SCENE_FILTER)
+        if not path:
+            return False
+        if not path.endswith(".json"):
+            path += ".json"
+        return self.save_to(path)
+
+    def save_to(self, path: str | Path) -> bool:
+        """Write the session (camera included) atomically; errors become a dialog."""
+        scene = self.session.scene
+        old_camera = scene.camera
+        # the saved camera is the document's from now on: a resize no longer refits it
+        self.viewport.camera_moved = True
+        scene.camera = Camera.from_dict(self.viewport.camera.to_dict())
+        try:
+            self._in_context(lambda: self.session.save(path))
+        except (VoxwarpError, OSError) as exc:
+            scene.camera = old_camera
+            self.show_error(f"could not save {path}: {exc}")
+            return False
+        self.path = Path(path)
+        _add_recent(str(path))
+        self.undo_stack.setClean()
+        self.statusBar().showMessage(f"Saved {path}", 4000)
+        self._update_title()
+        return True
+
+    def export_dialog(self) -> None:
+        """Export the viewport as PNG or EXR."""
+        path, _ = QFileDialog.getSaveFileName(
+            self, "Export screenshot", self._last_dir(), "PNG (*.png);;OpenEXR (*.exr)"
+        )
+        if path:
+            self.export_screenshot(path)
+
+    def export_screenshot(self, path: str | Path, whole_window: bool = False) -> Path | None:
+        """Write the viewport's frame (or the whole window) to PNG/EXR, atomically."""
+        path = Path(path)
+        if path.suffix.lower() not in (".png", ".exr"):
+            self.show_error(f"screenshots are PNG or EXR; {path.name} has neither ending")
+            return None
+        try:
+            if whole_window:
+                from ui.viewport import qimage_to_array
+
+                img = qimage_to_array(self.grab().toImage())
+            else:
+                img = self.viewport.screenshot()
+            if path.suffix.lower() == ".exr":
+                img = img.astype("float32") / 255.0
+            return write_image(path, img)
+        except (VoxwarpError, OSError) as exc:
+            self.show_error(f"could not write {path}: {exc}")
+            return None
+
+    def _last_dir(self) -> str:
+        recent = recent_files()
+        return str(Path(recent[0]).parent) if recent else os.getcwd()
+
+    def _fill_recent(self) -> None:
+        self.recent_menu.clear()
+        files = recent_files()
+        if not files:
+            self.recent_menu.addAction("(none)").setEnabled(False)
+        for p in files:
+            self.recent_menu.addAction(p, lambda p=p: self.open_path(p))
+
+    def dragEnterEvent(self, event: QDragEnterEvent) -> None:
+        """Accept dropped files."""
+        if event.mimeData().hasUrls():
+            event.acceptProposedAction()
+
+    def dropEvent(self, event: QDropEvent) -> None:
+        """Open the first dropped file."""
+        urls = event.mimeData().urls()
+        if urls:
+            self.open_path(urls[0].toLocalFile())
+
+    # ------------------------------------------------------------------ status and dialogs
+    def _frame_drawn(self, ms: float) -> None:
+        now = time.perf_counter()
+        self._fps_times = [t for t in self._fps_times if now - t < 1.0] + [now]
+        fps = len(self._fps_times)
+        self.fps_label.setText(f"{fps} fps · frame {ms:.0f} ms")
+        self.mem_label.setText(f"{_rss_mb():.0f} MB")
+        self.deformation_panel.refresh_timings(ms)
+
+    def show_error(self, message: str) -> None:
+        """Show a core error in a dialog (never a traceback)."""
+        self.errors.append(str(message))
+        self.statusBar().showMessage(str(message), 8000)
+        if os.environ.get("VOXWARP_GUI_NO_DIALOGS"):
+            return
+        QMessageBox.warning(self, "voxwarp", str(message))
+
+    def show_help(self) -> None:
+        """The keyboard and mouse help dialog."""
+        dlg = QDialog(self)
+        dlg.setWindowTitle("voxwarp — keyboard and mouse")
+        lay = QVBoxLayout(dlg)
+        text = QTextBrowser()
+        rows = "".join(f"<tr><td><b>{k}</b></td><td>{v}</td></tr>" for k, v in SHORTCUTS)
+        text.setHtml(f"<table cellspacing=6>{rows}</table>")
+        lay.addWidget(text)
+        dlg.resize(620, 520)
+        self.help_dialog = dlg
+        dlg.show()
+
+    def _about(self) -> None:
+        QMessageBox.about(
+            self,
+            "voxwarp",
+            "voxwarp: deform volumes and meshes at render time, without resampling the volume.",
+        )
+
+    def _clean_changed(self, _clean: bool) -> None:
+        self._update_title()
+
+    def _update_title(self) -> None:
+        name = self.path.name if self.path else (self.source or self.session.volume.name)
+        star = "" if self.undo_stack.isClean() else " *"
+        self.setWindowTitle(f"{name}{star} — voxwarp")
+
+    def closeEvent(self, event: Any) -> None:
+        """Stop the timer and release GL resources."""
+        self.sim_timer.stop()
+        self._cancel_wire_build()
+        self.viewport.release_gl()
+        super().closeEvent(event)
+
+
+# ---------------------------------------------------------------------------- helpers
+def load_session_input(spec: str) -> EditSession:
+    """A session for INPUT: a scene JSON (resuming its deformation), a volume file or
+    ``sample:NAME`` (shown with the sample's suggested transfer function)."""
+    from app.cli import load_input
+    from app.samples import suggested_transfer_function
+
+    path = Path(spec)
+    if path.suffix.lower() == ".json" and path.is_file():
+        return EditSession.load(path)
+    obj = load_input(spec)
+    if isinstance(obj, Scene):
+        return EditSession(obj)
+    if not isinstance(obj, Volume):
+        raise EditorError(f"{spec} is neither a volume nor a scene")
+    tf = suggested_transfer_function(obj.name) if spec.startswith("sample:") else "ct-bone"
+    return EditSession(Scene(obj, transfer_function=tf, zoom=1.2))
+
+
+def recent_files() -> list[str]:
+    """Recently opened or saved files that still exist (newest first)."""
+    value = QSettings("voxwarp", "voxwarp").value("recent", [])
+    files = [value] if isinstance(value, str) else list(value or [])
+    return [f for f in files if Path(f).exists()][:MAX_RECENT]
+
+
+def _add_recent(path: str) -> None:
+    p = str(Path(path).resolve())
+    files = [p] + [f for f in recent_files() if f != p]
+    QSettings("voxwarp", "voxwarp").setValue("recent", files[:MAX_RECENT])
+
+
+def _rss_mb() -> float:
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _quiet(fn: Callable[[], Any]) -> Callable[[], None]:
+    def run() -> None:
+        try:
+            fn()
+        except Exception:  # a warm-up only saves time later; never fail for it
+            pass
+
+    return run
+
+
+__all__ = ["MainWindow", "SnapshotCommand", "load_session_input", "recent_files"]

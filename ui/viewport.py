@@ -1,0 +1,341 @@
+"""The 3D viewport: a ``QOpenGLWidget`` drawing the scene with voxwarp's own renderer.
+
+moderngl is attached to Qt's current context (the GUI draws with exactly the renderer
+of headless rendering, into Qt's framebuffer object), then the editing handles are
+drawn over the frame by :class:`app.overlay.OverlayRenderer`.
+
+Mouse (see also the help dialog of the main window):
+
+* left button on a handle: pick it (Shift adds, Ctrl toggles) and drag the selection
+  in the plane parallel to the image through the reference handle;
+* left button elsewhere: orbit; Shift + left elsewhere: rubber-band selection;
+  while laying a wire (:attr:`Viewport.laying_wire`): each click lays a control point;
+* middle button, or right button dragged: pan; right click: context menu;
+* wheel: zoom.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import moderngl
+import numpy as np
+from PySide6.QtCore import QPoint, QRect, QSize, Qt, Signal
+from PySide6.QtGui import QImage, QMouseEvent, QOpenGLContext, QWheelEvent
+from PySide6.QtOpenGLWidgets import QOpenGLWidget
+from PySide6.QtWidgets import QRubberBand, QWidget
+
+from app.camera import Camera
+from app.editor import DisplayOptions, EditSession
+from app.errors import VoxwarpError
+from app.overlay import OverlayRenderer
+from app.render import Renderer
+
+#: pixels the mouse may move before a press becomes a drag (orbit, pan, band)
+CLICK_SLOP_PX = 3
+#: degrees of orbit per pixel of mouse motion
+ORBIT_DEG_PER_PX = 0.4
+
+
+class _QtLoader:
+    """moderngl's loader for an external context: Qt's ``getProcAddress``."""
+
+    def load_opengl_function(self, name: str) -> int:
+        ctx = QOpenGLContext.currentContext()
+        if ctx is None:
+            return 0
+        return int(ctx.getProcAddress(name.encode()) or 0)
+
+    def release(self) -> None:
+        """Nothing to release: Qt owns the context."""
+
+
+class Viewport(QOpenGLWidget):
+    """Draws an :class:`~app.editor.EditSession`'s scene and edits it with the mouse.
+
+    Signals
+    -------
+    editStarted(str)
+        Before an edit by mouse (a drag, a fix): the window snapshots for undo.
+    editFinished(str)
+        After it; the argument is the undo text.
+    dragged()
+        After every move of a drag (the window may rebuild a wire field).
+    frameDrawn(float)
+        After each frame, with its time in ms.
+    failed(str)
+        A drawing or editing error, with the message for the user.
+    contextMenuAt(QPoint, object)
+        Right click (global position, picked handle or None).
+    """
+
+    editStarted = Signal(str)
+    editFinished = Signal(str)
+    dragged = Signal()
+    frameDrawn = Signal(float)
+    failed = Signal(str)
+    contextMenuAt = Signal(QPoint, object)
+    wirePointLaid = Signal()
+
+    def __init__(self, session: EditSession, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.display = DisplayOptions()
+        self.camera: Camera = session.scene.resolved_camera()
+        #: a click lays a control point of a new wire instead of picking
+        self.laying_wire = False
+        self.ctx: Any = None
+        self.renderer: Renderer | None = None
+        self.overlay: OverlayRenderer | None = None
+        self.frames_drawn = 0
+        self.last_frame_ms = 0.0
+        self._press: dict[str, Any] | None = None
+        self._band = QRubberBand(QRubberBand.Shape.Rectangle, self)
+        #: the user moved the camera: a resize keeps it (else it is refitted)
+        self.camera_moved = False
+        self.setMinimumSize(320, 240)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.setMouseTracking(False)
+
+    # ------------------------------------------------------------------ GL
+    def initializeGL(self) -> None:
+        """Attach moderngl to Qt's context and make the renderers."""
+        try:
+            self.ctx = moderngl.create_context(context=_QtLoader(), require=430)
+        except Exception as exc:  # no 4.3 context: say so instead of crashing
+            self.failed.emit(f"voxwarp needs OpenGL 4.3; this display offers less: {exc}")
+            return
+        self.renderer = Renderer(self.ctx)
+        self.overlay = OverlayRenderer(self.ctx)
+        self.session.ctx = self.ctx
+
+    def size_px(self) -> tuple[int, int]:
+        """The framebuffer size in device pixels."""
+        r = self.devicePixelRatio()
+        return max(1, round(self.width() * r)), max(1, round(self.height() * r))
+
+    def resizeGL(self, w: int, h: int) -> None:
+        """Refit the camera to the new shape until the user moves it."""
+        if not self.camera_moved:
+            self.set_view(self.session.scene.view)
+
+    def paintGL(self) -> None:
+        """Raycast the scene, then the handles on top."""
+        if self.renderer is None or self.overlay is None:
+            return
+        t0 = time.perf_counter()
+        w, h = self.size_px()
+        fbo = self.ctx.detect_framebuffer(self.defaultFramebufferObject())
+        try:
+            for warp in self.session.take_released_warps():
+                warp.release()
+            scene = self.session.scene
+            if not self.display.volume:
+                fbo.use()
+                fbo.clear(*scene.background)
+            else:
+                self.renderer.draw(scene, fbo, viewport=(0, 0, w, h), camera=self.camera)
+            self.overlay.draw(
+                self.session.overlay_layers(self.display), fbo, self.camera, (0, 0, w, h)
+            )
+            self.ctx.finish()  # honest frame times: wait for the GPU, not just the submission
+        except VoxwarpError as exc:
+            fbo.use()
+            fbo.clear(0.15, 0.0, 0.0, 1.0)
+            self.failed.emit(str(exc))
+        self.last_frame_ms = (time.perf_counter() - t0) * 1000
+        self.frames_drawn += 1
+        self.frameDrawn.emit(self.last_frame_ms)
+
+    def with_context(self, fn: Callable[[], Any]) -> Any:
+        """Run ``fn`` with the viewport's GL context current (GPU models, releases)."""
+        self.makeCurrent()
+        try:
+            return fn()
+        finally:
+            self.doneCurrent()
+
+    def set_session(self, session: EditSession, keep_camera: bool = False) -> None:
+        """Show another session (a file was opened)."""
+        self.session = session
+        session.ctx = self.ctx
+        self.camera_moved = keep_camera
+        if not keep_camera:
+            self.reset_camera()
+        self.update()
+
+    def release_gl(self) -> None:
+        """Release the renderers and the session's GPU resources (idempotent)."""
+        if self.ctx is None:
+            return
+
+        def release() -> None:
+            for warp in self.session.take_released_warps():
+                warp.release()
+            if self.overlay is not None:
+                self.overlay.release()
+            if self.renderer is not None:
+                self.renderer.release()
+
+        self.with_context(release)
+        self.renderer = self.overlay = None
+        self.ctx = None
+
+    # ------------------------------------------------------------------ camera
+    def reset_camera(self) -> None:
+        """Fit the camera to the scene from its standard view."""
+        self.set_view(self.session.scene.view)
+
+    def set_view(self, view: Any) -> None:
+        """Look from a standard view (``"+x"`` ... ``"-z"``) or (azimuth, elevation),
+        framing the scene in this viewport (also when it is taller than wide)."""
+        scene = self.session.scene
+        cam = scene.copy(camera=None, view=view).resolved_camera()
+        w, h = self.size_px()
+        if w < h:  # the fit frames the height; a tall viewport needs the width framed
+            cam.zoom(w / h)
+        self.camera = cam
+        self.update()
+
+    def set_projection(self, projection: str) -> None:
+        """Perspective or orthographic, keeping the framing."""
+        cam = self.camera
+        if projection == cam.projection:
+            return
+        import math
+
+        h = 2 * cam.distance * math.tan(math.radians(cam.fov) / 2)
+        self.camera = Camera(
+            cam.center, cam.rotation, cam.distance, cam.fov, projection, h, cam.radius
+        )
+        self.session.scene.projection = projection
+        self.update()
+
+    # ------------------------------------------------------------------ mouse
+    def _xy(self, pos: Any) -> tuple[float, float]:
+        r = self.devicePixelRatio()
+        return float(pos.x()) * r, float(pos.y()) * r
+
+    def mousePressEvent(self, event: QMouseEvent) -> None:
+        """Pick, start a drag, an orbit, a pan or a rubber band."""
+        pos = event.position()
+        mods = event.modifiers()
+        shift = bool(mods & Qt.KeyboardModifier.ShiftModifier)
+        ctrl = bool(mods & Qt.KeyboardModifier.ControlModifier)
+        button = event.button()
+        self._press = {"pos": pos, "last": pos, "button": button, "mode": None, "moved": False}
+        xy = self._xy(pos)
+        size = self.size_px()
+        if button == Qt.MouseButton.LeftButton:
+            if self.laying_wire:
+                self.session.add_wire_point(self.camera, size, xy)
+                self._press["mode"] = "laid"
+                self.wirePointLaid.emit()
+                self.update()
+                return
+            hit = self.session.pick(self.camera, size, xy)
+            if hit is not None:
+                self.editStarted.emit("Drag")
+                if ctrl:
+                    self.session.select([hit], "toggle")
+                elif shift:
+                    self.session.select([hit], "add")
+                elif hit not in self.session.selection:
+                    self.session.select([hit], "replace")
+                else:
+                    self.session.set_reference(hit)
+                if self.session.begin_drag(self.camera, size, xy):
+                    self._press["mode"] = "drag"
+                else:
+                    self._press["mode"] = "select"
+                self.update()
+                return
+            self._press["mode"] = "band" if shift or ctrl else "orbit"
+        elif button == Qt.MouseButton.MiddleButton:
+            self._press["mode"] = "pan"
+        elif button == Qt.MouseButton.RightButton:
+            self._press["mode"] = "pan-or-menu"
+
+    def mouseMoveEvent(self, event: QMouseEvent) -> None:
+        """Drag the selection, orbit, pan or stretch the band."""
+        if self._press is None:
+            return
+        pos = event.position()
+        p = self._press
+        if not p["moved"]:
+            d = pos - p["pos"]
+            if abs(d.x()) + abs(d.y()) < CLICK_SLOP_PX:
+                return
+            p["moved"] = True
+        dx, dy = pos.x() - p["last"].x(), pos.y() - p["last"].y()
+        p["last"] = pos
+        mode = p["mode"]
+        try:
+            if mode == "drag":
+                self.session.drag_to(self._xy(pos))
+                self.dragged.emit()
+            elif mode == "orbit":
+                self.camera_moved = True
+                self.camera.orbit(-dx * ORBIT_DEG_PER_PX, -dy * ORBIT_DEG_PER_PX)
+            elif mode in ("pan", "pan-or-menu"):
+                self.camera_moved = True
+                self.camera.pan(-dx / max(1, self.height()), dy / max(1, self.height()))
+            elif mode == "band":
+                self._band.setGeometry(QRect(p["pos"].toPoint(), pos.toPoint()).normalized())
+                self._band.show()
+        except VoxwarpError as exc:
+            self.failed.emit(str(exc))
+        self.update()
+
+    def mouseReleaseEvent(self, event: QMouseEvent) -> None:
+        """Finish what the press started."""
+        p, self._press = self._press, None
+        if p is None:
+            return
+        mode = p["mode"]
+        if mode in ("drag", "select"):
+            self.session.end_drag()
+            self.editFinished.emit("Drag" if p["moved"] else "Select")
+        elif mode == "band":
+            self._band.hide()
+            mods = event.modifiers()
+            how = "remove" if mods & Qt.KeyboardModifier.ControlModifier else "add"
+            if p["moved"]:
+                hits = self.session.pick_rect(
+                    self.camera, self.size_px(), self._xy(p["pos"]), self._xy(event.position())
+                )
+                self.session.select(hits, how)
+        elif mode == "orbit" and not p["moved"]:
+            self.session.select([], "replace")  # a click on nothing clears the selection
+        elif mode == "pan-or-menu" and not p["moved"]:
+            hit = self.session.pick(self.camera, self.size_px(), self._xy(event.position()))
+            self.contextMenuAt.emit(event.globalPosition().toPoint(), hit)
+        self.update()
+
+    def wheelEvent(self, event: QWheelEvent) -> None:
+        """Zoom about the centre."""
+        steps = event.angleDelta().y() / 120.0
+        if steps:
+            self.camera_moved = True
+            self.camera.zoom(1.15**steps)
+            self.update()
+
+    # ------------------------------------------------------------------ pictures
+    def screenshot(self) -> np.ndarray:
+        """The current frame, (H, W, 4) uint8, row 0 at the top."""
+        img = self.grabFramebuffer().convertToFormat(QImage.Format.Format_RGBA8888)
+        return qimage_to_array(img)
+
+    def sizeHint(self) -> QSize:
+        """Preferred size."""
+        return QSize(800, 600)
+
+
+def qimage_to_array(img: QImage) -> np.ndarray:
+    """An RGBA8888 ``QImage`` as an (H, W, 4) uint8 array (copied)."""
+    img = img.convertToFormat(QImage.Format.Format_RGBA8888)
+    w, h = img.width(), img.height()
+    buf = np.frombuffer(img.constBits(), dtype=np.uint8, count=img.sizeInBytes())
+    return buf.reshape(h, img.bytesPerLine())[:, : 4 * w].reshape(h, w, 4).copy()
