@@ -33,6 +33,7 @@ import math
 import os
 import time
 import weakref
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -183,6 +184,9 @@ class Renderer:
         #: use, "never" keeps per-block checks
         self.warped_skip_maps = "auto"
         self._warped_seen: dict[int, Any] = {}
+        #: "background" mode: the job the last draw wanted, and finished results
+        self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
+        self._skip_ready: dict[Any, Any] = {}
         #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
         self.last_skip_kind = "none"
         if sampling not in ("auto", "texture3d", "slice_pairs"):
@@ -209,6 +213,9 @@ class Renderer:
         self._mesh_renderer: MeshRenderer | None = None
         #: (size, colour texture, depth texture, framebuffer) of the mesh pass
         self._mesh_target: tuple[tuple[int, int], Any, Any, Any] | None = None
+        #: (size, colour texture, framebuffer) of draw_scaled, and its upscaling program
+        self._lod_target: tuple[tuple[int, int], Any, Any] | None = None
+        self._upscale: tuple[Any, Any] | None = None
         self._released = False
 
     # ------------------------------------------------------------------ resources
@@ -329,6 +336,8 @@ class Renderer:
             if self.warped_skip_maps == "always" or gpu is None:
                 return "cells"
             key = self._warped_key(scene)
+            if self.warped_skip_maps == "background":
+                return self._background_skip_kind(gpu, scene, key)
             if gpu.warped_key == key or self._warped_seen.get(id(gpu)) == key:
                 return "cells"
             self._warped_seen[id(gpu)] = key
@@ -338,6 +347,65 @@ class Renderer:
         if scene.mode in ("mip", "minip", "average"):
             return "none"
         return "blocks"
+
+    def _background_skip_kind(self, gpu: _VolumeGPU, scene: Scene, key: Any) -> str:
+        """ "background" mode: cells when this warp state's maps are built or ready,
+        else blocks, and the work is offered as :meth:`skip_map_job`."""
+        if gpu.warped_key == key:
+            return "cells"
+        ready = self._skip_ready.pop(key, None)
+        self._skip_ready.clear()  # results for other states are stale
+        if ready is not None:
+            for tex in gpu.warped_skip.values():
+                tex.release()
+            gpu.warped_skip.clear()
+            gpu.warped_visible, gpu.warped_offset = ready
+            gpu.warped_key = key
+            return "cells"
+        visible = self._cell_visibility(gpu, scene)
+        vol = scene.volume
+        lo, hi = scene.ray_bounds()
+        warps = list(scene.warps)
+        spacing, origin = vol.spacing, vol.origin
+
+        def job() -> Any:
+            return warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
+
+        self._skip_wanted = (key, job)
+        return "blocks"
+
+    def needs_skip_maps(self, scene: Scene) -> bool:
+        """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
+        would march block by block only because its warp state's deformed-space skip
+        maps are not built yet (no side effects)."""
+        if self.warped_skip_maps != "background" or not self.empty_space_skipping:
+            return False
+        if fold_affine(scene.warps) is not None:
+            return False
+        if not (scene.mode in ("dvr", "iso", "flm") and self.cell_skipping):
+            return False
+        if not _bounded(scene.warps):
+            return False
+        entry = self._volumes.get(id(scene.volume))
+        key = self._warped_key(scene)
+        return (
+            not (entry is not None and entry[1].warped_key == key) and key not in self._skip_ready
+        )
+
+    def skip_map_job(self) -> tuple[Any, Callable[[], Any]] | None:
+        """With :attr:`warped_skip_maps` "background": ``(key, job)`` for the warp
+        state the last draw drew with block checks, or None. ``job()`` is CPU work (no
+        GL) that may run on any thread while the warps it was made from stay alive; hand
+        its result to :meth:`install_skip_map`. A state that changed meanwhile simply
+        never uses it."""
+        wanted, self._skip_wanted = self._skip_wanted, None
+        return wanted
+
+    def install_skip_map(self, key: Any, result: Any) -> None:
+        """Keep a finished :meth:`skip_map_job` result; the next draw of its warp state
+        uploads and uses it."""
+        if result is not None:
+            self._skip_ready = {key: result}
 
     def _cell_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
         """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
@@ -641,6 +709,55 @@ class Renderer:
             prog["u_polygon"].value = corners
             vao.render(mode=self.ctx.TRIANGLE_FAN, vertices=len(polygon))
 
+    def draw_scaled(
+        self,
+        scene: Scene,
+        framebuffer: Any,
+        viewport: tuple[int, int, int, int] | None = None,
+        camera: Camera | None = None,
+        scale: float = 0.5,
+    ) -> None:
+        """Like :meth:`draw`, at ``scale`` times the resolution, upscaled bilinearly into
+        ``viewport``: the interactive level of detail (``scale`` 0.5 costs about a
+        quarter of the samples). ``scale`` >= 1 is a plain :meth:`draw`."""
+        if viewport is None:
+            viewport = (0, 0, *framebuffer.size)
+        x, y, w, h = (int(v) for v in viewport)
+        if not 0.0 < scale:
+            raise RenderError(f"scale must be positive; got {scale}")
+        if scale >= 1.0:
+            self.draw(scene, framebuffer, viewport, camera)
+            return
+        size = (max(1, round(w * scale)), max(1, round(h * scale)))
+        if self._lod_target is None or self._lod_target[0] != size:
+            self._release_lod_target()
+            tex = self.ctx.texture(size, 4, dtype="f1")
+            tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            self._lod_target = (size, tex, self.ctx.framebuffer(color_attachments=[tex]))
+        _, tex, fbo = self._lod_target
+        self.draw(scene, fbo, (0, 0, *size), camera)
+        if self._upscale is None:
+            prog = self.ctx.program(
+                vertex_shader=shaders.source("upscale.vert.glsl"),
+                fragment_shader=shaders.source("upscale.frag.glsl"),
+            )
+            self._upscale = (prog, self.ctx.vertex_array(prog, []))
+        prog, vao = self._upscale
+        framebuffer.use()
+        framebuffer.viewport = (x, y, w, h)
+        with self.ctx.scope(framebuffer, enable_only=0):  # no blending, depth, culling: a copy
+            tex.use(0)
+            prog["u_frame"] = 0
+            vao.render(self.ctx.TRIANGLES, vertices=3)
+
+    def _release_lod_target(self) -> None:
+        if self._lod_target is not None:
+            _, tex, fbo = self._lod_target
+            fbo.release()
+            tex.release()
+            self._lod_target = None
+
     def release(self) -> None:
         """Free every GPU resource this renderer made; idempotent."""
         if self._released:
@@ -654,6 +771,11 @@ class Renderer:
         for prog in self._programs.values():
             prog.release()
         self._programs.clear()
+        self._release_lod_target()
+        if self._upscale is not None:
+            self._upscale[1].release()
+            self._upscale[0].release()
+            self._upscale = None
         if self._tf_tex is not None:
             self._tf_tex.release()
             self._tf_tex = None

@@ -569,3 +569,71 @@ def test_cell_block_and_no_skipping_give_the_same_image(gl_ctx: Any, mode: str) 
     assert np.abs(images["cells"] - images["none"]).max() <= 1 / 255
     assert np.abs(images["blocks"] - images["none"]).max() <= 1 / 255
     assert np.abs(images["none"] - np.asarray(PHANTOM_BG, np.float32)).max() > 0.05
+
+
+# ---------------------------------------------------------------------- interactive use
+def _warped_scene() -> Scene:
+    from deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+
+    vol = phantom()
+    lo, hi = vol.bounds
+    field = gaussian_drag_field((6, 6, 6), (3, 3, 3), (5.0, -2.0, 1.0), 1.0)
+    warp = OffsetFieldWarp(lo, hi, field, shape=(6, 6, 6))
+    return Scene(vol, mode="dvr", transfer_function="ct-bone", warps=[warp], jitter=False)
+
+
+def _draw(r: OffscreenRenderer, fn: Any) -> np.ndarray:
+    with r._current():
+        fn()
+        raw = r.framebuffer.read(components=4, alignment=1)
+    w, h = r.size
+    return np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1].astype(np.float64)
+
+
+def test_draw_scaled_is_draw_at_scale_one_and_a_blurred_draw_below(offscreen: Any) -> None:
+    """The interactive level of detail: scale 1 is exactly :meth:`Renderer.draw`; scale 0.5
+    draws a quarter of the pixels and upscales them, so the frame is close to the full one
+    (same picture, softer) without being it."""
+    r = offscreen(96, 80)
+    scene = _warped_scene()
+    full = r.render(scene)[..., :4].astype(np.float64)
+    one = _draw(r, lambda: r.renderer.draw_scaled(scene, r.framebuffer, scale=1.0))
+    np.testing.assert_array_equal(one, full)
+    half = _draw(r, lambda: r.renderer.draw_scaled(scene, r.framebuffer, scale=0.5))
+    assert np.abs(half - full).mean() < 0.15 * full.mean()
+    assert np.abs(half - full).max() > 8  # it is a lower resolution, not the same draw
+    # the low-resolution frame itself: a 48 x 40 render, upscaled, matches at its pixels
+    small = offscreen(48, 40).render(scene).astype(np.float64)
+    centres = half[1::2, 1::2]  # upscaled pixels between two low-res texel centres
+    assert np.abs(centres - small).mean() < 0.1 * small.mean() + 1
+
+
+def test_background_skip_maps_are_offered_as_a_job_and_do_not_change_the_image(
+    offscreen: Any,
+) -> None:
+    """``warped_skip_maps = "background"``: a warped draw marches blocks and offers the
+    skip-map work as a job (CPU only, any thread); once its result is installed the same
+    state draws with cell skipping, pixel for pixel the same image."""
+    r = offscreen(64, 64)
+    scene = _warped_scene()
+    rr = r.renderer
+    old = rr.warped_skip_maps
+    rr.warped_skip_maps = "background"
+    try:
+        assert rr.needs_skip_maps(scene)
+        blocks = r.render(scene)
+        assert rr.last_skip_kind == "blocks"
+        wanted = rr.skip_map_job()
+        assert wanted is not None
+        assert rr.skip_map_job() is None  # handed out once
+        key, job = wanted
+        rr.install_skip_map(key, job())
+        assert not rr.needs_skip_maps(scene)
+        cells = r.render(scene)
+        assert rr.last_skip_kind == "cells"
+        np.testing.assert_array_equal(cells, blocks)
+        # a new warp state needs new maps
+        scene.warps[0].inverse = "approx"
+        assert rr.needs_skip_maps(scene)
+    finally:
+        rr.warped_skip_maps = old

@@ -1,0 +1,10 @@
+#version 430 core
+// A full-screen triangle (no vertex buffer): draws a low-resolution frame over the
+// whole viewport (Renderer.draw_scaled, interactive level of detail).
+out vec2 v_uv;
+
+void main() {
+    vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+    v_uv = p;
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
