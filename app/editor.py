@@ -67,6 +67,8 @@ WIRE_KINDS: tuple[str, ...] = ("catmull-rom", "bezier")
 SelectMode = Literal["replace", "add", "remove", "toggle"]
 #: pick radius in pixels around a handle
 PICK_RADIUS_PX = 12.0
+#: mass-spring elements slower than this (mm/s) count as at rest
+SETTLED_SPEED = 1e-3
 #: key of the editor's entry in scene JSON
 EDITOR_KEY = "editor"
 
@@ -307,6 +309,16 @@ class EditSession:
         #: changes with every edit of the wires; the drawn field is of `_wire_built`
         self.wire_generation = 0
         self._wire_built = -1
+        #: rebuild wire fields at once on model changes and undo (scripts, tests); the
+        #: GUI sets False and builds them off its thread (:meth:`wire_build`)
+        self.sync_wires = True
+        #: GPU models: least seconds between element read-backs for the overlay while
+        #: the simulation runs (never during a drag)
+        self.gpu_readback_interval = 0.5
+        self._last_readback = 0.0
+        #: the running model came to rest (:meth:`advance` stops stepping until an edit)
+        self.settled = False
+        self._advances = 0
         self.lattice_nodes: np.ndarray | None = None
         self._lattice_warp: LatticeWarp | None = None
         self.selection: list[int] = []
@@ -348,6 +360,7 @@ class EditSession:
     def _touch(self) -> None:
         self.revision += 1
         self._handle_cache = None
+        self.settled = False
 
     # ------------------------------------------------------------------ models
     def set_deformation(self, kind: str, **settings: Any) -> None:
@@ -364,14 +377,27 @@ class EditSession:
         resolution = _resolution(settings.pop("resolution", self.resolution))
         integrator = _choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
         variant = _choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
-        stiffness = float(settings.pop("stiffness", self.stiffness))
+        stiffness_value = settings.pop("stiffness", self.stiffness)
+        try:
+            stiffness = float(stiffness_value)
+        except (TypeError, ValueError) as exc:
+            raise EditorError(
+                f"stiffness must be a number in (0, 1]; got {stiffness_value!r}"
+            ) from exc
         if settings:
             raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
         if not 0.0 < stiffness <= 1.0:
             raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
         if backend == "gpu" and kind in ("massspring", "chainmail") and self.ctx is None:
             raise EditorError("the GPU backend needs the viewport's OpenGL context; use cpu")
-        old = (self.kind, self.backend, self.resolution, self.integrator, self.variant)
+        old = (
+            self.kind,
+            self.backend,
+            self.resolution,
+            self.integrator,
+            self.variant,
+            self.stiffness,
+        )
         new_model = None
         if kind in ("massspring", "chainmail"):
             # build the new model before closing the old: a refused setting leaves the
@@ -381,7 +407,14 @@ class EditSession:
             try:
                 new_model = self._new_element_model()
             except (ValueError, WarpError) as exc:
-                self.kind, self.backend, self.resolution, self.integrator, self.variant = old
+                (
+                    self.kind,
+                    self.backend,
+                    self.resolution,
+                    self.integrator,
+                    self.variant,
+                    self.stiffness,
+                ) = old
                 if isinstance(exc, EditorError):
                     raise
                 raise EditorError(str(exc)) from exc
@@ -394,8 +427,8 @@ class EditSession:
             self.model = new_model
         elif kind == "wires":
             self.wires = [self._default_wire()]
-            self._wire_warp = self._build_wires_now()
-            self._wire_built = self.wire_generation
+            self.wire_generation += 1
+            self._refresh_wire_field()
         elif kind == "lattice":
             cells = tuple(min(r - 1, 8) for r in resolution)
             lo, hi = self.box
@@ -428,6 +461,13 @@ class EditSession:
         others = [a for a in range(3) if a != axis]
         radius = 0.3 * float(min(hi[others[0]] - lo[others[0]], hi[others[1]] - lo[others[1]]))
         return Wire(pts, pts.copy(), radius=radius, name="wire 1")
+
+    def _refresh_wire_field(self) -> None:
+        """After a change of the wires: rebuild the field now (:attr:`sync_wires`) or
+        leave it stale for an off-thread :meth:`wire_build` (the GUI)."""
+        if self.sync_wires:
+            self._wire_warp = self._replace_warp(self._wire_warp, self._build_wires_now())
+            self._wire_built = self.wire_generation
 
     def _build_wires_now(self) -> WireFieldWarp:
         job = self.wire_build()
@@ -542,12 +582,13 @@ class EditSession:
 
     def _wire_point(self, index: int) -> tuple[int, int]:
         """Handle index -> (wire, control point)."""
+        handle = index
         for w, wire in enumerate(self.wires):
             n = len(wire.modified.control_points)
             if index < n:
                 return w, index
             index -= n
-        raise EditorError(f"handle {index} is not a wire control point")
+        raise EditorError(f"handle {handle} is not a wire control point")
 
     # ------------------------------------------------------------------ picking
     def pick(
@@ -711,23 +752,42 @@ class EditSession:
     def advance(self) -> bool:
         """One frame of the running model: ``steps_per_frame`` mass-spring steps or
         ``relax_steps`` ChainMail relaxation steps. Returns whether anything ran."""
-        if not self.running or self.model is None:
+        if not self.running or self.model is None or (self.settled and self._drag is None):
             return False
         n = self.steps_per_frame if isinstance(self.model, MassSpring) else self.relax_steps
         if n <= 0:
             return False
+        gpu = self.model.backend == "gpu"
+        self._advances += 1
+        check = not gpu or (self._drag is None and self._advances % 30 == 0)
+        before = self.model.positions() if check and isinstance(self.model, ChainMail) else None
         t = time.perf_counter()
         if isinstance(self.model, MassSpring):
             self.model.step(n)
         else:
             self.model.relax(n)
         self.timings["step"] = (time.perf_counter() - t) * 1000 / n
-        self._touch()
+        if check and self._drag is None:
+            # at rest: stop stepping (the field, and so the picture, holds still, and the
+            # renderer can build its skip maps) until the next edit
+            if isinstance(self.model, MassSpring):
+                speed = np.sqrt(np.max(np.sum(self.model.velocities() ** 2, axis=-1)))
+                self.settled = bool(speed < SETTLED_SPEED)
+            elif before is not None:
+                self.settled = bool(np.max(np.abs(self.model.positions() - before)) < 1e-4)
+        self.revision += 1
+        now = time.perf_counter()
+        if self.model.backend != "gpu" or (
+            self._drag is None and now - self._last_readback >= self.gpu_readback_interval
+        ):
+            self._handle_cache = None  # GPU: read back at most every gpu_readback_interval
+            self._last_readback = now
         return True
 
     def single_step(self) -> None:
         """One step of the model even when paused."""
         running, self.running = self.running, True
+        self.settled = False
         steps, relax = self.steps_per_frame, self.relax_steps
         self.steps_per_frame = self.relax_steps = 1
         try:
@@ -742,14 +802,13 @@ class EditSession:
         elif self.kind == "wires":
             self.wires = [_with_modified(w, w.base.control_points) for w in self.wires]
             self.wire_generation += 1
-            self._wire_warp = self._replace_warp(self._wire_warp, self._build_wires_now())
-            self._wire_built = self.wire_generation
+            self._refresh_wire_field()
         elif self.kind == "lattice":
             self.set_deformation("lattice")
             return
         self._sync_warps()
 
-    def _replace_warp(self, old: Warp | None, new: Warp) -> Warp:
+    def _replace_warp(self, old: Any, new: Any) -> Any:
         if old is not None and old is not new:
             self._released_warps.append(old)
         return new
@@ -769,7 +828,8 @@ class EditSession:
 
     def install_wire_build(self, job: WireBuild) -> bool:
         """Put a finished :class:`WireBuild` in the scene (GUI thread). Returns False
-        (and drops it) when cancelled or when the wires are not the same any more."""
+        when it was cancelled (dropped) or when the wires changed while it ran (then it
+        is drawn meanwhile, and the field stays stale for the next build)."""
         if job.warp is None or job.cancelled or self.kind != "wires":
             return False
         self._wire_warp = self._replace_warp(self._wire_warp, job.warp)  # type: ignore[assignment]
@@ -817,6 +877,10 @@ class EditSession:
             raise EditorError(
                 f"field_scale must be 1, 2, 4, 8 or 16; got {settings['field_scale']!r}"
             )
+        if "layout" in settings and settings["layout"] not in ("float", "packed"):
+            raise EditorError(f"layout must be 'float' or 'packed'; got {settings['layout']!r}")
+        if "masks" in settings and not isinstance(settings["masks"], bool):
+            raise EditorError(f"masks must be true or false; got {settings['masks']!r}")
         self.wire_settings.update(settings)
         self.wire_generation += 1
         self._touch()
@@ -1004,10 +1068,11 @@ class EditSession:
             snap.kind == "wires"
             and self.kind == "wires"
             and snap.wires == [w.to_dict() for w in self.wires]
+            and snap.wire_settings == self.wire_settings
         )
         keep_field = self._wire_warp if same_wires and not self.wire_field_stale else None
-        if keep_field is not None:
-            self._wire_warp = None  # keep it out of _close_model's release list
+        drawn = self._wire_warp if snap.kind == "wires" else None
+        self._wire_warp = None  # keep the drawn field out of _close_model's release list
         self._close_model()
         s = snap.settings
         self.kind, self.backend, self.resolution = snap.kind, snap.backend, snap.resolution
@@ -1027,9 +1092,12 @@ class EditSession:
             self.wire_generation += 1
             if keep_field is not None:
                 self._wire_warp = keep_field
+                self._wire_built = self.wire_generation
             else:
-                self._wire_warp = self._build_wires_now()
-            self._wire_built = self.wire_generation
+                self._wire_warp = drawn  # drawn until the rebuilt field replaces it
+                self._refresh_wire_field()
+        elif drawn is not None:
+            self._released_warps.append(drawn)
         if snap.lattice_nodes is not None:
             self.lattice_nodes = snap.lattice_nodes.copy()
         self.selection, self.reference = list(snap.selection), snap.reference
@@ -1042,7 +1110,13 @@ class EditSession:
         """Scene JSON plus an ``"editor"`` entry (deformation, placement, settings).
 
         The warps carry the models (mass-spring/ChainMail state, wires, lattice), so
-        the file also renders with ``voxwarp render`` and resumes in the GUI."""
+        the file also renders with ``voxwarp render`` and resumes in the GUI. A stale
+        wire field (edited, not rebuilt yet) is rebuilt first, so the file holds the
+        wires as they are."""
+        if self.wire_field_stale:
+            self._wire_warp = self._replace_warp(self._wire_warp, self._build_wires_now())
+            self._wire_built = self.wire_generation
+            self._sync_warps()
         d = self.scene.to_dict(base_dir=base_dir)
         model_index = {0: None, 1: 0, 3: 1}[len(self.scene.warps)]
         d[EDITOR_KEY] = {
@@ -1086,12 +1160,11 @@ class EditSession:
         """Take over the deformation saved in the scene's warps (see :meth:`to_dict`)."""
         entry: dict[str, Any] = getattr(self, "_editor_entry", {}) or {}
         warps = list(self.scene.warps)
-        if not warps:
-            self._sync_warps()
-            return
         try:
             if entry.get("placement") is not None:
                 self.placement = Placement.from_dict(entry["placement"])
+            if entry.get("resolution") is not None:
+                self.resolution = _resolution(entry["resolution"])
             for key in ("integrator", "variant"):
                 if key in entry:
                     setattr(self, key, str(entry[key]))
@@ -1102,6 +1175,9 @@ class EditSession:
                 self.stiffness = float(entry["stiffness"])
             if isinstance(entry.get("wire_settings"), dict):
                 self.wire_settings = dict(entry["wire_settings"])
+            if not warps:
+                self._sync_warps()
+                return
             index = entry.get("model_warp", 0 if len(warps) == 1 else None)
             if len(warps) == 3 and index is None:
                 index = 1
