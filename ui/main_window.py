@@ -137,6 +137,7 @@ class MainWindow(QMainWindow):
 
     def __init__(self, session: EditSession, path: str | Path | None = None) -> None:
         super().__init__()
+        session.sync_wires = False  # wire fields build off the GUI thread here
         self.session = session
         self.path: Path | None = (
             Path(path) if path is not None and str(path).endswith(".json") else None
@@ -345,6 +346,8 @@ class MainWindow(QMainWindow):
             self._in_context(lambda: self.session.restore(snap))
         except VoxwarpError as exc:
             self.show_error(str(exc))
+        if self.session.wire_field_stale:
+            self.request_wire_build()
         self.refresh_panels()
         self.viewport.update()
 
@@ -560,6 +563,7 @@ class MainWindow(QMainWindow):
         """Show another session (a file was opened); clears the undo history."""
         self._cancel_wire_build()
         session.running = self.session.running  # run/pause is the window's, not the file's
+        session.sync_wires = False
         self.session = session
         self.viewport.set_session(session, keep_camera=session.scene.camera is not None)
         if session.scene.camera is not None:

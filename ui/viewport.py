@@ -22,7 +22,7 @@ from typing import Any
 
 import moderngl
 import numpy as np
-from PySide6.QtCore import QPoint, QRect, QSize, Qt, Signal
+from PySide6.QtCore import QPoint, QRect, QSize, Qt, QTimer, Signal
 from PySide6.QtGui import QImage, QMouseEvent, QOpenGLContext, QWheelEvent
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QRubberBand, QWidget
@@ -32,9 +32,14 @@ from app.editor import DisplayOptions, EditSession
 from app.errors import VoxwarpError
 from app.overlay import OverlayRenderer
 from app.render import Renderer
+from ui.tasks import Task
 
 #: pixels the mouse may move before a press becomes a drag (orbit, pan, band)
 CLICK_SLOP_PX = 3
+#: frames are drawn at full resolution again this long after the last input (ms)
+REFINE_AFTER_MS = 250
+#: a warp state drawn again after this long gets its skip maps built (ms)
+SKIP_MAP_SETTLE_MS = 150
 #: degrees of orbit per pixel of mouse motion
 ORBIT_DEG_PER_PX = 0.4
 
@@ -95,6 +100,17 @@ class Viewport(QOpenGLWidget):
         self._band = QRubberBand(QRubberBand.Shape.Rectangle, self)
         #: the user moved the camera: a resize keeps it (else it is refitted)
         self.camera_moved = False
+        self._skip_task: Task | None = None
+        self._skip_key: Any = None
+        self._skip_now = False
+        #: resolution scale of frames drawn while interacting (dragging, orbiting, a
+        #: running simulation): the level of detail that keeps the view responsive
+        self.interactive_scale = 0.5
+        self._last_input = 0.0
+        self._refine = QTimer(self)
+        self._refine.setSingleShot(True)
+        self._refine.setInterval(REFINE_AFTER_MS)
+        self._refine.timeout.connect(self._refine_frame)
         self.setMinimumSize(320, 240)
         self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         self.setMouseTracking(False)
@@ -108,6 +124,9 @@ class Viewport(QOpenGLWidget):
             self.failed.emit(f"voxwarp needs OpenGL 4.3; this display offers less: {exc}")
             return
         self.renderer = Renderer(self.ctx)
+        # deformed-space skip maps take 0.5-3 s of CPU: never in a frame, but on a
+        # worker thread once a warp state holds still (see _start_skip_map_job)
+        self.renderer.warped_skip_maps = "background"
         self.overlay = OverlayRenderer(self.ctx)
         self.session.ctx = self.ctx
 
@@ -136,7 +155,15 @@ class Viewport(QOpenGLWidget):
                 fbo.use()
                 fbo.clear(*scene.background)
             else:
-                self.renderer.draw(scene, fbo, viewport=(0, 0, w, h), camera=self.camera)
+                # a new warp state waits for its skip maps at the interactive scale
+                # (built on a worker: _start_skip_map_job) instead of marching every block
+                waiting = self._can_build_skip_maps() and self.renderer.needs_skip_maps(scene)
+                interactive = self.interacting()
+                self._skip_now = waiting and not interactive
+                scale = self.interactive_scale if interactive or waiting else 1.0
+                self.renderer.draw_scaled(scene, fbo, (0, 0, w, h), self.camera, scale)
+                if scale < 1.0:
+                    self._refine.start()  # full resolution once the interaction stops
             self.overlay.draw(
                 self.session.overlay_layers(self.display), fbo, self.camera, (0, 0, w, h)
             )
@@ -147,7 +174,75 @@ class Viewport(QOpenGLWidget):
             self.failed.emit(str(exc))
         self.last_frame_ms = (time.perf_counter() - t0) * 1000
         self.frames_drawn += 1
+        self._start_skip_map_job()
         self.frameDrawn.emit(self.last_frame_ms)
+
+    def _start_skip_map_job(self) -> None:
+        """Build the skip maps of a warp state drawn twice in a row on a worker thread
+        (CPU models only: a GPU model's field would be read back off its thread)."""
+        assert self.renderer is not None
+        wanted = self.renderer.skip_map_job()
+        if wanted is None:
+            self._skip_key = None
+            return
+        key, job = wanted
+        gpu_model = not self._can_build_skip_maps()
+        busy = self._skip_task is not None and self._skip_task.running
+        now, self._skip_now = self._skip_now, False
+        if (key != self._skip_key and not now) or gpu_model or busy:
+            if key != self._skip_key and not gpu_model:
+                QTimer.singleShot(SKIP_MAP_SETTLE_MS, self.update)  # is it still there?
+            self._skip_key = key
+            return
+        self._skip_key = None
+        renderer = self.renderer
+        task = Task(lambda _progress, _cancelled: job(), self)
+        task.succeeded.connect(lambda result: self._skip_map_ready(renderer, key, result))
+        self._skip_task = task.start()
+
+    def _can_build_skip_maps(self) -> bool:
+        """Skip maps are built off the GUI thread for CPU models only (a GPU model's
+        field would be read back off its context's thread)."""
+        m = self.session.model
+        return m is None or m.backend != "gpu"
+
+    def _skip_map_ready(self, renderer: Renderer, key: Any, result: Any) -> None:
+        if renderer is self.renderer:
+            renderer.install_skip_map(key, result)
+            self.update()
+
+    def interacting(self) -> bool:
+        """Whether the view is being changed right now: a mouse drag, a wheel turn or a
+        key in the last moments, or a simulation that has not come to rest."""
+        if self._press is not None and self._press.get("moved"):
+            return True
+        if (time.perf_counter() - self._last_input) * 1000 < REFINE_AFTER_MS:
+            return True
+        s = self.session
+        return bool(s.running and s.model is not None and not s.settled)
+
+    def at_rest(self) -> bool:
+        """Whether the next frame is the final one: no interaction and no skip maps
+        being built for it (tests and scripts wait for this before reading frames)."""
+        if self.interacting() or (self._skip_task is not None and self._skip_task.running):
+            return False
+        return self.renderer is None or not (
+            self._can_build_skip_maps() and self.renderer.needs_skip_maps(self.session.scene)
+        )
+
+    def note_input(self) -> None:
+        """Something changed the view (the next frames are interactive ones)."""
+        self._last_input = time.perf_counter()
+
+    def _refine_frame(self) -> None:
+        if self.interacting():
+            self._refine.start()
+        elif self._skip_task is not None and self._skip_task.running:
+            # the skip maps of this state are being built: its full-resolution frame
+            # waits for them (_skip_map_ready redraws) instead of marching every block
+            return
+        else:
+            self.update()
 
     def with_context(self, fn: Callable[[], Any]) -> Any:
         """Run ``fn`` with the viewport's GL context current (GPU models, releases)."""
@@ -271,6 +366,7 @@ class Viewport(QOpenGLWidget):
             p["moved"] = True
         dx, dy = pos.x() - p["last"].x(), pos.y() - p["last"].y()
         p["last"] = pos
+        self.note_input()
         mode = p["mode"]
         try:
             if mode == "drag":
@@ -318,6 +414,7 @@ class Viewport(QOpenGLWidget):
         """Zoom about the centre."""
         steps = event.angleDelta().y() / 120.0
         if steps:
+            self.note_input()
             self.camera_moved = True
             self.camera.zoom(1.15**steps)
             self.update()

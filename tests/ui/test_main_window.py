@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -58,8 +59,16 @@ def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
 
 
 def frame(w: Any, overlay: bool = False) -> np.ndarray:
-    """Redraw and read the viewport's frame (float RGB); without the handles by default,
-    so that a change is the volume's."""
+    """The viewport's full-resolution frame once the interaction has stopped (float RGB);
+    without the handles by default, so that a change is the volume's."""
+    from PySide6.QtWidgets import QApplication
+
+    deadline = time.monotonic() + 30
+    while not w.viewport.at_rest() and time.monotonic() < deadline:
+        w.viewport.update()  # a new warp state draws once before its skip maps are built
+        QApplication.processEvents()
+        time.sleep(0.02)
+    assert w.viewport.at_rest(), "the view did not come to rest"
     shown = w.viewport.display
     w.viewport.display = (
         shown
@@ -68,12 +77,8 @@ def frame(w: Any, overlay: bool = False) -> np.ndarray:
     )
     w.viewport.update()
     n = w.viewport.frames_drawn
-    deadline = 200
-    while w.viewport.frames_drawn == n and deadline:
-        from PySide6.QtWidgets import QApplication
-
+    while w.viewport.frames_drawn == n and time.monotonic() < deadline:
         QApplication.processEvents()
-        deadline -= 1
     img = w.viewport.screenshot()[..., :3].astype(np.float64)
     w.viewport.display = shown
     return img
@@ -158,7 +163,9 @@ def test_undo_restores_the_state_exactly_and_redo_reapplies(window: Any, qtbot: 
 def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any) -> None:
     w = window
     w.edit("Wire field", lambda: w.session.set_deformation("wires"))
+    assert w.wait_for_wire_build(60)
     field_before = w.session.model_warp()
+    assert field_before is not None
     img0 = frame(w)
     k = 2  # an inner control point of the default straight wire
     start = handle_pixel(w, k)
@@ -176,6 +183,7 @@ def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any
     np.testing.assert_array_equal(
         w.session.wires[0].modified.control_points, w.session.wires[0].base.control_points
     )
+    assert w.wait_for_wire_build(60)  # the undone field is rebuilt off the GUI thread too
     np.testing.assert_array_equal(frame(w), img0)
 
 
