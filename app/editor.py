@@ -32,6 +32,7 @@ whole state, velocities included) so that undo restores it exactly.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -332,6 +333,9 @@ class EditSession:
         self._drag: dict[str, Any] | None = None
         self._handle_cache: np.ndarray | None = None
         self._released_warps: list[Warp] = []
+        #: ``() -> context manager`` making the GL context of GPU models current (the
+        #: GUI's viewport sets it; a headless caller's context is current already)
+        self.gl_scope: Callable[[], Any] = contextlib.nullcontext
         self._recover_from_scene()
 
     # ------------------------------------------------------------------ properties
@@ -443,13 +447,18 @@ class EditSession:
         ctx = self.ctx if self.backend == "gpu" else None
         cls = MassSpring if self.kind == "massspring" else ChainMail
         if model is not None:
-            return cls.from_dict(model, backend=self.backend, ctx=ctx)
+            restored = cls.from_dict(model, backend=self.backend, ctx=ctx)
+            if isinstance(restored, ChainMail) and self.backend == "gpu":
+                restored.relax_steps = 0  # see below
+            return restored
         grid = ElementGrid(self.box, shape=self.resolution)
         grid.set_material(stiffness=self.stiffness)
         if self.kind == "massspring":
             return MassSpring(grid, backend=self.backend, ctx=ctx, integrator=self.integrator)
         cm = ChainMail(grid, variant=self.variant, backend=self.backend, ctx=ctx)
-        cm.relax_steps = self.relax_steps
+        # relaxation runs on the CPU (a GPU model is read back for it): a GPU model relaxes
+        # in advance() between drags, never inside a move
+        cm.relax_steps = self.relax_steps if self.backend == "cpu" else 0
         return cm
 
     def _default_wire(self) -> Wire:
@@ -538,7 +547,7 @@ class EditSession:
                 raise EditorError(f"{name} must be 0..10000; got {value!r}")
             setattr(self, name, v)
             if name == "relax_steps" and isinstance(self.model, ChainMail):
-                self.model.relax_steps = v
+                self.model.relax_steps = v if self.model.backend == "cpu" else 0
         else:
             raise EditorError(f"unknown option {name!r}")
 
@@ -554,9 +563,9 @@ class EditSession:
         if self.kind in ("massspring", "chainmail") and self.model is not None:
             if self.model.backend == "gpu" and self._drag is not None:
                 # never read the GPU back while dragging: targets of the held elements
-                base = self._drag["positions"].copy()
-                return base
-            return self.model.positions().reshape(-1, 3)
+                return self._drag["positions"].copy()
+            with self.gl_scope():
+                return self.model.positions().reshape(-1, 3)
         if self.kind == "wires":
             if not self.wires:
                 return np.zeros((0, 3))
@@ -758,6 +767,8 @@ class EditSession:
         if n <= 0:
             return False
         gpu = self.model.backend == "gpu"
+        if gpu and isinstance(self.model, ChainMail) and self._drag is not None:
+            return False  # its relaxation reads the GPU back: not during a drag
         self._advances += 1
         check = not gpu or (self._drag is None and self._advances % 30 == 0)
         before = self.model.positions() if check and isinstance(self.model, ChainMail) else None

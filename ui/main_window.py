@@ -213,10 +213,17 @@ class MainWindow(QMainWindow):
         # the viewport gets the room: docks at their compact widths
         QTimer.singleShot(
             0,
-            lambda: self.resizeDocks(
-                [self.docks["Volume"], self.docks["Deformation"]],
-                [300, 290],
-                Qt.Orientation.Horizontal,
+            lambda: (
+                self.resizeDocks(
+                    [self.docks["Volume"], self.docks["Deformation"]],
+                    [300, 290],
+                    Qt.Orientation.Horizontal,
+                ),
+                self.resizeDocks(
+                    [self.docks["Deformation"], self.docks["Display"]],
+                    [3 * self.height() // 4, self.height() // 4],
+                    Qt.Orientation.Vertical,
+                ),
             ),
         )
 

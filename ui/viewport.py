@@ -16,8 +16,9 @@ Mouse (see also the help dialog of the main window):
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import moderngl
@@ -123,6 +124,7 @@ class Viewport(QOpenGLWidget):
         except Exception as exc:  # no 4.3 context: say so instead of crashing
             self.failed.emit(f"voxwarp needs OpenGL 4.3; this display offers less: {exc}")
             return
+        self.session.gl_scope = self.gl_scope
         self.renderer = Renderer(self.ctx)
         # deformed-space skip maps take 0.5-3 s of CPU: never in a frame, but on a
         # worker thread once a warp state holds still (see _start_skip_map_job)
@@ -244,11 +246,26 @@ class Viewport(QOpenGLWidget):
         else:
             self.update()
 
+    def _in_gl(self, fn: Callable[[], Any]) -> Any:
+        if self.ctx is None:
+            return fn()
+        return self.with_context(fn)
+
     def with_context(self, fn: Callable[[], Any]) -> Any:
         """Run ``fn`` with the viewport's GL context current (GPU models, releases)."""
+        with self.gl_scope():
+            return fn()
+
+    @contextlib.contextmanager
+    def gl_scope(self) -> Iterator[None]:
+        """Make the viewport's context current for a block (re-entrant: inside
+        ``paintGL`` or another scope it is current already and stays so)."""
+        if self.ctx is None or QOpenGLContext.currentContext() is self.context():
+            yield
+            return
         self.makeCurrent()
         try:
-            return fn()
+            yield
         finally:
             self.doneCurrent()
 
@@ -256,6 +273,7 @@ class Viewport(QOpenGLWidget):
         """Show another session (a file was opened)."""
         self.session = session
         session.ctx = self.ctx
+        session.gl_scope = self.gl_scope
         self.camera_moved = keep_camera
         if not keep_camera:
             self.reset_camera()
@@ -314,6 +332,11 @@ class Viewport(QOpenGLWidget):
         return float(pos.x()) * r, float(pos.y()) * r
 
     def mousePressEvent(self, event: QMouseEvent) -> None:
+        """See :meth:`_mousePressEvent` (run with the GL context current: a GPU model moves
+        its elements through GL)."""
+        self._in_gl(lambda: self._mousePressEvent(event))
+
+    def _mousePressEvent(self, event: QMouseEvent) -> None:
         """Pick, start a drag, an orbit, a pan or a rubber band."""
         pos = event.position()
         mods = event.modifiers()
@@ -354,6 +377,11 @@ class Viewport(QOpenGLWidget):
             self._press["mode"] = "pan-or-menu"
 
     def mouseMoveEvent(self, event: QMouseEvent) -> None:
+        """See :meth:`_mouseMoveEvent` (run with the GL context current: a GPU model moves
+        its elements through GL)."""
+        self._in_gl(lambda: self._mouseMoveEvent(event))
+
+    def _mouseMoveEvent(self, event: QMouseEvent) -> None:
         """Drag the selection, orbit, pan or stretch the band."""
         if self._press is None:
             return
@@ -386,6 +414,11 @@ class Viewport(QOpenGLWidget):
         self.update()
 
     def mouseReleaseEvent(self, event: QMouseEvent) -> None:
+        """See :meth:`_mouseReleaseEvent` (run with the GL context current: a GPU model moves
+        its elements through GL)."""
+        self._in_gl(lambda: self._mouseReleaseEvent(event))
+
+    def _mouseReleaseEvent(self, event: QMouseEvent) -> None:
         """Finish what the press started."""
         p, self._press = self._press, None
         if p is None:

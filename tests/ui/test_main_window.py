@@ -291,3 +291,42 @@ def test_gui_command_screenshot_matches_golden(tmp_path: Path, golden: Any) -> N
     # the fps, frame time and memory labels differ from run to run (any difference
     # allowed there): 99.5 % of the pixels within 3/255 per channel
     golden("gui_window", img, 3 / 255, fraction=0.995, max_abs=1.0)
+
+
+@pytest.mark.parametrize("kind", ["massspring", "chainmail"])
+def test_gpu_backend_runs_live_without_read_backs_while_dragging(
+    window: Any, qtbot: Any, monkeypatch: pytest.MonkeyPatch, kind: str
+) -> None:
+    """The GPU solvers run in the viewport's own GL context; during a drag nothing is
+    read back (positions, velocities), yet the model moves and the picture changes."""
+    w = window
+    w.edit("GPU model", lambda: w.session.set_deformation(kind, backend="gpu", resolution=5))
+    assert w.session.model.backend == "gpu"
+    i = central_free_element(w.session, w.viewport.camera)
+    before_img = frame(w)
+    before = w.viewport.with_context(w.session.model.displacements).reshape(-1, 3)[i].copy()
+    reads: list[str] = []
+    model = w.session.model
+    for name in ("positions", "velocities", "displacements"):
+        if hasattr(model, name):
+            original = getattr(model, name)
+            monkeypatch.setattr(
+                model,
+                name,
+                lambda *a, _o=original, _n=name, **k: (reads.append(_n), _o(*a, **k))[1],
+            )
+    start = handle_pixel(w, i)
+    w.set_running(True)
+    qtbot.mousePress(w.viewport, Qt.MouseButton.LeftButton, pos=start)
+    reads.clear()  # the press may read the handles once; the drag itself must not
+    for k in range(1, 6):
+        qtbot.mouseMove(w.viewport, pos=start + QPoint(0, -16 * k))
+        w._tick()
+        w.viewport.repaint()
+    assert reads == [], f"read back during the drag: {reads}"
+    qtbot.mouseRelease(w.viewport, Qt.MouseButton.LeftButton, pos=start + QPoint(0, -80))
+    w.set_running(False)
+    monkeypatch.undo()
+    after = w.viewport.with_context(w.session.model.displacements).reshape(-1, 3)[i]
+    assert np.linalg.norm(after - before) > 5.0
+    assert np.mean(np.abs(frame(w) - before_img).max(axis=-1) > 8) > 0.002
