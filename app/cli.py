@@ -1287,6 +1287,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.bench_lattice import add_bench_lattice_parser
 
     add_bench_lattice_parser(bsub)
+    from app.bench_interactive import add_bench_interactive_parser
+
+    add_bench_interactive_parser(bsub)
     return p
 
 
