@@ -1055,7 +1055,8 @@ class DeformationPanel(_Panel):
 
 # ---------------------------------------------------------------------------- display
 class DisplayPanel(_Panel):
-    """Check boxes toggling what the viewport draws (:class:`~app.editor.DisplayOptions`).
+    """Check boxes toggling what the viewport draws (:class:`~app.editor.DisplayOptions`),
+    and below them the field slice view (:class:`ui.field_view.FieldSliceView`).
 
     Display toggles are not part of the document: they change
     ``window.viewport.display`` directly (no undo step) and redraw.
@@ -1078,15 +1079,23 @@ class DisplayPanel(_Panel):
             check.toggled.connect(lambda on, name=f.name: self._toggled(name, on))
             layout.addWidget(check)
             self.checks[f.name] = check
+        from ui.field_view import FieldSliceView
+
+        #: the deformation's internal fields on a slice (folded until asked for)
+        self.field_view = FieldSliceView(window)
+        layout.addSpacing(4)
+        layout.addWidget(self.field_view)
         layout.addStretch(1)
         self.refresh()
 
     def refresh(self) -> None:
-        """Show the viewport's current display options."""
+        """Show the viewport's current display options (and the field slice of the
+        current deformation, recomputed only when something changed)."""
         display = self._window.viewport.display
         with self._refreshing():
             for name, check in self.checks.items():
                 check.setChecked(bool(getattr(display, name)))
+        self.field_view.refresh()
 
     def _toggled(self, name: str, on: bool) -> None:
         if self._updating:

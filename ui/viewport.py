@@ -24,7 +24,7 @@ from typing import Any
 import moderngl
 import numpy as np
 from PySide6.QtCore import QPoint, QRect, QSize, Qt, QTimer, Signal
-from PySide6.QtGui import QImage, QMouseEvent, QOpenGLContext, QWheelEvent
+from PySide6.QtGui import QImage, QKeyEvent, QMouseEvent, QOpenGLContext, QWheelEvent
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QRubberBand, QWidget
 
@@ -41,6 +41,9 @@ CLICK_SLOP_PX = 3
 REFINE_AFTER_MS = 250
 #: a warp state drawn again after this long gets its skip maps built (ms)
 SKIP_MAP_SETTLE_MS = 150
+#: degrees of orbit per arrow key press, and fraction of the view height per Shift+arrow
+KEY_ORBIT_DEG = 5.0
+KEY_PAN = 0.05
 #: degrees of orbit per pixel of mouse motion
 ORBIT_DEG_PER_PX = 0.4
 
@@ -451,6 +454,33 @@ class Viewport(QOpenGLWidget):
             self.camera_moved = True
             self.camera.zoom(1.15**steps)
             self.update()
+
+    def keyPressEvent(self, event: QKeyEvent) -> None:
+        """Arrow keys orbit (Shift+arrows pan), + and - zoom."""
+        key = event.key()
+        shift = bool(event.modifiers() & Qt.KeyboardModifier.ShiftModifier)
+        arrows = {
+            Qt.Key.Key_Left: (-1, 0),
+            Qt.Key.Key_Right: (1, 0),
+            Qt.Key.Key_Up: (0, 1),
+            Qt.Key.Key_Down: (0, -1),
+        }
+        if key in arrows:
+            dx, dy = arrows[key]
+            if shift:
+                self.camera.pan(-dx * KEY_PAN, -dy * KEY_PAN)
+            else:
+                self.camera.orbit(dx * KEY_ORBIT_DEG, dy * KEY_ORBIT_DEG)
+        elif key in (Qt.Key.Key_Plus, Qt.Key.Key_Equal):
+            self.camera.zoom(1.15)
+        elif key == Qt.Key.Key_Minus:
+            self.camera.zoom(1 / 1.15)
+        else:
+            super().keyPressEvent(event)
+            return
+        self.camera_moved = True
+        self.note_input()
+        self.update()
 
     # ------------------------------------------------------------------ pictures
     def screenshot(self) -> np.ndarray:

@@ -330,3 +330,24 @@ def test_gpu_backend_runs_live_without_read_backs_while_dragging(
     after = w.viewport.with_context(w.session.model.displacements).reshape(-1, 3)[i]
     assert np.linalg.norm(after - before) > 5.0
     assert np.mean(np.abs(frame(w) - before_img).max(axis=-1) > 8) > 0.002
+
+
+def test_keys_orbit_pan_and_zoom(window: Any, qtbot: Any) -> None:
+    """Arrow keys orbit about the centre (distance kept), Shift+arrows pan (rotation
+    kept), + and - zoom; the standard-view keys look along the axes."""
+    w = window
+    vp = w.viewport
+    vp.setFocus()
+    cam0 = vp.camera.to_dict()
+    qtbot.keyClick(vp, Qt.Key.Key_Right)
+    assert not np.allclose(vp.camera.rotation, cam0["rotation"])
+    assert vp.camera.distance == pytest.approx(cam0["distance"])
+    rot = vp.camera.rotation.copy()
+    qtbot.keyClick(vp, Qt.Key.Key_Up, Qt.KeyboardModifier.ShiftModifier)
+    np.testing.assert_allclose(vp.camera.rotation, rot)
+    assert not np.allclose(vp.camera.center, cam0["center"])
+    d = vp.camera.distance
+    qtbot.keyClick(vp, Qt.Key.Key_Plus)
+    assert vp.camera.distance == pytest.approx(d / 1.15)
+    qtbot.keyClick(vp, Qt.Key.Key_5)  # view from +z: looking down -z
+    np.testing.assert_allclose(vp.camera.rotation[:, 2], [0, 0, 1], atol=1e-12)
