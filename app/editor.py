@@ -68,6 +68,8 @@ WIRE_KINDS: tuple[str, ...] = ("catmull-rom", "bezier")
 SelectMode = Literal["replace", "add", "remove", "toggle"]
 #: pick radius in pixels around a handle
 PICK_RADIUS_PX = 12.0
+#: the session attributes that choose the deformation model
+MODEL_SETTINGS = ("kind", "backend", "resolution", "integrator", "variant", "stiffness")
 #: mass-spring elements slower than this (mm/s) count as at rest
 SETTLED_SPEED = 1e-3
 #: key of the editor's entry in scene JSON
@@ -394,38 +396,29 @@ class EditSession:
             raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
         if backend == "gpu" and kind in ("massspring", "chainmail") and self.ctx is None:
             raise EditorError("the GPU backend needs the viewport's OpenGL context; use cpu")
-        old = (
-            self.kind,
-            self.backend,
-            self.resolution,
-            self.integrator,
-            self.variant,
-            self.stiffness,
+        settings_now = {name: getattr(self, name) for name in MODEL_SETTINGS}
+        wanted = dict(
+            zip(
+                MODEL_SETTINGS,
+                (kind, backend, resolution, integrator, variant, stiffness),
+                strict=True,
+            )
         )
         new_model = None
         if kind in ("massspring", "chainmail"):
             # build the new model before closing the old: a refused setting leaves the
             # session as it was
-            self.kind, self.backend, self.resolution = kind, backend, resolution
-            self.integrator, self.variant, self.stiffness = integrator, variant, stiffness
+            self._set_settings(wanted)
             try:
                 new_model = self._new_element_model()
             except (ValueError, WarpError) as exc:
-                (
-                    self.kind,
-                    self.backend,
-                    self.resolution,
-                    self.integrator,
-                    self.variant,
-                    self.stiffness,
-                ) = old
+                self._set_settings(settings_now)
                 if isinstance(exc, EditorError):
                     raise
                 raise EditorError(str(exc)) from exc
         self._close_model()
         self.timings.clear()
-        self.kind, self.backend, self.resolution = kind, backend, resolution
-        self.integrator, self.variant, self.stiffness = integrator, variant, stiffness
+        self._set_settings(wanted)
         self.selection, self.reference = [], None
         if new_model is not None:
             self.model = new_model
@@ -442,6 +435,10 @@ class EditSession:
             self.lattice_nodes = lo + u * (hi - lo)
             self._lattice_warp = None
         self._sync_warps()
+
+    def _set_settings(self, values: dict[str, Any]) -> None:
+        for name, value in values.items():
+            setattr(self, name, value)
 
     def _new_element_model(self, model: dict[str, Any] | None = None) -> MassSpring | ChainMail:
         ctx = self.ctx if self.backend == "gpu" else None
