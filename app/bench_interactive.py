@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from app.cli_args import image_size, positive_int
 from app.editor import EditSession, _with_modified
 from app.render import OffscreenRenderer
 from app.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
@@ -204,14 +205,12 @@ def cmd_bench_interactive(args: argparse.Namespace) -> int:
 
 def add_bench_interactive_parser(bsub: Any) -> None:
     """Add ``interactive`` to the ``bench`` sub-commands."""
-    from app.cli import _positive_int, _size
-
     p = bsub.add_parser(
         "interactive",
         help="the GUI's frame costs while editing each deformation family",
         description=__doc__.split("\n\n")[1] if __doc__ else None,
     )
-    p.add_argument("--size", type=_size, default=(750, 830), help="viewport WxH")
-    p.add_argument("--frames", type=_positive_int, default=5, help="timed frames per case")
+    p.add_argument("--size", type=image_size, default=(750, 830), help="viewport WxH")
+    p.add_argument("--frames", type=positive_int, default=5, help="timed frames per case")
     p.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=cmd_bench_interactive)

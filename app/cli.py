@@ -16,19 +16,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from app.cli_args import image_size as _size
+from app.cli_args import positive_int as _positive_int
 from app.errors import VoxwarpError
 
 MODES = ("dvr", "mip", "minip", "average", "flm", "iso")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"size must look like 512x512; got {text!r}") from exc
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"size must be 1..16384 per side; got {text!r}")
-    return w, h
 
 
 def _view(text: str) -> Any:
@@ -915,16 +907,6 @@ def _sizes(text: str) -> tuple[int, ...]:
     if not sizes or not all(2 <= n <= 128 for n in sizes):
         raise argparse.ArgumentTypeError(f"each size must be 2..128 elements; got {text!r}")
     return sizes
-
-
-def _positive_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a positive integer; got {text!r}") from exc
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer; got {text!r}")
-    return n
 
 
 def cmd_bench_massspring(args: argparse.Namespace) -> int:

@@ -15,6 +15,7 @@ import sys
 from collections.abc import Sequence
 
 from app import cli as app_cli
+from app.cli_args import image_size
 from app.samples import DEFAULT_SAMPLE
 
 
@@ -51,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     pg.add_argument(
         "--screenshot", metavar="PATH", help="save a PNG of the window after the first frame, quit"
     )
-    pg.add_argument("--size", type=app_cli._size, default=(1280, 820), help="window WxH")
+    pg.add_argument("--size", type=image_size, default=(1280, 820), help="window WxH")
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
     return parser
