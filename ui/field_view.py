@@ -137,8 +137,10 @@ class FieldSliceView(QWidget):
         row.addWidget(self.position_label)
         lay.addLayout(row)
 
+        top_left = Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop
         self.title_label = QLabel()
         self.title_label.setWordWrap(True)
+        self.title_label.setAlignment(top_left)
         lay.addWidget(self.title_label)
         self.image_label = _ImageLabel(self)
         self.image_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
@@ -147,6 +149,7 @@ class FieldSliceView(QWidget):
         lay.addWidget(self.image_label)
         self.legend_label = QLabel()
         self.legend_label.setWordWrap(True)
+        self.legend_label.setAlignment(top_left)
         small = self.legend_label.font()
         small.setPointSizeF(max(small.pointSizeF() * 0.9, 6.0))
         self.legend_label.setFont(small)
@@ -182,7 +185,8 @@ class FieldSliceView(QWidget):
         self.refresh()
 
     def _poll(self) -> None:
-        if self.isVisible():
+        # not during a drag: a GPU model's field would be read back while interacting
+        if self.isVisible() and not self._window.session.dragging:
             self.refresh()
 
     def _set_views(self, views: tuple[str, ...]) -> None:
@@ -215,7 +219,9 @@ class FieldSliceView(QWidget):
         self._set_views(views)
         if not views:
             self._key, self._warp, self.slice = None, None, None
-            self._show(None, "no deformation", "")
+            kind = getattr(session, "kind", "none")
+            # a wire field is built off the GUI thread: the session has no warp meanwhile
+            self._show(None, "no deformation" if kind == "none" else f"no {kind} field yet", "")
             return
         view = self.view_combo.currentText()
         axis = self.axis_combo.currentIndex()

@@ -193,3 +193,17 @@ def test_display_panel_embeds_and_refreshes_the_view(qtbot: Any, window: FakeWin
     panel.resize(290, panel.sizeHint().height())
     image = panel.grab().toImage()
     assert image.width() == 290
+
+
+def test_a_wire_field_being_built_shows_no_field_yet(qtbot: Any) -> None:
+    window = FakeWindow(cylinder_session())
+    window.session.sync_wires = False  # as the GUI: fields are built off its thread
+    window.session.set_deformation("wires")
+    view = make_view(qtbot, window)
+    assert window.session.wire_field_stale
+    assert view.title_label.text() == "no wires field yet"
+    assert not view.view_combo.isEnabled()
+    window.request_wire_build()
+    view.refresh()
+    assert combo_items(view) == list(app.field_views.VIEWS["wires"])
+    assert view.slice is not None
