@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from app.bench import bench_camera, cpu_count, load_average
+from app.cli_args import image_size, positive_int
 from app.volume import Volume
 
 #: field scales of the paper's Figure 12 (per-axis reduction: 1:1 ... 1:4096 voxels)
@@ -1337,26 +1338,6 @@ def _scales_arg(text: str) -> tuple[int, ...]:
         ) from None
 
 
-def _size_arg(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must be WxH, e.g. 512x256; got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"size must be 1..16384 pixels per side; got {text!r}")
-    return w, h
-
-
-def _positive_int_arg(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1; got {text!r}")
-    return n
-
-
 def add_bench_wires_parser(bsub: Any) -> None:
     """Add ``wires`` to the ``bench`` sub-commands (``bsub``: their sub-parsers object)."""
     from app.transfer_function import PRESETS
@@ -1375,17 +1356,17 @@ def add_bench_wires_parser(bsub: Any) -> None:
         help="field scales to build (1, 2, 4, 8, 16 = 1:1 ... 1:4096 voxels; default all)",
     )
     p.add_argument(
-        "--repeats", type=_positive_int_arg, default=3, help="timed builds per scale (default 3)"
+        "--repeats", type=positive_int, default=3, help="timed builds per scale (default 3)"
     )
     p.add_argument(
         "--frames",
-        type=_positive_int_arg,
+        type=positive_int,
         default=5,
         help="timed frames per render configuration (default 5)",
     )
     p.add_argument(
         "--size",
-        type=_size_arg,
+        type=image_size,
         action="append",
         metavar="WxH",
         help="image size (default 512x256, the paper's); repeat for more, e.g."

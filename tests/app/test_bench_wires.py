@@ -201,7 +201,8 @@ def test_bad_options_are_rejected(capsys: pytest.CaptureFixture) -> None:
         assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "field scales must be among 1, 2, 4, 8, 16; got 3" in err
-    assert "size must be WxH" in err
+    assert "size must look like 512x512" in err
+    assert "expected a positive integer; got '0'" in err
     with pytest.raises(ValueError, match="among 1, 2, 4, 8, 16"):
         check_scales([2, 3])
     with pytest.raises(ValueError, match="among 1, 2, 4, 8, 16"):
