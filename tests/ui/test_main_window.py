@@ -351,3 +351,33 @@ def test_keys_orbit_pan_and_zoom(window: Any, qtbot: Any) -> None:
     assert vp.camera.distance == pytest.approx(d / 1.15)
     qtbot.keyClick(vp, Qt.Key.Key_5)  # view from +z: looking down -z
     np.testing.assert_allclose(vp.camera.rotation[:, 2], [0, 0, 1], atol=1e-12)
+
+
+def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
+    """W starts laying a wire, clicks lay its control points in the view plane through
+    the volume's centre, Enter makes it a wire; its field is built off the GUI thread;
+    undo removes it again."""
+    w = window
+    vp = w.viewport
+    vp.setFocus()
+    qtbot.keyClick(vp, Qt.Key.Key_W)
+    assert vp.laying_wire
+    assert w.session.kind == "wires"
+    assert w.wait_for_wire_build(60)
+    clicks = [QPoint(300, 300), QPoint(350, 320), QPoint(400, 330)]
+    for p in clicks:
+        qtbot.mouseClick(vp, Qt.MouseButton.LeftButton, pos=p)
+    assert len(w.session.pending_wire) == 3
+    qtbot.keyClick(vp, Qt.Key.Key_Return)
+    assert not vp.laying_wire
+    assert len(w.session.wires) == 2
+    new = w.session.wires[1].base.control_points
+    # each point lies under its click, on the plane through the centre parallel to the image
+    xy = vp.camera.project(new, vp.size_px())
+    np.testing.assert_allclose(xy, [[p.x(), p.y()] for p in clicks], atol=1e-6)
+    centre = 0.5 * np.add(*w.session.volume.bounds)
+    np.testing.assert_allclose((new - centre) @ vp.camera.rotation[:, 2], 0.0, atol=1e-9)
+    assert w.wait_for_wire_build(60)
+    assert len(w.session.model_warp().wires) == 2
+    w.undo_action.trigger()
+    assert len(w.session.wires) == 1
