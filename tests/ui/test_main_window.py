@@ -381,3 +381,54 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     assert len(w.session.model_warp().wires) == 2
     w.undo_action.trigger()
     assert len(w.session.wires) == 1
+
+
+def test_drop_a_file_opens_it_and_it_becomes_recent(window: Any, tmp_path: Path) -> None:
+    """Dropping a scene file on the window opens it; saved and opened files are listed
+    under Open Recent (the settings live in the session's temporary folder: conftest)."""
+    from PySide6.QtCore import QMimeData, QPointF, QUrl
+    from PySide6.QtGui import QDropEvent
+
+    from ui.main_window import recent_files
+
+    w = window
+    w.edit("Lattice", lambda: w.session.set_deformation("lattice", resolution=3))
+    path = tmp_path / "dropped.json"
+    assert w.save_to(path)
+    assert recent_files()[0] == str(path.resolve())
+    w.edit("None", lambda: w.session.set_deformation("none"))
+    mime = QMimeData()
+    mime.setUrls([QUrl.fromLocalFile(str(path))])
+    event = QDropEvent(
+        QPointF(20, 20),
+        Qt.DropAction.CopyAction,
+        mime,
+        Qt.MouseButton.LeftButton,
+        Qt.KeyboardModifier.NoModifier,
+    )
+    w.dropEvent(event)
+    deadline = time.monotonic() + 60
+    from PySide6.QtWidgets import QApplication
+
+    while w.session.kind != "lattice" and time.monotonic() < deadline:
+        QApplication.processEvents()
+        time.sleep(0.01)
+    assert w.session.kind == "lattice"
+    assert w.path == path
+    w._fill_recent()
+    assert w.recent_menu.actions()[0].text() == str(path.resolve())
+
+
+def test_help_dialog_lists_the_shortcuts(window: Any) -> None:
+    """Help -> Keyboard and Mouse shows every shortcut of the table."""
+    from PySide6.QtWidgets import QTextBrowser
+
+    from ui.main_window import SHORTCUTS
+
+    w = window
+    w.show_help()
+    text = w.help_dialog.findChild(QTextBrowser).toPlainText()
+    for keys, what in SHORTCUTS:
+        assert keys in text
+        assert what.split()[0] in text
+    w.help_dialog.close()
