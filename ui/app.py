@@ -44,10 +44,14 @@ def application() -> QApplication:
 
 
 def run_gui(
-    input_spec: str, screenshot: str | None = None, size: tuple[int, int] = (1280, 820)
+    input_spec: str,
+    screenshot: str | None = None,
+    size: tuple[int, int] = (1280, 820),
+    tour: str | None = None,
 ) -> int:
-    """Open the window on ``input_spec``; with ``screenshot``, save a PNG of the whole
-    window once the first frame is drawn and quit. Returns the exit code."""
+    """Open the window on ``input_spec``; with ``tour``, step through a teaching demo's
+    tour (its first scene replaces ``input_spec``); with ``screenshot``, save a PNG of
+    the whole window once the first frame is drawn and quit. Returns the exit code."""
     from ui.main_window import MainWindow, load_session_input
 
     app = application()
@@ -59,6 +63,8 @@ def run_gui(
     window = MainWindow(session, input_spec)
     window.resize(*size)
     window.show()
+    if tour is not None:
+        window.start_tour(tour)
     status = {"code": 0}
     if screenshot:
         out = Path(screenshot)

@@ -40,7 +40,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
         return app_cli.main(["demo", "--out", args.fallback_out])
     from ui.app import run_gui
 
-    return run_gui(args.input, screenshot=args.screenshot, size=args.size)
+    return run_gui(args.input, screenshot=args.screenshot, size=args.size, tour=args.tour)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,6 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--screenshot", metavar="PATH", help="save a PNG of the window after the first frame, quit"
     )
     pg.add_argument("--size", type=image_size, default=(1280, 820), help="window WxH")
+    pg.add_argument(
+        "--tour", metavar="FILE", help="step through a teaching demo's tour (NAME_tour.json)"
+    )
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
     return parser

@@ -672,6 +672,30 @@ class MainWindow(QMainWindow):
         if urls:
             self.open_path(urls[0].toLocalFile())
 
+    def start_tour(self, path: str | Path) -> None:
+        """Step through a teaching demo's tour (``voxwarp demo NAME --gui``) in a dock."""
+        from app.tour import read_tour
+        from ui.tour_panel import TourPanel
+
+        try:
+            tour = read_tour(path)
+        except VoxwarpError as exc:
+            self.show_error(str(exc))
+            return
+        old = self.docks.pop("Tour", None)
+        if old is not None:
+            self.removeDockWidget(old)
+            old.deleteLater()
+        self.tour_panel = TourPanel(self, tour)
+        dock = QDockWidget("Tour", self)
+        dock.setObjectName("Tour")
+        dock.setWidget(self.tour_panel)
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
+        self.tabifyDockWidget(self.docks["Deformation"], dock)
+        dock.show()
+        dock.raise_()
+        self.docks["Tour"] = dock
+
     # ------------------------------------------------------------------ status and dialogs
     def _frame_drawn(self, ms: float) -> None:
         now = time.perf_counter()
