@@ -152,6 +152,7 @@ class MainWindow(QMainWindow):
         self._pending_before: Snapshot | None = None
         self._wire_task: Task | None = None
         self._wire_job: WireBuild | None = None
+        self._open_task: Task | None = None
         self._fps_times: list[float] = []
         self._panels: list[Any] = []
         self.errors: list[str] = []  # every message shown to the user (tests read it)
@@ -557,7 +558,10 @@ class MainWindow(QMainWindow):
             self._in_context(self.session.close)
             self.set_session(result, spec)
 
+        if self._open_task is not None and self._open_task.running:
+            self._open_task.cancel()  # the newest request wins (tour steps clicked fast)
         task = run_with_progress(self, f"Opening {Path(spec).name}", job, done, self.show_error)
+        self._open_task = task
         if wait:
             end = time.monotonic() + 120
             while task.running and time.monotonic() < end:

@@ -47,6 +47,7 @@ class Task(QObject):
         self._thread: threading.Thread | None = None
         self.result: Any = None
         self.error: str | None = None
+        self._done = False
 
     def start(self) -> Task:
         """Run the job on a new daemon thread."""
@@ -65,14 +66,14 @@ class Task(QObject):
 
     @property
     def running(self) -> bool:
-        """Whether the thread is still working."""
-        return self._thread is not None and self._thread.is_alive()
+        """Whether the job is still to finish (also before its thread started)."""
+        return not self._done
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the thread ends (tests, shutdown); True if it ended."""
         if self._thread is not None:
             self._thread.join(timeout)
-        return not self.running
+        return self._done
 
     def _run(self) -> None:
         try:
@@ -88,6 +89,7 @@ class Task(QObject):
             traceback.print_exc()
         else:
             self.result = result
+        self._done = True
         if self.error is not None:
             self.failed.emit(self.error)
         elif not self.cancelled:
