@@ -781,7 +781,70 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """``voxwarp demo``: render the default sample in every mode into a folder."""
+    """``voxwarp demo NAME``: a teaching demo's figure sheet (:mod:`app.demos`);
+    ``voxwarp demo [INPUT]``: render INPUT (default the bundled sample) in every mode
+    into a folder."""
+    from app.demos import DEMOS
+
+    if args.input in DEMOS:
+        return _teaching_demo(args)
+    if args.quick or args.gui:
+        raise CliOptionError(
+            f"--quick and --gui are options of the teaching demos ({', '.join(DEMOS)}),"
+            " e.g. voxwarp demo massspring --quick"
+        )
+    if (
+        args.input is not None
+        and not args.input.startswith("sample:")
+        and not Path(args.input).exists()
+    ):
+        raise CliOptionError(
+            f"{args.input!r} is neither a demo ({', '.join(DEMOS)}) nor a volume file or"
+            " folder; e.g. voxwarp demo massspring, or voxwarp demo sample:fish"
+        )
+    return _demo_volume(args)
+
+
+def _teaching_demo(args: argparse.Namespace) -> int:
+    """``voxwarp demo NAME``: write the figure sheet (and with --gui the tour)."""
+    from app.demos import run_demo
+
+    res = run_demo(
+        args.input,
+        args.out,
+        quick=args.quick,
+        tour=args.gui,
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    for path in res.figures:
+        print(path)
+    if res.tour is not None:
+        print(res.tour)
+        print(
+            f"voxwarp: step through the demo in the desktop GUI with: voxwarp gui --tour"
+            f" {res.tour}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """``voxwarp reproduce``: every demo's measurements and the report beside the
+    papers' numbers (see :mod:`app.reproduce`)."""
+    from app.reproduce import DEFAULT_REPORT, reproduce
+
+    command = "voxwarp reproduce" + (" --quick" if args.quick else "")
+    if Path(args.out) != DEFAULT_REPORT:
+        command += f" --out {args.out}"
+    path = reproduce(
+        args.out, quick=args.quick, log=lambda s: print(s, file=sys.stderr), command=command
+    )
+    print(path)
+    return 0
+
+
+def _demo_volume(args: argparse.Namespace) -> int:
+    """``voxwarp demo [INPUT]``: render INPUT in every mode into a folder."""
     from app.image_io import write_image
     from app.render import OffscreenRenderer
     from app.samples import DEFAULT_SAMPLE, suggested_transfer_function
@@ -1195,14 +1258,60 @@ def build_parser() -> argparse.ArgumentParser:
     _add_deform_args(pr)
     _add_wire_args(pr)
     pr.set_defaults(func=cmd_render)
+    from app.movie import add_animate_parser
 
-    pd = sub.add_parser("demo", help="render a sample in every mode into a folder")
-    pd.add_argument("input", nargs="?", help="volume (default: the bundled real CT)")
-    pd.add_argument("--out", default="out")
-    pd.add_argument("--size", type=_size, default=(512, 512))
-    pd.add_argument("--tf", help="preset or tf.json (default: suits the sample)")
-    pd.add_argument("--view", type=_view, default="-y")
+    add_animate_parser(sub)
+
+    from app.demos import DEMO_TITLES, DEMOS
+
+    pd = sub.add_parser(
+        "demo",
+        help=f"teaching demo NAME ({', '.join(DEMOS)}): a figure sheet; or render a volume"
+        " in every mode into a folder",
+        description="voxwarp demo NAME writes the figure sheet of a teaching demo to"
+        " OUT/NAME.png: "
+        + "; ".join(f"{n}: {t}" for n, t in DEMO_TITLES.items())
+        + ". voxwarp demo [INPUT] (a volume, scene JSON or sample:NAME; default the bundled"
+        " real CT) renders it in every mode, bent by a mass-spring drag and by a wire.",
+    )
+    pd.add_argument(
+        "input",
+        nargs="?",
+        metavar="NAME|INPUT",
+        help=f"a teaching demo ({', '.join(DEMOS)}) or a volume (default: the bundled real CT)",
+    )
+    pd.add_argument("--out", default="out", help="output folder (default out)")
+    pd.add_argument("--size", type=_size, default=(512, 512), help="INPUT: image WxH")
+    pd.add_argument("--tf", help="INPUT: preset or tf.json (default: suits the sample)")
+    pd.add_argument("--view", type=_view, default="-y", help="INPUT: view")
+    pd.add_argument(
+        "--quick",
+        action="store_true",
+        help="NAME: small volumes, grids and images (seconds instead of a minute)",
+    )
+    pd.add_argument(
+        "--gui",
+        action="store_true",
+        help="NAME: also write OUT/NAME_tour.json, the steps of a guided walk through the"
+        " model (title, explanation, scene JSON per step) for the desktop GUI",
+    )
     pd.set_defaults(func=cmd_demo)
+
+    prp = sub.add_parser(
+        "reproduce",
+        help="run every teaching demo and write the papers' numbers beside ours",
+        description="Regenerates the papers' tables and figures on this machine (the"
+        " teaching demos' measurements) and writes a markdown report with the hardware,"
+        " the papers' numbers beside ours, and the figure sheets in a folder beside it.",
+    )
+    prp.add_argument("--quick", action="store_true", help="small sizes (seconds; not comparable)")
+    prp.add_argument(
+        "--out",
+        default="docs/reproduction.md",
+        metavar="FILE",
+        help="the report (default docs/reproduction.md; figures in docs/reproduction/)",
+    )
+    prp.set_defaults(func=cmd_reproduce)
 
     ps = sub.add_parser("samples", help="list bundled sample volumes")
     ps.set_defaults(func=cmd_samples)
