@@ -13,6 +13,7 @@ import argparse
 import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from app import cli as app_cli
 from app.cli_args import image_size
@@ -43,6 +44,30 @@ def cmd_gui(args: argparse.Namespace) -> int:
     return run_gui(args.input, screenshot=args.screenshot, size=args.size, tour=args.tour)
 
 
+def cmd_demo_gui(args: argparse.Namespace) -> int:
+    """``voxwarp demo NAME --gui``: the teaching demo (figure sheet and tour, by
+    :func:`app.cli.cmd_demo`), then its guided step-through in the desktop window."""
+    from app.demos import DEMOS
+
+    code = app_cli.cmd_demo(args)
+    if code != 0 or not getattr(args, "gui", False) or args.input not in DEMOS:
+        return code
+    tour_path = Path(args.out) / f"{args.input}_tour.json"
+    if not has_display():
+        print(
+            f"voxwarp: no display ($DISPLAY is not set), so no window; the tour is"
+            f" {tour_path}: open it on a desktop with voxwarp gui --tour {tour_path}",
+            file=sys.stderr,
+        )
+        return 0
+    from app.tour import read_tour
+    from ui.app import run_gui
+
+    tour = read_tour(tour_path)
+    first = next((str(s.scene) for s in tour.steps if s.scene is not None), None)
+    return run_gui(first or f"sample:{DEFAULT_SAMPLE}", tour=str(tour_path))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """:func:`app.cli.build_parser` plus the ``gui`` command."""
     parser = app_cli.build_parser()
@@ -58,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
+    sub.choices["demo"].set_defaults(func=cmd_demo_gui)
     return parser
 
 

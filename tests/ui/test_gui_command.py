@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 
 def _no_display_env() -> dict[str, str]:
     env = dict(os.environ)
@@ -34,3 +36,38 @@ def test_gui_screenshot_without_display_is_a_clear_error(tmp_path: Path) -> None
     assert "xvfb-run" in res.stderr
     assert "Traceback" not in res.stderr
     assert not (tmp_path / "w.png").exists()
+
+
+def test_demo_gui_opens_the_tour_in_the_window(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``voxwarp demo NAME --gui``: figure sheet and tour, then the window on the tour's
+    first scene, stepping through the tour (run_gui is replaced: it would block)."""
+    import ui.app
+    import ui.cli
+
+    calls: list[tuple[str, str | None]] = []
+    monkeypatch.setattr(
+        ui.app, "run_gui", lambda spec, tour=None, **k: calls.append((spec, tour)) or 0
+    )
+    monkeypatch.setattr(ui.cli, "has_display", lambda: True)
+    out = tmp_path / "demo"
+    assert ui.cli.main(["demo", "massspring", "--quick", "--gui", "--out", str(out)]) == 0
+    tour = out / "massspring_tour.json"
+    assert (out / "massspring.png").is_file()
+    assert calls == [(calls[0][0], str(tour))]
+    assert Path(calls[0][0]).is_file()  # the first step's scene
+    assert Path(calls[0][0]).parent == out / "massspring_tour"
+
+
+def test_demo_gui_without_display_says_where_the_tour_is(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    import ui.cli
+
+    monkeypatch.setattr(ui.cli, "has_display", lambda: False)
+    out = tmp_path / "demo"
+    assert ui.cli.main(["demo", "lattice", "--quick", "--gui", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"voxwarp gui --tour {out / 'lattice_tour.json'}" in err
+    assert (out / "lattice_tour.json").is_file()

@@ -1,0 +1,76 @@
+"""``voxwarp reproduce`` (app.reproduce): the report beside the papers' numbers.
+
+The quick run takes the demos' quick sizes; it requests ``gl_ctx`` only so that it skips,
+like every GL test, where EGL is missing.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from app.cli import main
+from app.demos import DEMO_TITLES, DEMOS
+from app.reproduce import NOT_IN_REPO, cpu_model, reproduce
+
+
+@pytest.fixture(autouse=True)
+def _keep_warning_state(monkeypatch: pytest.MonkeyPatch) -> None:
+    """main() replaces warnings.formatwarning for good; undo it after each test."""
+    monkeypatch.setattr(warnings, "formatwarning", warnings.formatwarning)
+
+
+@pytest.mark.gl
+def test_quick_reproduction_writes_the_report_and_its_figures(gl_ctx: Any, tmp_path: Path) -> None:
+    out = tmp_path / "docs" / "reproduction.md"
+    assert reproduce(out, quick=True) == out
+    text = out.read_text(encoding="utf-8")
+    # the hardware section names the CPU, the GL renderer and the OpenCL device
+    hw = text.split("## Hardware", 1)[1].split("\n## ", 1)[0]
+    assert f"| CPU | {cpu_model()}," in hw
+    assert re.search(r"\| GL renderer [^|]*\| \S", hw)
+    assert re.search(r"\| OpenCL device [^|]*\| \S", hw)
+    assert "| memory |" in hw
+    assert "Quick run" in text
+    assert "`voxwarp reproduce --quick --out " in text
+    # one section per demo, each with its figure beside the report and a table
+    for name in DEMOS:
+        assert f". {DEMO_TITLES[name]}\n" in text
+        link = f"(reproduction/{name}.png)"
+        assert link in text
+        assert (tmp_path / "docs" / "reproduction" / f"{name}.png").is_file()
+    sections = text.split("\n## ")[2:]
+    assert len(sections) == len(DEMOS)
+    for sec in sections:
+        assert "| --- |" in sec, sec[:80]
+    # the papers' numbers the repo quotes, and the honest gaps
+    lattice = next(s for s in sections if s.startswith(f"{DEMOS.index('lattice') + 1}."))
+    assert "75%-80%" in lattice
+    wires = next(s for s in sections if s.startswith(f"{DEMOS.index('wires') + 1}."))
+    assert "2.2-5.3x" in wires
+    assert NOT_IN_REPO in wires
+    # nothing half-written left behind
+    assert not [p for p in out.parent.rglob(".*")]
+
+
+def test_cli_reproduce_passes_its_options(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[tuple[Any, ...]] = []
+
+    def fake(out_md: Any, quick: bool = False, **kw: Any) -> Path:
+        calls.append((out_md, quick, kw.get("command")))
+        return Path(out_md)
+
+    monkeypatch.setattr("app.reproduce.reproduce", fake)
+    out = tmp_path / "r.md"
+    assert main(["reproduce", "--quick", "--out", str(out)]) == 0
+    assert calls == [(str(out), True, f"voxwarp reproduce --quick --out {out}")]
+    assert capsys.readouterr().out.strip() == str(out)
+    calls.clear()
+    assert main(["reproduce"]) == 0
+    assert calls == [("docs/reproduction.md", False, "voxwarp reproduce")]
