@@ -47,6 +47,7 @@ import numpy as np
 
 from app.errors import VoxwarpError
 from app.files import atomic_write, atomic_write_text
+from app.tour import TOUR_FORMAT, TOUR_VERSION
 
 #: the teaching demos, in the order ``voxwarp reproduce`` runs them
 DEMOS: tuple[str, ...] = ("massspring", "chainmail", "wires", "lattice", "compare")
@@ -58,9 +59,6 @@ DEMO_TITLES: dict[str, str] = {
     "lattice": "Trilinear lattices vs 4x4 matrices (GRAPP 2010 table)",
     "compare": "Mass-spring vs ChainMail on the same drag; CPU vs GPU (thesis Figures 12-13)",
 }
-#: ``"format"`` of a tour file
-TOUR_FORMAT = "voxwarp-tour"
-TOUR_VERSION = 1
 #: resolution of the figure sheets (dots per inch)
 DPI = 90
 

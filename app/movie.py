@@ -46,8 +46,9 @@ import hashlib
 import json
 import os
 import re
+import shutil
 import sys
-import threading
+import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -58,7 +59,8 @@ import numpy as np
 
 from app.animation import MAX_FRAMES, AnimationError, FrameStates, load_animated_scene
 from app.cli_args import image_size, positive_int
-from app.errors import SceneError, VoxwarpError
+from app.errors import VoxwarpError
+from app.frames import canonical_json, release_process_renderer, render_frame_to_file
 
 #: ``--format`` -> frame file extension
 FRAME_FORMATS: dict[str, str] = {"png": ".png", "exr": ".exr"}
@@ -75,12 +77,6 @@ MOVIE_CRF = 18
 _FRAME_FILE = re.compile(r"^frame_\d{5}\.(png|exr)$")
 _FRAME_TEMP = re.compile(r"^\.frame_\d{5}\.(png|exr)\..+\.tmp\.(png|exr)$")
 #: a 1-voxel stand-in: scenes are parsed with it, then given the cached volume
-_STUB_VOLUME = {"embedded": {"dtype": "uint8", "shape": [1, 1, 1], "order": "F", "data": "AA=="}}
-
-
-def canonical_json(obj: Any) -> str:
-    """Compact JSON with sorted keys (the input of digests and cache keys)."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 # ---------------------------------------------------------------------------- frame jobs
@@ -240,123 +236,6 @@ def prepare_frames_dir(
     }
     atomic_write_text(folder / MANIFEST_NAME, json.dumps(manifest, indent=1))
     return kept, todo, removed
-
-
-# ---------------------------------------------------------------------------- rendering
-class _ProcessRenderer:
-    """This process's renderer, volume and warps, reused from frame to frame."""
-
-    def __init__(self) -> None:
-        self.renderer: Any = None
-        self.key: Any = None
-        self.volume: Any = None
-        self.volume_key: str | None = None
-        self.warps: dict[str, Any] = {}
-
-    def render(self, header: Mapping[str, Any], scene: Mapping[str, Any]) -> np.ndarray:
-        from app.render import OffscreenRenderer
-        from app.scene import Scene
-        from deform.warp import WarpError, warp_from_dict
-
-        w, h = (int(v) for v in header["size"])
-        dtype = str(header.get("dtype", "u1"))
-        if self.key != (w, h, dtype):
-            self.release()
-            self.renderer = OffscreenRenderer(w, h, dtype=dtype)
-            # a frame's image must not depend on the frames drawn before (module doc)
-            self.renderer.renderer.warped_skip_maps = "never"
-            self.key = (w, h, dtype)
-        base_dir = header.get("base_dir")
-        volume_key = canonical_json({"volume": header["volume"], "base_dir": base_dir})
-        if volume_key != self.volume_key:
-            self._release_warps(list(self.warps.values()))
-            self.warps = {}
-            self.volume = None
-            probe = {"volume": header["volume"], "transfer_function": {"points": [[0, 0, 0, 0, 0]]}}
-            self.volume = Scene.from_dict(probe, base_dir=base_dir).volume
-            self.volume_key = volume_key
-        entries = scene.get("warps") or []
-        if not isinstance(entries, list):
-            raise SceneError("scene 'warps' must be a list of warp objects")
-        keys = [canonical_json(e) for e in entries]
-        warps: dict[str, Any] = {}
-        try:
-            for k, e in zip(keys, entries, strict=True):
-                warp = self.warps.get(k) or warps.get(k)
-                if warp is None:
-                    warp = warp_from_dict(e)
-                    warp.bind_volume(self.volume)
-                warps[k] = warp
-        except (WarpError, TypeError) as exc:
-            raise SceneError(f"invalid warp in scene: {exc}") from exc
-        self._release_warps([v for k, v in self.warps.items() if k not in warps])
-        self.warps = warps
-        stub = {k: v for k, v in scene.items() if k != "warps"}
-        stub["volume"] = _STUB_VOLUME
-        parsed = Scene.from_dict(stub, base_dir=base_dir)
-        frame = parsed.copy(volume=self.volume, warps=[warps[k] for k in keys])
-        return self.renderer.render(frame)
-
-    def _release_warps(self, warps: Sequence[Any]) -> None:
-        if not warps or self.renderer is None:
-            return
-        with self.renderer._current():  # their textures live in the renderer's context
-            for w in warps:
-                w.release()
-
-    def release(self) -> None:
-        self._release_warps(list(self.warps.values()))
-        self.warps = {}
-        self.volume = None
-        self.volume_key = None
-        if self.renderer is not None:
-            self.renderer.release()
-        self.renderer = None
-        self.key = None
-
-
-_PROCESS = _ProcessRenderer()
-_PROCESS_LOCK = threading.Lock()
-
-
-def render_frame(header: Mapping[str, Any], scene: Mapping[str, Any]) -> np.ndarray:
-    """Render one frame with this process's renderer (made on first use and kept).
-
-    Parameters
-    ----------
-    header
-        :func:`render_header`: volume entry, base folder, size, dtype.
-    scene
-        The frame's scene dict (without ``"volume"``).
-
-    Returns
-    -------
-    numpy.ndarray
-        (H, W, 4) uint8 or float32 image, row 0 at the top.
-
-    Notes
-    -----
-    Thread-safe: frames of one process are drawn one at a time (one GL context).
-    """
-    with _PROCESS_LOCK:
-        return _PROCESS.render(header, scene)
-
-
-def render_frame_to_file(
-    header: Mapping[str, Any], scene: Mapping[str, Any], path: str | os.PathLike
-) -> str:
-    """Render one frame (:func:`render_frame`) and write it atomically; returns the path."""
-    from app.image_io import write_image
-
-    image = render_frame(header, scene)
-    write_image(path, image)
-    return str(path)
-
-
-def release_process_renderer() -> None:
-    """Free this process's renderer, volume and warps (the next frame makes new ones)."""
-    with _PROCESS_LOCK:
-        _PROCESS.release()
 
 
 # ---------------------------------------------------------------------------- movie
@@ -698,8 +577,6 @@ def add_animate_parser(sub: Any) -> None:
 def cmd_animate(args: argparse.Namespace) -> int:
     """``voxwarp animate SCENE -o movie.mp4``."""
     if args.bench:
-        from app.distributed import bench_workers, format_bench
-
         if args.scheduler is not None:
             raise AnimationError("--bench measures local workers; drop --scheduler")
         row = bench_workers(
@@ -733,3 +610,104 @@ def cmd_animate(args: argparse.Namespace) -> int:
     print(f"{note} ({result.frames_dir})", file=sys.stderr)
     print(result.movie if result.movie is not None else result.frames_dir)
     return 0
+
+
+# ---------------------------------------------------------------------------- benchmark
+def bench_workers(
+    scene: str,
+    *,
+    frames: int | None = None,
+    size: tuple[int, int] = (512, 512),
+    workers: int = 2,
+    image_format: str = "png",
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Time a serial run against ``workers`` local Dask workers; compare their frames.
+
+    Both runs render every frame into their own temporary folder (no movie). The serial
+    run starts with a fresh renderer in this process (its GL context and shader
+    compilation count, as they do on each worker).
+
+    Parameters
+    ----------
+    scene
+        Animated scene JSON.
+    frames, size, image_format
+        As for :func:`app.movie.animate`.
+    workers
+        Local worker processes.
+    progress
+        Progress bars on stderr.
+
+    Returns
+    -------
+    dict
+        ``frames``, ``size``, ``workers``, ``evaluate_s`` (the serial evaluation, once per
+        run), ``serial_s``, ``cluster_start_s``, ``distributed_s`` (rendering only),
+        ``speedup`` (serial / distributed rendering), ``speedup_with_start`` and
+        ``identical`` (every frame bit-exact).
+    """
+    from app.distributed import CONNECT_TIMEOUT_S, dask_client
+    from app.image_io import read_image
+
+    tmp = Path(tempfile.mkdtemp(prefix="voxwarp-bench-"))
+    try:
+        release_process_renderer()
+        serial = animate(
+            scene,
+            tmp / "serial.mp4",
+            frames=frames,
+            size=size,
+            image_format=image_format,
+            movie=False,
+            progress=progress,
+        )
+        t0 = time.perf_counter()
+        with dask_client(workers=workers) as client:
+            client.wait_for_workers(workers, timeout=CONNECT_TIMEOUT_S * 3)
+            start = time.perf_counter() - t0
+            dist = animate(
+                scene,
+                tmp / "dask.mp4",
+                frames=frames,
+                size=size,
+                image_format=image_format,
+                client=client,
+                movie=False,
+                progress=progress,
+            )
+        identical = all(
+            np.array_equal(read_image(a), read_image(b))
+            for a, b in zip(serial.frames, dist.frames, strict=True)
+        )
+        s, d = serial.seconds["render"], dist.seconds["render"]
+        return {
+            "frames": len(serial.frames),
+            "size": f"{size[0]}x{size[1]}",
+            "workers": workers,
+            "evaluate_s": serial.seconds["evaluate"],
+            "serial_s": s,
+            "cluster_start_s": start,
+            "distributed_s": d,
+            "speedup": s / d if d > 0 else float("nan"),
+            "speedup_with_start": s / (d + start) if d + start > 0 else float("nan"),
+            "identical": identical,
+        }
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def format_bench(row: Mapping[str, Any]) -> str:
+    """A markdown table of :func:`bench_workers`' result."""
+    head = (
+        "| frames | size | evaluate (s) | serial (s) | workers | cluster start (s) |"
+        " distributed (s) | speed-up | incl. start | identical |"
+    )
+    sep = "|" + "---|" * 10
+    body = (
+        f"| {row['frames']} | {row['size']} | {row['evaluate_s']:.2f} | {row['serial_s']:.2f} |"
+        f" {row['workers']} | {row['cluster_start_s']:.2f} | {row['distributed_s']:.2f} |"
+        f" {row['speedup']:.2f}x | {row['speedup_with_start']:.2f}x |"
+        f" {'yes' if row['identical'] else 'NO'} |"
+    )
+    return "\n".join([head, sep, body])

@@ -1,7 +1,7 @@
 """Tests of app.movie and app.distributed: ``voxwarp animate`` frames, resume, movie, Dask.
 
 Oracles: a direct ``OffscreenRenderer.render`` of a frame's scene, the movie decoded by
-imageio-ffmpeg, render calls counted by wrapping :func:`app.movie.render_frame`, file
+imageio-ffmpeg, render calls counted by wrapping :func:`app.frames.render_frame`, file
 modification times, and the serial run's frames for the Dask run (bit-exact).
 Error cases run ``main()`` in-process and must fail before any GL work.
 """
@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import app.distributed
+import app.frames
 import app.movie
 from app.animation import Animation, Track, load_animated_scene, save_animated_scene
 from app.cli import main
@@ -35,7 +36,7 @@ SIZE = (64, 48)
 @pytest.fixture(scope="module", autouse=True)
 def _release_the_process_renderer() -> Iterator[None]:
     yield
-    app.movie.release_process_renderer()
+    app.frames.release_process_renderer()
 
 
 def _animated(path: Path, opaque_end: bool = False) -> Path:
@@ -71,13 +72,13 @@ def _decode(movie: Path) -> tuple[tuple[int, int], list[np.ndarray]]:
 
 def _count_renders(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     calls: list[int] = []
-    real = app.movie.render_frame
+    real = app.frames.render_frame
 
     def counting(header: Any, scene: Any) -> np.ndarray:
         calls.append(1)
         return real(header, scene)
 
-    monkeypatch.setattr(app.movie, "render_frame", counting)
+    monkeypatch.setattr(app.frames, "render_frame", counting)
     return calls
 
 
@@ -195,7 +196,7 @@ def test_two_local_dask_workers_equal_the_serial_run_bit_exactly(
     def not_here(*args: Any) -> None:
         raise AssertionError("a --workers run must render on the workers, not in the client")
 
-    monkeypatch.setattr(app.movie, "render_frame", not_here)
+    monkeypatch.setattr(app.frames, "render_frame", not_here)
     dask = animate(scene_file, tmp_path / "dask.mp4", size=SIZE, progress=False, workers=2)
     assert dask.rendered
     assert sorted(dask.rendered) == [0, 1, 2]
