@@ -213,6 +213,8 @@ class Snapshot:
     settings: dict[str, Any] = field(default_factory=dict)
     #: the scene's look: mode, transfer function, sample distance, window, clip box, ...
     look: dict[str, Any] = field(default_factory=dict)
+    #: the keyframes (``Animation.to_dict()``) or None
+    animation: dict[str, Any] | None = None
 
     def same_as(self, other: Snapshot) -> bool:
         """True when both hold the same state (exact comparison of every array)."""
@@ -335,6 +337,8 @@ class EditSession:
         self._drag: dict[str, Any] | None = None
         self._handle_cache: np.ndarray | None = None
         self._released_warps: list[Warp] = []
+        #: keyframes (:mod:`app.keyframes`; saved in scene JSON for ``voxwarp animate``)
+        self.animation: Any = None
         #: ``() -> context manager`` making the GL context of GPU models current (the
         #: GUI's viewport sets it; a headless caller's context is current already)
         self.gl_scope: Callable[[], Any] = contextlib.nullcontext
@@ -1058,6 +1062,7 @@ class EditSession:
             },
             wire_settings=dict(self.wire_settings),
             look=scene_look(self.scene),
+            animation=self.animation.to_dict() if self.animation is not None else None,
         )
         if self.model is not None:
             snap.model = self.model.to_dict()
@@ -1111,6 +1116,7 @@ class EditSession:
         self.selection, self.reference = list(snap.selection), snap.reference
         if snap.look:
             set_scene_look(self.scene, snap.look)
+        self.animation = _animation_from(snap.animation)
         self._sync_warps()
 
     # ------------------------------------------------------------------ files
@@ -1140,6 +1146,8 @@ class EditSession:
             "stiffness": self.stiffness,
             "wire_settings": dict(self.wire_settings),
         }
+        if self.animation is not None:
+            d["animation"] = self.animation.to_dict()
         return d
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -1154,6 +1162,7 @@ class EditSession:
         """Open a scene JSON (from :meth:`save`, ``voxwarp render`` or ``demo``)."""
         scene = Scene.load(path)
         editor: dict[str, Any] = {}
+        raw: Any = None
         try:
             raw = json.loads(Path(path).read_text(encoding="utf-8"))
             editor = raw.get(EDITOR_KEY) or {}
@@ -1162,6 +1171,8 @@ class EditSession:
         session = cls.__new__(cls)
         session._editor_entry = editor if isinstance(editor, dict) else {}
         cls.__init__(session, scene, ctx)
+        if isinstance(raw, dict) and raw.get("animation") is not None:
+            session.animation = _animation_from(raw["animation"])
         return session
 
     def _recover_from_scene(self) -> None:
@@ -1267,6 +1278,18 @@ def set_scene_look(scene: Scene, look: dict[str, Any]) -> None:
             setattr(scene, k, tuple(v) if k == "background" else v)
     if "transfer_function" in look:
         scene.transfer_function = look["transfer_function"]
+
+
+def _animation_from(d: Any) -> Any:
+    """An :class:`~app.animation.Animation` from its dict (None stays None)."""
+    if d is None:
+        return None
+    from app.animation import Animation, AnimationError
+
+    try:
+        return Animation.from_dict(d)
+    except AnimationError as exc:
+        raise EditorError(f"invalid animation in the scene: {exc}") from exc
 
 
 def _with_modified(wire: Wire, points: np.ndarray) -> Wire:

@@ -10,6 +10,8 @@ than ~100 ms (opening a volume, rebuilding a wire field) runs off the GUI thread
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -35,6 +37,7 @@ from PySide6.QtWidgets import (
     QMenu,
     QMessageBox,
     QProgressBar,
+    QSpinBox,
     QTextBrowser,
     QVBoxLayout,
 )
@@ -43,6 +46,7 @@ from app.camera import VIEWS, Camera
 from app.editor import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
 from app.errors import VoxwarpError
 from app.image_io import write_image
+from app.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
 from app.scene import Scene
 from app.volume import Volume
 from ui.tasks import Task, run_with_progress
@@ -82,6 +86,8 @@ SHORTCUTS: list[tuple[str, str]] = [
     ("Ctrl+Z / Ctrl+Shift+Z", "undo / redo"),
     ("Ctrl+O / Ctrl+S / Ctrl+Shift+S", "open / save scene / save scene as"),
     ("Ctrl+E", "export a screenshot (PNG or EXR)"),
+    ("K", "set a key: store the deformation and the view at the toolbar's frame"),
+    ("Ctrl+M", "render the keyed animation into a movie"),
     ("F1", "this help"),
 ]
 
@@ -234,6 +240,8 @@ class MainWindow(QMainWindow):
         for p in self._panels:
             p.refresh()
         self.tf_editor.set_transfer_function(self.session.scene.transfer_function)
+        if hasattr(self, "keys_label"):
+            self._refresh_animation()
 
     # ------------------------------------------------------------------ actions
     def _action(
@@ -301,11 +309,41 @@ class MainWindow(QMainWindow):
         self._action(d, "Lay a New &Wire", self.start_wire, "W")
         self._action(d, "&Finish Wire", self.finish_wire, "Return")
 
+        a = mb.addMenu("&Animation")
+        self._action(a, "Set &Key at This Frame", self.set_key, "K")
+        self._action(a, "&Delete Keys at This Frame", self.delete_key)
+        self._action(a, "&Render Movie…", self.render_movie_dialog, "Ctrl+M")
+        self._make_animation_bar()
+
         h = mb.addMenu("&Help")
         self._action(
             h, "&Keyboard and Mouse…", self.show_help, QKeySequence.StandardKey.HelpContents
         )
         self._action(h, "&About voxwarp", self._about)
+
+    def _make_animation_bar(self) -> None:
+        """A toolbar: frame, length, Set Key, the key frames, Render Movie."""
+        bar = self.addToolBar("Animation")
+        bar.setObjectName("Animation")
+        self.frame_spin = QSpinBox()
+        self.frame_spin.setRange(0, DEFAULT_FRAMES - 1)
+        self.frame_spin.setToolTip("the frame Set Key stores the current state at")
+        self.frames_spin = QSpinBox()
+        self.frames_spin.setRange(2, 100_000)
+        self.frames_spin.setValue(DEFAULT_FRAMES)
+        self.frames_spin.setToolTip("frames of the animation")
+        self.frames_spin.valueChanged.connect(lambda n: self.frame_spin.setMaximum(n - 1))
+        bar.addWidget(QLabel(" Frame "))
+        bar.addWidget(self.frame_spin)
+        bar.addWidget(QLabel(" of "))
+        bar.addWidget(self.frames_spin)
+        key = bar.addAction("Set Key")
+        key.setToolTip("store the deformation and the view at this frame (K)")
+        key.triggered.connect(self.set_key)
+        self.keys_label = QLabel(" no keys ")
+        bar.addWidget(self.keys_label)
+        movie = bar.addAction("Render Movie…")
+        movie.triggered.connect(self.render_movie_dialog)
 
     def _make_status_bar(self) -> None:
         sb = self.statusBar()
@@ -675,6 +713,110 @@ class MainWindow(QMainWindow):
         urls = event.mimeData().urls()
         if urls:
             self.open_path(urls[0].toLocalFile())
+
+    # ------------------------------------------------------------------ animation
+    def set_key(self) -> None:
+        """Key the deformation and the view at the toolbar's frame (undoable)."""
+        frame, frames = self.frame_spin.value(), self.frames_spin.value()
+        camera = Camera.from_dict(self.viewport.camera.to_dict())
+
+        def key() -> None:
+            s = self.session
+            s.animation = set_key(s.animation, s, frame, camera, frames=frames)
+
+        self.edit(f"Set key at frame {frame}", key)
+
+    def delete_key(self) -> None:
+        """Remove the keys at the toolbar's frame (undoable)."""
+        frame = self.frame_spin.value()
+        if self.session.animation is None:
+            return
+        self.edit(
+            f"Delete keys at frame {frame}",
+            lambda: setattr(self.session, "animation", delete_keys(self.session.animation, frame)),
+        )
+
+    def _refresh_animation(self) -> None:
+        anim = self.session.animation
+        keys = key_frames(anim)
+        self.keys_label.setText(f" keys: {', '.join(map(str, keys))} " if keys else " no keys ")
+        if anim is not None and self.frames_spin.value() != anim.frames:
+            self.frames_spin.setValue(anim.frames)
+
+    def render_movie_dialog(self) -> None:
+        """Choose a movie file and render the keyed animation into it."""
+        path, _ = QFileDialog.getSaveFileName(self, "Render movie", self._last_dir(), "MP4 (*.mp4)")
+        if path:
+            self.render_movie(path if path.endswith(".mp4") else path + ".mp4")
+
+    def render_movie(
+        self, path: str | Path, size: tuple[int, int] | None = None, wait: bool = False
+    ) -> Task | None:
+        """Render the keyed animation to ``path`` (mp4) off the GUI thread: the scene
+        is saved as ``<movie>_scene.json`` beside it (``voxwarp animate`` renders it
+        again, and resumes it) and ``voxwarp animate`` runs in its own process, with a
+        cancellable progress dialog; the frames stay in ``<movie>_frames/``."""
+        if self.session.animation is None or not self.session.animation.tracks:
+            self.show_error("nothing to render: set keys first (Animation -> Set Key)")
+            return None
+        movie = Path(path)
+        scene_path = movie.with_name(movie.stem + "_scene.json")
+        if not self.save_copy(scene_path):
+            return None
+        w, h = size or self.viewport.size_px()
+        w, h = max(2, w - w % 2), max(2, h - h % 2)
+        frames_dir = movie.with_name(movie.stem + "_frames")
+        total = self.session.animation.frames
+        cmd = [sys.executable, "-m", "ui.cli", "animate", str(scene_path), "-o", str(movie)]
+        cmd += ["--size", f"{w}x{h}", "--no-progress"]
+
+        def job(progress: Callable[[float, str], None], cancelled: Callable[[], bool]) -> Any:
+            proc = subprocess.Popen(
+                cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+            )
+            while proc.poll() is None:
+                if cancelled():
+                    proc.terminate()
+                    proc.wait()
+                    return None
+                done = len(list(frames_dir.glob("frame_*"))) if frames_dir.is_dir() else 0
+                progress(0.95 * done / total, f"frame {done} of {total}")
+                time.sleep(0.2)
+            err = proc.stderr.read() if proc.stderr else ""
+            if proc.returncode != 0:
+                line = err.strip().splitlines()[-1] if err.strip() else f"exit {proc.returncode}"
+                raise EditorError(f"rendering the movie failed: {line}")
+            return movie
+
+        def done(result: Any) -> None:
+            if result is not None:
+                self.statusBar().showMessage(f"Movie written: {result}", 8000)
+                self.last_movie = Path(result)
+
+        task = run_with_progress(self, f"Rendering {movie.name}", job, done, self.show_error)
+        if wait:
+            end = time.monotonic() + 600
+            while task.running and time.monotonic() < end:
+                QApplication.processEvents()
+                time.sleep(0.02)
+            for _ in range(5):
+                QApplication.processEvents()
+        return task
+
+    def save_copy(self, path: str | Path) -> bool:
+        """Write the session (camera included) to ``path`` without making it the
+        document's file; errors become a dialog."""
+        scene = self.session.scene
+        old = scene.camera
+        scene.camera = Camera.from_dict(self.viewport.camera.to_dict())
+        try:
+            self._in_context(lambda: self.session.save(path))
+        except (VoxwarpError, OSError) as exc:
+            self.show_error(f"could not save {path}: {exc}")
+            return False
+        finally:
+            scene.camera = old
+        return True
 
     def start_tour(self, path: str | Path) -> None:
         """Step through a teaching demo's tour (``voxwarp demo NAME --gui``) in a dock."""

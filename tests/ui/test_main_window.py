@@ -432,3 +432,40 @@ def test_help_dialog_lists_the_shortcuts(window: Any) -> None:
         assert keys in text
         assert what.split()[0] in text
     w.help_dialog.close()
+
+
+def test_keyframes_and_render_movie(window: Any, qtbot: Any, tmp_path: Path) -> None:
+    """Set Key at two frames with a lattice drag between them, undo/redo a key, then
+    Render Movie: the scene (with its animation) is saved beside the movie and rendered
+    off the GUI thread into frames and a decodable mp4."""
+    import imageio_ffmpeg
+
+    w = window
+    w.edit("Lattice", lambda: w.session.set_deformation("lattice", resolution=3))
+    w.frames_spin.setValue(5)
+    w.frame_spin.setValue(0)
+    w.set_key()
+    rest = w.session.lattice_nodes.copy()
+    i = int(np.ravel_multi_index((1, 1, 2), rest.shape[:3]))
+    start = handle_pixel(w, i)
+    drag(qtbot, w.viewport, start, start + QPoint(40, 0))
+    w.frame_spin.setValue(4)
+    w.set_key()
+    assert "keys: 0, 4" in w.keys_label.text()
+    w.undo_action.trigger()
+    assert "keys: 0 " in w.keys_label.text()
+    w.redo_action.trigger()
+    assert "keys: 0, 4" in w.keys_label.text()
+    movie = tmp_path / "bend.mp4"
+    task = w.render_movie(movie, size=(64, 48), wait=True)
+    assert task is not None
+    assert not task.running
+    assert task.error is None, task.error
+    assert movie.is_file()
+    frames = imageio_ffmpeg.read_frames(str(movie))
+    meta = next(frames)
+    assert meta["size"] == (64, 48)
+    assert sum(1 for _ in frames) == 5
+    assert len(list((tmp_path / "bend_frames").glob("frame_*.png"))) == 5
+    saved = json.loads((tmp_path / "bend_scene.json").read_text())
+    assert saved["animation"]["frames"] == 5
