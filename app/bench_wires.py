@@ -947,15 +947,7 @@ def framed_camera(
         pts = w.modified.evaluate(np.linspace(0.0, 1.0, 257))
         r = w.radius * float(w.scale[:, 1].max())
         lo, hi = np.minimum(lo, pts.min(0) - r), np.maximum(hi, pts.max(0) + r)
-    cam = Camera.fit(lo, hi, view=view, projection="perspective", fov=fov)
-    corners = np.array(
-        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-    )
-    proj = (corners - cam.center) @ cam.rotation
-    extent_w, extent_h = 2 * np.abs(proj[:, 0]).max(), 2 * np.abs(proj[:, 1]).max()
-    height = 2 * cam.distance * np.tan(np.radians(fov) / 2)
-    zoom = fill * min(height * size[0] / size[1] / extent_w, height / extent_h)
-    return Camera.fit(lo, hi, view=view, projection="perspective", fov=fov, zoom=float(zoom))
+    return Camera.framing(lo, hi, view, size, fill=fill, fov=fov)
 
 
 def make_camera(kind: str, volume: Volume, wires: Sequence[Any], size: tuple[int, int]) -> Any:

@@ -155,6 +155,40 @@ class Camera:
             radius=radius,
         )
 
+    @classmethod
+    def framing(
+        cls,
+        lo: Sequence[float],
+        hi: Sequence[float],
+        view: View,
+        size: tuple[int, int],
+        fill: float = 0.95,
+        fov: float = 30.0,
+    ) -> Camera:
+        """A perspective camera from ``view`` whose image of ``size`` (W, H) the box
+        [lo, hi] fills: ``fill`` of the image's width or height, whichever it reaches
+        first, corners projected in perspective (:meth:`fit` frames a square image)."""
+        lo_a, hi_a = np.asarray(lo, float), np.asarray(hi, float)
+        corners = np.array(
+            [
+                [x, y, z]
+                for x in (lo_a[0], hi_a[0])
+                for y in (lo_a[1], hi_a[1])
+                for z in (lo_a[2], hi_a[2])
+            ]
+        )
+        half = np.array(size, dtype=np.float64) / 2
+        zoom = 1.0
+        cam = cls.fit(lo, hi, view=view, projection="perspective", fov=fov)
+        for _ in range(8):  # perspective: the reach is not linear in the zoom; converge
+            xy = cam.project(corners, size)
+            reach = float(np.max(np.abs(xy - half) / half))
+            if abs(reach - fill) < 1e-4:
+                break
+            zoom *= fill / reach
+            cam = cls.fit(lo, hi, view=view, projection="perspective", fov=fov, zoom=zoom)
+        return cam
+
     # ------------------------------------------------------------------ matrices
     @property
     def eye(self) -> np.ndarray:

@@ -345,3 +345,17 @@ def test_from_dict_ignores_unknown_keys_and_rejects_bad_values() -> None:
 def test_camera_rejects_nan_lengths_and_non_rotations(kwargs: dict[str, Any]) -> None:
     with pytest.raises(SceneError):
         Camera(**kwargs)
+
+
+@pytest.mark.parametrize("size", [(400, 200), (200, 400), (300, 300)])
+def test_framing_fills_the_image_width_or_height(size: tuple[int, int]) -> None:
+    """Camera.framing: the box's projected extent reaches ``fill`` of the image in one
+    direction (the tighter one) and stays inside it in the other."""
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([120.0, 40.0, 60.0])
+    cam = Camera.framing(lo, hi, (-60.0, 20.0), size, fill=0.9)
+    corners = np.array([[x, y, z] for x in (0, 120) for y in (0, 40) for z in (0, 60)], float)
+    xy = cam.project(corners, size)
+    centre = np.array(size) / 2
+    reach = np.abs(xy - centre).max(axis=0) / (np.array(size) / 2)
+    assert reach.max() == pytest.approx(0.9, abs=1e-3)
+    assert np.all(reach <= 0.9 + 1e-3)
