@@ -584,8 +584,10 @@ class MainWindow(QMainWindow):
         if path:
             self.open_path(path)
 
-    def open_path(self, path: str | Path, wait: bool = False) -> Task:
-        """Open a volume or a scene JSON off the GUI thread (progress, cancel)."""
+    def open_path(self, path: str | Path, wait: bool = False, refit: bool = False) -> Task:
+        """Open a volume or a scene JSON off the GUI thread (progress, cancel); with
+        ``refit`` the camera is fitted to this viewport instead of the file's camera
+        (tour scenes were framed for their figure's image shape)."""
         spec = str(path)
 
         def job(progress: Callable[[float, str], None], cancelled: Callable[[], bool]) -> Any:
@@ -594,6 +596,8 @@ class MainWindow(QMainWindow):
 
         def done(result: Any) -> None:
             self._in_context(self.session.close)
+            if refit:
+                result.scene.camera = None
             self.set_session(result, spec)
 
         if self._open_task is not None and self._open_task.running:

@@ -83,7 +83,7 @@ class TourPanel(QWidget):
         self.back_button.setEnabled(index > 0)
         self.next_button.setEnabled(index < len(self.tour.steps) - 1)
         if step.scene is not None:
-            self._window.open_path(step.scene)
+            self._window.open_path(step.scene, refit=True)
 
     def next(self) -> None:
         """The next step."""
