@@ -287,9 +287,12 @@ class EditSession:
     ctx
         The moderngl context of the GPU backends (the GUI's); the caller makes it
         current around calls that create, step or restore a GPU model.
+    editor
+        The ``"editor"`` entry of the scene's JSON (placement, settings, which warp is
+        the model's), as :meth:`load` passes it.
     """
 
-    def __init__(self, scene: Scene, ctx: Any = None) -> None:
+    def __init__(self, scene: Scene, ctx: Any = None, editor: Any = None) -> None:
         if not isinstance(scene, Scene):
             raise EditorError(f"EditSession needs an app.scene.Scene; got {type(scene).__name__}")
         self.scene = scene
@@ -342,7 +345,7 @@ class EditSession:
         #: ``() -> context manager`` making the GL context of GPU models current (the
         #: GUI's viewport sets it; a headless caller's context is current already)
         self.gl_scope: Callable[[], Any] = contextlib.nullcontext
-        self._recover_from_scene()
+        self._recover_from_scene(editor if isinstance(editor, dict) else {})
 
     # ------------------------------------------------------------------ properties
     @property
@@ -1168,16 +1171,14 @@ class EditSession:
             editor = raw.get(EDITOR_KEY) or {}
         except (OSError, ValueError, AttributeError):
             editor = {}
-        session = cls.__new__(cls)
-        session._editor_entry = editor if isinstance(editor, dict) else {}
-        cls.__init__(session, scene, ctx)
+        session = cls(scene, ctx, editor=editor if isinstance(editor, dict) else None)
         if isinstance(raw, dict) and raw.get("animation") is not None:
             session.animation = _animation_from(raw["animation"])
         return session
 
-    def _recover_from_scene(self) -> None:
-        """Take over the deformation saved in the scene's warps (see :meth:`to_dict`)."""
-        entry: dict[str, Any] = getattr(self, "_editor_entry", {}) or {}
+    def _recover_from_scene(self, entry: dict[str, Any]) -> None:
+        """Take over the deformation saved in the scene's warps (see :meth:`to_dict`),
+        with the settings of the scene's editor ``entry``."""
         warps = list(self.scene.warps)
         try:
             if entry.get("placement") is not None:
