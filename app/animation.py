@@ -120,7 +120,7 @@ import numpy as np
 from app.camera import Camera
 from app.errors import SceneError, VoxwarpError
 from app.files import atomic_write_text
-from app.scene import Scene
+from app.scene import Scene, read_scene_dict
 from app.transfer_function import TransferFunction
 
 #: key of the animation entry in scene JSON
@@ -675,7 +675,7 @@ class Animation:
     @classmethod
     def from_scene_file(cls, path: str | os.PathLike) -> Animation:
         """The animation of a scene JSON file."""
-        return cls.from_scene_dict(read_scene_json(path))
+        return cls.from_scene_dict(read_scene_dict(path))
 
     def time_of(self, index: int, count: int | None = None) -> float:
         """Animation frame (key time) of rendered frame ``index`` of ``count`` frames.
@@ -695,22 +695,6 @@ class Animation:
         if n <= 1 or n == self.frames:
             return float(index)
         return index * (self.frames - 1) / (n - 1)
-
-
-def read_scene_json(path: str | os.PathLike) -> dict[str, Any]:
-    """The JSON object of a scene file (:class:`SceneError` naming the problem)."""
-    p = Path(path)
-    try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise SceneError(f"no such scene file: {p}") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"cannot read scene file {p}: {exc}") from exc
-    except ValueError as exc:
-        raise SceneError(f"{p} is not valid JSON: {exc}") from exc
-    if not isinstance(d, dict):
-        raise SceneError(f"{p}: a scene must be a JSON object")
-    return d
 
 
 def save_animated_scene(path: str | os.PathLike, source: Any, animation: Animation) -> Path:
@@ -783,7 +767,7 @@ def load_animated_scene(path: str | os.PathLike, frames: int | None = None) -> F
     FrameStates
     """
     p = Path(path)
-    d = read_scene_json(p)
+    d = read_scene_dict(p)
     return evaluate(d, base_dir=p.parent.resolve(), frames=frames)
 
 

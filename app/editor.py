@@ -49,7 +49,7 @@ from app.camera import Camera
 from app.errors import VoxwarpError
 from app.files import atomic_write_text
 from app.overlay import OverlayLayer, box_edges, grid_edges, polyline_segments
-from app.scene import Scene
+from app.scene import Scene, read_scene_dict
 from deform.chainmail import ChainMail
 from deform.elements import ElementGrid
 from deform.lattice_warp import LatticeWarp
@@ -1163,16 +1163,11 @@ class EditSession:
     @classmethod
     def load(cls, path: str | os.PathLike, ctx: Any = None) -> EditSession:
         """Open a scene JSON (from :meth:`save`, ``voxwarp render`` or ``demo``)."""
-        scene = Scene.load(path)
-        editor: dict[str, Any] = {}
-        raw: Any = None
-        try:
-            raw = json.loads(Path(path).read_text(encoding="utf-8"))
-            editor = raw.get(EDITOR_KEY) or {}
-        except (OSError, ValueError, AttributeError):
-            editor = {}
+        raw = read_scene_dict(path)
+        scene = Scene.from_dict(raw, base_dir=Path(path).parent.resolve())
+        editor = raw.get(EDITOR_KEY)
         session = cls(scene, ctx, editor=editor if isinstance(editor, dict) else None)
-        if isinstance(raw, dict) and raw.get("animation") is not None:
+        if raw.get("animation") is not None:
             session.animation = _animation_from(raw["animation"])
         return session
 

@@ -522,17 +522,7 @@ class Scene:
     def load(cls, path: str | os.PathLike) -> Scene:
         """Read a scene JSON written by :meth:`save`; raises :class:`SceneError`."""
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError as exc:
-            raise SceneError(f"no such scene file: {path}") from exc
-        except (OSError, UnicodeDecodeError) as exc:
-            raise SceneError(f"cannot read scene file {path}: {exc}") from exc
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise SceneError(f"{path} is not valid JSON: {exc}") from exc
-        return cls.from_dict(d, base_dir=path.parent.resolve())
+        return cls.from_dict(read_scene_dict(path), base_dir=path.parent.resolve())
 
     def __repr__(self) -> str:
         return (
@@ -541,6 +531,23 @@ class Scene:
             f" projection={self.projection!r}, step={self.step}, warps={len(self.warps)}"
             + (f", meshes={len(self._meshes)})" if self._meshes else ")")
         )
+
+
+def read_scene_dict(path: str | os.PathLike) -> dict[str, Any]:
+    """The JSON object of a scene file, with its extra entries (``"editor"``,
+    ``"animation"``); :class:`SceneError` naming the file and the problem."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise SceneError(f"no such scene file: {p}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"cannot read scene file {p}: {exc}") from exc
+    except ValueError as exc:
+        raise SceneError(f"{p} is not valid JSON: {exc}") from exc
+    if not isinstance(d, dict):
+        raise SceneError(f"{p}: a scene must be a JSON object")
+    return d
 
 
 def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[str, Any]:
