@@ -331,7 +331,7 @@ class Renderer:
             return "none"
         sparse = scene.mode in ("dvr", "iso", "flm") and self.cell_skipping
         if not linear:
-            if not (sparse and _bounded(scene.warps)) or self.warped_skip_maps == "never":
+            if not self._warped_cells_possible(scene) or self.warped_skip_maps == "never":
                 return "blocks"
             if self.warped_skip_maps == "always" or gpu is None:
                 return "cells"
@@ -356,35 +356,47 @@ class Renderer:
         ready = self._skip_ready.pop(key, None)
         self._skip_ready.clear()  # results for other states are stale
         if ready is not None:
-            for tex in gpu.warped_skip.values():
-                tex.release()
-            gpu.warped_skip.clear()
-            gpu.warped_visible, gpu.warped_offset = ready
-            gpu.warped_key = key
+            self._install_warped(gpu, key, ready)
             return "cells"
+        self._skip_wanted = (key, self._warped_job(gpu, scene))
+        return "blocks"
+
+    def _warped_cells_possible(self, scene: Scene) -> bool:
+        """Whether warped rays of ``scene`` can skip by deformed-space cell maps: a mode
+        with sparse visibility (dvr, iso, flm), cell skipping on, and every warp of the
+        chain bounding its displacement."""
+        return (
+            self.empty_space_skipping
+            and self.cell_skipping
+            and scene.mode in ("dvr", "iso", "flm")
+            and _bounded(scene.warps)
+        )
+
+    def _warped_job(self, gpu: _VolumeGPU, scene: Scene) -> Callable[[], Any]:
+        """The CPU work of ``scene``'s deformed-space cell visibility, as a closure over
+        its inputs (no GL: it may run on any thread)."""
         visible = self._cell_visibility(gpu, scene)
         vol = scene.volume
         lo, hi = scene.ray_bounds()
         warps = list(scene.warps)
         spacing, origin = vol.spacing, vol.origin
+        return lambda: warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
 
-        def job() -> Any:
-            return warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
-
-        self._skip_wanted = (key, job)
-        return "blocks"
+    def _install_warped(self, gpu: _VolumeGPU, key: Any, result: Any) -> None:
+        """Keep a deformed-space visibility on the volume (its old skip maps go)."""
+        for tex in gpu.warped_skip.values():
+            tex.release()
+        gpu.warped_skip.clear()
+        gpu.warped_visible, gpu.warped_offset = result
+        gpu.warped_key = key
 
     def needs_skip_maps(self, scene: Scene) -> bool:
         """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
         would march block by block only because its warp state's deformed-space skip
         maps are not built yet (no side effects)."""
-        if self.warped_skip_maps != "background" or not self.empty_space_skipping:
+        if self.warped_skip_maps != "background" or fold_affine(scene.warps) is not None:
             return False
-        if fold_affine(scene.warps) is not None:
-            return False
-        if not (scene.mode in ("dvr", "iso", "flm") and self.cell_skipping):
-            return False
-        if not _bounded(scene.warps):
+        if not self._warped_cells_possible(scene):
             return False
         entry = self._volumes.get(id(scene.volume))
         key = self._warped_key(scene)
@@ -456,20 +468,12 @@ class Renderer:
     def _warped_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
         """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
         for one warp state; a change of the warps or of what the mode sees rebuilds it)."""
-        lo, hi = scene.ray_bounds()
         key = self._warped_key(scene)
         if gpu.warped_key != key:
-            for tex in gpu.warped_skip.values():
-                tex.release()
-            gpu.warped_skip.clear()
-            vol = scene.volume
-            result = warped_cell_visibility(
-                self._cell_visibility(gpu, scene), vol.spacing, vol.origin, scene.warps, lo, hi
-            )
+            result = self._warped_job(gpu, scene)()
             if result is None:
                 raise RenderError("warped cell skipping needs warps that bound their displacement")
-            gpu.warped_visible, gpu.warped_offset = result
-            gpu.warped_key = key
+            self._install_warped(gpu, key, result)
         assert gpu.warped_visible is not None
         return gpu.warped_visible
 
