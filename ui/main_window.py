@@ -361,19 +361,15 @@ class MainWindow(QMainWindow):
     def edit(self, text: str, fn: Callable[[], Any], merge: str | None = None) -> Any:
         """Run ``fn`` as one undoable edit (see the module docstring); errors become a
         dialog and the state goes back to where it was."""
-        before = (
-            self.viewport.with_context(self.session.snapshot)
-            if self.viewport.ctx
-            else self.session.snapshot()
-        )
+        before = self.viewport.with_context(self.session.snapshot)
         try:
-            result = self._in_context(fn)
+            result = self.viewport.with_context(fn)
         except (VoxwarpError, ValueError) as exc:
-            self._in_context(lambda: self.session.restore(before))
+            self.viewport.with_context(lambda: self.session.restore(before))
             self.show_error(str(exc))
             self.refresh_panels()
             return None
-        after = self._in_context(self.session.snapshot)
+        after = self.viewport.with_context(self.session.snapshot)
         self.undo_stack.push(SnapshotCommand(self, text, before, after, merge))
         if self.session.wire_field_stale:
             self.request_wire_build()
@@ -381,16 +377,11 @@ class MainWindow(QMainWindow):
         self.viewport.update()
         return result
 
-    def _in_context(self, fn: Callable[[], Any]) -> Any:
-        if self.viewport.ctx is None:
-            return fn()
-        return self.viewport.with_context(fn)
-
     def restore(self, snap: Snapshot) -> None:
         """Put the session in a snapshot's state (undo/redo)."""
         self._cancel_wire_build()
         try:
-            self._in_context(lambda: self.session.restore(snap))
+            self.viewport.with_context(lambda: self.session.restore(snap))
         except VoxwarpError as exc:
             self.show_error(str(exc))
         if self.session.wire_field_stale:
@@ -404,13 +395,13 @@ class MainWindow(QMainWindow):
         self._update_title()
 
     def _begin_mouse_edit(self, _text: str) -> None:
-        self._pending_before = self._in_context(self.session.snapshot)
+        self._pending_before = self.viewport.with_context(self.session.snapshot)
 
     def _end_mouse_edit(self, text: str) -> None:
         before, self._pending_before = self._pending_before, None
         if before is None:
             return
-        after = self._in_context(self.session.snapshot)
+        after = self.viewport.with_context(self.session.snapshot)
         if after.same_as(before):
             return
         if text == "Drag":
@@ -459,7 +450,7 @@ class MainWindow(QMainWindow):
     def _wire_built(self, job: WireBuild) -> None:
         if job is not self._wire_job:
             return
-        self._in_context(lambda: self.session.install_wire_build(job))
+        self.viewport.with_context(lambda: self.session.install_wire_build(job))
         self.refresh_panels()
         self.viewport.update()
 
@@ -595,7 +586,7 @@ class MainWindow(QMainWindow):
             return load_session_input(spec)
 
         def done(result: Any) -> None:
-            self._in_context(self.session.close)
+            self.viewport.with_context(self.session.close)
             if refit:
                 result.scene.camera = None
             self.set_session(result, spec)
@@ -655,7 +646,7 @@ class MainWindow(QMainWindow):
         self.viewport.camera_moved = True
         scene.camera = Camera.from_dict(self.viewport.camera.to_dict())
         try:
-            self._in_context(lambda: self.session.save(path))
+            self.viewport.with_context(lambda: self.session.save(path))
         except (VoxwarpError, OSError) as exc:
             scene.camera = old_camera
             self.show_error(f"could not save {path}: {exc}")
@@ -814,7 +805,7 @@ class MainWindow(QMainWindow):
         old = scene.camera
         scene.camera = Camera.from_dict(self.viewport.camera.to_dict())
         try:
-            self._in_context(lambda: self.session.save(path))
+            self.viewport.with_context(lambda: self.session.save(path))
         except (VoxwarpError, OSError) as exc:
             self.show_error(f"could not save {path}: {exc}")
             return False

@@ -17,6 +17,7 @@ Mouse (see also the help dialog of the main window):
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -106,7 +107,6 @@ class Viewport(QOpenGLWidget):
         self.camera_moved = False
         self._skip_task: Task | None = None
         self._skip_key: Any = None
-        self._skip_now = False
         #: resolution scale of frames drawn while interacting (dragging, orbiting, a
         #: running simulation): the level of detail that keeps the view responsive
         self.interactive_scale = 0.5
@@ -150,6 +150,7 @@ class Viewport(QOpenGLWidget):
         if self.renderer is None or self.overlay is None:
             return
         t0 = time.perf_counter()
+        start_now = False
         w, h = self.size_px()
         fbo = self.ctx.detect_framebuffer(self.defaultFramebufferObject())
         try:
@@ -162,9 +163,9 @@ class Viewport(QOpenGLWidget):
             else:
                 # a new warp state waits for its skip maps at the interactive scale
                 # (built on a worker: _start_skip_map_job) instead of marching every block
-                waiting = self._can_build_skip_maps() and self.renderer.needs_skip_maps(scene)
+                waiting = self._waiting_for_skip_maps()
                 interactive = self.interacting()
-                self._skip_now = waiting and not interactive
+                start_now = waiting and not interactive
                 scale = self.interactive_scale if interactive or waiting else 1.0
                 self.renderer.draw_scaled(scene, fbo, (0, 0, w, h), self.camera, scale)
                 if scale < 1.0:
@@ -179,12 +180,13 @@ class Viewport(QOpenGLWidget):
             self.failed.emit(str(exc))
         self.last_frame_ms = (time.perf_counter() - t0) * 1000
         self.frames_drawn += 1
-        self._start_skip_map_job()
+        self._start_skip_map_job(start_now)
         self.frameDrawn.emit(self.last_frame_ms)
 
-    def _start_skip_map_job(self) -> None:
-        """Build the skip maps of a warp state drawn twice in a row on a worker thread
-        (CPU models only: a GPU model's field would be read back off its thread)."""
+    def _start_skip_map_job(self, now: bool) -> None:
+        """Build the skip maps of a warp state drawn twice in a row (``now``: at once,
+        the view rests) on a worker thread (CPU models only: a GPU model's field would
+        be read back off its thread)."""
         assert self.renderer is not None
         wanted = self.renderer.skip_map_job()
         if wanted is None:
@@ -193,7 +195,6 @@ class Viewport(QOpenGLWidget):
         key, job = wanted
         gpu_model = not self._can_build_skip_maps()
         busy = self._skip_task is not None and self._skip_task.running
-        now, self._skip_now = self._skip_now, False
         if (key != self._skip_key and not now) or gpu_model or busy:
             if key != self._skip_key and not gpu_model:
                 QTimer.singleShot(SKIP_MAP_SETTLE_MS, self.update)  # is it still there?
@@ -204,6 +205,14 @@ class Viewport(QOpenGLWidget):
         task = Task(lambda _progress, _cancelled: job(), self)
         task.succeeded.connect(lambda result: self._skip_map_ready(renderer, key, result))
         self._skip_task = task.start()
+
+    def _waiting_for_skip_maps(self) -> bool:
+        """Whether the scene's warp state has no skip maps yet that a worker can build."""
+        return (
+            self.renderer is not None
+            and self._can_build_skip_maps()
+            and self.renderer.needs_skip_maps(self.session.scene)
+        )
 
     def _can_build_skip_maps(self) -> bool:
         """Skip maps are built off the GUI thread for CPU models only (a GPU model's
@@ -231,9 +240,7 @@ class Viewport(QOpenGLWidget):
         being built for it (tests and scripts wait for this before reading frames)."""
         if self.interacting() or (self._skip_task is not None and self._skip_task.running):
             return False
-        return self.renderer is None or not (
-            self._can_build_skip_maps() and self.renderer.needs_skip_maps(self.session.scene)
-        )
+        return not self._waiting_for_skip_maps()
 
     def note_input(self) -> None:
         """Something changed the view (the next frames are interactive ones)."""
@@ -249,13 +256,9 @@ class Viewport(QOpenGLWidget):
         else:
             self.update()
 
-    def _in_gl(self, fn: Callable[[], Any]) -> Any:
-        if self.ctx is None:
-            return fn()
-        return self.with_context(fn)
-
     def with_context(self, fn: Callable[[], Any]) -> Any:
-        """Run ``fn`` with the viewport's GL context current (GPU models, releases)."""
+        """Run ``fn`` with the viewport's GL context current (GPU models, releases);
+        before the context exists, just run it."""
         with self.gl_scope():
             return fn()
 
@@ -320,8 +323,6 @@ class Viewport(QOpenGLWidget):
         cam = self.camera
         if projection == cam.projection:
             return
-        import math
-
         h = 2 * cam.distance * math.tan(math.radians(cam.fov) / 2)
         self.camera = Camera(
             cam.center, cam.rotation, cam.distance, cam.fov, projection, h, cam.radius
@@ -337,7 +338,7 @@ class Viewport(QOpenGLWidget):
     def mousePressEvent(self, event: QMouseEvent) -> None:
         """See :meth:`_mousePressEvent` (run with the GL context current: a GPU model moves
         its elements through GL)."""
-        self._in_gl(lambda: self._mousePressEvent(event))
+        self.with_context(lambda: self._mousePressEvent(event))
 
     def _mousePressEvent(self, event: QMouseEvent) -> None:
         """Pick, start a drag, an orbit, a pan or a rubber band."""
@@ -382,7 +383,7 @@ class Viewport(QOpenGLWidget):
     def mouseMoveEvent(self, event: QMouseEvent) -> None:
         """See :meth:`_mouseMoveEvent` (run with the GL context current: a GPU model moves
         its elements through GL)."""
-        self._in_gl(lambda: self._mouseMoveEvent(event))
+        self.with_context(lambda: self._mouseMoveEvent(event))
 
     def _mouseMoveEvent(self, event: QMouseEvent) -> None:
         """Drag the selection, orbit, pan or stretch the band."""
@@ -419,7 +420,7 @@ class Viewport(QOpenGLWidget):
     def mouseReleaseEvent(self, event: QMouseEvent) -> None:
         """See :meth:`_mouseReleaseEvent` (run with the GL context current: a GPU model moves
         its elements through GL)."""
-        self._in_gl(lambda: self._mouseReleaseEvent(event))
+        self.with_context(lambda: self._mouseReleaseEvent(event))
 
     def _mouseReleaseEvent(self, event: QMouseEvent) -> None:
         """Finish what the press started."""
