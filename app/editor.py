@@ -333,8 +333,6 @@ class EditSession:
         self.reference: int | None = None
         #: control points of the wire being laid (:meth:`add_wire_point`)
         self.pending_wire: list[np.ndarray] = []
-        #: changes with every change of what is drawn (the viewport redraws on it)
-        self.revision = 0
         #: last timings in ms: "step" (model), "field" (wire build)
         self.timings: dict[str, float] = {}
         self._drag: dict[str, Any] | None = None
@@ -371,7 +369,6 @@ class EditSession:
         return self._drag is not None
 
     def _touch(self) -> None:
-        self.revision += 1
         self._handle_cache = None
         self.settled = False
 
@@ -670,14 +667,12 @@ class EditSession:
             self.reference = idx[-1]
         if self.reference not in sel:
             self.reference = sel[-1] if sel else None
-        self.revision += 1
 
     def set_reference(self, index: int) -> None:
         """Make a selected handle the reference of drags."""
         if index not in self.selection:
             raise EditorError(f"handle {index} is not selected; select it first")
         self.reference = int(index)
-        self.revision += 1
 
     def set_fixed(self, indices: Sequence[int], fixed: bool) -> None:
         """Fix or free elements (mass-spring and ChainMail)."""
@@ -790,7 +785,6 @@ class EditSession:
                 self.settled = bool(speed < SETTLED_SPEED)
             elif before is not None:
                 self.settled = bool(np.max(np.abs(self.model.positions() - before)) < 1e-4)
-        self.revision += 1
         now = time.perf_counter()
         if self.model.backend != "gpu" or (
             self._drag is None and now - self._last_readback >= self.gpu_readback_interval
@@ -940,7 +934,6 @@ class EditSession:
         p = camera.point_on_view_plane(pixel, size, 0.5 * (lo + hi))
         m = np.linalg.inv(self.placement_matrix)
         self.pending_wire.append(p @ m[:3, :3].T + m[:3, 3])
-        self.revision += 1
 
     def finish_wire(self, kind: str = "catmull-rom", radius: float | None = None) -> int:
         """Make the laid points a wire (base = modified; then bend it by dragging).
