@@ -371,11 +371,16 @@ class MainWindow(QMainWindow):
             return None
         after = self.viewport.with_context(self.session.snapshot)
         self.undo_stack.push(SnapshotCommand(self, text, before, after, merge))
+        self._changed()
+        return result
+
+    def _changed(self) -> None:
+        """After an edit, undo or redo: a stale wire field is rebuilt, panels and the
+        view follow."""
         if self.session.wire_field_stale:
             self.request_wire_build()
         self.refresh_panels()
         self.viewport.update()
-        return result
 
     def restore(self, snap: Snapshot) -> None:
         """Put the session in a snapshot's state (undo/redo)."""
@@ -384,10 +389,7 @@ class MainWindow(QMainWindow):
             self.viewport.with_context(lambda: self.session.restore(snap))
         except VoxwarpError as exc:
             self.show_error(str(exc))
-        if self.session.wire_field_stale:
-            self.request_wire_build()
-        self.refresh_panels()
-        self.viewport.update()
+        self._changed()
 
     def scene_changed(self) -> None:
         """The scene's look changed outside :meth:`edit`: redraw."""
@@ -412,9 +414,7 @@ class MainWindow(QMainWindow):
                 "lattice": "Drag lattice nodes",
             }.get(self.session.kind, "Drag")
         self.undo_stack.push(SnapshotCommand(self, text, before, after))
-        if self.session.wire_field_stale:
-            self.request_wire_build()
-        self.refresh_panels()
+        self._changed()
 
     def _dragged(self) -> None:
         if self.session.kind == "wires":
