@@ -564,10 +564,16 @@ class DeformationPanel(_Panel):
         row.addWidget(self.step_button)
         form.addRow(row)
         self.steps_spin = _int_spin(0, 1000, "Mass-spring steps per frame while running")
-        self.steps_spin.valueChanged.connect(self._steps_changed)
+        self.steps_spin.valueChanged.connect(
+            lambda v: self._option_changed(
+                "steps_per_frame", "Steps per frame", "steps per frame", v
+            )
+        )
         form.addRow("Steps per frame", self.steps_spin)
         self.relax_spin = _int_spin(0, 16, "ChainMail relaxation steps per frame while running")
-        self.relax_spin.valueChanged.connect(self._relax_changed)
+        self.relax_spin.valueChanged.connect(
+            lambda v: self._option_changed("relax_steps", "Relaxation steps", "relax steps", v)
+        )
         form.addRow("Relax steps", self.relax_spin)
         row = QHBoxLayout()
         self.fix_button = QPushButton("Fix selected")
@@ -910,23 +916,11 @@ class DeformationPanel(_Panel):
     def _single_step(self) -> None:
         self._edit("Single step", lambda: self.session.single_step())
 
-    def _steps_changed(self, value: int) -> None:
+    def _option_changed(self, name: str, label: str, merge: str, value: int) -> None:
+        """A run-time option of the session (one undo step per spin box drag)."""
         if self._updating:
             return
-        self._edit(
-            "Steps per frame",
-            lambda: self.session.set_option("steps_per_frame", int(value)),
-            merge="steps per frame",
-        )
-
-    def _relax_changed(self, value: int) -> None:
-        if self._updating:
-            return
-        self._edit(
-            "Relaxation steps",
-            lambda: self.session.set_option("relax_steps", int(value)),
-            merge="relax steps",
-        )
+        self._edit(label, lambda: self.session.set_option(name, int(value)), merge=merge)
 
     def _set_fixed(self, fixed: bool) -> None:
         def fn() -> None:
