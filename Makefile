@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml scripts/install-system-deps.sh
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "voxwarp needs Python >= 3.11; set PYTHON=python3.11"'
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev]'
+	$(PY) -m pip install -q -e '.[all,dev]'
 	@touch $(STAMP)
 
 setup: $(STAMP)
@@ -28,14 +28,14 @@ test: $(STAMP) lint
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
-	$(VENV)/bin/lint-imports
+	$(PY) scripts/lint_imports.py
 
 format: $(STAMP)
 	$(VENV)/bin/ruff check --fix .
 	$(VENV)/bin/ruff format .
 
 $(BENCH_STAMP): $(STAMP)
-	$(PY) -m pip install -q -e '.[dev,bench]'
+	$(PY) -m pip install -q -e '.[all,dev,bench]'
 	@touch $(BENCH_STAMP)
 
 ## raycaster benchmark against VTK (writes docs/bench-render.md)

@@ -1,56 +1,93 @@
-"""voxwarp application layer: volume I/O, scene, camera, transfer functions, renderer, CLI.
+"""voxwarp: deform 3D volumes and meshes at render time, without resampling the volume.
 
->>> from app import load_volume, Scene, OffscreenRenderer
+>>> from voxwarp import load_volume, Scene, OffscreenRenderer
 >>> vol = load_volume("sample:fish")
 >>> scene = Scene(vol, mode="dvr", transfer_function="ct-bone", view="+z", step=1.0)
 >>> with OffscreenRenderer(512, 512) as r:
 ...     img = r.render(scene)          # (512, 512, 4) uint8, row 0 = top
+
+The deformation models are in :mod:`voxwarp.deform`. Names load on first use, so
+``import voxwarp`` stays cheap (no numba, scipy, OpenCL or Qt until they are needed).
 """
 
-from app.camera import Camera
-from app.errors import (
-    MeshError,
-    RenderError,
-    SceneError,
-    VolumeError,
-    VolumeTooLargeError,
-    VoxwarpError,
-)
-from app.image_io import read_image, write_image
-from app.io import load_volume, save_volume, volume_info, volume_summary
-from app.mesh import Mesh, MeshInstance, instances_from_scene_graph, load_mesh
-from app.render import OffscreenRenderer, Renderer, create_context
-from app.samples import load_sample, sample_names
-from app.scene import MODES, Scene
-from app.transfer_function import PRESETS, TransferFunction
-from app.volume import Volume
+from __future__ import annotations
 
-__all__ = [
-    "MODES",
-    "PRESETS",
-    "Camera",
-    "Mesh",
-    "MeshError",
-    "MeshInstance",
-    "OffscreenRenderer",
-    "RenderError",
-    "Renderer",
-    "Scene",
-    "SceneError",
-    "TransferFunction",
-    "Volume",
-    "VolumeError",
-    "VolumeTooLargeError",
-    "VoxwarpError",
-    "create_context",
-    "instances_from_scene_graph",
-    "load_mesh",
-    "load_sample",
-    "load_volume",
-    "read_image",
-    "sample_names",
-    "save_volume",
-    "volume_info",
-    "volume_summary",
-    "write_image",
-]
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: public name -> module that defines it (imported on first access)
+_PUBLIC: dict[str, str] = {
+    "Camera": "voxwarp.core.camera",
+    "MeshError": "voxwarp.errors",
+    "RenderError": "voxwarp.errors",
+    "SceneError": "voxwarp.errors",
+    "VolumeError": "voxwarp.errors",
+    "VolumeTooLargeError": "voxwarp.errors",
+    "VoxwarpError": "voxwarp.errors",
+    "read_image": "voxwarp.io.images",
+    "write_image": "voxwarp.io.images",
+    "load_volume": "voxwarp.io.volumes",
+    "save_volume": "voxwarp.io.volumes",
+    "volume_info": "voxwarp.io.volumes",
+    "volume_summary": "voxwarp.io.volumes",
+    "Mesh": "voxwarp.core.mesh",
+    "MeshInstance": "voxwarp.core.mesh",
+    "instances_from_scene_graph": "voxwarp.core.mesh",
+    "load_mesh": "voxwarp.core.mesh",
+    "OffscreenRenderer": "voxwarp.render.raycaster",
+    "Renderer": "voxwarp.render.raycaster",
+    "create_context": "voxwarp.render.raycaster",
+    "load_sample": "voxwarp.io.samples",
+    "sample_names": "voxwarp.io.samples",
+    "MODES": "voxwarp.scene",
+    "Scene": "voxwarp.scene",
+    "PRESETS": "voxwarp.core.transfer_function",
+    "TransferFunction": "voxwarp.core.transfer_function",
+    "Volume": "voxwarp.core.volume",
+}
+
+__all__ = ["__version__", *sorted(_PUBLIC)]
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("voxwarp")
+    except metadata.PackageNotFoundError:  # running from a source tree that is not installed
+        return "0+unknown"
+
+
+def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        value: Any = _version()
+    elif name in _PUBLIC:
+        value = getattr(importlib.import_module(_PUBLIC[name]), name)
+    else:
+        raise AttributeError(f"module 'voxwarp' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
+    from voxwarp.core.camera import Camera
+    from voxwarp.core.mesh import Mesh, MeshInstance, instances_from_scene_graph, load_mesh
+    from voxwarp.core.transfer_function import PRESETS, TransferFunction
+    from voxwarp.core.volume import Volume
+    from voxwarp.errors import (
+        MeshError,
+        RenderError,
+        SceneError,
+        VolumeError,
+        VolumeTooLargeError,
+        VoxwarpError,
+    )
+    from voxwarp.io.images import read_image, write_image
+    from voxwarp.io.samples import load_sample, sample_names
+    from voxwarp.io.volumes import load_volume, save_volume, volume_info, volume_summary
+    from voxwarp.render.raycaster import OffscreenRenderer, Renderer, create_context
+    from voxwarp.scene import MODES, Scene

@@ -1,7 +1,9 @@
-"""Errors raised by voxwarp for bad input.
+"""Errors raised by voxwarp for bad input: one root, :class:`VoxwarpError`.
 
 Every error names the problem and the fix in its message, so a user never has to
-read a traceback from deep inside numpy or OpenGL.
+read a traceback from deep inside numpy or OpenGL. Every layer derives its errors from
+:class:`VoxwarpError` (this module sits below all of them), so callers such as the GUI
+catch ``VoxwarpError`` alone and a real bug still surfaces as a traceback.
 """
 
 from __future__ import annotations
@@ -29,3 +31,12 @@ class MeshError(VoxwarpError, ValueError):
 
 class RenderError(VoxwarpError, RuntimeError):
     """The renderer could not draw (no GL context, shader failure, ...)."""
+
+
+class InputError(VoxwarpError, ValueError):
+    """A file named on the command line or opened in the GUI (wire file, lattice file,
+    scene JSON) that does not fit; the message names the option or file and the fix."""
+
+
+class MissingExtraError(VoxwarpError, ImportError):
+    """A feature needs an optional dependency group (an *extra*) that is not installed."""

@@ -1,7 +1,7 @@
 """The :class:`Scene`: everything needed to reproduce an image, serialisable to JSON.
 
 A scene holds a volume, a compositing mode, a transfer function, a view, the sample
-distance, a chain of warps and optionally mesh instances (:mod:`app.mesh`), drawn
+distance, a chain of warps and optionally mesh instances (:mod:`voxwarp.core.mesh`), drawn
 depth-composited with the volume. It never touches the GPU; the renderer reads it.
 Scene JSON refers to the volume by path (relative to the JSON file when possible),
 by bundled sample name, or embeds a small array (base64, no pickle).
@@ -19,13 +19,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from app.camera import PROJECTIONS, Camera, Projection, View, view_rotation
-from app.errors import MeshError, SceneError, VolumeError
-from app.files import atomic_write_text
-from app.mesh import MeshInstance, mesh_instances_bounds
-from app.transfer_function import TransferFunction
-from app.volume import Volume, check_finite
-from deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
+from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
+from voxwarp.core.files import atomic_write_text
+from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
+from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.core.volume import Volume, check_finite
+from voxwarp.deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
+from voxwarp.errors import MeshError, SceneError, VolumeError
 
 Mode = Literal["dvr", "mip", "minip", "average", "flm", "iso"]
 MODES: tuple[str, ...] = ("dvr", "mip", "minip", "average", "flm", "iso")
@@ -64,15 +64,15 @@ class Scene:
     Parameters
     ----------
     volume
-        The :class:`~app.volume.Volume` to render.
+        The :class:`~voxwarp.core.volume.Volume` to render.
     mode
         Compositing mode: ``dvr`` (emission-absorption), ``mip``, ``minip``,
         ``average`` (X-ray like), ``flm`` (first local maximum) or ``iso`` (shaded
         isosurface).
     transfer_function
-        Preset name (see :data:`app.transfer_function.PRESETS`), a list of
+        Preset name (see :data:`voxwarp.core.transfer_function.PRESETS`), a list of
         ``(value, r, g, b, a)`` control points in data units, or a
-        :class:`~app.transfer_function.TransferFunction`.
+        :class:`~voxwarp.core.transfer_function.TransferFunction`.
     view
         ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"`` (the side the camera is
         on) or ``(azimuth, elevation)`` in degrees.
@@ -81,7 +81,7 @@ class Scene:
     step
         Sample distance in voxels (of the smallest spacing).
     warps
-        Chain of :class:`deform.warp.Warp` applied in order (deformed -> original).
+        Chain of :class:`voxwarp.deform.warp.Warp` applied in order (deformed -> original).
     window
         ``(level, width)`` in data units for the grey-value modes; default from the
         volume's 0.5-99.5 percentiles.
@@ -103,12 +103,12 @@ class Scene:
     background
         RGBA background in [0, 1].
     camera
-        An explicit :class:`~app.camera.Camera`; ``None`` fits one to the volume from
+        An explicit :class:`~voxwarp.core.camera.Camera`; ``None`` fits one to the volume from
         ``view``, ``projection``, ``fov`` and ``zoom``.
     zoom, fov
         Magnification and vertical field of view (degrees) of the fitted camera.
     meshes
-        :class:`~app.mesh.MeshInstance` objects drawn with the volume, depth-composited
+        :class:`~voxwarp.core.mesh.MeshInstance` objects drawn with the volume, depth-composited
         (rays stop at opaque mesh surfaces; the volume is composited over the meshes).
         The fitted camera then frames the volume and the meshes. A mesh-only picture
         still needs a volume: use a tiny empty one (e.g. ``Volume(np.zeros((2, 2, 2),
@@ -305,12 +305,12 @@ class Scene:
             return
         if isinstance(value, MeshInstance) or not isinstance(value, Sequence):
             raise SceneError(
-                f"meshes must be a list of app.mesh.MeshInstance; got {type(value).__name__}"
+                f"meshes must be a list of voxwarp.MeshInstance; got {type(value).__name__}"
             )
         for i, m in enumerate(value):
             if not isinstance(m, MeshInstance):
                 raise SceneError(
-                    f"meshes[{i}] must be an app.mesh.MeshInstance (wrap a Mesh:"
+                    f"meshes[{i}] must be an voxwarp.core.mesh.MeshInstance (wrap a Mesh:"
                     f" MeshInstance(mesh)); got {type(m).__name__}"
                 )
         self._meshes = list(value)
@@ -625,7 +625,7 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
                 units=str(d.get("units", "")),
             )
         if "sample" in d:
-            from app.samples import load_sample
+            from voxwarp.io.samples import load_sample
 
             name = str(d["sample"])
             kwargs: dict[str, Any] = {}
@@ -633,7 +633,7 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
                 kwargs["shape"] = tuple(int(v) for v in d["shape"])
             return load_sample(name, spacing=spacing, origin=origin, **kwargs)
         if "path" in d:
-            from app.io import load_volume
+            from voxwarp.io.volumes import load_volume
 
             p = Path(str(d["path"]))
             if not p.is_absolute() and base_dir is not None:

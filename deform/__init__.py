@@ -1,45 +1,77 @@
 """voxwarp deformation models (offset field, wire field, trilinear lattice).
 
 Each model has a CPU reference and a GPU backend and exposes its result as a warp
-(:class:`deform.warp.Warp`) that the raycaster samples without resampling the volume.
+(:class:`voxwarp.deform.warp.Warp`) that the raycaster samples without resampling the
+volume. Names load on first use (the models pull in numba, scipy and pyopencl).
 """
 
-from deform.chainmail import ChainMail as ChainMail
-from deform.chainmail import MoveStats as MoveStats
-from deform.chainmail_model import ChainMailError as ChainMailError
-from deform.elements import ElementGrid as ElementGrid
-from deform.elements import ElementGridError as ElementGridError
-from deform.lattice_warp import LatticeWarp as LatticeWarp
-from deform.massspring import CpuSpringSolver as CpuSpringSolver
-from deform.massspring import MassSpring as MassSpring
-from deform.offset_field import OffsetFieldWarp as OffsetFieldWarp
-from deform.scene_graph import SceneNode as SceneNode
-from deform.scene_graph import compose_scene as compose_scene
-from deform.trilinear import TrilinearGrid as TrilinearGrid
-from deform.trilinear import TrilinearTransform as TrilinearTransform
-from deform.warp import (
-    AffineWarp,
-    IdentityWarp,
-    Warp,
-    WarpError,
-    chain_apply,
-    compose_glsl,
-    known_warps,
-    register_warp,
-    warp_from_dict,
-)
-from deform.wires import Wire as Wire
-from deform.wires import WireDeformer as WireDeformer
-from deform.wires import WireFieldWarp as WireFieldWarp
+from __future__ import annotations
 
-__all__ = [
-    "AffineWarp",
-    "IdentityWarp",
-    "Warp",
-    "WarpError",
-    "chain_apply",
-    "compose_glsl",
-    "known_warps",
-    "register_warp",
-    "warp_from_dict",
-]
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: public name -> module that defines it (imported on first access)
+_PUBLIC: dict[str, str] = {
+    "ChainMail": "voxwarp.deform.chainmail",
+    "MoveStats": "voxwarp.deform.chainmail",
+    "ChainMailError": "voxwarp.deform.chainmail_model",
+    "ElementGrid": "voxwarp.deform.elements",
+    "ElementGridError": "voxwarp.deform.elements",
+    "LatticeWarp": "voxwarp.deform.lattice_warp",
+    "CpuSpringSolver": "voxwarp.deform.massspring",
+    "MassSpring": "voxwarp.deform.massspring",
+    "OffsetFieldWarp": "voxwarp.deform.offset_field",
+    "SceneNode": "voxwarp.deform.scene_graph",
+    "compose_scene": "voxwarp.deform.scene_graph",
+    "TrilinearGrid": "voxwarp.deform.trilinear",
+    "TrilinearTransform": "voxwarp.deform.trilinear",
+    "AffineWarp": "voxwarp.deform.warp",
+    "IdentityWarp": "voxwarp.deform.warp",
+    "Warp": "voxwarp.deform.warp",
+    "WarpError": "voxwarp.deform.warp",
+    "chain_apply": "voxwarp.deform.warp",
+    "compose_glsl": "voxwarp.deform.warp",
+    "known_warps": "voxwarp.deform.warp",
+    "register_warp": "voxwarp.deform.warp",
+    "warp_from_dict": "voxwarp.deform.warp",
+    "Wire": "voxwarp.deform.wires",
+    "WireDeformer": "voxwarp.deform.wires",
+    "WireFieldWarp": "voxwarp.deform.wires",
+}
+
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'voxwarp.deform' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_PUBLIC[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
+    from voxwarp.deform.chainmail import ChainMail, MoveStats
+    from voxwarp.deform.chainmail_model import ChainMailError
+    from voxwarp.deform.elements import ElementGrid, ElementGridError
+    from voxwarp.deform.lattice_warp import LatticeWarp
+    from voxwarp.deform.massspring import CpuSpringSolver, MassSpring
+    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.scene_graph import SceneNode, compose_scene
+    from voxwarp.deform.trilinear import TrilinearGrid, TrilinearTransform
+    from voxwarp.deform.warp import (
+        AffineWarp,
+        IdentityWarp,
+        Warp,
+        WarpError,
+        chain_apply,
+        compose_glsl,
+        known_warps,
+        register_warp,
+        warp_from_dict,
+    )
+    from voxwarp.deform.wires import Wire, WireDeformer, WireFieldWarp

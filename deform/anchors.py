@@ -11,9 +11,9 @@ barycentric, they follow the triangle exactly, whatever deforms or animates the 
 
 An array of anchors builds the deformation grid of an attached object *on the fly*,
 each frame: a 1D array (along a strap, a belt, a spine) or a 2D array (over a patch of
-skin) gives the nodes of a :class:`deform.trilinear.TrilinearGrid` by stepping from each
+skin) gives the nodes of a :class:`voxwarp.deform.trilinear.TrilinearGrid` by stepping from each
 anchor along its frame. The attached geometry lives in the unit cube of its own box
-(the scene-graph convention, :mod:`deform.scene_graph`); the grid maps it onto the base
+(the scene-graph convention, :mod:`voxwarp.deform.scene_graph`); the grid maps it onto the base
 mesh, bending with it:
 
 * 1D array of n anchors: nodes ``(n, 2, 2)``: node (i, j, k) = P_i + (j - 1/2) width y_i
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
 
 
 def _barycentric(b: Any, what: str) -> np.ndarray:
@@ -247,8 +247,8 @@ class AnchorStrip:
         return nodes  # (n, 2, 2, 3)
 
     def grid(self, vertices: Any, faces: Any) -> Any:
-        """The attached object's :class:`deform.trilinear.TrilinearGrid` for the base
+        """The attached object's :class:`voxwarp.deform.trilinear.TrilinearGrid` for the base
         mesh's current vertices (call every frame the base moves)."""
-        from deform.trilinear import TrilinearGrid
+        from voxwarp.deform.trilinear import TrilinearGrid
 
         return TrilinearGrid(self.nodes(vertices, faces))

@@ -3,8 +3,8 @@
 About this technique (Gibson 1997, "3D ChainMail"; Schill et al. 1998, "Enhanced
 ChainMail"; Knoche 2008, 2.4.2.2, 3.5.3)
 ------------------------------------------------------------------------------------
-The elements of an :class:`~deform.elements.ElementGrid` are linked to their 6
-neighbours like the rings of a chain mail (:mod:`deform.chainmail_model` states the
+The elements of an :class:`~voxwarp.deform.elements.ElementGrid` are linked to their 6
+neighbours like the rings of a chain mail (:mod:`voxwarp.deform.chainmail_model` states the
 constraints exactly): per element and axis ``i`` a least and a largest distance
 ``min_i <= d_i <= max_i`` and a largest shear ``|d_j| <= shear_i`` (``d = x_b - x_a``
 for ``b = a + e_i``, world mm; a link uses the mean of its two elements' limits). The
@@ -13,7 +13,7 @@ the slack of its links and pulls or pushes its neighbours once a link is taut, a
 those their neighbours, so that after every move **every link satisfies its limits**
 and fixed elements have not moved. The displacements form an offset field that the
 raycaster inverts (:meth:`ChainMail.warp`), exactly as for
-:class:`~deform.massspring.MassSpring`.
+:class:`~voxwarp.deform.massspring.MassSpring`.
 
 Limits from the material map
 ----------------------------
@@ -34,7 +34,7 @@ materials such as muscle, heterogeneous ones); the rest state must satisfy them.
 Moves
 -----
 :meth:`ChainMail.move` puts the dragged elements at ``rest + offset`` (as
-:meth:`MassSpring.move <deform.massspring.MassSpring.move>`) and **holds** them there
+:meth:`MassSpring.move <voxwarp.deform.massspring.MassSpring.move>`) and **holds** them there
 until :meth:`ChainMail.release`: later moves and relaxation treat held elements like
 fixed ones. The constraints are then restored by moving every other element *as little
 as possible*. If that would need a fixed or held element to move (the drag pulls
@@ -67,7 +67,7 @@ Variants
   first and moves the element to the nearest value allowed by *all* its links
   (when they conflict, the side it was pushed to); neighbours whose link it then
   violates are queued. Because the constraints are difference bounds per coordinate
-  (see :mod:`deform.chainmail_cpu`), this is Dijkstra's order for a single drag: every
+  (see :mod:`voxwarp.deform.chainmail_cpu`), this is Dijkstra's order for a single drag: every
   element is settled by its most demanding neighbour first, also in heterogeneous
   materials.
 
@@ -99,13 +99,13 @@ Why numba
 ---------
 Propagation is a sequential, data-dependent queue walk that numpy cannot vectorise, and
 pure Python loops do not get a local drag on 128³ elements under 100 ms; the kernels
-in :mod:`deform.chainmail_cpu` are ``numba.njit(cache=True, nogil=True)``, imported on
+in :mod:`voxwarp.deform.chainmail_cpu` are ``numba.njit(cache=True, nogil=True)``, imported on
 first use (so ``import deform`` does not pay for numba).
 
 Backends
 --------
 ``backend="cpu"`` runs the kernels above (float64). ``backend="gpu"`` drives
-``deform.chainmail_gpu.GpuChainMailSolver`` (created lazily) through ``set_positions``,
+``voxwarp.deform.chainmail_gpu.GpuChainMailSolver`` (created lazily) through ``set_positions``,
 ``enforce(held_mask, held_targets, max_passes) -> passes``, ``feasible`` (a check pass
 over the region the enforce changed), ``snapshot()``/``restore()`` (GPU copies of the
 state), ``positions()``, ``displacement_texture()``, ``revision`` and ``release()``;
@@ -125,8 +125,8 @@ from typing import Any
 
 import numpy as np
 
-from deform.chainmail_model import ChainMailError, ChainMailModel, check_limits
-from deform.elements import ElementGrid, ElementGridError, Selection, grid_from_entry
+from voxwarp.deform.chainmail_model import ChainMailError, ChainMailModel, check_limits
+from voxwarp.deform.elements import ElementGrid, ElementGridError, Selection, grid_from_entry
 
 __all__ = [
     "BACKENDS",
@@ -230,7 +230,7 @@ def limits_from_stiffness(
 
 
 def _kernels() -> Any:
-    from deform import chainmail_cpu
+    from voxwarp.deform import chainmail_cpu
 
     return chainmail_cpu
 
@@ -276,7 +276,7 @@ class ChainMail:
     ) -> None:
         if not isinstance(grid, ElementGrid):
             raise ChainMailError(
-                f"grid must be a deform.elements.ElementGrid; got {type(grid).__name__}"
+                f"grid must be a voxwarp.deform.elements.ElementGrid; got {type(grid).__name__}"
             )
         if backend not in BACKENDS:
             raise ChainMailError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
@@ -326,7 +326,7 @@ class ChainMail:
     # ------------------------------------------------------------------ parameters
     @property
     def model(self) -> ChainMailModel:
-        """The :class:`~deform.chainmail_model.ChainMailModel` the solver runs (live;
+        """The :class:`~voxwarp.deform.chainmail_model.ChainMailModel` the solver runs (live;
         change it through :meth:`set_limits`, :meth:`cut`, :meth:`fix`, :meth:`free`)."""
         return self._model
 
@@ -576,7 +576,7 @@ class ChainMail:
         ------
         ChainMailError
             On offsets of the wrong shape or not finite.
-        deform.elements.ElementGridError
+        voxwarp.deform.elements.ElementGridError
             On an index outside the grid.
         """
         t0 = time.perf_counter()
@@ -687,7 +687,7 @@ class ChainMail:
         commit: bool,
         repair: bool = False,
     ) -> tuple[bool, int, int, int, bool]:
-        """One propagation (see :func:`deform.chainmail_cpu.propagate`)."""
+        """One propagation (see :func:`voxwarp.deform.chainmail_cpu.propagate`)."""
         k = _kernels()
         self._epoch += 1
         if self._epoch >= 2**62:
@@ -1013,16 +1013,16 @@ class ChainMail:
     def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
         """The offset-field warp of the current displacements (one object, kept current).
 
-        As :meth:`MassSpring.warp <deform.massspring.MassSpring.warp>`: CPU backend,
+        As :meth:`MassSpring.warp <voxwarp.deform.massspring.MassSpring.warp>`: CPU backend,
         built from :meth:`displacements` and updated after every :meth:`move`,
         :meth:`relax`, :meth:`set_state`, :meth:`reset` and :meth:`fix`; GPU backend,
         reads the solver's displacement texture. Its ``to_dict()`` (scene JSON) also
         writes this model (``"model": {"type": "chainmail", **self.to_dict()}``) and
         the rendered field, so a saved scene renders the same image and can resume
         (:meth:`from_warp`). ``inverse`` / ``iterations``: see
-        :class:`deform.offset_field.OffsetFieldWarp` (``"baked"`` when first made).
+        :class:`voxwarp.deform.offset_field.OffsetFieldWarp` (``"baked"`` when first made).
         """
-        from deform.offset_field import element_model_warp
+        from voxwarp.deform.offset_field import element_model_warp
 
         self._warp = element_model_warp(
             self._warp,
@@ -1044,7 +1044,7 @@ class ChainMail:
 
     def _rendered_field(self) -> np.ndarray:
         """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        from deform.offset_field import texture_field
+        from voxwarp.deform.offset_field import texture_field
 
         field = texture_field(self._solver.displacement_texture(), self.grid.shape)
         return self.displacements().astype(np.float64) if field is None else field
@@ -1067,10 +1067,10 @@ class ChainMail:
     # ------------------------------------------------------------------ GPU backend
     def _make_gpu_solver(self) -> Any:
         try:
-            from deform.chainmail_gpu import GpuChainMailSolver
+            from voxwarp.deform.chainmail_gpu import GpuChainMailSolver
         except ImportError as exc:
             raise ChainMailError(
-                'backend="gpu" needs deform.chainmail_gpu.GpuChainMailSolver, which could'
+                'backend="gpu" needs voxwarp.deform.chainmail_gpu.GpuChainMailSolver, which could'
                 f' not be imported ({exc}); use backend="cpu"'
             ) from exc
         return GpuChainMailSolver(self._model, self._ctx)
@@ -1221,7 +1221,7 @@ class ChainMail:
         Parameters
         ----------
         warp
-            A :class:`deform.offset_field.OffsetFieldWarp` whose ``model_state`` is a
+            A :class:`voxwarp.deform.offset_field.OffsetFieldWarp` whose ``model_state`` is a
             ``"chainmail"`` model.
         backend, ctx
             As for :meth:`from_dict`.
@@ -1232,7 +1232,7 @@ class ChainMail:
             The model with positions ``rest + displacements`` (the saved field); its
             :meth:`warp` is a new warp, to be put in the scene in place of ``warp``.
         """
-        from deform.offset_field import saved_model
+        from voxwarp.deform.offset_field import saved_model
 
         state, positions = saved_model(warp, MODEL_TYPE, "ChainMail", "ChainMail", ChainMailError)
         return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)

@@ -1,4 +1,5 @@
-"""Numba kernels of the 3D ChainMail CPU solver (driven by :class:`deform.chainmail.ChainMail`).
+"""Numba kernels of the 3D ChainMail CPU solver (driven by
+:class:`voxwarp.deform.chainmail.ChainMail`).
 
 Why numba
 ---------

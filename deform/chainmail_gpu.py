@@ -3,11 +3,11 @@
 About this technique (Gibson 1997; Knoche 2008, 3.5.3.2)
 --------------------------------------------------------
 :class:`GpuChainMailSolver` enforces the link constraints of
-:class:`~deform.chainmail_model.ChainMailModel` on a ``moderngl`` context as the
+:class:`~voxwarp.deform.chainmail_model.ChainMailModel` on a ``moderngl`` context as the
 thesis does: every *pass* is one draw, one fragment per element, that reads the
 previous positions with ``imageLoad`` and writes the new ones into the other
 framebuffer of a ping-pong pair; passes repeat until none changes anything. It writes
-the same offset texture as :class:`deform.massspring_gpu.GpuSpringSolver`. The thesis
+the same offset texture as :class:`voxwarp.deform.massspring_gpu.GpuSpringSolver`. The thesis
 drew every pass over the whole grid, which loses ChainMail's locality (a drag that
 moves 300 elements costs a full-grid pass per step of its wave); here a pass covers
 only the box that can still change, so the cost follows the affected region (see
@@ -78,7 +78,7 @@ them (ping-pong; ``w`` 0 free, 1 fixed, 2 held), the targets ``(target - origin,
 if held)`` (read by the pin pass only), the rest positions (for the displacement
 texture) and the link limits, five per element: ``(min, max, shear)`` of its 3
 forward and 3 backward links packed in 18 floats (each link mean of its two
-elements' limits, :meth:`~deform.chainmail_model.ChainMailModel.link_limits`). A
+elements' limits, :meth:`~voxwarp.deform.chainmail_model.ChainMailModel.link_limits`). A
 constraint pass loads 12 texels per element (own position, 6 neighbours, 5 limits).
 Grid and atlas sizes are compile-time constants (``chainmail_config.glsl``, generated
 per solver).
@@ -157,7 +157,7 @@ limits instead of the 5 limit loads (up to ~1.5x faster full passes in a noisy t
 not kept: it would need a second shader path for uniform materials); skipping the
 phase not needed by the drag's direction (kept: 4 -> 3 passes per frame, 21 -> 20 per
 jump; "same targets again" -> 0 passes). Not tried: blocks of several elements per
-fragment as in :mod:`deform.massspring_gpu` (would cut the per-element cost of large
+fragment as in :mod:`voxwarp.deform.massspring_gpu` (would cut the per-element cost of large
 passes, not the per-pass floor that dominates local drags); a tighter region than a
 bounding box (a jump's box holds the settled interior of its wave); in-place
 (Gauss-Seidel) updates with ``imageStore``, which the monotone phases would allow
@@ -171,16 +171,15 @@ to 5 and SSBO binding 0 are left bound to its objects.
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import moderngl
 import numpy as np
 
-import shaders
-from deform.chainmail_model import ChainMailModel
-from deform.gpu_grid import GpuGridSolver
-from deform.massspring_gpu import atlas_layout
+from voxwarp import shaders
+from voxwarp.deform.chainmail_model import ChainMailModel
+from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError
+from voxwarp.deform.massspring_gpu import atlas_layout
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
 CHECK_TOL_MM = 1e-4
@@ -253,12 +252,12 @@ class GpuChainMailSolver(GpuGridSolver):
 
     def __init__(self, model: ChainMailModel, ctx: Any, *, local: bool = True) -> None:
         if ctx is None:
-            raise ValueError(
+            raise GpuSolverError(
                 "GpuChainMailSolver needs a moderngl.Context (OpenGL 4.3+); got None"
-                " (use the CPU ChainMail of deform.chainmail without a GL context)"
+                " (use the CPU ChainMail of voxwarp.deform.chainmail without a GL context)"
             )
         if getattr(ctx, "version_code", 0) < 430:
-            raise ValueError(
+            raise GpuSolverError(
                 "GpuChainMailSolver needs an OpenGL 4.3+ context (compute shaders, SSBOs);"
                 f" got version {getattr(ctx, 'version_code', None)}"
             )
@@ -269,7 +268,9 @@ class GpuChainMailSolver(GpuGridSolver):
         self._init_objects()
         shape = model.shape
         if len(shape) != 3 or min(shape) < 1:
-            raise ValueError(f"model.rest must have shape (nx, ny, nz, 3); got {model.rest.shape}")
+            raise GpuSolverError(
+                f"model.rest must have shape (nx, ny, nz, 3); got {model.rest.shape}"
+            )
         #: elements per axis (nx, ny, nz)
         self.shape: tuple[int, int, int] = shape
         nx, ny, nz = shape
@@ -277,7 +278,9 @@ class GpuChainMailSolver(GpuGridSolver):
         max_2d = int(info.get("GL_MAX_TEXTURE_SIZE", 16384))
         max_3d = int(info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 2048))
         if nz > max_3d or max(nx, ny) > max_2d:
-            raise ValueError(f"a grid of {nx}x{ny}x{nz} elements exceeds the context's textures")
+            raise GpuSolverError(
+                f"a grid of {nx}x{ny}x{nz} elements exceeds the context's textures"
+            )
         tx, ty = atlas_layout(shape, max_2d)
         if tx * nx <= _RASTER_TILE and ty * ny <= _RASTER_TILE and nz * nx <= max_2d:
             tx, ty = nz, 1  # one row: at least two raster tiles, so two threads
@@ -467,24 +470,24 @@ class GpuChainMailSolver(GpuGridSolver):
         self._check_alive()
         mask = np.asarray(held_mask)
         if mask.shape != self.shape:
-            raise ValueError(f"held_mask must have shape {self.shape}; got {mask.shape}")
+            raise GpuSolverError(f"held_mask must have shape {self.shape}; got {mask.shape}")
         targets = np.asarray(held_targets)
         if targets.shape != (*self.shape, 3):
-            raise ValueError(
+            raise GpuSolverError(
                 f"held_targets must have shape {(*self.shape, 3)}; got {targets.shape}"
             )
         if max_passes is None:
             max_passes = 4 * sum(self.shape)
         max_passes = int(max_passes)
         if max_passes < 0:
-            raise ValueError(f"max_passes must be >= 0; got {max_passes}")
+            raise GpuSolverError(f"max_passes must be >= 0; got {max_passes}")
         # O(held) from here on, but for one scan of the mask (a drag holds few elements)
         flat = np.flatnonzero(mask)
         flat = flat[~self._fixed.reshape(-1)[flat]]
         idx = np.unravel_index(flat, self.shape)
         rel = targets[idx].astype(np.float64) - self._origin
         if not np.all(np.isfinite(rel)):
-            raise ValueError("held_targets must be finite where held")
+            raise GpuSolverError("held_targets must be finite where held")
         held_box: Box | None = None
         if rel.size:
             held_box = (
@@ -721,7 +724,7 @@ class GpuChainMailSolver(GpuGridSolver):
         """Go back to the state of the last :meth:`snapshot` (GPU copy)."""
         self._check_alive()
         if getattr(self, "_snap", None) is None:
-            raise ValueError("restore() needs a snapshot() first")
+            raise GpuSolverError("restore() needs a snapshot() first")
         # both ping-pong buffers: a pass writes only its box into the other one
         for fbo in self._fbo:
             self.ctx.copy_framebuffer(fbo, self._snap_fbo)
@@ -791,95 +794,3 @@ def _link_data(model: ChainMailModel) -> np.ndarray:
     zero = np.zeros((*shape, 2))
     packed = np.concatenate([fx, bx, fy, by, fz, bz, zero], axis=-1)
     return packed.astype(np.float32)
-
-
-def _bench_model(n: int, spacing: float = 1.0) -> ChainMailModel:
-    """An n³ grid, 10 % stretch/compression slack and shear 0.1 spacing, bottom fixed."""
-    shape = (n, n, n)
-    idx = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), axis=-1)
-    fixed = np.zeros(shape, bool)
-    fixed[:, :, 0] = True
-    return ChainMailModel(
-        rest=idx * spacing,
-        spacing=np.full(3, spacing),
-        min_dist=0.9 * spacing,
-        max_dist=1.1 * spacing,
-        max_shear=0.1 * spacing,
-        links=np.ones((*shape, 3), bool),
-        fixed=fixed,
-    )
-
-
-def benchmark(
-    ctx: Any = None, sizes: tuple[int, ...] = (32, 64, 128), frames: int = 10, jumps: int = 3
-) -> list[dict[str, Any]]:
-    """Time local drags with the growing box (``local``) and with full-grid passes.
-
-    One element at the centre of the top face of an n³ grid (:func:`_bench_model`) is
-    held. ``frame``: it is dragged by (0.05, 0, -0.02) spacing per frame, one
-    :meth:`GpuChainMailSolver.enforce` each, from the last frame's state. ``jump``: it
-    is moved by (2, 0, -1) spacing in one enforce, from rest. Each enforce is timed to
-    the end of its GPU work; both variants run on the same solver and context, one
-    after the other, each from the same state (``set_positions`` plus one untimed
-    enforce that checks the whole grid).
-
-    Parameters
-    ----------
-    ctx
-        moderngl context (OpenGL 4.3+) to time on; ``None`` makes a standalone EGL one.
-    sizes, frames, jumps
-        Grid sizes n (n³ elements), timed frames and jumps per size.
-
-    Returns
-    -------
-    list of dict
-        Per size and scenario: median ms per enforce, passes and elements shaded of
-        both variants (``box_*``, ``full_*``) and the largest violation left.
-    """
-    own = ctx is None
-    if own:  # deform must not import app: a plain EGL context (the caller's otherwise)
-        ctx = moderngl.create_standalone_context(backend="egl")
-    rows = []
-    try:
-        for n in sizes:
-            model = _bench_model(n)
-            solver = GpuChainMailSolver(model, ctx)
-            held = np.zeros(model.shape, bool)
-            centre = (n // 2, n // 2, n - 1)
-            held[centre] = True
-            for scenario in ("frame", "jump"):
-                row: dict[str, Any] = {"n": n, "scenario": scenario}
-                for local in (True, False):
-                    solver.local = local
-                    times, passes, elements = [], [], []
-                    targets = model.rest.copy()
-                    for i in range(frames if scenario == "frame" else jumps):
-                        if scenario == "jump" or i == 0:
-                            solver.set_positions(model.rest)
-                            targets = model.rest.copy()
-                            solver.enforce(held, targets)
-                        step = (0.05, 0.0, -0.02) if scenario == "frame" else (2.0, 0.0, -1.0)
-                        targets[centre] += step
-                        ctx.finish()
-                        t0 = time.perf_counter()
-                        solver.enforce(held, targets)
-                        ctx.finish()
-                        times.append(time.perf_counter() - t0)
-                        passes.append(solver.last_passes)
-                        elements.append(solver.last_elements)
-                    key = "box" if local else "full"
-                    row[f"{key}_ms"] = round(1e3 * float(np.median(times)), 2)
-                    row[f"{key}_passes"] = float(np.median(passes))
-                    row[f"{key}_elements"] = float(np.median(elements))
-                    row[f"{key}_violation"] = model.violation(solver.positions())
-                rows.append(row)
-            solver.release()
-    finally:
-        if own:
-            ctx.release()
-    return rows
-
-
-if __name__ == "__main__":  # pragma: no cover - manual benchmark
-    for row in benchmark():
-        print(row)

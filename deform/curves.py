@@ -102,7 +102,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
 
 #: Curve kinds: Bézier (3k+1 points, handles) and uniform Catmull-Rom (interpolating).
 KINDS: tuple[str, ...] = ("bezier", "catmull-rom")

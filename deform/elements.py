@@ -13,7 +13,7 @@ by itself either (:meth:`ElementGrid.pinned`).
 Materials can vary over the grid; :meth:`ElementGrid.materials_from_volume` derives the
 stiffness from the volume's values, e.g. bone stiffer than soft tissue.
 
-This module only describes the grid; :class:`deform.massspring.MassSpring` simulates it.
+This module only describes the grid; :class:`voxwarp.deform.massspring.MassSpring` simulates it.
 """
 
 from __future__ import annotations
@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 from scipy import ndimage
+
+from voxwarp.errors import VoxwarpError
 
 #: most elements along one axis
 MAX_ELEMENTS_PER_AXIS = 128
@@ -37,7 +39,7 @@ DEFAULT_MASS = 1.0
 Selection = Any
 
 
-class ElementGridError(ValueError):
+class ElementGridError(VoxwarpError, ValueError):
     """An element grid was given invalid parameters (the message names the fix)."""
 
 
@@ -304,7 +306,7 @@ class ElementGrid:
             (X, Y, Z) voxel values covering ``bounds``: voxel ``i`` along x lies at
             ``lo + i * (hi - lo) / (X - 1)`` (like the elements; an axis of size 1
             lies at ``lo``). Or a volume (an object with ``data``, ``spacing`` and
-            ``origin``, e.g. :class:`app.volume.Volume`), whose voxel centres give
+            ``origin``, e.g. :class:`voxwarp.core.volume.Volume`), whose voxel centres give
             the bounds.
         bounds
             ``(lo, hi)`` corners in mm of the box the voxel centres span; ``None``

@@ -1,7 +1,7 @@
 """What the GPU solvers of the element models share: ownership of their GPU objects.
 
-:class:`~deform.massspring_gpu.GpuSpringSolver` and
-:class:`~deform.chainmail_gpu.GpuChainMailSolver` create textures, framebuffers and
+:class:`~voxwarp.deform.massspring_gpu.GpuSpringSolver` and
+:class:`~voxwarp.deform.chainmail_gpu.GpuChainMailSolver` create textures, framebuffers and
 programs on a context they are given; each keeps them (:meth:`GpuGridSolver._keep`)
 and frees all of them, once, in :meth:`GpuGridSolver.release`.
 """
@@ -11,6 +11,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+
+from voxwarp.errors import VoxwarpError
+
+
+class GpuSolverError(VoxwarpError, ValueError):
+    """A GPU solver cannot be set up or driven as asked (context, sizes, inputs)."""
 
 
 class GpuGridSolver:

@@ -9,15 +9,15 @@ finer control, composed along a scene graph (sections 4-5) and evaluated in the 
 shader (section 6). A mesh's vertices are pushed forward. A volume raycaster needs the
 opposite direction: it marches in deformed space and must know, per sample ``p``, which
 original point ``q`` is seen there. This module is that inverse, as a
-:class:`~deform.warp.Warp`.
+:class:`~voxwarp.deform.warp.Warp`.
 
-A :class:`~deform.trilinear.TrilinearGrid` ``grid`` deforms the content of the box
+A :class:`~voxwarp.deform.trilinear.TrilinearGrid` ``grid`` deforms the content of the box
 ``[lo, hi]`` (original world, mm): the original point ``x`` has lattice coordinates
 ``u = (x - lo) / (hi - lo)`` in the unit cube and appears at ``grid(u)``. The warp
 solves ``grid(u) = p`` and returns ``q = lo + u (hi - lo)``:
 
 * *Seed* (``inverse="baked"``, and the start of ``"newton"``): ``grid^-1`` is baked on
-  the CPU (:meth:`~deform.trilinear.TrilinearGrid.inverse`) at the nodes of a regular
+  the CPU (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.inverse`) at the nodes of a regular
   grid over the deformed lattice's bounding box, :data:`BAKE_FACTOR` nodes per lattice
   cell and axis (:data:`MIN_BAKE_NODES` to :data:`MAX_BAKE_NODES` per axis), stored as
   an RGBA32F 3D texture (xyz = u) and sampled with one hardware-trilinear fetch. Baked
@@ -30,7 +30,7 @@ solves ``grid(u) = p`` and returns ``q = lo + u (hi - lo)``:
 * *Newton* (``inverse="newton"``): ``iterations`` steps
   ``u <- u - J(u)^-1 (grid(u) - p)``, written out (llvmpipe does not unroll loops).
   ``grid(u)`` and ``J`` come from the 8 corners of u's cell, read with ``texelFetch``
-  from an RGBA32F texture of the nodes (:meth:`~deform.trilinear.TrilinearGrid.
+  from an RGBA32F texture of the nodes (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.
   texture_data`). The alternative, a hardware-filtered fetch for ``grid(u)`` plus
   forward differences towards the cell centre for ``J`` (exact, the map being linear
   along each axis within a cell), needs 4 filtered fetches per step (32 texel reads);
@@ -53,7 +53,7 @@ The point is inside the lattice when the final u lies in ``[0, 1]³``. Outside:
 A *linear* lattice (``grid.is_linear``, e.g. a translation or rotation of the box) is one
 affine map of all space, folded by the raycaster into the ray
 (:attr:`LatticeWarp.is_affine`): content around the box moves with it, as with
-:class:`~deform.warp.AffineWarp`. For a box holding the whole volume (the usual case)
+:class:`~voxwarp.deform.warp.AffineWarp`. For a box holding the whole volume (the usual case)
 this equals the rule above, since nothing lies outside the box. The identity lattice
 renders exactly like no warp.
 
@@ -131,9 +131,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from deform.offset_field import _cell_reduce, _window_reduce
-from deform.trilinear import TrilinearGrid
-from deform.warp import Warp, WarpError, box_corners, register_warp
+from voxwarp.deform.offset_field import _cell_reduce, _window_reduce
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
 
 #: Inverse modes: the baked seed alone, or the seed refined by Newton steps.
 INVERSE_MODES: tuple[str, ...] = ("newton", "baked")
@@ -318,7 +318,7 @@ class LatticeWarp(Warp):
     Parameters
     ----------
     grid
-        The :class:`~deform.trilinear.TrilinearGrid`: unit cube -> deformed world (mm).
+        The :class:`~voxwarp.deform.trilinear.TrilinearGrid`: unit cube -> deformed world (mm).
     box
         ``(lo, hi)``: the box (original world, mm) whose content the lattice deforms,
         mapped onto the unit cube; usually the volume's box (``volume.bounds``).
@@ -348,7 +348,8 @@ class LatticeWarp(Warp):
     ) -> None:
         if not isinstance(grid, TrilinearGrid):
             raise WarpError(
-                f"LatticeWarp needs a deform.trilinear.TrilinearGrid; got {type(grid).__name__}"
+                "LatticeWarp needs a voxwarp.deform.trilinear.TrilinearGrid;"
+                f" got {type(grid).__name__}"
                 " (build one with TrilinearGrid(nodes) or TrilinearGrid.from_function)"
             )
         if not isinstance(inverse, str) or inverse not in INVERSE_MODES:
@@ -523,7 +524,7 @@ class LatticeWarp(Warp):
         """The baked seed: ``(field, lo, hi)``.
 
         ``field`` is ``bake_shape + (4,)``: xyz = u at the baked nodes
-        (:meth:`~deform.trilinear.TrilinearGrid.inverse` inside the lattice, the inverse
+        (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.inverse` inside the lattice, the inverse
         of the lattice continued linearly beyond its surface outside), w = 1 for nodes
         near the lattice (see the module docstring), else 0. ``lo``, ``hi``: the box
         the nodes span (:meth:`seed_box`). Computed once.
@@ -666,7 +667,7 @@ class LatticeWarp(Warp):
         the baked cells the box touches (those with a node near the lattice), each
         widened by its margin. The interval holds 0 where the outside is the identity;
         baked cells far from the lattice show nothing. Linear lattice: exact, from the corners (as
-        :class:`~deform.warp.AffineWarp`).
+        :class:`~voxwarp.deform.warp.AffineWarp`).
         """
         blo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
         bhi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
@@ -933,7 +934,7 @@ def bent_grid(
     In box units: the middle is pushed along +z by ``bend sin(pi u_x)`` (an arc), twisted
     by ``0.15 (u_y - 0.5) sin(pi u_x)`` along z, shifted along y by ``0.1 sin(pi u_z)``
     and sheared along x by ``0.06 sin(pi u_z) (u_y - 0.5)``; sampled at the nodes of
-    ``cells`` cells per axis (:meth:`~deform.trilinear.TrilinearGrid.from_function`).
+    ``cells`` cells per axis (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.from_function`).
     """
     lo_a, hi_a = np.asarray(lo, float), np.asarray(hi, float)
     size = hi_a - lo_a

@@ -2,14 +2,14 @@
 
 About this technique (Knoche 2008, 2.4, 3.5, 3.6)
 --------------------------------------------------
-An :class:`~deform.elements.ElementGrid` of point masses spans the volume, joined by
-springs (:mod:`deform.spring_model` states the physics exactly). The user drags
+An :class:`~voxwarp.deform.elements.ElementGrid` of point masses spans the volume, joined by
+springs (:mod:`voxwarp.deform.spring_model` states the physics exactly). The user drags
 elements (:meth:`MassSpring.move`); the springs pull the others along, and the
 elements' displacements from rest form an *offset field* that the raycaster inverts
 (:meth:`MassSpring.warp`), so the volume itself is never resampled.
 
 Two solvers implement the same physics: :class:`CpuSpringSolver` here (numpy, float64,
-the reference) and ``GpuSpringSolver`` in :mod:`deform.massspring_gpu` (fragment
+the reference) and ``GpuSpringSolver`` in :mod:`voxwarp.deform.massspring_gpu` (fragment
 shaders, float32). :class:`MassSpring` drives either one through the same small
 interface and never reads GPU state back except in :meth:`MassSpring.displacements`,
 :meth:`MassSpring.energy` and :meth:`MassSpring.settle`.
@@ -50,8 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from deform.elements import ElementGrid, Selection, grid_from_entry
-from deform.spring_model import INTEGRATORS, SpringModel
+from voxwarp.deform.elements import ElementGrid, Selection, grid_from_entry
+from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
+from voxwarp.errors import VoxwarpError
 
 #: solver backends of :class:`MassSpring`
 BACKENDS: tuple[str, ...] = ("cpu", "gpu")
@@ -65,7 +66,7 @@ _SEMI_IMPLICIT_SAFETY = 0.5
 _SETTLE_CHECK_EVERY = 50
 
 
-class MassSpringError(ValueError):
+class MassSpringError(VoxwarpError, ValueError):
     """A mass-spring model was given invalid parameters (the message names the fix)."""
 
 
@@ -124,7 +125,8 @@ def spring_energy(model: SpringModel, positions: np.ndarray, velocities: np.ndar
 
 
 class CpuSpringSolver:
-    """Vectorised numpy (float64) solver of exactly the physics of :mod:`deform.spring_model`.
+    """Vectorised numpy (float64) solver of exactly the physics of
+    :mod:`voxwarp.deform.spring_model`.
 
     The materials, springs and grid are read from ``model`` once, at construction; the
     step parameters (``dt``, ``integrator``, ``max_step``, ``spring_constant``,
@@ -223,7 +225,7 @@ class CpuSpringSolver:
         """Accelerations (n_x, n_y, n_z, 3) of all elements in the given state.
 
         Spring, spring-damping and element-damping forces divided by mass, exactly as in
-        :mod:`deform.spring_model` (constraints are not applied here).
+        :mod:`voxwarp.deform.spring_model` (constraints are not applied here).
         """
         x, v = positions, velocities
         m = self.model
@@ -326,7 +328,7 @@ class MassSpring:
     ) -> None:
         if not isinstance(grid, ElementGrid):
             raise MassSpringError(
-                f"grid must be a deform.elements.ElementGrid; got {type(grid).__name__}"
+                f"grid must be a voxwarp.deform.elements.ElementGrid; got {type(grid).__name__}"
             )
         if backend not in BACKENDS:
             raise MassSpringError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
@@ -376,7 +378,7 @@ class MassSpring:
         self._offsets = np.zeros((*grid.shape, 3), dtype=np.float64)
         self._warp: Any = None
         if backend == "gpu":
-            from deform.massspring_gpu import GpuSpringSolver
+            from voxwarp.deform.massspring_gpu import GpuSpringSolver
 
             self._solver: Any = GpuSpringSolver(self._model, ctx)
         else:
@@ -387,7 +389,7 @@ class MassSpring:
     # ------------------------------------------------------------------ parameters
     @property
     def model(self) -> SpringModel:
-        """The :class:`~deform.spring_model.SpringModel` the solver runs."""
+        """The :class:`~voxwarp.deform.spring_model.SpringModel` the solver runs."""
         return self._model
 
     @property
@@ -477,7 +479,7 @@ class MassSpring:
         ------
         MassSpringError
             On offsets of the wrong shape or not finite.
-        deform.elements.ElementGridError
+        voxwarp.deform.elements.ElementGridError
             On an index outside the grid.
         """
         try:
@@ -607,14 +609,14 @@ class MassSpring:
         ----------
         inverse, iterations
             The warp's inverse mode (``"approx"``, ``"exact"`` or ``"baked"``) and
-            fixed-point iterations (see :class:`deform.offset_field.OffsetFieldWarp`);
+            fixed-point iterations (see :class:`voxwarp.deform.offset_field.OffsetFieldWarp`);
             ``None`` keeps the warp's current setting (``"baked"`` with its default
             iterations when it is first made: the accuracy of ``"exact"`` at half the
             texture fetches).
 
         Returns
         -------
-        deform.offset_field.OffsetFieldWarp
+        voxwarp.deform.offset_field.OffsetFieldWarp
             CPU backend: built from :meth:`displacements` and updated after every
             :meth:`step`, :meth:`settle` and :meth:`move`. GPU backend: reads the
             solver's displacement texture directly (no read-back). Either way its
@@ -624,7 +626,7 @@ class MassSpring:
             scene renders the same image and can resume the simulation
             (:meth:`from_warp`).
         """
-        from deform.offset_field import element_model_warp
+        from voxwarp.deform.offset_field import element_model_warp
 
         self._warp = element_model_warp(
             self._warp,
@@ -651,7 +653,7 @@ class MassSpring:
 
     def _rendered_field(self) -> np.ndarray:
         """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        from deform.offset_field import texture_field
+        from voxwarp.deform.offset_field import texture_field
 
         field = texture_field(self._solver.displacement_texture(), self.grid.shape)
         return self.displacements().astype(np.float64) if field is None else field
@@ -778,8 +780,8 @@ class MassSpring:
         Parameters
         ----------
         warp
-            A :class:`deform.offset_field.OffsetFieldWarp` whose
-            :attr:`~deform.offset_field.OffsetFieldWarp.model_state` is a
+            A :class:`voxwarp.deform.offset_field.OffsetFieldWarp` whose
+            :attr:`~voxwarp.deform.offset_field.OffsetFieldWarp.model_state` is a
             ``"massspring"`` model (a scene saved with a mass-spring warp).
         backend, ctx
             As for :meth:`from_dict`.
@@ -797,7 +799,7 @@ class MassSpring:
             When the warp carries no mass-spring model, or the model and the field do
             not fit together.
         """
-        from deform.offset_field import saved_model
+        from voxwarp.deform.offset_field import saved_model
 
         state, positions = saved_model(
             warp, MODEL_TYPE, "mass-spring", "MassSpring", MassSpringError

@@ -2,8 +2,8 @@
 
 About this technique (Knoche 2008, 3.5)
 ---------------------------------------
-:class:`GpuSpringSolver` integrates exactly the physics of :mod:`deform.spring_model`
-(the same as :class:`deform.massspring.CpuSpringSolver`, to float32 round-off) on a
+:class:`GpuSpringSolver` integrates exactly the physics of :mod:`voxwarp.deform.spring_model`
+(the same as :class:`voxwarp.deform.massspring.CpuSpringSolver`, to float32 round-off) on a
 ``moderngl`` context. One draw call is one integration step: one fragment per *block*
 of elements (default 2 x 2 x 1) reads the previous state of the block's elements and
 of their spring neighbours with ``imageLoad`` and writes the new positions and
@@ -76,7 +76,7 @@ grid   taichi (steps/s)    one element per fragment (old)  2 x 2 x 1 blocks (thi
 128³   ~26                 ~0.55x                          1.0-1.2x
 =====  ==================  ==============================  ===========================
 
-(the taichi column is the faster of ``app.bench_taichi`` and an equivalent kernel; its
+(the taichi column is the faster of ``voxwarp.bench.taichi`` and an equivalent kernel; its
 absolute numbers vary by 2x with the load of the shared machine, the ratios less.)
 
 What was measured and kept: blocks of 4 elements per fragment (2 x 2 x 1, 2 x 1 x 2,
@@ -112,7 +112,7 @@ per-element arrays (``rest``, ``stiffness``, ``damping``, ``mass``) and springs
 (``shear``, ``bend``, ``spacing``) are uploaded once, at construction.
 
 The solver draws on the context it is given and does not make it current: the caller
-does (as for :class:`app.render.Renderer`). GL state it changes (enable flags, bound
+does (as for :class:`voxwarp.render.raycaster.Renderer`). GL state it changes (enable flags, bound
 framebuffer) is restored after each call; image units from 0 up to twice the block
 size (at most 12) are left bound to its textures.
 """
@@ -125,9 +125,9 @@ from typing import Any
 import moderngl
 import numpy as np
 
-import shaders
-from deform.gpu_grid import GpuGridSolver
-from deform.spring_model import INTEGRATORS, SpringModel
+from voxwarp import shaders
+from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError
+from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
 
 #: Most springs per element the shaders accept (structural + shear + bend).
 MAX_SPRINGS = 24
@@ -175,7 +175,7 @@ def atlas_layout(shape: tuple[int, int, int], max_size: int) -> tuple[int, int]:
         if best is None or key < best[0]:
             best = (key, (tx, ty))
     if best is None:
-        raise ValueError(
+        raise GpuSolverError(
             f"a grid of {nx}x{ny}x{nz} elements does not fit in a 2D atlas of at most"
             f" {max_size}x{max_size} texels"
         )
@@ -213,12 +213,12 @@ class GpuSpringSolver(GpuGridSolver):
         self, model: SpringModel, ctx: Any, *, block: tuple[int, int, int] = DEFAULT_BLOCK
     ) -> None:
         if ctx is None:
-            raise ValueError(
+            raise GpuSolverError(
                 "GpuSpringSolver needs a moderngl.Context (OpenGL 4.3+); got None"
-                " (use deform.massspring.CpuSpringSolver without a GL context)"
+                " (use voxwarp.deform.massspring.CpuSpringSolver without a GL context)"
             )
         if getattr(ctx, "version_code", 0) < 430:
-            raise ValueError(
+            raise GpuSolverError(
                 "GpuSpringSolver needs an OpenGL 4.3+ context (compute shaders); got"
                 f" version {getattr(ctx, 'version_code', None)}"
             )
@@ -230,7 +230,7 @@ class GpuSpringSolver(GpuGridSolver):
         nx, ny, nz = shape
         blk = tuple(int(b) for b in block)
         if len(blk) != 3 or min(blk) < 1 or math.prod(blk) > MAX_BLOCK:
-            raise ValueError(
+            raise GpuSolverError(
                 f"block must be 3 sizes >= 1 with at most {MAX_BLOCK} elements; got {block}"
             )
         # no longer than the grid (a 1-element-thick grid gets 1 along that axis)
@@ -244,7 +244,7 @@ class GpuSpringSolver(GpuGridSolver):
         max_2d = int(info.get("GL_MAX_TEXTURE_SIZE", 16384))
         max_3d = int(info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
         if max(shape) > max_3d:
-            raise ValueError(
+            raise GpuSolverError(
                 f"a grid of {nx}x{ny}x{nz} elements exceeds GL_MAX_3D_TEXTURE_SIZE {max_3d}"
             )
         bx, by, nz_blocks = self.blocks
@@ -495,12 +495,12 @@ class GpuSpringSolver(GpuGridSolver):
         self._check_alive()
         n = int(n)
         if n < 0:
-            raise ValueError(f"step count must be >= 0; got {n}")
+            raise GpuSolverError(f"step count must be >= 0; got {n}")
         if n == 0:
             return
         m = self.model
         if m.integrator not in INTEGRATORS:
-            raise ValueError(f"integrator must be one of {INTEGRATORS}; got {m.integrator!r}")
+            raise GpuSolverError(f"integrator must be one of {INTEGRATORS}; got {m.integrator!r}")
         prog = self._prog
         prog["u_dt"].value = float(m.dt)
         prog["u_half_k"].value = 0.5 * float(m.spring_constant)
@@ -744,20 +744,22 @@ def _check_model(model: SpringModel) -> tuple[int, int, int]:
     """Validate the model's arrays; return the grid shape."""
     rest = np.asarray(model.rest)
     if rest.ndim != 4 or rest.shape[3] != 3 or min(rest.shape[:3]) < 1:
-        raise ValueError(f"model.rest must have shape (nx, ny, nz, 3); got {rest.shape}")
+        raise GpuSolverError(f"model.rest must have shape (nx, ny, nz, 3); got {rest.shape}")
     shape = tuple(int(n) for n in rest.shape[:3])
     for name in ("stiffness", "damping", "mass"):
         a = np.asarray(getattr(model, name))
         if a.shape != shape:
-            raise ValueError(f"model.{name} must have shape {shape}; got {a.shape}")
+            raise GpuSolverError(f"model.{name} must have shape {shape}; got {a.shape}")
     if not np.all(np.asarray(model.mass) > 0):
-        raise ValueError("model.mass must be > 0 everywhere")
+        raise GpuSolverError("model.mass must be > 0 everywhere")
     if np.asarray(model.spacing).shape != (3,):
-        raise ValueError(f"model.spacing must have shape (3,); got {np.shape(model.spacing)}")
+        raise GpuSolverError(f"model.spacing must have shape (3,); got {np.shape(model.spacing)}")
     if model.integrator not in INTEGRATORS:
-        raise ValueError(f"model.integrator must be one of {INTEGRATORS}; got {model.integrator!r}")
+        raise GpuSolverError(
+            f"model.integrator must be one of {INTEGRATORS}; got {model.integrator!r}"
+        )
     if len(model.offsets) > MAX_SPRINGS:
-        raise ValueError(f"at most {MAX_SPRINGS} springs per element; got {len(model.offsets)}")
+        raise GpuSolverError(f"at most {MAX_SPRINGS} springs per element; got {len(model.offsets)}")
     if not math.isfinite(float(model.dt)):
-        raise ValueError(f"model.dt must be finite; got {model.dt}")
+        raise GpuSolverError(f"model.dt must be finite; got {model.dt}")
     return shape  # type: ignore[return-value]

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from deform.warp import Warp, WarpError, register_warp
+from voxwarp.deform.warp import Warp, WarpError, register_warp
 
 #: Inverse modes: one step (thesis), the fixed-point iteration from ``q_0 = p``, or the
 #: fixed-point iteration seeded by a baked inverse field.
@@ -173,7 +173,7 @@ class OffsetFieldWarp(Warp):
         alpha channel (0 without it).
     model_source
         Optional ``callable() -> (model, displacements)`` set by the deformation model
-        that drives this warp (:meth:`deform.massspring.MassSpring.warp` sets it), so
+        that drives this warp (:meth:`voxwarp.deform.massspring.MassSpring.warp` sets it), so
         that :meth:`to_dict` saves the model with the field: ``model`` is a
         JSON-serialisable dict with a ``"type"`` key, ``displacements`` the current
         ``(nx, ny, nz, 3)`` field read back from the GPU (used only when this warp has
@@ -187,17 +187,17 @@ class OffsetFieldWarp(Warp):
         counter that changes whenever the field does (no read-back). With both, the
         warp can bound its displacement (:meth:`displacement_range`), so the renderer
         can skip empty space through deformed space; it asks only when the same field
-        state is drawn again (app.render, ``warped_skip_maps``), so nothing is read
+        state is drawn again (voxwarp.render.raycaster, ``warped_skip_maps``), so nothing is read
         back while the field changes every frame.
 
     Attributes
     ----------
     model_state : dict or None
         The ``"model"`` entry of the scene JSON this warp was loaded from (e.g.
-        ``{"type": "massspring", ...}``, :meth:`deform.massspring.MassSpring.to_dict`),
+        ``{"type": "massspring", ...}``, :meth:`voxwarp.deform.massspring.MassSpring.to_dict`),
         or ``None``. It describes the model that produced the saved field, so that an
         application can resume the simulation: for ``"massspring"``,
-        :meth:`deform.massspring.MassSpring.from_warp` rebuilds the model with
+        :meth:`voxwarp.deform.massspring.MassSpring.from_warp` rebuilds the model with
         positions ``rest + displacements`` and velocities 0. The warp itself renders
         the saved field and never reads this dict; :meth:`to_dict` writes it back
         unchanged (also after :meth:`update`).
@@ -249,7 +249,7 @@ class OffsetFieldWarp(Warp):
     seed is about 2.5x less accurate, so the default adds a correction there
     (:attr:`iterations`). Where the plain iteration converges slowly the seed wins
     outright: for a drag of 3 h (sigma 2 h), exact k=6 leaves 0.57 h. ``"baked"`` is
-    the default of :meth:`deform.massspring.MassSpring.warp` and of ``voxwarp render
+    the default of :meth:`voxwarp.deform.massspring.MassSpring.warp` and of ``voxwarp render
     --massspring``.
 
     Content cannot leave the grid box: outside the box ``u = 0``, so there the warp is
@@ -756,7 +756,7 @@ class OffsetFieldWarp(Warp):
             entry[2].release()
             entry = None
         if entry is None:
-            import shaders
+            from voxwarp import shaders
 
             prog = ctx.compute_shader(shaders.source("offset_field_bake.comp.glsl"))
             tex = ctx.texture_array(self.bake_shape, 4, dtype="f2")
@@ -840,7 +840,7 @@ class OffsetFieldWarp(Warp):
         """JSON form: lo, hi, shape, inverse, iterations, displacements (nested lists).
 
         With a :attr:`model_source` (a warp driven by a model such as
-        :class:`~deform.massspring.MassSpring`) the entry also holds ``"model"``, the
+        :class:`~voxwarp.deform.massspring.MassSpring`) the entry also holds ``"model"``, the
         model's own dict, and a GPU-owned field is read back once (through the
         model source) so that ``"displacements"`` hold exactly the field that is
         rendered; :meth:`from_dict` then rebuilds a warp that renders the same image.
@@ -973,7 +973,7 @@ def saved_model(
     (state, positions)
         The model dict and ``rest + displacements`` (the saved field) of its grid.
     """
-    from deform.elements import grid_from_entry
+    from voxwarp.deform.elements import grid_from_entry
 
     state = getattr(warp, "model_state", None)
     if not isinstance(state, Mapping) or state.get("type") != kind:
@@ -1010,7 +1010,7 @@ def element_model_warp(
     warp
         The model's warp so far (``None``: make it).
     grid
-        The :class:`~deform.elements.ElementGrid` (``lo``, ``hi``, ``shape``).
+        The :class:`~voxwarp.deform.elements.ElementGrid` (``lo``, ``hi``, ``shape``).
     displacements
         ``() -> (nx, ny, nz, 3)`` the model's displacements (mm): the CPU field, or for
         a GPU solver the read-back that bounds the field for empty-space skipping.

@@ -51,7 +51,7 @@ OpenCL backend off (``"auto"`` then uses scipy; ``"opencl"`` raises), e.g. to te
 or to work around a broken driver.
 
 Measured (2-core AMD EPYC VM, PoCL 3.0 'pthread' CPU device, scipy 1.17; command:
-``python -c "from deform.propagation import benchmark_nearest_seed as b;
+``python -c "from voxwarp.deform.propagation import benchmark_nearest_seed as b;
 print(b((256,) * 3))"``; seeds = the 8 corners of every cell a 3-turn helix passes
 through; median of 3; host<->device transfers included, kernel build excluded):
 
@@ -72,17 +72,15 @@ they are kept for the next call (see :func:`release_opencl_buffers`).
 
 from __future__ import annotations
 
-import math
 import os
 import threading
-import time
 import warnings
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
 
 #: Longest line (voxels along any axis) the OpenCL kernels handle (private arrays).
 MAX_LINE = 1024
@@ -365,7 +363,7 @@ def _check_seeds(seeds: Any) -> np.ndarray:
     )
 
 
-def _check_sampling(sampling: Any) -> tuple[float, float, float]:
+def check_sampling(sampling: Any) -> tuple[float, float, float]:
     try:
         s = np.asarray(sampling, dtype=np.float64)
     except (TypeError, ValueError):
@@ -511,7 +509,7 @@ def nearest_seed(
     if backend not in BACKENDS:
         raise WarpError(f"unknown nearest_seed backend {backend!r}; use one of {list(BACKENDS)}")
     arr = _check_seeds(seeds)
-    spacing = _check_sampling(sampling)
+    spacing = check_sampling(sampling)
     too_long = max(arr.shape) > MAX_LINE
     if backend == "opencl":
         if not opencl_available():
@@ -567,102 +565,6 @@ def nearest_seed(
     return _nearest_scipy(np.ascontiguousarray(arr), spacing)
 
 
-# ------------------------------------------------------------------ benchmark
-def helix_seeds(shape: Sequence[int], turns: float = 3.0) -> np.ndarray:
-    """Synthetic seed set: the 8 corner voxels of every cell a helix passes through.
-
-    Parameters
-    ----------
-    shape : sequence of 3 ints
-        Grid shape (nx, ny, nz); the helix winds around the z axis through the grid.
-    turns : float
-        Number of turns.
-
-    Returns
-    -------
-    np.ndarray
-        bool array of ``shape``.
-    """
-    nx, ny, nz = (int(n) for n in shape)
-    seeds = np.zeros((nx, ny, nz), dtype=bool)
-    n = 8 * (nx + ny + nz) * max(1, math.ceil(turns))
-    t = np.linspace(0.0, 1.0, n)
-    ang = 2 * math.pi * turns * t
-    pts = np.stack(
-        [
-            (0.5 + 0.35 * np.cos(ang)) * (nx - 1),
-            (0.5 + 0.35 * np.sin(ang)) * (ny - 1),
-            (0.05 + 0.9 * t) * (nz - 1),
-        ],
-        axis=1,
-    )
-    cells = np.unique(np.floor(pts).astype(np.int64), axis=0)
-    for corner in np.ndindex(2, 2, 2):
-        c = cells + np.array(corner)
-        c = np.minimum(c, np.array(seeds.shape) - 1)
-        seeds[c[:, 0], c[:, 1], c[:, 2]] = True
-    return seeds
-
-
-def benchmark_nearest_seed(
-    shape: Sequence[int],
-    sampling: float | Sequence[float] = (1.0, 1.0, 1.0),
-    repeats: int = 3,
-) -> dict[str, Any]:
-    """Time :func:`nearest_seed` with OpenCL and with scipy on the same helix seed set.
-
-    Parameters
-    ----------
-    shape : sequence of 3 ints
-        Grid shape (nx, ny, nz).
-    sampling : float or sequence of 3 floats
-        Voxel spacing (mm).
-    repeats : int
-        Timed runs per backend; the median is reported. OpenCL runs once untimed first
-        (kernel build, buffer allocation).
-
-    Returns
-    -------
-    dict
-        ``shape``, ``n_seeds``, ``device`` (OpenCL device name or ``""``), ``opencl_s``
-        and ``scipy_s`` (median wall seconds; ``opencl_s`` is None without OpenCL),
-        ``speedup`` (scipy_s / opencl_s, or None) and ``agree`` (the distances to the
-        chosen seeds match within 1e-4 relative; None without OpenCL).
-    """
-    shape = tuple(int(n) for n in shape)
-    spacing = _check_sampling(sampling)
-    repeats = max(1, int(repeats))
-    seeds = helix_seeds(shape)
-
-    def timed(backend: str) -> tuple[float, np.ndarray]:
-        times, res = [], None
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            res = nearest_seed(seeds, spacing, backend=backend)
-            times.append(time.perf_counter() - t0)
-        return float(np.median(times)), res
-
-    result: dict[str, Any] = {
-        "shape": shape,
-        "n_seeds": int(seeds.sum()),
-        "device": opencl_device_name(),
-        "opencl_s": None,
-        "scipy_s": None,
-        "speedup": None,
-        "agree": None,
-    }
-    scipy_s, ref = timed("scipy")
-    result["scipy_s"] = scipy_s
-    if opencl_available() and max(shape) <= MAX_LINE:
-        nearest_seed(seeds, spacing, backend="opencl")  # build + allocate, untimed
-        opencl_s, got = timed("opencl")
-        result["opencl_s"] = opencl_s
-        result["speedup"] = scipy_s / opencl_s if opencl_s > 0 else None
-        d_ref, d_got = (seed_distance(r, spacing) for r in (ref, got))
-        result["agree"] = bool(np.allclose(d_got, d_ref, rtol=1e-4, atol=1e-4))
-    return result
-
-
 def seed_distance(nearest: np.ndarray, sampling: float | Sequence[float] = 1.0) -> np.ndarray:
     """Distance (mm) from every voxel to the seed :func:`nearest_seed` chose for it.
 
@@ -679,7 +581,7 @@ def seed_distance(nearest: np.ndarray, sampling: float | Sequence[float] = 1.0) 
     np.ndarray
         float64 (nx, ny, nz).
     """
-    spacing = _check_sampling(sampling)
+    spacing = check_sampling(sampling)
     shape = nearest.shape
     seed = np.unravel_index(np.maximum(nearest, 0).ravel(), shape)
     own = np.indices(shape).reshape(3, -1)

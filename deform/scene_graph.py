@@ -5,7 +5,7 @@ About this technique
 Knuth, Kohlhammer and Kuijper, "Embedding hierarchical deformation within a realtime
 scene graph" (GRAPP 2010) put free-form deformation into an ordinary scene graph: every
 node carries a *transform*, either a 4x4 matrix or a grid of trilinear cells (the
-lattice of section 3, :class:`deform.trilinear.TrilinearGrid`), and a *bounding box*
+lattice of section 3, :class:`voxwarp.deform.trilinear.TrilinearGrid`), and a *bounding box*
 that maps the node's content into the unit cube on which the lattice is defined
 (section 4). Before rendering, the transforms are propagated from the world down to
 every geometry leaf, which receives ONE composed transform (section 4.1); the vertex
@@ -18,16 +18,16 @@ Semantics implemented here:
 * A node's transform maps its *local* coordinates into its *parent's* coordinates; the
   root's parent is the world. ``None`` is the identity.
 * A 4x4 (affine) matrix acts on local coordinates directly: ``x_parent = M [x; 1]``.
-* A :class:`~deform.trilinear.TrilinearGrid` acts on the box-normalised coordinates
+* A :class:`~voxwarp.deform.trilinear.TrilinearGrid` acts on the box-normalised coordinates
   ``u = (x - lo) / (hi - lo)`` of the node's box ``(lo, hi)`` (the node's content box,
   in its local coordinates) and returns parent coordinates: ``x_parent = G(u)``. A grid
-  transform therefore needs a box (:class:`~deform.warp.WarpError` otherwise).
+  transform therefore needs a box (:class:`~voxwarp.deform.warp.WarpError` otherwise).
 * The composed transform of a node with geometry (a *leaf*; it may still have children)
   maps the leaf's local points to world coordinates:
 
   - if every transform on the root-to-leaf path is a matrix (or ``None``), it is the
     4x4 product ``M_root @ ... @ M_leaf``: linear chains stay matrices;
-  - otherwise it is a :class:`~deform.trilinear.TrilinearGrid` over the leaf's
+  - otherwise it is a :class:`~voxwarp.deform.trilinear.TrilinearGrid` over the leaf's
     box-unit cube, built by pushing the leaf's grid node points through the chain,
     child side first. This is the paper's composition ``G o L`` (section 4.1) applied
     pairwise: L's grid points are mapped into G's box-unit coordinates and then through
@@ -44,10 +44,10 @@ Semantics implemented here:
   refuses (``strict=True``, the default) when a leaf's node points fall outside the box
   of a grid node above it, naming the box to enlarge; ``strict=False`` hands such points
   to the grid as they are, which extends its border cells' trilinear polynomials beyond
-  the unit cube (:class:`~deform.trilinear.TrilinearGrid`'s extrapolation).
+  the unit cube (:class:`~voxwarp.deform.trilinear.TrilinearGrid`'s extrapolation).
 
 Each node has at most one parent: adding a node twice, or into its own subtree, raises
-:class:`~deform.warp.WarpError`, and :meth:`SceneNode.walk` detects cycles made behind
+:class:`~voxwarp.deform.warp.WarpError`, and :meth:`SceneNode.walk` detects cycles made behind
 :meth:`SceneNode.add`'s back (``children.append``).
 
 Composition is done per leaf from scratch (``O(nodes x depth)``); shared path prefixes
@@ -63,8 +63,8 @@ from typing import Any
 
 import numpy as np
 
-from deform.trilinear import TrilinearGrid, TrilinearTransform
-from deform.warp import WarpError
+from voxwarp.deform.trilinear import TrilinearGrid, TrilinearTransform
+from voxwarp.deform.warp import WarpError
 
 __all__ = ["ComposedTransform", "SceneNode", "compose_path", "compose_scene"]
 
@@ -188,8 +188,8 @@ class SceneNode:
         Label used in error messages and saved by :meth:`to_dict`.
     transform
         ``None`` (the identity), a 4x4 affine matrix acting on local coordinates, or a
-        :class:`~deform.trilinear.TrilinearGrid` acting on the box-normalised coordinates
-        ``u = (x - lo) / (hi - lo)`` (a single :class:`~deform.trilinear.TrilinearTransform`
+        :class:`~voxwarp.deform.trilinear.TrilinearGrid` acting on the box-normalised coordinates
+        ``u = (x - lo) / (hi - lo)`` (a single :class:`~voxwarp.deform.trilinear.TrilinearTransform`
         is taken as a one-cell grid). Either way the result is in the parent's coordinates.
     box
         ``(lo, hi)``: the node's content box in its local coordinates, ``lo < hi`` on

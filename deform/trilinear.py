@@ -42,7 +42,7 @@ only one of several preimages. Points where Newton does not converge within
 ``max_iter`` iterations (or hits a singular Jacobian) are marked not converged and come
 back as NaN. A flat transform (zero volume everywhere: ``det J == 0`` on a 3x3x3 sample,
 which for this degree-2-per-variable polynomial means everywhere) has no inverse and
-raises :class:`~deform.warp.WarpError`.
+raises :class:`~voxwarp.deform.warp.WarpError`.
 
 *Grids of trilinear cells* (sections 5-6: hierarchical lattices): a
 :class:`TrilinearGrid` holds ``(nx+1, ny+1, nz+1)`` world nodes; node ``(i, j, k)`` is
@@ -79,7 +79,7 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
 
 __all__ = [
     "MONOMIALS",

@@ -27,6 +27,7 @@ tests, picking and bounds computation.
 
 from __future__ import annotations
 
+import importlib
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
@@ -34,14 +35,28 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-import shaders
+from voxwarp import shaders
+from voxwarp.errors import VoxwarpError
 
 
-class WarpError(ValueError):
+class WarpError(VoxwarpError, ValueError):
     """A warp was given invalid parameters (message names the fix)."""
 
 
 _REGISTRY: dict[str, type[Warp]] = {}
+#: the warp kinds voxwarp ships and the modules that register them: loaded when a scene
+#: names one, so that reading a warp entry never depends on what was imported before
+_BUILT_IN: dict[str, str] = {
+    "offset_field": "voxwarp.deform.offset_field",
+    "wires": "voxwarp.deform.wires",
+    "lattice": "voxwarp.deform.lattice_warp",
+}
+
+
+def _load_built_in(kind: str) -> None:
+    module = _BUILT_IN.get(kind)
+    if module is not None and kind not in _REGISTRY:
+        importlib.import_module(module)
 
 
 def register_warp(cls: type[Warp]) -> type[Warp]:
@@ -55,14 +70,16 @@ def warp_from_dict(d: Mapping[str, Any]) -> Warp:
     if not isinstance(d, Mapping) or "type" not in d:
         raise WarpError(f"a warp entry must be an object with a 'type' key; got {d!r:.80}")
     kind = d["type"]
+    if isinstance(kind, str):
+        _load_built_in(kind)
     if not isinstance(kind, str) or kind not in _REGISTRY:
-        raise WarpError(f"unknown warp type {kind!r}; known types: {sorted(_REGISTRY)}")
+        raise WarpError(f"unknown warp type {kind!r}; known types: {known_warps()}")
     return _REGISTRY[kind].from_dict(d)
 
 
 def known_warps() -> list[str]:
-    """Names of the registered warp kinds."""
-    return sorted(_REGISTRY)
+    """Names of the warp kinds :func:`warp_from_dict` reads (built-in and registered)."""
+    return sorted({*_REGISTRY, *_BUILT_IN})
 
 
 class Warp(ABC):
@@ -135,7 +152,7 @@ class Warp(ABC):
             default). The raycaster uses them to carry empty-space skipping into
             deformed space: a deformed-space point samples original content only
             within that interval of offsets (see
-            :func:`app.skipping.warped_cell_visibility`). Signed intervals matter: a
+            :func:`voxwarp.render.skipping.warped_cell_visibility`). Signed intervals matter: a
             smooth field moves a region mostly one way, so the content a sample can
             reach is a shifted window, not a ball.
         """

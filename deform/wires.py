@@ -14,7 +14,7 @@ fraction u in [0, 1] (0 = first control point), the same on both curves: this is
 paper's plane-to-plane mapping by t.
 
 Frames. Twist needs a frame on each curve that has no twist of its own: both curves
-carry rotation-minimising frames (double reflection, :meth:`deform.curves.Curve.frames`);
+carry rotation-minimising frames (double reflection, :meth:`voxwarp.deform.curves.Curve.frames`);
 the base frame starts from ``initial_normal`` (default: the world axis least aligned
 with the base tangent), the modified frame from that normal carried by the minimal
 rotation between the two start tangents. So a wire that is only translated or bent in
@@ -55,7 +55,7 @@ leave the original box). It is built in deformed space:
 3. *Voxel initialisation* (5.1): where the modified wire enters a field cell, its eight
    voxels become seeds with (γ wire id, ε closest u, d distance), keeping the minimum d.
 4. *Propagation*: every voxel of the region takes (γ, ε) of its nearest seed, by an
-   exact Euclidean distance transform in OpenCL (:mod:`deform.propagation`, PoCL on the
+   exact Euclidean distance transform in OpenCL (:mod:`voxwarp.deform.propagation`, PoCL on the
    CPU here, any OpenCL GPU elsewhere; scipy when no platform exists, with a warning).
    Distances are discarded. ε is then refined to the closest point of the wire
    (:data:`REFINE_STEPS` Newton steps): the nearest seed's u is off by up to a voxel
@@ -100,8 +100,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from deform.curves import Curve, minimal_rotation
-from deform.warp import Warp, WarpError, register_warp
+from voxwarp.deform.curves import Curve, minimal_rotation
+from voxwarp.deform.warp import Warp, WarpError, register_warp
 
 #: most wires in one attribute field (7-bit wire id of the packed layout)
 MAX_WIRES = 128
@@ -307,7 +307,7 @@ class Wire:
             "name",
         }
         if unknown:
-            raise WarpError(f"unknown wire keys {sorted(unknown)}; see deform.wires.Wire")
+            raise WarpError(f"unknown wire keys {sorted(unknown)}; see voxwarp.deform.wires.Wire")
         if "base" not in d:
             raise WarpError("a wire needs 'base': its control points [[x, y, z], ...] in mm")
         if "radius" not in d:
@@ -565,7 +565,7 @@ class WireDeformer:
     dilation
         Pixels of morphological dilation of each mask.
     backend
-        Propagation backend of :func:`deform.propagation.nearest_seed`.
+        Propagation backend of :func:`voxwarp.deform.propagation.nearest_seed`.
     precision
         Arc-length precision p (eq. 4) and closest-point precision (in t).
     """
@@ -595,7 +595,7 @@ class WireDeformer:
             )
         for i, w in enumerate(wires):
             if not isinstance(w, Wire):
-                raise WarpError(f"wires[{i}] is a {type(w).__name__}, not a deform.Wire")
+                raise WarpError(f"wires[{i}] is a {type(w).__name__}, not a voxwarp.deform.Wire")
         self.wires = wires
         if field_scale not in FIELD_SCALES:
             raise WarpError(
@@ -664,7 +664,7 @@ class WireDeformer:
             Field size, planes kept/dropped, seeds, swept/vacated/ignored voxel counts and
             the time of each stage.
         """
-        from deform.propagation import last_backend
+        from voxwarp.deform.propagation import last_backend
 
         t_all = time.perf_counter()
         timings: dict[str, float] = {}
@@ -784,7 +784,7 @@ class WireDeformer:
         """(wire, u) of the nearest seed for every voxel of the wires' region on one
         side: the region's first voxel and shape, the two grids, which voxels lie within
         their wire's reach, and the seed count."""
-        from deform.propagation import nearest_seed
+        from voxwarp.deform.propagation import nearest_seed
 
         seed_idx, seed_wire, seed_u = seeds
         c_lo = np.full(3, np.iinfo(np.int64).max)

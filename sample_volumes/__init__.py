@@ -11,7 +11,7 @@ Arrays are indexed ``data[i, j, k]`` with ``i`` along x (the voxwarp convention)
 This package imports only numpy, scipy and the standard library (nibabel is not needed).
 """
 
-from sample_volumes.generators import (
+from voxwarp.sample_volumes.generators import (
     FISH_FOV_MM,
     HEAD_FOV_MM,
     NOISE_STD,

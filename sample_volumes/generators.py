@@ -420,7 +420,7 @@ def fish(shape: tuple[int, int, int] = (192, 96, 80), seed: int = 0) -> SampleDa
             " vertebrae on a curved spine with neural/haemal spines and ribs, two-lobed"
             " air-filled swim bladder."
         ),
-        source=f"sample_volumes.generators.fish(shape={shape}, seed={seed})",
+        source=f"voxwarp.sample_volumes.generators.fish(shape={shape}, seed={seed})",
         license="BSD-3-Clause (voxwarp)",
     )
 
@@ -540,7 +540,7 @@ def tubes(shape: tuple[int, int, int] = (128, 128, 96), seed: int = 0) -> Sample
             " nearly touch each other (gaps 0.7-1.4 mm = 1.4-2.8 voxels at the default"
             " shape): the delineation problem."
         ),
-        source=f"sample_volumes.generators.tubes(shape={shape}, seed={seed})",
+        source=f"voxwarp.sample_volumes.generators.tubes(shape={shape}, seed={seed})",
         license="BSD-3-Clause (voxwarp)",
     )
 
@@ -606,13 +606,13 @@ def head(shape: tuple[int, int, int] = (128, 128, 128), seed: int = 0) -> Sample
             "3D Shepp-Logan-like head phantom in HU: scalp, skull shell (1000 HU) around"
             " the brain (40 HU) with ventricles (10 HU) and small lesions (65-70 HU)."
         ),
-        source=f"sample_volumes.generators.head(shape={shape}, seed={seed})",
+        source=f"voxwarp.sample_volumes.generators.head(shape={shape}, seed={seed})",
         license="BSD-3-Clause (voxwarp)",
     )
 
 
 # --------------------------------------------------------------------------- real scans
-_PACKAGE = "sample_volumes"
+_PACKAGE = __name__.rpartition(".")[0]  # the package holding the bundled files
 
 _VISVIS_LICENSE = (
     "BSD-3-Clause, Copyright (c) 2012-2025, Visvis development team (see sample_volumes/README.md)"

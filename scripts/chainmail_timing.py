@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from deform.chainmail import ChainMail
-from deform.elements import ElementGrid
+from voxwarp.deform.chainmail import ChainMail
+from voxwarp.deform.elements import ElementGrid
 
 
 def main(n: int = 128) -> None:

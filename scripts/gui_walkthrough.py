@@ -20,8 +20,8 @@ from PySide6.QtCore import QPoint, Qt
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 
-from ui.app import application
-from ui.main_window import MainWindow, load_session_input
+from voxwarp.ui.app import application
+from voxwarp.ui.main_window import MainWindow, load_session_input
 
 
 def main(out: Path) -> int:

@@ -29,16 +29,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from app.animation import Animation, Track  # noqa: E402
-from app.samples import load_sample  # noqa: E402
-from app.scene import Scene  # noqa: E402
-from app.volume import Volume  # noqa: E402
-from deform.chainmail import ChainMail  # noqa: E402
-from deform.elements import ElementGrid  # noqa: E402
-from deform.lattice_warp import LatticeWarp  # noqa: E402
-from deform.massspring import MassSpring  # noqa: E402
-from deform.trilinear import TrilinearGrid  # noqa: E402
-from deform.wires import Wire, WireDeformer  # noqa: E402
+from voxwarp.animation.tracks import Animation, Track  # noqa: E402
+from voxwarp.core.volume import Volume  # noqa: E402
+from voxwarp.deform.chainmail import ChainMail  # noqa: E402
+from voxwarp.deform.elements import ElementGrid  # noqa: E402
+from voxwarp.deform.lattice_warp import LatticeWarp  # noqa: E402
+from voxwarp.deform.massspring import MassSpring  # noqa: E402
+from voxwarp.deform.trilinear import TrilinearGrid  # noqa: E402
+from voxwarp.deform.wires import Wire, WireDeformer  # noqa: E402
+from voxwarp.io.samples import load_sample  # noqa: E402
+from voxwarp.scene import Scene  # noqa: E402
 
 OUT = ROOT / "sample_volumes"
 BACKGROUND = (0.08, 0.1, 0.14, 1.0)

@@ -1,7 +1,7 @@
 """Write the trilinear-lattice demo scenes to sample_volumes/lattice_<name>.json.
 
 Run from the repository root: ``.venv/bin/python scripts/make_lattice_demos.py``. The
-scenes are built by :mod:`app.lattice_demos`; render one with
+scenes are built by :mod:`voxwarp.teaching.lattice_scenes`; render one with
 ``voxwarp render sample_volumes/lattice_torus_tubes.json -o tubes.png``.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-from app.lattice_demos import DEMOS
+from voxwarp.teaching.lattice_scenes import DEMOS
 
 OUT = Path(__file__).resolve().parents[1] / "sample_volumes"
 

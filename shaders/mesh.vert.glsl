@@ -3,10 +3,10 @@
 // trilinear cells (Knuth, Kohlhammer, Kuijper, GRAPP 2010, sections 3-5). About this
 // technique:
 // * The lattice is a grid of (nx+1)(ny+1)(nz+1) node points in an RGBA32F 3D texture
-//   (deform.trilinear.TrilinearGrid.texture_data). It acts on the box-normalised vertex
+//   (voxwarp.deform.trilinear.TrilinearGrid.texture_data). It acts on the box-normalised vertex
 //   coordinate u = (p - lo) / (hi - lo); the cell holding u is a trilinear map of its 8
 //   corner nodes. Each vertex costs O(1) fetches, however deep the scene graph that
-//   composed the lattice (app.mesh.instances_from_scene_graph).
+//   composed the lattice (voxwarp.core.mesh.instances_from_scene_graph).
 // * The position is evaluated from the 8 corner nodes (texelFetch; the same fetches give
 //   the Jacobian), exactly in float arithmetic. With HW_TRILINEAR it is one hardware
 //   trilinear fetch at the node-centred coordinate (u * cells + 0.5) / (cells + 1),

@@ -1,5 +1,5 @@
 #version 430
-// Overlay handles (app.overlay). Points: a disc of the vertex colour inside a ring
+// Overlay handles (voxwarp.render.overlay). Points: a disc of the vertex colour inside a ring
 // u_outline_width pixels wide of u_outline (its alpha scaled by the point's), so a
 // handle reads on bright and dark volumes alike; outside the disc the sprite discards.
 // Lines: the vertex colour. Output is premultiplied RGBA ("over" blending).

@@ -1,5 +1,5 @@
 #version 430
-// Editing handles drawn over a rendered frame (app.overlay): points (round discs with
+// Editing handles drawn over a rendered frame (voxwarp.render.overlay): points (round discs with
 // an outline ring) and 1-px line segments, placed by the raycaster's camera.
 // * No near/far clipping: z is set to 0, so a handle outside the camera's scene sphere
 //   stays visible; perspective geometry behind the eye (w < 0) is still clipped.

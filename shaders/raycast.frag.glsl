@@ -16,18 +16,18 @@
 //   the same sample lattice, so skipping never changes the image. With CELL_SKIP
 //   (dvr, iso, flm) the map is kept per trilinear cell instead of per block, and per
 //   ray-direction octant: the cube a ray may jump through starts at its cell and
-//   extends ahead of it (app/skipping.py). One nearest fetch per sample.
+//   extends ahead of it (app/render/skipping.py). One nearest fetch per sample.
 // * otherwise: each sample goes through warp_chain(p). When every warp bounds its
 //   displacement (and the mode is dvr, iso or flm), CELL_SKIP applies in *deformed*
 //   space: the ray walks octant skip maps of the original cell visibility dilated by
-//   the local displacement bound (app/skipping.py warped_cell_visibility), so it jumps
+//   the local displacement bound (app/render/skipping.py warped_cell_visibility), so it jumps
 //   wherever no sample could land on visible content, again on the sample lattice.
 //   Without a bound, invisible blocks still save the volume fetch and classification.
 // Early ray termination: the mode returns true from mode_sample when nothing further
 // can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
 // The renderer clears the viewport to u_background first; rays that miss the volume
 // (or, with CELL_SKIP, meet nothing visible) discard instead of writing it.
-// MESH_DEPTH (mixed scenes, app/mesh_render.py): the meshes were drawn first into
+// MESH_DEPTH (mixed scenes, app/render/mesh_pass.py): the meshes were drawn first into
 // u_mesh_color (premultiplied, over the background) and u_mesh_depth, at the viewport's
 // size. Each ray stops at the mesh surface (the depth value unprojected to a point on
 // the pixel's ray, which works for both projections) and the volume is composited over
@@ -82,7 +82,7 @@ mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
 #ifdef CELL_SKIP
 // Warped rays skip through *deformed* space: the skip map's cells are those of the
 // original cell grid padded to the ray box, their visibility the original one dilated
-// by the warps' local displacement bound (app/skipping.py warped_cell_visibility).
+// by the warps' local displacement bound (app/render/skipping.py warped_cell_visibility).
 uniform mat4 u_skip_world_to_texel;   // deformed world -> skip-map texel coordinates
 uniform ivec3 u_cell_dims;            // cells of the skip map
 vec3 g_u0;
@@ -177,7 +177,7 @@ void main() {
 #ifdef CELL_SKIP
     // This pass draws the rays of octant u_octant only (each pixel exactly once). A
     // component counts as negative only below -OCTANT_EPS * max|du|, so directions
-    // along an axis (components ~0 of either sign) agree with app/skipping.py.
+    // along an axis (components ~0 of either sign) agree with app/render/skipping.py.
     float du_max = max(max(abs(g_du.x), abs(g_du.y)), abs(g_du.z));
     vec3 ray_octant = mix(vec3(1.0), vec3(-1.0), lessThan(g_du, vec3(-OCTANT_EPS * du_max)));
     if (any(notEqual(ray_octant, u_octant))) discard;

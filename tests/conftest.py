@@ -4,7 +4,7 @@
   use it (directly or through ``offscreen``) are marked ``gl`` automatically, and the
   context's error flag must read ``GL_NO_ERROR`` before and after each of them (the
   pattern of moderngl's own test suite). Without EGL they are skipped, with the reason.
-* ``offscreen``: factory of :class:`app.render.OffscreenRenderer` objects sharing
+* ``offscreen``: factory of :class:`voxwarp.render.raycaster.OffscreenRenderer` objects sharing
   ``gl_ctx``; all are released at the end of the session.
 * ``golden``: compares an image with ``tests/golden/NAME.png``; ``pytest
   --regenerate-golden`` rewrites the files instead. On a mismatch the actual, expected
@@ -50,8 +50,8 @@ def _seed_numpy() -> None:
 @pytest.fixture(scope="session")
 def gl_ctx() -> Iterator[Any]:
     """One headless OpenGL 4.3+ context (EGL) for the session; skips GL tests without one."""
-    from app.errors import RenderError
-    from app.render import create_context
+    from voxwarp.errors import RenderError
+    from voxwarp.render.raycaster import create_context
 
     try:
         ctx = create_context()
@@ -82,7 +82,7 @@ def offscreen(gl_ctx: Any) -> Iterator[Callable[..., Any]]:
     Renderers are cached per (width, height, dtype), so programs and textures are reused
     across tests; all are released at the end of the session.
     """
-    from app.render import OffscreenRenderer
+    from voxwarp.render.raycaster import OffscreenRenderer
 
     made: dict[tuple[int, int, str], Any] = {}
 

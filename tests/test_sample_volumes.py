@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-import sample_volumes as sv
-from sample_volumes import SampleData
+import voxwarp.sample_volumes as sv
+from voxwarp.sample_volumes import SampleData
 
 GENERATORS: dict[str, Callable[..., SampleData]] = {
     "fish": sv.fish,

@@ -10,7 +10,7 @@ from PySide6.QtCore import QTimer
 from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
-from app.errors import VoxwarpError
+from voxwarp.errors import VoxwarpError
 
 #: after the first frame, the time given to the docks to paint before a screenshot (ms)
 SCREENSHOT_SETTLE_MS = 300
@@ -52,7 +52,7 @@ def run_gui(
     """Open the window on ``input_spec``; with ``tour``, step through a teaching demo's
     tour (its first scene replaces ``input_spec``); with ``screenshot``, save a PNG of
     the whole window once the first frame is drawn and quit. Returns the exit code."""
-    from ui.main_window import MainWindow, load_session_input
+    from voxwarp.ui.main_window import MainWindow, load_session_input
 
     app = application()
     try:

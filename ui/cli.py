@@ -1,4 +1,4 @@
-"""The ``voxwarp`` console script: :mod:`app.cli`'s commands plus ``gui``.
+"""The ``voxwarp`` console script: :mod:`voxwarp.cli.main`'s commands plus ``gui``.
 
 ``voxwarp gui [INPUT] [--screenshot PATH]`` opens the desktop window on INPUT (a volume
 file, a scene JSON or ``sample:NAME``; default the bundled sample). With
@@ -15,9 +15,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from app import cli as app_cli
-from app.cli_args import image_size
-from app.samples import DEFAULT_SAMPLE
+from voxwarp.cli import main as app_cli
+from voxwarp.core.checks import image_size
+from voxwarp.core.extras import require
+from voxwarp.io.samples import DEFAULT_SAMPLE
 
 
 def has_display() -> bool:
@@ -39,15 +40,16 @@ def cmd_gui(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return app_cli.main(["demo", "--out", args.fallback_out])
-    from ui.app import run_gui
+    require("gui", "voxwarp gui")
+    from voxwarp.ui.app import run_gui
 
     return run_gui(args.input, screenshot=args.screenshot, size=args.size, tour=args.tour)
 
 
 def cmd_demo_gui(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME --gui``: the teaching demo (figure sheet and tour, by
-    :func:`app.cli.cmd_demo`), then its guided step-through in the desktop window."""
-    from app.demos import DEMOS
+    :func:`voxwarp.cli.main.cmd_demo`), then its guided step-through in the desktop window."""
+    from voxwarp.teaching.demos import DEMOS
 
     code = app_cli.cmd_demo(args)
     if code != 0 or not getattr(args, "gui", False) or args.input not in DEMOS:
@@ -60,17 +62,19 @@ def cmd_demo_gui(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 0
-    from app.tour import read_tour
-    from ui.app import run_gui
+    from voxwarp.teaching.tour import read_tour
+
+    require("gui", "voxwarp demo --gui")
+    from voxwarp.ui.app import run_gui
 
     tour = read_tour(tour_path)
     first = next((str(s.scene) for s in tour.steps if s.scene is not None), None)
     return run_gui(first or f"sample:{DEFAULT_SAMPLE}", tour=str(tour_path))
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """:func:`app.cli.build_parser` plus the ``gui`` command."""
-    parser = app_cli.build_parser()
+def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
+    """:func:`voxwarp.cli.main.build_parser` plus the ``gui`` command."""
+    parser = app_cli.build_parser(bench=bench)
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     pg = sub.add_parser("gui", help="open the desktop window (INPUT: volume, scene or sample:NAME)")
     pg.add_argument("input", nargs="?", default=f"sample:{DEFAULT_SAMPLE}")
@@ -89,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``voxwarp`` console script."""
-    return app_cli.main(argv, parser=build_parser())
+    return app_cli.main(argv, parser=build_parser(bench=app_cli.wants_bench(argv)))
 
 
 if __name__ == "__main__":

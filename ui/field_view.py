@@ -1,7 +1,7 @@
 """A compact view of the deformation's internal fields as a 2D slice (Display dock).
 
-Shows :func:`app.field_views.field_slice` of the session's model warp
-(:meth:`app.editor.EditSession.model_warp`: the model in its grid frame, without a
+Shows :func:`voxwarp.render.field_views.field_slice` of the session's model warp
+(:meth:`voxwarp.editing.session.EditSession.model_warp`: the model in its grid frame, without a
 placement's affine warps): a view combo (the views of that warp), the slice normal,
 a position slider and the image scaled to fit, with a title and a legend. The whole
 thing folds away behind a "Show field slice" check box (folded, nothing is computed).
@@ -32,9 +32,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app import field_views
-from app.errors import VoxwarpError
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
+from voxwarp.errors import VoxwarpError
+from voxwarp.render import field_views
 
 __all__ = ["FieldSliceView"]
 
@@ -66,7 +66,7 @@ class FieldSliceView(QWidget):
     Parameters
     ----------
     window
-        The main window (``window.session``: an :class:`~app.editor.EditSession`).
+        The main window (``window.session``: an :class:`~voxwarp.editing.session.EditSession`).
     parent
         Optional parent widget.
 
@@ -75,7 +75,7 @@ class FieldSliceView(QWidget):
     show_check : QCheckBox
         "Show field slice": unfolds the view.
     view_combo, axis_combo : QComboBox
-        The view (:func:`app.field_views.views_for`) and the slice normal (x, y, z).
+        The view (:func:`voxwarp.render.field_views.views_for`) and the slice normal (x, y, z).
     slider : QSlider
         Position of the slice across the volume, 0..100 %.
     image_label, title_label, legend_label : QLabel

@@ -1,10 +1,11 @@
 """The main window: viewport, docks, menus, undo/redo, files, screenshots, status bar.
 
 Every edit goes through :meth:`MainWindow.edit`: a snapshot of the session before and
-after (:meth:`app.editor.EditSession.snapshot`) makes one :class:`SnapshotCommand` on the
+after (:meth:`voxwarp.editing.session.EditSession.snapshot`) makes one :class:`SnapshotCommand` on
+the
 ``QUndoStack``, so undo restores the previous state exactly. Work that can take longer
 than ~100 ms (opening a volume, rebuilding a wire field) runs off the GUI thread
-(:mod:`ui.tasks`). Errors from the core are shown as dialogs with their message.
+(:mod:`voxwarp.ui.tasks`). Errors from the core are shown as dialogs with their message.
 """
 
 from __future__ import annotations
@@ -42,16 +43,16 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
 )
 
-from app.camera import VIEWS, Camera
-from app.editor import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
-from app.errors import VoxwarpError
-from app.image_io import write_image
-from app.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
-from app.scene import Scene
-from app.volume import Volume
-from ui.tasks import Task, run_with_progress
-from ui.tf_editor import TransferFunctionEditor
-from ui.viewport import Viewport
+from voxwarp.core.camera import VIEWS, Camera
+from voxwarp.core.volume import Volume
+from voxwarp.editing.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
+from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
+from voxwarp.errors import VoxwarpError
+from voxwarp.io.images import write_image
+from voxwarp.scene import Scene
+from voxwarp.ui.tasks import Task, run_with_progress
+from voxwarp.ui.tf_editor import TransferFunctionEditor
+from voxwarp.ui.viewport import Viewport
 
 #: frames per second of the simulation timer
 SIM_FPS = 30
@@ -185,7 +186,7 @@ class MainWindow(QMainWindow):
 
     # ------------------------------------------------------------------ docks
     def _make_docks(self) -> None:
-        from ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
+        from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
 
         self.volume_panel = VolumePanel(self)
         self.tf_editor = TransferFunctionEditor(
@@ -364,7 +365,7 @@ class MainWindow(QMainWindow):
         before = self.viewport.with_context(self.session.snapshot)
         try:
             result = self.viewport.with_context(fn)
-        except (VoxwarpError, ValueError) as exc:
+        except VoxwarpError as exc:
             self.viewport.with_context(lambda: self.session.restore(before))
             self.show_error(str(exc))
             self.refresh_panels()
@@ -674,7 +675,7 @@ class MainWindow(QMainWindow):
             return None
         try:
             if whole_window:
-                from ui.viewport import qimage_to_array
+                from voxwarp.ui.viewport import qimage_to_array
 
                 img = qimage_to_array(self.grab().toImage())
             else:
@@ -762,7 +763,7 @@ class MainWindow(QMainWindow):
         w, h = max(2, w - w % 2), max(2, h - h % 2)
         frames_dir = movie.with_name(movie.stem + "_frames")
         total = self.session.animation.frames
-        cmd = [sys.executable, "-m", "ui.cli", "animate", str(scene_path), "-o", str(movie)]
+        cmd = [sys.executable, "-m", "voxwarp.ui.cli", "animate", str(scene_path), "-o", str(movie)]
         cmd += ["--size", f"{w}x{h}", "--no-progress"]
 
         def job(progress: Callable[[float, str], None], cancelled: Callable[[], bool]) -> Any:
@@ -815,8 +816,8 @@ class MainWindow(QMainWindow):
 
     def start_tour(self, path: str | Path) -> None:
         """Step through a teaching demo's tour (``voxwarp demo NAME --gui``) in a dock."""
-        from app.tour import read_tour
-        from ui.tour_panel import TourPanel
+        from voxwarp.teaching.tour import read_tour
+        from voxwarp.ui.tour_panel import TourPanel
 
         try:
             tour = read_tour(path)
@@ -894,8 +895,8 @@ class MainWindow(QMainWindow):
 def load_session_input(spec: str) -> EditSession:
     """A session for INPUT: a scene JSON (resuming its deformation), a volume file or
     ``sample:NAME`` (shown with the sample's suggested transfer function)."""
-    from app.cli import load_input
-    from app.samples import suggested_transfer_function
+    from voxwarp.inputs import load_input
+    from voxwarp.io.samples import suggested_transfer_function
 
     path = Path(spec)
     if path.suffix.lower() == ".json" and path.is_file():

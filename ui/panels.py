@@ -59,8 +59,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.camera import PROJECTIONS
-from app.editor import (
+from voxwarp.core.camera import PROJECTIONS
+from voxwarp.editing.session import (
     BACKENDS,
     CHAINMAIL_VARIANTS,
     DEFORMATIONS,
@@ -71,7 +71,7 @@ from app.editor import (
     EditSession,
     Placement,
 )
-from app.scene import MODES
+from voxwarp.scene import MODES
 
 __all__ = [
     "DISPLAY_LABELS",
@@ -92,7 +92,8 @@ SHADING_CHOICES: tuple[tuple[str, bool | None], ...] = (
 )
 #: Per-axis reductions of the wire attribute field offered (``wire_settings["field_scale"]``).
 FIELD_SCALES: tuple[int, ...] = (1, 2, 4, 8, 16)
-#: Check box labels of the :class:`~app.editor.DisplayOptions` fields (others: field name).
+#: Check box labels of the :class:`~voxwarp.editing.session.DisplayOptions` fields (others: field
+#: name).
 DISPLAY_LABELS: dict[str, str] = {
     "volume": "Volume",
     "elements": "Elements",
@@ -1049,8 +1050,9 @@ class DeformationPanel(_Panel):
 
 # ---------------------------------------------------------------------------- display
 class DisplayPanel(_Panel):
-    """Check boxes toggling what the viewport draws (:class:`~app.editor.DisplayOptions`),
-    and below them the field slice view (:class:`ui.field_view.FieldSliceView`).
+    """Check boxes toggling what the viewport draws
+    (:class:`~voxwarp.editing.session.DisplayOptions`),
+    and below them the field slice view (:class:`voxwarp.ui.field_view.FieldSliceView`).
 
     Display toggles are not part of the document: they change
     ``window.viewport.display`` directly (no undo step) and redraw.
@@ -1073,7 +1075,7 @@ class DisplayPanel(_Panel):
             check.toggled.connect(lambda on, name=f.name: self._toggled(name, on))
             layout.addWidget(check)
             self.checks[f.name] = check
-        from ui.field_view import FieldSliceView
+        from voxwarp.ui.field_view import FieldSliceView
 
         #: the deformation's internal fields on a slice (folded until asked for)
         self.field_view = FieldSliceView(window)

@@ -11,7 +11,7 @@ from typing import Any
 from PySide6.QtCore import QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QProgressDialog, QWidget
 
-from app.errors import VoxwarpError
+from voxwarp.errors import VoxwarpError
 
 #: a job runs ``fn(progress, cancelled)``; progress(fraction, text), cancelled() -> bool
 Job = Callable[[Callable[[float, str], None], Callable[[], bool]], Any]

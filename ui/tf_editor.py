@@ -1,6 +1,6 @@
 """Transfer-function editor: histogram, opacity curve, control points, presets, files.
 
-:class:`TransferFunctionEditor` edits an :class:`app.transfer_function.TransferFunction`
+:class:`TransferFunctionEditor` edits an :class:`voxwarp.core.transfer_function.TransferFunction`
 interactively and emits ``transferFunctionChanged`` with the new transfer function after
 every user edit (also while a point is being dragged, so a live renderer follows).
 
@@ -59,10 +59,10 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.errors import VoxwarpError
-from app.files import atomic_write_text
-from app.transfer_function import PRESETS, ControlPoint, TransferFunction
-from app.volume import Volume
+from voxwarp.core.files import atomic_write_text
+from voxwarp.core.transfer_function import PRESETS, ControlPoint, TransferFunction
+from voxwarp.core.volume import Volume
+from voxwarp.errors import VoxwarpError
 
 __all__ = [
     "HISTOGRAM_BINS",
@@ -546,7 +546,7 @@ class TransferFunctionEditor(QWidget):
     canvas : TransferFunctionCanvas
         The painted plot that receives the mouse and key edits.
     preset_combo : QComboBox
-        ``"custom"`` followed by the names of :data:`app.transfer_function.PRESETS`.
+        ``"custom"`` followed by the names of :data:`voxwarp.core.transfer_function.PRESETS`.
     save_button, load_button : QPushButton
         Open a file dialog, then call :meth:`save_to` / :meth:`load_from`.
     """

@@ -18,18 +18,18 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.tour import Tour
+from voxwarp.teaching.tour import Tour
 
 
 class TourPanel(QWidget):
-    """Steps through a :class:`~app.tour.Tour` in a main window.
+    """Steps through a :class:`~voxwarp.teaching.tour.Tour` in a main window.
 
     Parameters
     ----------
     window
         The main window (``open_path(path)`` opens a step's scene).
     tour
-        The tour (:func:`app.tour.read_tour`).
+        The tour (:func:`voxwarp.teaching.tour.read_tour`).
     """
 
     def __init__(self, window: Any, tour: Tour, parent: QWidget | None = None) -> None:

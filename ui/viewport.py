@@ -2,7 +2,7 @@
 
 moderngl is attached to Qt's current context (the GUI draws with exactly the renderer
 of headless rendering, into Qt's framebuffer object), then the editing handles are
-drawn over the frame by :class:`app.overlay.OverlayRenderer`.
+drawn over the frame by :class:`voxwarp.render.overlay.OverlayRenderer`.
 
 Mouse (see also the help dialog of the main window):
 
@@ -29,12 +29,12 @@ from PySide6.QtGui import QImage, QKeyEvent, QMouseEvent, QOpenGLContext, QWheel
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QRubberBand, QWidget
 
-from app.camera import Camera
-from app.editor import DisplayOptions, EditSession
-from app.errors import VoxwarpError
-from app.overlay import OverlayRenderer
-from app.render import Renderer
-from ui.tasks import Task
+from voxwarp.core.camera import Camera
+from voxwarp.editing.session import DisplayOptions, EditSession
+from voxwarp.errors import VoxwarpError
+from voxwarp.render.overlay import OverlayRenderer
+from voxwarp.render.raycaster import Renderer
+from voxwarp.ui.tasks import Task
 
 #: pixels the mouse may move before a press becomes a drag (orbit, pan, band)
 CLICK_SLOP_PX = 3
@@ -63,7 +63,7 @@ class _QtLoader:
 
 
 class Viewport(QOpenGLWidget):
-    """Draws an :class:`~app.editor.EditSession`'s scene and edits it with the mouse.
+    """Draws an :class:`~voxwarp.editing.session.EditSession`'s scene and edits it with the mouse.
 
     Signals
     -------

@@ -1,4 +1,4 @@
-"""Tests of app.animation: interpolation, validation, evaluation into per-frame scenes.
+"""Tests of voxwarp.animation.tracks: interpolation, validation, evaluation into per-frame scenes.
 
 Pure CPU (no GL context). Oracles: closed forms (the linear midpoint, smoothstep's
 values and slopes, rotations about one axis), the key values themselves, the editor's
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.animation import (
+from voxwarp.animation.tracks import (
     TARGETS,
     Animation,
     AnimationError,
@@ -31,14 +31,14 @@ from app.animation import (
     save_animated_scene,
     slerp,
 )
-from app.camera import Camera, view_rotation
-from app.editor import EditSession
-from app.samples import load_sample
-from app.scene import Scene
-from app.volume import Volume
-from deform.chainmail import ChainMail
-from deform.massspring import MassSpring
-from deform.warp import rotation_matrix
+from voxwarp.core.camera import Camera, view_rotation
+from voxwarp.core.volume import Volume
+from voxwarp.deform.chainmail import ChainMail
+from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.warp import rotation_matrix
+from voxwarp.editing.session import EditSession
+from voxwarp.io.samples import load_sample
+from voxwarp.scene import Scene
 
 ROOT = Path(__file__).resolve().parents[2]
 BUNDLED = sorted((ROOT / "sample_volumes").glob("*anim*.json"))

@@ -1,4 +1,4 @@
-"""Smoke tests of ``voxwarp bench chainmail`` (app.bench_chainmail) on tiny grids.
+"""Smoke tests of ``voxwarp bench chainmail`` (voxwarp.bench.chainmail) on tiny grids.
 
 Oracles: both CPU variants end a single drag in the same state, so they touch the same
 elements; a local drag (1 spacing) touches 63 elements on any grid of 8³ and more (the
@@ -15,15 +15,15 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.bench_chainmail import (
+from tests.app.test_cli import _keep_warning_state  # noqa: F401  (autouse fixture)
+from voxwarp.bench.chainmail import (
     DRAGS,
     ChainBenchReport,
     ChainBenchRow,
     bench_chainmail,
     drag_offset,
 )
-from app.cli import main
-from tests.app.test_cli import _keep_warning_state  # noqa: F401  (autouse fixture)
+from voxwarp.cli.main import main
 
 
 def test_cpu_rows_on_tiny_grids() -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from app.bench_interactive import bench_interactive
+from voxwarp.bench.interactive import bench_interactive
 
 
 def test_bench_interactive_times_each_family_three_ways() -> None:

@@ -1,4 +1,4 @@
-"""Smoke tests of ``voxwarp bench lattice`` (app.bench_lattice) on a tiny configuration.
+"""Smoke tests of ``voxwarp bench lattice`` (voxwarp.bench.lattice) on a tiny configuration.
 
 Oracles: every FPS ratio is the quotient of the two medians it names; the report has
 one row per cell count and configuration, in order; the torus has 4 n² triangles (about
@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app import bench_lattice as bl
-from app.bench_lattice import (
+from voxwarp.bench import lattice as bl
+from voxwarp.bench.lattice import (
     THROUGHPUT_CONFIGS,
     CompositionRow,
     LatticeBenchReport,
@@ -184,8 +184,8 @@ def test_report_ratios_without_gl() -> None:
 
 @pytest.mark.parametrize("objects", [1, 7, 30])
 def test_scene_graphs_compose_as_described(objects: int) -> None:
-    from app.mesh import instances_from_scene_graph
-    from deform.scene_graph import compose_scene
+    from voxwarp.core.mesh import instances_from_scene_graph
+    from voxwarp.deform.scene_graph import compose_scene
 
     composed = {}
     for lattice in (True, False):
@@ -297,11 +297,13 @@ def test_cli_writes_the_markdown(
 
 
 def test_cli_main_knows_bench_lattice() -> None:
-    from app.cli import build_parser
+    from voxwarp.cli.main import build_parser
 
     parser = build_parser()
     try:
         args = parser.parse_args(["bench", "lattice", "--objects", "10"])
     except SystemExit:
-        pytest.skip("app.cli does not register `bench lattice` yet (add_bench_lattice_parser)")
+        pytest.skip(
+            "voxwarp.cli.main does not register `bench lattice` yet (add_bench_lattice_parser)"
+        )
     assert args.func is bl.cmd_bench_lattice

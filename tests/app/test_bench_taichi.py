@@ -1,6 +1,7 @@
-"""app.bench_taichi, the taichi reference of ``voxwarp bench massspring`` (skipped without taichi).
+"""voxwarp.bench.taichi, the taichi reference of ``voxwarp bench massspring`` (skipped without
+taichi).
 
-It must be the same model as deform.massspring.CpuSpringSolver (float64), stepped from
+It must be the same model as voxwarp.deform.massspring.CpuSpringSolver (float64), stepped from
 the same state with the same drag: in float64 the two agree to round-off (so every term
 of deform/spring_model.py is there, with the same constants); in float32, the
 benchmark's precision (as the GPU solver's), to a few 1e-5 of the largest displacement
@@ -14,10 +15,10 @@ import pytest
 
 pytest.importorskip("taichi")
 
-from app.bench_taichi import make_taichi_solver, taichi_available
-from deform.elements import ElementGrid
-from deform.massspring import CpuSpringSolver, MassSpring
-from deform.spring_model import SpringModel
+from voxwarp.bench.taichi import make_taichi_solver, taichi_available
+from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.massspring import CpuSpringSolver, MassSpring
+from voxwarp.deform.spring_model import SpringModel
 
 BOX = ((0.0, 0.0, 0.0), (100.0, 80.0, 60.0))
 

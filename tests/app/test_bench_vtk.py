@@ -1,4 +1,4 @@
-"""Tests of app.bench_vtk, the VTK side of ``voxwarp bench render`` (skipped without VTK)."""
+"""Tests of voxwarp.bench.vtk, the VTK side of ``voxwarp bench render`` (skipped without VTK)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("vtk")
 
-from app.bench_vtk import CameraSpec, VtkResult, render_vtk, vtk_available
+from voxwarp.bench.vtk import CameraSpec, VtkResult, render_vtk, vtk_available
 
 N = 32
 CENTRE = (N - 1) / 2

@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from app.transfer_function import TransferFunction
-from app.volume import Volume
+from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.core.volume import Volume
 
 pytestmark = pytest.mark.gl
 
@@ -25,7 +25,7 @@ def _volume() -> Volume:
 
 
 def test_bench_warp_render_reports_every_row() -> None:
-    from app.bench import bench_warp_render
+    from voxwarp.bench.render import bench_warp_render
 
     tf = TransferFunction([(0, 0, 0, 0, 0), (40, 1, 0.5, 0.2, 0.0), (255, 1, 1, 1, 0.8)])
     lines: list[str] = []

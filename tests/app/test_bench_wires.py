@@ -1,4 +1,4 @@
-"""Smoke tests of ``voxwarp bench wires`` (app.bench_wires) on a small configuration.
+"""Smoke tests of ``voxwarp bench wires`` (voxwarp.bench.wires) on a small configuration.
 
 Oracles: every ratio in the report is the quotient of the two times it names; voxel and
 sample counts split exactly into identity / vacated / swept and the % ignored is their
@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app import bench_wires as bw
-from app.bench_wires import (
+from voxwarp.bench import wires as bw
+from voxwarp.bench.wires import (
     CAMERAS,
     LAYOUTS,
     REFERENCE_LAYOUT,
@@ -33,7 +33,7 @@ from app.bench_wires import (
     padded_fish,
     ray_sample_stats,
 )
-from app.camera import Camera
+from voxwarp.core.camera import Camera
 
 
 @pytest.fixture(scope="module")
@@ -245,13 +245,13 @@ def test_cli_writes_the_markdown(
 
 
 def test_cli_main_knows_bench_wires() -> None:
-    from app.cli import build_parser
+    from voxwarp.cli.main import build_parser
 
     parser = build_parser()
     try:
         args = parser.parse_args(["bench", "wires", "--scales", "2"])
     except SystemExit:
-        pytest.skip("app.cli does not register `bench wires` yet (add_bench_wires_parser)")
+        pytest.skip("voxwarp.cli.main does not register `bench wires` yet (add_bench_wires_parser)")
     assert args.func is bw.cmd_bench_wires
 
 

@@ -1,4 +1,4 @@
-"""Tests of app.camera: standard views, fitting, projection, orbit / zoom / pan, JSON.
+"""Tests of voxwarp.core.camera: standard views, fitting, projection, orbit / zoom / pan, JSON.
 
 Pure CPU. Oracles: geometric facts (a standard view's back axis points to its side,
 right x up = back, rotations are proper), the pixel mapping of the documented
@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.camera import PROJECTIONS, VIEWS, Camera, view_rotation
-from app.errors import SceneError
+from voxwarp.core.camera import PROJECTIONS, VIEWS, Camera, view_rotation
+from voxwarp.errors import SceneError
 
 SIDES = {
     "+x": (1, 0, 0),

@@ -1,7 +1,7 @@
-"""Smoke tests of the ``voxwarp`` command line (app.cli).
+"""Smoke tests of the ``voxwarp`` command line (voxwarp.cli.main).
 
-``info``, ``samples`` and the error paths run in-process through ``app.cli.main``.
-Commands that render run in a subprocess (``python -m app.cli``): ``render`` creates and
+``info``, ``samples`` and the error paths run in-process through ``voxwarp.cli.main.main``.
+Commands that render run in a subprocess (``python -m voxwarp.cli.main``): ``render`` creates and
 releases its own EGL context, and doing that in the test process would leave the
 session's shared context (``gl_ctx``) no longer current, corrupting later GL tests (see
 ``test_in_process_render_leaves_other_contexts_usable``). Rendering tests request
@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.image_io import read_image
-from app.io import save_volume
-from app.volume import Volume
+from voxwarp.cli.main import main
+from voxwarp.core.volume import Volume
+from voxwarp.io.images import read_image
+from voxwarp.io.volumes import save_volume
 
 REPO = Path(__file__).resolve().parents[2]
 SHAPE = (24, 20, 16)
@@ -45,7 +45,7 @@ class _NoRendering:
 @pytest.fixture
 def no_rendering(monkeypatch: pytest.MonkeyPatch) -> None:
     """In-process main() must not create a GL context (see the module docstring)."""
-    monkeypatch.setattr("app.render.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
 
 
 def ball() -> np.ndarray:
@@ -69,7 +69,7 @@ def volume_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def run_cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.run(
-        [sys.executable, "-m", "app.cli", *args],
+        [sys.executable, "-m", "voxwarp.cli.main", *args],
         capture_output=True,
         text=True,
         env=env,
@@ -130,8 +130,8 @@ def test_info_with_downsample_and_spacing(
 def test_info_of_a_scene_json_describes_its_volume(
     volume_files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
-    from app.io import load_volume
-    from app.scene import Scene
+    from voxwarp.io.volumes import load_volume
+    from voxwarp.scene import Scene
 
     Scene(load_volume(volume_files["npz"])).save(tmp_path / "scene.json")
     assert main(["info", str(tmp_path / "scene.json"), "--json"]) == 0
@@ -257,7 +257,7 @@ def test_negative_views_can_follow_the_view_option(
 # ---------------------------------------------------------------------- samples
 def test_samples_lists_names(capsys: pytest.CaptureFixture) -> None:
     try:
-        from app.samples import sample_names
+        from voxwarp.io.samples import sample_names
 
         names = sample_names()
     except Exception as exc:  # sample volumes not ready in this checkout
@@ -357,10 +357,10 @@ def test_in_process_render_leaves_other_contexts_usable(
     script = textwrap.dedent(
         f"""
         import numpy as np
-        from app.cli import main
-        from app.render import OffscreenRenderer, create_context
-        from app.scene import Scene
-        from app.volume import Volume
+        from voxwarp.cli.main import main
+        from voxwarp.render.raycaster import OffscreenRenderer, create_context
+        from voxwarp.scene import Scene
+        from voxwarp.core.volume import Volume
 
         ctx = create_context()
         r = OffscreenRenderer(16, 16, ctx=ctx)

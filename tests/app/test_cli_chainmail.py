@@ -1,6 +1,6 @@
-"""Tests of ``voxwarp render --chainmail`` (app.cli): headless 3D ChainMail deformation.
+"""Tests of ``voxwarp render --chainmail`` (voxwarp.cli.main): headless 3D ChainMail deformation.
 
-Error paths run in-process through ``app.cli.main`` and must fail before any GL work
+Error paths run in-process through ``voxwarp.cli.main.main`` and must fail before any GL work
 (``no_rendering``). Rendering runs in a subprocess, as in ``test_cli.py``. Oracles: a
 drag along +x moves the intensity centroid of an orthographic MIP seen from +z (+x to
 the right) to the right; a saved scene renders the identical image again; relaxation
@@ -20,14 +20,14 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.image_io import read_image
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
     no_rendering,
     render,
 )
 from tests.app.test_cli_massspring import VIEW, ball_file, centroid_x, grey  # noqa: F401
+from voxwarp.cli.main import main
+from voxwarp.io.images import read_image
 
 DRAG = ["--chainmail", "7", "--drag", "3,3,3:3,0,0"]
 

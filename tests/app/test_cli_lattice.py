@@ -1,4 +1,4 @@
-"""``voxwarp render --lattice FILE`` (app.cli): a lattice of trilinear cells deforms a
+"""``voxwarp render --lattice FILE`` (voxwarp.cli.main): a lattice of trilinear cells deforms a
 volume. Errors run in-process and fail before any GL work; the bundled fish bend renders
 in a subprocess, differs from the plain fish and renders again identically from its
 saved scene."""
@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.image_io import read_image
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
     no_rendering,
     render,
 )
 from tests.app.test_cli_massspring import ball_file  # noqa: F401
+from voxwarp.cli.main import main
+from voxwarp.io.images import read_image
 
 ROOT = Path(__file__).resolve().parents[2]
 FISH_BEND = ROOT / "sample_volumes" / "fish_lattice_bend.json"

@@ -1,6 +1,6 @@
-"""Tests of ``voxwarp render --massspring`` (app.cli): headless mass-spring deformation.
+"""Tests of ``voxwarp render --massspring`` (voxwarp.cli.main): headless mass-spring deformation.
 
-Error paths run in-process through ``app.cli.main`` and must fail before any GL work
+Error paths run in-process through ``voxwarp.cli.main.main`` and must fail before any GL work
 (``no_rendering``). Rendering runs in a subprocess, as in ``test_cli.py`` (the command
 creates and releases its own EGL context). Oracles: a drag along +x moves the intensity
 centroid of an orthographic MIP seen from +z (+x to the right) to the right; a zero
@@ -20,16 +20,16 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.image_io import read_image
-from app.io import save_volume
-from app.volume import Volume
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
     no_rendering,
     render,
     run_cli,
 )
+from voxwarp.cli.main import main
+from voxwarp.core.volume import Volume
+from voxwarp.io.images import read_image
+from voxwarp.io.volumes import save_volume
 
 N = 16
 VIEW = ["--mode", "mip", "--projection", "orthographic", "--view", "+z", "--size", "128x128"]
@@ -203,9 +203,9 @@ def test_saved_scene_renders_the_identical_image(
 def test_scene_input_gets_the_massspring_warp_appended(
     gl_ctx: Any, ball_file: Path, tmp_path: Path
 ) -> None:
-    from app.io import load_volume
-    from app.scene import Scene
-    from deform.warp import AffineWarp
+    from voxwarp.deform.warp import AffineWarp
+    from voxwarp.io.volumes import load_volume
+    from voxwarp.scene import Scene
 
     src, out = tmp_path / "in.json", tmp_path / "out.json"
     vol = load_volume(ball_file)

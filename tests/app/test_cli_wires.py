@@ -1,6 +1,6 @@
-"""Tests of ``voxwarp render --wires`` (app.cli): the wire deformer, headless.
+"""Tests of ``voxwarp render --wires`` (voxwarp.cli.main): the wire deformer, headless.
 
-Error paths run in-process through ``app.cli.main`` and fail before any GL work
+Error paths run in-process through ``voxwarp.cli.main.main`` and fail before any GL work
 (``no_rendering``); rendering runs in a subprocess, as in ``test_cli.py``. Oracles: a
 wire file that moves a rod's wire by +4 mm along x moves the orthographic MIP's
 intensity centroid to the right by 4 mm; a saved scene renders the
@@ -16,16 +16,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.cli import load_wire_file, main
-from app.io import save_volume
-from app.scene import Scene
-from app.volume import Volume
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
     no_rendering,
     render,
 )
 from tests.app.test_cli_massspring import VIEW, centroid_x, grey
+from voxwarp.cli.main import main
+from voxwarp.core.volume import Volume
+from voxwarp.inputs import load_wire_file
+from voxwarp.io.volumes import save_volume
+from voxwarp.scene import Scene
 
 ROOT = Path(__file__).resolve().parents[2]
 N = 24
@@ -123,8 +124,8 @@ def test_help_documents_wires(capsys: pytest.CaptureFixture) -> None:
     ("name", "sample"), [("fish_spine_wires.json", "fish"), ("tubes_twist_wires.json", "tubes")]
 )
 def test_bundled_wire_files_load_on_their_samples(name: str, sample: str) -> None:
-    from app.samples import load_sample
-    from deform.wires import WireFieldWarp
+    from voxwarp.deform.wires import WireFieldWarp
+    from voxwarp.io.samples import load_sample
 
     entry = load_wire_file(ROOT / "sample_volumes" / name)
     assert entry["type"] == "wires"

@@ -1,4 +1,4 @@
-"""The teaching demos (app.demos) and ``voxwarp demo NAME``.
+"""The teaching demos (voxwarp.teaching.demos) and ``voxwarp demo NAME``.
 
 Every demo runs once, quick and headless (its own EGL context), into a module-wide
 folder; the tests then check the sheet it wrote, the numbers it returns (against the
@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.demos import (
+from voxwarp.cli.main import main
+from voxwarp.io.images import read_image
+from voxwarp.teaching.demos import (
     DEMOS,
     TOUR_FORMAT,
     DemoError,
@@ -27,7 +28,6 @@ from app.demos import (
     gibson_sponsor,
     run_demo,
 )
-from app.image_io import read_image
 
 
 @pytest.fixture(autouse=True)
@@ -233,7 +233,7 @@ def test_every_tour_lists_steps_with_scenes(demos: dict[str, DemoResult], name: 
 def test_a_tour_scene_resumes_in_the_editor(demos: dict[str, DemoResult]) -> None:
     """The GUI's EditSession takes over the model of a tour step (here: the settled
     mass-spring bend), with the state the step showed."""
-    from app.editor import EditSession
+    from voxwarp.editing.session import EditSession
 
     res = demos["massspring"]
     assert res.tour is not None
@@ -269,7 +269,7 @@ class _NoRendering:
 def test_cli_unknown_demo_name_is_a_one_line_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("app.render.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
     assert main(["demo", "springs", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
@@ -282,7 +282,7 @@ def test_cli_unknown_demo_name_is_a_one_line_error(
 def test_cli_quick_and_gui_need_a_demo_name(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("app.render.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
     for flag in ("--quick", "--gui"):
         assert main(["demo", "sample:fish", flag, "--out", str(tmp_path)]) == 2
         err = capsys.readouterr().err.strip().splitlines()

@@ -1,4 +1,5 @@
-"""Tests of app.editor: picking, selecting, dragging, wires, lattice, placement, undo, files.
+"""Tests of voxwarp.editing.session: picking, selecting, dragging, wires, lattice, placement, undo,
+files.
 
 Pure CPU (no GL context): a 48³ ``fish`` sample and small deformation grids. Oracles:
 the camera's own projection (a dragged handle must land under the cursor, in the plane
@@ -19,24 +20,24 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.camera import PROJECTIONS, VIEWS, Camera
-from app.editor import (
+from voxwarp.core.camera import PROJECTIONS, VIEWS, Camera
+from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.core.volume import Volume
+from voxwarp.deform.lattice_warp import LatticeWarp
+from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.warp import AffineWarp, chain_apply
+from voxwarp.deform.wires import WireFieldWarp
+from voxwarp.editing.session import (
     PICK_RADIUS_PX,
     DisplayOptions,
     EditorError,
     EditSession,
     Placement,
 )
-from app.errors import SceneError
-from app.samples import load_sample
-from app.scene import Scene
-from app.transfer_function import TransferFunction
-from app.volume import Volume
-from deform.lattice_warp import LatticeWarp
-from deform.massspring import MassSpring
-from deform.offset_field import OffsetFieldWarp
-from deform.warp import AffineWarp, chain_apply
-from deform.wires import WireFieldWarp
+from voxwarp.errors import SceneError
+from voxwarp.io.samples import load_sample
+from voxwarp.scene import Scene
 
 SIZE = (320, 240)
 ELEMENT_KINDS = ("massspring", "chainmail")

@@ -1,4 +1,5 @@
-"""Tests of app.field_views: slice images of wire, offset-field and lattice warps (no GL).
+"""Tests of voxwarp.render.field_views: slice images of wire, offset-field and lattice warps (no
+GL).
 
 The oracles are fields built with a known answer: a constant offset (|d| = 5 mm
 everywhere), a Gaussian drag whose peak node is known, a wire along z whose attribute u
@@ -12,8 +13,14 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.errors import VoxwarpError
-from app.field_views import (
+from voxwarp.core.volume import Volume
+from voxwarp.deform.lattice_warp import LatticeWarp, bent_grid
+from voxwarp.deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import AffineWarp
+from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.errors import VoxwarpError
+from voxwarp.render.field_views import (
     DISPLACEMENT_PIXELS,
     IDENTITY_COLOR,
     NOWHERE_COLOR,
@@ -28,12 +35,6 @@ from app.field_views import (
     pixel_of,
     views_for,
 )
-from app.volume import Volume
-from deform.lattice_warp import LatticeWarp, bent_grid
-from deform.offset_field import OffsetFieldWarp, gaussian_drag_field
-from deform.trilinear import TrilinearGrid
-from deform.warp import AffineWarp
-from deform.wires import Wire, WireDeformer
 
 N = 32
 
@@ -374,8 +375,8 @@ def test_wire_views_are_not_offered_for_lattices() -> None:
 
 
 def test_gpu_chainmail_field_is_read_back(gl_ctx: Any) -> None:
-    from deform.chainmail import ChainMail
-    from deform.elements import ElementGrid
+    from voxwarp.deform.chainmail import ChainMail
+    from voxwarp.deform.elements import ElementGrid
 
     vol = cube(spacing=2.0)
     lo, hi = vol.bounds

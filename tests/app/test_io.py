@@ -1,4 +1,4 @@
-"""Tests of app.io: round trips, axis order, DICOM/TIFF folders, errors, info text."""
+"""Tests of voxwarp.io.volumes: round trips, axis order, DICOM/TIFF folders, errors, info text."""
 
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ import tifffile
 from pydicom.dataset import FileDataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 
-from app.errors import VolumeError
-from app.io import load_volume, save_volume, volume_info, volume_summary
-from app.volume import Volume
+from voxwarp.core.volume import Volume
+from voxwarp.errors import VolumeError
+from voxwarp.io.volumes import load_volume, save_volume, volume_info, volume_summary
 
 DTYPES = ["uint8", "uint16", "int16", "float32"]
 FORMATS = [".npz", ".raw", ".nrrd", ".nii", ".nii.gz", ".tif"]
@@ -302,13 +302,13 @@ def test_npz_only_array_and_metadata_keys(tmp_path: Path) -> None:
 
 
 def test_sample_names_go_to_app_samples(monkeypatch: pytest.MonkeyPatch) -> None:
-    import app.samples
+    import voxwarp.io.samples
 
     def fake_sample(name: str) -> Volume:
         assert name == "tiny"
         return Volume(asym(), SPACING, name="tiny", source="sample:tiny", units="HU")
 
-    monkeypatch.setattr(app.samples, "load_sample", fake_sample)
+    monkeypatch.setattr(voxwarp.io.samples, "load_sample", fake_sample)
     vol = load_volume("sample:tiny", origin=ORIGIN)
     np.testing.assert_array_equal(vol.data, asym())
     assert_geometry(vol)
@@ -618,7 +618,7 @@ def test_downsample_halves_shape_doubles_spacing(tmp_path: Path) -> None:
     path = save_volume(Volume(data, (1.0, 2.0, 3.0)), tmp_path / "d.npz")
     with pytest.warns(UserWarning, match="downsampled by 2") as record:
         vol = load_volume(path, downsample=2)
-    assert record[0].filename == __file__  # attributed to the caller, not to app/io.py
+    assert record[0].filename == __file__  # attributed to the caller, not to app/io/volumes.py
     assert vol.shape == (4, 3, 2)
     assert vol.spacing == (2.0, 4.0, 6.0)
     assert vol.data[0, 0, 0] == pytest.approx(data[:2, :2, :2].mean())

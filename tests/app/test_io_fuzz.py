@@ -18,9 +18,9 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from app.errors import VolumeError
-from app.io import load_volume
-from app.volume import Volume
+from voxwarp.core.volume import Volume
+from voxwarp.errors import VolumeError
+from voxwarp.io.volumes import load_volume
 
 FUZZ = settings(
     max_examples=150,

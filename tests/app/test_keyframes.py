@@ -1,4 +1,4 @@
-"""Keyframing an editing session (app.keyframes): Set Key stores the deformation and the
+"""Keyframing an editing session (voxwarp.editing.keyframes): Set Key stores the deformation and the
 view at a frame; the saved scene animates between the keys."""
 
 from __future__ import annotations
@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.animation import AnimationError, load_animated_scene
-from app.editor import EditSession, _with_modified
-from app.keyframes import delete_keys, key_frames, set_key
-from app.samples import load_sample
-from app.scene import Scene
+from voxwarp.animation.tracks import AnimationError, load_animated_scene
+from voxwarp.editing.keyframes import delete_keys, key_frames, set_key
+from voxwarp.editing.session import EditSession, _with_modified
+from voxwarp.io.samples import load_sample
+from voxwarp.scene import Scene
 
 
 @pytest.fixture

@@ -1,4 +1,5 @@
-"""The trilinear-lattice demo scenes (app/lattice_demos.py, sample_volumes/lattice_*.json).
+"""The trilinear-lattice demo scenes (app/teaching/lattice_scenes.py,
+sample_volumes/lattice_*.json).
 
 Oracles: neighbouring tubes wrapped around the torus still touch along their contact
 line (Figure 1); neighbouring tiles share their edges exactly, C0 seams (Figure 9); the
@@ -17,8 +18,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.lattice_demos import DEMOS, accessories, torus_tiles, torus_tubes
-from app.scene import Scene
+from voxwarp.scene import Scene
+from voxwarp.teaching.lattice_scenes import DEMOS, accessories, torus_tiles, torus_tubes
 
 ROOT = Path(__file__).resolve().parents[2]
 

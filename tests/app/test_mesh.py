@@ -1,4 +1,4 @@
-"""Tests of app.mesh: loading (OBJ, STL, PLY, GLB), bad meshes, generators, instances,
+"""Tests of voxwarp.core.mesh: loading (OBJ, STL, PLY, GLB), bad meshes, generators, instances,
 serialisation, scene-graph instances, and meshes in Scene (pure CPU)."""
 
 from __future__ import annotations
@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from app.errors import MeshError, SceneError
-from app.mesh import (
+from voxwarp.core.mesh import (
     GENERATORS,
     MESH_EMBED_LIMIT_BYTES,
     Mesh,
@@ -28,11 +27,12 @@ from app.mesh import (
     torus_mesh,
     uv_sphere,
 )
-from app.scene import Scene
-from app.volume import Volume
-from deform.scene_graph import SceneNode
-from deform.trilinear import TrilinearGrid
-from deform.warp import rotation_matrix
+from voxwarp.core.volume import Volume
+from voxwarp.deform.scene_graph import SceneNode
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import rotation_matrix
+from voxwarp.errors import MeshError, SceneError
+from voxwarp.scene import Scene
 
 TRIANGLE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
@@ -413,7 +413,7 @@ def test_fitted_camera_frames_volume_and_meshes() -> None:
 
 def test_save_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A failed write leaves the previous file intact and no temporary file behind."""
-    from app.mesh import torus_mesh
+    from voxwarp.core.mesh import torus_mesh
 
     path = tmp_path / "ring.ply"
     torus_mesh().save(path)

@@ -1,4 +1,4 @@
-"""GL tests of app.mesh_render and of meshes depth-composited with volumes (llvmpipe).
+"""GL tests of voxwarp.render.mesh_pass and of meshes depth-composited with volumes (llvmpipe).
 
 Oracles: the vertex stage read back by transform feedback against the CPU lattice
 (``MeshInstance.local_to_world``, ``TrilinearGrid.jacobian``); images of the same surface
@@ -17,16 +17,16 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.bench_lattice import bench_mesh_throughput, bend_grid
-from app.camera import Camera, view_rotation
-from app.errors import RenderError
-from app.mesh import MeshInstance, box_mesh, tile_mesh, torus_mesh, uv_sphere
-from app.mesh_render import MESH_LIGHT, MeshRenderer
-from app.scene import Scene
-from app.volume import Volume
-from deform.offset_field import OffsetFieldWarp
-from deform.trilinear import TrilinearGrid
-from deform.warp import rotation_matrix
+from voxwarp.bench.lattice import bench_mesh_throughput, bend_grid
+from voxwarp.core.camera import Camera, view_rotation
+from voxwarp.core.mesh import MeshInstance, box_mesh, tile_mesh, torus_mesh, uv_sphere
+from voxwarp.core.volume import Volume
+from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import rotation_matrix
+from voxwarp.errors import RenderError
+from voxwarp.render.mesh_pass import MESH_LIGHT, MeshRenderer
+from voxwarp.scene import Scene
 
 SIZE = 128
 #: tolerance of "the same image" for two placements of one surface: float rounding of

@@ -1,7 +1,8 @@
-"""Tests of app.movie and app.distributed: ``voxwarp animate`` frames, resume, movie, Dask.
+"""Tests of voxwarp.animation.movie and voxwarp.animation.distributed: ``voxwarp animate`` frames,
+resume, movie, Dask.
 
 Oracles: a direct ``OffscreenRenderer.render`` of a frame's scene, the movie decoded by
-imageio-ffmpeg, render calls counted by wrapping :func:`app.frames.render_frame`, file
+imageio-ffmpeg, render calls counted by wrapping :func:`voxwarp.animation.frames.render_frame`, file
 modification times, and the serial run's frames for the Dask run (bit-exact).
 Error cases run ``main()`` in-process and must fail before any GL work.
 """
@@ -17,18 +18,18 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
-import app.distributed
-import app.frames
-import app.movie
-from app.animation import Animation, Track, load_animated_scene, save_animated_scene
-from app.cli import main
-from app.editor import EditSession
-from app.image_io import read_image
-from app.movie import animate, frames_dir_for
-from app.render import OffscreenRenderer
-from app.samples import load_sample
-from app.scene import Scene
+import voxwarp.animation.distributed
+import voxwarp.animation.frames
+import voxwarp.animation.movie
 from tests.app.test_cli import _keep_warning_state, no_rendering  # noqa: F401
+from voxwarp.animation.movie import animate, frames_dir_for
+from voxwarp.animation.tracks import Animation, Track, load_animated_scene, save_animated_scene
+from voxwarp.cli.main import main
+from voxwarp.editing.session import EditSession
+from voxwarp.io.images import read_image
+from voxwarp.io.samples import load_sample
+from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.scene import Scene
 
 SIZE = (64, 48)
 
@@ -36,7 +37,7 @@ SIZE = (64, 48)
 @pytest.fixture(scope="module", autouse=True)
 def _release_the_process_renderer() -> Iterator[None]:
     yield
-    app.frames.release_process_renderer()
+    voxwarp.animation.frames.release_process_renderer()
 
 
 def _animated(path: Path, opaque_end: bool = False) -> Path:
@@ -72,13 +73,13 @@ def _decode(movie: Path) -> tuple[tuple[int, int], list[np.ndarray]]:
 
 def _count_renders(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     calls: list[int] = []
-    real = app.frames.render_frame
+    real = voxwarp.animation.frames.render_frame
 
     def counting(header: Any, scene: Any) -> np.ndarray:
         calls.append(1)
         return real(header, scene)
 
-    monkeypatch.setattr(app.frames, "render_frame", counting)
+    monkeypatch.setattr(voxwarp.animation.frames, "render_frame", counting)
     return calls
 
 
@@ -196,7 +197,7 @@ def test_two_local_dask_workers_equal_the_serial_run_bit_exactly(
     def not_here(*args: Any) -> None:
         raise AssertionError("a --workers run must render on the workers, not in the client")
 
-    monkeypatch.setattr(app.frames, "render_frame", not_here)
+    monkeypatch.setattr(voxwarp.animation.frames, "render_frame", not_here)
     dask = animate(scene_file, tmp_path / "dask.mp4", size=SIZE, progress=False, workers=2)
     assert dask.rendered
     assert sorted(dask.rendered) == [0, 1, 2]
@@ -252,7 +253,7 @@ def test_cli_errors_are_one_line(
     elif case == "avi":
         out = tmp_path / "m.avi"
     elif case == "scheduler":
-        monkeypatch.setattr(app.distributed, "CONNECT_TIMEOUT_S", 1)
+        monkeypatch.setattr(voxwarp.animation.distributed, "CONNECT_TIMEOUT_S", 1)
         extra = ["--scheduler", "tcp://127.0.0.1:9"]
     if case != "missing":
         scene.write_text(json.dumps(d))

@@ -1,6 +1,6 @@
-"""GL tests of app.overlay: editing handles drawn over a frame (llvmpipe through EGL).
+"""GL tests of voxwarp.render.overlay: editing handles drawn over a frame (llvmpipe through EGL).
 
-Oracles: :meth:`app.camera.Camera.project` (independent of the shader's matrix path
+Oracles: :meth:`voxwarp.core.camera.Camera.project` (independent of the shader's matrix path
 only in that it is the CPU reference the GUI picks with) gives where each handle must
 land; a point must fill exactly the pixels whose centres lie within its disc, with the
 outline ring around it; a 1-px line must light one pixel per column (x-major) within
@@ -20,10 +20,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.camera import Camera
-from app.errors import RenderError
-from app.image_io import read_image, write_image
-from app.overlay import (
+from voxwarp.core.camera import Camera
+from voxwarp.core.volume import Volume
+from voxwarp.errors import RenderError
+from voxwarp.io.images import read_image, write_image
+from voxwarp.render.overlay import (
     OUTLINE_COLOR,
     OverlayLayer,
     OverlayRenderer,
@@ -31,8 +32,7 @@ from app.overlay import (
     grid_edges,
     polyline_segments,
 )
-from app.scene import Scene
-from app.volume import Volume
+from voxwarp.scene import Scene
 
 W, H = 96, 64
 BG = (0.2, 0.3, 0.4, 1.0)
@@ -75,7 +75,7 @@ def draw_on_background(
 
 
 def camera(projection: str) -> Camera:
-    from app.camera import view_rotation
+    from voxwarp.core.camera import view_rotation
 
     return Camera(
         center=np.array([1.0, 2.0, 3.0]),
@@ -498,7 +498,7 @@ def test_bad_draw_arguments(overlay: OverlayRenderer, target: Any) -> None:
     good.positions = POINTS
     with pytest.raises(RenderError, match="viewport must have a positive size"):
         overlay.draw([good], target, cam, (0, 0, 0, 10))
-    with pytest.raises(RenderError, match=r"takes an app\.camera\.Camera"):
+    with pytest.raises(RenderError, match=r"takes a voxwarp\.Camera"):
         overlay.draw([good], target, "perspective")  # type: ignore[arg-type]
 
 

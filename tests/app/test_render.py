@@ -1,4 +1,4 @@
-"""Oracle tests of the raycaster (app.render) on llvmpipe through EGL.
+"""Oracle tests of the raycaster (voxwarp.render.raycaster) on llvmpipe through EGL.
 
 Most tests use a pixel-aligned orthographic camera: pixel centres fall on voxel
 centres across the screen and, with ``jitter=False`` and a step of one voxel along the
@@ -6,7 +6,7 @@ ray, every sample lies on a voxel centre. Trilinear interpolation is then exact,
 grey-value modes must equal numpy reductions of the data (``max``, ``min``, ``mean``)
 mapped through the window, up to 8-bit filtering weights and float round-off.
 
-Screen orientation per standard view (app.camera): ``+z`` has +x right and +y up;
+Screen orientation per standard view (voxwarp.core.camera): ``+z`` has +x right and +y up;
 ``-z`` has -x right, +y up; ``+x`` has +y right, +z up; ``-x`` has -y right, +z up;
 ``+y`` has -x right, +z up; ``-y`` has +x right, +z up. Image row 0 is the top.
 """
@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from app.camera import Camera, view_rotation
-from app.errors import VolumeTooLargeError
-from app.render import OffscreenRenderer, Renderer
-from app.scene import MODES, Scene
-from app.volume import Volume
-from deform.warp import AffineWarp, IdentityWarp
+from voxwarp.core.camera import Camera, view_rotation
+from voxwarp.core.volume import Volume
+from voxwarp.deform.warp import AffineWarp, IdentityWarp
+from voxwarp.errors import VolumeTooLargeError
+from voxwarp.render.raycaster import OffscreenRenderer, Renderer
+from voxwarp.scene import MODES, Scene
 
 #: 8-bit texture filtering weights and float round-off: one grey level plus a little.
 #: Measured on llvmpipe (LLVM 15): at most 5e-4/255 for MIP/MinIP/average of all dtypes,
@@ -88,7 +88,7 @@ def blob(n: int = 32) -> Volume:
 
 # ---------------------------------------------------------------------- cameras / oracles
 #: view -> (screen-right (axis, sign), screen-up (axis, sign), depth axis); from the
-#: view definitions in app.camera, written out independently of view_rotation().
+#: view definitions in voxwarp.core.camera, written out independently of view_rotation().
 VIEW_AXES = {
     "+z": ((0, 1), (1, 1), 2),
     "-z": ((0, -1), (1, 1), 2),
@@ -573,7 +573,7 @@ def test_cell_block_and_no_skipping_give_the_same_image(gl_ctx: Any, mode: str) 
 
 # ---------------------------------------------------------------------- interactive use
 def _warped_scene() -> Scene:
-    from deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from voxwarp.deform.offset_field import OffsetFieldWarp, gaussian_drag_field
 
     vol = phantom()
     lo, hi = vol.bounds

@@ -1,4 +1,4 @@
-"""``voxwarp reproduce`` (app.reproduce): the report beside the papers' numbers.
+"""``voxwarp reproduce`` (voxwarp.teaching.reproduce): the report beside the papers' numbers.
 
 The quick run takes the demos' quick sizes; it requests ``gl_ctx`` only so that it skips,
 like every GL test, where EGL is missing.
@@ -13,9 +13,9 @@ from typing import Any
 
 import pytest
 
-from app.cli import main
-from app.demos import DEMO_TITLES, DEMOS
-from app.reproduce import NOT_IN_REPO, cpu_model, reproduce
+from voxwarp.cli.main import main
+from voxwarp.teaching.demos import DEMO_TITLES, DEMOS
+from voxwarp.teaching.reproduce import NOT_IN_REPO, cpu_model, reproduce
 
 
 @pytest.fixture(autouse=True)
@@ -66,7 +66,7 @@ def test_cli_reproduce_passes_its_options(
         calls.append((out_md, quick, kw.get("command")))
         return Path(out_md)
 
-    monkeypatch.setattr("app.reproduce.reproduce", fake)
+    monkeypatch.setattr("voxwarp.teaching.reproduce.reproduce", fake)
     out = tmp_path / "r.md"
     assert main(["reproduce", "--quick", "--out", str(out)]) == 0
     assert calls == [(str(out), True, f"voxwarp reproduce --quick --out {out}")]

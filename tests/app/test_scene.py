@@ -1,4 +1,4 @@
-"""Tests of app.scene: argument validation, JSON round trips, atomic save, bad scene files.
+"""Tests of voxwarp.scene: argument validation, JSON round trips, atomic save, bad scene files.
 
 Pure CPU. The hypothesis fuzz feeds mutated scene dicts to ``Scene.from_dict``: it must
 return a Scene or raise SceneError, never anything else.
@@ -20,12 +20,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from app.camera import PROJECTIONS, VIEWS, Camera
-from app.errors import SceneError
-from app.io import save_volume
-from app.scene import MODES, SCENE_FORMAT, SCENE_VERSION, Scene
-from app.volume import Volume
-from deform.warp import AffineWarp, IdentityWarp, chain_apply
+from voxwarp.core.camera import PROJECTIONS, VIEWS, Camera
+from voxwarp.core.volume import Volume
+from voxwarp.deform.warp import AffineWarp, IdentityWarp, chain_apply
+from voxwarp.errors import SceneError
+from voxwarp.io.volumes import save_volume
+from voxwarp.scene import MODES, SCENE_FORMAT, SCENE_VERSION, Scene
 
 
 # ---------------------------------------------------------------------- helpers
@@ -264,7 +264,7 @@ def test_warps_round_trip() -> None:
 def test_path_volume_is_referenced_relatively_and_survives_a_move(tmp_path: Path) -> None:
     src = tmp_path / "a"
     vol_path = save_volume(small_volume(), src / "data" / "vol.npz")
-    from app.io import load_volume
+    from voxwarp.io.volumes import load_volume
 
     vol = load_volume(vol_path)
     scene = Scene(vol, mode="average", view="+x")
@@ -284,7 +284,7 @@ def test_path_volume_is_referenced_relatively_and_survives_a_move(tmp_path: Path
 
 
 def test_path_volume_in_a_sibling_folder(tmp_path: Path) -> None:
-    from app.io import load_volume
+    from voxwarp.io.volumes import load_volume
 
     vol = load_volume(save_volume(small_volume(), tmp_path / "volumes" / "v.nrrd"))
     Scene(vol).save(tmp_path / "scenes" / "s.json")
@@ -295,7 +295,7 @@ def test_path_volume_in_a_sibling_folder(tmp_path: Path) -> None:
 
 def _sample_names() -> list[str]:
     try:
-        from app.samples import sample_names
+        from voxwarp.io.samples import sample_names
 
         return sample_names()
     except Exception:  # sample volumes not ready in this checkout
@@ -306,7 +306,7 @@ def test_sample_volume_is_referenced_by_name() -> None:
     names = _sample_names()
     if "stent" not in names:
         pytest.skip("sample 'stent' not available")
-    from app.samples import load_sample
+    from voxwarp.io.samples import load_sample
 
     vol = load_sample("stent")
     d = json.loads(json.dumps(Scene(vol, transfer_function="grayscale").to_dict()))
@@ -322,7 +322,7 @@ def test_sample_volume_is_referenced_by_name() -> None:
 def test_sample_generated_at_a_small_shape_round_trips() -> None:
     if "fish" not in _sample_names():
         pytest.skip("sample 'fish' not available")
-    from app.samples import load_sample
+    from voxwarp.io.samples import load_sample
 
     vol = load_sample("fish", shape=(24, 12, 10))
     back = Scene.from_dict(Scene(vol).to_dict())

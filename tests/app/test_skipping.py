@@ -1,5 +1,5 @@
 """Tests of the directional (octant) empty-space-skipping maps and of the split of the
-image into ray-direction octants (app.skipping), plus their use by the renderer.
+image into ray-direction octants (voxwarp.render.skipping), plus their use by the renderer.
 
 Oracles: a brute-force search for the largest invisible cube ahead of each cell; the
 isotropic chessboard distance (a cube centred on the cell is never larger than the best
@@ -16,19 +16,19 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.camera import Camera
-from app.render import OffscreenRenderer
-from app.scene import Scene
-from app.skipping import (
+from voxwarp.core.camera import Camera
+from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.core.volume import Volume
+from voxwarp.deform.warp import AffineWarp
+from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.skipping import (
     block_skip_distances,
     octant_of,
     octant_regions,
     octant_skip_distances,
     ray_direction_coefficients,
 )
-from app.transfer_function import TransferFunction
-from app.volume import Volume
-from deform.warp import AffineWarp
+from voxwarp.scene import Scene
 
 OCTANTS = list(itertools.product((1, -1), repeat=3))
 
@@ -258,7 +258,7 @@ def test_visible_ranges_integer_path_equals_float_path(dtype: Any) -> None:
 
 # ---------------------------------------------------------------------- warped rays
 def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
-    from deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from voxwarp.deform.offset_field import OffsetFieldWarp, gaussian_drag_field
 
     lo, hi = vol.bounds
     field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (amount, -0.5 * amount, 1.0), 1.0)
@@ -273,7 +273,7 @@ def _random_boxes(rng: Any, lo: Any, hi: Any, n: int = 3000) -> tuple[np.ndarray
 
 @pytest.mark.parametrize("chain", ["offset", "baked", "affine", "offset+affine"])
 def test_displacement_range_holds_for_every_point_of_its_box(chain: str) -> None:
-    from deform.warp import chain_apply, chain_displacement_range
+    from voxwarp.deform.warp import chain_apply, chain_displacement_range
 
     vol = _volume()
     baked = _drag_warp(vol)
@@ -303,7 +303,7 @@ def test_displacement_range_holds_for_every_point_of_its_box(chain: str) -> None
 
 
 def test_offset_range_is_local_and_signed() -> None:
-    from deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.offset_field import OffsetFieldWarp
 
     field = np.zeros((9, 9, 9, 3))
     field[2:5, 2:5, 2:5] = (3.0, 0.0, 0.0)  # a block of nodes dragged along +x
@@ -318,15 +318,19 @@ def test_offset_range_is_local_and_signed() -> None:
 
 
 def test_gpu_owned_field_gives_no_range() -> None:
-    from deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.offset_field import OffsetFieldWarp
 
     w = OffsetFieldWarp((0, 0, 0), (1, 1, 1), shape=(2, 2, 2), texture_source=lambda ctx: None)
     assert w.displacement_range(np.zeros((1, 3)), np.ones((1, 3))) is None
 
 
 def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_truth() -> None:
-    from app.skipping import cell_min_max, static_block_visibility, warped_cell_visibility
-    from deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.render.skipping import (
+        cell_min_max,
+        static_block_visibility,
+        warped_cell_visibility,
+    )
 
     vol = _volume()
     lo, hi = (np.asarray(b) for b in vol.bounds)
@@ -422,7 +426,7 @@ def test_warped_skip_maps_are_built_when_a_warp_state_is_drawn_again(gl_ctx: Any
         r.render(scene)
         assert r.renderer.last_skip_kind == "cells"
         # a warp without a displacement range (a GPU-owned field) keeps block checks
-        from deform.offset_field import OffsetFieldWarp
+        from voxwarp.deform.offset_field import OffsetFieldWarp
 
         tex = warp.textures(gl_ctx)["displacement"]
         owned = OffsetFieldWarp(warp.lo, warp.hi, shape=warp.shape, texture_source=lambda c: tex)

@@ -1,4 +1,4 @@
-"""Tests of app.transfer_function: presets, interpolation, GPU table, visibility, files.
+"""Tests of voxwarp.core.transfer_function: presets, interpolation, GPU table, visibility, files.
 
 Pure CPU; expected values come from the definitions in the module docstring (piecewise
 linear, opacity correction ``1 - (1 - a) ** r``, HU rescaling), computed here
@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.errors import SceneError
-from app.transfer_function import PRESETS, TABLE_SIZE, TransferFunction
-from app.volume import Volume
+from voxwarp.core.transfer_function import PRESETS, TABLE_SIZE, TransferFunction
+from voxwarp.core.volume import Volume
+from voxwarp.errors import SceneError
 
 HU_PRESETS = ("ct-bone", "ct-skin", "ct-soft", "ct-muscle")
 RELATIVE_PRESETS = ("mri", "grayscale", "hot")

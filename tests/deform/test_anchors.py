@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from deform.anchors import Anchor, AnchorStrip, anchor_frames, anchors_at
-from deform.warp import WarpError
+from voxwarp.deform.anchors import Anchor, AnchorStrip, anchor_frames, anchors_at
+from voxwarp.deform.warp import WarpError
 
 
 def sheet(n: int = 6, size: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +75,7 @@ def test_strip_nodes_touch_the_surface_at_the_anchors() -> None:
 
 
 def test_attached_grid_follows_a_bending_base() -> None:
-    pytest.importorskip("deform.trilinear")
+    pytest.importorskip("voxwarp.deform.trilinear")
     v, f = sheet(9)
     pts = np.array([[x, y, 0.0] for x in (2.0, 5.0, 8.0) for y in (3.0, 7.0)])
     flat = anchors_at(v, f, pts, np.tile([1.0, 0.0, 0.0], (6, 1)))

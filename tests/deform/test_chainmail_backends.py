@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from deform import ChainMail
-from deform.elements import ElementGrid
+from voxwarp.deform import ChainMail
+from voxwarp.deform.elements import ElementGrid
 
 pytestmark = pytest.mark.gl
 

@@ -14,9 +14,9 @@ import moderngl
 import numpy as np
 import pytest
 
-from deform.chainmail_model import ChainMailModel
+from voxwarp.deform.chainmail_model import ChainMailModel
 
-chainmail_gpu = pytest.importorskip("deform.chainmail_gpu")
+chainmail_gpu = pytest.importorskip("voxwarp.deform.chainmail_gpu")
 GpuChainMailSolver = chainmail_gpu.GpuChainMailSolver
 
 SHAPE = (7, 6, 5)
@@ -459,8 +459,8 @@ def test_valid_positions_skip_the_full_check(gl_ctx: Any) -> None:
     the held elements: far fewer elements shaded than after an unverified upload, and
     the same result."""
     g = np.zeros((24, 24, 24), bool)
-    from deform.chainmail_model import ChainMailModel
-    from deform.elements import ElementGrid
+    from voxwarp.deform.chainmail_model import ChainMailModel
+    from voxwarp.deform.elements import ElementGrid
 
     grid = ElementGrid(((0, 0, 0), (230, 230, 230)), shape=(24, 24, 24))
     s = grid.spacing

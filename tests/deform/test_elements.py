@@ -1,4 +1,4 @@
-"""Tests of deform.elements: grid geometry, constraints, materials, serialisation.
+"""Tests of voxwarp.deform.elements: grid geometry, constraints, materials, serialisation.
 
 Oracles are hand-computed positions, explicit index lists and a step-function volume
 whose halves must map to the two stiffnesses.
@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from deform.elements import MAX_ELEMENTS_PER_AXIS, ElementGrid, ElementGridError
+from voxwarp.deform.elements import MAX_ELEMENTS_PER_AXIS, ElementGrid, ElementGridError
 
 BOX = ((-10.0, 0.0, 5.0), (30.0, 20.0, 35.0))
 
@@ -232,7 +232,7 @@ def test_from_dict_errors() -> None:
 
 
 def test_materials_from_a_volume_object_take_its_voxel_centres() -> None:
-    from app.volume import Volume
+    from voxwarp.core.volume import Volume
 
     data = np.zeros((20, 10, 10), np.float32)
     data[10:] = 1000.0  # the upper half in x is "bone"

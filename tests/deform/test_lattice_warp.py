@@ -1,8 +1,8 @@
-"""Tests of deform.lattice_warp: the trilinear-lattice warp, CPU reference and GPU path.
+"""Tests of voxwarp.deform.lattice_warp: the trilinear-lattice warp, CPU reference and GPU path.
 
 CPU oracles: the lattice's forward map (the inverse must undo it: ``grid(apply(p)) = p``
 within each mode's measured error), the identity lattice (the identity everywhere), a
-linear lattice against :class:`~deform.warp.AffineWarp`, central differences (the
+linear lattice against :class:`~voxwarp.deform.warp.AffineWarp`, central differences (the
 Jacobian), sampled points (the displacement intervals and deformed bounds). GPU oracles:
 the GLSL evaluated at single points against :meth:`LatticeWarp.apply`, renders of the
 identity lattice against no warp, of a linear lattice against the equivalent affine
@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from app.volume import Volume
-from deform.lattice_warp import (
+from tests.app.test_render import aligned_camera, grey_scene
+from voxwarp.core.volume import Volume
+from voxwarp.deform.lattice_warp import (
     DEFAULT_ITERATIONS,
     FAR,
     LatticeWarp,
@@ -30,9 +31,8 @@ from deform.lattice_warp import (
     inverse_error_table,
     lattice_eval,
 )
-from deform.trilinear import TrilinearGrid
-from deform.warp import AffineWarp, WarpError, chain_apply, compose_glsl, warp_from_dict
-from tests.app.test_render import aligned_camera, grey_scene
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import AffineWarp, WarpError, chain_apply, compose_glsl, warp_from_dict
 
 BOX = (np.array([-10.0, 0.0, 5.0]), np.array([54.0, 48.0, 61.0]))
 SIZE = BOX[1] - BOX[0]
@@ -283,8 +283,8 @@ def _flat_grid() -> TrilinearGrid:
         ((bent_grid(2, *BOX), (BOX[1], BOX[0])), {}, "degenerate"),
         ((bent_grid(2, *BOX), (BOX[0], [1, np.nan, 2])), {}, "NaN"),
         ((bent_grid(2, *BOX), [1, 2, 3]), {}, r"box must be \(lo, hi\)"),
-        ((np.zeros((3, 3, 3, 3)), BOX), {}, "needs a deform.trilinear.TrilinearGrid"),
-        (({"nodes": []}, BOX), {}, "needs a deform.trilinear.TrilinearGrid"),
+        ((np.zeros((3, 3, 3, 3)), BOX), {}, "needs a voxwarp.deform.trilinear.TrilinearGrid"),
+        (({"nodes": []}, BOX), {}, "needs a voxwarp.deform.trilinear.TrilinearGrid"),
         ((bent_grid(2, *BOX), BOX), {"inverse": "exact"}, "inverse must be one of"),
         ((bent_grid(2, *BOX), BOX), {"iterations": 0}, "1..8.*inverse='baked'"),
         ((bent_grid(2, *BOX), BOX), {"iterations": 9}, "1..8"),

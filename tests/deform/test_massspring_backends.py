@@ -23,10 +23,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from deform.elements import ElementGrid
-from deform.massspring import MassSpring
+from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.massspring import MassSpring
 
-pytest.importorskip("deform.massspring_gpu")
+pytest.importorskip("voxwarp.deform.massspring_gpu")
 
 BOX = ((0.0, 0.0, 0.0), (70.0, 60.0, 50.0))
 
@@ -180,8 +180,8 @@ def test_zero_displacement_renders_like_no_warp(offscreen: Any, gl_ctx: Any, bac
     Jacobian of the field, evaluated in float32) instead of the folded no-warp path.
     So: exact equality for mip and dvr, 1/255 for iso (one 8-bit grey level).
     """
-    from app.scene import Scene
     from tests.app.test_render import aligned_camera, grey_scene, phantom
+    from voxwarp.scene import Scene
 
     vol = phantom()
     grid = ElementGrid(vol, shape=(6, 5, 5))
@@ -226,8 +226,8 @@ def test_zero_displacement_renders_like_no_warp(offscreen: Any, gl_ctx: Any, bac
 
 # ---------------------------------------------------------------------- bench smoke
 def test_bench_massspring_smoke(gl_ctx: Any) -> None:
-    from app.bench_massspring import BACKENDS, bench_massspring
-    from app.bench_taichi import taichi_available
+    from voxwarp.bench.massspring import BACKENDS, bench_massspring
+    from voxwarp.bench.taichi import taichi_available
 
     logged: list[str] = []
     report = bench_massspring(
@@ -266,7 +266,7 @@ def test_bench_massspring_smoke(gl_ctx: Any) -> None:
 
 
 def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
-    from app.cli import main
+    from voxwarp.cli.main import main
 
     out = tmp_path / "bench.md"
     argv = ["bench", "massspring", "--sizes", "3", "--steps", "2", "--repeats", "1"]
@@ -299,9 +299,9 @@ def test_element_dragged_onto_its_neighbour_agrees_on_cpu_and_gpu(gl_ctx: Any) -
 def test_gpu_field_skips_through_deformed_space_once_it_holds_still(gl_ctx: Any) -> None:
     """A GPU-owned warp is bounded by reading the field back, but only when the same
     field state is drawn again: never while the simulation steps between frames."""
-    from app.render import OffscreenRenderer
-    from app.scene import Scene
     from tests.app.test_render import phantom
+    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.scene import Scene
 
     vol = phantom()
     grid = ElementGrid(vol, shape=(6, 5, 5))

@@ -1,6 +1,6 @@
 """GpuSpringSolver (deform/massspring_gpu.py) against the CPU reference of the same physics.
 
-The reference is ``deform.massspring.CpuSpringSolver`` when that module exists (the
+The reference is ``voxwarp.deform.massspring.CpuSpringSolver`` when that module exists (the
 project's float64 reference), else the small numpy solver below, written straight from
 ``deform/spring_model.py``.
 """
@@ -15,9 +15,9 @@ import moderngl
 import numpy as np
 import pytest
 
-from deform.spring_model import SpringModel
+from voxwarp.deform.spring_model import SpringModel
 
-massspring_gpu = pytest.importorskip("deform.massspring_gpu")
+massspring_gpu = pytest.importorskip("voxwarp.deform.massspring_gpu")
 GpuSpringSolver = massspring_gpu.GpuSpringSolver
 
 SHAPE = (5, 4, 6)
@@ -78,8 +78,8 @@ class _NumpyReference:
 
 def _reference_class() -> type:
     """The project's CpuSpringSolver when present, else the numpy transcription above."""
-    if importlib.util.find_spec("deform.massspring") is not None:
-        module = importlib.import_module("deform.massspring")
+    if importlib.util.find_spec("voxwarp.deform.massspring") is not None:
+        module = importlib.import_module("voxwarp.deform.massspring")
         if hasattr(module, "CpuSpringSolver"):
             return module.CpuSpringSolver
     return _NumpyReference

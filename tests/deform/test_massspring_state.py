@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from deform.elements import ElementGrid
-from deform.massspring import MassSpring, MassSpringError
-from deform.offset_field import OffsetFieldWarp
-from deform.warp import WarpError, warp_from_dict
+from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.massspring import MassSpring, MassSpringError
+from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.warp import WarpError, warp_from_dict
 
 BOX = ((0.0, -10.0, 5.0), (60.0, 30.0, 45.0))
 
@@ -243,8 +243,8 @@ def test_bad_warp_settings() -> None:
 def test_saved_gpu_warp_renders_like_the_live_one(
     offscreen: Callable[..., Any], gl_ctx: Any
 ) -> None:
-    from app.scene import Scene
     from tests.app.test_render import phantom
+    from voxwarp.scene import Scene
 
     vol = phantom()
     grid = ElementGrid(vol, shape=6)

@@ -1,4 +1,4 @@
-"""Tests of deform.offset_field: the offset-field warp, CPU reference and GPU path.
+"""Tests of voxwarp.deform.offset_field: the offset-field warp, CPU reference and GPU path.
 
 CPU oracles: the forward map ``X + u(X)`` (the inverse must undo it), finite
 differences (Jacobian), the error study behind the default iteration count. GPU
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from app.scene import Scene
-from app.volume import Volume
-from deform.offset_field import (
+from tests.app.test_render import aligned_camera, grey_scene, phantom
+from voxwarp.core.volume import Volume
+from voxwarp.deform.offset_field import (
     DEFAULT_BAKED_ITERATIONS,
     DEFAULT_ITERATIONS,
     OffsetFieldWarp,
@@ -28,8 +28,8 @@ from deform.offset_field import (
     gaussian_drag_field,
     inverse_error_table,
 )
-from deform.warp import WarpError, compose_glsl, warp_from_dict
-from tests.app.test_render import aligned_camera, grey_scene, phantom
+from voxwarp.deform.warp import WarpError, compose_glsl, warp_from_dict
+from voxwarp.scene import Scene
 
 SAVE_IMAGES = os.environ.get("VOXWARP_SAVE_IMAGES")  # folder for the comparison PNGs
 
@@ -677,7 +677,7 @@ def test_update_region_rewrites_only_its_block(gl_ctx: Any) -> None:
 
 @pytest.mark.parametrize("width", [(1, 1, 1), (2, 4, 1), (3, 5, 2), (8, 2, 16)])
 def test_window_reduce_matches_brute_force(width: tuple[int, int, int]) -> None:
-    from deform.offset_field import _window_reduce
+    from voxwarp.deform.offset_field import _window_reduce
 
     a = np.random.default_rng(9).normal(size=(9, 7, 6, 3))
     cache: dict = {}

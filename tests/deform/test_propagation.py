@@ -1,4 +1,6 @@
-"""Tests of deform.propagation: the nearest-seed transform (OpenCL vs scipy vs brute force)."""
+"""Tests of voxwarp.deform.propagation: the nearest-seed transform (OpenCL vs scipy vs brute
+force).
+"""
 
 from __future__ import annotations
 
@@ -8,17 +10,17 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from deform import propagation as prop
-from deform.propagation import (
+from voxwarp.bench.propagation import benchmark_nearest_seed, helix_seeds
+from voxwarp.deform import propagation as prop
+from voxwarp.deform.propagation import (
     MAX_LINE,
     OpenCLUnavailableWarning,
-    benchmark_nearest_seed,
     last_backend,
     nearest_seed,
     opencl_available,
     seed_distance,
 )
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
 
 requires_opencl = pytest.mark.skipif(
     not opencl_available(),
@@ -107,7 +109,7 @@ def test_opencl_matches_scipy_on_a_larger_anisotropic_grid() -> None:
 
 @requires_opencl
 def test_helix_seeds_match_scipy() -> None:
-    seeds = prop.helix_seeds((48, 40, 56))
+    seeds = helix_seeds((48, 40, 56))
     _check_against_scipy(seeds, (1.0, 1.0, 1.5), brute=False)
 
 

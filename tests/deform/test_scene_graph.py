@@ -1,4 +1,5 @@
-"""Tests of deform.scene_graph: matrices and trilinear lattices in a hierarchy, one map per leaf.
+"""Tests of voxwarp.deform.scene_graph: matrices and trilinear lattices in a hierarchy, one map per
+leaf.
 
 Oracles: the matrix product of a linear chain; the chain applied step by step (each grid
 evaluated by an independent trilinear interpolator written here, on the box-normalised
@@ -16,17 +17,17 @@ import numpy as np
 import pytest
 
 pytest.importorskip(
-    "deform.trilinear", reason="deform/trilinear.py (TrilinearGrid) is not available yet"
+    "voxwarp.deform.trilinear", reason="deform/trilinear.py (TrilinearGrid) is not available yet"
 )
 
-from deform.scene_graph import (
+from voxwarp.deform.scene_graph import (
     ComposedTransform,
     SceneNode,
     compose_path,
     compose_scene,
 )
-from deform.trilinear import TrilinearGrid, TrilinearTransform
-from deform.warp import WarpError
+from voxwarp.deform.trilinear import TrilinearGrid, TrilinearTransform
+from voxwarp.deform.warp import WarpError
 
 RNG = np.random.default_rng(20100517)
 

@@ -1,4 +1,4 @@
-"""Tests of deform.trilinear: trilinear transformations and grids of trilinear cells.
+"""Tests of voxwarp.deform.trilinear: trilinear transformations and grids of trilinear cells.
 
 Oracles: the paper's corner form (eq. 1) against the coefficient form (eqs. 2-4) and
 the explicit alternating edge sums of ``C``; corners reproduced at the cube corners; an
@@ -17,13 +17,13 @@ import time
 import numpy as np
 import pytest
 
-from deform.trilinear import (
+from voxwarp.deform.trilinear import (
     MONOMIALS,
     UNIT_CORNERS,
     TrilinearGrid,
     TrilinearTransform,
 )
-from deform.warp import WarpError
+from voxwarp.deform.warp import WarpError
 
 
 # -------------------------------------------------------------------- helpers

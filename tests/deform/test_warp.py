@@ -1,4 +1,4 @@
-"""Tests of deform.warp: CPU references, chains, GLSL composition and CPU/GPU agreement.
+"""Tests of voxwarp.deform.warp: CPU references, chains, GLSL composition and CPU/GPU agreement.
 
 The CPU tests use geometric oracles (inverse maps, fixed points, finite differences);
 the ``gl`` tests compile the GLSL of :func:`compose_glsl` into a tiny program that writes
@@ -9,13 +9,15 @@ framebuffer and compare it with :func:`chain_apply` and the product of the matri
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import pytest
 
-from deform.warp import (
+from voxwarp.deform.warp import (
     AffineWarp,
     IdentityWarp,
     Warp,
@@ -426,3 +428,25 @@ def test_warp_from_dict_errors(d: Any, pattern: str) -> None:
 
 def test_warp_error_is_a_value_error() -> None:
     assert issubclass(WarpError, ValueError)
+
+
+def test_built_in_warps_load_without_importing_their_modules() -> None:
+    """Scene JSON names a warp kind; reading it must not depend on earlier imports."""
+    code = (
+        "import sys\n"
+        "from voxwarp.deform.warp import known_warps, warp_from_dict\n"
+        "assert 'voxwarp.deform.lattice_warp' not in sys.modules\n"
+        "print(known_warps())\n"
+        "box = [[0, 0, 0], [1, 1, 1]]\n"
+        "w = warp_from_dict({'type': 'lattice', 'grid': {'nodes': %r}, 'box': box})\n"
+        "print(type(w).__module__)\n"
+    )
+    nodes = [[[[float(i), float(j), float(k)] for k in (0, 1)] for j in (0, 1)] for i in (0, 1)]
+    res = subprocess.run(
+        [sys.executable, "-c", code % nodes], capture_output=True, text=True, timeout=120
+    )
+    assert res.returncode == 0, res.stderr
+    kinds, module = res.stdout.split("\n")[:2]
+    for kind in ("affine", "identity", "lattice", "offset_field", "wires"):
+        assert repr(kind) in kinds
+    assert module == "voxwarp.deform.lattice_warp"

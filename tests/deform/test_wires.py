@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from app.scene import Scene
-from app.volume import Volume
-from deform.propagation import opencl_available
-from deform.warp import WarpError, warp_from_dict
-from deform.wires import (
+from tests.app.test_render import aligned_camera, grey_scene, projected
+from voxwarp.core.volume import Volume
+from voxwarp.deform.propagation import opencl_available
+from voxwarp.deform.warp import WarpError, warp_from_dict
+from voxwarp.deform.wires import (
     FAR,
     LUT_SIZE,
     MAX_WIRES,
@@ -30,7 +30,7 @@ from deform.wires import (
     WireDeformer,
     WireFieldWarp,
 )
-from tests.app.test_render import aligned_camera, grey_scene, projected
+from voxwarp.scene import Scene
 
 N = (64, 40, 40)  # voxels, 1 mm
 AXIS_Y, AXIS_Z = 19.5, 19.5  # the cylinder's axis (mm)
@@ -247,7 +247,7 @@ def test_opencl_field_equals_the_scipy_reference() -> None:
 
 
 def test_without_opencl_the_build_warns_and_uses_scipy(monkeypatch: pytest.MonkeyPatch) -> None:
-    from deform import propagation
+    from voxwarp.deform import propagation
 
     vol = cylinder()
     ws = [wire(modified=axis_points(dz=-2.0))]
@@ -395,7 +395,7 @@ def test_bad_deformer_arguments_raise_clear_errors() -> None:
         WireDeformer(vol, [w], layout="half")
     with pytest.raises(WarpError, match="at least one"):
         WireDeformer(vol, [])
-    with pytest.raises(WarpError, match=r"not a deform\.Wire"):
+    with pytest.raises(WarpError, match=r"not a voxwarp\.deform\.Wire"):
         WireDeformer(vol, [{"base": []}])  # type: ignore[list-item]
     flat = type("V", (), {"data": np.zeros(4), "spacing": (1, 1, 1), "origin": (0, 0, 0)})
     with pytest.raises(WarpError, match="3D volume"):

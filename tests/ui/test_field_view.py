@@ -1,4 +1,4 @@
-"""Tests of ui.field_view.FieldSliceView against a fake window over a real EditSession.
+"""Tests of voxwarp.ui.field_view.FieldSliceView against a fake window over a real EditSession.
 
 The fake window is the one of the panel tests (``tests/ui/test_panels.py``): the view
 uses only ``window.session``.
@@ -11,13 +11,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-import app.field_views
-from app.editor import EditSession
-from app.scene import Scene
-from app.volume import Volume
+import voxwarp.render.field_views
 from tests.ui.test_panels import FakeWindow, make_panel, make_session
-from ui.field_view import FieldSliceView
-from ui.panels import DisplayPanel
+from voxwarp.core.volume import Volume
+from voxwarp.editing.session import EditSession
+from voxwarp.scene import Scene
+from voxwarp.ui.field_view import FieldSliceView
+from voxwarp.ui.panels import DisplayPanel
 
 TF = [(0.0, 0.0, 0.0, 0.0, 0.0), (100.0, 1.0, 1.0, 1.0, 1.0)]
 
@@ -83,7 +83,7 @@ def test_switching_to_wires_lists_the_wire_views(qtbot: Any) -> None:
     assert view.view_combo.isEnabled()
     window.session.set_deformation("wires")
     view.refresh()
-    assert combo_items(view) == list(app.field_views.VIEWS["wires"])
+    assert combo_items(view) == list(voxwarp.render.field_views.VIEWS["wires"])
     assert view.view_combo.currentText() == "attribute t"
     assert view.slice is not None
     assert view.title_label.text().startswith("attribute t, z = ")
@@ -93,8 +93,8 @@ def test_switching_to_wires_lists_the_wire_views(qtbot: Any) -> None:
     view.view_combo.setCurrentText("swept / vacated")
     view.axis_combo.setCurrentText("x")
     colors = {tuple(c) for c in image_of(view).reshape(-1, 3)}
-    assert app.field_views.SWEPT_COLOR in colors
-    assert app.field_views.VACATED_COLOR not in colors
+    assert voxwarp.render.field_views.SWEPT_COLOR in colors
+    assert voxwarp.render.field_views.VACATED_COLOR not in colors
     window.session.set_deformation("none")
     view.refresh()
     assert combo_items(view) == ["no deformation"]
@@ -123,13 +123,13 @@ def test_refresh_without_change_does_not_recompute(
     qtbot: Any, window: FakeWindow, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     calls: list[tuple[Any, ...]] = []
-    real = app.field_views.field_slice
+    real = voxwarp.render.field_views.field_slice
 
     def counting(*args: Any, **kwargs: Any) -> Any:
         calls.append(args)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(app.field_views, "field_slice", counting)
+    monkeypatch.setattr(voxwarp.render.field_views, "field_slice", counting)
     window.session.set_deformation("lattice", resolution=3)
     view = make_view(qtbot, window)
     assert len(calls) == 1
@@ -172,9 +172,9 @@ def test_errors_show_in_the_title(
     qtbot: Any, window: FakeWindow, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     def failing(*_args: Any, **_kwargs: Any) -> Any:
-        raise app.field_views.FieldViewError("cannot read the field")
+        raise voxwarp.render.field_views.FieldViewError("cannot read the field")
 
-    monkeypatch.setattr(app.field_views, "field_slice", failing)
+    monkeypatch.setattr(voxwarp.render.field_views, "field_slice", failing)
     window.session.set_deformation("lattice", resolution=3)
     view = make_view(qtbot, window)
     assert view.title_label.text() == "cannot read the field"
@@ -205,5 +205,5 @@ def test_a_wire_field_being_built_shows_no_field_yet(qtbot: Any) -> None:
     assert not view.view_combo.isEnabled()
     window.request_wire_build()
     view.refresh()
-    assert combo_items(view) == list(app.field_views.VIEWS["wires"])
+    assert combo_items(view) == list(voxwarp.render.field_views.VIEWS["wires"])
     assert view.slice is not None

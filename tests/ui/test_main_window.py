@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QPoint, Qt
 
-from app.editor import DisplayOptions, EditSession
-from app.image_io import read_image
-from app.samples import load_sample, suggested_transfer_function
-from app.scene import Scene
+from voxwarp.editing.session import DisplayOptions, EditSession
+from voxwarp.io.images import read_image
+from voxwarp.io.samples import load_sample, suggested_transfer_function
+from voxwarp.scene import Scene
 
 SIZE = (1280, 820)
 
@@ -40,10 +40,10 @@ def _session() -> EditSession:
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A shown main window on the fish, its first frame drawn, simulation paused."""
     monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
-    from ui.app import configure_qt
+    from voxwarp.ui.app import configure_qt
 
     configure_qt()
-    from ui.main_window import MainWindow
+    from voxwarp.ui.main_window import MainWindow
 
     w = MainWindow(_session())
     w.resize(*SIZE)
@@ -283,7 +283,16 @@ def test_gui_command_screenshot_matches_golden(tmp_path: Path, golden: Any) -> N
     """``voxwarp gui --screenshot`` on the bundled CT: a real window, first frame, the
     whole window saved (docks included) and compared with a golden image."""
     out = tmp_path / "window.png"
-    cmd = [sys.executable, "-m", "ui.cli", "gui", "--screenshot", str(out), "--size", "1100x700"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "voxwarp.ui.cli",
+        "gui",
+        "--screenshot",
+        str(out),
+        "--size",
+        "1100x700",
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
     img = read_image(out)
@@ -389,7 +398,7 @@ def test_drop_a_file_opens_it_and_it_becomes_recent(window: Any, tmp_path: Path)
     from PySide6.QtCore import QMimeData, QPointF, QUrl
     from PySide6.QtGui import QDropEvent
 
-    from ui.main_window import recent_files
+    from voxwarp.ui.main_window import recent_files
 
     w = window
     w.edit("Lattice", lambda: w.session.set_deformation("lattice", resolution=3))
@@ -423,7 +432,7 @@ def test_help_dialog_lists_the_shortcuts(window: Any) -> None:
     """Help -> Keyboard and Mouse shows every shortcut of the table."""
     from PySide6.QtWidgets import QTextBrowser
 
-    from ui.main_window import SHORTCUTS
+    from voxwarp.ui.main_window import SHORTCUTS
 
     w = window
     w.show_help()

@@ -1,7 +1,7 @@
-"""Tests of ui.panels against a fake main window over a real EditSession.
+"""Tests of voxwarp.ui.panels against a fake main window over a real EditSession.
 
 The fake window implements the window contract the panels code against (see the module
-docstring of ``ui.panels``): it records every ``edit`` (text and merge key), runs the
+docstring of ``voxwarp.ui.panels``): it records every ``edit`` (text and merge key), runs the
 edit's function, turns VoxwarpErrors into recorded errors (the real window shows them
 in a dialog) and refreshes its panels afterwards, as the real window does. Wire builds
 run synchronously here.
@@ -18,12 +18,18 @@ import pytest
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QTreeWidgetItem, QWidget
 
-from app.editor import DEFORMATIONS, DisplayOptions, EditorError, EditSession, Placement
-from app.errors import VoxwarpError
-from app.mesh import MeshInstance, box_mesh
-from app.scene import MODES, Scene
-from app.volume import Volume
-from ui.panels import (
+from voxwarp.core.mesh import MeshInstance, box_mesh
+from voxwarp.core.volume import Volume
+from voxwarp.editing.session import (
+    DEFORMATIONS,
+    DisplayOptions,
+    EditorError,
+    EditSession,
+    Placement,
+)
+from voxwarp.errors import VoxwarpError
+from voxwarp.scene import MODES, Scene
+from voxwarp.ui.panels import (
     DeformationPanel,
     DisplayPanel,
     ScenePanel,
@@ -55,7 +61,7 @@ class FakeViewport:
 
 
 class FakeWindow:
-    """The main-window contract of ui.panels, recording what the panels ask for."""
+    """The main-window contract of voxwarp.ui.panels, recording what the panels ask for."""
 
     def __init__(self, session: EditSession) -> None:
         self.session = session

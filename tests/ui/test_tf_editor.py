@@ -1,4 +1,4 @@
-"""Tests of ui.tf_editor: mouse/key editing, signals, presets, files, histogram, painting.
+"""Tests of voxwarp.ui.tf_editor: mouse/key editing, signals, presets, files, histogram, painting.
 
 Mouse events go to the real canvas through pytest-qt (QTest) on the private Xvfb the
 conftest starts; expected values come from the canvas's own pixel <-> value mapping,
@@ -18,9 +18,9 @@ from PySide6.QtCore import QPoint, QPointF, Qt
 from PySide6.QtGui import QColor, QImage
 from PySide6.QtWidgets import QColorDialog, QFileDialog, QMessageBox
 
-from app.transfer_function import PRESETS, TransferFunction
-from app.volume import Volume
-from ui.tf_editor import HISTOGRAM_BINS, TransferFunctionEditor, value_histogram
+from voxwarp.core.transfer_function import PRESETS, TransferFunction
+from voxwarp.core.volume import Volume
+from voxwarp.ui.tf_editor import HISTOGRAM_BINS, TransferFunctionEditor, value_histogram
 
 POINTS = [
     (0.0, 0.0, 0.0, 0.0, 0.0),

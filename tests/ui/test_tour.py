@@ -9,10 +9,10 @@ from typing import Any
 
 import pytest
 
-from app.editor import EditSession
-from app.samples import load_sample
-from app.scene import Scene
-from app.tour import TourError, read_tour
+from voxwarp.editing.session import EditSession
+from voxwarp.io.samples import load_sample
+from voxwarp.scene import Scene
+from voxwarp.teaching.tour import TourError, read_tour
 
 
 def _tour(tmp_path: Path) -> Path:
@@ -66,10 +66,10 @@ def test_read_tour_checks_the_file(tmp_path: Path) -> None:
 
 def test_tour_steps_open_their_scenes(qtbot: Any, tmp_path: Path, monkeypatch: Any) -> None:
     monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
-    from ui.app import configure_qt
+    from voxwarp.ui.app import configure_qt
 
     configure_qt()
-    from ui.main_window import MainWindow
+    from voxwarp.ui.main_window import MainWindow
 
     vol = load_sample("fish", shape=(32, 32, 32))
     w = MainWindow(EditSession(Scene(vol, jitter=False)))

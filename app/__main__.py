@@ -1,0 +1,8 @@
+"""``python -m voxwarp``: the same as the ``voxwarp`` command."""
+
+import sys
+
+from voxwarp.ui.cli import main
+
+if __name__ == "__main__":
+    sys.exit(main())

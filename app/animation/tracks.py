@@ -1,0 +1,1117 @@
+"""Keyframe animation of scenes: tracks on scene parameters, evaluated into per-frame scenes.
+
+The wire paper's tool let the user deform a wire differently over any number of frames
+and render the series into a movie; here every deformation family (wires, lattice,
+mass-spring, ChainMail) and the look of the scene (camera, transfer function, sample
+distance, window, clipping box, ...) can be keyed the same way. ``voxwarp animate``
+(:mod:`voxwarp.animation.movie`) renders the frames and encodes the movie.
+
+Scene JSON
+----------
+An animated scene is ordinary scene JSON (:meth:`voxwarp.scene.Scene.to_dict`, also
+:meth:`voxwarp.editing.session.EditSession.save` with its ``"editor"`` entry) plus an
+``"animation"`` entry, which :meth:`Scene.from_dict <voxwarp.scene.Scene.from_dict>` ignores::
+
+    "animation": {
+      "frames": 24,                  # frames of the animation (>= 1)
+      "fps": 24,                     # frames per second of the movie (default 24)
+      "steps_per_frame": 10,         # optional: mass-spring steps per frame
+      "relax_steps": 1,              # optional: ChainMail relaxation steps per frame
+      "tracks": [
+        {"target": "wires[0].modified", "interpolation": "linear",
+         "keys": [[0, [[x, y, z], ...]], [12, [[x, y, z], ...]]]},
+        {"target": "elements.drag", "elements": [[4, 2, 3]], "interpolation": "smooth",
+         "keys": [[0, [0, 0, 0]], [8, [0, 0, -6]], [9, null]]},
+        {"target": "camera", "keys": [[0, {"view": "-y"}], [23, {"view": [-60, 20]}]]}
+      ]
+    }
+
+``steps_per_frame`` and ``relax_steps`` default to the ``"editor"`` entry's values (what
+the GUI runs per frame), else 10 and 1. Each track keys one *target*; its ``keys`` are
+``[frame, value]`` pairs with frames in ``[0, frames - 1]`` (numbers, strictly
+increasing). Before the first key a track holds the first value, after the last key
+the last value.
+
+Targets and their values:
+
+``camera``
+    A camera object (:meth:`voxwarp.core.camera.Camera.to_dict`; missing fields come from the
+    scene's camera), or ``{"view": "-y" | [azimuth, elevation], "zoom": z, "fov": f,
+    "projection": p}`` (optional zoom/fov/projection): a camera fitted, like the scene's
+    own, to the scene's deformed box as saved. Centre, distance, field of view,
+    orthographic height and radius are interpolated component-wise, the rotation by
+    quaternion slerp (the shorter way round); all keys need the same projection.
+``transfer_function``
+    Control points ``[[value, r, g, b, a], ...]``, ``{"points": [...]}`` or a preset name
+    (resolved on the scene's volume); every key must have the same number of points,
+    which are paired in value order.
+``step``, ``zoom``, ``fov``, ``iso_value``, ``flm_threshold``
+    A number. ``zoom`` and ``fov`` refit the camera of a scene without an explicit
+    camera (they cannot be combined with a ``camera`` track or a scene camera).
+``window``, ``clip_box``, ``background``
+    ``[level, width]``; ``[[x0, y0, z0], [x1, y1, z1]]`` (mm); ``[r, g, b(, a)]``.
+``wires[i].modified``
+    The (N, 3) control points (mm) of wire ``i``'s modified curve (N the same in every
+    key; a Bézier wire needs 3k + 1). The scene needs exactly one ``"wires"`` warp.
+``wires[i].twist``, ``wires[i].scale``
+    Wire ``i``'s twist (radians) or scale keys along the wire: a number (constant along
+    the wire) or ``[[u, value], ...]`` (u the fraction of the wire's length; the same
+    number of pairs in every key), see :class:`voxwarp.deform.wires.Wire`.
+``lattice.nodes``
+    The (nx + 1, ny + 1, nz + 1, 3) nodes (mm) of the scene's one ``"lattice"`` warp
+    (the shape of the scene's lattice), or ``"rest"``: the undeformed lattice over the
+    warp's box.
+``elements.drag``
+    Which elements of the scene's mass-spring or ChainMail model (an ``offset_field``
+    warp saved with its model) are held, and where: the track's ``"elements"`` lists
+    ``[i, j, k]`` indices; a value is one offset ``[dx, dy, dz]`` (mm from rest, in the
+    model's frame: world mm unless the editor placed the grid) for all of them, an
+    (m, 3) list (one per element), or ``null``: let them go. Between a held key and a
+    ``null`` key the earlier key holds until the later key's frame. Several drag
+    tracks may hold different elements. The model is simulated only in animations with
+    a drag track (a scene's saved model state is otherwise rendered as saved); it starts
+    from the saved state at rest (velocities are not saved), with the saved held
+    elements still held.
+
+Interpolation
+-------------
+``"linear"`` blends the two keys around a frame by ``t`` in [0, 1] (the fraction of the
+way from one key frame to the next). ``"smooth"`` eases each key interval with
+smoothstep, ``t' = 3 t² - 2 t³``: it passes through every key with zero slope there
+(ease-in/ease-out, also at the first and last key), and, unlike a Catmull-Rom spline,
+never leaves the range of the two keys around a frame — so blended transfer functions
+stay sorted with components in [0, 1], scales stay positive, and a poke eases in and
+out. Dense keys (e.g. every second frame of a swimming motion) with ``"linear"`` give
+steady motion through the keys. Rotations use slerp with the same (eased) ``t``.
+
+Evaluation
+----------
+Physics models depend on their history, so the animation is evaluated *serially* on the
+CPU before anything is rendered (:func:`evaluate`): for each frame ``f`` (in order) the
+tracks are evaluated at ``f``, the element drags applied, then ``steps_per_frame``
+mass-spring steps or ``relax_steps`` ChainMail relaxation steps run, and the frame's
+state is written as a complete scene dict (:meth:`Scene.to_dict` form: the warps'
+``to_dict()`` carry the deformed fields, wires and lattice nodes). Frames are then
+rendered from those dicts in any order and on any machine (:mod:`voxwarp.animation.movie`,
+:mod:`voxwarp.animation.distributed`), identically. A scene without an explicit camera and without a
+``camera`` track gets the camera fitted to its deformed box *as saved*, held for every
+frame, so the view does not jump as the object deforms.
+
+Rendering ``N`` frames of an animation of ``frames`` frames (``voxwarp animate
+--frames N``) evaluates the tracks at ``f = i (frames - 1) / (N - 1)`` for frame ``i``,
+i.e. the key frames are scaled to the new length; the physics still runs
+``steps_per_frame`` steps per rendered frame.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.camera import Camera
+from voxwarp.core.files import atomic_write_text
+from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.errors import SceneError, VoxwarpError
+from voxwarp.scene import Scene, read_scene_dict
+
+#: key of the animation entry in scene JSON
+ANIMATION_KEY = "animation"
+#: interpolation modes of a track
+INTERPOLATIONS: tuple[str, ...] = ("linear", "smooth")
+#: default frames per second
+DEFAULT_FPS = 24.0
+#: physics per frame when neither the animation nor the editor entry says
+DEFAULT_STEPS_PER_FRAME = 10
+DEFAULT_RELAX_STEPS = 1
+#: most frames of one animation
+MAX_FRAMES = 100_000
+#: scene attributes a track can key, with the shape of their values (() = a number)
+SCALAR_TARGETS: dict[str, tuple[int, ...]] = {
+    "step": (),
+    "zoom": (),
+    "fov": (),
+    "iso_value": (),
+    "flm_threshold": (),
+    "window": (2,),
+    "clip_box": (2, 3),
+    "background": (4,),
+}
+#: every target a track can key (``i``: a wire's index)
+TARGETS: tuple[str, ...] = (
+    "camera",
+    "transfer_function",
+    *SCALAR_TARGETS,
+    "wires[i].modified",
+    "wires[i].twist",
+    "wires[i].scale",
+    "lattice.nodes",
+    "elements.drag",
+)
+_WIRE_TARGET = re.compile(r"^wires\[(\d+)\]\.(modified|twist|scale)$")
+
+
+class AnimationError(VoxwarpError, ValueError):
+    """An animation entry is invalid or does not fit its scene (names the fix)."""
+
+
+# ---------------------------------------------------------------------------- interpolation
+def key_weights(
+    frames: Sequence[float], frame: float, interpolation: str = "linear"
+) -> tuple[int, int, float]:
+    """Where ``frame`` falls among key ``frames``: ``(i, j, t)`` with the value
+    ``(1 - t) v_i + t v_j``.
+
+    Parameters
+    ----------
+    frames
+        Strictly increasing key frames.
+    frame
+        The frame to evaluate (any number; clamped to the first/last key).
+    interpolation
+        ``"linear"`` or ``"smooth"`` (smoothstep-eased ``t``; see the module doc).
+
+    Returns
+    -------
+    tuple
+        ``(i, j, t)``; ``t == 0`` exactly on a key (then ``i`` is that key).
+    """
+    f = np.asarray(frames, dtype=np.float64)
+    x = float(frame)
+    if x <= f[0]:
+        return 0, 0, 0.0
+    if x >= f[-1]:
+        return len(f) - 1, len(f) - 1, 0.0
+    j = int(np.searchsorted(f, x, side="right"))
+    i = j - 1
+    t = (x - f[i]) / (f[j] - f[i])
+    if interpolation == "smooth":
+        t = t * t * (3.0 - 2.0 * t)
+    return i, j, float(t)
+
+
+def interpolate(
+    keys: Sequence[tuple[float, Any]], frame: float, interpolation: str = "linear"
+) -> np.ndarray:
+    """Blend array values of ``[(frame, value), ...]`` keys at ``frame``.
+
+    Parameters
+    ----------
+    keys
+        ``(frame, value)`` pairs, frames strictly increasing, values arrays of one shape.
+    frame
+        Frame to evaluate.
+    interpolation
+        ``"linear"`` or ``"smooth"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 array of the values' shape (the key's own value on a key; never outside
+        the range of the two keys around ``frame``, component by component).
+    """
+    i, j, t = key_weights([k[0] for k in keys], frame, interpolation)
+    a = np.asarray(keys[i][1], dtype=np.float64)
+    if t == 0.0:
+        return a.copy()
+    b = np.asarray(keys[j][1], dtype=np.float64)
+    # a + t (b - a) is exact for equal keys; the clip keeps rounding inside the keys'
+    # range (a transfer function's 1.0 never becomes 1.0000000000000002)
+    return np.clip(a + t * (b - a), np.minimum(a, b), np.maximum(a, b))
+
+
+def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion ``(w, x, y, z)`` of a 3x3 rotation matrix (Shepperd's method).
+
+    Parameters
+    ----------
+    r
+        Proper rotation matrix.
+
+    Returns
+    -------
+    numpy.ndarray
+        (4,) unit quaternion with ``w >= 0``.
+    """
+    m = np.asarray(r, dtype=np.float64)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = np.array(
+            [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+        )
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = np.array(
+            [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+        )
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = np.array(
+            [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+        )
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = np.array(
+            [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+        )
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
+    """3x3 rotation matrix of a quaternion ``(w, x, y, z)`` (normalised first).
+
+    Parameters
+    ----------
+    q
+        (4,) quaternion, any non-zero length.
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, 3) proper rotation matrix.
+    """
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions, the shorter way round.
+
+    Parameters
+    ----------
+    q0, q1
+        (4,) unit quaternions ``(w, x, y, z)``.
+    t
+        Fraction in [0, 1] (0 gives ``q0``, 1 gives ``q1`` or ``-q1``).
+
+    Returns
+    -------
+    numpy.ndarray
+        (4,) unit quaternion.
+    """
+    a = np.asarray(q0, dtype=np.float64)
+    b = np.asarray(q1, dtype=np.float64)
+    dot = float(a @ b)
+    if dot < 0.0:  # q and -q are the same rotation: take the shorter arc
+        b, dot = -b, -dot
+    if dot > 0.9995:  # nearly the same rotation: normalised lerp is exact enough
+        q = a + t * (b - a)
+        return q / np.linalg.norm(q)
+    theta = math.acos(min(dot, 1.0))
+    s = math.sin(theta)
+    q = (math.sin((1.0 - t) * theta) / s) * a + (math.sin(t * theta) / s) * b
+    return q / np.linalg.norm(q)
+
+
+_CAMERA_LINEAR = ("distance", "fov", "ortho_height", "radius")
+
+
+def interpolate_camera(
+    keys: Sequence[tuple[float, Camera]], frame: float, interpolation: str = "linear"
+) -> Camera:
+    """The camera at ``frame`` between camera keys (see the module doc).
+
+    Parameters
+    ----------
+    keys
+        ``(frame, Camera)`` pairs, frames strictly increasing, one projection.
+    frame
+        Frame to evaluate.
+    interpolation
+        ``"linear"`` or ``"smooth"``.
+
+    Returns
+    -------
+    Camera
+        A new camera (a copy of the key's camera on a key).
+    """
+    i, j, t = key_weights([k[0] for k in keys], frame, interpolation)
+    a = keys[i][1]
+    if t == 0.0:
+        return Camera.from_dict(a.to_dict())
+    b = keys[j][1]
+    rot = quaternion_to_rotation(
+        slerp(rotation_to_quaternion(a.rotation), rotation_to_quaternion(b.rotation), t)
+    )
+    values = {n: (1.0 - t) * getattr(a, n) + t * getattr(b, n) for n in _CAMERA_LINEAR}
+    return Camera(
+        center=(1.0 - t) * a.center + t * b.center,
+        rotation=rot,
+        projection=a.projection,
+        **values,
+    )
+
+
+# ---------------------------------------------------------------------------- parsing
+def _number(x: Any, what: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        raise AnimationError(f"{what} must be a number; got {x!r:.60}")
+    v = float(x)
+    if not math.isfinite(v):
+        raise AnimationError(f"{what} must be finite; got {x!r}")
+    return v
+
+
+def _count(x: Any, what: str, lo: int, hi: int) -> int:
+    if isinstance(x, bool) or not isinstance(x, int | float) or float(x) != int(x):
+        raise AnimationError(f"{what} must be an integer {lo}..{hi}; got {x!r:.60}")
+    if not lo <= int(x) <= hi:
+        raise AnimationError(f"{what} must be an integer {lo}..{hi}; got {x!r}")
+    return int(x)
+
+
+def _array(x: Any, what: str, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
+    """A finite float64 array; ``shape`` entries None match any length."""
+    if isinstance(x, str | bytes | Mapping) or x is None:
+        raise AnimationError(f"{what} must be numbers; got {x!r:.60}")
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise AnimationError(f"{what} must be numbers; got {x!r:.60}") from exc
+    if shape is not None and (
+        a.ndim != len(shape)
+        or any(s is not None and s != n for s, n in zip(shape, a.shape, strict=True))
+    ):
+        want = "x".join("N" if s is None else str(s) for s in shape) or "a single number"
+        raise AnimationError(f"{what} must have shape {want}; got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise AnimationError(f"{what} has NaN/Inf entries")
+    return a
+
+
+def _target_name(target: Any) -> str:
+    if isinstance(target, str) and (
+        target in ("camera", "transfer_function", "lattice.nodes", "elements.drag")
+        or target in SCALAR_TARGETS
+        or _WIRE_TARGET.match(target)
+    ):
+        return target
+    raise AnimationError(f"unknown animation target {target!r}; targets: {', '.join(TARGETS)}")
+
+
+@dataclass
+class Track:
+    """Keys of one target (see the module doc for targets and values).
+
+    Parameters
+    ----------
+    target
+        One of :data:`TARGETS` (``wires[i]...`` with a wire index).
+    keys
+        ``(frame, value)`` pairs (JSON values), frames strictly increasing.
+    interpolation
+        ``"linear"`` or ``"smooth"``.
+    elements
+        For ``elements.drag``: the (m, 3) element indices the track holds.
+    """
+
+    target: str
+    keys: list[tuple[float, Any]]
+    interpolation: str = "linear"
+    elements: list[list[int]] | None = None
+
+    @property
+    def key_frames(self) -> list[float]:
+        """The key frames."""
+        return [k[0] for k in self.keys]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        d: dict[str, Any] = {
+            "target": self.target,
+            "interpolation": self.interpolation,
+            "keys": [[_json_number(f), _jsonable(v)] for f, v in self.keys],
+        }
+        if self.elements is not None:
+            d["elements"] = [list(e) for e in self.elements]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Any, frames: int, where: str = "track") -> Track:
+        """Parse and check one track entry (the checks that need no scene).
+
+        Parameters
+        ----------
+        d
+            ``{"target", "keys", "interpolation"?, "elements"?}``.
+        frames
+            The animation's frame count (key frames must lie in ``[0, frames - 1]``).
+        where
+            Name of the entry in error messages.
+
+        Returns
+        -------
+        Track
+
+        Raises
+        ------
+        AnimationError
+            Naming the entry and the problem.
+        """
+        if not isinstance(d, Mapping):
+            raise AnimationError(f"{where} must be an object with 'target' and 'keys'")
+        unknown = set(d) - {"target", "keys", "interpolation", "elements"}
+        if unknown:
+            raise AnimationError(
+                f"{where}: unknown keys {sorted(unknown)}; allowed: target, keys,"
+                " interpolation, elements"
+            )
+        if "target" not in d:
+            raise AnimationError(f"{where} needs a 'target'; targets: {', '.join(TARGETS)}")
+        target = _target_name(d["target"])
+        where = f"{where} ({target})"
+        interpolation = d.get("interpolation", "linear")
+        if interpolation not in INTERPOLATIONS:
+            raise AnimationError(
+                f"{where}: interpolation must be one of {', '.join(INTERPOLATIONS)};"
+                f" got {interpolation!r}"
+            )
+        raw = d.get("keys")
+        if not isinstance(raw, list) or not raw:
+            raise AnimationError(f"{where} needs 'keys': a non-empty list of [frame, value]")
+        keys: list[tuple[float, Any]] = []
+        for n, k in enumerate(raw):
+            if not isinstance(k, list | tuple) or len(k) != 2:
+                raise AnimationError(f"{where}: key {n} must be [frame, value]; got {k!r:.60}")
+            f = _number(k[0], f"{where}: key {n}'s frame")
+            if not 0 <= f <= frames - 1:
+                raise AnimationError(
+                    f"{where}: key {n}'s frame {f:g} is outside the animation's frames"
+                    f" 0..{frames - 1}"
+                )
+            if keys and f <= keys[-1][0]:
+                raise AnimationError(
+                    f"{where}: key frames must increase strictly; key {n} ({f:g}) follows"
+                    f" {keys[-1][0]:g}"
+                )
+            keys.append((f, _check_value(target, k[1], f"{where}: key {n}")))
+        elements = None
+        if target == "elements.drag":
+            if "elements" not in d:
+                raise AnimationError(
+                    f"{where} needs 'elements': the [i, j, k] indices of the held elements"
+                )
+            e = d["elements"]
+            a = _array(e, f"{where}: elements", None)
+            if a.ndim == 1:
+                a = a.reshape(1, -1)
+            if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0 or np.any(a != np.round(a)):
+                raise AnimationError(
+                    f"{where}: elements must be a list of integer [i, j, k] indices; got {e!r:.60}"
+                )
+            elements = a.astype(int).tolist()
+            for n, (_, v) in enumerate(keys):
+                if v is not None and np.shape(v) not in ((3,), (len(elements), 3)):
+                    raise AnimationError(
+                        f"{where}: key {n}'s offset must be [dx, dy, dz] or one per element"
+                        f" ({len(elements)}x3), or null; got shape {np.shape(v)}"
+                    )
+        elif "elements" in d:
+            raise AnimationError(f"{where}: 'elements' belongs to elements.drag tracks only")
+        return cls(target, keys, interpolation, elements)
+
+
+def _json_number(f: float) -> int | float:
+    return int(f) if float(f).is_integer() else float(f)
+
+
+def _jsonable(v: Any) -> Any:
+    """Key values as JSON values (numpy arrays and numbers become lists and floats)."""
+    if isinstance(v, np.ndarray | np.generic):
+        return v.tolist()
+    if isinstance(v, list | tuple):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, Mapping):
+        return {k: _jsonable(x) for k, x in v.items()}
+    return v
+
+
+def _check_value(target: str, v: Any, what: str) -> Any:
+    """Checks of a key value that need no scene; returns the JSON value."""
+    if target in SCALAR_TARGETS:
+        shape = SCALAR_TARGETS[target]
+        if target == "background" and isinstance(v, list) and len(v) == 3:
+            shape = (3,)
+        if shape == ():
+            _number(v, what)
+        else:
+            _array(v, what, shape)
+    elif target == "elements.drag":
+        if v is not None:
+            _array(v, f"{what} (an offset in mm)")
+    elif target == "lattice.nodes":
+        if not (isinstance(v, str) and v == "rest"):
+            _array(v, f"{what} (lattice nodes)", (None, None, None, 3))
+    elif target == "camera":
+        if not isinstance(v, Mapping):
+            raise AnimationError(
+                f"{what} must be a camera object (Camera.to_dict form) or"
+                ' {"view": ..., "zoom": ...}'
+            )
+    elif target == "transfer_function":
+        if not isinstance(v, str | list | Mapping):
+            raise AnimationError(f"{what} must be control points, {{'points': ...}} or a preset")
+    else:
+        m = _WIRE_TARGET.match(target)
+        assert m is not None
+        if m.group(2) == "modified":
+            _array(v, f"{what} (control points)", (None, 3))
+        elif not isinstance(v, int | float) or isinstance(v, bool):
+            _array(v, f"{what} ({m.group(2)} keys [[u, value], ...])", (None, 2))
+        else:
+            _number(v, what)
+    return v
+
+
+@dataclass
+class Animation:
+    """The ``"animation"`` entry of scene JSON (see the module doc).
+
+    Parameters
+    ----------
+    frames
+        Number of frames (1..:data:`MAX_FRAMES`).
+    fps
+        Frames per second of the movie.
+    tracks
+        The :class:`Track` objects.
+    steps_per_frame, relax_steps
+        Physics per frame (``None``: the editor entry's values or the defaults).
+    """
+
+    frames: int
+    fps: float = DEFAULT_FPS
+    tracks: list[Track] = field(default_factory=list)
+    steps_per_frame: int | None = None
+    relax_steps: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (the value of the scene's ``"animation"`` key)."""
+        d: dict[str, Any] = {
+            "frames": self.frames,
+            "fps": _json_number(self.fps),
+            "tracks": [t.to_dict() for t in self.tracks],
+        }
+        if self.steps_per_frame is not None:
+            d["steps_per_frame"] = self.steps_per_frame
+        if self.relax_steps is not None:
+            d["relax_steps"] = self.relax_steps
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Animation:
+        """Parse and check an animation entry.
+
+        Parameters
+        ----------
+        d
+            The ``"animation"`` object.
+
+        Returns
+        -------
+        Animation
+
+        Raises
+        ------
+        AnimationError
+            On a missing or malformed key (the message names it and the fix).
+        """
+        if not isinstance(d, Mapping):
+            raise AnimationError("'animation' must be an object with 'frames' and 'tracks'")
+        allowed = {"frames", "fps", "tracks", "steps_per_frame", "relax_steps"}
+        unknown = set(d) - allowed
+        if unknown:
+            raise AnimationError(
+                f"animation: unknown keys {sorted(unknown)}; allowed: {', '.join(sorted(allowed))}"
+            )
+        if "frames" not in d:
+            raise AnimationError("animation needs 'frames': the number of frames (>= 1)")
+        frames = _count(d["frames"], "animation 'frames'", 1, MAX_FRAMES)
+        fps = _number(d.get("fps", DEFAULT_FPS), "animation 'fps'")
+        if not 0 < fps <= 1000:
+            raise AnimationError(f"animation 'fps' must be in (0, 1000]; got {fps:g}")
+        steps = d.get("steps_per_frame")
+        relax = d.get("relax_steps")
+        if steps is not None:
+            steps = _count(steps, "animation 'steps_per_frame'", 0, 10000)
+        if relax is not None:
+            relax = _count(relax, "animation 'relax_steps'", 0, 10000)
+        tracks = d.get("tracks", [])
+        if not isinstance(tracks, list):
+            raise AnimationError("animation 'tracks' must be a list of track objects")
+        parsed = [Track.from_dict(t, frames, f"track {n}") for n, t in enumerate(tracks)]
+        singles = [t.target for t in parsed if t.target != "elements.drag"]
+        twice = sorted({t for t in singles if singles.count(t) > 1})
+        if twice:
+            raise AnimationError(f"animation: more than one track keys {', '.join(twice)}")
+        return cls(frames, fps, parsed, steps, relax)
+
+    @classmethod
+    def from_scene_dict(cls, d: Mapping[str, Any]) -> Animation:
+        """The animation of a scene JSON object (:class:`AnimationError` without one)."""
+        if not isinstance(d, Mapping) or ANIMATION_KEY not in d:
+            raise AnimationError(
+                "the scene has no 'animation' entry; add one (see app/animation/tracks.py or"
+                " sample_volumes/fish_swim_anim.json)"
+            )
+        return cls.from_dict(d[ANIMATION_KEY])
+
+    @classmethod
+    def from_scene_file(cls, path: str | os.PathLike) -> Animation:
+        """The animation of a scene JSON file."""
+        return cls.from_scene_dict(read_scene_dict(path))
+
+    def time_of(self, index: int, count: int | None = None) -> float:
+        """Animation frame (key time) of rendered frame ``index`` of ``count`` frames.
+
+        Parameters
+        ----------
+        index
+            Rendered frame, 0..count - 1.
+        count
+            Frames rendered (default :attr:`frames`); key frames scale to it.
+
+        Returns
+        -------
+        float
+        """
+        n = self.frames if count is None else int(count)
+        if n <= 1 or n == self.frames:
+            return float(index)
+        return index * (self.frames - 1) / (n - 1)
+
+
+def save_animated_scene(path: str | os.PathLike, source: Any, animation: Animation) -> Path:
+    """Write scene JSON with an ``"animation"`` entry, atomically.
+
+    Parameters
+    ----------
+    path
+        Output file.
+    source
+        A :class:`~voxwarp.scene.Scene`, an :class:`~voxwarp.editing.session.EditSession` (anything
+        with
+        ``to_dict(base_dir=...)``) or a scene JSON dict (written as given).
+    animation
+        The animation to attach (validated against the frames first).
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    if isinstance(source, Mapping):
+        d = dict(source)
+    else:
+        d = source.to_dict(base_dir=path.parent.resolve())
+    d[ANIMATION_KEY] = Animation.from_dict(animation.to_dict()).to_dict()
+    atomic_write_text(path, json.dumps(d, indent=1))
+    return path
+
+
+# ---------------------------------------------------------------------------- evaluation
+@dataclass
+class FrameStates:
+    """An animation evaluated into one complete scene dict per frame.
+
+    Attributes
+    ----------
+    animation
+        The :class:`Animation`.
+    scenes
+        Per frame, scene JSON (:meth:`Scene.to_dict` form, with the volume entry);
+        plain JSON values, ready to be hashed, shipped and rendered.
+    base_dir
+        Folder that relative volume and mesh paths in ``scenes`` refer to (absolute).
+    """
+
+    animation: Animation
+    scenes: list[dict[str, Any]]
+    base_dir: Path | None
+
+    def __len__(self) -> int:
+        return len(self.scenes)
+
+    def scene(self, index: int) -> Scene:
+        """The :class:`Scene` of frame ``index`` (loads the volume)."""
+        return Scene.from_dict(self.scenes[index], base_dir=self.base_dir)
+
+
+def load_animated_scene(path: str | os.PathLike, frames: int | None = None) -> FrameStates:
+    """Read an animated scene file and evaluate it (see :func:`evaluate`).
+
+    Parameters
+    ----------
+    path
+        Scene JSON with an ``"animation"`` entry.
+    frames
+        Frames to render (default: the animation's).
+
+    Returns
+    -------
+    FrameStates
+    """
+    p = Path(path)
+    d = read_scene_dict(p)
+    return evaluate(d, base_dir=p.parent.resolve(), frames=frames)
+
+
+def evaluate(
+    scene: Mapping[str, Any],
+    base_dir: str | os.PathLike | None = None,
+    animation: Animation | None = None,
+    frames: int | None = None,
+) -> FrameStates:
+    """Evaluate an animation serially into per-frame scene dicts (see the module doc).
+
+    Parameters
+    ----------
+    scene
+        Scene JSON object (with an ``"animation"`` entry unless ``animation`` is given).
+    base_dir
+        Folder relative paths in ``scene`` refer to.
+    animation
+        The animation (default: the scene's entry).
+    frames
+        Frames to render (default: the animation's); the keys scale to it.
+
+    Returns
+    -------
+    FrameStates
+
+    Raises
+    ------
+    AnimationError, SceneError
+        When the animation or the scene is invalid, or a track does not fit the scene.
+    """
+    anim = animation if animation is not None else Animation.from_scene_dict(scene)
+    count = anim.frames if frames is None else _count(frames, "frames", 1, MAX_FRAMES)
+    base_path = Path(base_dir).resolve() if base_dir is not None else None
+    base = Scene.from_dict(scene, base_dir=base_path)
+    editor = scene.get("editor") if isinstance(scene.get("editor"), Mapping) else {}
+    assert isinstance(editor, Mapping)
+    steps = _physics(anim.steps_per_frame, editor.get("steps_per_frame"), DEFAULT_STEPS_PER_FRAME)
+    relax = _physics(anim.relax_steps, editor.get("relax_steps"), DEFAULT_RELAX_STEPS)
+    template = base.to_dict(base_dir=base_path)
+    bound = _Bound(base, template, anim)
+    try:
+        out = []
+        for index in range(count):
+            f = anim.time_of(index, count)
+            out.append(bound.frame(f, index, steps, relax))
+    finally:
+        bound.close()
+    return FrameStates(anim, out, base_path)
+
+
+def _physics(own: int | None, editor: Any, default: int) -> int:
+    if own is not None:
+        return own
+    if isinstance(editor, int) and not isinstance(editor, bool) and 0 <= editor <= 10000:
+        return editor
+    return default
+
+
+def _find_warp(scene: Scene, cls: type, what: str, target: str) -> int:
+    hits = [n for n, w in enumerate(scene.warps) if isinstance(w, cls)]
+    if len(hits) != 1:
+        raise AnimationError(
+            f"track {target} needs a scene with exactly one {what} warp; this scene has"
+            f" {len(hits)} (warps: {[w.kind for w in scene.warps]})"
+        )
+    return hits[0]
+
+
+class _Bound:
+    """An animation bound to its scene: resolved key values and the physics model."""
+
+    def __init__(self, base: Scene, template: dict[str, Any], anim: Animation) -> None:
+        self.base = base
+        self.template = template
+        self.tracks: list[tuple[Track, list[tuple[float, Any]]]] = []
+        self.model: Any = None
+        self.model_warp = -1
+        self.model_inverse: tuple[str, int] | None = None
+        self.wire_warp = -1
+        self.lattice_warp = -1
+        targets = {t.target for t in anim.tracks}
+        if targets & {"zoom", "fov"} and (base.camera is not None or "camera" in targets):
+            raise AnimationError(
+                "zoom and fov tracks refit the camera of a scene without one; this scene has"
+                " an explicit camera or a camera track: key the camera's distance/fov instead"
+            )
+        #: the held camera of a scene without an explicit one (see the module doc)
+        self.camera = base.resolved_camera()
+        try:
+            for t in anim.tracks:
+                values: list[tuple[float, Any]] = []
+                for f, v in t.keys:
+                    first = values[0][1] if values else None
+                    values.append((f, self._resolve(t, v, f, first)))
+                self.tracks.append((t, values))
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        if self.model is not None:
+            self.model.close()
+            self.model = None
+
+    # -------------------------------------------------------------- key values
+    def _resolve(self, t: Track, v: Any, f: float, first: Any) -> Any:
+        what = f"track {t.target}, key at frame {f:g}"
+        try:
+            return self._resolve_value(t, v, what, first)
+        except AnimationError:
+            raise
+        except (SceneError, ValueError, TypeError) as exc:
+            raise AnimationError(f"{what}: {exc}") from exc
+
+    def _resolve_value(self, t: Track, v: Any, what: str, first: Any) -> Any:
+        target = t.target
+        base = self.base
+        if target in SCALAR_TARGETS:
+            a = np.asarray(v, dtype=np.float64)
+            if target == "background" and a.shape == (3,):
+                a = np.append(a, 1.0)
+            return a
+        if target == "camera":
+            cam = self._camera(dict(v), what)
+            if first is not None and first.projection != cam.projection:
+                raise AnimationError(
+                    f"{what}: every camera key needs the same projection; {cam.projection}"
+                    f" here, {first.projection} in the first key"
+                )
+            return cam
+        if target == "transfer_function":
+            tf = TransferFunction.coerce(v, base.volume)
+            pts = np.asarray(tf.points, dtype=np.float64)
+            if first is not None and first.shape != pts.shape:
+                raise AnimationError(
+                    f"{what}: every transfer function key needs the same number of control"
+                    f" points to be interpolated; {len(pts)} here, {len(first)} in the first"
+                )
+            return pts
+        if target == "lattice.nodes":
+            from voxwarp.deform.lattice_warp import LatticeWarp
+
+            k = _find_warp(base, LatticeWarp, "lattice", target)
+            self.lattice_warp = k
+            w = base.warps[k]
+            shape = np.asarray(w.grid.nodes).shape
+            if isinstance(v, str) and v == "rest":
+                cells = [n - 1 for n in shape[:3]]
+                u = np.stack(
+                    np.meshgrid(*(np.linspace(0.0, 1.0, c + 1) for c in cells), indexing="ij"),
+                    -1,
+                )
+                return w.lo + u * (w.hi - w.lo)
+            a = np.asarray(v, dtype=np.float64)
+            if a.shape != shape:
+                raise AnimationError(
+                    f"{what}: lattice nodes must have the scene lattice's shape {shape};"
+                    f" got {a.shape}"
+                )
+            return a
+        if target == "elements.drag":
+            return self._drag_value(t, v, what)
+        m = _WIRE_TARGET.match(target)
+        assert m is not None
+        from voxwarp.deform.wires import Wire, WireFieldWarp
+
+        k = _find_warp(base, WireFieldWarp, "wires", target)
+        self.wire_warp = k
+        wires = self.template["warps"][k]["wires"]
+        i, part = int(m.group(1)), m.group(2)
+        if i >= len(wires):
+            raise AnimationError(
+                f"{what}: no wire {i}; the scene's wire warp has {len(wires)} wire(s)"
+                f" (indices 0..{len(wires) - 1})"
+            )
+        if part == "modified":
+            a = np.asarray(v, dtype=np.float64)
+        elif isinstance(v, int | float):
+            a = np.array([[0.0, float(v)]])
+        else:
+            a = np.asarray(v, dtype=np.float64)
+        if first is not None and first.shape != a.shape:
+            raise AnimationError(
+                f"{what}: every key of {target} needs the same shape to be interpolated;"
+                f" {a.shape} here, {first.shape} in the first key"
+            )
+        entry = dict(wires[i])
+        entry[part] = a.tolist()
+        Wire.from_dict(entry)  # validates: Bézier counts, u in [0, 1], scale > 0
+        return a
+
+    def _camera(self, v: dict[str, Any], what: str) -> Camera:
+        base = self.base
+        if "view" in v:
+            extra = set(v) - {"view", "zoom", "fov", "projection"}
+            if extra:
+                raise AnimationError(
+                    f"{what}: a view key takes view, zoom, fov and projection; got {sorted(extra)}"
+                )
+            view = v["view"]
+            view = tuple(view) if isinstance(view, list) else view
+            scene = base.copy(
+                camera=None,
+                view=view,
+                zoom=v.get("zoom", base.zoom),
+                fov=v.get("fov", base.fov),
+                projection=v.get("projection", base.projection),
+            )
+            cam = scene.resolved_camera()
+        else:
+            unknown = set(v) - set(Camera.__dataclass_fields__)
+            if unknown:
+                raise AnimationError(
+                    f"{what}: unknown camera keys {sorted(unknown)}; allowed:"
+                    f" {', '.join(Camera.__dataclass_fields__)} (or a view key)"
+                )
+            cam = Camera.from_dict({**self.camera.to_dict(), **v})
+        return cam
+
+    def _drag_value(self, t: Track, v: Any, what: str) -> Any:
+        from voxwarp.deform.chainmail import ChainMail
+        from voxwarp.deform.massspring import MassSpring
+        from voxwarp.deform.offset_field import OffsetFieldWarp
+
+        if self.model is None:
+            hits = [
+                n
+                for n, w in enumerate(self.base.warps)
+                if isinstance(w, OffsetFieldWarp)
+                and isinstance(w.model_state, Mapping)
+                and w.model_state.get("type") in ("massspring", "chainmail")
+            ]
+            if len(hits) != 1:
+                raise AnimationError(
+                    "track elements.drag needs a scene with exactly one mass-spring or ChainMail"
+                    f" model (an offset_field warp saved with its model); this scene has"
+                    f" {len(hits)}: save one from the editor or with `voxwarp render"
+                    " --massspring/--chainmail ... --save-scene`"
+                )
+            k = hits[0]
+            w = self.base.warps[k]
+            cls = MassSpring if w.model_state["type"] == "massspring" else ChainMail
+            self.model = cls.from_warp(w)
+            if isinstance(self.model, ChainMail):
+                self.model.relax_steps = 0  # relax_steps per frame run in frame()
+            self.model_warp = k
+            self.model_inverse = (w.inverse, w.iterations)
+        self.model.grid.indices(np.asarray(t.elements))  # inside the grid?
+        if v is None:
+            return None
+        a = np.asarray(v, dtype=np.float64)
+        return np.broadcast_to(a, (len(t.elements or []), 3)).copy()
+
+    # -------------------------------------------------------------- frames
+    def frame(self, f: float, index: int, steps: int, relax: int) -> dict[str, Any]:
+        """Scene dict of animation time ``f`` (advances the physics by one frame)."""
+        from voxwarp.deform.massspring import MassSpring
+
+        d = dict(self.template)
+        d["warps"] = list(self.template["warps"])
+        d["camera"] = self.camera.to_dict()
+        wire_entry: dict[str, Any] | None = None
+        refit: dict[str, Any] = {}
+        drags: list[tuple[np.ndarray, Any]] = []
+        for t, keys in self.tracks:
+            target = t.target
+            if target == "elements.drag":
+                drags.append((np.asarray(t.elements), _drag_at(keys, f, t.interpolation)))
+            elif target == "camera":
+                d["camera"] = interpolate_camera(keys, f, t.interpolation).to_dict()
+            elif target == "transfer_function":
+                pts = interpolate(keys, f, t.interpolation)
+                d["transfer_function"] = {
+                    "name": self.base.transfer_function.name,
+                    "points": pts.tolist(),
+                }
+            elif target in SCALAR_TARGETS:
+                a = interpolate(keys, f, t.interpolation)
+                value = float(a) if a.ndim == 0 else a.tolist()
+                if target in ("zoom", "fov"):
+                    refit[target] = value
+                d[target] = value
+            elif target == "lattice.nodes":
+                entry = dict(d["warps"][self.lattice_warp])
+                entry["grid"] = {"nodes": interpolate(keys, f, t.interpolation).tolist()}
+                d["warps"][self.lattice_warp] = entry
+            else:
+                m = _WIRE_TARGET.match(target)
+                assert m is not None
+                if wire_entry is None:
+                    wire_entry = copy.deepcopy(d["warps"][self.wire_warp])
+                    d["warps"][self.wire_warp] = wire_entry
+                value = interpolate(keys, f, t.interpolation)
+                wire_entry["wires"][int(m.group(1))][m.group(2)] = value.tolist()
+        if refit:
+            d["camera"] = self.base.copy(camera=None, **refit).resolved_camera().to_dict()
+        if self.model is not None:
+            try:
+                for elements, offsets in drags:
+                    if offsets is None:
+                        self.model.release(elements)
+                    else:
+                        self.model.move(elements, offsets)
+                if isinstance(self.model, MassSpring):
+                    self.model.step(steps)
+                else:
+                    self.model.relax(relax)
+            except (ValueError, TypeError) as exc:
+                raise AnimationError(f"frame {index}: elements.drag: {exc}") from exc
+            assert self.model_inverse is not None
+            inverse, iterations = self.model_inverse
+            warp = self.model.warp(inverse=inverse, iterations=iterations)
+            d["warps"][self.model_warp] = warp.to_dict()
+        self._check_frame(d, index)
+        return d
+
+    def _check_frame(self, d: dict[str, Any], index: int) -> None:
+        """Cheap checks of a frame's interpolated values (no volume, no wire field)."""
+        from voxwarp.deform.lattice_warp import LatticeWarp
+        from voxwarp.deform.wires import Wire
+
+        try:
+            Camera.from_dict(d["camera"])
+            if isinstance(d.get("transfer_function"), Mapping):
+                TransferFunction.from_dict(d["transfer_function"])
+            self.base.copy(
+                **{k: d[k] for k in ("step", "zoom", "fov", "window", "clip_box") if k in d},
+                background=tuple(d["background"]),
+            )
+            if self.lattice_warp >= 0:
+                LatticeWarp.from_dict(d["warps"][self.lattice_warp])
+            if self.wire_warp >= 0:
+                for w in d["warps"][self.wire_warp]["wires"]:
+                    Wire.from_dict(w)
+        except (SceneError, ValueError, TypeError) as exc:
+            raise AnimationError(f"frame {index}: {exc}") from exc
+
+
+def _drag_at(keys: Sequence[tuple[float, Any]], f: float, interpolation: str) -> Any:
+    """Offsets of a drag track at ``f`` (None: released); steps across null keys."""
+    i, j, t = key_weights([k[0] for k in keys], f, interpolation)
+    a, b = keys[i][1], keys[j][1]
+    if t == 0.0 or a is None or b is None:
+        return None if a is None else np.array(a, dtype=np.float64)
+    return a + t * (b - a)

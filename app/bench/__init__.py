@@ -1,0 +1,1 @@
+"""Benchmarks (``voxwarp bench ...``). Product code never imports this package."""

@@ -1,0 +1,213 @@
+"""``voxwarp bench interactive``: what the desktop GUI's frames cost while editing.
+
+For each deformation family the GUI edits (none, mass-spring, ChainMail, wires,
+lattice), one edit is made through :class:`voxwarp.editing.session.EditSession` on the bundled CT
+(an element dragged and the model settled, a wire control point moved, a lattice node
+moved), then the frame is timed the ways the GUI draws it:
+
+* ``interactive``: half resolution with per-block checks (while dragging: the warp
+  state changes every frame, no skip maps);
+* ``rest, no maps``: full resolution with per-block checks (what a naive viewer draws
+  when the motion stops);
+* ``rest, maps``: full resolution with the deformed-space skip maps (what the GUI
+  draws once its worker thread built them), and the seconds that build took.
+
+Every time is also given as a ratio to the undeformed full-resolution frame measured
+in the same run (these machines are shared; ratios hold better than times).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.checks import image_size, positive_int
+from voxwarp.editing.session import EditSession
+from voxwarp.io.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
+from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.scene import Scene
+
+FAMILIES = ("none", "massspring", "chainmail", "wires", "lattice")
+
+
+@dataclass
+class InteractiveRow:
+    """Timings (ms) of one deformation family."""
+
+    family: str
+    interactive_ms: float
+    rest_blocks_ms: float
+    rest_cells_ms: float
+    maps_s: float
+    edit: str
+
+
+@dataclass
+class InteractiveReport:
+    """The rows, the image size and the reference frame."""
+
+    size: tuple[int, int]
+    reference_ms: float
+    rows: list[InteractiveRow] = field(default_factory=list)
+    renderer: str = ""
+
+    def markdown(self, command: str) -> str:
+        """The table, with the command that produced it."""
+        w, h = self.size
+        ref = self.reference_ms
+        lines = [
+            f"`{command}` — {self.renderer}, {w}x{h}, bundled CT, median frame times;"
+            f" ratios against the undeformed full-resolution frame ({ref:.0f} ms)",
+            "",
+            "| deformation | edit | interactive (half res) | at rest, block checks |"
+            " at rest, skip maps | skip maps built in |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in self.rows:
+            lines.append(
+                f"| {r.family} | {r.edit} | {r.interactive_ms:.0f} ms"
+                f" ({r.interactive_ms / ref:.2f}x) | {r.rest_blocks_ms:.0f} ms"
+                f" ({r.rest_blocks_ms / ref:.2f}x) | {r.rest_cells_ms:.0f} ms"
+                f" ({r.rest_cells_ms / ref:.2f}x) | {r.maps_s:.2f} s |"
+            )
+        return "\n".join(lines) + "\n"
+
+
+def _edit(session: EditSession, family: str) -> str:
+    """Make the family's benchmark edit; returns what was done."""
+    lo, hi = session.box
+    size = hi - lo
+    if family in ("massspring", "chainmail"):
+        session.set_deformation(family, resolution=8)
+        model = session.model
+        assert model is not None
+        shape = model.grid.shape
+        idx = (shape[0] // 2, shape[1] // 2, shape[2] // 2)
+        offset = (0.2 * size[0], 0.0, 0.1 * size[2])
+        model.move(idx, offset)
+        if family == "massspring":
+            model.settle(max_steps=3000)
+        session.model_moved()
+        return f"middle element of 8³ dragged {np.linalg.norm(offset):.0f} mm"
+    if family == "wires":
+        session.set_deformation("wires")
+        wire = session.wires[0]
+        pts = wire.modified.control_points.copy()
+        pts[2, 0] += 0.25 * size[0]
+        session.set_wire_points(0, pts)
+        job = session.wire_build()
+        job.run()
+        session.install_wire_build(job)
+        return f"control point 3 of 4 moved {0.25 * size[0]:.0f} mm"
+    if family == "lattice":
+        session.set_deformation("lattice", resolution=4)
+        nodes = session.lattice_nodes
+        assert nodes is not None
+        nodes = nodes.copy()
+        nodes[1, 1, 2, 0] += 0.2 * size[0]
+        session.set_lattice_nodes(nodes)
+        return f"node (1, 1, 2) of 3³ cells moved {0.2 * size[0]:.0f} mm"
+    session.set_deformation("none")
+    return "-"
+
+
+def _median_ms(fn: Any, frames: int) -> float:
+    times = []
+    for _ in range(frames):
+        t = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - t) * 1000)
+    return statistics.median(times)
+
+
+def bench_interactive(
+    size: tuple[int, int] = (750, 830),
+    frames: int = 5,
+    families: tuple[str, ...] = FAMILIES,
+    log: Any = None,
+) -> InteractiveReport:
+    """Time the GUI's frames per deformation family (see the module docstring)."""
+    vol = load_sample(DEFAULT_SAMPLE)
+    tf = suggested_transfer_function(DEFAULT_SAMPLE)
+    with OffscreenRenderer(*size) as r:
+        rr = r.renderer
+
+        def draw(scene: Scene, scale: float) -> None:
+            with r._current():
+                rr.draw_scaled(scene, r.framebuffer, None, None, scale)
+                r.ctx.finish()
+
+        base = Scene(vol, transfer_function=tf, view=(-60, 20), zoom=1.2, jitter=False)
+        draw(base, 1.0)
+        report = InteractiveReport(size, _median_ms(lambda: draw(base, 1.0), frames))
+        report.renderer = str(r.ctx.info.get("GL_RENDERER", ""))
+        for family in families:
+            session = EditSession(base.copy(warps=[]))
+            edit = _edit(session, family)
+            scene = session.scene
+            rr.warped_skip_maps = "never"
+            draw(scene, 0.5)
+            interactive = _median_ms(lambda s=scene: draw(s, 0.5), frames)
+            rest_blocks = _median_ms(lambda s=scene: draw(s, 1.0), frames)
+            rr.warped_skip_maps = "background"
+            maps_s = 0.0
+            if rr.needs_skip_maps(scene):
+                draw(scene, 1.0)
+                wanted = rr.skip_map_job()
+                if wanted is not None:
+                    t = time.perf_counter()
+                    result = wanted[1]()
+                    maps_s = time.perf_counter() - t
+                    rr.install_skip_map(wanted[0], result)
+            draw(scene, 1.0)
+            rest_cells = _median_ms(lambda s=scene: draw(s, 1.0), frames)
+            rr.warped_skip_maps = "auto"
+            row = InteractiveRow(family, interactive, rest_blocks, rest_cells, maps_s, edit)
+            report.rows.append(row)
+            if log:
+                log(
+                    f"{family}: interactive {interactive:.0f} ms, rest {rest_blocks:.0f} ms"
+                    f" (blocks) / {rest_cells:.0f} ms (maps, built in {maps_s:.2f} s)"
+                )
+            session.close()
+    return report
+
+
+def cmd_bench_interactive(args: argparse.Namespace) -> int:
+    """``voxwarp bench interactive``."""
+    from pathlib import Path
+
+    from voxwarp.core.files import atomic_write_text
+
+    report = bench_interactive(
+        size=args.size, frames=args.frames, log=lambda s: print(s, file=sys.stderr)
+    )
+    text = report.markdown(
+        "voxwarp bench interactive"
+        + "".join(
+            f" {a}" for a in (sys.argv[3:] if sys.argv[1:3] == ["bench", "interactive"] else [])
+        )
+    )
+    print(text)
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
+def add_bench_interactive_parser(bsub: Any) -> None:
+    """Add ``interactive`` to the ``bench`` sub-commands."""
+    p = bsub.add_parser(
+        "interactive",
+        help="the GUI's frame costs while editing each deformation family",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    )
+    p.add_argument("--size", type=image_size, default=(750, 830), help="viewport WxH")
+    p.add_argument("--frames", type=positive_int, default=5, help="timed frames per case")
+    p.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    p.set_defaults(func=cmd_bench_interactive)

@@ -1,0 +1,389 @@
+"""``voxwarp bench massspring``: mass-spring steps per second, CPU, GPU and taichi.
+
+For each grid size ``n`` (n³ elements, by default 16, 32, 64 and 128) the same model is
+stepped by three solvers in one process:
+
+* ``numpy``: :class:`voxwarp.deform.massspring.CpuSpringSolver` (float64, vectorised numpy),
+  through ``MassSpring(backend="cpu")``;
+* ``gpu``: :class:`voxwarp.deform.massspring_gpu.GpuSpringSolver` (float32 fragment shaders)
+  through ``MassSpring(backend="gpu")`` on a standalone EGL context (on a machine
+  without a GPU: Mesa llvmpipe);
+* ``taichi``: :class:`voxwarp.bench.taichi.TaichiSpringSolver` (float32, taichi's CPU
+  backend on all cores), when ``taichi`` is installed (extra ``[bench]``).
+
+Model (the defaults of :class:`voxwarp.deform.massspring.MassSpring`): structural springs, an
+``ElementGrid`` over a 100 mm box with its 8 corners fixed, default materials, the
+explicit integrator at its stable time step, the displacement clamp at half the
+spacing; the centre element is dragged 10 mm along +z so the whole grid is in motion.
+
+Timing: per backend, two steps first (shader / JIT compilation, both ping-pong
+directions), then two timed steps to size its blocks: a block is ``steps`` steps, fewer
+where one block would take longer than ``max_block_s`` (128³ on numpy), never fewer
+than 1. Then ``repeats`` rounds, each timing one block of every backend in turn
+(numpy, taichi, GPU), so that a change in the machine's load affects all alike; each
+block is bound by ``ctx.finish()`` (GPU) or ``ti.sync()`` (taichi). A rate is steps /
+block seconds; the report gives the median (and min, max) over the blocks and the
+ratios ``gpu / taichi`` and ``gpu / numpy`` of the medians, all from the same run.
+"""
+
+from __future__ import annotations
+
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from voxwarp.bench.render import cpu_count, load_average
+
+#: the benchmark's grid sizes (elements per axis)
+DEFAULT_SIZES: tuple[int, ...] = (16, 32, 64, 128)
+#: the box the element grid spans (mm)
+BOX: tuple[tuple[float, float, float], tuple[float, float, float]] = (
+    (0.0, 0.0, 0.0),
+    (100.0, 100.0, 100.0),
+)
+#: drag of the centre element (mm)
+DRAG_MM: tuple[float, float, float] = (0.0, 0.0, 10.0)
+#: backends in report order, and their names in the table
+BACKENDS: tuple[str, ...] = ("numpy", "gpu", "taichi")
+BACKEND_NAMES: dict[str, str] = {
+    "numpy": "numpy CPU",
+    "gpu": "GPU",
+    "taichi": "taichi CPU",
+}
+
+
+@dataclass
+class SpringBenchRow:
+    """Timings of one backend at one grid size (rates 0 when skipped; see ``note``)."""
+
+    size: int
+    backend: str
+    steps: int
+    repeats: int
+    median_sps: float
+    min_sps: float
+    max_sps: float
+    note: str = ""
+
+
+@dataclass
+class SpringBenchReport:
+    """All rows of one ``bench massspring`` run and its setting."""
+
+    sizes: tuple[int, ...]
+    steps: int
+    repeats: int
+    integrator: str
+    dt: float
+    max_step_fraction: float
+    springs: int
+    gl_renderer: str
+    taichi: str
+    rows: list[SpringBenchRow] = field(default_factory=list)
+    #: 1-minute load average of the machine before and after the run (-1: unknown)
+    load: tuple[float, float] = (-1.0, -1.0)
+
+    def find(self, size: int, backend: str) -> SpringBenchRow | None:
+        """The row of ``backend`` at ``size`` (None if absent or skipped)."""
+        for r in self.rows:
+            if r.size == size and r.backend == backend and r.median_sps > 0:
+                return r
+        return None
+
+    def ratio(self, size: int, backend: str, reference: str) -> float | None:
+        """Median steps/s of ``backend`` over that of ``reference`` at ``size``."""
+        a, b = self.find(size, backend), self.find(size, reference)
+        if a is None or b is None:
+            return None
+        return a.median_sps / b.median_sps
+
+    def notes(self, size: int) -> list[str]:
+        """Skip notes of the backends at ``size``."""
+        return [
+            f"{BACKEND_NAMES[r.backend]}: {r.note}" for r in self.rows if r.size == size and r.note
+        ]
+
+    def markdown(self, command: str) -> str:
+        """A markdown table of the run, headed by the command that produced it."""
+        taichi = f"taichi {self.taichi} (float32, CPU backend)" if self.taichi else "no taichi"
+        lines = [
+            f"Command: `{command}`",
+            "",
+            f"Model: {self.springs} structural springs per element; n³ elements over a"
+            " 100 mm box (corners fixed), default materials (stiffness 0.5, damping 1/s,"
+            " mass 1), spring constant 50, spring damping 0.5; "
+            f"{self.integrator} Euler at the stable dt {self.dt * 1000:.2f} ms, clamp"
+            f" {self.max_step_fraction:g} x spacing; the centre element dragged 10 mm"
+            " along +z.",
+            "",
+            "Rates: steps/s, median (min–max) of the timed blocks after warm-up (the"
+            " backends' blocks taking turns); a"
+            " block is `steps x blocks` steps (fewer steps per block where one block"
+            " would take over 2 s); GPU blocks end with `ctx.finish()`, taichi blocks"
+            f" with `ti.sync()`. GL: {self.gl_renderer}; CPU:"
+            f" {platform.processor() or platform.machine()}, {cpu_count()} cores;"
+            f" numpy {np.__version__} (float64);"
+            f" {taichi};"
+            f" 1-minute load average before / after the run {self.load[0]:.2f} /"
+            f" {self.load[1]:.2f}.",
+            "",
+            "| grid | numpy CPU steps/s | GPU steps/s | taichi CPU steps/s"
+            " | GPU / taichi | GPU / numpy | steps x blocks (numpy, GPU, taichi) |",
+            "|---|---:|---:|---:|---:|---:|---|",
+        ]
+        for n in self.sizes:
+            cells = []
+            blocks = []
+            for b in BACKENDS:
+                r = self.find(n, b)
+                cells.append(_rate(r))
+                blocks.append(f"{r.steps}x{r.repeats}" if r else "—")
+            gt = self.ratio(n, "gpu", "taichi")
+            gn = self.ratio(n, "gpu", "numpy")
+            lines.append(
+                f"| {n}³ | {' | '.join(cells)} | {_ratio(gt)} | {_ratio(gn)}"
+                f" | {', '.join(blocks)} |"
+            )
+        notes = [f"{n}³ {note}" for n in self.sizes for note in self.notes(n)]
+        if notes:
+            lines += ["", *(f"* {s}" for s in notes)]
+        return "\n".join(lines) + "\n"
+
+
+def _rate(r: SpringBenchRow | None) -> str:
+    if r is None:
+        return "—"
+    return f"{_num(r.median_sps)} ({_num(r.min_sps)}–{_num(r.max_sps)})"
+
+
+def _num(x: float) -> str:
+    return f"{x:.1f}" if x < 100 else f"{x:.0f}"
+
+
+def _ratio(x: float | None) -> str:
+    return f"{x:.2f}x" if x is not None else "—"
+
+
+def block_size(
+    step: Callable[[int], None],
+    finish: Callable[[], None],
+    *,
+    steps: int,
+    max_block_s: float = 2.0,
+) -> int:
+    """Warm ``step`` up and choose its block size (see the module doc).
+
+    Parameters
+    ----------
+    step
+        ``step(n)`` advances n steps (may return before the work is done).
+    finish
+        Waits until all work launched so far is done.
+    steps
+        Most steps per block.
+    max_block_s
+        A block has fewer steps than ``steps`` where it would take longer than this
+        (estimated from two timed steps after warm-up), and at least 1.
+    """
+    step(2)  # compile / JIT / first draw, both directions of a ping-pong
+    finish()
+    t = time.perf_counter()
+    step(2)
+    finish()
+    one = max(time.perf_counter() - t, 1e-9) / 2
+    return max(1, min(int(steps), int(max_block_s / one)))
+
+
+def time_block(step: Callable[[int], None], finish: Callable[[], None], block: int) -> float:
+    """Steps per second of one block of ``block`` steps, bound by ``finish()``."""
+    t = time.perf_counter()
+    step(block)
+    finish()
+    return block / (time.perf_counter() - t)
+
+
+@dataclass
+class _Runner:
+    backend: str
+    step: Callable[[int], None]
+    finish: Callable[[], None]
+    close: Callable[[], None]
+    block: int = 0
+    rates: list[float] = field(default_factory=list)
+
+
+def _grid(n: int) -> Any:
+    from voxwarp.deform.elements import ElementGrid
+
+    return ElementGrid(BOX, shape=n)
+
+
+def _centre(n: int) -> tuple[int, int, int]:
+    return (n // 2, n // 2, n // 2)
+
+
+def _dragged_mass_spring(n: int, backend: str = "cpu", ctx: Any = None) -> Any:
+    """The benchmark's ``MassSpring`` of an n³ grid, centre element dragged."""
+    from voxwarp.deform.massspring import MassSpring
+
+    ms = MassSpring(_grid(n), backend=backend, ctx=ctx)
+    ms.move(_centre(n), DRAG_MM)
+    return ms
+
+
+def _constraints(ms: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Pinned elements and their targets of the benchmark's drag (as MassSpring has them)."""
+    n = ms.grid.shape[0]
+    pinned = ms.grid.fixed | ms.held
+    targets = np.array(ms.model.rest, dtype=np.float64)
+    targets[_centre(n)] += DRAG_MM
+    return pinned, targets
+
+
+def _row(size: int, backend: str, block: int, rates: list[float], note: str = "") -> SpringBenchRow:
+    return SpringBenchRow(
+        size,
+        backend,
+        block,
+        len(rates),
+        statistics.median(rates),
+        min(rates),
+        max(rates),
+        note,
+    )
+
+
+def bench_massspring(
+    sizes: tuple[int, ...] = DEFAULT_SIZES,
+    *,
+    steps: int = 50,
+    repeats: int = 5,
+    use_taichi: bool = True,
+    use_gpu: bool = True,
+    ctx: Any = None,
+    max_block_s: float = 2.0,
+    log: Any = print,
+) -> SpringBenchReport:
+    """Time the numpy, GPU and taichi solvers on the benchmark model (see the module doc).
+
+    Parameters
+    ----------
+    sizes
+        Elements per axis of each grid (2..128).
+    steps
+        Most steps per timed block.
+    repeats
+        Timed blocks per backend and size.
+    use_taichi
+        Time the taichi solver (skipped with a note when taichi is not installed).
+    use_gpu
+        Time the GPU solver (skipped with a note when no OpenGL 4.3 context can be made).
+    ctx
+        moderngl context of the GPU solver, made current by the caller; by default a
+        standalone EGL context is created (and released at the end).
+    max_block_s
+        Longest block (s): see :func:`block_size`.
+    log
+        Progress messages go here.
+    """
+    from voxwarp.bench import taichi as bench_taichi
+
+    probe = _dragged_mass_spring(2)
+    report = SpringBenchReport(
+        sizes=tuple(int(n) for n in sizes),
+        steps=int(steps),
+        repeats=int(repeats),
+        integrator=probe.integrator,
+        dt=probe.dt,
+        max_step_fraction=probe.max_step / float(np.min(probe.grid.spacing)),
+        springs=len(probe.model.offsets),
+        gl_renderer="not used",
+        taichi="",
+    )
+    load_start = load_average()
+    own_ctx = False
+    gpu_skip = "" if use_gpu else "skipped (not asked for)"
+    if use_gpu and ctx is None:
+        from voxwarp.errors import RenderError
+        from voxwarp.render.raycaster import create_context
+
+        try:
+            ctx = create_context()
+            own_ctx = True
+        except RenderError as exc:
+            gpu_skip = f"skipped: {exc}"
+    if ctx is not None and not gpu_skip:
+        report.gl_renderer = str(ctx.info.get("GL_RENDERER", "?"))
+    taichi_skip = "" if use_taichi else "skipped (--no-taichi)"
+    if use_taichi and not bench_taichi.taichi_available():
+        taichi_skip = "skipped: taichi not installed (pip install '.[bench]')"
+    if not taichi_skip:
+        report.taichi = bench_taichi.taichi_version()
+    try:
+        for n in report.sizes:
+            report.rows += _bench_size(
+                n, ctx, gpu_skip, taichi_skip, steps, repeats, max_block_s, log
+            )
+    finally:
+        if own_ctx:
+            ctx.release()
+    report.load = (load_start, load_average())
+    if taichi_skip:
+        log(f"taichi rows {taichi_skip}")
+    return report
+
+
+def _bench_size(
+    n: int,
+    ctx: Any,
+    gpu_skip: str,
+    taichi_skip: str,
+    steps: int,
+    repeats: int,
+    max_block_s: float,
+    log: Any,
+) -> list[SpringBenchRow]:
+    """Rows of the three backends at n³, their timed blocks interleaved.
+
+    The blocks take turns (numpy, taichi, GPU, numpy, ...), so that a change of the
+    machine's load during the run affects every backend alike.
+    """
+    from voxwarp.bench import taichi as bench_taichi
+
+    runners: list[_Runner] = []
+    skipped: list[SpringBenchRow] = []
+    try:
+        ms = _dragged_mass_spring(n)
+        runners.append(_Runner("numpy", ms.step, lambda: None, ms.close))
+        if taichi_skip:
+            skipped.append(SpringBenchRow(n, "taichi", 0, 0, 0, 0, 0, taichi_skip))
+        else:  # the same model and constraints
+            solver = bench_taichi.make_taichi_solver(ms.model)
+            solver.set_constraints(*_constraints(ms))
+            runners.append(_Runner("taichi", solver.step, solver.sync, solver.release))
+        if gpu_skip:
+            skipped.append(SpringBenchRow(n, "gpu", 0, 0, 0, 0, 0, gpu_skip))
+        else:
+            gms = _dragged_mass_spring(n, "gpu", ctx)
+            runners.append(_Runner("gpu", gms.step, ctx.finish, gms.close))
+        for r in runners:
+            r.block = block_size(r.step, r.finish, steps=steps, max_block_s=max_block_s)
+        for _ in range(int(repeats)):
+            for r in runners:
+                r.rates.append(time_block(r.step, r.finish, r.block))
+    finally:
+        for r in runners:
+            r.close()
+    rows = [_row(n, r.backend, r.block, r.rates) for r in runners] + skipped
+    for row in rows:
+        if row.median_sps > 0:
+            log(
+                f"{n}³ {BACKEND_NAMES[row.backend]}: {row.median_sps:.1f} steps/s"
+                f" ({row.steps} steps x {row.repeats})"
+            )
+    return rows

@@ -1,0 +1,379 @@
+"""``voxwarp bench render``: raycaster speed against references measured in the same run.
+
+Renders one 256³ volume (by default the bundled real CT ``stent``, upsampled x2 in x
+and y to 256³) at 512x512 in ``dvr`` and ``mip``, and reports the median of ``frames``
+frames after warm-up, each bound by ``ctx.finish()``. References in the same process:
+
+* voxwarp with empty-space skipping off (what skipping buys);
+* VTK's ``vtkFixedPointVolumeRayCastMapper`` (CPU) and ``vtkGPUVolumeRayCastMapper``
+  (on whatever OpenGL the machine has), when ``vtk`` is installed (extra ``[bench]``),
+  with the same array, transfer function, sample distance, image size and camera.
+
+Ratios are ``reference time / voxwarp time`` (above 1: voxwarp is faster).
+"""
+
+from __future__ import annotations
+
+import platform
+import statistics
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.camera import Camera
+from voxwarp.core.volume import Volume
+from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.scene import Scene
+
+
+@dataclass
+class BenchRow:
+    """One timed configuration."""
+
+    renderer: str
+    mode: str
+    median_ms: float
+    min_ms: float
+    note: str = ""
+
+
+@dataclass
+class BenchReport:
+    """All rows of one benchmark run plus its setting."""
+
+    volume: str
+    shape: tuple[int, int, int]
+    size: tuple[int, int]
+    step: float
+    frames: int
+    gl_renderer: str
+    rows: list[BenchRow] = field(default_factory=list)
+
+    def find(self, renderer: str, mode: str) -> BenchRow | None:
+        """The row of ``renderer`` in ``mode`` (None if absent or skipped)."""
+        for r in self.rows:
+            if r.renderer == renderer and r.mode == mode and r.median_ms > 0:
+                return r
+        return None
+
+    def ratio(self, reference: str, mode: str) -> float | None:
+        """``reference`` median / voxwarp median for ``mode``."""
+        ours, ref = self.find("voxwarp", mode), self.find(reference, mode)
+        if ours is None or ref is None:
+            return None
+        return ref.median_ms / ours.median_ms
+
+    def markdown(self, command: str) -> str:
+        """A markdown table of the run, headed by the command that produced it."""
+        lines = [
+            f"Command: `{command}`",
+            "",
+            f"Volume: {self.volume} {self.shape[0]}x{self.shape[1]}x{self.shape[2]},"
+            f" image {self.size[0]}x{self.size[1]}, sample distance {self.step} voxel,"
+            f" median of {self.frames} frames after warm-up; GL: {self.gl_renderer};"
+            f" CPU: {platform.processor() or platform.machine()}",
+            "",
+            "| renderer | mode | median ms | min ms | voxwarp speed-up | note |",
+            "|---|---|---:|---:|---:|---|",
+        ]
+        for r in self.rows:
+            ratio = self.ratio(r.renderer, r.mode) if r.renderer != "voxwarp" else 1.0
+            med = f"{r.median_ms:.1f}" if r.median_ms > 0 else "—"
+            mn = f"{r.min_ms:.1f}" if r.min_ms > 0 else "—"
+            rs = f"{ratio:.2f}x" if ratio else "—"
+            lines.append(f"| {r.renderer} | {r.mode} | {med} | {mn} | {rs} | {r.note} |")
+        return "\n".join(lines) + "\n"
+
+
+def cpu_count() -> int:
+    """CPU cores this process may run on (for the benchmark reports)."""
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def load_average() -> float:
+    """The 1-minute load average (-1 where the platform has none): benchmark reports
+    record it before and after a run, since these machines are shared."""
+    import os
+
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):  # not available on this platform
+        return -1.0
+
+
+def benchmark_volume(volume: Volume | None = None) -> Volume:
+    """The benchmark volume: ``volume``, or the real CT ``stent`` upsampled to 256³."""
+    if volume is not None:
+        return volume
+    from scipy.ndimage import zoom
+
+    from voxwarp.io.samples import load_sample
+
+    stent = load_sample("stent")
+    factors = [256 / s for s in stent.shape]
+    data = zoom(stent.data.astype(np.float32), factors, order=1)
+    data = np.clip(np.rint(data), 0, 255).astype(np.uint8)
+    spacing = tuple(sp / f for sp, f in zip(stent.spacing, factors, strict=True))
+    return Volume(data, spacing, name="stent CT (real scan, trilinearly upsampled to 256³)")
+
+
+def bench_camera(volume: Volume) -> Camera:
+    """Oblique perspective camera (30° field of view) with the volume filling the image."""
+    lo, hi = volume.bounds
+    return Camera.fit(lo, hi, view=(30.0, 20.0), projection="perspective", fov=30.0, zoom=1.6)
+
+
+def bench_render(
+    volume: Volume | None = None,
+    *,
+    size: tuple[int, int] = (512, 512),
+    frames: int = 10,
+    warmup: int = 2,
+    modes: tuple[str, ...] = ("dvr", "mip"),
+    step: float = 1.0,
+    transfer_function: Any = None,
+    use_vtk: bool = True,
+    log: Any = print,
+) -> BenchReport:
+    """Time voxwarp and the references on one volume (see the module docstring)."""
+    vol = benchmark_volume(volume)
+    if transfer_function is None:
+        from voxwarp.io.samples import suggested_transfer_function
+
+        transfer_function = suggested_transfer_function("stent" if volume is None else vol.name)
+    cam = bench_camera(vol)
+    scenes = {
+        m: Scene(vol, mode=m, transfer_function=transfer_function, step=step, camera=cam)
+        for m in modes
+    }
+    with OffscreenRenderer(*size) as r:
+        report = BenchReport(
+            volume=vol.name,
+            shape=vol.shape,
+            size=size,
+            step=step,
+            frames=frames,
+            gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
+        )
+        for m, scene in scenes.items():
+            t = r.time_frames(scene, frames=frames, warmup=warmup)
+            report.rows.append(BenchRow("voxwarp", m, statistics.median(t), min(t)))
+            log(f"voxwarp {m}: {statistics.median(t):.1f} ms")
+        r.renderer.empty_space_skipping = False
+        for m, scene in scenes.items():
+            t = r.time_frames(scene, frames=frames, warmup=warmup)
+            row = BenchRow("voxwarp, no skipping", m, statistics.median(t), min(t))
+            report.rows.append(row)
+            log(f"voxwarp without skipping {m}: {statistics.median(t):.1f} ms")
+        r.renderer.empty_space_skipping = True
+    if use_vtk:
+        _bench_vtk(report, vol, scenes, cam, size, frames, warmup, log)
+    return report
+
+
+def _bench_vtk(
+    report: BenchReport,
+    vol: Volume,
+    scenes: dict[str, Scene],
+    cam: Camera,
+    size: tuple[int, int],
+    frames: int,
+    warmup: int,
+    log: Any,
+) -> None:
+    from voxwarp.bench import vtk as bench_vtk
+
+    names = {"fixed_point": "VTK fixed-point (CPU)", "gpu": "VTK GPU raycaster"}
+    if not bench_vtk.vtk_available():
+        for name in names.values():
+            report.rows.append(BenchRow(name, "-", 0, 0, "skipped: pip install '.[bench]'"))
+        log("vtk not installed: VTK rows skipped (pip install '.[bench]')")
+        return
+    near, far = cam.near_far()
+    spec = bench_vtk.CameraSpec(
+        position=tuple(cam.eye),
+        focal_point=tuple(cam.center),
+        view_up=tuple(cam.rotation[:, 1]),
+        view_angle_deg=cam.fov,
+        parallel=False,
+        parallel_scale=cam.ortho_height / 2,
+        near=near,
+        far=far,
+    )
+    for mapper, name in names.items():
+        for m, scene in scenes.items():
+            try:
+                res = bench_vtk.render_vtk(
+                    vol.data,
+                    vol.spacing,
+                    vol.origin,
+                    list(scene.transfer_function.points),
+                    mapper=mapper,  # type: ignore[arg-type]
+                    mode=m,  # type: ignore[arg-type]
+                    sample_distance_mm=scene.sample_distance_mm,
+                    opacity_unit_distance_mm=scene.opacity_reference_mm,
+                    size=size,
+                    camera=spec,
+                    frames=frames,
+                    warmup=warmup,
+                )
+            except (RuntimeError, ValueError) as exc:
+                report.rows.append(BenchRow(name, m, 0, 0, f"skipped: {exc}"))
+                log(f"{name} {m}: skipped ({exc})")
+                continue
+            report.rows.append(BenchRow(name, m, res.median_ms, res.min_ms))
+            log(f"{name} {m}: {res.median_ms:.1f} ms")
+
+
+# ---------------------------------------------------------------------- deformed DVR
+@dataclass
+class WarpRenderReport:
+    """Deformed vs undeformed DVR timings of one run (see :func:`bench_warp_render`)."""
+
+    volume: str
+    shape: tuple[int, int, int]
+    size: tuple[int, int]
+    grid: tuple[int, int, int]
+    drag_mm: float
+    max_displacement_mm: float
+    frames: int
+    gl_renderer: str
+    rows: list[BenchRow] = field(default_factory=list)
+
+    def ratio(self, renderer: str) -> float | None:
+        """``renderer`` median / undeformed median (the cost of deforming; 1 = free)."""
+        ref = next((r for r in self.rows if r.renderer == "undeformed"), None)
+        row = next((r for r in self.rows if r.renderer == renderer), None)
+        if ref is None or row is None:
+            return None
+        return row.median_ms / ref.median_ms
+
+    def markdown(self, command: str) -> str:
+        """A markdown table of the run, headed by the command that produced it."""
+        lines = [
+            f"Command: `{command}`",
+            "",
+            f"Volume: {self.volume} {self.shape[0]}x{self.shape[1]}x{self.shape[2]},"
+            f" image {self.size[0]}x{self.size[1]}, dvr; mass-spring grid"
+            f" {'x'.join(map(str, self.grid))}, one element dragged {self.drag_mm:.1f} mm and"
+            f" settled (largest displacement {self.max_displacement_mm:.1f} mm); median of"
+            f" {self.frames} frames after warm-up; GL: {self.gl_renderer}",
+            "",
+            "| render | median ms | min ms | cost vs undeformed | note |",
+            "|---|---:|---:|---:|---|",
+        ]
+        for r in self.rows:
+            ratio = self.ratio(r.renderer)
+            rs = f"{ratio:.2f}x" if ratio else "—"
+            lines.append(f"| {r.renderer} | {r.median_ms:.1f} | {r.min_ms:.1f} | {rs} | {r.note} |")
+        return "\n".join(lines) + "\n"
+
+
+def bench_warp_render(
+    volume: Volume | None = None,
+    *,
+    size: tuple[int, int] = (512, 512),
+    frames: int = 10,
+    warmup: int = 2,
+    grid: int = 16,
+    drag_spacings: float = 1.5,
+    transfer_function: Any = None,
+    log: Any = print,
+) -> WarpRenderReport:
+    """Cost of rendering through the mass-spring offset-field warp (dvr).
+
+    A ``grid``³ :class:`~voxwarp.deform.massspring.MassSpring` (CPU; semi-implicit Euler, shear
+    springs, as ``voxwarp render --massspring``) over the benchmark volume has its
+    centre element dragged ``drag_spacings`` element spacings along x and
+    settled. Rows, in one process and on one context: the undeformed volume; the
+    offset warp with the ``approx`` inverse (the thesis' one fetch per sample), the
+    ``baked`` inverse (the default) and the ``exact`` inverse, each with deformed-space
+    empty-space skipping; and the ``exact`` warp with per-block checks only (what
+    skipping through deformed space buys).
+    """
+    from voxwarp.deform import ElementGrid, MassSpring
+    from voxwarp.deform.offset_field import OffsetFieldWarp
+
+    vol = benchmark_volume(volume)
+    if transfer_function is None:
+        from voxwarp.io.samples import suggested_transfer_function
+
+        transfer_function = suggested_transfer_function("stent" if volume is None else vol.name)
+    cam = bench_camera(vol)
+    elements = ElementGrid(vol, shape=(grid, grid, grid))
+    ms = MassSpring(elements, integrator="semi-implicit", shear=True)
+    drag = float(drag_spacings * elements.spacing[0])
+    centre = (grid // 2, grid // 2, grid // 2)
+    ms.move(centre, (drag, 0.0, 0.0))
+    ms.settle(max_steps=20000, tol=1e-3)
+    field_mm = ms.displacements()
+    base = Scene(vol, mode="dvr", transfer_function=transfer_function, camera=cam)
+    lo, hi = elements.lo, elements.hi
+    configs = [
+        ("undeformed", base, True, ""),
+        (
+            "offset warp, approx",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="approx")]),
+            True,
+            "1 field fetch per sample (thesis)",
+        ),
+        (
+            "offset warp, baked",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="baked")]),
+            True,
+            "default: seed from the inverse baked 4x finer + 1 step (2 fetches)",
+        ),
+        (
+            "offset warp, exact",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="exact")]),
+            True,
+            "fixed point from p, 6 steps (6 fetches)",
+        ),
+        (
+            "undeformed, no skipping",
+            base,
+            None,
+            "naive raycaster (reference)",
+        ),
+        (
+            "offset warp, approx, no skipping",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="approx")]),
+            None,
+            "naive raycaster + one field fetch per sample",
+        ),
+        (
+            "offset warp, exact, block checks only",
+            base.copy(warps=[OffsetFieldWarp(lo, hi, field_mm, inverse="exact")]),
+            False,
+            "no skipping through deformed space",
+        ),
+    ]
+    with OffscreenRenderer(*size) as r:
+        report = WarpRenderReport(
+            volume=vol.name,
+            shape=vol.shape,
+            size=size,
+            grid=elements.shape,
+            drag_mm=drag,
+            max_displacement_mm=float(np.sqrt((field_mm**2).sum(-1)).max()),
+            frames=frames,
+            gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
+        )
+        r.renderer.warped_skip_maps = "always"  # built in the warm-up frames
+        for name, scene, cells, note in configs:
+            # cells None: no empty-space skipping at all
+            r.renderer.empty_space_skipping = cells is not None
+            r.renderer.cell_skipping = bool(cells)
+            t = r.time_frames(scene, frames=frames, warmup=warmup)
+            report.rows.append(BenchRow(name, "dvr", statistics.median(t), min(t), note))
+            log(f"{name}: {statistics.median(t):.1f} ms")
+        r.renderer.cell_skipping = True
+        r.renderer.empty_space_skipping = True
+    ms.close()
+    return report

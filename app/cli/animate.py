@@ -1,0 +1,125 @@
+"""``voxwarp animate``: its parser and command (the work is in :mod:`voxwarp.animation.movie`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from voxwarp.animation import FRAME_FORMATS
+from voxwarp.core.checks import image_size, positive_int
+
+
+def _fps(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"fps must be a number; got {text!r}") from exc
+    if not 0 < v <= 1000:
+        raise argparse.ArgumentTypeError(f"fps must be in (0, 1000]; got {text!r}")
+    return v
+
+
+def _frames(text: str) -> int:
+    from voxwarp.animation.tracks import MAX_FRAMES
+
+    n = positive_int(text)
+    if n > MAX_FRAMES:
+        raise argparse.ArgumentTypeError(f"frames must be 1..{MAX_FRAMES}; got {text!r}")
+    return n
+
+
+def add_animate_parser(sub: Any) -> None:
+    """Add ``animate`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
+    p = sub.add_parser(
+        "animate",
+        help="render an animated scene JSON into frames and a movie",
+        description="Render the frames of a scene JSON with an 'animation' entry (see"
+        " app/animation/tracks.py and sample_volumes/*anim*.json) and encode them with"
+        " ffmpeg. An interrupted run resumes: finished frames are kept and skipped.",
+    )
+    p.add_argument("scene", help="scene JSON with an 'animation' entry")
+    p.add_argument(
+        "-o",
+        "--output",
+        default="movie.mp4",
+        help="movie file (.mp4, .mov, .mkv); frames go to <stem>_frames/",
+    )
+    p.add_argument("--frames", type=_frames, help="frames to render (default: the animation's)")
+    p.add_argument("--fps", type=_fps, help="frames per second (default: the animation's)")
+    p.add_argument("--size", type=image_size, default=(512, 512), help="WxH pixels")
+    p.add_argument(
+        "--format",
+        dest="image_format",
+        choices=tuple(FRAME_FORMATS),
+        default="png",
+        help="frame files: 8-bit PNG or float EXR (default png)",
+    )
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=positive_int,
+        metavar="N",
+        help="render on a local Dask cluster of N worker processes (one GL context each)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="render on an existing Dask cluster, e.g. tcp://host:8786 (docs/distributed.md)",
+    )
+    p.add_argument("--no-movie", action="store_true", help="write the frames only")
+    p.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="progress bar on stderr (default on)",
+    )
+    p.add_argument(
+        "--bench",
+        action="store_true",
+        help="time a serial run against --workers N (default 2) local workers in temporary"
+        " folders, check that their frames are identical, print a table (no movie)",
+    )
+    p.set_defaults(func=cmd_animate)
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    """``voxwarp animate SCENE -o movie.mp4``."""
+    from voxwarp.animation.movie import animate
+    from voxwarp.animation.tracks import AnimationError
+    from voxwarp.bench.movie import bench_workers, format_bench
+
+    if args.bench:
+        if args.scheduler is not None:
+            raise AnimationError("--bench measures local workers; drop --scheduler")
+        row = bench_workers(
+            args.scene,
+            frames=args.frames,
+            size=args.size,
+            workers=args.workers or 2,
+            image_format=args.image_format,
+            progress=args.progress,
+        )
+        print(format_bench(row))
+        return 0 if row["identical"] else 1
+    result = animate(
+        args.scene,
+        args.output,
+        frames=args.frames,
+        fps=args.fps,
+        size=args.size,
+        image_format=args.image_format,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        movie=not args.no_movie,
+        progress=args.progress,
+    )
+    n = len(result.frames)
+    note = f"{len(result.rendered)} of {n} frames rendered"
+    if result.skipped:
+        note += f", {len(result.skipped)} kept from an earlier run"
+    if result.removed:
+        note += f", {result.removed} stale frame files removed"
+    print(f"{note} ({result.frames_dir})", file=sys.stderr)
+    print(result.movie if result.movie is not None else result.frames_dir)
+    return 0

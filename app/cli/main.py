@@ -1,0 +1,1350 @@
+"""The ``voxwarp`` command line: info, render, demo, samples, bench.
+
+INPUT is a volume file or folder (npy, npz, raw + JSON sidecar, NRRD, NIfTI, DICOM
+folder, TIFF), a scene JSON written by ``Scene.save``, or ``sample:NAME`` for a
+bundled sample (``voxwarp samples`` lists them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from voxwarp.cli.animate import add_animate_parser
+from voxwarp.core.checks import image_size as _size
+from voxwarp.core.checks import positive_int as _positive_int
+from voxwarp.errors import InputError as CliOptionError
+from voxwarp.errors import VoxwarpError
+from voxwarp.inputs import load_input, load_lattice_file, load_wire_file
+
+MODES = ("dvr", "mip", "minip", "average", "flm", "iso")
+
+
+def _view(text: str) -> Any:
+    if text in ("+x", "-x", "+y", "-y", "+z", "-z"):
+        return text
+    try:
+        az, el = (float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"view must be one of +x,-x,+y,-y,+z,-z or AZIMUTH,ELEVATION degrees; got {text!r}"
+        ) from exc
+    return (az, el)
+
+
+# ---------------------------------------------------------------------- mass-spring options
+#: Steps ``render --massspring`` runs without ``--settle`` (and no ``--steps``). With the
+#: CLI's defaults (semi-implicit, shear springs, dt ~ 24 ms) an 8³ grid is settled after
+#: about 600 steps and a 16³ grid within ~5 % of the dragged distance after 1000.
+MASSSPRING_STEPS = 1000
+#: Most steps ``--settle`` runs when ``--steps`` is not given.
+MASSSPRING_SETTLE_MAX_STEPS = 20000
+#: ``--settle`` stops once every element is slower than this (mm/s).
+MASSSPRING_SETTLE_TOL = 1e-3
+
+
+class _Drag(tuple):
+    """One ``--drag I,J,K:DX,DY,DZ``: ``(text, (i, j, k), (dx, dy, dz))``."""
+
+    @property
+    def text(self) -> str:
+        return self[0]
+
+    @property
+    def index(self) -> tuple[int, int, int]:
+        return self[1]
+
+    @property
+    def offset(self) -> tuple[float, float, float]:
+        return self[2]
+
+
+def _grid_shape(text: str) -> tuple[int, int, int]:
+    from voxwarp.deform.elements import MAX_ELEMENTS_PER_AXIS as hi
+    from voxwarp.deform.elements import MIN_ELEMENTS_PER_AXIS as lo
+
+    form = f"N or NX,NY,NZ elements per axis ({lo}..{hi}), e.g. 16 or 16,8,8"
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(vals) == 1:
+        vals = vals * 3
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if any(not lo <= v <= hi for v in vals):
+        raise argparse.ArgumentTypeError(f"{text!r}: out of range; expected {form}")
+    return vals  # type: ignore[return-value]
+
+
+def _drag(text: str) -> _Drag:
+    form = "I,J,K:DX,DY,DZ (element index, then its offset in mm along x, y, z), e.g. 6,4,4:0,12,0"
+    try:
+        left, right = text.split(":")
+        idx = tuple(int(v) for v in left.split(","))
+        off = tuple(float(v) for v in right.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(idx) != 3 or len(off) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if not all(math.isfinite(v) for v in off):
+        raise argparse.ArgumentTypeError(f"{text!r}: offsets must be finite mm; expected {form}")
+    return _Drag((text, idx, off))
+
+
+def _fix(text: str) -> tuple[str, tuple[tuple[int, int], ...]]:
+    form = "I,J,K with each an index or a range A..B, e.g. 3,4,4 or 0..1,0..7,0..7"
+    ranges = []
+    try:
+        parts = text.split(",")
+        for part in parts:
+            a, _, b = part.partition("..")
+            lo, hi = int(a), int(b if b else a)
+            if lo < 0 or hi < lo:
+                raise ValueError(part)
+            ranges.append((lo, hi))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(ranges) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    return text, tuple(ranges)
+
+
+class _Cut(tuple):
+    """One ``--cut PX,PY,PZ:NX,NY,NZ[:RADIUS]``: ``(text, point, normal, radius)``."""
+
+    @property
+    def text(self) -> str:
+        return self[0]
+
+    @property
+    def point(self) -> tuple[float, float, float]:
+        return self[1]
+
+    @property
+    def normal(self) -> tuple[float, float, float]:
+        return self[2]
+
+    @property
+    def radius(self) -> float | None:
+        return self[3]
+
+
+def _cut(text: str) -> _Cut:
+    form = (
+        "PX,PY,PZ:NX,NY,NZ[:RADIUS] (a point on the cutting plane in world mm, its normal,"
+        " optionally the radius in mm of the disk on it that cuts), e.g. 48,24,20:1,0,0"
+    )
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError(text)
+        point = tuple(float(v) for v in parts[0].split(","))
+        normal = tuple(float(v) for v in parts[1].split(","))
+        radius = float(parts[2]) if len(parts) == 3 else None
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(point) != 3 or len(normal) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    values = [*point, *normal, *([] if radius is None else [radius])]
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: numbers must be finite; expected {form}")
+    if not any(normal):
+        raise argparse.ArgumentTypeError(f"{text!r}: the normal must not be 0,0,0; expected {form}")
+    if radius is not None and radius <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the radius must be > 0 mm; expected {form}")
+    return _Cut((text, point, normal, radius))
+
+
+def _relax(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a number of relaxation steps >= 0, e.g. 4"
+        )
+    return n
+
+
+def _stiffness_points(text: str) -> list[tuple[float, float]]:
+    form = (
+        "VALUE:STIFFNESS[,VALUE:STIFFNESS...] in data units and 0..1, e.g. 100:0.2,400:0.95"
+        " (write --stiffness-from-volume=-500:0.1,... for a negative first value)"
+    )
+    try:
+        pts = [tuple(float(v) for v in pair.split(":")) for pair in text.split(",")]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if not pts or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if any(not 0.0 <= s <= 1.0 for _, s in pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: stiffnesses must be in 0..1; expected {form}")
+    if len({v for v, _ in pts}) != len(pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: values must differ; expected {form}")
+    return pts  # type: ignore[return-value]
+
+
+def _steps(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a step count >= 0, e.g. 1000")
+    return n
+
+
+def _grid_text(shape: Sequence[int]) -> str:
+    return "x".join(str(n) for n in shape)
+
+
+#: the options of ``render``'s deformation models, in the order of ``--help``: (flag,
+#: attribute, the model that takes it: "both", "massspring" or "chainmail")
+_DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
+    ("--drag", "drag", "both"),
+    ("--fix", "fix", "both"),
+    ("--backend", "backend", "both"),
+    ("--inverse", "inverse", "both"),
+    ("--stiffness-from-volume", "stiffness_from_volume", "both"),
+    ("--settle", "settle", "massspring"),
+    ("--steps", "steps", "massspring"),
+    ("--integrator", "integrator", "massspring"),
+    ("--shear/--no-shear", "shear", "massspring"),
+    ("--bend", "bend", "massspring"),
+    ("--relax", "relax", "chainmail"),
+    ("--variant", "variant", "chainmail"),
+    ("--cut", "cut", "chainmail"),
+)
+#: why a mass-spring option does not apply to ChainMail
+_NOT_FOR_CHAINMAIL: dict[str, str] = {
+    "settle": "ChainMail settles each drag at once; --relax K smooths it",
+    "steps": "ChainMail settles each drag at once; --relax K smooths it",
+    "integrator": "ChainMail has no time steps",
+    "shear": "ChainMail's shear limits follow the stiffness",
+    "bend": "ChainMail has no bend springs",
+}
+
+
+def _given(args: argparse.Namespace, attr: str) -> bool:
+    return getattr(args, attr) is not None  # every deformation option defaults to None
+
+
+def _deform_model(args: argparse.Namespace) -> str | None:
+    """``"massspring"``, ``"chainmail"`` or None (no deformation)."""
+    if args.massspring is not None:
+        return "massspring"
+    if args.chainmail is not None:
+        return "chainmail"
+    return None
+
+
+def _check_deform_options(args: argparse.Namespace) -> None:
+    """Option checks that need no volume: deformation options without their model, both
+    models at once, options of the other model, drags and fixes outside the grid, drags
+    of a fixed element or of one element twice."""
+    import numpy as np
+
+    if args.massspring is not None and args.chainmail is not None:
+        raise CliOptionError(
+            "--massspring and --chainmail cannot be combined: deform with one model per"
+            " render (a scene JSON saved with --save-scene can be rendered again with the"
+            " other, which then deforms the result)"
+        )
+    _check_wire_options(args)
+    _check_lattice_options(args)
+    model = _deform_model(args)
+    for opt, attr, owner in _DEFORM_OPTIONS:
+        if not _given(args, attr) or owner in ("both", model):
+            continue
+        if model is None and owner == "chainmail":
+            raise CliOptionError(
+                f"{opt} needs --chainmail: add --chainmail N (the element grid over the"
+                " volume, e.g. --chainmail 16)"
+            )
+        if model is None:
+            raise CliOptionError(
+                f"{opt} needs --massspring: add --massspring N (the element grid over the"
+                " volume, e.g. --massspring 16)"
+            )
+        if model == "chainmail":
+            raise CliOptionError(
+                f"{opt} is a mass-spring option (--massspring) and does not apply to"
+                f" --chainmail: {_NOT_FOR_CHAINMAIL[attr]}"
+            )
+        raise CliOptionError(
+            f"{opt} is a ChainMail option (--chainmail) and does not apply to"
+            " --massspring; deform with --chainmail N instead to use it"
+        )
+    if model is None:
+        for opt, attr, _ in _DEFORM_OPTIONS:
+            if _given(args, attr):  # an option of both models
+                raise CliOptionError(
+                    f"{opt} needs --massspring: add --massspring N (the element grid over"
+                    " the volume, e.g. --massspring 16) or --chainmail N (3D ChainMail)"
+                )
+        return
+    shape = args.massspring if model == "massspring" else args.chainmail
+    grid = _grid_text(shape)
+    if len(set(shape)) == 1:
+        ranges_text = f"indices run 0..{shape[0] - 1}"
+    else:
+        ranges_text = "indices run " + ", ".join(f"0..{n - 1}" for n in shape) + " (i, j, k)"
+    fixed = np.zeros(shape, dtype=bool)
+    fixed[:: shape[0] - 1, :: shape[1] - 1, :: shape[2] - 1] = True
+    for text, ranges in args.fix or []:
+        if any(hi >= n for (_, hi), n in zip(ranges, shape, strict=True)):
+            raise CliOptionError(f"--fix {text}: reaches outside the {grid} grid; {ranges_text}")
+        fixed[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+    seen: dict[tuple[int, int, int], str] = {}
+    for d in args.drag or []:
+        if any(not 0 <= v < n for v, n in zip(d.index, shape, strict=True)):
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is outside the {grid} grid; {ranges_text}"
+            )
+        if fixed[d.index]:
+            corner = all(v in (0, n - 1) for v, n in zip(d.index, shape, strict=True))
+            what = (
+                f"a corner of the {grid} grid (corners stay fixed)" if corner else "fixed by --fix"
+            )
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is {what}; drag an element that is not fixed"
+            )
+        if d.index in seen:
+            raise CliOptionError(
+                f"--drag {d.text}: element {d.index} is already dragged by --drag"
+                f" {seen[d.index]}; give each element once"
+            )
+        seen[d.index] = d.text
+
+
+def _check_lattice_options(args: argparse.Namespace) -> None:
+    """--lattice deforms alone (one deformation per render on the command line)."""
+    if args.lattice is None:
+        return
+    if args.wires is not None or _deform_model(args) is not None:
+        raise CliOptionError(
+            "--lattice cannot be combined with --wires, --massspring or --chainmail in one"
+            " render: save one with --save-scene and render that scene with the other"
+        )
+
+
+def _check_wire_options(args: argparse.Namespace) -> None:
+    """--wires cannot be combined with a model; its options need it."""
+    if args.wires is None:
+        for opt, attr in (("--field-scale", "field_scale"), ("--layout", "layout")):
+            if getattr(args, attr) is not None:
+                raise CliOptionError(f"{opt} needs --wires FILE (a wire file, see --help)")
+        if args.masks is not None:
+            raise CliOptionError("--masks/--no-masks needs --wires FILE (a wire file)")
+        return
+    if _deform_model(args) is not None:
+        raise CliOptionError(
+            "--wires cannot be combined with --massspring or --chainmail in one render:"
+            " save one with --save-scene and render that scene with the other"
+        )
+
+
+def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
+    """The wire warp of --wires on ``volume``, built, and a one-line summary."""
+    from voxwarp.deform.warp import WarpError
+    from voxwarp.deform.wires import WireFieldWarp
+
+    entry = load_wire_file(args.wires)
+    if args.field_scale is not None:
+        entry["field_scale"] = args.field_scale
+    if args.layout is not None:
+        entry["layout"] = args.layout
+    if args.masks is not None:
+        entry["masks"] = args.masks
+    try:
+        warp = WireFieldWarp.from_dict(entry)
+        warp.bind_volume(volume)
+    except WarpError as exc:
+        raise CliOptionError(f"--wires {args.wires}: {exc}") from exc
+    st = warp.deformer.stats
+    assert st is not None
+    summary = (
+        f"wires: {len(warp.wires)} wire(s), field {'x'.join(map(str, st.field_shape))}"
+        f" (1:{st.field_scale**3}, {st.layout}), {st.planes - st.planes_dropped} planes,"
+        f" {st.swept} voxels swept, {st.percent_ignored:.1f}% ignored,"
+        f" built in {st.timings['total']:.2f} s ({st.backend})"
+    )
+    return warp, summary
+
+
+def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
+    """The element grid of ``render --massspring`` / ``--chainmail`` over ``volume``
+    (None without either): fixed elements and materials set, drags checked against
+    rigid elements (mass-spring) and cutting planes against the grid (ChainMail), all
+    before any GL work."""
+    import numpy as np
+
+    from voxwarp.deform.elements import ElementGrid, ElementGridError
+
+    model = _deform_model(args)
+    if model is None:
+        return None
+    grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
+    for _, ranges in args.fix or []:
+        mask = np.zeros(grid.shape, dtype=bool)
+        mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+        grid.fix(mask)
+    if args.stiffness_from_volume:
+        # the voxel centres span origin .. origin + spacing * (shape - 1)
+        org = np.asarray(volume.origin, dtype=np.float64)
+        n = np.maximum(np.asarray(volume.shape) - 1, 1)
+        centres = (org, org + np.asarray(volume.spacing, dtype=np.float64) * n)
+        try:
+            grid.materials_from_volume(volume.data, centres, args.stiffness_from_volume)
+        except ElementGridError as exc:
+            raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
+    if model == "massspring":
+        rigid = grid.pinned()
+        for d in args.drag or []:
+            if rigid[d.index]:
+                raise CliOptionError(
+                    f"--drag {d.text}: element {d.index} is rigid (stiffness 1 from"
+                    " --stiffness-from-volume) and cannot move; drag another element or"
+                    " map its value to a stiffness below 1"
+                )
+    for c in args.cut or []:
+        if not _cut_crosses(grid, c):
+            lo, hi = grid.lo, grid.hi
+            box = ", ".join(f"{a} {lo[i]:g}..{hi[i]:g}" for i, a in enumerate("xyz"))
+            where = "plane" if c.radius is None else f"disk of radius {c.radius:g} mm"
+            raise CliOptionError(
+                f"--cut {c.text}: the {where} crosses no link of the"
+                f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
+                " point inside that box (world mm, as --drag offsets)"
+            )
+    return grid
+
+
+def _cut_crosses(grid: Any, cut: _Cut) -> bool:
+    """Whether ``cut`` removes a link of ``grid`` at rest (the test of ChainMail.cut)."""
+    import numpy as np
+
+    p0 = np.asarray(cut.point, dtype=np.float64)
+    normal = np.asarray(cut.normal, dtype=np.float64)
+    x = grid.rest_positions
+    s = (x - p0) @ (normal / np.linalg.norm(normal))
+    for axis in range(3):
+        sa = np.moveaxis(s, axis, 0)[:-1]
+        sb = np.moveaxis(s, axis, 0)[1:]
+        cross = ((sa < 0) & (sb >= 0)) | ((sb < 0) & (sa >= 0))
+        if cut.radius is not None and np.any(cross):
+            xa = np.moveaxis(x, axis, 0)[:-1]
+            xb = np.moveaxis(x, axis, 0)[1:]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.where(cross, sa / (sa - sb), 0.0)
+            hit = xa + t[..., None] * (xb - xa)
+            cross &= np.linalg.norm(hit - p0, axis=-1) <= cut.radius
+        if np.any(cross):
+            return True
+    return False
+
+
+def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
+    """Build, drag and run the mass-spring model of ``render --massspring`` on ``grid``.
+
+    Returns the :class:`~voxwarp.deform.massspring.MassSpring` and a one-line summary.
+    """
+    from voxwarp.deform.massspring import MassSpring, MassSpringError
+
+    backend = args.backend or "cpu"
+    try:
+        ms = MassSpring(
+            grid,
+            backend=backend,
+            ctx=ctx if backend == "gpu" else None,
+            integrator=args.integrator or "semi-implicit",
+            shear=True if args.shear is None else args.shear,
+            bend=bool(args.bend),
+        )
+    except MassSpringError as exc:
+        raise CliOptionError(f"--massspring: {exc}") from exc
+    try:
+        for d in args.drag or []:
+            ms.move(d.index, d.offset)
+        if args.settle:
+            limit = MASSSPRING_SETTLE_MAX_STEPS if args.steps is None else args.steps
+            steps = ms.settle(max_steps=limit, tol=MASSSPRING_SETTLE_TOL)
+            how = f"{steps} steps"
+            if steps >= limit and limit > 0:
+                warnings.warn(
+                    f"--settle stopped at the limit of {limit} steps; the grid may still"
+                    " be moving: raise --steps",
+                    RuntimeWarning,
+                    stacklevel=1,
+                )
+            else:
+                how += f" (settled: every element slower than {MASSSPRING_SETTLE_TOL:g} mm/s)"
+        else:
+            steps = MASSSPRING_STEPS if args.steps is None else args.steps
+            ms.step(steps)
+            how = f"{steps} steps"
+        ms.warp(inverse=args.inverse or "baked")
+    except BaseException:
+        ms.close()
+        raise
+    summary = (
+        f"massspring: {_grid_text(grid.shape)} {backend} {ms.integrator}, dt {ms.dt:.3g} s,"
+        f" {len(args.drag or [])} dragged, {how}"
+    )
+    return ms, summary
+
+
+def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
+    """Build, cut, drag and relax the ChainMail model of ``render --chainmail``.
+
+    Cuts come first (through the rest state), then all ``--drag`` elements move at once
+    (one :meth:`~voxwarp.deform.chainmail.ChainMail.move`), then ``--relax`` steps (also saved
+    as the model's ``relax_steps``). Returns the :class:`~voxwarp.deform.chainmail.ChainMail`
+    and a one-line summary.
+    """
+    import time
+
+    import numpy as np
+
+    from voxwarp.deform.chainmail import ChainMail, ChainMailError
+
+    backend = args.backend or "cpu"
+    relax = args.relax or 0
+    drags = args.drag or []
+    try:
+        cm = ChainMail(
+            grid,
+            variant=args.variant or "enhanced",
+            backend=backend,
+            ctx=ctx if backend == "gpu" else None,
+        )
+    except ChainMailError as exc:
+        raise CliOptionError(f"--chainmail: {exc}") from exc
+    try:
+        cut = sum(cm.cut(c.point, c.normal, c.radius) for c in args.cut or [])
+        if backend == "cpu":  # load the numba kernels outside the timed move: no element
+            cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
+        touched, solve_ms = 0, 0.0
+        if drags:
+            stats = cm.move([d.index for d in drags], [d.offset for d in drags])
+            touched, solve_ms = stats.touched, stats.seconds * 1000
+            if stats.limited:
+                what = f"--drag {drags[0].text}" if len(drags) == 1 else "the dragged elements"
+                warnings.warn(
+                    f"{what} went only {stats.fraction:.0%} of the way: the links between"
+                    " the dragged and the fixed elements (the 8 corners always are fixed)"
+                    " ran out of slack; fix fewer elements or drag less",
+                    RuntimeWarning,
+                    stacklevel=1,
+                )
+        t = time.perf_counter()
+        cm.relax(relax)
+        relax_ms = (time.perf_counter() - t) * 1000
+        cm.relax_steps = relax  # saved with the model: a resumed one relaxes alike
+        cm.warp(inverse=args.inverse or "baked")
+        displaced = int(np.count_nonzero(np.any(cm.displacements() != 0.0, axis=-1)))
+    except BaseException:
+        cm.close()
+        raise
+    moved = (
+        f"{touched} elements touched in {solve_ms:.1f} ms"
+        if backend == "cpu"
+        else f"solved in {solve_ms:.1f} ms"
+    )
+    summary = f"chainmail: {_grid_text(grid.shape)} {backend} {cm.variant}, {len(drags)} dragged"
+    summary += f", {moved}"
+    if relax:
+        summary += f", relax {relax} step{'s' * (relax != 1)} in {relax_ms:.1f} ms"
+    if args.cut:
+        summary += f", {cut} links cut"
+    summary += f"; {displaced} elements displaced"
+    return cm, summary
+
+
+def _add_volume_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--spacing", nargs=3, type=float, metavar=("SX", "SY", "SZ"), help="voxel size in mm"
+    )
+    p.add_argument("--downsample", type=int, default=1, metavar="N", help="reduce by N per axis")
+    p.add_argument(
+        "--nan", choices=("raise", "mask"), default="raise", help="NaN/Inf voxels: reject or mask"
+    )
+
+
+def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
+    from voxwarp.core.transfer_function import TransferFunction
+    from voxwarp.scene import Scene
+
+    tf: Any = None
+    if args.tf is not None:
+        tf = TransferFunction.load(args.tf) if args.tf.endswith(".json") else args.tf
+    if isinstance(obj, Scene):
+        changes: dict[str, Any] = {}
+        if tf is not None:
+            changes["transfer_function"] = TransferFunction.coerce(tf, obj.volume)
+        for key in ("mode", "projection", "view", "step", "window", "seed", "iso_value", "zoom"):
+            val = getattr(args, key)
+            if val is not None:
+                changes[key] = val
+        if args.jitter is not None:
+            changes["jitter"] = args.jitter
+        if args.shading is not None:
+            changes["shading"] = args.shading
+        if changes.keys() & {"view", "projection", "zoom"}:
+            changes["camera"] = None
+        return obj.copy(**changes)
+    kw: dict[str, Any] = {
+        "mode": args.mode or "dvr",
+        "transfer_function": tf if tf is not None else "ct-bone",
+        "view": args.view or "-y",
+        "projection": args.projection or "perspective",
+        "step": args.step if args.step is not None else 1.0,
+        "window": args.window,
+        "jitter": True if args.jitter is None else args.jitter,
+        "seed": args.seed if args.seed is not None else 0,
+        "shading": args.shading,
+        "iso_value": args.iso_value,
+        "zoom": args.zoom if args.zoom is not None else 1.0,
+    }
+    return Scene(obj, **kw)
+
+
+def _tf_arg(tf: str | None) -> Any:
+    from voxwarp.core.transfer_function import TransferFunction
+
+    if tf is not None and tf.endswith(".json"):
+        return TransferFunction.load(tf)
+    return tf
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """``voxwarp info INPUT``: dims, dtype, spacing, value range, histogram."""
+    from voxwarp.io.volumes import volume_info, volume_summary
+    from voxwarp.scene import Scene
+
+    obj = load_input(
+        args.input, spacing=args.spacing, downsample=args.downsample, nan_policy=args.nan
+    )
+    vol = obj.volume if isinstance(obj, Scene) else obj
+    if args.json:
+        print(json.dumps(volume_info(vol), indent=2))
+    else:
+        print(volume_summary(vol))
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    """``voxwarp render INPUT -o out.png``: render one image headless."""
+    from voxwarp.io.images import write_image
+    from voxwarp.render.raycaster import OffscreenRenderer
+
+    _check_deform_options(args)
+    obj = load_input(
+        args.input, spacing=args.spacing, downsample=args.downsample, nan_policy=args.nan
+    )
+    scene = _scene_from_args(obj, args)
+    grid = _deform_grid(args, scene.volume)
+    file_warp = None  # --wires or --lattice (they exclude each other)
+    if args.wires is not None:  # built before any GL work: bad wires fail fast
+        file_warp, summary = _wire_warp(args, scene.volume)
+        print(summary, file=sys.stderr)
+    if args.lattice is not None:
+        file_warp = load_lattice_file(args.lattice, scene.volume)
+    out = Path(args.output)
+    dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
+    with OffscreenRenderer(*args.size, dtype=dtype) as r:
+        model = None
+        # the GPU backends run on the renderer's context (made current here)
+        with r._current():
+            try:
+                if grid is not None:
+                    run = _run_massspring if args.massspring is not None else _run_chainmail
+                    model, summary = run(args, grid, r.ctx)
+                    print(summary, file=sys.stderr)
+                    # last in the chain: it deforms the volume itself, before the
+                    # scene's own warps move the result
+                    scene = scene.copy(warps=[*scene.warps, model.warp()])
+                if file_warp is not None:
+                    scene = scene.copy(warps=[*scene.warps, file_warp])
+                img = r.render(scene)
+                if args.save_scene:  # inside: a GPU-owned field is read back to save it
+                    scene.save(args.save_scene)
+            finally:
+                if model is not None:
+                    model.close()
+    write_image(out, img)
+    if args.save_scene:
+        print(f"scene: {args.save_scene}")
+    print(out)
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """``voxwarp demo NAME``: a teaching demo's figure sheet (:mod:`voxwarp.teaching.demos`);
+    ``voxwarp demo [INPUT]``: render INPUT (default the bundled sample) in every mode
+    into a folder."""
+    from voxwarp.teaching.demos import DEMOS
+
+    if args.input in DEMOS:
+        return _teaching_demo(args)
+    if args.quick or args.gui:
+        raise CliOptionError(
+            f"--quick and --gui are options of the teaching demos ({', '.join(DEMOS)}),"
+            " e.g. voxwarp demo massspring --quick"
+        )
+    if (
+        args.input is not None
+        and not args.input.startswith("sample:")
+        and not Path(args.input).exists()
+    ):
+        raise CliOptionError(
+            f"{args.input!r} is neither a demo ({', '.join(DEMOS)}) nor a volume file or"
+            " folder; e.g. voxwarp demo massspring, or voxwarp demo sample:fish"
+        )
+    return _demo_volume(args)
+
+
+def _teaching_demo(args: argparse.Namespace) -> int:
+    """``voxwarp demo NAME``: write the figure sheet (and with --gui the tour)."""
+    from voxwarp.teaching.demos import run_demo
+
+    res = run_demo(
+        args.input,
+        args.out,
+        quick=args.quick,
+        tour=args.gui,
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    for path in res.figures:
+        print(path)
+    if res.tour is not None:
+        print(res.tour)
+        print(
+            f"voxwarp: step through the demo in the desktop GUI with: voxwarp gui --tour"
+            f" {res.tour}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """``voxwarp reproduce``: every demo's measurements and the report beside the
+    papers' numbers (see :mod:`voxwarp.teaching.reproduce`)."""
+    from voxwarp.teaching.reproduce import DEFAULT_REPORT, reproduce
+
+    command = "voxwarp reproduce" + (" --quick" if args.quick else "")
+    if Path(args.out) != DEFAULT_REPORT:
+        command += f" --out {args.out}"
+    path = reproduce(
+        args.out, quick=args.quick, log=lambda s: print(s, file=sys.stderr), command=command
+    )
+    print(path)
+    return 0
+
+
+def _demo_volume(args: argparse.Namespace) -> int:
+    """``voxwarp demo [INPUT]``: render INPUT in every mode into a folder."""
+    from voxwarp.io.images import write_image
+    from voxwarp.io.samples import DEFAULT_SAMPLE, suggested_transfer_function
+    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.scene import Scene
+
+    spec = args.input or f"sample:{DEFAULT_SAMPLE}"
+    obj = load_input(spec)
+    vol = obj.volume if isinstance(obj, Scene) else obj
+    out = Path(args.out)
+    tf = _tf_arg(args.tf)
+    if tf is None:
+        tf = suggested_transfer_function(vol.name) if spec.startswith("sample:") else "ct-bone"
+    paths = []
+    with OffscreenRenderer(*args.size) as r:
+        for mode in MODES:
+            scene = Scene(vol, mode=mode, transfer_function=tf, view=args.view, zoom=1.3)
+            img = r.render(scene)
+            paths.append(write_image(out / f"{vol.name}_{mode}.png", img))
+        scene.save(out / f"{vol.name}_scene.json")
+        # the point of voxwarp: the same volume bent at render time, not resampled
+        dvr = Scene(vol, mode="dvr", transfer_function=tf, view=args.view, zoom=1.3)
+        dvr.warps.append(_demo_bend(vol))
+        paths.append(write_image(out / f"{vol.name}_dvr_massspring.png", r.render(dvr)))
+        dvr.save(out / f"{vol.name}_massspring_scene.json")
+        wired = Scene(vol, mode="dvr", transfer_function=tf, view=args.view, zoom=1.3)
+        wired.warps.append(_demo_wire(vol))
+        paths.append(write_image(out / f"{vol.name}_dvr_wires.png", r.render(wired)))
+        wired.save(out / f"{vol.name}_wires_scene.json")
+    for p in paths:
+        print(p)
+    return 0
+
+
+def _demo_bend(vol: Any) -> Any:
+    """A settled mass-spring bend of ``vol``: an 8³ grid, the bottom quarter (lowest z)
+    fixed, the centre elements of the top two layers dragged sideways by 30% of the box
+    width."""
+    from voxwarp.deform import ElementGrid, MassSpring
+
+    grid = ElementGrid(vol, shape=(8, 8, 8))
+    ms = MassSpring(grid, integrator="semi-implicit", shear=True)
+    z = grid.rest_positions[..., 2]
+    ms.fix(z < grid.lo[2] + 0.25 * (grid.hi[2] - grid.lo[2]))
+    drag = 0.3 * float(grid.hi[0] - grid.lo[0])
+    ms.move([(i, j, k) for i in (3, 4) for j in (3, 4) for k in (6, 7)], (drag, 0.0, 0.0))
+    ms.settle(max_steps=MASSSPRING_SETTLE_MAX_STEPS, tol=MASSSPRING_SETTLE_TOL)
+    return ms.warp()  # a CPU model: nothing to release
+
+
+def _demo_wire(vol: Any) -> Any:
+    """A wire bend of ``vol``: a wire up the middle of the box (z from 10% to 95%), its
+    top half bent sideways by 25% of the box width and twisted by 60 degrees; it sweeps
+    the column of radius 30% of the box width around it (no value classification)."""
+    import numpy as np
+
+    from voxwarp.deform.wires import Wire, WireDeformer
+
+    lo, hi = vol.bounds
+    c = 0.5 * (lo + hi)
+    zs = lo[2] + (hi[2] - lo[2]) * np.array([0.1, 0.4, 0.7, 0.95])
+    base = [[c[0], c[1], z] for z in zs]
+    s = (zs - zs[0]) / (zs[-1] - zs[0])
+    shift = 0.25 * float(hi[0] - lo[0]) * s**2
+    modified = [[c[0] + dx, c[1], z] for dx, z in zip(shift, zs, strict=True)]
+    radius = 0.3 * float(min(hi[0] - lo[0], hi[1] - lo[1]))
+    wire = Wire(base, modified, twist=[(0.0, 0.0), (1.0, np.pi / 3)], radius=radius)
+    wd = WireDeformer(vol, [wire], field_scale=2)
+    wd.build()
+    return wd.warp()
+
+
+def cmd_samples(args: argparse.Namespace) -> int:
+    """``voxwarp samples``: list bundled samples."""
+    from voxwarp.io.samples import sample_names
+
+    for name in sample_names():
+        print(f"sample:{name}")
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``voxwarp bench render``: timings against references (see voxwarp.bench.render)."""
+    from voxwarp.bench.render import bench_render
+    from voxwarp.core.files import atomic_write_text
+
+    vol = None
+    if args.input:
+        obj = load_input(args.input)
+        vol = getattr(obj, "volume", obj)
+    report = bench_render(
+        vol,
+        size=args.size,
+        frames=args.frames,
+        warmup=args.warmup,
+        use_vtk=not args.no_vtk,
+        step=args.step,
+        transfer_function=_tf_arg(args.tf),
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    command = (
+        "voxwarp " + " ".join(sys.argv[1:])
+        if sys.argv[0].endswith("voxwarp")
+        else ("voxwarp bench render")
+    )
+    text = report.markdown(command)
+    print(text)
+    for mode in ("dvr", "mip"):
+        ratio = report.ratio("VTK fixed-point (CPU)", mode)
+        if ratio is not None:
+            print(f"{mode}: voxwarp is {ratio:.2f}x the speed of VTK's fixed-point raycaster")
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
+def _sizes(text: str) -> tuple[int, ...]:
+    try:
+        sizes = tuple(int(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"sizes must be comma-separated integers like 16,32,64; got {text!r}"
+        ) from exc
+    if not sizes or not all(2 <= n <= 128 for n in sizes):
+        raise argparse.ArgumentTypeError(f"each size must be 2..128 elements; got {text!r}")
+    return sizes
+
+
+def cmd_bench_massspring(args: argparse.Namespace) -> int:
+    """``voxwarp bench massspring``: solver steps/s (see voxwarp.bench.massspring)."""
+    from voxwarp.bench.massspring import bench_massspring
+    from voxwarp.core.files import atomic_write_text
+
+    report = bench_massspring(
+        args.sizes,
+        steps=args.steps,
+        repeats=args.repeats,
+        use_taichi=not args.no_taichi,
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    command = (
+        "voxwarp " + " ".join(sys.argv[1:])
+        if sys.argv[0].endswith("voxwarp")
+        else "voxwarp bench massspring"
+    )
+    text = report.markdown(command)
+    print(text)
+    for n in report.sizes:
+        ratio = report.ratio(n, "gpu", "taichi")
+        if ratio is not None:
+            print(f"{n}³: the GPU solver runs {ratio:.2f}x the steps/s of taichi on the CPU")
+    if args.render:
+        from voxwarp.bench.render import bench_warp_render
+
+        warp_report = bench_warp_render(
+            frames=args.frames, warmup=2, log=lambda s: print(s, file=sys.stderr)
+        )
+        warp_text = warp_report.markdown(command)
+        print(warp_text)
+        cost = warp_report.ratio("offset warp, baked")
+        if cost is not None:
+            print(f"deformed dvr (offset warp, baked inverse) costs {cost:.2f}x undeformed")
+        text += "\n" + warp_text
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
+def cmd_bench_chainmail(args: argparse.Namespace) -> int:
+    """``voxwarp bench chainmail``: time to settle one drag (see voxwarp.bench.chainmail)."""
+    from voxwarp.bench.chainmail import bench_chainmail
+    from voxwarp.core.files import atomic_write_text
+
+    report = bench_chainmail(
+        args.sizes,
+        repeats=args.repeats,
+        use_gpu=not args.no_gpu,
+        log=lambda s: print(s, file=sys.stderr),
+    )
+    command = (
+        "voxwarp " + " ".join(sys.argv[1:])
+        if sys.argv[0].endswith("voxwarp")
+        else "voxwarp bench chainmail"
+    )
+    text = report.markdown(command)
+    print(text)
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
+def _field_scale(text: str) -> int:
+    from voxwarp.deform.wires import FIELD_SCALES
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v not in FIELD_SCALES:
+        raise argparse.ArgumentTypeError(
+            f"field scale must be one of {', '.join(map(str, FIELD_SCALES))} (per-axis"
+            f" reduction of the attribute field); got {text!r}"
+        )
+    return v
+
+
+def _add_wire_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "wires (--wires FILE)",
+        "Bend, twist and scale objects along curves (the WSCG 2006 wire deformer for"
+        " volumes): each wire is a base curve laid through an object and a modified copy;"
+        " the object's cross-sections are swept from the base to the modified curve."
+        ' A wire file is JSON: {"wires": [{"kind": "catmull-rom"|"bezier", "base":'
+        ' [[x, y, z], ...], "modified": [...], "twist": [[t, radians], ...], "scale":'
+        ' [[t, s], ...], "radius": mm, "beta": [lo, hi]}], "field_scale": 2}'
+        " (points in world mm, t the fraction of the wire's length). Example:"
+        " voxwarp render sample:fish --view +z --wires"
+        " sample_volumes/fish_spine_wires.json -o bent.png",
+    )
+    g.add_argument("--wires", metavar="FILE", help="deform with the wires of this wire file")
+    g.add_argument(
+        "--field-scale",
+        type=_field_scale,
+        metavar="N",
+        help="attribute field N times coarser than the volume per axis: 1, 2, 4, 8 or 16"
+        " (1:1 ... 1:4096 voxels; default: the file's, else 2)",
+    )
+    g.add_argument(
+        "--layout",
+        choices=("float", "packed"),
+        help="attribute field storage: float (5 bytes/voxel, hardware-filtered t) or packed"
+        " (the paper's 2 bytes/voxel); default: the file's, else float",
+    )
+    p.add_argument(
+        "--lattice",
+        metavar="FILE",
+        help="deform with a lattice of trilinear cells over the volume (a JSON 'lattice' warp"
+        " entry; e.g. sample_volumes/fish_lattice_bend.json on sample:fish)",
+    )
+    g.add_argument(
+        "--masks",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="plane masks: sweep only the connected cross-section the wire runs through"
+        " (default on; --no-masks sweeps every object voxel within the radius)",
+    )
+
+
+def _add_deform_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "deformation (--massspring or --chainmail)",
+        "Deform the volume before rendering: an element grid spans the volume's box (its"
+        " 8 corners fixed), --drag holds elements at offsets from rest, the model moves"
+        " the others along, and the resulting offset field warps the volume at render"
+        " time. --massspring runs a mass-spring simulation (springs pull the rest along"
+        " over time steps); --chainmail runs 3D ChainMail (links with slack: each drag is"
+        " settled at once, moving every other element as little as the links allow). With"
+        " --save-scene the JSON keeps the field and the model (grid, materials, held"
+        " elements; ChainMail also its limits and cuts), so rendering it again gives the"
+        " same image. Examples (bend the fish's tail sideways, head held):"
+        " voxwarp render sample:fish --view +z --massspring 8 --fix 0..2,0..7,0..7"
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png;"
+        " voxwarp render sample:fish --view +z --chainmail 8 --fix 0..2,0..7,0..7"
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
+    )
+    g.add_argument(
+        "--massspring",
+        type=_grid_shape,
+        metavar="N|NX,NY,NZ",
+        help="deform with a mass-spring model: its element grid over the volume's"
+        " bounding box (2..128 per axis, e.g. 16)",
+    )
+    g.add_argument(
+        "--chainmail",
+        type=_grid_shape,
+        metavar="N|NX,NY,NZ",
+        help="deform with 3D ChainMail: its element grid over the volume's bounding box"
+        " (2..128 per axis, e.g. 16)",
+    )
+    g.add_argument(
+        "--drag",
+        type=_drag,
+        action="append",
+        metavar="I,J,K:DX,DY,DZ",
+        help="hold element (i, j, k) at its rest position + (dx, dy, dz) mm (world x, y, z"
+        " axes); repeatable; indices run 0..N-1 along x, y, z; corners stay fixed",
+    )
+    g.add_argument(
+        "--fix",
+        type=_fix,
+        action="append",
+        metavar="I,J,K",
+        help="also fix these elements at rest (the 8 corners always are); each index may"
+        " be a range A..B, e.g. --fix 0..2,0..7,0..7 holds the x = low end; repeatable",
+    )
+    g.add_argument(
+        "--backend",
+        choices=("cpu", "gpu"),
+        help="solve on the CPU (default: numpy for mass-spring, numba for ChainMail) or"
+        " in shaders on the renderer's context (gpu)",
+    )
+    g.add_argument(
+        "--inverse",
+        choices=("approx", "exact", "baked"),
+        help="offset-field inverse: baked (default: fixed point seeded by the inverse baked"
+        " on a finer grid, 2 fetches), exact (fixed point from p, 6 fetches) or approx (one"
+        " step, q = p - u(p), the thesis')",
+    )
+    g.add_argument(
+        "--stiffness-from-volume",
+        type=_stiffness_points,
+        metavar="V:S,...",
+        help="element stiffness from the volume value at each element, piecewise linear"
+        " through VALUE:STIFFNESS points (data units : 0..1; constant beyond the ends),"
+        " e.g. 100:0.2,400:0.95 makes CT bone stiff; stiffness 1 is rigid (default:"
+        " 0.5 everywhere); ChainMail's link slack is 1 - stiffness",
+    )
+
+    m = p.add_argument_group("mass-spring options (with --massspring)")
+    m.add_argument(
+        "--settle",
+        action="store_true",
+        default=None,
+        help=f"run until every element is slower than {MASSSPRING_SETTLE_TOL:g} mm/s, at"
+        f" most --steps steps (default {MASSSPRING_SETTLE_MAX_STEPS})",
+    )
+    m.add_argument(
+        "--steps",
+        type=_steps,
+        metavar="N",
+        help=f"time steps to run (default {MASSSPRING_STEPS}: a smooth, nearly settled"
+        " deformation); with --settle the most steps",
+    )
+    m.add_argument(
+        "--integrator",
+        choices=("explicit", "semi-implicit"),
+        help="semi-implicit (default; ~10x larger stable steps) or explicit Euler (the thesis')",
+    )
+    m.add_argument(
+        "--shear",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="face-diagonal shear springs (default on; without them the grid does not"
+        " resist shearing and a sideways drag tears it)",
+    )
+    m.add_argument(
+        "--bend",
+        action="store_true",
+        default=None,
+        help="second-neighbour bend springs (default off)",
+    )
+
+    c = p.add_argument_group(
+        "3D ChainMail options (with --chainmail)",
+        "Each link lets its two elements stretch or compress by up to half a spacing and"
+        " shear by up to half a spacing, each times 1 - stiffness (0.5 by default); a drag"
+        " moves other elements only once a link is taut, which leaves straight, sheared"
+        " blocks; --relax smooths them within the same limits.",
+    )
+    c.add_argument(
+        "--relax",
+        type=_relax,
+        metavar="K",
+        help="relaxation steps after each drag (default 0; the thesis shows 0, 1 and 4):"
+        " constrained Laplacian smoothing that keeps every link within its limits",
+    )
+    c.add_argument(
+        "--variant",
+        choices=("gibson", "enhanced"),
+        help="propagation: enhanced (default; Schill et al.'s priority queue) or gibson"
+        " (Gibson's sponsor lists); a single drag ends in the same state",
+    )
+    c.add_argument(
+        "--cut",
+        type=_cut,
+        action="append",
+        metavar="PX,PY,PZ:NX,NY,NZ[:R]",
+        help="before the drags, remove the links crossing the plane through point P (world"
+        " mm) with normal N, or only a disk of radius R mm on it; the two sides then move"
+        " independently; repeatable, e.g. --cut 48,24,20:1,0,0",
+    )
+
+
+def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
+    """The argument parser of the ``voxwarp`` command.
+
+    ``bench=False`` leaves out the benchmarks whose modules are heavy to import (``bench
+    wires``, ``lattice``, ``interactive``): :func:`main` does so unless a ``bench``
+    command runs, which keeps ``voxwarp --help`` and every other command quick to start.
+    """
+    from voxwarp import __version__
+
+    p = argparse.ArgumentParser(prog="voxwarp", description=__doc__.split("\n")[0])
+    p.add_argument("--version", action="version", version=f"voxwarp {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    pi = sub.add_parser("info", help="print dims, dtype, spacing, value range, histogram")
+    pi.add_argument("input")
+    pi.add_argument("--json", action="store_true", help="machine-readable output")
+    _add_volume_args(pi)
+    pi.set_defaults(func=cmd_info)
+
+    pr = sub.add_parser("render", help="render INPUT (volume or scene JSON) to an image")
+    pr.add_argument("input")
+    pr.add_argument("-o", "--output", default="out.png", help="PNG/EXR/TIFF by extension")
+    pr.add_argument("--mode", choices=MODES)
+    pr.add_argument("--projection", choices=("perspective", "orthographic"))
+    pr.add_argument("--view", type=_view, help="+x,-x,+y,-y,+z,-z or AZIMUTH,ELEVATION")
+    pr.add_argument("--size", type=_size, default=(512, 512), help="WxH pixels")
+    pr.add_argument("--tf", help="preset name or transfer function JSON file")
+    pr.add_argument("--step", type=float, help="sample distance in voxels (default 1)")
+    pr.add_argument("--window", nargs=2, type=float, metavar=("LEVEL", "WIDTH"))
+    pr.add_argument("--iso", dest="iso_value", type=float, help="isovalue for --mode iso")
+    pr.add_argument("--zoom", type=float)
+    pr.add_argument("--seed", type=int, help="jitter seed")
+    pr.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=None)
+    pr.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None)
+    pr.add_argument("--save-scene", metavar="JSON", help="also write the scene JSON")
+    _add_volume_args(pr)
+    _add_deform_args(pr)
+    _add_wire_args(pr)
+    pr.set_defaults(func=cmd_render)
+    add_animate_parser(sub)
+
+    from voxwarp.teaching import DEMO_TITLES, DEMOS
+
+    pd = sub.add_parser(
+        "demo",
+        help=f"teaching demo NAME ({', '.join(DEMOS)}): a figure sheet; or render a volume"
+        " in every mode into a folder",
+        description="voxwarp demo NAME writes the figure sheet of a teaching demo to"
+        " OUT/NAME.png: "
+        + "; ".join(f"{n}: {t}" for n, t in DEMO_TITLES.items())
+        + ". voxwarp demo [INPUT] (a volume, scene JSON or sample:NAME; default the bundled"
+        " real CT) renders it in every mode, bent by a mass-spring drag and by a wire.",
+    )
+    pd.add_argument(
+        "input",
+        nargs="?",
+        metavar="NAME|INPUT",
+        help=f"a teaching demo ({', '.join(DEMOS)}) or a volume (default: the bundled real CT)",
+    )
+    pd.add_argument("--out", default="out", help="output folder (default out)")
+    pd.add_argument("--size", type=_size, default=(512, 512), help="INPUT: image WxH")
+    pd.add_argument("--tf", help="INPUT: preset or tf.json (default: suits the sample)")
+    pd.add_argument("--view", type=_view, default="-y", help="INPUT: view")
+    pd.add_argument(
+        "--quick",
+        action="store_true",
+        help="NAME: small volumes, grids and images (seconds instead of a minute)",
+    )
+    pd.add_argument(
+        "--gui",
+        action="store_true",
+        help="NAME: also write OUT/NAME_tour.json, the steps of a guided walk through the"
+        " model (title, explanation, scene JSON per step) for the desktop GUI",
+    )
+    pd.set_defaults(func=cmd_demo)
+
+    prp = sub.add_parser(
+        "reproduce",
+        help="run every teaching demo and write the papers' numbers beside ours",
+        description="Regenerates the papers' tables and figures on this machine (the"
+        " teaching demos' measurements) and writes a markdown report with the hardware,"
+        " the papers' numbers beside ours, and the figure sheets in a folder beside it.",
+    )
+    prp.add_argument("--quick", action="store_true", help="small sizes (seconds; not comparable)")
+    prp.add_argument(
+        "--out",
+        default="docs/reproduction.md",
+        metavar="FILE",
+        help="the report (default docs/reproduction.md; figures in docs/reproduction/)",
+    )
+    prp.set_defaults(func=cmd_reproduce)
+
+    ps = sub.add_parser("samples", help="list bundled sample volumes")
+    ps.set_defaults(func=cmd_samples)
+
+    pb = sub.add_parser("bench", help="benchmarks")
+    bsub = pb.add_subparsers(dest="bench", required=True)
+    pbr = bsub.add_parser("render", help="raycaster timings vs VTK and no-skipping")
+    pbr.add_argument("input", nargs="?", help="volume (default: real CT upsampled to 256³)")
+    pbr.add_argument("--size", type=_size, default=(512, 512))
+    pbr.add_argument("--frames", type=int, default=10)
+    pbr.add_argument("--warmup", type=int, default=2)
+    pbr.add_argument("--step", type=float, default=1.0)
+    pbr.add_argument("--tf", help="preset or tf.json (default: suits the bench volume)")
+    pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
+    pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    pbr.set_defaults(func=cmd_bench)
+    pbm = bsub.add_parser("massspring", help="mass-spring steps/s: numpy, GPU and taichi")
+    pbm.add_argument(
+        "--sizes",
+        type=_sizes,
+        default=(16, 32, 64, 128),
+        metavar="N,N,...",
+        help="grids of N³ elements (default 16,32,64,128)",
+    )
+    pbm.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=50,
+        metavar="N",
+        help="steps per timed block (fewer where a block would take over 2 s)",
+    )
+    pbm.add_argument("--repeats", type=_positive_int, default=5, help="timed blocks per solver")
+    pbm.add_argument("--no-taichi", action="store_true", help="skip the taichi reference")
+    pbm.add_argument(
+        "--render",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also time deformed vs undeformed dvr through the offset warp (default on)",
+    )
+    pbm.add_argument(
+        "--frames", type=_positive_int, default=10, help="timed frames per render (default 10)"
+    )
+    pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    pbm.set_defaults(func=cmd_bench_massspring)
+    pbc = bsub.add_parser(
+        "chainmail", help="3D ChainMail: time to settle a local and a large drag vs grid size"
+    )
+    pbc.add_argument(
+        "--sizes",
+        type=_sizes,
+        default=(16, 32, 64, 128),
+        metavar="N,N,...",
+        help="grids of N³ elements (default 16,32,64,128)",
+    )
+    pbc.add_argument(
+        "--repeats", type=_positive_int, default=5, help="timed moves per solver (default 5)"
+    )
+    pbc.add_argument("--no-gpu", action="store_true", help="skip the GPU backend")
+    pbc.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    pbc.set_defaults(func=cmd_bench_chainmail)
+    if bench:
+        _add_heavy_bench_parsers(bsub)
+    return p
+
+
+def _add_heavy_bench_parsers(bsub: Any) -> None:
+    """``bench wires|lattice|interactive``: their modules define their options (and load
+    numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
+    from voxwarp.bench.interactive import add_bench_interactive_parser
+    from voxwarp.bench.lattice import add_bench_lattice_parser
+    from voxwarp.bench.wires import add_bench_wires_parser
+
+    add_bench_wires_parser(bsub)
+    add_bench_lattice_parser(bsub)
+    add_bench_interactive_parser(bsub)
+
+
+def wants_bench(argv: Sequence[str] | None) -> bool:
+    """Whether ``argv`` (default ``sys.argv[1:]``) runs a ``bench`` command."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    return bool(args) and args[0] == "bench"
+
+
+def _join_negative_views(argv: list[str]) -> list[str]:
+    # "--view -y" / "--view -30,20": argparse would take the value for an option
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        negative = i + 1 < len(argv) and argv[i + 1].startswith("-")
+        if argv[i] in ("--view", "--stiffness-from-volume", "--cut") and negative:
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
+
+
+def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
+    """Entry point of the ``voxwarp`` console script.
+
+    ``parser`` replaces :func:`build_parser`'s (the desktop GUI's entry point,
+    :func:`voxwarp.ui.cli.main`, adds its ``gui`` command to it: ``app`` never imports ``ui``).
+    """
+    parser = parser or build_parser(bench=wants_bench(argv))
+    args = parser.parse_args(_join_negative_views(list(sys.argv[1:] if argv is None else argv)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        old_format = warnings.formatwarning
+        warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
+        try:
+            return int(args.func(args) or 0)
+        except VoxwarpError as exc:
+            print(f"voxwarp: error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            return 130
+        finally:
+            warnings.formatwarning = old_format
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,40 @@
+"""Optional dependency groups (pip *extras*) and the one-line error when one is missing.
+
+Core voxwarp renders headless and runs every deformation family; the rest is optional:
+``gui`` (PySide6), ``movie`` (imageio-ffmpeg, tqdm), ``distributed`` (dask, distributed),
+``teach`` (matplotlib, Pillow) and ``all``. Call :func:`require` where a feature starts,
+so a user learns which extra to install before any work is done.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+from voxwarp.errors import MissingExtraError
+
+#: extra -> the modules it provides
+EXTRAS: dict[str, tuple[str, ...]] = {
+    "gui": ("PySide6",),
+    "movie": ("imageio_ffmpeg", "tqdm"),
+    "distributed": ("dask", "distributed"),
+    "teach": ("matplotlib", "PIL"),
+}
+
+
+def missing(extra: str) -> list[str]:
+    """The modules of ``extra`` that cannot be imported here."""
+    return [m for m in EXTRAS[extra] if importlib.util.find_spec(m) is None]
+
+
+def require(extra: str, what: str) -> None:
+    """Raise :class:`~voxwarp.errors.MissingExtraError` unless ``extra`` is installed.
+
+    ``what`` names the feature, e.g. ``require("gui", "voxwarp gui")`` gives
+    ``voxwarp gui needs the gui extra: pip install 'voxwarp[gui]'``.
+    """
+    absent = missing(extra)
+    if absent:
+        raise MissingExtraError(
+            f"{what} needs the {extra} extra (missing: {', '.join(absent)}):"
+            f" pip install 'voxwarp[{extra}]'"
+        )

@@ -1,0 +1,279 @@
+"""Transfer functions: data value -> colour and opacity.
+
+A :class:`TransferFunction` is a piecewise-linear list of control points
+``(value, r, g, b, a)`` with ``value`` in data units and components in [0, 1].
+Opacity ``a`` is the opacity of one *reference* sample distance (one voxel of the
+smallest spacing); the raycaster corrects it for the actual sample distance
+``d`` by ``1 - (1 - a) ** (d / reference)``, so changing the sample distance changes
+quality, not brightness.
+
+Presets
+-------
+``ct-bone``, ``ct-skin``, ``ct-soft`` and ``ct-muscle`` are defined in Hounsfield units.
+On a volume whose values are not HU (``units != "HU"`` and no value below -200), they
+are rescaled from [-1000, 2000] HU onto the volume's 0.5-99.5 percentile range, with a
+warning. ``mri``, ``grayscale`` and ``hot`` are relative: defined on [0, 1] and mapped
+onto the volume's percentile range.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.volume import Volume
+from voxwarp.errors import SceneError
+
+ControlPoint = tuple[float, float, float, float, float]
+
+_HU_PRESETS: dict[str, list[ControlPoint]] = {
+    "ct-bone": [
+        (-1000, 0, 0, 0, 0),
+        (150, 0.55, 0.25, 0.15, 0.0),
+        (300, 0.9, 0.75, 0.55, 0.25),
+        (700, 1.0, 0.95, 0.85, 0.6),
+        (2000, 1.0, 1.0, 1.0, 0.85),
+    ],
+    "ct-skin": [
+        (-1000, 0, 0, 0, 0),
+        (-600, 0.8, 0.55, 0.45, 0.0),
+        (-400, 0.9, 0.65, 0.55, 0.35),
+        (100, 1.0, 0.8, 0.7, 0.5),
+        (400, 1.0, 0.95, 0.9, 0.6),
+        (2000, 1.0, 1.0, 1.0, 0.9),
+    ],
+    "ct-soft": [
+        (-1000, 0, 0, 0, 0),
+        (-100, 0.75, 0.45, 0.3, 0.0),
+        (40, 0.85, 0.35, 0.3, 0.08),
+        (200, 0.95, 0.8, 0.6, 0.15),
+        (600, 1.0, 0.95, 0.9, 0.6),
+        (2000, 1.0, 1.0, 1.0, 0.85),
+    ],
+    "ct-muscle": [
+        (-1000, 0, 0, 0, 0),
+        (-50, 0.6, 0.1, 0.1, 0.0),
+        (40, 0.8, 0.25, 0.2, 0.12),
+        (120, 0.9, 0.5, 0.4, 0.2),
+        (500, 1.0, 0.95, 0.9, 0.7),
+        (2000, 1.0, 1.0, 1.0, 0.85),
+    ],
+}
+
+_RELATIVE_PRESETS: dict[str, list[ControlPoint]] = {
+    "mri": [
+        (0.0, 0, 0, 0, 0),
+        (0.2, 0.6, 0.4, 0.35, 0.0),
+        (0.45, 0.85, 0.7, 0.6, 0.08),
+        (0.75, 1.0, 0.9, 0.8, 0.35),
+        (1.0, 1.0, 1.0, 1.0, 0.7),
+    ],
+    "grayscale": [(0.0, 0, 0, 0, 0), (1.0, 1, 1, 1, 0.5)],
+    "hot": [
+        (0.0, 0, 0, 0, 0),
+        (0.3, 0.8, 0.0, 0.0, 0.05),
+        (0.6, 1.0, 0.6, 0.0, 0.3),
+        (1.0, 1.0, 1.0, 0.8, 0.8),
+    ],
+}
+
+PRESETS: tuple[str, ...] = (*_HU_PRESETS, *_RELATIVE_PRESETS)
+
+#: Number of entries of the GPU lookup table.
+TABLE_SIZE = 4096
+
+
+def _points(points: Iterable[Sequence[float]]) -> list[ControlPoint]:
+    try:
+        arr = np.asarray([tuple(p) for p in points], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(
+            "transfer function control points must be (value, r, g, b, a) number tuples"
+        ) from exc
+    if arr.ndim != 2 or arr.shape[1] != 5 or arr.shape[0] < 1:
+        raise SceneError(
+            "a transfer function needs at least one control point (value, r, g, b, a);"
+            f" got an array of shape {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise SceneError("transfer function control points contain NaN/Inf")
+    if np.any(arr[:, 1:] < 0) or np.any(arr[:, 1:] > 1):
+        raise SceneError("transfer function colour and opacity components must lie in [0, 1]")
+    order = np.argsort(arr[:, 0], kind="stable")
+    return [tuple(float(x) for x in row) for row in arr[order]]  # type: ignore[misc]
+
+
+@dataclass(eq=False)
+class TransferFunction:
+    """Piecewise-linear colour + opacity over data values (see module docstring).
+
+    Parameters
+    ----------
+    points
+        Control points ``(value, r, g, b, a)``; sorted by value on construction.
+    name
+        Preset name or ``"custom"``.
+    """
+
+    points: list[ControlPoint]
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        self.points = _points(self.points)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def preset(cls, name: str, volume: Volume | None = None) -> TransferFunction:
+        """A named preset resolved to the data units of ``volume`` (see module docstring)."""
+        if name in _HU_PRESETS:
+            pts = _HU_PRESETS[name]
+            if volume is not None and not _looks_like_hu(volume):
+                lo, hi = _percentile_range(volume)
+                warnings.warn(
+                    f"preset {name!r} is in Hounsfield units but volume {volume.name!r} is"
+                    f" not (values {volume.value_range[0]:g}..{volume.value_range[1]:g});"
+                    f" rescaled from [-1000, 2000] HU to [{lo:g}, {hi:g}].",
+                    stacklevel=2,
+                )
+                pts = [
+                    (lo + (v + 1000.0) / 3000.0 * (hi - lo), r, g, b, a) for v, r, g, b, a in pts
+                ]
+            return cls(list(pts), name=name)
+        if name in _RELATIVE_PRESETS:
+            lo, hi = _percentile_range(volume) if volume is not None else (0.0, 1.0)
+            pts = [(lo + v * (hi - lo), r, g, b, a) for v, r, g, b, a in _RELATIVE_PRESETS[name]]
+            return cls(pts, name=name)
+        raise SceneError(
+            f"unknown transfer function preset {name!r}; presets: {', '.join(PRESETS)},"
+            " or give a list of (value, r, g, b, a) control points"
+        )
+
+    @classmethod
+    def coerce(cls, tf: Any, volume: Volume | None = None) -> TransferFunction:
+        """Accept a TransferFunction, a preset name, a list of points or a dict."""
+        if isinstance(tf, TransferFunction):
+            return tf
+        if isinstance(tf, str):
+            return cls.preset(tf, volume)
+        if isinstance(tf, Mapping):
+            return cls.from_dict(tf, volume)
+        if tf is None:
+            raise SceneError("transfer_function must be a preset name or control points, not None")
+        return cls(list(tf))
+
+    # ------------------------------------------------------------------ evaluation
+    @property
+    def value_range(self) -> tuple[float, float]:
+        """``(first, last)`` control point values (a non-empty interval)."""
+        lo, hi = self.points[0][0], self.points[-1][0]
+        if hi <= lo:
+            hi = lo + 1.0
+        return lo, hi
+
+    def __call__(self, values: np.ndarray | float) -> np.ndarray:
+        """RGBA (..., 4) at data ``values``, linear between points, clamped outside."""
+        v = np.asarray(values, dtype=np.float64)
+        pts = np.asarray(self.points)
+        out = np.empty((*v.shape, 4))
+        for c in range(4):
+            out[..., c] = np.interp(v, pts[:, 0], pts[:, c + 1])
+        return out
+
+    def table(self, size: int = TABLE_SIZE) -> np.ndarray:
+        """RGBA float32 table (size, 4) sampling :attr:`value_range` uniformly."""
+        lo, hi = self.value_range
+        return self(np.linspace(lo, hi, size)).astype(np.float32)
+
+    def gpu_table(self, ratio: float = 1.0, size: int = TABLE_SIZE) -> np.ndarray:
+        """The raycaster's (2, size, 4) float32 table over :attr:`value_range`.
+
+        Row 0 is premultiplied colour with opacity corrected for a sample distance of
+        ``ratio`` reference distances (``1 - (1 - a) ** ratio``); row 1 is the straight
+        colour and opacity.
+        """
+        straight = self.table(size)
+        a = 1.0 - np.power(np.clip(1.0 - straight[:, 3], 0.0, 1.0), ratio)
+        premul = np.concatenate([straight[:, :3] * a[:, None], a[:, None]], axis=1)
+        return np.stack([premul, straight]).astype(np.float32)
+
+    def visible_ranges(self, lo: np.ndarray, hi: np.ndarray, size: int = TABLE_SIZE) -> np.ndarray:
+        """True where the table has non-zero opacity anywhere in ``[lo, hi]`` (conservative).
+
+        Used for empty-space skipping: a block whose value range is invisible is skipped.
+        """
+        alpha = self.table(size)[:, 3]
+        tlo, thi = self.value_range
+        scale = (size - 1) / (thi - tlo)
+        # prefix count of visible entries answers "any visible in [i0, i1]" in O(1)
+        csum = np.concatenate([[0], np.cumsum(alpha > 0)])
+        lo, hi = np.asarray(lo), np.asarray(hi)
+        if lo.dtype.kind in "ui" and lo.dtype.itemsize <= 2 and lo.dtype == hi.dtype:
+            # integer data: per possible value, a lookup table (two gathers per element
+            # instead of float arithmetic on every element)
+            info = np.iinfo(lo.dtype)
+            values = np.arange(info.min, info.max + 1, dtype=np.float64)
+            i0 = np.clip(np.floor((values - tlo) * scale), 0, size - 1).astype(np.int64)
+            i1 = np.clip(np.ceil((values - tlo) * scale), 0, size - 1).astype(np.int64)
+            before_lo = csum[i0].astype(np.int32)  # visible entries below lo's index
+            through_hi = csum[i1 + 1].astype(np.int32)  # visible entries up to hi's index
+            if info.min:
+                lo = lo.astype(np.int32) - info.min
+                hi = hi.astype(np.int32) - info.min
+            return through_hi[hi] > before_lo[lo]
+        i0 = np.clip(np.floor((lo - tlo) * scale), 0, size - 1).astype(np.int64)
+        i1 = np.clip(np.ceil((hi - tlo) * scale), 0, size - 1).astype(np.int64)
+        return (csum[i1 + 1] - csum[i0]) > 0
+
+    def first_visible_value(self) -> float:
+        """Lowest data value with non-zero opacity (the FLM threshold default)."""
+        pts = np.asarray(self.points)
+        nz = np.nonzero(pts[:, 4] > 0)[0]
+        if nz.size == 0:
+            return float(pts[-1, 0])
+        i = int(nz[0])
+        return float(pts[i - 1, 0]) if i > 0 else float(pts[0, 0])
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """``{"name": ..., "points": [[value, r, g, b, a], ...]}`` (resolved data units)."""
+        return {"name": self.name, "points": [list(p) for p in self.points]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], volume: Volume | None = None) -> TransferFunction:
+        """Inverse of :meth:`to_dict`; ``{"preset": name}`` is resolved against ``volume``."""
+        if "points" in d:
+            return cls(d["points"], name=str(d.get("name", "custom")))
+        if "preset" in d:
+            return cls.preset(str(d["preset"]), volume)
+        raise SceneError("a transfer function entry needs 'points' or 'preset'")
+
+    @classmethod
+    def load(cls, path: str) -> TransferFunction:
+        """Read a transfer function JSON file (``to_dict`` form or a bare list of points)."""
+        import json
+
+        try:
+            with open(path, encoding="utf-8") as fh:
+                d = json.load(fh)
+        except FileNotFoundError as exc:
+            raise SceneError(f"no such transfer function file: {path}") from exc
+        except (OSError, ValueError) as exc:  # ValueError: bad JSON or not UTF-8
+            raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
+        if isinstance(d, list):
+            return cls(d)
+        if not isinstance(d, Mapping):
+            raise SceneError(f"{path}: expected a JSON object or list of control points")
+        return cls.from_dict(d)
+
+
+def _looks_like_hu(volume: Volume) -> bool:
+    return volume.units.upper() == "HU" or volume.value_range[0] < -200
+
+
+def _percentile_range(volume: Volume) -> tuple[float, float]:
+    level, window = volume.default_window()
+    return level - window / 2, level + window / 2

@@ -1,0 +1,297 @@
+"""The :class:`Volume`: a scalar 3D image with its geometry in world units.
+
+Axis order (kept everywhere in voxwarp)
+---------------------------------------
+``Volume.data`` is indexed ``data[i, j, k]`` with ``i`` along world x, ``j`` along
+world y and ``k`` along world z, so ``data.shape == (nx, ny, nz)``. This is the
+order NIfTI and NRRD use, and the order of :class:`deform.ElementGrid` indices.
+The array is stored Fortran-contiguous, so ``data.T`` is a C-contiguous
+``(nz, ny, nx)`` array with x varying fastest: exactly the memory layout of an
+OpenGL 3D texture, uploaded without a copy.
+
+Geometry
+--------
+Voxel ``(i, j, k)`` has its centre at ``origin + spacing * (i, j, k)`` (millimetres).
+The volume's box, the region the raycaster renders, covers whole voxels:
+``origin - spacing / 2`` to ``origin + spacing * (shape - 1/2)``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from voxwarp.errors import VolumeError
+
+#: dtypes the GPU path supports natively.
+SUPPORTED_DTYPES: tuple[np.dtype, ...] = (
+    np.dtype(np.uint8),
+    np.dtype(np.uint16),
+    np.dtype(np.int16),
+    np.dtype(np.float32),
+)
+
+NanPolicy = Literal["raise", "mask"]
+
+
+def short_repr(value: object, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for error messages."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def parse_triple(
+    value: object, what: str, *, positive: bool = False, where: str = ""
+) -> tuple[float, float, float]:
+    """Parse one number or three numbers into a finite ``(x, y, z)`` tuple.
+
+    Raises :class:`VolumeError` naming ``what`` (and ``where`` it came from) otherwise.
+    """
+    suffix = f" in {where}" if where else ""
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise VolumeError(
+            f"{what}{suffix} must be one number or three numbers (x, y, z);"
+            f" got {short_repr(value)}."
+        ) from exc
+    if arr.size == 1:
+        arr = np.repeat(arr, 3)
+    if arr.size != 3:
+        raise VolumeError(
+            f"{what}{suffix} must be one number or three numbers (x, y, z);"
+            f" got {short_repr(value)}."
+        )
+    if not np.all(np.isfinite(arr)):
+        raise VolumeError(f"{what}{suffix} must be finite; got {short_repr(value)}.")
+    if positive and np.any(arr <= 0):
+        raise VolumeError(
+            f"{what}{suffix} must be positive in every axis; got {short_repr(value)}."
+        )
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def coerce_dtype(data: np.ndarray) -> np.ndarray:
+    """Return ``data`` in one of :data:`SUPPORTED_DTYPES`, converting only when lossless.
+
+    bool and int8 widen to uint8/int16; wider integers narrow to the smallest supported
+    integer type that holds their value range; float16/float64 become float32 (with a
+    warning for float64 when precision is lost). Anything else raises
+    :class:`VolumeError` naming the supported dtypes.
+    """
+    dt = data.dtype
+    if dt in SUPPORTED_DTYPES:
+        return data
+    if dt == np.bool_:
+        return data.astype(np.uint8)
+    if dt.kind in "iu":
+        if data.size == 0:
+            raise VolumeError("the volume is empty (a dimension is 0).")
+        lo, hi = int(data.min()), int(data.max())
+        for target in (np.uint8, np.int16, np.uint16):
+            info = np.iinfo(target)
+            if info.min <= lo and hi <= info.max:
+                return data.astype(target)
+        warnings.warn(
+            f"volume dtype {dt} with values in [{lo}, {hi}] does not fit a 16-bit integer;"
+            " converted to float32 (integers above 2**24 lose precision).",
+            stacklevel=3,
+        )
+        return data.astype(np.float32)
+    if dt.kind == "f":
+        return data.astype(np.float32)
+    raise VolumeError(
+        f"unsupported volume dtype {dt}; voxwarp reads uint8, uint16, int16 and float32"
+        " (integers and floats of other widths are converted). Convert the data to one"
+        " of these, e.g. array.astype(np.float32)."
+    )
+
+
+@dataclass(eq=False)
+class Volume:
+    """A scalar volume: voxel data plus spacing and origin in millimetres.
+
+    Parameters
+    ----------
+    data
+        Array of shape ``(nx, ny, nz)``, indexed ``data[i, j, k]`` with ``i`` along x
+        (see the module docstring). Stored Fortran-contiguous.
+    spacing
+        Voxel size ``(sx, sy, sz)`` in mm.
+    origin
+        World position ``(x, y, z)`` in mm of the centre of voxel ``(0, 0, 0)``.
+    name
+        Human-readable name (file stem for loaded files).
+    source
+        Path the volume was loaded from, or ``None`` for in-memory arrays; a scene
+        JSON refers to the volume by this path.
+    units
+        Unit of the voxel values, e.g. ``"HU"`` for CT; empty when unknown.
+    """
+
+    data: np.ndarray
+    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    name: str = "volume"
+    source: str | None = None
+    units: str = ""
+    _range: tuple[float, float] | None = field(default=None, repr=False)
+    _window: tuple[float, float] | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        data = np.asarray(self.data)
+        if data.ndim != 3:
+            raise VolumeError(
+                f"a volume needs a 3D array (nx, ny, nz); got {data.ndim}D with shape"
+                f" {data.shape}. For a single image, add an axis: array[..., None]."
+            )
+        if min(data.shape) < 1:
+            raise VolumeError(f"the volume is empty: shape {data.shape}.")
+        data = coerce_dtype(data)
+        self.data = np.asfortranarray(data)
+        self.spacing = parse_triple(
+            1.0 if self.spacing is None else self.spacing, "spacing", positive=True
+        )
+        self.origin = parse_triple(0.0 if self.origin is None else self.origin, "origin")
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """Number of voxels ``(nx, ny, nz)``."""
+        return tuple(int(s) for s in self.data.shape)  # type: ignore[return-value]
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The voxel dtype (one of :data:`SUPPORTED_DTYPES`)."""
+        return self.data.dtype
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lo, hi)`` corners of the box covering all voxels, in mm."""
+        sp = np.asarray(self.spacing)
+        org = np.asarray(self.origin)
+        lo = org - 0.5 * sp
+        hi = org + (np.asarray(self.shape) - 0.5) * sp
+        return lo, hi
+
+    @property
+    def size_mm(self) -> np.ndarray:
+        """Extent of the volume box in mm per axis."""
+        lo, hi = self.bounds
+        return hi - lo
+
+    @property
+    def center(self) -> np.ndarray:
+        """Centre of the volume box in mm."""
+        lo, hi = self.bounds
+        return 0.5 * (lo + hi)
+
+    def world_to_index(self, points: np.ndarray) -> np.ndarray:
+        """Map world points (..., 3) in mm to continuous voxel indices (i, j, k)."""
+        return (np.asarray(points, float) - np.asarray(self.origin)) / np.asarray(self.spacing)
+
+    def index_to_world(self, indices: np.ndarray) -> np.ndarray:
+        """Map continuous voxel indices (..., 3) to world points in mm."""
+        return np.asarray(self.origin) + np.asarray(indices, float) * np.asarray(self.spacing)
+
+    # ------------------------------------------------------------------ values
+    @property
+    def value_range(self) -> tuple[float, float]:
+        """``(min, max)`` of the voxel values (computed once)."""
+        if self._range is None:
+            self._range = (float(self.data.min()), float(self.data.max()))
+        return self._range
+
+    def default_window(self) -> tuple[float, float]:
+        """A ``(level, window)`` from the 0.5 and 99.5 percentiles of the values (cached)."""
+        if self._window is not None:
+            return self._window
+        sample = self.data[:: max(1, self.shape[0] // 64), :: max(1, self.shape[1] // 64), ::]
+        lo, hi = np.percentile(sample, [0.5, 99.5])
+        if hi <= lo:
+            lo, hi = self.value_range
+        if hi <= lo:
+            hi = lo + 1.0
+        self._window = (float(0.5 * (lo + hi)), float(hi - lo))
+        return self._window
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of voxel data."""
+        return int(self.data.nbytes)
+
+    def texture_array(self) -> np.ndarray:
+        """The data as a C-contiguous ``(nz, ny, nx)`` array (x fastest), for GL upload."""
+        return np.ascontiguousarray(self.data.T)
+
+    def downsample(self, factor: int | Sequence[int]) -> Volume:
+        """Return a volume reduced by an integer ``factor`` per axis (block mean).
+
+        Spacing grows by the factor; the box keeps its position up to half a new voxel.
+        """
+        f = np.asarray(factor, dtype=int).reshape(-1)
+        if f.size == 1:
+            f = np.repeat(f, 3)
+        if f.size != 3 or np.any(f < 1):
+            raise VolumeError(
+                f"downsample factor must be a positive integer (or three); got {factor}."
+            )
+        if np.all(f == 1):
+            return self
+        n = np.asarray(self.shape) // f
+        if np.any(n < 1):
+            raise VolumeError(
+                f"downsample factor {tuple(f)} is larger than the volume {self.shape}."
+            )
+        d = self.data[: n[0] * f[0], : n[1] * f[1], : n[2] * f[2]].astype(np.float32)
+        d = d.reshape(n[0], f[0], n[1], f[1], n[2], f[2]).mean(axis=(1, 3, 5))
+        if self.dtype.kind in "iu":
+            d = np.rint(d).astype(self.dtype)
+        sp = np.asarray(self.spacing) * f
+        org = np.asarray(self.origin) + 0.5 * (f - 1) * np.asarray(self.spacing)
+        return Volume(
+            d, tuple(sp), tuple(org), name=self.name, source=self.source, units=self.units
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"Volume(name={self.name!r}, shape={self.shape}, dtype={self.dtype},"
+            f" spacing={self.spacing}, origin={self.origin})"
+        )
+
+
+def check_finite(data: np.ndarray, policy: NanPolicy = "raise", what: str = "volume") -> np.ndarray:
+    """Reject or mask NaN/Inf voxels.
+
+    ``policy="raise"`` raises :class:`VolumeError` with the count of bad voxels;
+    ``policy="mask"`` replaces them by the minimum finite value (background) with a
+    warning. Integer arrays pass through unchanged.
+    """
+    if data.dtype.kind != "f":
+        return data
+    bad = ~np.isfinite(data)
+    nbad = int(bad.sum())
+    if nbad == 0:
+        return data
+    if policy == "raise":
+        raise VolumeError(
+            f"{what} has {nbad} NaN/Inf voxel(s) of {data.size}. Pass nan_policy='mask'"
+            " (CLI: --nan mask) to replace them by the minimum finite value, or clean the data."
+        )
+    if policy != "mask":
+        raise VolumeError(f"nan_policy must be 'raise' or 'mask'; got {policy!r}.")
+    finite = data[~bad]
+    if finite.size == 0:
+        raise VolumeError(f"{what} has no finite voxel at all; nothing to render.")
+    fill = finite.min()
+    warnings.warn(
+        f"{what}: {nbad} NaN/Inf voxel(s) replaced by the minimum finite value {fill}.",
+        stacklevel=3,
+    )
+    out = np.array(data, copy=True)
+    out[bad] = fill
+    return out

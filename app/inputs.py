@@ -1,0 +1,118 @@
+"""The files voxwarp opens by name, for the command line and the GUI alike.
+
+:func:`load_input` opens INPUT: a volume file or folder (npy, npz, raw + JSON sidecar,
+NRRD, NIfTI, DICOM folder, TIFF), a scene JSON written by ``Scene.save``, or
+``sample:NAME`` for a bundled sample. :func:`read_wire_file` / :func:`load_wire_file`
+and :func:`load_lattice_file` read the deformation files of ``--wires`` and
+``--lattice``. Bad files raise :class:`~voxwarp.errors.InputError` naming the file and
+the fix.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from voxwarp.errors import InputError
+
+
+def is_scene_json(path: Path) -> bool:
+    """Whether ``path`` is a scene JSON file (``"format": "voxwarp-scene"``)."""
+    if path.suffix.lower() != ".json" or not path.is_file():
+        return False
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(d, dict) and d.get("format") == "voxwarp-scene"
+
+
+def load_input(
+    spec: str,
+    *,
+    spacing: Sequence[float] | None = None,
+    downsample: int = 1,
+    nan_policy: str = "raise",
+) -> Any:
+    """Load INPUT: returns a Volume, or a Scene for scene JSON."""
+    from voxwarp.io.samples import load_sample
+    from voxwarp.io.volumes import load_volume
+    from voxwarp.scene import Scene
+
+    if spec.startswith("sample:"):
+        vol = load_sample(spec.split(":", 1)[1], spacing=spacing)
+        return vol.downsample(downsample) if downsample > 1 else vol
+    path = Path(spec)
+    if is_scene_json(path):
+        return Scene.load(path)
+    return load_volume(path, spacing=spacing, nan_policy=nan_policy, downsample=downsample)  # type: ignore[arg-type]
+
+
+_WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}
+_WIRE_FILE_NOTES = {"description", "sample", "type"}
+
+
+def read_json_option(option: str, path: str | Path) -> Any:
+    """The JSON in the file an option names; :class:`InputError` naming the option,
+    the file and what is wrong with it otherwise."""
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InputError(f"{option} {path}: no such file") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{option} {path}: cannot read it ({exc})") from exc
+    except ValueError as exc:
+        raise InputError(f"{option} {path}: not valid JSON ({exc})") from exc
+
+
+def load_wire_file(path: str | Path) -> dict[str, Any]:
+    """Read a wire file: JSON ``{"wires": [...], "field_scale": ..., ...}``.
+
+    The keys are those of a ``"wires"`` warp in scene JSON (see
+    :class:`voxwarp.deform.wires.WireFieldWarp`), plus the free-text notes ``description`` and
+    ``sample``. Returns the warp entry (``{"type": "wires", ...}``); raises
+    :class:`InputError` naming the problem.
+    """
+    d = read_wire_file(path)
+    return {"type": "wires", **{k: v for k, v in d.items() if k in _WIRE_FILE_KEYS}}
+
+
+def read_wire_file(path: str | Path) -> dict[str, Any]:
+    """The whole JSON object of a wire file, its notes included, after the checks of
+    :func:`load_wire_file` (which builds the warp entry from it)."""
+    d = read_json_option("--wires", path)
+    if not isinstance(d, dict) or "wires" not in d:
+        raise InputError(
+            f"--wires {path}: a wire file is a JSON object with a 'wires' list (see"
+            " sample_volumes/fish_spine_wires.json)"
+        )
+    unknown = set(d) - _WIRE_FILE_KEYS - _WIRE_FILE_NOTES
+    if unknown:
+        raise InputError(
+            f"--wires {path}: unknown keys {sorted(unknown)}; allowed:"
+            f" {sorted(_WIRE_FILE_KEYS | _WIRE_FILE_NOTES)}"
+        )
+    return d
+
+
+def load_lattice_file(path: str | Path, volume: Any) -> Any:
+    """Read a lattice file (a ``"lattice"`` warp entry of scene JSON: ``grid`` with its
+    ``nodes``, optional ``box`` (default: the volume's box), ``inverse``, ``iterations``;
+    plus the free-text notes ``description`` and ``sample``) and build the warp."""
+    from voxwarp.deform.lattice_warp import LatticeWarp
+    from voxwarp.deform.warp import WarpError
+
+    d = read_json_option("--lattice", path)
+    if not isinstance(d, dict) or "grid" not in d:
+        raise InputError(
+            f"--lattice {path}: a lattice file is a JSON object with a 'grid' ({{'nodes':"
+            " [...]}}, see sample_volumes/fish_lattice_bend.json)"
+        )
+    entry = {k: v for k, v in d.items() if k not in _WIRE_FILE_NOTES}
+    entry.setdefault("box", [list(map(float, b)) for b in volume.bounds])
+    try:
+        return LatticeWarp.from_dict(entry)
+    except WarpError as exc:
+        raise InputError(f"--lattice {path}: {exc}") from exc

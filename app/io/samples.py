@@ -1,0 +1,84 @@
+"""Bundled sample volumes as :class:`~voxwarp.core.volume.Volume` objects.
+
+Wraps :mod:`sample_volumes` (generators and bundled real scans, numpy only). A sample
+volume's ``source`` is ``"sample:NAME"`` so scene JSON can refer to it by name.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from voxwarp.errors import VolumeError
+
+if TYPE_CHECKING:
+    from voxwarp.core.volume import Volume
+
+#: The sample `make run` and `voxwarp demo` render by default.
+DEFAULT_SAMPLE = "stent"
+
+#: Transfer functions that suit each sample (presets or control points in its units).
+#: The stent CT is stored as 0..32 (not HU): soft tissue 0..6, contrast-filled vessels
+#: and bone around 10..20, the stent graft's metal at the top of the range.
+SUGGESTED_TRANSFER_FUNCTIONS: dict[str, Any] = {
+    "stent": [
+        (0.0, 0.0, 0.0, 0.0, 0.0),
+        (4.0, 0.7, 0.2, 0.15, 0.0),
+        (6.0, 0.85, 0.35, 0.25, 0.03),
+        (10.0, 0.95, 0.7, 0.55, 0.25),
+        (20.0, 1.0, 0.95, 0.9, 0.7),
+        (32.0, 1.0, 1.0, 1.0, 0.95),
+    ],
+    "colin27": "mri",
+    "fish": "ct-bone",
+    "tubes": "ct-soft",
+    "head": "ct-bone",
+}
+
+
+def suggested_transfer_function(name: str) -> Any:
+    """A transfer function (preset name or points) that shows sample ``name`` well."""
+    return SUGGESTED_TRANSFER_FUNCTIONS.get(name, "ct-bone")
+
+
+def sample_names() -> list[str]:
+    """Names accepted by :func:`load_sample`."""
+    from voxwarp import sample_volumes
+
+    return list(sample_volumes.names())
+
+
+def bundled_dir() -> Path:
+    """The folder of the bundled sample files (scenes, wire and lattice files, volumes)."""
+    from voxwarp import sample_volumes
+
+    return Path(sample_volumes.__file__).resolve().parent
+
+
+def load_sample(
+    name: str,
+    spacing: Sequence[float] | None = None,
+    origin: Sequence[float] | None = None,
+    **kwargs: Any,
+) -> Volume:
+    """Generate or load the bundled sample ``name`` (see ``sample_volumes/README.md``).
+
+    ``kwargs`` go to the generator (``shape``, ``seed``) for synthetic phantoms.
+    """
+    from voxwarp import sample_volumes
+    from voxwarp.core.volume import Volume
+
+    if name not in sample_volumes.names():
+        raise VolumeError(
+            f"unknown sample {name!r}; bundled samples: {', '.join(sample_volumes.names())}"
+        )
+    s = sample_volumes.get(name, **kwargs)
+    return Volume(
+        s.data,
+        spacing if spacing is not None else s.spacing,
+        origin if origin is not None else (0.0, 0.0, 0.0),
+        name=name,
+        source=f"sample:{name}",
+        units=s.units,
+    )

@@ -1,0 +1,1501 @@
+"""Reading and writing volumes, and the numbers ``voxwarp info`` prints.
+
+Every reader returns a :class:`voxwarp.core.volume.Volume` in voxwarp's axis order:
+``data[i, j, k]`` with ``i`` along x, ``j`` along y and ``k`` along z, spacing and
+origin in millimetres (see :mod:`voxwarp.core.volume`).
+
+Supported inputs (chosen by extension, or by the content of a folder):
+
+========================  ===========================================================
+``.npy`` / ``.npz``       NumPy arrays indexed ``(x, y, z)`` (``allow_pickle=False``);
+                          an ``.npz`` holds the volume under ``data`` (or as its only
+                          array) and optionally ``spacing``, ``origin`` and ``units``.
+``.raw .bin .img``        Headerless voxels, x fastest, described by a JSON sidecar
++ ``.json`` sidecar       ``vol.raw.json`` or ``vol.json``:
+                          ``{"dims": [nx, ny, nz], "dtype": "uint16", "spacing":
+                          [sx, sy, sz], "byte_order": "little", "origin": [...],
+                          "header_bytes": 0, "units": "HU"}``. The sidecar path
+                          itself may be passed too.
+``.nrrd`` / ``.nhdr``     NRRD via pynrrd (axis-aligned geometry only).
+``.nii`` / ``.nii.gz``    NIfTI via nibabel (axis-aligned geometry only).
+folder of DICOM files     One series (the largest if several), sorted along the slice
+                          normal, rescaled to stored units (HU for CT).
+``.dcm``                  A single multi-frame DICOM file.
+``.tif`` / ``.tiff``      A multi-page TIFF z-stack, or a folder of single-page TIFF
+                          slices in natural file-name order; ImageJ calibration is used.
+========================  ===========================================================
+
+:func:`save_volume` writes ``.npz``, ``.raw`` (+ ``.raw.json``), ``.nrrd``,
+``.nii``/``.nii.gz`` and ``.tif`` atomically. :func:`volume_summary` and
+:func:`volume_info` describe a volume as text and as a JSON-ready dict.
+
+Every problem caused by the input raises :class:`voxwarp.errors.VolumeError` with a
+message naming the problem and the fix. The format libraries (pynrrd, nibabel,
+pydicom, tifffile) are imported only when a file of their format is read or written.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import sys
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from voxwarp.core.files import atomic_write as _atomic
+from voxwarp.core.files import temp_name as _temp_name
+from voxwarp.core.volume import Volume, check_finite
+from voxwarp.core.volume import parse_triple as _triple
+from voxwarp.core.volume import short_repr as _short
+from voxwarp.errors import VolumeError
+
+__all__ = [
+    "LOAD_EXTENSIONS",
+    "SAVE_FORMATS",
+    "load_volume",
+    "save_volume",
+    "volume_info",
+    "volume_summary",
+]
+
+AxisOrder = Literal["xyz", "zyx"]
+NanPolicy = Literal["raise", "mask"]
+
+#: File extensions :func:`load_volume` reads (besides folders of DICOM or TIFF slices).
+LOAD_EXTENSIONS: tuple[str, ...] = (
+    ".npy",
+    ".npz",
+    ".raw",
+    ".bin",
+    ".img",
+    ".json",
+    ".nrrd",
+    ".nhdr",
+    ".nii",
+    ".nii.gz",
+    ".hdr",
+    ".dcm",
+    ".tif",
+    ".tiff",
+)
+
+#: Formats :func:`save_volume` writes, with the extension each one uses.
+SAVE_FORMATS: dict[str, str] = {
+    "npz": ".npz",
+    "raw": ".raw",
+    "nrrd": ".nrrd",
+    "nii": ".nii",
+    "nii.gz": ".nii.gz",
+    "tif": ".tif",
+}
+
+_RAW_EXTENSIONS = (".raw", ".bin", ".img")
+_TIFF_EXTENSIONS = (".tif", ".tiff")
+_SUPPORTED_TEXT = (
+    ".npy, .npz, .raw/.bin/.img with a .json sidecar, .nrrd/.nhdr, .nii/.nii.gz,"
+    " .tif/.tiff (multi-page), .dcm (multi-frame), or a folder of DICOM or TIFF slices"
+)
+
+#: dtype names accepted in a raw sidecar, mapped to NumPy type codes.
+_RAW_DTYPES: dict[str, str] = {
+    "uint8": "u1",
+    "uchar": "u1",
+    "int8": "i1",
+    "char": "i1",
+    "uint16": "u2",
+    "ushort": "u2",
+    "int16": "i2",
+    "short": "i2",
+    "uint32": "u4",
+    "uint": "u4",
+    "int32": "i4",
+    "int": "i4",
+    "float32": "f4",
+    "float": "f4",
+    "float64": "f8",
+    "double": "f8",
+}
+_RAW_DTYPE_TEXT = "uint8, int8, uint16, int16, uint32, int32, float32, float64"
+
+#: Length units found in file headers, in millimetres.
+_LENGTH_UNITS_MM: dict[str, float] = {
+    "": 1.0,
+    "mm": 1.0,
+    "millimeter": 1.0,
+    "millimetre": 1.0,
+    "unknown": 1.0,
+    "pixel": 1.0,
+    "micron": 1e-3,
+    "microns": 1e-3,
+    "um": 1e-3,
+    "µm": 1e-3,
+    "μm": 1e-3,
+    "\\u00b5m": 1e-3,
+    "nm": 1e-6,
+    "cm": 10.0,
+    "m": 1000.0,
+    "meter": 1000.0,
+    "metre": 1000.0,
+    "inch": 25.4,
+}
+
+_HIST_BINS = 16
+_HIST_WIDTH = 40
+_PERCENTILES = (1, 5, 50, 95, 99)
+_STATS_SAMPLE_VOXELS = 1 << 24
+
+
+# ---------------------------------------------------------------------------- helpers
+@dataclass
+class _Loaded:
+    """What a format reader found: data (x, y, z) plus the geometry the file states."""
+
+    data: np.ndarray
+    spacing: tuple[float, float, float] | None = None
+    origin: tuple[float, float, float] | None = None
+    units: str = ""
+    array_like: bool = False  # True for .npy/.npz: axis_order applies
+
+
+def _warn(message: str) -> None:
+    """Warn, attributing the warning to the first caller outside this module."""
+    level = 2  # stacklevel=2 is the frame that called _warn
+    frame = sys._getframe(1)
+    while frame is not None and frame.f_code.co_filename == __file__:
+        frame = frame.f_back
+        level += 1
+    warnings.warn(message, UserWarning, stacklevel=level)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _json_triple(
+    value: Any, what: str, where: str, *, positive: bool
+) -> tuple[float, float, float]:
+    """Like :func:`_triple` but accepting only JSON numbers (no strings or booleans)."""
+    items = value if isinstance(value, list) else [value]
+    if not items or not all(_is_number(v) for v in items):
+        raise VolumeError(
+            f"'{what}' in {where} must be a number or a list of three numbers [x, y, z];"
+            f" got {_short(value)}."
+        )
+    return _triple(items, f"'{what}'", positive=positive, where=where)
+
+
+def _natural_key(name: str) -> tuple:
+    """Sort key putting ``slice2`` before ``slice10``."""
+    parts = re.split(r"(\d+)", name)
+    return tuple(int(p) if p.isdigit() else p.lower() for p in parts)
+
+
+def _stem(path: Path) -> str:
+    name = path.name
+    lower = name.lower()
+    for double in (".nii.gz", ".raw.json", ".bin.json", ".img.json"):
+        if lower.endswith(double) and len(name) > len(double):
+            return name[: -len(double)]
+    return path.stem or name
+
+
+def _native(data: np.ndarray) -> np.ndarray:
+    """Return ``data`` in native byte order (keeps the dtype's kind and width)."""
+    if data.dtype.byteorder not in ("=", "|") and data.dtype.fields is None:
+        return data.astype(data.dtype.newbyteorder("="))
+    return data
+
+
+def _unit_scale(unit: Any, where: str) -> float:
+    """Millimetres per ``unit`` (a length unit name from a file header)."""
+    if not isinstance(unit, str):
+        return 1.0
+    key = unit.strip().lower()
+    if key in _LENGTH_UNITS_MM:
+        return _LENGTH_UNITS_MM[key]
+    _warn(f"{where}: unknown length unit {unit!r}; spacing taken as millimetres.")
+    return 1.0
+
+
+def _check_choice(value: Any, name: str, choices: Sequence[str]) -> None:
+    if not isinstance(value, str) or value not in choices:
+        options = " or ".join(repr(c) for c in choices)
+        raise VolumeError(f"{name} must be {options}; got {_short(value)}.")
+
+
+def _check_downsample(factor: Any) -> int | tuple[int, int, int]:
+    values = factor if isinstance(factor, list | tuple) else [factor]
+    ok = len(values) in (1, 3) and all(
+        isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 1 for v in values
+    )
+    if not ok:
+        raise VolumeError(
+            f"downsample must be a positive integer (or three); got {_short(factor)}."
+        )
+    if len(values) == 1:
+        return int(values[0])
+    return (int(values[0]), int(values[1]), int(values[2]))
+
+
+# ---------------------------------------------------------------------------- loading
+def load_volume(
+    source: str | os.PathLike[str] | np.ndarray,
+    spacing: float | Sequence[float] | None = None,
+    *,
+    origin: float | Sequence[float] | None = None,
+    axis_order: AxisOrder = "xyz",
+    nan_policy: NanPolicy = "raise",
+    downsample: int = 1,
+) -> Volume:
+    """Load a volume from a file, a folder of slices, or a NumPy array.
+
+    Parameters
+    ----------
+    source
+        Path to a volume file or to a folder of DICOM or TIFF slices (see the module
+        docstring for the formats), ``"sample:NAME"`` for a bundled sample volume
+        (see :func:`voxwarp.io.samples.sample_names`), or an in-memory array.
+    spacing
+        Voxel size ``(sx, sy, sz)`` in mm (or one number for all axes). Overrides what
+        the file states; default: the file's spacing, or 1 mm.
+    origin
+        World position ``(x, y, z)`` in mm of the centre of voxel ``(0, 0, 0)``.
+        Overrides what the file states; default: the file's origin, or 0.
+    axis_order
+        How an array (or a ``.npy``/``.npz`` file) is indexed: ``"xyz"``
+        (``array[i, j, k]``, voxwarp's order) or ``"zyx"`` (napari/tifffile order,
+        transposed on load). ``spacing`` and ``origin`` are always given as
+        ``(x, y, z)``. Other formats define their own axis order, so ``"zyx"`` is an
+        error for them.
+    nan_policy
+        ``"raise"`` rejects NaN/Inf voxels; ``"mask"`` replaces them by the minimum
+        finite value with a warning (see :func:`voxwarp.core.volume.check_finite`).
+    downsample
+        Integer block-mean reduction factor per axis (1 = full resolution); warns
+        when it reduces the volume.
+
+    Returns
+    -------
+    Volume
+        With ``name`` set to the file stem (or folder name), ``source`` to the
+        absolute path (``None`` for arrays) and ``units`` to the value unit when
+        known (``"HU"`` for CT DICOM).
+
+    Raises
+    ------
+    VolumeError
+        For a missing file, an unsupported or corrupt file, bad metadata, NaN/Inf
+        voxels under ``nan_policy="raise"`` or an invalid argument; the message names
+        the problem and the fix.
+    """
+    _check_choice(axis_order, "axis_order", ("xyz", "zyx"))
+    _check_choice(nan_policy, "nan_policy", ("raise", "mask"))
+    factor = _check_downsample(downsample)
+    spacing_override = None if spacing is None else _triple(spacing, "spacing", positive=True)
+    origin_override = None if origin is None else _triple(origin, "origin")
+
+    if isinstance(source, str) and source.startswith("sample:") and not os.path.exists(source):
+        from voxwarp.io.samples import load_sample
+
+        sample = load_sample(source.split(":", 1)[1])
+        loaded = _Loaded(sample.data, sample.spacing, sample.origin, sample.units)
+        name, src, what = sample.name, sample.source, source
+    elif isinstance(source, str | os.PathLike):
+        try:
+            path = Path(os.path.abspath(os.path.expanduser(os.fspath(source))))
+        except (TypeError, ValueError) as exc:
+            raise VolumeError(f"invalid path {_short(source)}: {exc}") from exc
+        loaded = _load_path(path)
+        name, src = _stem(path), str(path)
+        what = path.name
+    elif isinstance(source, np.ndarray) or hasattr(source, "__array__"):
+        try:
+            array = np.asarray(source)
+        except (TypeError, ValueError) as exc:
+            raise VolumeError(f"cannot convert {type(source).__name__} to an array: {exc}") from exc
+        loaded = _Loaded(array, array_like=True)
+        name, src, what = "volume", None, "array"
+    else:
+        raise VolumeError(f"source must be a path or a NumPy array; got {type(source).__name__}.")
+
+    data = loaded.data
+    if axis_order == "zyx":
+        if not loaded.array_like:
+            raise VolumeError(
+                f"axis_order='zyx' applies to NumPy arrays and .npy/.npz files; {what}"
+                " defines its own axis order. Leave axis_order at 'xyz'."
+            )
+        if data.ndim != 3:
+            raise VolumeError(
+                f"a volume needs a 3D array; got {data.ndim}D with shape {data.shape}."
+            )
+        data = data.transpose(2, 1, 0)
+
+    volume = _finish(
+        data,
+        spacing=spacing_override if spacing_override is not None else loaded.spacing,
+        origin=origin_override if origin_override is not None else loaded.origin,
+        name=name,
+        source=src,
+        units=loaded.units,
+        nan_policy=nan_policy,
+        what=what,
+    )
+    if factor != 1:
+        reduced = volume.downsample(factor)
+        _warn(
+            f"{what}: downsampled by {factor} from {volume.shape} to {reduced.shape} voxels;"
+            f" spacing is now {reduced.spacing} mm."
+        )
+        volume = reduced
+    return volume
+
+
+def _finish(
+    data: np.ndarray,
+    *,
+    spacing: tuple[float, float, float] | None,
+    origin: tuple[float, float, float] | None,
+    name: str,
+    source: str | None,
+    units: str,
+    nan_policy: NanPolicy,
+    what: str,
+) -> Volume:
+    """Normalise dtype and byte order, check NaN/Inf, and build the :class:`Volume`."""
+    data = np.asarray(data)
+    if data.dtype.kind == "f" and data.dtype != np.float32:
+        with np.errstate(over="ignore", invalid="ignore"):
+            data = data.astype(np.float32)  # before check_finite: overflow becomes Inf
+    elif data.dtype.kind in "iub":
+        data = _native(data)
+    if data.dtype.kind == "f" and data.ndim == 3 and data.size:
+        data = check_finite(data, nan_policy, what=what)
+    return Volume(
+        data,
+        spacing if spacing is not None else (1.0, 1.0, 1.0),
+        origin if origin is not None else (0.0, 0.0, 0.0),
+        name=name,
+        source=source,
+        units=units,
+    )
+
+
+def _load_path(path: Path) -> _Loaded:
+    """Dispatch on the path: folder content or file extension."""
+    if not path.exists():
+        raise VolumeError(f"no such file or directory: {path}")
+    if path.is_dir():
+        return _read_directory(path)
+    lower = path.name.lower()
+    if lower.endswith((".npy", ".npz")):
+        return _read_numpy(path)
+    if lower.endswith((".nii", ".nii.gz", ".hdr")):
+        return _read_nifti(path)
+    if lower.endswith((".nrrd", ".nhdr")):
+        return _read_nrrd(path)
+    if lower.endswith(_TIFF_EXTENSIONS):
+        return _read_tiff_file(path)
+    if lower.endswith(".json"):
+        return _read_raw(_raw_for_sidecar(path), path)
+    if lower.endswith(_RAW_EXTENSIONS):
+        sidecar = _sidecar_for_raw(path)
+        if sidecar is None and lower.endswith(".img") and path.with_suffix(".hdr").exists():
+            return _read_nifti(path)  # Analyze / NIfTI pair
+        if sidecar is None:
+            raise VolumeError(
+                f"no JSON sidecar for raw file {path}: put {path.name}.json or"
+                f" {path.stem}.json beside it, e.g. "
+                '{"dims": [nx, ny, nz], "dtype": "uint16", "spacing": [sx, sy, sz],'
+                ' "byte_order": "little"}.'
+            )
+        return _read_raw(path, sidecar)
+    if lower.endswith((".dcm", ".dicom")):
+        return _read_dicom_file(path)
+    raise VolumeError(
+        f"unsupported file type {path.suffix or '(no extension)'} for {path}; voxwarp reads"
+        f" {_SUPPORTED_TEXT}. Convert the file, or pass the folder for DICOM slices."
+    )
+
+
+# ---------------------------------------------------------------------------- numpy
+def _read_numpy(path: Path) -> _Loaded:
+    try:
+        obj = np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read {path} as a NumPy .npy/.npz file ({type(exc).__name__}: {exc})."
+            " The file may be corrupt or hold pickled objects, which voxwarp does not load;"
+            " save plain numeric arrays with np.save / np.savez."
+        ) from exc
+    if isinstance(obj, np.ndarray):
+        return _Loaded(obj, array_like=True)
+    with obj:
+        return _read_npz_contents(obj, path)
+
+
+def _npz_get(npz: Any, key: str, path: Path) -> np.ndarray:
+    try:
+        return np.asarray(npz[key])
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read array {key!r} from {path} ({type(exc).__name__}: {exc}). The file"
+            " may be corrupt or hold pickled objects; save plain arrays with np.savez."
+        ) from exc
+
+
+def _read_npz_contents(npz: Any, path: Path) -> _Loaded:
+    keys = list(npz.files)
+    meta = {"spacing", "origin", "units"}
+    if "data" in keys:
+        key = "data"
+    else:
+        candidates = [k for k in keys if k not in meta]
+        if len(candidates) != 1:
+            raise VolumeError(
+                f"{path} holds the arrays {_short(keys)}; voxwarp expects the volume under"
+                " the key 'data' (or a single array). Save it with"
+                " np.savez(path, data=array, spacing=(sx, sy, sz))."
+            )
+        key = candidates[0]
+    data = _npz_get(npz, key, path)
+    loaded = _Loaded(data, array_like=True)
+    for name in ("spacing", "origin"):
+        if name in keys and name != key:
+            arr = _npz_get(npz, name, path)
+            if arr.dtype.kind not in "iuf":
+                raise VolumeError(
+                    f"'{name}' in {path} must hold numbers; got an array of dtype {arr.dtype}."
+                )
+            value = _triple(arr, f"'{name}'", positive=name == "spacing", where=str(path))
+            setattr(loaded, name, value)
+    if "units" in keys and key != "units":
+        arr = _npz_get(npz, "units", path)
+        if arr.dtype.kind not in "US" or arr.size != 1:
+            raise VolumeError(
+                f"'units' in {path} must be a string, e.g. np.array('HU'); got an array of"
+                f" dtype {arr.dtype} and shape {arr.shape}."
+            )
+        item = arr.reshape(()).item()
+        loaded.units = item.decode("utf-8", "replace") if isinstance(item, bytes) else str(item)
+    return loaded
+
+
+# ---------------------------------------------------------------------------- raw
+def _sidecar_for_raw(path: Path) -> Path | None:
+    for candidate in (path.with_name(path.name + ".json"), path.with_suffix(".json")):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _raw_for_sidecar(sidecar: Path) -> Path:
+    name = sidecar.name
+    if name.lower().endswith(tuple(ext + ".json" for ext in _RAW_EXTENSIONS)):
+        candidates = [sidecar.with_name(name[: -len(".json")])]
+    else:
+        candidates = [sidecar.with_suffix(ext) for ext in _RAW_EXTENSIONS]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    names = ", ".join(c.name for c in candidates)
+    raise VolumeError(
+        f"no raw data file for the sidecar {sidecar}: expected {names} beside it."
+        " Pass the raw file, or a volume file of another supported type."
+    )
+
+
+def _read_sidecar(sidecar: Path) -> dict[str, Any]:
+    try:
+        text = sidecar.read_text(encoding="utf-8")
+        meta = json.loads(text)
+    except OSError as exc:
+        raise VolumeError(f"cannot read the sidecar {sidecar}: {exc.strerror or exc}.") from exc
+    except (ValueError, RecursionError) as exc:
+        raise VolumeError(
+            f"the sidecar {sidecar} is not valid JSON ({exc}). It must be a JSON object like"
+            ' {"dims": [nx, ny, nz], "dtype": "uint16", "spacing": [sx, sy, sz]}.'
+        ) from exc
+    if not isinstance(meta, dict):
+        raise VolumeError(
+            f"the sidecar {sidecar} must hold a JSON object with 'dims' and 'dtype';"
+            f" got {type(meta).__name__}."
+        )
+    return meta
+
+
+def _read_raw(path: Path, sidecar: Path) -> _Loaded:
+    meta = _read_sidecar(sidecar)
+    where = sidecar.name
+    if "dims" not in meta or "dtype" not in meta:
+        raise VolumeError(
+            f"the sidecar {sidecar} needs 'dims' and 'dtype' (found keys {_short(sorted(meta))}),"
+            ' e.g. {"dims": [nx, ny, nz], "dtype": "uint16", "spacing": [sx, sy, sz]}.'
+        )
+    dims = meta["dims"]
+    if not (
+        isinstance(dims, list)
+        and len(dims) == 3
+        and all(isinstance(d, int) and not isinstance(d, bool) and d > 0 for d in dims)
+    ):
+        raise VolumeError(
+            f"'dims' in {where} must be three positive integers [nx, ny, nz]; got {_short(dims)}."
+        )
+    dtype_name = meta["dtype"]
+    code = _RAW_DTYPES.get(dtype_name.strip().lower()) if isinstance(dtype_name, str) else None
+    if code is None:
+        raise VolumeError(
+            f"unsupported dtype {_short(dtype_name)} in {where}; use one of {_RAW_DTYPE_TEXT}."
+        )
+    byte_order = meta.get("byte_order", "little")
+    if not isinstance(byte_order, str) or byte_order not in ("little", "big"):
+        raise VolumeError(
+            f'\'byte_order\' in {where} must be "little" or "big"; got {_short(byte_order)}.'
+        )
+    dtype = np.dtype(("<" if byte_order == "little" else ">") + code)
+    header = meta.get("header_bytes", 0)
+    if not (isinstance(header, int) and not isinstance(header, bool) and header >= 0):
+        raise VolumeError(
+            f"'header_bytes' in {where} must be a non-negative integer; got {_short(header)}."
+        )
+    spacing = (
+        _json_triple(meta["spacing"], "spacing", where, positive=True)
+        if "spacing" in meta
+        else None
+    )
+    origin = (
+        _json_triple(meta["origin"], "origin", where, positive=False) if "origin" in meta else None
+    )
+    units = meta.get("units", "")
+    if not isinstance(units, str):
+        raise VolumeError(f"'units' in {where} must be a string; got {_short(units)}.")
+
+    count = dims[0] * dims[1] * dims[2]
+    expected = header + count * dtype.itemsize
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise VolumeError(f"cannot read {path}: {exc.strerror or exc}.") from exc
+    header_text = f" after {header} header bytes" if header else ""
+    if size < expected:
+        raise VolumeError(
+            f"{path.name} is too short: expected {expected} bytes for dims {dims} dtype"
+            f" {dtype_name}{header_text}, file has {size} bytes. Fix 'dims', 'dtype' or"
+            f" 'header_bytes' in {where}, or the file is truncated."
+        )
+    if size > expected:
+        _warn(
+            f"{path.name} has {size} bytes, more than the {expected} expected for dims {dims}"
+            f" dtype {dtype_name}{header_text}; the extra {size - expected} bytes are ignored."
+            f" Check 'dims', 'dtype' and 'header_bytes' in {where}."
+        )
+    try:
+        flat = np.fromfile(path, dtype=dtype, count=count, offset=header)
+    except (OSError, ValueError) as exc:
+        raise VolumeError(f"cannot read {path}: {exc}.") from exc
+    if flat.size != count:  # the file changed under us
+        raise VolumeError(f"{path.name}: read {flat.size} voxels, expected {count}.")
+    data = _native(flat).reshape(tuple(dims), order="F")
+    return _Loaded(data, spacing, origin, units)
+
+
+# ---------------------------------------------------------------------------- NRRD
+def _read_nrrd(path: Path) -> _Loaded:
+    import nrrd
+
+    try:
+        data, header = nrrd.read(str(path), index_order="F")
+        data = np.asarray(data)
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read the NRRD file {path} ({type(exc).__name__}: {exc})."
+            " The file may be corrupt or its header invalid."
+        ) from exc
+    where = path.name
+    try:
+        dirs = header.get("space directions")
+        dirs = None if dirs is None else np.asarray(dirs, dtype=np.float64)
+        spacings = header.get("spacings")
+        spacings = None if spacings is None else np.asarray(spacings, dtype=np.float64)
+        space_origin = header.get("space origin")
+        space_origin = None if space_origin is None else np.asarray(space_origin, np.float64)
+    except (TypeError, ValueError) as exc:
+        raise VolumeError(f"invalid geometry in the NRRD header of {path}: {exc}.") from exc
+    if dirs is not None and (dirs.ndim != 2 or dirs.shape[0] != data.ndim):
+        dirs = None
+
+    spatial = list(range(data.ndim))
+    if dirs is not None:
+        spatial = [a for a in range(data.ndim) if np.all(np.isfinite(dirs[a]))]
+    if data.ndim != 3:
+        extra = [a for a in range(data.ndim) if a not in spatial]
+        if len(spatial) != 3 or any(data.shape[a] != 1 for a in extra):
+            raise VolumeError(
+                f"{path} is a {data.ndim}D NRRD with sizes {list(data.shape)}; voxwarp reads"
+                " scalar 3D volumes. Extract one 3D scalar component first."
+            )
+        data = np.squeeze(data, axis=tuple(extra))
+
+    spacing = None
+    if dirs is not None:
+        vectors = dirs[spatial]
+        spacing = tuple(float(v) for v in np.linalg.norm(vectors, axis=1))
+        diagonal = vectors.shape == (3, 3) and np.allclose(
+            vectors - np.diag(np.diag(vectors)), 0.0, atol=1e-6 * max(spacing)
+        )
+        if not diagonal or np.any(np.diag(vectors) <= 0):
+            _warn(
+                f"{where}: the space directions are not axis-aligned with positive axes"
+                f" ({_short(vectors.tolist())}); voxwarp keeps only the voxel sizes and the"
+                " origin and shows the volume in index order."
+            )
+    elif spacings is not None:
+        finite = spacings[np.isfinite(spacings)]
+        if finite.size == 3:
+            spacing = tuple(float(v) for v in finite)
+    if spacing is not None:
+        spacing = _triple(spacing, "spacing", positive=True, where=where)
+    origin = None
+    if space_origin is not None and space_origin.size == 3 and np.all(np.isfinite(space_origin)):
+        origin = _triple(space_origin, "space origin", where=where)
+
+    units_field = header.get("space units")
+    if isinstance(units_field, list) and units_field and len(set(units_field)) == 1:
+        scale = _unit_scale(units_field[0], where)
+        if scale != 1.0:
+            spacing = None if spacing is None else tuple(s * scale for s in spacing)
+            origin = None if origin is None else tuple(o * scale for o in origin)
+    units = header.get("voxwarp_units", "")
+    return _Loaded(data, spacing, origin, units if isinstance(units, str) else "")
+
+
+# ---------------------------------------------------------------------------- NIfTI
+def _read_nifti(path: Path) -> _Loaded:
+    import nibabel as nib
+
+    try:
+        img = nib.load(str(path))
+        shape = tuple(int(s) for s in img.shape)
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
+            " The file may be corrupt or not a NIfTI/Analyze image."
+        ) from exc
+    while len(shape) > 3 and shape[-1] == 1:
+        shape = shape[:-1]
+    if len(shape) > 3:
+        raise VolumeError(
+            f"{path} is a 4D NIfTI with shape {tuple(img.shape)} (a time series or several"
+            " channels); voxwarp renders one 3D volume. Extract one, e.g. with nibabel:"
+            " nib.save(img.slicer[..., 0], 'volume0.nii.gz')."
+        )
+    if len(shape) < 3:
+        raise VolumeError(
+            f"{path} is a {len(shape)}D image with shape {shape}; voxwarp needs a 3D volume."
+        )
+    try:
+        proxy = img.dataobj
+        if hasattr(proxy, "get_unscaled"):
+            raw = np.asarray(proxy.get_unscaled())
+            slope = float(getattr(proxy, "slope", 1.0))
+            inter = float(getattr(proxy, "inter", 0.0))
+        else:
+            raw, slope, inter = np.asanyarray(proxy), 1.0, 0.0
+        hdr = img.header
+        zooms = tuple(float(z) for z in hdr.get_zooms()[:3])
+        affine = None if img.affine is None else np.asarray(img.affine, dtype=np.float64)
+        space_unit = hdr.get_xyzt_units()[0] if hasattr(hdr, "get_xyzt_units") else "mm"
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read the voxel data of the NIfTI file {path} ({type(exc).__name__}: {exc});"
+            " the file may be truncated or corrupt."
+        ) from exc
+    data = np.asarray(raw).reshape(shape, order="F") if raw.ndim != 3 else np.asarray(raw)
+    if not (math.isfinite(slope) and math.isfinite(inter)):
+        slope, inter = 1.0, 0.0
+    if slope != 1.0 or inter != 0.0:
+        data = _rescale(data, slope, inter)
+
+    scale = _unit_scale(space_unit, path.name)
+    spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=path.name)
+    spacing = tuple(s * scale for s in spacing)
+    origin = None
+    if affine is not None and affine.shape == (4, 4) and np.all(np.isfinite(affine)):
+        origin = tuple(float(v) * scale for v in affine[:3, 3])
+        m = affine[:3, :3]
+        off = m - np.diag(np.diag(m))
+        if np.max(np.abs(off)) > 1e-6 * max(np.max(np.abs(m)), 1e-12) or np.any(np.diag(m) <= 0):
+            _warn(
+                f"{path.name}: the affine has rotation, shear or flipped axes; voxwarp keeps"
+                " only the voxel sizes and the translation and shows the volume in index order."
+            )
+    return _Loaded(data, spacing, origin)  # type: ignore[arg-type]
+
+
+def _rescale(data: np.ndarray, slope: float, inter: float) -> np.ndarray:
+    """``data * slope + inter``, as integers when that is exact and fits 32 bits."""
+    integral = data.dtype.kind in "iub" and float(slope).is_integer() and float(inter).is_integer()
+    scaled = data.astype(np.float64) * slope + inter
+    if integral and scaled.size:
+        lo, hi = float(scaled.min()), float(scaled.max())
+        if -(2**31) <= lo and hi < 2**31:
+            return scaled.astype(np.int32)  # Volume narrows it to uint8/int16/uint16
+    return scaled.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------- folders
+def _read_directory(directory: Path) -> _Loaded:
+    try:
+        entries = sorted(
+            (p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
+            key=lambda p: _natural_key(p.name),
+        )
+    except OSError as exc:
+        raise VolumeError(f"cannot list the folder {directory}: {exc.strerror or exc}.") from exc
+    tiffs = [p for p in entries if p.name.lower().endswith(_TIFF_EXTENSIONS)]
+    others = [p for p in entries if not p.name.lower().endswith(_TIFF_EXTENSIONS)]
+    loaded = _read_dicom_dir(directory, others)
+    if loaded is not None:
+        return loaded
+    if tiffs:
+        return _read_tiff_dir(directory, tiffs)
+    raise VolumeError(
+        f"no DICOM files in {directory}; voxwarp reads a folder of DICOM slices (one image"
+        " per file, any file names, directly inside the folder) or of TIFF slices (.tif/.tiff)."
+        f" Pass the folder holding the series, or a volume file: {_SUPPORTED_TEXT}."
+    )
+
+
+# ---------------------------------------------------------------------------- DICOM
+def _floats(value: Any, n: int) -> np.ndarray | None:
+    """``value`` as ``n`` finite floats, or ``None`` when absent or malformed."""
+    if value is None:
+        return None
+    try:
+        arr = np.asarray([float(v) for v in value], dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if arr.size != n or not np.all(np.isfinite(arr)):
+        return None
+    return arr
+
+
+def _to_float(value: Any, default: float) -> float:
+    """``float(value)`` when that is a finite number, else ``default``."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return default
+    return out if math.isfinite(out) else default
+
+
+def _number(ds: Any, keyword: str, default: float | None) -> float | None:
+    value = ds.get(keyword)
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return default
+    return out if math.isfinite(out) else default
+
+
+def _read_dicom_dir(directory: Path, files: list[Path]) -> _Loaded | None:
+    """Load the (largest) DICOM series in ``files``; ``None`` if none is DICOM."""
+    if not files:
+        return None
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    headers: list[tuple[Path, Any]] = []
+    for p in files:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ds = pydicom.dcmread(p, stop_before_pixels=True, force=False)
+        except InvalidDicomError:
+            continue
+        except Exception as exc:
+            _warn(f"skipped {p.name}: not a readable DICOM file ({type(exc).__name__}: {exc}).")
+            continue
+        if "Rows" in ds and "Columns" in ds:
+            headers.append((p, ds))
+    if not headers:
+        return None
+
+    series: dict[str, list[tuple[Path, Any]]] = {}
+    for p, ds in headers:
+        series.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append((p, ds))
+    uid, chosen = max(series.items(), key=lambda item: len(item[1]))
+    if len(series) > 1:
+
+        def describe(u: str, items: list) -> str:
+            desc = str(items[0][1].get("SeriesDescription", "") or "no description")
+            return f"{u or '(no SeriesInstanceUID)'} ({desc}, {len(items)} files)"
+
+        ignored = "; ".join(describe(u, s) for u, s in series.items() if u != uid)
+        _warn(
+            f"{directory} holds {len(series)} DICOM series; loading the largest,"
+            f" {describe(uid, chosen)}. Ignored: {ignored}. Put one series per folder to"
+            " choose another."
+        )
+
+    frames = [int(_number(ds, "NumberOfFrames", 1) or 1) for _, ds in chosen]
+    if max(frames) > 1:
+        if len(chosen) == 1:
+            return _read_dicom_file(chosen[0][0])
+        raise VolumeError(
+            f"{directory} holds several multi-frame DICOM files in one series; pass one"
+            " of them (a .dcm file) instead of the folder."
+        )
+    return _assemble_dicom_series(directory, chosen)
+
+
+def _assemble_dicom_series(directory: Path, chosen: list[tuple[Path, Any]]) -> _Loaded:
+    import pydicom
+
+    ds0 = chosen[0][1]
+    iop = _floats(ds0.get("ImageOrientationPatient"), 6)
+    ipps = [_floats(ds.get("ImagePositionPatient"), 3) for _, ds in chosen]
+    positions: np.ndarray | None = None
+    if iop is not None and all(p is not None for p in ipps):
+        normal = np.cross(iop[:3], iop[3:])
+        if np.linalg.norm(normal) > 1e-6:
+            normal /= np.linalg.norm(normal)
+            positions = np.array([float(np.dot(p, normal)) for p in ipps])
+    if positions is not None:
+        order = np.argsort(positions, kind="stable")
+    else:
+        numbers = [_number(ds, "InstanceNumber", None) for _, ds in chosen]
+        if all(n is not None for n in numbers):
+            order = np.argsort(np.asarray(numbers, dtype=np.float64), kind="stable")
+        else:
+            order = np.arange(len(chosen))
+            if len(chosen) > 1:
+                _warn(
+                    f"{directory}: the slices have neither ImagePositionPatient nor"
+                    " InstanceNumber; they are stacked in file-name order."
+                )
+    chosen = [chosen[i] for i in order]
+    n = len(chosen)
+
+    slice_spacing: float | None = None
+    if positions is not None and n > 1:
+        sorted_pos = positions[order]
+        gaps = np.diff(sorted_pos)
+        if np.any(gaps < 1e-4):
+            count = int(np.sum(gaps < 1e-4)) + 1
+            raise VolumeError(
+                f"{directory}: {count} slices share a position; the series may hold several"
+                " acquisitions (echoes, phases, time points). Put one acquisition per folder."
+            )
+        slice_spacing = float(np.median(gaps))
+        if float(np.max(np.abs(gaps - slice_spacing))) > 0.01 * slice_spacing:
+            _warn(
+                f"{directory}: uneven slice spacing ({gaps.min():.4g} to {gaps.max():.4g} mm);"
+                f" using the median {slice_spacing:.4g} mm. Missing slices or a variable"
+                " acquisition make the volume geometrically inexact."
+            )
+    if slice_spacing is None:
+        slice_spacing = _number(ds0, "SpacingBetweenSlices", None) or _number(
+            ds0, "SliceThickness", None
+        )
+        if slice_spacing is None or slice_spacing <= 0:
+            slice_spacing = 1.0
+            if n > 1:
+                _warn(f"{directory}: no slice positions or thickness; slice spacing set to 1 mm.")
+    pixel = _floats(ds0.get("PixelSpacing"), 2)
+    if pixel is None:
+        pixel = _floats(ds0.get("ImagerPixelSpacing"), 2)
+    if pixel is None or np.any(pixel <= 0):
+        _warn(f"{directory}: no PixelSpacing; in-plane spacing set to 1 mm.")
+        pixel = np.array([1.0, 1.0])
+    spacing = (float(pixel[1]), float(pixel[0]), float(slice_spacing))  # (sx, sy, sz)
+
+    origin = None
+    first_ipp = _floats(chosen[0][1].get("ImagePositionPatient"), 3)
+    if first_ipp is not None:
+        origin = tuple(float(v) for v in first_ipp)
+    if iop is not None and not np.allclose(iop, [1, 0, 0, 0, 1, 0], atol=1e-3):
+        _warn(
+            f"{directory}: the slices are not axial (ImageOrientationPatient"
+            f" {[round(float(v), 4) for v in iop]}); voxwarp shows them in index order"
+            " (x along rows, y along columns, z along the slice normal)."
+        )
+
+    rows, cols = int(ds0.Rows), int(ds0.Columns)
+    slopes = np.array([_number(ds, "RescaleSlope", 1.0) or 1.0 for _, ds in chosen])
+    inters = np.array([_number(ds, "RescaleIntercept", 0.0) or 0.0 for _, ds in chosen])
+    rescaled = bool(np.any(slopes != 1.0) or np.any(inters != 0.0))
+    out: np.ndarray | None = None
+    integer_pixels = True
+    for k, (p, _) in enumerate(chosen):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                full = pydicom.dcmread(p, force=False)
+        except Exception as exc:
+            raise VolumeError(
+                f"cannot read the DICOM file {p} ({type(exc).__name__}: {exc})."
+            ) from exc
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                arr = np.asarray(full.pixel_array)
+        except Exception as exc:
+            syntax = getattr(getattr(full, "file_meta", None), "TransferSyntaxUID", "?")
+            raise VolumeError(
+                f"cannot decode the pixel data of {p} (transfer syntax {syntax};"
+                f" {type(exc).__name__}: {exc}). Compressed DICOM needs a decoder: pip install"
+                " pylibjpeg pylibjpeg-libjpeg pylibjpeg-openjpeg (or python-gdcm)."
+            ) from exc
+        if arr.shape != (rows, cols):
+            raise VolumeError(
+                f"{p.name} has an image of shape {arr.shape}, but the series' first slice is"
+                f" {(rows, cols)}; voxwarp reads grayscale series with equal-sized slices."
+            )
+        integer_pixels = integer_pixels and arr.dtype.kind in "iub"
+        if out is None:
+            dtype = np.float32 if rescaled else arr.dtype
+            out = np.empty((cols, rows, n), dtype=dtype, order="F")
+        elif not rescaled and arr.dtype != out.dtype:
+            out = out.astype(np.result_type(out.dtype, arr.dtype))
+        if rescaled:
+            out[:, :, k] = (arr.astype(np.float64) * slopes[k] + inters[k]).T
+        else:
+            out[:, :, k] = arr.T
+    assert out is not None
+    if rescaled:
+        integral = (
+            integer_pixels
+            and all(float(s).is_integer() for s in slopes)
+            and all(float(i).is_integer() for i in inters)
+        )
+        if integral and out.min() >= -32768 and out.max() <= 32767:
+            out = out.astype(np.int16)
+    units = "HU" if str(ds0.get("Modality", "")).upper() == "CT" else ""
+    return _Loaded(out, spacing, origin, units)  # type: ignore[arg-type]
+
+
+def _functional_attr(ds: Any, keyword: str, frame: int | None = None) -> Any:
+    """Find ``keyword`` at top level or in the (per-frame or shared) functional groups."""
+    if keyword in ds:
+        return ds.get(keyword)
+    groups = []
+    if frame is not None and "PerFrameFunctionalGroupsSequence" in ds:
+        seq = ds.PerFrameFunctionalGroupsSequence
+        if frame < len(seq):
+            groups.append(seq[frame])
+    if "SharedFunctionalGroupsSequence" in ds and len(ds.SharedFunctionalGroupsSequence):
+        groups.append(ds.SharedFunctionalGroupsSequence[0])
+    for group in groups:
+        for element in group:
+            if element.VR == "SQ" and len(element.value) and keyword in element.value[0]:
+                return element.value[0].get(keyword)
+    return None
+
+
+def _read_dicom_file(path: Path) -> _Loaded:
+    """Load a single multi-frame DICOM file (frames stacked along z)."""
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds = pydicom.dcmread(path, force=False)
+    except InvalidDicomError as exc:
+        raise VolumeError(f"{path} is not a DICOM file ({exc}).") from exc
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read the DICOM file {path} ({type(exc).__name__}: {exc})."
+        ) from exc
+    frames = int(_number(ds, "NumberOfFrames", 1) or 1)
+    if frames <= 1:
+        raise VolumeError(
+            f"{path} is a single DICOM slice; pass the folder holding the whole series"
+            f" instead: {path.parent}"
+        )
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            arr = np.asarray(ds.pixel_array)
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot decode the pixel data of {path} ({type(exc).__name__}: {exc})."
+            " Compressed DICOM needs a decoder: pip install pylibjpeg pylibjpeg-libjpeg"
+            " pylibjpeg-openjpeg (or python-gdcm)."
+        ) from exc
+    if arr.ndim != 3 or arr.shape[0] != frames:
+        raise VolumeError(
+            f"{path} has pixel data of shape {arr.shape}; voxwarp reads grayscale multi-frame"
+            " images (frames, rows, columns)."
+        )
+    data = arr.transpose(2, 1, 0)  # (frames, rows, cols) -> (x, y, z)
+
+    iop = _floats(_functional_attr(ds, "ImageOrientationPatient", 0), 6)
+    ipps = [_floats(_functional_attr(ds, "ImagePositionPatient", f), 3) for f in range(frames)]
+    slice_spacing = None
+    origin = None
+    if iop is not None and all(p is not None for p in ipps):
+        normal = np.cross(iop[:3], iop[3:])
+        if np.linalg.norm(normal) > 1e-6:
+            normal /= np.linalg.norm(normal)
+            pos = np.array([float(np.dot(p, normal)) for p in ipps])
+            order = np.argsort(pos, kind="stable")
+            gaps = np.diff(pos[order])
+            if np.all(gaps > 1e-4):
+                data = data[:, :, order]
+                slice_spacing = float(np.median(gaps))
+                origin = tuple(float(v) for v in ipps[int(order[0])])  # type: ignore[index]
+    if slice_spacing is None:
+        for keyword in ("SpacingBetweenSlices", "SliceThickness"):
+            value = _functional_attr(ds, keyword, 0)
+            try:
+                if value is not None and float(value) > 0:
+                    slice_spacing = float(value)
+                    break
+            except (TypeError, ValueError):
+                pass
+    if slice_spacing is None:
+        slice_spacing = 1.0
+        _warn(f"{path.name}: no frame positions or slice thickness; slice spacing set to 1 mm.")
+    pixel = _floats(_functional_attr(ds, "PixelSpacing", 0), 2)
+    if pixel is None or np.any(pixel <= 0):
+        _warn(f"{path.name}: no PixelSpacing; in-plane spacing set to 1 mm.")
+        pixel = np.array([1.0, 1.0])
+    spacing = (float(pixel[1]), float(pixel[0]), float(slice_spacing))
+
+    s = _to_float(_functional_attr(ds, "RescaleSlope", 0), 1.0) or 1.0
+    i = _to_float(_functional_attr(ds, "RescaleIntercept", 0), 0.0)
+    if s != 1.0 or i != 0.0:
+        data = _rescale(data, s, i)
+        if data.dtype == np.int32 and data.min() >= -32768 and data.max() <= 32767:
+            data = data.astype(np.int16)
+        elif data.dtype == np.int32:
+            data = data.astype(np.float32)
+    units = "HU" if str(ds.get("Modality", "")).upper() == "CT" else ""
+    return _Loaded(data, spacing, origin, units)
+
+
+# ---------------------------------------------------------------------------- TIFF
+def _tiff_geometry(tif: Any, where: str) -> tuple[tuple | None, tuple | None, str]:
+    """Spacing, origin (mm) and value unit from ImageJ metadata; ``None`` when absent."""
+    meta = tif.imagej_metadata
+    if not meta:
+        return None, None, ""
+    scale = _unit_scale(meta.get("unit", ""), where)
+    page = tif.pages[0]
+    xy = []
+    for tag_name in ("XResolution", "YResolution"):
+        tag = page.tags.get(tag_name)
+        value = 1.0
+        if tag is not None:
+            try:
+                num, den = tag.value
+                if num > 0 and den > 0:
+                    value = den / num
+            except (TypeError, ValueError):
+                pass
+        xy.append(value)
+    z = meta.get("spacing", 1.0)
+    z = float(z) if _is_number(z) and z > 0 and math.isfinite(z) else 1.0
+    spacing = (xy[0] * scale, xy[1] * scale, z * scale)
+    origin_px = []
+    for key in ("xorigin", "yorigin", "zorigin"):
+        value = meta.get(key, 0.0)
+        origin_px.append(float(value) if _is_number(value) and math.isfinite(value) else 0.0)
+    origin = tuple(-o * s for o, s in zip(origin_px, spacing, strict=True))
+    units = meta.get("vunit", "")
+    return spacing, origin, units if isinstance(units, str) else ""
+
+
+def _tiff_to_zyx(data: np.ndarray, axes: str, path: Path) -> np.ndarray:
+    """Reduce a tifffile series to a ``(z, y, x)`` stack, or explain why not."""
+    keep = [i for i, a in enumerate(axes) if a in "YX" or data.shape[i] != 1]
+    squeezed = np.squeeze(data, axis=tuple(i for i in range(data.ndim) if i not in keep))
+    axes = "".join(axes[i] for i in keep)
+    if axes == "YX":
+        return squeezed[None]
+    if len(axes) == 3 and axes[1:] == "YX" and axes[0] not in "CS":
+        return squeezed
+    raise VolumeError(
+        f"{path} holds images with axes {axes!r} and shape {squeezed.shape}; voxwarp reads a"
+        " grayscale z-stack (pages of 2D images). Split channels, colours or time points into"
+        " separate single-channel stacks first."
+    )
+
+
+def _read_tiff_file(path: Path) -> _Loaded:
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(path) as tif:
+            series = tif.series[0]
+            axes = series.axes
+            data = np.asarray(series.asarray())
+            spacing, origin, units = _tiff_geometry(tif, path.name)
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read the TIFF file {path} ({type(exc).__name__}: {exc})."
+            " The file may be corrupt or not a TIFF image."
+        ) from exc
+    data = _tiff_to_zyx(data, axes, path)
+    return _Loaded(data.transpose(2, 1, 0), spacing, origin, units)
+
+
+def _read_tiff_dir(directory: Path, files: list[Path]) -> _Loaded:
+    import tifffile
+
+    slices = []
+    geometry: tuple = (None, None, "")
+    for index, p in enumerate(files):
+        try:
+            with tifffile.TiffFile(p) as tif:
+                series = tif.series[0]
+                image = _tiff_to_zyx(np.asarray(series.asarray()), series.axes, p)
+                if index == 0:
+                    geometry = _tiff_geometry(tif, p.name)
+        except VolumeError:
+            raise
+        except Exception as exc:
+            raise VolumeError(
+                f"cannot read the TIFF slice {p} ({type(exc).__name__}: {exc})."
+                " Remove it from the folder or replace it."
+            ) from exc
+        if image.shape[0] != 1:
+            raise VolumeError(
+                f"{p} holds {image.shape[0]} pages; a folder of TIFF slices needs one 2D image"
+                " per file. Load the multi-page file on its own instead."
+            )
+        if slices and image.shape != slices[0].shape:
+            raise VolumeError(
+                f"{p.name} is {image.shape[2]}x{image.shape[1]} pixels but {files[0].name} is"
+                f" {slices[0].shape[2]}x{slices[0].shape[1]}; all TIFF slices must have the"
+                " same size."
+            )
+        slices.append(image)
+    stack = np.concatenate(slices, axis=0)  # (z, y, x)
+    spacing, origin, units = geometry
+    return _Loaded(stack.transpose(2, 1, 0), spacing, origin, units)
+
+
+# ---------------------------------------------------------------------------- saving
+def save_volume(volume: Volume, path: str | os.PathLike[str], *, format: str | None = None) -> Path:
+    """Write ``volume`` to ``path`` atomically.
+
+    Parameters
+    ----------
+    volume
+        The volume to write.
+    path
+        Destination. Its extension picks the format unless ``format`` is given; with
+        ``format`` and no extension, the format's extension is appended. Missing parent
+        folders are created.
+    format
+        One of ``"npz"``, ``"raw"`` (plus a ``.raw.json`` sidecar), ``"nrrd"``,
+        ``"nii"``, ``"nii.gz"`` or ``"tif"`` (ImageJ-calibrated multi-page TIFF).
+
+    Returns
+    -------
+    Path
+        The path of the data file written (for ``raw``, the sidecar is that path plus
+        ``.json``).
+
+    Raises
+    ------
+    VolumeError
+        For an unknown format, an extension that contradicts ``format``, or a
+        file that cannot be written.
+
+    Notes
+    -----
+    Every file is written to a temporary name in the destination folder and then
+    renamed over the destination with :func:`os.replace`, so readers never see a
+    partial file. NIfTI stores spacing and origin as float32; the other formats keep
+    them exactly. Value units are kept by ``npz``, ``raw``, ``nrrd`` and ``tif``.
+    """
+    if not isinstance(volume, Volume):
+        raise VolumeError(f"save_volume needs a Volume; got {type(volume).__name__}.")
+    try:
+        target = Path(os.path.expanduser(os.fspath(path)))
+    except TypeError as exc:
+        raise VolumeError(f"invalid path {_short(path)}: {exc}") from exc
+    detected = _format_from_name(target.name)
+    if format is None:
+        if detected is None:
+            raise VolumeError(
+                f"cannot tell the format of {target} from its extension; use one of"
+                " .npz, .raw, .nrrd, .nii, .nii.gz, .tif (or pass format=...)."
+            )
+        fmt = detected
+    else:
+        fmt = "tif" if format == "tiff" else format
+        if not isinstance(fmt, str) or fmt not in SAVE_FORMATS:
+            raise VolumeError(
+                f"unknown format {_short(format)}; use one of {', '.join(SAVE_FORMATS)}."
+            )
+        if detected is None and not target.suffix:
+            target = target.with_name(target.name + SAVE_FORMATS[fmt])
+        elif detected is not None and detected != fmt:
+            raise VolumeError(
+                f"the extension of {target.name} does not match format {fmt!r}; use a"
+                f" {SAVE_FORMATS[fmt]} file name or drop the extension."
+            )
+    target = Path(os.path.abspath(target))
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if fmt == "raw":
+            _save_raw(volume, target)
+        else:
+            writer = {
+                "npz": _write_npz,
+                "nrrd": _write_nrrd,
+                "nii": _write_nifti,
+                "nii.gz": _write_nifti,
+                "tif": _write_tiff,
+            }[fmt]
+            _atomic(target, SAVE_FORMATS[fmt], lambda tmp: writer(volume, tmp))
+    except OSError as exc:
+        raise VolumeError(f"cannot write {target}: {exc.strerror or exc}.") from exc
+    return target
+
+
+def _format_from_name(name: str) -> str | None:
+    lower = name.lower()
+    if lower.endswith(".nii.gz"):
+        return "nii.gz"
+    for fmt, extensions in (
+        ("npz", (".npz",)),
+        ("raw", (".raw", ".bin")),
+        ("nrrd", (".nrrd",)),
+        ("nii", (".nii",)),
+        ("tif", (".tif", ".tiff")),
+    ):
+        if lower.endswith(extensions):
+            return fmt
+    return None
+
+
+def _write_npz(volume: Volume, tmp: Path) -> None:
+    with open(tmp, "xb") as f:
+        np.savez_compressed(
+            f,
+            data=volume.data,
+            spacing=np.asarray(volume.spacing, dtype=np.float64),
+            origin=np.asarray(volume.origin, dtype=np.float64),
+            units=np.array(volume.units),
+        )
+
+
+def _save_raw(volume: Volume, final: Path) -> None:
+    sidecar = final.with_name(final.name + ".json")
+    meta = {
+        "dims": list(volume.shape),
+        "dtype": volume.dtype.name,
+        "byte_order": "little",
+        "spacing": list(volume.spacing),
+        "origin": list(volume.origin),
+        "header_bytes": 0,
+        "units": volume.units,
+    }
+    tmp_data = _temp_name(final, ".raw")
+    tmp_side = _temp_name(sidecar, ".json")
+    try:
+        data = volume.data.astype(volume.dtype.newbyteorder("<"), copy=False)
+        with open(tmp_data, "xb") as f:
+            np.ascontiguousarray(data.T).tofile(f)  # C order of (z, y, x): x fastest
+        with open(tmp_side, "x", encoding="utf-8") as f:
+            json.dump(meta, f, indent=2)
+            f.write("\n")
+        os.replace(tmp_data, final)
+        os.replace(tmp_side, sidecar)
+    except BaseException:
+        tmp_data.unlink(missing_ok=True)
+        tmp_side.unlink(missing_ok=True)
+        raise
+
+
+def _write_nrrd(volume: Volume, tmp: Path) -> None:
+    import nrrd
+
+    header: dict[str, Any] = {
+        "space dimension": 3,
+        "space directions": np.diag(np.asarray(volume.spacing, dtype=np.float64)),
+        "space origin": np.asarray(volume.origin, dtype=np.float64),
+        "space units": ["mm", "mm", "mm"],
+        "kinds": ["domain", "domain", "domain"],
+        "encoding": "gzip",
+    }
+    if volume.units:
+        header["voxwarp_units"] = volume.units
+    nrrd.write(str(tmp), np.asarray(volume.data), header, index_order="F")
+
+
+def _write_nifti(volume: Volume, tmp: Path) -> None:
+    import nibabel as nib
+
+    affine = np.diag([*volume.spacing, 1.0])
+    affine[:3, 3] = volume.origin
+    img = nib.Nifti1Image(np.asarray(volume.data), affine)
+    img.header.set_xyzt_units("mm")
+    nib.save(img, str(tmp))
+
+
+def _write_tiff(volume: Volume, tmp: Path) -> None:
+    import tifffile
+
+    sx, sy, sz = volume.spacing
+    ox, oy, oz = volume.origin
+    metadata: dict[str, Any] = {
+        "axes": "ZYX",
+        "spacing": sz,
+        "unit": "mm",
+        "xorigin": -ox / sx,
+        "yorigin": -oy / sy,
+        "zorigin": -oz / sz,
+    }
+    if volume.units:
+        metadata["vunit"] = volume.units
+    tifffile.imwrite(
+        tmp,
+        volume.texture_array(),  # (z, y, x)
+        imagej=True,
+        resolution=(1.0 / sx, 1.0 / sy),
+        metadata=metadata,
+    )
+
+
+# ---------------------------------------------------------------------------- info
+def volume_info(volume: Volume) -> dict[str, Any]:
+    """Numbers describing ``volume``, JSON-serialisable (``voxwarp info --json``).
+
+    Parameters
+    ----------
+    volume
+        The volume to describe.
+
+    Returns
+    -------
+    dict
+        Keys ``name``, ``source``, ``dims`` ``[nx, ny, nz]``, ``voxels``, ``dtype``,
+        ``units``, ``spacing_mm``, ``origin_mm``, ``size_mm``, ``memory_mb``, ``min``,
+        ``max``, ``mean``, ``std``, ``nonfinite`` (count of NaN/Inf voxels, left out of
+        the statistics), ``percentiles`` (``{"1": ..., "5": ..., "50": ..., "95": ...,
+        "99": ...}``, from an evenly strided sample above 2**24 voxels),
+        ``percentiles_sampled`` and ``histogram`` (``{"edges": [17 floats], "counts":
+        [16 ints]}`` over ``[min, max]``). Every value is a plain Python number,
+        string, list, dict or ``None``.
+    """
+    data = volume.data
+    flat = data.ravel(order="K")
+    if data.dtype.kind == "f":
+        finite_mask = np.isfinite(flat)
+        nonfinite = int(flat.size - np.count_nonzero(finite_mask))
+        values = flat[finite_mask] if nonfinite else flat
+    else:
+        nonfinite, values = 0, flat
+    if values.size:
+        lo, hi = float(values.min()), float(values.max())
+        mean = float(values.mean(dtype=np.float64))
+        std = float(values.std(dtype=np.float64))
+        step = max(1, values.size // _STATS_SAMPLE_VOXELS)
+        sample = values[::step]
+        pct = np.percentile(sample, _PERCENTILES)
+        percentiles = {str(p): float(v) for p, v in zip(_PERCENTILES, pct, strict=True)}
+        counts, edges = np.histogram(values, bins=_HIST_BINS, range=(lo, hi) if hi > lo else None)
+    else:
+        lo = hi = mean = std = 0.0
+        step = 1
+        percentiles = {str(p): 0.0 for p in _PERCENTILES}
+        counts, edges = np.zeros(_HIST_BINS, dtype=int), np.zeros(_HIST_BINS + 1)
+    return {
+        "name": volume.name,
+        "source": volume.source,
+        "dims": list(volume.shape),
+        "voxels": int(data.size),
+        "dtype": str(volume.dtype),
+        "units": volume.units,
+        "spacing_mm": [float(s) for s in volume.spacing],
+        "origin_mm": [float(o) for o in volume.origin],
+        "size_mm": [float(s) for s in volume.size_mm],
+        "memory_mb": volume.nbytes / 2**20,
+        "min": lo,
+        "max": hi,
+        "mean": mean,
+        "std": std,
+        "nonfinite": nonfinite,
+        "percentiles": percentiles,
+        "percentiles_sampled": step > 1,
+        "histogram": {
+            "edges": [float(e) for e in edges],
+            "counts": [int(c) for c in counts],
+        },
+    }
+
+
+def _fmt(value: float) -> str:
+    return f"{value:.6g}"
+
+
+def _fmt3(values: Sequence[float]) -> str:
+    return "(" + ", ".join(_fmt(v) for v in values) + ")"
+
+
+def volume_summary(volume: Volume) -> str:
+    """The multi-line text ``voxwarp info`` prints for ``volume``.
+
+    Parameters
+    ----------
+    volume
+        The volume to describe.
+
+    Returns
+    -------
+    str
+        Name and source, dims ``(nx, ny, nz)``, dtype, units, spacing, origin and
+        physical size in mm, memory in MB, value range, mean/std, the 1/5/50/95/99
+        percentiles and a 16-bin text histogram: one line per bin with its value range,
+        a bar of ``#`` whose length grows with the logarithm of the count, and the count.
+        The numbers are those of :func:`volume_info`.
+    """
+    info = volume_info(volume)
+    nx, ny, nz = info["dims"]
+    lines = [
+        f"name:        {info['name']}",
+        f"source:      {info['source'] if info['source'] is not None else '(in memory)'}",
+        f"dims:        ({nx}, {ny}, {nz})  = {info['voxels']:,} voxels",
+        f"dtype:       {info['dtype']}",
+        f"units:       {info['units'] or '(unknown)'}",
+        f"spacing:     {_fmt3(info['spacing_mm'])} mm",
+        f"origin:      {_fmt3(info['origin_mm'])} mm",
+        f"size:        {_fmt3(info['size_mm'])} mm",
+        f"memory:      {info['memory_mb']:.2f} MB ({volume.nbytes:,} bytes)",
+        f"range:       [{_fmt(info['min'])}, {_fmt(info['max'])}]",
+        f"mean / std:  {_fmt(info['mean'])} / {_fmt(info['std'])}",
+        "percentiles: "
+        + "  ".join(f"p{p}={_fmt(v)}" for p, v in info["percentiles"].items())
+        + ("  (sampled)" if info["percentiles_sampled"] else ""),
+    ]
+    if info["nonfinite"]:
+        lines.append(f"non-finite:  {info['nonfinite']:,} NaN/Inf voxels (left out above)")
+    counts = info["histogram"]["counts"]
+    edges = info["histogram"]["edges"]
+    top = max(counts) if counts else 0
+    lines.append(f"histogram ({len(counts)} bins, bar length ~ log(count)):")
+    width = max(len(_fmt(e)) for e in edges) if edges else 1
+    for b, count in enumerate(counts):
+        length = 0
+        if count > 0 and top > 0:
+            length = max(1, round(_HIST_WIDTH * math.log1p(count) / math.log1p(top)))
+        closing = "]" if b == len(counts) - 1 else ")"
+        lines.append(
+            f"  [{_fmt(edges[b]):>{width}}, {_fmt(edges[b + 1]):>{width}}{closing}"
+            f" {'#' * length:<{_HIST_WIDTH}} {count}"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,3 @@
+"""The renderer: the raycaster and its GL context, empty-space skipping, the mesh pass, the editing
+overlay, field views.
+"""

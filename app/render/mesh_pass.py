@@ -1,0 +1,342 @@
+"""Drawing mesh instances deformed in the vertex shader (moderngl).
+
+About this technique
+--------------------
+Knuth, Kohlhammer and Kuijper ("Embedding hierarchical deformation within a realtime
+scene graph", GRAPP 2010, sections 4-6) deform scene-graph geometry on the GPU: each
+leaf gets one composed transform, a 4x4 matrix or a grid of trilinear cells, and the
+vertex shader applies it, so a vertex costs the same whatever the depth of the graph.
+Here (``shaders/mesh.vert.glsl``):
+
+* a matrix instance is drawn by the ``LINEAR`` program (one matrix product per vertex);
+* a lattice instance uploads its grid nodes as an RGBA32F 3D texture
+  (:meth:`voxwarp.deform.trilinear.TrilinearGrid.texture_data`); each vertex fetches the 8 nodes
+  of its cell and evaluates the trilinear map and its analytic Jacobian (exact float
+  arithmetic). ``position="hardware"`` evaluates the position with one hardware
+  trilinear fetch at node-centred coordinates instead (the paper's texture lookup;
+  GPUs quantise filter weights to 8 bits, 1/256 of a cell);
+* normals follow section 4.2, per instance: ``"normal"`` (``J^-T n``) or ``"tangent"``
+  (two tangents through ``J``, crossed).
+
+Fragments get Blinn-Phong shading with a headlight, lit from both sides, and are written
+premultiplied with depth. Opaque instances are drawn first with depth writes; translucent
+ones (alpha < 1) after them, blended (premultiplied "over") without depth writes and
+unsorted, so overlapping translucent instances depend on their order.
+
+:class:`MeshRenderer` draws into a framebuffer it is given;
+:class:`voxwarp.render.raycaster.Renderer`
+uses it for mixed scenes (meshes depth-composited with the volume).
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from voxwarp import shaders
+from voxwarp.core.camera import Camera
+from voxwarp.core.mesh import Mesh, MeshInstance
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.errors import RenderError
+
+#: Blinn-Phong ambient, diffuse, specular, shininess (as the raycaster's
+#: voxwarp.render.raycaster.LIGHT).
+MESH_LIGHT = (0.25, 0.7, 0.3, 32.0)
+#: Vertex position evaluation of lattice instances.
+POSITIONS = ("exact", "hardware")
+
+
+class _MeshGPU:
+    """Interleaved position + normal buffer and index buffer of one mesh."""
+
+    def __init__(self, ctx: Any, mesh: Mesh) -> None:
+        data = np.concatenate([mesh.vertices, mesh.normals], axis=1).astype(np.float32)
+        self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
+        self.ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, dtype=np.uint32).tobytes())
+        self.count = mesh.n_faces * 3
+        self.vaos: dict[int, Any] = {}
+
+    def vao(self, ctx: Any, prog: Any) -> Any:
+        vao = self.vaos.get(id(prog))
+        if vao is None:
+            vao = ctx.vertex_array(
+                prog,
+                [(self.vbo, "3f 3f", "in_position", "in_normal")],
+                index_buffer=self.ibo,
+                index_element_size=4,
+            )
+            self.vaos[id(prog)] = vao
+        return vao
+
+    def release(self) -> None:
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos.clear()
+        self.vbo.release()
+        self.ibo.release()
+
+
+class MeshRenderer:
+    """Draws :class:`~voxwarp.core.mesh.MeshInstance` lists on a given moderngl context.
+
+    Parameters
+    ----------
+    ctx
+        A ``moderngl.Context`` (OpenGL 4.3+); the caller owns it.
+    position
+        ``"exact"`` (default): lattice positions from the 8 fetched corner nodes;
+        ``"hardware"``: one hardware-trilinear texture fetch (see the module docstring).
+
+    GPU buffers are cached per mesh object and node textures per grid object (both are
+    immutable), programs per variant; :meth:`release` frees everything (idempotent).
+    """
+
+    def __init__(self, ctx: Any, *, position: str = "exact") -> None:
+        if position not in POSITIONS:
+            raise RenderError(f"position must be one of {', '.join(POSITIONS)}; got {position!r}")
+        self.ctx = ctx
+        self.position = position
+        self._programs: dict[tuple, Any] = {}
+        self._meshes: dict[int, tuple[weakref.ref, _MeshGPU]] = {}
+        self._grids: dict[int, tuple[weakref.ref, Any]] = {}
+        #: 1x1 framebuffer bound during transform feedback (drivers such as Mesa check
+        #: the bound framebuffer's completeness even with rasterisation discarded)
+        self._feedback_fbo: tuple[Any, Any] | None = None
+        self._released = False
+
+    # ------------------------------------------------------------------ resources
+    def _program(self, linear: bool, feedback: bool = False) -> Any:
+        key = (linear, self.position, feedback)
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
+        defines = []
+        if linear:
+            defines.append("#define LINEAR")
+        elif self.position == "hardware":
+            defines.append("#define HW_TRILINEAR")
+        head, _, rest = shaders.source("mesh.vert.glsl").partition("\n")
+        vert = "\n".join([head, *defines, rest])
+        try:
+            if feedback:  # vertex stage only, its outputs captured (deformed_vertices)
+                prog = self.ctx.program(vertex_shader=vert, varyings=["v_world", "v_normal"])
+            else:
+                prog = self.ctx.program(
+                    vertex_shader=vert, fragment_shader=shaders.source("mesh.frag.glsl")
+                )
+        except Exception as exc:
+            raise RenderError(f"mesh shader failed to compile/link for {key}: {exc}") from exc
+        self._programs[key] = prog
+        return prog
+
+    def _mesh_gpu(self, mesh: Mesh) -> _MeshGPU:
+        hit = self._meshes.get(id(mesh))
+        if hit is not None and hit[0]() is mesh:
+            return hit[1]
+        if hit is not None:  # a dead mesh reused the id
+            hit[1].release()
+        gpu = _MeshGPU(self.ctx, mesh)
+        self._meshes[id(mesh)] = (weakref.ref(mesh), gpu)
+        return gpu
+
+    def _grid_texture(self, grid: TrilinearGrid) -> Any:
+        hit = self._grids.get(id(grid))
+        if hit is not None and hit[0]() is grid:
+            return hit[1]
+        if hit is not None:
+            hit[1].release()
+        data = np.ascontiguousarray(grid.texture_data(), dtype=np.float32)
+        nz, ny, nx = data.shape[:3]
+        tex = self.ctx.texture3d((nx, ny, nz), 4, data.tobytes(), dtype="f4")
+        tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        self._grids[id(grid)] = (weakref.ref(grid), tex)
+        return tex
+
+    def _evict_dead(self) -> None:
+        for cache in (self._meshes, self._grids):
+            for key in [k for k, (ref, _) in cache.items() if ref() is None]:
+                cache.pop(key)[1].release()
+
+    # ------------------------------------------------------------------ drawing
+    def draw(
+        self,
+        instances: Sequence[MeshInstance],
+        framebuffer: Any,
+        camera: Camera,
+        viewport: tuple[int, int, int, int] | None = None,
+        *,
+        clear: Sequence[float] | None = (0.0, 0.0, 0.0, 0.0),
+    ) -> None:
+        """Draw ``instances`` seen by ``camera`` into ``framebuffer`` within ``viewport``.
+
+        Writes premultiplied colour and depth (the framebuffer needs a depth attachment
+        for occlusion). ``clear``: premultiplied RGBA the viewport's colour is cleared to
+        (depth to 1) first; ``None`` draws over what is there.
+        """
+        if self._released:
+            raise RenderError("this MeshRenderer was released")
+        instances = list(instances)
+        for inst in instances:
+            if not isinstance(inst, MeshInstance):
+                raise RenderError(
+                    f"MeshRenderer.draw takes MeshInstance objects; got {type(inst).__name__}"
+                )
+        self._evict_dead()
+        if viewport is None:
+            viewport = (0, 0, *framebuffer.size)
+        x, y, w, h = (int(v) for v in viewport)
+        if w <= 0 or h <= 0:
+            raise RenderError(f"viewport must have a positive size; got {viewport}")
+        ctx = self.ctx
+        framebuffer.use()
+        framebuffer.viewport = (x, y, w, h)
+        if clear is not None:
+            framebuffer.clear(*clear, depth=1.0, viewport=(x, y, w, h))
+        if not instances:
+            return
+        view_proj = camera.view_projection(w / h)
+        if camera.projection == "perspective":
+            eye = (*camera.eye, 1.0)
+        else:
+            eye = (*camera.rotation[:, 2], 0.0)
+        opaque = [i for i in instances if i.color[3] >= 1.0]
+        translucent = [i for i in instances if i.color[3] < 1.0]
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.disable(ctx.CULL_FACE)
+        try:
+            ctx.disable(ctx.BLEND)
+            for inst in opaque:
+                self._draw_instance(inst, view_proj, eye)
+            if translucent:
+                ctx.enable(ctx.BLEND)
+                ctx.blend_func = (ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA)
+                framebuffer.depth_mask = False
+                for inst in translucent:
+                    self._draw_instance(inst, view_proj, eye)
+        finally:
+            framebuffer.depth_mask = True
+            ctx.blend_func = ctx.DEFAULT_BLENDING
+            ctx.disable(ctx.DEPTH_TEST | ctx.BLEND)
+
+    def deformed_vertices(self, instance: MeshInstance) -> tuple[np.ndarray, np.ndarray]:
+        """Run the vertex stage alone (transform feedback) and read its results back.
+
+        Returns the (N, 3) world positions and (N, 3) unit normals the shader gives the
+        mesh's vertices: what is drawn, for picking on deformed meshes and for tests
+        against the CPU reference :meth:`voxwarp.core.mesh.MeshInstance.local_to_world`.
+        """
+        if self._released:
+            raise RenderError("this MeshRenderer was released")
+        if not isinstance(instance, MeshInstance):
+            raise RenderError(f"deformed_vertices takes a MeshInstance; got {type(instance)}")
+        self._evict_dead()
+        prog = self._program(not instance.is_lattice, feedback=True)
+        self._set_instance_uniforms(prog, instance, np.eye(4), (0.0, 0.0, 1.0, 0.0))
+        gpu = self._mesh_gpu(instance.mesh)
+        n = instance.mesh.n_vertices
+        if self._feedback_fbo is None:
+            rb = self.ctx.renderbuffer((1, 1), 4, dtype="f1")
+            self._feedback_fbo = (self.ctx.framebuffer(color_attachments=[rb]), rb)
+        previous = self.ctx.fbo
+        out = self.ctx.buffer(reserve=n * 6 * 4)
+        vao = self.ctx.vertex_array(prog, [(gpu.vbo, "3f 3f", "in_position", "in_normal")])
+        try:
+            self._feedback_fbo[0].use()
+            vao.transform(out, mode=self.ctx.POINTS, vertices=n)
+            data = np.frombuffer(out.read(), dtype=np.float32).reshape(n, 6).astype(np.float64)
+        finally:
+            vao.release()
+            out.release()
+            if previous is not None:
+                previous.use()
+        normals = data[:, 3:]
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            normals = normals / length
+        return data[:, :3], normals
+
+    def _draw_instance(self, inst: MeshInstance, view_proj: np.ndarray, eye: tuple) -> None:
+        prog = self._program(not inst.is_lattice)
+        self._set_instance_uniforms(prog, inst, view_proj, eye)
+        gpu = self._mesh_gpu(inst.mesh)
+        gpu.vao(self.ctx, prog).render(mode=self.ctx.TRIANGLES, vertices=gpu.count)
+
+    def _set_instance_uniforms(
+        self, prog: Any, inst: MeshInstance, view_proj: np.ndarray, eye: tuple
+    ) -> None:
+        linear = not inst.is_lattice
+        values: dict[str, Any] = {
+            "u_view_proj": view_proj,
+            "u_normal_method": 0 if inst.normal_method == "normal" else 1,
+            "u_color": inst.color,
+            "u_eye": tuple(float(v) for v in eye),
+            "u_light": MESH_LIGHT,
+        }
+        if linear:
+            m = inst.matrix()
+            values["u_model"] = m
+            a = m[:3, :3]
+            # the inverse transpose; a singular matrix keeps the (defined) cofactor matrix
+            singular = abs(float(np.linalg.det(a))) <= 1e-300
+            values["u_normal_matrix"] = _cofactor(a) if singular else np.linalg.inv(a).T
+        else:
+            grid = inst.transform
+            assert isinstance(grid, TrilinearGrid)
+            lo, hi = inst.box
+            self._grid_texture(grid).use(0)
+            values["u_nodes"] = 0
+            values["u_cells"] = tuple(float(c) for c in grid.shape)
+            values["u_box_lo"] = tuple(float(v) for v in lo)
+            values["u_box_inv_size"] = tuple(float(v) for v in 1.0 / (hi - lo))
+        for name, value in values.items():
+            _set_uniform(prog, name, value)
+
+    def release(self) -> None:
+        """Free every GPU resource this renderer made; idempotent."""
+        if self._released:
+            return
+        for _, gpu in self._meshes.values():
+            gpu.release()
+        self._meshes.clear()
+        for _, tex in self._grids.values():
+            tex.release()
+        self._grids.clear()
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+        if self._feedback_fbo is not None:
+            if self.ctx.fbo is self._feedback_fbo[0]:
+                # never delete the bound framebuffer (moderngl would re-bind the dead name)
+                try:
+                    self.ctx.detect_framebuffer(0).use()
+                except Exception:
+                    pass
+            for obj in self._feedback_fbo:
+                obj.release()
+            self._feedback_fbo = None
+        self._released = True
+
+
+def _cofactor(a: np.ndarray) -> np.ndarray:
+    """Cofactor matrix of a 3x3 (``cof(A) = det(A) A^-T`` where A is invertible)."""
+    return np.array(
+        [
+            np.cross(a[:, 1], a[:, 2]),
+            np.cross(a[:, 2], a[:, 0]),
+            np.cross(a[:, 0], a[:, 1]),
+        ]
+    ).T
+
+
+def _set_uniform(prog: Any, name: str, value: Any) -> None:
+    if name not in prog:
+        return  # optimised out
+    u = prog[name]
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        u.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())  # column-major
+    else:
+        u.value = value

@@ -1,0 +1,995 @@
+"""The raycasting renderer (moderngl) and the headless :class:`OffscreenRenderer`.
+
+:class:`Renderer` draws a :class:`~voxwarp.scene.Scene` into a framebuffer it is given,
+on a ``moderngl.Context`` it is given (the GUI passes Qt's, scripts pass an EGL
+standalone context); it never creates a window. GPU resources (volume texture,
+block min/max grid, transfer-function table, compiled programs) are cached per
+volume / transfer function / program variant and freed by :meth:`Renderer.release`.
+
+Each draw first clears its viewport to the scene's background, then draws one NDC
+polygon per ray-direction octant present in the image (one polygon covering the
+viewport unless octant skip maps are in use; see :mod:`voxwarp.render.skipping`). Rays that miss
+the volume, or see nothing visible, discard and leave the background.
+
+Mixed scenes (``Scene(..., meshes=[...])``): the mesh instances are drawn first by
+:class:`voxwarp.render.mesh_pass.MeshRenderer` into an internal colour + depth target of the
+viewport's size, cleared to the background; the raycaster (``MESH_DEPTH``) then stops
+each ray at the mesh surface and composites the volume over that image (front to back,
+premultiplied: ``out = volume + (1 - volume.a) * mesh_over_background``). Opaque meshes
+are exact; translucent ones write no depth, so the whole ray's volume lies over them.
+Without meshes nothing of this runs (same programs, same images).
+
+See ``shaders/raycast.frag.glsl`` for the technique (warp chain, empty-space skipping,
+early ray termination, jitter) and ``docs/benchmarks.md`` for what each part buys on a
+CPU rasteriser.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import functools
+import math
+import os
+import time
+import weakref
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from voxwarp import shaders
+from voxwarp.core.camera import Camera
+from voxwarp.core.mesh import mesh_instances_bounds
+from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
+from voxwarp.core.volume import Volume
+from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
+from voxwarp.errors import RenderError, VolumeTooLargeError
+from voxwarp.render.mesh_pass import MeshRenderer
+from voxwarp.render.skipping import (
+    BLOCK,
+    OCTANT_EPS,
+    Octant,
+    block_min_max,
+    block_skip_distances,
+    cell_min_max,
+    octant_regions,
+    octant_skip_distances,
+    ray_direction_coefficients,
+    skip_map_key,
+    static_block_visibility,
+    warped_cell_visibility,
+)
+from voxwarp.scene import Scene
+
+#: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
+DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
+#: Blinn-Phong ambient, diffuse, specular, shininess.
+LIGHT = (0.25, 0.7, 0.3, 32.0)
+#: Corners of the NDC polygons a draw is made of (u_polygon in polygon.vert.glsl).
+MAX_POLYGON = 8
+
+_TEX_FORMAT = {
+    # dtype: (moderngl dtype, scale, offset) so that value = texel * scale + offset
+    np.dtype(np.uint8): ("f1", 255.0, 0.0),
+    np.dtype(np.uint16): ("nu2", 65535.0, 0.0),
+    np.dtype(np.int16): ("nu2", 65535.0, -32768.0),  # stored as uint16 + 32768: exact
+    np.dtype(np.float32): ("f4", 1.0, 0.0),
+}
+
+
+class _VolumeGPU:
+    """GPU copy of one volume: texture (3D or slice pairs) + block min/max grid."""
+
+    def __init__(self, ctx: Any, volume: Volume, slice_pairs: bool) -> None:
+        fmt, scale, offset = _TEX_FORMAT[volume.dtype]
+        arr = volume.texture_array()  # (nz, ny, nx), x fastest
+        if volume.dtype == np.int16:
+            arr = (arr.astype(np.int32) + 32768).astype(np.uint16)
+        nx, ny, nz = volume.shape
+        self.slice_pairs = slice_pairs
+        if slice_pairs:
+            upper = np.concatenate([arr[1:], arr[-1:]], axis=0)
+            pairs = np.stack([arr, upper], axis=-1)  # layer k: (v[k], v[k+1])
+            self.texture = ctx.texture_array(
+                (nx, ny, nz), 2, pairs.tobytes(), dtype=fmt, alignment=1
+            )
+            self.texture.repeat_x = self.texture.repeat_y = False
+        else:
+            self.texture = ctx.texture3d((nx, ny, nz), 1, arr.tobytes(), dtype=fmt, alignment=1)
+            self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
+        self.texture.filter = (ctx.LINEAR, ctx.LINEAR)
+        self.value_map = (scale, offset)
+        bmin, bmax = block_min_max(volume.data, BLOCK)
+        self.block_min, self.block_max = bmin, bmax
+        self.blocks = bmin.shape
+        # block info texture (skip distance, min, max, 0), written once a mode is known
+        self.info = ctx.texture3d(self.blocks, 4, dtype="f4")
+        self.info.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.info_key: Any = None
+        self.volume_data = volume.data
+        self.cell_range: tuple[np.ndarray, np.ndarray] | None = None
+        self.cell_visible: np.ndarray | None = None
+        #: octant -> R8 texture of octant skip distances, for the scene key cell_key
+        self.cell_skip: dict[Octant, Any] = {}
+        self.cell_key: Any = None
+        # deformed-space skip maps of warped rays (one warp state at a time)
+        self.warped_skip: dict[Octant, Any] = {}
+        self.warped_key: Any = None
+        self.warped_visible: np.ndarray | None = None
+        self.warped_offset = np.zeros(3, dtype=int)
+        self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
+
+    def release(self) -> None:
+        for tex in (
+            self.texture,
+            self.info,
+            *self.cell_skip.values(),
+            *self.warped_skip.values(),
+        ):
+            if tex is not None:
+                tex.release()
+        self.cell_skip.clear()
+        self.warped_skip.clear()
+        self.texture = self.info = None  # type: ignore[assignment]
+
+
+def _tf_key(tf: TransferFunction) -> tuple:
+    return tuple(tf.points)
+
+
+class Renderer:
+    """Raycasts scenes into framebuffers on a given moderngl context.
+
+    Parameters
+    ----------
+    ctx
+        A ``moderngl.Context`` (OpenGL 4.3+); the caller owns it.
+    texture_budget_bytes
+        Largest volume texture accepted; default 2 GiB or ``VOXWARP_TEXTURE_BUDGET_MB``.
+    empty_space_skipping
+        Jump over space the compositing mode cannot see (default). Turning it off
+        never changes the image, only the time; benchmarks use it as a reference.
+        Straight rays of dvr/iso/flm use per-octant cell maps (:mod:`voxwarp.render.skipping`):
+        one byte per trilinear cell per octant the camera needs, computed on the CPU
+        when first needed after a change of what the mode can see (~1 s per octant
+        for 256³ on 2 cores) and kept on the volume (at most 8).
+    sampling
+        ``"texture3d"``: one hardware-trilinear fetch per sample (best on GPUs);
+        ``"slice_pairs"``: a 2D array texture whose layer k holds slices k and k+1,
+        one bilinear fetch + one lerp (half the texel reads; ~1.6x faster per sample
+        on llvmpipe, twice the texture memory). ``"auto"`` picks slice pairs on
+        software rasterisers.
+    """
+
+    def __init__(
+        self,
+        ctx: Any,
+        *,
+        texture_budget_bytes: int | None = None,
+        empty_space_skipping: bool = True,
+        sampling: str = "auto",
+    ) -> None:
+        if ctx.version_code < 430:
+            raise RenderError(
+                f"voxwarp needs OpenGL 4.3 or newer; this context offers {ctx.version_code}"
+            )
+        self.ctx = ctx
+        #: skip blocks the mode cannot see (off only to measure what it buys)
+        self.empty_space_skipping = bool(empty_space_skipping)
+        #: skip at the resolution of trilinear cells
+        self.cell_skipping = True
+        #: deformed-space skip maps of warped rays (see :meth:`_skip_kind`): "auto"
+        #: builds them when a warp state is drawn a second time, "always" on first
+        #: use, "never" keeps per-block checks
+        self.warped_skip_maps = "auto"
+        self._warped_seen: dict[int, Any] = {}
+        #: "background" mode: the job the last draw wanted, and finished results
+        self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
+        self._skip_ready: dict[Any, Any] = {}
+        #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
+        self.last_skip_kind = "none"
+        if sampling not in ("auto", "texture3d", "slice_pairs"):
+            raise RenderError(
+                f"sampling must be 'auto', 'texture3d' or 'slice_pairs'; got {sampling!r}"
+            )
+        renderer_name = str(ctx.info.get("GL_RENDERER", "")).lower()
+        software = any(w in renderer_name for w in ("llvmpipe", "softpipe", "swr", "swiftshader"))
+        if sampling == "auto":
+            sampling = "slice_pairs" if software else "texture3d"
+        #: "texture3d" (hardware trilinear) or "slice_pairs" (faster on CPU rasterisers)
+        self.sampling = sampling
+        env = os.environ.get("VOXWARP_TEXTURE_BUDGET_MB")
+        if texture_budget_bytes is None:
+            texture_budget_bytes = int(float(env) * 2**20) if env else DEFAULT_TEXTURE_BUDGET
+        self.texture_budget_bytes = int(texture_budget_bytes)
+        self.max_texture_size = int(ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
+        self._volumes: dict[int, tuple[weakref.ref, _VolumeGPU]] = {}
+        self._programs: dict[tuple, Any] = {}
+        self._tf_tex: Any = None
+        self._tf_key: Any = None
+        self._vao: dict[int, Any] = {}
+        #: draws the meshes of mixed scenes (made on first use)
+        self._mesh_renderer: MeshRenderer | None = None
+        #: (size, colour texture, depth texture, framebuffer) of the mesh pass
+        self._mesh_target: tuple[tuple[int, int], Any, Any, Any] | None = None
+        #: (size, colour texture, framebuffer) of draw_scaled, and its upscaling program
+        self._lod_target: tuple[tuple[int, int], Any, Any] | None = None
+        self._upscale: tuple[Any, Any] | None = None
+        self._released = False
+
+    # ------------------------------------------------------------------ resources
+    def check_volume(self, volume: Volume) -> None:
+        """Raise :class:`VolumeTooLargeError` if ``volume`` cannot become a texture here."""
+        fmt_bytes = {"f1": 1, "nu2": 2, "f4": 4}[_TEX_FORMAT[volume.dtype][0]]
+        need = int(np.prod(volume.shape)) * fmt_bytes * (2 if self.sampling == "slice_pairs" else 1)
+        too_big_dim = max(volume.shape) > self.max_texture_size
+        if too_big_dim or need > self.texture_budget_bytes:
+            f_dim = max(volume.shape) / self.max_texture_size
+            f_mem = (need / self.texture_budget_bytes) ** (1 / 3)
+            factor = max(2, math.ceil(max(f_dim, f_mem)))
+            if too_big_dim:
+                what = (
+                    f"volume {volume.shape} exceeds the GPU's maximum 3D texture size"
+                    f" {self.max_texture_size} per axis"
+                )
+            else:
+                what = (
+                    f"volume {volume.shape} needs {need / 2**20:.3g} MB of texture memory, over"
+                    f" the budget of {self.texture_budget_bytes / 2**20:.3g} MB"
+                    " (VOXWARP_TEXTURE_BUDGET_MB)"
+                )
+            raise VolumeTooLargeError(
+                f"{what}. Downsample it: load_volume(..., downsample={factor}) or"
+                f" `voxwarp render ... --downsample {factor}`."
+            )
+
+    def _volume_gpu(self, volume: Volume) -> _VolumeGPU:
+        self._evict_dead()
+        key = id(volume)
+        hit = self._volumes.get(key)
+        if hit is not None and hit[0]() is volume:
+            if hit[1].slice_pairs == (self.sampling == "slice_pairs"):
+                return hit[1]
+            hit[1].release()
+        if hit is not None:  # a dead volume reused the id
+            hit[1].release()
+        self.check_volume(volume)
+        self.ctx.error  # noqa: B018 - clear any stale error flag
+        try:
+            gpu = _VolumeGPU(self.ctx, volume, self.sampling == "slice_pairs")
+        except Exception as exc:  # moderngl raises plain Error on GL failures
+            raise VolumeTooLargeError(
+                f"the GPU could not allocate the texture for volume {volume.shape}"
+                f" ({exc}); downsample it (load_volume(..., downsample=2))"
+            ) from exc
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            gpu.release()
+            raise VolumeTooLargeError(
+                f"OpenGL reported {err} while uploading volume {volume.shape};"
+                " downsample it (load_volume(..., downsample=2))"
+            )
+        self._volumes[key] = (weakref.ref(volume), gpu)
+        return gpu
+
+    def _evict_dead(self) -> None:
+        # textures of garbage-collected volumes are freed here, while the context is
+        # current, rather than from a weakref callback that may run at any time
+        for key in [k for k, (ref, _) in self._volumes.items() if ref() is None]:
+            self._volumes.pop(key)[1].release()
+
+    def _tf_texture(self, tf: TransferFunction, ratio: float) -> Any:
+        key = (_tf_key(tf), ratio)
+        if self._tf_tex is None or self._tf_key != key:
+            if self._tf_tex is not None:
+                self._tf_tex.release()
+            table = np.ascontiguousarray(tf.gpu_table(ratio, TABLE_SIZE))
+            self._tf_tex = self.ctx.texture((TABLE_SIZE, 2), 4, table.tobytes(), dtype="f4")
+            self._tf_tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self._tf_tex.repeat_x = self._tf_tex.repeat_y = False
+            self._tf_key = key
+        return self._tf_tex
+
+    def _block_info(self, gpu: _VolumeGPU, scene: Scene) -> Any:
+        key = skip_map_key(scene)
+        if gpu.info_key != key:
+            dist = block_skip_distances(
+                static_block_visibility(scene, gpu.block_min, gpu.block_max)
+            )
+            info = np.stack(
+                [
+                    dist.astype(np.float32),
+                    gpu.block_min,
+                    gpu.block_max,
+                    np.zeros_like(gpu.block_min),
+                ],
+                axis=-1,
+            )
+            gpu.info.write(np.ascontiguousarray(info.transpose(2, 1, 0, 3)).tobytes())
+            gpu.info_key = key
+        return gpu.info
+
+    def _skip_kind(self, scene: Scene, linear: bool, gpu: _VolumeGPU | None = None) -> str:
+        """Which empty-space skipping a draw uses: "cells", "blocks" or "none".
+
+        Straight rays (affine chains) skip at trilinear-cell resolution for the modes
+        whose visibility is sparse (dvr, iso, flm). mip, minip and average must look
+        at (nearly) every sample along the ray; on the benchmark CT their skip checks
+        cost more than they saved (no skipping: 1.3x faster), so they march plainly.
+        Warped (non-affine) rays skip at cell resolution too, through deformed space,
+        when every warp of the chain bounds its displacement
+        (:meth:`voxwarp.deform.warp.Warp.displacement_range`; see
+        :func:`voxwarp.render.skipping.warped_cell_visibility`); otherwise they test their 4³
+        block per sample. Building those maps takes seconds on the CPU for a 256³
+        volume (a one-frame render costs less with block checks, and a warp that
+        changes every frame, as while dragging, would rebuild every frame), so with
+        :attr:`warped_skip_maps` "auto" they are built when the same warp state is
+        drawn a second time (``gpu`` given: the draw's volume, whose cache decides).
+        """
+        if not self.empty_space_skipping:
+            return "none"
+        sparse = scene.mode in ("dvr", "iso", "flm") and self.cell_skipping
+        if not linear:
+            if not self._warped_cells_possible(scene) or self.warped_skip_maps == "never":
+                return "blocks"
+            if self.warped_skip_maps == "always" or gpu is None:
+                return "cells"
+            key = self._warped_key(scene)
+            if self.warped_skip_maps == "background":
+                return self._background_skip_kind(gpu, scene, key)
+            if gpu.warped_key == key or self._warped_seen.get(id(gpu)) == key:
+                return "cells"
+            self._warped_seen[id(gpu)] = key
+            return "blocks"
+        if sparse:
+            return "cells"
+        if scene.mode in ("mip", "minip", "average"):
+            return "none"
+        return "blocks"
+
+    def _background_skip_kind(self, gpu: _VolumeGPU, scene: Scene, key: Any) -> str:
+        """ "background" mode: cells when this warp state's maps are built or ready,
+        else blocks, and the work is offered as :meth:`skip_map_job`."""
+        if gpu.warped_key == key:
+            return "cells"
+        ready = self._skip_ready.pop(key, None)
+        self._skip_ready.clear()  # results for other states are stale
+        if ready is not None:
+            self._install_warped(gpu, key, ready)
+            return "cells"
+        self._skip_wanted = (key, self._warped_job(gpu, scene))
+        return "blocks"
+
+    def _warped_cells_possible(self, scene: Scene) -> bool:
+        """Whether warped rays of ``scene`` can skip by deformed-space cell maps: a mode
+        with sparse visibility (dvr, iso, flm), cell skipping on, and every warp of the
+        chain bounding its displacement."""
+        return (
+            self.empty_space_skipping
+            and self.cell_skipping
+            and scene.mode in ("dvr", "iso", "flm")
+            and _bounded(scene.warps)
+        )
+
+    def _warped_job(self, gpu: _VolumeGPU, scene: Scene) -> Callable[[], Any]:
+        """The CPU work of ``scene``'s deformed-space cell visibility, as a closure over
+        its inputs (no GL: it may run on any thread)."""
+        visible = self._cell_visibility(gpu, scene)
+        vol = scene.volume
+        lo, hi = scene.ray_bounds()
+        warps = list(scene.warps)
+        spacing, origin = vol.spacing, vol.origin
+        return lambda: warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
+
+    def _install_warped(self, gpu: _VolumeGPU, key: Any, result: Any) -> None:
+        """Keep a deformed-space visibility on the volume (its old skip maps go)."""
+        for tex in gpu.warped_skip.values():
+            tex.release()
+        gpu.warped_skip.clear()
+        gpu.warped_visible, gpu.warped_offset = result
+        gpu.warped_key = key
+
+    def needs_skip_maps(self, scene: Scene) -> bool:
+        """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
+        would march block by block only because its warp state's deformed-space skip
+        maps are not built yet (no side effects)."""
+        if self.warped_skip_maps != "background" or fold_affine(scene.warps) is not None:
+            return False
+        if not self._warped_cells_possible(scene):
+            return False
+        entry = self._volumes.get(id(scene.volume))
+        key = self._warped_key(scene)
+        return (
+            not (entry is not None and entry[1].warped_key == key) and key not in self._skip_ready
+        )
+
+    def skip_map_job(self) -> tuple[Any, Callable[[], Any]] | None:
+        """With :attr:`warped_skip_maps` "background": ``(key, job)`` for the warp
+        state the last draw drew with block checks, or None. ``job()`` is CPU work (no
+        GL) that may run on any thread while the warps it was made from stay alive; hand
+        its result to :meth:`install_skip_map`. A state that changed meanwhile simply
+        never uses it."""
+        wanted, self._skip_wanted = self._skip_wanted, None
+        return wanted
+
+    def install_skip_map(self, key: Any, result: Any) -> None:
+        """Keep a finished :meth:`skip_map_job` result; the next draw of its warp state
+        uploads and uses it."""
+        if result is not None:
+            self._skip_ready = {key: result}
+
+    def _cell_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
+        """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
+        key = skip_map_key(scene)
+        if gpu.cell_key != key:
+            for tex in gpu.cell_skip.values():
+                tex.release()
+            gpu.cell_skip.clear()
+            if gpu.cell_range is None:
+                gpu.cell_range = cell_min_max(gpu.volume_data)
+            gpu.cell_visible = static_block_visibility(scene, *gpu.cell_range)
+            gpu.cell_key = key
+        assert gpu.cell_visible is not None
+        return gpu.cell_visible
+
+    def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
+        dist = octant_skip_distances(visible, octant)
+        data = np.ascontiguousarray(dist.transpose(2, 1, 0))
+        tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
+        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        return tex
+
+    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
+        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
+
+        Computed on first use per (mode visibility, octant) and cached on the volume;
+        a change of what the mode can see (transfer function, isovalue, ...) drops all.
+        """
+        visible = self._cell_visibility(gpu, scene)
+        tex = gpu.cell_skip.get(octant)
+        if tex is None:
+            tex = gpu.cell_skip[octant] = self._octant_texture(visible, octant)
+        return tex
+
+    def _warped_key(self, scene: Scene) -> tuple:
+        """What the deformed-space skip maps of ``scene`` depend on."""
+        lo, hi = scene.ray_bounds()
+        return (
+            skip_map_key(scene),
+            tuple(
+                (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
+                for w in scene.warps
+            ),
+            tuple(np.round(np.asarray(lo, float), 9)),
+            tuple(np.round(np.asarray(hi, float), 9)),
+        )
+
+    def _warped_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
+        """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
+        for one warp state; a change of the warps or of what the mode sees rebuilds it)."""
+        key = self._warped_key(scene)
+        if gpu.warped_key != key:
+            result = self._warped_job(gpu, scene)()
+            if result is None:
+                raise RenderError("warped cell skipping needs warps that bound their displacement")
+            self._install_warped(gpu, key, result)
+        assert gpu.warped_visible is not None
+        return gpu.warped_visible
+
+    def _warped_cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
+        """R8 octant skip map of the deformed-space cells (see :meth:`_warped_visibility`)."""
+        visible = self._warped_visibility(gpu, scene)
+        tex = gpu.warped_skip.get(octant)
+        if tex is None:
+            tex = gpu.warped_skip[octant] = self._octant_texture(visible, octant)
+        return tex
+
+    def _mesh_pass(self, scene: Scene, cam: Camera, w: int, h: int, bg: tuple) -> np.ndarray:
+        """Draw ``scene.meshes`` into the internal (w, h) colour + depth target, over the
+        premultiplied background ``bg``; returns the mesh camera's inverse view-projection.
+
+        The mesh camera is ``cam`` with its near/far range widened to hold every mesh,
+        so meshes are not clipped by a camera fitted to the volume.
+        """
+        if self._mesh_renderer is None:
+            self._mesh_renderer = MeshRenderer(self.ctx)
+        if self._mesh_target is None or self._mesh_target[0] != (w, h):
+            self._release_mesh_target()
+            color = self.ctx.texture((w, h), 4, dtype="f4")
+            depth = self.ctx.depth_texture((w, h))
+            depth.compare_func = ""  # read depth values, not comparisons
+            for tex in (color, depth):
+                tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            fbo = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+            self._mesh_target = ((w, h), color, depth, fbo)
+        bounds = mesh_instances_bounds(scene.meshes)
+        assert bounds is not None
+        lo, hi = bounds
+        corners = box_corners(lo, hi)
+        reach = float(np.max(np.linalg.norm(corners - cam.center, axis=1)))
+        mesh_cam = dataclasses.replace(cam, radius=reach) if reach > cam.radius else cam
+        self._mesh_renderer.draw(scene.meshes, self._mesh_target[3], mesh_cam, clear=bg)
+        return np.linalg.inv(mesh_cam.view_projection(w / h))
+
+    def _release_mesh_target(self) -> None:
+        if self._mesh_target is not None:
+            for obj in self._mesh_target[1:][::-1]:
+                obj.release()
+            self._mesh_target = None
+
+    def _program(self, scene: Scene, linear: bool, kind: str) -> Any:
+        warps = [] if linear else scene.warps
+        meshes = bool(scene.meshes)
+        key = (
+            scene.mode,
+            linear,
+            scene.use_shading(),
+            kind,
+            self.sampling,
+            tuple(w.signature() for w in warps),
+            meshes,
+        )
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
+        defines = [f"#define BLOCK {BLOCK}", f"#define OCTANT_EPS {OCTANT_EPS:e}"]
+        if linear:
+            defines.append("#define LINEAR_PATH")
+        if scene.use_shading():
+            defines.append("#define SHADING")
+        if kind == "none":
+            defines.append("#define NO_SKIPPING")
+        if self.sampling == "slice_pairs":
+            defines.append("#define SLICE_PAIRS")
+        if kind == "cells":
+            defines.append("#define CELL_SKIP")
+        if meshes:
+            defines.append("#define MESH_DEPTH")
+        frag = shaders.source(
+            "raycast.frag.glsl",
+            extra={
+                "mode.glsl": shaders.read(f"mode_{scene.mode}.glsl"),
+                "warps.glsl": compose_glsl(warps),
+            },
+        )
+        head, _, rest = frag.partition("\n")
+        frag = "\n".join([head, *defines, rest])
+        try:
+            prog = self.ctx.program(
+                vertex_shader=shaders.read("polygon.vert.glsl"), fragment_shader=frag
+            )
+        except Exception as exc:
+            raise RenderError(f"raycast shader failed to compile/link for {key}: {exc}") from exc
+        self._programs[key] = prog
+        return prog
+
+    # ------------------------------------------------------------------ drawing
+    def draw(
+        self,
+        scene: Scene,
+        framebuffer: Any,
+        viewport: tuple[int, int, int, int] | None = None,
+        camera: Camera | None = None,
+    ) -> None:
+        """Raycast ``scene`` into ``framebuffer`` (moderngl.Framebuffer) within ``viewport``.
+
+        ``camera`` overrides the scene's (e.g. the GUI's interactive camera).
+        """
+        if self._released:
+            raise RenderError("this Renderer was released")
+        vol = scene.volume
+        gpu = self._volume_gpu(vol)
+        if viewport is None:
+            viewport = (0, 0, *framebuffer.size)
+        x, y, w, h = (int(v) for v in viewport)
+        if w <= 0 or h <= 0:
+            raise RenderError(f"viewport must have a positive size; got {viewport}")
+        cam = camera or scene.resolved_camera()
+        fold = fold_affine(scene.warps)
+        linear = fold is not None
+        skip_kind = self._skip_kind(scene, linear, gpu)
+        self.last_skip_kind = skip_kind
+        prog = self._program(scene, linear, skip_kind)
+
+        tf = scene.transfer_function
+        lo, hi = scene.ray_bounds()
+        level, width = scene.window
+        sp = np.asarray(vol.spacing)
+        step_mm = scene.sample_distance_mm
+        diag = float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
+        max_steps = int(min(diag / step_mm + 4, 1_000_000))
+        bg = np.asarray(scene.background, float)
+        bg_premul = (*(bg[:3] * bg[3]), bg[3])
+
+        tf_lo, tf_hi = tf.value_range
+        tf_scale = (TABLE_SIZE - 1) / (tf_hi - tf_lo)
+        vp = cam.view_projection(w / h)
+        values: dict[str, Any] = {
+            "u_inv_view_proj": np.linalg.inv(vp),
+            "u_viewport": (x, y, w, h),
+            "u_bounds_lo": tuple(lo),
+            "u_bounds_hi": tuple(hi),
+            "u_step": step_mm,
+            "u_max_steps": max_steps,
+            "u_jitter": int(scene.jitter),
+            "u_seed": scene.seed & 0xFFFFFFFF,
+            "u_background": bg_premul,
+            "u_value_limits": vol.value_range,
+            "u_dims": tuple(float(s) for s in vol.shape),
+            "u_inv_dims": tuple(1.0 / s for s in vol.shape),
+            "u_value_map": gpu.value_map,
+            "u_spacing": tuple(sp),
+            "u_origin": tuple(vol.origin),
+            "u_tf_map": (tf_scale, 0.5 - tf_lo * tf_scale),
+            "u_tf_size": float(TABLE_SIZE),
+            "u_window": (level - width / 2, level + width / 2),
+            "u_light": LIGHT,
+            "u_blocks": tuple(int(b) for b in gpu.blocks),
+            "u_volume": 0,
+            "u_tf": 1,
+            "u_block_info": 2,
+            "u_cell_skip": 3,
+        }
+        # mode parameters, resolved only for the mode that reads them
+        if scene.mode == "flm":
+            values["u_threshold"] = scene.resolved_flm_threshold()
+        if scene.mode == "iso":
+            iso = scene.resolved_iso_value()
+            iso_rgb = tf(iso)[:3]
+            if float(np.max(iso_rgb)) < 0.2:  # a dark TF colour: use a neutral surface
+                iso_rgb = np.array([0.9, 0.85, 0.8])
+            values["u_iso"] = iso
+            values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
+        if linear:
+            to_texel = np.eye(4)
+            to_texel[:3, :3] = np.diag(1.0 / sp)
+            to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
+            values["u_world_to_texel"] = to_texel @ fold
+            values["u_jacobian"] = fold[:3, :3]
+        skip_to_texel = values.get("u_world_to_texel")
+        if skip_kind == "cells" and not linear:
+            # warped rays look up deformed-space cells: the volume's texel grid shifted
+            # by the skip map's padding
+            visible = self._warped_visibility(gpu, scene)
+            skip_to_texel = np.eye(4)
+            skip_to_texel[:3, :3] = np.diag(1.0 / sp)
+            skip_to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5 - gpu.warped_offset
+            values["u_skip_world_to_texel"] = skip_to_texel
+            values["u_cell_dims"] = tuple(int(c) for c in visible.shape)
+        for name, value in values.items():
+            _set_uniform(prog, name, value)
+
+        # meshes of a mixed scene first: the pass binds its own textures and framebuffer
+        mesh_inv_view_proj = self._mesh_pass(scene, cam, w, h, bg_premul) if scene.meshes else None
+        # the warps' textures first: making them may run GPU passes (an offset field
+        # bakes its inverse) that bind texture units of their own
+        warp_textures = [] if linear else [w.textures(self.ctx) for w in scene.warps]
+        gpu.texture.use(0)
+        self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
+        self._block_info(gpu, scene).use(2)
+        # The image is drawn as convex polygons in NDC: one covering the viewport, or,
+        # with octant skip maps, one per ray-direction octant present in the image
+        # (the shader discards the other octants' pixels along the shared borders).
+        regions: list[tuple[Octant | None, list[tuple[float, float]]]]
+        regions = [(None, [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])]
+        if skip_kind == "cells":
+            coefficients = ray_direction_coefficients(values["u_inv_view_proj"], skip_to_texel)
+            regions = list(octant_regions(coefficients, (w, h)))
+        unit = 4
+        if not linear:
+            for i, warp in enumerate(scene.warps):
+                for name, value in warp.uniforms().items():
+                    _set_uniform(prog, f"w{i}_{name}", value)
+                for name, tex in warp_textures[i].items():
+                    tex.use(unit)
+                    _set_uniform(prog, f"w{i}_{name}", unit)
+                    unit += 1
+        if mesh_inv_view_proj is not None:
+            assert self._mesh_target is not None
+            self._mesh_target[1].use(unit)
+            self._mesh_target[2].use(unit + 1)
+            _set_uniform(prog, "u_mesh_color", unit)
+            _set_uniform(prog, "u_mesh_depth", unit + 1)
+            _set_uniform(prog, "u_mesh_inv_view_proj", mesh_inv_view_proj)
+
+        framebuffer.use()
+        framebuffer.viewport = (x, y, w, h)
+        # rays that miss the volume (or see nothing) discard: background first
+        framebuffer.clear(*bg_premul, viewport=(x, y, w, h))
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
+        vao = self._vao.get(id(prog))
+        if vao is None:
+            vao = self.ctx.vertex_array(prog, [])
+            self._vao[id(prog)] = vao
+        for octant, polygon in regions:
+            if octant is not None:
+                if linear:
+                    self._cell_skip(gpu, scene, octant).use(3)
+                else:
+                    self._warped_cell_skip(gpu, scene, octant).use(3)
+                _set_uniform(prog, "u_octant", tuple(float(c) for c in octant))
+            corners = [*polygon, *[(0.0, 0.0)] * (MAX_POLYGON - len(polygon))]
+            prog["u_polygon"].value = corners
+            vao.render(mode=self.ctx.TRIANGLE_FAN, vertices=len(polygon))
+
+    def draw_scaled(
+        self,
+        scene: Scene,
+        framebuffer: Any,
+        viewport: tuple[int, int, int, int] | None = None,
+        camera: Camera | None = None,
+        scale: float = 0.5,
+    ) -> None:
+        """Like :meth:`draw`, at ``scale`` times the resolution, upscaled bilinearly into
+        ``viewport``: the interactive level of detail (``scale`` 0.5 costs about a
+        quarter of the samples). ``scale`` >= 1 is a plain :meth:`draw`."""
+        if viewport is None:
+            viewport = (0, 0, *framebuffer.size)
+        x, y, w, h = (int(v) for v in viewport)
+        if not 0.0 < scale:
+            raise RenderError(f"scale must be positive; got {scale}")
+        if scale >= 1.0:
+            self.draw(scene, framebuffer, viewport, camera)
+            return
+        size = (max(1, round(w * scale)), max(1, round(h * scale)))
+        if self._lod_target is None or self._lod_target[0] != size:
+            self._release_lod_target()
+            tex = self.ctx.texture(size, 4, dtype="f1")
+            tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            self._lod_target = (size, tex, self.ctx.framebuffer(color_attachments=[tex]))
+        _, tex, fbo = self._lod_target
+        self.draw(scene, fbo, (0, 0, *size), camera)
+        if self._upscale is None:
+            prog = self.ctx.program(
+                vertex_shader=shaders.source("upscale.vert.glsl"),
+                fragment_shader=shaders.source("upscale.frag.glsl"),
+            )
+            self._upscale = (prog, self.ctx.vertex_array(prog, []))
+        prog, vao = self._upscale
+        framebuffer.use()
+        framebuffer.viewport = (x, y, w, h)
+        with self.ctx.scope(framebuffer, enable_only=0):  # no blending, depth, culling: a copy
+            tex.use(0)
+            prog["u_frame"] = 0
+            vao.render(self.ctx.TRIANGLES, vertices=3)
+
+    def _release_lod_target(self) -> None:
+        if self._lod_target is not None:
+            _, tex, fbo = self._lod_target
+            fbo.release()
+            tex.release()
+            self._lod_target = None
+
+    def release(self) -> None:
+        """Free every GPU resource this renderer made; idempotent."""
+        if self._released:
+            return
+        for _, gpu in self._volumes.values():
+            gpu.release()
+        self._volumes.clear()
+        for vao in self._vao.values():
+            vao.release()
+        self._vao.clear()
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+        self._release_lod_target()
+        if self._upscale is not None:
+            self._upscale[1].release()
+            self._upscale[0].release()
+            self._upscale = None
+        if self._tf_tex is not None:
+            self._tf_tex.release()
+            self._tf_tex = None
+        if self._mesh_renderer is not None:
+            self._mesh_renderer.release()
+            self._mesh_renderer = None
+        self._release_mesh_target()
+        self._released = True
+
+
+def _bounded(warps: Any) -> bool:
+    """Whether every warp of the chain bounds its displacement (no read-back)."""
+    return all(w.bounds_displacement for w in warps)
+
+
+def _set_uniform(prog: Any, name: str, value: Any) -> None:
+    if name not in prog:
+        return  # optimised out or not used by this variant
+    u = prog[name]
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        # GLSL matrices are column-major
+        u.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())
+    elif isinstance(value, np.ndarray):
+        u.value = tuple(float(v) for v in value)
+    else:
+        u.value = value
+
+
+@functools.cache
+def _egl_library() -> Any:
+    """libEGL through ctypes with the few entry points used here typed, or None."""
+    import ctypes
+
+    try:
+        lib = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return None
+    for name in ("eglGetCurrentContext", "eglGetCurrentDisplay", "eglGetCurrentSurface"):
+        getattr(lib, name).restype = ctypes.c_void_p
+    lib.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+    lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    return lib
+
+
+def _egl_current() -> tuple | None:
+    """The current EGL (display, draw, read, context), or None (no EGL or none current)."""
+    lib = _egl_library()
+    if lib is None:
+        return None
+    context = lib.eglGetCurrentContext()
+    if not context:
+        return None
+    return (
+        lib.eglGetCurrentDisplay(),
+        lib.eglGetCurrentSurface(0x3059),  # EGL_DRAW
+        lib.eglGetCurrentSurface(0x305A),  # EGL_READ
+        context,
+    )
+
+
+def _egl_restore(saved: tuple | None) -> None:
+    if saved is not None:
+        _egl_library().eglMakeCurrent(*saved)
+
+
+def create_context() -> Any:
+    """A standalone headless OpenGL 4.3+ context through EGL (the caller owns it).
+
+    Whatever EGL context was current before stays current (a new context is left
+    current only when none was).
+    """
+    import moderngl
+
+    saved = _egl_current()
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl", require=430)
+    except Exception as exc:
+        raise RenderError(
+            "could not create a headless OpenGL 4.3 context through EGL"
+            f" ({exc}). Install Mesa's EGL and GL libraries (Debian: libegl1 libgl1"
+            " libegl-mesa0 libgl1-mesa-dri; run `sudo scripts/install-system-deps.sh`)."
+        ) from exc
+    finally:
+        _egl_restore(saved)
+    return ctx
+
+
+class OffscreenRenderer:
+    """Headless rendering into an offscreen framebuffer.
+
+    Parameters
+    ----------
+    width, height
+        Image size in pixels.
+    ctx
+        Optional existing context; by default an EGL standalone context is created and
+        owned (released with the renderer).
+    dtype
+        ``"u1"`` for (H, W, 4) uint8 images, ``"f4"`` for float32 (tests, HDR/EXR output).
+
+    Use as a context manager; :meth:`render` returns the image with row 0 at the top.
+    """
+
+    def __init__(
+        self, width: int = 512, height: int = 512, *, ctx: Any = None, dtype: str = "u1"
+    ) -> None:
+        if int(width) < 1 or int(height) < 1 or int(width) > 16384 or int(height) > 16384:
+            raise RenderError(f"image size must be 1..16384 pixels per side; got {width}x{height}")
+        if dtype not in ("u1", "f4"):
+            raise RenderError(f"dtype must be 'u1' or 'f4'; got {dtype!r}")
+        self._owns_ctx = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self.size = (int(width), int(height))
+        self.dtype = dtype
+        self._gl_dtype = "f1" if dtype == "u1" else "f4"
+        self._fbo: Any = None
+        self._color: Any = None
+        with self._current():
+            self.renderer = Renderer(self.ctx)
+            self._make_fbo()
+        self._released = False
+
+    @contextlib.contextmanager
+    def _current(self) -> Any:
+        """Make an owned context current for a block, then restore the previous one."""
+        if not self._owns_ctx:
+            yield
+            return
+        saved = _egl_current()
+        self.ctx.mglo.__enter__()  # eglMakeCurrent(this context)
+        try:
+            yield
+        finally:
+            if saved is not None:
+                _egl_restore(saved)
+
+    def _unbind_fbo(self) -> None:
+        # never delete the bound framebuffer: moderngl would re-bind the dead name later
+        try:
+            self.ctx.detect_framebuffer(0).use()
+        except Exception:
+            pass
+
+    def _make_fbo(self) -> None:
+        if self._fbo is not None:
+            self._unbind_fbo()
+            self._fbo.release()
+            self._color.release()
+        # moderngl "f1" is normalised RGBA8 ("u1" would be an integer format)
+        self._color = self.ctx.renderbuffer(self.size, 4, dtype=self._gl_dtype)
+        self._fbo = self.ctx.framebuffer(color_attachments=[self._color])
+
+    def resize(self, width: int, height: int) -> None:
+        """Change the image size."""
+        self.size = (int(width), int(height))
+        with self._current():
+            self._make_fbo()
+
+    @property
+    def framebuffer(self) -> Any:
+        """The moderngl framebuffer images are drawn into."""
+        return self._fbo
+
+    def render(self, scene: Scene, camera: Camera | None = None) -> np.ndarray:
+        """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top."""
+        with self._current():
+            self.renderer.draw(scene, self._fbo, camera=camera)
+            raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
+        w, h = self.size
+        img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
+        return img.reshape(h, w, 4)[::-1].copy()
+
+    def time_frames(
+        self, scene: Scene, frames: int = 10, warmup: int = 2, camera: Camera | None = None
+    ) -> list[float]:
+        """Milliseconds per frame (``ctx.finish()`` bound) after ``warmup`` frames."""
+        with self._current():
+            return self._time_frames(scene, frames, warmup, camera)
+
+    def _time_frames(
+        self, scene: Scene, frames: int, warmup: int, camera: Camera | None
+    ) -> list[float]:
+        for _ in range(warmup):
+            self.renderer.draw(scene, self._fbo, camera=camera)
+        self.ctx.finish()
+        times = []
+        for _ in range(frames):
+            t = time.perf_counter()
+            self.renderer.draw(scene, self._fbo, camera=camera)
+            self.ctx.finish()
+            times.append((time.perf_counter() - t) * 1000)
+        return times
+
+    def release(self) -> None:
+        """Free GPU resources (and the context if this renderer created it); idempotent."""
+        if getattr(self, "_released", True):
+            return
+        with self._current():
+            self.renderer.release()
+            self._unbind_fbo()
+            self._fbo.release()
+            self._color.release()
+        if self._owns_ctx:
+            saved = _egl_current()  # releasing may clear the current context
+            self.ctx.release()
+            _egl_restore(saved)
+        self._released = True
+
+    def __enter__(self) -> OffscreenRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()

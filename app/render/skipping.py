@@ -1,0 +1,420 @@
+"""Empty-space skipping maps: which parts of a volume a compositing mode can see, and
+how far a ray may jump from each place without missing any of them.
+
+Two resolutions, both computed on the CPU from the volume and the scene:
+
+* **blocks** of ``BLOCK``³ voxels (with a one-voxel apron): value range per block,
+  visibility for the mode and the chessboard distance to the nearest visible block.
+  Used by warped (non-affine) rays and by the dynamic mip/minip skips.
+* **trilinear cells** (cell ``c`` spans texel coordinates ``[c - 1/2, c + 1/2]`` per
+  axis and interpolates voxels ``c - 1`` and ``c``): value range per cell, visibility,
+  and per **ray-direction octant** the size of the largest invisible cube that starts
+  at the cell and extends in that octant's direction (:func:`octant_skip_distances`).
+  A ray travelling in that octant can leave the whole cube in one jump. Compared with
+  a cube centred on the cell (isotropic chessboard distance), the directional cube
+  does not waste half of its extent behind the ray: on the benchmark CT it cuts the
+  loop iterations per pixel from 30 to 21 (Deakin & Knackstedt 2020, "Efficient ray
+  casting of volumetric images using distance maps for empty space skipping").
+
+:func:`octant_regions` splits the image into the regions whose rays share an octant,
+so the renderer can draw each region with its octant's map.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from voxwarp.core.transfer_function import TransferFunction
+    from voxwarp.scene import Scene
+
+#: Voxels per block edge of the block grid.
+BLOCK = 4
+#: Exact cell-level octant distances are computed up to this many cells; beyond it the
+#: block-level octant distance (exact in blocks) takes over (see octant_skip_distances).
+CELL_CAP = 8
+
+#: A direction component counts as negative only below ``-OCTANT_EPS * max_i |d_i|``
+#: (also ``OCTANT_EPS`` in the raycaster), so axis-aligned rays, whose other components
+#: are rounding noise of either sign, fall in one well-defined octant.
+OCTANT_EPS = 1e-5
+
+Octant = tuple[int, int, int]
+"""Signs (+1 or -1) of a ray direction's x, y and z components (see OCTANT_EPS)."""
+
+
+def tf_key(tf: TransferFunction) -> tuple:
+    """What a transfer function's visibility depends on (cache key)."""
+    return tuple(tf.points)
+
+
+def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
+    """Per-block (min, max) of ``data`` (nx, ny, nz) with a one-voxel apron.
+
+    Block ``b`` along an axis covers voxels ``[b*block - 1, (b+1)*block]`` (clamped), the
+    voxels trilinear interpolation reads for any sample inside the block. Returns two
+    float32 arrays of shape ``ceil(n / block)`` per axis, in data units.
+    """
+    lo = np.asarray(data)
+    hi = lo
+    for axis in range(3):
+        lo = _reduce_axis(lo, axis, block, np.minimum)
+        hi = _reduce_axis(hi, axis, block, np.maximum)
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
+    n = a.shape[axis]
+    nb = -(-n // block)
+    pad = nb * block - n
+    a = np.moveaxis(a, axis, 0)
+    if pad:
+        a = np.concatenate([a, np.repeat(a[-1:], pad, axis=0)], axis=0)
+    r = op.reduce(a.reshape(nb, block, *a.shape[1:]), axis=1)
+    if nb > 1:
+        # apron: last voxel of the previous block and first voxel of the next one
+        prev_last = a[block - 1 : (nb - 1) * block : block]
+        next_first = a[block : nb * block : block]
+        r[1:] = op(r[1:], prev_last)
+        r[:-1] = op(r[:-1], next_first)
+    return np.moveaxis(r, 0, axis)
+
+
+def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per trilinear cell (min, max) of its 8 corner voxels, shape ``n + 1`` per axis.
+
+    Cell ``c`` covers texel coordinates ``[c - 1/2, c + 1/2]`` per axis, whose samples
+    interpolate voxels ``c - 1`` and ``c`` (clamped to the edge). The data's dtype
+    (integer ranges keep :meth:`TransferFunction.visible_ranges` on its fast path).
+    """
+    p = np.pad(np.asarray(data), 1, mode="edge")
+    lo = hi = None
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                v = p[i : i + p.shape[0] - 1, j : j + p.shape[1] - 1, k : k + p.shape[2] - 1]
+                lo = v if lo is None else np.minimum(lo, v)
+                hi = v if hi is None else np.maximum(hi, v)
+    return lo, hi  # type: ignore[return-value]
+
+
+def static_block_visibility(
+    scene: Scene, block_min: np.ndarray, block_max: np.ndarray
+) -> np.ndarray:
+    """Blocks the scene's mode may need, from their value ranges alone (bool grid).
+
+    dvr: the transfer function is non-zero somewhere in the block's range; mip: the
+    block's maximum is above the window's low end; minip: its minimum is below the
+    window's high end; iso / flm: its maximum reaches the isovalue / threshold;
+    average: every block. (mip and minip also skip dynamically in the shader.)
+    """
+    mode = scene.mode
+    level, width = scene.window
+    if mode == "dvr":
+        return scene.transfer_function.visible_ranges(block_min, block_max)
+    if mode == "mip":
+        return block_max > level - width / 2
+    if mode == "minip":
+        return block_min < level + width / 2
+    if mode == "iso":
+        return block_max >= scene.resolved_iso_value()
+    if mode == "flm":
+        return block_max >= scene.resolved_flm_threshold()
+    return np.ones(block_min.shape, dtype=bool)
+
+
+def block_skip_distances(visible: np.ndarray) -> np.ndarray:
+    """Chessboard distance (in blocks, capped at 255) from each block to a visible one.
+
+    0 marks a visible block. A ray in a block at distance d may jump out of the cube of
+    (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8.
+    """
+    from scipy.ndimage import distance_transform_cdt
+
+    if not visible.any():
+        return np.full(visible.shape, 255, dtype=np.uint8)
+    if visible.all():
+        return np.zeros(visible.shape, dtype=np.uint8)
+    d = distance_transform_cdt(~visible, metric="chessboard")
+    return np.clip(d, 0, 255).astype(np.uint8)
+
+
+def skip_map_key(scene: Scene) -> tuple:
+    """What the static block visibility of ``scene`` depends on (cache key)."""
+    mode = scene.mode
+    if mode == "dvr":
+        return (mode, tf_key(scene.transfer_function))
+    if mode in ("mip", "minip"):
+        return (mode, scene.window)
+    if mode == "iso":
+        return (mode, scene.resolved_iso_value())
+    if mode == "flm":
+        return (mode, scene.resolved_flm_threshold())
+    return (mode,)
+
+
+def _flip(signs: Octant) -> tuple[slice, ...]:
+    return tuple(slice(None, None, -1) if s < 0 else slice(None) for s in signs)
+
+
+def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
+    """Per element ``min over k >= 0 of max(k, g[c + k])`` along each axis in turn, capped.
+
+    Applied to g = 0 (visible) / cap (invisible) along x, y and z, this is the forward
+    chessboard distance ``min over visible o >= c of max_i(o_i - c_i)`` (max distributes
+    over min, so the three 1D passes compose exactly), i.e. the edge of the largest
+    invisible cube starting at c and extending towards +x, +y, +z. uint8, in place on a
+    C-contiguous copy.
+    """
+    src = np.ascontiguousarray(g, dtype=np.uint8).copy()
+    out = src.copy()
+    tmp = np.empty_like(src)
+    for axis in range(3):
+        n = src.shape[axis]
+        for k in range(1, min(cap, n)):
+            head = [slice(None)] * 3
+            tail = [slice(None)] * 3
+            head[axis] = slice(0, n - k)
+            tail[axis] = slice(k, n)
+            t = tmp[tuple(head)]
+            np.maximum(src[tuple(tail)], np.uint8(k), out=t)
+            np.minimum(out[tuple(head)], t, out=out[tuple(head)])
+        src[...] = out
+    return out
+
+
+def octant_skip_distances(
+    visible: np.ndarray, signs: Octant, cell_cap: int = CELL_CAP, block: int = BLOCK
+) -> np.ndarray:
+    """Edge (in cells, capped at 255) of the largest invisible cube starting at each cell
+    and extending in the direction ``signs``; 0 marks a visible cell.
+
+    The cube of edge ``r`` at cell ``c`` covers cells ``c + s * [0, r - 1]`` per axis
+    (s = ``signs``). It is exact up to ``cell_cap`` cells; beyond that it is the bound
+    given by the block-level map (blocks of ``block`` cells, exact in blocks): the
+    cube of ``R`` invisible blocks starting at the cell's block contains the cell's
+    cube of edge ``R * block - max_i(offset of the cell in its block)``. Both are
+    lower bounds of the true edge, so every jump stays inside invisible cells.
+    Returns uint8 of ``visible``'s shape.
+    """
+    visible = np.asarray(visible, dtype=bool)
+    if visible.ndim != 3:
+        raise ValueError(f"visible must be a 3D bool array; got shape {visible.shape}")
+    if any(s not in (-1, 1) for s in signs) or len(signs) != 3:
+        raise ValueError(f"signs must be three of +1/-1; got {signs}")
+    flip = _flip(signs)
+    v = np.ascontiguousarray(visible[flip])
+    cap = int(min(max(cell_cap, 1), 255))
+    near = _forward_chessboard(np.where(v, 0, cap).astype(np.uint8), cap)
+    # block level (in the flipped frame, blocks start at the flipped origin)
+    shape = v.shape
+    nb = tuple(-(-n // block) for n in shape)
+    padded = np.zeros(tuple(b * block for b in nb), dtype=bool)
+    padded[: shape[0], : shape[1], : shape[2]] = v
+    bvis = padded.reshape(nb[0], block, nb[1], block, nb[2], block).any(axis=(1, 3, 5))
+    far = _forward_chessboard(np.where(bvis, 0, 255).astype(np.uint8), max(nb) + 1)
+    r = far.astype(np.int16) * block
+    r = r.repeat(block, 0).repeat(block, 1).repeat(block, 2)[: shape[0], : shape[1], : shape[2]]
+    offs = [np.arange(n, dtype=np.int16) % block for n in shape]
+    inner = np.maximum(
+        np.maximum(offs[0][:, None, None], offs[1][None, :, None]), offs[2][None, None, :]
+    )
+    r -= inner
+    bound = np.clip(r, 0, 255).astype(np.uint8)
+    out = np.maximum(near, bound)
+    return np.ascontiguousarray(out[flip])
+
+
+def ray_direction_coefficients(inv_view_proj: np.ndarray, to_texel: np.ndarray) -> np.ndarray:
+    """(3, 3) array ``A`` with texel-space ray direction ``du ~ A @ (x, y, 1)`` at NDC (x, y).
+
+    The shader's ray runs from the unprojected near point to the far point; for
+    perspective and orthographic projections both are affine in (x, y), so the
+    direction (before normalisation, which keeps its signs) is too. ``to_texel`` is
+    the 4x4 (deformed world -> texel) matrix, of which only the linear part matters.
+    """
+    inv = np.asarray(inv_view_proj, dtype=np.float64)
+    lin = np.asarray(to_texel, dtype=np.float64)[:3, :3]
+
+    def direction(x: float, y: float) -> np.ndarray:
+        a = inv @ np.array([x, y, -1.0, 1.0])
+        b = inv @ np.array([x, y, 1.0, 1.0])
+        return lin @ (b[:3] / b[3] - a[:3] / a[3])
+
+    d00, d10, d01 = direction(0.0, 0.0), direction(1.0, 0.0), direction(0.0, 1.0)
+    return np.stack([d10 - d00, d01 - d00, d00], axis=1)
+
+
+def octant_of(direction: np.ndarray) -> Octant:
+    """The octant of a direction as the raycaster classifies it (see ``OCTANT_EPS``)."""
+    d = np.asarray(direction, dtype=np.float64)[:3]
+    limit = -OCTANT_EPS * float(np.max(np.abs(d)))
+    return tuple(-1 if c < limit else 1 for c in d)  # type: ignore[return-value]
+
+
+def _clip_polygon(poly: list[tuple[float, float]], a: float, b: float, c: float) -> list:
+    """Sutherland-Hodgman: the part of convex ``poly`` where a*x + b*y + c >= 0."""
+    out: list[tuple[float, float]] = []
+    n = len(poly)
+    for i in range(n):
+        p, q = poly[i], poly[(i + 1) % n]
+        fp, fq = a * p[0] + b * p[1] + c, a * q[0] + b * q[1] + c
+        if fp >= 0:
+            out.append(p)
+        if (fp >= 0) != (fq >= 0):
+            s = fp / (fp - fq)
+            out.append((p[0] + s * (q[0] - p[0]), p[1] + s * (q[1] - p[1])))
+    return out
+
+
+def octant_regions(
+    coefficients: np.ndarray, size: tuple[int, int], margin_px: float = 2.0
+) -> list[tuple[Octant, list[tuple[float, float]]]]:
+    """Convex NDC polygons, one per octant that some pixel's ray lies in.
+
+    ``coefficients`` come from :func:`ray_direction_coefficients`; ``size`` is the
+    viewport (width, height). Each polygon is the viewport square [-1, 1]² clipped to
+    where the octant's direction signs hold, widened by ``margin_px`` pixels and by
+    the ``OCTANT_EPS`` band so that it covers every pixel whose ray the shader (in
+    float32) puts in that octant. The
+    polygons overlap along their borders; the shader discards the pixels of other
+    octants, so each pixel is drawn exactly once.
+    """
+    w, h = size
+    px = np.array([2.0 / max(w, 1), 2.0 / max(h, 1)])
+    coefficients = np.asarray(coefficients, dtype=np.float64)
+    corners = np.array([[x, y, 1.0] for x in (-1.0, 1.0) for y in (-1.0, 1.0)])
+    # largest |component| over the image (affine: at a corner) bounds the zero band
+    du_max = float(np.max(np.abs(corners @ coefficients.T)))
+    regions = []
+    for sx in (1, -1):
+        for sy in (1, -1):
+            for sz in (1, -1):
+                poly = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                for s, (a, b, c) in zip((sx, sy, sz), coefficients, strict=True):
+                    slack = (
+                        margin_px * (abs(a) * px[0] + abs(b) * px[1])
+                        + OCTANT_EPS * du_max
+                        + 1e-9 * (abs(a) + abs(b) + abs(c))
+                    )
+                    poly = _clip_polygon(poly, s * a, s * b, s * c + slack)
+                    if len(poly) < 3:
+                        break
+                if len(poly) >= 3:
+                    regions.append(((sx, sy, sz), poly))
+    return regions
+
+
+def warped_cell_visibility(
+    visible: np.ndarray,
+    spacing: Any,
+    origin: Any,
+    warps: Any,
+    ray_lo: Any,
+    ray_hi: Any,
+    block: int = BLOCK,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Cell visibility in *deformed* space for a warp chain that bounds its displacement.
+
+    A deformed-space point p samples the original volume at ``warp(p)``, and
+    ``warp(p) - p`` lies in an interval ``[a, b]`` per axis
+    (:meth:`voxwarp.deform.warp.Warp.displacement_range`, per block of ``block``³ cells). So a
+    deformed-space cell c can show something only if a visible original cell lies in
+    the box ``c + [floor(a / spacing), ceil(b / spacing)]``: the deformed visibility is
+    the original one spread by a window that follows the local displacement. A smooth
+    field that moves a region by ~d reads it through a window around -d one to two
+    cells wide, instead of a ball of radius d; cells where nothing moves keep their
+    original visibility. Each cell of a moved block is tested exactly with a
+    summed-area table. Octant skip maps built on this grid
+    (:func:`octant_skip_distances`) let warped rays jump through deformed space as
+    straight rays do through the original, without changing the image.
+
+    Parameters
+    ----------
+    visible
+        Original-space cell visibility (n + 1 per axis, cell c centred on texel c).
+    spacing, origin
+        The volume's voxel spacing and origin (mm).
+    warps
+        The warp chain (deformed -> original).
+    ray_lo, ray_hi
+        Deformed-space box the rays march in (mm); the grid is padded to cover it.
+    block
+        Cells per block edge of the displacement intervals.
+
+    Returns
+    -------
+    (visible_deformed, offset) or None
+        Boolean grid of deformed-space cells and the index of its cell 0 in the
+        original cell grid (per axis, <= 0; a deformed point with texel coordinate u
+        lies in cell ``floor(u + 1/2) - offset``); ``None`` when a warp of the chain
+        gives no interval (e.g. a GPU-owned field).
+    """
+    from voxwarp.deform.warp import chain_displacement_range
+
+    visible = np.asarray(visible, dtype=bool)
+    sp = np.asarray(spacing, dtype=float)
+    org = np.asarray(origin, dtype=float)
+    n = np.asarray(visible.shape)
+    # cells covering the ray box: texel u = (p - origin) / spacing + 1/2, cell floor(u + 1/2)
+    c_lo = np.floor((np.asarray(ray_lo, float) - org) / sp + 1.0).astype(int)
+    c_hi = np.floor((np.asarray(ray_hi, float) - org) / sp + 1.0).astype(int)
+    pad_lo = np.maximum(-c_lo, 0)
+    pad_hi = np.maximum(c_hi - (n - 1), 0)
+    shape = n + pad_lo + pad_hi
+    offset = -pad_lo
+    # displacement interval per block of cells (boxes in deformed world mm)
+    nb = -(-shape // block)
+    idx = np.stack(np.meshgrid(*(np.arange(k) for k in nb), indexing="ij"), -1).reshape(-1, 3)
+    first = idx * block + offset  # original cell index of each block's first cell
+    box_lo = org + (first - 1.0) * sp  # cell c spans texels [c - 1/2, c + 1/2]
+    box_hi = org + (first + block - 1.0) * sp
+    rng = chain_displacement_range(warps, box_lo, box_hi)
+    if rng is None:
+        return None
+    big = float(shape.max())
+    # p in cell c: texel of warp(p) in [c - 1/2 + a, c + 1/2 + b], its cell in
+    # [c + floor(a), c + ceil(b)] (a, b in texels)
+    d_lo = np.clip(np.floor(np.asarray(rng[0], float) / sp), -big, big).astype(np.int64)
+    d_hi = np.clip(np.ceil(np.asarray(rng[1], float) / sp), -big, big).astype(np.int64)
+    d_lo, d_hi = d_lo.reshape(*nb, 3), d_hi.reshape(*nb, 3)
+    out = np.zeros(tuple(shape), dtype=bool)
+    inner = tuple(slice(pad_lo[a], pad_lo[a] + n[a]) for a in range(3))
+    out[inner] = visible
+    moved = np.argwhere(np.any((d_lo != 0) | (d_hi != 0), axis=-1))
+    if len(moved) == 0 or not visible.any():
+        return out, offset
+    # summed-area table of the padded visibility: sat[i, j, k] = count below (i, j, k)
+    sat = np.zeros(tuple(shape + 1), dtype=np.int32)
+    sat[1:, 1:, 1:] = out.cumsum(0, dtype=np.int32).cumsum(1).cumsum(2)
+
+    def count_visible(lo_cell: np.ndarray, hi_cell: np.ndarray) -> np.ndarray:
+        """Visible cells in the boxes [lo_cell, hi_cell) (clipped to the grid)."""
+        a, b = np.clip(lo_cell, 0, shape), np.clip(hi_cell, 0, shape)
+        b = np.maximum(a, b)
+        count = np.zeros(len(a), dtype=np.int64)
+        for corner in range(8):
+            pick = [(corner >> ax) & 1 for ax in range(3)]
+            ix = [b[:, ax] if pick[ax] else a[:, ax] for ax in range(3)]
+            count += (-1 if (3 - sum(pick)) % 2 else 1) * sat[ix[0], ix[1], ix[2]]
+        return count
+
+    # moved blocks whose whole window holds no visible cell are invisible
+    blo = d_lo[moved[:, 0], moved[:, 1], moved[:, 2]]
+    bhi = d_hi[moved[:, 0], moved[:, 1], moved[:, 2]]
+    near = count_visible(moved * block + blo, moved * block + block + bhi) > 0
+    for m in moved[~near]:
+        out[tuple(slice(m[a] * block, (m[a] + 1) * block) for a in range(3))] = False
+    moved = moved[near]
+    local = np.stack(np.meshgrid(*(np.arange(block),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    for chunk in np.array_split(moved, max(1, len(moved) // 4096)) if len(moved) else []:
+        cells = (chunk[:, None, :] * block + local[None]).reshape(-1, 3)
+        lo_off = np.repeat(d_lo[chunk[:, 0], chunk[:, 1], chunk[:, 2]], len(local), axis=0)
+        hi_off = np.repeat(d_hi[chunk[:, 0], chunk[:, 1], chunk[:, 2]], len(local), axis=0)
+        keep = np.all(cells < shape, axis=1)
+        cells, lo_off, hi_off = cells[keep], lo_off[keep], hi_off[keep]
+        count = count_visible(cells + lo_off, cells + hi_off + 1)
+        out[cells[:, 0], cells[:, 1], cells[:, 2]] = count > 0
+    return out, offset

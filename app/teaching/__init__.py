@@ -1,0 +1,14 @@
+"""Teaching material: figure-sheet demos, guided tours, lattice scenes and the papers'
+reproduction. The demo names live here so the command line lists them without loading
+the demos."""
+
+#: the teaching demos, in the order ``voxwarp reproduce`` runs them
+DEMOS: tuple[str, ...] = ("massspring", "chainmail", "wires", "lattice", "compare")
+#: one line per demo (``voxwarp demo --help``, the reproduction report)
+DEMO_TITLES: dict[str, str] = {
+    "massspring": "Mass-spring: explicit vs semi-implicit Euler",
+    "chainmail": "3D ChainMail: propagation order and relaxation (thesis Figure 13)",
+    "wires": "Wires: attribute field scale 1:1 ... 1:4096 (wire paper Figure 12, Table 1)",
+    "lattice": "Trilinear lattices vs 4x4 matrices (GRAPP 2010 table)",
+    "compare": "Mass-spring vs ChainMail on the same drag; CPU vs GPU (thesis Figures 12-13)",
+}
