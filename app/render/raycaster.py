@@ -46,19 +46,14 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render.mesh_pass import MeshRenderer
+from voxwarp.render.skip_cache import SkipMapCache, VolumeSkipMaps
 from voxwarp.render.skipping import (
     BLOCK,
     OCTANT_EPS,
     Octant,
     block_min_max,
-    block_skip_distances,
-    cell_min_max,
     octant_regions,
-    octant_skip_distances,
     ray_direction_coefficients,
-    skip_map_key,
-    static_block_visibility,
-    warped_cell_visibility,
 )
 from voxwarp.scene import Scene
 
@@ -79,7 +74,7 @@ _TEX_FORMAT = {
 
 
 class _VolumeGPU:
-    """GPU copy of one volume: texture (3D or slice pairs) + block min/max grid."""
+    """GPU copy of one volume: texture (3D or slice pairs) + its skip maps (VolumeSkipMaps)."""
 
     def __init__(self, ctx: Any, volume: Volume, slice_pairs: bool) -> None:
         fmt, scale, offset = _TEX_FORMAT[volume.dtype]
@@ -101,41 +96,48 @@ class _VolumeGPU:
         self.texture.filter = (ctx.LINEAR, ctx.LINEAR)
         self.value_map = (scale, offset)
         bmin, bmax = block_min_max(volume.data, BLOCK)
-        self.block_min, self.block_max = bmin, bmax
         self.blocks = bmin.shape
-        # block info texture (skip distance, min, max, 0), written once a mode is known
-        self.info = ctx.texture3d(self.blocks, 4, dtype="f4")
-        self.info.filter = (ctx.NEAREST, ctx.NEAREST)
-        self.info_key: Any = None
-        self.volume_data = volume.data
-        self.cell_range: tuple[np.ndarray, np.ndarray] | None = None
-        self.cell_visible: np.ndarray | None = None
-        #: octant -> R8 texture of octant skip distances, for the scene key cell_key
-        self.cell_skip: dict[Octant, Any] = {}
-        self.cell_key: Any = None
-        # deformed-space skip maps of warped rays (one warp state at a time)
-        self.warped_skip: dict[Octant, Any] = {}
-        self.warped_key: Any = None
-        self.warped_visible: np.ndarray | None = None
-        self.warped_offset = np.zeros(3, dtype=int)
+        #: block info, cell and warped skip maps, filled by the renderer's SkipMapCache
+        self.skip = VolumeSkipMaps(ctx, volume.data, bmin, bmax)
         self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
 
     def release(self) -> None:
-        for tex in (
-            self.texture,
-            self.info,
-            *self.cell_skip.values(),
-            *self.warped_skip.values(),
-        ):
-            if tex is not None:
-                tex.release()
-        self.cell_skip.clear()
-        self.warped_skip.clear()
-        self.texture = self.info = None  # type: ignore[assignment]
+        if self.texture is not None:
+            self.texture.release()
+        self.skip.release()
+        self.texture = None  # type: ignore[assignment]
 
 
 def _tf_key(tf: TransferFunction) -> tuple:
     return tuple(tf.points)
+
+
+#: an NDC polygon of a draw and the ray-direction octant whose skip map it uses (or None)
+_Region = tuple[Octant | None, list[tuple[float, float]]]
+
+
+@dataclasses.dataclass
+class _Frame:
+    """What the steps of one :meth:`Renderer.draw` share (made by ``_begin_frame``)."""
+
+    scene: Scene
+    gpu: _VolumeGPU
+    camera: Camera
+    #: (x, y, w, h) in pixels
+    viewport: tuple[int, int, int, int]
+    #: the warp chain folded into one matrix; None for warped (non-affine) rays
+    fold: np.ndarray | None
+    #: the empty-space skipping: "cells", "blocks" or "none"
+    skip_kind: str
+    #: the raycast program variant
+    prog: Any
+    #: the scene's background, premultiplied
+    background: tuple
+
+    @property
+    def linear(self) -> bool:
+        """Straight rays: the warp chain is affine."""
+        return self.fold is not None
 
 
 class Renderer:
@@ -175,18 +177,8 @@ class Renderer:
                 f"voxwarp needs OpenGL 4.3 or newer; this context offers {ctx.version_code}"
             )
         self.ctx = ctx
-        #: skip blocks the mode cannot see (off only to measure what it buys)
-        self.empty_space_skipping = bool(empty_space_skipping)
-        #: skip at the resolution of trilinear cells
-        self.cell_skipping = True
-        #: deformed-space skip maps of warped rays (see :meth:`_skip_kind`): "auto"
-        #: builds them when a warp state is drawn a second time, "always" on first
-        #: use, "never" keeps per-block checks
-        self.warped_skip_maps = "auto"
-        self._warped_seen: dict[int, Any] = {}
-        #: "background" mode: the job the last draw wanted, and finished results
-        self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
-        self._skip_ready: dict[Any, Any] = {}
+        #: when skip maps are built, reused and dropped (and the settings that decide it)
+        self._skip_maps = SkipMapCache(ctx, empty_space_skipping=bool(empty_space_skipping))
         #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
         self.last_skip_kind = "none"
         if sampling not in ("auto", "texture3d", "slice_pairs"):
@@ -291,118 +283,43 @@ class Renderer:
             self._tf_key = key
         return self._tf_tex
 
-    def _block_info(self, gpu: _VolumeGPU, scene: Scene) -> Any:
-        key = skip_map_key(scene)
-        if gpu.info_key != key:
-            dist = block_skip_distances(
-                static_block_visibility(scene, gpu.block_min, gpu.block_max)
-            )
-            info = np.stack(
-                [
-                    dist.astype(np.float32),
-                    gpu.block_min,
-                    gpu.block_max,
-                    np.zeros_like(gpu.block_min),
-                ],
-                axis=-1,
-            )
-            gpu.info.write(np.ascontiguousarray(info.transpose(2, 1, 0, 3)).tobytes())
-            gpu.info_key = key
-        return gpu.info
+    # ------------------------------------------------------------------ skip maps
+    @property
+    def empty_space_skipping(self) -> bool:
+        """Skip space the mode cannot see (default); off only to measure what it buys."""
+        return self._skip_maps.empty_space_skipping
 
-    def _skip_kind(self, scene: Scene, linear: bool, gpu: _VolumeGPU | None = None) -> str:
-        """Which empty-space skipping a draw uses: "cells", "blocks" or "none".
+    @empty_space_skipping.setter
+    def empty_space_skipping(self, value: bool) -> None:
+        self._skip_maps.empty_space_skipping = value
 
-        Straight rays (affine chains) skip at trilinear-cell resolution for the modes
-        whose visibility is sparse (dvr, iso, flm). mip, minip and average must look
-        at (nearly) every sample along the ray; on the benchmark CT their skip checks
-        cost more than they saved (no skipping: 1.3x faster), so they march plainly.
-        Warped (non-affine) rays skip at cell resolution too, through deformed space,
-        when every warp of the chain bounds its displacement
-        (:meth:`voxwarp.deform.warp.Warp.displacement_range`; see
-        :func:`voxwarp.render.skipping.warped_cell_visibility`); otherwise they test their 4³
-        block per sample. Building those maps takes seconds on the CPU for a 256³
-        volume (a one-frame render costs less with block checks, and a warp that
-        changes every frame, as while dragging, would rebuild every frame), so with
-        :attr:`warped_skip_maps` "auto" they are built when the same warp state is
-        drawn a second time (``gpu`` given: the draw's volume, whose cache decides).
-        """
-        if not self.empty_space_skipping:
-            return "none"
-        sparse = scene.mode in ("dvr", "iso", "flm") and self.cell_skipping
-        if not linear:
-            if not self._warped_cells_possible(scene) or self.warped_skip_maps == "never":
-                return "blocks"
-            if self.warped_skip_maps == "always" or gpu is None:
-                return "cells"
-            key = self._warped_key(scene)
-            if self.warped_skip_maps == "background":
-                return self._background_skip_kind(gpu, scene, key)
-            if gpu.warped_key == key or self._warped_seen.get(id(gpu)) == key:
-                return "cells"
-            self._warped_seen[id(gpu)] = key
-            return "blocks"
-        if sparse:
-            return "cells"
-        if scene.mode in ("mip", "minip", "average"):
-            return "none"
-        return "blocks"
+    @property
+    def cell_skipping(self) -> bool:
+        """Skip at the resolution of trilinear cells (default; off: 4³ blocks)."""
+        return self._skip_maps.cell_skipping
 
-    def _background_skip_kind(self, gpu: _VolumeGPU, scene: Scene, key: Any) -> str:
-        """ "background" mode: cells when this warp state's maps are built or ready,
-        else blocks, and the work is offered as :meth:`skip_map_job`."""
-        if gpu.warped_key == key:
-            return "cells"
-        ready = self._skip_ready.pop(key, None)
-        self._skip_ready.clear()  # results for other states are stale
-        if ready is not None:
-            self._install_warped(gpu, key, ready)
-            return "cells"
-        self._skip_wanted = (key, self._warped_job(gpu, scene))
-        return "blocks"
+    @cell_skipping.setter
+    def cell_skipping(self, value: bool) -> None:
+        self._skip_maps.cell_skipping = value
 
-    def _warped_cells_possible(self, scene: Scene) -> bool:
-        """Whether warped rays of ``scene`` can skip by deformed-space cell maps: a mode
-        with sparse visibility (dvr, iso, flm), cell skipping on, and every warp of the
-        chain bounding its displacement."""
-        return (
-            self.empty_space_skipping
-            and self.cell_skipping
-            and scene.mode in ("dvr", "iso", "flm")
-            and _bounded(scene.warps)
-        )
+    @property
+    def warped_skip_maps(self) -> str:
+        """Deformed-space skip maps of warped rays: "auto" builds them when a warp state
+        is drawn a second time, "always" on first use, "never" keeps per-block checks,
+        "background" offers them as :meth:`skip_map_job` (see
+        :meth:`voxwarp.render.skip_cache.SkipMapCache.kind`)."""
+        return self._skip_maps.warped_skip_maps
 
-    def _warped_job(self, gpu: _VolumeGPU, scene: Scene) -> Callable[[], Any]:
-        """The CPU work of ``scene``'s deformed-space cell visibility, as a closure over
-        its inputs (no GL: it may run on any thread)."""
-        visible = self._cell_visibility(gpu, scene)
-        vol = scene.volume
-        lo, hi = scene.ray_bounds()
-        warps = list(scene.warps)
-        spacing, origin = vol.spacing, vol.origin
-        return lambda: warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
-
-    def _install_warped(self, gpu: _VolumeGPU, key: Any, result: Any) -> None:
-        """Keep a deformed-space visibility on the volume (its old skip maps go)."""
-        for tex in gpu.warped_skip.values():
-            tex.release()
-        gpu.warped_skip.clear()
-        gpu.warped_visible, gpu.warped_offset = result
-        gpu.warped_key = key
+    @warped_skip_maps.setter
+    def warped_skip_maps(self, value: str) -> None:
+        self._skip_maps.warped_skip_maps = value
 
     def needs_skip_maps(self, scene: Scene) -> bool:
         """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
         would march block by block only because its warp state's deformed-space skip
         maps are not built yet (no side effects)."""
-        if self.warped_skip_maps != "background" or fold_affine(scene.warps) is not None:
-            return False
-        if not self._warped_cells_possible(scene):
-            return False
         entry = self._volumes.get(id(scene.volume))
-        key = self._warped_key(scene)
-        return (
-            not (entry is not None and entry[1].warped_key == key) and key not in self._skip_ready
-        )
+        return self._skip_maps.needs_maps(scene, None if entry is None else entry[1].skip)
 
     def skip_map_job(self) -> tuple[Any, Callable[[], Any]] | None:
         """With :attr:`warped_skip_maps` "background": ``(key, job)`` for the warp
@@ -410,113 +327,12 @@ class Renderer:
         GL) that may run on any thread while the warps it was made from stay alive; hand
         its result to :meth:`install_skip_map`. A state that changed meanwhile simply
         never uses it."""
-        wanted, self._skip_wanted = self._skip_wanted, None
-        return wanted
+        return self._skip_maps.take_job()
 
     def install_skip_map(self, key: Any, result: Any) -> None:
         """Keep a finished :meth:`skip_map_job` result; the next draw of its warp state
         uploads and uses it."""
-        if result is not None:
-            self._skip_ready = {key: result}
-
-    def _cell_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
-        """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
-        key = skip_map_key(scene)
-        if gpu.cell_key != key:
-            for tex in gpu.cell_skip.values():
-                tex.release()
-            gpu.cell_skip.clear()
-            if gpu.cell_range is None:
-                gpu.cell_range = cell_min_max(gpu.volume_data)
-            gpu.cell_visible = static_block_visibility(scene, *gpu.cell_range)
-            gpu.cell_key = key
-        assert gpu.cell_visible is not None
-        return gpu.cell_visible
-
-    def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
-        dist = octant_skip_distances(visible, octant)
-        data = np.ascontiguousarray(dist.transpose(2, 1, 0))
-        tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
-        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-        return tex
-
-    def _cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
-        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
-
-        Computed on first use per (mode visibility, octant) and cached on the volume;
-        a change of what the mode can see (transfer function, isovalue, ...) drops all.
-        """
-        visible = self._cell_visibility(gpu, scene)
-        tex = gpu.cell_skip.get(octant)
-        if tex is None:
-            tex = gpu.cell_skip[octant] = self._octant_texture(visible, octant)
-        return tex
-
-    def _warped_key(self, scene: Scene) -> tuple:
-        """What the deformed-space skip maps of ``scene`` depend on."""
-        lo, hi = scene.ray_bounds()
-        return (
-            skip_map_key(scene),
-            tuple(
-                (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
-                for w in scene.warps
-            ),
-            tuple(np.round(np.asarray(lo, float), 9)),
-            tuple(np.round(np.asarray(hi, float), 9)),
-        )
-
-    def _warped_visibility(self, gpu: _VolumeGPU, scene: Scene) -> np.ndarray:
-        """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
-        for one warp state; a change of the warps or of what the mode sees rebuilds it)."""
-        key = self._warped_key(scene)
-        if gpu.warped_key != key:
-            result = self._warped_job(gpu, scene)()
-            if result is None:
-                raise RenderError("warped cell skipping needs warps that bound their displacement")
-            self._install_warped(gpu, key, result)
-        assert gpu.warped_visible is not None
-        return gpu.warped_visible
-
-    def _warped_cell_skip(self, gpu: _VolumeGPU, scene: Scene, octant: Octant) -> Any:
-        """R8 octant skip map of the deformed-space cells (see :meth:`_warped_visibility`)."""
-        visible = self._warped_visibility(gpu, scene)
-        tex = gpu.warped_skip.get(octant)
-        if tex is None:
-            tex = gpu.warped_skip[octant] = self._octant_texture(visible, octant)
-        return tex
-
-    def _mesh_pass(self, scene: Scene, cam: Camera, w: int, h: int, bg: tuple) -> np.ndarray:
-        """Draw ``scene.meshes`` into the internal (w, h) colour + depth target, over the
-        premultiplied background ``bg``; returns the mesh camera's inverse view-projection.
-
-        The mesh camera is ``cam`` with its near/far range widened to hold every mesh,
-        so meshes are not clipped by a camera fitted to the volume.
-        """
-        if self._mesh_renderer is None:
-            self._mesh_renderer = MeshRenderer(self.ctx)
-        if self._mesh_target is None or self._mesh_target[0] != (w, h):
-            self._release_mesh_target()
-            color = self.ctx.texture((w, h), 4, dtype="f4")
-            depth = self.ctx.depth_texture((w, h))
-            depth.compare_func = ""  # read depth values, not comparisons
-            for tex in (color, depth):
-                tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            fbo = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
-            self._mesh_target = ((w, h), color, depth, fbo)
-        bounds = mesh_instances_bounds(scene.meshes)
-        assert bounds is not None
-        lo, hi = bounds
-        corners = box_corners(lo, hi)
-        reach = float(np.max(np.linalg.norm(corners - cam.center, axis=1)))
-        mesh_cam = dataclasses.replace(cam, radius=reach) if reach > cam.radius else cam
-        self._mesh_renderer.draw(scene.meshes, self._mesh_target[3], mesh_cam, clear=bg)
-        return np.linalg.inv(mesh_cam.view_projection(w / h))
-
-    def _release_mesh_target(self) -> None:
-        if self._mesh_target is not None:
-            for obj in self._mesh_target[1:][::-1]:
-                obj.release()
-            self._mesh_target = None
+        self._skip_maps.install(key, result)
 
     def _program(self, scene: Scene, linear: bool, kind: str) -> Any:
         warps = [] if linear else scene.warps
@@ -578,8 +394,24 @@ class Renderer:
         """
         if self._released:
             raise RenderError("this Renderer was released")
-        vol = scene.volume
-        gpu = self._volume_gpu(vol)
+        frame = self._begin_frame(scene, framebuffer, viewport, camera)
+        values = self._set_uniforms(frame)
+        # meshes of a mixed scene first: the pass binds its own textures and framebuffer
+        mesh_inv_view_proj = self._draw_mesh_pass(frame)
+        unit = self._bind_textures(frame)
+        self._bind_mesh_target(frame, unit, mesh_inv_view_proj)
+        self._draw_regions(frame, framebuffer, self._octant_regions(frame, values))
+
+    def _begin_frame(
+        self,
+        scene: Scene,
+        framebuffer: Any,
+        viewport: tuple[int, int, int, int] | None,
+        camera: Camera | None,
+    ) -> _Frame:
+        """Upload the volume, resolve viewport, camera and ray kind, pick the skipping
+        (kept in :attr:`last_skip_kind`) and the program: the :class:`_Frame` of a draw."""
+        gpu = self._volume_gpu(scene.volume)
         if viewport is None:
             viewport = (0, 0, *framebuffer.size)
         x, y, w, h = (int(v) for v in viewport)
@@ -588,38 +420,49 @@ class Renderer:
         cam = camera or scene.resolved_camera()
         fold = fold_affine(scene.warps)
         linear = fold is not None
-        skip_kind = self._skip_kind(scene, linear, gpu)
+        skip_kind = self._skip_maps.kind(scene, linear, gpu.skip)
         self.last_skip_kind = skip_kind
         prog = self._program(scene, linear, skip_kind)
-
-        tf = scene.transfer_function
-        lo, hi = scene.ray_bounds()
-        level, width = scene.window
-        sp = np.asarray(vol.spacing)
-        step_mm = scene.sample_distance_mm
-        diag = float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
-        max_steps = int(min(diag / step_mm + 4, 1_000_000))
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
+        return _Frame(scene, gpu, cam, (x, y, w, h), fold, skip_kind, prog, bg_premul)
 
+    def _set_uniforms(self, frame: _Frame) -> dict[str, Any]:
+        """Set the raycast program's uniforms for ``frame``; returns them by name."""
+        values = self._frame_uniforms(frame)
+        values.update(_mode_uniforms(frame.scene))
+        values.update(self._texel_uniforms(frame))
+        for name, value in values.items():
+            _set_uniform(frame.prog, name, value)
+        return values
+
+    def _frame_uniforms(self, frame: _Frame) -> dict[str, Any]:
+        """The uniforms of every program variant: camera, ray bounds and steps, volume,
+        value and colour mappings, light and texture units."""
+        scene, gpu = frame.scene, frame.gpu
+        vol, tf = scene.volume, scene.transfer_function
+        x, y, w, h = frame.viewport
+        lo, hi = scene.ray_bounds()
+        level, width = scene.window
+        step_mm = scene.sample_distance_mm
+        diag = float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
         tf_lo, tf_hi = tf.value_range
         tf_scale = (TABLE_SIZE - 1) / (tf_hi - tf_lo)
-        vp = cam.view_projection(w / h)
-        values: dict[str, Any] = {
-            "u_inv_view_proj": np.linalg.inv(vp),
+        return {
+            "u_inv_view_proj": np.linalg.inv(frame.camera.view_projection(w / h)),
             "u_viewport": (x, y, w, h),
             "u_bounds_lo": tuple(lo),
             "u_bounds_hi": tuple(hi),
             "u_step": step_mm,
-            "u_max_steps": max_steps,
+            "u_max_steps": int(min(diag / step_mm + 4, 1_000_000)),
             "u_jitter": int(scene.jitter),
             "u_seed": scene.seed & 0xFFFFFFFF,
-            "u_background": bg_premul,
+            "u_background": frame.background,
             "u_value_limits": vol.value_range,
             "u_dims": tuple(float(s) for s in vol.shape),
             "u_inv_dims": tuple(1.0 / s for s in vol.shape),
             "u_value_map": gpu.value_map,
-            "u_spacing": tuple(sp),
+            "u_spacing": tuple(np.asarray(vol.spacing)),
             "u_origin": tuple(vol.origin),
             "u_tf_map": (tf_scale, 0.5 - tf_lo * tf_scale),
             "u_tf_size": float(TABLE_SIZE),
@@ -631,53 +474,85 @@ class Renderer:
             "u_block_info": 2,
             "u_cell_skip": 3,
         }
-        # mode parameters, resolved only for the mode that reads them
-        if scene.mode == "flm":
-            values["u_threshold"] = scene.resolved_flm_threshold()
-        if scene.mode == "iso":
-            iso = scene.resolved_iso_value()
-            iso_rgb = tf(iso)[:3]
-            if float(np.max(iso_rgb)) < 0.2:  # a dark TF colour: use a neutral surface
-                iso_rgb = np.array([0.9, 0.85, 0.8])
-            values["u_iso"] = iso
-            values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
-        if linear:
-            to_texel = np.eye(4)
-            to_texel[:3, :3] = np.diag(1.0 / sp)
-            to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
-            values["u_world_to_texel"] = to_texel @ fold
-            values["u_jacobian"] = fold[:3, :3]
-        skip_to_texel = values.get("u_world_to_texel")
-        if skip_kind == "cells" and not linear:
-            # warped rays look up deformed-space cells: the volume's texel grid shifted
-            # by the skip map's padding
-            visible = self._warped_visibility(gpu, scene)
-            skip_to_texel = np.eye(4)
-            skip_to_texel[:3, :3] = np.diag(1.0 / sp)
-            skip_to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5 - gpu.warped_offset
-            values["u_skip_world_to_texel"] = skip_to_texel
-            values["u_cell_dims"] = tuple(int(c) for c in visible.shape)
-        for name, value in values.items():
-            _set_uniform(prog, name, value)
 
-        # meshes of a mixed scene first: the pass binds its own textures and framebuffer
-        mesh_inv_view_proj = self._mesh_pass(scene, cam, w, h, bg_premul) if scene.meshes else None
+    def _texel_uniforms(self, frame: _Frame) -> dict[str, Any]:
+        """World-to-texel maps: straight rays', through the folded chain; with cell
+        skipping, warped rays' into the deformed-space skip map, and its size."""
+        vol = frame.scene.volume
+        sp = np.asarray(vol.spacing)
+        to_texel = np.eye(4)
+        to_texel[:3, :3] = np.diag(1.0 / sp)
+        to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
+        if frame.fold is not None:
+            return {"u_world_to_texel": to_texel @ frame.fold, "u_jacobian": frame.fold[:3, :3]}
+        if frame.skip_kind != "cells":
+            return {}
+        # warped rays look up deformed-space cells: the volume's texel grid shifted by
+        # the skip map's padding
+        maps = frame.gpu.skip
+        visible = self._skip_maps.warped_visibility(maps, frame.scene)
+        to_texel[:3, 3] -= maps.warped_offset
+        return {
+            "u_skip_world_to_texel": to_texel,
+            "u_cell_dims": tuple(int(c) for c in visible.shape),
+        }
+
+    def _draw_mesh_pass(self, frame: _Frame) -> np.ndarray | None:
+        """Draw a mixed scene's meshes into the internal colour + depth target of the
+        viewport's size, over the background; returns the mesh camera's inverse
+        view-projection (None without meshes: nothing is drawn).
+
+        The mesh camera is the frame's with its near/far range widened to hold every
+        mesh, so meshes are not clipped by a camera fitted to the volume.
+        """
+        scene, cam = frame.scene, frame.camera
+        if not scene.meshes:
+            return None
+        _, _, w, h = frame.viewport
+        if self._mesh_renderer is None:
+            self._mesh_renderer = MeshRenderer(self.ctx)
+        fbo = self._mesh_framebuffer(w, h)
+        bounds = mesh_instances_bounds(scene.meshes)
+        assert bounds is not None
+        lo, hi = bounds
+        corners = box_corners(lo, hi)
+        reach = float(np.max(np.linalg.norm(corners - cam.center, axis=1)))
+        mesh_cam = dataclasses.replace(cam, radius=reach) if reach > cam.radius else cam
+        self._mesh_renderer.draw(scene.meshes, fbo, mesh_cam, clear=frame.background)
+        return np.linalg.inv(mesh_cam.view_projection(w / h))
+
+    def _mesh_framebuffer(self, w: int, h: int) -> Any:
+        """The mesh pass's (w, h) framebuffer (colour + depth textures), remade on resize."""
+        if self._mesh_target is None or self._mesh_target[0] != (w, h):
+            self._release_mesh_target()
+            color = self.ctx.texture((w, h), 4, dtype="f4")
+            depth = self.ctx.depth_texture((w, h))
+            depth.compare_func = ""  # read depth values, not comparisons
+            for tex in (color, depth):
+                tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            fbo = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+            self._mesh_target = ((w, h), color, depth, fbo)
+        return self._mesh_target[3]
+
+    def _release_mesh_target(self) -> None:
+        if self._mesh_target is not None:
+            for obj in self._mesh_target[1:][::-1]:
+                obj.release()
+            self._mesh_target = None
+
+    def _bind_textures(self, frame: _Frame) -> int:
+        """Bind the volume (unit 0), transfer-function table (1), block info (2) and the
+        warps' textures (4 on), and set the warps' uniforms; returns the next free unit."""
+        scene, prog = frame.scene, frame.prog
         # the warps' textures first: making them may run GPU passes (an offset field
         # bakes its inverse) that bind texture units of their own
-        warp_textures = [] if linear else [w.textures(self.ctx) for w in scene.warps]
-        gpu.texture.use(0)
-        self._tf_texture(tf, step_mm / scene.opacity_reference_mm).use(1)
-        self._block_info(gpu, scene).use(2)
-        # The image is drawn as convex polygons in NDC: one covering the viewport, or,
-        # with octant skip maps, one per ray-direction octant present in the image
-        # (the shader discards the other octants' pixels along the shared borders).
-        regions: list[tuple[Octant | None, list[tuple[float, float]]]]
-        regions = [(None, [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])]
-        if skip_kind == "cells":
-            coefficients = ray_direction_coefficients(values["u_inv_view_proj"], skip_to_texel)
-            regions = list(octant_regions(coefficients, (w, h)))
+        warp_textures = [] if frame.linear else [w.textures(self.ctx) for w in scene.warps]
+        frame.gpu.texture.use(0)
+        ratio = scene.sample_distance_mm / scene.opacity_reference_mm
+        self._tf_texture(scene.transfer_function, ratio).use(1)
+        self._skip_maps.block_info(frame.gpu.skip, scene).use(2)
         unit = 4
-        if not linear:
+        if not frame.linear:
             for i, warp in enumerate(scene.warps):
                 for name, value in warp.uniforms().items():
                     _set_uniform(prog, f"w{i}_{name}", value)
@@ -685,29 +560,50 @@ class Renderer:
                     tex.use(unit)
                     _set_uniform(prog, f"w{i}_{name}", unit)
                     unit += 1
-        if mesh_inv_view_proj is not None:
-            assert self._mesh_target is not None
-            self._mesh_target[1].use(unit)
-            self._mesh_target[2].use(unit + 1)
-            _set_uniform(prog, "u_mesh_color", unit)
-            _set_uniform(prog, "u_mesh_depth", unit + 1)
-            _set_uniform(prog, "u_mesh_inv_view_proj", mesh_inv_view_proj)
+        return unit
 
+    def _bind_mesh_target(
+        self, frame: _Frame, unit: int, mesh_inv_view_proj: np.ndarray | None
+    ) -> None:
+        """Bind the mesh pass's colour and depth (units ``unit``, ``unit + 1``) and set
+        its camera, for the raycaster to composite over (nothing without meshes)."""
+        if mesh_inv_view_proj is None:
+            return
+        assert self._mesh_target is not None
+        self._mesh_target[1].use(unit)
+        self._mesh_target[2].use(unit + 1)
+        _set_uniform(frame.prog, "u_mesh_color", unit)
+        _set_uniform(frame.prog, "u_mesh_depth", unit + 1)
+        _set_uniform(frame.prog, "u_mesh_inv_view_proj", mesh_inv_view_proj)
+
+    @staticmethod
+    def _octant_regions(frame: _Frame, values: dict[str, Any]) -> list[_Region]:
+        """The convex NDC polygons the image is drawn as: one covering the viewport, or,
+        with octant skip maps, one per ray-direction octant present in the image (the
+        shader discards the other octants' pixels along the shared borders)."""
+        if frame.skip_kind != "cells":
+            return [(None, [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)])]
+        to_texel = values["u_world_to_texel" if frame.linear else "u_skip_world_to_texel"]
+        coefficients = ray_direction_coefficients(values["u_inv_view_proj"], to_texel)
+        _, _, w, h = frame.viewport
+        return list(octant_regions(coefficients, (w, h)))
+
+    def _draw_regions(self, frame: _Frame, framebuffer: Any, regions: list[_Region]) -> None:
+        """Clear the viewport to the background (rays that miss the volume, or see
+        nothing, discard), then draw each region with its octant's skip map."""
+        prog = frame.prog
         framebuffer.use()
-        framebuffer.viewport = (x, y, w, h)
-        # rays that miss the volume (or see nothing) discard: background first
-        framebuffer.clear(*bg_premul, viewport=(x, y, w, h))
+        framebuffer.viewport = frame.viewport
+        framebuffer.clear(*frame.background, viewport=frame.viewport)
         self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.BLEND)
         vao = self._vao.get(id(prog))
         if vao is None:
             vao = self.ctx.vertex_array(prog, [])
             self._vao[id(prog)] = vao
+        skip = self._skip_maps.cell_skip if frame.linear else self._skip_maps.warped_cell_skip
         for octant, polygon in regions:
             if octant is not None:
-                if linear:
-                    self._cell_skip(gpu, scene, octant).use(3)
-                else:
-                    self._warped_cell_skip(gpu, scene, octant).use(3)
+                skip(frame.gpu.skip, frame.scene, octant).use(3)
                 _set_uniform(prog, "u_octant", tuple(float(c) for c in octant))
             corners = [*polygon, *[(0.0, 0.0)] * (MAX_POLYGON - len(polygon))]
             prog["u_polygon"].value = corners
@@ -790,9 +686,19 @@ class Renderer:
         self._released = True
 
 
-def _bounded(warps: Any) -> bool:
-    """Whether every warp of the chain bounds its displacement (no read-back)."""
-    return all(w.bounds_displacement for w in warps)
+def _mode_uniforms(scene: Scene) -> dict[str, Any]:
+    """The mode's parameters, resolved only for the mode that reads them."""
+    values: dict[str, Any] = {}
+    if scene.mode == "flm":
+        values["u_threshold"] = scene.resolved_flm_threshold()
+    if scene.mode == "iso":
+        iso = scene.resolved_iso_value()
+        iso_rgb = scene.transfer_function(iso)[:3]
+        if float(np.max(iso_rgb)) < 0.2:  # a dark TF colour: use a neutral surface
+            iso_rgb = np.array([0.9, 0.85, 0.8])
+        values["u_iso"] = iso
+        values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
+    return values
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:

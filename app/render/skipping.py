@@ -17,7 +17,8 @@ Two resolutions, both computed on the CPU from the volume and the scene:
   casting of volumetric images using distance maps for empty space skipping").
 
 :func:`octant_regions` splits the image into the regions whose rays share an octant,
-so the renderer can draw each region with its octant's map.
+so the renderer can draw each region with its octant's map. When the maps are built,
+kept and dropped is :mod:`voxwarp.render.skip_cache`.
 """
 
 from __future__ import annotations

@@ -1,0 +1,305 @@
+"""When the raycaster's empty-space skip maps are built, kept, reused and dropped.
+
+The maths of the maps is :mod:`voxwarp.render.skipping`; this module is their cache
+policy, for :class:`voxwarp.render.raycaster.Renderer`:
+
+* :class:`VolumeSkipMaps` holds one volume's maps (GPU textures and the CPU arrays they
+  are made from), kept with the volume's texture.
+* :class:`SkipMapCache` (one per renderer) decides per draw which skipping a scene uses
+  (:meth:`SkipMapCache.kind`), builds or reuses the textures of that kind, drops them
+  when what the mode can see or the warp state changes, and, with ``warped_skip_maps``
+  "background", hands the CPU work of warped maps to a worker thread
+  (:meth:`SkipMapCache.take_job`, :meth:`SkipMapCache.install`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from voxwarp.deform.warp import fold_affine
+from voxwarp.errors import RenderError
+from voxwarp.render.skipping import (
+    Octant,
+    block_skip_distances,
+    cell_min_max,
+    octant_skip_distances,
+    skip_map_key,
+    static_block_visibility,
+    warped_cell_visibility,
+)
+
+if TYPE_CHECKING:
+    from voxwarp.scene import Scene
+
+#: modes whose visibility is sparse enough for cell-resolution skipping
+SPARSE_MODES = ("dvr", "iso", "flm")
+
+
+class VolumeSkipMaps:
+    """The skip maps of one volume: a GPU block-info texture, per-octant R8 cell textures
+    (straight and warped rays) and the CPU arrays they come from.
+
+    Made beside the volume's texture from its data and block (min, max) grids
+    (:func:`voxwarp.render.skipping.block_min_max`); only a :class:`SkipMapCache` fills it.
+    Free its textures with :meth:`release` while the context is current.
+    """
+
+    def __init__(
+        self, ctx: Any, data: np.ndarray, block_min: np.ndarray, block_max: np.ndarray
+    ) -> None:
+        self.block_min, self.block_max = block_min, block_max
+        # block info texture (skip distance, min, max, 0), written once a mode is known
+        self.info = ctx.texture3d(block_min.shape, 4, dtype="f4")
+        self.info.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.info_key: Any = None
+        self.volume_data = data
+        self.cell_range: tuple[np.ndarray, np.ndarray] | None = None
+        self.cell_visible: np.ndarray | None = None
+        #: octant -> R8 texture of octant skip distances, for the scene key cell_key
+        self.cell_skip: dict[Octant, Any] = {}
+        self.cell_key: Any = None
+        # deformed-space skip maps of warped rays (one warp state at a time)
+        self.warped_skip: dict[Octant, Any] = {}
+        self.warped_key: Any = None
+        self.warped_visible: np.ndarray | None = None
+        self.warped_offset = np.zeros(3, dtype=int)
+
+    def release(self) -> None:
+        """Free every texture (idempotent)."""
+        for tex in (self.info, *self.cell_skip.values(), *self.warped_skip.values()):
+            if tex is not None:
+                tex.release()
+        self.cell_skip.clear()
+        self.warped_skip.clear()
+        self.info = None
+
+
+class SkipMapCache:
+    """Which empty-space skipping each draw uses, and the maps it needs, kept up to date.
+
+    ``ctx`` is the renderer's moderngl context (the octant textures are made on it). Per
+    draw the renderer asks :meth:`kind`, then for the textures of that kind
+    (:meth:`block_info`, :meth:`cell_skip`, :meth:`warped_cell_skip`), passing the
+    draw volume's :class:`VolumeSkipMaps`. The settings below are the renderer's
+    ``empty_space_skipping``, ``cell_skipping`` and ``warped_skip_maps``.
+    """
+
+    def __init__(self, ctx: Any, *, empty_space_skipping: bool = True) -> None:
+        self.ctx = ctx
+        #: skip blocks the mode cannot see (off only to measure what it buys)
+        self.empty_space_skipping = empty_space_skipping
+        #: skip at the resolution of trilinear cells
+        self.cell_skipping = True
+        #: deformed-space skip maps of warped rays (see :meth:`kind`): "auto" builds them
+        #: when a warp state is drawn a second time, "always" on first use, "never" keeps
+        #: per-block checks, "background" offers them as :meth:`take_job`
+        self.warped_skip_maps = "auto"
+        self._warped_seen: dict[int, Any] = {}
+        #: "background" mode: the job the last draw wanted, and finished results
+        self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
+        self._skip_ready: dict[Any, Any] = {}
+
+    # ------------------------------------------------------------------ policy
+    def kind(self, scene: Scene, linear: bool, maps: VolumeSkipMaps | None = None) -> str:
+        """Which empty-space skipping a draw uses: "cells", "blocks" or "none".
+
+        Straight rays (affine chains) skip at trilinear-cell resolution for the modes
+        whose visibility is sparse (dvr, iso, flm). mip, minip and average must look
+        at (nearly) every sample along the ray; on the benchmark CT their skip checks
+        cost more than they saved (no skipping: 1.3x faster), so they march plainly.
+        Warped (non-affine) rays skip at cell resolution too, through deformed space,
+        when every warp of the chain bounds its displacement
+        (:meth:`voxwarp.deform.warp.Warp.displacement_range`; see
+        :func:`voxwarp.render.skipping.warped_cell_visibility`); otherwise they test their
+        4³ block per sample. Building those maps takes seconds on the CPU for a 256³
+        volume (a one-frame render costs less with block checks, and a warp that
+        changes every frame, as while dragging, would rebuild every frame), so with
+        :attr:`warped_skip_maps` "auto" they are built when the same warp state is
+        drawn a second time (``maps`` given: the draw volume's, whose cache decides).
+        """
+        if not self.empty_space_skipping:
+            return "none"
+        sparse = scene.mode in SPARSE_MODES and self.cell_skipping
+        if not linear:
+            if not self._warped_cells_possible(scene) or self.warped_skip_maps == "never":
+                return "blocks"
+            if self.warped_skip_maps == "always" or maps is None:
+                return "cells"
+            key = self._warped_key(scene)
+            if self.warped_skip_maps == "background":
+                return self._background_kind(maps, scene, key)
+            if maps.warped_key == key or self._warped_seen.get(id(maps)) == key:
+                return "cells"
+            self._warped_seen[id(maps)] = key
+            return "blocks"
+        if sparse:
+            return "cells"
+        if scene.mode in ("mip", "minip", "average"):
+            return "none"
+        return "blocks"
+
+    def _background_kind(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> str:
+        """ "background" mode: cells when this warp state's maps are built or ready,
+        else blocks, and the work is offered as :meth:`take_job`."""
+        if maps.warped_key == key:
+            return "cells"
+        ready = self._skip_ready.pop(key, None)
+        self._skip_ready.clear()  # results for other states are stale
+        if ready is not None:
+            self._install_warped(maps, key, ready)
+            return "cells"
+        self._skip_wanted = (key, self._warped_job(maps, scene))
+        return "blocks"
+
+    def _warped_cells_possible(self, scene: Scene) -> bool:
+        """Whether warped rays of ``scene`` can skip by deformed-space cell maps: a mode
+        with sparse visibility (dvr, iso, flm), cell skipping on, and every warp of the
+        chain bounding its displacement."""
+        return (
+            self.empty_space_skipping
+            and self.cell_skipping
+            and scene.mode in SPARSE_MODES
+            and _bounded(scene.warps)
+        )
+
+    # ------------------------------------------------------------------ background builds
+    def needs_maps(self, scene: Scene, maps: VolumeSkipMaps | None) -> bool:
+        """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
+        would march block by block only because its warp state's deformed-space skip
+        maps are not built yet (``maps``: its volume's, None before its first draw; no
+        side effects)."""
+        if self.warped_skip_maps != "background" or fold_affine(scene.warps) is not None:
+            return False
+        if not self._warped_cells_possible(scene):
+            return False
+        key = self._warped_key(scene)
+        return not (maps is not None and maps.warped_key == key) and key not in self._skip_ready
+
+    def take_job(self) -> tuple[Any, Callable[[], Any]] | None:
+        """With :attr:`warped_skip_maps` "background": ``(key, job)`` for the warp
+        state the last draw drew with block checks, or None (handed out once). ``job()``
+        is CPU work (no GL) that may run on any thread while the warps it was made from
+        stay alive; hand its result to :meth:`install`."""
+        wanted, self._skip_wanted = self._skip_wanted, None
+        return wanted
+
+    def install(self, key: Any, result: Any) -> None:
+        """Keep a finished :meth:`take_job` result; the next draw of its warp state
+        uploads and uses it (a state that changed meanwhile never does)."""
+        if result is not None:
+            self._skip_ready = {key: result}
+
+    def _warped_job(self, maps: VolumeSkipMaps, scene: Scene) -> Callable[[], Any]:
+        """The CPU work of ``scene``'s deformed-space cell visibility, as a closure over
+        its inputs (no GL: it may run on any thread)."""
+        visible = self._cell_visibility(maps, scene)
+        vol = scene.volume
+        lo, hi = scene.ray_bounds()
+        warps = list(scene.warps)
+        spacing, origin = vol.spacing, vol.origin
+        return lambda: warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
+
+    def _install_warped(self, maps: VolumeSkipMaps, key: Any, result: Any) -> None:
+        """Keep a deformed-space visibility on the volume (its old skip maps go)."""
+        for tex in maps.warped_skip.values():
+            tex.release()
+        maps.warped_skip.clear()
+        maps.warped_visible, maps.warped_offset = result
+        maps.warped_key = key
+
+    # ------------------------------------------------------------------ maps
+    def block_info(self, maps: VolumeSkipMaps, scene: Scene) -> Any:
+        """The block info texture (skip distance, min, max, 0) for ``scene``'s mode,
+        rewritten when what the mode can see changes."""
+        key = skip_map_key(scene)
+        if maps.info_key != key:
+            dist = block_skip_distances(
+                static_block_visibility(scene, maps.block_min, maps.block_max)
+            )
+            info = np.stack(
+                [
+                    dist.astype(np.float32),
+                    maps.block_min,
+                    maps.block_max,
+                    np.zeros_like(maps.block_min),
+                ],
+                axis=-1,
+            )
+            maps.info.write(np.ascontiguousarray(info.transpose(2, 1, 0, 3)).tobytes())
+            maps.info_key = key
+        return maps.info
+
+    def _cell_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
+        """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
+        key = skip_map_key(scene)
+        if maps.cell_key != key:
+            for tex in maps.cell_skip.values():
+                tex.release()
+            maps.cell_skip.clear()
+            if maps.cell_range is None:
+                maps.cell_range = cell_min_max(maps.volume_data)
+            maps.cell_visible = static_block_visibility(scene, *maps.cell_range)
+            maps.cell_key = key
+        assert maps.cell_visible is not None
+        return maps.cell_visible
+
+    def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
+        dist = octant_skip_distances(visible, octant)
+        data = np.ascontiguousarray(dist.transpose(2, 1, 0))
+        tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
+        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        return tex
+
+    def cell_skip(self, maps: VolumeSkipMaps, scene: Scene, octant: Octant) -> Any:
+        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
+
+        Computed on first use per (mode visibility, octant) and cached on the volume;
+        a change of what the mode can see (transfer function, isovalue, ...) drops all.
+        """
+        visible = self._cell_visibility(maps, scene)
+        tex = maps.cell_skip.get(octant)
+        if tex is None:
+            tex = maps.cell_skip[octant] = self._octant_texture(visible, octant)
+        return tex
+
+    def _warped_key(self, scene: Scene) -> tuple:
+        """What the deformed-space skip maps of ``scene`` depend on."""
+        lo, hi = scene.ray_bounds()
+        return (
+            skip_map_key(scene),
+            tuple(
+                (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
+                for w in scene.warps
+            ),
+            tuple(np.round(np.asarray(lo, float), 9)),
+            tuple(np.round(np.asarray(hi, float), 9)),
+        )
+
+    def warped_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
+        """Deformed-space cell visibility of ``scene``'s warped rays (cached on the volume
+        for one warp state; a change of the warps or of what the mode sees rebuilds it).
+        Its grid is the volume's shifted by ``maps.warped_offset`` cells."""
+        key = self._warped_key(scene)
+        if maps.warped_key != key:
+            result = self._warped_job(maps, scene)()
+            if result is None:
+                raise RenderError("warped cell skipping needs warps that bound their displacement")
+            self._install_warped(maps, key, result)
+        assert maps.warped_visible is not None
+        return maps.warped_visible
+
+    def warped_cell_skip(self, maps: VolumeSkipMaps, scene: Scene, octant: Octant) -> Any:
+        """R8 octant skip map of the deformed-space cells (see :meth:`warped_visibility`)."""
+        visible = self.warped_visibility(maps, scene)
+        tex = maps.warped_skip.get(octant)
+        if tex is None:
+            tex = maps.warped_skip[octant] = self._octant_texture(visible, octant)
+        return tex
+
+
+def _bounded(warps: Any) -> bool:
+    """Whether every warp of the chain bounds its displacement (no read-back)."""
+    return all(w.bounds_displacement for w in warps)
