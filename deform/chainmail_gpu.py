@@ -11,7 +11,11 @@ the same offset texture as :class:`voxwarp.deform.massspring_gpu.GpuSpringSolver
 drew every pass over the whole grid, which loses ChainMail's locality (a drag that
 moves 300 elements costs a full-grid pass per step of its wave); here a pass covers
 only the box that can still change, so the cost follows the affected region (see
-"Locality" and the measurements below).
+"Locality").
+
+Measurements (growing box vs full-grid passes, cost of the per-pass sync, what was
+tried): docs/benchmarks.md, section 'voxwarp.deform.chainmail_gpu: growing box vs full
+grid'.
 
 The iteration
 -------------
@@ -63,8 +67,7 @@ pulled back up, leaving the violation at the held element instead).
 *Float32.* Moves smaller than ``max(1e-6 mm, 2^-19 x the largest coordinate)`` (8 to
 16 ulp of the coordinates) count as round-off: without this threshold, zero-weight
 cycles (rigid material: ``min = max``) can creep by an ulp per round trip and never
-settle. Links are satisfied to about that threshold (the tests
-ask for 1e-4 mm; measured 4e-7 mm at 32³ and 1.4e-5 mm at 128³ with 1 mm spacing).
+settle. Links are satisfied to about that threshold (the tests ask for 1e-4 mm).
 Coordinates are stored relative to the centre of the rest box, halving their
 magnitude.
 
@@ -96,11 +99,8 @@ coordinate and ``atomicMin``/``atomicMax`` of its indices into a 64-byte SSBO
 read give the CPU the changed coordinates and the bounding box of the changes: that
 is the only readback during ``enforce``. On llvmpipe a barrier is a ``glFinish``, so
 this is a sync per pass, but a ping-pong pass already flushes a scene (the next pass
-reads what this one rendered): measured per pass at 64³, a 1-element box costs
-~85 us with or without the barrier and read (the scene flush dominates), a 7³ box
-0.12 ms against 0.09 ms unsynchronised, a 31³ box 0.79 against 0.66 ms, the full
-grid 9.7 against 8.9 ms (noisy, 2 shared cores). A flag read every N passes would
-save little here and cannot steer the box. Changes are counted as such only above the
+reads what this one rendered), so the sync adds little; a flag read every N passes
+would save little and cannot steer the box. Changes are counted as such only above the
 float32 threshold above, so "no bit set" is an exact fixed point.
 
 Locality
@@ -124,44 +124,8 @@ shader places the quads from the box uniforms). Ping-pong stays consistent altho
 a pass writes only its box: every element changed by a pass lies in the next pass's
 box, which copies it into the other buffer, so outside the box both buffers always
 agree. ``local=False`` draws every pass over the whole grid (the thesis' scheme,
-same passes and result) for comparison.
-
-Measured (llvmpipe, Mesa 22.3, 2 shared cores; :func:`benchmark`): an n³ grid, 1 mm
-spacing, 10 % stretch slack and 0.1 mm shear, bottom face fixed, the centre of the top
-face held. *frame*: dragged by (0.05, 0, -0.02) mm per enforce (median of 10, from
-the last state); *jump*: moved by (2, 0, -1) mm in one enforce (median of 3). Times
-per enforce (pin pass, constraint passes, displacement texture), medians of two runs:
-
-=====  ========  ======  =====================  ==================  ===========
-grid   scenario  passes  box: elements / time   full: time          box speed-up
-=====  ========  ======  =====================  ==================  ===========
-32³    frame     3       289 / 0.5-1.0 ms       3.5-4.2 ms          ~5x
-32³    jump      20      165 k / 6.5-7.3 ms     12-18 ms            ~2x
-64³    frame     3       289 / 0.6-0.7 ms       22-57 ms            ~50x
-64³    jump      20      200 k / 8.8-10 ms      173-179 ms          ~18x
-128³   frame     3       289 / 0.9 ms           127-132 ms          ~145x
-128³   jump      20      200 k / 10.4-10.6 ms   919-940 ms          ~90x
-=====  ========  ======  =====================  ==================  ===========
-
-(the full variant shades 3 or 20 x n³ elements). The box variant's cost follows the
-disturbance, not the grid: the same at 64³ and 128³. Its floor is ~0.1 ms per pass
-(llvmpipe's scene flush of a ping-pong draw); a full-grid pass costs 22-30 ns per
-element (64³: ~8 ms; 128³: ~46 ms), about twice the mass-spring step's cost per
-element.
-
-What was tried: one element per fragment with clamped neighbour texels (kept; the x
-and y neighbours as the adjacent texels of the tile instead of recomputing the atlas
-address: no measurable change, kept as simpler); atomics only in changed fragments
-(an ``atomicMax`` in every fragment of a 1024² draw costs ~6x the draw); constant
-limits instead of the 5 limit loads (up to ~1.5x faster full passes in a noisy test;
-not kept: it would need a second shader path for uniform materials); skipping the
-phase not needed by the drag's direction (kept: 4 -> 3 passes per frame, 21 -> 20 per
-jump; "same targets again" -> 0 passes). Not tried: blocks of several elements per
-fragment as in :mod:`voxwarp.deform.massspring_gpu` (would cut the per-element cost of large
-passes, not the per-pass floor that dominates local drags); a tighter region than a
-bounding box (a jump's box holds the settled interior of its wave); in-place
-(Gauss-Seidel) updates with ``imageStore``, which the monotone phases would allow
-but which is not the ping-pong technique of the thesis.
+same passes and result) for comparison; :func:`voxwarp.bench.chainmail.gpu_enforce_table`
+times both.
 
 The solver draws on the context it is given and does not make it current. GL state it
 changes (enable flags, bound framebuffer) is restored after each call; image units 0

@@ -54,12 +54,10 @@ segment); a k-d tree gives each query point its nearest sample; then the paramet
 of +-1 coarse step around it is refined repeatedly, 9 samples across the bracket, keeping
 the best sample and shrinking the bracket to +-1 sample step around it (4x per round),
 until the bracket is narrower than ``precision`` (in ``t``). All query points are refined
-together (numpy), in chunks to bound memory. Measured (2-core CPU, numpy 2.4, 8-segment
-Catmull-Rom curve, ``precision=1e-3``): 1e5 points in about 0.25 s (0.07 s of it the k-d
-tree), 1e6 in about 2.3 s; ``precision=1e-6`` takes about 0.8 s for 1e5 points.
-Near the curve's medial axis (points about equidistant from two distant parts of the curve)
-the coarse stage may pick the slightly farther part; the distance is then over by at most
-half a coarse chord and typically by far less (second order).
+together (numpy), in chunks to bound memory. Near the curve's medial axis (points about
+equidistant from two distant parts of the curve) the coarse stage may pick the slightly
+farther part; the distance is then over by at most half a coarse chord and typically by
+far less (second order).
 
 **Rotation-minimising frames** (:meth:`Curve.frames`): a wire's *twist* (rotation about its
 own tangent) must be something the user does, not an artefact of the frame, so the frame
@@ -76,14 +74,14 @@ over the curve). The products of the per-step reflections are accumulated with a
 log-depth prefix scan, so no Python loop runs over the samples. For an arbitrary ``t``
 the normals of the two neighbouring samples are each carried to the exact tangent
 ``T(t)`` by the minimal rotation from their own tangent (:func:`minimal_rotation`), then
-interpolated linearly in ``t`` and re-normalised; ``B = T x N``. (Interpolating the raw
-sample normals and re-orthonormalising against ``T(t)`` is only second order between
-samples: on a gently bent 200 mm curve with the default 1024 samples it erred by 1.2e-5
-rad against a 1e5-step parallel transport, the carried normals by 8e-9, the same as at
-the samples themselves.) Accuracy needs the samples to resolve the turns: a turn of
-radius below a few sample spacings (``length / samples``) is followed less accurately
-(measured: 3e-4 rad after a 0.25 mm-radius hairpin on a 470 mm curve at 1024 samples,
-2e-7 at 4096); pass more ``samples`` for such curves.
+interpolated linearly in ``t`` and re-normalised; ``B = T x N`` (interpolating the raw
+sample normals and re-orthonormalising against ``T(t)`` would be only second order
+between samples). Accuracy needs the samples to resolve the turns: a turn of radius
+below a few sample spacings (``length / samples``) is followed less accurately; pass
+more ``samples`` for such curves.
+
+Measurements (speed of evaluation, closest points and frames; frame accuracy):
+docs/benchmarks.md, section 'voxwarp.deform.curves: speed and frame accuracy'.
 
 **Tangent.** ``T = alpha'(t) / |alpha'(t)|``. Where the derivative vanishes (coincident
 Bézier handles, e.g. ``P[1] == P[0]``; a cusp) it falls back to a finite-difference chord
@@ -307,10 +305,8 @@ class Curve:
 
     Notes
     -----
-    Measured (2-core CPU, numpy 2.4, 8 and 64 segments): :meth:`evaluate`,
-    :meth:`derivative` and :meth:`second_derivative` of 1e6 parameters 0.05-0.09 s each;
-    :meth:`closest_point` of 1e5 points about 0.25 s; :attr:`length` about 1 ms; the RMF
-    of :meth:`frames` (1024 samples) about 2 ms to build, then 0.03 s per 1e5 parameters.
+    Evaluation is vectorised over parameters and points; timings are in
+    docs/benchmarks.md, section 'voxwarp.deform.curves: speed and frame accuracy'.
     """
 
     def __init__(self, control_points: Any, kind: str = "catmull-rom") -> None:
@@ -628,8 +624,8 @@ class Curve:
 
         Notes
         -----
-        Measured (2-core CPU): 1e5 points on an 8- or 64-segment curve in about 0.25 s at
-        ``precision=1e-3``, 0.7-0.9 s at ``1e-6``.
+        Timings: docs/benchmarks.md, section 'voxwarp.deform.curves: speed and frame
+        accuracy'.
         """
         if not (isinstance(precision, int | float) and 0.0 < precision < 1.0):
             raise WarpError(f"precision must be a number in (0, 1) (e.g. 1e-3); got {precision!r}")

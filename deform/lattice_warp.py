@@ -68,59 +68,17 @@ per-cell margin measured once (:meth:`LatticeWarp.cell_margins`: large only in t
 cells that the lattice's cell faces, its kinks, cross). The intervals are local (a few
 mm), so the raycaster keeps skipping empty space.
 
-Measured accuracy and cost
---------------------------
-Inverse error, from :func:`inverse_error_table` (defaults): a 4³-cell lattice over a
-128 mm box, bent (:func:`bent_grid`: the middle pushed 32 mm along z in an arc, sheared
-and twisted; largest node displacement 44 mm); 20000 points ``p = grid(u)``, u uniform
-in the unit cube (the true inverse known). ``|grid(u') - p|`` in mm, u' the computed
-inverse (before the inside test); "lost": inside points that the inverse declares
-outside (they show nothing, or the identity).
+Accuracy
+--------
+The baked seed is good almost everywhere but poor where the lattice map has kinks (its
+cells' faces: the inverse of a piecewise-trilinear map is not smooth there); Newton
+converges quadratically from it. The default, ``"newton"`` with
+:data:`DEFAULT_ITERATIONS` = 2 steps, is the fewest steps whose worst residual in
+:func:`inverse_error_table` is below 0.01 mm (a hundredth of a voxel). Each Newton step
+costs 8 texel fetches per sample, the seed one filtered fetch.
 
-=============  =========  ===========  ======
-inverse        max (mm)   median (mm)  lost
-=============  =========  ===========  ======
-baked (k=0)    0.70       0.0022       0.04 %
-newton k=1     0.26       8.7e-08      0
-newton k=2     2.1e-05    1.4e-14      0
-newton k=3     5.9e-14    0            0
-=============  =========  ===========  ======
-
-The seed (baked 8 nodes per lattice cell without Newton steps, 4 with them) is good
-almost everywhere but poor where the lattice map has kinks (its cells' faces: the
-inverse of a piecewise-trilinear map is not smooth there); Newton converges
-quadratically from it. The default, ``"newton"`` with :data:`DEFAULT_ITERATIONS` = 2
-steps, is the fewest steps whose worst residual is below 0.01 mm (a hundredth of a
-voxel): below float32's own rounding on the GPU. One step leaves 0.26 mm at a few
-kink points; the seed alone 0.7 mm, and it loses points within a fraction of a mm of
-the lattice's surface.
-
-Render speed (llvmpipe, LLVM 15, 256 bits, on a shared 2-core machine: timings vary up
-to 2x with the load, the ratios less): ``stent`` CT trilinearly downsampled to 128³, dvr
-with its suggested transfer function, 256x256, perspective (30°), one sample per
-voxel, median of 5 frames after 2 warm-up frames, deformed-space skip maps built; the
-bent lattice above on the volume's box. Cost relative to the undeformed volume:
-
-=============================  ==========  ==============
-render                         median ms   vs undeformed
-=============================  ==========  ==============
-undeformed                     10.5        1.0
-linear lattice (folded)        10.5        1.0
-baked (k=0)                    28          2.7
-newton k=1                     57          5.4
-newton k=2 (default)           77          7.3
-newton k=3                     93          8.8
-undeformed, no skipping        42          4.0
-newton k=2, no skipping        312         30
-=============================  ==========  ==============
-
-Each Newton step costs 8 texel fetches and ~100 flops per sample, ~20 ms here (the
-first step more: its displacement margins are wider than the seed's); the seed one
-filtered fetch. Without skipping, the bounds make the difference: 312 ms. Variant
-measured and rejected: ``grid(u)`` and J from 4 hardware-filtered fetches per step
-(F and forward differences towards the cell centre) made each step ~20 % slower (k=3:
-234 against 195 ms, same run). The CPU side, once per lattice: the bake (17³ nodes)
-0.02 s, the margins 0.07 s, the first frame (skip maps) 0.6 s.
+Measurements (inverse error per mode, render cost, CPU preparation): docs/benchmarks.md,
+section 'voxwarp.deform.lattice_warp: inverse accuracy and render cost'.
 """
 
 from __future__ import annotations
@@ -137,7 +95,7 @@ from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
 
 #: Inverse modes: the baked seed alone, or the seed refined by Newton steps.
 INVERSE_MODES: tuple[str, ...] = ("newton", "baked")
-#: Newton steps of ``inverse="newton"`` (see the module docstring's error table).
+#: Newton steps of ``inverse="newton"`` (see "Accuracy" in the module docstring).
 DEFAULT_ITERATIONS = 2
 #: Most Newton steps (each is written out in the shader).
 MAX_ITERATIONS = 8

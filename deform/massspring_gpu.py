@@ -30,8 +30,8 @@ of every texture (``u`` = column/x, ``v`` = row/y). The atlas is
 :func:`atlas_layout` makes it as square as possible within ``GL_MAX_TEXTURE_SIZE``
 (128³ elements in 2 x 2 x 1 blocks: 11 x 12 tiles, 704 x 768 texels), except that an
 atlas fitting in one 64 x 64 llvmpipe raster tile is laid out as one row instead, so
-that both rasterizer threads get work (16³: +20 %). The step draw covers only the used
-tiles. Textures (RGBA32F, ``NEAREST``), per element of a block:
+that both rasterizer threads get work. The step draw covers only the used tiles.
+Textures (RGBA32F, ``NEAREST``), per element of a block:
 
 * position ``(x, y, z, stiffness)`` and velocity ``(vx, vy, vz, 1 / mass)``, two of
   each (ping-pong), at image units / colour attachments ``2e`` and ``2e + 1``. The
@@ -60,42 +60,13 @@ go to their targets at rest, and every element's inverse mass is set from the ta
 (as the CPU solver does); the next :meth:`~GpuSpringSolver.step` then runs one step,
 the pin pass, and the remaining steps, matching the CPU solver step by step.
 
-Performance (llvmpipe, Mesa 22.3, 2 cores)
-------------------------------------------
+Performance
+-----------
 On llvmpipe every texel fetch is a per-lane gather and both sides of every branch run,
-so the step's cost is its loads and its memory traffic. Measured steps/s against a
-taichi CPU kernel of the same model (``ti.init(arch=ti.cpu)``, structural springs,
-explicit Euler, clamp on), same process, interleaved, medians, noisy shared machine:
-
-=====  ==================  ==============================  ===========================
-grid   taichi (steps/s)    one element per fragment (old)  2 x 2 x 1 blocks (this)
-=====  ==================  ==============================  ===========================
-16³    5000-5900           0.9-1.4x taichi                 1.5-1.8x taichi
-32³    ~800                ~1.4x                           ~2.4x
-64³    100-200 (by load)   0.6-1.2x                        1.4-1.6x
-128³   ~26                 ~0.55x                          1.0-1.2x
-=====  ==================  ==============================  ===========================
-
-(the taichi column is the faster of ``voxwarp.bench.taichi`` and an equivalent kernel; its
-absolute numbers vary by 2x with the load of the shared machine, the ratios less.)
-
-What was measured and kept: blocks of 4 elements per fragment (2 x 2 x 1, 2 x 1 x 2,
-1 x 2 x 2 and 4 x 1 x 1 are within noise of each other; 1 x 1 x 1 with the folded
-constants is ~1.4x the old step, blocks of 4 ~2.5x at 64³); folding the damping/mass/
-pinned material and the target out of the step (inverse mass in the velocity's ``w``,
-pinned = inverse mass 0); ``imageLoad`` rather than ``texelFetch`` (1.5x cheaper per
-load) or SSBO reads in the fragment shader (2x dearer than ``imageLoad`` in a
-17-load test, before any framebuffer-to-buffer copy, so not pursued); the one-row
-atlas for small grids. At 64³ a step is now close to the memory-bandwidth floor of
-this machine (~8 GB/s: a pass that only reads 8 and writes 8 RGBA32F 256 x 256
-textures takes ~2.3 ms of the ~3.2 ms step); the neighbour loads are ~1/3 and the
-spring arithmetic ~1/5 of it. Tried and not kept: ``d * (1 / |d|)`` instead of
-``d / |d|`` and ``restrict`` images (no measurable gain). Not tried: blocks of 8
-elements (would need ``imageStore`` for the 4 elements past the 8 draw buffers, about
-as dear as the loads saved); a compute-shader step (not the technique of the thesis).
-Not done on purpose: a compile-time damping when ``model.damping`` is uniform (it
-would save the one damping load per block, 7-10 % at 64³, but the taichi reference
-loads its damping too).
+so the step's cost is its loads and its memory traffic; blocks of elements per fragment
+cut the loads per element. Measurements (steps/s against a taichi CPU kernel, block
+shapes, what was tried): docs/benchmarks.md, section 'voxwarp.deform.massspring_gpu:
+step throughput'.
 
 Displacement texture
 --------------------
@@ -326,7 +297,7 @@ class GpuSpringSolver(GpuGridSolver):
         self._target = [self._state_texture(a) for a in self._to_atlas(rest4)]
 
         # z-slices as layers of a 2D array: the offset-field warp samples it with two
-        # bilinear fetches, ~1.4x cheaper than one 3D trilinear fetch on llvmpipe
+        # bilinear fetches, cheaper than one 3D trilinear fetch on llvmpipe
         self._disp = self._keep(ctx.texture_array(self.shape, 4, dtype="f2"))
         self._disp.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self._disp.repeat_x = self._disp.repeat_y = False

@@ -16,9 +16,11 @@ contraction (``|grad u| < 1``: no folding), with error shrinking roughly like
 On the GPU the field is an RGBA16F 2D array texture whose layers are the z-slices of
 the node grid (xyz = u in mm, a = material), sampled at node-centred texture
 coordinates by two hardware-bilinear fetches (layers k and k + 1) and a lerp: the
-trilinear value, at ~0.6x the cost of one 3D trilinear fetch on llvmpipe (measured:
-the warp's share of a deformed frame 57 -> 35 ms). The field can be owned by this warp
-(uploaded from numpy) or by a GPU simulation (``texture_source``).
+trilinear value, cheaper than one 3D trilinear fetch on llvmpipe. The field can be owned
+by this warp (uploaded from numpy) or by a GPU simulation (``texture_source``).
+
+Measurements (inverse error per mode and iteration count, GPU costs): docs/benchmarks.md,
+section 'voxwarp.deform.offset_field: inverse accuracy and cost'.
 """
 
 from __future__ import annotations
@@ -35,14 +37,15 @@ from voxwarp.deform.warp import Warp, WarpError, register_warp
 INVERSE_MODES: tuple[str, ...] = ("approx", "exact", "baked")
 #: Allowed range of fixed-point iterations.
 MAX_ITERATIONS = 64
-#: Default number of fixed-point iterations of ``inverse="exact"``; see
-#: :class:`OffsetFieldWarp` for the measurement it comes from.
+#: Default number of fixed-point iterations of ``inverse="exact"``: the fewest whose
+#: worst residual in :func:`inverse_error_table` stays below 1 % of the node spacing
+#: (docs/benchmarks.md, section 'voxwarp.deform.offset_field: inverse accuracy and cost').
 DEFAULT_ITERATIONS = 6
 #: Default fixed-point corrections of ``inverse="baked"`` after the baked seed, when the
 #: inverse is baked at least 3x finer than the field (grids up to 43 nodes per axis):
-#: more accurate than ``"exact"`` with :data:`DEFAULT_ITERATIONS` on the error table,
-#: with 2 texture fetches instead of 6; one more correction on coarser bakes (see
-#: :class:`OffsetFieldWarp`).
+#: more accurate than ``"exact"`` with :data:`DEFAULT_ITERATIONS` on the error study, with
+#: 2 texture fetches instead of 6; coarser bakes get one more correction
+#: (:attr:`OffsetFieldWarp.iterations`).
 DEFAULT_BAKED_ITERATIONS = 1
 #: Fixed-point steps that bake the inverse at the nodes (converged to float precision
 #: for fields without folds).
@@ -142,6 +145,26 @@ def _material(material: Any, grid: tuple[int, int, int]) -> np.ndarray | None:
 class OffsetFieldWarp(Warp):
     """Warp by a displacement (offset) field on a regular grid of nodes.
 
+    Give it the grid box and a ``(nx, ny, nz, 3)`` field of node displacements in mm,
+    or a GPU texture owned by a simulation (``texture_source``); add it to a scene's
+    ``warps``. The deformation models build one for you
+    (:meth:`voxwarp.deform.massspring.MassSpring.warp`). Change a CPU field with
+    :meth:`update` or :meth:`update_region`; the texture follows on the next draw.
+
+    How it works: for a sample ``p`` in deformed space the warp finds the original
+    point ``q`` with ``q + u(q) = p`` (``u`` trilinear between nodes). ``"approx"``
+    takes one step ``q = p - u(p)`` (the thesis); ``"exact"`` repeats
+    ``q <- p - u(q)`` from ``q = p``, each step one field lookup per sample;
+    ``"baked"`` starts the same steps from ``p - v(p)``, where ``v`` is the inverse
+    solved once per field change on a grid :attr:`bake_factor` times finer
+    (:meth:`baked_inverse`), so one or two corrections are enough. Outside the grid
+    box ``u = 0`` and the warp is the identity: content cannot leave the box (what is
+    dragged across a face is cut off there), so give the grid a margin around the
+    part of the volume that is to move.
+
+    Measurements: docs/benchmarks.md, section 'voxwarp.deform.offset_field: inverse
+    accuracy and cost'.
+
     Parameters
     ----------
     lo, hi
@@ -155,15 +178,16 @@ class OffsetFieldWarp(Warp):
         must match ``displacements`` when both are given.
     texture_source
         ``callable(ctx) -> moderngl.TextureArray`` returning an RGBA16F 2D array
-        texture (z-slices as layers) of
-        ``shape`` texels (xyz = displacement in mm, a = material) owned by someone else,
-        e.g. a GPU mass-spring simulation; this warp never releases it. Such a warp has
-        no CPU field: :meth:`apply`, :meth:`forward`, :meth:`jacobian` and
-        :meth:`to_dict` round trips need ``displacements``.
+        texture (z-slices as layers) of ``shape`` texels (xyz = displacement in mm,
+        a = material) owned by someone else, e.g. a GPU mass-spring simulation; this
+        warp never releases it. Such a warp has no CPU field: :meth:`apply`,
+        :meth:`forward`, :meth:`jacobian` and :meth:`to_dict` round trips need
+        ``displacements``.
     inverse
-        ``"approx"``: ``q = p - u(p)`` (the thesis; one texture fetch); ``"exact"``:
-        the fixed point ``q_{n+1} = p - u(q_n)`` from ``q_0 = p``, ``iterations``
-        times. ``"approx"`` is the same as ``"exact"`` with one iteration.
+        ``"approx"``, ``"exact"`` (default) or ``"baked"``, as described above.
+        ``"approx"`` is ``"exact"`` with one iteration. ``"baked"`` is the default of
+        :meth:`voxwarp.deform.massspring.MassSpring.warp` and of ``voxwarp render
+        --massspring``.
     iterations
         Fixed-point steps of ``"exact"``, or corrections after the seed of
         ``"baked"`` (1..64); ``None`` chooses :data:`DEFAULT_ITERATIONS` or
@@ -172,91 +196,33 @@ class OffsetFieldWarp(Warp):
         Optional ``(nx, ny, nz)`` per-node material value, uploaded to the texture's
         alpha channel (0 without it).
     model_source
-        Optional ``callable() -> (model, displacements)`` set by the deformation model
-        that drives this warp (:meth:`voxwarp.deform.massspring.MassSpring.warp` sets it), so
-        that :meth:`to_dict` saves the model with the field: ``model`` is a
-        JSON-serialisable dict with a ``"type"`` key, ``displacements`` the current
-        ``(nx, ny, nz, 3)`` field read back from the GPU (used only when this warp has
-        no CPU field; ``None`` otherwise). Called once per :meth:`to_dict`, never
-        while rendering.
+        Optional ``callable() -> (model, displacements)``, set by the model that drives
+        this warp (e.g. :meth:`voxwarp.deform.massspring.MassSpring.warp`) so that
+        :meth:`to_dict` saves the model with the field: ``model`` is a JSON-serialisable
+        dict with a ``"type"`` key; ``displacements`` is the current field read back
+        from the GPU, or ``None`` when this warp holds a CPU field. Called once per
+        :meth:`to_dict`, never while rendering.
     model_state
         The model dict a loaded scene entry carried (see :attr:`model_state`).
     field_reader, revision_source
-        For a ``texture_source`` field: ``field_reader()`` reads the current
-        ``(nx, ny, nz, 3)`` field back from the GPU and ``revision_source()`` returns a
-        counter that changes whenever the field does (no read-back). With both, the
-        warp can bound its displacement (:meth:`displacement_range`), so the renderer
-        can skip empty space through deformed space; it asks only when the same field
-        state is drawn again (voxwarp.render.raycaster, ``warped_skip_maps``), so nothing is read
-        back while the field changes every frame.
+        For a ``texture_source`` field: ``field_reader()`` reads the ``(nx, ny, nz, 3)``
+        field back from the GPU; ``revision_source()`` returns a counter that changes
+        whenever the field does (no read-back). With both, the warp can bound its
+        displacement (:meth:`displacement_range`) so the renderer can skip empty space;
+        the renderer asks only when the same field state is drawn again
+        (``warped_skip_maps`` of voxwarp.render.raycaster), never while the field
+        changes every frame.
 
     Attributes
     ----------
     model_state : dict or None
         The ``"model"`` entry of the scene JSON this warp was loaded from (e.g.
-        ``{"type": "massspring", ...}``, :meth:`voxwarp.deform.massspring.MassSpring.to_dict`),
-        or ``None``. It describes the model that produced the saved field, so that an
-        application can resume the simulation: for ``"massspring"``,
-        :meth:`voxwarp.deform.massspring.MassSpring.from_warp` rebuilds the model with
-        positions ``rest + displacements`` and velocities 0. The warp itself renders
-        the saved field and never reads this dict; :meth:`to_dict` writes it back
-        unchanged (also after :meth:`update`).
+        ``{"type": "massspring", ...}``), or ``None``. It lets an application resume
+        the simulation that produced the saved field
+        (:meth:`voxwarp.deform.massspring.MassSpring.from_warp`). The warp never reads
+        it; :meth:`to_dict` writes it back unchanged (also after :meth:`update`).
     model_source : callable or None
         See the parameter of the same name.
-
-    Notes
-    -----
-    Inverse error, from :func:`inverse_error_table` (defaults): a 16³ grid with node
-    spacing h; the interior node (8, 8, 8) dragged by 1.5 h (5 steps of 0.3 h) along x,
-    every node displaced by ``1.5 h exp(-d² / (2 (2h)²))``, d its distance to the dragged
-    node (largest ``|du/dX|`` 0.42); 20000 deformed points p uniform in the box of
-    half-width 7.5 h around the dragged node (most of them where the field is small,
-    hence the small means). Residual ``|forward(apply(p)) - p|`` in units of h:
-
-    ==========  ========  ========
-    inverse     max / h   mean / h
-    ==========  ========  ========
-    approx      0.463     0.0089
-    exact k=1   0.463     0.0089
-    exact k=2   0.186     0.0020
-    exact k=4   0.0308    1.7e-04
-    exact k=5   0.0125    5.5e-05
-    exact k=6   0.00509   1.9e-05
-    exact k=8   0.00084   2.3e-06
-    exact k=16  6.3e-07   8.0e-10
-    baked k=0   0.0150    9.2e-05
-    baked k=1   0.00330   1.2e-05
-    baked k=2   0.00113   2.3e-06
-    baked k=3   0.00039   5.6e-07
-    ==========  ========  ========
-
-    Each step shrinks the error about 2.5x (the contraction factor ~ max ``|du/dX|``).
-    The default ``k = 6`` is the smallest count whose worst residual is below 1 % of the
-    node spacing (k = 5 leaves 1.25 %); each step costs one trilinear texture fetch per
-    sample. The error of ``q`` itself is at most ``residual / (1 - L)``, L < 0.5 the
-    field's Lipschitz constant here, so under twice the residual. The half-float
-    texture limits the field to about ``|u| * 2**-11`` (0.0007 h for this drag) anyway.
-
-    ``"baked"`` starts the same iteration from ``p - v(p)``, v the inverse offsets solved
-    on a grid :attr:`bake_factor` times finer than the field (4x here, at most 128 nodes
-    per axis; :meth:`baked_inverse`; on the GPU a compute shader bakes them once per
-    field change) and interpolated trilinearly (baked k=0: the seed alone, one fetch).
-    Its error is the interpolation error of v (the inverse of a trilinear field is not
-    trilinear), not the size of the drag, and each correction shrinks it by the
-    contraction factor. One correction (2 fetches) beats ``exact k=6`` (6 fetches)
-    here; on a sharper sinusoidal bump (9³ nodes, max ``|u|`` = h) the error of q is
-    0.0048 h against exact k=6's 0.0018 h. With a 2x bake (grids of 44-64 nodes) the
-    seed is about 2.5x less accurate, so the default adds a correction there
-    (:attr:`iterations`). Where the plain iteration converges slowly the seed wins
-    outright: for a drag of 3 h (sigma 2 h), exact k=6 leaves 0.57 h. ``"baked"`` is
-    the default of :meth:`voxwarp.deform.massspring.MassSpring.warp` and of ``voxwarp render
-    --massspring``.
-
-    Content cannot leave the grid box: outside the box ``u = 0``, so there the warp is
-    the identity and shows the undeformed volume, whatever the field does near the
-    faces. Material dragged across a face of the grid box is cut off at that face (and
-    a boundary node with ``u != 0`` leaves a seam at the face). Give the grid a margin
-    around the part of the volume that is to move.
     """
 
     kind = "offset_field"
@@ -423,8 +389,8 @@ class OffsetFieldWarp(Warp):
     def update_region(self, start: Sequence[int], values: np.ndarray) -> None:
         """Replace the displacements of one block of nodes (the rest stays).
 
-        The texture then rewrites only that block (a local drag on a 128³ grid: well
-        under a millisecond instead of ~70 ms for the whole field).
+        The texture then rewrites only that block instead of re-uploading the whole
+        field, which keeps a local drag on a large grid cheap.
 
         Parameters
         ----------
@@ -712,8 +678,9 @@ class OffsetFieldWarp(Warp):
         and ``ITERATE``, the steps unrolled as a macro.
 
         Unrolled in the text because llvmpipe (Mesa 22) keeps even a loop with a
-        constant trip count of 1 as a loop, which cost ~25 % of a deformed frame over
-        the straight-line code (a uniform trip count: ~40 %).
+        constant trip count of 1 as a loop, which is slower than straight-line code
+        (docs/benchmarks.md, section 'voxwarp.deform.offset_field: inverse accuracy and
+        cost').
         """
         return {
             "ITERATIONS": int(self.steps),
@@ -735,11 +702,10 @@ class OffsetFieldWarp(Warp):
         with ``inverse="baked"`` also ``"inverse"``, the baked inverse offsets.
 
         The CPU field becomes an RGBA16F 2D array texture (layers = z) with linear
-        filtering and
-        clamp-to-edge, created on first use on ``ctx`` and rewritten after
+        filtering and clamp-to-edge, created on first use on ``ctx`` and rewritten after
         :meth:`update`. The inverse is baked on the GPU from that texture by a compute
-        shader (once per field version; every call for a ``texture_source``, whose
-        changes this warp cannot see: a 64³ field takes ~2 ms on llvmpipe).
+        shader (once per field version; on every call for a ``texture_source``, whose
+        changes this warp cannot see).
         """
         field = self._field_texture(ctx)
         out = {"displacement": field}
@@ -1131,7 +1097,8 @@ def inverse_error_table(
     :func:`gaussian_drag_field`. Deformed points ``p`` are drawn uniformly (``seed``) in
     the box of half-width ``3 sigma + drag`` spacings around the dragged node's rest
     position (clipped to the grid), and the residual ``|forward(apply(p)) - p|`` is
-    measured for ``"approx"`` and for ``"exact"`` with each iteration count.
+    measured for ``"approx"`` and for ``"exact"`` and ``"baked"`` with each iteration
+    count. docs/benchmarks.md shows the table for the defaults.
 
     Parameters
     ----------

@@ -50,24 +50,9 @@ has not been measured). Set the environment variable ``VOXWARP_OPENCL=0`` to swi
 OpenCL backend off (``"auto"`` then uses scipy; ``"opencl"`` raises), e.g. to test the fallback
 or to work around a broken driver.
 
-Measured (2-core AMD EPYC VM, PoCL 3.0 'pthread' CPU device, scipy 1.17; command:
-``python -c "from voxwarp.deform.propagation import benchmark_nearest_seed as b;
-print(b((256,) * 3))"``; seeds = the 8 corners of every cell a 3-turn helix passes
-through; median of 3; host<->device transfers included, kernel build excluded):
-
-=========  =====  =======  ========  =======
-grid       seeds  OpenCL   scipy(a)  speedup
-=========  =====  =======  ========  =======
-128^3      4656   0.018 s  0.20 s    11x
-256^3      9272   0.136 s  2.31 s    17x
-=========  =====  =======  ========  =======
-
-(a) the ``"scipy"`` backend (indices only); ``distance_transform_edt`` computing its
-default distances as well took 2.62 s at 256^3 in the same run. A worst case for the
-envelope passes (1 % random seeds, every line full of candidates) took 0.45 s at 256^3 (0.34 s
-Fortran-ordered). The first call in a process builds the kernels: ~0.4 s with PoCL's disk
-cache empty, less afterwards. Allocating the buffers costs another ~0.05-0.1 s at 256^3;
-they are kept for the next call (see :func:`release_opencl_buffers`).
+Measurements (OpenCL against scipy, kernel build and buffer allocation): docs/benchmarks.md,
+section 'voxwarp.deform.propagation: OpenCL vs scipy'; the timing helper is
+:func:`voxwarp.bench.propagation.benchmark_nearest_seed`.
 """
 
 from __future__ import annotations
@@ -291,9 +276,8 @@ def release_opencl_buffers() -> None:
     """Free the device buffers kept between :func:`nearest_seed` calls.
 
     The OpenCL backend keeps its buffers (9 bytes per voxel: 151 MB at 256^3) for the
-    next call of a similar size, which saves their allocation (~40-100 ms at 256^3 on
-    PoCL); call this when no more propagation is expected. The context and the compiled
-    kernels stay.
+    next call of a similar size, which saves allocating them again; call this when no
+    more propagation is expected. The context and the compiled kernels stay.
     """
     with _lock:
         if _cl_state is not None and "buffers" in _cl_state:
