@@ -15,20 +15,19 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
+from voxwarp.core.modes import MODES as MODES
+from voxwarp.core.modes import Mode as Mode
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
 from voxwarp.errors import MeshError, SceneError, VolumeError
-
-Mode = Literal["dvr", "mip", "minip", "average", "flm", "iso"]
-MODES: tuple[str, ...] = ("dvr", "mip", "minip", "average", "flm", "iso")
 
 #: Largest volume (bytes) a scene JSON embeds instead of referring to a file.
 EMBED_LIMIT_BYTES = 8 * 1024 * 1024
@@ -59,7 +58,12 @@ def _vec(x: Any, n: int, what: str) -> tuple[float, ...]:
 
 
 class Scene:
-    """A renderable scene description.
+    """A renderable scene description: what to draw and how, but no GPU state.
+
+    Build one from a volume and pass it to
+    :meth:`voxwarp.render.raycaster.OffscreenRenderer.render`; :meth:`copy` makes a
+    variant with some arguments changed, and :meth:`save` / :meth:`load` write and read
+    it as scene JSON. Invalid values raise :class:`~voxwarp.errors.SceneError`.
 
     Parameters
     ----------

@@ -19,11 +19,10 @@ from typing import Any
 from voxwarp.cli.animate import add_animate_parser
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.checks import positive_int as _positive_int
+from voxwarp.core.modes import MODES
 from voxwarp.errors import InputError as CliOptionError
 from voxwarp.errors import VoxwarpError
 from voxwarp.inputs import load_input, load_lattice_file, load_wire_file
-
-MODES = ("dvr", "mip", "minip", "average", "flm", "iso")
 
 
 def _view(text: str) -> Any:

@@ -29,17 +29,20 @@ from voxwarp.core.camera import Camera
 DEFAULT_FRAMES = 48
 
 
-def _json(a: Any) -> Any:
+def json_values(a: Any) -> Any:
+    """An array as nested lists of floats rounded to 1e-6 (key values in scene JSON)."""
     return np.asarray(a, dtype=np.float64).round(6).tolist()
 
 
-def _put(track: Track, frame: int, value: Any) -> None:
+def put_key(track: Track, frame: int, value: Any) -> None:
+    """Set ``track``'s key at ``frame`` (replacing one there)."""
     keys = [(f, v) for f, v in track.keys if f != frame]
     keys.append((frame, value))
     track.keys = sorted(keys, key=lambda k: k[0])
 
 
-def _track(anim: Animation, target: str, interpolation: str) -> Track:
+def track(anim: Animation, target: str, interpolation: str) -> Track:
+    """The track of ``target`` in ``anim`` (a new one with ``interpolation`` if none)."""
     for t in anim.tracks:
         if t.target == target:
             return t
@@ -92,46 +95,9 @@ def set_key(
         raise AnimationError(f"frame must be 0..{anim.frames - 1}; got {frame}")
     frame = int(frame)
     if camera is not None:
-        _put(_track(anim, "camera", interpolation), frame, camera.to_dict())
-    kind = session.kind
-    if kind == "wires":
-        for i, wire in enumerate(session.wires):
-            value = _json(wire.modified.control_points)
-            _put(_track(anim, f"wires[{i}].modified", interpolation), frame, value)
-    elif kind == "lattice" and session.lattice_nodes is not None:
-        _put(_track(anim, "lattice.nodes", interpolation), frame, _json(session.lattice_nodes))
-    elif kind in ("massspring", "chainmail") and session.model is not None:
-        _key_drag(anim, session, frame, interpolation)
+        put_key(track(anim, "camera", interpolation), frame, camera.to_dict())
+    session.family.set_keys(anim, frame, interpolation)
     return Animation.from_dict(anim.to_dict())  # checked
-
-
-def _key_drag(anim: Animation, session: Any, frame: int, interpolation: str) -> None:
-    """The ``elements.drag`` key: held elements and offsets; others where they are."""
-    model = session.model
-    held = {tuple(h["index"]): h["offset"] for h in model.to_dict().get("held", [])}
-    track = _track(anim, "elements.drag", interpolation)
-    old = [tuple(e) for e in (track.elements or [])]
-    elements = old + [e for e in held if e not in old]
-    if not elements:
-        return
-    disp = model.displacements()
-
-    def offsets_of(elems: list[tuple[int, ...]]) -> list[list[float]]:
-        return [_json(held[e] if e in held else disp[e]) for e in elems]
-
-    extra = len(elements) - len(old)
-    if extra:  # elements held for the first time: earlier keys hold them at rest
-        track.keys = [
-            (f, None if v is None else _per_element(v, len(old)) + [[0.0, 0.0, 0.0]] * extra)
-            for f, v in track.keys
-        ]
-    track.elements = [list(e) for e in elements]
-    _put(track, frame, offsets_of(elements))
-
-
-def _per_element(value: Any, count: int) -> list[list[float]]:
-    """A drag key value (one offset or one per element) as ``count`` offsets."""
-    return np.broadcast_to(np.asarray(value, dtype=np.float64), (count, 3)).tolist()
 
 
 def delete_keys(animation: Animation, frame: int) -> Animation:

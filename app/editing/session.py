@@ -3,7 +3,8 @@ and dragging, snapshots for undo, save and load. No Qt here (``ui/`` drives it).
 
 About the interaction (Knoche 2008, 3.2; Singh and Fiume, wires, section 8)
 -----------------------------------------------------------------------------
-The session holds a :class:`~voxwarp.scene.Scene` and at most one deformation family:
+The session holds a :class:`~voxwarp.scene.Scene` and one deformation family, through
+its adapter (:mod:`voxwarp.editing.families`; the session never switches on the family):
 
 * ``"massspring"`` / ``"chainmail"``: an :class:`~voxwarp.deform.elements.ElementGrid` of
   elements over the volume, run by :class:`~voxwarp.deform.massspring.MassSpring` or
@@ -34,9 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import os
-import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -50,52 +49,54 @@ from voxwarp.core.files import atomic_write_text
 from voxwarp.deform.chainmail import ChainMail
 from voxwarp.deform.elements import ElementGrid
 from voxwarp.deform.lattice_warp import LatticeWarp
-from voxwarp.deform.massspring import MassSpring
-from voxwarp.deform.offset_field import OffsetFieldWarp
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError, rotation_matrix
-from voxwarp.deform.wires import Wire, WireDeformer, WireFieldWarp
-from voxwarp.errors import VoxwarpError
-from voxwarp.render.overlay import OverlayLayer, box_edges, grid_edges, polyline_segments
+from voxwarp.editing.common import (
+    BACKENDS as BACKENDS,
+)
+from voxwarp.editing.common import (
+    CHAINMAIL_VARIANTS as CHAINMAIL_VARIANTS,
+)
+from voxwarp.editing.common import (
+    COLORS,
+    WIRE_KINDS,
+    DisplayOptions,
+    EditorError,
+    choice,
+    resolution,
+)
+from voxwarp.editing.common import (
+    INTEGRATORS as INTEGRATORS,
+)
+from voxwarp.editing.families import FAMILIES, Family, WireBuild
+from voxwarp.editing.families.lattice import LatticeFamily
+from voxwarp.editing.families.wires import WiresFamily
+from voxwarp.render.overlay import OverlayLayer, box_edges, polyline_segments
 from voxwarp.scene import Scene, read_scene_dict
 
 Deformation = Literal["none", "massspring", "chainmail", "wires", "lattice"]
-DEFORMATIONS: tuple[str, ...] = ("none", "massspring", "chainmail", "wires", "lattice")
-BACKENDS: tuple[str, ...] = ("cpu", "gpu")
-INTEGRATORS: tuple[str, ...] = ("semi-implicit", "explicit")
-CHAINMAIL_VARIANTS: tuple[str, ...] = ("enhanced", "gibson")
-WIRE_KINDS: tuple[str, ...] = ("catmull-rom", "bezier")
+#: the deformation families, in the order the GUI offers them
+DEFORMATIONS: tuple[str, ...] = tuple(FAMILIES)
 SelectMode = Literal["replace", "add", "remove", "toggle"]
 #: pick radius in pixels around a handle
 PICK_RADIUS_PX = 12.0
 #: the session attributes that choose the deformation model
 MODEL_SETTINGS = ("kind", "backend", "resolution", "integrator", "variant", "stiffness")
-#: mass-spring elements slower than this (mm/s) count as at rest
-SETTLED_SPEED = 1e-3
 #: key of the editor's entry in scene JSON
 EDITOR_KEY = "editor"
-
-
-class EditorError(VoxwarpError, ValueError):
-    """An edit the session cannot make (names the problem and the fix)."""
-
-
-def _choice(value: Any, allowed: Sequence[str], what: str) -> str:
-    if not isinstance(value, str) or value not in allowed:
-        raise EditorError(f"{what} must be one of {', '.join(allowed)}; got {value!r}")
-    return value
-
-
-def _resolution(value: Any) -> tuple[int, int, int]:
-    try:
-        r = np.broadcast_to(np.asarray(value, dtype=np.int64), (3,))
-    except (TypeError, ValueError) as exc:
-        raise EditorError(f"grid resolution must be 1 or 3 integers; got {value!r}") from exc
-    if np.any(r < 2) or np.any(r > 64):
-        raise EditorError(
-            f"grid resolution must be 2..64 elements per axis here; got {tuple(r.tolist())}"
-        )
-    return (int(r[0]), int(r[1]), int(r[2]))
+__all__ = [
+    "BACKENDS",
+    "CHAINMAIL_VARIANTS",
+    "DEFORMATIONS",
+    "INTEGRATORS",
+    "WIRE_KINDS",
+    "DisplayOptions",
+    "EditSession",
+    "EditorError",
+    "Placement",
+    "Snapshot",
+    "WireBuild",
+]
 
 
 # ---------------------------------------------------------------------------- placement
@@ -162,37 +163,6 @@ class Placement:
         )
 
 
-# ---------------------------------------------------------------------------- display
-@dataclass
-class DisplayOptions:
-    """What the viewport draws besides the volume (every feature can be toggled)."""
-
-    volume: bool = True
-    elements: bool = True
-    links: bool = True
-    fixed: bool = True
-    wires_base: bool = True
-    wires_modified: bool = True
-    lattice_cells: bool = True
-    grid_box: bool = True
-    clip_box: bool = False
-    selection: bool = True
-
-
-COLORS = {
-    "element": (0.30, 0.80, 1.00, 0.9),
-    "fixed": (1.00, 0.30, 0.25, 0.95),
-    "selected": (1.00, 0.85, 0.10, 1.0),
-    "reference": (1.00, 1.00, 1.00, 1.0),
-    "link": (0.30, 0.80, 1.00, 0.35),
-    "wire_base": (0.55, 0.55, 0.60, 0.8),
-    "wire_modified": (0.20, 1.00, 0.40, 0.95),
-    "lattice": (1.00, 0.55, 0.10, 0.6),
-    "box": (0.80, 0.80, 0.80, 0.5),
-    "pending": (1.00, 0.40, 1.00, 1.0),
-}
-
-
 # ---------------------------------------------------------------------------- snapshots
 @dataclass
 class Snapshot:
@@ -202,12 +172,9 @@ class Snapshot:
     backend: str
     resolution: tuple[int, int, int]
     placement: Placement
-    model: dict[str, Any] | None = None
-    positions: np.ndarray | None = None
-    velocities: np.ndarray | None = None
-    wires: list[dict[str, Any]] = field(default_factory=list)
+    #: the family's own state (:meth:`Family.snapshot`: model, wires or lattice nodes)
+    state: dict[str, Any] = field(default_factory=dict)
     wire_settings: dict[str, Any] = field(default_factory=dict)
-    lattice_nodes: np.ndarray | None = None
     selection: tuple[int, ...] = ()
     reference: int | None = None
     settings: dict[str, Any] = field(default_factory=dict)
@@ -218,61 +185,15 @@ class Snapshot:
 
     def same_as(self, other: Snapshot) -> bool:
         """True when both hold the same state (exact comparison of every array)."""
-
-        def eq(a: Any, b: Any) -> bool:
-            if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-                return a is not None and b is not None and np.array_equal(a, b)
-            return bool(a == b)
-
-        return all(eq(getattr(self, f), getattr(other, f)) for f in self.__dataclass_fields__)
+        return all(_same(getattr(self, f), getattr(other, f)) for f in self.__dataclass_fields__)
 
 
-# ---------------------------------------------------------------------------- wire builds
-@dataclass
-class WireBuild:
-    """A rebuild of the wire field, to run off the GUI thread.
-
-    :meth:`run` builds a new attribute field from a copy of the wires (nothing shared
-    with the field being drawn); :meth:`EditSession.install_wire_build` puts it in the
-    scene on the GUI thread, unless the wires changed again meanwhile. :meth:`cancel`
-    makes :meth:`run` stop at its next check and return ``None``.
-    """
-
-    generation: int
-    volume: Any
-    wires: list[Wire]
-    settings: dict[str, Any]
-    warp: WireFieldWarp | None = None
-    seconds: float = 0.0
-    _cancel: threading.Event = field(default_factory=threading.Event)
-
-    def cancel(self) -> None:
-        """Ask :meth:`run` to stop; its result is then dropped."""
-        self._cancel.set()
-
-    @property
-    def cancelled(self) -> bool:
-        """Whether :meth:`cancel` was called."""
-        return self._cancel.is_set()
-
-    def run(self, progress: Callable[[float, str], None] | None = None) -> WireFieldWarp | None:
-        """Build the field (thread-safe: touches only this job's objects)."""
-        t0 = time.perf_counter()
-        if progress:
-            progress(0.05, "laying the wires")
-        if self.cancelled:
-            return None
-        deformer = WireDeformer(self.volume, self.wires, **self.settings)
-        if progress:
-            progress(0.2, "propagating the attribute field")
-        deformer.build()
-        if self.cancelled:
-            return None
-        self.warp = deformer.warp()
-        self.seconds = time.perf_counter() - t0
-        if progress:
-            progress(1.0, "done")
-        return self.warp
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is not None and b is not None and np.array_equal(a, b)
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return bool(a == b)
 
 
 # ---------------------------------------------------------------------------- session
@@ -299,7 +220,8 @@ class EditSession:
             )
         self.scene = scene
         self.ctx = ctx
-        self.kind: str = "none"
+        #: the deformation family's adapter (its state and behaviour)
+        self.family: Family = Family(self)
         self.backend: str = "cpu"
         self.resolution: tuple[int, int, int] = (8, 8, 8)
         self.placement = Placement()
@@ -312,13 +234,10 @@ class EditSession:
         #: element stiffness of new mass-spring/ChainMail models (0..1)
         self.stiffness: float = 0.5
         self.running: bool = True
-        self.model: MassSpring | ChainMail | None = None
-        self.wires: list[Wire] = []
         self.wire_settings: dict[str, Any] = {"field_scale": 2}
-        self._wire_warp: WireFieldWarp | None = None
-        #: changes with every edit of the wires; the drawn field is of `_wire_built`
+        #: changes with every edit of the wires (a field is of the generation it was built
+        #: from; see :attr:`wire_field_stale`)
         self.wire_generation = 0
-        self._wire_built = -1
         #: rebuild wire fields at once on model changes and undo (scripts, tests); the
         #: GUI sets False and builds them off its thread (:meth:`wire_build`)
         self.sync_wires = True
@@ -328,9 +247,6 @@ class EditSession:
         self._last_readback = 0.0
         #: the running model came to rest (:meth:`advance` stops stepping until an edit)
         self.settled = False
-        self._advances = 0
-        self.lattice_nodes: np.ndarray | None = None
-        self._lattice_warp: LatticeWarp | None = None
         self.selection: list[int] = []
         self.reference: int | None = None
         #: control points of the wire being laid (:meth:`add_wire_point`)
@@ -340,7 +256,8 @@ class EditSession:
         self._drag: dict[str, Any] | None = None
         self._handle_cache: np.ndarray | None = None
         self._released_warps: list[Warp] = []
-        #: keyframes (:mod:`voxwarp.editing.keyframes`; saved in scene JSON for ``voxwarp animate``)
+        #: keyframes (:mod:`voxwarp.editing.keyframes`; saved in scene JSON for ``voxwarp
+        #: animate``)
         self.animation: Any = None
         #: ``() -> context manager`` making the GL context of GPU models current (the
         #: GUI's viewport sets it; a headless caller's context is current already)
@@ -348,6 +265,26 @@ class EditSession:
         self._recover_from_scene(editor if isinstance(editor, dict) else {})
 
     # ------------------------------------------------------------------ properties
+    @property
+    def kind(self) -> str:
+        """The deformation family: one of :data:`DEFORMATIONS`."""
+        return self.family.kind
+
+    @property
+    def model(self) -> Any:
+        """The element model (mass-spring or ChainMail), else None."""
+        return self.family.model
+
+    @property
+    def wires(self) -> list[Any]:
+        """The wires of the wire family (empty for the others)."""
+        return self.family.wires
+
+    @property
+    def lattice_nodes(self) -> np.ndarray | None:
+        """The lattice's nodes (None for the other families)."""
+        return self.family.lattice_nodes
+
     @property
     def volume(self) -> Any:
         """The scene's volume."""
@@ -370,9 +307,24 @@ class EditSession:
         """Whether a drag is in progress."""
         return self._drag is not None
 
+    @property
+    def drag_state(self) -> dict[str, Any] | None:
+        """The drag in progress (for the family adapters), or None."""
+        return self._drag
+
     def _touch(self) -> None:
         self._handle_cache = None
         self.settled = False
+
+    def handles_moved(self, throttle: bool = False) -> None:
+        """The handles moved (a running model): forget their cached positions; with
+        ``throttle`` (a GPU model) at most every :attr:`gpu_readback_interval` s and
+        never during a drag."""
+        now = time.perf_counter()
+        late = now - self._last_readback >= self.gpu_readback_interval
+        if not throttle or (self._drag is None and late):
+            self._handle_cache = None
+            self._last_readback = now
 
     # ------------------------------------------------------------------ models
     def set_deformation(self, kind: str, **settings: Any) -> None:
@@ -384,11 +336,35 @@ class EditSession:
         ``"lattice"`` starts with an undeformed lattice of ``resolution - 1`` cells
         per axis (at most 8).
         """
-        kind = _choice(kind, DEFORMATIONS, "deformation")
-        backend = _choice(settings.pop("backend", self.backend), BACKENDS, "backend")
-        resolution = _resolution(settings.pop("resolution", self.resolution))
-        integrator = _choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
-        variant = _choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
+        kind = choice(kind, DEFORMATIONS, "deformation")
+        wanted = self._checked_settings(kind, settings)
+        if wanted["backend"] == "gpu" and FAMILIES[kind].uses_backend and self.ctx is None:
+            raise EditorError("the GPU backend needs the viewport's OpenGL context; use cpu")
+        settings_now = {name: getattr(self, name) for name in MODEL_SETTINGS[1:]}
+        # build the new family before closing the old: a refused setting leaves the
+        # session as it was (the wire family builds its field after the switch)
+        family = FAMILIES[kind](self)
+        self._set_settings(wanted)
+        if family.uses_backend:
+            try:
+                family.start()
+            except EditorError:
+                self._set_settings(settings_now)
+                raise
+        self._close_family()
+        self.timings.clear()
+        self.selection, self.reference = [], None
+        self.family = family
+        if not family.uses_backend:
+            family.start()
+        self.sync_warps()
+
+    def _checked_settings(self, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
+        settings = dict(settings)
+        backend = choice(settings.pop("backend", self.backend), BACKENDS, "backend")
+        res = resolution(settings.pop("resolution", self.resolution))
+        integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
+        variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
         stiffness_value = settings.pop("stiffness", self.stiffness)
         try:
             stiffness = float(stiffness_value)
@@ -400,107 +376,22 @@ class EditSession:
             raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
         if not 0.0 < stiffness <= 1.0:
             raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
-        if backend == "gpu" and kind in ("massspring", "chainmail") and self.ctx is None:
-            raise EditorError("the GPU backend needs the viewport's OpenGL context; use cpu")
-        settings_now = {name: getattr(self, name) for name in MODEL_SETTINGS}
-        wanted = dict(
-            zip(
-                MODEL_SETTINGS,
-                (kind, backend, resolution, integrator, variant, stiffness),
-                strict=True,
-            )
-        )
-        new_model = None
-        if kind in ("massspring", "chainmail"):
-            # build the new model before closing the old: a refused setting leaves the
-            # session as it was
-            self._set_settings(wanted)
-            try:
-                new_model = self._new_element_model()
-            except (ValueError, WarpError) as exc:
-                self._set_settings(settings_now)
-                if isinstance(exc, EditorError):
-                    raise
-                raise EditorError(str(exc)) from exc
-        self._close_model()
-        self.timings.clear()
-        self._set_settings(wanted)
-        self.selection, self.reference = [], None
-        if new_model is not None:
-            self.model = new_model
-        elif kind == "wires":
-            self.wires = [self._default_wire()]
-            self.wire_generation += 1
-            self._refresh_wire_field()
-        elif kind == "lattice":
-            cells = tuple(min(r - 1, 8) for r in resolution)
-            lo, hi = self.box
-            u = np.stack(
-                np.meshgrid(*(np.linspace(0.0, 1.0, c + 1) for c in cells), indexing="ij"), -1
-            )
-            self.lattice_nodes = lo + u * (hi - lo)
-            self._lattice_warp = None
-        self._sync_warps()
+        values = (backend, res, integrator, variant, stiffness)
+        return dict(zip(MODEL_SETTINGS[1:], values, strict=True))
 
     def _set_settings(self, values: dict[str, Any]) -> None:
         for name, value in values.items():
             setattr(self, name, value)
 
-    def _new_element_model(self, model: dict[str, Any] | None = None) -> MassSpring | ChainMail:
-        ctx = self.ctx if self.backend == "gpu" else None
-        cls = MassSpring if self.kind == "massspring" else ChainMail
-        if model is not None:
-            restored = cls.from_dict(model, backend=self.backend, ctx=ctx)
-            if isinstance(restored, ChainMail) and self.backend == "gpu":
-                restored.relax_steps = 0  # see below
-            return restored
-        grid = ElementGrid(self.box, shape=self.resolution)
-        grid.set_material(stiffness=self.stiffness)
-        if self.kind == "massspring":
-            return MassSpring(grid, backend=self.backend, ctx=ctx, integrator=self.integrator)
-        cm = ChainMail(grid, variant=self.variant, backend=self.backend, ctx=ctx)
-        # relaxation runs on the CPU (a GPU model is read back for it): a GPU model relaxes
-        # in advance() between drags, never inside a move
-        cm.relax_steps = self.relax_steps if self.backend == "cpu" else 0
-        return cm
-
-    def _default_wire(self) -> Wire:
-        lo, hi = self.box
-        c = 0.5 * (lo + hi)
-        axis = int(np.argmax(hi - lo))
-        pts = np.repeat(c[None], 4, axis=0)
-        pts[:, axis] = lo[axis] + (hi[axis] - lo[axis]) * np.array([0.1, 0.37, 0.63, 0.9])
-        others = [a for a in range(3) if a != axis]
-        radius = 0.3 * float(min(hi[others[0]] - lo[others[0]], hi[others[1]] - lo[others[1]]))
-        return Wire(pts, pts.copy(), radius=radius, name="wire 1")
-
-    def _refresh_wire_field(self) -> None:
-        """After a change of the wires: rebuild the field now (:attr:`sync_wires`) or
-        leave it stale for an off-thread :meth:`wire_build` (the GUI)."""
-        if self.sync_wires:
-            self._wire_warp = self._replace_warp(self._wire_warp, self._build_wires_now())
-            self._wire_built = self.wire_generation
-
-    def _build_wires_now(self) -> WireFieldWarp:
-        job = self.wire_build()
-        warp = job.run()
-        assert warp is not None
-        self.timings["field"] = job.seconds * 1000
-        return warp
-
-    def _close_model(self) -> None:
-        if self.model is not None:
-            self.model.close()
-        self.model = None
-        for w in (self._wire_warp, self._lattice_warp):
-            if w is not None:
-                self._released_warps.append(w)
-        self._wire_warp = None
-        self._lattice_warp = None
-        self.wires = []
-        self.lattice_nodes = None
+    def _close_family(self) -> None:
+        self.family.close()
+        self.family = Family(self)
         self.pending_wire = []
         self._drag = None
+
+    def release_warp(self, warp: Warp) -> None:
+        """Hand over a warp that is no longer drawn (see :meth:`take_released_warps`)."""
+        self._released_warps.append(warp)
 
     def take_released_warps(self) -> list[Warp]:
         """Warps no longer drawn, whose GPU textures the caller should release (with its
@@ -510,17 +401,10 @@ class EditSession:
 
     def model_warp(self) -> Warp | None:
         """The warp of the current deformation in the grid frame (None for ``"none"``)."""
-        if self.kind in ("massspring", "chainmail") and self.model is not None:
-            return self.model.warp()
-        if self.kind == "wires":
-            return self._wire_warp
-        if self.kind == "lattice" and self.lattice_nodes is not None:
-            if self._lattice_warp is None:
-                self._lattice_warp = LatticeWarp(TrilinearGrid(self.lattice_nodes), self.box)
-            return self._lattice_warp
-        return None
+        return self.family.warp()
 
-    def _sync_warps(self) -> None:
+    def sync_warps(self) -> None:
+        """Put the family's warp (placed by :attr:`placement`) in the scene."""
         w = self.model_warp()
         if w is None:
             self.scene.warps = []
@@ -532,12 +416,17 @@ class EditSession:
             self.scene.warps = [AffineWarp(m), w, AffineWarp(np.linalg.inv(m))]
         self._touch()
 
+    def model_moved(self) -> None:
+        """Call after moving the element model directly (``model.move``, ``settle``) so
+        that the scene's warps show its new state."""
+        self.sync_warps()
+
     def set_placement(self, placement: Placement) -> None:
         """Move/rotate/scale the deformation grid relative to the volume."""
         if not isinstance(placement, Placement):
             raise EditorError("set_placement needs a Placement")
         self.placement = placement
-        self._sync_warps()
+        self.sync_warps()
 
     def set_option(self, name: str, value: Any) -> None:
         """Set a run-time option: ``steps_per_frame`` (mass-spring steps per frame),
@@ -549,8 +438,7 @@ class EditSession:
             if not 0 <= v <= 10000:
                 raise EditorError(f"{name} must be 0..10000; got {value!r}")
             setattr(self, name, v)
-            if name == "relax_steps" and isinstance(self.model, ChainMail):
-                self.model.relax_steps = v if self.model.backend == "cpu" else 0
+            self.family.option_changed(name, v)
         else:
             raise EditorError(f"unknown option {name!r}")
 
@@ -561,46 +449,17 @@ class EditSession:
         m = self.placement_matrix
         return p @ m[:3, :3].T + m[:3, 3]
 
-    def _handles_grid(self) -> np.ndarray:
-        """(N, 3) handle positions in the grid frame."""
-        if self.kind in ("massspring", "chainmail") and self.model is not None:
-            if self.model.backend == "gpu" and self._drag is not None:
-                # never read the GPU back while dragging: targets of the held elements
-                return self._drag["positions"].copy()
-            with self.gl_scope():
-                return self.model.positions().reshape(-1, 3)
-        if self.kind == "wires":
-            if not self.wires:
-                return np.zeros((0, 3))
-            return np.concatenate([w.modified.control_points for w in self.wires])
-        if self.kind == "lattice" and self.lattice_nodes is not None:
-            return self.lattice_nodes.reshape(-1, 3)
-        return np.zeros((0, 3))
-
     def handles(self) -> np.ndarray:
         """(N, 3) world positions of the pickable handles (elements, modified wire
         control points or lattice nodes); a GPU model is read back at most once per
         change, never during a drag."""
         if self._handle_cache is None:
-            self._handle_cache = self._grid_to_world(self._handles_grid())
+            self._handle_cache = self._grid_to_world(self.family.handles())
         return self._handle_cache
 
     def fixed_handles(self) -> np.ndarray:
         """(N,) bool: handles that do not move (fixed elements)."""
-        n = len(self.handles())
-        if self.kind in ("massspring", "chainmail") and self.model is not None:
-            return self.model.grid.fixed.reshape(-1).copy()
-        return np.zeros(n, dtype=bool)
-
-    def _wire_point(self, index: int) -> tuple[int, int]:
-        """Handle index -> (wire, control point)."""
-        handle = index
-        for w, wire in enumerate(self.wires):
-            n = len(wire.modified.control_points)
-            if index < n:
-                return w, index
-            index -= n
-        raise EditorError(f"handle {handle} is not a wire control point")
+        return self.family.fixed_handles(len(self.handles()))
 
     # ------------------------------------------------------------------ picking
     def pick(
@@ -678,17 +537,7 @@ class EditSession:
 
     def set_fixed(self, indices: Sequence[int], fixed: bool) -> None:
         """Fix or free elements (mass-spring and ChainMail)."""
-        if self.kind not in ("massspring", "chainmail") or self.model is None:
-            raise EditorError("only the elements of mass-spring and ChainMail can be fixed")
-        indices = list(indices)
-        if not indices:
-            raise EditorError("select elements first (click them, or Shift+drag a rectangle)")
-        grid = self.model.grid
-        ijk = np.array(np.unravel_index(np.asarray(indices, int), grid.shape)).T
-        if fixed:
-            self.model.fix(ijk)
-        else:
-            self.model.free(ijk)
+        self.family.set_fixed(list(indices), fixed)
         self._touch()
 
     # ------------------------------------------------------------------ dragging
@@ -705,13 +554,10 @@ class EditSession:
             "size": size,
             "anchor": camera.point_on_view_plane(pixel, size, ref),
             "start_world": pts[np.asarray(self.selection)].copy(),
-            "positions": self._handles_grid().copy(),
+            "positions": self.family.handles().copy(),
             "selection": list(self.selection),
         }
-        if self.kind in ("massspring", "chainmail") and self.model is not None:
-            rest = self.model.grid.rest_positions.reshape(-1, 3)
-            sel = np.asarray(self.selection)
-            self._drag["start_offsets"] = self._drag["positions"][sel] - rest[sel]
+        self.family.begin_drag(self._drag)
         return True
 
     def drag_to(self, pixel: Sequence[float]) -> np.ndarray | None:
@@ -727,54 +573,9 @@ class EditSession:
         delta_world = hit - d["anchor"]
         lin = self.placement_matrix[:3, :3]
         delta = np.linalg.solve(lin, delta_world) if not self.placement.is_identity else delta_world
-        sel = np.asarray(d["selection"])
-        if self.kind in ("massspring", "chainmail") and self.model is not None:
-            ijk = np.array(np.unravel_index(sel, self.model.grid.shape)).T
-            offsets = d["start_offsets"] + delta
-            self.model.move(ijk, offsets)
-            rest = self.model.grid.rest_positions.reshape(-1, 3)
-            movable = ~self.model.grid.fixed.reshape(-1)[sel]
-            d["positions"][sel[movable]] = rest[sel[movable]] + offsets[movable]
-        elif self.kind == "wires":
-            start = d["positions"]
-            for h in sel:
-                w, k = self._wire_point(int(h))
-                pts = self.wires[w].modified.control_points.copy()
-                pts[k] = start[h] + delta
-                self.wires[w] = _with_modified(self.wires[w], pts)
-            self.wire_generation += 1
-        elif self.kind == "lattice" and self.lattice_nodes is not None:
-            nodes = d["positions"].copy()
-            nodes[sel] += delta
-            self.lattice_nodes = nodes.reshape(self.lattice_nodes.shape)
-            self._drop_lattice_warp()
-        self._sync_warps()
+        self.family.drag(d, np.asarray(d["selection"]), delta)
+        self.sync_warps()
         return delta_world
-
-    def _drop_lattice_warp(self) -> None:
-        if self._lattice_warp is not None:
-            self._released_warps.append(self._lattice_warp)
-        self._lattice_warp = None
-
-    def set_wire_points(self, wire: int, points: np.ndarray) -> None:
-        """Move the modified control points of wire ``wire``; its attribute field is then
-        stale (rebuild it with :meth:`wire_build` and :meth:`install_wire_build`)."""
-        self.wires[wire] = _with_modified(self._wire(wire), points)
-        self.wire_generation += 1
-
-    def set_lattice_nodes(self, nodes: np.ndarray) -> None:
-        """Move every node of the lattice (shape of :attr:`lattice_nodes`); the scene's
-        warps follow."""
-        if self.lattice_nodes is None:
-            raise EditorError("no lattice to move: set_deformation('lattice') first")
-        self.lattice_nodes = np.asarray(nodes, dtype=np.float64).reshape(self.lattice_nodes.shape)
-        self._drop_lattice_warp()
-        self._sync_warps()
-
-    def model_moved(self) -> None:
-        """Call after moving the element model directly (``model.move``, ``settle``) so
-        that the scene's warps show its new state."""
-        self._sync_warps()
 
     def end_drag(self) -> None:
         """Finish a drag (the elements stay held where they were dragged)."""
@@ -785,38 +586,9 @@ class EditSession:
     def advance(self) -> bool:
         """One frame of the running model: ``steps_per_frame`` mass-spring steps or
         ``relax_steps`` ChainMail relaxation steps. Returns whether anything ran."""
-        if not self.running or self.model is None or (self.settled and self._drag is None):
+        if not self.running or (self.settled and self._drag is None):
             return False
-        n = self.steps_per_frame if isinstance(self.model, MassSpring) else self.relax_steps
-        if n <= 0:
-            return False
-        gpu = self.model.backend == "gpu"
-        if gpu and isinstance(self.model, ChainMail) and self._drag is not None:
-            return False  # its relaxation reads the GPU back: not during a drag
-        self._advances += 1
-        check = not gpu or (self._drag is None and self._advances % 30 == 0)
-        before = self.model.positions() if check and isinstance(self.model, ChainMail) else None
-        t = time.perf_counter()
-        if isinstance(self.model, MassSpring):
-            self.model.step(n)
-        else:
-            self.model.relax(n)
-        self.timings["step"] = (time.perf_counter() - t) * 1000 / n
-        if check and self._drag is None:
-            # at rest: stop stepping (the field, and so the picture, holds still, and the
-            # renderer can build its skip maps) until the next edit
-            if isinstance(self.model, MassSpring):
-                speed = np.sqrt(np.max(np.sum(self.model.velocities() ** 2, axis=-1)))
-                self.settled = bool(speed < SETTLED_SPEED)
-            elif before is not None:
-                self.settled = bool(np.max(np.abs(self.model.positions() - before)) < 1e-4)
-        now = time.perf_counter()
-        if self.model.backend != "gpu" or (
-            self._drag is None and now - self._last_readback >= self.gpu_readback_interval
-        ):
-            self._handle_cache = None  # GPU: read back at most every gpu_readback_interval
-            self._last_readback = now
-        return True
+        return self.family.advance()
 
     def single_step(self) -> None:
         """One step of the model even when paused."""
@@ -831,46 +603,47 @@ class EditSession:
 
     def reset_model(self) -> None:
         """Back to rest: elements released, wires straightened, lattice undeformed."""
-        if self.model is not None:
-            self.model.reset()
-        elif self.kind == "wires":
-            self.wires = [_with_modified(w, w.base.control_points) for w in self.wires]
-            self.wire_generation += 1
-            self._refresh_wire_field()
-        elif self.kind == "lattice":
-            self.set_deformation("lattice")
-            return
-        self._sync_warps()
+        self.family.reset()
+        self.sync_warps()
 
-    def _replace_warp(self, old: Any, new: Any) -> Any:
-        if old is not None and old is not new:
-            self._released_warps.append(old)
-        return new
+    # ------------------------------------------------------------------ lattice
+    def set_lattice_nodes(self, nodes: np.ndarray) -> None:
+        """Move every node of the lattice (shape of :attr:`lattice_nodes`); the scene's
+        warps follow."""
+        if not isinstance(self.family, LatticeFamily):
+            raise EditorError("no lattice to move: set_deformation('lattice') first")
+        self.family.set_nodes(nodes)
+        self.sync_warps()
 
     # ------------------------------------------------------------------ wires
+    def _wire_family(self) -> WiresFamily:
+        if not isinstance(self.family, WiresFamily):
+            raise EditorError("choose the wires deformation first")
+        return self.family
+
     def wire_build(self) -> WireBuild:
         """A job rebuilding the field of the current wires (run it on any thread)."""
-        wires = [Wire.from_dict(w.to_dict()) for w in self.wires]
-        return WireBuild(self.wire_generation, self.volume, wires, dict(self.wire_settings))
+        return self._wire_family().build_job()
 
     @property
     def wire_field_stale(self) -> bool:
         """Whether the drawn field lags the wires (a rebuild is due)."""
-        return self.kind == "wires" and (
-            self._wire_warp is None or self._wire_built != self.wire_generation
-        )
+        return self.family.field_stale
 
     def install_wire_build(self, job: WireBuild) -> bool:
         """Put a finished :class:`WireBuild` in the scene (GUI thread). Returns False
         when it was cancelled (dropped) or when the wires changed while it ran (then it
         is drawn meanwhile, and the field stays stale for the next build)."""
-        if job.warp is None or job.cancelled or self.kind != "wires":
+        if not isinstance(self.family, WiresFamily):
             return False
-        self._wire_warp = self._replace_warp(self._wire_warp, job.warp)  # type: ignore[assignment]
-        self._wire_built = job.generation
-        self.timings["field"] = job.seconds * 1000
-        self._sync_warps()
-        return job.generation == self.wire_generation
+        return self.family.install(job)
+
+    def set_wire_points(self, wire: int, points: np.ndarray) -> None:
+        """Move the modified control points of wire ``wire``; its attribute field is then
+        stale (rebuild it with :meth:`wire_build` and :meth:`install_wire_build`)."""
+        self._wire(wire)
+        self._wire_family().set_points(wire, points)
+        self._touch()
 
     def set_wire_parameters(
         self,
@@ -882,20 +655,8 @@ class EditSession:
     ) -> None:
         """Change a wire's curve kind, influence radius (mm) or β (value range or None);
         the field is then stale (rebuild it with :meth:`wire_build`)."""
-        w = self._wire(wire)
-        d = w.to_dict()
-        if kind is not None:
-            kind = _choice(kind, WIRE_KINDS, "wire kind")
-            if kind != w.kind:
-                d["base"] = _resampled(w.base.control_points, kind)
-                d["modified"] = _resampled(w.modified.control_points, kind)
-                d["kind"] = kind
-        if radius is not None:
-            d["radius"] = radius
-        if beta != "keep":
-            d["beta"] = None if beta is None else [float(beta[0]), float(beta[1])]
-        self.wires[wire] = self._wire_from(d)
-        self.wire_generation += 1
+        self._wire(wire)
+        self._wire_family().set_parameters(wire, kind, radius, beta)
         self._touch()
 
     def set_wire_settings(self, **settings: Any) -> None:
@@ -926,31 +687,13 @@ class EditSession:
         at that point's fraction of the wire's length (replacing a key there)."""
         if handle is None:
             raise EditorError("select a control point of a wire first (click it)")
-        w, k = self._wire_point(int(handle))
-        wire = self.wires[w]
-        t = _length_fraction(wire.modified, k)
-        d = wire.to_dict()
-        for name, value in (("twist", twist), ("scale", scale)):
-            if value is None:
-                continue
-            keys = [tuple(x) for x in (d.get(name) or []) if abs(float(x[0]) - t) > 1e-6]
-            keys.append((t, float(value)))
-            d[name] = sorted(keys)
-        self.wires[w] = self._wire_from(d)
-        self.wire_generation += 1
+        self._wire_family().set_key(int(handle), twist, scale)
         self._touch()
 
-    def _wire(self, wire: int) -> Wire:
-        if self.kind != "wires" or not 0 <= wire < len(self.wires):
+    def _wire(self, wire: int) -> Any:
+        if not isinstance(self.family, WiresFamily) or not 0 <= wire < len(self.wires):
             raise EditorError(f"no wire {wire}: there are {len(self.wires)} wires")
         return self.wires[wire]
-
-    @staticmethod
-    def _wire_from(d: dict[str, Any]) -> Wire:
-        try:
-            return Wire.from_dict(d)
-        except (WarpError, TypeError, ValueError) as exc:
-            raise EditorError(str(exc)) from exc
 
     def add_wire_point(self, camera: Camera, size: tuple[int, int], pixel: Sequence[float]) -> None:
         """Lay a control point of a new wire where the cursor meets the plane parallel
@@ -963,7 +706,7 @@ class EditSession:
     def finish_wire(self, kind: str = "catmull-rom", radius: float | None = None) -> int:
         """Make the laid points a wire (base = modified; then bend it by dragging).
         Returns its index. Needs 2+ points (Bézier: 3k + 1, extra points are dropped)."""
-        kind = _choice(kind, WIRE_KINDS, "wire kind")
+        kind = choice(kind, WIRE_KINDS, "wire kind")
         pts = np.asarray(self.pending_wire, dtype=np.float64).reshape(-1, 3)
         if kind == "bezier":
             pts = pts[: 3 * ((len(pts) - 1) // 3) + 1]
@@ -972,35 +715,18 @@ class EditSession:
                 f"a {kind} wire needs at least {4 if kind == 'bezier' else 2} control points;"
                 f" {len(self.pending_wire)} laid: click more points first"
             )
-        if self.kind != "wires":
+        if not isinstance(self.family, WiresFamily):
             raise EditorError("choose the wires deformation before laying a wire")
-        if radius is None:
-            radius = (
-                self.wires[-1].radius if self.wires else 0.1 * float(np.max(np.ptp(self.box, 0)))
-            )
-        wire = self._wire_from(
-            {
-                "base": pts.tolist(),
-                "modified": pts.tolist(),
-                "kind": kind,
-                "radius": radius,
-                "name": f"wire {len(self.wires) + 1}",
-            }
-        )
-        self.wires.append(wire)
+        index = self.family.add(pts, kind, radius)
         self.pending_wire = []
-        self.wire_generation += 1
         self._touch()
-        return len(self.wires) - 1
+        return index
 
     def remove_wire(self, wire: int) -> None:
         """Delete a wire (the last one cannot go: switch the deformation off instead)."""
         self._wire(wire)
-        if len(self.wires) == 1:
-            raise EditorError("a wire field needs a wire: choose deformation 'none' instead")
-        del self.wires[wire]
+        self._wire_family().remove(wire)
         self.selection, self.reference = [], None
-        self.wire_generation += 1
         self._touch()
 
     # ------------------------------------------------------------------ overlay
@@ -1009,69 +735,41 @@ class EditSession:
         disp = display or DisplayOptions()
         layers: list[OverlayLayer] = []
         lo, hi = self.box
-        if disp.grid_box and self.kind != "none":
+        if disp.grid_box and self.family.has_grid:
             edges = self._grid_to_world(box_edges(lo, hi))
             layers.append(OverlayLayer("lines", edges, COLORS["box"], name="grid box"))
         if disp.clip_box and self.scene.clip_box is not None:
             c0, c1 = self.scene.clip_box
             layers.append(OverlayLayer("lines", box_edges(c0, c1), COLORS["box"], name="clip"))
         pts = self.handles()
-        if self.kind in ("massspring", "chainmail") and self.model is not None:
-            shape = self.model.grid.shape
-            if disp.links:
-                layers.append(
-                    OverlayLayer(
-                        "lines", grid_edges(pts.reshape(*shape, 3)), COLORS["link"], name="links"
-                    )
-                )
-            fixed = self.fixed_handles()
-            if disp.elements:
-                layers.append(
-                    OverlayLayer("points", pts[~fixed], COLORS["element"], 5.0, name="elements")
-                )
-            if disp.fixed and np.any(fixed):
-                layers.append(OverlayLayer("points", pts[fixed], COLORS["fixed"], 7.0, "fixed"))
-        elif self.kind == "wires":
-            for wire in self.wires:
-                t = np.linspace(0.0, 1.0, 96)
-                if disp.wires_base:
-                    seg = polyline_segments(self._grid_to_world(wire.base.evaluate(t)))
-                    layers.append(OverlayLayer("lines", seg, COLORS["wire_base"], name="base"))
-                if disp.wires_modified:
-                    seg = polyline_segments(self._grid_to_world(wire.modified.evaluate(t)))
-                    layers.append(OverlayLayer("lines", seg, COLORS["wire_modified"], name="wire"))
-            if disp.wires_modified and len(pts):
-                layers.append(OverlayLayer("points", pts, COLORS["wire_modified"], 8.0, "points"))
-        elif self.kind == "lattice" and self.lattice_nodes is not None:
-            if disp.lattice_cells:
-                nodes = pts.reshape(self.lattice_nodes.shape)
-                layers.append(
-                    OverlayLayer("lines", grid_edges(nodes), COLORS["lattice"], name="cells")
-                )
-                layers.append(OverlayLayer("points", pts, COLORS["lattice"], 7.0, "nodes"))
+        layers += self.family.overlay(pts, disp, self._grid_to_world)
         if self.pending_wire:
             p = self._grid_to_world(np.asarray(self.pending_wire))
             layers.append(OverlayLayer("points", p, COLORS["pending"], 8.0, "new wire"))
             if len(p) > 1:
                 layers.append(OverlayLayer("lines", polyline_segments(p), COLORS["pending"]))
         if disp.selection and self.selection and len(pts):
-            sel = np.asarray([i for i in self.selection if i < len(pts)], dtype=int)
-            layers.append(OverlayLayer("points", pts[sel], COLORS["selected"], 10.0, "selected"))
-            if self.reference is not None and self.reference < len(pts):
-                layers.append(
-                    OverlayLayer("points", pts[[self.reference]], COLORS["reference"], 12.0, "ref")
-                )
+            layers += self._selection_layers(pts)
+        return layers
+
+    def _selection_layers(self, pts: np.ndarray) -> list[OverlayLayer]:
+        sel = np.asarray([i for i in self.selection if i < len(pts)], dtype=int)
+        layers = [OverlayLayer("points", pts[sel], COLORS["selected"], 10.0, "selected")]
+        if self.reference is not None and self.reference < len(pts):
+            ref = pts[[self.reference]]
+            layers.append(OverlayLayer("points", ref, COLORS["reference"], 12.0, "ref"))
         return layers
 
     # ------------------------------------------------------------------ snapshots
     def snapshot(self) -> Snapshot:
         """The whole editable state, copied (model state incl. velocities, wires,
         lattice, placement, selection, settings)."""
-        snap = Snapshot(
+        return Snapshot(
             kind=self.kind,
             backend=self.backend,
             resolution=self.resolution,
             placement=Placement(**self.placement.to_dict()),
+            state=self.family.snapshot(),
             selection=tuple(self.selection),
             reference=self.reference,
             settings={
@@ -1085,60 +783,27 @@ class EditSession:
             look=scene_look(self.scene),
             animation=self.animation.to_dict() if self.animation is not None else None,
         )
-        if self.model is not None:
-            snap.model = self.model.to_dict()
-            snap.positions = self.model.positions()
-            if isinstance(self.model, MassSpring):
-                snap.velocities = self.model.velocities()
-        snap.wires = [w.to_dict() for w in self.wires]
-        if self.lattice_nodes is not None:
-            snap.lattice_nodes = self.lattice_nodes.copy()
-        return snap
 
     def restore(self, snap: Snapshot) -> None:
         """Return to a :meth:`snapshot` exactly (a wire field is rebuilt synchronously
         when its wires differ from the drawn field's)."""
-        same_wires = (
-            snap.kind == "wires"
-            and self.kind == "wires"
-            and snap.wires == [w.to_dict() for w in self.wires]
-            and snap.wire_settings == self.wire_settings
-        )
-        keep_field = self._wire_warp if same_wires and not self.wire_field_stale else None
-        drawn = self._wire_warp if snap.kind == "wires" else None
-        self._wire_warp = None  # keep the drawn field out of _close_model's release list
-        self._close_model()
+        family = FAMILIES[snap.kind](self)
+        family.adopt(self.family, snap)
+        self._close_family()
         s = snap.settings
-        self.kind, self.backend, self.resolution = snap.kind, snap.backend, snap.resolution
+        self.backend, self.resolution = snap.backend, snap.resolution
         self.integrator, self.variant = s["integrator"], s["variant"]
         self.steps_per_frame, self.relax_steps = s["steps_per_frame"], s["relax_steps"]
         self.stiffness = s["stiffness"]
         self.placement = Placement(**snap.placement.to_dict())
         self.wire_settings = dict(snap.wire_settings)
-        if snap.model is not None:
-            self.model = self._new_element_model(snap.model)
-            if isinstance(self.model, MassSpring):
-                self.model.set_state(snap.positions, snap.velocities)
-            else:
-                self.model.set_state(snap.positions)
-        self.wires = [Wire.from_dict(w) for w in snap.wires]
-        if self.kind == "wires":
-            self.wire_generation += 1
-            if keep_field is not None:
-                self._wire_warp = keep_field
-                self._wire_built = self.wire_generation
-            else:
-                self._wire_warp = drawn  # drawn until the rebuilt field replaces it
-                self._refresh_wire_field()
-        elif drawn is not None:
-            self._released_warps.append(drawn)
-        if snap.lattice_nodes is not None:
-            self.lattice_nodes = snap.lattice_nodes.copy()
+        self.family = family
+        family.restore(snap.state)
         self.selection, self.reference = list(snap.selection), snap.reference
         if snap.look:
             set_scene_look(self.scene, snap.look)
         self.animation = _animation_from(snap.animation)
-        self._sync_warps()
+        self.sync_warps()
 
     # ------------------------------------------------------------------ files
     def to_dict(self, base_dir: str | os.PathLike | None = None) -> dict[str, Any]:
@@ -1148,10 +813,7 @@ class EditSession:
         the file also renders with ``voxwarp render`` and resumes in the GUI. A stale
         wire field (edited, not rebuilt yet) is rebuilt first, so the file holds the
         wires as they are."""
-        if self.wire_field_stale:
-            self._wire_warp = self._replace_warp(self._wire_warp, self._build_wires_now())
-            self._wire_built = self.wire_generation
-            self._sync_warps()
+        self.family.before_save()
         d = self.scene.to_dict(base_dir=base_dir)
         model_index = {0: None, 1: 0, 3: 1}[len(self.scene.warps)]
         d[EDITOR_KEY] = {
@@ -1189,74 +851,60 @@ class EditSession:
             session.animation = _animation_from(raw["animation"])
         return session
 
+    def _read_editor_entry(self, entry: dict[str, Any]) -> None:
+        if entry.get("placement") is not None:
+            self.placement = Placement.from_dict(entry["placement"])
+        if entry.get("resolution") is not None:
+            self.resolution = resolution(entry["resolution"])
+        for key in ("integrator", "variant"):
+            if key in entry:
+                setattr(self, key, str(entry[key]))
+        for key in ("steps_per_frame", "relax_steps"):
+            if key in entry:
+                setattr(self, key, int(entry[key]))
+        if "stiffness" in entry:
+            self.stiffness = float(entry["stiffness"])
+        if isinstance(entry.get("wire_settings"), dict):
+            self.wire_settings = dict(entry["wire_settings"])
+
     def _recover_from_scene(self, entry: dict[str, Any]) -> None:
         """Take over the deformation saved in the scene's warps (see :meth:`to_dict`),
         with the settings of the scene's editor ``entry``."""
         warps = list(self.scene.warps)
         try:
-            if entry.get("placement") is not None:
-                self.placement = Placement.from_dict(entry["placement"])
-            if entry.get("resolution") is not None:
-                self.resolution = _resolution(entry["resolution"])
-            for key in ("integrator", "variant"):
-                if key in entry:
-                    setattr(self, key, str(entry[key]))
-            for key in ("steps_per_frame", "relax_steps"):
-                if key in entry:
-                    setattr(self, key, int(entry[key]))
-            if "stiffness" in entry:
-                self.stiffness = float(entry["stiffness"])
-            if isinstance(entry.get("wire_settings"), dict):
-                self.wire_settings = dict(entry["wire_settings"])
-            if not warps:
-                self._sync_warps()
-                return
-            index = entry.get("model_warp", 0 if len(warps) == 1 else None)
-            if len(warps) == 3 and index is None:
-                index = 1
-            if index is None or not 0 <= int(index) < len(warps):
-                raise EditorError(
-                    f"the scene has {len(warps)} warps; the editor takes over one model warp"
-                    " (optionally between two placement warps)"
-                )
-            w = warps[int(index)]
-            backend = entry.get("backend", "cpu")
-            self.backend = backend if backend in BACKENDS and self.ctx is not None else "cpu"
-            if isinstance(w, OffsetFieldWarp) and w.model_state is not None:
-                kind = w.model_state.get("type")
-                cls = MassSpring if kind == "massspring" else ChainMail
-                ctx = self.ctx if self.backend == "gpu" else None
-                self.model = cls.from_warp(w, backend=self.backend, ctx=ctx)
-                self.kind = "massspring" if cls is MassSpring else "chainmail"
-                self.resolution = self.model.grid.shape
-            elif isinstance(w, WireFieldWarp):
-                self.kind = "wires"
-                self.wires = list(w.wires)
-                self._wire_warp = w
-                self._wire_built = self.wire_generation
-                spec = w.to_dict()
-                self.wire_settings = {
-                    k: spec[k] for k in ("field_scale", "layout", "masks") if k in spec
-                } or self.wire_settings
-            elif isinstance(w, LatticeWarp):
-                self.kind = "lattice"
-                self.lattice_nodes = np.asarray(w.grid.nodes, dtype=np.float64).copy()
-                self._lattice_warp = w
-            else:
-                raise EditorError(
-                    f"the scene's {w.kind!r} warp is not editable (the editor takes"
-                    " mass-spring, ChainMail, wire and lattice warps)"
-                )
+            self._read_editor_entry(entry)
+            if warps:
+                self.family = self._resume(warps, entry)
         except (WarpError, KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, EditorError):
                 raise
             raise EditorError(f"cannot resume the scene's deformation: {exc}") from exc
-        self._sync_warps()
+        self.sync_warps()
+
+    def _resume(self, warps: list[Warp], entry: dict[str, Any]) -> Family:
+        index = entry.get("model_warp", 0 if len(warps) == 1 else None)
+        if len(warps) == 3 and index is None:
+            index = 1
+        if index is None or not 0 <= int(index) < len(warps):
+            raise EditorError(
+                f"the scene has {len(warps)} warps; the editor takes over one model warp"
+                " (optionally between two placement warps)"
+            )
+        w = warps[int(index)]
+        backend = entry.get("backend", "cpu")
+        self.backend = backend if backend in BACKENDS and self.ctx is not None else "cpu"
+        for cls in FAMILIES.values():
+            family = cls.resume(self, w)
+            if family is not None:
+                return family
+        raise EditorError(
+            f"the scene's {w.kind!r} warp is not editable (the editor takes"
+            " mass-spring, ChainMail, wire and lattice warps)"
+        )
 
     def close(self) -> None:
         """Release the model (GPU resources: call with the context current)."""
-        self._close_model()
-        self.kind = "none"
+        self._close_family()
         self.scene.warps = []
 
 
@@ -1304,34 +952,6 @@ def _animation_from(d: Any) -> Any:
         return Animation.from_dict(d)
     except AnimationError as exc:
         raise EditorError(f"invalid animation in the scene: {exc}") from exc
-
-
-def _with_modified(wire: Wire, points: np.ndarray) -> Wire:
-    d = wire.to_dict()
-    d["modified"] = np.asarray(points, dtype=np.float64).tolist()
-    return Wire.from_dict(d)
-
-
-def _resampled(points: np.ndarray, kind: str) -> list[list[float]]:
-    """Control points for a curve of another kind through about the same places."""
-    p = np.asarray(points, dtype=np.float64)
-    if kind == "bezier":
-        n = 3 * max(1, math.ceil((len(p) - 1) / 3)) + 1
-    else:
-        n = max(2, len(p))
-    s = np.linspace(0.0, 1.0, len(p))
-    t = np.linspace(0.0, 1.0, n)
-    return np.stack([np.interp(t, s, p[:, a]) for a in range(3)], axis=1).tolist()
-
-
-def _length_fraction(curve: Any, k: int) -> float:
-    """Fraction of the curve's length at (the point closest to) control point ``k``."""
-    t, _ = curve.closest_point(curve.control_points[k])
-    t = float(np.asarray(t).reshape(-1)[0])
-    total = curve.arc_length()
-    if total <= 0:
-        return 0.0
-    return float(np.clip(curve.arc_length(t1=t) / total, 0.0, 1.0))
 
 
 def warm_up_kernels() -> None:

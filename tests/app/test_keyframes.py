@@ -10,7 +10,7 @@ import pytest
 
 from voxwarp.animation.tracks import AnimationError, load_animated_scene
 from voxwarp.editing.keyframes import delete_keys, key_frames, set_key
-from voxwarp.editing.session import EditSession, _with_modified
+from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import load_sample
 from voxwarp.scene import Scene
 
@@ -26,8 +26,7 @@ def test_lattice_keys_interpolate_the_nodes(session: EditSession, tmp_path: Path
     anim = set_key(None, session, 0, frames=11, interpolation="linear")
     moved = rest.copy()
     moved[1, 1, 2] += (6.0, -3.0, 2.0)
-    session.lattice_nodes = moved
-    session._lattice_warp = None
+    session.set_lattice_nodes(moved)
     anim = set_key(anim, session, 10)
     assert key_frames(anim) == [0, 10]
     session.animation = anim
@@ -47,8 +46,7 @@ def test_wire_keys_and_the_camera(session: EditSession, tmp_path: Path) -> None:
     w = session.wires[0]
     pts = w.modified.control_points.copy()
     pts[2, 1] += 8.0
-    session.wires[0] = _with_modified(w, pts)
-    session.wire_generation += 1
+    session.set_wire_points(0, pts)
     cam1 = session.scene.copy(camera=None, view=(-60, 20)).resolved_camera()
     anim = set_key(anim, session, 8, cam1)
     assert {t.target for t in anim.tracks} == {"camera", "wires[0].modified"}

@@ -1,0 +1,143 @@
+"""The interface every deformation family's adapter implements for the edit session.
+
+An adapter holds one family's editable state (an element model, wires, a lattice) and
+answers the session's questions about it: its warp, its handles and how they drag, what
+the overlay draws, what undo keeps, how it resumes from a scene's warp and what it keys
+for animation. :class:`~voxwarp.editing.session.EditSession` only talks to this
+interface, so adding a family is its warp, its shader, one adapter file registered in
+:mod:`voxwarp.editing.families` and one panel in ``ui/``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from voxwarp.deform.warp import Warp
+from voxwarp.editing.common import DisplayOptions, EditorError
+from voxwarp.render.overlay import OverlayLayer
+
+if TYPE_CHECKING:
+    from voxwarp.animation.tracks import Animation
+    from voxwarp.editing.session import EditSession, Snapshot
+
+#: maps (N, 3) grid-frame points to world mm (the session's placement)
+ToWorld = Callable[[np.ndarray], np.ndarray]
+
+
+class Family:
+    """One deformation family in an edit session (the base is the family ``"none"``).
+
+    Subclasses set :attr:`kind` and override what their family does; the defaults mean
+    "nothing to edit". ``session`` gives the shared settings (box, resolution, backend,
+    context, ...) and collects warps that are no longer drawn (:meth:`release`).
+    """
+
+    #: name of the family in the GUI, scene JSON and :meth:`EditSession.set_deformation`
+    kind: ClassVar[str] = "none"
+    #: whether the family runs on the CPU or GPU backend (``backend`` setting)
+    uses_backend: ClassVar[bool] = False
+    #: whether the overlay draws the grid's box
+    has_grid: ClassVar[bool] = False
+    #: the element model (mass-spring or ChainMail families), else None
+    model: Any = None
+
+    def __init__(self, session: EditSession) -> None:
+        self.session = session
+
+    # ---------------------------------------------------------------- life cycle
+    def start(self) -> None:
+        """Build the family's state at rest from the session's settings."""
+
+    def close(self) -> None:
+        """Give up the state; warps still drawn go to :meth:`release`."""
+
+    def release(self, warp: Warp | None) -> None:
+        """Hand a warp that is no longer drawn to the session (its GPU data is freed by
+        the caller of :meth:`EditSession.take_released_warps`)."""
+        if warp is not None:
+            self.session.release_warp(warp)
+
+    @classmethod
+    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+        """An adapter taking over ``warp`` from a saved scene, or None if not ours."""
+        return None
+
+    # ---------------------------------------------------------------- state views
+    @property
+    def wires(self) -> list[Any]:
+        """The wires of a wire field (empty for other families)."""
+        return []
+
+    @property
+    def lattice_nodes(self) -> np.ndarray | None:
+        """The lattice's nodes (None for other families)."""
+        return None
+
+    @property
+    def field_stale(self) -> bool:
+        """Whether a field built off the GUI thread lags the edits."""
+        return False
+
+    # ---------------------------------------------------------------- the warp
+    def warp(self) -> Warp | None:
+        """The family's warp in the grid frame (None: nothing deforms)."""
+        return None
+
+    def before_save(self) -> None:
+        """Bring the warp up to date before the scene is written."""
+
+    # ---------------------------------------------------------------- handles
+    def handles(self) -> np.ndarray:
+        """(N, 3) handle positions in the grid frame."""
+        return np.zeros((0, 3))
+
+    def fixed_handles(self, count: int) -> np.ndarray:
+        """(count,) bool: handles that do not move."""
+        return np.zeros(count, dtype=bool)
+
+    def set_fixed(self, indices: list[int], fixed: bool) -> None:
+        """Fix or free handles."""
+        raise EditorError("only the elements of mass-spring and ChainMail can be fixed")
+
+    def begin_drag(self, drag: dict[str, Any]) -> None:
+        """Remember what the drag starting with ``drag`` needs (``drag["positions"]``
+        are the handles in the grid frame, ``drag["selection"]`` the dragged ones)."""
+
+    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
+        """Move the selected handles by ``delta`` (grid frame) from their start."""
+
+    # ---------------------------------------------------------------- running
+    def advance(self) -> bool:
+        """One frame of a running model; whether anything ran."""
+        return False
+
+    def reset(self) -> None:
+        """Back to rest."""
+
+    def option_changed(self, name: str, value: Any) -> None:
+        """A run-time option of the session changed (``relax_steps``, ...)."""
+
+    # ---------------------------------------------------------------- drawing
+    def overlay(
+        self, handles: np.ndarray, display: DisplayOptions, to_world: ToWorld
+    ) -> list[OverlayLayer]:
+        """The family's overlay layers (``handles``: world positions)."""
+        return []
+
+    # ---------------------------------------------------------------- undo and animation
+    def snapshot(self) -> dict[str, Any]:
+        """The family's state, copied (arrays and plain values only)."""
+        return {}
+
+    def adopt(self, previous: Family, snap: Snapshot) -> None:
+        """Before :meth:`restore` and before ``previous`` closes: take over what of it
+        can be kept for ``snap`` (a wire field still valid for it)."""
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Return to a :meth:`snapshot` (the session's settings are restored already)."""
+
+    def set_keys(self, animation: Animation, frame: int, interpolation: str) -> None:
+        """Key the family's state at ``frame`` (:func:`voxwarp.editing.keyframes.set_key`)."""

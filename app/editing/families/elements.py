@@ -1,0 +1,317 @@
+"""The offset-field families: a grid of elements run by a mass-spring model or by 3D
+ChainMail (Knoche 2008). The handles are the elements; dragging one holds it at its
+offset, the model moves the rest."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from voxwarp.deform.chainmail import ChainMail
+from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.warp import Warp, WarpError
+from voxwarp.editing.common import COLORS, DisplayOptions, EditorError
+from voxwarp.editing.families.base import Family, ToWorld
+from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.render.overlay import OverlayLayer, grid_edges
+
+if TYPE_CHECKING:
+    from voxwarp.animation.tracks import Animation
+    from voxwarp.editing.session import EditSession
+
+#: mass-spring elements slower than this (mm/s) count as at rest
+SETTLED_SPEED = 1e-3
+
+
+class ElementFamily(Family):
+    """Shared by mass-spring and ChainMail: an element grid over the volume's box."""
+
+    uses_backend = True
+    has_grid = True
+    model_class: ClassVar[type[MassSpring] | type[ChainMail]]
+
+    def __init__(self, session: EditSession) -> None:
+        super().__init__(session)
+        self.model: MassSpring | ChainMail | None = None
+        self._advances = 0
+
+    # ---------------------------------------------------------------- life cycle
+    def start(self) -> None:
+        try:
+            self.model = self._new_model()
+        except (ValueError, WarpError) as exc:
+            if isinstance(exc, EditorError):
+                raise
+            raise EditorError(str(exc)) from exc
+
+    def _ctx(self) -> Any:
+        return self.session.ctx if self.session.backend == "gpu" else None
+
+    def _new_model(self) -> MassSpring | ChainMail:
+        s = self.session
+        grid = ElementGrid(s.box, shape=s.resolution)
+        grid.set_material(stiffness=s.stiffness)
+        return self._build(grid)
+
+    def _build(self, grid: ElementGrid) -> MassSpring | ChainMail:
+        raise NotImplementedError
+
+    def _from_dict(self, model: dict[str, Any]) -> MassSpring | ChainMail:
+        return self.model_class.from_dict(model, backend=self.session.backend, ctx=self._ctx())
+
+    def close(self) -> None:
+        if self.model is not None:
+            self.model.close()
+        self.model = None
+
+    @classmethod
+    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+        state = getattr(warp, "model_state", None)
+        if not isinstance(warp, OffsetFieldWarp) or state is None:
+            return None
+        if state.get("type") != cls.kind:
+            return None
+        family = cls(session)
+        ctx = session.ctx if session.backend == "gpu" else None
+        family.model = cls.model_class.from_warp(warp, backend=session.backend, ctx=ctx)
+        session.resolution = family.model.grid.shape
+        return family
+
+    # ---------------------------------------------------------------- warp and handles
+    def warp(self) -> Warp | None:
+        return self.model.warp() if self.model is not None else None
+
+    def handles(self) -> np.ndarray:
+        if self.model is None:
+            return np.zeros((0, 3))
+        drag = self.session.drag_state
+        if self.model.backend == "gpu" and drag is not None:
+            # never read the GPU back while dragging: targets of the held elements
+            return drag["positions"].copy()
+        with self.session.gl_scope():
+            return self.model.positions().reshape(-1, 3)
+
+    def fixed_handles(self, count: int) -> np.ndarray:
+        if self.model is None:
+            return super().fixed_handles(count)
+        return self.model.grid.fixed.reshape(-1).copy()
+
+    def set_fixed(self, indices: list[int], fixed: bool) -> None:
+        if self.model is None:
+            super().set_fixed(indices, fixed)
+            return
+        if not indices:
+            raise EditorError("select elements first (click them, or Shift+drag a rectangle)")
+        ijk = np.array(np.unravel_index(np.asarray(indices, int), self.model.grid.shape)).T
+        if fixed:
+            self.model.fix(ijk)
+        else:
+            self.model.free(ijk)
+
+    def begin_drag(self, drag: dict[str, Any]) -> None:
+        if self.model is None:
+            return
+        rest = self.model.grid.rest_positions.reshape(-1, 3)
+        sel = np.asarray(drag["selection"])
+        drag["start_offsets"] = drag["positions"][sel] - rest[sel]
+
+    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
+        if self.model is None:
+            return
+        grid = self.model.grid
+        ijk = np.array(np.unravel_index(selection, grid.shape)).T
+        offsets = drag["start_offsets"] + delta
+        self.model.move(ijk, offsets)
+        rest = grid.rest_positions.reshape(-1, 3)
+        movable = ~grid.fixed.reshape(-1)[selection]
+        drag["positions"][selection[movable]] = rest[selection[movable]] + offsets[movable]
+
+    # ---------------------------------------------------------------- running
+    def _steps(self) -> int:
+        """Model steps per frame."""
+        raise NotImplementedError
+
+    def _run(self, n: int) -> None:
+        raise NotImplementedError
+
+    def _at_rest(self, before: np.ndarray | None) -> bool | None:
+        """Whether the model came to rest (None: cannot tell)."""
+        raise NotImplementedError
+
+    def _check_rest_now(self) -> bool:
+        gpu = self.model is not None and self.model.backend == "gpu"
+        return not gpu or (self.session.drag_state is None and self._advances % 30 == 0)
+
+    def advance(self) -> bool:
+        s, model = self.session, self.model
+        n = self._steps()
+        if model is None or n <= 0 or not self._may_run_now():
+            return False
+        self._advances += 1
+        check = self._check_rest_now()
+        before = self._positions_before(check)
+        t = time.perf_counter()
+        self._run(n)
+        s.timings["step"] = (time.perf_counter() - t) * 1000 / n
+        if check and s.drag_state is None:
+            # at rest: stop stepping (the field, and so the picture, holds still, and the
+            # renderer can build its skip maps) until the next edit
+            rest = self._at_rest(before)
+            if rest is not None:
+                s.settled = rest
+        s.handles_moved(throttle=model.backend == "gpu")
+        return True
+
+    def _may_run_now(self) -> bool:
+        return True
+
+    def _positions_before(self, check: bool) -> np.ndarray | None:
+        return None
+
+    def reset(self) -> None:
+        if self.model is not None:
+            self.model.reset()
+
+    # ---------------------------------------------------------------- drawing
+    def overlay(
+        self, handles: np.ndarray, display: DisplayOptions, to_world: ToWorld
+    ) -> list[OverlayLayer]:
+        if self.model is None:
+            return []
+        layers = []
+        if display.links:
+            edges = grid_edges(handles.reshape(*self.model.grid.shape, 3))
+            layers.append(OverlayLayer("lines", edges, COLORS["link"], name="links"))
+        fixed = self.fixed_handles(len(handles))
+        if display.elements:
+            layers.append(
+                OverlayLayer("points", handles[~fixed], COLORS["element"], 5.0, name="elements")
+            )
+        if display.fixed and np.any(fixed):
+            layers.append(OverlayLayer("points", handles[fixed], COLORS["fixed"], 7.0, "fixed"))
+        return layers
+
+    # ---------------------------------------------------------------- undo and animation
+    def snapshot(self) -> dict[str, Any]:
+        if self.model is None:
+            return {}
+        return {"model": self.model.to_dict(), "positions": self.model.positions()}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        if "model" in state:
+            self.model = self._from_dict(state["model"])
+
+    def set_keys(self, animation: Animation, frame: int, interpolation: str) -> None:
+        """The ``elements.drag`` key: held elements and offsets; others where they are."""
+        if self.model is None:
+            return
+        held = {tuple(h["index"]): h["offset"] for h in self.model.to_dict().get("held", [])}
+        t = track(animation, "elements.drag", interpolation)
+        old = [tuple(e) for e in (t.elements or [])]
+        elements = old + [e for e in held if e not in old]
+        if not elements:
+            return
+        disp = self.model.displacements()
+        extra = len(elements) - len(old)
+        if extra:  # elements held for the first time: earlier keys hold them at rest
+            t.keys = [
+                (f, None if v is None else _per_element(v, len(old)) + [[0.0, 0.0, 0.0]] * extra)
+                for f, v in t.keys
+            ]
+        t.elements = [list(e) for e in elements]
+        put_key(t, frame, [json_values(held[e] if e in held else disp[e]) for e in elements])
+
+
+def _per_element(value: Any, count: int) -> list[list[float]]:
+    """A drag key value (one offset or one per element) as ``count`` offsets."""
+    return np.broadcast_to(np.asarray(value, dtype=np.float64), (count, 3)).tolist()
+
+
+class MassSpringFamily(ElementFamily):
+    """Elements joined by springs, integrated in time (``steps_per_frame`` per frame)."""
+
+    kind = "massspring"
+    model_class = MassSpring
+
+    def _build(self, grid: ElementGrid) -> MassSpring:
+        s = self.session
+        return MassSpring(grid, backend=s.backend, ctx=self._ctx(), integrator=s.integrator)
+
+    def _steps(self) -> int:
+        return self.session.steps_per_frame
+
+    def _run(self, n: int) -> None:
+        assert isinstance(self.model, MassSpring)
+        self.model.step(n)
+
+    def _at_rest(self, before: np.ndarray | None) -> bool | None:
+        assert isinstance(self.model, MassSpring)
+        speed = np.sqrt(np.max(np.sum(self.model.velocities() ** 2, axis=-1)))
+        return bool(speed < SETTLED_SPEED)
+
+    def snapshot(self) -> dict[str, Any]:
+        state = super().snapshot()
+        if isinstance(self.model, MassSpring):
+            state["velocities"] = self.model.velocities()
+        return state
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        if isinstance(self.model, MassSpring):
+            self.model.set_state(state["positions"], state["velocities"])
+
+
+class ChainMailFamily(ElementFamily):
+    """Elements joined by ChainMail links; ``relax_steps`` relaxation steps per frame
+    (on the CPU: a GPU model relaxes between drags, never inside one)."""
+
+    kind = "chainmail"
+    model_class = ChainMail
+
+    def _build(self, grid: ElementGrid) -> ChainMail:
+        s = self.session
+        cm = ChainMail(grid, variant=s.variant, backend=s.backend, ctx=self._ctx())
+        # relaxation runs on the CPU (a GPU model is read back for it): a GPU model relaxes
+        # in advance() between drags, never inside a move
+        cm.relax_steps = s.relax_steps if s.backend == "cpu" else 0
+        return cm
+
+    def _from_dict(self, model: dict[str, Any]) -> ChainMail:
+        restored = super()._from_dict(model)
+        assert isinstance(restored, ChainMail)
+        if self.session.backend == "gpu":
+            restored.relax_steps = 0  # see _build
+        return restored
+
+    def _steps(self) -> int:
+        return self.session.relax_steps
+
+    def _may_run_now(self) -> bool:
+        # a GPU model's relaxation reads it back: not during a drag
+        gpu = self.model is not None and self.model.backend == "gpu"
+        return not (gpu and self.session.drag_state is not None)
+
+    def _positions_before(self, check: bool) -> np.ndarray | None:
+        return self.model.positions() if check and self.model is not None else None
+
+    def _run(self, n: int) -> None:
+        assert isinstance(self.model, ChainMail)
+        self.model.relax(n)
+
+    def _at_rest(self, before: np.ndarray | None) -> bool | None:
+        if before is None or self.model is None:
+            return None
+        return bool(np.max(np.abs(self.model.positions() - before)) < 1e-4)
+
+    def option_changed(self, name: str, value: Any) -> None:
+        if name == "relax_steps" and isinstance(self.model, ChainMail):
+            self.model.relax_steps = value if self.model.backend == "cpu" else 0
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        if isinstance(self.model, ChainMail):
+            self.model.set_state(state["positions"])

@@ -1,0 +1,110 @@
+"""The lattice family (Knuth et al., GRAPP 2010): a grid of trilinear cells over the
+volume's box; the handles are its nodes."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from voxwarp.deform.lattice_warp import LatticeWarp
+from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import Warp
+from voxwarp.editing.common import COLORS, DisplayOptions
+from voxwarp.editing.families.base import Family, ToWorld
+from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.render.overlay import OverlayLayer, grid_edges
+
+if TYPE_CHECKING:
+    from voxwarp.animation.tracks import Animation
+    from voxwarp.editing.session import EditSession
+
+#: most cells per axis of a new lattice
+MAX_CELLS = 8
+
+
+class LatticeFamily(Family):
+    """A trilinear lattice; its warp is rebuilt lazily after the nodes move."""
+
+    kind = "lattice"
+    has_grid = True
+
+    def __init__(self, session: EditSession) -> None:
+        super().__init__(session)
+        self.nodes: np.ndarray | None = None
+        self._warp: LatticeWarp | None = None
+
+    @property
+    def lattice_nodes(self) -> np.ndarray | None:
+        return self.nodes
+
+    def start(self) -> None:
+        """An undeformed lattice of ``resolution - 1`` cells per axis (at most 8)."""
+        cells = tuple(min(r - 1, MAX_CELLS) for r in self.session.resolution)
+        lo, hi = self.session.box
+        axes = (np.linspace(0.0, 1.0, c + 1) for c in cells)
+        u = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
+        self.set_nodes(lo + u * (hi - lo))
+
+    def close(self) -> None:
+        self.release(self._warp)
+        self._warp = None
+        self.nodes = None
+
+    @classmethod
+    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+        if not isinstance(warp, LatticeWarp):
+            return None
+        family = cls(session)
+        family.nodes = np.asarray(warp.grid.nodes, dtype=np.float64).copy()
+        family._warp = warp
+        return family
+
+    def set_nodes(self, nodes: np.ndarray) -> None:
+        """Move every node (the warp follows at the next :meth:`warp`)."""
+        shape = self.nodes.shape if self.nodes is not None else np.shape(nodes)
+        self.nodes = np.asarray(nodes, dtype=np.float64).reshape(shape)
+        self.release(self._warp)
+        self._warp = None
+
+    def warp(self) -> Warp | None:
+        if self.nodes is None:
+            return None
+        if self._warp is None:
+            self._warp = LatticeWarp(TrilinearGrid(self.nodes), self.session.box)
+        return self._warp
+
+    def handles(self) -> np.ndarray:
+        return self.nodes.reshape(-1, 3) if self.nodes is not None else np.zeros((0, 3))
+
+    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
+        nodes = drag["positions"].copy()
+        nodes[selection] += delta
+        self.set_nodes(nodes)
+
+    def reset(self) -> None:
+        self.session.set_deformation(self.kind)  # a fresh lattice, as when first chosen
+
+    def overlay(
+        self, handles: np.ndarray, display: DisplayOptions, to_world: ToWorld
+    ) -> list[OverlayLayer]:
+        if self.nodes is None or not display.lattice_cells:
+            return []
+        edges = grid_edges(handles.reshape(self.nodes.shape))
+        return [
+            OverlayLayer("lines", edges, COLORS["lattice"], name="cells"),
+            OverlayLayer("points", handles, COLORS["lattice"], 7.0, "nodes"),
+        ]
+
+    def snapshot(self) -> dict[str, Any]:
+        return {"nodes": self.nodes.copy()} if self.nodes is not None else {}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        if "nodes" in state:
+            self.nodes = state["nodes"].copy()
+
+    def set_keys(self, animation: Animation, frame: int, interpolation: str) -> None:
+        if self.nodes is not None:
+            put_key(
+                track(animation, "lattice.nodes", interpolation), frame, json_values(self.nodes)
+            )

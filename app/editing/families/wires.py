@@ -1,0 +1,383 @@
+"""The wire family (Singh and Fiume's wires, as a sweep-based attribute field): curves
+laid through the object; the handles are the control points of the *modified* wires
+(the base wires stay where they were laid). Editing one makes the attribute field
+stale: :meth:`WiresFamily.build_job` hands out a :class:`WireBuild` that can run off
+the GUI thread, and its result is installed only if nothing changed meanwhile."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from voxwarp.deform.warp import Warp, WarpError
+from voxwarp.deform.wires import Wire, WireDeformer, WireFieldWarp
+from voxwarp.editing.common import COLORS, WIRE_KINDS, DisplayOptions, EditorError, choice
+from voxwarp.editing.families.base import Family, ToWorld
+from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.render.overlay import OverlayLayer, polyline_segments
+
+if TYPE_CHECKING:
+    from voxwarp.animation.tracks import Animation
+    from voxwarp.editing.session import EditSession, Snapshot
+
+#: how the field may be built (``EditSession.wire_settings``)
+WIRE_SETTINGS = ("field_scale", "layout", "masks")
+
+
+@dataclass
+class WireBuild:
+    """A rebuild of the wire field, to run off the GUI thread.
+
+    :meth:`run` builds a new attribute field from a copy of the wires (nothing shared
+    with the field being drawn); :meth:`EditSession.install_wire_build` puts it in the
+    scene on the GUI thread, unless the wires changed again meanwhile. :meth:`cancel`
+    makes :meth:`run` stop at its next check and return ``None``.
+    """
+
+    generation: int
+    volume: Any
+    wires: list[Wire]
+    settings: dict[str, Any]
+    warp: WireFieldWarp | None = None
+    seconds: float = 0.0
+    _cancel: threading.Event = field(default_factory=threading.Event)
+
+    def cancel(self) -> None:
+        """Ask :meth:`run` to stop; its result is then dropped."""
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        """Whether :meth:`cancel` was called."""
+        return self._cancel.is_set()
+
+    def run(self, progress: Callable[[float, str], None] | None = None) -> WireFieldWarp | None:
+        """Build the field (thread-safe: touches only this job's objects)."""
+        t0 = time.perf_counter()
+        if progress:
+            progress(0.05, "laying the wires")
+        if self.cancelled:
+            return None
+        deformer = WireDeformer(self.volume, self.wires, **self.settings)
+        if progress:
+            progress(0.2, "propagating the attribute field")
+        deformer.build()
+        if self.cancelled:
+            return None
+        self.warp = deformer.warp()
+        self.seconds = time.perf_counter() - t0
+        if progress:
+            progress(1.0, "done")
+        return self.warp
+
+
+class WiresFamily(Family):
+    """Wires and their attribute field (see the module docstring)."""
+
+    kind = "wires"
+    has_grid = True
+
+    def __init__(self, session: EditSession) -> None:
+        super().__init__(session)
+        self._wires: list[Wire] = []
+        #: the field drawn, and the wire generation it was built from
+        self.field: WireFieldWarp | None = None
+        self.built = -1
+        #: a kept field that restore() installs (see adopt)
+        self._kept: WireFieldWarp | None = None
+        self._drawn: WireFieldWarp | None = None
+
+    @property
+    def wires(self) -> list[Wire]:
+        return self._wires
+
+    @wires.setter
+    def wires(self, value: list[Wire]) -> None:
+        self._wires = list(value)
+
+    # ---------------------------------------------------------------- life cycle
+    def start(self) -> None:
+        self._wires = [self._default_wire()]
+        self.changed()
+        self.refresh_field()
+
+    def _default_wire(self) -> Wire:
+        lo, hi = self.session.box
+        c = 0.5 * (lo + hi)
+        axis = int(np.argmax(hi - lo))
+        pts = np.repeat(c[None], 4, axis=0)
+        pts[:, axis] = lo[axis] + (hi[axis] - lo[axis]) * np.array([0.1, 0.37, 0.63, 0.9])
+        others = [a for a in range(3) if a != axis]
+        radius = 0.3 * float(min(hi[others[0]] - lo[others[0]], hi[others[1]] - lo[others[1]]))
+        return Wire(pts, pts.copy(), radius=radius, name="wire 1")
+
+    def close(self) -> None:
+        self.release(self.field)
+        self.field = None
+        self._wires = []
+
+    @classmethod
+    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+        if not isinstance(warp, WireFieldWarp):
+            return None
+        family = cls(session)
+        family._wires = list(warp.wires)
+        family.field = warp
+        family.built = session.wire_generation
+        spec = warp.to_dict()
+        settings = {k: spec[k] for k in WIRE_SETTINGS if k in spec}
+        session.wire_settings = settings or session.wire_settings
+        return family
+
+    # ---------------------------------------------------------------- the field
+    def changed(self) -> None:
+        """The wires or their settings changed: the field is stale from now on."""
+        self.session.wire_generation += 1
+
+    @property
+    def field_stale(self) -> bool:
+        return self.field is None or self.built != self.session.wire_generation
+
+    def warp(self) -> Warp | None:
+        return self.field
+
+    def build_job(self) -> WireBuild:
+        """A job rebuilding the field of the current wires (run it on any thread)."""
+        s = self.session
+        wires = [Wire.from_dict(w.to_dict()) for w in self._wires]
+        return WireBuild(s.wire_generation, s.volume, wires, dict(s.wire_settings))
+
+    def _install(self, warp: WireFieldWarp, generation: int) -> None:
+        if self.field is not None and self.field is not warp:
+            self.release(self.field)
+        self.field = warp
+        self.built = generation
+
+    def _build_now(self) -> None:
+        job = self.build_job()
+        warp = job.run()
+        assert warp is not None
+        self.session.timings["field"] = job.seconds * 1000
+        self._install(warp, job.generation)
+
+    def refresh_field(self) -> None:
+        """After a change of the wires: rebuild the field now (the session's
+        ``sync_wires``) or leave it stale for an off-thread :meth:`build_job` (the GUI)."""
+        if self.session.sync_wires:
+            self._build_now()
+
+    def install(self, job: WireBuild) -> bool:
+        """Put a finished build in the scene; whether it is of the current wires."""
+        if job.warp is None or job.cancelled:
+            return False
+        self._install(job.warp, job.generation)
+        self.session.timings["field"] = job.seconds * 1000
+        self.session.sync_warps()
+        return job.generation == self.session.wire_generation
+
+    def before_save(self) -> None:
+        if self.field_stale:
+            self._build_now()
+            self.session.sync_warps()
+
+    # ---------------------------------------------------------------- handles
+    def handles(self) -> np.ndarray:
+        if not self._wires:
+            return np.zeros((0, 3))
+        return np.concatenate([w.modified.control_points for w in self._wires])
+
+    def point(self, handle: int) -> tuple[int, int]:
+        """Handle index -> (wire, control point)."""
+        index = handle
+        for w, wire in enumerate(self._wires):
+            n = len(wire.modified.control_points)
+            if index < n:
+                return w, index
+            index -= n
+        raise EditorError(f"handle {handle} is not a wire control point")
+
+    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
+        start = drag["positions"]
+        for h in selection:
+            w, k = self.point(int(h))
+            pts = self._wires[w].modified.control_points.copy()
+            pts[k] = start[h] + delta
+            self._wires[w] = with_modified(self._wires[w], pts)
+        self.changed()
+
+    def reset(self) -> None:
+        self._wires = [with_modified(w, w.base.control_points) for w in self._wires]
+        self.changed()
+        self.refresh_field()
+
+    # ---------------------------------------------------------------- editing the wires
+    def wire(self, index: int) -> Wire:
+        """Wire ``index`` (an :class:`EditorError` when there is none)."""
+        if not 0 <= index < len(self._wires):
+            raise EditorError(f"no wire {index}: there are {len(self._wires)} wires")
+        return self._wires[index]
+
+    def set_points(self, index: int, points: np.ndarray) -> None:
+        """Move the modified control points of wire ``index``."""
+        self._wires[index] = with_modified(self.wire(index), points)
+        self.changed()
+
+    def set_parameters(
+        self,
+        index: int,
+        kind: str | None,
+        radius: float | None,
+        beta: tuple[float, float] | Literal["keep"] | None,
+    ) -> None:
+        """Change a wire's curve kind, influence radius (mm) or β (see the session)."""
+        w = self.wire(index)
+        d = w.to_dict()
+        if kind is not None:
+            kind = choice(kind, WIRE_KINDS, "wire kind")
+            if kind != w.kind:
+                d["base"] = _resampled(w.base.control_points, kind)
+                d["modified"] = _resampled(w.modified.control_points, kind)
+                d["kind"] = kind
+        if radius is not None:
+            d["radius"] = radius
+        if beta != "keep":
+            d["beta"] = None if beta is None else [float(beta[0]), float(beta[1])]
+        self._wires[index] = wire_from(d)
+        self.changed()
+
+    def set_key(self, handle: int, twist: float | None, scale: float | None) -> None:
+        """Set the twist or scale key at the control point of ``handle``."""
+        w, k = self.point(int(handle))
+        wire = self._wires[w]
+        t = _length_fraction(wire.modified, k)
+        d = wire.to_dict()
+        for name, value in (("twist", twist), ("scale", scale)):
+            if value is None:
+                continue
+            keys = [tuple(x) for x in (d.get(name) or []) if abs(float(x[0]) - t) > 1e-6]
+            keys.append((t, float(value)))
+            d[name] = sorted(keys)
+        self._wires[w] = wire_from(d)
+        self.changed()
+
+    def add(self, points: np.ndarray, kind: str, radius: float | None) -> int:
+        """A new wire through ``points`` (base = modified); returns its index."""
+        if radius is None:
+            extent = float(np.max(np.ptp(self.session.box, 0)))
+            radius = self._wires[-1].radius if self._wires else 0.1 * extent
+        wire = wire_from(
+            {
+                "base": points.tolist(),
+                "modified": points.tolist(),
+                "kind": kind,
+                "radius": radius,
+                "name": f"wire {len(self._wires) + 1}",
+            }
+        )
+        self._wires.append(wire)
+        self.changed()
+        return len(self._wires) - 1
+
+    def remove(self, index: int) -> None:
+        """Delete a wire (the last one cannot go)."""
+        self.wire(index)
+        if len(self._wires) == 1:
+            raise EditorError("a wire field needs a wire: choose deformation 'none' instead")
+        del self._wires[index]
+        self.changed()
+
+    # ---------------------------------------------------------------- drawing
+    def overlay(
+        self, handles: np.ndarray, display: DisplayOptions, to_world: ToWorld
+    ) -> list[OverlayLayer]:
+        layers = []
+        t = np.linspace(0.0, 1.0, 96)
+        for wire in self._wires:
+            if display.wires_base:
+                seg = polyline_segments(to_world(wire.base.evaluate(t)))
+                layers.append(OverlayLayer("lines", seg, COLORS["wire_base"], name="base"))
+            if display.wires_modified:
+                seg = polyline_segments(to_world(wire.modified.evaluate(t)))
+                layers.append(OverlayLayer("lines", seg, COLORS["wire_modified"], name="wire"))
+        if display.wires_modified and len(handles):
+            layers.append(OverlayLayer("points", handles, COLORS["wire_modified"], 8.0, "points"))
+        return layers
+
+    # ---------------------------------------------------------------- undo and animation
+    def snapshot(self) -> dict[str, Any]:
+        return {"wires": [w.to_dict() for w in self._wires]}
+
+    def adopt(self, previous: Family, snap: Snapshot) -> None:
+        """Keep the field drawn by ``previous`` (a wire family): as it is when ``snap``
+        has the same wires and settings and the field is up to date, else drawn until
+        the rebuilt one replaces it."""
+        if not isinstance(previous, WiresFamily):
+            return
+        same = (
+            snap.state.get("wires") == [w.to_dict() for w in previous.wires]
+            and snap.wire_settings == self.session.wire_settings
+        )
+        if same and not previous.field_stale:
+            self._kept = previous.field
+        else:
+            self._drawn = previous.field
+        previous.field = None  # not released by previous.close()
+
+    def restore(self, state: dict[str, Any]) -> None:
+        self._wires = [Wire.from_dict(w) for w in state.get("wires", [])]
+        self.changed()
+        if self._kept is not None:
+            self.field, self.built = self._kept, self.session.wire_generation
+        else:
+            self.field = self._drawn  # drawn until the rebuilt field replaces it
+            self.refresh_field()
+        self._kept = self._drawn = None
+
+    def set_keys(self, animation: Animation, frame: int, interpolation: str) -> None:
+        for i, wire in enumerate(self._wires):
+            value = json_values(wire.modified.control_points)
+            put_key(track(animation, f"wires[{i}].modified", interpolation), frame, value)
+
+
+# ---------------------------------------------------------------------------- helpers
+def with_modified(wire: Wire, points: np.ndarray) -> Wire:
+    """``wire`` with its modified curve through ``points``."""
+    d = wire.to_dict()
+    d["modified"] = np.asarray(points, dtype=np.float64).tolist()
+    return Wire.from_dict(d)
+
+
+def wire_from(d: dict[str, Any]) -> Wire:
+    """A wire from its dict; an :class:`EditorError` naming what is wrong."""
+    try:
+        return Wire.from_dict(d)
+    except (WarpError, TypeError, ValueError) as exc:
+        raise EditorError(str(exc)) from exc
+
+
+def _resampled(points: np.ndarray, kind: str) -> list[list[float]]:
+    """Control points for a curve of another kind through about the same places."""
+    p = np.asarray(points, dtype=np.float64)
+    if kind == "bezier":
+        n = 3 * max(1, math.ceil((len(p) - 1) / 3)) + 1
+    else:
+        n = max(2, len(p))
+    s = np.linspace(0.0, 1.0, len(p))
+    t = np.linspace(0.0, 1.0, n)
+    return np.stack([np.interp(t, s, p[:, a]) for a in range(3)], axis=1).tolist()
+
+
+def _length_fraction(curve: Any, k: int) -> float:
+    """Fraction of the curve's length at (the point closest to) control point ``k``."""
+    t, _ = curve.closest_point(curve.control_points[k])
+    t = float(np.asarray(t).reshape(-1)[0])
+    total = curve.arc_length()
+    if total <= 0:
+        return 0.0
+    return float(np.clip(curve.arc_length(t1=t) / total, 0.0, 1.0))
