@@ -126,6 +126,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.deform.chainmail_model import ChainMailError, ChainMailModel, check_limits
+from voxwarp.deform.element_model import ElementWarpMixin
 from voxwarp.deform.elements import ElementGrid, ElementGridError, Selection, grid_from_entry
 
 __all__ = [
@@ -235,7 +236,7 @@ def _kernels() -> Any:
     return chainmail_cpu
 
 
-class ChainMail:
+class ChainMail(ElementWarpMixin):
     """Interactive 3D ChainMail deformation of a volume (see the module doc).
 
     Parameters
@@ -263,6 +264,10 @@ class ChainMail:
     >>> stats.touched > 1, cm.violation() <= 1e-6
     (True, True)
     """
+
+    model_type = MODEL_TYPE
+    label = "ChainMail"
+    error = ChainMailError
 
     def __init__(
         self,
@@ -1010,45 +1015,6 @@ class ChainMail:
         self._update_warp()
 
     # ------------------------------------------------------------------ warp
-    def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
-        """The offset-field warp of the current displacements (one object, kept current).
-
-        As :meth:`MassSpring.warp <voxwarp.deform.massspring.MassSpring.warp>`: CPU backend,
-        built from :meth:`displacements` and updated after every :meth:`move`,
-        :meth:`relax`, :meth:`set_state`, :meth:`reset` and :meth:`fix`; GPU backend,
-        reads the solver's displacement texture. Its ``to_dict()`` (scene JSON) also
-        writes this model (``"model": {"type": "chainmail", **self.to_dict()}``) and
-        the rendered field, so a saved scene renders the same image and can resume
-        (:meth:`from_warp`). ``inverse`` / ``iterations``: see
-        :class:`voxwarp.deform.offset_field.OffsetFieldWarp` (``"baked"`` when first made).
-        """
-        from voxwarp.deform.offset_field import element_model_warp
-
-        self._warp = element_model_warp(
-            self._warp,
-            self.grid,
-            displacements=self.displacements,
-            solver=(lambda: self._solver) if self.backend == "gpu" else None,
-            model_source=self._model_snapshot,
-            inverse=inverse,
-            iterations=iterations,
-            error=ChainMailError,
-        )
-        return self._warp
-
-    def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:
-        model = {"type": MODEL_TYPE, **self.to_dict()}
-        if self.backend != "gpu":
-            return model, None
-        return model, self._rendered_field()
-
-    def _rendered_field(self) -> np.ndarray:
-        """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        from voxwarp.deform.offset_field import texture_field
-
-        field = texture_field(self._solver.displacement_texture(), self.grid.shape)
-        return self.displacements().astype(np.float64) if field is None else field
-
     def _update_warp(self) -> None:
         """Keep a CPU warp current: only the box of displaced elements (every element
         that changed since the last reset lies in it) is rewritten, so a local drag on
@@ -1213,36 +1179,6 @@ class ChainMail:
         if np.any(b >= np.asarray(self.grid.shape)):
             raise ChainMailError(f"{form}: a link leaves the grid of shape {self.grid.shape}")
         self.cut_pairs(np.stack([a, b], axis=1))
-
-    @classmethod
-    def from_warp(cls, warp: Any, backend: str = "cpu", ctx: Any = None) -> ChainMail:
-        """Resume the ChainMail model behind a warp loaded from scene JSON.
-
-        Parameters
-        ----------
-        warp
-            A :class:`voxwarp.deform.offset_field.OffsetFieldWarp` whose ``model_state`` is a
-            ``"chainmail"`` model.
-        backend, ctx
-            As for :meth:`from_dict`.
-
-        Returns
-        -------
-        ChainMail
-            The model with positions ``rest + displacements`` (the saved field); its
-            :meth:`warp` is a new warp, to be put in the scene in place of ``warp``.
-        """
-        from voxwarp.deform.offset_field import saved_model
-
-        state, positions = saved_model(warp, MODEL_TYPE, "ChainMail", "ChainMail", ChainMailError)
-        return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)
-
-    def close(self) -> None:
-        """Free the solver's and the warp's GPU resources; idempotent."""
-        if self._warp is not None:
-            self._warp.release()
-        if self._solver is not None:
-            self._solver.release()
 
     def __repr__(self) -> str:
         return (

@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.deform.element_model import ElementWarpMixin
 from voxwarp.deform.elements import ElementGrid, Selection, grid_from_entry
 from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
 from voxwarp.errors import VoxwarpError
@@ -275,7 +276,7 @@ class CpuSpringSolver:
             self._x, self._v = x_new, v_new
 
 
-class MassSpring:
+class MassSpring(ElementWarpMixin):
     """Interactive mass-spring deformation of a volume (see the module doc).
 
     Parameters
@@ -312,6 +313,10 @@ class MassSpring:
     >>> bool(ms.displacements()[2, 2, 4, 2] > 0)  # its neighbour followed
     True
     """
+
+    model_type = MODEL_TYPE
+    label = "mass-spring"
+    error = MassSpringError
 
     def __init__(
         self,
@@ -602,62 +607,6 @@ class MassSpring:
         """Kinetic plus spring potential energy (see :func:`spring_energy`)."""
         return spring_energy(self._model, self.positions(), self._solver.velocities())
 
-    def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
-        """The offset-field warp of the current displacements (one object, kept current).
-
-        Parameters
-        ----------
-        inverse, iterations
-            The warp's inverse mode (``"approx"``, ``"exact"`` or ``"baked"``) and
-            fixed-point iterations (see :class:`voxwarp.deform.offset_field.OffsetFieldWarp`);
-            ``None`` keeps the warp's current setting (``"baked"`` with its default
-            iterations when it is first made: the accuracy of ``"exact"`` at half the
-            texture fetches).
-
-        Returns
-        -------
-        voxwarp.deform.offset_field.OffsetFieldWarp
-            CPU backend: built from :meth:`displacements` and updated after every
-            :meth:`step`, :meth:`settle` and :meth:`move`. GPU backend: reads the
-            solver's displacement texture directly (no read-back). Either way its
-            ``to_dict()`` (scene JSON) also writes this model
-            (``"model": {"type": "massspring", **self.to_dict()}``) and the field that
-            is rendered (a GPU field is read back once, at save time), so that a saved
-            scene renders the same image and can resume the simulation
-            (:meth:`from_warp`).
-        """
-        from voxwarp.deform.offset_field import element_model_warp
-
-        self._warp = element_model_warp(
-            self._warp,
-            self.grid,
-            displacements=self.displacements,
-            solver=(lambda: self._solver) if self.backend == "gpu" else None,
-            model_source=self._model_snapshot,
-            inverse=inverse,
-            iterations=iterations,
-            error=MassSpringError,
-        )
-        return self._warp
-
-    def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:
-        """The warp's ``model_source``: this model's dict and, on the GPU, the field.
-
-        The GPU field is read from the displacement texture the renderer samples
-        (RGBA16F), so the saved displacements are bit for bit the rendered ones.
-        """
-        model = {"type": MODEL_TYPE, **self.to_dict()}
-        if self.backend != "gpu":
-            return model, None
-        return model, self._rendered_field()
-
-    def _rendered_field(self) -> np.ndarray:
-        """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        from voxwarp.deform.offset_field import texture_field
-
-        field = texture_field(self._solver.displacement_texture(), self.grid.shape)
-        return self.displacements().astype(np.float64) if field is None else field
-
     def _update_warp(self) -> None:
         if self._warp is not None and self.backend == "cpu":
             self._warp.update(self.displacements())
@@ -773,39 +722,6 @@ class MassSpring:
             raise
         return ms
 
-    @classmethod
-    def from_warp(cls, warp: Any, backend: str = "cpu", ctx: Any = None) -> MassSpring:
-        """Resume the simulation behind a warp loaded from scene JSON.
-
-        Parameters
-        ----------
-        warp
-            A :class:`voxwarp.deform.offset_field.OffsetFieldWarp` whose
-            :attr:`~voxwarp.deform.offset_field.OffsetFieldWarp.model_state` is a
-            ``"massspring"`` model (a scene saved with a mass-spring warp).
-        backend, ctx
-            As for :meth:`from_dict`.
-
-        Returns
-        -------
-        MassSpring
-            The model of ``warp.model_state`` with positions ``rest + displacements``
-            (the saved field) and velocities 0; its :meth:`warp` is a new warp, to be
-            put in the scene in place of ``warp``.
-
-        Raises
-        ------
-        MassSpringError
-            When the warp carries no mass-spring model, or the model and the field do
-            not fit together.
-        """
-        from voxwarp.deform.offset_field import saved_model
-
-        state, positions = saved_model(
-            warp, MODEL_TYPE, "mass-spring", "MassSpring", MassSpringError
-        )
-        return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)
-
     def set_state(self, positions: Any, velocities: Any = None) -> None:
         """Replace the element positions (and velocities; default 0).
 
@@ -845,12 +761,6 @@ class MassSpring:
         self._solver.set_state(arrays[0], arrays[1])
         self._sync_constraints()
         self._update_warp()
-
-    def close(self) -> None:
-        """Free the solver's and the warp's GPU resources; idempotent."""
-        if self._warp is not None:
-            self._warp.release()
-        self._solver.release()
 
     def __repr__(self) -> str:
         return (

@@ -1,0 +1,143 @@
+"""What mass-spring and 3D ChainMail have in common: a grid of elements that can be
+fixed, held at offsets and read back, with an offset-field warp for the raycaster.
+
+:class:`ElementModel` names the interface (a ``typing.Protocol``; the edit session and
+the animation code use only these methods). :class:`ElementWarpMixin` is the one
+implementation both models share of the warp, its scene-JSON snapshot, resuming from a
+saved warp and releasing GPU resources.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from typing import Self
+
+    from voxwarp.deform.elements import ElementGrid, Selection
+
+
+@runtime_checkable
+class ElementModel(Protocol):
+    """An element model over an :class:`~voxwarp.deform.elements.ElementGrid`."""
+
+    grid: ElementGrid
+    #: ``"cpu"`` or ``"gpu"``
+    backend: str
+
+    def fix(self, sel: Selection) -> None:
+        """Fix elements at rest."""
+
+    def free(self, sel: Selection) -> None:
+        """Free fixed elements."""
+
+    def move(self, sel: Selection, offsets: Any) -> Any:
+        """Hold elements at ``offsets`` (mm) from rest; the model moves the rest."""
+
+    def release(self, sel: Selection = None) -> None:
+        """Stop holding elements (all by default)."""
+
+    def reset(self) -> None:
+        """Back to rest, nothing held."""
+
+    def positions(self) -> np.ndarray:
+        """(nx, ny, nz, 3) element positions (mm)."""
+
+    def displacements(self) -> np.ndarray:
+        """(nx, ny, nz, 3) positions minus rest positions (mm)."""
+
+    def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
+        """The offset-field warp of the current displacements."""
+
+    def to_dict(self, include_positions: bool = False) -> dict[str, Any]:
+        """JSON form (:meth:`from_dict` reads it back)."""
+
+    def close(self) -> None:
+        """Free GPU resources; idempotent."""
+
+
+class ElementWarpMixin:
+    """The warp side shared by :class:`~voxwarp.deform.massspring.MassSpring` and
+    :class:`~voxwarp.deform.chainmail.ChainMail`.
+
+    A model sets :attr:`model_type` (its ``"type"`` in scene JSON), :attr:`label` (its
+    name in messages) and :attr:`error` (its exception class), and keeps ``grid``,
+    ``backend``, ``_warp`` and ``_solver`` (the GPU solver, or None).
+    """
+
+    model_type: ClassVar[str]
+    label: ClassVar[str]
+    error: ClassVar[type[Exception]]
+    grid: ElementGrid
+    backend: str
+    _warp: Any
+    _solver: Any
+
+    def displacements(self) -> np.ndarray:  # pragma: no cover - the models define it
+        raise NotImplementedError
+
+    def to_dict(self, include_positions: bool = False) -> dict[str, Any]:  # pragma: no cover
+        raise NotImplementedError
+
+    def warp(self, inverse: str | None = None, iterations: int | None = None) -> Any:
+        """The offset-field warp of the current displacements (one object, kept current).
+
+        ``inverse`` and ``iterations``: the warp's inverse mode (``"approx"``,
+        ``"exact"`` or ``"baked"``) and fixed-point iterations (see
+        :class:`voxwarp.deform.offset_field.OffsetFieldWarp`); ``None`` keeps the
+        current setting (``"baked"`` when first made). CPU backend: built from
+        :meth:`displacements` and kept current by every change of the model. GPU
+        backend: reads the solver's displacement texture (no read-back). Its
+        ``to_dict()`` also writes this model and the field rendered, so a saved scene
+        renders the same image and resumes (:meth:`from_warp`).
+        """
+        from voxwarp.deform.offset_field import element_model_warp
+
+        self._warp = element_model_warp(
+            self._warp,
+            self.grid,
+            displacements=self.displacements,
+            solver=(lambda: self._solver) if self.backend == "gpu" else None,
+            model_source=self._model_snapshot,
+            inverse=inverse,
+            iterations=iterations,
+            error=self.error,
+        )
+        return self._warp
+
+    def _model_snapshot(self) -> tuple[dict[str, Any], np.ndarray | None]:
+        """The warp's ``model_source``: this model's dict and, on the GPU, the field
+        read from the displacement texture the renderer samples (so the saved
+        displacements are bit for bit the rendered ones)."""
+        model = {"type": self.model_type, **self.to_dict()}
+        if self.backend != "gpu":
+            return model, None
+        return model, self._rendered_field()
+
+    def _rendered_field(self) -> np.ndarray:
+        """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
+        from voxwarp.deform.offset_field import texture_field
+
+        field = texture_field(self._solver.displacement_texture(), self.grid.shape)
+        return self.displacements().astype(np.float64) if field is None else field
+
+    @classmethod
+    def from_warp(cls, warp: Any, backend: str = "cpu", ctx: Any = None) -> Self:
+        """Resume the model behind a warp loaded from scene JSON: the model of
+        ``warp.model_state`` with positions ``rest + displacements`` (the saved field);
+        its :meth:`warp` is a new warp, to put in the scene in place of ``warp``.
+        Raises the model's error when the warp carries no such model or the model and
+        the field do not fit together."""
+        from voxwarp.deform.offset_field import saved_model
+
+        state, positions = saved_model(warp, cls.model_type, cls.label, cls.__name__, cls.error)
+        return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)  # type: ignore[attr-defined]
+
+    def close(self) -> None:
+        """Free the solver's and the warp's GPU resources; idempotent."""
+        if self._warp is not None:
+            self._warp.release()
+        if self._solver is not None:
+            self._solver.release()
