@@ -32,7 +32,9 @@ the GUI runs per frame), else 10 and 1. Each track keys one *target*; its ``keys
 increasing). Before the first key a track holds the first value, after the last key
 the last value.
 
-Targets and their values:
+Targets and their values (the deformation families' targets, ``wires[i]...``,
+``lattice.nodes`` and ``elements.drag``, are handled by one module per family in
+:mod:`voxwarp.animation.targets`):
 
 ``camera``
     A camera object (:meth:`voxwarp.core.camera.Camera.to_dict`; missing fields come from the
@@ -105,11 +107,9 @@ i.e. the key frames are scaled to the new length; the physics still runs
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import os
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -117,10 +117,20 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.animation.targets import (
+    FAMILY_TARGET_NAMES,
+    TARGET_FAMILIES,
+    Binding,
+    TargetFamily,
+    family_of,
+    repeatable,
+    track_elements,
+)
+from voxwarp.animation.values import AnimationError, array, interpolate, key_weights, number
 from voxwarp.core.camera import Camera
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.transfer_function import TransferFunction
-from voxwarp.errors import SceneError, VoxwarpError
+from voxwarp.errors import SceneError
 from voxwarp.scene import Scene, read_scene_dict
 
 #: key of the animation entry in scene JSON
@@ -150,84 +160,11 @@ TARGETS: tuple[str, ...] = (
     "camera",
     "transfer_function",
     *SCALAR_TARGETS,
-    "wires[i].modified",
-    "wires[i].twist",
-    "wires[i].scale",
-    "lattice.nodes",
-    "elements.drag",
+    *FAMILY_TARGET_NAMES,
 )
-_WIRE_TARGET = re.compile(r"^wires\[(\d+)\]\.(modified|twist|scale)$")
-
-
-class AnimationError(VoxwarpError, ValueError):
-    """An animation entry is invalid or does not fit its scene (names the fix)."""
 
 
 # ---------------------------------------------------------------------------- interpolation
-def key_weights(
-    frames: Sequence[float], frame: float, interpolation: str = "linear"
-) -> tuple[int, int, float]:
-    """Where ``frame`` falls among key ``frames``: ``(i, j, t)`` with the value
-    ``(1 - t) v_i + t v_j``.
-
-    Parameters
-    ----------
-    frames
-        Strictly increasing key frames.
-    frame
-        The frame to evaluate (any number; clamped to the first/last key).
-    interpolation
-        ``"linear"`` or ``"smooth"`` (smoothstep-eased ``t``; see the module doc).
-
-    Returns
-    -------
-    tuple
-        ``(i, j, t)``; ``t == 0`` exactly on a key (then ``i`` is that key).
-    """
-    f = np.asarray(frames, dtype=np.float64)
-    x = float(frame)
-    if x <= f[0]:
-        return 0, 0, 0.0
-    if x >= f[-1]:
-        return len(f) - 1, len(f) - 1, 0.0
-    j = int(np.searchsorted(f, x, side="right"))
-    i = j - 1
-    t = (x - f[i]) / (f[j] - f[i])
-    if interpolation == "smooth":
-        t = t * t * (3.0 - 2.0 * t)
-    return i, j, float(t)
-
-
-def interpolate(
-    keys: Sequence[tuple[float, Any]], frame: float, interpolation: str = "linear"
-) -> np.ndarray:
-    """Blend array values of ``[(frame, value), ...]`` keys at ``frame``.
-
-    Parameters
-    ----------
-    keys
-        ``(frame, value)`` pairs, frames strictly increasing, values arrays of one shape.
-    frame
-        Frame to evaluate.
-    interpolation
-        ``"linear"`` or ``"smooth"``.
-
-    Returns
-    -------
-    numpy.ndarray
-        float64 array of the values' shape (the key's own value on a key; never outside
-        the range of the two keys around ``frame``, component by component).
-    """
-    i, j, t = key_weights([k[0] for k in keys], frame, interpolation)
-    a = np.asarray(keys[i][1], dtype=np.float64)
-    if t == 0.0:
-        return a.copy()
-    b = np.asarray(keys[j][1], dtype=np.float64)
-    # a + t (b - a) is exact for equal keys; the clip keeps rounding inside the keys'
-    # range (a transfer function's 1.0 never becomes 1.0000000000000002)
-    return np.clip(a + t * (b - a), np.minimum(a, b), np.maximum(a, b))
-
-
 def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
     """Unit quaternion ``(w, x, y, z)`` of a 3x3 rotation matrix (Shepperd's method).
 
@@ -359,15 +296,6 @@ def interpolate_camera(
 
 
 # ---------------------------------------------------------------------------- parsing
-def _number(x: Any, what: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, int | float):
-        raise AnimationError(f"{what} must be a number; got {x!r:.60}")
-    v = float(x)
-    if not math.isfinite(v):
-        raise AnimationError(f"{what} must be finite; got {x!r}")
-    return v
-
-
 def _count(x: Any, what: str, lo: int, hi: int) -> int:
     if isinstance(x, bool) or not isinstance(x, int | float) or float(x) != int(x):
         raise AnimationError(f"{what} must be an integer {lo}..{hi}; got {x!r:.60}")
@@ -376,30 +304,11 @@ def _count(x: Any, what: str, lo: int, hi: int) -> int:
     return int(x)
 
 
-def _array(x: Any, what: str, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
-    """A finite float64 array; ``shape`` entries None match any length."""
-    if isinstance(x, str | bytes | Mapping) or x is None:
-        raise AnimationError(f"{what} must be numbers; got {x!r:.60}")
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise AnimationError(f"{what} must be numbers; got {x!r:.60}") from exc
-    if shape is not None and (
-        a.ndim != len(shape)
-        or any(s is not None and s != n for s, n in zip(shape, a.shape, strict=True))
-    ):
-        want = "x".join("N" if s is None else str(s) for s in shape) or "a single number"
-        raise AnimationError(f"{what} must have shape {want}; got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise AnimationError(f"{what} has NaN/Inf entries")
-    return a
-
-
 def _target_name(target: Any) -> str:
     if isinstance(target, str) and (
-        target in ("camera", "transfer_function", "lattice.nodes", "elements.drag")
+        target in ("camera", "transfer_function")
         or target in SCALAR_TARGETS
-        or _WIRE_TARGET.match(target)
+        or family_of(target) is not None
     ):
         return target
     raise AnimationError(f"unknown animation target {target!r}; targets: {', '.join(TARGETS)}")
@@ -489,7 +398,7 @@ class Track:
         for n, k in enumerate(raw):
             if not isinstance(k, list | tuple) or len(k) != 2:
                 raise AnimationError(f"{where}: key {n} must be [frame, value]; got {k!r:.60}")
-            f = _number(k[0], f"{where}: key {n}'s frame")
+            f = number(k[0], f"{where}: key {n}'s frame")
             if not 0 <= f <= frames - 1:
                 raise AnimationError(
                     f"{where}: key {n}'s frame {f:g} is outside the animation's frames"
@@ -501,29 +410,7 @@ class Track:
                     f" {keys[-1][0]:g}"
                 )
             keys.append((f, _check_value(target, k[1], f"{where}: key {n}")))
-        elements = None
-        if target == "elements.drag":
-            if "elements" not in d:
-                raise AnimationError(
-                    f"{where} needs 'elements': the [i, j, k] indices of the held elements"
-                )
-            e = d["elements"]
-            a = _array(e, f"{where}: elements", None)
-            if a.ndim == 1:
-                a = a.reshape(1, -1)
-            if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0 or np.any(a != np.round(a)):
-                raise AnimationError(
-                    f"{where}: elements must be a list of integer [i, j, k] indices; got {e!r:.60}"
-                )
-            elements = a.astype(int).tolist()
-            for n, (_, v) in enumerate(keys):
-                if v is not None and np.shape(v) not in ((3,), (len(elements), 3)):
-                    raise AnimationError(
-                        f"{where}: key {n}'s offset must be [dx, dy, dz] or one per element"
-                        f" ({len(elements)}x3), or null; got shape {np.shape(v)}"
-                    )
-        elif "elements" in d:
-            raise AnimationError(f"{where}: 'elements' belongs to elements.drag tracks only")
+        elements = track_elements(target, d, keys, where)
         return cls(target, keys, interpolation, elements)
 
 
@@ -544,20 +431,17 @@ def _jsonable(v: Any) -> Any:
 
 def _check_value(target: str, v: Any, what: str) -> Any:
     """Checks of a key value that need no scene; returns the JSON value."""
-    if target in SCALAR_TARGETS:
+    family = family_of(target)
+    if family is not None:
+        family.check_value(target, v, what)
+    elif target in SCALAR_TARGETS:
         shape = SCALAR_TARGETS[target]
         if target == "background" and isinstance(v, list) and len(v) == 3:
             shape = (3,)
         if shape == ():
-            _number(v, what)
+            number(v, what)
         else:
-            _array(v, what, shape)
-    elif target == "elements.drag":
-        if v is not None:
-            _array(v, f"{what} (an offset in mm)")
-    elif target == "lattice.nodes":
-        if not (isinstance(v, str) and v == "rest"):
-            _array(v, f"{what} (lattice nodes)", (None, None, None, 3))
+            array(v, what, shape)
     elif target == "camera":
         if not isinstance(v, Mapping):
             raise AnimationError(
@@ -567,15 +451,6 @@ def _check_value(target: str, v: Any, what: str) -> Any:
     elif target == "transfer_function":
         if not isinstance(v, str | list | Mapping):
             raise AnimationError(f"{what} must be control points, {{'points': ...}} or a preset")
-    else:
-        m = _WIRE_TARGET.match(target)
-        assert m is not None
-        if m.group(2) == "modified":
-            _array(v, f"{what} (control points)", (None, 3))
-        elif not isinstance(v, int | float) or isinstance(v, bool):
-            _array(v, f"{what} ({m.group(2)} keys [[u, value], ...])", (None, 2))
-        else:
-            _number(v, what)
     return v
 
 
@@ -643,7 +518,7 @@ class Animation:
         if "frames" not in d:
             raise AnimationError("animation needs 'frames': the number of frames (>= 1)")
         frames = _count(d["frames"], "animation 'frames'", 1, MAX_FRAMES)
-        fps = _number(d.get("fps", DEFAULT_FPS), "animation 'fps'")
+        fps = number(d.get("fps", DEFAULT_FPS), "animation 'fps'")
         if not 0 < fps <= 1000:
             raise AnimationError(f"animation 'fps' must be in (0, 1000]; got {fps:g}")
         steps = d.get("steps_per_frame")
@@ -656,7 +531,7 @@ class Animation:
         if not isinstance(tracks, list):
             raise AnimationError("animation 'tracks' must be a list of track objects")
         parsed = [Track.from_dict(t, frames, f"track {n}") for n, t in enumerate(tracks)]
-        singles = [t.target for t in parsed if t.target != "elements.drag"]
+        singles = [t.target for t in parsed if not repeatable(t.target)]
         twice = sorted({t for t in singles if singles.count(t) > 1})
         if twice:
             raise AnimationError(f"animation: more than one track keys {', '.join(twice)}")
@@ -828,28 +703,15 @@ def _physics(own: int | None, editor: Any, default: int) -> int:
     return default
 
 
-def _find_warp(scene: Scene, cls: type, what: str, target: str) -> int:
-    hits = [n for n, w in enumerate(scene.warps) if isinstance(w, cls)]
-    if len(hits) != 1:
-        raise AnimationError(
-            f"track {target} needs a scene with exactly one {what} warp; this scene has"
-            f" {len(hits)} (warps: {[w.kind for w in scene.warps]})"
-        )
-    return hits[0]
-
-
 class _Bound:
-    """An animation bound to its scene: resolved key values and the physics model."""
+    """An animation bound to its scene: resolved key values and each family's binding."""
 
     def __init__(self, base: Scene, template: dict[str, Any], anim: Animation) -> None:
         self.base = base
         self.template = template
-        self.tracks: list[tuple[Track, list[tuple[float, Any]]]] = []
-        self.model: Any = None
-        self.model_warp = -1
-        self.model_inverse: tuple[str, int] | None = None
-        self.wire_warp = -1
-        self.lattice_warp = -1
+        self.tracks: list[tuple[Track, list[tuple[float, Any]], Binding | None]] = []
+        #: the bound families, by handler (see :mod:`voxwarp.animation.targets`)
+        self.bindings: dict[TargetFamily, Binding] = {}
         targets = {t.target for t in anim.tracks}
         if targets & {"zoom", "fov"} and (base.camera is not None or "camera" in targets):
             raise AnimationError(
@@ -864,29 +726,42 @@ class _Bound:
                 for f, v in t.keys:
                     first = values[0][1] if values else None
                     values.append((f, self._resolve(t, v, f, first)))
-                self.tracks.append((t, values))
+                family = family_of(t.target)
+                self.tracks.append((t, values, self.bindings.get(family) if family else None))
         except BaseException:
             self.close()
             raise
 
     def close(self) -> None:
-        if self.model is not None:
-            self.model.close()
-            self.model = None
+        for binding in self.bindings.values():
+            binding.close()
+
+    def _ordered(self) -> list[Binding]:
+        """The bindings in the registry's order."""
+        return [self.bindings[f] for f in TARGET_FAMILIES if f in self.bindings]
 
     # -------------------------------------------------------------- key values
     def _resolve(self, t: Track, v: Any, f: float, first: Any) -> Any:
         what = f"track {t.target}, key at frame {f:g}"
         try:
+            family = family_of(t.target)
+            if family is not None:
+                return self._bind(family, t.target).resolve(t, v, what, first)
             return self._resolve_value(t, v, what, first)
         except AnimationError:
             raise
         except (SceneError, ValueError, TypeError) as exc:
             raise AnimationError(f"{what}: {exc}") from exc
 
+    def _bind(self, family: TargetFamily, target: str) -> Binding:
+        """The family's binding to the scene (bound at its first key)."""
+        if family not in self.bindings:
+            self.bindings[family] = family.bind(self.base, self.template, target)
+        return self.bindings[family]
+
     def _resolve_value(self, t: Track, v: Any, what: str, first: Any) -> Any:
+        """A key value of a scene attribute (camera, transfer function, numbers)."""
         target = t.target
-        base = self.base
         if target in SCALAR_TARGETS:
             a = np.asarray(v, dtype=np.float64)
             if target == "background" and a.shape == (3,):
@@ -900,66 +775,14 @@ class _Bound:
                     f" here, {first.projection} in the first key"
                 )
             return cam
-        if target == "transfer_function":
-            tf = TransferFunction.coerce(v, base.volume)
-            pts = np.asarray(tf.points, dtype=np.float64)
-            if first is not None and first.shape != pts.shape:
-                raise AnimationError(
-                    f"{what}: every transfer function key needs the same number of control"
-                    f" points to be interpolated; {len(pts)} here, {len(first)} in the first"
-                )
-            return pts
-        if target == "lattice.nodes":
-            from voxwarp.deform.lattice_warp import LatticeWarp
-
-            k = _find_warp(base, LatticeWarp, "lattice", target)
-            self.lattice_warp = k
-            w = base.warps[k]
-            shape = np.asarray(w.grid.nodes).shape
-            if isinstance(v, str) and v == "rest":
-                cells = [n - 1 for n in shape[:3]]
-                u = np.stack(
-                    np.meshgrid(*(np.linspace(0.0, 1.0, c + 1) for c in cells), indexing="ij"),
-                    -1,
-                )
-                return w.lo + u * (w.hi - w.lo)
-            a = np.asarray(v, dtype=np.float64)
-            if a.shape != shape:
-                raise AnimationError(
-                    f"{what}: lattice nodes must have the scene lattice's shape {shape};"
-                    f" got {a.shape}"
-                )
-            return a
-        if target == "elements.drag":
-            return self._drag_value(t, v, what)
-        m = _WIRE_TARGET.match(target)
-        assert m is not None
-        from voxwarp.deform.wires import Wire, WireFieldWarp
-
-        k = _find_warp(base, WireFieldWarp, "wires", target)
-        self.wire_warp = k
-        wires = self.template["warps"][k]["wires"]
-        i, part = int(m.group(1)), m.group(2)
-        if i >= len(wires):
+        tf = TransferFunction.coerce(v, self.base.volume)
+        pts = np.asarray(tf.points, dtype=np.float64)
+        if first is not None and first.shape != pts.shape:
             raise AnimationError(
-                f"{what}: no wire {i}; the scene's wire warp has {len(wires)} wire(s)"
-                f" (indices 0..{len(wires) - 1})"
+                f"{what}: every transfer function key needs the same number of control"
+                f" points to be interpolated; {len(pts)} here, {len(first)} in the first"
             )
-        if part == "modified":
-            a = np.asarray(v, dtype=np.float64)
-        elif isinstance(v, int | float):
-            a = np.array([[0.0, float(v)]])
-        else:
-            a = np.asarray(v, dtype=np.float64)
-        if first is not None and first.shape != a.shape:
-            raise AnimationError(
-                f"{what}: every key of {target} needs the same shape to be interpolated;"
-                f" {a.shape} here, {first.shape} in the first key"
-            )
-        entry = dict(wires[i])
-        entry[part] = a.tolist()
-        Wire.from_dict(entry)  # validates: Bézier counts, u in [0, 1], scale > 0
-        return a
+        return pts
 
     def _camera(self, v: dict[str, Any], what: str) -> Camera:
         base = self.base
@@ -989,108 +812,47 @@ class _Bound:
             cam = Camera.from_dict({**self.camera.to_dict(), **v})
         return cam
 
-    def _drag_value(self, t: Track, v: Any, what: str) -> Any:
-        from voxwarp.deform.chainmail import ChainMail
-        from voxwarp.deform.massspring import MassSpring
-        from voxwarp.deform.offset_field import OffsetFieldWarp
-
-        if self.model is None:
-            hits = [
-                n
-                for n, w in enumerate(self.base.warps)
-                if isinstance(w, OffsetFieldWarp)
-                and isinstance(w.model_state, Mapping)
-                and w.model_state.get("type") in ("massspring", "chainmail")
-            ]
-            if len(hits) != 1:
-                raise AnimationError(
-                    "track elements.drag needs a scene with exactly one mass-spring or ChainMail"
-                    f" model (an offset_field warp saved with its model); this scene has"
-                    f" {len(hits)}: save one from the editor or with `voxwarp render"
-                    " --massspring/--chainmail ... --save-scene`"
-                )
-            k = hits[0]
-            w = self.base.warps[k]
-            cls = MassSpring if w.model_state["type"] == "massspring" else ChainMail
-            self.model = cls.from_warp(w)
-            if isinstance(self.model, ChainMail):
-                self.model.relax_steps = 0  # relax_steps per frame run in frame()
-            self.model_warp = k
-            self.model_inverse = (w.inverse, w.iterations)
-        self.model.grid.indices(np.asarray(t.elements))  # inside the grid?
-        if v is None:
-            return None
-        a = np.asarray(v, dtype=np.float64)
-        return np.broadcast_to(a, (len(t.elements or []), 3)).copy()
-
     # -------------------------------------------------------------- frames
     def frame(self, f: float, index: int, steps: int, relax: int) -> dict[str, Any]:
         """Scene dict of animation time ``f`` (advances the physics by one frame)."""
-        from voxwarp.deform.massspring import MassSpring
-
         d = dict(self.template)
         d["warps"] = list(self.template["warps"])
         d["camera"] = self.camera.to_dict()
-        wire_entry: dict[str, Any] | None = None
         refit: dict[str, Any] = {}
-        drags: list[tuple[np.ndarray, Any]] = []
-        for t, keys in self.tracks:
-            target = t.target
-            if target == "elements.drag":
-                drags.append((np.asarray(t.elements), _drag_at(keys, f, t.interpolation)))
-            elif target == "camera":
-                d["camera"] = interpolate_camera(keys, f, t.interpolation).to_dict()
-            elif target == "transfer_function":
-                pts = interpolate(keys, f, t.interpolation)
-                d["transfer_function"] = {
-                    "name": self.base.transfer_function.name,
-                    "points": pts.tolist(),
-                }
-            elif target in SCALAR_TARGETS:
-                a = interpolate(keys, f, t.interpolation)
-                value = float(a) if a.ndim == 0 else a.tolist()
-                if target in ("zoom", "fov"):
-                    refit[target] = value
-                d[target] = value
-            elif target == "lattice.nodes":
-                entry = dict(d["warps"][self.lattice_warp])
-                entry["grid"] = {"nodes": interpolate(keys, f, t.interpolation).tolist()}
-                d["warps"][self.lattice_warp] = entry
+        for t, keys, binding in self.tracks:
+            if binding is not None:
+                binding.apply(d, t, keys, f)
             else:
-                m = _WIRE_TARGET.match(target)
-                assert m is not None
-                if wire_entry is None:
-                    wire_entry = copy.deepcopy(d["warps"][self.wire_warp])
-                    d["warps"][self.wire_warp] = wire_entry
-                value = interpolate(keys, f, t.interpolation)
-                wire_entry["wires"][int(m.group(1))][m.group(2)] = value.tolist()
+                self._apply(d, t, keys, f, refit)
         if refit:
             d["camera"] = self.base.copy(camera=None, **refit).resolved_camera().to_dict()
-        if self.model is not None:
-            try:
-                for elements, offsets in drags:
-                    if offsets is None:
-                        self.model.release(elements)
-                    else:
-                        self.model.move(elements, offsets)
-                if isinstance(self.model, MassSpring):
-                    self.model.step(steps)
-                else:
-                    self.model.relax(relax)
-            except (ValueError, TypeError) as exc:
-                raise AnimationError(f"frame {index}: elements.drag: {exc}") from exc
-            assert self.model_inverse is not None
-            inverse, iterations = self.model_inverse
-            warp = self.model.warp(inverse=inverse, iterations=iterations)
-            d["warps"][self.model_warp] = warp.to_dict()
+        for binding in self._ordered():
+            binding.step(d, index, steps, relax)
         self._check_frame(d, index)
         return d
 
+    def _apply(
+        self, d: dict[str, Any], t: Track, keys: list[tuple[float, Any]], f: float, refit: dict
+    ) -> None:
+        """Write a scene attribute's value at ``f`` into ``d`` (``refit``: zoom and fov)."""
+        target = t.target
+        if target == "camera":
+            d["camera"] = interpolate_camera(keys, f, t.interpolation).to_dict()
+        elif target == "transfer_function":
+            pts = interpolate(keys, f, t.interpolation)
+            d["transfer_function"] = {
+                "name": self.base.transfer_function.name,
+                "points": pts.tolist(),
+            }
+        else:
+            a = interpolate(keys, f, t.interpolation)
+            value = float(a) if a.ndim == 0 else a.tolist()
+            if target in ("zoom", "fov"):
+                refit[target] = value
+            d[target] = value
+
     def _check_frame(self, d: dict[str, Any], index: int) -> None:
         """Cheap checks of a frame's interpolated values (no volume, no wire field)."""
-        from voxwarp.deform.lattice_warp import LatticeWarp
-        from voxwarp.deform.wires import Wire
-
         try:
             Camera.from_dict(d["camera"])
             if isinstance(d.get("transfer_function"), Mapping):
@@ -1099,19 +861,7 @@ class _Bound:
                 **{k: d[k] for k in ("step", "zoom", "fov", "window", "clip_box") if k in d},
                 background=tuple(d["background"]),
             )
-            if self.lattice_warp >= 0:
-                LatticeWarp.from_dict(d["warps"][self.lattice_warp])
-            if self.wire_warp >= 0:
-                for w in d["warps"][self.wire_warp]["wires"]:
-                    Wire.from_dict(w)
+            for binding in self._ordered():
+                binding.check(d)
         except (SceneError, ValueError, TypeError) as exc:
             raise AnimationError(f"frame {index}: {exc}") from exc
-
-
-def _drag_at(keys: Sequence[tuple[float, Any]], f: float, interpolation: str) -> Any:
-    """Offsets of a drag track at ``f`` (None: released); steps across null keys."""
-    i, j, t = key_weights([k[0] for k in keys], f, interpolation)
-    a, b = keys[i][1], keys[j][1]
-    if t == 0.0 or a is None or b is None:
-        return None if a is None else np.array(a, dtype=np.float64)
-    return a + t * (b - a)

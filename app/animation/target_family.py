@@ -1,0 +1,82 @@
+"""The interface of a deformation family's animation targets.
+
+A :class:`TargetFamily` names a family's targets and checks their key values without a
+scene; :meth:`TargetFamily.bind` finds the family's warp in a scene and returns a
+:class:`Binding`, which resolves key values against it and writes each frame's state.
+The evaluator of :mod:`voxwarp.animation.tracks` only talks to these two classes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from voxwarp.animation.values import AnimationError
+
+if TYPE_CHECKING:
+    from voxwarp.animation.tracks import Track
+    from voxwarp.scene import Scene
+
+#: ``(frame, value)`` pairs of a track, resolved against the scene
+Keys = Sequence[tuple[float, Any]]
+
+
+class Binding:
+    """A family's targets bound to one scene for one evaluation (keys, frames, physics)."""
+
+    def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
+        """A key value checked against the scene (``first``: the track's first, resolved)."""
+        raise NotImplementedError
+
+    def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
+        """Write ``track``'s value at animation time ``f`` into frame dict ``d``."""
+        raise NotImplementedError
+
+    def step(self, d: dict[str, Any], index: int, steps: int, relax: int) -> None:
+        """Advance the family's physics by frame ``index`` (after every track applied)."""
+
+    def check(self, d: dict[str, Any]) -> None:
+        """Cheap checks of the family's warp entry in frame dict ``d``."""
+
+    def close(self) -> None:
+        """Free what the binding holds (a physics model)."""
+
+
+class TargetFamily:
+    """The animation targets of one deformation family (one instance, registered in
+    :data:`voxwarp.animation.targets.TARGET_FAMILIES`)."""
+
+    #: the family's targets as listed in :data:`voxwarp.animation.tracks.TARGETS`
+    names: ClassVar[tuple[str, ...]] = ()
+    #: whether several tracks may key one target
+    repeatable: ClassVar[bool] = False
+    #: whether its tracks take an ``"elements"`` entry
+    takes_elements: ClassVar[bool] = False
+
+    def matches(self, target: str) -> bool:
+        """Whether ``target`` is one of the family's."""
+        return target in self.names
+
+    def check_value(self, target: str, value: Any, what: str) -> None:
+        """Checks of a key value that need no scene (raise :class:`AnimationError`)."""
+        raise NotImplementedError
+
+    def elements(self, d: Mapping[str, Any], keys: Keys, where: str) -> list[list[int]]:
+        """The checked ``"elements"`` entry of track ``d`` (families that take it)."""
+        raise AnimationError(f"{where}: this target takes no 'elements'")
+
+    def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
+        """Find the family's warp in ``base`` (``template``: its JSON form) for a track
+        of ``target``; raise :class:`AnimationError` when the scene has none to key."""
+        raise NotImplementedError
+
+
+def find_warp(scene: Scene, cls: type, what: str, target: str) -> int:
+    """Index of the scene's one warp of class ``cls`` (``what`` names it for ``target``)."""
+    hits = [n for n, w in enumerate(scene.warps) if isinstance(w, cls)]
+    if len(hits) != 1:
+        raise AnimationError(
+            f"track {target} needs a scene with exactly one {what} warp; this scene has"
+            f" {len(hits)} (warps: {[w.kind for w in scene.warps]})"
+        )
+    return hits[0]
