@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib.metadata
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -24,6 +25,8 @@ ROOT = Path(__file__).resolve().parent.parent
 #: modules that must not load on ``import voxwarp`` or ``voxwarp --help``
 HEAVY = ("numba", "scipy", "pyopencl", "PySide6", "dask", "distributed", "matplotlib")
 OLD_NAMES = ("app", "deform", "ui", "shaders", "sample_volumes")
+#: what a source distribution leaves out (copied trees of the core-only install)
+NOT_PACKAGED = (".git", ".venv", "build", "*.egg-info", "__pycache__", "tests", "out", ".*cache")
 
 
 def _python(code: str, cwd: Path, exe: str = sys.executable) -> str:
@@ -103,6 +106,19 @@ def test_renders_beside_a_users_own_app_package(tmp_path: Path) -> None:
     assert int(brightest) > 0
 
 
+def test_every_package_folder_is_installed() -> None:
+    """pyproject lists the packages one by one (package-dir maps the folders): a folder
+    with an ``__init__.py`` missing from the list would be left out of the wheel."""
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    package_dir = config["tool"]["setuptools"]["package-dir"]
+    found = set()
+    for name, folder in package_dir.items():
+        for init in (ROOT / folder).rglob("__init__.py"):
+            rel = init.parent.relative_to(ROOT / folder)
+            found.add(".".join((name, *rel.parts)))
+    assert found == set(config["tool"]["setuptools"]["packages"])
+
+
 def test_extras_match_pyproject() -> None:
     config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     declared = set(config["project"]["optional-dependencies"]) - {"all", "dev", "bench"}
@@ -131,8 +147,10 @@ def test_core_only_install_renders_headless(tmp_path: Path) -> None:
     env_dir = tmp_path / "venv"
     venv.create(env_dir, with_pip=True)
     py = env_dir / "bin" / "python"
+    source = tmp_path / "source"  # a copy: pip builds in the tree and would leave build/
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(*NOT_PACKAGED))
     res = subprocess.run(
-        [str(py), "-m", "pip", "install", "-q", "--disable-pip-version-check", str(ROOT)],
+        [str(py), "-m", "pip", "install", "-q", "--disable-pip-version-check", str(source)],
         capture_output=True,
         text=True,
         timeout=1200,
