@@ -17,6 +17,7 @@ _PUBLIC: dict[str, str] = {
     "ChainMailError": "voxwarp.deform.chainmail_model",
     "ElementGrid": "voxwarp.deform.elements",
     "ElementGridError": "voxwarp.deform.elements",
+    "ElementModel": "voxwarp.deform.element_model",
     "LatticeWarp": "voxwarp.deform.lattice_warp",
     "CpuSpringSolver": "voxwarp.deform.massspring",
     "MassSpring": "voxwarp.deform.massspring",
@@ -57,6 +58,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
     from voxwarp.deform.chainmail import ChainMail, MoveStats
     from voxwarp.deform.chainmail_model import ChainMailError
+    from voxwarp.deform.element_model import ElementModel
     from voxwarp.deform.elements import ElementGrid, ElementGridError
     from voxwarp.deform.lattice_warp import LatticeWarp
     from voxwarp.deform.massspring import CpuSpringSolver, MassSpring
