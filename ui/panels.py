@@ -1,8 +1,9 @@
 """Dock panels of the main window: volume look, deformation, display toggles, scene tree.
 
 Every panel is a plain :class:`QWidget` built as ``Panel(window)`` and placed by the
-window in a :class:`QDockWidget`. The panels talk to the window only through this
-contract (see ``ui/main_window.py``)::
+window in a :class:`QDockWidget`. The widgets of each deformation family are in its panel
+of :mod:`voxwarp.ui.family_panels`, shown by :class:`DeformationPanel`. The panels talk
+to the window only through this contract (see ``ui/main_window.py``)::
 
     window.session: EditSession            # replaced when a file is opened
     window.viewport.display: DisplayOptions
@@ -32,27 +33,20 @@ every edit, undo, redo and open.
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import QSize, Qt, QTimer
+from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
     QDoubleSpinBox,
     QFormLayout,
-    QFrame,
     QGridLayout,
     QGroupBox,
     QHBoxLayout,
     QLabel,
     QPushButton,
-    QScrollArea,
-    QSizePolicy,
-    QSpinBox,
     QTreeWidget,
     QTreeWidgetItem,
     QVBoxLayout,
@@ -60,18 +54,17 @@ from PySide6.QtWidgets import (
 )
 
 from voxwarp.core.camera import PROJECTIONS
-from voxwarp.editing.session import (
-    BACKENDS,
-    CHAINMAIL_VARIANTS,
-    DEFORMATIONS,
-    INTEGRATORS,
-    WIRE_KINDS,
-    DisplayOptions,
-    EditorError,
-    EditSession,
-    Placement,
-)
+from voxwarp.editing.session import DEFORMATIONS, DisplayOptions, EditSession, Placement
 from voxwarp.scene import MODES
+from voxwarp.ui.family_panels import FAMILY_PANELS, FamilyPanel, ModelOptions, family_label
+from voxwarp.ui.family_panels.wires import FIELD_SCALES, wire_of_handle
+from voxwarp.ui.panel_base import (
+    Panel,
+    combo,
+    double_spin,
+    set_combo_data,
+    value_decimals,
+)
 
 __all__ = [
     "DISPLAY_LABELS",
@@ -90,8 +83,6 @@ SHADING_CHOICES: tuple[tuple[str, bool | None], ...] = (
     ("on", True),
     ("off", False),
 )
-#: Per-axis reductions of the wire attribute field offered (``wire_settings["field_scale"]``).
-FIELD_SCALES: tuple[int, ...] = (1, 2, 4, 8, 16)
 #: Check box labels of the :class:`~voxwarp.editing.session.DisplayOptions` fields (others: field
 #: name).
 DISPLAY_LABELS: dict[str, str] = {
@@ -105,175 +96,11 @@ DISPLAY_LABELS: dict[str, str] = {
     "grid_box": "Deformation grid box",
     "clip_box": "Clipping box",
 }
-#: Human names of the deformation families (model combo box and edit names).
-DEFORMATION_LABELS: dict[str, str] = {
-    "none": "none",
-    "massspring": "mass-spring",
-    "chainmail": "ChainMail",
-    "wires": "wires",
-    "lattice": "lattice",
-}
 AXES = ("x", "y", "z")
 
 
-# ---------------------------------------------------------------------------- helpers
-def _double_spin(
-    lo: float,
-    hi: float,
-    step: float,
-    decimals: int = 2,
-    suffix: str = "",
-    tooltip: str = "",
-) -> QDoubleSpinBox:
-    """A compact double spin box that reports a value only when typing is finished."""
-    spin = QDoubleSpinBox()
-    spin.setRange(lo, hi)
-    spin.setDecimals(decimals)
-    spin.setSingleStep(step)
-    spin.setSuffix(suffix)
-    spin.setKeyboardTracking(False)
-    spin.setAccelerated(True)
-    spin.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
-    spin.setMinimumWidth(40)
-    if tooltip:
-        spin.setToolTip(tooltip)
-    return spin
-
-
-def _int_spin(lo: int, hi: int, tooltip: str = "") -> QSpinBox:
-    spin = QSpinBox()
-    spin.setRange(lo, hi)
-    spin.setKeyboardTracking(False)
-    if tooltip:
-        spin.setToolTip(tooltip)
-    return spin
-
-
-def _combo(items: tuple[str, ...] | list[str], tooltip: str = "") -> QComboBox:
-    combo = QComboBox()
-    combo.addItems(list(items))
-    if tooltip:
-        combo.setToolTip(tooltip)
-    return combo
-
-
-def _set_combo_data(combo: QComboBox, value: Any) -> None:
-    """Select the entry whose item data equals ``value`` (no change when none does)."""
-    for i in range(combo.count()):
-        if combo.itemData(i) == value:
-            combo.setCurrentIndex(i)
-            return
-
-
-def _value_decimals(span: float) -> int:
-    """Decimals that show about three significant digits of a value range ``span``."""
-    if not math.isfinite(span) or span <= 0:
-        return 3
-    return int(np.clip(3 - math.floor(math.log10(span)), 0, 6))
-
-
-def wire_of_handle(session: EditSession, handle: int | None) -> tuple[int, int] | None:
-    """``(wire, control point)`` of a handle index of the wires deformation, or None.
-
-    Parameters
-    ----------
-    session
-        The session (its ``wires``; handles are the modified wires' control points in
-        order).
-    handle
-        A handle index (e.g. ``session.reference``) or None.
-
-    Returns
-    -------
-    tuple of int or None
-        The wire's index and the control point's index in it; None when ``handle`` is
-        None or not a wire control point.
-    """
-    if handle is None or handle < 0:
-        return None
-    index = int(handle)
-    for w, wire in enumerate(session.wires):
-        n = len(wire.modified.control_points)
-        if index < n:
-            return w, index
-        index -= n
-    return None
-
-
-class _Panel(QWidget):
-    """Common plumbing: the window, the session, the refresh guard, edits."""
-
-    def __init__(self, window: Any, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
-        self._window = window
-        self._updating = False
-        self._body: QWidget | None = None
-        self._scroll: QScrollArea | None = None
-
-    def _scrolling_body(self) -> QWidget:
-        """The widget to put the panel's content in: it scrolls vertically, so that a
-        dock can be shorter than the content (the main window's height stays free)."""
-        outer = QVBoxLayout(self)
-        outer.setContentsMargins(0, 0, 0, 0)
-        self._scroll = QScrollArea()
-        self._scroll.setWidgetResizable(True)
-        self._scroll.setFrameShape(QFrame.Shape.NoFrame)
-        self._scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        self._body = QWidget()
-        self._scroll.setWidget(self._body)
-        outer.addWidget(self._scroll)
-        return self._body
-
-    def _scrollbar_width(self) -> int:
-        assert self._scroll is not None
-        return self._scroll.verticalScrollBar().sizeHint().width()
-
-    def sizeHint(self) -> QSize:
-        """The content's size (plus room for the scroll bar)."""
-        if self._body is None:
-            return super().sizeHint()
-        hint = self._body.sizeHint()
-        return QSize(hint.width() + self._scrollbar_width(), hint.height())
-
-    def minimumSizeHint(self) -> QSize:
-        """The content's width (never cut off sideways), a short height (it scrolls)."""
-        if self._body is None:
-            return super().minimumSizeHint()
-        hint = self._body.minimumSizeHint()
-        return QSize(hint.width() + self._scrollbar_width(), min(hint.height(), 120))
-
-    @property
-    def session(self) -> EditSession:
-        """The window's current session (re-read every time: opening a file replaces it)."""
-        return self._window.session
-
-    @contextmanager
-    def _refreshing(self) -> Iterator[None]:
-        """Widget changes made inside do not trigger edits."""
-        previous, self._updating = self._updating, True
-        try:
-            yield
-        finally:
-            self._updating = previous
-
-    def _edit(self, text: str, fn: Callable[[], Any], merge: str | None = None) -> Any:
-        return self._window.edit(text, fn, merge=merge)
-
-    def _edit_look(self, text: str, name: str, value: Any, merge: str | None = None) -> None:
-        """Set ``session.scene.<name>`` as an edit, then tell the window the look changed."""
-        if self._updating:
-            return
-
-        def fn() -> bool:
-            setattr(self.session.scene, name, value)
-            return True
-
-        if self._edit(text, fn, merge) is not None:
-            self._window.scene_changed()
-
-
 # ---------------------------------------------------------------------------- volume
-class VolumePanel(_Panel):
+class VolumePanel(Panel):
     """The volume and how it is rendered: mode, projection, sampling, window, clipping.
 
     Parameters
@@ -305,17 +132,17 @@ class VolumePanel(_Panel):
         render_box = QGroupBox("Rendering")
         form = QFormLayout(render_box)
         form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
-        self.mode_combo = _combo(
+        self.mode_combo = combo(
             MODES,
             "dvr: emission-absorption; mip/minip: maximum/minimum intensity; average:"
             " X-ray like; flm: first local maximum; iso: shaded isosurface",
         )
         self.mode_combo.currentTextChanged.connect(self._mode_changed)
         form.addRow("Mode", self.mode_combo)
-        self.projection_combo = _combo(PROJECTIONS)
+        self.projection_combo = combo(PROJECTIONS)
         self.projection_combo.currentTextChanged.connect(self._projection_changed)
         form.addRow("Projection", self.projection_combo)
-        self.step_spin = _double_spin(
+        self.step_spin = double_spin(
             0.1,
             8.0,
             0.1,
@@ -326,10 +153,10 @@ class VolumePanel(_Panel):
         )
         self.step_spin.valueChanged.connect(self._step_changed)
         form.addRow("Sample distance", self.step_spin)
-        self.level_spin = _double_spin(-1e9, 1e9, 1.0, 3, tooltip="Window centre (data units)")
+        self.level_spin = double_spin(-1e9, 1e9, 1.0, 3, tooltip="Window centre (data units)")
         self.level_spin.valueChanged.connect(self._window_changed)
         form.addRow("Window level", self.level_spin)
-        self.width_spin = _double_spin(1e-6, 1e9, 1.0, 3, tooltip="Window width (data units)")
+        self.width_spin = double_spin(1e-6, 1e9, 1.0, 3, tooltip="Window width (data units)")
         self.width_spin.valueChanged.connect(self._window_changed)
         form.addRow("Window width", self.width_spin)
         self.shading_combo = QComboBox()
@@ -357,8 +184,8 @@ class VolumePanel(_Panel):
         grid.addWidget(self.clip_check, 0, 0, 1, 3)
         self.clip_spins: list[tuple[QDoubleSpinBox, QDoubleSpinBox]] = []
         for a, axis in enumerate(AXES):
-            lo = _double_spin(-1e6, 1e6, 1.0, 2, " mm", f"Low {axis} of the clipping box")
-            hi = _double_spin(-1e6, 1e6, 1.0, 2, " mm", f"High {axis} of the clipping box")
+            lo = double_spin(-1e6, 1e6, 1.0, 2, " mm", f"Low {axis} of the clipping box")
+            hi = double_spin(-1e6, 1e6, 1.0, 2, " mm", f"High {axis} of the clipping box")
             lo.valueChanged.connect(lambda _v, a=a: self._clip_changed(a, 0))
             hi.valueChanged.connect(lambda _v, a=a: self._clip_changed(a, 1))
             grid.addWidget(QLabel(axis), a + 1, 0)
@@ -384,7 +211,7 @@ class VolumePanel(_Panel):
             self.step_spin.setValue(scene.step)
             vlo, vhi = vol.value_range
             span = max(vhi - vlo, scene.window[1], 1e-6)
-            decimals = _value_decimals(span)
+            decimals = value_decimals(span)
             step = max(span / 100.0, 10.0**-decimals)
             for spin in (self.level_spin, self.width_spin):
                 spin.setDecimals(decimals)
@@ -396,7 +223,7 @@ class VolumePanel(_Panel):
             self.width_spin.setRange(10.0**-decimals, max(2.0 * reach, width))
             self.level_spin.setValue(level)
             self.width_spin.setValue(width)
-            _set_combo_data(self.shading_combo, scene.shading)
+            set_combo_data(self.shading_combo, scene.shading)
             self.jitter_check.setChecked(scene.jitter)
             lo, hi = (np.asarray(b, dtype=np.float64) for b in vol.bounds)
             box = scene.clip_box
@@ -470,8 +297,12 @@ class VolumePanel(_Panel):
 
 
 # ---------------------------------------------------------------------------- deformation
-class DeformationPanel(_Panel):
-    """The deformation model, its simulation, wires and placement, and timings.
+class DeformationPanel(Panel):
+    """The deformation model, the current family's panel, placement and timings.
+
+    The family's own widgets live in its panel (:data:`FAMILY_PANELS`); the panel shows
+    that of ``session.kind`` and offers the family panels' ``exposed`` widgets as its own
+    attributes (``steps_spin``, ``wire_group``, ``wire_kind()``, ...).
 
     Parameters
     ----------
@@ -484,15 +315,11 @@ class DeformationPanel(_Panel):
 
     def __init__(self, window: Any, parent: QWidget | None = None) -> None:
         super().__init__(window, parent)
-        self._fraction_cache: tuple[Any, ...] | None = None
-        self._fraction: float | None = None
         self._timings_text = ""
-        self._beta_volume: Any = None
         layout = QVBoxLayout(self._scrolling_body())
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addWidget(self._build_model_group())
-        layout.addWidget(self._build_simulation_group())
-        layout.addWidget(self._build_wire_group())
+        self._family_panels = self._build_family_panels(layout)
         layout.addWidget(self._build_placement_group())
         self.timings_label = QLabel()
         self.timings_label.setWordWrap(True)
@@ -513,27 +340,16 @@ class DeformationPanel(_Panel):
         self.model_form = form
         self.model_combo = QComboBox()
         for kind in DEFORMATIONS:
-            self.model_combo.addItem(DEFORMATION_LABELS.get(kind, kind), kind)
+            self.model_combo.addItem(family_label(kind), kind)
         self.model_combo.setToolTip("Deformation family (choosing one builds it at rest)")
         self.model_combo.currentIndexChanged.connect(self._model_changed)
         form.addRow("Model", self.model_combo)
-        self.backend_combo = _combo(BACKENDS, "Where mass-spring and ChainMail run")
-        form.addRow("Backend", self.backend_combo)
-        self.resolution_spin = _int_spin(
-            2,
-            32,
-            "Elements per axis (mass-spring, ChainMail); lattice: cells + 1 per axis"
-            " (at most 8 cells)",
-        )
-        form.addRow("Resolution", self.resolution_spin)
-        self.integrator_combo = _combo(INTEGRATORS, "Mass-spring time integration")
-        form.addRow("Integrator", self.integrator_combo)
-        self.variant_combo = _combo(CHAINMAIL_VARIANTS, "ChainMail variant")
-        form.addRow("Variant", self.variant_combo)
-        self.stiffness_spin = _double_spin(
-            0.01, 1.0, 0.05, 2, tooltip="Element stiffness of new models (0..1]"
-        )
-        form.addRow("Stiffness", self.stiffness_spin)
+        self.options = ModelOptions(form)
+        self.backend_combo = self.options.backend_combo
+        self.resolution_spin = self.options.resolution_spin
+        self.integrator_combo = self.options.integrator_combo
+        self.variant_combo = self.options.variant_combo
+        self.stiffness_spin = self.options.stiffness_spin
         row = QHBoxLayout()
         self.apply_button = QPushButton("Apply")
         self.apply_button.setToolTip("Build a new model at rest with these settings")
@@ -548,125 +364,21 @@ class DeformationPanel(_Panel):
         form.addRow(row)
         return box
 
-    def _build_simulation_group(self) -> QGroupBox:
-        self.simulation_group = QGroupBox("Simulation")
-        form = QFormLayout(self.simulation_group)
-        form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
-        self.simulation_form = form
-        row = QHBoxLayout()
-        self.run_button = QPushButton("Pause")
-        self.run_button.setCheckable(True)
-        self.run_button.setToolTip("Run or pause the simulation")
-        self.run_button.toggled.connect(self._run_toggled)
-        self.step_button = QPushButton("Step")
-        self.step_button.setToolTip("One step of the model, also while paused")
-        self.step_button.clicked.connect(self._single_step)
-        row.addWidget(self.run_button)
-        row.addWidget(self.step_button)
-        form.addRow(row)
-        self.steps_spin = _int_spin(0, 1000, "Mass-spring steps per frame while running")
-        self.steps_spin.valueChanged.connect(
-            lambda v: self._option_changed(
-                "steps_per_frame", "Steps per frame", "steps per frame", v
-            )
-        )
-        form.addRow("Steps per frame", self.steps_spin)
-        self.relax_spin = _int_spin(0, 16, "ChainMail relaxation steps per frame while running")
-        self.relax_spin.valueChanged.connect(
-            lambda v: self._option_changed("relax_steps", "Relaxation steps", "relax steps", v)
-        )
-        form.addRow("Relax steps", self.relax_spin)
-        row = QHBoxLayout()
-        self.fix_button = QPushButton("Fix selected")
-        self.fix_button.setToolTip("The selected elements stay where they are")
-        self.fix_button.clicked.connect(lambda: self._set_fixed(True))
-        self.free_button = QPushButton("Free selected")
-        self.free_button.setToolTip("The selected elements move again")
-        self.free_button.clicked.connect(lambda: self._set_fixed(False))
-        row.addWidget(self.fix_button)
-        row.addWidget(self.free_button)
-        form.addRow(row)
-        return self.simulation_group
+    def _build_family_panels(self, layout: QVBoxLayout) -> dict[str, FamilyPanel]:
+        """One panel per panel class of :data:`FAMILY_PANELS` (shared by its families),
+        added to ``layout``; their ``exposed`` attributes become this panel's."""
+        built: dict[type[FamilyPanel], FamilyPanel] = {}
+        for cls in FAMILY_PANELS.values():
+            if cls not in built:
+                built[cls] = cls(self._window, self.refresh)
+                layout.addWidget(built[cls])
+                self._expose(built[cls])
+        return {kind: built[cls] for kind, cls in FAMILY_PANELS.items()}
 
-    def _build_wire_group(self) -> QGroupBox:
-        self.wire_group = QGroupBox("Wires")
-        form = QFormLayout(self.wire_group)
-        form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
-        self.wire_label = QLabel()
-        self.wire_label.setWordWrap(True)
-        form.addRow(self.wire_label)
-        self.wire_kind_combo = _combo(
-            WIRE_KINDS, "Curve of the selected wire (and of the next wire laid)"
-        )
-        self.wire_kind_combo.currentTextChanged.connect(self._wire_kind_changed)
-        form.addRow("Curve", self.wire_kind_combo)
-        self.radius_spin = _double_spin(
-            0.01,
-            1e5,
-            1.0,
-            2,
-            " mm",
-            "Region of influence of the selected wire (and of the next wire laid)",
-        )
-        self.radius_spin.valueChanged.connect(self._radius_changed)
-        form.addRow("Radius", self.radius_spin)
-        self.beta_check = QCheckBox("Object classification")
-        self.beta_check.setToolTip(
-            "β: only voxels with values in [low, high] follow the selected wire;"
-            " unchecked: everything within the radius"
-        )
-        self.beta_check.toggled.connect(self._beta_toggled)
-        form.addRow(self.beta_check)
-        row = QHBoxLayout()
-        self.beta_lo_spin = _double_spin(-1e9, 1e9, 1.0, 3, tooltip="Lowest value of the object")
-        self.beta_hi_spin = _double_spin(-1e9, 1e9, 1.0, 3, tooltip="Highest value of the object")
-        self.beta_lo_spin.valueChanged.connect(self._beta_range_changed)
-        self.beta_hi_spin.valueChanged.connect(self._beta_range_changed)
-        row.addWidget(self.beta_lo_spin)
-        row.addWidget(QLabel("–"))
-        row.addWidget(self.beta_hi_spin)
-        form.addRow("β range", row)
-        self.twist_spin = _double_spin(
-            -720.0, 720.0, 5.0, 1, "°", "Twist about the wire at the reference control point"
-        )
-        form.addRow("Twist", self.twist_spin)
-        self.scale_spin = _double_spin(
-            0.05, 20.0, 0.05, 2, tooltip="Cross-section scale at the reference control point"
-        )
-        form.addRow("Scale", self.scale_spin)
-        self.set_key_button = QPushButton("Set at point")
-        self.set_key_button.setToolTip(
-            "Key this twist and scale at the reference control point (select one first)"
-        )
-        self.set_key_button.clicked.connect(self._set_wire_key)
-        form.addRow(self.set_key_button)
-        self.field_scale_combo = QComboBox()
-        for s in FIELD_SCALES:
-            self.field_scale_combo.addItem(f"1/{s}" if s > 1 else "full", s)
-        self.field_scale_combo.setToolTip(
-            "Resolution of the wire attribute field per axis (coarser builds faster)"
-        )
-        self.field_scale_combo.currentIndexChanged.connect(self._field_scale_changed)
-        form.addRow("Field resolution", self.field_scale_combo)
-        row = QHBoxLayout()
-        self.lay_button = QPushButton("New wire: click points")
-        self.lay_button.setCheckable(True)
-        self.lay_button.setToolTip(
-            "Click control points of a new wire in the viewport (on the plane through the"
-            " volume's centre, parallel to the image), then Finish wire"
-        )
-        self.lay_button.toggled.connect(self._lay_toggled)
-        self.finish_button = QPushButton("Finish wire")
-        self.finish_button.setToolTip("Make the clicked points a wire (curve and radius above)")
-        self.finish_button.clicked.connect(self._finish_wire)
-        row.addWidget(self.lay_button)
-        row.addWidget(self.finish_button)
-        form.addRow(row)
-        self.remove_wire_button = QPushButton("Remove wire")
-        self.remove_wire_button.setToolTip("Delete the selected wire (not the last one)")
-        self.remove_wire_button.clicked.connect(self._remove_wire)
-        form.addRow(self.remove_wire_button)
-        return self.wire_group
+    def _expose(self, panel: FamilyPanel) -> None:
+        for name in panel.exposed:
+            assert not hasattr(self, name), f"two family panels expose {name}"
+            setattr(self, name, getattr(panel, name))
 
     def _build_placement_group(self) -> QGroupBox:
         self.placement_group = QGroupBox("Placement of the grid")
@@ -680,9 +392,9 @@ class DeformationPanel(_Panel):
             label.setAlignment(Qt.AlignmentFlag.AlignCenter)
             grid.addWidget(label, 0, c + 1)
             grid.setColumnStretch(c + 1, 1)
-        self.translate_spins = [_double_spin(-1e5, 1e5, 1.0, 1) for _ in AXES]
-        self.rotate_spins = [_double_spin(-360.0, 360.0, 5.0, 1) for _ in AXES]
-        self.scale_spins = [_double_spin(0.05, 20.0, 0.05, 2) for _ in AXES]
+        self.translate_spins = [double_spin(-1e5, 1e5, 1.0, 1) for _ in AXES]
+        self.rotate_spins = [double_spin(-360.0, 360.0, 5.0, 1) for _ in AXES]
+        self.scale_spins = [double_spin(0.05, 20.0, 0.05, 2) for _ in AXES]
         rows = (
             ("Move mm", self.translate_spins),
             ("Rotate °", self.rotate_spins),
@@ -700,113 +412,21 @@ class DeformationPanel(_Panel):
         return self.placement_group
 
     # ------------------------------------------------------------------ refresh
+    @property
+    def family_panel(self) -> FamilyPanel:
+        """The panel of the session's current family."""
+        return self._family_panels[self.session.kind]
+
     def refresh(self) -> None:
-        """Show the current session's model, settings, wires and placement (no edit)."""
+        """Show the current session's model, settings, family and placement (no edit)."""
         s = self.session
         with self._refreshing():
-            _set_combo_data(self.model_combo, s.kind)
-            self.backend_combo.setCurrentText(s.backend)
-            self.resolution_spin.setValue(int(max(s.resolution)))
-            self.integrator_combo.setCurrentText(s.integrator)
-            self.variant_combo.setCurrentText(s.variant)
-            self.stiffness_spin.setValue(s.stiffness)
-            self.run_button.setChecked(bool(s.running))
-            self.run_button.setText("Pause" if s.running else "Run")
-            self.steps_spin.setValue(s.steps_per_frame)
-            self.relax_spin.setValue(s.relax_steps)
-            has_elements = s.kind in ("massspring", "chainmail") and s.model is not None
-            for button in (self.fix_button, self.free_button, self.step_button):
-                button.setEnabled(has_elements)
-            self.reset_button.setEnabled(s.kind != "none")
-            self._refresh_wires(s)
+            set_combo_data(self.model_combo, s.kind)
+            self.options.refresh(s)
+            self.reset_button.setEnabled(self.family_panel.editable)
+            self.family_panel.refresh(s)
             self._refresh_placement(s)
-            self._update_visibility(s.kind)
-
-    def _current_wire(self, s: EditSession) -> tuple[int, int | None] | None:
-        """(wire, control point or None) the wire widgets edit: that of the reference or
-        the last selected handle, else wire 0; None without wires."""
-        if s.kind != "wires" or not s.wires:
-            return None
-        for handle in (s.reference, s.selection[-1] if s.selection else None):
-            hit = wire_of_handle(s, handle)
-            if hit is not None:
-                return hit
-        return 0, None
-
-    def _reference_fraction(self, s: EditSession) -> float | None:
-        """Fraction of its wire's length at the reference control point (cached)."""
-        hit = wire_of_handle(s, s.reference) if s.kind == "wires" else None
-        if hit is None:
-            return None
-        key = (id(s), s.reference, s.wire_generation, len(s.wires))
-        if key != self._fraction_cache:
-            curve = s.wires[hit[0]].modified
-            t, _ = curve.closest_point(curve.control_points[hit[1]])
-            t = float(np.asarray(t).reshape(-1)[0])
-            total = curve.arc_length()
-            self._fraction = (
-                0.0 if total <= 0 else float(np.clip(curve.arc_length(t1=t) / total, 0.0, 1.0))
-            )
-            self._fraction_cache = key
-        return self._fraction
-
-    def _refresh_wires(self, s: EditSession) -> None:
-        current = self._current_wire(s)
-        pending = len(s.pending_wire)
-        laying = bool(getattr(self._window.viewport, "laying_wire", False))
-        self.lay_button.setChecked(laying)
-        self.finish_button.setEnabled(pending > 0)
-        self.field_scale_combo.setCurrentIndex(
-            max(0, self.field_scale_combo.findData(int(s.wire_settings.get("field_scale", 2))))
-        )
-        lo, hi = s.volume.value_range
-        span = max(hi - lo, 1e-6)
-        decimals = _value_decimals(span)
-        for spin in (self.beta_lo_spin, self.beta_hi_spin):
-            spin.setDecimals(decimals)
-            spin.setSingleStep(max(span / 100.0, 10.0**-decimals))
-            spin.setRange(lo - span, hi + span)
-        extent = float(np.max(s.box[1] - s.box[0]))
-        self.radius_spin.setSingleStep(max(extent / 100.0, 0.01))
-        self.radius_spin.setMaximum(max(10.0 * extent, 1.0))
-        self.remove_wire_button.setEnabled(current is not None and len(s.wires) > 1)
-        self.set_key_button.setEnabled(current is not None and current[1] is not None)
-        if current is None:
-            self.wire_label.setText("No wires." if s.kind == "wires" else "")
-            return
-        w, point = current
-        wire = s.wires[w]
-        where = f", point {point + 1}" if point is not None else " (click a point to pick)"
-        text = f"Wire {w + 1} of {len(s.wires)}{where}"
-        if laying or pending:
-            text += (
-                f"<br>New wire: {pending} point{'s' if pending != 1 else ''} laid;"
-                " curve and radius are those of the new wire"
-            )
-        self.wire_label.setText(text)
-        if not laying:
-            self.wire_kind_combo.setCurrentText(wire.kind)
-            self.radius_spin.setMaximum(max(self.radius_spin.maximum(), wire.radius))
-            self.radius_spin.setValue(wire.radius)
-        beta = wire.beta if isinstance(wire.beta, tuple) else None
-        self.beta_check.setChecked(beta is not None)
-        if beta is not None:
-            for spin in (self.beta_lo_spin, self.beta_hi_spin):
-                spin.setRange(min(spin.minimum(), beta[0]), max(spin.maximum(), beta[1]))
-            self.beta_lo_spin.setValue(beta[0])
-            self.beta_hi_spin.setValue(beta[1])
-        elif self._beta_volume is not s.volume:
-            # without classification the spins keep what was typed, for switching it on;
-            # a new volume starts them at its value range
-            self.beta_lo_spin.setValue(lo)
-            self.beta_hi_spin.setValue(hi)
-        self._beta_volume = s.volume
-        self.beta_lo_spin.setEnabled(beta is not None)
-        self.beta_hi_spin.setEnabled(beta is not None)
-        fraction = self._reference_fraction(s) if point is not None else None
-        if fraction is not None:
-            self.twist_spin.setValue(math.degrees(float(wire.twist_at(fraction))))
-            self.scale_spin.setValue(float(wire.scale_at(fraction)))
+            self._show_family(s.kind)
 
     def _refresh_placement(self, s: EditSession) -> None:
         p = s.placement
@@ -822,34 +442,16 @@ class DeformationPanel(_Panel):
                 spin.setValue(v)
         self.place_reset_button.setEnabled(not p.is_identity)
 
-    def _update_visibility(self, kind: str) -> None:
+    def _show_family(self, kind: str) -> None:
         """Show only the widgets of deformation family ``kind``."""
-        elements = kind in ("massspring", "chainmail")
-        rows = {
-            self.backend_combo: elements,
-            self.resolution_spin: elements or kind == "lattice",
-            self.integrator_combo: kind == "massspring",
-            self.variant_combo: kind == "chainmail",
-            self.stiffness_spin: elements,
-        }
-        for widget, visible in rows.items():
-            self.model_form.setRowVisible(widget, visible)
-        self.apply_button.setVisible(kind != "none")
-        self.simulation_group.setVisible(elements)
-        self.simulation_form.setRowVisible(self.steps_spin, kind == "massspring")
-        self.simulation_form.setRowVisible(self.relax_spin, kind == "chainmail")
-        self.wire_group.setVisible(kind == "wires")
-        self.placement_group.setVisible(kind != "none")
+        current = self._family_panels[kind]
+        self.options.show_only(current.options[kind])
+        self.apply_button.setVisible(current.editable)
+        self.placement_group.setVisible(current.editable)
+        for panel in dict.fromkeys(self._family_panels.values()):
+            panel.setVisible(panel is current and panel.has_groups)
+        current.show_family(kind)
         self.updateGeometry()
-
-    # ------------------------------------------------------------------ new wires
-    def wire_kind(self) -> str:
-        """Curve kind chosen in the wire group (for :meth:`EditSession.finish_wire`)."""
-        return self.wire_kind_combo.currentText()
-
-    def wire_radius(self) -> float:
-        """Radius (mm) chosen in the wire group (for :meth:`EditSession.finish_wire`)."""
-        return float(self.radius_spin.value())
 
     # ------------------------------------------------------------------ timings
     def refresh_timings(self, frame_ms: float | None) -> None:
@@ -861,14 +463,7 @@ class DeformationPanel(_Panel):
         frame_ms
             Duration of the last frame in ms, or None when unknown.
         """
-        timings = self.session.timings
-        parts = []
-        step = timings.get("step")
-        if step is not None and self.session.kind in ("massspring", "chainmail"):
-            parts.append(f"step {step:.2f} ms")
-        field = timings.get("field")
-        if field is not None and self.session.kind == "wires":
-            parts.append(f"field {field:.0f} ms")
+        parts = self.family_panel.timing_parts(self.session.timings)
         if frame_ms is not None and frame_ms > 0:
             parts.append(f"frame {frame_ms:.1f} ms ({1000.0 / frame_ms:.0f} fps)")
         text = " · ".join(parts)
@@ -877,15 +472,6 @@ class DeformationPanel(_Panel):
             self.timings_label.setText(text)
 
     # ------------------------------------------------------------------ model handlers
-    def _settings(self) -> dict[str, Any]:
-        return {
-            "backend": self.backend_combo.currentText(),
-            "resolution": int(self.resolution_spin.value()),
-            "integrator": self.integrator_combo.currentText(),
-            "variant": self.variant_combo.currentText(),
-            "stiffness": float(self.stiffness_spin.value()),
-        }
-
     def _model_changed(self, _index: int) -> None:
         if self._updating:
             return
@@ -893,143 +479,17 @@ class DeformationPanel(_Panel):
 
     def _apply(self) -> None:
         kind = str(self.model_combo.currentData())
-        settings = self._settings()
-        text = "No deformation" if kind == "none" else f"New {DEFORMATION_LABELS[kind]} model"
-        self._edit(text, lambda: self.session.set_deformation(kind, **settings))
-        if kind == "wires":
-            self._window.request_wire_build()
+        settings = self.options.settings()
+        panel = self._family_panels[kind]
+        self._edit(panel.edit_name(kind), lambda: self.session.set_deformation(kind, **settings))
+        panel.model_edited()
         # also after a failed edit: the widgets must show the session again
         self.refresh()
 
     def _reset(self) -> None:
-        wires = self.session.kind == "wires"
+        panel = self.family_panel
         self._edit("Reset model", lambda: self.session.reset_model())
-        if wires:
-            self._window.request_wire_build()
-
-    # ------------------------------------------------------------------ simulation
-    def _run_toggled(self, running: bool) -> None:
-        self.run_button.setText("Pause" if running else "Run")
-        if self._updating:
-            return
-        self._window.set_running(bool(running))
-
-    def _single_step(self) -> None:
-        self._edit("Single step", lambda: self.session.single_step())
-
-    def _option_changed(self, name: str, label: str, merge: str, value: int) -> None:
-        """A run-time option of the session (one undo step per spin box drag)."""
-        if self._updating:
-            return
-        self._edit(label, lambda: self.session.set_option(name, int(value)), merge=merge)
-
-    def _set_fixed(self, fixed: bool) -> None:
-        def fn() -> None:
-            s = self.session
-            if not s.selection:
-                raise EditorError("select elements first (click or drag a rectangle)")
-            s.set_fixed(s.selection, fixed)
-
-        self._edit("Fix selected" if fixed else "Free selected", fn)
-
-    # ------------------------------------------------------------------ wire handlers
-    def _wire_edit(self, text: str, fn: Callable[[], Any], merge: str | None = None) -> Any:
-        """An edit of the wires, then a rebuild of their field off the GUI thread."""
-        result = self._edit(text, fn, merge)
-        self._window.request_wire_build()
-        return result
-
-    def _wire_index(self) -> int | None:
-        current = self._current_wire(self.session)
-        return None if current is None else current[0]
-
-    def _wire_kind_changed(self, kind: str) -> None:
-        w = self._wire_index()
-        if (
-            self._updating
-            or self.lay_button.isChecked()
-            or w is None
-            or self.session.wires[w].kind == kind
-        ):
-            return
-        self._wire_edit(
-            f"Wire curve {kind}", lambda: self.session.set_wire_parameters(w, kind=kind)
-        )
-
-    def _radius_changed(self, radius: float) -> None:
-        w = self._wire_index()
-        if self._updating or self.lay_button.isChecked() or w is None:
-            return
-        self._wire_edit(
-            "Wire radius",
-            lambda: self.session.set_wire_parameters(w, radius=float(radius)),
-            merge=f"wire radius {w}",
-        )
-
-    def _beta_toggled(self, on: bool) -> None:
-        if self._updating:
-            return
-        self.beta_lo_spin.setEnabled(on)
-        self.beta_hi_spin.setEnabled(on)
-        self._beta_changed()
-
-    def _beta_range_changed(self, _value: float) -> None:
-        if self._updating or not self.beta_check.isChecked():
-            return  # the range is kept for when classification is switched on
-        self._beta_changed()
-
-    def _beta_changed(self) -> None:
-        w = self._wire_index()
-        if self._updating or w is None:
-            return
-        on = self.beta_check.isChecked()
-        beta = (float(self.beta_lo_spin.value()), float(self.beta_hi_spin.value())) if on else None
-        self._wire_edit(
-            "Wire object classification",
-            lambda: self.session.set_wire_parameters(w, beta=beta),
-            merge=f"wire beta {w}" if on else None,
-        )
-
-    def _set_wire_key(self) -> None:
-        twist = math.radians(float(self.twist_spin.value()))
-        scale = float(self.scale_spin.value())
-
-        def fn() -> None:
-            s = self.session
-            if s.kind != "wires" or wire_of_handle(s, s.reference) is None:
-                raise EditorError("select a control point of a wire first (click it)")
-            s.set_wire_key(s.reference, twist=twist, scale=scale)
-
-        self._wire_edit("Wire twist and scale", fn)
-
-    def _field_scale_changed(self, _index: int) -> None:
-        if self._updating:
-            return
-        scale = int(self.field_scale_combo.currentData())
-
-        def fn() -> None:
-            self.session.set_wire_settings(field_scale=scale)
-
-        self._wire_edit(f"Wire field 1/{scale}", fn)
-
-    def _lay_toggled(self, on: bool) -> None:
-        if self._updating:
-            return
-        self._window.viewport.laying_wire = bool(on)
-        self.refresh()
-
-    def _finish_wire(self) -> None:
-        kind, radius = self.wire_kind(), self.wire_radius()
-        result = self._wire_edit("New wire", lambda: self.session.finish_wire(kind, radius))
-        if result is not None:
-            self._window.viewport.laying_wire = False
-            self.refresh()
-
-    def _remove_wire(self) -> None:
-        w = self._wire_index()
-        if w is None:
-            return
-        self._wire_edit(f"Remove wire {w + 1}", lambda: self.session.remove_wire(w))
+        panel.model_edited()
 
     # ------------------------------------------------------------------ placement
     def _placement_changed(self, _value: float) -> None:
@@ -1049,7 +509,7 @@ class DeformationPanel(_Panel):
 
 
 # ---------------------------------------------------------------------------- display
-class DisplayPanel(_Panel):
+class DisplayPanel(Panel):
     """Check boxes toggling what the viewport draws
     (:class:`~voxwarp.editing.session.DisplayOptions`),
     and below them the field slice view (:class:`voxwarp.ui.field_view.FieldSliceView`).
@@ -1101,7 +561,7 @@ class DisplayPanel(_Panel):
 
 
 # ---------------------------------------------------------------------------- scene tree
-class ScenePanel(_Panel):
+class ScenePanel(Panel):
     """A tree of the scene: the volume, the deformation and its warps, the meshes.
 
     Meshes whose instance has a ``visible`` attribute get a check box that shows or hides
@@ -1147,15 +607,7 @@ class ScenePanel(_Panel):
             volume_item = QTreeWidgetItem(["Volume", f"{vol.name}, {shape}"])
             volume_item.setToolTip(1, f"{shape} voxels of {spacing} mm, {vol.dtype}")
             self.tree.addTopLevelItem(volume_item)
-            label = DEFORMATION_LABELS.get(s.kind, s.kind)
-            detail = label
-            if s.kind in ("massspring", "chainmail") and s.model is not None:
-                detail += f", {'×'.join(str(n) for n in s.model.grid.shape)} elements"
-            elif s.kind == "wires":
-                detail += f", {len(s.wires)} wire{'s' if len(s.wires) != 1 else ''}"
-            elif s.kind == "lattice" and s.lattice_nodes is not None:
-                cells = "×".join(str(n - 1) for n in s.lattice_nodes.shape[:3])
-                detail += f", {cells} cells"
+            detail = FAMILY_PANELS[s.kind].summary(s)
             deform_item = QTreeWidgetItem(["Deformation", detail])
             for warp in scene.warps:
                 deform_item.addChild(QTreeWidgetItem([type(warp).__name__, ""]))

@@ -1,0 +1,72 @@
+"""The settings of new models in the Model group: backend, resolution, integrator,
+variant and stiffness.
+
+They are the session's settings (shared by the families: the resolution is that of the
+elements and of the lattice), so there is one widget each; a family panel names the rows
+its families show (:attr:`FamilyPanel.options`). Usage: ``ModelOptions(form)`` adds the
+rows to the Model group's form; ``settings()`` is the keywords of
+:meth:`EditSession.set_deformation`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtWidgets import QFormLayout, QWidget
+
+from voxwarp.editing.session import BACKENDS, CHAINMAIL_VARIANTS, INTEGRATORS, EditSession
+from voxwarp.ui.panel_base import combo, double_spin, int_spin
+
+__all__ = ["ModelOptions"]
+
+
+class ModelOptions:
+    """The option rows of the Model group (``form``), all built, shown as asked."""
+
+    def __init__(self, form: QFormLayout) -> None:
+        self._form = form
+        self.backend_combo = combo(BACKENDS, "Where mass-spring and ChainMail run")
+        self.resolution_spin = int_spin(
+            2,
+            32,
+            "Elements per axis (mass-spring, ChainMail); lattice: cells + 1 per axis"
+            " (at most 8 cells)",
+        )
+        self.integrator_combo = combo(INTEGRATORS, "Mass-spring time integration")
+        self.variant_combo = combo(CHAINMAIL_VARIANTS, "ChainMail variant")
+        self.stiffness_spin = double_spin(
+            0.01, 1.0, 0.05, 2, tooltip="Element stiffness of new models (0..1]"
+        )
+        #: option name -> its widget, in the order of the rows
+        self.widgets: dict[str, QWidget] = {
+            "backend": self.backend_combo,
+            "resolution": self.resolution_spin,
+            "integrator": self.integrator_combo,
+            "variant": self.variant_combo,
+            "stiffness": self.stiffness_spin,
+        }
+        for name, widget in self.widgets.items():
+            form.addRow(name.capitalize(), widget)
+
+    def settings(self) -> dict[str, Any]:
+        """The chosen settings (keywords of :meth:`EditSession.set_deformation`)."""
+        return {
+            "backend": self.backend_combo.currentText(),
+            "resolution": int(self.resolution_spin.value()),
+            "integrator": self.integrator_combo.currentText(),
+            "variant": self.variant_combo.currentText(),
+            "stiffness": float(self.stiffness_spin.value()),
+        }
+
+    def refresh(self, s: EditSession) -> None:
+        """Show the session's settings (call inside the panel's refresh guard)."""
+        self.backend_combo.setCurrentText(s.backend)
+        self.resolution_spin.setValue(int(max(s.resolution)))
+        self.integrator_combo.setCurrentText(s.integrator)
+        self.variant_combo.setCurrentText(s.variant)
+        self.stiffness_spin.setValue(s.stiffness)
+
+    def show_only(self, names: tuple[str, ...]) -> None:
+        """Show the rows of the options ``names``, hide the others."""
+        for name, widget in self.widgets.items():
+            self._form.setRowVisible(widget, name in names)
