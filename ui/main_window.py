@@ -407,19 +407,13 @@ class MainWindow(QMainWindow):
         after = self.viewport.with_context(self.session.snapshot)
         if after.same_as(before):
             return
-        if text == "Drag":
-            text = {
-                "massspring": "Drag elements",
-                "chainmail": "Drag elements",
-                "wires": "Drag wire points",
-                "lattice": "Drag lattice nodes",
-            }.get(self.session.kind, "Drag")
+        if text == "Drag" and self.session.family.handle_name:
+            text = f"Drag {self.session.family.handle_name}"
         self.undo_stack.push(SnapshotCommand(self, text, before, after))
         self._changed()
 
     def _dragged(self) -> None:
-        if self.session.kind == "wires":
-            self.request_wire_build()
+        self.request_wire_build()  # only when the drag left a wire field stale
 
     def _tf_edited(self, tf: Any) -> None:
         self.edit(
@@ -432,9 +426,9 @@ class MainWindow(QMainWindow):
     def request_wire_build(self) -> None:
         """Rebuild the wire field off the GUI thread (one at a time; a newer edit
         starts the next build when this one is done)."""
-        if self.session.kind != "wires" or (self._wire_task and self._wire_task.running):
+        if self._wire_task and self._wire_task.running:
             return
-        if not self.session.wire_field_stale:
+        if not self.session.wire_field_stale:  # (never for the other families)
             return
         job = self.session.wire_build()
         task = Task(lambda progress, cancelled: job.run(progress), self)
@@ -545,11 +539,11 @@ class MainWindow(QMainWindow):
         if hit is not None and hit not in self.session.selection:
             self.session.select([hit], "replace")
         has_sel = bool(self.session.selection)
-        elements = self.session.kind in ("massspring", "chainmail")
+        fixable = self.session.family.can_fix
         a = menu.addAction("Fix", lambda: self.fix_selected(True))
-        a.setEnabled(has_sel and elements)
+        a.setEnabled(has_sel and fixable)
         a = menu.addAction("Free", lambda: self.fix_selected(False))
-        a.setEnabled(has_sel and elements)
+        a.setEnabled(has_sel and fixable)
         if hit is not None:
             menu.addAction(
                 "Make Reference", lambda: (self.session.set_reference(hit), self.viewport.update())

@@ -41,6 +41,10 @@ class Family:
     uses_backend: ClassVar[bool] = False
     #: whether the overlay draws the grid's box
     has_grid: ClassVar[bool] = False
+    #: what the handles are, for messages and undo ("Drag elements")
+    handle_name: ClassVar[str] = ""
+    #: whether handles can be fixed (:meth:`set_fixed`)
+    can_fix: ClassVar[bool] = False
     #: the element model (mass-spring or ChainMail families), else None
     model: Any = None
 

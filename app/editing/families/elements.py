@@ -32,6 +32,8 @@ class ElementFamily(Family):
 
     uses_backend = True
     has_grid = True
+    handle_name = "elements"
+    can_fix = True
     model_class: ClassVar[type[MassSpring] | type[ChainMail]]
 
     def __init__(self, session: EditSession) -> None:

@@ -28,6 +28,7 @@ class LatticeFamily(Family):
 
     kind = "lattice"
     has_grid = True
+    handle_name = "lattice nodes"
 
     def __init__(self, session: EditSession) -> None:
         super().__init__(session)

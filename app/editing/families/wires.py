@@ -82,6 +82,7 @@ class WiresFamily(Family):
 
     kind = "wires"
     has_grid = True
+    handle_name = "wire points"
 
     def __init__(self, session: EditSession) -> None:
         super().__init__(session)
