@@ -918,6 +918,18 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_startup(args: argparse.Namespace) -> int:
+    """``voxwarp bench startup``: start-up time of the command line (voxwarp.bench.startup)."""
+    from voxwarp.bench.startup import bench_startup, markdown
+    from voxwarp.core.files import atomic_write_text
+
+    text = markdown(bench_startup(args.repeats), f"voxwarp bench startup --repeats {args.repeats}")
+    print(text)
+    if args.markdown:
+        atomic_write_text(Path(args.markdown), text)
+    return 0
+
+
 def cmd_bench_chainmail(args: argparse.Namespace) -> int:
     """``voxwarp bench chainmail``: time to settle one drag (see voxwarp.bench.chainmail)."""
     from voxwarp.bench.chainmail import bench_chainmail
@@ -1268,6 +1280,12 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     )
     pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbm.set_defaults(func=cmd_bench_massspring)
+    pbs = bsub.add_parser(
+        "startup", help="start-up time of voxwarp --help and import voxwarp vs python"
+    )
+    pbs.add_argument("--repeats", type=_positive_int, default=5, help="runs per case")
+    pbs.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    pbs.set_defaults(func=cmd_bench_startup)
     pbc = bsub.add_parser(
         "chainmail", help="3D ChainMail: time to settle a local and a large drag vs grid size"
     )
