@@ -12,8 +12,9 @@ The deformation models are in :mod:`voxwarp.deform`. Names load on first use, so
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from voxwarp.lazy import exports
 
 #: public name -> module that defines it (imported on first access)
 _PUBLIC: dict[str, str] = {
@@ -58,19 +59,7 @@ def _version() -> str:
         return "0+unknown"
 
 
-def __getattr__(name: str) -> Any:
-    if name == "__version__":
-        value: Any = _version()
-    elif name in _PUBLIC:
-        value = getattr(importlib.import_module(_PUBLIC[name]), name)
-    else:
-        raise AttributeError(f"module 'voxwarp' has no attribute {name!r}")
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = exports(__name__, _PUBLIC, {"__version__": _version})
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these

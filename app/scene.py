@@ -13,13 +13,14 @@ import base64
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
+from voxwarp.core.checks import finite_vector
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
 from voxwarp.core.modes import MODES as MODES
@@ -48,13 +49,7 @@ def _finite(x: Any, what: str, positive: bool = False) -> float:
 
 
 def _vec(x: Any, n: int, what: str) -> tuple[float, ...]:
-    try:
-        a = np.asarray(x, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f"{what} must be {n} numbers; got {x!r}") from exc
-    if a.size != n or not np.all(np.isfinite(a)):
-        raise SceneError(f"{what} must be {n} finite numbers; got {x!r}")
-    return tuple(float(v) for v in a)
+    return tuple(float(v) for v in finite_vector(x, n, what, SceneError))
 
 
 class Scene:
@@ -517,10 +512,7 @@ class Scene:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the scene as JSON, atomically (temp file + rename)."""
-        path = Path(path)
-        text = json.dumps(self.to_dict(base_dir=path.parent.resolve()), indent=2)
-        atomic_write_text(path, text)
-        return path
+        return write_scene_json(path, self.to_dict, indent=2)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Scene:
@@ -552,6 +544,17 @@ def read_scene_dict(path: str | os.PathLike) -> dict[str, Any]:
     if not isinstance(d, dict):
         raise SceneError(f"{p}: a scene must be a JSON object")
     return d
+
+
+def write_scene_json(
+    path: str | os.PathLike, to_dict: Callable[..., dict[str, Any]], indent: int
+) -> Path:
+    """Write ``to_dict(base_dir=<path's folder>)`` to ``path`` as JSON, atomically (a
+    failed write keeps the old file); volume paths in it are relative to that folder."""
+    path = Path(path)
+    text = json.dumps(to_dict(base_dir=path.parent.resolve()), indent=indent)
+    atomic_write_text(path, text)
+    return path
 
 
 def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[str, Any]:

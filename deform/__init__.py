@@ -7,8 +7,9 @@ volume. Names load on first use (the models pull in numba, scipy and pyopencl).
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from voxwarp.lazy import exports
 
 #: public name -> module that defines it (imported on first access)
 _PUBLIC: dict[str, str] = {
@@ -43,16 +44,7 @@ _PUBLIC: dict[str, str] = {
 __all__ = sorted(_PUBLIC)
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _PUBLIC:
-        raise AttributeError(f"module 'voxwarp.deform' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_PUBLIC[name]), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = exports(__name__, _PUBLIC)
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these

@@ -142,7 +142,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.deform.chainmail_model import ChainMailModel
-from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError
+from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
 from voxwarp.deform.massspring_gpu import atlas_layout
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
@@ -215,16 +215,12 @@ class GpuChainMailSolver(GpuGridSolver):
     """
 
     def __init__(self, model: ChainMailModel, ctx: Any, *, local: bool = True) -> None:
-        if ctx is None:
-            raise GpuSolverError(
-                "GpuChainMailSolver needs a moderngl.Context (OpenGL 4.3+); got None"
-                " (use the CPU ChainMail of voxwarp.deform.chainmail without a GL context)"
-            )
-        if getattr(ctx, "version_code", 0) < 430:
-            raise GpuSolverError(
-                "GpuChainMailSolver needs an OpenGL 4.3+ context (compute shaders, SSBOs);"
-                f" got version {getattr(ctx, 'version_code', None)}"
-            )
+        require_compute_context(
+            ctx,
+            "GpuChainMailSolver",
+            "use the CPU ChainMail of voxwarp.deform.chainmail without a GL context",
+            "compute shaders, SSBOs",
+        )
         self.model = model
         self.ctx = ctx
         #: restrict passes to the box that can still change (see the module doc)
@@ -272,11 +268,7 @@ class GpuChainMailSolver(GpuGridSolver):
         self.converged = True
         #: elements shaded by the constraint passes of the last :meth:`enforce`
         self.last_elements = 0
-        try:
-            self._create(model)
-        except Exception:
-            self.release()
-            raise
+        self._create_or_release(model)
 
     # ------------------------------------------------------------------ setup
     def _create(self, model: ChainMailModel) -> None:

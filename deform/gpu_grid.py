@@ -19,6 +19,22 @@ class GpuSolverError(VoxwarpError, ValueError):
     """A GPU solver cannot be set up or driven as asked (context, sizes, inputs)."""
 
 
+def require_compute_context(ctx: Any, owner: str, without: str, needs: str) -> None:
+    """A :class:`GpuSolverError` unless ``ctx`` is a moderngl context of OpenGL 4.3+.
+
+    ``owner`` names the solver, ``without`` what to use without a GL context, ``needs``
+    the features it needs (in the messages)."""
+    if ctx is None:
+        raise GpuSolverError(
+            f"{owner} needs a moderngl.Context (OpenGL 4.3+); got None ({without})"
+        )
+    if getattr(ctx, "version_code", 0) < 430:
+        raise GpuSolverError(
+            f"{owner} needs an OpenGL 4.3+ context ({needs}); got"
+            f" version {getattr(ctx, 'version_code', None)}"
+        )
+
+
 class GpuGridSolver:
     """Base of the GPU solvers on an ``(nx, ny, nz)`` element grid (see module doc).
 
@@ -54,6 +70,14 @@ class GpuGridSolver:
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"{name} must be finite")
         return a
+
+    def _create_or_release(self, model: Any) -> None:
+        """Run the subclass's ``_create(model)``; on failure free what it made, re-raise."""
+        try:
+            self._create(model)  # type: ignore[attr-defined]
+        except Exception:
+            self.release()
+            raise
 
     def release(self) -> None:
         """Free all GPU objects (textures, framebuffers, programs, buffers); idempotent."""

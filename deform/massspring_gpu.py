@@ -97,7 +97,7 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError
+from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
 from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
 
 #: Most springs per element the shaders accept (structural + shear + bend).
@@ -183,16 +183,12 @@ class GpuSpringSolver(GpuGridSolver):
     def __init__(
         self, model: SpringModel, ctx: Any, *, block: tuple[int, int, int] = DEFAULT_BLOCK
     ) -> None:
-        if ctx is None:
-            raise GpuSolverError(
-                "GpuSpringSolver needs a moderngl.Context (OpenGL 4.3+); got None"
-                " (use voxwarp.deform.massspring.CpuSpringSolver without a GL context)"
-            )
-        if getattr(ctx, "version_code", 0) < 430:
-            raise GpuSolverError(
-                "GpuSpringSolver needs an OpenGL 4.3+ context (compute shaders); got"
-                f" version {getattr(ctx, 'version_code', None)}"
-            )
+        require_compute_context(
+            ctx,
+            "GpuSpringSolver",
+            "use voxwarp.deform.massspring.CpuSpringSolver without a GL context",
+            "compute shaders",
+        )
         self.model = model
         self.ctx = ctx
         self._init_objects()
@@ -230,11 +226,7 @@ class GpuSpringSolver(GpuGridSolver):
         self._pinned = np.zeros(shape, bool)
         self._pin_pending = False
 
-        try:
-            self._create(model)
-        except Exception:
-            self.release()
-            raise
+        self._create_or_release(model)
 
     # ------------------------------------------------------------------ setup
     def _create(self, model: SpringModel) -> None:

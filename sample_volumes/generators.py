@@ -26,22 +26,6 @@ from scipy import ndimage
 from scipy.interpolate import PchipInterpolator
 from scipy.spatial import cKDTree
 
-__all__ = [
-    "FISH_FOV_MM",
-    "HEAD_FOV_MM",
-    "NOISE_STD",
-    "TUBES_FOV_MM",
-    "SampleData",
-    "colin27",
-    "fish",
-    "fish_spine",
-    "get",
-    "head",
-    "names",
-    "stent",
-    "tubes",
-]
-
 #: Standard deviation of the additive noise, in HU.
 NOISE_STD = 10.0
 #: Field of view (x, y, z) of :func:`fish`, mm (0.5 mm voxels at the default shape).

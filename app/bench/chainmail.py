@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.bench.render import cpu_count, load_average
+from voxwarp.bench.render import cpu_count, gpu_context, load_average
 from voxwarp.deform.chainmail_gpu import GpuChainMailSolver
 from voxwarp.deform.chainmail_model import ChainMailModel
 from voxwarp.render.raycaster import create_context
@@ -290,17 +290,7 @@ def bench_chainmail(
     """
     report = ChainBenchReport(sizes=tuple(int(n) for n in sizes), repeats=int(repeats))
     load_start = load_average()
-    own_ctx = False
-    gpu_skip = "" if use_gpu else "skipped (not asked for)"
-    if use_gpu and ctx is None:
-        from voxwarp.errors import RenderError
-        from voxwarp.render.raycaster import create_context
-
-        try:
-            ctx = create_context()
-            own_ctx = True
-        except RenderError as exc:
-            gpu_skip = f"skipped: {exc}"
+    ctx, own_ctx, gpu_skip = gpu_context(ctx, use_gpu)
     if ctx is not None and not gpu_skip:
         report.gl_renderer = str(ctx.info.get("GL_RENDERER", "?"))
     try:

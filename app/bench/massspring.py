@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.bench.render import cpu_count, load_average
+from voxwarp.bench.render import cpu_count, gpu_context, load_average
 
 #: the benchmark's grid sizes (elements per axis)
 DEFAULT_SIZES: tuple[int, ...] = (16, 32, 64, 128)
@@ -306,17 +306,7 @@ def bench_massspring(
         taichi="",
     )
     load_start = load_average()
-    own_ctx = False
-    gpu_skip = "" if use_gpu else "skipped (not asked for)"
-    if use_gpu and ctx is None:
-        from voxwarp.errors import RenderError
-        from voxwarp.render.raycaster import create_context
-
-        try:
-            ctx = create_context()
-            own_ctx = True
-        except RenderError as exc:
-            gpu_skip = f"skipped: {exc}"
+    ctx, own_ctx, gpu_skip = gpu_context(ctx, use_gpu)
     if ctx is not None and not gpu_skip:
         report.gl_renderer = str(ctx.info.get("GL_RENDERER", "?"))
     taichi_skip = "" if use_taichi else "skipped (--no-taichi)"

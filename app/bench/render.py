@@ -96,6 +96,23 @@ def cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+def gpu_context(ctx: Any, use_gpu: bool) -> tuple[Any, bool, str]:
+    """The GL context a benchmark's GPU rows run on: ``(ctx, own, skip)``. ``ctx`` as
+    given, else a new headless one when ``use_gpu`` (``own``: the caller releases it);
+    ``skip`` is why GPU rows are skipped ("" when they run)."""
+    if not use_gpu:
+        return ctx, False, "skipped (not asked for)"
+    if ctx is not None:
+        return ctx, False, ""
+    from voxwarp.errors import RenderError
+    from voxwarp.render.raycaster import create_context
+
+    try:
+        return create_context(), True, ""
+    except RenderError as exc:
+        return None, False, f"skipped: {exc}"
+
+
 def load_average() -> float:
     """The 1-minute load average (-1 where the platform has none): benchmark reports
     record it before and after a run, since these machines are shared."""

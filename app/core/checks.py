@@ -1,9 +1,14 @@
-"""argparse value types shared by the ``voxwarp`` commands (``voxwarp.cli.main`` and the
-benchmark modules that add their own sub-commands)."""
+"""Checks of values shared across voxwarp: argparse types of the ``voxwarp`` commands
+(``voxwarp.cli.main`` and the benchmark modules that add their own sub-commands) and
+:func:`finite_vector` for vectors given in Python or scene JSON."""
 
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def image_size(text: str) -> tuple[int, int]:
@@ -26,3 +31,16 @@ def positive_int(text: str) -> int:
     if n < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer; got {text!r}")
     return n
+
+
+def finite_vector(x: Any, n: int, what: str, error: type[Exception]) -> np.ndarray:
+    """``x`` as ``n`` finite float64 numbers; else ``error`` naming ``what``."""
+    import numpy as np  # here: the command line imports this module and must start fast
+
+    try:
+        a = np.asarray(x, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise error(f"{what} must be {n} numbers; got {x!r:.80}") from exc
+    if a.size != n or not np.all(np.isfinite(a)):
+        raise error(f"{what} must be {n} finite numbers; got {x!r:.80}")
+    return a

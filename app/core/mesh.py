@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core.checks import finite_vector
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import box_corners
 from voxwarp.errors import MeshError
@@ -57,13 +58,7 @@ class MeshWarning(UserWarning):
 
 
 def _vector(x: Any, n: int, what: str) -> np.ndarray:
-    try:
-        a = np.asarray(x, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise MeshError(f"{what} must be {n} numbers; got {x!r:.80}") from exc
-    if a.size != n or not np.all(np.isfinite(a)):
-        raise MeshError(f"{what} must be {n} finite numbers; got {x!r:.80}")
-    return a
+    return finite_vector(x, n, what, MeshError)
 
 
 class Mesh:

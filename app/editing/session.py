@@ -34,7 +34,6 @@ whole state, velocities included) so that undo restores it exactly.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -45,7 +44,6 @@ from typing import Any, Literal
 import numpy as np
 
 from voxwarp.core.camera import Camera
-from voxwarp.core.files import atomic_write_text
 from voxwarp.deform.chainmail import ChainMail
 from voxwarp.deform.elements import ElementGrid
 from voxwarp.deform.lattice_warp import LatticeWarp
@@ -72,7 +70,7 @@ from voxwarp.editing.families import FAMILIES, Family, WireBuild
 from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.render.overlay import OverlayLayer, box_edges, polyline_segments
-from voxwarp.scene import Scene, read_scene_dict
+from voxwarp.scene import Scene, read_scene_dict, write_scene_json
 
 Deformation = Literal["none", "massspring", "chainmail", "wires", "lattice"]
 #: the deformation families, in the order the GUI offers them
@@ -835,10 +833,7 @@ class EditSession:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the session as scene JSON, atomically (a failed save keeps the old file)."""
-        path = Path(path)
-        text = json.dumps(self.to_dict(base_dir=path.parent.resolve()), indent=1)
-        atomic_write_text(path, text)
-        return path
+        return write_scene_json(path, self.to_dict, indent=1)
 
     @classmethod
     def load(cls, path: str | os.PathLike, ctx: Any = None) -> EditSession:

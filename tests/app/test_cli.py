@@ -86,6 +86,20 @@ def render(*args: str) -> subprocess.CompletedProcess:
     return proc
 
 
+def assert_render_refused(
+    volume: Path, tmp_path: Path, capsys: pytest.CaptureFixture, args: list[str], message: str
+) -> None:
+    """``voxwarp render VOLUME ... ARGS`` exits 2 with one line naming ``message`` and
+    writes no image."""
+    out = tmp_path / "x.png"
+    assert main(["render", str(volume), "-o", str(out), "--tf", "grayscale", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("voxwarp: error:")
+    assert err.count("\n") == 1
+    assert message in err
+    assert not out.exists()
+
+
 def assert_not_blank(img: np.ndarray) -> None:
     rgb = img[..., :3].astype(np.float64)
     assert rgb.max() > 0, "the image is black"

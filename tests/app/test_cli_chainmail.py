@@ -22,6 +22,7 @@ import pytest
 
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
+    assert_render_refused,
     no_rendering,
     render,
 )
@@ -113,13 +114,7 @@ def test_bad_options_are_one_line_errors(
     args: list[str],
     message: str,
 ) -> None:
-    out = tmp_path / "x.png"
-    assert main(["render", str(ball_file), "-o", str(out), "--tf", "grayscale", *args]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("voxwarp: error:")
-    assert err.count("\n") == 1
-    assert message in err
-    assert not out.exists()
+    assert_render_refused(ball_file, tmp_path, capsys, args, message)
 
 
 def test_help_documents_chainmail(capsys: pytest.CaptureFixture) -> None:

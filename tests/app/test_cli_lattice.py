@@ -13,11 +13,11 @@ import pytest
 
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
+    assert_render_refused,
     no_rendering,
     render,
 )
 from tests.app.test_cli_massspring import ball_file  # noqa: F401
-from voxwarp.cli.main import main
 from voxwarp.io.images import read_image
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -49,13 +49,7 @@ def test_bad_lattice_options_are_one_line_errors(
         path = tmp_path / "lattice.json"
         path.write_text(FISH_BEND.read_text() if content == "ok" else content)
         args = ["--lattice", str(path), *args]
-    out = tmp_path / "x.png"
-    assert main(["render", str(ball_file), "-o", str(out), "--tf", "grayscale", *args]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("voxwarp: error:")
-    assert err.count("\n") == 1
-    assert message in err
-    assert not out.exists()
+    assert_render_refused(ball_file, tmp_path, capsys, args, message)
 
 
 def test_bundled_fish_bend_renders_and_round_trips(tmp_path: Path) -> None:

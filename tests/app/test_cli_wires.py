@@ -18,6 +18,7 @@ import pytest
 
 from tests.app.test_cli import (  # noqa: F401  (fixtures used by name)
     _keep_warning_state,
+    assert_render_refused,
     no_rendering,
     render,
 )
@@ -93,13 +94,7 @@ def test_bad_wire_options_are_one_line_errors(
         }[make]
         path.write_text(content)
         args = ["--wires", str(path), *args]
-    out = tmp_path / "x.png"
-    assert main(["render", str(rod_file), "-o", str(out), "--tf", "grayscale", *args]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("voxwarp: error:")
-    assert err.count("\n") == 1
-    assert message in err
-    assert not out.exists()
+    assert_render_refused(rod_file, tmp_path, capsys, args, message)
 
 
 @pytest.mark.usefixtures("no_rendering")

@@ -70,6 +70,15 @@ class FamilyPanel(Panel):
         """One line on the session's deformation (the scene tree's details)."""
         return cls.labels.get(s.kind, s.kind)
 
+    @classmethod
+    def sized(cls, s: EditSession, shape: Any, what: str) -> str:
+        """:meth:`summary` of the family plus a grid size, e.g. "mass-spring, 8×8×8
+        elements" (just the family when ``shape`` is None)."""
+        text = cls.labels.get(s.kind, s.kind)
+        if shape is None:
+            return text
+        return f"{text}, {'×'.join(str(n) for n in shape)} {what}"
+
     def show_family(self, kind: str) -> None:
         """Show the rows of family ``kind`` (for panels serving several families)."""
 

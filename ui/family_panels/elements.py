@@ -95,10 +95,7 @@ class ElementsPanel(FamilyPanel):
     @classmethod
     def summary(cls, s: EditSession) -> str:
         """The family and its element grid."""
-        text = super().summary(s)
-        if s.model is None:
-            return text
-        return f"{text}, {'×'.join(str(n) for n in s.model.grid.shape)} elements"
+        return cls.sized(s, s.model.grid.shape if s.model is not None else None, "elements")
 
     def show_family(self, kind: str) -> None:
         """Show the run-time option row of family ``kind`` only."""

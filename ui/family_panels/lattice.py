@@ -21,7 +21,5 @@ class LatticePanel(FamilyPanel):
     @classmethod
     def summary(cls, s: EditSession) -> str:
         """The family and its cells per axis."""
-        text = super().summary(s)
-        if s.lattice_nodes is None:
-            return text
-        return f"{text}, {'×'.join(str(n - 1) for n in s.lattice_nodes.shape[:3])} cells"
+        nodes = s.lattice_nodes
+        return cls.sized(s, None if nodes is None else [n - 1 for n in nodes.shape[:3]], "cells")
