@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
-from voxwarp.core.checks import finite_vector
+from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
 from voxwarp.core.modes import MODES as MODES
@@ -239,14 +239,8 @@ class Scene:
         if value is None:
             self._clip_box = None
             return
-        try:
-            lo, hi = value
-        except (TypeError, ValueError) as exc:
-            raise SceneError("clip_box must be ((x0, y0, z0), (x1, y1, z1))") from exc
-        lo, hi = _vec(lo, 3, "clip_box low corner"), _vec(hi, 3, "clip_box high corner")
-        if any(h <= lo_ for lo_, h in zip(lo, hi, strict=True)):
-            raise SceneError(f"clip_box high corner must exceed the low corner; got {lo}, {hi}")
-        self._clip_box = (lo, hi)
+        lo, hi = finite_box(value, "clip_box", SceneError)
+        self._clip_box = (tuple(map(float, lo)), tuple(map(float, hi)))
 
     @property
     def background(self) -> tuple[float, float, float, float]:

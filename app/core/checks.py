@@ -44,3 +44,20 @@ def finite_vector(x: Any, n: int, what: str, error: type[Exception]) -> np.ndarr
     if a.size != n or not np.all(np.isfinite(a)):
         raise error(f"{what} must be {n} finite numbers; got {x!r:.80}")
     return a
+
+
+def finite_box(value: Any, what: str, error: type[Exception]) -> tuple[np.ndarray, np.ndarray]:
+    """``value`` as a box ``(lo, hi)`` of finite 3-vectors with ``hi > lo`` on every
+    axis; else ``error`` naming ``what`` (e.g. ``"clip_box"``)."""
+    try:
+        lo, hi = value
+    except (TypeError, ValueError) as exc:
+        raise error(f"{what} must be ((x0, y0, z0), (x1, y1, z1))") from exc
+    lo = finite_vector(lo, 3, f"{what} low corner", error)
+    hi = finite_vector(hi, 3, f"{what} high corner", error)
+    if (hi <= lo).any():
+        corners = tuple(map(float, lo)), tuple(map(float, hi))
+        raise error(
+            f"{what} high corner must exceed the low corner; got {corners[0]}, {corners[1]}"
+        )
+    return lo, hi

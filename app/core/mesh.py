@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.core.checks import finite_vector
+from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import box_corners
 from voxwarp.errors import MeshError
@@ -891,14 +891,7 @@ class MeshInstance:
         if value is None:
             self._box = None
             return
-        try:
-            lo, hi = value
-        except (TypeError, ValueError) as exc:
-            raise MeshError("box must be ((x0, y0, z0), (x1, y1, z1))") from exc
-        lo_, hi_ = _vector(lo, 3, "box low corner"), _vector(hi, 3, "box high corner")
-        if np.any(hi_ <= lo_):
-            raise MeshError(f"box high corner must exceed the low corner; got {lo_}, {hi_}")
-        self._box = (lo_, hi_)
+        self._box = finite_box(value, "box", MeshError)
 
     @property
     def color(self) -> tuple[float, float, float, float]:
