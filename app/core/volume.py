@@ -11,9 +11,16 @@ OpenGL 3D texture, uploaded without a copy.
 
 Geometry
 --------
-Voxel ``(i, j, k)`` has its centre at ``origin + spacing * (i, j, k)`` (millimetres).
-The volume's box, the region the raycaster renders, covers whole voxels:
-``origin - spacing / 2`` to ``origin + spacing * (shape - 1/2)``.
+Voxel ``(i, j, k)`` has its centre at ``origin + direction @ (spacing * (i, j, k))``
+(millimetres), ITK's (spacing, origin, direction) triple; :attr:`Volume.affine` is the
+same map as a 4x4 matrix. ``direction`` is the identity unless the scan is oblique
+(files with a patient orientation are stored in the closest RAS axis order, see
+:mod:`voxwarp.core.orientation`). The voxels fill the *volume box* from index
+``-1/2`` to ``shape - 1/2``; :attr:`Volume.bounds` is its axis-aligned bounding box in
+world space (the box itself when ``direction`` is the identity).
+
+World space is patient RAS+ mm when :attr:`Volume.space` is ``"RAS"``; arrays without
+an orientation have ``space == ""`` and their index axes run along +x, +y, +z.
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from typing import Literal
 
 import numpy as np
 
+from voxwarp.core.orientation import axis_code, compose_affine, obliquity_degrees
 from voxwarp.errors import VolumeError
 
 #: dtypes the GPU path supports natively.
@@ -131,6 +139,23 @@ class Volume:
         JSON refers to the volume by this path.
     units
         Unit of the voxel values, e.g. ``"HU"`` for CT; empty when unknown.
+    direction
+        3x3 rotation whose columns are the world directions of the index axes i, j, k
+        (identity unless the scan is oblique).
+    space
+        ``"RAS"`` when world coordinates are patient RAS+ mm (read from the file),
+        ``""`` when the data carries no patient orientation.
+    file_axes
+        Axis code of the file's voxel axes before voxwarp's lossless reorientation
+        (e.g. ``"LAS"``); ``""`` when unknown.
+    spacing_source
+        ``"file"`` (stated by the file), ``"given"`` (passed by the user) or
+        ``"assumed"`` (nobody said; 1 mm).
+    modality
+        ``"CT"``, ``"MR"`` or another DICOM modality when the file says; ``""`` otherwise.
+    padding_value
+        Value the file marks as outside the scanned field of view (DICOM
+        PixelPaddingValue, in stored units after rescaling), or ``None``.
     """
 
     data: np.ndarray
@@ -139,6 +164,12 @@ class Volume:
     name: str = "volume"
     source: str | None = None
     units: str = ""
+    direction: np.ndarray | None = None
+    space: str = ""
+    file_axes: str = ""
+    spacing_source: str = "file"
+    modality: str = ""
+    padding_value: float | None = None
     _range: tuple[float, float] | None = field(default=None, repr=False)
     _window: tuple[float, float] | None = field(default=None, repr=False)
 
@@ -157,6 +188,9 @@ class Volume:
             1.0 if self.spacing is None else self.spacing, "spacing", positive=True
         )
         self.origin = parse_triple(0.0 if self.origin is None else self.origin, "origin")
+        self.direction = _rotation(self.direction)
+        if self.space not in ("", "RAS"):
+            raise VolumeError(f"space must be 'RAS' or '' (no orientation); got {self.space!r}.")
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -170,33 +204,77 @@ class Volume:
         return self.data.dtype
 
     @property
+    def affine(self) -> np.ndarray:
+        """4x4 index -> world matrix (mm): ``direction * spacing`` and ``origin``."""
+        return compose_affine(self.spacing, self.origin, self.direction)
+
+    @property
+    def is_oblique(self) -> bool:
+        """Whether the index axes are rotated against the world axes."""
+        return not np.allclose(self.direction, np.eye(3), atol=1e-9)
+
+    @property
+    def obliquity(self) -> float:
+        """Largest angle (degrees) between an index axis and its world axis."""
+        return obliquity_degrees(self.direction)
+
+    @property
+    def orientation(self) -> str:
+        """Axis code of the stored axes (``"RAS"`` for oriented volumes), ``""`` unknown."""
+        return axis_code(self.direction) if self.space else ""
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners (8, 3) of the volume box in world mm."""
+        n = np.asarray(self.shape, dtype=np.float64)
+        idx = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], float)
+        return self.index_to_world(idx * n - 0.5)
+
+    @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(lo, hi)`` corners of the box covering all voxels, in mm."""
-        sp = np.asarray(self.spacing)
-        org = np.asarray(self.origin)
-        lo = org - 0.5 * sp
-        hi = org + (np.asarray(self.shape) - 0.5) * sp
-        return lo, hi
+        """``(lo, hi)`` corners of the axis-aligned box holding all voxels, in mm."""
+        if not self.is_oblique:
+            sp = np.asarray(self.spacing)
+            org = np.asarray(self.origin)
+            return org - 0.5 * sp, org + (np.asarray(self.shape) - 0.5) * sp
+        c = self.corners()
+        return c.min(axis=0), c.max(axis=0)
 
     @property
     def size_mm(self) -> np.ndarray:
-        """Extent of the volume box in mm per axis."""
+        """Extent of :attr:`bounds` in mm per axis."""
         lo, hi = self.bounds
         return hi - lo
 
     @property
     def center(self) -> np.ndarray:
         """Centre of the volume box in mm."""
-        lo, hi = self.bounds
-        return 0.5 * (lo + hi)
+        return self.index_to_world((np.asarray(self.shape, dtype=np.float64) - 1.0) / 2.0)
 
     def world_to_index(self, points: np.ndarray) -> np.ndarray:
         """Map world points (..., 3) in mm to continuous voxel indices (i, j, k)."""
-        return (np.asarray(points, float) - np.asarray(self.origin)) / np.asarray(self.spacing)
+        rel = np.asarray(points, float) - np.asarray(self.origin)
+        if self.is_oblique:
+            rel = rel @ self.direction  # direction^T applied to each row
+        return rel / np.asarray(self.spacing)
 
     def index_to_world(self, indices: np.ndarray) -> np.ndarray:
         """Map continuous voxel indices (..., 3) to world points in mm."""
-        return np.asarray(self.origin) + np.asarray(indices, float) * np.asarray(self.spacing)
+        scaled = np.asarray(indices, float) * np.asarray(self.spacing)
+        if self.is_oblique:
+            scaled = scaled @ self.direction.T
+        return np.asarray(self.origin) + scaled
+
+    def world_to_texel_matrix(self) -> np.ndarray:
+        """4x4 world mm -> texel coordinates (voxel i spans [i, i + 1], centre i + 1/2)."""
+        m = np.linalg.inv(self.affine)
+        m[:3, 3] += 0.5
+        return m
+
+    def with_geometry(self, **changes: object) -> Volume:
+        """The same voxels with some geometry fields changed (``spacing``, ``origin``...)."""
+        kw = {name: getattr(self, name) for name in _GEOMETRY_FIELDS}
+        kw.update(changes)
+        return Volume(self.data, name=self.name, source=self.source, units=self.units, **kw)
 
     # ------------------------------------------------------------------ values
     @property
@@ -252,16 +330,56 @@ class Volume:
         if self.dtype.kind in "iu":
             d = np.rint(d).astype(self.dtype)
         sp = np.asarray(self.spacing) * f
-        org = np.asarray(self.origin) + 0.5 * (f - 1) * np.asarray(self.spacing)
-        return Volume(
-            d, tuple(sp), tuple(org), name=self.name, source=self.source, units=self.units
-        )
+        org = self.index_to_world(0.5 * (f - 1))
+        kw = {name: getattr(self, name) for name in _GEOMETRY_FIELDS}
+        kw.update(spacing=tuple(sp), origin=tuple(org))
+        return Volume(d, name=self.name, source=self.source, units=self.units, **kw)
 
     def __repr__(self) -> str:
+        extra = f", orientation={self.orientation!r}" if self.space else ""
+        if self.is_oblique:
+            extra += f", oblique={self.obliquity:.1f} deg"
         return (
             f"Volume(name={self.name!r}, shape={self.shape}, dtype={self.dtype},"
-            f" spacing={self.spacing}, origin={self.origin})"
+            f" spacing={self.spacing}, origin={self.origin}{extra})"
         )
+
+
+#: Volume fields that describe geometry and provenance (copied by with_geometry).
+_GEOMETRY_FIELDS = (
+    "spacing",
+    "origin",
+    "direction",
+    "space",
+    "file_axes",
+    "spacing_source",
+    "modality",
+    "padding_value",
+)
+
+
+def _rotation(value: object) -> np.ndarray:
+    """``value`` as a 3x3 proper rotation (identity for ``None``); raises VolumeError."""
+    if value is None:
+        return np.eye(3)
+    try:
+        m = np.asarray(value, dtype=np.float64).reshape(3, 3)
+    except (TypeError, ValueError) as exc:
+        raise VolumeError(
+            f"direction must be a 3x3 rotation matrix; got {short_repr(value)}."
+        ) from exc
+    if not (np.all(np.isfinite(m)) and np.allclose(m.T @ m, np.eye(3), atol=1e-5)):
+        raise VolumeError(
+            f"direction must be a 3x3 rotation matrix (orthonormal columns); got"
+            f" {short_repr(m.tolist())}."
+        )
+    if np.linalg.det(m) < 0:
+        raise VolumeError(
+            "direction must be a proper rotation (determinant +1); a mirrored grid is"
+            " stored with its axes flipped (voxwarp.core.orientation.to_closest_ras)."
+        )
+    u, _, vt = np.linalg.svd(m)
+    return u @ vt
 
 
 def check_finite(data: np.ndarray, policy: NanPolicy = "raise", what: str = "volume") -> np.ndarray:
