@@ -679,6 +679,10 @@ def cmd_render(args: argparse.Namespace) -> int:
             finally:
                 if model is not None:
                     model.close()
+    if args.marker:  # the orientation triad (R/L, A/P, S/I letters when oriented)
+        from voxwarp.render.orientation_marker import draw_scene_marker
+
+        draw_scene_marker(img, scene)
     write_image(out, img)
     if args.save_scene:
         print(f"scene: {args.save_scene}")
@@ -1180,6 +1184,9 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pr.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=None)
     pr.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None)
     pr.add_argument("--save-scene", metavar="JSON", help="also write the scene JSON")
+    pr.add_argument(
+        "--marker", action="store_true", help="draw an orientation marker (bottom left)"
+    )
     _add_volume_args(pr)
     _add_deform_args(pr)
     _add_wire_args(pr)
