@@ -235,9 +235,13 @@ def marker_layout(
     scale = max(1, round(size / 64))
     glyph_h = GLYPH_SHAPE[0] * scale
     # room for the letters beyond the ends of the lines, inside the square
-    length = max(2.0, 0.5 * size - glyph_h - 2.0 * scale)
+    # (a letter's centre lies 0.6 glyph heights + one cell beyond the line's end; its
+    # half height and its halo come on top)
+    length = max(2.0, 0.5 * size - (1.1 * glyph_h + scale + _halo_radius(scale) + 1))
     cx = margin + size / 2 if "left" in corner else w - margin - size / 2
     cy = margin + size / 2 if "top" in corner else h - margin - size / 2
+    # on a pixel centre: lines along the image axes are sharp
+    cx, cy = np.floor(cx) + 0.5, np.floor(cy) + 0.5
     axes = tuple(marker_axes(camera, oriented))
     ends, labels = [], []
     for a in axes:
@@ -286,6 +290,11 @@ def _glyph_alpha(shape: tuple[int, int], mask: np.ndarray, x0: int, y0: int) -> 
     if ys1 > ys0 and xs1 > xs0:
         out[ys0:ys1, xs0:xs1] = mask[ys0 - y0 : ys1 - y0, xs0 - x0 : xs1 - x0]
     return out
+
+
+def _halo_radius(scale: int) -> int:
+    """Width in pixels of the dark halo around letters."""
+    return max(1, scale // 2 + 1)
 
 
 def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
@@ -355,7 +364,7 @@ def draw_orientation_marker(
         return img
     region = img[y0:y1, x0:x1].astype(np.float64)
     ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float64)
-    width = max(1.5, lay.length / 16)
+    width = max(2.0, lay.length / 14)
     for a, end, label_at in zip(lay.axes, lay.ends, lay.labels, strict=True):
         if a.sign < 0 and not negative:
             continue
@@ -367,7 +376,7 @@ def draw_orientation_marker(
             mask = glyph_mask(a.label, lay.scale)
             gx = round(label_at[0] - mask.shape[1] / 2) - x0
             gy = round(label_at[1] - mask.shape[0] / 2) - y0
-            r = max(1, lay.scale // 2 + 1)
+            r = _halo_radius(lay.scale)
             halo_mask = _dilate(mask, r)
             shape = region.shape[:2]
             _blend(
