@@ -66,8 +66,9 @@ class Scene:
         The :class:`~voxwarp.core.volume.Volume` to render.
     mode
         Compositing mode: ``dvr`` (emission-absorption), ``mip``, ``minip``,
-        ``average`` (X-ray like), ``flm`` (first local maximum) or ``iso`` (shaded
-        isosurface).
+        ``average`` (mean along the ray), ``xray`` (radiograph: line integral over a
+        fixed length; see :mod:`voxwarp.core.modes`), ``flm`` (first local maximum) or
+        ``iso`` (shaded isosurface).
     transfer_function
         Preset name (see :data:`voxwarp.core.transfer_function.PRESETS`), a list of
         ``(value, r, g, b, a)`` control points in data units, or a

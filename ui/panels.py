@@ -135,7 +135,8 @@ class VolumePanel(Panel):
         self.mode_combo = combo(
             MODES,
             "dvr: emission-absorption; mip/minip: maximum/minimum intensity; average:"
-            " X-ray like; flm: first local maximum; iso: shaded isosurface",
+            " mean along the ray; xray: radiograph (line integral, brighter where thicker);"
+            " flm: first local maximum; iso: shaded isosurface",
         )
         self.mode_combo.currentTextChanged.connect(self._mode_changed)
         form.addRow("Mode", self.mode_combo)

@@ -691,6 +691,8 @@ def _mode_uniforms(scene: Scene) -> dict[str, Any]:
     values: dict[str, Any] = {}
     if scene.mode == "flm":
         values["u_threshold"] = scene.resolved_flm_threshold()
+    if scene.mode == "xray":
+        values["u_xray_length"] = xray_reference_length(scene.volume)
     if scene.mode == "iso":
         iso = scene.resolved_iso_value()
         iso_rgb = scene.transfer_function(iso)[:3]
@@ -699,6 +701,13 @@ def _mode_uniforms(scene: Scene) -> dict[str, Any]:
         values["u_iso"] = iso
         values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
     return values
+
+
+def xray_reference_length(volume: Volume) -> float:
+    """The fixed length (mm) the ``xray`` mode divides its line integral by: the longest
+    edge of the volume box, ``max(shape * spacing)`` (independent of the ray, the view,
+    the volume's rotation, warps and the clip box; see :mod:`voxwarp.core.modes`)."""
+    return float(np.max(np.asarray(volume.shape, float) * np.asarray(volume.spacing, float)))
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:

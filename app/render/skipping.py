@@ -109,13 +109,15 @@ def static_block_visibility(
     dvr: the transfer function is non-zero somewhere in the block's range; mip: the
     block's maximum is above the window's low end; minip: its minimum is below the
     window's high end; iso / flm: its maximum reaches the isovalue / threshold;
-    average: every block. (mip and minip also skip dynamically in the shader.)
+    xray: its maximum is above the window's low end (values at or below it add nothing
+    to the line integral); average: every block. (mip and minip also skip dynamically
+    in the shader.)
     """
     mode = scene.mode
     level, width = scene.window
     if mode == "dvr":
         return scene.transfer_function.visible_ranges(block_min, block_max)
-    if mode == "mip":
+    if mode in ("mip", "xray"):
         return block_max > level - width / 2
     if mode == "minip":
         return block_min < level + width / 2
@@ -147,7 +149,7 @@ def skip_map_key(scene: Scene) -> tuple:
     mode = scene.mode
     if mode == "dvr":
         return (mode, tf_key(scene.transfer_function))
-    if mode in ("mip", "minip"):
+    if mode in ("mip", "minip", "xray"):
         return (mode, scene.window)
     if mode == "iso":
         return (mode, scene.resolved_iso_value())

@@ -409,7 +409,7 @@ def test_demo_writes_every_mode_and_a_mass_spring_bend(tmp_path: Path) -> None:
     out = tmp_path / "out"
     assert main(["demo", "--out", str(out), "--size", "96x96"]) == 0
     images = {p.stem: read_image(p) for p in out.glob("*.png")}
-    modes = ("dvr", "mip", "minip", "average", "flm", "iso")
+    modes = ("dvr", "mip", "minip", "average", "xray", "flm", "iso")
     bends = {"stent_dvr_massspring", "stent_dvr_wires"}
     assert set(images) == {f"stent_{m}" for m in modes} | bends
     for name, img in images.items():

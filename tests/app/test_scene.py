@@ -104,7 +104,7 @@ def assert_same_scene(a: Scene, b: Scene) -> None:
 @pytest.mark.parametrize(
     ("kwargs", "needles"),
     [
-        ({"mode": "xray"}, MODES),
+        ({"mode": "radiograph"}, MODES),
         ({"mode": None}, MODES),
         ({"projection": "fisheye"}, PROJECTIONS),
         ({"view": "top"}, (*VIEWS, "azimuth")),
@@ -153,7 +153,7 @@ def test_scene_needs_a_volume() -> None:
 def test_setters_validate_after_construction() -> None:
     scene = Scene(small_volume())
     with pytest.raises(SceneError, match="mode"):
-        scene.mode = "xray"
+        scene.mode = "radiograph"
     with pytest.raises(SceneError, match="step"):
         scene.step = -1
     assert scene.mode == "dvr"
@@ -559,7 +559,7 @@ SINGULAR = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1]]
         ("transfer_function", {"points": 5}, "control point"),
         ("transfer_function", {"points": None}, "control point"),
         ("step", None, "step"),
-        ("mode", "xray", "mode"),
+        ("mode", "radiograph", "mode"),
         ("view", "top", "view"),
     ],
 )
