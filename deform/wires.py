@@ -585,6 +585,9 @@ class WireDeformer:
         precision: float = 1e-4,
     ) -> None:
         self.data, self.spacing, self.origin = _volume_parts(volume)
+        # oblique scans: world <-> index through the volume's rotation
+        direction = getattr(volume, "direction", None)
+        self._direction = np.eye(3) if direction is None else np.asarray(direction, float)
         wires = list(wires)
         if not wires:
             raise WarpError("WireDeformer needs at least one Wire")
@@ -628,6 +631,8 @@ class WireDeformer:
         self._warp: WireFieldWarp | None = None
         vlo = self.origin - 0.5 * self.spacing
         vhi = self.origin + (np.asarray(self.data.shape) - 0.5) * self.spacing
+        if hasattr(volume, "bounds"):  # the axis-aligned box of a (possibly oblique) volume
+            vlo, vhi = (np.asarray(b, dtype=np.float64) for b in volume.bounds)
         self.volume_bounds = (vlo, vhi)
         for i, w in enumerate(wires):
             blo, bhi = _curve_box(w.base)
@@ -926,7 +931,7 @@ class WireDeformer:
         q = (np.einsum("pij,pj->pi", a, m) + b)[:, None, None, :] + np.einsum(
             "pij,pabj->pabi", a, local
         )
-        ijk = (q - self.origin) / self.spacing
+        ijk = ((q - self.origin) @ self._direction) / self.spacing
         vlo = np.zeros(3)
         vhi = np.asarray(self.data.shape) - 1.0
         inside_vol = np.all((ijk >= vlo - 0.5) & (ijk <= vhi + 0.5), axis=-1)

@@ -43,7 +43,9 @@ class SampleData:
     ``data`` is indexed ``data[i, j, k]`` with ``i`` along x; ``spacing`` is the voxel
     size ``(sx, sy, sz)`` in mm; ``units`` is ``"HU"`` for the phantoms and ``""`` when
     the values have no physical unit; ``origin`` is the position in mm of the centre of
-    voxel ``(0, 0, 0)``.
+    voxel ``(0, 0, 0)``; ``axes`` is the patient axis code of the array's axes (e.g.
+    ``"RAS"``: i grows towards the patient's right, j anterior, k superior) for real
+    scans whose orientation is known, ``""`` for phantoms.
     """
 
     data: np.ndarray
@@ -53,6 +55,7 @@ class SampleData:
     source: str
     license: str
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    axes: str = ""
 
 
 # --------------------------------------------------------------------------- helpers
@@ -661,6 +664,7 @@ def colin27() -> SampleData:
         " usr/share/mricron/templates/ch2.nii.gz",
         license=_MRICRON_LICENSE,
         origin=_triple_of(f["origin"]),
+        axes="RAS",
     )
 
 

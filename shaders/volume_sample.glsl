@@ -13,6 +13,7 @@ uniform vec3 u_inv_dims;      // 1 / u_dims
 uniform vec2 u_value_map;     // data value = texel * x + y (undoes normalised formats)
 uniform vec3 u_spacing;       // voxel size in mm
 uniform vec3 u_origin;        // world position of voxel (0, 0, 0)'s centre, mm
+uniform mat3 u_direction;     // world directions of the texel axes (identity unless oblique)
 
 float sample_value(vec3 u) {
 #ifdef SLICE_PAIRS
@@ -26,7 +27,12 @@ float sample_value(vec3 u) {
 }
 
 // Original-world point (mm) -> texel coordinates.
-vec3 world_to_texel(vec3 q) { return (q - u_origin) / u_spacing + 0.5; }
+// Oblique scans map through their rotation here: the volume is never resampled.
+// (With the identity this is exactly (q - origin) / spacing + 0.5, as the folded
+// straight-ray map computes it.)
+vec3 world_to_texel(vec3 q) {
+    return (transpose(u_direction) * (q - u_origin)) / u_spacing + 0.5;
+}
 
 bool inside_texels(vec3 u) {
     return all(greaterThanEqual(u, vec3(0.0))) && all(lessThanEqual(u, u_dims));
@@ -38,5 +44,5 @@ vec3 gradient_original(vec3 u) {
     g.x = sample_value(u + vec3(1, 0, 0)) - sample_value(u - vec3(1, 0, 0));
     g.y = sample_value(u + vec3(0, 1, 0)) - sample_value(u - vec3(0, 1, 0));
     g.z = sample_value(u + vec3(0, 0, 1)) - sample_value(u - vec3(0, 0, 1));
-    return 0.5 * g / u_spacing;
+    return u_direction * (0.5 * g / u_spacing);
 }

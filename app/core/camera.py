@@ -4,9 +4,18 @@ The camera looks at ``center`` from ``center + distance * back``, where ``rotati
 columns are the camera's right, up and back axes in world coordinates (mm).
 
 Standard views name the side the camera sits on: ``"+z"`` looks from +z towards -z
-with +x to the right and +y up; ``"+x"``/``"-x"``/``"+y"``/``"-y"`` keep +z up. A view may
-also be ``(azimuth, elevation)`` in degrees: azimuth about +z from the +x axis,
-elevation above the xy plane (so ``(0, 0)`` is ``"+x"``).
+with +x to the right and +y up; ``"-z"`` has +y up and +x to the left;
+``"+x"``/``"-x"``/``"+y"``/``"-y"`` keep +z up. A view may also be ``(azimuth,
+elevation)`` in degrees: the camera sits at azimuth degrees about +z, counted from +x
+towards +y, and elevation degrees above the xy plane, looking at the centre with +z
+up (so ``(0, 0)`` is ``"+x"`` and ``(90, 0)`` is ``"+y"``). Straight from above or below
+(elevation ±90) the azimuth direction points down the image: ``(0, 90)`` looks down
+from +z with +x down and +y to the right.
+
+Anatomical views (``"anterior"``, ``"posterior"``, ``"left"``, ``"right"``,
+``"superior"``, ``"inferior"``) are the axis views of patient RAS world space
+(:data:`voxwarp.core.orientation.ANATOMICAL_VIEWS`): in RAS, +x is the patient's
+right, +y anterior and +z superior, so ``(90, 0)`` is the anterior view.
 """
 
 from __future__ import annotations
@@ -17,6 +26,7 @@ from typing import Literal
 
 import numpy as np
 
+from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.deform.warp import rotation_matrix
 from voxwarp.errors import SceneError
 
@@ -33,6 +43,8 @@ _VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]]
     "-z": ((-1, 0, 0), (0, 1, 0)),
 }
 VIEWS: tuple[str, ...] = tuple(_VIEWS)
+#: Every named view: the axis views and the anatomical ones.
+VIEW_NAMES: tuple[str, ...] = (*VIEWS, *ANATOMICAL_VIEWS)
 
 View = str | tuple[float, float]
 
@@ -40,9 +52,10 @@ View = str | tuple[float, float]
 def view_rotation(view: View) -> np.ndarray:
     """3x3 rotation (columns right, up, back) for a standard view or (azimuth, elevation)."""
     if isinstance(view, str):
+        view = ANATOMICAL_VIEWS.get(view, view)
         if view not in _VIEWS:
             raise SceneError(
-                f"unknown view {view!r}; use one of {', '.join(VIEWS)} or (azimuth, elevation)"
+                f"unknown view {view!r}; use one of {', '.join(VIEW_NAMES)} or (azimuth, elevation)"
             )
         right, up = (np.asarray(v, float) for v in _VIEWS[view])
         return np.column_stack([right, up, np.cross(right, up)])

@@ -37,6 +37,10 @@ SUGGESTED_TRANSFER_FUNCTIONS: dict[str, Any] = {
 }
 
 
+#: The modality of the bundled real scans (their files carry none); the phantoms are HU.
+SAMPLE_MODALITIES: dict[str, str] = {"stent": "CT", "colin27": "MR"}
+
+
 def suggested_transfer_function(name: str) -> Any:
     """A transfer function (preset name or points) that shows sample ``name`` well."""
     return SUGGESTED_TRANSFER_FUNCTIONS.get(name, "ct-bone")
@@ -74,11 +78,17 @@ def load_sample(
             f"unknown sample {name!r}; bundled samples: {', '.join(sample_volumes.names())}"
         )
     s = sample_volumes.get(name, **kwargs)
+    spacing = s.spacing if spacing is None else spacing
+    origin = s.origin if origin is None else origin
     return Volume(
         s.data,
-        spacing if spacing is not None else s.spacing,
-        origin if origin is not None else (0.0, 0.0, 0.0),
+        spacing,
+        origin,
         name=name,
         source=f"sample:{name}",
         units=s.units,
+        modality=SAMPLE_MODALITIES.get(name, ""),
+        space="RAS" if s.axes == "RAS" else "",
+        file_axes=s.axes,
+        spacing_source="file" if s.axes or s.units == "HU" else "assumed",
     )

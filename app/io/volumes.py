@@ -9,17 +9,24 @@ Supported inputs (chosen by extension, or by the content of a folder):
 ========================  ===========================================================
 ``.npy`` / ``.npz``       NumPy arrays indexed ``(x, y, z)`` (``allow_pickle=False``);
                           an ``.npz`` holds the volume under ``data`` (or as its only
-                          array) and optionally ``spacing``, ``origin`` and ``units``.
+                          array) and optionally ``spacing``, ``origin``, ``units``, or
+                          ``affine`` with ``space`` ("RAS" or "LPS").
 ``.raw .bin .img``        Headerless voxels, x fastest, described by a JSON sidecar
 + ``.json`` sidecar       ``vol.raw.json`` or ``vol.json``:
                           ``{"dims": [nx, ny, nz], "dtype": "uint16", "spacing":
                           [sx, sy, sz], "byte_order": "little", "origin": [...],
-                          "header_bytes": 0, "units": "HU"}``. The sidecar path
-                          itself may be passed too.
-``.nrrd`` / ``.nhdr``     NRRD via pynrrd (axis-aligned geometry only).
-``.nii`` / ``.nii.gz``    NIfTI via nibabel (axis-aligned geometry only).
-folder of DICOM files     One series (the largest if several), sorted along the slice
-                          normal, rescaled to stored units (HU for CT).
+                          "header_bytes": 0, "units": "HU"}``, optionally an
+                          ``"affine"`` (4x4 index -> world mm) with ``"space"``
+                          ``"RAS"`` or ``"LPS"``. The sidecar path itself may be
+                          passed too.
+``.nrrd`` / ``.nhdr``     NRRD via pynrrd: ``space directions`` and ``space origin`` in
+                          any ``space`` (RAS, LAS, LPS become patient RAS).
+``.nii`` / ``.nii.gz``    NIfTI via nibabel: the sform, else the qform (nibabel's
+                          precedence); neither code set means no orientation.
+folder of DICOM files     One series (``series=``; the largest by default), sorted
+                          along the slice normal, rescaled to stored units (HU for CT);
+                          ImageOrientationPatient/ImagePositionPatient (LPS) give the
+                          patient geometry.
 ``.dcm``                  A single multi-frame DICOM file.
 ``.tif`` / ``.tiff``      A multi-page TIFF z-stack, or a folder of single-page TIFF
                           slices in natural file-name order; ImageJ calibration is used.
@@ -28,6 +35,11 @@ folder of DICOM files     One series (the largest if several), sorted along the 
 :func:`save_volume` writes ``.npz``, ``.raw`` (+ ``.raw.json``), ``.nrrd``,
 ``.nii``/``.nii.gz`` and ``.tif`` atomically. :func:`volume_summary` and
 :func:`volume_info` describe a volume as text and as a JSON-ready dict.
+
+Files with a patient orientation are stored in the closest RAS axis order (a lossless
+permutation and flip of the voxels; see :mod:`voxwarp.core.orientation`), so world space
+is patient RAS+ mm whatever the format; an oblique scan keeps its rotation in
+``Volume.direction`` and renders without resampling.
 
 Every problem caused by the input raises :class:`voxwarp.errors.VolumeError` with a
 message naming the problem and the fix. The format libraries (pynrrd, nibabel,
@@ -40,10 +52,7 @@ import json
 import math
 import os
 import re
-import sys
-import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -55,6 +64,10 @@ from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
 from voxwarp.core.volume import short_repr as _short
 from voxwarp.errors import VolumeError
+from voxwarp.io.loaded import Loaded as _Loaded
+from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
+from voxwarp.io.loaded import native as _native
+from voxwarp.io.loaded import warn as _warn
 
 __all__ = [
     "LOAD_EXTENSIONS",
@@ -153,27 +166,6 @@ _STATS_SAMPLE_VOXELS = 1 << 24
 
 
 # ---------------------------------------------------------------------------- helpers
-@dataclass
-class _Loaded:
-    """What a format reader found: data (x, y, z) plus the geometry the file states."""
-
-    data: np.ndarray
-    spacing: tuple[float, float, float] | None = None
-    origin: tuple[float, float, float] | None = None
-    units: str = ""
-    array_like: bool = False  # True for .npy/.npz: axis_order applies
-
-
-def _warn(message: str) -> None:
-    """Warn, attributing the warning to the first caller outside this module."""
-    level = 2  # stacklevel=2 is the frame that called _warn
-    frame = sys._getframe(1)
-    while frame is not None and frame.f_code.co_filename == __file__:
-        frame = frame.f_back
-        level += 1
-    warnings.warn(message, UserWarning, stacklevel=level)
-
-
 def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
@@ -204,13 +196,6 @@ def _stem(path: Path) -> str:
         if lower.endswith(double) and len(name) > len(double):
             return name[: -len(double)]
     return path.stem or name
-
-
-def _native(data: np.ndarray) -> np.ndarray:
-    """Return ``data`` in native byte order (keeps the dtype's kind and width)."""
-    if data.dtype.byteorder not in ("=", "|") and data.dtype.fields is None:
-        return data.astype(data.dtype.newbyteorder("="))
-    return data
 
 
 def _unit_scale(unit: Any, where: str) -> float:
@@ -253,6 +238,9 @@ def load_volume(
     axis_order: AxisOrder = "xyz",
     nan_policy: NanPolicy = "raise",
     downsample: int = 1,
+    affine: Sequence[Sequence[float]] | np.ndarray | None = None,
+    space: str = "RAS",
+    series: str | int | None = None,
 ) -> Volume:
     """Load a volume from a file, a folder of slices, or a NumPy array.
 
@@ -280,6 +268,15 @@ def load_volume(
     downsample
         Integer block-mean reduction factor per axis (1 = full resolution); warns
         when it reduces the volume.
+    affine
+        For arrays: the 4x4 index -> world matrix (mm) in ``space``; gives the array a
+        patient orientation (e.g. ``nibabel_image.affine``). Excludes spacing/origin.
+    space
+        ``"RAS"`` (nibabel, Slicer) or ``"LPS"`` (DICOM, ITK): the patient space of
+        ``affine``.
+    series
+        For a folder with several DICOM series: the 1-based index ``voxwarp info``
+        lists, or a SeriesInstanceUID. Default: the largest series, with a warning.
 
     Returns
     -------
@@ -300,19 +297,24 @@ def load_volume(
     factor = _check_downsample(downsample)
     spacing_override = None if spacing is None else _triple(spacing, "spacing", positive=True)
     origin_override = None if origin is None else _triple(origin, "origin")
+    array_affine = _array_affine(affine, space, spacing_override, origin_override)
+    sample_spacing: str | None = None  # a bundled sample knows whether its spacing is real
 
     if isinstance(source, str) and source.startswith("sample:") and not os.path.exists(source):
         from voxwarp.io.samples import load_sample
 
         sample = load_sample(source.split(":", 1)[1])
         loaded = _Loaded(sample.data, sample.spacing, sample.origin, sample.units)
+        if sample.space:
+            loaded.affine, loaded.space = sample.affine, sample.space
         name, src, what = sample.name, sample.source, source
+        sample_spacing = sample.spacing_source
     elif isinstance(source, str | os.PathLike):
         try:
             path = Path(os.path.abspath(os.path.expanduser(os.fspath(source))))
         except (TypeError, ValueError) as exc:
             raise VolumeError(f"invalid path {_short(source)}: {exc}") from exc
-        loaded = _load_path(path)
+        loaded = _load_path(path, series)
         name, src = _stem(path), str(path)
         what = path.name
     elif isinstance(source, np.ndarray) or hasattr(source, "__array__"):
@@ -321,6 +323,8 @@ def load_volume(
         except (TypeError, ValueError) as exc:
             raise VolumeError(f"cannot convert {type(source).__name__} to an array: {exc}") from exc
         loaded = _Loaded(array, array_like=True)
+        if array_affine is not None:
+            loaded.affine, loaded.space = array_affine, "RAS"
         name, src, what = "volume", None, "array"
     else:
         raise VolumeError(f"source must be a path or a NumPy array; got {type(source).__name__}.")
@@ -337,17 +341,20 @@ def load_volume(
                 f"a volume needs a 3D array; got {data.ndim}D with shape {data.shape}."
             )
         data = data.transpose(2, 1, 0)
+        if loaded.affine is not None:  # the file's affine indexes the stored axes
+            loaded.affine = loaded.affine[:, [2, 1, 0, 3]]
 
-    volume = _finish(
-        data,
-        spacing=spacing_override if spacing_override is not None else loaded.spacing,
-        origin=origin_override if origin_override is not None else loaded.origin,
-        name=name,
-        source=src,
-        units=loaded.units,
-        nan_policy=nan_policy,
-        what=what,
-    )
+    if array_affine is not None and not loaded.array_like:
+        raise VolumeError(
+            f"affine= applies to NumPy arrays and .npy files; {what} states its own"
+            " geometry. Leave affine out."
+        )
+    if array_affine is not None and loaded.affine is None:
+        loaded.affine, loaded.space = array_affine, "RAS"
+    loaded.data = data
+    volume = _finish(loaded, spacing_override, origin_override, name, src, nan_policy, what)
+    if sample_spacing is not None and spacing_override is None:
+        volume.spacing_source = sample_spacing
     if factor != 1:
         reduced = volume.downsample(factor)
         _warn(
@@ -359,18 +366,20 @@ def load_volume(
 
 
 def _finish(
-    data: np.ndarray,
-    *,
+    loaded: _Loaded,
     spacing: tuple[float, float, float] | None,
     origin: tuple[float, float, float] | None,
     name: str,
     source: str | None,
-    units: str,
     nan_policy: NanPolicy,
     what: str,
 ) -> Volume:
-    """Normalise dtype and byte order, check NaN/Inf, and build the :class:`Volume`."""
-    data = np.asarray(data)
+    """Normalise dtype and byte order, check NaN/Inf, orient, and build the Volume.
+
+    ``spacing``/``origin`` are the user's overrides; they apply to the stored
+    (closest-RAS) axes.
+    """
+    data = np.asarray(loaded.data)
     if data.dtype.kind == "f" and data.dtype != np.float32:
         with np.errstate(over="ignore", invalid="ignore"):
             data = data.astype(np.float32)  # before check_finite: overflow becomes Inf
@@ -378,22 +387,69 @@ def _finish(
         data = _native(data)
     if data.dtype.kind == "f" and data.ndim == 3 and data.size:
         data = check_finite(data, nan_policy, what=what)
+    if data.ndim != 3:
+        raise VolumeError(
+            f"a volume needs a 3D array (nx, ny, nz); got {data.ndim}D with shape"
+            f" {data.shape}. For a single image, add an axis: array[..., None]."
+        )
+    loaded.data = data
+    data, geometry = loaded_geometry(loaded, what)
+    stated = geometry["spacing"] is not None
+    if spacing is not None:
+        geometry["spacing"] = spacing
+    if origin is not None:
+        geometry["origin"] = origin
+    geometry["spacing"] = geometry["spacing"] or (1.0, 1.0, 1.0)
+    geometry["origin"] = geometry["origin"] or (0.0, 0.0, 0.0)
+    source_of_spacing = "given" if spacing is not None else "file" if stated else "assumed"
     return Volume(
         data,
-        spacing if spacing is not None else (1.0, 1.0, 1.0),
-        origin if origin is not None else (0.0, 0.0, 0.0),
         name=name,
         source=source,
-        units=units,
+        units=loaded.units,
+        spacing_source=source_of_spacing,
+        modality=loaded.modality,
+        padding_value=loaded.padding_value,
+        **geometry,
     )
 
 
-def _load_path(path: Path) -> _Loaded:
+def _array_affine(affine: Any, space: Any, spacing: Any, origin: Any) -> np.ndarray | None:
+    """The RAS affine an array was given (``affine=`` in ``space``), or ``None``."""
+    if affine is None:
+        return None
+    if spacing is not None or origin is not None:
+        raise VolumeError(
+            "pass either affine= or spacing=/origin= for an array, not both (the affine"
+            " holds the spacing and the origin)."
+        )
+    a = checked_affine(affine, "affine=")
+    return _to_ras(a, space, "space=")
+
+
+#: Sign flips from a patient space to RAS.
+_SPACE_TO_RAS = {"RAS": (1.0, 1.0), "LPS": (-1.0, -1.0), "LAS": (-1.0, 1.0)}
+
+
+def _to_ras(affine: np.ndarray, space: Any, where: str) -> np.ndarray:
+    """``affine`` (in ``space``: "RAS", "LPS" or "LAS") as a RAS affine."""
+    if space not in _SPACE_TO_RAS:
+        raise VolumeError(f"{where} must be 'RAS' or 'LPS'; got {_short(space)}.")
+    fx, fy = _SPACE_TO_RAS[space]
+    return np.diag([fx, fy, 1.0, 1.0]) @ affine
+
+
+def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
     """Dispatch on the path: folder content or file extension."""
     if not path.exists():
         raise VolumeError(f"no such file or directory: {path}")
     if path.is_dir():
-        return _read_directory(path)
+        return _read_directory(path, series)
+    if series is not None:
+        raise VolumeError(
+            f"series= chooses among the DICOM series of a folder; {path.name} is a file."
+            " Pass the folder, or leave series out."
+        )
     lower = path.name.lower()
     if lower.endswith((".npy", ".npz")):
         return _read_numpy(path)
@@ -418,7 +474,9 @@ def _load_path(path: Path) -> _Loaded:
             )
         return _read_raw(path, sidecar)
     if lower.endswith((".dcm", ".dicom")):
-        return _read_dicom_file(path)
+        from voxwarp.io.dicom import read_dicom_file
+
+        return read_dicom_file(path)
     raise VolumeError(
         f"unsupported file type {path.suffix or '(no extension)'} for {path}; voxwarp reads"
         f" {_SUPPORTED_TEXT}. Convert the file, or pass the folder for DICOM slices."
@@ -453,7 +511,7 @@ def _npz_get(npz: Any, key: str, path: Path) -> np.ndarray:
 
 def _read_npz_contents(npz: Any, path: Path) -> _Loaded:
     keys = list(npz.files)
-    meta = {"spacing", "origin", "units"}
+    meta = {"spacing", "origin", "units", "affine", "space"}
     if "data" in keys:
         key = "data"
     else:
@@ -485,6 +543,12 @@ def _read_npz_contents(npz: Any, path: Path) -> _Loaded:
             )
         item = arr.reshape(()).item()
         loaded.units = item.decode("utf-8", "replace") if isinstance(item, bytes) else str(item)
+    if "affine" in keys and key != "affine":
+        space = _npz_get(npz, "space", path).reshape(-1) if "space" in keys else ["RAS"]
+        affine = _npz_get(npz, "affine", path)
+        if affine.dtype.kind not in "iuf":
+            raise VolumeError(f"'affine' in {path} must hold numbers; got dtype {affine.dtype}.")
+        _stated_affine(loaded, affine, str(space[0]) if len(space) == 1 else space, str(path))
     return loaded
 
 
@@ -603,7 +667,22 @@ def _read_raw(path: Path, sidecar: Path) -> _Loaded:
     if flat.size != count:  # the file changed under us
         raise VolumeError(f"{path.name}: read {flat.size} voxels, expected {count}.")
     data = _native(flat).reshape(tuple(dims), order="F")
-    return _Loaded(data, spacing, origin, units)
+    loaded = _Loaded(data, spacing, origin, units)
+    _stated_affine(loaded, meta.get("affine"), meta.get("space", "RAS"), where)
+    return loaded
+
+
+def _stated_affine(loaded: _Loaded, affine: Any, space: Any, where: str) -> None:
+    """Give ``loaded`` the ``affine`` (in patient ``space``) a sidecar or .npz states."""
+    if affine is None:
+        return
+    if loaded.spacing is not None or loaded.origin is not None:
+        raise VolumeError(
+            f"{where} states both an 'affine' and 'spacing'/'origin'; keep only the affine"
+            " (it holds both)."
+        )
+    loaded.affine = _to_ras(checked_affine(affine, where), space, f"'space' in {where}")
+    loaded.space = "RAS"
 
 
 # ---------------------------------------------------------------------------- NRRD
@@ -643,37 +722,51 @@ def _read_nrrd(path: Path) -> _Loaded:
             )
         data = np.squeeze(data, axis=tuple(extra))
 
-    spacing = None
-    if dirs is not None:
-        vectors = dirs[spatial]
-        spacing = tuple(float(v) for v in np.linalg.norm(vectors, axis=1))
-        diagonal = vectors.shape == (3, 3) and np.allclose(
-            vectors - np.diag(np.diag(vectors)), 0.0, atol=1e-6 * max(spacing)
-        )
-        if not diagonal or np.any(np.diag(vectors) <= 0):
-            _warn(
-                f"{where}: the space directions are not axis-aligned with positive axes"
-                f" ({_short(vectors.tolist())}); voxwarp keeps only the voxel sizes and the"
-                " origin and shows the volume in index order."
-            )
-    elif spacings is not None:
-        finite = spacings[np.isfinite(spacings)]
-        if finite.size == 3:
-            spacing = tuple(float(v) for v in finite)
-    if spacing is not None:
-        spacing = _triple(spacing, "spacing", positive=True, where=where)
-    origin = None
-    if space_origin is not None and space_origin.size == 3 and np.all(np.isfinite(space_origin)):
-        origin = _triple(space_origin, "space origin", where=where)
-
+    scale = 1.0
     units_field = header.get("space units")
     if isinstance(units_field, list) and units_field and len(set(units_field)) == 1:
         scale = _unit_scale(units_field[0], where)
-        if scale != 1.0:
-            spacing = None if spacing is None else tuple(s * scale for s in spacing)
-            origin = None if origin is None else tuple(o * scale for o in origin)
     units = header.get("voxwarp_units", "")
-    return _Loaded(data, spacing, origin, units if isinstance(units, str) else "")
+    units = units if isinstance(units, str) else ""
+    origin = None
+    if space_origin is not None and space_origin.size == 3 and np.all(np.isfinite(space_origin)):
+        origin = np.asarray(_triple(space_origin, "space origin", where=where)) * scale
+    if dirs is not None and len(spatial) == 3:
+        affine = np.eye(4)
+        affine[:3, :3] = dirs[spatial].T * scale  # rows of space directions are axes
+        if origin is not None:
+            affine[:3, 3] = origin
+        affine = checked_affine(affine, f"the space directions of {where}")
+        space = _nrrd_space(header, where)
+        if space is not None:
+            return _Loaded(data, units=units, affine=_to_ras(affine, space, where), space="RAS")
+        return _Loaded(data, units=units, affine=affine)
+    spacing = None
+    if spacings is not None:
+        finite = spacings[np.isfinite(spacings)]
+        if finite.size == 3:
+            spacing = _triple(finite * scale, "spacing", positive=True, where=where)
+    return _Loaded(data, spacing, None if origin is None else tuple(origin), units)
+
+
+#: NRRD ``space`` values with a patient orientation -> the patient space of the header.
+_NRRD_SPACES = {
+    "right-anterior-superior": "RAS",
+    "ras": "RAS",
+    "left-posterior-superior": "LPS",
+    "lps": "LPS",
+    "left-anterior-superior": "LAS",
+    "las": "LAS",
+}
+
+
+def _nrrd_space(header: dict[str, Any], where: str) -> str | None:
+    """The patient space of the header (RAS, LPS, LAS), or ``None`` for scanner-xyz,
+    3D-right-handed, 3D-left-handed or no ``space`` (geometry without orientation)."""
+    space = header.get("space")
+    if not isinstance(space, str):
+        return None
+    return _NRRD_SPACES.get(space.strip().lower().removesuffix("-time"))
 
 
 # ---------------------------------------------------------------------------- NIfTI
@@ -710,7 +803,7 @@ def _read_nifti(path: Path) -> _Loaded:
             raw, slope, inter = np.asanyarray(proxy), 1.0, 0.0
         hdr = img.header
         zooms = tuple(float(z) for z in hdr.get_zooms()[:3])
-        affine = None if img.affine is None else np.asarray(img.affine, dtype=np.float64)
+        affine = _nifti_affine(hdr)
         space_unit = hdr.get_xyzt_units()[0] if hasattr(hdr, "get_xyzt_units") else "mm"
     except Exception as exc:
         raise VolumeError(
@@ -721,49 +814,65 @@ def _read_nifti(path: Path) -> _Loaded:
     if not (math.isfinite(slope) and math.isfinite(inter)):
         slope, inter = 1.0, 0.0
     if slope != 1.0 or inter != 0.0:
-        data = _rescale(data, slope, inter)
+        data = rescale(data, slope, inter)
 
     scale = _unit_scale(space_unit, path.name)
+    if affine is not None:
+        affine[:3, :] *= scale
+        return _Loaded(data, affine=checked_affine(affine, path.name), space="RAS")
     spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=path.name)
-    spacing = tuple(s * scale for s in spacing)
-    origin = None
-    if affine is not None and affine.shape == (4, 4) and np.all(np.isfinite(affine)):
-        origin = tuple(float(v) * scale for v in affine[:3, 3])
-        m = affine[:3, :3]
-        off = m - np.diag(np.diag(m))
-        if np.max(np.abs(off)) > 1e-6 * max(np.max(np.abs(m)), 1e-12) or np.any(np.diag(m) <= 0):
-            _warn(
-                f"{path.name}: the affine has rotation, shear or flipped axes; voxwarp keeps"
-                " only the voxel sizes and the translation and shows the volume in index order."
-            )
-    return _Loaded(data, spacing, origin)  # type: ignore[arg-type]
+    return _Loaded(data, tuple(s * scale for s in spacing))  # type: ignore[arg-type]
 
 
-def _rescale(data: np.ndarray, slope: float, inter: float) -> np.ndarray:
-    """``data * slope + inter``, as integers when that is exact and fits 32 bits."""
-    integral = data.dtype.kind in "iub" and float(slope).is_integer() and float(inter).is_integer()
-    scaled = data.astype(np.float64) * slope + inter
-    if integral and scaled.size:
-        lo, hi = float(scaled.min()), float(scaled.max())
-        if -(2**31) <= lo and hi < 2**31:
-            return scaled.astype(np.int32)  # Volume narrows it to uint8/int16/uint16
-    return scaled.astype(np.float32)
+def _nifti_affine(hdr: Any) -> np.ndarray | None:
+    """The sform when its code is set, else the qform when its code is set (nibabel's
+    ``get_best_affine`` precedence); ``None`` for neither, or for Analyze headers:
+    such a file has no patient orientation."""
+    if not hasattr(hdr, "get_sform"):
+        return None
+    sform, scode = hdr.get_sform(coded=True)
+    if scode and sform is not None and np.all(np.isfinite(sform)):
+        return np.asarray(sform, dtype=np.float64)
+    qform, qcode = hdr.get_qform(coded=True)
+    if qcode and qform is not None and np.all(np.isfinite(qform)):
+        return np.asarray(qform, dtype=np.float64)
+    return None
 
 
 # ---------------------------------------------------------------------------- folders
-def _read_directory(directory: Path) -> _Loaded:
+def _list_files(directory: Path) -> list[Path]:
+    """Visible files directly inside ``directory``, in natural name order."""
     try:
-        entries = sorted(
+        return sorted(
             (p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")),
             key=lambda p: _natural_key(p.name),
         )
     except OSError as exc:
         raise VolumeError(f"cannot list the folder {directory}: {exc.strerror or exc}.") from exc
+
+
+def dicom_series(path: str | os.PathLike[str]) -> list[Any]:
+    """The DICOM series in a folder (``SeriesInfo``, largest first); empty otherwise."""
+    from voxwarp.io.dicom import list_dicom_series
+
+    folder = Path(os.path.abspath(os.path.expanduser(os.fspath(path))))
+    if not folder.is_dir():
+        return []
+    files = [p for p in _list_files(folder) if not p.name.lower().endswith(_TIFF_EXTENSIONS)]
+    return list_dicom_series(folder, files)
+
+
+def _read_directory(directory: Path, series: str | int | None = None) -> _Loaded:
+    from voxwarp.io.dicom import read_dicom_dir
+
+    entries = _list_files(directory)
     tiffs = [p for p in entries if p.name.lower().endswith(_TIFF_EXTENSIONS)]
     others = [p for p in entries if not p.name.lower().endswith(_TIFF_EXTENSIONS)]
-    loaded = _read_dicom_dir(directory, others)
+    loaded = read_dicom_dir(directory, others, series)
     if loaded is not None:
         return loaded
+    if series is not None:
+        raise VolumeError(f"series= needs a folder of DICOM files; {directory} holds none.")
     if tiffs:
         return _read_tiff_dir(directory, tiffs)
     raise VolumeError(
@@ -771,316 +880,6 @@ def _read_directory(directory: Path) -> _Loaded:
         " per file, any file names, directly inside the folder) or of TIFF slices (.tif/.tiff)."
         f" Pass the folder holding the series, or a volume file: {_SUPPORTED_TEXT}."
     )
-
-
-# ---------------------------------------------------------------------------- DICOM
-def _floats(value: Any, n: int) -> np.ndarray | None:
-    """``value`` as ``n`` finite floats, or ``None`` when absent or malformed."""
-    if value is None:
-        return None
-    try:
-        arr = np.asarray([float(v) for v in value], dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    if arr.size != n or not np.all(np.isfinite(arr)):
-        return None
-    return arr
-
-
-def _to_float(value: Any, default: float) -> float:
-    """``float(value)`` when that is a finite number, else ``default``."""
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        return default
-    return out if math.isfinite(out) else default
-
-
-def _number(ds: Any, keyword: str, default: float | None) -> float | None:
-    value = ds.get(keyword)
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        return default
-    return out if math.isfinite(out) else default
-
-
-def _read_dicom_dir(directory: Path, files: list[Path]) -> _Loaded | None:
-    """Load the (largest) DICOM series in ``files``; ``None`` if none is DICOM."""
-    if not files:
-        return None
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    headers: list[tuple[Path, Any]] = []
-    for p in files:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ds = pydicom.dcmread(p, stop_before_pixels=True, force=False)
-        except InvalidDicomError:
-            continue
-        except Exception as exc:
-            _warn(f"skipped {p.name}: not a readable DICOM file ({type(exc).__name__}: {exc}).")
-            continue
-        if "Rows" in ds and "Columns" in ds:
-            headers.append((p, ds))
-    if not headers:
-        return None
-
-    series: dict[str, list[tuple[Path, Any]]] = {}
-    for p, ds in headers:
-        series.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append((p, ds))
-    uid, chosen = max(series.items(), key=lambda item: len(item[1]))
-    if len(series) > 1:
-
-        def describe(u: str, items: list) -> str:
-            desc = str(items[0][1].get("SeriesDescription", "") or "no description")
-            return f"{u or '(no SeriesInstanceUID)'} ({desc}, {len(items)} files)"
-
-        ignored = "; ".join(describe(u, s) for u, s in series.items() if u != uid)
-        _warn(
-            f"{directory} holds {len(series)} DICOM series; loading the largest,"
-            f" {describe(uid, chosen)}. Ignored: {ignored}. Put one series per folder to"
-            " choose another."
-        )
-
-    frames = [int(_number(ds, "NumberOfFrames", 1) or 1) for _, ds in chosen]
-    if max(frames) > 1:
-        if len(chosen) == 1:
-            return _read_dicom_file(chosen[0][0])
-        raise VolumeError(
-            f"{directory} holds several multi-frame DICOM files in one series; pass one"
-            " of them (a .dcm file) instead of the folder."
-        )
-    return _assemble_dicom_series(directory, chosen)
-
-
-def _assemble_dicom_series(directory: Path, chosen: list[tuple[Path, Any]]) -> _Loaded:
-    import pydicom
-
-    ds0 = chosen[0][1]
-    iop = _floats(ds0.get("ImageOrientationPatient"), 6)
-    ipps = [_floats(ds.get("ImagePositionPatient"), 3) for _, ds in chosen]
-    positions: np.ndarray | None = None
-    if iop is not None and all(p is not None for p in ipps):
-        normal = np.cross(iop[:3], iop[3:])
-        if np.linalg.norm(normal) > 1e-6:
-            normal /= np.linalg.norm(normal)
-            positions = np.array([float(np.dot(p, normal)) for p in ipps])
-    if positions is not None:
-        order = np.argsort(positions, kind="stable")
-    else:
-        numbers = [_number(ds, "InstanceNumber", None) for _, ds in chosen]
-        if all(n is not None for n in numbers):
-            order = np.argsort(np.asarray(numbers, dtype=np.float64), kind="stable")
-        else:
-            order = np.arange(len(chosen))
-            if len(chosen) > 1:
-                _warn(
-                    f"{directory}: the slices have neither ImagePositionPatient nor"
-                    " InstanceNumber; they are stacked in file-name order."
-                )
-    chosen = [chosen[i] for i in order]
-    n = len(chosen)
-
-    slice_spacing: float | None = None
-    if positions is not None and n > 1:
-        sorted_pos = positions[order]
-        gaps = np.diff(sorted_pos)
-        if np.any(gaps < 1e-4):
-            count = int(np.sum(gaps < 1e-4)) + 1
-            raise VolumeError(
-                f"{directory}: {count} slices share a position; the series may hold several"
-                " acquisitions (echoes, phases, time points). Put one acquisition per folder."
-            )
-        slice_spacing = float(np.median(gaps))
-        if float(np.max(np.abs(gaps - slice_spacing))) > 0.01 * slice_spacing:
-            _warn(
-                f"{directory}: uneven slice spacing ({gaps.min():.4g} to {gaps.max():.4g} mm);"
-                f" using the median {slice_spacing:.4g} mm. Missing slices or a variable"
-                " acquisition make the volume geometrically inexact."
-            )
-    if slice_spacing is None:
-        slice_spacing = _number(ds0, "SpacingBetweenSlices", None) or _number(
-            ds0, "SliceThickness", None
-        )
-        if slice_spacing is None or slice_spacing <= 0:
-            slice_spacing = 1.0
-            if n > 1:
-                _warn(f"{directory}: no slice positions or thickness; slice spacing set to 1 mm.")
-    pixel = _floats(ds0.get("PixelSpacing"), 2)
-    if pixel is None:
-        pixel = _floats(ds0.get("ImagerPixelSpacing"), 2)
-    if pixel is None or np.any(pixel <= 0):
-        _warn(f"{directory}: no PixelSpacing; in-plane spacing set to 1 mm.")
-        pixel = np.array([1.0, 1.0])
-    spacing = (float(pixel[1]), float(pixel[0]), float(slice_spacing))  # (sx, sy, sz)
-
-    origin = None
-    first_ipp = _floats(chosen[0][1].get("ImagePositionPatient"), 3)
-    if first_ipp is not None:
-        origin = tuple(float(v) for v in first_ipp)
-    if iop is not None and not np.allclose(iop, [1, 0, 0, 0, 1, 0], atol=1e-3):
-        _warn(
-            f"{directory}: the slices are not axial (ImageOrientationPatient"
-            f" {[round(float(v), 4) for v in iop]}); voxwarp shows them in index order"
-            " (x along rows, y along columns, z along the slice normal)."
-        )
-
-    rows, cols = int(ds0.Rows), int(ds0.Columns)
-    slopes = np.array([_number(ds, "RescaleSlope", 1.0) or 1.0 for _, ds in chosen])
-    inters = np.array([_number(ds, "RescaleIntercept", 0.0) or 0.0 for _, ds in chosen])
-    rescaled = bool(np.any(slopes != 1.0) or np.any(inters != 0.0))
-    out: np.ndarray | None = None
-    integer_pixels = True
-    for k, (p, _) in enumerate(chosen):
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                full = pydicom.dcmread(p, force=False)
-        except Exception as exc:
-            raise VolumeError(
-                f"cannot read the DICOM file {p} ({type(exc).__name__}: {exc})."
-            ) from exc
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                arr = np.asarray(full.pixel_array)
-        except Exception as exc:
-            syntax = getattr(getattr(full, "file_meta", None), "TransferSyntaxUID", "?")
-            raise VolumeError(
-                f"cannot decode the pixel data of {p} (transfer syntax {syntax};"
-                f" {type(exc).__name__}: {exc}). Compressed DICOM needs a decoder: pip install"
-                " pylibjpeg pylibjpeg-libjpeg pylibjpeg-openjpeg (or python-gdcm)."
-            ) from exc
-        if arr.shape != (rows, cols):
-            raise VolumeError(
-                f"{p.name} has an image of shape {arr.shape}, but the series' first slice is"
-                f" {(rows, cols)}; voxwarp reads grayscale series with equal-sized slices."
-            )
-        integer_pixels = integer_pixels and arr.dtype.kind in "iub"
-        if out is None:
-            dtype = np.float32 if rescaled else arr.dtype
-            out = np.empty((cols, rows, n), dtype=dtype, order="F")
-        elif not rescaled and arr.dtype != out.dtype:
-            out = out.astype(np.result_type(out.dtype, arr.dtype))
-        if rescaled:
-            out[:, :, k] = (arr.astype(np.float64) * slopes[k] + inters[k]).T
-        else:
-            out[:, :, k] = arr.T
-    assert out is not None
-    if rescaled:
-        integral = (
-            integer_pixels
-            and all(float(s).is_integer() for s in slopes)
-            and all(float(i).is_integer() for i in inters)
-        )
-        if integral and out.min() >= -32768 and out.max() <= 32767:
-            out = out.astype(np.int16)
-    units = "HU" if str(ds0.get("Modality", "")).upper() == "CT" else ""
-    return _Loaded(out, spacing, origin, units)  # type: ignore[arg-type]
-
-
-def _functional_attr(ds: Any, keyword: str, frame: int | None = None) -> Any:
-    """Find ``keyword`` at top level or in the (per-frame or shared) functional groups."""
-    if keyword in ds:
-        return ds.get(keyword)
-    groups = []
-    if frame is not None and "PerFrameFunctionalGroupsSequence" in ds:
-        seq = ds.PerFrameFunctionalGroupsSequence
-        if frame < len(seq):
-            groups.append(seq[frame])
-    if "SharedFunctionalGroupsSequence" in ds and len(ds.SharedFunctionalGroupsSequence):
-        groups.append(ds.SharedFunctionalGroupsSequence[0])
-    for group in groups:
-        for element in group:
-            if element.VR == "SQ" and len(element.value) and keyword in element.value[0]:
-                return element.value[0].get(keyword)
-    return None
-
-
-def _read_dicom_file(path: Path) -> _Loaded:
-    """Load a single multi-frame DICOM file (frames stacked along z)."""
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ds = pydicom.dcmread(path, force=False)
-    except InvalidDicomError as exc:
-        raise VolumeError(f"{path} is not a DICOM file ({exc}).") from exc
-    except Exception as exc:
-        raise VolumeError(
-            f"cannot read the DICOM file {path} ({type(exc).__name__}: {exc})."
-        ) from exc
-    frames = int(_number(ds, "NumberOfFrames", 1) or 1)
-    if frames <= 1:
-        raise VolumeError(
-            f"{path} is a single DICOM slice; pass the folder holding the whole series"
-            f" instead: {path.parent}"
-        )
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            arr = np.asarray(ds.pixel_array)
-    except Exception as exc:
-        raise VolumeError(
-            f"cannot decode the pixel data of {path} ({type(exc).__name__}: {exc})."
-            " Compressed DICOM needs a decoder: pip install pylibjpeg pylibjpeg-libjpeg"
-            " pylibjpeg-openjpeg (or python-gdcm)."
-        ) from exc
-    if arr.ndim != 3 or arr.shape[0] != frames:
-        raise VolumeError(
-            f"{path} has pixel data of shape {arr.shape}; voxwarp reads grayscale multi-frame"
-            " images (frames, rows, columns)."
-        )
-    data = arr.transpose(2, 1, 0)  # (frames, rows, cols) -> (x, y, z)
-
-    iop = _floats(_functional_attr(ds, "ImageOrientationPatient", 0), 6)
-    ipps = [_floats(_functional_attr(ds, "ImagePositionPatient", f), 3) for f in range(frames)]
-    slice_spacing = None
-    origin = None
-    if iop is not None and all(p is not None for p in ipps):
-        normal = np.cross(iop[:3], iop[3:])
-        if np.linalg.norm(normal) > 1e-6:
-            normal /= np.linalg.norm(normal)
-            pos = np.array([float(np.dot(p, normal)) for p in ipps])
-            order = np.argsort(pos, kind="stable")
-            gaps = np.diff(pos[order])
-            if np.all(gaps > 1e-4):
-                data = data[:, :, order]
-                slice_spacing = float(np.median(gaps))
-                origin = tuple(float(v) for v in ipps[int(order[0])])  # type: ignore[index]
-    if slice_spacing is None:
-        for keyword in ("SpacingBetweenSlices", "SliceThickness"):
-            value = _functional_attr(ds, keyword, 0)
-            try:
-                if value is not None and float(value) > 0:
-                    slice_spacing = float(value)
-                    break
-            except (TypeError, ValueError):
-                pass
-    if slice_spacing is None:
-        slice_spacing = 1.0
-        _warn(f"{path.name}: no frame positions or slice thickness; slice spacing set to 1 mm.")
-    pixel = _floats(_functional_attr(ds, "PixelSpacing", 0), 2)
-    if pixel is None or np.any(pixel <= 0):
-        _warn(f"{path.name}: no PixelSpacing; in-plane spacing set to 1 mm.")
-        pixel = np.array([1.0, 1.0])
-    spacing = (float(pixel[1]), float(pixel[0]), float(slice_spacing))
-
-    s = _to_float(_functional_attr(ds, "RescaleSlope", 0), 1.0) or 1.0
-    i = _to_float(_functional_attr(ds, "RescaleIntercept", 0), 0.0)
-    if s != 1.0 or i != 0.0:
-        data = _rescale(data, s, i)
-        if data.dtype == np.int32 and data.min() >= -32768 and data.max() <= 32767:
-            data = data.astype(np.int16)
-        elif data.dtype == np.int32:
-            data = data.astype(np.float32)
-    units = "HU" if str(ds.get("Modality", "")).upper() == "CT" else ""
-    return _Loaded(data, spacing, origin, units)
 
 
 # ---------------------------------------------------------------------------- TIFF
@@ -1287,10 +1086,23 @@ def _write_npz(volume: Volume, tmp: Path) -> None:
         np.savez_compressed(
             f,
             data=volume.data,
-            spacing=np.asarray(volume.spacing, dtype=np.float64),
-            origin=np.asarray(volume.origin, dtype=np.float64),
             units=np.array(volume.units),
+            **_npz_geometry(volume),
         )
+
+
+def _oriented(volume: Volume) -> bool:
+    """Whether the geometry needs a full affine (a patient orientation or a rotation)."""
+    return bool(volume.space) or volume.is_oblique
+
+
+def _npz_geometry(volume: Volume) -> dict[str, np.ndarray]:
+    if _oriented(volume):
+        return {"affine": volume.affine, "space": np.array(volume.space or "RAS")}
+    return {
+        "spacing": np.asarray(volume.spacing, dtype=np.float64),
+        "origin": np.asarray(volume.origin, dtype=np.float64),
+    }
 
 
 def _save_raw(volume: Volume, final: Path) -> None:
@@ -1299,11 +1111,13 @@ def _save_raw(volume: Volume, final: Path) -> None:
         "dims": list(volume.shape),
         "dtype": volume.dtype.name,
         "byte_order": "little",
-        "spacing": list(volume.spacing),
-        "origin": list(volume.origin),
         "header_bytes": 0,
         "units": volume.units,
     }
+    if _oriented(volume):
+        meta.update(affine=volume.affine.tolist(), space=volume.space or "RAS")
+    else:
+        meta.update(spacing=list(volume.spacing), origin=list(volume.origin))
     tmp_data = _temp_name(final, ".raw")
     tmp_side = _temp_name(sidecar, ".json")
     try:
@@ -1326,12 +1140,14 @@ def _write_nrrd(volume: Volume, tmp: Path) -> None:
 
     header: dict[str, Any] = {
         "space dimension": 3,
-        "space directions": np.diag(np.asarray(volume.spacing, dtype=np.float64)),
+        "space directions": volume.affine[:3, :3].T,
         "space origin": np.asarray(volume.origin, dtype=np.float64),
         "space units": ["mm", "mm", "mm"],
         "kinds": ["domain", "domain", "domain"],
         "encoding": "gzip",
     }
+    if volume.space:
+        header["space"] = "right-anterior-superior"
     if volume.units:
         header["voxwarp_units"] = volume.units
     nrrd.write(str(tmp), np.asarray(volume.data), header, index_order="F")
@@ -1340,9 +1156,10 @@ def _write_nrrd(volume: Volume, tmp: Path) -> None:
 def _write_nifti(volume: Volume, tmp: Path) -> None:
     import nibabel as nib
 
-    affine = np.diag([*volume.spacing, 1.0])
-    affine[:3, 3] = volume.origin
-    img = nib.Nifti1Image(np.asarray(volume.data), affine)
+    img = nib.Nifti1Image(np.asarray(volume.data), volume.affine)
+    code = 1 if volume.space else 2  # scanner (patient) space, or "aligned" to something
+    img.set_sform(volume.affine, code=code)
+    img.set_qform(volume.affine, code=code)
     img.header.set_xyzt_units("mm")
     nib.save(img, str(tmp))
 
@@ -1350,6 +1167,11 @@ def _write_nifti(volume: Volume, tmp: Path) -> None:
 def _write_tiff(volume: Volume, tmp: Path) -> None:
     import tifffile
 
+    if _oriented(volume):
+        _warn(
+            f"TIFF stores no patient orientation; {volume.name} keeps spacing and origin only"
+            " (save as .nii.gz or .nrrd to keep the orientation)."
+        )
     sx, sy, sz = volume.spacing
     ox, oy, oz = volume.origin
     metadata: dict[str, Any] = {
@@ -1384,7 +1206,11 @@ def volume_info(volume: Volume) -> dict[str, Any]:
     -------
     dict
         Keys ``name``, ``source``, ``dims`` ``[nx, ny, nz]``, ``voxels``, ``dtype``,
-        ``units``, ``spacing_mm``, ``origin_mm``, ``size_mm``, ``memory_mb``, ``min``,
+        ``units``, ``spacing_mm``, ``spacing_source`` (file, given or assumed),
+        ``origin_mm``, ``orientation`` (axis code of the stored axes, ``None`` without a
+        patient orientation), ``file_axes`` (the file's axis code), ``world``,
+        ``oblique_deg``, ``affine`` (4x4 index -> world), ``modality``,
+        ``padding_value``, ``size_mm``, ``memory_mb``, ``min``,
         ``max``, ``mean``, ``std``, ``nonfinite`` (count of NaN/Inf voxels, left out of
         the statistics), ``percentiles`` (``{"1": ..., "5": ..., "50": ..., "95": ...,
         "99": ...}``, from an evenly strided sample above 2**24 voxels),
@@ -1422,7 +1248,15 @@ def volume_info(volume: Volume) -> dict[str, Any]:
         "dtype": str(volume.dtype),
         "units": volume.units,
         "spacing_mm": [float(s) for s in volume.spacing],
+        "spacing_source": volume.spacing_source,
         "origin_mm": [float(o) for o in volume.origin],
+        "orientation": volume.orientation or None,
+        "file_axes": volume.file_axes or None,
+        "world": "RAS+ mm" if volume.space else "index axes along +x, +y, +z (no orientation)",
+        "oblique_deg": volume.obliquity,
+        "affine": volume.affine.tolist(),
+        "modality": volume.modality or None,
+        "padding_value": volume.padding_value,
         "size_mm": [float(s) for s in volume.size_mm],
         "memory_mb": volume.nbytes / 2**20,
         "min": lo,
@@ -1437,6 +1271,29 @@ def volume_info(volume: Volume) -> dict[str, Any]:
             "counts": [int(c) for c in counts],
         },
     }
+
+
+_SPACING_NOTE = {
+    "file": "from the file",
+    "given": "given by the user",
+    "assumed": "assumed: the input states none; pass --spacing",
+}
+
+
+def _orientation_text(volume: Volume) -> str:
+    if not volume.space:
+        return "none (no patient orientation; index axes along world +x, +y, +z)"
+    text = f"{volume.file_axes or 'RAS'} in the file"
+    if volume.file_axes and volume.file_axes != "RAS":
+        text += ", stored as RAS (axes permuted/flipped, no resampling)"
+    if volume.is_oblique:
+        text += f", oblique by {volume.obliquity:.1f} deg (rendered through the affine)"
+    return text + "; world is patient RAS+ mm"
+
+
+def _affine_lines(affine: np.ndarray) -> list[str]:
+    rows = [" ".join(f"{v:>10.4g}" for v in row) for row in affine]
+    return [f"affine:      [{rows[0]}]", *(f"             [{r}]" for r in rows[1:])]
 
 
 def _fmt(value: float) -> str:
@@ -1472,8 +1329,10 @@ def volume_summary(volume: Volume) -> str:
         f"dims:        ({nx}, {ny}, {nz})  = {info['voxels']:,} voxels",
         f"dtype:       {info['dtype']}",
         f"units:       {info['units'] or '(unknown)'}",
-        f"spacing:     {_fmt3(info['spacing_mm'])} mm",
-        f"origin:      {_fmt3(info['origin_mm'])} mm",
+        f"spacing:     {_fmt3(info['spacing_mm'])} mm ({_SPACING_NOTE[volume.spacing_source]})",
+        f"origin:      {_fmt3(info['origin_mm'])} mm (centre of voxel 0, 0, 0)",
+        f"orientation: {_orientation_text(volume)}",
+        *_affine_lines(volume.affine),
         f"size:        {_fmt3(info['size_mm'])} mm",
         f"memory:      {info['memory_mb']:.2f} MB ({volume.nbytes:,} bytes)",
         f"range:       [{_fmt(info['min'])}, {_fmt(info['max'])}]",

@@ -157,11 +157,14 @@ class SkipMapCache:
 
     def _warped_cells_possible(self, scene: Scene) -> bool:
         """Whether warped rays of ``scene`` can skip by deformed-space cell maps: a mode
-        with sparse visibility (dvr, iso, flm), cell skipping on, and every warp of the
-        chain bounding its displacement."""
+        with sparse visibility (dvr, iso, flm), cell skipping on, every warp of the
+        chain bounding its displacement, and voxel axes along the world axes (the
+        deformed-space map is the volume's cell grid; an oblique scan's cells are
+        rotated, so its warped rays test blocks instead)."""
         return (
             self.empty_space_skipping
             and self.cell_skipping
+            and not scene.volume.is_oblique
             and scene.mode in SPARSE_MODES
             and _bounded(scene.warps)
         )

@@ -41,6 +41,29 @@ def assert_geometry(vol: Volume, spacing=SPACING, origin=ORIGIN) -> None:
     np.testing.assert_allclose(vol.origin, origin, rtol=1e-9, atol=1e-9)
 
 
+def assert_same_voxels(vol: Volume, data: np.ndarray, ras_affine: np.ndarray) -> None:
+    """Every file voxel ``data[i, j, k]`` sits at world ``ras_affine @ (i, j, k)`` in ``vol``
+    (the oracle for voxwarp's lossless reorientation: values at the same RAS points)."""
+    ijk = np.indices(data.shape).reshape(3, -1).T.astype(float)
+    world = ijk @ ras_affine[:3, :3].T + ras_affine[:3, 3]
+    stored = np.rint(vol.world_to_index(world)).astype(int)
+    np.testing.assert_allclose(vol.world_to_index(world), stored, atol=1e-6)
+    np.testing.assert_array_equal(
+        vol.data[tuple(stored.T)],
+        data.reshape(-1)[np.ravel_multi_index(ijk.T.astype(int), data.shape)],
+    )
+
+
+def lps_to_ras(affine: np.ndarray) -> np.ndarray:
+    return np.diag([-1.0, -1.0, 1.0, 1.0]) @ affine
+
+
+def diag_affine(spacing=SPACING, origin=ORIGIN) -> np.ndarray:
+    a = np.diag([*spacing, 1.0])
+    a[:3, 3] = origin
+    return a
+
+
 @contextmanager
 def no_warnings() -> Iterator[None]:
     """Turn every warning into an error inside the block."""
@@ -160,17 +183,25 @@ def test_nrrd_written_by_pynrrd_keeps_xyz(tmp_path: Path) -> None:
     assert list(read_header["sizes"]) == [5, 6, 7]
     with no_warnings():
         vol = load_volume(tmp_path / "a.nrrd")
-    np.testing.assert_array_equal(vol.data, data)
-    assert_geometry(vol)
+    # LPS file axes: stored flipped in x and y so that they run along RAS
+    assert (vol.file_axes, vol.orientation, vol.space) == ("LPS", "RAS", "RAS")
+    np.testing.assert_array_equal(vol.data, data[::-1, ::-1, :])
+    assert_same_voxels(vol, data, lps_to_ras(diag_affine()))
+    np.testing.assert_allclose(vol.spacing, SPACING)
 
 
-def test_nrrd_rotated_directions_warn(tmp_path: Path) -> None:
-    header = {"space directions": np.array([[0.0, 2.0, 0.0], [1.0, 0.0, 0.0], [0, 0, 3.0]])}
-    header["space"] = "right-anterior-superior"
+def test_nrrd_permuted_directions_are_reoriented_without_warning(tmp_path: Path) -> None:
+    dirs = np.array([[0.0, 2.0, 0.0], [1.0, 0.0, 0.0], [0, 0, 3.0]])  # rows: i -> +y, j -> +x
+    header = {"space directions": dirs, "space": "right-anterior-superior"}
     nrrd.write(str(tmp_path / "r.nrrd"), asym(), header, index_order="F")
-    with pytest.warns(UserWarning, match="axis-aligned"):
+    with no_warnings():
         vol = load_volume(tmp_path / "r.nrrd")
-    assert vol.spacing == (2.0, 1.0, 3.0)
+    assert vol.file_axes == "ARS"
+    assert vol.spacing == (1.0, 2.0, 3.0)
+    assert not vol.is_oblique
+    affine = np.eye(4)
+    affine[:3, :3] = dirs.T
+    assert_same_voxels(vol, asym(), affine)
 
 
 def test_nrrd_spacings_field_and_vector_axis(tmp_path: Path) -> None:
@@ -183,7 +214,7 @@ def test_nrrd_spacings_field_and_vector_axis(tmp_path: Path) -> None:
     }
     nrrd.write(str(tmp_path / "v.nrrd"), asym()[None], header, index_order="F")
     vol = load_volume(tmp_path / "v.nrrd")
-    np.testing.assert_array_equal(vol.data, asym())
+    assert_same_voxels(vol, asym(), lps_to_ras(diag_affine(origin=(0, 0, 0))))
     assert vol.spacing == SPACING
 
 
@@ -216,13 +247,26 @@ def test_nifti_scaling_keeps_integers_and_trailing_singleton(tmp_path: Path) -> 
     np.testing.assert_allclose(vol.data, 0.5 * asym("int16") + 0.25)
 
 
-def test_nifti_rotated_affine_warns(tmp_path: Path) -> None:
+def test_nifti_rotated_affine_is_kept_as_an_oblique_direction(tmp_path: Path) -> None:
     theta = 0.3
     affine = np.eye(4)
     affine[:2, :2] = [[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]]
+    affine[:3, :3] *= 1.5
     nib.save(nib.Nifti1Image(asym(), affine), str(tmp_path / "r.nii"))
-    with pytest.warns(UserWarning, match="rotation"):
-        load_volume(tmp_path / "r.nii")
+    with no_warnings():
+        vol = load_volume(tmp_path / "r.nii")
+    assert vol.is_oblique
+    assert vol.obliquity == pytest.approx(np.degrees(theta))
+    np.testing.assert_allclose(vol.affine, affine, atol=1e-9)  # RAS already: data as is
+    np.testing.assert_array_equal(vol.data, asym())
+
+
+def test_nifti_sheared_affine_warns(tmp_path: Path) -> None:
+    affine = np.eye(4)
+    affine[0, 2] = 0.2  # k tilts towards x: a gantry tilt
+    nib.save(nib.Nifti1Image(asym(), affine), str(tmp_path / "s.nii"))
+    with pytest.warns(UserWarning, match="not orthogonal"):
+        load_volume(tmp_path / "s.nii")
 
 
 def test_tiff_multipage_written_by_tifffile_keeps_xyz(tmp_path: Path) -> None:
@@ -401,9 +445,13 @@ def test_dicom_series_order_values_spacing_units(tmp_path: Path) -> None:
         vol = load_volume(folder)
     assert vol.shape == (10, 8, 6)
     assert vol.dtype == np.int16
-    np.testing.assert_array_equal(vol.data, 2 * dicom_expected() - 1024)
+    # LPS patient axes (IOP 1,0,0,0,1,0): stored flipped in x and y, at the same points
+    assert (vol.file_axes, vol.modality) == ("LPS", "CT")
+    np.testing.assert_array_equal(vol.data, (2 * dicom_expected() - 1024)[::-1, ::-1, :])
+    assert_same_voxels(
+        vol, 2 * dicom_expected() - 1024, lps_to_ras(diag_affine((0.5, 0.7, 1.5), (-20, 10, 30)))
+    )
     np.testing.assert_allclose(vol.spacing, (0.5, 0.7, 1.5))
-    np.testing.assert_allclose(vol.origin, (-20.0, 10.0, 30.0))
     assert vol.units == "HU"
     assert vol.name == "ct"
     assert vol.source == str(folder)

@@ -1,0 +1,404 @@
+"""DICOM: a folder of single-frame slices (one series) or one multi-frame file.
+
+Geometry comes from ImageOrientationPatient, ImagePositionPatient and PixelSpacing in
+DICOM's patient space (LPS+ mm) and is handed on as a RAS+ affine: column index i runs
+along the row direction (IOP[:3], PixelSpacing[1] apart), row index j along the column
+direction (IOP[3:], PixelSpacing[0]) and k along the slice normal (slices sorted by their
+position on it). Values are rescaled to stored units (HU for CT); the Modality and the
+PixelPaddingValue (rescaled) are kept. pydicom is imported only here.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.orientation import LPS_TO_RAS
+from voxwarp.errors import VolumeError
+from voxwarp.io.loaded import Loaded, floats, rescale, to_float, warn
+
+_DECODER_HINT = (
+    "Compressed DICOM needs a decoder: pip install 'voxwarp[dicom]' (pylibjpeg and its"
+    " JPEG/JPEG 2000/RLE plugins)."
+)
+
+
+@dataclass(frozen=True)
+class SeriesInfo:
+    """One DICOM series in a folder, as ``voxwarp info`` lists it."""
+
+    index: int  # 1-based, in the order listed (largest first)
+    uid: str
+    description: str
+    modality: str
+    files: int
+    rows: int
+    columns: int
+
+    def line(self) -> str:
+        """One line: index, file count, size, modality, description and UID."""
+        return (
+            f"{self.index}: {self.files} files, {self.columns}x{self.rows},"
+            f" {self.modality or '?'}, {self.description or 'no description'}"
+            f" ({self.uid or 'no SeriesInstanceUID'})"
+        )
+
+
+def _number(ds: Any, keyword: str, default: float | None) -> float | None:
+    return to_float(ds.get(keyword), default)
+
+
+def _headers(files: list[Path]) -> list[tuple[Path, Any]]:
+    """(path, header) of every image file in ``files`` that pydicom reads."""
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    headers: list[tuple[Path, Any]] = []
+    for p in files:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ds = pydicom.dcmread(p, stop_before_pixels=True, force=False)
+        except InvalidDicomError:
+            continue
+        except Exception as exc:
+            warn(f"skipped {p.name}: not a readable DICOM file ({type(exc).__name__}: {exc}).")
+            continue
+        if "Rows" in ds and "Columns" in ds:
+            headers.append((p, ds))
+    return headers
+
+
+def _group_series(headers: list[tuple[Path, Any]]) -> list[tuple[SeriesInfo, list]]:
+    """Series in the folder, largest first (ties in UID order)."""
+    groups: dict[str, list[tuple[Path, Any]]] = {}
+    for p, ds in headers:
+        groups.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append((p, ds))
+    ordered = sorted(groups.items(), key=lambda item: (-len(item[1]), item[0]))
+    out = []
+    for n, (uid, items) in enumerate(ordered, start=1):
+        ds = items[0][1]
+        info = SeriesInfo(
+            index=n,
+            uid=uid,
+            description=str(ds.get("SeriesDescription", "") or ""),
+            modality=str(ds.get("Modality", "") or ""),
+            files=len(items),
+            rows=int(ds.Rows),
+            columns=int(ds.Columns),
+        )
+        out.append((info, items))
+    return out
+
+
+def list_dicom_series(directory: Path, files: list[Path]) -> list[SeriesInfo]:
+    """The DICOM series among ``files`` (largest first); empty when none is DICOM."""
+    return [info for info, _ in _group_series(_headers(files))]
+
+
+def _pick_series(
+    directory: Path, groups: list[tuple[SeriesInfo, list]], series: str | int | None
+) -> tuple[SeriesInfo, list]:
+    """The series ``series`` names (1-based index or UID); the largest when ``None``."""
+    listing = "; ".join(info.line() for info, _ in groups)
+    if series is None:
+        chosen = groups[0]
+        if len(groups) > 1:
+            warn(
+                f"{directory} holds {len(groups)} DICOM series; loading the largest"
+                f" ({chosen[0].line()}). Choose another with --series N or --series UID"
+                f" (voxwarp info lists them): {listing}"
+            )
+        return chosen
+    text = str(series).strip()
+    for info, items in groups:
+        if text == info.uid or (text.isdigit() and int(text) == info.index):
+            return info, items
+    raise VolumeError(
+        f"{directory} has no DICOM series {text!r}; pass an index 1..{len(groups)} or a"
+        f" SeriesInstanceUID: {listing}"
+    )
+
+
+def read_dicom_dir(
+    directory: Path, files: list[Path], series: str | int | None = None
+) -> Loaded | None:
+    """Load one DICOM series among ``files``; ``None`` if none of them is DICOM."""
+    if not files:
+        return None
+    headers = _headers(files)
+    if not headers:
+        return None
+    _, chosen = _pick_series(directory, _group_series(headers), series)
+    frames = [int(_number(ds, "NumberOfFrames", 1) or 1) for _, ds in chosen]
+    if max(frames) > 1:
+        if len(chosen) == 1:
+            return read_dicom_file(chosen[0][0])
+        raise VolumeError(
+            f"{directory} holds several multi-frame DICOM files in one series; pass one"
+            " of them (a .dcm file) instead of the folder."
+        )
+    return _assemble_series(directory, chosen)
+
+
+def _slice_order(
+    directory: Path, chosen: list[tuple[Path, Any]], iop: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Order of the slices and their sorted positions along the normal (or ``None``)."""
+    ipps = [floats(ds.get("ImagePositionPatient"), 3) for _, ds in chosen]
+    if iop is not None and all(p is not None for p in ipps):
+        normal = np.cross(iop[:3], iop[3:])
+        if np.linalg.norm(normal) > 1e-6:
+            normal /= np.linalg.norm(normal)
+            positions = np.array([float(np.dot(p, normal)) for p in ipps])
+            order = np.argsort(positions, kind="stable")
+            return order, positions[order]
+    numbers = [_number(ds, "InstanceNumber", None) for _, ds in chosen]
+    if all(n is not None for n in numbers):
+        return np.argsort(np.asarray(numbers, dtype=np.float64), kind="stable"), None
+    if len(chosen) > 1:
+        warn(
+            f"{directory}: the slices have neither ImagePositionPatient nor"
+            " InstanceNumber; they are stacked in file-name order."
+        )
+    return np.arange(len(chosen)), None
+
+
+def _slice_spacing(directory: Path, positions: np.ndarray | None, ds0: Any, n: int) -> float:
+    """Distance between slices: the median gap of their positions, else the header's."""
+    if positions is not None and n > 1:
+        gaps = np.diff(positions)
+        if np.any(gaps < 1e-4):
+            count = int(np.sum(gaps < 1e-4)) + 1
+            raise VolumeError(
+                f"{directory}: {count} slices share a position; the series may hold several"
+                " acquisitions (echoes, phases, time points). Put one acquisition per folder"
+                " or choose the series with --series."
+            )
+        spacing = float(np.median(gaps))
+        if float(np.max(np.abs(gaps - spacing))) > 0.01 * spacing:
+            warn(
+                f"{directory}: uneven slice spacing ({gaps.min():.4g} to {gaps.max():.4g} mm);"
+                f" using the median {spacing:.4g} mm. Missing slices or a variable"
+                " acquisition make the volume geometrically inexact."
+            )
+        return spacing
+    value = _number(ds0, "SpacingBetweenSlices", None) or _number(ds0, "SliceThickness", None)
+    if value is None or value <= 0:
+        if n > 1:
+            warn(f"{directory}: no slice positions or thickness; slice spacing set to 1 mm.")
+        return 1.0
+    return value
+
+
+def _pixel_spacing(where: str, value: Any) -> np.ndarray:
+    pixel = floats(value, 2)
+    if pixel is None or np.any(pixel <= 0):
+        warn(f"{where}: no PixelSpacing; in-plane spacing set to 1 mm.")
+        return np.array([1.0, 1.0])
+    return pixel
+
+
+def _ras_affine(
+    iop: np.ndarray | None, first_ipp: np.ndarray | None, pixel: np.ndarray, dz: float
+) -> tuple[np.ndarray | None, tuple[float, float, float]]:
+    """RAS affine (or ``None`` without IOP/IPP) and the (sx, sy, sz) spacing."""
+    spacing = (float(pixel[1]), float(pixel[0]), float(dz))
+    if iop is None or first_ipp is None:
+        return None, spacing
+    row, col = iop[:3], iop[3:]
+    normal = np.cross(row, col)
+    if np.linalg.norm(normal) < 1e-6:
+        return None, spacing
+    lps = np.eye(4)
+    lps[:3, 0] = row / np.linalg.norm(row) * spacing[0]
+    lps[:3, 1] = col / np.linalg.norm(col) * spacing[1]
+    lps[:3, 2] = normal / np.linalg.norm(normal) * spacing[2]
+    lps[:3, 3] = first_ipp
+    to_ras = np.eye(4)
+    to_ras[:3, :3] = LPS_TO_RAS
+    return to_ras @ lps, spacing
+
+
+def _pixels(p: Path, full: Any) -> np.ndarray:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return np.asarray(full.pixel_array)
+    except Exception as exc:
+        syntax = getattr(getattr(full, "file_meta", None), "TransferSyntaxUID", "?")
+        raise VolumeError(
+            f"cannot decode the pixel data of {p} (transfer syntax {syntax};"
+            f" {type(exc).__name__}: {exc}). {_DECODER_HINT}"
+        ) from exc
+
+
+def _padding(ds: Any, slope: float, inter: float) -> float | None:
+    value = _number(ds, "PixelPaddingValue", None)
+    return None if value is None else float(value * slope + inter)
+
+
+def _assemble_series(directory: Path, chosen: list[tuple[Path, Any]]) -> Loaded:
+    import pydicom
+
+    ds0 = chosen[0][1]
+    iop = floats(ds0.get("ImageOrientationPatient"), 6)
+    order, positions = _slice_order(directory, chosen, iop)
+    chosen = [chosen[i] for i in order]
+    n = len(chosen)
+    dz = _slice_spacing(directory, positions, ds0, n)
+    pixel = _pixel_spacing(str(directory), ds0.get("PixelSpacing") or ds0.get("ImagerPixelSpacing"))
+    first_ipp = floats(chosen[0][1].get("ImagePositionPatient"), 3)
+    affine, spacing = _ras_affine(iop, first_ipp, pixel, dz)
+
+    rows, cols = int(ds0.Rows), int(ds0.Columns)
+    slopes = np.array([_number(ds, "RescaleSlope", 1.0) or 1.0 for _, ds in chosen])
+    inters = np.array([_number(ds, "RescaleIntercept", 0.0) or 0.0 for _, ds in chosen])
+    rescaled = bool(np.any(slopes != 1.0) or np.any(inters != 0.0))
+    out: np.ndarray | None = None
+    integer_pixels = True
+    for k, (p, _) in enumerate(chosen):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                full = pydicom.dcmread(p, force=False)
+        except Exception as exc:
+            raise VolumeError(
+                f"cannot read the DICOM file {p} ({type(exc).__name__}: {exc})."
+            ) from exc
+        arr = _pixels(p, full)
+        if arr.shape != (rows, cols):
+            raise VolumeError(
+                f"{p.name} has an image of shape {arr.shape}, but the series' first slice is"
+                f" {(rows, cols)}; voxwarp reads grayscale series with equal-sized slices."
+            )
+        integer_pixels = integer_pixels and arr.dtype.kind in "iub"
+        if out is None:
+            dtype = np.float32 if rescaled else arr.dtype
+            out = np.empty((cols, rows, n), dtype=dtype, order="F")
+        elif not rescaled and arr.dtype != out.dtype:
+            out = out.astype(np.result_type(out.dtype, arr.dtype))
+        if rescaled:
+            out[:, :, k] = (arr.astype(np.float64) * slopes[k] + inters[k]).T
+        else:
+            out[:, :, k] = arr.T
+    assert out is not None
+    if rescaled:
+        integral = (
+            integer_pixels
+            and all(float(s).is_integer() for s in slopes)
+            and all(float(i).is_integer() for i in inters)
+        )
+        if integral and out.min() >= -32768 and out.max() <= 32767:
+            out = out.astype(np.int16)
+    return _loaded(out, spacing, affine, ds0, float(slopes[0]), float(inters[0]))
+
+
+def _loaded(
+    data: np.ndarray,
+    spacing: tuple[float, float, float],
+    affine: np.ndarray | None,
+    ds: Any,
+    slope: float,
+    inter: float,
+) -> Loaded:
+    modality = str(ds.get("Modality", "") or "").upper()
+    return Loaded(
+        data,
+        spacing=spacing,
+        units="HU" if modality == "CT" else "",
+        affine=affine,
+        space="RAS" if affine is not None else "",
+        modality=modality,
+        padding_value=_padding(ds, slope, inter),
+    )
+
+
+def _functional_attr(ds: Any, keyword: str, frame: int | None = None) -> Any:
+    """Find ``keyword`` at top level or in the (per-frame or shared) functional groups."""
+    if keyword in ds:
+        return ds.get(keyword)
+    groups = []
+    if frame is not None and "PerFrameFunctionalGroupsSequence" in ds:
+        seq = ds.PerFrameFunctionalGroupsSequence
+        if frame < len(seq):
+            groups.append(seq[frame])
+    if "SharedFunctionalGroupsSequence" in ds and len(ds.SharedFunctionalGroupsSequence):
+        groups.append(ds.SharedFunctionalGroupsSequence[0])
+    for group in groups:
+        for element in group:
+            if element.VR == "SQ" and len(element.value) and keyword in element.value[0]:
+                return element.value[0].get(keyword)
+    return None
+
+
+def _read_multiframe(path: Path) -> Any:
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return pydicom.dcmread(path, force=False)
+    except InvalidDicomError as exc:
+        raise VolumeError(f"{path} is not a DICOM file ({exc}).") from exc
+    except Exception as exc:
+        raise VolumeError(
+            f"cannot read the DICOM file {path} ({type(exc).__name__}: {exc})."
+        ) from exc
+
+
+def read_dicom_file(path: Path) -> Loaded:
+    """Load a single multi-frame DICOM file (frames stacked along the slice normal)."""
+    ds = _read_multiframe(path)
+    frames = int(_number(ds, "NumberOfFrames", 1) or 1)
+    if frames <= 1:
+        raise VolumeError(
+            f"{path} is a single DICOM slice; pass the folder holding the whole series"
+            f" instead: {path.parent}"
+        )
+    arr = _pixels(path, ds)
+    if arr.ndim != 3 or arr.shape[0] != frames:
+        raise VolumeError(
+            f"{path} has pixel data of shape {arr.shape}; voxwarp reads grayscale multi-frame"
+            " images (frames, rows, columns)."
+        )
+    data = arr.transpose(2, 1, 0)  # (frames, rows, cols) -> (x, y, z)
+    iop = floats(_functional_attr(ds, "ImageOrientationPatient", 0), 6)
+    ipps = [floats(_functional_attr(ds, "ImagePositionPatient", f), 3) for f in range(frames)]
+    dz, first_ipp = None, None
+    if iop is not None and all(p is not None for p in ipps):
+        normal = np.cross(iop[:3], iop[3:])
+        if np.linalg.norm(normal) > 1e-6:
+            normal /= np.linalg.norm(normal)
+            pos = np.array([float(np.dot(p, normal)) for p in ipps])
+            order = np.argsort(pos, kind="stable")
+            gaps = np.diff(pos[order])
+            if np.all(gaps > 1e-4):
+                data = data[:, :, order]
+                dz = float(np.median(gaps))
+                first_ipp = ipps[int(order[0])]
+    if dz is None:
+        for keyword in ("SpacingBetweenSlices", "SliceThickness"):
+            value = to_float(_functional_attr(ds, keyword, 0), None)
+            if value is not None and value > 0:
+                dz = value
+                break
+    if dz is None:
+        dz = 1.0
+        warn(f"{path.name}: no frame positions or slice thickness; slice spacing set to 1 mm.")
+    pixel = _pixel_spacing(path.name, _functional_attr(ds, "PixelSpacing", 0))
+    affine, spacing = _ras_affine(iop, first_ipp, pixel, dz)
+    s = to_float(_functional_attr(ds, "RescaleSlope", 0), 1.0) or 1.0
+    i = to_float(_functional_attr(ds, "RescaleIntercept", 0), 0.0) or 0.0
+    if s != 1.0 or i != 0.0:
+        data = rescale(data, s, i)
+        if data.dtype == np.int32 and data.min() >= -32768 and data.max() <= 32767:
+            data = data.astype(np.int16)
+        elif data.dtype == np.int32:
+            data = data.astype(np.float32)
+    return _loaded(data, spacing, affine, ds, s, i)
