@@ -266,8 +266,9 @@ class Volume:
 
     def world_to_texel_matrix(self) -> np.ndarray:
         """4x4 world mm -> texel coordinates (voxel i spans [i, i + 1], centre i + 1/2)."""
-        m = np.linalg.inv(self.affine)
-        m[:3, 3] += 0.5
+        m = np.eye(4)
+        m[:3, :3] = self.direction.T / np.asarray(self.spacing)[:, None]
+        m[:3, 3] = -(m[:3, :3] @ np.asarray(self.origin)) + 0.5
         return m
 
     def with_geometry(self, **changes: object) -> Volume:

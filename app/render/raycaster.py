@@ -464,6 +464,7 @@ class Renderer:
             "u_value_map": gpu.value_map,
             "u_spacing": tuple(np.asarray(vol.spacing)),
             "u_origin": tuple(vol.origin),
+            "u_direction": vol.direction,
             "u_tf_map": (tf_scale, 0.5 - tf_lo * tf_scale),
             "u_tf_size": float(TABLE_SIZE),
             "u_window": (level - width / 2, level + width / 2),
@@ -478,11 +479,7 @@ class Renderer:
     def _texel_uniforms(self, frame: _Frame) -> dict[str, Any]:
         """World-to-texel maps: straight rays', through the folded chain; with cell
         skipping, warped rays' into the deformed-space skip map, and its size."""
-        vol = frame.scene.volume
-        sp = np.asarray(vol.spacing)
-        to_texel = np.eye(4)
-        to_texel[:3, :3] = np.diag(1.0 / sp)
-        to_texel[:3, 3] = -np.asarray(vol.origin) / sp + 0.5
+        to_texel = frame.scene.volume.world_to_texel_matrix()
         if frame.fold is not None:
             return {"u_world_to_texel": to_texel @ frame.fold, "u_jacobian": frame.fold[:3, :3]}
         if frame.skip_kind != "cells":
