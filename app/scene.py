@@ -13,6 +13,7 @@ import base64
 import json
 import math
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,13 @@ from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rota
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
+from voxwarp.core.modality import (
+    default_shading,
+    describe,
+    display_defaults,
+    iso_range_warning,
+    uses_transfer_function,
+)
 from voxwarp.core.modes import MODES as MODES
 from voxwarp.core.modes import Mode as Mode
 from voxwarp.core.transfer_function import TransferFunction
@@ -72,7 +80,9 @@ class Scene:
     transfer_function
         Preset name (see :data:`voxwarp.core.transfer_function.PRESETS`), a list of
         ``(value, r, g, b, a)`` control points in data units, or a
-        :class:`~voxwarp.core.transfer_function.TransferFunction`.
+        :class:`~voxwarp.core.transfer_function.TransferFunction`; ``None`` (default)
+        picks one for the volume's modality (:mod:`voxwarp.core.modality`: ``ct-bone``
+        for CT in HU, ``mri`` for MR, a percentile ramp for other data).
     view
         ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"`` (the side the camera is
         on) or ``(azimuth, elevation)`` in degrees.
@@ -83,8 +93,9 @@ class Scene:
     warps
         Chain of :class:`voxwarp.deform.warp.Warp` applied in order (deformed -> original).
     window
-        ``(level, width)`` in data units for the grey-value modes; default from the
-        volume's 0.5-99.5 percentiles.
+        ``(level, width)`` in data units for the grey-value modes; default from robust
+        percentiles of the voxels inside the field of view, per mode
+        (:func:`voxwarp.core.modality.display_defaults`).
     clip_box
         ``((x0, y0, z0), (x1, y1, z1))`` in deformed world mm; rays are cut to it.
     jitter
@@ -93,8 +104,9 @@ class Scene:
     seed
         Jitter seed.
     shading
-        Blinn-Phong shading from gradients; ``None`` means on for ``iso``/``flm`` and off
-        for ``dvr``.
+        Blinn-Phong shading from gradients; ``None`` means on for ``iso``/``flm``, and for
+        ``dvr`` on where the transfer function is a preset that shows surfaces
+        (:data:`voxwarp.core.modality.SURFACE_PRESETS`), off otherwise.
     iso_value
         Isovalue for ``iso``; default where the transfer function's opacity first
         reaches a quarter of its maximum.
@@ -119,7 +131,7 @@ class Scene:
         self,
         volume: Volume,
         mode: Mode = "dvr",
-        transfer_function: Any = "ct-bone",
+        transfer_function: Any = None,
         view: View = "-y",
         projection: Projection = "perspective",
         step: float = 1.0,
@@ -144,7 +156,7 @@ class Scene:
             )
         self.volume = volume
         self.mode = mode
-        self.transfer_function = TransferFunction.coerce(transfer_function, volume)
+        self.transfer_function = _scene_transfer_function(transfer_function, volume, mode)
         self.view = view
         self.projection = projection
         self.step = step
@@ -155,6 +167,8 @@ class Scene:
         self.seed = int(seed)
         self.shading = shading
         self.iso_value = iso_value
+        if mode == "iso" and iso_value is not None:
+            _warn_iso_range(volume, iso_value)
         self.flm_threshold = flm_threshold
         self.background = background
         self.camera = camera
@@ -218,7 +232,9 @@ class Scene:
     @property
     def window(self) -> tuple[float, float]:
         """``(level, width)`` for grey-value modes."""
-        return self._window if self._window is not None else self.volume.default_window()
+        if self._window is not None:
+            return self._window
+        return display_defaults(self.volume, self.mode).window
 
     @window.setter
     def window(self, value: tuple[float, float] | None) -> None:
@@ -323,8 +339,21 @@ class Scene:
     def use_shading(self) -> bool:
         """Whether this scene shades (resolves ``shading=None``)."""
         if self.shading is None:
-            return self.mode in ("iso", "flm")
+            return default_shading(self.mode, self.transfer_function)
         return bool(self.shading)
+
+    def display_note(self) -> str:
+        """One line: the volume's modality and what this scene draws with (transfer
+        function and shading, or window), and its padding (see
+        :mod:`voxwarp.core.modality`); ``voxwarp render`` prints it, the GUI shows it."""
+        return describe(
+            self.volume,
+            self.mode,
+            self.transfer_function,
+            self.window,
+            self.use_shading(),
+            window_given=self._window is not None,
+        )
 
     def resolved_iso_value(self) -> float:
         """The isovalue used by ``iso``."""
@@ -453,7 +482,7 @@ class Scene:
                 w.bind_volume(volume)
         except (WarpError, TypeError) as exc:
             raise SceneError(f"invalid warp in scene: {exc}") from exc
-        tf = d.get("transfer_function", "ct-bone")
+        tf = d.get("transfer_function")  # absent: the modality's default
         if isinstance(tf, Mapping):
             tf = TransferFunction.from_dict(tf, volume)
         camera = d.get("camera")
@@ -522,6 +551,29 @@ class Scene:
             f" projection={self.projection!r}, step={self.step}, warps={len(self.warps)}"
             + (f", meshes={len(self._meshes)})" if self._meshes else ")")
         )
+
+
+def _scene_transfer_function(tf: Any, volume: Volume, mode: str) -> TransferFunction:
+    """``tf`` resolved against ``volume``; None: the modality's default. A mode that
+    draws without it (mip, minip, average, xray) leaves out the HU-preset warning."""
+    if tf is None:
+        return display_defaults(volume, mode).transfer_function
+    if uses_transfer_function(mode):
+        return TransferFunction.coerce(tf, volume)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return TransferFunction.coerce(tf, volume)
+
+
+def _warn_iso_range(volume: Volume, iso_value: Any) -> None:
+    """Warn (one line) when the iso value lies outside the data range."""
+    try:
+        iso = float(iso_value)
+    except (TypeError, ValueError):
+        return  # resolved_iso_value names the bad value
+    message = iso_range_warning(volume, iso)
+    if message is not None:
+        warnings.warn(message, stacklevel=2)  # one location: shown once per message
 
 
 def read_scene_dict(path: str | os.PathLike) -> dict[str, Any]:

@@ -617,6 +617,8 @@ class MainWindow(QMainWindow):
         self.refresh_panels()
         self.sessionChanged.emit()
         self._update_title()
+        if source is not None:  # what the volume was taken for and how it is shown
+            self.statusBar().showMessage(session.scene.display_note(), 10000)
 
     def save(self) -> bool:
         """Save the scene to its file (asks for one the first time)."""
@@ -900,7 +902,8 @@ def load_session_input(spec: str) -> EditSession:
         return EditSession(obj)
     if not isinstance(obj, Volume):
         raise EditorError(f"{spec} is neither a volume nor a scene")
-    tf = suggested_transfer_function(obj.name) if spec.startswith("sample:") else "ct-bone"
+    # a file gets the defaults of its modality (voxwarp.core.modality)
+    tf = suggested_transfer_function(obj.name) if spec.startswith("sample:") else None
     return EditSession(Scene(obj, transfer_function=tf, zoom=1.2))
 
 

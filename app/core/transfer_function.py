@@ -10,7 +10,7 @@ quality, not brightness.
 Presets
 -------
 ``ct-bone``, ``ct-skin``, ``ct-soft`` and ``ct-muscle`` are defined in Hounsfield units.
-On a volume whose values are not HU (``units != "HU"`` and no value below -200), they
+On a volume whose values are not HU (:func:`voxwarp.core.modality.is_hu`), they
 are rescaled from [-1000, 2000] HU onto the volume's 0.5-99.5 percentile range, with a
 warning. ``mri``, ``grayscale`` and ``hot`` are relative: defined on [0, 1] and mapped
 onto the volume's percentile range.
@@ -271,7 +271,9 @@ class TransferFunction:
 
 
 def _looks_like_hu(volume: Volume) -> bool:
-    return volume.units.upper() == "HU" or volume.value_range[0] < -200
+    from voxwarp.core.modality import is_hu  # modality builds on this module
+
+    return is_hu(volume)
 
 
 def _percentile_range(volume: Volume) -> tuple[float, float]:
