@@ -35,19 +35,40 @@ def load_input(
     spacing: Sequence[float] | None = None,
     downsample: int = 1,
     nan_policy: str = "raise",
+    axis_order: str = "xyz",
+    series: int | str | None = None,
 ) -> Any:
-    """Load INPUT: returns a Volume, or a Scene for scene JSON."""
+    """Load INPUT: returns a Volume, or a Scene for scene JSON.
+
+    ``axis_order`` (``"xyz"`` or ``"zyx"``) says how a .npy/.npz array is indexed;
+    ``series`` picks one series of a DICOM folder (its UID or index); both are passed to
+    :func:`voxwarp.io.volumes.load_volume` and refused for samples and scene JSON.
+    """
     from voxwarp.io.samples import load_sample
     from voxwarp.io.volumes import load_volume
     from voxwarp.scene import Scene
 
+    path = Path(spec)
+    named = "a bundled sample" if spec.startswith("sample:") else "a scene JSON"
+    if spec.startswith("sample:") or is_scene_json(path):
+        if axis_order != "xyz":
+            raise InputError(f"--axis-order applies to .npy/.npz arrays; {spec} is {named}")
+        if series is not None:
+            raise InputError(f"--series applies to DICOM folders; {spec} is {named}")
     if spec.startswith("sample:"):
         vol = load_sample(spec.split(":", 1)[1], spacing=spacing)
         return vol.downsample(downsample) if downsample > 1 else vol
-    path = Path(spec)
     if is_scene_json(path):
         return Scene.load(path)
-    return load_volume(path, spacing=spacing, nan_policy=nan_policy, downsample=downsample)  # type: ignore[arg-type]
+    extra: dict[str, Any] = {} if series is None else {"series": series}
+    return load_volume(
+        path,
+        spacing=spacing,
+        nan_policy=nan_policy,  # type: ignore[arg-type]
+        downsample=downsample,
+        axis_order=axis_order,  # type: ignore[arg-type]
+        **extra,
+    )
 
 
 _WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}

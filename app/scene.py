@@ -16,7 +16,7 @@ import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -42,6 +42,9 @@ from voxwarp.errors import MeshError, SceneError, VolumeError
 EMBED_LIMIT_BYTES = 8 * 1024 * 1024
 #: Samples made by generators (their shape is stored in scene JSON).
 GENERATED_SAMPLES = ("fish", "tubes", "head")
+#: What a fitted camera frames: the volume's own box or the box of the warped volume.
+Frame = Literal["undeformed", "deformed"]
+FRAMES: tuple[str, ...] = ("undeformed", "deformed")
 SCENE_FORMAT = "voxwarp-scene"
 SCENE_VERSION = 1
 
@@ -117,6 +120,11 @@ class Scene:
     camera
         An explicit :class:`~voxwarp.core.camera.Camera`; ``None`` fits one to the volume from
         ``view``, ``projection``, ``fov`` and ``zoom``.
+    frame
+        What the fitted camera frames: ``"undeformed"`` (default: the volume's own box,
+        so images before and after a deformation share the framing and a translation
+        shows as a shift) or ``"deformed"`` (the box of the warped volume, refitted to
+        every deformation). An explicit ``camera`` ignores it.
     zoom, fov
         Magnification and vertical field of view (degrees) of the fitted camera.
     meshes
@@ -149,6 +157,7 @@ class Scene:
         zoom: float = 1.0,
         fov: float = 30.0,
         meshes: Sequence[MeshInstance] | None = None,
+        frame: Frame = "undeformed",
     ) -> None:
         if not isinstance(volume, Volume):
             raise SceneError(
@@ -175,6 +184,7 @@ class Scene:
         self.zoom = zoom
         self.fov = fov
         self.meshes = meshes
+        self.frame = frame
 
     # ------------------------------------------------------------------ validated attributes
     @property
@@ -187,6 +197,17 @@ class Scene:
         if value not in MODES:
             raise SceneError(f"mode must be one of {', '.join(MODES)}; got {value!r}")
         self._mode = value
+
+    @property
+    def frame(self) -> str:
+        """What the fitted camera frames, one of :data:`FRAMES`."""
+        return self._frame
+
+    @frame.setter
+    def frame(self, value: str) -> None:
+        if value not in FRAMES:
+            raise SceneError(f"frame must be one of {', '.join(FRAMES)}; got {value!r}")
+        self._frame = value
 
     @property
     def view(self) -> View:
@@ -388,10 +409,11 @@ class Scene:
         return lo, hi
 
     def resolved_camera(self) -> Camera:
-        """The explicit camera, or one fitted to the (warped) volume and the meshes."""
+        """The explicit camera, or one fitted to the volume (its own box, or the warped box
+        with ``frame="deformed"``) and the meshes."""
         if self.camera is not None:
             return self.camera
-        lo, hi = self.deformed_bounds()
+        lo, hi = self.deformed_bounds() if self.frame == "deformed" else self.volume.bounds
         if self._meshes:
             mlo, mhi = mesh_instances_bounds(self._meshes)  # type: ignore[misc]
             lo, hi = np.minimum(lo, mlo), np.maximum(hi, mhi)
@@ -424,6 +446,7 @@ class Scene:
             "zoom": self.zoom,
             "fov": self.fov,
             "meshes": list(self._meshes),
+            "frame": self.frame,
         }
 
     # ------------------------------------------------------------------ serialisation
@@ -450,6 +473,7 @@ class Scene:
             "camera": self.camera.to_dict() if self.camera is not None else None,
             "zoom": self.zoom,
             "fov": self.fov,
+            "frame": self.frame,
         }
         if self._meshes:  # absent without meshes: scene JSON stays as before
             try:
@@ -519,6 +543,7 @@ class Scene:
             "zoom": d.get("zoom", 1.0),
             "fov": d.get("fov", 30.0),
             "meshes": meshes,
+            "frame": d.get("frame", "undeformed"),  # scenes written before it: undeformed
         }
         for key in ("jitter",):
             if not isinstance(kwargs[key], bool):

@@ -48,6 +48,7 @@ def run_gui(
     screenshot: str | None = None,
     size: tuple[int, int] = (1280, 820),
     tour: str | None = None,
+    series: int | str | None = None,
 ) -> int:
     """Open the window on ``input_spec``; with ``tour``, step through a teaching demo's
     tour (its first scene replaces ``input_spec``); with ``screenshot``, save a PNG of
@@ -56,7 +57,7 @@ def run_gui(
 
     app = application()
     try:
-        session = load_session_input(input_spec)
+        session = load_session_input(input_spec, series=series)
     except VoxwarpError as exc:
         print(f"voxwarp: error: {exc}", file=sys.stderr)
         return 2

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from voxwarp.cli import main as app_cli
+from voxwarp.cli.render_options import add_series_arg
 from voxwarp.core.checks import image_size
 from voxwarp.core.extras import require
 from voxwarp.io.samples import DEFAULT_SAMPLE
@@ -43,7 +44,9 @@ def cmd_gui(args: argparse.Namespace) -> int:
     require("gui", "voxwarp gui")
     from voxwarp.ui.app import run_gui
 
-    return run_gui(args.input, screenshot=args.screenshot, size=args.size, tour=args.tour)
+    return run_gui(
+        args.input, screenshot=args.screenshot, size=args.size, tour=args.tour, series=args.series
+    )
 
 
 def cmd_demo_gui(args: argparse.Namespace) -> int:
@@ -85,6 +88,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pg.add_argument(
         "--tour", metavar="FILE", help="step through a teaching demo's tour (NAME_tour.json)"
     )
+    add_series_arg(pg)
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
     sub.choices["demo"].set_defaults(func=cmd_demo_gui)

@@ -888,16 +888,19 @@ class MainWindow(QMainWindow):
 
 
 # ---------------------------------------------------------------------------- helpers
-def load_session_input(spec: str) -> EditSession:
+def load_session_input(spec: str, series: int | str | None = None) -> EditSession:
     """A session for INPUT: a scene JSON (resuming its deformation), a volume file or
-    ``sample:NAME`` (shown with the sample's suggested transfer function)."""
+    ``sample:NAME`` (shown with the sample's suggested transfer function); ``series``
+    picks one series of a DICOM folder (``voxwarp gui --series``)."""
     from voxwarp.inputs import load_input
     from voxwarp.io.samples import suggested_transfer_function
 
     path = Path(spec)
     if path.suffix.lower() == ".json" and path.is_file():
+        if series is not None:
+            raise EditorError(f"--series applies to DICOM folders; {spec} is a scene JSON")
         return EditSession.load(path)
-    obj = load_input(spec)
+    obj = load_input(spec, **({} if series is None else {"series": series}))
     if isinstance(obj, Scene):
         return EditSession(obj)
     if not isinstance(obj, Volume):

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from voxwarp.cli import render_options as ropt
 from voxwarp.cli.animate import add_animate_parser
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.checks import positive_int as _positive_int
@@ -49,7 +50,12 @@ MASSSPRING_SETTLE_TOL = 1e-3
 
 
 class _Drag(tuple):
-    """One ``--drag I,J,K:DX,DY,DZ``: ``(text, (i, j, k), (dx, dy, dz))``."""
+    """One ``--drag I,J,K:DX,DY,DZ``: ``(text, (i, j, k), (dx, dy, dz))``, or one
+    ``--drag-at`` resolved to its element: ``(text, (i, j, k), (dx, dy, dz), "--drag-at")``."""
+
+    @property
+    def flag(self) -> str:
+        return self[3] if len(self) > 3 else "--drag"
 
     @property
     def text(self) -> str:
@@ -209,6 +215,7 @@ def _grid_text(shape: Sequence[int]) -> str:
 #: attribute, the model that takes it: "both", "massspring" or "chainmail")
 _DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
     ("--drag", "drag", "both"),
+    ("--drag-at", "drag_at", "both"),
     ("--fix", "fix", "both"),
     ("--backend", "backend", "both"),
     ("--inverse", "inverse", "both"),
@@ -306,7 +313,7 @@ def _check_deform_options(args: argparse.Namespace) -> None:
     for d in args.drag or []:
         if any(not 0 <= v < n for v, n in zip(d.index, shape, strict=True)):
             raise CliOptionError(
-                f"--drag {d.text}: element {d.index} is outside the {grid} grid; {ranges_text}"
+                f"{d.flag} {d.text}: element {d.index} is outside the {grid} grid; {ranges_text}"
             )
         if fixed[d.index]:
             corner = all(v in (0, n - 1) for v, n in zip(d.index, shape, strict=True))
@@ -314,14 +321,14 @@ def _check_deform_options(args: argparse.Namespace) -> None:
                 f"a corner of the {grid} grid (corners stay fixed)" if corner else "fixed by --fix"
             )
             raise CliOptionError(
-                f"--drag {d.text}: element {d.index} is {what}; drag an element that is not fixed"
+                f"{d.flag} {d.text}: element {d.index} is {what}; drag an element that is not fixed"
             )
         if d.index in seen:
             raise CliOptionError(
-                f"--drag {d.text}: element {d.index} is already dragged by --drag"
+                f"{d.flag} {d.text}: element {d.index} is already dragged by"
                 f" {seen[d.index]}; give each element once"
             )
-        seen[d.index] = d.text
+        seen[d.index] = f"{d.flag} {d.text}"
 
 
 def _check_lattice_options(args: argparse.Namespace) -> None:
@@ -392,6 +399,16 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     if model is None:
         return None
     grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
+    if args.drag_at:  # to the nearest elements, then checked as --drag elements are
+        picks = ropt.pick_elements(grid, args.drag_at)
+        for pick in picks:
+            print(pick.summary(), file=sys.stderr)
+        args.drag = [
+            *(args.drag or []),
+            *(_Drag((k.drag.text, k.index, k.drag.offset, "--drag-at")) for k in picks),
+        ]
+        args.drag_at = None
+        _check_deform_options(args)
     for _, ranges in args.fix or []:
         mask = np.zeros(grid.shape, dtype=bool)
         mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
@@ -410,7 +427,7 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
         for d in args.drag or []:
             if rigid[d.index]:
                 raise CliOptionError(
-                    f"--drag {d.text}: element {d.index} is rigid (stiffness 1 from"
+                    f"{d.flag} {d.text}: element {d.index} is rigid (stiffness 1 from"
                     " --stiffness-from-volume) and cannot move; drag another element or"
                     " map its value to a stiffness below 1"
                 )
@@ -536,7 +553,11 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
             stats = cm.move([d.index for d in drags], [d.offset for d in drags])
             touched, solve_ms = stats.touched, stats.seconds * 1000
             if stats.limited:
-                what = f"--drag {drags[0].text}" if len(drags) == 1 else "the dragged elements"
+                what = (
+                    f"{drags[0].flag} {drags[0].text}"
+                    if len(drags) == 1
+                    else "the dragged elements"
+                )
                 warnings.warn(
                     f"{what} went only {stats.fraction:.0%} of the way: the links between"
                     " the dragged and the fixed elements (the 8 corners always are fixed)"
@@ -576,6 +597,7 @@ def _add_volume_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--nan", choices=("raise", "mask"), default="raise", help="NaN/Inf voxels: reject or mask"
     )
+    ropt.add_input_args(p)
 
 
 def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
@@ -630,7 +652,11 @@ def cmd_info(args: argparse.Namespace) -> int:
     from voxwarp.scene import Scene
 
     obj = load_input(
-        args.input, spacing=args.spacing, downsample=args.downsample, nan_policy=args.nan
+        args.input,
+        spacing=args.spacing,
+        downsample=args.downsample,
+        nan_policy=args.nan,
+        **ropt.load_options(args),
     )
     vol = obj.volume if isinstance(obj, Scene) else obj
     if args.json:
@@ -646,10 +672,16 @@ def cmd_render(args: argparse.Namespace) -> int:
     from voxwarp.render.raycaster import OffscreenRenderer
 
     _check_deform_options(args)
+    ropt.check_render_options(args)
     obj = load_input(
-        args.input, spacing=args.spacing, downsample=args.downsample, nan_policy=args.nan
+        args.input,
+        spacing=args.spacing,
+        downsample=args.downsample,
+        nan_policy=args.nan,
+        **ropt.load_options(args),
     )
     scene = _scene_from_args(obj, args)
+    ropt.spacing_notice(scene.volume, args)
     grid = _deform_grid(args, scene.volume)
     file_warp = None  # --wires or --lattice (they exclude each other)
     if args.wires is not None:  # built before any GL work: bad wires fail fast
@@ -673,6 +705,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                     scene = scene.copy(warps=[*scene.warps, model.warp()])
                 if file_warp is not None:
                     scene = scene.copy(warps=[*scene.warps, file_warp])
+                scene = ropt.apply_render_options(scene, args)  # every warp is in place
                 img = r.render(scene)
                 if args.save_scene:  # inside: a GPU-owned field is read back to save it
                     scene.save(args.save_scene)
@@ -684,6 +717,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
         draw_scene_marker(img, scene)
     write_image(out, img)
+    ropt.save_camera(scene, args)
     if args.save_scene:
         print(f"scene: {args.save_scene}")
     print(out)
@@ -1054,6 +1088,15 @@ def _add_deform_args(p: argparse.ArgumentParser) -> None:
         " axes); repeatable; indices run 0..N-1 along x, y, z; corners stay fixed",
     )
     g.add_argument(
+        "--drag-at",
+        type=ropt.drag_at_arg,
+        action="append",
+        metavar="X,Y,Z:DX,DY,DZ",
+        help="as --drag, on the element nearest the world point (x, y, z) mm (at rest; it"
+        " says which and how far); the point may lie at most one element spacing outside"
+        " the grid; repeatable",
+    )
+    g.add_argument(
         "--fix",
         type=_fix,
         action="append",
@@ -1173,7 +1216,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pr.add_argument("-o", "--output", default="out.png", help="PNG/EXR/TIFF by extension")
     pr.add_argument("--mode", choices=MODES)
     pr.add_argument("--projection", choices=("perspective", "orthographic"))
-    pr.add_argument("--view", type=_view, help="+x,-x,+y,-y,+z,-z or AZIMUTH,ELEVATION")
+    pr.add_argument("--view", type=_view, help=ropt.VIEW_HELP)
     pr.add_argument("--size", type=_size, default=(512, 512), help="WxH pixels")
     pr.add_argument("--tf", help="preset name or transfer function JSON file")
     pr.add_argument("--step", type=float, help="sample distance in voxels (default 1)")
@@ -1188,6 +1231,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
         "--marker", action="store_true", help="draw an orientation marker (bottom left)"
     )
     _add_volume_args(pr)
+    ropt.add_render_options(pr)
     _add_deform_args(pr)
     _add_wire_args(pr)
     pr.set_defaults(func=cmd_render)
@@ -1338,7 +1382,9 @@ def _join_negative_views(argv: list[str]) -> list[str]:
     i = 0
     while i < len(argv):
         negative = i + 1 < len(argv) and argv[i + 1].startswith("-")
-        if argv[i] in ("--view", "--stiffness-from-volume", "--cut") and negative:
+        if argv[i] in ("--view", "--stiffness-from-volume", "--cut", "--clip", "--drag-at") and (
+            negative
+        ):
             out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
             continue

@@ -2,7 +2,8 @@
 
 Core voxwarp renders headless and runs every deformation family; the rest is optional:
 ``gui`` (PySide6), ``movie`` (imageio-ffmpeg, tqdm), ``distributed`` (dask, distributed),
-``teach`` (matplotlib, Pillow) and ``all``. Call :func:`require` where a feature starts,
+``teach`` (matplotlib, Pillow), ``dicom`` (pylibjpeg and its JPEG, JPEG 2000 and RLE
+decoders, for compressed DICOM) and ``all``. Call :func:`require` where a feature starts,
 so a user learns which extra to install before any work is done.
 """
 
@@ -18,6 +19,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "movie": ("imageio_ffmpeg", "tqdm"),
     "distributed": ("dask", "distributed"),
     "teach": ("matplotlib", "PIL"),
+    "dicom": ("pylibjpeg", "libjpeg", "openjpeg", "rle"),
 }
 
 

@@ -69,8 +69,10 @@ def test_bundled_fish_bend_renders_and_round_trips(tmp_path: Path) -> None:
     )
     a = read_image(plain)[..., :3].astype(float)
     b = read_image(bent)[..., :3].astype(float)
-    changed = (np.abs(a - b).max(axis=-1) > 24).mean()
-    assert 0.02 < changed < 0.6  # the tail moved, the head did not
+    changed = np.abs(a - b).max(axis=-1) > 24
+    # the default camera frames the undeformed fish: the tail (right) moved, the head not
+    assert 0.005 < changed.mean() < 0.6
+    assert not changed[:, : a.shape[1] * 2 // 5].any()
     assert json.loads(scene.read_text())["warps"][0]["type"] == "lattice"
     render(str(scene), "-o", str(again), "--size", "96x64")
     np.testing.assert_array_equal(read_image(again), read_image(bent))
