@@ -37,13 +37,17 @@ def load_input(
     nan_policy: str = "raise",
     axis_order: str = "xyz",
     series: int | str | None = None,
+    keep_padding: bool = False,
 ) -> Any:
     """Load INPUT: returns a Volume, or a Scene for scene JSON.
 
     ``axis_order`` (``"xyz"`` or ``"zyx"``) says how a .npy/.npz array is indexed;
     ``series`` picks one series of a DICOM folder (its UID or index); both are passed to
     :func:`voxwarp.io.volumes.load_volume` and refused for samples and scene JSON.
+    The padding outside a CT's field of view is masked
+    (:func:`voxwarp.core.modality.mask_padding`) unless ``keep_padding``.
     """
+    from voxwarp.core.modality import mask_padding
     from voxwarp.io.samples import load_sample
     from voxwarp.io.volumes import load_volume
     from voxwarp.scene import Scene
@@ -57,11 +61,13 @@ def load_input(
             raise InputError(f"--series applies to DICOM folders; {spec} is {named}")
     if spec.startswith("sample:"):
         vol = load_sample(spec.split(":", 1)[1], spacing=spacing)
-        return vol.downsample(downsample) if downsample > 1 else vol
+        vol = vol.downsample(downsample) if downsample > 1 else vol
+        return vol if keep_padding else mask_padding(vol)[0]
     if is_scene_json(path):
-        return Scene.load(path)
+        scene = Scene.load(path)
+        return scene if keep_padding else _scene_without_padding(scene)
     extra: dict[str, Any] = {} if series is None else {"series": series}
-    return load_volume(
+    vol = load_volume(
         path,
         spacing=spacing,
         nan_policy=nan_policy,  # type: ignore[arg-type]
@@ -69,6 +75,19 @@ def load_input(
         axis_order=axis_order,  # type: ignore[arg-type]
         **extra,
     )
+    return vol if keep_padding else mask_padding(vol)[0]
+
+
+def _scene_without_padding(scene: Any) -> Any:
+    """``scene`` on its volume with the padding masked (warps rebound to it)."""
+    from voxwarp.core.modality import mask_padding
+
+    vol, count = mask_padding(scene.volume)
+    if count == 0:
+        return scene
+    for warp in scene.warps:
+        warp.bind_volume(vol)
+    return scene.copy(volume=vol)
 
 
 _WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}

@@ -33,6 +33,7 @@ from voxwarp.core.modality import (
 )
 from voxwarp.core.modes import MODES as MODES
 from voxwarp.core.modes import Mode as Mode
+from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
@@ -61,6 +62,12 @@ def _finite(x: Any, what: str, positive: bool = False) -> float:
 
 def _vec(x: Any, n: int, what: str) -> tuple[float, ...]:
     return tuple(float(v) for v in finite_vector(x, n, what, SceneError))
+
+
+def default_view(volume: Volume) -> str:
+    """The view a scene of ``volume`` starts from: ``"anterior"`` (head up) for a volume
+    with a patient orientation, ``"-y"`` otherwise."""
+    return "anterior" if volume.space else "-y"
 
 
 class Scene:
@@ -140,7 +147,7 @@ class Scene:
         volume: Volume,
         mode: Mode = "dvr",
         transfer_function: Any = None,
-        view: View = "-y",
+        view: View | None = None,
         projection: Projection = "perspective",
         step: float = 1.0,
         warps: Sequence[Warp] | None = None,
@@ -166,7 +173,7 @@ class Scene:
         self.volume = volume
         self.mode = mode
         self.transfer_function = _scene_transfer_function(transfer_function, volume, mode)
-        self.view = view
+        self.view = default_view(volume) if view is None else view
         self.projection = projection
         self.step = step
         self.warps: list[Warp] = list(warps or [])
@@ -221,10 +228,16 @@ class Scene:
                 value = tuple(float(v) for v in value)  # type: ignore[assignment]
             except (TypeError, ValueError) as exc:
                 raise SceneError(
-                    "view must be one of +x, -x, +y, -y, +z, -z or (azimuth, elevation)"
-                    f" degrees; got {value!r}"
+                    "view must be one of +x, -x, +y, -y, +z, -z, an anatomical view"
+                    f" (anterior, posterior, ...) or (azimuth, elevation) degrees; got {value!r}"
                 ) from exc
         view_rotation(value)  # validates
+        if value in ANATOMICAL_VIEWS and not self.volume.space:
+            raise SceneError(
+                f"view {value!r} needs a patient orientation, and volume {self.volume.name!r}"
+                " has none (an array or a file without orientation); use an axis view"
+                " (+x, -x, +y, -y, +z, -z) or load a NIfTI, NRRD or DICOM file"
+            )
         self._view = value
 
     @property
@@ -633,6 +646,8 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
     d: dict[str, Any] = {
         "spacing": list(volume.spacing),
         "origin": list(volume.origin),
+        "direction": volume.direction.tolist(),
+        "space": volume.space,
         "name": volume.name,
         "units": volume.units,
     }
@@ -664,6 +679,17 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
         "data": base64.b64encode(volume.data.tobytes(order="F")).decode("ascii"),
     }
     return d
+
+
+def _with_stated_geometry(volume: Volume, spacing: Any, origin: Any) -> Volume:
+    """``volume`` with the scene's spacing/origin where they differ from the file's (a
+    scene saved after ``--spacing``); the file's own geometry otherwise."""
+    changes: dict[str, Any] = {}
+    if spacing is not None and not np.allclose(np.asarray(spacing, float), volume.spacing):
+        changes.update(spacing=spacing, spacing_source="given")
+    if origin is not None and not np.allclose(np.asarray(origin, float), volume.origin):
+        changes["origin"] = origin
+    return volume.with_geometry(**changes) if changes else volume
 
 
 def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
@@ -702,6 +728,8 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
                 origin if origin is not None else (0, 0, 0),
                 name=str(d.get("name", "embedded")),
                 units=str(d.get("units", "")),
+                direction=d.get("direction"),
+                space=str(d.get("space", "")),
             )
         if "sample" in d:
             from voxwarp.io.samples import load_sample
@@ -717,7 +745,7 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
             p = Path(str(d["path"]))
             if not p.is_absolute() and base_dir is not None:
                 p = Path(base_dir) / p
-            return load_volume(p, spacing=spacing, origin=origin)
+            return _with_stated_geometry(load_volume(p), spacing, origin)
     except (VolumeError, TypeError, ValueError, OverflowError) as exc:
         raise SceneError(f"scene volume: {exc}") from exc
     raise SceneError("scene 'volume' needs one of 'path', 'sample' or 'embedded'")

@@ -27,13 +27,16 @@ from voxwarp.inputs import load_input, load_lattice_file, load_wire_file
 
 
 def _view(text: str) -> Any:
-    if text in ("+x", "-x", "+y", "-y", "+z", "-z"):
+    from voxwarp.core.camera import VIEW_NAMES
+
+    if text in VIEW_NAMES:
         return text
     try:
         az, el = (float(v) for v in text.split(","))
     except ValueError as exc:
         raise argparse.ArgumentTypeError(
-            f"view must be one of +x,-x,+y,-y,+z,-z or AZIMUTH,ELEVATION degrees; got {text!r}"
+            f"view must be one of {','.join(VIEW_NAMES)} or AZIMUTH,ELEVATION degrees;"
+            f" got {text!r}"
         ) from exc
     return (az, el)
 
@@ -610,7 +613,7 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
     if isinstance(obj, Scene):
         changes: dict[str, Any] = {}
         if tf is not None:
-            changes["transfer_function"] = TransferFunction.coerce(tf, obj.volume)
+            changes["transfer_function"] = tf  # resolved by the scene, knowing the mode
         for key in ("mode", "projection", "view", "step", "window", "seed", "iso_value", "zoom"):
             val = getattr(args, key)
             if val is not None:
@@ -624,8 +627,8 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
         return obj.copy(**changes)
     kw: dict[str, Any] = {
         "mode": args.mode or "dvr",
-        "transfer_function": tf if tf is not None else "ct-bone",
-        "view": args.view or "-y",
+        "transfer_function": tf,  # None: the modality's default
+        "view": args.view,
         "projection": args.projection or "perspective",
         "step": args.step if args.step is not None else 1.0,
         "window": args.window,
@@ -656,6 +659,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         spacing=args.spacing,
         downsample=args.downsample,
         nan_policy=args.nan,
+        keep_padding=True,  # info shows the file's values
         **ropt.load_options(args),
     )
     vol = obj.volume if isinstance(obj, Scene) else obj
@@ -678,9 +682,11 @@ def cmd_render(args: argparse.Namespace) -> int:
         spacing=args.spacing,
         downsample=args.downsample,
         nan_policy=args.nan,
+        keep_padding=args.keep_padding,
         **ropt.load_options(args),
     )
     scene = _scene_from_args(obj, args)
+    print(scene.display_note(), file=sys.stderr)
     ropt.spacing_notice(scene.volume, args)
     grid = _deform_grid(args, scene.volume)
     file_warp = None  # --wires or --lattice (they exclude each other)
@@ -1226,6 +1232,11 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pr.add_argument("--seed", type=int, help="jitter seed")
     pr.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=None)
     pr.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None)
+    pr.add_argument(
+        "--keep-padding",
+        action="store_true",
+        help="keep the padding outside a CT's field of view (default: shown as air)",
+    )
     pr.add_argument("--save-scene", metavar="JSON", help="also write the scene JSON")
     pr.add_argument(
         "--marker", action="store_true", help="draw an orientation marker (bottom left)"
