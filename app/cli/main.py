@@ -8,8 +8,10 @@ bundled sample (``voxwarp samples`` lists them).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -651,7 +653,7 @@ def _tf_arg(tf: str | None) -> Any:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """``voxwarp info INPUT``: dims, dtype, spacing, value range, histogram."""
-    from voxwarp.io.volumes import volume_info, volume_summary
+    from voxwarp.io.volumes import dicom_series, volume_info, volume_summary
     from voxwarp.scene import Scene
 
     obj = load_input(
@@ -663,10 +665,20 @@ def cmd_info(args: argparse.Namespace) -> int:
         **ropt.load_options(args),
     )
     vol = obj.volume if isinstance(obj, Scene) else obj
+    series = dicom_series(args.input) if os.path.isdir(args.input) else []
     if args.json:
-        print(json.dumps(volume_info(vol), indent=2))
-    else:
-        print(volume_summary(vol))
+        info = volume_info(vol)
+        if series:
+            info["dicom_series"] = [dataclasses.asdict(s) for s in series]
+        print(json.dumps(info, indent=2))
+        return 0
+    print(volume_summary(vol))
+    if len(series) > 1:
+        chosen = str(getattr(args, "series", None) or 1)
+        print("DICOM series in this folder (choose with --series N or --series UID):")
+        for s in series:
+            mark = "*" if chosen in (str(s.index), s.uid) else " "
+            print(f" {mark} {s.line()}")
     return 0
 
 

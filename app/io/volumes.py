@@ -1333,6 +1333,12 @@ def volume_summary(volume: Volume) -> str:
         f"origin:      {_fmt3(info['origin_mm'])} mm (centre of voxel 0, 0, 0)",
         f"orientation: {_orientation_text(volume)}",
         *_affine_lines(volume.affine),
+        f"modality:    {volume.modality or '(not stated by the file)'}"
+        + (
+            f"; padding value {_fmt(volume.padding_value)}"
+            if volume.padding_value is not None
+            else ""
+        ),
         f"size:        {_fmt3(info['size_mm'])} mm",
         f"memory:      {info['memory_mb']:.2f} MB ({volume.nbytes:,} bytes)",
         f"range:       [{_fmt(info['min'])}, {_fmt(info['max'])}]",

@@ -489,6 +489,28 @@ def test_dicom_several_series_pick_largest(tmp_path: Path) -> None:
     with pytest.warns(UserWarning, match="scout"):
         vol = load_volume(tmp_path)
     assert vol.shape == (10, 8, 6)
+    # choose the other one by index (as voxwarp info lists them) or by UID
+    with no_warnings():
+        assert load_volume(tmp_path, series=2).shape == (4, 4, 1)
+        assert load_volume(tmp_path, series="9.9").shape == (4, 4, 1)
+        assert load_volume(tmp_path, series="1.2.3.4").shape == (10, 8, 6)
+    with pytest.raises(VolumeError, match=r"no DICOM series '3'.*1: 6 files.*2: 1 files"):
+        load_volume(tmp_path, series=3)
+    with pytest.raises(VolumeError, match="is a file"):
+        load_volume(tmp_path / "other.dcm", series=1)
+
+
+def test_info_lists_the_series_of_a_folder(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from voxwarp.cli.main import main
+
+    write_series(tmp_path)
+    write_dicom_slice(tmp_path / "other.dcm", np.zeros((4, 4)), z=0.0, instance=1, series_uid="9.9")
+    assert main(["info", str(tmp_path), "--series", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "dims:        (4, 4, 1)" in out
+    assert "* 2: 1 files, 4x4, CT" in out
+    assert "  1: 6 files, 10x8, CT" in out
+    assert "orientation: LPS in the file" in out
 
 
 def test_dicom_multiframe_file_and_single_slice(tmp_path: Path) -> None:
