@@ -37,8 +37,7 @@ def _view(text: str) -> Any:
         az, el = (float(v) for v in text.split(","))
     except ValueError as exc:
         raise argparse.ArgumentTypeError(
-            f"view must be one of {','.join(VIEW_NAMES)} or AZIMUTH,ELEVATION degrees;"
-            f" got {text!r}"
+            f"view must be one of {','.join(VIEW_NAMES)} or AZIMUTH,ELEVATION degrees; got {text!r}"
         ) from exc
     return (az, el)
 
@@ -818,7 +817,8 @@ def _demo_volume(args: argparse.Namespace) -> int:
     out = Path(args.out)
     tf = _tf_arg(args.tf)
     if tf is None:
-        tf = suggested_transfer_function(vol.name) if spec.startswith("sample:") else "ct-bone"
+        # samples: a function tuned to them; files: the modality's default (None)
+        tf = suggested_transfer_function(vol.name) if spec.startswith("sample:") else None
     paths = []
     with OffscreenRenderer(*args.size) as r:
         for mode in MODES:
@@ -1281,7 +1281,9 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pd.add_argument("--out", default="out", help="output folder (default out)")
     pd.add_argument("--size", type=_size, default=(512, 512), help="INPUT: image WxH")
     pd.add_argument("--tf", help="INPUT: preset or tf.json (default: suits the sample)")
-    pd.add_argument("--view", type=_view, default="-y", help="INPUT: view")
+    pd.add_argument(
+        "--view", type=_view, help="INPUT: view (default anterior for oriented volumes, else -y)"
+    )
     pd.add_argument(
         "--quick",
         action="store_true",
