@@ -530,3 +530,23 @@ def test_series_picks_one_of_several(tmp_path: Path, capsys: pytest.CaptureFixtu
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert "has no DICOM series '7'" in err
+
+
+def test_gui_takes_series(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``voxwarp gui FOLDER --series N`` opens that series (the window itself is tested in
+    tests/ui; here run_gui is replaced and the session loader called directly)."""
+    pytest.importorskip("PySide6")
+    import voxwarp.ui.app as ui_app
+    from voxwarp.ui import cli as ui_cli
+    from voxwarp.ui.main_window import load_session_input
+
+    folder = tmp_path / "two"
+    _rle_series(folder, 3, "MR_small.dcm", "a")
+    _rle_series(folder, 2, "MR_small.dcm", "b")
+    seen: dict[str, Any] = {}
+    monkeypatch.setattr(ui_app, "run_gui", lambda spec, **kw: seen.update(spec=spec, **kw) or 0)
+    monkeypatch.setenv("DISPLAY", ":99")
+    assert ui_cli.main(["gui", str(folder), "--series", "2"]) == 0
+    assert seen["spec"] == str(folder)
+    assert seen["series"] == 2
+    assert load_session_input(str(folder), series=2).scene.volume.shape == (64, 64, 2)
