@@ -16,6 +16,25 @@ from voxwarp.errors import VoxwarpError
 SCREENSHOT_SETTLE_MS = 300
 
 
+def guard_none_refcount() -> None:
+    """Keep CPython 3.11 from aborting on PySide6's lost references to ``None``.
+
+    PySide6 6.12 drops one reference to ``None`` on every call of a Qt method that
+    returns nothing (``label.setText``, ``spin.setValue``, ``widget.setEnabled`` ...).
+    From Python 3.12 on ``None`` is immortal and that is harmless; on 3.11 a long
+    session (or a long GUI test run) brings its reference count to zero and CPython
+    aborts with "none_dealloc: deallocating None". ``None`` is a static object that is
+    never freed, so its count is raised once by far more than any session can use up,
+    which is what 3.12's immortality does. Idempotent in effect; a no-op on 3.12+.
+    """
+    if sys.version_info >= (3, 12) or getattr(guard_none_refcount, "done", False):
+        return
+    import ctypes
+
+    ctypes.c_ssize_t.from_address(id(None)).value += 1 << 40
+    guard_none_refcount.done = True  # type: ignore[attr-defined]
+
+
 def configure_qt() -> None:
     """Ask Qt for an OpenGL 4.5 core context with depth, through EGL on X11.
 
@@ -23,6 +42,7 @@ def configure_qt() -> None:
     a GPU, and works on GPU drivers too; ``QT_XCB_GL_INTEGRATION`` set by the user wins.
     Must run before the ``QApplication`` is made.
     """
+    guard_none_refcount()
     os.environ.setdefault("QT_XCB_GL_INTEGRATION", "xcb_egl")
     fmt = QSurfaceFormat()
     fmt.setVersion(4, 5)

@@ -47,6 +47,12 @@ def _start_xvfb() -> None:
 
 _start_xvfb()
 
+# PySide6 6.12 loses references to None on CPython 3.11 (see guard_none_refcount):
+# without this guard a long GUI test run aborts when the interpreter finalizes
+from voxwarp.ui.app import guard_none_refcount  # noqa: E402
+
+guard_none_refcount()
+
 
 @pytest.fixture(autouse=True, scope="session")
 def _private_settings(tmp_path_factory: pytest.TempPathFactory) -> None:
