@@ -44,6 +44,7 @@ from PySide6.QtWidgets import (
 )
 
 from voxwarp.core.camera import VIEWS, Camera
+from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
 from voxwarp.editing.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
 from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
@@ -63,6 +64,17 @@ OPEN_FILTER = (
     " *.npz *.dcm *.raw);;All files (*)"
 )
 
+#: shortcuts of the anatomical views (Shift: R, P and S are taken by reset, projection
+#: and step)
+ANATOMICAL_VIEW_KEYS: dict[str, str] = {
+    "anterior": "Shift+A",
+    "posterior": "Shift+P",
+    "left": "Shift+L",
+    "right": "Shift+R",
+    "superior": "Shift+S",
+    "inferior": "Shift+I",
+}
+
 SHORTCUTS: list[tuple[str, str]] = [
     (
         "Left drag on a handle",
@@ -81,6 +93,13 @@ SHORTCUTS: list[tuple[str, str]] = [
     ("S", "one simulation step"),
     ("Ctrl+A / Esc", "select all / clear the selection"),
     ("1 … 6", "views from +x, -x, +y, -y, +z, -z"),
+    (
+        "Shift + A / P / L / R / S / I",
+        "anterior, posterior, left, right, superior (neurological: the patient's right"
+        " on the right), inferior (radiological) views of a volume with a patient"
+        " orientation",
+    ),
+    ("M", "show / hide the orientation marker"),
     ("R", "reset the camera"),
     ("P", "perspective / orthographic"),
     ("W", "lay a new wire (click points; Enter finishes, Esc cancels)"),
@@ -233,13 +252,29 @@ class MainWindow(QMainWindow):
                     [3 * self.height() // 4, self.height() // 4],
                     Qt.Orientation.Vertical,
                 ),
+                self._fit_volume_dock(),
             ),
         )
+
+    def _fit_volume_dock(self) -> None:
+        """The Volume dock as tall as its content (its clipping group in view, no
+        scrolling), the transfer function editor the rest, when the window has room."""
+        volume, tf = self.docks["Volume"], self.docks["Transfer function"]
+        if volume.isFloating() or tf.isFloating():
+            return
+        title = volume.height() - self.volume_panel.height()
+        want = self.volume_panel.sizeHint().height() + max(0, title)
+        both = volume.height() + tf.height()
+        if both - want < 220:  # too little room: the editor keeps a usable height
+            want = max(both - 220, both // 2)
+        self.resizeDocks([volume, tf], [want, both - want], Qt.Orientation.Vertical)
 
     def refresh_panels(self) -> None:
         """Update every panel from the session (after undo, open, edits)."""
         for p in self._panels:
             p.refresh()
+        if hasattr(self, "anatomical_view_actions"):
+            self._refresh_view_actions()
         self.tf_editor.set_transfer_function(self.session.scene.transfer_function)
         if hasattr(self, "keys_label"):
             self._refresh_animation()
@@ -291,11 +326,25 @@ class MainWindow(QMainWindow):
 
         v = mb.addMenu("&View")
         self._action(v, "&Reset Camera", self.viewport.reset_camera, "R")
+        #: axis views by name (their text names the anatomical side for oriented volumes)
+        self.axis_view_actions: dict[str, QAction] = {}
         for i, name in enumerate(VIEWS):
-            self._action(
+            self.axis_view_actions[name] = self._action(
                 v, f"View from {name}", lambda n=name: self.viewport.set_view(n), str(i + 1)
             )
+        v.addSeparator()
+        #: anatomical views (enabled for volumes with a patient orientation)
+        self.anatomical_view_actions: dict[str, QAction] = {}
+        for name, key in ANATOMICAL_VIEW_KEYS.items():
+            self.anatomical_view_actions[name] = self._action(
+                v, f"{name.capitalize()} View", lambda n=name: self.set_anatomical_view(n), key
+            )
+        v.addSeparator()
         self._action(v, "&Perspective / Orthographic", self.toggle_projection, "P")
+        self.marker_action = self._action(
+            v, "Orientation &Marker", self.toggle_marker, "M", checkable=True
+        )
+        self.marker_action.setChecked(self.viewport.show_marker)
         v.addSeparator()
         for dock in self.docks.values():
             v.addAction(dock.toggleViewAction())
@@ -355,6 +404,7 @@ class MainWindow(QMainWindow):
         self.progress.setRange(0, 1000)
         self.progress.hide()
         sb.addPermanentWidget(self.progress)
+        self.fps_label.setToolTip("frames drawn in the last second · time of the last frame")
         sb.addPermanentWidget(self.fps_label)
         sb.addPermanentWidget(self.mem_label)
 
@@ -554,6 +604,37 @@ class MainWindow(QMainWindow):
         menu.addAction("Reset Camera", self.viewport.reset_camera)
         self.viewport.update()
         menu.popup(pos)
+
+    def set_anatomical_view(self, name: str) -> None:
+        """Look from an anatomical side (``"anterior"`` ... ``"inferior"``, see
+        :data:`voxwarp.core.orientation.ANATOMICAL_VIEWS`); a volume without a patient
+        orientation has no sides: the status bar says so."""
+        if not self.viewport.oriented():
+            self.statusBar().showMessage(
+                f"{name} view: this volume has no patient orientation; use the axis views (1 … 6)",
+                5000,
+            )
+            return
+        self.viewport.set_view(ANATOMICAL_VIEWS[name])
+
+    def toggle_marker(self) -> None:
+        """Show or hide the orientation marker."""
+        self.viewport.show_marker = self.marker_action.isChecked()
+        self.viewport.update()
+
+    def _refresh_view_actions(self) -> None:
+        """Anatomical views only for oriented volumes; axis views named by the side."""
+        oriented = self.viewport.oriented()
+        side = {axis: name for name, axis in ANATOMICAL_VIEWS.items()}
+        for name, action in self.axis_view_actions.items():
+            action.setText(f"View from {name} ({side[name]})" if oriented else f"View from {name}")
+        for name, action in self.anatomical_view_actions.items():
+            action.setEnabled(oriented)
+            action.setToolTip(
+                f"look from the patient's {name} side"
+                if oriented
+                else "needs a volume with a patient orientation"
+            )
 
     def toggle_projection(self) -> None:
         """Perspective <-> orthographic."""
@@ -841,7 +922,7 @@ class MainWindow(QMainWindow):
         fps = len(self._fps_times)
         self.fps_label.setText(f"{fps} fps · frame {ms:.0f} ms")
         self.mem_label.setText(f"{_rss_mb():.0f} MB")
-        self.deformation_panel.refresh_timings(ms)
+        self.deformation_panel.refresh_timings()
 
     def show_error(self, message: str) -> None:
         """Show a core error in a dialog (never a traceback)."""

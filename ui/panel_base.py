@@ -9,12 +9,14 @@ contract). The helpers build compact spin and combo boxes.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 from PySide6.QtCore import QSize, Qt
+from PySide6.QtGui import QValidator
 from PySide6.QtWidgets import (
     QComboBox,
     QDoubleSpinBox,
@@ -28,7 +30,38 @@ from PySide6.QtWidgets import (
 
 from voxwarp.editing.session import EditSession
 
-__all__ = ["Panel", "combo", "double_spin", "int_spin", "set_combo_data", "value_decimals"]
+__all__ = [
+    "AXIS_LETTERS",
+    "AxisSpinBox",
+    "Panel",
+    "axis_names",
+    "axis_spin",
+    "combo",
+    "double_spin",
+    "int_spin",
+    "is_oriented",
+    "set_combo_data",
+    "value_decimals",
+]
+
+#: Patient letters of the RAS world axes: (positive end, negative end) per axis.
+AXIS_LETTERS: tuple[tuple[str, str], ...] = (("R", "L"), ("A", "P"), ("S", "I"))
+
+
+def is_oriented(volume: Any) -> bool:
+    """Whether ``volume``'s world is patient RAS (its coordinates get letters)."""
+    return getattr(volume, "space", "") == "RAS"
+
+
+def axis_names(volume: Any) -> list[tuple[str, tuple[str, str] | None]]:
+    """Per world axis: its row/column label and its (positive, negative) letters.
+
+    An oriented volume gets ``"L–R"``, ``"P–A"``, ``"I–S"`` (from low to high values)
+    and letters; others ``"x"``, ``"y"``, ``"z"`` and None.
+    """
+    if not is_oriented(volume):
+        return [(a, None) for a in ("x", "y", "z")]
+    return [(f"{neg}–{pos}", (pos, neg)) for pos, neg in AXIS_LETTERS]
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -42,6 +75,102 @@ def double_spin(
 ) -> QDoubleSpinBox:
     """A compact double spin box that reports a value only when typing is finished."""
     spin = QDoubleSpinBox()
+    spin.setRange(lo, hi)
+    spin.setDecimals(decimals)
+    spin.setSingleStep(step)
+    spin.setSuffix(suffix)
+    spin.setKeyboardTracking(False)
+    spin.setAccelerated(True)
+    spin.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
+    spin.setMinimumWidth(40)
+    if tooltip:
+        spin.setToolTip(tooltip)
+    return spin
+
+
+class AxisSpinBox(QDoubleSpinBox):
+    """A spin box of a world coordinate along one axis (mm); with patient letters it
+    shows the value as a distance towards an anatomical side, as radiology viewers do:
+    ``R 12.0`` for x = +12, ``L 80.0`` for x = -80 (RAS world). The value stays the
+    signed world coordinate; typing ``L 80``, ``-80`` or ``R 12`` all work.
+    """
+
+    _NUMBER = re.compile(r"^\s*([A-Za-z])?\s*([+-]?(?:\d+\.?\d*|\.\d+)?)\s*$")
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._letters: tuple[str, str] | None = None
+
+    @property
+    def letters(self) -> tuple[str, str] | None:
+        """(positive, negative) letters, or None (plain signed numbers)."""
+        return self._letters
+
+    def set_letters(self, letters: tuple[str, str] | None) -> None:
+        """Show values with these (positive, negative) letters, or plain (None)."""
+        if letters != self._letters:
+            self._letters = letters
+            # the shown text follows the new letters
+            blocked = self.blockSignals(True)
+            self.lineEdit().setText(
+                self.prefix() + self.textFromValue(self.value()) + self.suffix()
+            )
+            self.blockSignals(blocked)
+
+    def textFromValue(self, value: float) -> str:
+        """``"R 12.00"`` / ``"L 80.00"`` with letters, else the plain number."""
+        if self._letters is None:
+            return super().textFromValue(value)
+        d = self.decimals()
+        if abs(value) < 0.5 * 10.0**-d:
+            return f"{0.0:.{d}f}"
+        letter = self._letters[0] if value > 0 else self._letters[1]
+        return f"{letter} {abs(value):.{d}f}"
+
+    def _parse(self, text: str) -> float | str | None:
+        """The value of ``text`` (prefix/suffix allowed), None when it cannot become
+        one, ``"partial"`` when it may after more typing."""
+        t = text
+        if self.suffix() and t.endswith(self.suffix()):
+            t = t[: -len(self.suffix())]
+        elif self.suffix().strip() and t.rstrip().endswith(self.suffix().strip()):
+            t = t.rstrip()[: -len(self.suffix().strip())]
+        m = self._NUMBER.match(t)
+        if m is None:
+            return None
+        letter, number = m.group(1), m.group(2)
+        sign = 1.0
+        if letter is not None:
+            letter = letter.upper()
+            if self._letters is None or letter not in self._letters:
+                return None
+            sign = 1.0 if letter == self._letters[0] else -1.0
+            if number.startswith(("+", "-")):
+                return None
+        if number in ("", "+", "-", "."):
+            return "partial"
+        return sign * float(number)
+
+    def valueFromText(self, text: str) -> float:
+        """The signed world coordinate of ``text`` (``"L 80"`` -> -80)."""
+        v = self._parse(text)
+        return float(v) if isinstance(v, float) else self.value()
+
+    def validate(self, text: str, pos: int) -> Any:
+        """Acceptable: a value in range; intermediate: on the way to one."""
+        v = self._parse(text)
+        if v is None:
+            return (QValidator.State.Invalid, text, pos)
+        if v == "partial" or not (self.minimum() <= float(v) <= self.maximum()):
+            return (QValidator.State.Intermediate, text, pos)
+        return (QValidator.State.Acceptable, text, pos)
+
+
+def axis_spin(
+    lo: float, hi: float, step: float, decimals: int = 2, suffix: str = "", tooltip: str = ""
+) -> AxisSpinBox:
+    """A compact :class:`AxisSpinBox` (see :func:`double_spin`)."""
+    spin = AxisSpinBox()
     spin.setRange(lo, hi)
     spin.setDecimals(decimals)
     spin.setSingleStep(step)

@@ -33,6 +33,7 @@ every edit, undo, redo and open.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any
 
 import numpy as np
@@ -53,13 +54,17 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from voxwarp import shaders
 from voxwarp.core.camera import PROJECTIONS
 from voxwarp.editing.session import DEFORMATIONS, DisplayOptions, EditSession, Placement
 from voxwarp.scene import MODES
 from voxwarp.ui.family_panels import FAMILY_PANELS, FamilyPanel, ModelOptions, family_label
 from voxwarp.ui.family_panels.wires import FIELD_SCALES, wire_of_handle
 from voxwarp.ui.panel_base import (
+    AxisSpinBox,
     Panel,
+    axis_names,
+    axis_spin,
     combo,
     double_spin,
     set_combo_data,
@@ -74,6 +79,7 @@ __all__ = [
     "DisplayPanel",
     "ScenePanel",
     "VolumePanel",
+    "window_acts",
     "wire_of_handle",
 ]
 
@@ -97,6 +103,48 @@ DISPLAY_LABELS: dict[str, str] = {
     "clip_box": "Clipping box",
 }
 AXES = ("x", "y", "z")
+
+
+@functools.cache
+def window_acts(mode: str) -> bool:
+    """Whether render ``mode`` reads the grey-value window (level, width).
+
+    Asked of the mode's own shader (``shaders/mode_<mode>.glsl`` uses ``u_window`` or
+    ``window_gray``), so a new mode is right without a list to keep in step: today mip,
+    minip, average and xray; dvr, flm and iso map values through the transfer function.
+    """
+    try:
+        text = shaders.read(f"mode_{mode}.glsl")
+    except FileNotFoundError:
+        return False
+    return "u_window" in text or "window_gray" in text
+
+
+def _compact_form(form: QFormLayout) -> None:
+    form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+    form.setContentsMargins(6, 4, 6, 4)
+    form.setVerticalSpacing(3)
+    form.setHorizontalSpacing(6)
+
+
+def _orientation_text(vol: Any) -> str:
+    """`` · RAS (file LAS)`` for an oriented volume, `` · no orientation`` else."""
+    if getattr(vol, "space", "") != "RAS":
+        return " · no patient orientation"
+    file_axes = getattr(vol, "file_axes", "")
+    was = f", file {file_axes}" if file_axes and file_axes != "RAS" else ""
+    oblique = ", oblique" if getattr(vol, "is_oblique", False) else ""
+    return f" · patient RAS{was}{oblique}"
+
+
+def _axis_tooltip(name: str, letters: tuple[str, str] | None) -> str:
+    if letters is None:
+        return f"world {name} (mm; the volume has no patient orientation)"
+    pos, neg = letters
+    return (
+        f"patient axis {name} in RAS world mm: {pos} 12 = 12 mm towards {pos},"
+        f" {neg} 12 = 12 mm towards {neg} (type either, or a signed number)"
+    )
 
 
 # ---------------------------------------------------------------------------- volume
@@ -128,15 +176,16 @@ class VolumePanel(Panel):
         top.addWidget(self.open_button, 0, Qt.AlignmentFlag.AlignTop)
         layout.addLayout(top)
 
-        # rendering
+        # rendering (compact: two values per row where they belong together, so that
+        # the clipping group stays in view in a 1280x800 window)
         render_box = QGroupBox("Rendering")
         form = QFormLayout(render_box)
-        form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+        _compact_form(form)
         self.mode_combo = combo(
             MODES,
             "dvr: emission-absorption; mip/minip: maximum/minimum intensity; average:"
-            " mean along the ray; xray: radiograph (line integral, brighter where thicker);"
-            " flm: first local maximum; iso: shaded isosurface",
+            " mean along the ray; xray: line integral (a radiograph); flm: first local"
+            " maximum; iso: shaded isosurface",
         )
         self.mode_combo.currentTextChanged.connect(self._mode_changed)
         form.addRow("Mode", self.mode_combo)
@@ -153,13 +202,19 @@ class VolumePanel(Panel):
             " smallest spacing (smaller: finer and slower)",
         )
         self.step_spin.valueChanged.connect(self._step_changed)
-        form.addRow("Sample distance", self.step_spin)
+        form.addRow("Sample dist.", self.step_spin)
         self.level_spin = double_spin(-1e9, 1e9, 1.0, 3, tooltip="Window centre (data units)")
         self.level_spin.valueChanged.connect(self._window_changed)
-        form.addRow("Window level", self.level_spin)
         self.width_spin = double_spin(1e-6, 1e9, 1.0, 3, tooltip="Window width (data units)")
         self.width_spin.valueChanged.connect(self._window_changed)
-        form.addRow("Window width", self.width_spin)
+        self.level_spin.setPrefix("L ")
+        self.width_spin.setPrefix("W ")
+        window_row = QHBoxLayout()
+        window_row.setSpacing(4)
+        window_row.addWidget(self.level_spin)
+        window_row.addWidget(self.width_spin)
+        self.window_label = QLabel("Window")
+        form.addRow(self.window_label, window_row)
         self.shading_combo = QComboBox()
         for label, value in SHADING_CHOICES:
             self.shading_combo.addItem(label, value)
@@ -167,32 +222,45 @@ class VolumePanel(Panel):
             "Blinn-Phong shading from gradients; auto: on for iso and flm, off otherwise"
         )
         self.shading_combo.currentIndexChanged.connect(self._shading_changed)
-        form.addRow("Shading", self.shading_combo)
-        self.jitter_check = QCheckBox("Jitter ray starts")
+        self.jitter_check = QCheckBox("Jitter")
         self.jitter_check.setToolTip("Jitter the ray starts per pixel against wood-grain rings")
         self.jitter_check.toggled.connect(self._jitter_changed)
-        form.addRow(self.jitter_check)
+        shading_row = QHBoxLayout()
+        shading_row.setSpacing(6)
+        shading_row.addWidget(self.shading_combo, 1)
+        shading_row.addWidget(self.jitter_check)
+        form.addRow("Shading", shading_row)
         layout.addWidget(render_box)
 
-        # clipping box
-        clip_box = QGroupBox("Clipping")
+        # clipping box: the group's own check box turns it on
+        clip_box = QGroupBox("Clipping (world mm)")
+        clip_box.setCheckable(True)
+        clip_box.setToolTip(
+            "Cut the rays to a box in world coordinates (mm; for a volume with a patient"
+            " orientation, R/L A/P S/I of RAS patient space)"
+        )
+        #: the clipping group's check box (on: the scene has a clip box)
+        self.clip_group = clip_box
+        self.clip_check = clip_box
+        clip_box.toggled.connect(self._clip_toggled)
         grid = QGridLayout(clip_box)
+        grid.setContentsMargins(6, 4, 6, 4)
+        grid.setVerticalSpacing(3)
         grid.setColumnStretch(1, 1)
         grid.setColumnStretch(2, 1)
-        self.clip_check = QCheckBox("Clip")
-        self.clip_check.setToolTip("Cut the rays to a box (deformed world, mm)")
-        self.clip_check.toggled.connect(self._clip_toggled)
-        grid.addWidget(self.clip_check, 0, 0, 1, 3)
-        self.clip_spins: list[tuple[QDoubleSpinBox, QDoubleSpinBox]] = []
+        self.clip_spins: list[tuple[AxisSpinBox, AxisSpinBox]] = []
+        self.clip_labels: list[QLabel] = []
         for a, axis in enumerate(AXES):
-            lo = double_spin(-1e6, 1e6, 1.0, 2, " mm", f"Low {axis} of the clipping box")
-            hi = double_spin(-1e6, 1e6, 1.0, 2, " mm", f"High {axis} of the clipping box")
+            lo = axis_spin(-1e6, 1e6, 1.0, 2, " mm", f"Low {axis} of the clipping box")
+            hi = axis_spin(-1e6, 1e6, 1.0, 2, " mm", f"High {axis} of the clipping box")
             lo.valueChanged.connect(lambda _v, a=a: self._clip_changed(a, 0))
             hi.valueChanged.connect(lambda _v, a=a: self._clip_changed(a, 1))
-            grid.addWidget(QLabel(axis), a + 1, 0)
-            grid.addWidget(lo, a + 1, 1)
-            grid.addWidget(hi, a + 1, 2)
+            label = QLabel(axis)
+            grid.addWidget(label, a, 0)
+            grid.addWidget(lo, a, 1)
+            grid.addWidget(hi, a, 2)
             self.clip_spins.append((lo, hi))
+            self.clip_labels.append(label)
         layout.addWidget(clip_box)
         layout.addStretch(1)
         self.refresh()
@@ -203,9 +271,10 @@ class VolumePanel(Panel):
         scene = self.session.scene
         vol = scene.volume
         with self._refreshing():
-            shape = " × ".join(str(n) for n in vol.shape)
-            spacing = " × ".join(f"{s:g}" for s in vol.spacing)
-            self.info_label.setText(f"<b>{vol.name}</b><br>{shape} voxels<br>{spacing} mm")
+            shape = "×".join(str(n) for n in vol.shape)
+            spacing = "×".join(f"{s:g}" for s in vol.spacing)
+            where = _orientation_text(vol)
+            self.info_label.setText(f"<b>{vol.name}</b>{where}<br>{shape} voxels · {spacing} mm")
             self.info_label.setToolTip(str(vol.source or "in memory"))
             self.mode_combo.setCurrentText(scene.mode)
             self.projection_combo.setCurrentText(scene.projection)
@@ -224,12 +293,19 @@ class VolumePanel(Panel):
             self.width_spin.setRange(10.0**-decimals, max(2.0 * reach, width))
             self.level_spin.setValue(level)
             self.width_spin.setValue(width)
+            self._show_window_controls(scene.mode)
             set_combo_data(self.shading_combo, scene.shading)
             self.jitter_check.setChecked(scene.jitter)
             lo, hi = (np.asarray(b, dtype=np.float64) for b in vol.bounds)
             box = scene.clip_box
             self.clip_check.setChecked(box is not None)
+            names = axis_names(vol)
             for a, (lo_spin, hi_spin) in enumerate(self.clip_spins):
+                name, letters = names[a]
+                self.clip_labels[a].setText(name)
+                self.clip_labels[a].setToolTip(_axis_tooltip(name, letters))
+                lo_spin.set_letters(letters)
+                hi_spin.set_letters(letters)
                 r0, r1 = float(lo[a]), float(hi[a])
                 if box is not None:
                     r0, r1 = min(r0, box[0][a]), max(r1, box[1][a])
@@ -253,6 +329,20 @@ class VolumePanel(Panel):
 
     def _step_changed(self, value: float) -> None:
         self._edit_look("Sample distance", "step", float(value), merge="sample distance")
+
+    def _show_window_controls(self, mode: str) -> None:
+        """Window level and width act only in the modes that read them: enabled there,
+        disabled (with a tooltip saying where they act) elsewhere."""
+        acts = window_acts(mode)
+        where = ", ".join(m for m in MODES if window_acts(m))
+        for w in (self.window_label, self.level_spin, self.width_spin):
+            w.setEnabled(acts)
+        self.window_label.setToolTip(
+            "Grey-value window (level, width) of this mode"
+            if acts
+            else f"The window acts in {where} only; {mode} maps values through the"
+            " transfer function"
+        )
 
     def _window_changed(self, _value: float) -> None:
         window = (float(self.level_spin.value()), float(self.width_spin.value()))
@@ -326,12 +416,12 @@ class DeformationPanel(Panel):
         self.timings_label.setWordWrap(True)
         self.timings_label.setToolTip(
             "step: one model step (mass-spring) or relaxation step (ChainMail); field: the"
-            " last wire-field build; frame: the last frame drawn"
+            " last wire-field build (the frame rate is in the status bar)"
         )
         layout.addWidget(self.timings_label)
         layout.addStretch(1)
         self.refresh()
-        self.refresh_timings(None)
+        self.refresh_timings()
 
     # ------------------------------------------------------------------ building
     def _build_model_group(self) -> QGroupBox:
@@ -388,12 +478,16 @@ class DeformationPanel(Panel):
             " relative to the volume; outside it nothing moves"
         )
         grid = QGridLayout(self.placement_group)
+        #: column headers: x y z, or L–R P–A I–S for a volume with a patient orientation
+        self.placement_labels: list[QLabel] = []
         for c, axis in enumerate(AXES):
             label = QLabel(axis)
             label.setAlignment(Qt.AlignmentFlag.AlignCenter)
             grid.addWidget(label, 0, c + 1)
             grid.setColumnStretch(c + 1, 1)
-        self.translate_spins = [double_spin(-1e5, 1e5, 1.0, 1) for _ in AXES]
+            self.placement_labels.append(label)
+        # moves in world mm: shown towards a patient side (R 5.0) when oriented
+        self.translate_spins = [axis_spin(-1e5, 1e5, 1.0, 1) for _ in AXES]
         self.rotate_spins = [double_spin(-360.0, 360.0, 5.0, 1) for _ in AXES]
         self.scale_spins = [double_spin(0.05, 20.0, 0.05, 2) for _ in AXES]
         rows = (
@@ -431,6 +525,12 @@ class DeformationPanel(Panel):
 
     def _refresh_placement(self, s: EditSession) -> None:
         p = s.placement
+        for label, spin, (name, letters) in zip(
+            self.placement_labels, self.translate_spins, axis_names(s.volume), strict=True
+        ):
+            label.setText(name)
+            label.setToolTip(_axis_tooltip(name, letters))
+            spin.set_letters(letters)
         extent = float(np.max(s.box[1] - s.box[0]))
         for spin in self.translate_spins:
             spin.setSingleStep(max(extent / 100.0, 0.1))
@@ -455,18 +555,10 @@ class DeformationPanel(Panel):
         self.updateGeometry()
 
     # ------------------------------------------------------------------ timings
-    def refresh_timings(self, frame_ms: float | None) -> None:
-        """Show the last step and field-build times and the frame time (cheap: call
-        every frame).
-
-        Parameters
-        ----------
-        frame_ms
-            Duration of the last frame in ms, or None when unknown.
-        """
+    def refresh_timings(self) -> None:
+        """Show the last step and field-build times (cheap: call every frame). The frame
+        rate has one readout only, in the window's status bar."""
         parts = self.family_panel.timing_parts(self.session.timings)
-        if frame_ms is not None and frame_ms > 0:
-            parts.append(f"frame {frame_ms:.1f} ms ({1000.0 / frame_ms:.0f} fps)")
         text = " · ".join(parts)
         if text != self._timings_text:
             self._timings_text = text

@@ -2,7 +2,12 @@
 
 moderngl is attached to Qt's current context (the GUI draws with exactly the renderer
 of headless rendering, into Qt's framebuffer object), then the editing handles are
-drawn over the frame by :class:`voxwarp.render.overlay.OverlayRenderer`.
+drawn over the frame by :class:`voxwarp.render.overlay.OverlayRenderer`, and the
+orientation marker (:mod:`voxwarp.render.orientation_marker`: the world axes with the
+patient's R/L A/P S/I letters, or x y z for volumes without an orientation) in the
+bottom-left corner (:attr:`Viewport.show_marker`): drawn with numpy, as headless renders
+draw it, and blended into the frame as a texture (a ``QPainter`` on the widget would miss
+grabs of the whole window, which redirect the widget's painting).
 
 Mouse (see also the help dialog of the main window):
 
@@ -29,9 +34,11 @@ from PySide6.QtGui import QImage, QKeyEvent, QMouseEvent, QOpenGLContext, QWheel
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QRubberBand, QWidget
 
+from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.errors import VoxwarpError
+from voxwarp.render.orientation_marker import draw_orientation_marker
 from voxwarp.render.overlay import OverlayRenderer
 from voxwarp.render.raycaster import Renderer
 from voxwarp.ui.tasks import Task
@@ -47,6 +54,9 @@ KEY_ORBIT_DEG = 5.0
 KEY_PAN = 0.05
 #: degrees of orbit per pixel of mouse motion
 ORBIT_DEG_PER_PX = 0.4
+#: side of the orientation marker's square and its distance from the corner (pixels)
+MARKER_PX = 96
+MARKER_MARGIN_PX = 6
 
 
 class _QtLoader:
@@ -96,6 +106,10 @@ class Viewport(QOpenGLWidget):
         self.camera: Camera = session.scene.resolved_camera()
         #: a click lays a control point of a new wire instead of picking
         self.laying_wire = False
+        #: draw the orientation marker (View -> Orientation Marker)
+        self.show_marker = True
+        self._marker: tuple[Any, np.ndarray] | None = None
+        self._marker_gl: dict[str, Any] = {}
         self.ctx: Any = None
         self.renderer: Renderer | None = None
         self.overlay: OverlayRenderer | None = None
@@ -173,6 +187,8 @@ class Viewport(QOpenGLWidget):
             self.overlay.draw(
                 self.session.overlay_layers(self.display), fbo, self.camera, (0, 0, w, h)
             )
+            if self.show_marker:
+                self._draw_marker(fbo)
             self.ctx.finish()  # honest frame times: wait for the GPU, not just the submission
         except VoxwarpError as exc:
             fbo.use()
@@ -182,6 +198,67 @@ class Viewport(QOpenGLWidget):
         self.frames_drawn += 1
         self._start_skip_map_job(start_now)
         self.frameDrawn.emit(self.last_frame_ms)
+
+    def oriented(self) -> bool:
+        """Whether the volume's world is patient RAS (the marker shows R/L A/P S/I)."""
+        return getattr(self.session.volume, "space", "") == "RAS"
+
+    def marker_image(self) -> np.ndarray:
+        """The orientation marker for the current camera: premultiplied RGBA (uint8,
+        row 0 at the top) of its square plus margin in device pixels, drawn by
+        :func:`~voxwarp.render.orientation_marker.draw_orientation_marker` (kept until
+        the view direction, the volume's orientation or the pixel ratio change)."""
+        r = self.devicePixelRatio()
+        side = round((MARKER_PX + 2 * MARKER_MARGIN_PX) * r)
+        key = (np.round(self.camera.rotation, 6).tobytes(), self.oriented(), side)
+        if self._marker is None or self._marker[0] != key:
+            arr = np.zeros((side, side, 4), np.uint8)  # transparent: "over" gives premultiplied
+            draw_orientation_marker(
+                arr,
+                self.camera,
+                self.oriented(),
+                size_px=round(MARKER_PX * r),
+                margin_px=round(MARKER_MARGIN_PX * r),
+            )
+            self._marker = (key, arr)
+        return self._marker[1]
+
+    def _draw_marker(self, fbo: Any) -> None:
+        """Blend the marker into the bottom-left corner of ``fbo`` (premultiplied over)."""
+        img = self.marker_image()
+        side = img.shape[0]
+        gl = self._marker_gl
+        ctx = self.ctx
+        if gl.get("side") != side:
+            if "tex" in gl:
+                gl.pop("tex").release()
+            tex = ctx.texture((side, side), 4, dtype="f1")
+            tex.filter = (ctx.NEAREST, ctx.NEAREST)
+            gl.update(tex=tex, side=side, shown=None)
+        if gl.get("shown") is not img:
+            gl["tex"].write(np.ascontiguousarray(img[::-1]).tobytes())  # GL rows: bottom up
+            gl["shown"] = img
+        if "prog" not in gl:
+            # a textured square through the full-screen triangle of the raycaster's upscaler
+            prog = ctx.program(
+                vertex_shader=shaders.source("upscale.vert.glsl"),
+                fragment_shader=shaders.source("upscale.frag.glsl"),
+            )
+            gl.update(prog=prog, vao=ctx.vertex_array(prog, []))
+        previous_viewport = fbo.viewport
+        fbo.use()
+        fbo.viewport = (0, 0, side, side)  # GL's origin is the bottom-left corner
+        scope = ctx.scope(fbo, enable_only=ctx.BLEND)
+        try:
+            with scope:
+                ctx.blend_func = (ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA)
+                gl["tex"].use(0)
+                gl["prog"]["u_frame"] = 0
+                gl["vao"].render(ctx.TRIANGLES, vertices=3)
+        finally:
+            ctx.blend_func = ctx.DEFAULT_BLENDING
+            scope.release()
+            fbo.viewport = previous_viewport
 
     def _start_skip_map_job(self, now: bool) -> None:
         """Build the skip maps of a warp state drawn twice in a row (``now``: at once,
@@ -293,6 +370,10 @@ class Viewport(QOpenGLWidget):
         def release() -> None:
             for warp in self.session.take_released_warps():
                 warp.release()
+            for name in ("vao", "prog", "tex"):
+                if name in self._marker_gl:
+                    self._marker_gl.pop(name).release()
+            self._marker_gl.clear()
             if self.overlay is not None:
                 self.overlay.release()
             if self.renderer is not None:
