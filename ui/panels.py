@@ -184,8 +184,8 @@ class VolumePanel(Panel):
         self.mode_combo = combo(
             MODES,
             "dvr: emission-absorption; mip/minip: maximum/minimum intensity; average:"
-            " mean along the ray; xray: line integral (a radiograph); flm: first local"
-            " maximum; iso: shaded isosurface",
+            " mean along the ray; xray: radiograph (line integral, brighter where thicker);"
+            " flm: first local maximum; iso: shaded isosurface",
         )
         self.mode_combo.currentTextChanged.connect(self._mode_changed)
         form.addRow("Mode", self.mode_combo)
