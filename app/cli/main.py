@@ -697,8 +697,6 @@ def cmd_render(args: argparse.Namespace) -> int:
         **ropt.load_options(args),
     )
     scene = _scene_from_args(obj, args)
-    print(scene.display_note(), file=sys.stderr)
-    ropt.spacing_notice(scene.volume, args)
     grid = _deform_grid(args, scene.volume)
     file_warp = None  # --wires or --lattice (they exclude each other)
     if args.wires is not None:  # built before any GL work: bad wires fail fast
@@ -729,6 +727,9 @@ def cmd_render(args: argparse.Namespace) -> int:
             finally:
                 if model is not None:
                     model.close()
+    # what was chosen, once the image exists (a refused render prints only its error)
+    print(scene.display_note(), file=sys.stderr)
+    ropt.spacing_notice(scene.volume, args)
     if args.marker:  # the orientation triad (R/L, A/P, S/I letters when oriented)
         from voxwarp.render.orientation_marker import draw_scene_marker
 

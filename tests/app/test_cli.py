@@ -196,7 +196,7 @@ def test_bad_size_is_an_argparse_error(
     ("args", "message"),
     [
         (["--view", "top"], "AZIMUTH,ELEVATION"),
-        (["--mode", "xray"], "invalid choice"),
+        (["--mode", "radiograph"], "invalid choice"),
         (["--projection", "fisheye"], "invalid choice"),
     ],
 )
