@@ -19,13 +19,23 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.core.orientation import axis_code, shear_of, split_affine, to_closest_ras
+from voxwarp.core.orientation import (
+    axis_code,
+    obliquity_degrees,
+    shear_of,
+    split_affine,
+    to_closest_ras,
+)
 from voxwarp.errors import VolumeError
 
 _IO_DIR = str(Path(__file__).resolve().parent)
 
 #: Largest axis cosine accepted as an orthogonal voxel grid (a shear above it warns).
 _SHEAR_TOL = 1e-3
+#: Obliquity below which the axes count as the world axes: header rounding (DICOM
+#: ImageOrientationPatient is often written to 6 digits), not an oblique acquisition;
+#: 0.001 degrees moves a point 500 mm away by 0.009 mm.
+_SNAP_DEGREES = 1e-3
 
 
 @dataclass
@@ -143,6 +153,8 @@ def loaded_geometry(loaded: Loaded, where: str) -> tuple[np.ndarray, dict[str, A
         )
     data, affine = to_closest_ras(data, affine)
     spacing, origin, direction = split_affine(affine)
+    if obliquity_degrees(direction) < _SNAP_DEGREES:
+        direction = np.eye(3)  # rounding noise in the header, not an oblique scan
     geometry = {
         "spacing": tuple(float(s) for s in spacing),
         "origin": tuple(float(o) for o in origin),

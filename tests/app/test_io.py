@@ -742,3 +742,15 @@ def test_loading_does_not_create_files(tmp_path: Path) -> None:
     before = sorted(os.listdir(tmp_path))
     load_volume(path)
     assert sorted(os.listdir(tmp_path)) == before
+
+
+@pytest.mark.parametrize(("degrees", "oblique"), [(2e-5, False), (0.05, True)])
+def test_header_rounding_is_not_an_oblique_scan(degrees: float, oblique: bool) -> None:
+    """A direction off the axes by header rounding (DICOM writes ImageOrientationPatient
+    to ~6 digits) snaps to the axes; a real tilt, however small, stays oblique."""
+    t = np.radians(degrees)
+    affine = np.eye(4)
+    affine[:2, :2] = [[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]]
+    vol = load_volume(asym(), affine=affine)
+    assert vol.is_oblique is oblique
+    assert vol.obliquity == pytest.approx(degrees if oblique else 0.0, abs=1e-9)
