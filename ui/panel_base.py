@@ -72,9 +72,11 @@ def double_spin(
     decimals: int = 2,
     suffix: str = "",
     tooltip: str = "",
+    spin: QDoubleSpinBox | None = None,
 ) -> QDoubleSpinBox:
-    """A compact double spin box that reports a value only when typing is finished."""
-    spin = QDoubleSpinBox()
+    """A compact double spin box that reports a value only when typing is finished
+    (``spin``: set up this one, e.g. an :class:`AxisSpinBox`, instead of a new one)."""
+    spin = QDoubleSpinBox() if spin is None else spin
     spin.setRange(lo, hi)
     spin.setDecimals(decimals)
     spin.setSingleStep(step)
@@ -171,16 +173,7 @@ def axis_spin(
 ) -> AxisSpinBox:
     """A compact :class:`AxisSpinBox` (see :func:`double_spin`)."""
     spin = AxisSpinBox()
-    spin.setRange(lo, hi)
-    spin.setDecimals(decimals)
-    spin.setSingleStep(step)
-    spin.setSuffix(suffix)
-    spin.setKeyboardTracking(False)
-    spin.setAccelerated(True)
-    spin.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
-    spin.setMinimumWidth(40)
-    if tooltip:
-        spin.setToolTip(tooltip)
+    double_spin(lo, hi, step, decimals, suffix, tooltip, spin=spin)
     return spin
 
 

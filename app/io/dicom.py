@@ -150,13 +150,10 @@ def _slice_order(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Order of the slices and their sorted positions along the normal (or ``None``)."""
     ipps = [floats(ds.get("ImagePositionPatient"), 3) for _, ds in chosen]
-    if iop is not None and all(p is not None for p in ipps):
-        normal = np.cross(iop[:3], iop[3:])
-        if np.linalg.norm(normal) > 1e-6:
-            normal /= np.linalg.norm(normal)
-            positions = np.array([float(np.dot(p, normal)) for p in ipps])
-            order = np.argsort(positions, kind="stable")
-            return order, positions[order]
+    positions = _positions_on_normal(iop, ipps)
+    if positions is not None:
+        order = np.argsort(positions, kind="stable")
+        return order, positions[order]
     numbers = [_number(ds, "InstanceNumber", None) for _, ds in chosen]
     if all(n is not None for n in numbers):
         return np.argsort(np.asarray(numbers, dtype=np.float64), kind="stable"), None
@@ -166,6 +163,18 @@ def _slice_order(
             " InstanceNumber; they are stacked in file-name order."
         )
     return np.arange(len(chosen)), None
+
+
+def _positions_on_normal(iop: np.ndarray | None, ipps: list) -> np.ndarray | None:
+    """Each slice's position along the slice normal (mm), or ``None`` without
+    ImageOrientationPatient or an ImagePositionPatient per slice."""
+    if iop is None or any(p is None for p in ipps):
+        return None
+    normal = np.cross(iop[:3], iop[3:])
+    if np.linalg.norm(normal) <= 1e-6:
+        return None
+    normal /= np.linalg.norm(normal)
+    return np.array([float(np.dot(p, normal)) for p in ipps])
 
 
 def _slice_spacing(directory: Path, positions: np.ndarray | None, ds0: Any, n: int) -> float:
@@ -371,17 +380,14 @@ def read_dicom_file(path: Path) -> Loaded:
     iop = floats(_functional_attr(ds, "ImageOrientationPatient", 0), 6)
     ipps = [floats(_functional_attr(ds, "ImagePositionPatient", f), 3) for f in range(frames)]
     dz, first_ipp = None, None
-    if iop is not None and all(p is not None for p in ipps):
-        normal = np.cross(iop[:3], iop[3:])
-        if np.linalg.norm(normal) > 1e-6:
-            normal /= np.linalg.norm(normal)
-            pos = np.array([float(np.dot(p, normal)) for p in ipps])
-            order = np.argsort(pos, kind="stable")
-            gaps = np.diff(pos[order])
-            if np.all(gaps > 1e-4):
-                data = data[:, :, order]
-                dz = float(np.median(gaps))
-                first_ipp = ipps[int(order[0])]
+    pos = _positions_on_normal(iop, ipps)
+    if pos is not None:
+        order = np.argsort(pos, kind="stable")
+        gaps = np.diff(pos[order])
+        if np.all(gaps > 1e-4):
+            data = data[:, :, order]
+            dz = float(np.median(gaps))
+            first_ipp = ipps[int(order[0])]
     if dz is None:
         for keyword in ("SpacingBetweenSlices", "SliceThickness"):
             value = to_float(_functional_attr(ds, keyword, 0), None)
