@@ -109,8 +109,7 @@ class SkipMapCache:
         Straight rays (affine chains) skip at trilinear-cell resolution for the modes
         whose visibility is sparse (dvr, iso, flm). mip, minip, average and xray must
         look at (nearly) every sample along the ray; on the benchmark CT their skip checks
-        cost more than they saved (no skipping: 1.3x faster; xray 1.3-1.6x on the stent,
-        head and colin27 samples), so they march plainly.
+        cost more than they saved (docs/benchmarks.md), so they march plainly.
         Warped (non-affine) rays skip at cell resolution too, through deformed space,
         when every warp of the chain bounds its displacement
         (:meth:`voxwarp.deform.warp.Warp.displacement_range`; see
