@@ -31,7 +31,9 @@ modality  transfer function (dvr,      window (mip, minip, average, xray)
 CT        ``ct-bone`` (HU), shaded     robust percentiles of the voxels inside the
 MR        ``mri`` (0.5-99.5 %), shaded field of view (padding excluded):
 other     ``ramp`` over 1-99.9 %,      mip 1-99.9 %, minip 0.5-99.5 %,
-          shaded                       average / xray 1-99.5 %
+          shaded                       average 1-99.5 %; xray from 1 %, white at
+                                       the 99.5th percentile of the line integrals
+                                       along the volume axes
 ========  ===========================  ==========================================
 
 Shading (when ``shading`` is not given): ``iso`` and ``flm`` always; ``dvr`` where the
@@ -60,6 +62,7 @@ from typing import Literal
 
 import numpy as np
 
+from voxwarp.core.modes import xray_reference_length
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 
@@ -78,6 +81,10 @@ WINDOW_PERCENTILES: dict[str, tuple[float, float]] = {
     "average": (1.0, 99.5),
     "xray": (1.0, 99.5),
 }
+#: The ``xray`` window's width: this percentile of the line integrals shows white.
+XRAY_WHITE_PERCENTILE = 99.5
+#: The ``xray`` window is estimated on a volume strided to about this many voxels per axis.
+XRAY_ESTIMATE_VOXELS = 128
 #: Percentiles the ``ramp`` transfer function of *other* data spans.
 RAMP_PERCENTILES: tuple[float, float] = (1.0, 99.9)
 #: In a CT (HU), values below this are padding outside the field of view.
@@ -280,7 +287,27 @@ def robust_range(volume: Volume, lo: float, hi: float) -> tuple[float, float]:
 
 def _window(volume: Volume, mode: str) -> tuple[float, float]:
     lo, hi = robust_range(volume, *WINDOW_PERCENTILES.get(mode, (1.0, 99.5)))
+    if mode == "xray":
+        return _xray_window(volume, lo)
     return 0.5 * (lo + hi), hi - lo
+
+
+def _xray_window(volume: Volume, low: float) -> tuple[float, float]:
+    """``xray``'s window: the low end at the 1st value percentile (zero attenuation, the
+    air), the width such that the 99.5th percentile of the line integrals along the three
+    volume axes (over the mode's reference length) shows as white, so a radiograph of
+    mostly empty data is not dim."""
+    step = max(1, max(volume.shape) // XRAY_ESTIMATE_VOXELS)
+    sub = np.maximum(volume.data[::step, ::step, ::step].astype(np.float32) - low, 0.0)
+    length = xray_reference_length(volume)
+    tops = []
+    for axis in range(3):
+        line = sub.sum(axis=axis) * (step * volume.spacing[axis]) / length
+        tops.append(float(np.percentile(line, XRAY_WHITE_PERCENTILE)))
+    width = max(tops)
+    if not (np.isfinite(width) and width > 0):
+        width = 1.0
+    return low + 0.5 * width, width
 
 
 def ramp_transfer_function(volume: Volume) -> TransferFunction:
@@ -351,7 +378,9 @@ def describe(
     else:
         pct = WINDOW_PERCENTILES.get(mode, (1.0, 99.5))
         what = f"{mode.upper()} window {window[0]:.4g}/{window[1]:.4g}{unit}"
-        if not window_given:
+        if not window_given and mode == "xray":
+            what += f" (from the {pct[0]:g} % value, white at the thickest material)"
+        elif not window_given:
             what += f" (percentiles {pct[0]:g}-{pct[1]:g} inside the field of view)"
     text = f"{modality}: {what}"
     masked = _MASKED.get(volume)

@@ -23,8 +23,22 @@ an iso value, shaded.
   leave no caps.
 """
 
-from typing import Literal
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from voxwarp.core.volume import Volume
 
 Mode = Literal["dvr", "mip", "minip", "average", "xray", "flm", "iso"]
 #: every render mode, in the order the GUI and ``voxwarp render --mode`` offer them
 MODES: tuple[str, ...] = ("dvr", "mip", "minip", "average", "xray", "flm", "iso")
+
+
+def xray_reference_length(volume: Volume) -> float:
+    """The fixed length (mm) the ``xray`` mode divides its line integral by: the longest
+    edge of the volume box, ``max(shape * spacing)`` (independent of the ray, the view,
+    the volume's rotation, warps and the clip box)."""
+    return float(np.max(np.asarray(volume.shape, float) * np.asarray(volume.spacing, float)))

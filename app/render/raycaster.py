@@ -41,6 +41,7 @@ import numpy as np
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import mesh_instances_bounds
+from voxwarp.core.modes import xray_reference_length
 from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
@@ -698,13 +699,6 @@ def _mode_uniforms(scene: Scene) -> dict[str, Any]:
         values["u_iso"] = iso
         values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
     return values
-
-
-def xray_reference_length(volume: Volume) -> float:
-    """The fixed length (mm) the ``xray`` mode divides its line integral by: the longest
-    edge of the volume box, ``max(shape * spacing)`` (independent of the ray, the view,
-    the volume's rotation, warps and the clip box; see :mod:`voxwarp.core.modes`)."""
-    return float(np.max(np.asarray(volume.shape, float) * np.asarray(volume.spacing, float)))
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:

@@ -337,3 +337,21 @@ def test_cli_iso_out_of_range_and_padding(tmp_path: Path) -> None:
     assert f"padding {PAD} masked ({pad_count() / 1e3:.0f} k voxels)" in err
     err = run_render(path, "-o", out, "--keep-padding").stderr
     assert f"padding {PAD} kept" in err
+
+
+def test_default_xray_window_shows_the_thickest_material_white() -> None:
+    """A ball in a mostly empty box: the default xray window starts at the air and puts
+    the ball's longest chord near white (the value-percentile window left such
+    radiographs dim)."""
+    from voxwarp.core.modes import xray_reference_length
+    from voxwarp.scene import Scene
+
+    n = 96
+    x, y, z = np.indices((n, n, n)) - (n - 1) / 2
+    data = np.where(x**2 + y**2 + z**2 <= 20.0**2, 100, 0).astype(np.uint8)
+    vol = Volume(data, spacing=(1.0, 1.0, 1.0))
+    level, width = Scene(vol, mode="xray").window
+    low = level - width / 2
+    assert low == pytest.approx(0.0)
+    diameter = 40.0 * 100 / xray_reference_length(vol)  # the centre ray's integral / L
+    assert 0.9 <= diameter / width <= 1.1
