@@ -108,25 +108,24 @@ def rescale(data: np.ndarray, slope: float, inter: float) -> np.ndarray:
     return scaled.astype(np.float32)
 
 
-def checked_affine(value: Any, where: str) -> np.ndarray:
-    """``value`` as a finite, invertible 4x4 affine; raises VolumeError naming ``where``."""
+def checked_affine(value: Any, where: str, what: str = "") -> np.ndarray:
+    """``value`` as a finite, invertible 4x4 affine; raises VolumeError naming ``what``
+    (default: the ``'affine'`` key) in ``where``."""
+    what = what or f"'affine' in {where}"
     try:
         a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise VolumeError(
-            f"'affine' in {where} must be a 4x4 matrix of numbers (index -> world mm)."
-        ) from exc
+        raise VolumeError(f"{what} must be a 4x4 matrix of numbers (index -> world mm).") from exc
     if a.shape == (3, 4):
         a = np.vstack([a, [0.0, 0.0, 0.0, 1.0]])
     if a.shape != (4, 4) or not np.all(np.isfinite(a)):
         raise VolumeError(
-            f"'affine' in {where} must be a finite 4x4 matrix (index -> world mm); got shape"
-            f" {a.shape}."
+            f"{what} must be a finite 4x4 matrix (index -> world mm); got shape {a.shape}."
         )
     if not np.allclose(a[3], [0, 0, 0, 1]) or abs(np.linalg.det(a[:3, :3])) < 1e-12:
         raise VolumeError(
-            f"'affine' in {where} is not an invertible index -> world matrix (last row"
-            " 0, 0, 0, 1 and non-zero voxel axes)."
+            f"{what} is not an invertible index -> world map (a zero or repeated voxel"
+            " axis, or a last row other than 0, 0, 0, 1); fix the file's geometry."
         )
     return a
 

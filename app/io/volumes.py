@@ -736,7 +736,7 @@ def _read_nrrd(path: Path) -> _Loaded:
         affine[:3, :3] = dirs[spatial].T * scale  # rows of space directions are axes
         if origin is not None:
             affine[:3, 3] = origin
-        affine = checked_affine(affine, f"the space directions of {where}")
+        affine = checked_affine(affine, where, f"the geometry (space directions) of {where}")
         space = _nrrd_space(header, where)
         if space is not None:
             return _Loaded(data, units=units, affine=_to_ras(affine, space, where), space="RAS")
@@ -803,7 +803,7 @@ def _read_nifti(path: Path) -> _Loaded:
             raw, slope, inter = np.asanyarray(proxy), 1.0, 0.0
         hdr = img.header
         zooms = tuple(float(z) for z in hdr.get_zooms()[:3])
-        affine = _nifti_affine(hdr)
+        affine = _nifti_affine(hdr, path.name)
         space_unit = hdr.get_xyzt_units()[0] if hasattr(hdr, "get_xyzt_units") else "mm"
     except Exception as exc:
         raise VolumeError(
@@ -819,23 +819,31 @@ def _read_nifti(path: Path) -> _Loaded:
     scale = _unit_scale(space_unit, path.name)
     if affine is not None:
         affine[:3, :] *= scale
-        return _Loaded(data, affine=checked_affine(affine, path.name), space="RAS")
+        return _Loaded(data, affine=affine, space="RAS")
     spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=path.name)
     return _Loaded(data, tuple(s * scale for s in spacing))  # type: ignore[arg-type]
 
 
-def _nifti_affine(hdr: Any) -> np.ndarray | None:
+def _nifti_affine(hdr: Any, where: str) -> np.ndarray | None:
     """The sform when its code is set, else the qform when its code is set (nibabel's
-    ``get_best_affine`` precedence); ``None`` for neither, or for Analyze headers:
-    such a file has no patient orientation."""
+    ``get_best_affine`` precedence); ``None`` for neither, or for Analyze headers: such a
+    file has no patient orientation. A coded transform that is not finite or not
+    invertible is passed over with a warning."""
     if not hasattr(hdr, "get_sform"):
         return None
-    sform, scode = hdr.get_sform(coded=True)
-    if scode and sform is not None and np.all(np.isfinite(sform)):
-        return np.asarray(sform, dtype=np.float64)
-    qform, qcode = hdr.get_qform(coded=True)
-    if qcode and qform is not None and np.all(np.isfinite(qform)):
-        return np.asarray(qform, dtype=np.float64)
+    for name, (affine, code) in (
+        ("sform", hdr.get_sform(coded=True)),
+        ("qform", hdr.get_qform(coded=True)),
+    ):
+        if not code or affine is None:
+            continue
+        a = np.asarray(affine, dtype=np.float64)
+        if np.all(np.isfinite(a)) and abs(np.linalg.det(a[:3, :3])) > 1e-12:
+            return a
+        _warn(
+            f"{where}: the {name} (code {int(code)}) is not a finite, invertible matrix;"
+            " ignored. Fix the header (e.g. nibabel's set_sform) for a patient orientation."
+        )
     return None
 
 

@@ -754,3 +754,54 @@ def test_header_rounding_is_not_an_oblique_scan(degrees: float, oblique: bool) -
     vol = load_volume(asym(), affine=affine)
     assert vol.is_oblique is oblique
     assert vol.obliquity == pytest.approx(degrees if oblique else 0.0, abs=1e-9)
+
+
+def test_nifti_broken_sform_falls_back_with_a_warning(tmp_path: Path) -> None:
+    """A coded sform that is singular or not finite is ignored with a warning (the
+    qform, if coded, is used; here none): the volume loads without an orientation."""
+    import struct
+
+    img = nib.Nifti1Image(asym(), np.eye(4))
+    img.set_sform(np.eye(4), code=1)
+    img.set_qform(None, code=0)
+    nib.save(img, str(tmp_path / "base.nii"))
+    raw = bytearray((tmp_path / "base.nii").read_bytes())
+    raw[280:296] = struct.pack("<4f", 0.0, 0.0, 0.0, 0.0)  # srow_x: a zero voxel axis
+    (tmp_path / "bad.nii").write_bytes(bytes(raw))
+    with pytest.warns(UserWarning, match="sform .code 1. is not a finite, invertible"):
+        vol = load_volume(tmp_path / "bad.nii")
+    assert (vol.space, vol.orientation) == ("", "")
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        ("nrrd_zero_axis", "not an invertible index -> world map"),
+        ("npz_3x3", r"'affine' in .* must be a finite 4x4 matrix"),
+        ("npz_space", r"'space' in .* must be 'RAS' or 'LPS'"),
+        ("npz_both", "states both an 'affine' and 'spacing'"),
+        ("sidecar_text", r"'affine' in vol.raw.json must be a 4x4 matrix of numbers"),
+    ],
+)
+def test_bad_stated_geometry_is_one_clear_error(tmp_path: Path, make: str, message: str) -> None:
+    d = asym()
+    if make == "nrrd_zero_axis":
+        dirs = np.array([[1.0, 0, 0], [0, 0, 0], [0, 0, 1.0]])
+        header = {"space": "left-posterior-superior", "space directions": dirs}
+        nrrd.write(str(tmp_path / "v.nrrd"), d, header, index_order="F")
+        path = tmp_path / "v.nrrd"
+    elif make.startswith("npz"):
+        extra = {
+            "npz_3x3": {"affine": np.eye(3)},
+            "npz_space": {"affine": np.eye(4), "space": np.array("XYZ")},
+            "npz_both": {"affine": np.eye(4), "spacing": np.ones(3)},
+        }[make]
+        np.savez(tmp_path / "v.npz", data=d, **extra)
+        path = tmp_path / "v.npz"
+    else:
+        d.T.tofile(tmp_path / "vol.raw")
+        side = {"dims": [5, 6, 7], "dtype": "int16", "affine": "eye"}
+        (tmp_path / "vol.raw.json").write_text(json.dumps(side))
+        path = tmp_path / "vol.raw"
+    with pytest.raises(VolumeError, match=message):
+        load_volume(path)
