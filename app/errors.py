@@ -40,3 +40,22 @@ class InputError(VoxwarpError, ValueError):
 
 class MissingExtraError(VoxwarpError, ImportError):
     """A feature needs an optional dependency group (an *extra*) that is not installed."""
+
+
+class OutputError(VoxwarpError, OSError):
+    """A file could not be written (disk full, read-only, permission denied, ...).
+
+    Raised by every writer (through :func:`voxwarp.core.files.atomic_output`) after it
+    has removed its temporary file, so the destination keeps its previous content (or
+    stays absent). The message is one line: ``cannot write PATH: CAUSE (strerror); FIX``.
+    It is also an :class:`OSError` (``errno`` set when known), so code that caught the
+    ``OSError`` of a failed write keeps working.
+    """
+
+    def __init__(self, message: str, *, path: str = "", errno: int | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.errno = errno
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""

@@ -1,47 +1,295 @@
-"""Atomic file writes: a file appears complete or not at all, never half written.
+"""Atomic, checked file writes: a file appears complete or not at all, never half written.
 
-Every writer in voxwarp (volumes, scene JSON, images, benchmark tables) goes through
-:func:`atomic_write`: it writes a temporary file in the target's folder, then renames
-it over the target with ``os.replace``; on any failure the temporary file is removed
-and a previous version of the target stays intact.
+Every writer in voxwarp (images, frames, volumes, scene JSON, manifests, meshes,
+benchmark tables) goes through :func:`atomic_output`. It hands the writer a temporary
+path in the destination's folder; once the writer returns, the temporary file is synced
+to disk and renamed over the destination with ``os.replace``. On any failure (the
+writer raising, a short write, the sync, the rename) the temporary file is removed, a
+previous version of the destination stays intact, and an :class:`OSError` becomes an
+:class:`~voxwarp.errors.OutputError` whose one-line message names the path and the
+cause::
+
+    from voxwarp.core.files import atomic_output, atomic_open
+
+    with atomic_output(path, ".nii.gz") as tmp:   # a library writes a file by name
+        nib.save(img, str(tmp))
+
+    with atomic_open(path, "w") as fh:            # or write through a file object
+        json.dump(doc, fh)
+
+    # OutputError: cannot write /data/out.png: disk full (No space left on device); ...
+
+A writer that reports failure by a return value instead of an exception (OpenImageIO)
+raises :func:`output_error` itself. Temporary names are hidden and recognisable
+(``.NAME.PID-XXXXXXXX.vwtmp[SUFFIX]``, see :func:`is_temp_name`), never stack
+(``.tmp.tmp``), and :func:`remove_stale_temps` removes those a killed process left.
 """
 
 from __future__ import annotations
 
+import errno as _errno
 import os
+import re
 import secrets
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import IO, Any
+
+from voxwarp.errors import OutputError
+
+#: Marks every temporary file voxwarp writes (before the format's own suffix).
+TEMP_MARK = ".vwtmp"
+
+# ".NAME.PID-8hex.vwtmp[.suffix]"; the legacy ".tmp" mark of earlier versions too
+_TEMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)-[0-9a-f]{8}\.(?:vwtmp|tmp)(?:\..*)?$")
+
+#: errno -> (cause, fix) for the one-line message of :class:`OutputError`.
+_CAUSES: dict[int, tuple[str, str]] = {
+    _errno.ENOSPC: ("disk full", "free some space or write to another disk"),
+    _errno.EDQUOT: ("disk quota exceeded", "free some space or write to another disk"),
+    _errno.EFBIG: ("file too large for this file system", "write to another disk"),
+    _errno.EROFS: ("read-only file system", "write to a writable folder"),
+    _errno.EACCES: ("permission denied", "write to a folder you may write to"),
+    _errno.EPERM: ("permission denied", "write to a folder you may write to"),
+    _errno.ENOENT: ("folder does not exist", "create the folder or fix the path"),
+    _errno.ENOTDIR: ("a part of the path is not a folder", "fix the path"),
+    _errno.EISDIR: ("it is a folder", "name a file, not a folder"),
+    _errno.EIO: ("input/output error", "check the disk"),
+}
+
+# texts of libraries that report no errno (OpenImageIO, ...) -> errno
+_TEXT_ERRNO = (
+    ("no space left", _errno.ENOSPC),
+    ("disk quota", _errno.EDQUOT),
+    ("read-only file system", _errno.EROFS),
+    ("permission denied", _errno.EACCES),
+    ("file too large", _errno.EFBIG),
+)
 
 
-def temp_name(final: Path, suffix: str) -> Path:
-    """A hidden, unique temporary path beside ``final`` ending in ``suffix``.
+def output_error(path: str | os.PathLike, cause: BaseException | str) -> OutputError:
+    """The one-line :class:`OutputError` for a failed write of ``path``.
 
-    The suffix is kept so that libraries choosing the format by extension (NIfTI,
-    OpenImageIO) write the right format.
+    ``cause`` is the :class:`OSError` raised (its errno picks the cause and the fix) or
+    a library's error text (recognised phrases such as "No space left on device" map to
+    the same causes).
     """
-    return final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
+    code = getattr(cause, "errno", None) if isinstance(cause, BaseException) else None
+    if isinstance(cause, OSError):
+        detail = cause.strerror or str(cause) or type(cause).__name__
+    else:
+        detail = str(cause) or type(cause).__name__
+    detail = " ".join(detail.split())  # one line whatever the library printed
+    if code is None:
+        low = detail.lower()
+        code = next((c for text, c in _TEXT_ERRNO if text in low), None)
+    if code in _CAUSES:
+        what, fix = _CAUSES[code]
+        msg = f"cannot write {path}: {what} ({detail}); {fix}"
+    else:
+        msg = f"cannot write {path}: {detail}"
+    return OutputError(msg, path=str(path), errno=code)
+
+
+def temp_name(final: Path, suffix: str = "") -> Path:
+    """A hidden, unique temporary path beside ``final``: ``.NAME.PID-HEX.vwtmp`` + ``suffix``.
+
+    ``suffix`` (e.g. ``".png"``, ``".nii.gz"``) is kept so that libraries choosing the
+    format by extension write the right format. The name of a temporary file is never
+    nested into another (a ``final`` that is itself a temporary name is used by its
+    real name).
+    """
+    final = Path(final)
+    m = _TEMP_RE.match(final.name)
+    name = m.group("name") if m else final.name
+    if suffix == TEMP_MARK or suffix == ".tmp":  # no ".vwtmp.tmp"
+        suffix = ""
+    return final.with_name(f".{name}.{os.getpid()}-{secrets.token_hex(4)}{TEMP_MARK}{suffix}")
+
+
+def is_temp_name(name: str | os.PathLike) -> bool:
+    """Whether ``name`` (a file name or path) is a temporary file of :func:`temp_name`
+    (or of an earlier voxwarp, ``.NAME.PID-HEX.tmp...``)."""
+    return _TEMP_RE.match(Path(name).name) is not None
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists (another user's), or cannot tell: keep its files
+    return True
+
+
+def remove_stale_temps(
+    folder: str | os.PathLike, *, for_name: str | None = None, min_age_s: float = 0.0
+) -> list[Path]:
+    """Remove the temporary files that writers killed before finishing left in ``folder``.
+
+    A temporary file is stale when the process that wrote it (its name holds the pid)
+    no longer runs on this machine and it is at least ``min_age_s`` seconds old (give a
+    margin when other machines write into a shared folder: their pids mean nothing
+    here). ``for_name`` limits the cleaning to the temporaries of that one destination
+    name. Files that cannot be removed are left. Returns the paths removed.
+    """
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    now = time.time()
+    for entry in entries:
+        m = _TEMP_RE.match(entry.name)
+        if m is None or (for_name is not None and m.group("name") != for_name):
+            continue
+        try:
+            if not entry.is_file(follow_symlinks=False) or _pid_alive(int(m.group("pid"))):
+                continue
+            if now - entry.stat(follow_symlinks=False).st_mtime < min_age_s:
+                continue
+            os.unlink(entry.path)
+        except OSError:
+            continue
+        removed.append(Path(entry.path))
+    return removed
+
+
+def _discard(tmp: Path) -> None:
+    """Remove ``tmp`` if it is there; a failing removal (read-only disk) never hides the
+    error that made the write fail."""
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
+
+
+def _sync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make the rename durable; file systems that cannot sync a folder are passed over."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def atomic_output(
+    path: str | os.PathLike, suffix: str | None = None, *, mkdir: bool = True
+) -> Iterator[Path]:
+    """Yield a temporary path to write; on success it replaces ``path`` atomically.
+
+    Parameters
+    ----------
+    path
+        The destination.
+    suffix
+        Ending of the temporary name, for libraries that pick the format from the
+        extension (``".nii.gz"``); default the destination's last suffix.
+    mkdir
+        Create the destination's folder first.
+
+    Raises
+    ------
+    OutputError
+        For any :class:`OSError` of the write, the sync or the rename (and when the
+        writer left no file); the temporary file is removed first. Other exceptions of
+        the writer pass through unchanged, after the same clean-up.
+
+    Examples
+    --------
+    >>> with atomic_output(out, ".png") as tmp:  # doctest: +SKIP
+    ...     library_write(str(tmp))
+    """
+    final = Path(path)
+    if suffix is None:
+        suffix = final.suffix
+    if mkdir:
+        try:
+            final.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise output_error(final, exc) from exc
+    tmp = temp_name(final, suffix)
+    try:
+        yield tmp
+        if not tmp.is_file():
+            raise OutputError(f"cannot write {final}: the writer produced no file", path=str(final))
+        _sync_file(tmp)
+        os.replace(tmp, final)
+    except OutputError:
+        _discard(tmp)
+        raise
+    except OSError as exc:
+        _discard(tmp)
+        raise output_error(final, exc) from exc
+    except BaseException:
+        _discard(tmp)
+        raise
+    _sync_folder(final.parent)
+
+
+@contextmanager
+def atomic_open(
+    path: str | os.PathLike,
+    mode: str = "w",
+    *,
+    encoding: str | None = "utf-8",
+    suffix: str | None = None,
+    mkdir: bool = True,
+) -> Iterator[IO[Any]]:
+    """Yield a new file object (``mode`` ``"w"`` or ``"wb"``) whose content replaces
+    ``path`` atomically once the block ends; every write, the flush, the sync and the
+    close are checked (see :func:`atomic_output` for the errors)."""
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_open mode must be 'w' or 'wb'; got {mode!r}")
+    binary = mode == "wb"
+    with atomic_output(path, suffix, mkdir=mkdir) as tmp:
+        fh = open(tmp, "xb" if binary else "x", encoding=None if binary else encoding)
+        try:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        except BaseException:
+            try:
+                fh.close()
+            except OSError:
+                pass  # the first error is the one to report
+            raise
+        fh.close()  # a failing close (buffered data) raises here, inside the guard
 
 
 def atomic_write(final: Path, suffix: str, write: Callable[[Path], None]) -> None:
-    """Write through ``write(tmp)`` to a temporary file, then rename it to ``final``."""
-    tmp = temp_name(final, suffix)
-    try:
+    """Write through ``write(tmp)`` to a temporary file, then rename it to ``final``
+    (:func:`atomic_output` as a call)."""
+    with atomic_output(final, suffix) as tmp:
         write(tmp)
-        os.replace(tmp, final)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
-def atomic_write_text(path: Path, text: str) -> None:
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically, synced to disk, creating folders."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_open(path, "w", suffix="") as fh:
+        fh.write(text)
 
-    def write(tmp: Path) -> None:
-        with open(tmp, "x", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
 
-    atomic_write(path, ".tmp", write)
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically, synced to disk, creating folders."""
+    with atomic_open(path, "wb", suffix="") as fh:
+        fh.write(data)

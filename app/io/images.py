@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
 import numpy as np
 
-from voxwarp.core.files import atomic_write
-from voxwarp.errors import VoxwarpError
+from voxwarp.core.files import atomic_output, output_error, temp_name
+from voxwarp.errors import OutputError, VoxwarpError
 
 #: Extensions that keep float data (an ``f4`` render is written as float).
 FLOAT_FORMATS = (".exr", ".hdr", ".tif", ".tiff")
@@ -18,7 +19,9 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     """Write an (H, W, C) uint8 or float32 image, row 0 = top, atomically.
 
     The format follows the extension; the file appears only once complete (temp file
-    in the same folder, then ``os.replace``).
+    in the same folder, then ``os.replace``). Every step of OpenImageIO is checked (its
+    results and its error text: a PNG cut short by a full disk reports only the latter);
+    a failure raises :class:`~voxwarp.errors.OutputError` and leaves no file behind.
     """
     import OpenImageIO as oiio
 
@@ -32,9 +35,8 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     if img.dtype == np.float32 and ext not in FLOAT_FORMATS:
         img = np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
     fmt = oiio.FLOAT if img.dtype == np.float32 else oiio.UINT8
-    path.parent.mkdir(parents=True, exist_ok=True)
-
-    def write(tmp: Path) -> None:
+    with atomic_output(path, ext) as tmp:
+        oiio.geterror()  # clear a stale error of this thread
         out = oiio.ImageOutput.create(str(tmp))
         if out is None:
             raise VoxwarpError(
@@ -43,14 +45,37 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
         spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], fmt)
         if img.shape[2] == 4:
             spec.alpha_channel = 3
-        ok = out.open(str(tmp), spec) and out.write_image(img)
+        ok = bool(out.open(str(tmp), spec) and out.write_image(img))
+        # some formats (PNG) report a short write only through geterror, not the result
         err = out.geterror()
-        out.close()
-        if not ok:
-            raise VoxwarpError(f"could not write {path}: {err}")
-
-    atomic_write(path, ext, write)
+        ok = bool(out.close()) and ok
+        err = "\n".join(e for e in (err, out.geterror(), oiio.geterror()) if e)
+        if not ok or err or not tmp.is_file() or tmp.stat().st_size == 0:
+            raise _image_error(path, err or "the image file is empty", tmp)
     return path
+
+
+def _image_error(path: Path, text: str, tmp: Path) -> OutputError:
+    """One line for a failed image write. OpenImageIO gives no errno: a probe file in
+    the folder tells a read-only or forbidden folder, no free space a full disk."""
+    text = text.replace(str(tmp), str(path)).strip()
+    first = text.splitlines()[0] if text else "OpenImageIO failed"
+    if len(first) > 200:
+        first = first[:200] + "..."
+    probe = temp_name(path, ".probe")
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as exc:
+        if exc.errno is not None and exc.errno != errno.EEXIST:
+            return output_error(path, OSError(exc.errno, f"{exc.strerror}: {first}"))
+    try:
+        full = os.statvfs(tmp.parent).f_bavail == 0
+    except OSError:
+        full = False
+    if full:
+        return output_error(path, OSError(errno.ENOSPC, f"No space left on device: {first}"))
+    return output_error(path, first)
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
