@@ -52,7 +52,9 @@ import json
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Literal
 
@@ -241,6 +243,7 @@ def load_volume(
     affine: Sequence[Sequence[float]] | np.ndarray | None = None,
     space: str = "RAS",
     series: str | int | None = None,
+    allow_data_dirs: Sequence[str | os.PathLike[str]] | None = None,
 ) -> Volume:
     """Load a volume from a file, a folder of slices, or a NumPy array.
 
@@ -277,6 +280,10 @@ def load_volume(
     series
         For a folder with several DICOM series: the 1-based index ``voxwarp info``
         lists, or a SeriesInstanceUID. Default: the largest series, with a warning.
+    allow_data_dirs
+        Folders a detached NRRD header (``data file:``) may name its data in, besides
+        the header's own folder and its subfolders (also ``$VOXWARP_ALLOW_DATA_DIRS``,
+        ``os.pathsep``-separated); any other data file is refused.
 
     Returns
     -------
@@ -314,7 +321,8 @@ def load_volume(
             path = Path(os.path.abspath(os.path.expanduser(os.fspath(source))))
         except (TypeError, ValueError) as exc:
             raise VolumeError(f"invalid path {_short(source)}: {exc}") from exc
-        loaded = _load_path(path, series)
+        with allowed_data_dirs(allow_data_dirs):
+            loaded = _load_path(path, series)
         name, src = _stem(path), str(path)
         what = path.name
     elif isinstance(source, np.ndarray) or hasattr(source, "__array__"):
@@ -689,6 +697,7 @@ def _stated_affine(loaded: _Loaded, affine: Any, space: Any, where: str) -> None
 def _read_nrrd(path: Path) -> _Loaded:
     import nrrd
 
+    _check_nrrd_data_files(path)  # before nrrd.read opens a detached data file
     try:
         data, header = nrrd.read(str(path), index_order="F")
         data = np.asarray(data)
@@ -747,6 +756,94 @@ def _read_nrrd(path: Path) -> _Loaded:
         if finite.size == 3:
             spacing = _triple(finite * scale, "spacing", positive=True, where=where)
     return _Loaded(data, spacing, None if origin is None else tuple(origin), units)
+
+
+#: Folders the caller allows detached NRRD data files in, besides the header's own folder
+#: (set by :func:`load_volume` ``allow_data_dirs=``; see :func:`_check_nrrd_data_files`).
+_NRRD_DATA_DIRS: ContextVar[tuple[Path, ...]] = ContextVar("voxwarp_nrrd_data_dirs", default=())
+#: Environment variable with more allowed folders (``os.pathsep``-separated), for the CLI.
+NRRD_DATA_DIRS_ENV = "VOXWARP_ALLOW_DATA_DIRS"
+#: Most bytes of a detached header read to find its ``data file`` field.
+_NRRD_HEADER_SCAN_BYTES = 1 << 20
+
+
+@contextmanager
+def allowed_data_dirs(dirs: Sequence[str | os.PathLike[str]] | None) -> Iterator[None]:
+    """Allow detached NRRD data files under ``dirs`` (besides the header's folder) while
+    the block runs; ``None`` or empty changes nothing."""
+    if not dirs:
+        yield
+        return
+    if isinstance(dirs, str | os.PathLike):
+        dirs = [dirs]
+    extra = tuple(Path(os.path.expanduser(os.fspath(d))).resolve() for d in dirs)
+    token = _NRRD_DATA_DIRS.set(_NRRD_DATA_DIRS.get() + extra)
+    try:
+        yield
+    finally:
+        _NRRD_DATA_DIRS.reset(token)
+
+
+def _nrrd_data_names(path: Path) -> tuple[str, list[str]]:
+    """``(field value, file names)`` of the ``data file`` / ``datafile`` field of the NRRD
+    header ``path`` (``("", [])`` when the data is attached). Covers the three forms of the
+    NRRD spec: one name, ``LIST`` (the names follow, one a line) and ``<format> <min>
+    <max> <step> [<subdim>]`` (the format's folder counts). The literal value is always
+    among the names, since pynrrd opens it as a file name."""
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(_NRRD_HEADER_SCAN_BYTES)
+    except OSError as exc:
+        raise VolumeError(f"cannot read the NRRD file {path}: {exc}") from exc
+    lines = raw.decode("ascii", "ignore").splitlines()
+    for n, line in enumerate(lines[1:], start=1):
+        line = line.rstrip()
+        if line == "":
+            break  # end of the header
+        if line.startswith("#"):
+            continue
+        field, sep, value = line.partition(":")
+        if not sep or field.strip() not in ("data file", "datafile"):
+            continue
+        value = value.lstrip("=").strip()
+        names = [value]
+        parts = value.split()
+        if parts and parts[0] == "LIST":
+            names += [x.strip() for x in lines[n + 1 :] if x.strip()]
+        elif len(parts) >= 4 and "%" in parts[0]:
+            names.append(parts[0])
+        return value, names
+    return "", []
+
+
+def _check_nrrd_data_files(path: Path) -> None:
+    """Refuse a detached NRRD data file outside the header's folder (and its subfolders)
+    and the folders allowed by ``allow_data_dirs=`` / ``$VOXWARP_ALLOW_DATA_DIRS``: a
+    header must not make voxwarp read ``/etc/passwd`` or ``../../secret`` as voxels."""
+    value, names = _nrrd_data_names(path)
+    if not names:
+        return
+    home = path.parent.resolve()
+    allowed = [home, *_NRRD_DATA_DIRS.get()]
+    env = os.environ.get(NRRD_DATA_DIRS_ENV, "")
+    allowed += [Path(os.path.expanduser(d)).resolve() for d in env.split(os.pathsep) if d]
+    for name in names:
+        target = (home / os.path.expanduser(name)).resolve()  # absolute names stay as they are
+        if not any(target.is_relative_to(folder) for folder in allowed):
+            shown = name if str(target) == name else f"{name} ({target})"
+            raise VolumeError(
+                f"the NRRD header {path} names the data file {shown}, outside the header's"
+                " folder; voxwarp reads detached data only beside the header or in"
+                " its subfolders: move the data file there, or allow its folder with"
+                f" load_volume(..., allow_data_dirs=[{str(target.parent)!r}]) or"
+                f" {NRRD_DATA_DIRS_ENV}={target.parent}"
+            )
+    if value.split()[:1] == ["LIST"]:
+        raise VolumeError(
+            f"the NRRD header {path} spreads its data over several files (data file: LIST),"
+            " which voxwarp's NRRD reader (pynrrd) cannot read; join the slices into one"
+            " data file and name it in the header"
+        )
 
 
 #: NRRD ``space`` values with a patient orientation -> the patient space of the header.
