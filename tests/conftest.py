@@ -3,7 +3,10 @@
 * ``gl_ctx``: one EGL standalone OpenGL 4.3 context for the whole session. Tests that
   use it (directly or through ``offscreen``) are marked ``gl`` automatically, and the
   context's error flag must read ``GL_NO_ERROR`` before and after each of them (the
-  pattern of moderngl's own test suite). Without EGL they are skipped, with the reason.
+  pattern of moderngl's own test suite). Without EGL they are skipped, with the reason;
+  with ``VOXWARP_REQUIRE_GL=1`` in the environment (``make test`` and CI set it) they
+  fail instead, so a machine that cannot create the context cannot pass the suite with
+  most checks skipped.
 * ``offscreen``: factory of :class:`voxwarp.render.raycaster.OffscreenRenderer` objects sharing
   ``gl_ctx``; all are released at the end of the session.
 * ``golden``: compares an image with ``tests/golden/NAME.png``; ``pytest
@@ -13,6 +16,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -21,6 +25,8 @@ import numpy as np
 import pytest
 
 GOLDEN_DIR = Path(__file__).parent / "golden"
+#: environment variable that turns "no GL context" from a skip into a failure
+REQUIRE_GL = "VOXWARP_REQUIRE_GL"
 FAILURE_DIR = Path(__file__).parent / "_failures"
 
 
@@ -49,13 +55,20 @@ def _seed_numpy() -> None:
 # ---------------------------------------------------------------------- GL context
 @pytest.fixture(scope="session")
 def gl_ctx() -> Iterator[Any]:
-    """One headless OpenGL 4.3+ context (EGL) for the session; skips GL tests without one."""
+    """One headless OpenGL 4.3+ context (EGL) for the session; skips GL tests without one
+    (fails them when ``VOXWARP_REQUIRE_GL=1``)."""
     from voxwarp.errors import RenderError
     from voxwarp.render.raycaster import create_context
 
     try:
         ctx = create_context()
     except RenderError as exc:
+        if os.environ.get(REQUIRE_GL, "") not in ("", "0"):
+            pytest.fail(
+                f"{REQUIRE_GL} is set but no headless OpenGL 4.3 context could be created"
+                f" through EGL: {exc}",
+                pytrace=False,
+            )
         pytest.skip(f"no headless OpenGL 4.3 context through EGL: {exc}")
     yield ctx
     ctx.release()
