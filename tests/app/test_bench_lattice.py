@@ -299,11 +299,5 @@ def test_cli_writes_the_markdown(
 def test_cli_main_knows_bench_lattice() -> None:
     from voxwarp.cli.main import build_parser
 
-    parser = build_parser()
-    try:
-        args = parser.parse_args(["bench", "lattice", "--objects", "10"])
-    except SystemExit:
-        pytest.skip(
-            "voxwarp.cli.main does not register `bench lattice` yet (add_bench_lattice_parser)"
-        )
+    args = build_parser().parse_args(["bench", "lattice", "--objects", "10"])
     assert args.func is bl.cmd_bench_lattice

@@ -247,11 +247,7 @@ def test_cli_writes_the_markdown(
 def test_cli_main_knows_bench_wires() -> None:
     from voxwarp.cli.main import build_parser
 
-    parser = build_parser()
-    try:
-        args = parser.parse_args(["bench", "wires", "--scales", "2"])
-    except SystemExit:
-        pytest.skip("voxwarp.cli.main does not register `bench wires` yet (add_bench_wires_parser)")
+    args = build_parser().parse_args(["bench", "wires", "--scales", "2"])
     assert args.func is bw.cmd_bench_wires
 
 

@@ -292,20 +292,10 @@ def test_path_volume_in_a_sibling_folder(tmp_path: Path) -> None:
     np.testing.assert_array_equal(Scene.load(tmp_path / "scenes" / "s.json").volume.data, vol.data)
 
 
-def _sample_names() -> list[str]:
-    try:
-        from voxwarp.io.samples import sample_names
-
-        return sample_names()
-    except Exception:  # sample volumes not ready in this checkout
-        return []
-
-
 def test_sample_volume_is_referenced_by_name() -> None:
-    names = _sample_names()
-    if "stent" not in names:
-        pytest.skip("sample 'stent' not available")
-    from voxwarp.io.samples import load_sample
+    from voxwarp.io.samples import load_sample, sample_names
+
+    assert "stent" in sample_names()
 
     vol = load_sample("stent")
     d = json.loads(json.dumps(Scene(vol, transfer_function="grayscale").to_dict()))
@@ -319,9 +309,9 @@ def test_sample_volume_is_referenced_by_name() -> None:
 
 
 def test_sample_generated_at_a_small_shape_round_trips() -> None:
-    if "fish" not in _sample_names():
-        pytest.skip("sample 'fish' not available")
-    from voxwarp.io.samples import load_sample
+    from voxwarp.io.samples import load_sample, sample_names
+
+    assert "fish" in sample_names()
 
     vol = load_sample("fish", shape=(24, 12, 10))
     back = Scene.from_dict(Scene(vol).to_dict())
