@@ -681,6 +681,30 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_distinct_outputs(args: argparse.Namespace) -> None:
+    """``-o``, ``--save-scene`` and ``--save-camera`` must name different files (one
+    would overwrite the other); checked before anything is rendered."""
+    named = [
+        (flag, getattr(args, attr, None))
+        for flag, attr in (
+            ("-o", "output"),
+            ("--save-scene", "save_scene"),
+            ("--save-camera", "save_camera"),
+        )
+    ]
+    seen: dict[str, str] = {}
+    for flag, value in named:
+        if value is None:
+            continue
+        key = os.path.normcase(os.path.realpath(os.path.expanduser(os.fspath(value))))
+        if key in seen:
+            raise CliOptionError(
+                f"{seen[key]} and {flag} both name {value}; give each output its own file"
+                " (e.g. -o image.png --save-scene scene.json)"
+            )
+        seen[key] = flag
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     """``voxwarp render INPUT -o out.png``: render one image headless."""
     from voxwarp.io.images import write_image
@@ -688,6 +712,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     _check_deform_options(args)
     ropt.check_render_options(args)
+    _check_distinct_outputs(args)
     obj = load_input(
         args.input,
         spacing=args.spacing,
@@ -1433,8 +1458,12 @@ def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | No
         warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
         try:
             return int(args.func(args) or 0)
-        except VoxwarpError as exc:
+        except VoxwarpError as exc:  # OutputError too: a write that failed, cleaned up
             print(f"voxwarp: error: {exc}", file=sys.stderr)
+            return 2
+        except OSError as exc:  # a file operation outside the checked writers: one line
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"voxwarp: error: {where}{exc.strerror or exc}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             return 130

@@ -339,10 +339,7 @@ def save_camera(scene: Any, args: argparse.Namespace) -> None:
     from voxwarp.core.files import atomic_write_text
 
     text = json.dumps(scene.resolved_camera().to_dict(), indent=2)
-    try:
-        atomic_write_text(Path(path), text + "\n")
-    except OSError as exc:
-        raise InputError(f"--save-camera {path}: cannot write it ({exc})") from exc
+    atomic_write_text(Path(path), text + "\n")  # OutputError: one line, path and cause
     print(f"camera: {path}")
 
 

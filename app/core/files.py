@@ -85,12 +85,31 @@ def output_error(path: str | os.PathLike, cause: BaseException | str) -> OutputE
     if code is None:
         low = detail.lower()
         code = next((c for text, c in _TEXT_ERRNO if text in low), None)
+    if code is None:  # a short write with no errno (numpy's tofile, OpenImageIO)
+        code = _probe_errno(Path(path).parent)
+        if code is not None:
+            detail = f"{os.strerror(code)}: {detail}"
     if code in _CAUSES:
         what, fix = _CAUSES[code]
         msg = f"cannot write {path}: {what} ({detail}); {fix}"
     else:
         msg = f"cannot write {path}: {detail}"
     return OutputError(msg, path=str(path), errno=code)
+
+
+def _probe_errno(folder: Path) -> int | None:
+    """Why writing in ``folder`` fails, for errors that carry no errno: the errno of
+    creating a probe file there, else ``ENOSPC`` when no space is left, else None."""
+    probe = folder / f".{os.getpid()}-{secrets.token_hex(4)}{TEMP_MARK}.probe"
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except OSError as exc:
+        return exc.errno if exc.errno in _CAUSES else None
+    _discard(probe)
+    try:
+        return _errno.ENOSPC if os.statvfs(folder).f_bavail == 0 else None
+    except OSError:
+        return None
 
 
 def temp_name(final: Path, suffix: str = "") -> Path:

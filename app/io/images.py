@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import errno
 import os
 from pathlib import Path
 
 import numpy as np
 
-from voxwarp.core.files import atomic_output, output_error, temp_name
+from voxwarp.core.files import atomic_output, output_error
 from voxwarp.errors import OutputError, VoxwarpError
 
 #: Extensions that keep float data (an ``f4`` render is written as float).
@@ -45,6 +44,10 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
         spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], fmt)
         if img.shape[2] == 4:
             spec.alpha_channel = 3
+        if ext in (".tif", ".tiff"):
+            # no Exif block: OpenImageIO 3.2 reports a failed (empty) Exif directory at
+            # close, which would read as a failed write
+            spec.attribute("tiff:write_exif", 0)
         ok = bool(out.open(str(tmp), spec) and out.write_image(img))
         # some formats (PNG) report a short write only through geterror, not the result
         err = out.geterror()
@@ -56,25 +59,12 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
 
 
 def _image_error(path: Path, text: str, tmp: Path) -> OutputError:
-    """One line for a failed image write. OpenImageIO gives no errno: a probe file in
-    the folder tells a read-only or forbidden folder, no free space a full disk."""
+    """One line for a failed image write (the first line of OpenImageIO's text, which
+    names the temporary file: it is replaced by ``path``)."""
     text = text.replace(str(tmp), str(path)).strip()
     first = text.splitlines()[0] if text else "OpenImageIO failed"
     if len(first) > 200:
         first = first[:200] + "..."
-    probe = temp_name(path, ".probe")
-    try:
-        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
-        os.unlink(probe)
-    except OSError as exc:
-        if exc.errno is not None and exc.errno != errno.EEXIST:
-            return output_error(path, OSError(exc.errno, f"{exc.strerror}: {first}"))
-    try:
-        full = os.statvfs(tmp.parent).f_bavail == 0
-    except OSError:
-        full = False
-    if full:
-        return output_error(path, OSError(errno.ENOSPC, f"No space left on device: {first}"))
     return output_error(path, first)
 
 

@@ -60,8 +60,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from voxwarp.core.files import atomic_write as _atomic
-from voxwarp.core.files import temp_name as _temp_name
+from voxwarp.core.files import atomic_open as _atomic_open
+from voxwarp.core.files import atomic_output as _atomic_output
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
 from voxwarp.core.volume import short_repr as _short
@@ -1114,8 +1114,10 @@ def save_volume(volume: Volume, path: str | os.PathLike[str], *, format: str | N
     Raises
     ------
     VolumeError
-        For an unknown format, an extension that contradicts ``format``, or a
-        file that cannot be written.
+        For an unknown format or an extension that contradicts ``format``.
+    OutputError
+        For a file that cannot be written (disk full, read-only, permission): one
+        line naming the path and the cause; no partial or temporary file is left.
 
     Notes
     -----
@@ -1152,21 +1154,19 @@ def save_volume(volume: Volume, path: str | os.PathLike[str], *, format: str | N
                 f" {SAVE_FORMATS[fmt]} file name or drop the extension."
             )
     target = Path(os.path.abspath(target))
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        if fmt == "raw":
-            _save_raw(volume, target)
-        else:
-            writer = {
-                "npz": _write_npz,
-                "nrrd": _write_nrrd,
-                "nii": _write_nifti,
-                "nii.gz": _write_nifti,
-                "tif": _write_tiff,
-            }[fmt]
-            _atomic(target, SAVE_FORMATS[fmt], lambda tmp: writer(volume, tmp))
-    except OSError as exc:
-        raise VolumeError(f"cannot write {target}: {exc.strerror or exc}.") from exc
+    # a failed write raises OutputError (one line: path and cause) and leaves no file
+    if fmt == "raw":
+        _save_raw(volume, target)
+    else:
+        writer = {
+            "npz": _write_npz,
+            "nrrd": _write_nrrd,
+            "nii": _write_nifti,
+            "nii.gz": _write_nifti,
+            "tif": _write_tiff,
+        }[fmt]
+        with _atomic_output(target, SAVE_FORMATS[fmt]) as tmp:
+            writer(volume, tmp)
     return target
 
 
@@ -1223,21 +1223,16 @@ def _save_raw(volume: Volume, final: Path) -> None:
         meta.update(affine=volume.affine.tolist(), space=volume.space or "RAS")
     else:
         meta.update(spacing=list(volume.spacing), origin=list(volume.origin))
-    tmp_data = _temp_name(final, ".raw")
-    tmp_side = _temp_name(sidecar, ".json")
-    try:
-        data = volume.data.astype(volume.dtype.newbyteorder("<"), copy=False)
-        with open(tmp_data, "xb") as f:
-            np.ascontiguousarray(data.T).tofile(f)  # C order of (z, y, x): x fastest
-        with open(tmp_side, "x", encoding="utf-8") as f:
-            json.dump(meta, f, indent=2)
-            f.write("\n")
-        os.replace(tmp_data, final)
-        os.replace(tmp_side, sidecar)
-    except BaseException:
-        tmp_data.unlink(missing_ok=True)
-        tmp_side.unlink(missing_ok=True)
-        raise
+    data = volume.data.astype(volume.dtype.newbyteorder("<"), copy=False)
+    # both files are complete before either is renamed (the data first, then its sidecar)
+    with _atomic_open(sidecar, "w", suffix=".json") as side:
+        json.dump(meta, side, indent=2)
+        side.write("\n")
+        side.flush()
+        os.fsync(side.fileno())
+        with _atomic_open(final, "wb", suffix=".raw") as f:
+            # C order of (z, y, x): x fastest; a file write (not tofile) keeps the errno
+            f.write(np.ascontiguousarray(data.T).reshape(-1).view(np.uint8).data)
 
 
 def _write_nrrd(volume: Volume, tmp: Path) -> None:

@@ -477,7 +477,6 @@ def _save_figure(fig: Any, path: Path) -> Path:
     img = Image.fromarray(rgb).quantize(
         256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, ".png", lambda tmp: img.save(tmp, format="PNG", optimize=True))
     return path
 

@@ -19,7 +19,7 @@ from pydicom.dataset import FileDataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 
 from voxwarp.core.volume import Volume
-from voxwarp.errors import VolumeError
+from voxwarp.errors import OutputError, VolumeError
 from voxwarp.io.volumes import load_volume, save_volume, volume_info, volume_summary
 
 DTYPES = ["uint8", "uint16", "int16", "float32"]
@@ -126,7 +126,7 @@ def test_failed_save_keeps_previous_file(tmp_path: Path, monkeypatch: pytest.Mon
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(nrrd, "write", broken_write)
-    with pytest.raises(VolumeError, match="cannot write"):
+    with pytest.raises(OutputError, match=r"cannot write .*: disk full"):
         save_volume(Volume(np.zeros((2, 2, 2), np.uint8)), target)
     monkeypatch.undo()
     assert [p.name for p in tmp_path.iterdir()] == ["v.nrrd"]  # temp file removed
