@@ -53,6 +53,8 @@ def load_input(
     from voxwarp.scene import Scene
 
     path = Path(spec)
+    if path.suffix.lower() == ".json" and path.is_file():
+        _check_json_input(path)
     named = "a bundled sample" if spec.startswith("sample:") else "a scene JSON"
     if spec.startswith("sample:") or is_scene_json(path):
         if axis_order != "xyz":
@@ -76,6 +78,32 @@ def load_input(
         **extra,
     )
     return vol if keep_padding else mask_padding(vol)[0]
+
+
+#: Keys that make a JSON object without ``"format"`` a scene rather than a raw sidecar.
+_SCENE_HINT_KEYS = ("volume", "mode", "warps", "transfer_function", "camera")
+
+
+def _check_json_input(path: Path) -> None:
+    """A JSON INPUT that is not valid JSON, or a scene without its ``"format"`` key, is an
+    :class:`InputError` saying so (instead of a hunt for a raw file beside a sidecar)."""
+    from voxwarp.scene import SCENE_FORMAT, json_error_text
+
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {path}: {exc}") from exc
+    except ValueError as exc:
+        raise InputError(f"{path} is not valid JSON: {json_error_text(exc)}") from exc
+    if not isinstance(d, dict) or "format" in d or "dims" in d:
+        return  # a scene, another voxwarp file or a raw sidecar: their readers check it
+    hints = [k for k in _SCENE_HINT_KEYS if k in d]
+    if hints:
+        raise InputError(
+            f"{path} looks like a scene JSON (it has {', '.join(hints)}) but lacks"
+            f' "format": "{SCENE_FORMAT}"; add that key (Scene.save writes it), or for a'
+            ' raw volume give the sidecar its "dims"'
+        )
 
 
 def _scene_without_padding(scene: Any) -> Any:

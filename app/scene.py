@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import numbers
 import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -34,6 +35,7 @@ from voxwarp.core.modality import (
 from voxwarp.core.modes import MODES as MODES
 from voxwarp.core.modes import Mode as Mode
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
+from voxwarp.core.scene_paths import scene_file
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
@@ -512,6 +514,7 @@ class Scene:
             )
         if "volume" not in d:
             raise SceneError("the scene has no 'volume' entry")
+        check_scene_json(d)
         volume = _volume_from_dict(d["volume"], base_dir)
         try:
             warps = [warp_from_dict(w) for w in (d.get("warps") or [])]
@@ -625,10 +628,111 @@ def read_scene_dict(path: str | os.PathLike) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"cannot read scene file {p}: {exc}") from exc
     except ValueError as exc:
-        raise SceneError(f"{p} is not valid JSON: {exc}") from exc
+        raise SceneError(f"{p} is not valid JSON: {json_error_text(exc)}") from exc
     if not isinstance(d, dict):
         raise SceneError(f"{p}: a scene must be a JSON object")
     return d
+
+
+def json_error_text(exc: ValueError) -> str:
+    """What is wrong with a JSON text and where (line and column), in one line."""
+    if isinstance(exc, json.JSONDecodeError):
+        return f"{exc.msg} at line {exc.lineno}, column {exc.colno}; fix the JSON syntax there"
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+#: Entries of scene JSON beside the scene's own: notes and the editor's and animation's.
+SCENE_EXTRA_KEYS = ("description", "editor", "animation")
+_NUMBER = "a number (e.g. 1.5)"
+#: Scene JSON entry -> (JSON types it may hold, what the error says it must be).
+_SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
+    "format": (("str",), f"the string {SCENE_FORMAT!r}"),
+    "version": (("int",), "an integer"),
+    "volume": (("object",), "an object with 'path', 'sample' or 'embedded'"),
+    "mode": (("str",), f"one of the strings {', '.join(MODES)}"),
+    "transfer_function": (("str", "list", "object", "null"), "a preset name, a list or an object"),
+    "view": (("str", "pair"), "a view name or [azimuth, elevation] numbers"),
+    "projection": (("str",), f"one of the strings {', '.join(PROJECTIONS)}"),
+    "step": (("number",), _NUMBER),
+    "warps": (("list", "null"), "a list of warp objects"),
+    "window": (("pair", "null"), "[level, width] numbers or null"),
+    "clip_box": (("box", "null"), "[[x0, y0, z0], [x1, y1, z1]] numbers or null"),
+    "jitter": (("bool",), "true or false"),
+    "seed": (("int",), "an integer"),
+    "shading": (("bool", "null"), "true, false or null"),
+    "iso_value": (("number", "null"), f"{_NUMBER} or null"),
+    "flm_threshold": (("number", "null"), f"{_NUMBER} or null"),
+    "background": (("rgba",), "[r, g, b] or [r, g, b, a] numbers in [0, 1]"),
+    "camera": (("object", "null"), "a camera object or null"),
+    "zoom": (("number",), _NUMBER),
+    "fov": (("number",), _NUMBER),
+    "frame": (("str",), f"one of the strings {', '.join(FRAMES)}"),
+    "meshes": (("list", "null"), "a list of mesh instance objects"),
+}
+#: Every key a scene JSON object may hold.
+SCENE_KEYS: tuple[str, ...] = (*_SCENE_TYPES, *SCENE_EXTRA_KEYS)
+
+
+def _is_json_number(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_)
+
+
+def _is_list(v: Any) -> bool:
+    return isinstance(v, list | tuple | np.ndarray)
+
+
+def _numbers(v: Any, n: int) -> bool:
+    return _is_list(v) and len(v) == n and all(_is_json_number(x) for x in v)
+
+
+_JSON_TYPE_CHECKS: dict[str, Callable[[Any], bool]] = {
+    "str": lambda v: isinstance(v, str),
+    "int": lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool | np.bool_),
+    "number": _is_json_number,
+    "bool": lambda v: isinstance(v, bool | np.bool_),
+    "null": lambda v: v is None,
+    "list": _is_list,
+    "object": lambda v: isinstance(v, Mapping),
+    "pair": lambda v: _numbers(v, 2),
+    "rgba": lambda v: _numbers(v, 3) or _numbers(v, 4),
+    "box": lambda v: _is_list(v) and len(v) == 2 and all(_numbers(c, 3) for c in v),
+}
+
+
+def check_scene_json(d: Mapping[str, Any]) -> None:
+    """Check a scene JSON object's keys and the JSON types of its values, strictly:
+    ``"step": "1"`` (a string) or ``"jitter": 1`` is an error, as is a key scene JSON does
+    not have (a typo would otherwise be ignored); :class:`SceneError` naming the key, what
+    it must be and the keys allowed. Values are checked further by :class:`Scene`."""
+    unknown = sorted(str(k) for k in d if k not in SCENE_KEYS)
+    if unknown:
+        raise SceneError(
+            f"unknown scene key{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))};"
+            f" a scene JSON holds only {', '.join(SCENE_KEYS)}"
+        )
+    for key, (kinds, expected) in _SCENE_TYPES.items():
+        if key in d and not any(_JSON_TYPE_CHECKS[k](d[key]) for k in kinds):
+            got = _short_json(d[key])
+            raise SceneError(f"scene '{key}' must be {expected}; got {_json_kind(d[key])} {got}")
+
+
+def _json_kind(value: Any) -> str:
+    """The JSON type of ``value`` in words ("a string", "a number", ...)."""
+    if isinstance(value, bool) or value is None:
+        return "the literal"
+    if isinstance(value, str):
+        return "the string"
+    if _is_json_number(value):
+        return "the number"
+    return "the list" if _is_list(value) else "the object"
+
+
+def _short_json(value: Any) -> str:
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def write_scene_json(
@@ -742,10 +846,10 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
         if "path" in d:
             from voxwarp.io.volumes import load_volume
 
-            p = Path(str(d["path"]))
-            if not p.is_absolute() and base_dir is not None:
-                p = Path(base_dir) / p
+            p = scene_file(d["path"], base_dir, "volume 'path'", SceneError)
             return _with_stated_geometry(load_volume(p), spacing, origin)
+    except SceneError:
+        raise  # names the scene volume already
     except (VolumeError, TypeError, ValueError, OverflowError) as exc:
         raise SceneError(f"scene volume: {exc}") from exc
     raise SceneError("scene 'volume' needs one of 'path', 'sample' or 'embedded'")

@@ -83,6 +83,7 @@ section 'voxwarp.deform.lattice_warp: inverse accuracy and render cost'.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -864,13 +865,15 @@ class LatticeWarp(Warp):
             raise
         except (TypeError, ValueError, KeyError) as exc:
             raise WarpError(f"a lattice warp's 'grid' is invalid: {exc}") from exc
-        return cls(
+        warp = cls(
             grid,
             d["box"],
             inverse=d.get("inverse", "newton"),
             iterations=d.get("iterations"),
             fold_linear=bool(d.get("fold_linear", True)),
         )
+        warn_if_folded(grid)
+        return warp
 
     def __repr__(self) -> str:
         return (
@@ -881,6 +884,29 @@ class LatticeWarp(Warp):
 
 
 # ---------------------------------------------------------------------- error study
+class FoldedLatticeWarning(UserWarning):
+    """A lattice read from a file has cells that fold (turn inside out)."""
+
+
+def warn_if_folded(grid: TrilinearGrid, what: str = "the lattice") -> None:
+    """One warning naming the first folded cell of ``grid`` (``det J`` vanishing or of the
+    wrong sign on a 3x3x3 sample of a cell, :meth:`TrilinearGrid.folded_cells`): such a
+    lattice still renders, but where it folds two places of the volume land on one point
+    and the inverse picks one of them."""
+    cells = grid.folded_cells()
+    if len(cells) == 0:
+        return
+    i, j, k = (int(v) for v in cells[0])
+    more = f" and {len(cells) - 1} more of its {grid.n_cells} cells" if len(cells) > 1 else ""
+    warnings.warn(
+        f"{what} folds: its cell ({i}, {j}, {k}){more} turns inside out (Jacobian"
+        " determinant <= 0), so the volume renders with overlapping parts there; move the"
+        " cell's nodes back so that it keeps its orientation",
+        FoldedLatticeWarning,
+        stacklevel=3,
+    )
+
+
 def bent_grid(
     cells: int | Sequence[int] = 4,
     lo: Sequence[float] = (0.0, 0.0, 0.0),

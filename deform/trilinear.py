@@ -1109,6 +1109,22 @@ class TrilinearGrid:
         thr = SINGULAR_RTOL * self._extent() ** 3 / max(self.n_cells, 1)
         return bool((det * orient <= thr).any())
 
+    def folded_cells(self) -> np.ndarray:
+        """The cells where :meth:`folds` finds ``det J`` vanishing or of the wrong sign.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(K, 3)`` cell indices ``(i, j, k)`` in C order (empty when nothing folds).
+        """
+        s = np.linspace(0.0, 1.0, 3)
+        g = np.stack(np.meshgrid(s, s, s, indexing="ij"), -1).reshape(-1, 3)
+        det = self._cell_dets(g)
+        orient, _ = self._orientation_and_flat()
+        thr = SINGULAR_RTOL * self._extent() ** 3 / max(self.n_cells, 1)
+        bad = np.flatnonzero((det * orient <= thr).any(axis=1))
+        return np.stack(np.unravel_index(bad, tuple(self.shape)), axis=1)
+
     # --------------------------------------------------------------- inverse
     def _buckets(self) -> dict[str, Any]:
         """Uniform bucket grid over the world bounds listing the cells whose padded node

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from PySide6.QtCore import QTimer
 from PySide6.QtGui import QSurfaceFormat
@@ -63,6 +64,37 @@ def application() -> QApplication:
     return app  # type: ignore[return-value]
 
 
+def open_window(
+    input_spec: str,
+    size: tuple[int, int] = (1280, 820),
+    series: int | str | None = None,
+    fallback: bool = True,
+) -> Any:
+    """Show the main window on ``input_spec``. With ``fallback``, an INPUT that cannot be
+    opened (a :class:`~voxwarp.errors.VoxwarpError`) still opens the window, on the
+    bundled sample, and shows the one-line error in a dialog (and on stderr), as File >
+    Open does; without, the error is raised."""
+    from voxwarp.io.samples import DEFAULT_SAMPLE
+    from voxwarp.ui.main_window import MainWindow, load_session_input
+
+    error: str | None = None
+    try:
+        session = load_session_input(input_spec, series=series)
+    except VoxwarpError as exc:
+        if not fallback:
+            raise
+        error = str(exc)
+        print(f"voxwarp: error: {error}", file=sys.stderr)
+        input_spec = f"sample:{DEFAULT_SAMPLE}"
+        session = load_session_input(input_spec)
+    window = MainWindow(session, input_spec)
+    window.resize(*size)
+    window.show()
+    if error is not None:
+        QTimer.singleShot(0, lambda: window.show_error(error))  # over the shown window
+    return window
+
+
 def run_gui(
     input_spec: str,
     screenshot: str | None = None,
@@ -72,18 +104,15 @@ def run_gui(
 ) -> int:
     """Open the window on ``input_spec``; with ``tour``, step through a teaching demo's
     tour (its first scene replaces ``input_spec``); with ``screenshot``, save a PNG of
-    the whole window once the first frame is drawn and quit. Returns the exit code."""
-    from voxwarp.ui.main_window import MainWindow, load_session_input
-
+    the whole window once the first frame is drawn and quit. A bad INPUT opens the window
+    on the sample with the error in a dialog (:func:`open_window`), or with
+    ``screenshot`` returns 2 without a window. Returns the exit code."""
     app = application()
-    try:
-        session = load_session_input(input_spec, series=series)
+    try:  # with --screenshot (a script) a bad INPUT ends it: no window to wait on
+        window = open_window(input_spec, size=size, series=series, fallback=not screenshot)
     except VoxwarpError as exc:
         print(f"voxwarp: error: {exc}", file=sys.stderr)
         return 2
-    window = MainWindow(session, input_spec)
-    window.resize(*size)
-    window.show()
     if tour is not None:
         window.start_tour(tour)
     status = {"code": 0}

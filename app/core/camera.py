@@ -20,7 +20,8 @@ right, +y anterior and +z superior, so ``(90, 0)`` is the anterior view.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import numbers
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -324,8 +325,47 @@ class Camera:
 
     @classmethod
     def from_dict(cls, d: dict) -> Camera:
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict`: a :class:`SceneError` for a key a camera does not
+        have (a typo would otherwise be ignored) and for a value of the wrong JSON type
+        (``"fov": "30"``); missing keys take their defaults."""
+        fields = tuple(cls.__dataclass_fields__)
+        if not isinstance(d, Mapping):
+            raise SceneError(f"a camera must be an object with keys {', '.join(fields)}")
+        unknown = sorted(str(k) for k in d if k not in fields)
+        if unknown:
+            raise SceneError(
+                f"unknown camera key{'s' if len(unknown) > 1 else ''}"
+                f" {', '.join(map(repr, unknown))}; a camera holds only {', '.join(fields)}"
+            )
+        for key, value in d.items():
+            if key == "projection":
+                ok = isinstance(value, str)
+            elif key in ("center", "rotation"):
+                shape = (3,) if key == "center" else (3, 3)
+                ok = _numbers_of_shape(value, shape)
+            else:
+                ok = _is_number(value)
+            if not ok:
+                expected = {
+                    "projection": f"one of the strings {', '.join(PROJECTIONS)}",
+                    "center": "[x, y, z] numbers",
+                    "rotation": "a 3x3 list of numbers",
+                }.get(key, "a number")
+                raise SceneError(f"camera '{key}' must be {expected}; got {value!r:.60}")
         try:
-            return cls(**{k: d[k] for k in d if k in cls.__dataclass_fields__})
+            return cls(**dict(d))
         except (TypeError, ValueError) as exc:
             raise SceneError(f"invalid camera entry: {exc}") from exc
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def _numbers_of_shape(value: object, shape: tuple[int, ...]) -> bool:
+    """Whether ``value`` is a (nested) list/array of numbers of ``shape``."""
+    if not shape:
+        return _is_number(value)
+    if not isinstance(value, list | tuple | np.ndarray) or len(value) != shape[0]:
+        return False
+    return all(_numbers_of_shape(v, shape[1:]) for v in value)

@@ -273,10 +273,9 @@ class Mesh:
             raise MeshError("a mesh entry must be an object with 'path', 'generator' or 'embedded'")
         name = str(d.get("name", "mesh"))
         if "path" in d:
-            p = Path(str(d["path"]))
-            if not p.is_absolute() and base_dir is not None:
-                p = Path(base_dir) / p
-            mesh = load_mesh(p)
+            from voxwarp.core.scene_paths import scene_file
+
+            mesh = load_mesh(scene_file(d["path"], base_dir, f"mesh {name!r} 'path'", MeshError))
             mesh.name = name
             return mesh
         if "generator" in d:

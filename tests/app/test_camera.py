@@ -325,9 +325,10 @@ def test_to_dict_from_dict_round_trip(projection: str) -> None:
     np.testing.assert_array_equal(back.view_projection(1.25), cam.view_projection(1.25))
 
 
-def test_from_dict_ignores_unknown_keys_and_rejects_bad_values() -> None:
-    cam = Camera.from_dict({"distance": 5.0, "comment": "hello"})
-    assert cam.distance == 5.0
+def test_from_dict_rejects_unknown_keys_and_bad_values() -> None:
+    assert Camera.from_dict({"distance": 5.0}).distance == 5.0
+    with pytest.raises(SceneError, match=r"unknown camera key 'comment'.*center, rotation"):
+        Camera.from_dict({"distance": 5.0, "comment": "hello"})
     for bad in ({"center": "here"}, {"rotation": [1, 2]}, {"fov": "wide"}, {"distance": None}):
         with pytest.raises(SceneError, match=r"camera|fov|positive"):
             Camera.from_dict(bad)

@@ -49,8 +49,10 @@ def test_absolute_system_file_is_refused(tmp_path: Path) -> None:
         load_volume(h)
     msg = str(err.value)
     assert "\n" not in msg
-    assert "/etc/passwd" in msg and str(h) in msg  # names the data file and the header
-    assert "allow_data_dirs" in msg and "beside the header" in msg  # and the fix
+    assert "/etc/passwd" in msg
+    assert str(h) in msg
+    assert "allow_data_dirs" in msg
+    assert "beside the header" in msg
 
 
 @pytest.mark.parametrize("name", ["../outside/v.raw", "sub/../../outside/v.raw"])
@@ -102,3 +104,76 @@ def test_attached_nrrd_still_loads(tmp_path: Path) -> None:
 
     path = save_volume(Volume(DATA), tmp_path / "v.nrrd")
     np.testing.assert_array_equal(load_volume(path).data, DATA)
+
+
+# ---------------------------------------------------------------------------- scene paths
+def _write_scene(path: Path, volume: dict, **extra: object) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"format": "voxwarp-scene", "volume": volume, **extra}))
+    return path
+
+
+def _load_recording(path: Path) -> tuple[Scene, list[str]]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = Scene.load(path)
+    return scene, [str(w.message) for w in caught if "outside the scene's folder" in str(w.message)]
+
+
+def test_scene_volume_beside_the_scene_loads_silently(tmp_path: Path) -> None:
+    from voxwarp.core.volume import Volume
+
+    save_volume(Volume(DATA), tmp_path / "scn/sub/v.nrrd")
+    scene, outside = _load_recording(_write_scene(tmp_path / "scn/s.json", {"path": "sub/v.nrrd"}))
+    np.testing.assert_array_equal(scene.volume.data, DATA)
+    assert outside == []
+
+
+@pytest.mark.parametrize("absolute", [False, True])
+def test_scene_volume_outside_the_folder_loads_with_one_warning(
+    tmp_path: Path, absolute: bool
+) -> None:
+    from voxwarp.core.volume import Volume
+
+    target = save_volume(Volume(DATA), tmp_path / "shared/v.nrrd")
+    named = str(target) if absolute else "../shared/v.nrrd"
+    scene, outside = _load_recording(_write_scene(tmp_path / "scn/s.json", {"path": named}))
+    np.testing.assert_array_equal(scene.volume.data, DATA)
+    assert len(outside) == 1
+    assert named in outside[0]
+    assert str(target) in outside[0]
+    assert "\n" not in outside[0]
+
+
+def test_scene_missing_volume_is_one_line_naming_the_resolved_path(tmp_path: Path) -> None:
+    path = _write_scene(tmp_path / "scn/s.json", {"path": "data/none.nrrd"})
+    with pytest.raises(SceneError) as err:
+        Scene.load(path)
+    msg = str(err.value)
+    assert "\n" not in msg
+    assert str(tmp_path / "scn/data/none.nrrd") in msg
+
+
+def test_scene_cannot_reach_system_files_through_an_nrrd_header(tmp_path: Path) -> None:
+    """The attack of finding 6: a scene names a header beside it that names /etc/passwd."""
+    _detached(tmp_path / "scn/evil.nhdr", "/etc/passwd")
+    with pytest.raises(SceneError, match="/etc/passwd") as err:
+        Scene.load(_write_scene(tmp_path / "scn/s.json", {"path": "evil.nhdr"}))
+    assert "\n" not in str(err.value)
+
+
+def test_scene_mesh_paths_resolve_against_the_scene_and_warn_outside(tmp_path: Path) -> None:
+    from voxwarp.core.mesh import box_mesh
+
+    box_mesh().save(tmp_path / "scn/box.obj")
+    box_mesh().save(tmp_path / "elsewhere/box.obj")
+    vol = {"sample": "tubes", "shape": [8, 8, 8]}
+    for named, warned in (("box.obj", 0), ("../elsewhere/box.obj", 1)):
+        meshes = [{"mesh": {"path": named}}]
+        path = _write_scene(tmp_path / "scn/s.json", vol, meshes=meshes)
+        scene, outside = _load_recording(path)
+        assert scene.meshes[0].mesh.n_faces == 12
+        assert len(outside) == warned
+    path = _write_scene(tmp_path / "scn/s.json", vol, meshes=[{"mesh": {"path": "gone.obj"}}])
+    with pytest.raises(SceneError, match=str(tmp_path / "scn/gone.obj")):
+        Scene.load(path)

@@ -1,0 +1,62 @@
+"""Files named inside a scene JSON (its volume, its meshes): where they are, and whether
+they stay in the scene's folder.
+
+A relative path in scene JSON is relative to the folder of the scene file. A path that
+leaves that folder (an absolute path elsewhere, or ``..``) still loads, since a scene may
+well refer to a shared scan, but it is reported in one warning line naming it, so opening
+a scene never makes voxwarp read outside the place the user pointed it at unnoticed. A
+missing file is one error line naming the path it resolved to.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+from voxwarp.errors import VoxwarpError
+
+
+class OutsideSceneFolderWarning(UserWarning):
+    """A scene JSON names a file outside the scene's own folder."""
+
+
+def scene_file(
+    value: Any,
+    base_dir: str | os.PathLike[str] | None,
+    what: str,
+    error: type[VoxwarpError],
+    *,
+    must_exist: bool = True,
+) -> Path:
+    """The file a scene entry names (``what``: e.g. ``"volume 'path'"``), resolved against
+    the scene's folder ``base_dir`` (made absolute, symlinks kept); warns
+    (:class:`OutsideSceneFolderWarning`) when it lies outside that folder. Raises
+    ``error`` for a value that is not a path string or, with ``must_exist``, for a file
+    or folder that is not there."""
+    if not isinstance(value, str | os.PathLike) or not os.fspath(value):
+        raise error(f"scene {what} must be a file path (a string); got {value!r:.60}")
+    p = Path(os.path.expanduser(os.fspath(value)))
+    if not p.is_absolute() and base_dir is not None:
+        p = Path(base_dir) / p
+    try:
+        resolved = p.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise error(f"scene {what} {os.fspath(value)}: cannot resolve it ({exc})") from exc
+    if must_exist and not resolved.exists():
+        where = "" if base_dir is None else " (relative paths start at the scene's folder)"
+        raise error(
+            f"scene {what} {os.fspath(value)}: no such file {resolved}{where}; fix the path"
+            " in the scene JSON or put the file there"
+        )
+    if base_dir is not None:
+        folder = Path(base_dir).resolve()
+        if not resolved.is_relative_to(folder):
+            warnings.warn(
+                f"scene {what} {os.fspath(value)} is outside the scene's folder {folder}:"
+                f" reading {resolved}",
+                OutsideSceneFolderWarning,
+                stacklevel=3,
+            )
+    return Path(os.path.abspath(p))
