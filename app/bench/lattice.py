@@ -1018,6 +1018,7 @@ __all__ = [
     "LatticeBenchReport",
     "ThroughputRow",
     "add_bench_lattice_parser",
+    "bench_cpu_grid",
     "bench_lattice",
     "build_scene_graph",
     "cmd_bench_lattice",
@@ -1132,4 +1133,45 @@ def bench_mesh_throughput(
         "mvertices_per_s": {k: mesh.n_vertices / v / 1e3 for k, v in vertex_ms.items()},
         "ratio": {k: v / ms["linear"] for k, v in ms.items() if k != "linear"},
         "vertex_stage_ratio": vertex_ms["lattice_normal"] / vertex_ms["linear"],
+    }
+
+
+# ---------------------------------------------------------------------- CPU maps
+def bench_cpu_grid(
+    points: int = 100_000, cells: int = 8, repeats: int = 3, seed: int = 23
+) -> dict[str, float]:
+    """Seconds (best of ``repeats``) of the CPU trilinear maps on ``points`` parameters.
+
+    ``forward``: a ``cells``³-cell :class:`~voxwarp.deform.trilinear.TrilinearGrid`
+    (a box of 10 x 20 x 30 mm, nodes jittered by up to 0.1 cell, no folds) and a
+    one-cell :class:`~voxwarp.deform.trilinear.TrilinearTransform` evaluated at
+    ``points`` uniform parameters together; ``inverse``: the grid's inverse of the
+    mapped points (its bucket grid built before timing). Run it with
+    ``python -c "from voxwarp.bench.lattice import bench_cpu_grid; print(bench_cpu_grid())"``.
+    """
+    from voxwarp.deform.trilinear import UNIT_CORNERS, TrilinearTransform
+
+    rng = np.random.default_rng(seed)
+    g = TrilinearGrid.identity(int(cells))
+    size = np.array([10.0, 20.0, 30.0])
+    grid = TrilinearGrid(g.nodes * size + rng.uniform(-0.1, 0.1, g.nodes.shape) * size / cells)
+    box = np.array([2.0, 3.0, 4.0])
+    one = TrilinearTransform(UNIT_CORNERS * box + rng.uniform(-0.12, 0.12, (8, 3)) * box)
+    u = rng.uniform(0.0, 1.0, (int(points), 3))
+    x = grid(u)
+    grid.inverse(x[:10])  # build the bucket grid once
+    forward = inverse = math.inf
+    for _ in range(max(1, int(repeats))):
+        t = time.perf_counter()
+        grid(u)
+        one(u)
+        forward = min(forward, time.perf_counter() - t)
+        t = time.perf_counter()
+        grid.inverse(x)
+        inverse = min(inverse, time.perf_counter() - t)
+    return {
+        "points": float(points),
+        "cells": float(cells),
+        "forward_s": forward,
+        "inverse_s": inverse,
     }

@@ -1437,9 +1437,52 @@ __all__ = [
     "Target",
     "WireBenchReport",
     "add_bench_wires_parser",
+    "bench_curve_speed",
     "bench_wires",
     "camera_rays",
     "cmd_bench_wires",
     "padded_fish",
     "ray_sample_stats",
 ]
+
+
+# ---------------------------------------------------------------------- curves
+def bench_curve_speed(
+    parameters: int = 1_000_000,
+    points: int = 100_000,
+    control_points: int = 9,
+    repeats: int = 3,
+    seed: int = 24,
+) -> dict[str, float]:
+    """Seconds (best of ``repeats``) of the vectorised :class:`~voxwarp.deform.curves.Curve`
+    methods a wire uses, on a random Catmull-Rom curve of ``control_points`` points
+    (normal, sd 30 mm).
+
+    ``evaluate_derivative``: ``evaluate`` and ``derivative`` of ``parameters`` uniform
+    parameters together; ``closest_point``: ``points`` normal (sd 30 mm) points at the
+    default precision (the curve's k-d tree built before timing). Run it with
+    ``python -c "from voxwarp.bench.wires import bench_curve_speed; print(bench_curve_speed())"``.
+    """
+    from voxwarp.deform.curves import Curve
+
+    rng = np.random.default_rng(seed)
+    curve = Curve(rng.normal(scale=30.0, size=(int(control_points), 3)), kind="catmull-rom")
+    t = rng.uniform(0.0, 1.0, int(parameters))
+    pts = rng.normal(scale=30.0, size=(int(points), 3))
+    curve.evaluate(t[:10])
+    curve.closest_point(pts[:10])
+    along = closest = float("inf")
+    for _ in range(max(1, int(repeats))):
+        start = time.perf_counter()
+        curve.evaluate(t)
+        curve.derivative(t)
+        along = min(along, time.perf_counter() - start)
+        start = time.perf_counter()
+        curve.closest_point(pts)
+        closest = min(closest, time.perf_counter() - start)
+    return {
+        "parameters": float(parameters),
+        "points": float(points),
+        "evaluate_derivative_s": along,
+        "closest_point_s": closest,
+    }

@@ -301,3 +301,12 @@ def test_cli_main_knows_bench_lattice() -> None:
 
     args = build_parser().parse_args(["bench", "lattice", "--objects", "10"])
     assert args.func is bl.cmd_bench_lattice
+
+
+def test_bench_cpu_grid_times_the_forward_maps_and_the_inverse() -> None:
+    """The CPU measurement that replaced the wall-clock assert of test_trilinear.py."""
+    out = bl.bench_cpu_grid(points=2000, cells=4, repeats=2)
+    assert out["points"] == 2000
+    assert out["cells"] == 4
+    for key in ("forward_s", "inverse_s"):
+        assert 0.0 < out[key] < 60.0

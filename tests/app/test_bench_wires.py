@@ -307,3 +307,12 @@ def test_ray_samples_are_counted_on_the_lattice() -> None:
     assert stats.percent_not_swept == pytest.approx(
         100 * (stats.samples - stats.swept) / stats.samples
     )
+
+
+def test_bench_curve_speed_times_evaluation_and_closest_points() -> None:
+    """The curve measurement that replaced the wall-clock assert of test_curves.py."""
+    out = bw.bench_curve_speed(parameters=5000, points=500, repeats=2)
+    assert out["parameters"] == 5000
+    assert out["points"] == 500
+    for key in ("evaluate_derivative_s", "closest_point_s"):
+        assert 0.0 < out[key] < 60.0
