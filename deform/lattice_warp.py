@@ -852,9 +852,13 @@ class LatticeWarp(Warp):
                 f"a lattice warp entry needs {missing}: 'grid' (a TrilinearGrid dict with"
                 " 'nodes') and 'box' ([lo, hi] in mm)"
             )
-        unknown = set(d) - {"type", "grid", "box", "inverse", "iterations", "fold_linear"}
+        allowed = ("type", "grid", "box", "inverse", "iterations", "fold_linear")
+        unknown = set(d) - set(allowed)
         if unknown:
-            raise WarpError(f"unknown keys {sorted(unknown)} in a lattice warp entry")
+            raise WarpError(
+                f"unknown keys {sorted(unknown)} in a lattice warp entry; allowed:"
+                f" {', '.join(allowed)}"
+            )
         if not isinstance(d["grid"], Mapping):
             raise WarpError(
                 f"a lattice warp's 'grid' must be an object with 'nodes'; got {d['grid']!r:.80}"

@@ -186,3 +186,18 @@ def test_cli_exit_2_one_line_no_traceback(
 def test_errors_are_voxwarp_errors() -> None:
     assert issubclass(SceneError, VoxwarpError)
     assert issubclass(InputError, VoxwarpError)
+
+
+def test_lattice_file_unknown_key_lists_the_allowed(tmp_path: Path) -> None:
+    from voxwarp.core.volume import Volume
+    from voxwarp.deform.trilinear import TrilinearGrid
+    from voxwarp.inputs import load_lattice_file
+
+    grid = TrilinearGrid.from_function(lambda u: u * 4.0, (1, 1, 1)).to_dict()
+    path = tmp_path / "lattice.json"
+    path.write_text(json.dumps({"grid": grid, "description": "a note", "itertions": 3}))
+    with pytest.raises(InputError) as err:
+        load_lattice_file(path, Volume(np.zeros((4, 4, 4), np.uint8)))
+    msg = _one_line(err.value)
+    assert "'itertions'" in msg
+    assert "allowed: type, grid, box, inverse, iterations, fold_linear" in msg
