@@ -1426,6 +1426,14 @@ class WireFieldWarp(Warp):
                 tex.release()
         fld = self.field
         texs: dict[str, Any] = {}
+        max_3d = int(ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
+        if max(fld.shape) > max_3d:  # GL would fail silently (GL_INVALID_VALUE)
+            axis = int(np.argmax(fld.shape))
+            raise WarpError(
+                f"the wire attribute field is {'x'.join(map(str, fld.shape))} voxels: axis"
+                f" {axis} ({'xyz'[axis]}) is over the GPU's maximum 3D texture size {max_3d};"
+                " use a larger field_scale (--field-scale) or keep the wires near the volume"
+            )
 
         def tex3d(a: np.ndarray, dtype: str, linear: bool) -> Any:
             t = ctx.texture3d(fld.shape, 1, np.asfortranarray(a).tobytes(order="F"), dtype=dtype)

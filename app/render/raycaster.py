@@ -216,15 +216,23 @@ class Renderer:
         """Raise :class:`VolumeTooLargeError` if ``volume`` cannot become a texture here."""
         fmt_bytes = {"f1": 1, "nu2": 2, "f4": 4}[_TEX_FORMAT[volume.dtype][0]]
         need = int(np.prod(volume.shape)) * fmt_bytes * (2 if self.sampling == "slice_pairs" else 1)
-        too_big_dim = max(volume.shape) > self.max_texture_size
+        limits = self._axis_limits()
+        ratios = [n / lim for n, lim in zip(volume.shape, limits, strict=True)]
+        axis = int(np.argmax(ratios))
+        too_big_dim = ratios[axis] > 1
         if too_big_dim or need > self.texture_budget_bytes:
-            f_dim = max(volume.shape) / self.max_texture_size
+            f_dim = ratios[axis]
             f_mem = (need / self.texture_budget_bytes) ** (1 / 3)
             factor = max(2, math.ceil(max(f_dim, f_mem)))
             if too_big_dim:
+                limit = (
+                    f"maximum 3D texture size {limits[axis]} per axis"
+                    if limits[axis] == self.max_texture_size
+                    else f"limit of {limits[axis]} for this axis of a slice-pair texture"
+                )
                 what = (
-                    f"volume {volume.shape} exceeds the GPU's maximum 3D texture size"
-                    f" {self.max_texture_size} per axis"
+                    f"volume {volume.shape} has {volume.shape[axis]} voxels along axis"
+                    f" {axis} ({'xyz'[axis]}), over the GPU's {limit}"
                 )
             else:
                 what = (
@@ -236,6 +244,16 @@ class Renderer:
                 f"{what}. Downsample it: load_volume(..., downsample={factor}) or"
                 f" `voxwarp render ... --downsample {factor}`."
             )
+
+    def _axis_limits(self) -> tuple[int, int, int]:
+        """Most voxels per axis of a volume texture here: the 3D texture size, and with
+        slice pairs also the 2D texture size (x, y) and the array layers (z)."""
+        m = self.max_texture_size
+        if self.sampling != "slice_pairs":
+            return (m, m, m)
+        info = self.ctx.info
+        m2 = min(m, int(info.get("GL_MAX_TEXTURE_SIZE", m)))
+        return (m2, m2, min(m, int(info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", m))))
 
     def _volume_gpu(self, volume: Volume) -> _VolumeGPU:
         self._evict_dead()

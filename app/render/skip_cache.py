@@ -24,10 +24,12 @@ from voxwarp.errors import RenderError
 from voxwarp.render.skipping import (
     Octant,
     block_skip_distances,
+    cell_grid_shape,
     cell_min_max,
     octant_skip_distances,
     skip_map_key,
     static_block_visibility,
+    warped_cell_grid,
     warped_cell_visibility,
 )
 
@@ -89,6 +91,10 @@ class SkipMapCache:
 
     def __init__(self, ctx: Any, *, empty_space_skipping: bool = True) -> None:
         self.ctx = ctx
+        #: largest 3D texture edge: a cell map longer than this on an axis (a volume of
+        #: exactly that many voxels has one cell more) cannot be a texture, so its draws
+        #: skip per block instead (correct, a little slower)
+        self.max_texture_size = int(ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
         #: skip blocks the mode cannot see (off only to measure what it buys)
         self.empty_space_skipping = empty_space_skipping
         #: skip at the resolution of trilinear cells
@@ -119,6 +125,8 @@ class SkipMapCache:
         changes every frame, as while dragging, would rebuild every frame), so with
         :attr:`warped_skip_maps` "auto" they are built when the same warp state is
         drawn a second time (``maps`` given: the draw volume's, whose cache decides).
+        A cell map longer than :attr:`max_texture_size` on some axis (a volume of
+        exactly that many voxels, or a warped ray box reaching beyond it) gives "blocks".
         """
         if not self.empty_space_skipping:
             return "none"
@@ -136,7 +144,7 @@ class SkipMapCache:
             self._warped_seen[id(maps)] = key
             return "blocks"
         if sparse:
-            return "cells"
+            return "cells" if self._fits(cell_grid_shape(scene.volume.shape)) else "blocks"
         if scene.mode in ("mip", "minip", "average", "xray"):
             return "none"
         return "blocks"
@@ -166,7 +174,20 @@ class SkipMapCache:
             and not scene.volume.is_oblique
             and scene.mode in SPARSE_MODES
             and _bounded(scene.warps)
+            and self._fits(self._warped_grid_shape(scene))
         )
+
+    def _fits(self, shape: Any) -> bool:
+        """Whether a cell map of ``shape`` can be a 3D texture on this context."""
+        return all(0 < int(n) <= self.max_texture_size for n in shape)
+
+    @staticmethod
+    def _warped_grid_shape(scene: Scene) -> Any:
+        """Cells per axis of ``scene``'s deformed-space skip map (its ray box)."""
+        vol = scene.volume
+        lo, hi = scene.ray_bounds()
+        shape, _ = warped_cell_grid(cell_grid_shape(vol.shape), vol.spacing, vol.origin, lo, hi)
+        return shape
 
     # ------------------------------------------------------------------ background builds
     def needs_maps(self, scene: Scene, maps: VolumeSkipMaps | None) -> bool:

@@ -170,8 +170,16 @@ def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
     over min, so the three 1D passes compose exactly), i.e. the edge of the largest
     invisible cube starting at c and extending towards +x, +y, +z. uint8, in place on a
     C-contiguous copy.
+
+    ``cap`` (at most 255, the uint8 maximum) must be >= every value of ``g``: shifts
+    ``k >= cap`` cannot lower a result (``max(k, .) >= cap``), so the loop stops there
+    and axes of any length (more than 256 cells or blocks) give the capped distance.
     """
+    if not 1 <= cap <= 255:
+        raise ValueError(f"cap must be in [1, 255]; got {cap}")
     src = np.ascontiguousarray(g, dtype=np.uint8).copy()
+    if src.size and int(src.max()) > cap:
+        raise ValueError(f"values of g must be at most cap {cap}; got {int(src.max())}")
     out = src.copy()
     tmp = np.empty_like(src)
     for axis in range(3):
@@ -217,7 +225,11 @@ def octant_skip_distances(
     padded = np.zeros(tuple(b * block for b in nb), dtype=bool)
     padded[: shape[0], : shape[1], : shape[2]] = v
     bvis = padded.reshape(nb[0], block, nb[1], block, nb[2], block).any(axis=(1, 3, 5))
-    far = _forward_chessboard(np.where(bvis, 0, 255).astype(np.uint8), max(nb) + 1)
+    # block distances beyond far_cap give a cell bound over 255 anyway (clipped below):
+    # far_cap * block - (block - 1) >= 255, so the capped block map loses nothing and
+    # its loop length does not grow with the number of blocks along an axis
+    far_cap = min(-(-(255 + block - 1) // block), 255)
+    far = _forward_chessboard(np.where(bvis, 0, far_cap).astype(np.uint8), far_cap)
     r = far.astype(np.int16) * block
     r = r.repeat(block, 0).repeat(block, 1).repeat(block, 2)[: shape[0], : shape[1], : shape[2]]
     offs = [np.arange(n, dtype=np.int16) % block for n in shape]
@@ -310,6 +322,33 @@ def octant_regions(
     return regions
 
 
+def cell_grid_shape(volume_shape: Any) -> tuple[int, int, int]:
+    """Trilinear cells per axis of a volume of ``volume_shape`` voxels (one more than
+    voxels: cell ``c`` interpolates voxels ``c - 1`` and ``c``; see :func:`cell_min_max`)."""
+    return tuple(int(n) + 1 for n in volume_shape)  # type: ignore[return-value]
+
+
+def warped_cell_grid(
+    cells: Any, spacing: Any, origin: Any, ray_lo: Any, ray_hi: Any
+) -> tuple[np.ndarray, np.ndarray]:
+    """(shape, offset) of the deformed-space cell grid of :func:`warped_cell_visibility`:
+    the volume's ``cells`` per axis padded to cover the ray box ``[ray_lo, ray_hi]`` (mm),
+    and the index of its cell 0 in the original cell grid (per axis, <= 0)."""
+    sp = np.asarray(spacing, dtype=float)
+    org = np.asarray(origin, dtype=float)
+    n = np.asarray(cells, dtype=np.int64)
+    # cells covering the ray box: texel u = (p - origin) / spacing + 1/2, cell floor(u + 1/2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        c_lo = np.floor((np.asarray(ray_lo, float) - org) / sp + 1.0)
+        c_hi = np.floor((np.asarray(ray_hi, float) - org) / sp + 1.0)
+    big = float(2**40)  # a ray box beyond any texture: clipped so the ints stay exact
+    c_lo = np.clip(np.nan_to_num(c_lo, nan=0.0), -big, big).astype(np.int64)
+    c_hi = np.clip(np.nan_to_num(c_hi, nan=0.0), -big, big).astype(np.int64)
+    pad_lo = np.maximum(-c_lo, 0)
+    pad_hi = np.maximum(c_hi - (n - 1), 0)
+    return n + pad_lo + pad_hi, -pad_lo
+
+
 def warped_cell_visibility(
     visible: np.ndarray,
     spacing: Any,
@@ -361,13 +400,8 @@ def warped_cell_visibility(
     sp = np.asarray(spacing, dtype=float)
     org = np.asarray(origin, dtype=float)
     n = np.asarray(visible.shape)
-    # cells covering the ray box: texel u = (p - origin) / spacing + 1/2, cell floor(u + 1/2)
-    c_lo = np.floor((np.asarray(ray_lo, float) - org) / sp + 1.0).astype(int)
-    c_hi = np.floor((np.asarray(ray_hi, float) - org) / sp + 1.0).astype(int)
-    pad_lo = np.maximum(-c_lo, 0)
-    pad_hi = np.maximum(c_hi - (n - 1), 0)
-    shape = n + pad_lo + pad_hi
-    offset = -pad_lo
+    shape, offset = warped_cell_grid(visible.shape, spacing, origin, ray_lo, ray_hi)
+    pad_lo = -offset
     # displacement interval per block of cells (boxes in deformed world mm)
     nb = -(-shape // block)
     idx = np.stack(np.meshgrid(*(np.arange(k) for k in nb), indexing="ij"), -1).reshape(-1, 3)
