@@ -1035,21 +1035,63 @@ def _tiff_to_zyx(data: np.ndarray, axes: str, path: Path) -> np.ndarray:
     )
 
 
+def _tiff_stack(tif: Any, path: Path) -> np.ndarray:
+    """Every image of an open TIFF file as one ``(z, y, x)`` stack, whatever its layout.
+
+    A file whose pages form one series (an ImageJ hyperstack, a stack written in one
+    call, pages of one size without metadata) reads through that series, so ImageJ's
+    axes hold. Otherwise (a stack written page by page, where each page is its own
+    series; pages of different kinds; a series that misses pages) every page in file
+    order is a slice; reduced-resolution pages (thumbnails) are skipped. Pages must
+    share size and type: the first that does not is named.
+    """
+    series = tif.series
+    if not series:
+        raise VolumeError(f"{path} holds no images; voxwarp reads a grayscale z-stack.")
+    pages = [p for p in tif.pages if not getattr(p, "is_reduced", False)]
+    first = series[0]
+    if len(series) == 1 and (tif.is_imagej or len(first.pages) >= len(pages)):
+        return _tiff_to_zyx(np.asarray(first.asarray()), first.axes, path)
+    out: np.ndarray | None = None
+    count = 0
+    for index, page in enumerate(pages):
+        page = page.aspage() if hasattr(page, "aspage") else page
+        image = _tiff_to_zyx(np.asarray(page.asarray()), page.axes, path)
+        if out is None:
+            out = np.empty((len(pages) * image.shape[0], *image.shape[1:]), image.dtype)
+        elif image.shape[1:] != out.shape[1:] or image.dtype != out.dtype:
+            raise VolumeError(
+                f"page {index + 1} of {path.name} is {image.shape[2]}x{image.shape[1]} pixels"
+                f" of {image.dtype} but page 1 is {out.shape[2]}x{out.shape[1]} of {out.dtype};"
+                " all pages of a TIFF z-stack must have the same size and type. Crop or"
+                " convert the odd pages, or save them as a separate file."
+            )
+        end = count + image.shape[0]
+        if end > out.shape[0]:  # a page holding several planes: grow the stack
+            grown = np.empty((end, *out.shape[1:]), out.dtype)
+            grown[:count] = out[:count]
+            out = grown
+        out[count:end] = image
+        count = end
+    if out is None:
+        raise VolumeError(f"{path} holds only reduced-resolution images (thumbnails).")
+    return out[:count]
+
+
 def _read_tiff_file(path: Path) -> _Loaded:
     import tifffile
 
     try:
         with tifffile.TiffFile(path) as tif:
-            series = tif.series[0]
-            axes = series.axes
-            data = np.asarray(series.asarray())
+            data = _tiff_stack(tif, path)
             spacing, origin, units = _tiff_geometry(tif, path.name)
+    except VolumeError:
+        raise
     except Exception as exc:
         raise VolumeError(
             f"cannot read the TIFF file {path} ({type(exc).__name__}: {exc})."
             " The file may be corrupt or not a TIFF image."
         ) from exc
-    data = _tiff_to_zyx(data, axes, path)
     return _Loaded(data.transpose(2, 1, 0), spacing, origin, units)
 
 
@@ -1061,8 +1103,7 @@ def _read_tiff_dir(directory: Path, files: list[Path]) -> _Loaded:
     for index, p in enumerate(files):
         try:
             with tifffile.TiffFile(p) as tif:
-                series = tif.series[0]
-                image = _tiff_to_zyx(np.asarray(series.asarray()), series.axes, p)
+                image = _tiff_stack(tif, p)
                 if index == 0:
                     geometry = _tiff_geometry(tif, p.name)
         except VolumeError:
