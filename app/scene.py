@@ -846,7 +846,7 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
         if "path" in d:
             from voxwarp.io.volumes import load_volume
 
-            p = scene_file(d["path"], base_dir, "volume 'path'", SceneError)
+            p = scene_file(d["path"], base_dir, "volume", SceneError)
             return _with_stated_geometry(load_volume(p), spacing, origin)
     except SceneError:
         raise  # names the scene volume already

@@ -275,7 +275,9 @@ class Mesh:
         if "path" in d:
             from voxwarp.core.scene_paths import scene_file
 
-            mesh = load_mesh(scene_file(d["path"], base_dir, f"mesh {name!r} 'path'", MeshError))
+            mesh = load_mesh(
+                scene_file(d["path"], base_dir, f"mesh {name!r}", MeshError, noun="mesh file")
+            )
             mesh.name = name
             return mesh
         if "generator" in d:

@@ -28,33 +28,35 @@ def scene_file(
     what: str,
     error: type[VoxwarpError],
     *,
+    noun: str = "file",
     must_exist: bool = True,
 ) -> Path:
-    """The file a scene entry names (``what``: e.g. ``"volume 'path'"``), resolved against
-    the scene's folder ``base_dir`` (made absolute, symlinks kept); warns
+    """The file a scene entry's ``path`` names (``what``: the entry, e.g. ``"volume"``;
+    ``noun``: what the file is, in the error), resolved against the scene's folder
+    ``base_dir`` (made absolute, symlinks kept); warns
     (:class:`OutsideSceneFolderWarning`) when it lies outside that folder. Raises
     ``error`` for a value that is not a path string or, with ``must_exist``, for a file
     or folder that is not there."""
     if not isinstance(value, str | os.PathLike) or not os.fspath(value):
-        raise error(f"scene {what} must be a file path (a string); got {value!r:.60}")
+        raise error(f"scene {what} path must be a file path (a string); got {value!r:.60}")
     p = Path(os.path.expanduser(os.fspath(value)))
     if not p.is_absolute() and base_dir is not None:
         p = Path(base_dir) / p
     try:
         resolved = p.resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop
-        raise error(f"scene {what} {os.fspath(value)}: cannot resolve it ({exc})") from exc
+        raise error(f"scene {what} path {os.fspath(value)}: cannot resolve it ({exc})") from exc
     if must_exist and not resolved.exists():
         where = "" if base_dir is None else " (relative paths start at the scene's folder)"
         raise error(
-            f"scene {what} {os.fspath(value)}: no such file {resolved}{where}; fix the path"
+            f"scene {what} path {os.fspath(value)}: no such {noun} {resolved}{where}; fix the path"
             " in the scene JSON or put the file there"
         )
     if base_dir is not None:
         folder = Path(base_dir).resolve()
         if not resolved.is_relative_to(folder):
             warnings.warn(
-                f"scene {what} {os.fspath(value)} is outside the scene's folder {folder}:"
+                f"scene {what} path {os.fspath(value)} is outside the scene's folder {folder}:"
                 f" reading {resolved}",
                 OutsideSceneFolderWarning,
                 stacklevel=3,
