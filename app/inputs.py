@@ -33,7 +33,7 @@ def load_input(
     spec: str,
     *,
     spacing: Sequence[float] | None = None,
-    downsample: int = 1,
+    downsample: int | tuple[int, int, int] = 1,
     nan_policy: str = "raise",
     axis_order: str = "xyz",
     series: int | str | None = None,
@@ -63,7 +63,7 @@ def load_input(
             raise InputError(f"--series applies to DICOM folders; {spec} is {named}")
     if spec.startswith("sample:"):
         vol = load_sample(spec.split(":", 1)[1], spacing=spacing)
-        vol = vol.downsample(downsample) if downsample > 1 else vol
+        vol = vol.downsample(downsample) if downsample != 1 else vol
         return vol if keep_padding else mask_padding(vol)[0]
     if is_scene_json(path):
         scene = Scene.load(path)

@@ -21,6 +21,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.files import atomic_write_text
@@ -320,12 +321,19 @@ class Scene:
 
     @property
     def zoom(self) -> float:
-        """Magnification of the fitted camera."""
+        """Magnification of the fitted camera, in [:data:`~voxwarp.core.limits.MIN_ZOOM`,
+        :data:`~voxwarp.core.limits.MAX_ZOOM`]."""
         return self._zoom
 
     @zoom.setter
     def zoom(self, value: float) -> None:
-        self._zoom = _finite(value, "zoom", positive=True)
+        zoom = _finite(value, "zoom", positive=True)
+        if not limits.MIN_ZOOM <= zoom <= limits.MAX_ZOOM:
+            raise SceneError(
+                f"zoom must lie in [{limits.MIN_ZOOM:g}, {limits.MAX_ZOOM:g}] (1 frames the"
+                f" volume); got {zoom:g}"
+            )
+        self._zoom = zoom
 
     @property
     def fov(self) -> float:

@@ -115,6 +115,15 @@ LAYOUTS = ("float", "packed")
 PACKED_VACATED = 0x7FFF
 #: a vacated sample is sent this far away (it then lies outside every volume)
 FAR = 1.0e20
+#: most control points of a wire's base or modified curve (its tables cost time per point)
+MAX_WIRE_POINTS = 1024
+#: most a wire's reach (radius times its largest scale) may be, in volume diagonals:
+#: a larger region of influence covers nothing more
+MAX_REACH_DIAGONALS = 1.0
+#: most voxels of an attribute field (the volume box grown by the wires' reach)
+MAX_FIELD_VOXELS = 1 << 27
+#: most mask pixels (planes x K x K) of one wire; each costs ~100 bytes while built
+MAX_MASK_PIXELS = 1 << 25
 #: what float32 arithmetic can add to a mapped point (mm): displacement bounds grow by it
 #: (the filtered lookups of t and of the tables need none, see _box_mapping_range)
 FLOAT32_MARGIN = 1e-4
@@ -167,6 +176,15 @@ def _beta(beta: Any) -> tuple[float, float] | Beta | None:
     return (lo, hi)
 
 
+def _count(points: Any) -> int:
+    """Number of control points in ``points`` (0 when it is not a sequence: the curve
+    reports that)."""
+    try:
+        return len(points)
+    except TypeError:
+        return 0
+
+
 # ---------------------------------------------------------------------- wires
 class Wire:
     """A wire: base curve, modified curve, twist and scale keys, influence and β.
@@ -209,6 +227,13 @@ class Wire:
         initial_normal: Any = None,
         name: str = "",
     ) -> None:
+        for what, points in (("base", base), ("modified", modified)):
+            count = len(points.control_points) if isinstance(points, Curve) else _count(points)
+            if count > MAX_WIRE_POINTS:
+                raise WarpError(
+                    f"wire {what} has {count:,} control points, over the limit of"
+                    f" {MAX_WIRE_POINTS}; a few dozen describe any bend: thin them out"
+                )
         self.base = base if isinstance(base, Curve) else Curve(base, kind)
         if modified is None:
             modified = self.base.control_points.copy()
@@ -634,6 +659,15 @@ class WireDeformer:
         if hasattr(volume, "bounds"):  # the axis-aligned box of a (possibly oblique) volume
             vlo, vhi = (np.asarray(b, dtype=np.float64) for b in volume.bounds)
         self.volume_bounds = (vlo, vhi)
+        diagonal = float(np.linalg.norm(vhi - vlo))
+        for i, w in enumerate(wires):
+            reach = w.radius * float(w.scale[:, 1].max())
+            if reach > MAX_REACH_DIAGONALS * diagonal:
+                raise WarpError(
+                    f"wire {i}: radius x largest scale = {reach:.4g} mm, over the volume's"
+                    f" diagonal ({diagonal:.4g} mm, the limit): give a radius in mm that"
+                    " covers the object, not more"
+                )
         for i, w in enumerate(wires):
             blo, bhi = _curve_box(w.base)
             if np.any(bhi < vlo) or np.any(blo > vhi):
@@ -656,7 +690,15 @@ class WireDeformer:
             hi = np.maximum(hi, chi + w.radius * float(w.scale[:, 1].max()))
         grow_lo = np.ceil((vlo - lo) / h - 1e-9)
         lo = vlo - grow_lo * h
-        shape = np.maximum(np.ceil((hi - lo) / h - 1e-9).astype(int), 1)
+        count = np.maximum(np.ceil((hi - lo) / h - 1e-9), 1)
+        if float(np.prod(count)) > MAX_FIELD_VOXELS:
+            dims = "x".join(f"{v:.0f}" for v in count)
+            raise WarpError(
+                f"the attribute field would be {dims} voxels, over the limit of"
+                f" {MAX_FIELD_VOXELS:,}: the modified wires reach far outside the volume;"
+                " keep them near the object or use a larger field_scale"
+            )
+        shape = count.astype(int)
         return lo, h, (int(shape[0]), int(shape[1]), int(shape[2]))
 
     # ------------------------------------------------------------------ build
@@ -912,6 +954,13 @@ class WireDeformer:
         smax = float(wire.scale[:, 1].max())
         half = math.ceil(wire.radius * smax / px)
         k = 2 * half + 1
+        if n_planes * k * k > MAX_MASK_PIXELS:
+            raise WarpError(
+                f"wire {wire.name or self.wires.index(wire)}: its masks would need"
+                f" {n_planes:,} planes of {k}x{k} pixels, over the limit of"
+                f" {MAX_MASK_PIXELS:,}; give a smaller radius or scale, a shorter modified"
+                " wire, or a coarser mask_resolution"
+            )
         ax = (np.arange(k) - half) * px
         x, y = np.meshgrid(ax, ax, indexing="ij")
         disc = x**2 + y**2 <= (wire.radius * smax) ** 2

@@ -28,6 +28,11 @@ from scipy.spatial import cKDTree
 
 #: Standard deviation of the additive noise, in HU.
 NOISE_STD = 10.0
+#: Most voxels along one axis of a generated phantom (the GPU's usual 3D texture limit).
+MAX_SAMPLE_AXIS = 2048
+#: Most voxels of a generated phantom (400³; made with float32 temporaries, so its peak
+#: memory is many times the int16 result).
+MAX_SAMPLE_VOXELS = 1 << 26
 #: Field of view (x, y, z) of :func:`fish`, mm (0.5 mm voxels at the default shape).
 FISH_FOV_MM = (96.0, 48.0, 40.0)
 #: Field of view (x, y, z) of :func:`tubes`, mm (0.5 mm voxels at the default shape).
@@ -63,6 +68,12 @@ def _check_shape(shape: tuple[int, int, int]) -> tuple[int, int, int]:
     shp = tuple(int(n) for n in shape)
     if len(shp) != 3 or min(shp) < 1:
         raise ValueError(f"shape must be three positive integers (nx, ny, nz); got {shape!r}")
+    if max(shp) > MAX_SAMPLE_AXIS or math.prod(shp) > MAX_SAMPLE_VOXELS:
+        raise ValueError(
+            f"shape {shp} is over the phantom limits ({MAX_SAMPLE_AXIS} voxels per axis,"
+            f" {MAX_SAMPLE_VOXELS:,} voxels in all: a phantom needs tens of bytes per voxel"
+            " while it is made); give a smaller shape, e.g. (256, 256, 256)"
+        )
     return shp  # type: ignore[return-value]
 
 

@@ -89,6 +89,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
         "--tour", metavar="FILE", help="step through a teaching demo's tour (NAME_tour.json)"
     )
     add_series_arg(pg)
+    app_cli.add_memory_budget_arg(pg)
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
     sub.choices["demo"].set_defaults(func=cmd_demo_gui)

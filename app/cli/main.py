@@ -20,6 +20,7 @@ from typing import Any
 
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.animate import add_animate_parser
+from voxwarp.core import limits
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.checks import positive_int as _positive_int
 from voxwarp.core.modes import MODES
@@ -104,6 +105,11 @@ def _drag(text: str) -> _Drag:
         raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
     if not all(math.isfinite(v) for v in off):
         raise argparse.ArgumentTypeError(f"{text!r}: offsets must be finite mm; expected {form}")
+    if max(abs(v) for v in off) > limits.MAX_DRAG_MM:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: offsets must be at most {limits.MAX_DRAG_MM:g} mm (the displacement"
+            " texture's range); check the units (mm expected)"
+        )
     return _Drag((text, idx, off))
 
 
@@ -180,6 +186,11 @@ def _relax(text: str) -> int:
         raise argparse.ArgumentTypeError(
             f"{text!r}: expected a number of relaxation steps >= 0, e.g. 4"
         )
+    if n > limits.MAX_RELAX_STEPS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: at most {limits.MAX_RELAX_STEPS} relaxation steps (each smooths the"
+            " whole grid); a few (e.g. 4) smooth a drag"
+        )
     return n
 
 
@@ -208,6 +219,11 @@ def _steps(text: str) -> int:
         n = -1
     if n < 0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a step count >= 0, e.g. 1000")
+    if n > limits.MAX_MASSSPRING_STEPS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: at most {limits.MAX_MASSSPRING_STEPS} steps; use --settle to stop"
+            " once the grid is at rest"
+        )
     return n
 
 
@@ -478,6 +494,7 @@ def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any,
     Returns the :class:`~voxwarp.deform.massspring.MassSpring` and a one-line summary.
     """
     from voxwarp.deform.massspring import MassSpring, MassSpringError
+    from voxwarp.deform.warp import WarpError
 
     backend = args.backend or "cpu"
     try:
@@ -512,6 +529,9 @@ def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any,
             ms.step(steps)
             how = f"{steps} steps"
         ms.warp(inverse=args.inverse or "baked")
+    except WarpError as exc:  # e.g. displacements beyond the texture's range
+        ms.close()
+        raise CliOptionError(f"--massspring: {exc}") from exc
     except BaseException:
         ms.close()
         raise
@@ -593,11 +613,43 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
     return cm, summary
 
 
+def _downsample(text: str) -> int | tuple[int, int, int]:
+    """argparse type of ``--downsample N`` or ``--downsample NX,NY,NZ``."""
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 3) or min(values) < 1:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a positive integer N or three NX,NY,NZ, e.g. 2 or 8,1,1"
+        )
+    return values[0] if len(values) == 1 else (values[0], values[1], values[2])
+
+
+def add_memory_budget_arg(p: argparse.ArgumentParser) -> None:
+    """``--memory-budget SIZE`` (:func:`main` makes it the budget of every load)."""
+    p.add_argument(
+        "--memory-budget",
+        type=limits.size_arg,
+        metavar="SIZE",
+        help="most memory a volume file's voxels may take, e.g. 2G, 512M or unlimited"
+        f" (default {limits.DEFAULT_MEMORY_FRACTION * 100:.0f}%% of the physical memory); checked"
+        " before reading",
+    )
+
+
 def _add_volume_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--spacing", nargs=3, type=float, metavar=("SX", "SY", "SZ"), help="voxel size in mm"
     )
-    p.add_argument("--downsample", type=int, default=1, metavar="N", help="reduce by N per axis")
+    p.add_argument(
+        "--downsample",
+        type=_downsample,
+        default=1,
+        metavar="N|NX,NY,NZ",
+        help="reduce by N per axis (or by NX, NY, NZ along x, y, z)",
+    )
+    add_memory_budget_arg(p)
     p.add_argument(
         "--nan", choices=("raise", "mask"), default="raise", help="NaN/Inf voxels: reject or mask"
     )
@@ -1298,6 +1350,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
         + ". voxwarp demo [INPUT] (a volume, scene JSON or sample:NAME; default the bundled"
         " real CT) renders it in every mode, bent by a mass-spring drag and by a wire.",
     )
+    add_memory_budget_arg(pd)
     pd.add_argument(
         "input",
         nargs="?",
@@ -1457,6 +1510,7 @@ def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | No
         old_format = warnings.formatwarning
         warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
         try:
+            limits.set_memory_budget(getattr(args, "memory_budget", None))
             return int(args.func(args) or 0)
         except VoxwarpError as exc:  # OutputError too: a write that failed, cleaned up
             print(f"voxwarp: error: {exc}", file=sys.stderr)
@@ -1468,6 +1522,7 @@ def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | No
         except KeyboardInterrupt:
             return 130
         finally:
+            limits.set_memory_budget(None)
             warnings.formatwarning = old_format
 
 

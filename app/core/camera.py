@@ -267,8 +267,8 @@ class Camera:
 
     def zoom(self, factor: float) -> None:
         """Magnify by ``factor`` (> 1 zooms in)."""
-        if factor <= 0:
-            raise SceneError(f"zoom factor must be positive; got {factor}")
+        if not (np.isfinite(factor) and factor > 0):
+            raise SceneError(f"zoom factor must be positive and finite; got {factor}")
         self.distance /= factor
         self.ortho_height /= factor
 

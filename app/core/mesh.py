@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.checks import finite_box, finite_vector
+from voxwarp.core.limits import MAX_MESH_TRIANGLES
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import box_corners
 from voxwarp.errors import MeshError
@@ -498,6 +499,16 @@ def load_mesh(path_or_trimesh: Any, name: str | None = None) -> Mesh:
 
 
 # ---------------------------------------------------------------------- generators
+def _check_triangles(generator: str, count: int) -> None:
+    """Raise :class:`MeshError` before ``generator`` allocates ``count`` triangles over
+    :data:`voxwarp.core.limits.MAX_MESH_TRIANGLES`."""
+    if count > MAX_MESH_TRIANGLES:
+        raise MeshError(
+            f"{generator} would make {count:,} triangles, over the limit of"
+            f" {MAX_MESH_TRIANGLES:,}; give fewer sections, rows, cells or subdivisions"
+        )
+
+
 def _generated(v: Any, f: Any, normals: Any, generator: str, **args: Any) -> Mesh:
     return Mesh(v, f, normals, name=generator, recipe={"generator": generator, "args": args})
 
@@ -540,6 +551,7 @@ def uv_sphere(
     rows, cols = int(rows), int(cols)
     if rows < 2 or cols < 3 or not radius > 0:
         raise MeshError(f"uv_sphere needs rows >= 2, cols >= 3, radius > 0; got {rows}, {cols}")
+    _check_triangles("uv_sphere", 2 * (rows - 1) * cols)
     theta = np.pi * np.arange(1, rows) / rows
     phi = 2 * np.pi * np.arange(cols) / cols
     st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
@@ -580,6 +592,7 @@ def cylinder_mesh(
     sections = int(sections)
     if sections < 3 or not radius > 0 or not height > 0:
         raise MeshError("cylinder_mesh needs sections >= 3, radius > 0 and height > 0")
+    _check_triangles("cylinder_mesh", 4 * sections)
     phi = 2 * np.pi * np.arange(sections) / sections
     radial = np.stack([np.cos(phi), np.sin(phi), np.zeros(sections)], axis=-1)
     h = height / 2
@@ -628,6 +641,7 @@ def torus_mesh(
             "torus_mesh needs sections >= 3 and 0 < minor_radius < major_radius; got"
             f" {major_radius}, {minor_radius}"
         )
+    _check_triangles("torus_mesh", 2 * nu * nv)
     u = 2 * np.pi * np.arange(nu) / nu
     v = 2 * np.pi * np.arange(nv) / nv
     uu, vv = np.meshgrid(u, v, indexing="ij")
@@ -666,6 +680,7 @@ def tile_mesh(
     nx, ny = int(nx), int(ny)
     if nx < 1 or ny < 1 or sx <= 0 or sy <= 0:
         raise MeshError(f"tile_mesh needs nx, ny >= 1 and a positive size; got {nx}, {ny}")
+    _check_triangles("tile_mesh", 2 * nx * ny)
     x = (np.arange(nx + 1) / nx - 0.5) * sx
     y = (np.arange(ny + 1) / ny - 0.5) * sy
     xx, yy = np.meshgrid(x, y, indexing="ij")
@@ -694,6 +709,10 @@ def tube_mesh(
 ) -> Mesh:
     """An open tube along x from 0 to ``length``, axis y = z = 0, ``rings`` rings of
     ``sections`` vertices (tessellated along its length, so a lattice can bend it)."""
+    rings, sections = int(rings), int(sections)
+    if rings < 2 or sections < 3:
+        raise MeshError(f"tube_mesh needs rings >= 2 and sections >= 3; got {rings}, {sections}")
+    _check_triangles("tube_mesh", 2 * (rings - 1) * sections)
     x = np.linspace(0.0, length, rings)
     phi = 2 * np.pi * np.arange(sections) / sections
     xx, pp = np.meshgrid(x, phi, indexing="ij")
@@ -720,6 +739,10 @@ def tube_mesh(
 def height_tile(size: float = 1.0, height: float = 0.25, n: int = 24) -> Mesh:
     """A square tile ``size`` wide on z = 0 with a raised rounded boss (up to ``height``)
     and a ridge along its diagonal; its border is flat, so copies meet without gaps."""
+    n = int(n)
+    if n < 1:
+        raise MeshError(f"height_tile needs n >= 1; got {n}")
+    _check_triangles("height_tile", 2 * n * n)
     g = np.linspace(0.0, size, n + 1)
     x, y = np.meshgrid(g, g, indexing="ij")
     s = 2.0 * x / size - 1.0
@@ -748,6 +771,8 @@ def box_mesh_tessellated(
     cells = [int(c) for c in cells]
     if min(cells) < 1 or min(size) <= 0:
         raise MeshError("box_mesh_tessellated needs cells >= 1 and sizes > 0 per axis")
+    cx, cy, cz = cells
+    _check_triangles("box_mesh_tessellated", 4 * (cx * cy + cy * cz + cx * cz))
     verts, faces, norms = [], [], []
     offset = 0
     for axis in range(3):

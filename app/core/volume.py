@@ -84,11 +84,12 @@ def parse_triple(
 
 
 def coerce_dtype(data: np.ndarray) -> np.ndarray:
-    """Return ``data`` in one of :data:`SUPPORTED_DTYPES`, converting only when lossless.
+    """Return ``data`` in one of :data:`SUPPORTED_DTYPES`.
 
     bool and int8 widen to uint8/int16; wider integers narrow to the smallest supported
-    integer type that holds their value range; float16/float64 become float32 (with a
-    warning for float64 when precision is lost). Anything else raises
+    integer type that holds their value range (lossless), else become float32 with a
+    warning that says whether that was exact (values within +-2**24) or rounded;
+    float16/float64 become float32. Anything else raises
     :class:`VolumeError` naming the supported dtypes.
     """
     dt = data.dtype
@@ -104,9 +105,16 @@ def coerce_dtype(data: np.ndarray) -> np.ndarray:
             info = np.iinfo(target)
             if info.min <= lo and hi <= info.max:
                 return data.astype(target)
+        exact = max(abs(lo), abs(hi)) <= 1 << 24  # float32 holds every integer up to 2**24
         warnings.warn(
             f"volume dtype {dt} with values in [{lo}, {hi}] does not fit a 16-bit integer;"
-            " converted to float32 (integers above 2**24 lose precision).",
+            " converted to float32"
+            + (
+                " (exact: every value is within +-2**24)."
+                if exact
+                else " with LOSS: integers beyond +-2**24 are rounded to the nearest float32"
+                " (24 significant bits)."
+            ),
             stacklevel=3,
         )
         return data.astype(np.float32)

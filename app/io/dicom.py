@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core.limits import check_load_bytes
 from voxwarp.core.orientation import LPS_TO_RAS
 from voxwarp.errors import VolumeError
 from voxwarp.io.loaded import Loaded, floats, rescale, to_float, warn
@@ -246,6 +247,13 @@ def _pixels(p: Path, full: Any) -> np.ndarray:
         ) from exc
 
 
+def _bytes_per_voxel(ds: Any) -> int:
+    """Bytes per voxel once decoded: BitsAllocated (in bytes) times SamplesPerPixel."""
+    bits = int(_number(ds, "BitsAllocated", 16) or 16)
+    samples = int(_number(ds, "SamplesPerPixel", 1) or 1)
+    return max(1, (bits + 7) // 8) * max(1, samples)
+
+
 def _padding(ds: Any, slope: float, inter: float) -> float | None:
     value = _number(ds, "PixelPaddingValue", None)
     return None if value is None else float(value * slope + inter)
@@ -265,6 +273,7 @@ def _assemble_series(directory: Path, chosen: list[tuple[Path, Any]]) -> Loaded:
     affine, spacing = _ras_affine(iop, first_ipp, pixel, dz)
 
     rows, cols = int(ds0.Rows), int(ds0.Columns)
+    check_load_bytes((cols, rows, n), _bytes_per_voxel(ds0), directory.name)
     slopes = np.array([_number(ds, "RescaleSlope", 1.0) or 1.0 for _, ds in chosen])
     inters = np.array([_number(ds, "RescaleIntercept", 0.0) or 0.0 for _, ds in chosen])
     rescaled = bool(np.any(slopes != 1.0) or np.any(inters != 0.0))
@@ -370,6 +379,8 @@ def read_dicom_file(path: Path) -> Loaded:
             f"{path} is a single DICOM slice; pass the folder holding the whole series"
             f" instead: {path.parent}"
         )
+    rows, cols = int(_number(ds, "Rows", 0) or 0), int(_number(ds, "Columns", 0) or 0)
+    check_load_bytes((cols, rows, frames), _bytes_per_voxel(ds), path.name)
     arr = _pixels(path, ds)
     if arr.ndim != 3 or arr.shape[0] != frames:
         raise VolumeError(

@@ -77,7 +77,10 @@ def load_sample(
         raise VolumeError(
             f"unknown sample {name!r}; bundled samples: {', '.join(sample_volumes.names())}"
         )
-    s = sample_volumes.get(name, **kwargs)
+    try:
+        s = sample_volumes.get(name, **kwargs)
+    except (TypeError, ValueError, OverflowError) as exc:  # e.g. a shape over the limits
+        raise VolumeError(f"sample {name!r}: {exc}") from exc
     spacing = s.spacing if spacing is None else spacing
     origin = s.origin if origin is None else origin
     return Volume(

@@ -60,6 +60,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
 from voxwarp.core.volume import Volume, check_finite
@@ -244,6 +245,7 @@ def load_volume(
     space: str = "RAS",
     series: str | int | None = None,
     allow_data_dirs: Sequence[str | os.PathLike[str]] | None = None,
+    memory_budget: int | float | str | None = None,
 ) -> Volume:
     """Load a volume from a file, a folder of slices, or a NumPy array.
 
@@ -284,6 +286,11 @@ def load_volume(
         Folders a detached NRRD header (``data file:``) may name its data in, besides
         the header's own folder and its subfolders (also ``$VOXWARP_ALLOW_DATA_DIRS``,
         ``os.pathsep``-separated); any other data file is refused.
+    memory_budget
+        Most bytes the voxels of a file may take (an int, or a size text such as
+        ``"2G"``; ``"unlimited"`` for no limit). Default: half the physical memory
+        (:data:`voxwarp.core.limits.DEFAULT_MEMORY_FRACTION`). Each reader checks the
+        size its header states before reading the voxels.
 
     Returns
     -------
@@ -321,7 +328,7 @@ def load_volume(
             path = Path(os.path.abspath(os.path.expanduser(os.fspath(source))))
         except (TypeError, ValueError) as exc:
             raise VolumeError(f"invalid path {_short(source)}: {exc}") from exc
-        with allowed_data_dirs(allow_data_dirs):
+        with allowed_data_dirs(allow_data_dirs), _limits.memory_budget(memory_budget):
             loaded = _load_path(path, series)
         name, src = _stem(path), str(path)
         what = path.name
@@ -492,7 +499,26 @@ def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
 
 
 # ---------------------------------------------------------------------------- numpy
+def _check_npy_header(f: Any, what: str) -> None:
+    """Check the shape an ``.npy`` header (open binary file ``f``) states against the
+    memory budget; a header that cannot be parsed is left to ``np.load`` to report."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(f)
+        read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, _, dtype = read(f)
+    except Exception:
+        return
+    _limits.check_load_bytes(shape, dtype.itemsize, what)
+
+
 def _read_numpy(path: Path) -> _Loaded:
+    if path.name.lower().endswith(".npy"):
+        try:
+            with open(path, "rb") as f:
+                _check_npy_header(f, path.name)
+        except OSError as exc:
+            raise VolumeError(f"cannot read {path}: {exc.strerror or exc}.") from exc
     try:
         obj = np.load(path, allow_pickle=False)
     except Exception as exc:
@@ -531,6 +557,13 @@ def _read_npz_contents(npz: Any, path: Path) -> _Loaded:
                 " np.savez(path, data=array, spacing=(sx, sy, sz))."
             )
         key = candidates[0]
+    try:
+        member = npz.zip.open(f"{key}.npy")
+    except Exception:  # _npz_get reports a member it cannot read
+        member = None
+    if member is not None:
+        with member:
+            _check_npy_header(member, f"{path.name}[{key!r}]")
     data = _npz_get(npz, key, path)
     loaded = _Loaded(data, array_like=True)
     for name in ("spacing", "origin"):
@@ -668,6 +701,7 @@ def _read_raw(path: Path, sidecar: Path) -> _Loaded:
             f" dtype {dtype_name}{header_text}; the extra {size - expected} bytes are ignored."
             f" Check 'dims', 'dtype' and 'header_bytes' in {where}."
         )
+    _limits.check_load_bytes(dims, dtype.itemsize, path.name)
     try:
         flat = np.fromfile(path, dtype=dtype, count=count, offset=header)
     except (OSError, ValueError) as exc:
@@ -694,10 +728,31 @@ def _stated_affine(loaded: _Loaded, affine: Any, space: Any, where: str) -> None
 
 
 # ---------------------------------------------------------------------------- NRRD
+def _check_nrrd_budget(path: Path) -> None:
+    """Check the ``sizes`` and ``type`` of an NRRD header against the memory budget
+    before ``nrrd.read`` reads the voxels; a header it cannot parse is left to it."""
+    import nrrd
+
+    try:
+        with open(path, "rb") as f:
+            header = nrrd.read_header(f)
+        sizes = [int(n) for n in header["sizes"]]
+    except Exception:
+        return
+    try:
+        from nrrd.reader import _determine_datatype
+
+        itemsize = int(_determine_datatype(header).itemsize)
+    except Exception:
+        itemsize = 1
+    _limits.check_load_bytes(sizes, itemsize, path.name)
+
+
 def _read_nrrd(path: Path) -> _Loaded:
     import nrrd
 
     _check_nrrd_data_files(path)  # before nrrd.read opens a detached data file
+    _check_nrrd_budget(path)
     try:
         data, header = nrrd.read(str(path), index_order="F")
         data = np.asarray(data)
@@ -755,6 +810,12 @@ def _read_nrrd(path: Path) -> _Loaded:
         finite = spacings[np.isfinite(spacings)]
         if finite.size == 3:
             spacing = _triple(finite * scale, "spacing", positive=True, where=where)
+        else:
+            _warn(
+                f"{where}: 'spacings' {spacings.tolist()} does not give a finite spacing for"
+                " each of the 3 axes; spacing treated as not stated (1 mm assumed). Fix the"
+                " header or pass --spacing SX SY SZ."
+            )
     return _Loaded(data, spacing, None if origin is None else tuple(origin), units)
 
 
@@ -890,6 +951,7 @@ def _read_nifti(path: Path) -> _Loaded:
         raise VolumeError(
             f"{path} is a {len(shape)}D image with shape {shape}; voxwarp needs a 3D volume."
         )
+    _limits.check_load_bytes(shape, _nifti_itemsize(img), path.name)
     try:
         proxy = img.dataobj
         if hasattr(proxy, "get_unscaled"):
@@ -919,6 +981,14 @@ def _read_nifti(path: Path) -> _Loaded:
         return _Loaded(data, affine=affine, space="RAS")
     spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=path.name)
     return _Loaded(data, tuple(s * scale for s in spacing))  # type: ignore[arg-type]
+
+
+def _nifti_itemsize(img: Any) -> int:
+    """Bytes per voxel of ``img`` as stored (its header's dtype)."""
+    try:
+        return int(img.get_data_dtype().itemsize)
+    except Exception:
+        return 1
 
 
 def _nifti_affine(hdr: Any, where: str) -> np.ndarray | None:
@@ -1373,9 +1443,11 @@ def volume_info(volume: Volume) -> dict[str, Any]:
         std = float(values.std(dtype=np.float64))
         step = max(1, values.size // _STATS_SAMPLE_VOXELS)
         sample = values[::step]
+        if sample.dtype.kind == "f" and max(abs(lo), abs(hi)) > 1e37:
+            sample = sample.astype(np.float64)  # float32 interpolation would overflow
         pct = np.percentile(sample, _PERCENTILES)
         percentiles = {str(p): float(v) for p, v in zip(_PERCENTILES, pct, strict=True)}
-        counts, edges = np.histogram(values, bins=_HIST_BINS, range=(lo, hi) if hi > lo else None)
+        counts, edges = _histogram(values, lo, hi)
     else:
         lo = hi = mean = std = 0.0
         step = 1
@@ -1412,6 +1484,30 @@ def volume_info(volume: Volume) -> dict[str, Any]:
             "counts": [int(c) for c in counts],
         },
     }
+
+
+#: Values per chunk of :func:`_histogram` (bounds its float64 temporaries to 32 MiB).
+_HIST_CHUNK = 1 << 22
+
+
+def _histogram(values: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """Counts and edges of :data:`_HIST_BINS` equal bins over ``[lo, hi]``, in float64
+    chunk by chunk: any finite range works, float32 values near +-3.4e38 (whose range
+    overflows float32) and a constant volume of large values (edges ``lo +- 0.5`` equal
+    to ``lo`` in floating point) included."""
+    if hi > lo:
+        edges = np.linspace(lo, hi, _HIST_BINS + 1)
+    else:  # one value: a bin of width 1 around it, wider where 1 is below its resolution
+        half = max(0.5, abs(lo) * 2.0**-20)
+        edges = np.linspace(lo - half, lo + half, _HIST_BINS + 1)
+    first, width = float(edges[0]), (float(edges[-1]) - float(edges[0])) / _HIST_BINS
+    counts = np.zeros(_HIST_BINS, dtype=np.int64)
+    for start in range(0, values.size, _HIST_CHUNK):
+        chunk = values[start : start + _HIST_CHUNK].astype(np.float64)
+        index = np.floor((chunk - first) / width)
+        np.clip(index, 0, _HIST_BINS - 1, out=index)
+        counts += np.bincount(index.astype(np.intp), minlength=_HIST_BINS)
+    return counts, edges
 
 
 _SPACING_NOTE = {

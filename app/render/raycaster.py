@@ -141,6 +141,29 @@ class _Frame:
         return self.fold is not None
 
 
+def _downsample_advice(
+    shape: tuple[int, ...], limits: tuple[int, ...], need: int, budget: int
+) -> tuple[int, int, int]:
+    """Per-axis downsample factors (each >= 1, at least one >= 2) that make a volume of
+    ``shape`` (``need`` texture bytes) fit ``limits`` voxels per axis and ``budget``
+    bytes while every axis keeps >= 1 voxel: the longest reduced axis shrinks until
+    both hold (a uniform factor would empty the short axes of a (200000, 2, 2) volume)."""
+    n = [max(int(v), 1) for v in shape]
+    f = [max(1, math.ceil(v / lim)) for v, lim in zip(n, limits, strict=True)]
+    per_voxel = need / math.prod(n)
+
+    def reduced() -> list[int]:
+        return [v // k for v, k in zip(n, f, strict=True)]
+
+    while per_voxel * math.prod(reduced()) > budget or max(f) < 2:
+        r = reduced()
+        axis = max(range(3), key=lambda a: r[a])
+        if r[axis] <= 1:
+            break
+        f[axis] = math.ceil(n[axis] / max(1, (r[axis] * 4) // 5))
+    return (f[0], f[1], f[2])
+
+
 class Renderer:
     """Raycasts scenes into framebuffers on a given moderngl context.
 
@@ -221,9 +244,7 @@ class Renderer:
         axis = int(np.argmax(ratios))
         too_big_dim = ratios[axis] > 1
         if too_big_dim or need > self.texture_budget_bytes:
-            f_dim = ratios[axis]
-            f_mem = (need / self.texture_budget_bytes) ** (1 / 3)
-            factor = max(2, math.ceil(max(f_dim, f_mem)))
+            factor = _downsample_advice(volume.shape, limits, need, self.texture_budget_bytes)
             if too_big_dim:
                 limit = (
                     f"maximum 3D texture size {limits[axis]} per axis"
@@ -240,9 +261,11 @@ class Renderer:
                     f" the budget of {self.texture_budget_bytes / 2**20:.3g} MB"
                     " (VOXWARP_TEXTURE_BUDGET_MB)"
                 )
+            uniform = len(set(factor)) == 1
+            arg = str(factor[0]) if uniform else ",".join(map(str, factor))
             raise VolumeTooLargeError(
-                f"{what}. Downsample it: load_volume(..., downsample={factor}) or"
-                f" `voxwarp render ... --downsample {factor}`."
+                f"{what}. Downsample it: load_volume(..., downsample={arg if uniform else factor})"
+                f" or `voxwarp render ... --downsample {arg}`."
             )
 
     def _axis_limits(self) -> tuple[int, int, int]:
