@@ -1121,7 +1121,13 @@ def _tiff_stack(tif: Any, path: Path) -> np.ndarray:
     pages = [p for p in tif.pages if not getattr(p, "is_reduced", False)]
     first = series[0]
     if len(series) == 1 and (tif.is_imagej or len(first.pages) >= len(pages)):
+        _limits.check_load_bytes(first.shape, first.dtype.itemsize, path.name)
         return _tiff_to_zyx(np.asarray(first.asarray()), first.axes, path)
+    try:  # the pages' size as their tags state it (a page that has none reads as 0)
+        voxels, itemsize = sum(math.prod(p.shape) for p in pages), pages[0].dtype.itemsize
+    except (AttributeError, TypeError, ValueError):
+        voxels, itemsize = 0, 1
+    _limits.check_load_bytes((voxels,), itemsize, path.name)
     out: np.ndarray | None = None
     count = 0
     for index, page in enumerate(pages):
@@ -1176,6 +1182,8 @@ def _read_tiff_dir(directory: Path, files: list[Path]) -> _Loaded:
                 image = _tiff_stack(tif, p)
                 if index == 0:
                     geometry = _tiff_geometry(tif, p.name)
+                    size = image.dtype.itemsize
+                    _limits.check_load_bytes((*image.shape, len(files)), size, directory.name)
         except VolumeError:
             raise
         except Exception as exc:

@@ -19,6 +19,7 @@ import nibabel as nib
 import nrrd
 import numpy as np
 import pytest
+import tifffile
 
 from tests.app.test_io import write_dicom_slice
 from voxwarp.cli.main import build_parser, main
@@ -374,6 +375,17 @@ def save_each_format(tmp_path: Path) -> dict[str, Path]:
         multi, np.zeros((3, 5, 4), np.uint16), z=0.0, instance=1, series_uid="8.8", frames=3
     )
     paths["dcm"] = multi
+    stack = np.zeros((5, 6, 7), np.uint16)  # (z, y, x)
+    paths["tif"] = tmp_path / "stack.tif"
+    tifffile.imwrite(paths["tif"], stack)
+    paths["tif pages"] = tmp_path / "pages.tif"
+    with tifffile.TiffWriter(paths["tif pages"]) as tw:
+        for plane in stack:
+            tw.write(plane)  # each page its own series
+    paths["tif folder"] = tmp_path / "tiffs"
+    paths["tif folder"].mkdir()
+    for k, plane in enumerate(stack):
+        tifffile.imwrite(paths["tif folder"] / f"s{k}.tif", plane)
     return paths
 
 
@@ -382,6 +394,8 @@ READERS: dict[str, tuple[Any, str]] = {
     "npz": (np.lib.npyio.NpzFile, "__getitem__"),
     "nrrd": (nrrd, "read"),
     "nii": (nib.arrayproxy.ArrayProxy, "get_unscaled"),
+    "tif": (tifffile.TiffPageSeries, "asarray"),
+    "tif pages": (tifffile.TiffPage, "asarray"),
 }
 
 
