@@ -10,6 +10,7 @@ a worker may or may not have seen): serial and distributed runs give identical p
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import threading
@@ -127,15 +128,60 @@ def render_frame(header: Mapping[str, Any], scene: Mapping[str, Any]) -> np.ndar
         return _PROCESS.render(header, scene)
 
 
+def file_record(path: str | os.PathLike) -> tuple[int, str] | None:
+    """``(size, SHA-256 hex)`` of a file's bytes, or None when it cannot be read."""
+    h = hashlib.sha256()
+    size = 0
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+                size += len(chunk)
+    except OSError:
+        return None
+    return size, h.hexdigest()
+
+
 def render_frame_to_file(
     header: Mapping[str, Any], scene: Mapping[str, Any], path: str | os.PathLike
-) -> str:
-    """Render one frame (:func:`render_frame`) and write it atomically; returns the path."""
-    from voxwarp.io.images import write_image
+) -> dict[str, Any]:
+    """Render one frame (:func:`render_frame`), write it atomically and check it.
+
+    The written file is read back and compared with the rendered pixels, so a short
+    write a library did not report never passes as a finished frame.
+
+    Returns
+    -------
+    dict
+        ``{"path", "size", "sha256"}`` of the file as written (what the manifest records).
+
+    Raises
+    ------
+    OutputError
+        When the frame cannot be written or does not read back as written (the file is
+        removed).
+    """
+    from voxwarp.core.files import output_error
+    from voxwarp.errors import VoxwarpError
+    from voxwarp.io.images import read_image, write_image
 
     image = render_frame(header, scene)
     write_image(path, image)
-    return str(path)
+    record = file_record(path)
+    try:
+        back = read_image(path) if record is not None else None
+    except VoxwarpError:
+        back = None
+    if back is None or back.dtype != image.dtype or not np.array_equal(back, image):
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+        raise output_error(
+            path, "the frame file does not read back as written (a short write: disk full?)"
+        )
+    assert record is not None
+    return {"path": str(path), "size": record[0], "sha256": record[1]}
 
 
 def release_process_renderer() -> None:

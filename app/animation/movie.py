@@ -5,31 +5,47 @@
     voxwarp animate scene.json --frames 48 --fps 24 -o movie.mp4 [--size 640x480]
         [--format png|exr] [--workers N | --scheduler tcp://host:8786] [--no-movie]
 
-The scene JSON's ``"animation"`` entry (:mod:`voxwarp.animation.tracks`) is first evaluated
-serially into one complete scene dict per frame (physics included); the frames are then
-rendered from those dicts — in this process, or on Dask workers
-(:mod:`voxwarp.animation.distributed`),
-with identical results — and encoded.
+The scene JSON's ``"animation"`` entry (:mod:`voxwarp.animation.tracks`) is evaluated
+serially into one complete scene dict per frame (physics included), *streamed*: frame
+``i``'s dict is evaluated when the renderer is ready for it and dropped once its file is
+written (:func:`voxwarp.animation.tracks.stream_animated_scene`), so memory stays bounded
+and the first frame appears after the first physics step, whatever ``--frames``. The
+frames are rendered from those dicts — in this process, or on Dask workers
+(:mod:`voxwarp.animation.distributed`, at most a window of frames in flight) — with
+identical results, and encoded.
 
 Frames
     ``<output stem>_frames/frame_00000.png`` (``--format exr``: float EXR), written
-    through OpenImageIO (:func:`voxwarp.io.images.write_image`, atomic: a frame file that
-    exists is complete). Images are RGBA with the scene's background composited in.
+    through OpenImageIO (:func:`voxwarp.io.images.write_image`, atomic and checked: a frame
+    file that exists is complete), then read back and compared with the rendered pixels
+    (a short write the library did not report fails the run). Images are RGBA with the
+    scene's background composited in. A failed write (disk full, read-only folder) ends
+    the run with one line naming the file and the cause (:class:`~voxwarp.errors.OutputError`).
 Resume
-    The frame folder holds ``manifest.json``: per frame, a SHA-256 of everything the
-    frame's pixels depend on (its scene dict, the volume entry and, for a volume file,
-    its absolute path, size and modification time, the image size and format). A run
-    keeps the frame files whose manifest digest equals the new one and skips them;
-    every other frame file of the folder (``frame_NNNNN.png|exr``: another scene, size
-    or format, or no manifest) is deleted and rendered again, so frames of another
-    scene are never reused. The new manifest is written before the first frame is rendered. An
-    interrupted run (Ctrl+C, a failed worker) therefore resumes where it stopped.
-    Two runs must not write to the same folder at once.
+    The frame folder holds ``manifest.json``: per finished frame, a SHA-256 of everything
+    the frame's pixels depend on (its scene dict, the volume entry and, for a volume file,
+    its absolute path, size and modification time, the image size and format) *and* the
+    size and SHA-256 of the frame file as written. A run first checks every frame the
+    manifest lists against the file on disk: a missing, truncated or modified file is
+    re-rendered (one warning line says how many). It then keeps the frame files whose
+    recorded digest equals the new one and renders the others; every other frame file
+    of the folder (another scene, size or format, no manifest, a manifest of an older
+    voxwarp without file hashes) is deleted and rendered again, so frames of another
+    scene are never reused and a damaged frame never reaches the movie. The manifest is
+    rewritten atomically as frames finish (after each frame while that is cheap, at
+    most a few per cent of the run's time for very long animations) and when the run
+    stops for any reason; a frame written after the last manifest update of a killed run
+    is rendered again. An interrupted run (Ctrl+C, kill, a failed worker) therefore
+    resumes where it stopped. Temporary files of a killed run (frames, manifest, the
+    movie beside ``-o``) are removed when the next run starts. Two runs must not write
+    to the same folder at once.
 Movie
     Encoded with imageio-ffmpeg's bundled ffmpeg: H.264 (libx264, CRF 18), yuv420p, at
     ``--fps``; the RGB of each frame (alpha dropped: the background is already in), padded
     to an even size by repeating the last row/column. Written to a temporary name in the
-    output's folder and renamed when complete. ``.mp4``, ``.mov`` or ``.mkv``.
+    output's folder and renamed when complete; ffmpeg's exit status is checked, and ffmpeg
+    is killed when voxwarp fails or is interrupted (on Linux also when voxwarp itself is
+    killed). ``.mp4``, ``.mov`` or ``.mkv``.
 Rendering
     One :class:`~voxwarp.render.raycaster.OffscreenRenderer` per process (made on first use, kept
     for
@@ -38,18 +54,24 @@ Rendering
     (``warped_skip_maps = "never"``): a frame's image then never depends on which
     frames the process drew before, so serial and distributed runs are bit-identical.
 Progress
-    A tqdm bar on stderr (``--no-progress`` turns it off).
+    A tqdm bar on stderr, or on a non-terminal stderr one line every few seconds
+    (``--no-progress`` turns it off). Frames kept from an earlier run count as done.
 """
 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 import re
+import signal
+import subprocess
 import sys
+import tempfile
 import time
-from collections.abc import Callable, Mapping, Sequence
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -57,12 +79,11 @@ from typing import Any
 import numpy as np
 
 from voxwarp.animation import FRAME_FORMATS
-from voxwarp.animation.frames import canonical_json, render_frame_to_file
-from voxwarp.animation.tracks import MAX_FRAMES, FrameStates, load_animated_scene
+from voxwarp.animation.frames import canonical_json, file_record, render_frame_to_file
+from voxwarp.animation.tracks import MAX_FRAMES, FrameStream, stream_animated_scene
 from voxwarp.core.extras import require
 from voxwarp.errors import VoxwarpError
 
-#: ``--format`` -> frame file extension
 #: movie containers accepted for ``-o``
 MOVIE_SUFFIXES: tuple[str, ...] = (".mp4", ".mov", ".mkv")
 #: name of the frame folder's manifest
@@ -70,12 +91,17 @@ MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = "voxwarp-animation-frames"
 #: changes whenever what a frame digest covers changes (old frames are then re-rendered)
 DIGEST_VERSION = 1
+#: layout of the manifest: 2 records each frame file's size and SHA-256 (1 did not)
+MANIFEST_VERSION = 2
+#: the manifest is rewritten after a frame only when the last write took at most this
+#: fraction of the time since (bounds its cost for very long animations)
+MANIFEST_COST_FRACTION = 0.05
 #: H.264 constant rate factor of the movie (18: visually lossless)
 MOVIE_CRF = 18
+#: seconds between progress lines when stderr is not a terminal
+PROGRESS_LINE_S = 5.0
 
-_FRAME_FILE = re.compile(r"^frame_\d{5}\.(png|exr)$")
-_FRAME_TEMP = re.compile(r"^\.frame_\d{5}\.(png|exr)\..+\.tmp\.(png|exr)$")
-#: a 1-voxel stand-in: scenes are parsed with it, then given the cached volume
+_FRAME_FILE = re.compile(r"^frame_(\d{5})\.(png|exr)$")
 
 
 # ---------------------------------------------------------------------------- frame jobs
@@ -100,13 +126,20 @@ def frames_dir_for(output: str | os.PathLike) -> Path:
     return out.with_name(f"{out.stem}_frames")
 
 
-def render_header(states: FrameStates, size: tuple[int, int], dtype: str = "u1") -> dict[str, Any]:
-    """What every frame of ``states`` shares: volume entry, base folder, image size, dtype.
+def render_header(
+    volume: Mapping[str, Any],
+    base_dir: str | os.PathLike | None,
+    size: tuple[int, int],
+    dtype: str = "u1",
+) -> dict[str, Any]:
+    """What every frame shares: volume entry, base folder, image size, dtype.
 
     Parameters
     ----------
-    states
-        The evaluated animation.
+    volume
+        The scene's volume entry (the same in every frame).
+    base_dir
+        Folder that relative paths of the scene refer to.
     size
         ``(width, height)`` in pixels.
     dtype
@@ -117,10 +150,9 @@ def render_header(states: FrameStates, size: tuple[int, int], dtype: str = "u1")
     dict
         JSON values only (shipped to Dask workers as is).
     """
-    volume = states.scenes[0]["volume"] if states.scenes else {}
     return {
-        "volume": volume,
-        "base_dir": None if states.base_dir is None else str(states.base_dir),
+        "volume": dict(volume),
+        "base_dir": None if base_dir is None else str(base_dir),
         "size": [int(size[0]), int(size[1])],
         "dtype": dtype,
     }
@@ -162,30 +194,182 @@ def frame_digest(header: Mapping[str, Any], scene: Mapping[str, Any], ext: str) 
 
 
 def plan_jobs(
-    states: FrameStates, frames_dir: str | os.PathLike, header: Mapping[str, Any], ext: str
-) -> list[FrameJob]:
-    """One :class:`FrameJob` per frame of ``states`` (absolute paths in ``frames_dir``)."""
+    scenes: Iterable[Mapping[str, Any]],
+    frames_dir: str | os.PathLike,
+    header: Mapping[str, Any],
+    ext: str,
+) -> Iterator[FrameJob]:
+    """One :class:`FrameJob` per scene dict of ``scenes`` (absolute paths in
+    ``frames_dir``), made as ``scenes`` yields them."""
     folder = Path(frames_dir).resolve()
-    jobs = []
-    for i, d in enumerate(states.scenes):
+    for i, d in enumerate(scenes):
         scene = {k: v for k, v in d.items() if k != "volume"}
-        jobs.append(
-            FrameJob(i, scene, str(folder / frame_name(i, ext)), frame_digest(header, scene, ext))
-        )
-    return jobs
+        yield FrameJob(i, scene, str(folder / frame_name(i, ext)), frame_digest(header, scene, ext))
 
 
-def _read_manifest(folder: Path) -> list[str] | None:
+# ---------------------------------------------------------------------------- frame folder
+#: a manifest entry: (input digest, file size, file SHA-256)
+Entry = tuple[str, int, str]
+
+
+def _read_manifest(folder: Path) -> tuple[str | None, dict[int, Entry], bool]:
+    """``(ext, entries, older)`` of the folder's manifest; ``older``: a readable
+    manifest of an older layout (no file hashes). A missing or unreadable manifest
+    gives no entries."""
     try:
         d = json.loads((folder / MANIFEST_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None, {}, False
     if not isinstance(d, dict) or d.get("format") != MANIFEST_FORMAT:
-        return None
-    frames = d.get("frames")
-    if not isinstance(frames, list) or not all(isinstance(x, str) for x in frames):
-        return None
-    return frames
+        return None, {}, False
+    if d.get("version") != MANIFEST_VERSION or d.get("digest_version") != DIGEST_VERSION:
+        return None, {}, isinstance(d.get("frames"), list) and bool(d.get("frames"))
+    ext, frames = d.get("ext"), d.get("frames")
+    if ext not in FRAME_FORMATS.values() or not isinstance(frames, list):
+        return None, {}, False
+    entries: dict[int, Entry] = {}
+    for i, e in enumerate(frames):
+        if (
+            isinstance(e, list)
+            and len(e) == 3
+            and isinstance(e[0], str)
+            and isinstance(e[1], int)
+            and not isinstance(e[1], bool)
+            and isinstance(e[2], str)
+        ):
+            entries[i] = (e[0], e[1], e[2])
+    return ext, entries, False
+
+
+class FrameFolder:
+    """The frame folder of one run: which frames are finished, and its manifest.
+
+    Made at the start of a run (see Resume in the module doc): removes temporary files of
+    killed runs, checks every frame the old manifest lists against its file, deletes
+    the frame files nothing vouches for and writes the manifest of what is left.
+
+    Parameters
+    ----------
+    folder
+        The frame folder (made if missing).
+    count
+        Frames of this run.
+    ext
+        Frame file extension (``".png"``, ``".exr"``).
+    """
+
+    def __init__(self, folder: str | os.PathLike, count: int, ext: str) -> None:
+        from voxwarp.core.files import output_error
+
+        self.folder = Path(folder)
+        self.count = int(count)
+        self.ext = ext
+        #: stale frame files deleted (not vouched for, changed on disk, or another scene)
+        self.removed = 0
+        #: frames the manifest listed whose file was missing or not as written
+        self.changed = 0
+        #: frames listed by a manifest of an older layout (re-rendered)
+        self.older = 0
+        self._last_write = 0.0
+        self._write_cost = 0.0
+        self._dirty = False
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise output_error(self.folder, exc) from exc
+        self._remove_temps()
+        old_ext, old, older = _read_manifest(self.folder)
+        self.entries: dict[int, Entry] = {}
+        for i, entry in old.items():
+            if i >= self.count or old_ext != ext:
+                continue
+            if file_record(self.folder / frame_name(i, ext)) == entry[1:]:
+                self.entries[i] = entry
+            else:
+                self.changed += 1
+        frame_files = [p for p in self.folder.iterdir() if _FRAME_FILE.match(p.name)]
+        if older:
+            self.older = len(frame_files)
+        for p in frame_files:
+            m = _FRAME_FILE.match(p.name)
+            assert m is not None
+            if p.suffix != ext or int(m.group(1)) not in self.entries:
+                self._delete(p)
+        self.write_manifest()
+
+    def _remove_temps(self) -> None:
+        """Remove temporary frame and manifest files of killed runs (this folder is
+        written by one run at a time)."""
+        from voxwarp.core.files import is_temp_name
+
+        for p in self.folder.iterdir():
+            n = p.name
+            ours = n.startswith(".frame_") or n.startswith(f".{MANIFEST_NAME}.")
+            if ours and is_temp_name(n):
+                try:
+                    p.unlink()
+                except FileNotFoundError:
+                    pass
+                except OSError as exc:
+                    from voxwarp.core.files import output_error
+
+                    raise output_error(p, exc) from exc
+
+    def _delete(self, p: Path) -> None:
+        from voxwarp.core.files import output_error
+
+        try:
+            p.unlink()
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            raise output_error(p, exc) from exc
+        self.removed += 1
+
+    def keep(self, job: FrameJob) -> bool:
+        """Whether ``job``'s frame is finished; a frame file of other inputs is deleted."""
+        entry = self.entries.get(job.index)
+        if entry is None:
+            return False
+        if entry[0] == job.digest:
+            return True
+        del self.entries[job.index]
+        self._dirty = True
+        self._delete(Path(job.path))
+        return False
+
+    def record(self, job: FrameJob, size: int, sha256: str) -> None:
+        """Note a frame file as written; the manifest follows when that is cheap."""
+        self.entries[job.index] = (job.digest, int(size), str(sha256))
+        self._dirty = True
+        now = time.perf_counter()
+        if self._write_cost <= MANIFEST_COST_FRACTION * (now - self._last_write):
+            self.write_manifest()
+
+    def write_manifest(self) -> None:
+        """Write the manifest (atomically; :class:`~voxwarp.errors.OutputError` on failure)."""
+        from voxwarp.core.files import atomic_write_text
+
+        frames: list[Any] = [None] * self.count
+        for i, e in self.entries.items():
+            frames[i] = list(e)
+        doc = {
+            "format": MANIFEST_FORMAT,
+            "version": MANIFEST_VERSION,
+            "digest_version": DIGEST_VERSION,
+            "ext": self.ext,
+            "frames": frames,
+        }
+        t0 = time.perf_counter()
+        atomic_write_text(self.folder / MANIFEST_NAME, json.dumps(doc, separators=(",", ":")))
+        self._last_write = time.perf_counter()
+        self._write_cost = self._last_write - t0
+        self._dirty = False
+
+    def flush(self) -> None:
+        """Write the manifest if frames finished since the last write."""
+        if self._dirty:
+            self.write_manifest()
 
 
 def prepare_frames_dir(
@@ -193,48 +377,19 @@ def prepare_frames_dir(
 ) -> tuple[list[FrameJob], list[FrameJob], int]:
     """Sort ``jobs`` into finished frames (kept) and frames to render (see Resume above).
 
-    Deletes frame files the manifest does not vouch for, and leftover temporary files of
-    a killed run, then writes the new manifest.
-
-    Parameters
-    ----------
-    frames_dir
-        The frame folder (made if missing).
-    jobs
-        The frames of this run.
+    :class:`FrameFolder` for a list of jobs known in advance.
 
     Returns
     -------
     (kept, todo, removed)
         Finished frames, frames to render, and the number of stale frame files deleted.
     """
-    from voxwarp.core.files import atomic_write_text
-
-    folder = Path(frames_dir)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise VoxwarpError(f"cannot make the frame folder {folder}: {exc}") from exc
-    old = _read_manifest(folder)
-    kept: list[FrameJob] = []
-    todo: list[FrameJob] = []
-    for job in jobs:
-        p = Path(job.path)
-        ok = old is not None and job.index < len(old) and old[job.index] == job.digest
-        (kept if ok and p.is_file() else todo).append(job)
-    keep = {Path(j.path).name for j in kept}
-    removed = 0
-    for p in folder.iterdir():
-        if (_FRAME_FILE.match(p.name) and p.name not in keep) or _FRAME_TEMP.match(p.name):
-            p.unlink(missing_ok=True)
-            removed += int(bool(_FRAME_FILE.match(p.name)))
-    manifest = {
-        "format": MANIFEST_FORMAT,
-        "version": DIGEST_VERSION,
-        "frames": [j.digest for j in jobs],
-    }
-    atomic_write_text(folder / MANIFEST_NAME, json.dumps(manifest, indent=1))
-    return kept, todo, removed
+    ext = Path(jobs[0].path).suffix if jobs else ".png"
+    ff = FrameFolder(frames_dir, len(jobs), ext)
+    kept = [j for j in jobs if ff.keep(j)]
+    todo = [j for j in jobs if j.index not in ff.entries]
+    ff.flush()
+    return kept, todo, ff.removed
 
 
 # ---------------------------------------------------------------------------- movie
@@ -252,10 +407,80 @@ def _rgb8(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
+def _pdeathsig() -> Callable[[], None] | None:
+    """A ``preexec_fn`` that has Linux kill the child when voxwarp dies (even by
+    ``kill -9``), so an ffmpeg is never left writing a movie nobody will rename."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def setup() -> None:  # runs in the child between fork and exec
+        prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # the parent died before prctl took effect
+            os._exit(1)
+
+    return setup
+
+
+def _ffmpeg_command(tmp: Path, width: int, height: int, fps: float) -> list[str]:
+    """The ffmpeg command of :func:`encode_movie` (raw RGB frames on stdin)."""
+    from fractions import Fraction
+
+    import imageio_ffmpeg
+
+    rate = str(Fraction(float(fps)).limit_denominator())
+    return [
+        imageio_ffmpeg.get_ffmpeg_exe(),
+        "-y",
+        "-f",
+        "rawvideo",
+        "-vcodec",
+        "rawvideo",
+        "-s",
+        f"{width}x{height}",
+        "-pix_fmt",
+        "rgb24",
+        "-r",
+        rate,
+        "-i",
+        "-",
+        "-an",
+        "-vcodec",
+        "libx264",
+        "-pix_fmt",
+        "yuv420p",
+        "-v",
+        "error",
+        "-crf",
+        str(MOVIE_CRF),
+        str(tmp),
+    ]
+
+
+def _last_line(fh: Any) -> str:
+    try:
+        fh.seek(0)
+        text = fh.read().decode("utf-8", "replace")
+    except OSError:
+        return ""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return lines[-1] if lines else ""
+
+
 def encode_movie(
     frame_paths: Sequence[str | os.PathLike], output: str | os.PathLike, fps: float
 ) -> Path:
     """Encode frame files into an H.264 movie (see the module doc), atomically.
+
+    ffmpeg runs as a child that is killed whenever this function does not finish
+    normally (an error, Ctrl+C), and on Linux also when this process is killed; its
+    exit status is checked, so a movie cut short (disk full) never replaces ``output``.
 
     Parameters
     ----------
@@ -269,10 +494,15 @@ def encode_movie(
     Returns
     -------
     Path
-    """
-    import imageio_ffmpeg
 
-    from voxwarp.core.files import atomic_write
+    Raises
+    ------
+    OutputError
+        When the movie cannot be written (one line naming the file and the cause).
+    VoxwarpError
+        When a frame cannot be read or has another size than the first.
+    """
+    from voxwarp.core.files import atomic_output, output_error
     from voxwarp.io.images import read_image
 
     out = Path(output)
@@ -282,44 +512,53 @@ def encode_movie(
         raise VoxwarpError("no frames to encode")
     first = _rgb8(read_image(frame_paths[0]))
     height, width = first.shape[:2]
-
-    def write(tmp: Path) -> None:
-        writer = imageio_ffmpeg.write_frames(
-            str(tmp),
-            (width, height),
-            fps=float(fps),
-            codec="libx264",
-            pix_fmt_in="rgb24",
-            pix_fmt_out="yuv420p",
-            quality=None,
-            macro_block_size=1,
-            ffmpeg_log_level="error",
-            output_params=["-crf", str(MOVIE_CRF)],
-        )
-        writer.send(None)  # start ffmpeg
+    with atomic_output(out, out.suffix) as tmp, tempfile.TemporaryFile() as log:
         try:
-            for n, p in enumerate(frame_paths):
-                rgb = first if n == 0 else _rgb8(read_image(p))
-                if rgb.shape != first.shape:
-                    raise VoxwarpError(
-                        f"frame {p} is {rgb.shape[1]}x{rgb.shape[0]}; the first frame is"
-                        f" {width}x{height}"
-                    )
-                writer.send(rgb)
+            proc = subprocess.Popen(
+                _ffmpeg_command(tmp, width, height, fps),
+                stdin=subprocess.PIPE,
+                stdout=subprocess.DEVNULL,
+                stderr=log,
+                preexec_fn=_pdeathsig(),  # kills ffmpeg with voxwarp (Linux)
+            )
+        except OSError as exc:
+            raise VoxwarpError(f"cannot start ffmpeg to encode {out}: {exc}") from exc
+        assert proc.stdin is not None
+        finished = False
+        try:
+            try:
+                for n, p in enumerate(frame_paths):
+                    rgb = first if n == 0 else _rgb8(read_image(p))
+                    if rgb.shape != first.shape:
+                        raise VoxwarpError(
+                            f"frame {p} is {rgb.shape[1]}x{rgb.shape[0]}; the first frame is"
+                            f" {width}x{height}"
+                        )
+                    proc.stdin.write(rgb.tobytes())
+                proc.stdin.close()
+            except (BrokenPipeError, ConnectionResetError):
+                pass  # ffmpeg stopped: its exit status and log say why
+            code = proc.wait()
+            finished = True
         finally:
-            writer.close()
-
-    out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        atomic_write(out, out.suffix, write)
-    except VoxwarpError:
-        raise
-    except (OSError, RuntimeError) as exc:
-        raise VoxwarpError(f"could not encode the movie {out}: {exc}") from exc
+            if not finished:
+                proc.kill()
+                proc.wait()
+            try:
+                proc.stdin.close()
+            except OSError:
+                pass
+        if code != 0:
+            reason = _last_line(log) or f"ffmpeg exited with status {code}"
+            raise output_error(out, reason)
     return out
 
 
 # ---------------------------------------------------------------------------- animate
+class FramesChangedWarning(UserWarning):
+    """Frames of an earlier run were missing or changed on disk and are rendered again."""
+
+
 @dataclass
 class AnimateResult:
     """What :func:`animate` did.
@@ -337,11 +576,15 @@ class AnimateResult:
         those kept from an earlier one.
     removed
         Stale frame files deleted.
+    changed
+        Frames an earlier run had finished whose file was missing or not as written
+        (rendered again).
     fps
         Frames per second of the movie.
     seconds
-        Wall times: ``evaluate``, ``render`` (including worker start for ``workers``),
-        ``encode``.
+        Wall times: ``evaluate`` (binding the animation and the physics of every frame,
+        interleaved with rendering), ``render`` (the rest of the frame loop, including
+        worker start for ``workers``), ``encode``.
     """
 
     movie: Path | None
@@ -350,8 +593,77 @@ class AnimateResult:
     rendered: list[int] = field(default_factory=list)
     skipped: list[int] = field(default_factory=list)
     removed: int = 0
+    changed: int = 0
     fps: float = 24.0
     seconds: dict[str, float] = field(default_factory=dict)
+
+
+class _Progress:
+    """Frames done of ``total``: a tqdm bar on a terminal, else a line every
+    :data:`PROGRESS_LINE_S` seconds (and at the end); nothing when disabled."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total, self.done = total, 0
+        self.bar: Any = None
+        self.lines = False
+        self._last = time.monotonic()
+        if not enabled:
+            return
+        tty = getattr(sys.stderr, "isatty", lambda: False)()
+        if tty:
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=total, unit="frame", desc="frames", file=sys.stderr, dynamic_ncols=True
+            )
+        else:
+            self.lines = True
+
+    def update(self, n: int = 1) -> None:
+        self.done += n
+        if self.bar is not None:
+            self.bar.update(n)
+        elif self.lines and time.monotonic() - self._last >= PROGRESS_LINE_S:
+            self._line()
+
+    def _line(self) -> None:
+        self._last = time.monotonic()
+        pct = 100.0 * self.done / max(self.total, 1)
+        print(f"frames: {self.done}/{self.total} ({pct:.0f}%)", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+        elif self.lines:
+            self._line()
+            self.lines = False
+
+
+class _Timed:
+    """Iterates ``it``, adding the time spent in it to ``self.seconds``."""
+
+    def __init__(self, it: Iterator[Any]) -> None:
+        self.it, self.seconds = it, 0.0
+
+    def __iter__(self) -> _Timed:
+        return self
+
+    def __next__(self) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return next(self.it)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+
+def remove_stale_movie_temps(output: str | os.PathLike) -> list[Path]:
+    """Remove temporary movies of ``output`` that killed runs left beside it (only
+    temporaries of that name whose writing process is gone)."""
+    from voxwarp.core.files import remove_stale_temps
+
+    out = Path(output)
+    return remove_stale_temps(out.parent, for_name=out.name)
 
 
 def animate(
@@ -389,12 +701,13 @@ def animate(
         Render on a local Dask cluster of this many worker processes.
     scheduler
         Render on the Dask cluster of this scheduler address (``tcp://host:8786``).
+        It must be a cluster you trust: Dask deserialises what it receives with pickle.
     client
         An existing ``distributed.Client`` to render on (instead of the two above).
     movie
         Encode the movie (False: frames only).
     progress
-        Show a progress bar on stderr.
+        Show progress on stderr.
     on_frame
         ``on_frame(index, path)`` after each frame is written (in this process).
 
@@ -405,8 +718,14 @@ def animate(
     Raises
     ------
     VoxwarpError
-        On bad input (scene, animation, options); frames finished before an error or
-        an interruption stay and are skipped by the next run.
+        On bad input (scene, animation, options) or a failed write
+        (:class:`~voxwarp.errors.OutputError`); frames finished before an error or an
+        interruption stay and are skipped by the next run.
+
+    Warns
+    -----
+    FramesChangedWarning
+        When frames of an earlier run are rendered again because their files changed.
     """
     out = Path(output)
     if image_format not in FRAME_FORMATS:
@@ -428,77 +747,127 @@ def animate(
     require("movie", "voxwarp animate")
     if workers is not None or scheduler is not None:
         require("distributed", "voxwarp animate --workers/--scheduler")
+    if scheduler is not None:  # a wrong address fails before any file is touched
+        from voxwarp.animation.distributed import probe_scheduler
+
+        probe_scheduler(scheduler)
     ext = FRAME_FORMATS[image_format]
-    t0 = time.perf_counter()
-    states = load_animated_scene(scene, frames=frames)
-    rate = float(fps) if fps is not None else states.animation.fps
-    header = render_header(states, size, "f4" if image_format == "exr" else "u1")
     folder = frames_dir_for(out)
-    jobs = plan_jobs(states, folder, header, ext)
-    kept, todo, removed = prepare_frames_dir(folder, jobs)
-    result = AnimateResult(
-        movie=None,
-        frames_dir=folder,
-        frames=[Path(j.path) for j in jobs],
-        skipped=[j.index for j in kept],
-        removed=removed,
-        fps=rate,
-    )
-    result.seconds["evaluate"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    if todo:
-        _render_jobs(
-            header, todo, result, workers, scheduler, client, progress, on_frame, len(jobs)
-        )
-    result.seconds["render"] = time.perf_counter() - t0
+    t_start = time.perf_counter()
+    stream = stream_animated_scene(scene, frames=frames)
+    try:
+        result = _animate_frames(
+            stream, out, folder, ext, size, image_format,
+            (workers, scheduler, client), progress, on_frame, t_start,
+        )  # fmt: skip
+    finally:
+        stream.close()
+    result.fps = float(fps) if fps is not None else stream.animation.fps
     if movie:
         t0 = time.perf_counter()
-        result.movie = encode_movie(result.frames, out, rate)
+        result.movie = encode_movie(result.frames, out, result.fps)
         result.seconds["encode"] = time.perf_counter() - t0
     return result
 
 
-def _render_jobs(
-    header: Mapping[str, Any],
-    todo: list[FrameJob],
-    result: AnimateResult,
-    workers: int | None,
-    scheduler: str | None,
-    client: Any,
+def _animate_frames(
+    stream: FrameStream,
+    out: Path,
+    folder: Path,
+    ext: str,
+    size: tuple[int, int],
+    image_format: str,
+    cluster: tuple[int | None, str | None, Any],
     progress: bool,
     on_frame: Callable[[int, Path], None] | None,
-    total: int,
-) -> None:
-    from tqdm import tqdm
-
-    bar = tqdm(
-        total=total,
-        initial=total - len(todo),
-        unit="frame",
-        desc="frames",
-        file=sys.stderr,
-        disable=not progress,
-        dynamic_ncols=True,
+    t_start: float,
+) -> AnimateResult:
+    """The frame loop of :func:`animate`: resume, render, keep the manifest up to date."""
+    scenes = _Timed(stream.frames)
+    first = next(scenes)  # frame 0: checks the physics set-up before any file is touched
+    header = render_header(
+        first["volume"], stream.base_dir, size, "f4" if image_format == "exr" else "u1"
     )
+    remove_stale_movie_temps(out)
+    ff = FrameFolder(folder, stream.count, ext)
+    result = AnimateResult(
+        movie=None,
+        frames_dir=folder,
+        frames=[folder / frame_name(i, ext) for i in range(stream.count)],
+        removed=ff.removed,
+        changed=ff.changed,
+    )
+    if ff.changed:
+        warnings.warn(
+            f"re-rendering {ff.changed} frame{'s' * (ff.changed != 1)} that changed on disk"
+            f" (missing, truncated or modified since written) in {folder}",
+            FramesChangedWarning,
+            stacklevel=3,
+        )
+    if ff.older:
+        warnings.warn(
+            f"the frame manifest in {folder} is from an older voxwarp (no frame hashes):"
+            f" re-rendering its {ff.older} frame{'s' * (ff.older != 1)}",
+            FramesChangedWarning,
+            stacklevel=3,
+        )
+    bar = _Progress(stream.count, progress)
 
-    def done(job: FrameJob) -> None:
+    def todo() -> Iterator[FrameJob]:
+        for job in plan_jobs(itertools.chain([first], scenes), folder, header, ext):
+            if ff.keep(job):
+                result.skipped.append(job.index)
+                bar.update(1)
+            else:
+                yield job
+
+    def done(job: FrameJob, record: Mapping[str, Any]) -> None:
+        ff.record(job, record["size"], record["sha256"])
         result.rendered.append(job.index)
         bar.update(1)
         if on_frame is not None:
             on_frame(job.index, Path(job.path))
 
+    t0 = time.perf_counter()
+    evaluate0 = scenes.seconds
     try:
-        if workers is None and scheduler is None and client is None:
-            for job in todo:
-                render_frame_to_file(header, job.scene, job.path)
-                done(job)
-            return
-        from voxwarp.animation.distributed import dask_client, render_on_dask
-
-        if client is not None:
-            render_on_dask(client, header, todo, done)
-            return
-        with dask_client(workers=workers, scheduler=scheduler) as c:
-            render_on_dask(c, header, todo, done)
+        _render_jobs(header, todo(), done, *cluster)
+        ff.flush()
+    except BaseException:
+        try:
+            ff.flush()  # keep what finished; the first error is the one to report
+        except (OSError, VoxwarpError):
+            pass
+        raise
     finally:
         bar.close()
+    result.removed = ff.removed
+    loop = time.perf_counter() - t0
+    result.seconds["evaluate"] = (t0 - t_start) + scenes.seconds - evaluate0
+    result.seconds["render"] = max(loop - (scenes.seconds - evaluate0), 0.0)
+    return result
+
+
+def _render_jobs(
+    header: Mapping[str, Any],
+    jobs: Iterator[FrameJob],
+    done: Callable[[FrameJob, Mapping[str, Any]], None],
+    workers: int | None,
+    scheduler: str | None,
+    client: Any,
+) -> None:
+    head = next(jobs, None)
+    if head is None:  # every frame kept: no cluster to start
+        return
+    jobs = itertools.chain([head], jobs)
+    if workers is None and scheduler is None and client is None:
+        for job in jobs:
+            done(job, render_frame_to_file(header, job.scene, job.path))
+        return
+    from voxwarp.animation.distributed import dask_client, render_on_dask
+
+    if client is not None:
+        render_on_dask(client, header, jobs, done)
+        return
+    with dask_client(workers=workers, scheduler=scheduler) as c:
+        render_on_dask(c, header, jobs, done)

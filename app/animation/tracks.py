@@ -89,15 +89,20 @@ steady motion through the keys. Rotations use slerp with the same (eased) ``t``.
 Evaluation
 ----------
 Physics models depend on their history, so the animation is evaluated *serially* on the
-CPU before anything is rendered (:func:`evaluate`): for each frame ``f`` (in order) the
-tracks are evaluated at ``f``, the element drags applied, then ``steps_per_frame``
-mass-spring steps or ``relax_steps`` ChainMail relaxation steps run, and the frame's
-state is written as a complete scene dict (:meth:`Scene.to_dict` form: the warps'
-``to_dict()`` carry the deformed fields, wires and lattice nodes). Frames are then
-rendered from those dicts in any order and on any machine (:mod:`voxwarp.animation.movie`,
-:mod:`voxwarp.animation.distributed`), identically. A scene without an explicit camera and without a
-``camera`` track gets the camera fitted to its deformed box *as saved*, held for every
-frame, so the view does not jump as the object deforms.
+CPU, frame after frame (:func:`iter_frames`; :func:`evaluate` collects them all): for
+each frame ``f`` (in order) the tracks are evaluated at ``f``, the element drags
+applied, then ``steps_per_frame`` mass-spring steps or ``relax_steps`` ChainMail
+relaxation steps run, and the frame's state is written as a complete scene dict
+(:meth:`Scene.to_dict` form: the warps' ``to_dict()`` carry the deformed fields, wires
+and lattice nodes). Frames are then rendered from those dicts in any order and on any
+machine (:mod:`voxwarp.animation.movie`, :mod:`voxwarp.animation.distributed`),
+identically. ``voxwarp animate`` streams them (:func:`stream_animated_scene`): a frame's
+dict is made when the renderer is ready for it and dropped once it is drawn, so memory
+stays bounded and the first frame appears at once however long the animation (each dict
+holds the deformed fields, so evaluating all :data:`MAX_FRAMES` frames up front would
+take gigabytes). A scene without an explicit camera and without a ``camera`` track gets
+the camera fitted to its deformed box *as saved*, held for every frame, so the view does
+not jump as the object deforms.
 
 Rendering ``N`` frames of an animation of ``frames`` frames (``voxwarp animate
 --frames N``) evaluates the tracks at ``f = i (frames - 1) / (N - 1)`` for frame ``i``,
@@ -110,7 +115,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -628,6 +633,39 @@ class FrameStates:
         return Scene.from_dict(self.scenes[index], base_dir=self.base_dir)
 
 
+@dataclass
+class FrameStream:
+    """An animation whose per-frame scene dicts are evaluated one at a time, on demand.
+
+    Attributes
+    ----------
+    animation
+        The :class:`Animation`.
+    count
+        Number of frames ``frames`` yields.
+    base_dir
+        Folder that relative volume and mesh paths refer to (absolute).
+    frames
+        The frames' scene dicts in order (as :attr:`FrameStates.scenes`), evaluated
+        lazily: frame ``i`` is computed when it is asked for. Close it (or exhaust it)
+        to free the physics models.
+    """
+
+    animation: Animation
+    count: int
+    base_dir: Path | None
+    frames: Iterator[dict[str, Any]]
+    on_close: Callable[[], None] | None = field(default=None, repr=False)
+
+    def close(self) -> None:
+        """Stop evaluating and free the physics models (idempotent)."""
+        close = getattr(self.frames, "close", None)
+        if close is not None:
+            close()
+        if self.on_close is not None:
+            self.on_close()
+
+
 def load_animated_scene(path: str | os.PathLike, frames: int | None = None) -> FrameStates:
     """Read an animated scene file and evaluate it (see :func:`evaluate`).
 
@@ -645,6 +683,17 @@ def load_animated_scene(path: str | os.PathLike, frames: int | None = None) -> F
     p = Path(path)
     d = read_scene_dict(p)
     return evaluate(d, base_dir=p.parent.resolve(), frames=frames)
+
+
+def stream_animated_scene(path: str | os.PathLike, frames: int | None = None) -> FrameStream:
+    """Read an animated scene file and evaluate it lazily (see :func:`iter_frames`).
+
+    The scene and every track are checked before this returns; a frame's own problem
+    (say a drag that folds the model) is raised when that frame is evaluated.
+    """
+    p = Path(path)
+    d = read_scene_dict(p)
+    return iter_frames(d, base_dir=p.parent.resolve(), frames=frames)
 
 
 def evaluate(
@@ -669,11 +718,36 @@ def evaluate(
     Returns
     -------
     FrameStates
+        Every frame at once (:func:`iter_frames` gives them one at a time, with the
+        same values).
 
     Raises
     ------
     AnimationError, SceneError
         When the animation or the scene is invalid, or a track does not fit the scene.
+    """
+    stream = iter_frames(scene, base_dir=base_dir, animation=animation, frames=frames)
+    return FrameStates(stream.animation, list(stream.frames), stream.base_dir)
+
+
+def iter_frames(
+    scene: Mapping[str, Any],
+    base_dir: str | os.PathLike | None = None,
+    animation: Animation | None = None,
+    frames: int | None = None,
+) -> FrameStream:
+    """Bind an animation to its scene and evaluate its frames one at a time.
+
+    Parameters are those of :func:`evaluate`. The scene, the animation and every key
+    value are checked here; the physics of frame ``i`` runs when frame ``i`` is taken
+    from :attr:`FrameStream.frames`, so only the frames a caller holds are in memory.
+    The dicts are the ones :func:`evaluate` returns, value for value.
+
+    Raises
+    ------
+    AnimationError, SceneError
+        When the animation or the scene is invalid, or a track does not fit the scene
+        (here); when a frame is invalid (while iterating).
     """
     anim = animation if animation is not None else Animation.from_scene_dict(scene)
     count = anim.frames if frames is None else _count(frames, "frames", 1, MAX_FRAMES)
@@ -685,14 +759,16 @@ def evaluate(
     relax = _physics(anim.relax_steps, editor.get("relax_steps"), DEFAULT_RELAX_STEPS)
     template = base.to_dict(base_dir=base_path)
     bound = _Bound(base, template, anim)
-    try:
-        out = []
-        for index in range(count):
-            f = anim.time_of(index, count)
-            out.append(bound.frame(f, index, steps, relax))
-    finally:
-        bound.close()
-    return FrameStates(anim, out, base_path)
+
+    def frames_of() -> Iterator[dict[str, Any]]:
+        try:
+            for index in range(count):
+                f = anim.time_of(index, count)
+                yield bound.frame(f, index, steps, relax)
+        finally:
+            bound.close()
+
+    return FrameStream(anim, count, base_path, frames_of(), bound.close)
 
 
 def _physics(own: int | None, editor: Any, default: int) -> int:
@@ -733,7 +809,9 @@ class _Bound:
             raise
 
     def close(self) -> None:
-        for binding in self.bindings.values():
+        """Free the families' bindings (physics models); idempotent."""
+        bindings, self.bindings = list(self.bindings.values()), {}
+        for binding in bindings:
             binding.close()
 
     def _ordered(self) -> list[Binding]:
