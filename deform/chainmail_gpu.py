@@ -141,6 +141,7 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
+from voxwarp.deform import gl_programs
 from voxwarp.deform.chainmail_model import ChainMailModel
 from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
 from voxwarp.deform.massspring_gpu import atlas_layout
@@ -282,29 +283,32 @@ class GpuChainMailSolver(GpuGridSolver):
         )
         vert = shaders.source("chainmail_box.vert.glsl", {"chainmail_config.glsl": config})
         self._prog = self._keep(
-            ctx.program(
+            gl_programs.program(
+                ctx,
                 vertex_shader=vert,
                 fragment_shader=shaders.source(
                     "chainmail_pass.frag.glsl", {"chainmail_config.glsl": config}
                 ),
             )
-        )
+        ).program
         self._pin_prog = self._keep(
-            ctx.program(
+            gl_programs.program(
+                ctx,
                 vertex_shader=vert,
                 fragment_shader=shaders.source(
                     "chainmail_pass.frag.glsl",
                     {"chainmail_config.glsl": config + "#define CM_PIN_PASS\n"},
                 ),
             )
-        )
+        ).program
         self._comp = self._keep(
-            ctx.compute_shader(
+            gl_programs.compute_shader(
+                ctx,
                 shaders.source(
                     "chainmail_displacement.comp.glsl", {"chainmail_config.glsl": config}
-                )
+                ),
             )
-        )
+        ).program
         self._vao = self._keep(ctx.vertex_array(self._prog, []))
         self._pin_vao = self._keep(ctx.vertex_array(self._pin_prog, []))
         self._pos = [self._texture() for _ in range(2)]

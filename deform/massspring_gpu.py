@@ -97,6 +97,7 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
+from voxwarp.deform import gl_programs
 from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
 from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
 
@@ -234,16 +235,18 @@ class GpuSpringSolver(GpuGridSolver):
         config = _config_glsl(self.shape, self.block, self.tiles[0], model)
         vert = shaders.source("massspring_step.vert.glsl")
         self._prog = self._keep(
-            ctx.program(
+            gl_programs.program(
+                ctx,
                 vertex_shader=vert,
                 fragment_shader=shaders.source(
                     "massspring_step.frag.glsl",
                     {"massspring_config.glsl": config, "massspring_pass.glsl": _step_glsl(self)},
                 ),
             )
-        )
+        ).program
         self._pin_prog = self._keep(
-            ctx.program(
+            gl_programs.program(
+                ctx,
                 vertex_shader=vert,
                 fragment_shader=shaders.source(
                     "massspring_step.frag.glsl",
@@ -253,15 +256,16 @@ class GpuSpringSolver(GpuGridSolver):
                     },
                 ),
             )
-        )
+        ).program
         self._comp = self._keep(
-            ctx.compute_shader(
+            gl_programs.compute_shader(
+                ctx,
                 shaders.source(
                     "massspring_displacement.comp.glsl",
                     {"massspring_config.glsl": config, "massspring_pass.glsl": _disp_glsl(self)},
-                )
+                ),
             )
-        )
+        ).program
         e = self._n_block
         #: per ping-pong side: position textures (one per element of a block)
         self._pos = [[self._state_texture() for _ in range(e)] for _ in range(2)]

@@ -723,15 +723,18 @@ class OffsetFieldWarp(Warp):
             entry = None
         if entry is None:
             from voxwarp import shaders
+            from voxwarp.deform import gl_programs
 
-            prog = ctx.compute_shader(shaders.source("offset_field_bake.comp.glsl"))
+            # one compiled bake shader per context, shared by every warp (gl_programs)
+            hold = gl_programs.compute_shader(ctx, shaders.source("offset_field_bake.comp.glsl"))
             tex = ctx.texture_array(self.bake_shape, 4, dtype="f2")
             tex.filter = (ctx.LINEAR, ctx.LINEAR)
             tex.repeat_x = tex.repeat_y = False
         else:
-            _, prog, tex, version = entry
+            _, hold, tex, version = entry
             if self._source is None and version == self._version:
                 return tex
+        prog = hold.program
         field.use(0)
         prog["u_field"].value = 0
         prog["u_shape"].value = tuple(int(n) for n in self.bake_shape)
@@ -742,7 +745,7 @@ class OffsetFieldWarp(Warp):
         groups = [-(-int(n) // 4) for n in self.bake_shape]
         prog.run(*groups)
         ctx.memory_barrier()
-        self._baked[id(ctx)] = (ctx, prog, tex, self._version)
+        self._baked[id(ctx)] = (ctx, hold, tex, self._version)
         return tex
 
     def _field_texture(self, ctx: Any) -> Any:
@@ -792,8 +795,8 @@ class OffsetFieldWarp(Warp):
         for _, tex, _ in self._textures.values():
             tex.release()
         self._textures.clear()
-        for _, prog, tex, _ in self._baked.values():
-            prog.release()
+        for _, hold, tex, _ in self._baked.values():
+            hold.release()  # the shared bake shader stays for other warps
             tex.release()
         self._baked.clear()
 

@@ -39,6 +39,7 @@ import numpy as np
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance
+from voxwarp.deform import gl_programs
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.errors import RenderError
 
@@ -110,9 +111,9 @@ class MeshRenderer:
     # ------------------------------------------------------------------ resources
     def _program(self, linear: bool, feedback: bool = False) -> Any:
         key = (linear, self.position, feedback)
-        prog = self._programs.get(key)
-        if prog is not None:
-            return prog
+        hold = self._programs.get(key)
+        if hold is not None:
+            return hold.program
         defines = []
         if linear:
             defines.append("#define LINEAR")
@@ -120,17 +121,19 @@ class MeshRenderer:
             defines.append("#define HW_TRILINEAR")
         head, _, rest = shaders.source("mesh.vert.glsl").partition("\n")
         vert = "\n".join([head, *defines, rest])
-        try:
+        try:  # compiled once per context, shared by its mesh renderers (gl_programs)
             if feedback:  # vertex stage only, its outputs captured (deformed_vertices)
-                prog = self.ctx.program(vertex_shader=vert, varyings=["v_world", "v_normal"])
+                hold = gl_programs.program(
+                    self.ctx, vertex_shader=vert, varyings=["v_world", "v_normal"]
+                )
             else:
-                prog = self.ctx.program(
-                    vertex_shader=vert, fragment_shader=shaders.source("mesh.frag.glsl")
+                hold = gl_programs.program(
+                    self.ctx, vertex_shader=vert, fragment_shader=shaders.source("mesh.frag.glsl")
                 )
         except Exception as exc:
             raise RenderError(f"mesh shader failed to compile/link for {key}: {exc}") from exc
-        self._programs[key] = prog
-        return prog
+        self._programs[key] = hold
+        return hold.program
 
     def _mesh_gpu(self, mesh: Mesh) -> _MeshGPU:
         hit = self._meshes.get(id(mesh))
@@ -305,8 +308,8 @@ class MeshRenderer:
         for _, tex in self._grids.values():
             tex.release()
         self._grids.clear()
-        for prog in self._programs.values():
-            prog.release()
+        for hold in self._programs.values():
+            hold.release()  # the shared program stays for the context's other users
         self._programs.clear()
         if self._feedback_fbo is not None:
             if self.ctx.fbo is self._feedback_fbo[0]:

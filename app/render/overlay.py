@@ -37,6 +37,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
+from voxwarp.deform import gl_programs
 from voxwarp.errors import RenderError
 
 #: Layer kinds: ``"points"`` or ``"lines"`` (consecutive pairs of positions).
@@ -176,13 +177,15 @@ class OverlayRenderer:
             )
         self.ctx = ctx
         self._released = False
-        try:
-            self._prog = ctx.program(
+        try:  # compiled once per context, shared by its overlay renderers (gl_programs)
+            self._hold = gl_programs.program(
+                ctx,
                 vertex_shader=shaders.source("overlay.vert.glsl"),
                 fragment_shader=shaders.source("overlay.frag.glsl"),
             )
         except Exception as exc:
             raise RenderError(f"overlay shader failed to compile/link: {exc}") from exc
+        self._prog = self._hold.program
         point_range = ctx.info.get("GL_POINT_SIZE_RANGE") or (1.0, 64.0)
         #: largest sprite the driver draws (gl_PointSize is clamped to it)
         self.max_sprite_size = float(point_range[1])
@@ -316,7 +319,7 @@ class OverlayRenderer:
         if self._released:
             return
         self._release_buffers()
-        self._prog.release()
+        self._hold.release()  # the shared program stays for the context's other users
         self._staging = np.zeros(0, dtype=_VERTEX)
         self._released = True
 

@@ -388,9 +388,9 @@ class Renderer:
             tuple(w.signature() for w in warps),
             meshes,
         )
-        prog = self._programs.get(key)
-        if prog is not None:
-            return prog
+        hold = self._programs.get(key)
+        if hold is not None:
+            return hold.program
         defines = [f"#define BLOCK {BLOCK}", f"#define OCTANT_EPS {OCTANT_EPS:e}"]
         if linear:
             defines.append("#define LINEAR_PATH")
@@ -413,14 +413,16 @@ class Renderer:
         )
         head, _, rest = frag.partition("\n")
         frag = "\n".join([head, *defines, rest])
-        try:
-            prog = self.ctx.program(
-                vertex_shader=shaders.read("polygon.vert.glsl"), fragment_shader=frag
+        from voxwarp.deform import gl_programs
+
+        try:  # compiled once per context, shared by its renderers (gl_programs)
+            hold = gl_programs.program(
+                self.ctx, vertex_shader=shaders.read("polygon.vert.glsl"), fragment_shader=frag
             )
         except Exception as exc:
             raise RenderError(f"raycast shader failed to compile/link for {key}: {exc}") from exc
-        self._programs[key] = prog
-        return prog
+        self._programs[key] = hold
+        return hold.program
 
     # ------------------------------------------------------------------ drawing
     def draw(
@@ -677,12 +679,16 @@ class Renderer:
         _, tex, fbo = self._lod_target
         self.draw(scene, fbo, (0, 0, *size), camera)
         if self._upscale is None:
-            prog = self.ctx.program(
+            from voxwarp.deform import gl_programs
+
+            hold = gl_programs.program(
+                self.ctx,
                 vertex_shader=shaders.source("upscale.vert.glsl"),
                 fragment_shader=shaders.source("upscale.frag.glsl"),
             )
-            self._upscale = (prog, self.ctx.vertex_array(prog, []))
-        prog, vao = self._upscale
+            self._upscale = (hold, self.ctx.vertex_array(hold.program, []))
+        hold, vao = self._upscale
+        prog = hold.program
         framebuffer.use()
         framebuffer.viewport = (x, y, w, h)
         with self.ctx.scope(framebuffer, enable_only=0):  # no blending, depth, culling: a copy
@@ -707,8 +713,8 @@ class Renderer:
         for vao in self._vao.values():
             vao.release()
         self._vao.clear()
-        for prog in self._programs.values():
-            prog.release()
+        for hold in self._programs.values():
+            hold.release()  # the shared program stays for the context's other users
         self._programs.clear()
         self._release_lod_target()
         if self._upscale is not None:
