@@ -15,6 +15,8 @@ After a warm-up (every program variant of the run compiled once) the test checks
   driver does not show in Python's heap, so RSS is the measure. The bound is several
   times the growth measured over this run, and far below what one leaked program per
   frame costs (the figures are in docs/reliability.md).
+
+``VOXWARP_LOAD_FRAMES`` changes the number of frames (default 1000; at least 31).
 """
 
 from __future__ import annotations
