@@ -12,6 +12,10 @@ from __future__ import annotations
 class VoxwarpError(Exception):
     """Base class of every error voxwarp raises on purpose."""
 
+    def __str__(self) -> str:
+        # one line, whatever a wrapped library's message holds (some span lines)
+        return " ".join(super().__str__().split())
+
 
 class VolumeError(VoxwarpError, ValueError):
     """A volume cannot be read or is not usable (format, dtype, NaN, size)."""

@@ -47,8 +47,9 @@ NanPolicy = Literal["raise", "mask"]
 
 
 def short_repr(value: object, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters, for error messages."""
-    text = repr(value)
+    """``repr(value)`` on one line (an array's repr spans several), cut to ``limit``
+    characters, for error messages."""
+    text = " ".join(repr(value).split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
