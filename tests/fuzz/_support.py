@@ -87,11 +87,12 @@ def _own_warning(w: warnings.WarningMessage) -> bool:
     return "/app/" in name or "/deform/" in name or "/voxwarp/" in name
 
 
-def outcome(test: str, call: Callable[[], Any]) -> str:
+def outcome(test: str, call: Callable[[], Any], also: tuple[type[Exception], ...] = ()) -> str:
     """Run ``call`` under the time limit and check the property; count the case.
 
-    Returns ``"ok"`` or ``"error"`` (a one-line VoxwarpError); any other exception
-    propagates (the bug the suite looks for), so does :class:`CaseTimeout`.
+    Returns ``"ok"`` or ``"error"`` (a one-line VoxwarpError, or one of ``also``: the
+    ArgumentTypeError of an option's parser, which argparse prints as the error line);
+    any other exception propagates (the bug the suite looks for), so does :class:`CaseTimeout`.
     """
     CASES[test] += 1
     result = "ok"
@@ -100,7 +101,7 @@ def outcome(test: str, call: Callable[[], Any]) -> str:
         try:
             with time_limit():
                 call()
-        except VoxwarpError as exc:
+        except (VoxwarpError, *also) as exc:
             assert_one_line(str(exc), type(exc).__name__)
             result = "error"
     for w in caught:
