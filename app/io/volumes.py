@@ -460,6 +460,11 @@ def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
         raise VolumeError(f"no such file or directory: {path}")
     if path.is_dir():
         return _read_directory(path, series)
+    if not path.is_file():  # a FIFO, socket or device: reading could block forever
+        raise VolumeError(
+            f"{path} is not a regular file (a pipe, socket or device); voxwarp reads volume"
+            " files and folders of slices. Save the data to a file first."
+        )
     if series is not None:
         raise VolumeError(
             f"series= chooses among the DICOM series of a folder; {path.name} is a file."
@@ -889,6 +894,11 @@ def _check_nrrd_data_files(path: Path) -> None:
     env = os.environ.get(NRRD_DATA_DIRS_ENV, "")
     allowed += [Path(os.path.expanduser(d)).resolve() for d in env.split(os.pathsep) if d]
     for name in names:
+        if "\x00" in name:
+            raise VolumeError(
+                f"the NRRD header {path} names a data file with a NUL byte ({name!r});"
+                " fix the 'data file' line of the header"
+            )
         target = (home / os.path.expanduser(name)).resolve()  # absolute names stay as they are
         if not any(target.is_relative_to(folder) for folder in allowed):
             shown = name if str(target) == name else f"{name} ({target})"

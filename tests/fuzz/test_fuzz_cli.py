@@ -5,8 +5,7 @@ lists (each option with a bad, odd or valid value, in any order and combination)
 :func:`tests.fuzz._support.cli_outcome` is exit 0, or exit 2 with one ``voxwarp: error:``
 line (argparse's usage lines may come before it) and never a traceback, within the
 per-case time limit. Renders are 16x16 or smaller, on an (8, 6, 5) volume. Values that a
-known finding turns into a traceback or a hang are left out here and pinned by the xfail
-tests at the end (see the reasons).
+known finding turned into a traceback or a hang are pinned by the tests at the end.
 """
 
 from __future__ import annotations
@@ -145,15 +144,14 @@ def test_render(workdir, source, names, data) -> None:
 @pytest.mark.parametrize(
     ("extra", "finding"),
     [
-        (["--zoom", "1e-300"], "--zoom 1e-300 ends in a traceback (issue 17, finding 7)"),
+        (["--zoom", "1e-300"], "--zoom 1e-300 ended in a traceback (issue 17, finding 7)"),
         (
             ["--massspring", "4", "--drag", "2,2,2:1e9,0,0"],
-            "--drag 2,2,2:1e9,0,0 raises an uncaught WarpError (issue 17, finding 7)",
+            "--drag 2,2,2:1e9,0,0 raised an uncaught WarpError (issue 17, finding 7)",
         ),
     ],
 )
-def test_known_cli_findings(workdir, extra: list[str], finding: str, request) -> None:
-    """Inputs of issue 17's findings the generator leaves out; xfail until fixed."""
-    request.node.add_marker(pytest.mark.xfail(strict=False, reason=finding))
+def test_known_cli_findings(workdir, extra: list[str], finding: str) -> None:
+    """Inputs of issue 17's findings the generator leaves out (now fixed: one line)."""
     argv = ["render", str(workdir / "v.npy"), "-o", str(workdir / "k.png"), "--size", "8x8"]
     cli_outcome("cli known findings", [*argv, *extra])
