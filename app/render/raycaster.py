@@ -146,22 +146,19 @@ def _downsample_advice(
 ) -> tuple[int, int, int]:
     """Per-axis downsample factors (each >= 1, at least one >= 2) that make a volume of
     ``shape`` (``need`` texture bytes) fit ``limits`` voxels per axis and ``budget``
-    bytes while every axis keeps >= 1 voxel: the longest reduced axis shrinks until
-    both hold (a uniform factor would empty the short axes of a (200000, 2, 2) volume)."""
+    bytes. Axes over their limit get the factor that fits them; for the budget, the
+    smallest common factor ``g`` is applied on top (voxels stay isotropic where they
+    were), capped per axis so every axis keeps >= 1 voxel (a uniform factor would empty
+    the short axes of a (200000, 2, 2) volume)."""
     n = [max(int(v), 1) for v in shape]
-    f = [max(1, math.ceil(v / lim)) for v, lim in zip(n, limits, strict=True)]
+    base = [max(1, math.ceil(v / lim)) for v, lim in zip(n, limits, strict=True)]
     per_voxel = need / math.prod(n)
-
-    def reduced() -> list[int]:
-        return [v // k for v, k in zip(n, f, strict=True)]
-
-    while per_voxel * math.prod(reduced()) > budget or max(f) < 2:
-        r = reduced()
-        axis = max(range(3), key=lambda a: r[a])
-        if r[axis] <= 1:
-            break
-        f[axis] = math.ceil(n[axis] / max(1, (r[axis] * 4) // 5))
-    return (f[0], f[1], f[2])
+    for g in range(1, max(n) + 1):
+        f = [max(b, min(g, v)) for b, v in zip(base, n, strict=True)]
+        fits = per_voxel * math.prod(v // k for v, k in zip(n, f, strict=True)) <= budget
+        if fits and max(f) >= 2:
+            return (f[0], f[1], f[2])
+    return (n[0], n[1], n[2])
 
 
 class Renderer:
