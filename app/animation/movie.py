@@ -306,25 +306,11 @@ class FrameFolder:
             n = p.name
             ours = n.startswith(".frame_") or n.startswith(f".{MANIFEST_NAME}.")
             if ours and is_temp_name(n):
-                try:
-                    p.unlink()
-                except FileNotFoundError:
-                    pass
-                except OSError as exc:
-                    from voxwarp.core.files import output_error
-
-                    raise output_error(p, exc) from exc
+                _unlink(p)
 
     def _delete(self, p: Path) -> None:
-        from voxwarp.core.files import output_error
-
-        try:
-            p.unlink()
-        except FileNotFoundError:
-            return
-        except OSError as exc:
-            raise output_error(p, exc) from exc
-        self.removed += 1
+        if _unlink(p):
+            self.removed += 1
 
     def keep(self, job: FrameJob) -> bool:
         """Whether ``job``'s frame is finished; a frame file of other inputs is deleted."""
@@ -871,3 +857,16 @@ def _render_jobs(
         return
     with dask_client(workers=workers, scheduler=scheduler) as c:
         render_on_dask(c, header, jobs, done)
+
+
+def _unlink(p: Path) -> bool:
+    """Delete ``p``; False if it was already gone, OutputError if it cannot be deleted."""
+    from voxwarp.core.files import output_error
+
+    try:
+        p.unlink()
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise output_error(p, exc) from exc
+    return True

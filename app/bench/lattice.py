@@ -57,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.bench.render import cpu_count, load_average
+from voxwarp.bench.render import best_times, cpu_count, load_average
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.deform.trilinear import TrilinearGrid
@@ -1160,15 +1160,7 @@ def bench_cpu_grid(
     u = rng.uniform(0.0, 1.0, (int(points), 3))
     x = grid(u)
     grid.inverse(x[:10])  # build the bucket grid once
-    forward = inverse = math.inf
-    for _ in range(max(1, int(repeats))):
-        t = time.perf_counter()
-        grid(u)
-        one(u)
-        forward = min(forward, time.perf_counter() - t)
-        t = time.perf_counter()
-        grid.inverse(x)
-        inverse = min(inverse, time.perf_counter() - t)
+    forward, inverse = best_times(repeats, lambda: (grid(u), one(u)), lambda: grid.inverse(x))
     return {
         "points": float(points),
         "cells": float(cells),

@@ -14,8 +14,11 @@ Ratios are ``reference time / voxwarp time`` (above 1: voxwarp is faster).
 
 from __future__ import annotations
 
+import math
 import platform
 import statistics
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -394,3 +397,15 @@ def bench_warp_render(
         r.renderer.empty_space_skipping = True
     ms.close()
     return report
+
+
+def best_times(repeats: int, *steps: Callable[[], Any]) -> list[float]:
+    """The shortest wall time (s) of each of ``steps`` over ``repeats`` rounds (each
+    round runs every step once, in order)."""
+    best = [math.inf] * len(steps)
+    for _ in range(max(1, int(repeats))):
+        for i, step in enumerate(steps):
+            start = time.perf_counter()
+            step()
+            best[i] = min(best[i], time.perf_counter() - start)
+    return best

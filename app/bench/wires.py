@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.bench.render import bench_camera, cpu_count, load_average
+from voxwarp.bench.render import bench_camera, best_times, cpu_count, load_average
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.core.volume import Volume
 from voxwarp.io.samples import bundled_dir
@@ -1471,15 +1471,9 @@ def bench_curve_speed(
     pts = rng.normal(scale=30.0, size=(int(points), 3))
     curve.evaluate(t[:10])
     curve.closest_point(pts[:10])
-    along = closest = float("inf")
-    for _ in range(max(1, int(repeats))):
-        start = time.perf_counter()
-        curve.evaluate(t)
-        curve.derivative(t)
-        along = min(along, time.perf_counter() - start)
-        start = time.perf_counter()
-        curve.closest_point(pts)
-        closest = min(closest, time.perf_counter() - start)
+    along, closest = best_times(
+        repeats, lambda: (curve.evaluate(t), curve.derivative(t)), lambda: curve.closest_point(pts)
+    )
     return {
         "parameters": float(parameters),
         "points": float(points),
