@@ -214,7 +214,8 @@ def _sync_folder(folder: Path) -> None:
 def atomic_output(
     path: str | os.PathLike, suffix: str | None = None, *, mkdir: bool = True
 ) -> Iterator[Path]:
-    """Yield a temporary path to write; on success it replaces ``path`` atomically.
+    """Yield a temporary path to write; on success it replaces ``path`` atomically and
+    removes the temporaries of ``path`` that killed writers left (:func:`remove_stale_temps`).
 
     Parameters
     ----------
@@ -263,6 +264,8 @@ def atomic_output(
         _discard(tmp)
         raise
     _sync_folder(final.parent)
+    # temporaries of this destination that a killed writer left (its pid is gone)
+    remove_stale_temps(final.parent, for_name=final.name)
 
 
 @contextmanager
