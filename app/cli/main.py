@@ -16,7 +16,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.animate import add_animate_parser
@@ -1288,6 +1288,15 @@ def _add_deform_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line: ``PROG: error: MESSAGE (see PROG
+    --help)``, exit code 2, instead of argparse's usage block followed by the error.
+    Subcommand parsers inherit it (``add_subparsers`` uses the parent's class)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     """The argument parser of the ``voxwarp`` command.
 
@@ -1297,7 +1306,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     """
     from voxwarp import __version__
 
-    p = argparse.ArgumentParser(prog="voxwarp", description=__doc__.split("\n")[0])
+    p = OneLineErrorParser(prog="voxwarp", description=__doc__.split("\n")[0])
     p.add_argument("--version", action="version", version=f"voxwarp {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 

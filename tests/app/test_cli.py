@@ -255,7 +255,10 @@ def test_no_command_is_an_argparse_error(capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(SystemExit) as info:
         main([])
     assert info.value.code == 2
-    assert "usage: voxwarp" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1  # one line, no usage block
+    assert err.startswith("voxwarp: error: the following arguments are required: command")
+    assert "(see 'voxwarp --help')" in err
 
 
 @pytest.mark.usefixtures("no_rendering")
