@@ -85,6 +85,8 @@ PRESETS: tuple[str, ...] = (*_HU_PRESETS, *_RELATIVE_PRESETS)
 
 #: Number of entries of the GPU lookup table.
 TABLE_SIZE = 4096
+#: Keys of a transfer function entry (scene JSON, tf.json).
+_TF_KEYS = {"name", "points", "preset"}
 
 
 def _points(points: Iterable[Sequence[float]]) -> list[ControlPoint]:
@@ -244,7 +246,16 @@ class TransferFunction:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], volume: Volume | None = None) -> TransferFunction:
-        """Inverse of :meth:`to_dict`; ``{"preset": name}`` is resolved against ``volume``."""
+        """Inverse of :meth:`to_dict`; ``{"preset": name}`` is resolved against ``volume``.
+
+        Unknown keys are an error listing the allowed ones (as for scenes and cameras).
+        """
+        unknown = set(d) - _TF_KEYS if isinstance(d, Mapping) else set()
+        if unknown:
+            raise SceneError(
+                f"unknown transfer function keys {sorted(unknown)}; an entry has 'points' or"
+                f" 'preset' (allowed keys: {', '.join(sorted(_TF_KEYS))})"
+            )
         if "points" in d:
             return cls(d["points"], name=str(d.get("name", "custom")))
         if "preset" in d:

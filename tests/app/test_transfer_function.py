@@ -325,6 +325,8 @@ def test_coerce_rejects_none_and_accepts_points_and_dicts() -> None:
     assert TransferFunction.coerce({"preset": "hot"}).name == "hot"
     with pytest.raises(SceneError, match="'points' or 'preset'"):
         TransferFunction.coerce({"colours": pts})
+    with pytest.raises(SceneError, match=r"unknown transfer function keys \['opacity'\]"):
+        TransferFunction.coerce({"points": pts, "opacity": 0.5})  # not silently ignored
 
 
 def test_to_dict_from_dict_round_trip() -> None:
