@@ -36,7 +36,7 @@ from voxwarp.core.modality import (
 from voxwarp.core.modes import MODES as MODES
 from voxwarp.core.modes import Mode as Mode
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
-from voxwarp.core.scene_paths import scene_file
+from voxwarp.core.scene_paths import path_entry, scene_file
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
@@ -769,14 +769,7 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
         d["shape"] = list(volume.shape)
         return d
     if src is not None and os.path.exists(src):
-        p = Path(src).resolve()
-        if base_dir is not None:
-            try:
-                d["path"] = os.path.relpath(p, Path(base_dir).resolve())
-            except ValueError:
-                d["path"] = str(p)
-        else:
-            d["path"] = str(p)
+        d["path"] = path_entry(src, base_dir)
         return d
     if volume.nbytes > EMBED_LIMIT_BYTES:
         raise SceneError(

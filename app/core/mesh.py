@@ -240,14 +240,9 @@ class Mesh:
         """
         d: dict[str, Any] = {"name": self.name}
         if self.source is not None and os.path.exists(self.source):
-            p = Path(self.source).resolve()
-            if base_dir is not None:
-                try:
-                    d["path"] = os.path.relpath(p, Path(base_dir).resolve())
-                except ValueError:
-                    d["path"] = str(p)
-            else:
-                d["path"] = str(p)
+            from voxwarp.core.scene_paths import path_entry
+
+            d["path"] = path_entry(self.source, base_dir)
             return d
         if self.recipe is not None:
             d["generator"] = self.recipe["generator"]

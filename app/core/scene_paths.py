@@ -62,3 +62,16 @@ def scene_file(
                 stacklevel=3,
             )
     return Path(os.path.abspath(p))
+
+
+def path_entry(path: str | os.PathLike[str], base_dir: str | os.PathLike[str] | None) -> str:
+    """How a scene JSON written to ``base_dir`` names the existing file ``path``: relative
+    to that folder (the inverse of :func:`scene_file`), absolute without a folder or when
+    no relative path exists (another drive)."""
+    p = Path(path).resolve()
+    if base_dir is None:
+        return str(p)
+    try:
+        return os.path.relpath(p, Path(base_dir).resolve())
+    except ValueError:
+        return str(p)
