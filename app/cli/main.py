@@ -707,14 +707,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     from voxwarp.io.volumes import dicom_series, volume_info, volume_summary
     from voxwarp.scene import Scene
 
-    obj = load_input(
-        args.input,
-        spacing=args.spacing,
-        downsample=args.downsample,
-        nan_policy=args.nan,
-        keep_padding=True,  # info shows the file's values
-        **ropt.load_options(args),
-    )
+    # info shows the file's values: padding kept
+    obj = load_input(args.input, keep_padding=True, **ropt.load_options(args))
     vol = obj.volume if isinstance(obj, Scene) else obj
     series = dicom_series(args.input) if os.path.isdir(args.input) else []
     if args.json:
@@ -765,14 +759,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     _check_deform_options(args)
     ropt.check_render_options(args)
     _check_distinct_outputs(args)
-    obj = load_input(
-        args.input,
-        spacing=args.spacing,
-        downsample=args.downsample,
-        nan_policy=args.nan,
-        keep_padding=args.keep_padding,
-        **ropt.load_options(args),
-    )
+    obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
     scene = _scene_from_args(obj, args)
     grid = _deform_grid(args, scene.volume)
     file_warp = None  # --wires or --lattice (they exclude each other)

@@ -205,9 +205,11 @@ def add_series_arg(p: argparse.ArgumentParser) -> None:
 
 
 def load_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The keywords of :func:`voxwarp.inputs.load_input` that ``--axis-order`` and
-    ``--series`` give (only those given)."""
-    out: dict[str, Any] = {}
+    """The keywords of :func:`voxwarp.inputs.load_input` that the input options give:
+    ``--spacing``, ``--downsample`` and ``--nan`` where the command has them, and
+    ``--axis-order`` and ``--series`` when given."""
+    names = {"spacing": "spacing", "downsample": "downsample", "nan": "nan_policy"}
+    out: dict[str, Any] = {kw: getattr(args, a) for a, kw in names.items() if hasattr(args, a)}
     if getattr(args, "axis_order", None) is not None:
         out["axis_order"] = args.axis_order
     if getattr(args, "series", None) is not None:
