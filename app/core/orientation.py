@@ -49,8 +49,19 @@ ANATOMICAL_VIEWS: dict[str, str] = {
 #: Letters for the positive and negative end of each RAS world axis.
 _LETTERS = (("R", "L"), ("A", "P"), ("S", "I"))
 
-#: RAS <-> LPS: negate x and y (its own inverse).
-LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0])
+#: Patient spaces files use, with the signs that take their x and y to RAS.
+PATIENT_SPACES: dict[str, tuple[float, float]] = {
+    "RAS": (1.0, 1.0),
+    "LPS": (-1.0, -1.0),  # DICOM, ITK
+    "LAS": (-1.0, 1.0),
+}
+
+
+def affine_to_ras(affine: np.ndarray, space: str) -> np.ndarray:
+    """A 4x4 index -> world ``affine`` in patient ``space`` (a key of
+    :data:`PATIENT_SPACES`) as the same map into RAS (x and y negated as needed)."""
+    fx, fy = PATIENT_SPACES[space]
+    return np.diag([fx, fy, 1.0, 1.0]) @ np.asarray(affine, dtype=np.float64)
 
 
 def axis_letters(axis: int, sign: float) -> str:

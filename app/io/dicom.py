@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.limits import check_load_bytes
-from voxwarp.core.orientation import LPS_TO_RAS
+from voxwarp.core.orientation import affine_to_ras
 from voxwarp.errors import VolumeError
 from voxwarp.io.loaded import Loaded, floats, rescale, to_float, warn
 
@@ -229,9 +229,7 @@ def _ras_affine(
     lps[:3, 1] = col / np.linalg.norm(col) * spacing[1]
     lps[:3, 2] = normal / np.linalg.norm(normal) * spacing[2]
     lps[:3, 3] = first_ipp
-    to_ras = np.eye(4)
-    to_ras[:3, :3] = LPS_TO_RAS
-    return to_ras @ lps, spacing
+    return affine_to_ras(lps, "LPS"), spacing
 
 
 def _pixels(p: Path, full: Any) -> np.ndarray:

@@ -63,6 +63,7 @@ import numpy as np
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
+from voxwarp.core.orientation import PATIENT_SPACES, affine_to_ras
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
 from voxwarp.core.volume import short_repr as _short
@@ -442,16 +443,11 @@ def _array_affine(affine: Any, space: Any, spacing: Any, origin: Any) -> np.ndar
     return _to_ras(a, space, "space=")
 
 
-#: Sign flips from a patient space to RAS.
-_SPACE_TO_RAS = {"RAS": (1.0, 1.0), "LPS": (-1.0, -1.0), "LAS": (-1.0, 1.0)}
-
-
 def _to_ras(affine: np.ndarray, space: Any, where: str) -> np.ndarray:
     """``affine`` (in ``space``: "RAS", "LPS" or "LAS") as a RAS affine."""
-    if space not in _SPACE_TO_RAS:
+    if space not in PATIENT_SPACES:
         raise VolumeError(f"{where} must be 'RAS' or 'LPS'; got {_short(space)}.")
-    fx, fy = _SPACE_TO_RAS[space]
-    return np.diag([fx, fy, 1.0, 1.0]) @ affine
+    return affine_to_ras(affine, space)
 
 
 def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
