@@ -280,11 +280,13 @@ class Volume:
         m[:3, 3] = -(m[:3, :3] @ np.asarray(self.origin)) + 0.5
         return m
 
-    def with_geometry(self, **changes: object) -> Volume:
-        """The same voxels with some geometry fields changed (``spacing``, ``origin``...)."""
+    def with_geometry(self, data: np.ndarray | None = None, **changes: object) -> Volume:
+        """The same voxels (or ``data``) with some geometry fields changed (``spacing``,
+        ``origin``...); name, source, units and the other fields are kept."""
         kw = {name: getattr(self, name) for name in _GEOMETRY_FIELDS}
         kw.update(changes)
-        return Volume(self.data, name=self.name, source=self.source, units=self.units, **kw)
+        voxels = self.data if data is None else data
+        return Volume(voxels, name=self.name, source=self.source, units=self.units, **kw)
 
     # ------------------------------------------------------------------ values
     @property
@@ -341,9 +343,7 @@ class Volume:
             d = np.rint(d).astype(self.dtype)
         sp = np.asarray(self.spacing) * f
         org = self.index_to_world(0.5 * (f - 1))
-        kw = {name: getattr(self, name) for name in _GEOMETRY_FIELDS}
-        kw.update(spacing=tuple(sp), origin=tuple(org))
-        return Volume(d, name=self.name, source=self.source, units=self.units, **kw)
+        return self.with_geometry(d, spacing=tuple(sp), origin=tuple(org))
 
     def __repr__(self) -> str:
         extra = f", orientation={self.orientation!r}" if self.space else ""
