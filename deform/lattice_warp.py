@@ -90,7 +90,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from voxwarp.deform.offset_field import _cell_reduce, _window_reduce
+from voxwarp.deform.offset_field import cell_reduce, window_reduce
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
 
@@ -661,8 +661,8 @@ class LatticeWarp(Warp):
                 rows = np.flatnonzero(which.ravel() == k)
                 i = i0[rows]
                 w = tuple(int(v) for v in size)
-                ql = _window_reduce(cell_lo, w, np.minimum, cache_lo)[i[:, 0], i[:, 1], i[:, 2]]
-                qh = _window_reduce(cell_hi, w, np.maximum, cache_hi)[i[:, 0], i[:, 1], i[:, 2]]
+                ql = window_reduce(cell_lo, w, np.minimum, cache_lo)[i[:, 0], i[:, 1], i[:, 2]]
+                qh = window_reduce(cell_hi, w, np.maximum, cache_hi)[i[:, 0], i[:, 1], i[:, 2]]
                 a[sel[rows]] = ql
                 b[sel[rows]] = qh
         if self.boundary_on_box:
@@ -684,10 +684,10 @@ class LatticeWarp(Warp):
             near = field[..., 3] > 0
             # a cell counts when any corner is near (the seed's alpha is then > 0)
             masked = np.where(near[..., None], q, np.inf)
-            valid = np.isfinite(_cell_reduce(masked, np.minimum)).all(axis=-1)
+            valid = np.isfinite(cell_reduce(masked, np.minimum)).all(axis=-1)
             m = self.cell_margins()[..., None]
-            c_lo = _cell_reduce(q, np.minimum) - m
-            c_hi = _cell_reduce(q, np.maximum) + m
+            c_lo = cell_reduce(q, np.minimum) - m
+            c_hi = cell_reduce(q, np.maximum) + m
             self._cell_ranges = (
                 np.where(valid[..., None], c_lo, np.inf),
                 np.where(valid[..., None], c_hi, -np.inf),

@@ -497,8 +497,8 @@ class OffsetFieldWarp(Warp):
         h = (self.hi - self.lo) / np.maximum(n - 1, 1)
         # RGBA16F rounding: 2^-11 relative, or a subnormal step (6e-8); 0 stays 0
         slack = np.abs(field) * 2.0**-10 + np.where(field != 0, 6e-8, 0.0)
-        cell_lo = _cell_reduce(-field - slack, np.minimum)
-        cell_hi = _cell_reduce(-field + slack, np.maximum)
+        cell_lo = cell_reduce(-field - slack, np.minimum)
+        cell_hi = cell_reduce(-field + slack, np.maximum)
         ilo = np.clip(np.floor((lo - self.lo) / h), 0, cells - 1).astype(np.int64)
         ihi = np.clip(np.floor((hi - self.lo) / h), 0, cells - 1).astype(np.int64)
         # windows rounded up to powers of two (a wider window only loosens the range):
@@ -513,12 +513,8 @@ class OffsetFieldWarp(Warp):
             sel = np.flatnonzero(which.ravel() == s)
             i = ilo[sel]
             w = tuple(int(v) for v in size)
-            out_lo[sel] = _window_reduce(cell_lo, w, np.minimum, cache_lo)[
-                i[:, 0], i[:, 1], i[:, 2]
-            ]
-            out_hi[sel] = _window_reduce(cell_hi, w, np.maximum, cache_hi)[
-                i[:, 0], i[:, 1], i[:, 2]
-            ]
+            out_lo[sel] = window_reduce(cell_lo, w, np.minimum, cache_lo)[i[:, 0], i[:, 1], i[:, 2]]
+            out_hi[sel] = window_reduce(cell_hi, w, np.maximum, cache_hi)[i[:, 0], i[:, 1], i[:, 2]]
         # where the box leaves the grid box the field is 0
         outside = np.any((lo < self.lo) | (hi > self.hi), axis=1)
         out_lo[outside] = np.minimum(out_lo[outside], 0.0)
@@ -1031,7 +1027,7 @@ def element_model_warp(
     return warp
 
 
-def _cell_reduce(node: np.ndarray, op: Any) -> np.ndarray:
+def cell_reduce(node: np.ndarray, op: Any) -> np.ndarray:
     """Per grid cell, ``op`` over its (up to) 8 corner nodes; (cells..., 3)."""
     cell = node
     for axis in range(3):
@@ -1048,7 +1044,7 @@ def _part(ndim: int, axis: int, start: int, stop: int | None) -> tuple[slice, ..
     return tuple(sl)
 
 
-def _window_reduce(
+def window_reduce(
     cell: np.ndarray,
     width: Sequence[int],
     op: Any,

@@ -50,6 +50,7 @@ _BUILT_IN: dict[str, str] = {
     "offset_field": "voxwarp.deform.offset_field",
     "wires": "voxwarp.deform.wires",
     "lattice": "voxwarp.deform.lattice_warp",
+    "displacement_field": "voxwarp.deform.displacement_field",
 }
 
 
@@ -65,8 +66,8 @@ def register_warp(cls: type[Warp]) -> type[Warp]:
     return cls
 
 
-def warp_from_dict(d: Mapping[str, Any]) -> Warp:
-    """Rebuild a warp from its :meth:`Warp.to_dict` form (scene JSON)."""
+def warp_class(d: Mapping[str, Any]) -> type[Warp]:
+    """The warp class a scene-JSON warp entry names (loading a built-in kind's module)."""
     if not isinstance(d, Mapping) or "type" not in d:
         raise WarpError(f"a warp entry must be an object with a 'type' key; got {d!r:.80}")
     kind = d["type"]
@@ -74,7 +75,12 @@ def warp_from_dict(d: Mapping[str, Any]) -> Warp:
         _load_built_in(kind)
     if not isinstance(kind, str) or kind not in _REGISTRY:
         raise WarpError(f"unknown warp type {kind!r}; known types: {known_warps()}")
-    return _REGISTRY[kind].from_dict(d)
+    return _REGISTRY[kind]
+
+
+def warp_from_dict(d: Mapping[str, Any]) -> Warp:
+    """Rebuild a warp from its :meth:`Warp.to_dict` form (scene JSON)."""
+    return warp_class(d).from_dict(d)
 
 
 def known_warps() -> list[str]:
@@ -104,6 +110,40 @@ class Warp(ABC):
             e[a] = eps
             out[:, :, a] = (self.apply(p + e) - self.apply(p - e)) / (2 * eps)
         return out
+
+    #: Tolerance (mm) of the numerical forward map of :meth:`forward`: the residual
+    #: ``|apply(forward(x)) - x|`` it iterates down to.
+    forward_tolerance: ClassVar[float] = 1e-4
+    #: Newton steps :meth:`forward` takes at most.
+    forward_steps: ClassVar[int] = 30
+    #: Scene-JSON keys of :meth:`to_dict` whose values are file paths: a scene stores them
+    #: relative to its own folder and resolves them before :meth:`from_dict`.
+    file_keys: ClassVar[tuple[str, ...]] = ()
+
+    def forward(self, points: np.ndarray) -> np.ndarray:
+        """Original -> deformed: the point ``p`` with ``apply(p) = x``, for (N, 3) points.
+
+        This moves meshes and handles with the volume (the raycaster needs only
+        :meth:`apply`). The default solves ``apply(p) = x`` by Newton steps with
+        :meth:`jacobian`, from ``p_0 = 2 x - apply(x)``, until the residual is below
+        :attr:`forward_tolerance` mm; families with a closed form override it. A point
+        that does not converge (the warp folds there) raises :class:`WarpError`
+        naming how many points failed and the largest residual.
+        """
+        x = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        p = 2.0 * x - self.apply(x)
+        for _ in range(self.forward_steps):
+            r = self.apply(p) - x
+            bad = np.linalg.norm(r, axis=1) > self.forward_tolerance
+            if not np.any(bad):
+                return p
+            j = self.jacobian(p[bad])
+            ok = np.abs(np.linalg.det(j)) > 1e-12
+            step = np.zeros((int(bad.sum()), 3))
+            step[ok] = np.linalg.solve(j[ok], r[bad][ok][..., None])[..., 0]
+            step[~ok] = r[bad][~ok]
+            p[bad] -= step
+        return check_forward(self, p, x)
 
     @property
     def is_affine(self) -> bool:
@@ -212,6 +252,10 @@ class IdentityWarp(Warp):
         """Return the points unchanged (as float64 (N, 3))."""
         return np.atleast_2d(np.asarray(points, dtype=np.float64)).copy()
 
+    def forward(self, points: np.ndarray) -> np.ndarray:
+        """Return the points unchanged."""
+        return self.apply(points)
+
     def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
         """Identity matrices."""
         n = np.atleast_2d(points).shape[0]
@@ -273,14 +317,19 @@ class AffineWarp(Warp):
     matrix
         The *forward* transform, original -> deformed, in world mm: the object appears
         moved by this matrix. The GLSL warp applies its inverse (deformed -> original).
+
+    Attributes
+    ----------
+    forward_matrix, inverse : numpy.ndarray
+        The 4x4 forward (original -> deformed) matrix and its inverse.
     """
 
     kind = "affine"
     glsl_file = "warp_affine.glsl"
 
     def __init__(self, matrix: Any) -> None:
-        self.forward = _as_matrix4(matrix, "AffineWarp matrix")
-        self.inverse = np.linalg.inv(self.forward)
+        self.forward_matrix = _as_matrix4(matrix, "AffineWarp matrix")
+        self.inverse = np.linalg.inv(self.forward_matrix)
 
     @classmethod
     def translation(cls, offset: Sequence[float]) -> AffineWarp:
@@ -312,6 +361,11 @@ class AffineWarp(Warp):
         p = np.atleast_2d(np.asarray(points, dtype=np.float64))
         return p @ self.inverse[:3, :3].T + self.inverse[:3, 3]
 
+    def forward(self, points: np.ndarray) -> np.ndarray:
+        """Original -> deformed: the forward matrix applied to (N, 3) points."""
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        return p @ self.forward_matrix[:3, :3].T + self.forward_matrix[:3, 3]
+
     def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
         """The constant linear part of the inverse."""
         n = np.atleast_2d(points).shape[0]
@@ -329,7 +383,7 @@ class AffineWarp(Warp):
     def deformed_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Box around the forward image of the 8 corners of [lo, hi]."""
         c = box_corners(lo, hi)
-        f = c @ self.forward[:3, :3].T + self.forward[:3, 3]
+        f = c @ self.forward_matrix[:3, :3].T + self.forward_matrix[:3, 3]
         return f.min(axis=0), f.max(axis=0)
 
     @property
@@ -357,7 +411,7 @@ class AffineWarp(Warp):
 
     def to_dict(self) -> dict[str, Any]:
         """``{"type": "affine", "matrix": 4x4 nested list}`` (forward matrix)."""
-        return {"type": self.kind, "matrix": self.forward.tolist()}
+        return {"type": self.kind, "matrix": self.forward_matrix.tolist()}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> AffineWarp:
@@ -398,6 +452,45 @@ def box_corners(lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     idx = np.array([[i, j, k] for k in (0, 1) for j in (0, 1) for i in (0, 1)], dtype=float)
     return lo + idx * (hi - lo)
+
+
+def check_forward(warp: Warp, p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Return ``p`` if ``warp.apply(p)`` is within the warp's forward tolerance of ``x``;
+    otherwise raise :class:`WarpError` saying where the forward map failed."""
+    err = np.linalg.norm(warp.apply(p) - x, axis=1)
+    bad = ~(err <= warp.forward_tolerance)
+    if np.any(bad):
+        worst = int(np.nanargmax(np.where(np.isfinite(err), err, np.inf)))
+        raise WarpError(
+            f"the {warp.kind} warp has no forward map at {int(bad.sum())} of {len(x)} points"
+            f" (largest residual {float(err[worst]):.3g} mm at"
+            f" {np.round(x[worst], 2).tolist()}): the deformation folds there; smooth it"
+            " or keep meshes out of the folded region"
+        )
+    return p
+
+
+def chain_forward(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:
+    """Original -> deformed through a chain: the forward maps, last warp first.
+
+    The inverse of :func:`chain_apply`: ``chain_apply(warps, chain_forward(warps, x))``
+    is ``x`` within the warps' forward tolerances. Meshes and handles follow the volume
+    through it.
+    """
+    p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    for w in reversed(list(warps)):
+        p = w.forward(p)
+    return p
+
+
+def chain_jacobian(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:
+    """Jacobians (N, 3, 3) of :func:`chain_apply` by the chain rule (deformed points)."""
+    q = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    out = np.broadcast_to(np.eye(3), (len(q), 3, 3)).copy()
+    for w in warps:
+        out = w.jacobian(q) @ out
+        q = w.apply(q)
+    return out
 
 
 def chain_apply(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:

@@ -556,7 +556,7 @@ def test_placed_handles_are_the_placement_matrix_times_the_grid(session: EditSes
     assert isinstance(warps[0], AffineWarp)
     assert isinstance(warps[1], OffsetFieldWarp)
     assert isinstance(warps[2], AffineWarp)
-    np.testing.assert_allclose(warps[0].forward, m)
+    np.testing.assert_allclose(warps[0].forward_matrix, m)
     # the placement is rotation and scale about the box centre, then the translation
     np.testing.assert_allclose(
         m[:3, :3] @ (0.5 * (lo + hi)) + m[:3, 3], 0.5 * (lo + hi) + PLACEMENT.translate

@@ -310,7 +310,7 @@ def test_translation_shifts_and_stretch_brightens_xray(offscreen: Any, warp_cls:
     )
     np.testing.assert_allclose(moved[:, k:, 0], base[:, :-k, 0], atol=1e-4)
     assert np.all(moved[:, :k, 0] < 1e-6)
-    stretch = warp_cls(AffineWarp.scaling((1.0, 1.0, 1.5), center=vol.center).forward)
+    stretch = warp_cls(AffineWarp.scaling((1.0, 1.0, 1.5), center=vol.center).forward_matrix)
     scene = grey_scene(vol, "xray", "+z", cam, window=window, warps=[stretch], step=0.25)
     tall = render(offscreen, scene, size)[..., 0].astype(float)
     ref = render(offscreen, grey_scene(vol, "xray", "+z", cam, window=window, step=0.25), size)

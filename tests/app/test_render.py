@@ -386,7 +386,7 @@ def test_empty_space_skipping_does_not_change_image(
     vol = phantom()
     if rotated:
         fold: Any = AffineWarp.rotation((0, 0, 1), 90.0, center=vol.center)
-        generic: Any = GenericAffine(fold.forward)
+        generic: Any = GenericAffine(fold.forward_matrix)
     else:
         fold, generic = IdentityWarp(), GenericIdentity()
     scene = phantom_scene(mode=mode, view=(30, 20), jitter=True, seed=0)

@@ -254,7 +254,7 @@ def test_warps_round_trip() -> None:
     assert [type(w) for w in back.warps] == [type(w) for w in warps]
     for w, b in zip(warps, back.warps, strict=True):
         if isinstance(w, AffineWarp):
-            np.testing.assert_array_equal(w.forward, b.forward)
+            np.testing.assert_array_equal(w.forward_matrix, b.forward_matrix)
     pts = np.random.default_rng(0).uniform(-10, 10, (100, 3))
     np.testing.assert_allclose(chain_apply(back.warps, pts), chain_apply(warps, pts), atol=1e-12)
     np.testing.assert_allclose(back.deformed_bounds(), scene.deformed_bounds())

@@ -84,12 +84,12 @@ def test_identity_lattice_is_the_identity_everywhere() -> None:
 
 def test_linear_lattice_is_the_equivalent_affine_warp() -> None:
     aff = AffineWarp.rotation((1, 2, 0.5), 25.0, center=BOX[0] + 0.5 * SIZE)
-    aff = AffineWarp(AffineWarp.translation((4.0, -3.0, 2.5)).forward @ aff.forward)
+    aff = AffineWarp(AffineWarp.translation((4.0, -3.0, 2.5)).forward_matrix @ aff.forward_matrix)
     # the lattice: the box's unit cube mapped by the affine forward map
     unit_to_box = np.eye(4)
     unit_to_box[:3, :3] = np.diag(SIZE)
     unit_to_box[:3, 3] = BOX[0]
-    w = LatticeWarp(TrilinearGrid.from_matrix(aff.forward @ unit_to_box, cells=2), BOX)
+    w = LatticeWarp(TrilinearGrid.from_matrix(aff.forward_matrix @ unit_to_box, cells=2), BOX)
     assert w.is_affine
     assert w.signature() == "lattice:linear"
     assert w.textures(None) == {}  # folded: no GPU data
@@ -508,13 +508,13 @@ def test_linear_lattice_renders_like_the_affine_warp(offscreen: Callable[..., An
     vol = blobs()
     lo, hi = vol.bounds
     aff = AffineWarp(
-        AffineWarp.translation((3.0, -2.0, 0.0)).forward
-        @ AffineWarp.rotation((0, 0, 1), 20.0, center=0.5 * (lo + hi)).forward
+        AffineWarp.translation((3.0, -2.0, 0.0)).forward_matrix
+        @ AffineWarp.rotation((0, 0, 1), 20.0, center=0.5 * (lo + hi)).forward_matrix
     )
     unit_to_box = np.eye(4)
     unit_to_box[:3, :3] = np.diag(hi - lo)
     unit_to_box[:3, 3] = lo
-    grid = TrilinearGrid.from_matrix(aff.forward @ unit_to_box, cells=2)
+    grid = TrilinearGrid.from_matrix(aff.forward_matrix @ unit_to_box, cells=2)
     folded = LatticeWarp(grid, (lo, hi))
     general = LatticeWarp(grid, (lo, hi), fold_linear=False)
     try:

@@ -677,12 +677,12 @@ def test_update_region_rewrites_only_its_block(gl_ctx: Any) -> None:
 
 @pytest.mark.parametrize("width", [(1, 1, 1), (2, 4, 1), (3, 5, 2), (8, 2, 16)])
 def test_window_reduce_matches_brute_force(width: tuple[int, int, int]) -> None:
-    from voxwarp.deform.offset_field import _window_reduce
+    from voxwarp.deform.offset_field import window_reduce
 
     a = np.random.default_rng(9).normal(size=(9, 7, 6, 3))
     cache: dict = {}
     for op, red in ((np.maximum, np.max), (np.minimum, np.min)):
-        got = _window_reduce(a, width, op, cache if op is np.maximum else None)
+        got = window_reduce(a, width, op, cache if op is np.maximum else None)
         want = np.empty_like(a)
         for i, j, k in np.ndindex(a.shape[:3]):
             block = a[i : i + width[0], j : j + width[1], k : k + width[2]]

@@ -69,7 +69,7 @@ def rng_points(n: int = 200, seed: int = 0, scale: float = 50.0) -> np.ndarray:
 
 def forward(w: AffineWarp, p: np.ndarray) -> np.ndarray:
     """Original -> deformed, from the documented forward matrix."""
-    return p @ w.forward[:3, :3].T + w.forward[:3, 3]
+    return p @ w.forward_matrix[:3, :3].T + w.forward_matrix[:3, 3]
 
 
 def finite_difference_jacobian(w: Warp, p: np.ndarray, eps: float = 1e-5) -> np.ndarray:
@@ -107,7 +107,7 @@ def test_identity_warp() -> None:
     assert w.apply([1, 2, 3]).shape == (1, 3)
 
 
-@pytest.mark.parametrize("w", AFFINES, ids=lambda w: str(np.round(w.forward[:3, 3], 2)))
+@pytest.mark.parametrize("w", AFFINES, ids=lambda w: str(np.round(w.forward_matrix[:3, 3], 2)))
 def test_apply_inverts_forward(w: AffineWarp) -> None:
     p = rng_points()
     np.testing.assert_allclose(w.apply(forward(w, p)), p, atol=1e-10)
@@ -141,7 +141,7 @@ def test_rotation_keeps_its_centre_and_axis_fixed(axis: Sequence[float], degrees
     np.testing.assert_allclose(
         np.linalg.norm(q[1:] - q[:-1], axis=1), np.linalg.norm(p[1:] - p[:-1], axis=1)
     )
-    assert np.linalg.det(w.forward[:3, :3]) == pytest.approx(1.0)
+    assert np.linalg.det(w.forward_matrix[:3, :3]) == pytest.approx(1.0)
 
 
 def test_rotation_90_about_z_maps_x_to_y_forward() -> None:
@@ -157,11 +157,11 @@ def test_rotation_about_a_zero_axis_is_an_error() -> None:
         AffineWarp.rotation((0, 0, 0), 10)
 
 
-@pytest.mark.parametrize("w", AFFINES, ids=lambda w: str(np.round(w.forward[:3, 3], 2)))
+@pytest.mark.parametrize("w", AFFINES, ids=lambda w: str(np.round(w.forward_matrix[:3, 3], 2)))
 def test_affine_jacobian_equals_finite_differences(w: AffineWarp) -> None:
     p = rng_points(30)
     np.testing.assert_allclose(w.jacobian(p), finite_difference_jacobian(w, p), atol=1e-7)
-    np.testing.assert_allclose(w.affine_matrix() @ w.forward, np.eye(4), atol=1e-12)
+    np.testing.assert_allclose(w.affine_matrix() @ w.forward_matrix, np.eye(4), atol=1e-12)
 
 
 def test_default_jacobian_of_a_non_affine_warp() -> None:
@@ -173,7 +173,7 @@ def test_default_jacobian_of_a_non_affine_warp() -> None:
         w.affine_matrix()
 
 
-@pytest.mark.parametrize("w", AFFINES, ids=lambda w: str(np.round(w.forward[:3, 3], 2)))
+@pytest.mark.parametrize("w", AFFINES, ids=lambda w: str(np.round(w.forward_matrix[:3, 3], 2)))
 def test_deformed_bounds_contain_the_forward_image_of_the_box(w: AffineWarp) -> None:
     lo, hi = np.array([-10.0, 0.0, 5.0]), np.array([20.0, 8.0, 40.0])
     dlo, dhi = w.deformed_bounds(lo, hi)
@@ -390,8 +390,10 @@ def test_registry_and_round_trip() -> None:
         back = warp_from_dict(w.to_dict())
         assert type(back) is type(w)
         np.testing.assert_array_equal(back.affine_matrix(), w.affine_matrix())
-    three_by_four = warp_from_dict({"type": "affine", "matrix": AFFINES[4].forward[:3].tolist()})
-    np.testing.assert_array_equal(three_by_four.forward, AFFINES[4].forward)
+    three_by_four = warp_from_dict(
+        {"type": "affine", "matrix": AFFINES[4].forward_matrix[:3].tolist()}
+    )
+    np.testing.assert_array_equal(three_by_four.forward_matrix, AFFINES[4].forward_matrix)
 
 
 @pytest.mark.parametrize(
