@@ -3,7 +3,9 @@
 Core voxwarp renders headless and runs every deformation family; the rest is optional:
 ``gui`` (PySide6), ``movie`` (imageio-ffmpeg, tqdm), ``distributed`` (dask, distributed),
 ``teach`` (matplotlib, Pillow), ``dicom`` (pylibjpeg and its JPEG, JPEG 2000 and RLE
-decoders, for compressed DICOM) and ``all``. Call :func:`require` where a feature starts,
+decoders, for compressed DICOM), ``registration`` (SimpleITK: ITK transform files,
+MetaImage fields, the registration demo), ``segmentation`` (scikit-image: meshes from
+label volumes) and ``all``. Call :func:`require` where a feature starts,
 so a user learns which extra to install before any work is done.
 """
 
@@ -20,6 +22,8 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "distributed": ("dask", "distributed"),
     "teach": ("matplotlib", "PIL"),
     "dicom": ("pylibjpeg", "libjpeg", "openjpeg", "rle"),
+    "registration": ("SimpleITK",),
+    "segmentation": ("skimage",),
 }
 
 
