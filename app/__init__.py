@@ -35,6 +35,7 @@ _PUBLIC: dict[str, str] = {
     "MeshInstance": "voxwarp.core.mesh",
     "instances_from_scene_graph": "voxwarp.core.mesh",
     "load_mesh": "voxwarp.core.mesh",
+    "mesh_from_labels": "voxwarp.core.labels_mesh",
     "OffscreenRenderer": "voxwarp.render.raycaster",
     "Renderer": "voxwarp.render.raycaster",
     "create_context": "voxwarp.render.raycaster",
@@ -64,6 +65,7 @@ __getattr__, __dir__ = exports(__name__, _PUBLIC, {"__version__": _version})
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
     from voxwarp.core.camera import Camera
+    from voxwarp.core.labels_mesh import mesh_from_labels
     from voxwarp.core.mesh import Mesh, MeshInstance, instances_from_scene_graph, load_mesh
     from voxwarp.core.transfer_function import PRESETS, TransferFunction
     from voxwarp.core.volume import Volume

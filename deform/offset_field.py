@@ -181,8 +181,9 @@ class OffsetFieldWarp(Warp):
         texture (z-slices as layers) of ``shape`` texels (xyz = displacement in mm,
         a = material) owned by someone else, e.g. a GPU mass-spring simulation; this
         warp never releases it. Such a warp has no CPU field: :meth:`apply`,
-        :meth:`forward`, :meth:`jacobian` and :meth:`to_dict` round trips need
-        ``displacements``.
+        :meth:`forward` and :meth:`jacobian` read it back through ``field_reader``
+        (once per revision; an error without one), and :meth:`to_dict` round trips
+        need ``displacements``.
     inverse
         ``"approx"``, ``"exact"`` (default) or ``"baked"``, as described above.
         ``"approx"`` is ``"exact"`` with one iteration. ``"baked"`` is the default of
@@ -530,7 +531,7 @@ class OffsetFieldWarp(Warp):
         ``field``: another node field over the same box (the baked inverse, on its own
         node counts) instead of u; 0 outside the box as well.
         """
-        u = self._cpu_field("the CPU reference") if field is None else field
+        u = self._reference_field() if field is None else field
         n = np.asarray(u.shape[:3])
         s = (q - self.lo) / (self.hi - self.lo)
         inside = np.all((s >= 0.0) & (s <= 1.0), axis=1)
@@ -557,13 +558,29 @@ class OffsetFieldWarp(Warp):
         grad[~inside] = 0.0
         return val, grad
 
+    def _reference_field(self) -> np.ndarray:
+        """The field the CPU reference evaluates: the CPU field, or a GPU-owned field
+        read back through ``field_reader`` (once per revision)."""
+        u = self._range_field()
+        if u is None:
+            raise WarpError(
+                "this OffsetFieldWarp's field is owned by a GPU texture (texture_source)"
+                " without a field_reader, so apply/forward/jacobian have no CPU copy; give"
+                " the warp field_reader and revision_source (MassSpring.warp() does)"
+            )
+        return u
+
     def offset(self, points: np.ndarray) -> np.ndarray:
         """The interpolated field ``u(X)`` (N, 3) at original-space points (mm)."""
         x = np.atleast_2d(np.asarray(points, dtype=np.float64))
         return self._interpolate(x)
 
     def forward(self, points: np.ndarray) -> np.ndarray:
-        """Original -> deformed: ``X + u(X)`` for (N, 3) points in mm (tests, picking)."""
+        """Original -> deformed: ``X + u(X)`` for (N, 3) points in mm (meshes, picking).
+
+        Exact (no iteration). A GPU-owned field is read back through its
+        ``field_reader`` once per revision; without one this raises :class:`WarpError`.
+        """
         x = np.atleast_2d(np.asarray(points, dtype=np.float64))
         return x + self._interpolate(x)
 
@@ -604,7 +621,7 @@ class OffsetFieldWarp(Warp):
         field with a compute shader (``shaders/offset_field_bake.comp.glsl``). Cached per
         field version. Returns ``bake_shape + (3,)``.
         """
-        return self._baked_inverse_of(self._cpu_field("baked_inverse()"))
+        return self._baked_inverse_of(self._reference_field())
 
     def _baked_inverse_of(self, u: np.ndarray) -> np.ndarray:
         if self._baked_cpu is not None and self._baked_cpu[0] == self.revision:

@@ -101,7 +101,7 @@ import numpy as np
 from scipy import ndimage
 
 from voxwarp.deform.curves import Curve, minimal_rotation
-from voxwarp.deform.warp import Warp, WarpError, register_warp
+from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
 
 #: most wires in one attribute field (7-bit wire id of the packed layout)
 MAX_WIRES = 128
@@ -1149,6 +1149,23 @@ def _curve_box(curve: Curve) -> tuple[np.ndarray, np.ndarray]:
     return pts.min(axis=0), pts.max(axis=0)
 
 
+def _newton_forward(warp: Warp, p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Newton steps on ``warp.apply(p) = x`` from ``p`` (the base class's iteration from
+    a given seed); unconverged points are left for :func:`check_forward`."""
+    p = p.copy()
+    for _ in range(warp.forward_steps):
+        r = warp.apply(p) - x
+        bad = np.linalg.norm(r, axis=1) > warp.forward_tolerance
+        if not np.any(bad):
+            break
+        j = warp.jacobian(p[bad])
+        ok = np.abs(np.linalg.det(j)) > 1e-12
+        step = r[bad].copy()
+        step[ok] = np.linalg.solve(j[ok], r[bad][ok][..., None])[..., 0]
+        p[bad] -= step
+    return p
+
+
 def _lerp_table(table: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Entries of a table (n, ...) linearly interpolated at table coordinates t (clamped
     to [0, n - 1]); frames come out not re-orthonormalised (neighbouring entries differ
@@ -1320,6 +1337,54 @@ class WireFieldWarp(Warp):
         for wi in np.unique(wire[state == 2]):
             sel = (state == 2) & (wire == wi)
             out[sel] = map_points(self.field.tables[int(wi)], t[sel], p[sel])
+        return out
+
+    def forward(self, points: np.ndarray) -> np.ndarray:
+        """Original -> deformed for (N, 3) points (mm): meshes follow the swept object.
+
+        A point the deformed volume shows in place (``apply(x) = x``) stays. Any other
+        is seeded by the closed-form inverse of the sweep: its fraction u on the base
+        wire is where the base wire's normal plane passes through it (``(x - C(u))
+        . T_b(u) = 0``, interpolated between table entries), and the seed is
+        ``A(u)^-1 (x - b(u))`` near the modified wire; Newton steps with
+        :meth:`jacobian` then remove what the field's coarse t adds, down to
+        :attr:`forward_tolerance`. Points neither in place nor swept (the vacated
+        region, beyond the wire's reach) raise :class:`WarpError`
+        (:func:`~voxwarp.deform.warp.check_forward`).
+        """
+        x = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        p = x.copy()
+        moved = ~(np.linalg.norm(self.apply(x) - x, axis=1) <= self.forward_tolerance)
+        if np.any(moved):
+            seed = self._sweep_seed(x[moved])
+            p[moved] = _newton_forward(self, seed, x[moved])
+        return check_forward(self, p, x)
+
+    def _sweep_seed(self, x: np.ndarray) -> np.ndarray:
+        """Closed-form forward of each point by the wire whose base plane through it
+        lies nearest to the base wire (the point itself where no plane passes)."""
+        best = np.full(len(x), np.inf)
+        out = x.copy()
+        for tab in self.field.tables:
+            normal = tab.base_frames[:, :, 2]  # (n, 3) base tangents
+            for lo in range(0, len(x), 4096):
+                q = x[lo : lo + 4096]
+                side = np.einsum("mnk,nk->mn", q[:, None, :] - tab.base_points[None], normal)
+                cross = (side[:, :-1] >= 0) & (side[:, 1:] < 0)
+                i = np.arange(tab.size - 1)[None, :]
+                frac = side[:, :-1] / np.where(cross, side[:, :-1] - side[:, 1:], 1.0)
+                t = np.where(cross, i + frac, np.nan)
+                near = _lerp_table(tab.base_points, np.nan_to_num(t).ravel()).reshape(*t.shape, 3)
+                dist = np.where(cross, np.linalg.norm(q[:, None, :] - near, axis=2), np.inf)
+                k = np.argmin(dist, axis=1)
+                d = dist[np.arange(len(q)), k]
+                sel = d < best[lo : lo + 4096]
+                if not np.any(sel):
+                    continue
+                a, b = tab.lookup(t[np.arange(len(q)), k][sel])
+                seed = np.linalg.solve(a, (q[sel] - b)[..., None])[..., 0]
+                rows = np.flatnonzero(sel) + lo
+                out[rows], best[rows] = seed, d[sel]
         return out
 
     def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
