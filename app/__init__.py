@@ -25,6 +25,10 @@ _PUBLIC: dict[str, str] = {
     "VolumeError": "voxwarp.errors",
     "VolumeTooLargeError": "voxwarp.errors",
     "VoxwarpError": "voxwarp.errors",
+    "FieldError": "voxwarp.errors",
+    "load_displacement_field": "voxwarp.io.fields",
+    "load_transform": "voxwarp.io.fields",
+    "save_displacement_field": "voxwarp.io.fields",
     "read_image": "voxwarp.io.images",
     "write_image": "voxwarp.io.images",
     "load_volume": "voxwarp.io.volumes",
@@ -70,6 +74,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads t
     from voxwarp.core.transfer_function import PRESETS, TransferFunction
     from voxwarp.core.volume import Volume
     from voxwarp.errors import (
+        FieldError,
         MeshError,
         RenderError,
         SceneError,
@@ -77,6 +82,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads t
         VolumeTooLargeError,
         VoxwarpError,
     )
+    from voxwarp.io.fields import load_displacement_field, load_transform, save_displacement_field
     from voxwarp.io.images import read_image, write_image
     from voxwarp.io.samples import load_sample, sample_names
     from voxwarp.io.volumes import load_volume, save_volume, volume_info, volume_summary

@@ -33,6 +33,10 @@ class MeshError(VoxwarpError, ValueError):
     """A mesh cannot be read or is not usable (format, empty, NaN, bad face indices)."""
 
 
+class FieldError(VoxwarpError, ValueError):
+    """A displacement field or transform file cannot be read or written as asked."""
+
+
 class RenderError(VoxwarpError, RuntimeError):
     """The renderer could not draw (no GL context, shader failure, ...)."""
 

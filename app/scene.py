@@ -39,8 +39,14 @@ from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.scene_paths import path_entry, scene_file
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume, check_finite
-from voxwarp.deform.warp import Warp, WarpError, chain_deformed_bounds, warp_from_dict
-from voxwarp.errors import MeshError, SceneError, VolumeError
+from voxwarp.deform.warp import (
+    Warp,
+    WarpError,
+    chain_deformed_bounds,
+    warp_class,
+    warp_from_dict,
+)
+from voxwarp.errors import FieldError, MeshError, SceneError, VolumeError
 
 #: Largest volume (bytes) a scene JSON embeds instead of referring to a file.
 EMBED_LIMIT_BYTES = 8 * 1024 * 1024
@@ -438,7 +444,8 @@ class Scene:
             return self.camera
         lo, hi = self.deformed_bounds() if self.frame == "deformed" else self.volume.bounds
         if self._meshes:
-            mlo, mhi = mesh_instances_bounds(self._meshes)  # type: ignore[misc]
+            warps = self.warps if self.frame == "deformed" else ()
+            mlo, mhi = mesh_instances_bounds(self._meshes, warps)  # type: ignore[misc]
             lo, hi = np.minimum(lo, mlo), np.maximum(hi, mhi)
         return Camera.fit(lo, hi, self.view, self.projection, fov=self.fov, zoom=self.zoom)
 
@@ -484,7 +491,7 @@ class Scene:
             "view": self.view if isinstance(self.view, str) else list(self.view),
             "projection": self.projection,
             "step": self.step,
-            "warps": [w.to_dict() for w in self.warps],
+            "warps": [_warp_entry(w, base_dir) for w in self.warps],
             "window": list(self._window) if self._window is not None else None,
             "clip_box": [list(c) for c in self.clip_box] if self.clip_box else None,
             "jitter": self.jitter,
@@ -525,10 +532,10 @@ class Scene:
         check_scene_json(d)
         volume = _volume_from_dict(d["volume"], base_dir)
         try:
-            warps = [warp_from_dict(w) for w in (d.get("warps") or [])]
+            warps = [warp_from_dict(_resolved_warp(w, base_dir)) for w in (d.get("warps") or [])]
             for w in warps:
                 w.bind_volume(volume)
-        except (WarpError, TypeError) as exc:
+        except (WarpError, FieldError, TypeError) as exc:
             raise SceneError(f"invalid warp in scene: {exc}") from exc
         tf = d.get("transfer_function")  # absent: the modality's default
         if isinstance(tf, Mapping):
@@ -795,6 +802,31 @@ def _with_stated_geometry(volume: Volume, spacing: Any, origin: Any) -> Volume:
     if origin is not None and not np.allclose(np.asarray(origin, float), volume.origin):
         changes["origin"] = origin
     return volume.with_geometry(**changes) if changes else volume
+
+
+def _warp_entry(warp: Warp, base_dir: str | os.PathLike | None) -> dict[str, Any]:
+    """``warp.to_dict()`` with its file paths (:attr:`Warp.file_keys`) relative to the
+    scene's folder."""
+    d = warp.to_dict()
+    for key in warp.file_keys:
+        if isinstance(d.get(key), str):
+            d[key] = path_entry(d[key], base_dir)
+    return d
+
+
+def _resolved_warp(d: Any, base_dir: str | os.PathLike | None) -> Any:
+    """A scene's warp entry with its file paths resolved against the scene's folder
+    (:func:`~voxwarp.core.scene_paths.scene_file`: the file must exist)."""
+    keys = warp_class(d).file_keys
+    if not any(k in d for k in keys):
+        return d
+    import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed warps
+
+    out = dict(d)
+    for key in keys:
+        if key in out:
+            out[key] = str(scene_file(out[key], base_dir, f"{d['type']} warp", SceneError))
+    return out
 
 
 def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:

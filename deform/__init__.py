@@ -16,6 +16,7 @@ _PUBLIC: dict[str, str] = {
     "ChainMail": "voxwarp.deform.chainmail",
     "MoveStats": "voxwarp.deform.chainmail",
     "ChainMailError": "voxwarp.deform.chainmail_model",
+    "DisplacementFieldWarp": "voxwarp.deform.displacement_field",
     "ElementGrid": "voxwarp.deform.elements",
     "ElementGridError": "voxwarp.deform.elements",
     "ElementModel": "voxwarp.deform.element_model",
@@ -50,6 +51,7 @@ __getattr__, __dir__ = exports(__name__, _PUBLIC)
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
     from voxwarp.deform.chainmail import ChainMail, MoveStats
     from voxwarp.deform.chainmail_model import ChainMailError
+    from voxwarp.deform.displacement_field import DisplacementFieldWarp
     from voxwarp.deform.element_model import ElementModel
     from voxwarp.deform.elements import ElementGrid, ElementGridError
     from voxwarp.deform.lattice_warp import LatticeWarp

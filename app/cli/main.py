@@ -761,6 +761,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     _check_distinct_outputs(args)
     obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
     scene = _scene_from_args(obj, args)
+    fields = _field_warps(args)
+    if fields:  # nearest the displayed (fixed) space; the models act in the volume's
+        scene = scene.copy(warps=[*fields, *scene.warps])
     grid = _deform_grid(args, scene.volume)
     file_warp = None  # --wires or --lattice (they exclude each other)
     if args.wires is not None:  # built before any GL work: bad wires fail fast
@@ -1089,6 +1092,41 @@ def _field_scale(text: str) -> int:
     return v
 
 
+def _add_field_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "displacement fields (--displacement FILE)",
+        "Render the volume through registration results without resampling it: the"
+        " volume is the moving image, shown in the fixed image's space. ITK/ANTs/SimpleITK"
+        " fields (pull-back, LPS) as NIfTI, NRRD, MetaImage, .npz, or ITK transform files"
+        " (.h5, .tfm: displacement fields, B-splines, affines, composites). Repeat the"
+        " option to compose: the first field is applied first to the displayed point"
+        " (the reverse of antsApplyTransforms' -t order).",
+    )
+    g.add_argument(
+        "--displacement",
+        action="append",
+        metavar="FILE",
+        help="a displacement field or ITK transform file (repeatable)",
+    )
+    g.add_argument(
+        "--field-convention",
+        choices=("itk", "ras", "voxel"),
+        help="what the vectors of a field whose header does not say mean: itk (LPS mm),"
+        " ras (RAS mm) or voxel (index units, as voxelmorph); NIfTI intents and NRRD"
+        " spaces say it themselves",
+    )
+
+
+def _field_warps(args: argparse.Namespace) -> list[Any]:
+    """The warps of every ``--displacement`` file, in order (fails before any GL work)."""
+    from voxwarp.io.fields import load_transform
+
+    warps: list[Any] = []
+    for path in args.displacement or []:
+        warps += load_transform(path, convention=args.field_convention)
+    return warps
+
+
 def _add_wire_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "wires (--wires FILE)",
@@ -1331,6 +1369,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     ropt.add_render_options(pr)
     _add_deform_args(pr)
     _add_wire_args(pr)
+    _add_field_args(pr)
     pr.set_defaults(func=cmd_render)
     add_animate_parser(sub)
 

@@ -878,6 +878,18 @@ def _nrrd_data_names(path: Path) -> tuple[str, list[str]]:
     return "", []
 
 
+def data_file_outside(header: Path, name: str) -> Path | None:
+    """The data file ``name`` a detached header names, resolved, when it lies outside the
+    header's folder (and subfolders) and the allowed folders (:func:`allowed_data_dirs`,
+    ``$VOXWARP_ALLOW_DATA_DIRS``); ``None`` when reading it is allowed."""
+    home = header.parent.resolve()
+    allowed = [home, *_NRRD_DATA_DIRS.get()]
+    env = os.environ.get(NRRD_DATA_DIRS_ENV, "")
+    allowed += [Path(os.path.expanduser(d)).resolve() for d in env.split(os.pathsep) if d]
+    target = (home / os.path.expanduser(name)).resolve()  # absolute names stay as they are
+    return None if any(target.is_relative_to(f) for f in allowed) else target
+
+
 def _check_nrrd_data_files(path: Path) -> None:
     """Refuse a detached NRRD data file outside the header's folder (and its subfolders)
     and the folders allowed by ``allow_data_dirs=`` / ``$VOXWARP_ALLOW_DATA_DIRS``: a
@@ -885,18 +897,14 @@ def _check_nrrd_data_files(path: Path) -> None:
     value, names = _nrrd_data_names(path)
     if not names:
         return
-    home = path.parent.resolve()
-    allowed = [home, *_NRRD_DATA_DIRS.get()]
-    env = os.environ.get(NRRD_DATA_DIRS_ENV, "")
-    allowed += [Path(os.path.expanduser(d)).resolve() for d in env.split(os.pathsep) if d]
     for name in names:
         if "\x00" in name:
             raise VolumeError(
                 f"the NRRD header {path} names a data file with a NUL byte ({name!r});"
                 " fix the 'data file' line of the header"
             )
-        target = (home / os.path.expanduser(name)).resolve()  # absolute names stay as they are
-        if not any(target.is_relative_to(folder) for folder in allowed):
+        target = data_file_outside(path, name)
+        if target is not None:
             shown = name if str(target) == name else f"{name} ({target})"
             raise VolumeError(
                 f"the NRRD header {path} names the data file {shown}, outside the header's"
