@@ -1110,11 +1110,19 @@ def instances_from_scene_graph(
 
 
 def mesh_instances_bounds(
-    instances: Sequence[MeshInstance],
+    instances: Sequence[MeshInstance], warps: Sequence[Any] = ()
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Union of the instances' :meth:`MeshInstance.world_bounds`, or None without any."""
+    """Union of the instances' :meth:`MeshInstance.world_bounds`, or None without any.
+
+    ``warps``: a scene's warp chain; the box then holds the meshes moved by its forward
+    map (:func:`voxwarp.core.mesh_warp.warped_bounds`), as they are drawn.
+    """
     if not instances:
         return None
+    from voxwarp.core.mesh_warp import moves_meshes, warped_bounds
+
+    if moves_meshes(warps):
+        return warped_bounds(instances, warps)
     boxes = [inst.world_bounds() for inst in instances]
     lo = np.min([b[0] for b in boxes], axis=0)
     hi = np.max([b[1] for b in boxes], axis=0)

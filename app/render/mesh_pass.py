@@ -18,6 +18,12 @@ Here (``shaders/mesh.vert.glsl``):
 * normals follow section 4.2, per instance: ``"normal"`` (``J^-T n``) or ``"tangent"``
   (two tangents through ``J``, crossed).
 
+With a scene's warp chain (``draw(..., warps=...)``) the meshes move with the volume:
+an all-affine chain joins the instance matrix; any other chain is baked per vertex on the
+CPU through its forward map (:mod:`voxwarp.core.mesh_warp`) and drawn by the ``LINEAR``
+program with an identity model matrix, its buffers cached per mesh, transform and warp
+revisions.
+
 Fragments get Blinn-Phong shading with a headlight, lit from both sides, and are written
 premultiplied with depth. Opaque instances are drawn first with depth writes; translucent
 ones (alpha < 1) after them, blended (premultiplied "over") without depth writes and
@@ -31,7 +37,7 @@ uses it for mixed scenes (meshes depth-composited with the volume).
 from __future__ import annotations
 
 import weakref
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 import numpy as np
@@ -39,8 +45,10 @@ import numpy as np
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance
+from voxwarp.core.mesh_warp import affine_forward, moves_meshes, warped_geometry
 from voxwarp.deform import gl_programs
 from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.errors import RenderError
 
 #: Blinn-Phong ambient, diffuse, specular, shininess (as the raycaster's
@@ -51,10 +59,19 @@ POSITIONS = ("exact", "hardware")
 
 
 class _MeshGPU:
-    """Interleaved position + normal buffer and index buffer of one mesh."""
+    """Interleaved position + normal buffer and index buffer of one mesh (its own
+    vertices, or ``vertices``/``normals`` baked through a warp chain)."""
 
-    def __init__(self, ctx: Any, mesh: Mesh) -> None:
-        data = np.concatenate([mesh.vertices, mesh.normals], axis=1).astype(np.float32)
+    def __init__(
+        self,
+        ctx: Any,
+        mesh: Mesh,
+        vertices: np.ndarray | None = None,
+        normals: np.ndarray | None = None,
+    ) -> None:
+        v = mesh.vertices if vertices is None else vertices
+        n = mesh.normals if normals is None else normals
+        data = np.concatenate([v, n], axis=1).astype(np.float32)
         self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
         self.ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, dtype=np.uint32).tobytes())
         self.count = mesh.n_faces * 3
@@ -102,6 +119,8 @@ class MeshRenderer:
         self.position = position
         self._programs: dict[tuple, Any] = {}
         self._meshes: dict[int, tuple[weakref.ref, _MeshGPU]] = {}
+        #: buffers of instances baked through a warp chain, by mesh_warp.geometry_key
+        self._baked: dict[Hashable, tuple[weakref.ref, _MeshGPU]] = {}
         self._grids: dict[int, tuple[weakref.ref, Any]] = {}
         #: 1x1 framebuffer bound during transform feedback (drivers such as Mesa check
         #: the bound framebuffer's completeness even with rasterisation discarded)
@@ -159,8 +178,24 @@ class MeshRenderer:
         self._grids[id(grid)] = (weakref.ref(grid), tex)
         return tex
 
+    def _baked_gpu(self, inst: MeshInstance, warps: Sequence[Warp]) -> _MeshGPU:
+        """Buffers of ``inst`` moved by the chain (baked on the CPU once per mesh,
+        transform and warp revisions; the previous revision's buffers are freed)."""
+        try:
+            positions, normals, key = warped_geometry(inst, warps)
+        except WarpError as exc:
+            raise RenderError(f"mesh {inst.name!r} cannot follow the warps: {exc}") from exc
+        hit = self._baked.get(key)
+        if hit is not None and hit[0]() is inst.mesh:
+            return hit[1]
+        for old in [k for k in self._baked if k[:2] == key[:2]]:  # type: ignore[index]
+            self._baked.pop(old)[1].release()
+        gpu = _MeshGPU(self.ctx, inst.mesh, positions, normals)
+        self._baked[key] = (weakref.ref(inst.mesh), gpu)
+        return gpu
+
     def _evict_dead(self) -> None:
-        for cache in (self._meshes, self._grids):
+        for cache in (self._meshes, self._grids, self._baked):
             for key in [k for k, (ref, _) in cache.items() if ref() is None]:
                 cache.pop(key)[1].release()
 
@@ -173,12 +208,17 @@ class MeshRenderer:
         viewport: tuple[int, int, int, int] | None = None,
         *,
         clear: Sequence[float] | None = (0.0, 0.0, 0.0, 0.0),
+        warps: Sequence[Warp] = (),
     ) -> None:
         """Draw ``instances`` seen by ``camera`` into ``framebuffer`` within ``viewport``.
 
         Writes premultiplied colour and depth (the framebuffer needs a depth attachment
         for occlusion). ``clear``: premultiplied RGBA the viewport's colour is cleared to
-        (depth to 1) first; ``None`` draws over what is there.
+        (depth to 1) first; ``None`` draws over what is there. ``warps``: the scene's
+        warp chain; the meshes move with the volume through its forward map (an
+        all-affine chain joins the instance matrix; any other is baked per vertex on the
+        CPU, see :mod:`voxwarp.core.mesh_warp`). A fold on a mesh raises
+        :class:`RenderError`.
         """
         if self._released:
             raise RenderError("this MeshRenderer was released")
@@ -206,20 +246,22 @@ class MeshRenderer:
             eye = (*camera.eye, 1.0)
         else:
             eye = (*camera.rotation[:, 2], 0.0)
-        opaque = [i for i in instances if i.color[3] >= 1.0]
-        translucent = [i for i in instances if i.color[3] < 1.0]
+        warps = list(warps) if moves_meshes(warps) else []
+        drawn = [self._prepared(inst, warps) for inst in instances]
+        opaque = [d for d in drawn if d[0].color[3] >= 1.0]
+        translucent = [d for d in drawn if d[0].color[3] < 1.0]
         ctx.enable(ctx.DEPTH_TEST)
         ctx.disable(ctx.CULL_FACE)
         try:
             ctx.disable(ctx.BLEND)
-            for inst in opaque:
-                self._draw_instance(inst, view_proj, eye)
+            for inst, gpu in opaque:
+                self._draw_instance(inst, gpu, view_proj, eye)
             if translucent:
                 ctx.enable(ctx.BLEND)
                 ctx.blend_func = (ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA)
                 framebuffer.depth_mask = False
-                for inst in translucent:
-                    self._draw_instance(inst, view_proj, eye)
+                for inst, gpu in translucent:
+                    self._draw_instance(inst, gpu, view_proj, eye)
         finally:
             framebuffer.depth_mask = True
             ctx.blend_func = ctx.DEFAULT_BLENDING
@@ -262,10 +304,32 @@ class MeshRenderer:
             normals = normals / length
         return data[:, :3], normals
 
-    def _draw_instance(self, inst: MeshInstance, view_proj: np.ndarray, eye: tuple) -> None:
+    def _prepared(self, inst: MeshInstance, warps: Sequence[Warp]) -> tuple[MeshInstance, _MeshGPU]:
+        """The instance to set uniforms from and the buffers to draw for ``inst`` under
+        the chain: itself; its matrix times the chain's forward matrix; or an identity
+        instance over buffers baked through the chain."""
+        if not warps:
+            return inst, self._mesh_gpu(inst.mesh)
+        forward = affine_forward(warps)
+        if forward is None or inst.is_lattice:
+            gpu = self._baked_gpu(inst, warps)
+            forward, inst_matrix = np.eye(4), None
+        else:
+            gpu, inst_matrix = self._mesh_gpu(inst.mesh), inst.matrix()
+        moved = MeshInstance(
+            inst.mesh,
+            forward if inst_matrix is None else forward @ inst_matrix,
+            color=inst.color,
+            normal_method=inst.normal_method,
+            name=inst.name,
+        )
+        return moved, gpu
+
+    def _draw_instance(
+        self, inst: MeshInstance, gpu: _MeshGPU, view_proj: np.ndarray, eye: tuple
+    ) -> None:
         prog = self._program(not inst.is_lattice)
         self._set_instance_uniforms(prog, inst, view_proj, eye)
-        gpu = self._mesh_gpu(inst.mesh)
         gpu.vao(self.ctx, prog).render(mode=self.ctx.TRIANGLES, vertices=gpu.count)
 
     def _set_instance_uniforms(
@@ -302,9 +366,10 @@ class MeshRenderer:
         """Free every GPU resource this renderer made; idempotent."""
         if self._released:
             return
-        for _, gpu in self._meshes.values():
-            gpu.release()
-        self._meshes.clear()
+        for cache in (self._meshes, self._baked):
+            for _, gpu in cache.values():
+                gpu.release()
+            cache.clear()
         for _, tex in self._grids.values():
             tex.release()
         self._grids.clear()

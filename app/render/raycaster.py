@@ -17,7 +17,9 @@ viewport's size, cleared to the background; the raycaster (``MESH_DEPTH``) then 
 each ray at the mesh surface and composites the volume over that image (front to back,
 premultiplied: ``out = volume + (1 - volume.a) * mesh_over_background``). Opaque meshes
 are exact; translucent ones write no depth, so the whole ray's volume lies over them.
-Without meshes nothing of this runs (same programs, same images).
+The meshes move with the scene's warps (their forward map; see
+:mod:`voxwarp.core.mesh_warp`). Without meshes nothing of this runs (same programs, same
+images).
 
 See ``shaders/raycast.frag.glsl`` for the technique (warp chain, empty-space skipping,
 early ray termination, jitter) and ``docs/benchmarks.md`` for what each part buys on a
@@ -550,13 +552,15 @@ class Renderer:
         if self._mesh_renderer is None:
             self._mesh_renderer = MeshRenderer(self.ctx)
         fbo = self._mesh_framebuffer(w, h)
-        bounds = mesh_instances_bounds(scene.meshes)
+        bounds = mesh_instances_bounds(scene.meshes, scene.warps)
         assert bounds is not None
         lo, hi = bounds
         corners = box_corners(lo, hi)
         reach = float(np.max(np.linalg.norm(corners - cam.center, axis=1)))
         mesh_cam = dataclasses.replace(cam, radius=reach) if reach > cam.radius else cam
-        self._mesh_renderer.draw(scene.meshes, fbo, mesh_cam, clear=frame.background)
+        self._mesh_renderer.draw(
+            scene.meshes, fbo, mesh_cam, clear=frame.background, warps=scene.warps
+        )
         return np.linalg.inv(mesh_cam.view_projection(w / h))
 
     def _mesh_framebuffer(self, w: int, h: int) -> Any:

@@ -1,0 +1,122 @@
+"""Meshes that follow the volume's warp chain: vertices baked on the CPU.
+
+A scene's warps map deformed points to original ones (``chain_apply``); meshes live in
+the original world (they are drawn on the anatomy), so to move with the volume a vertex
+goes the other way, through the chain's forward map
+(:func:`voxwarp.deform.warp.chain_forward`). Normals follow the Jacobian: for a surface
+``f(x) = 0`` of the original space seen in deformed space as ``f(A(p)) = 0`` (A the
+chain), the normal is ``J_A(p)^T n`` (:func:`voxwarp.deform.warp.chain_jacobian`).
+
+:func:`warped_geometry` bakes one instance (its own matrix or lattice first, then the
+chain) and caches the result per mesh object, instance transform and the chain's warps
+and revisions, so an unchanged scene is not baked again each frame. Only the
+:class:`~voxwarp.deform.warp.Warp` interface is used, whatever the families.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections import OrderedDict
+from collections.abc import Hashable, Sequence
+
+import numpy as np
+
+from voxwarp.core.mesh import MeshInstance
+from voxwarp.deform.warp import Warp, chain_forward, chain_jacobian
+
+#: baked instances kept (least recently used dropped first)
+CACHE_SIZE = 32
+
+_CACHE: OrderedDict[Hashable, tuple[weakref.ref, np.ndarray, np.ndarray]] = OrderedDict()
+
+
+def moves_meshes(warps: Sequence[Warp]) -> bool:
+    """True when the chain moves anything: non-empty and not only identity maps."""
+    for w in warps:
+        if not (w.is_affine and np.allclose(w.affine_matrix(), np.eye(4), atol=0.0)):
+            return True
+    return False
+
+
+def affine_forward(warps: Sequence[Warp]) -> np.ndarray | None:
+    """The chain's forward 4x4 matrix (original -> deformed) when every warp is affine,
+    else None (an all-affine chain goes into the instance matrix, no baking)."""
+    if not all(w.is_affine for w in warps):
+        return None
+    m = np.eye(4)
+    for w in warps:  # chain_apply = w_{n-1} ... w_0, so apply = A_{n-1} ... A_0
+        m = w.affine_matrix() @ m
+    return np.linalg.inv(m)
+
+
+def geometry_key(instance: MeshInstance, warps: Sequence[Warp]) -> Hashable:
+    """What a baked instance depends on: the mesh object, its transform and box, and
+    each warp's identity and revision."""
+    t = instance.transform
+    if t is None or isinstance(t, np.ndarray):
+        tkey: Hashable = instance.matrix().tobytes()
+    else:
+        lo, hi = instance.box
+        tkey = (id(t), lo.tobytes(), hi.tobytes())
+    return (id(instance.mesh), tkey, tuple((id(w), w.revision) for w in warps))
+
+
+def warped_geometry(
+    instance: MeshInstance, warps: Sequence[Warp]
+) -> tuple[np.ndarray, np.ndarray, Hashable]:
+    """World positions (N, 3) and unit normals (N, 3) of an instance's vertices moved
+    by the chain's forward map, and the cache key they are stored under.
+
+    Raises :class:`~voxwarp.deform.warp.WarpError` (one line) where the forward map
+    has no solution (the deformation folds there).
+    """
+    key = geometry_key(instance, warps)
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0]() is instance.mesh:
+        _CACHE.move_to_end(key)
+        return hit[1], hit[2], key
+    world, normals = _placed(instance)
+    p = chain_forward(warps, world)
+    j = chain_jacobian(warps, p)
+    n = np.einsum("nji,nj->ni", j, normals)  # J^T n
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    p.setflags(write=False)
+    n.setflags(write=False)
+    _CACHE[key] = (weakref.ref(instance.mesh), p, n)
+    while len(_CACHE) > CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return p, n, key
+
+
+def _placed(instance: MeshInstance) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and normals placed by the instance's own matrix or lattice (CPU)."""
+    mesh = instance.mesh
+    v = mesh.vertices.astype(np.float64)
+    n = mesh.normals.astype(np.float64)
+    world = instance.local_to_world(v)
+    if instance.is_lattice:
+        lo, hi = instance.box
+        jac = np.asarray(instance.transform.jacobian((v - lo) / (hi - lo)))  # type: ignore[union-attr]
+        jac = jac.reshape(-1, 3, 3) / (hi - lo)[None, None, :]
+    else:
+        jac = np.broadcast_to(instance.matrix()[:3, :3], (len(v), 3, 3))
+    ok = np.abs(np.linalg.det(jac)) > 1e-300
+    out = n.copy()
+    out[ok] = np.linalg.solve(np.transpose(jac[ok], (0, 2, 1)), n[ok][..., None])[..., 0]
+    return world, out
+
+
+def warped_bounds(
+    instances: Sequence[MeshInstance], warps: Sequence[Warp]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Box of the instances moved by the chain (None without instances)."""
+    if not instances:
+        return None
+    pts = [warped_geometry(inst, warps)[0] for inst in instances]
+    return (
+        np.min([p.min(axis=0) for p in pts], axis=0),
+        np.max([p.max(axis=0) for p in pts], axis=0),
+    )
+
+
+__all__ = ["affine_forward", "geometry_key", "moves_meshes", "warped_bounds", "warped_geometry"]
