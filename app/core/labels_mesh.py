@@ -5,8 +5,9 @@ with Lewiner et al.'s topology-consistent tables) on a label volume and maps the
 vertices through the volume's full index -> world affine (spacing, direction, origin),
 so the mesh lies on the anatomy in patient RAS+ mm whatever the scan's orientation and
 follows the volume's warps like any other mesh. A label's mask is padded by one empty
-voxel so its surface is closed; faces are turned outward (positive enclosed volume after
-the affine, which may mirror), and vertex normals follow the faces.
+voxel so its surface is closed; faces are turned outward (positive enclosed volume),
+whichever side of the level the inside lies on (a mask is high inside, a distance field
+low), and vertex normals follow the faces.
 """
 
 from __future__ import annotations
