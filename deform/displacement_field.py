@@ -413,15 +413,13 @@ class DisplacementFieldWarp(Warp):
     def from_dict(cls, d: Mapping[str, Any]) -> DisplacementFieldWarp:
         """Build from :meth:`to_dict` output (a ``path`` is read by the installed reader)."""
         if "path" in d:
+            part = d.get("part")
+            if part is not None and (not isinstance(part, int) or isinstance(part, bool)):
+                raise WarpError(f"a displacement_field 'part' must be an integer; got {part!r}")
             if not _reader:
                 raise WarpError(
                     "reading a displacement field file needs voxwarp.io.fields"
                     " (load scenes with voxwarp.Scene.load)"
-                )
-            part = d.get("part")
-            if part is not None and (not isinstance(part, int) or isinstance(part, bool)):
-                raise WarpError(
-                    f"a displacement_field entry's 'part' must be an integer; got {part!r}"
                 )
             return _reader[0](str(d["path"]), part)
         try:

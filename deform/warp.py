@@ -464,8 +464,9 @@ def check_forward(warp: Warp, p: np.ndarray, x: np.ndarray) -> np.ndarray:
         raise WarpError(
             f"the {warp.kind} warp has no forward map at {int(bad.sum())} of {len(x)} points"
             f" (largest residual {float(err[worst]):.3g} mm at"
-            f" {np.round(x[worst], 2).tolist()}): the deformation folds there; smooth it"
-            " or keep meshes out of the folded region"
+            f" {np.round(x[worst], 2).tolist()}): the deformation folds or tears there (e.g."
+            " at the edge of a displacement field's grid); smooth it or keep meshes out of"
+            " that region"
         )
     return p
 

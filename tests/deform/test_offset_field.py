@@ -28,7 +28,8 @@ from voxwarp.deform.offset_field import (
     gaussian_drag_field,
     inverse_error_table,
 )
-from voxwarp.deform.warp import WarpError, compose_glsl, warp_from_dict
+from voxwarp.deform.warp import Warp, WarpError, compose_glsl, warp_from_dict
+from voxwarp.render.raycaster import _set_uniform
 from voxwarp.scene import Scene
 
 SAVE_IMAGES = os.environ.get("VOXWARP_SAVE_IMAGES")  # folder for the comparison PNGs
@@ -403,7 +404,7 @@ void main() {{
 """
 
 
-def gpu_warp(ctx: Any, w: OffsetFieldWarp, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def gpu_warp(ctx: Any, w: Warp, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """warp(p) (N, 3) and warp_jacobian(p) (N, 3, 3) of the GLSL, one pixel column a point."""
     n = len(points)
     prog = ctx.program(
@@ -416,8 +417,7 @@ def gpu_warp(ctx: Any, w: OffsetFieldWarp, points: np.ndarray) -> tuple[np.ndarr
     vao = ctx.vertex_array(prog, [])
     try:
         for name, value in w.uniforms().items():
-            v = prog[f"w0_{name}"]
-            v.value = value if isinstance(value, int) else tuple(float(c) for c in value)
+            _set_uniform(prog, f"w0_{name}", value)
         pts.use(0)
         prog["u_points"].value = 0
         for unit, (name, tex) in enumerate(w.textures(ctx).items(), start=1):
