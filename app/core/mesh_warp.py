@@ -22,7 +22,7 @@ from collections.abc import Hashable, Sequence
 import numpy as np
 
 from voxwarp.core.mesh import MeshInstance
-from voxwarp.deform.warp import Warp, chain_forward, chain_jacobian
+from voxwarp.deform.warp import Warp, chain_forward, chain_jacobian, fold_affine
 
 #: baked instances kept (least recently used dropped first)
 CACHE_SIZE = 32
@@ -41,12 +41,8 @@ def moves_meshes(warps: Sequence[Warp]) -> bool:
 def affine_forward(warps: Sequence[Warp]) -> np.ndarray | None:
     """The chain's forward 4x4 matrix (original -> deformed) when every warp is affine,
     else None (an all-affine chain goes into the instance matrix, no baking)."""
-    if not all(w.is_affine for w in warps):
-        return None
-    m = np.eye(4)
-    for w in warps:  # chain_apply = w_{n-1} ... w_0, so apply = A_{n-1} ... A_0
-        m = w.affine_matrix() @ m
-    return np.linalg.inv(m)
+    m = fold_affine(warps)
+    return None if m is None else np.linalg.inv(m)
 
 
 def geometry_key(instance: MeshInstance, warps: Sequence[Warp]) -> Hashable:
