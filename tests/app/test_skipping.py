@@ -265,13 +265,31 @@ def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
     return OffsetFieldWarp(lo, hi, field, shape=(7, 6, 5))
 
 
+def _field_warp(vol: Volume, amount: float = 4.0) -> Any:
+    """An imported (pull-back) field on its own rotated grid over the volume: one smooth
+    bump of displacement, as a registration result."""
+    from voxwarp.deform.displacement_field import DisplacementFieldWarp
+    from voxwarp.deform.warp import rotation_matrix
+
+    n = np.array([8, 7, 6])
+    r = rotation_matrix((1.0, 0.5, 0.2), 15.0)
+    spacing = 1.3 * np.max(vol.size_mm) / (n - 1)
+    a = np.eye(4)
+    a[:3, :3] = r * spacing
+    a[:3, 3] = vol.center - r @ ((n - 1) / 2 * spacing)
+    i, j, k = np.meshgrid(*(np.arange(m) for m in n), indexing="ij")
+    bump = np.exp(-((i - 3.5) ** 2 + (j - 3.0) ** 2 + (k - 2.5) ** 2) / 2.0)
+    u = np.stack([amount * bump, -0.5 * amount * bump, 0.3 * amount * bump], axis=-1)
+    return DisplacementFieldWarp(u, a)
+
+
 def _random_boxes(rng: Any, lo: Any, hi: Any, n: int = 3000) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = np.asarray(lo), np.asarray(hi)
     a = rng.uniform(lo - 5, hi + 5, (n, 3))
     return a, a + rng.uniform(0, 4, (n, 3))
 
 
-@pytest.mark.parametrize("chain", ["offset", "baked", "affine", "offset+affine"])
+@pytest.mark.parametrize("chain", ["offset", "baked", "affine", "offset+affine", "field+affine"])
 def test_displacement_range_holds_for_every_point_of_its_box(chain: str) -> None:
     from voxwarp.deform.warp import chain_apply, chain_displacement_range
 
@@ -286,6 +304,11 @@ def test_displacement_range_holds_for_every_point_of_its_box(chain: str) -> None
             _drag_warp(vol),
             AffineWarp.rotation((0, 0, 1), 10.0, center=vol.center),
             _drag_warp(vol, -3.0),
+        ],
+        "field+affine": [
+            _field_warp(vol),
+            AffineWarp.rotation((0, 0, 1), 10.0, center=vol.center),
+            _field_warp(vol, -3.0),
         ],
     }[chain]
     rng = np.random.default_rng(1)
@@ -379,11 +402,11 @@ def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_trut
 
 
 @pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
-@pytest.mark.parametrize("chain", ["offset", "baked", "offset+rotation"])
+@pytest.mark.parametrize("chain", ["offset", "baked", "offset+rotation", "field"])
 def test_warped_cell_skipping_matches_block_path(gl_ctx: Any, mode: str, chain: str) -> None:
     vol = _volume()
     lo, hi = vol.bounds
-    warps: list = [_drag_warp(vol)]
+    warps: list = [_field_warp(vol, 6.0) if chain == "field" else _drag_warp(vol)]
     if chain == "baked":
         warps[0].inverse = "baked"
     if chain == "offset+rotation":
