@@ -98,6 +98,14 @@ def load_transform(path: str | os.PathLike[str], *, convention: str | None = Non
     return [load_displacement_field(p, convention=convention)]
 
 
+def _check_file_budget(path: Path) -> None:
+    """Refuse a file larger than the memory budget before a library reads all of it."""
+    try:
+        _limits.check_load_bytes((path.stat().st_size,), 1, path.name)
+    except VolumeError as exc:
+        raise FieldError(str(exc)) from exc
+
+
 def load_displacement_field(
     path: str | os.PathLike[str], *, convention: str | None = None, part: int | None = None
 ) -> DisplacementFieldWarp:
@@ -124,6 +132,8 @@ def load_displacement_field(
         return DisplacementFieldWarp(u, affine, space=space, units=units, path=str(p))
     except WarpError as exc:
         raise FieldError(f"{p.name}: {exc}") from exc
+    except VolumeError as exc:  # over the memory budget
+        raise FieldError(str(exc)) from exc
 
 
 def _read_field_entry(path: str, part: int | None = None) -> DisplacementFieldWarp:
@@ -256,12 +266,16 @@ def _read_npz(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str,
                     f"{path.name} needs arrays 'displacement' (nx, ny, nz, 3) and 'affine'"
                     f" (4x4); it has {sorted(keys)}"
                 )
+            size = npz.zip.getinfo("displacement.npy").file_size
+            _limits.check_load_bytes((size,), 1, path.name)
             u = np.asarray(npz["displacement"], dtype=np.float32)
             affine = np.asarray(npz["affine"], dtype=np.float64)
             space = str(npz["space"]) if "space" in keys else "RAS"
             units = str(npz["units"]) if "units" in keys else "mm"
     except FieldError:
         raise
+    except VolumeError as exc:
+        raise FieldError(str(exc)) from exc
     except Exception as exc:
         raise FieldError(f"cannot read the field {path}: {exc}") from exc
     if convention is not None:
@@ -347,6 +361,7 @@ def _first_line(exc: BaseException) -> str:
 
 def _read_transform_file(path: Path) -> list[Warp]:
     sitk = _sitk(f"reading the ITK transform file {path.name}")
+    _check_file_budget(path)
     try:
         transform = sitk.ReadTransform(str(path))
     except RuntimeError as exc:

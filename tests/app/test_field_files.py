@@ -361,3 +361,16 @@ def test_rendering_through_an_imported_field_matches_sitk_resampling(
         assert mean_abs <= 2 / 255, (mode, mean_abs * 255)
         # the field matters: the undeformed render is far from both
         assert float(np.abs(still - ref).mean()) > 2.5 * mean_abs, mode
+
+
+@pytest.mark.parametrize("suffix", [".nii.gz", ".nrrd", ".npz", ".h5", ".mha"])
+def test_a_field_over_the_memory_budget_is_refused_before_reading(
+    field: DisplacementFieldWarp, tmp_path: Path, suffix: str
+) -> None:
+    from voxwarp.core import limits
+
+    path = save_displacement_field(field, tmp_path / f"field{suffix}")
+    with limits.memory_budget(1000), pytest.raises(FieldError, match="memory budget") as info:
+        load_transform(path)
+    assert "\n" not in str(info.value)
+    assert len(load_transform(path)) == 1  # within the default budget it loads
