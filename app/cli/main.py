@@ -704,9 +704,15 @@ def _tf_arg(tf: str | None) -> Any:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """``voxwarp info INPUT``: dims, dtype, spacing, value range, histogram."""
+    from voxwarp.io.fields import field_info, field_summary, is_field_file, load_transform
     from voxwarp.io.volumes import dicom_series, volume_info, volume_summary
     from voxwarp.scene import Scene
 
+    if is_field_file(args.input):  # a registration result, not a volume
+        warps = load_transform(args.input)
+        text = json.dumps([field_info(w) for w in warps], indent=2)
+        print(text if args.json else field_summary(warps))
+        return 0
     # info shows the file's values: padding kept
     obj = load_input(args.input, keep_padding=True, **ropt.load_options(args))
     vol = obj.volume if isinstance(obj, Scene) else obj

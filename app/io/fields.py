@@ -561,3 +561,72 @@ def _write_npz(field: DisplacementFieldWarp, tmp: Path) -> None:
             space=np.str_("RAS"),
             units=np.str_("mm"),
         )
+
+
+# ---------------------------------------------------------------------------- info
+def is_field_file(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` holds a displacement field or transform rather than a volume:
+    an ITK transform file, a vector NIfTI/NRRD/MetaImage, or an ``.npz`` with a
+    ``displacement`` array (headers only are read)."""
+    p = Path(path)
+    suffix = field_suffix(p)
+    if not p.is_file() or suffix not in IMAGE_SUFFIXES + TRANSFORM_SUFFIXES:
+        return False
+    if suffix in TRANSFORM_SUFFIXES:
+        return True
+    try:
+        if suffix == ".npz":
+            with np.load(p, allow_pickle=False) as npz:
+                return "displacement" in npz.files
+        if suffix in (".nii", ".nii.gz"):
+            import nibabel as nib
+
+            hdr = nib.load(str(p)).header
+            return len(hdr.get_data_shape()) in (4, 5) and hdr.get_data_shape()[-1] == 3
+        if suffix in (".nrrd", ".nhdr"):
+            import nrrd
+
+            header = nrrd.read_header(str(p))
+            return any(
+                str(k).lower() in ("vector", "covariant-vector", "3-vector")
+                for k in header.get("kinds") or []
+            )
+        with open(p, "rb") as fh:  # MetaImage: a header line says the channels
+            return b"ElementNumberOfChannels = 3" in fh.read(1 << 16)
+    except Exception:
+        return False
+
+
+def field_info(warp: Warp) -> dict[str, Any]:
+    """JSON-ready facts about one warp read from a field or transform file."""
+    if not isinstance(warp, DisplacementFieldWarp):
+        m = warp.affine_matrix().tolist() if warp.is_affine else None
+        return {"type": warp.kind, "matrix_fixed_to_moving_ras": m}
+    lo, hi = warp.support_bounds()
+    return {
+        "type": warp.kind,
+        "shape": list(warp.shape),
+        "spacing": warp.spacing.tolist(),
+        "affine_ras": warp.affine.tolist(),
+        "support_ras": [lo.tolist(), hi.tolist()],
+        "max_displacement_mm": warp.max_displacement(),
+        "mean_displacement_mm": float(warp.magnitude().mean()),
+    }
+
+
+def field_summary(warps: Sequence[Warp]) -> str:
+    """Lines describing a chain read from a field or transform file (``voxwarp info``)."""
+    lines = []
+    for i, w in enumerate(warps):
+        if isinstance(w, DisplacementFieldWarp):
+            lo, hi = w.support_bounds()
+            lines += [
+                f"[{i}] displacement field (ITK pull-back), {w.shape[0]}x{w.shape[1]}x"
+                f"{w.shape[2]} nodes, spacing {np.round(w.spacing, 4).tolist()} mm",
+                f"    grid covers RAS {np.round(lo, 2).tolist()} .. {np.round(hi, 2).tolist()} mm",
+                f"    |u| max {w.max_displacement():.3g} mm, mean {w.magnitude().mean():.3g} mm",
+            ]
+        else:
+            m = np.round(w.affine_matrix(), 5).tolist() if w.is_affine else None
+            lines.append(f"[{i}] {w.kind} warp (fixed -> moving, RAS): {m}")
+    return "\n".join(lines)

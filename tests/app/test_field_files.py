@@ -374,3 +374,35 @@ def test_a_field_over_the_memory_budget_is_refused_before_reading(
         load_transform(path)
     assert "\n" not in str(info.value)
     assert len(load_transform(path)) == 1  # within the default budget it loads
+
+
+@pytest.mark.parametrize("suffix", [".nii.gz", ".nrrd", ".mha", ".h5", ".npz"])
+def test_info_describes_a_field_file(
+    field: DisplacementFieldWarp, tmp_path: Path, suffix: str
+) -> None:
+    import json
+
+    from voxwarp.io.fields import is_field_file
+
+    path = save_displacement_field(field, tmp_path / f"field{suffix}")
+    assert is_field_file(path)
+    run = subprocess.run(
+        [sys.executable, "-m", "voxwarp", "info", str(path), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    (info,) = json.loads(run.stdout)
+    assert info["shape"] == list(field.shape)
+    assert info["max_displacement_mm"] == pytest.approx(field.max_displacement(), rel=1e-5)
+    np.testing.assert_allclose(info["affine_ras"], field.affine, atol=1e-5)
+
+
+def test_volumes_are_not_taken_for_fields(tmp_path: Path) -> None:
+    from voxwarp.io.fields import is_field_file
+    from voxwarp.io.volumes import save_volume
+
+    vol = load_sample("colin27")
+    for suffix in (".nii.gz", ".nrrd", ".npz"):
+        assert not is_field_file(save_volume(vol, tmp_path / f"v{suffix}"))
