@@ -2,7 +2,9 @@
 
 Shows :func:`voxwarp.render.field_views.field_slice` of the session's model warp
 (:meth:`voxwarp.editing.session.EditSession.model_warp`: the model in its grid frame, without a
-placement's affine warps): a view combo (the views of that warp), the slice normal,
+placement's affine warps) or of an imported warp (a displacement field read with File ->
+Add Displacement Field; :meth:`~voxwarp.editing.session.EditSession.field_view_warps`): a
+view combo (the views of those warps, an imported one's named by its file), the slice normal,
 a position slider and the image scaled to fit, with a title and a legend. The whole
 thing folds away behind a "Show field slice" check box (folded, nothing is computed).
 
@@ -42,6 +44,8 @@ __all__ = ["FieldSliceView"]
 IMAGE_PIXELS = 256
 #: milliseconds between the refreshes of a shown view (cheap when nothing changed)
 POLL_MS = 400
+#: between a view and the file of an imported warp in the view combo
+SEP = " · "
 #: most height of the image on screen (px)
 MAX_IMAGE_HEIGHT = 260
 
@@ -189,18 +193,38 @@ class FieldSliceView(QWidget):
         if self.isVisible() and not self._window.session.dragging:
             self.refresh()
 
+    def _entries(self, session: Any) -> list[tuple[str, Any, str]]:
+        """``(combo text, warp, view)`` of every view of the session's warps."""
+        out = []
+        for label, warp in session.field_view_warps():
+            for view in field_views.views_for(warp):
+                out.append((view if label == "model" else f"{view}{SEP}{label}", warp, view))
+        return out
+
+    def select(self, text: str) -> bool:
+        """Show the combo entry ``text`` (e.g. ``"field |u| · u.nii.gz"``); False if absent."""
+        self._set_views(tuple(t for t, _, _ in self._entries(self._window.session)))
+        index = self.view_combo.findText(text)
+        if index >= 0:
+            self.view_combo.setCurrentIndex(index)
+        return index >= 0
+
     def _set_views(self, views: tuple[str, ...]) -> None:
         """Fill the view combo with ``views`` when they changed (another kind of
-        deformation: its first, most specific view is selected)."""
+        deformation: its first, most specific view is selected; only imported warps
+        changed: the current view stays selected if still offered)."""
         current = [self.view_combo.itemText(i) for i in range(self.view_combo.count())]
         if tuple(current) == views and self.view_combo.isEnabled() == bool(views):
             return
+        model_views = [v for v in views if SEP not in v]
+        same_model = model_views == [v for v in current if SEP not in v]
+        selected = self.view_combo.currentText() if same_model else ""
         self.view_combo.blockSignals(True)
         try:
             self.view_combo.clear()
             if views:
                 self.view_combo.addItems(list(views))
-                self.view_combo.setCurrentIndex(0)
+                self.view_combo.setCurrentIndex(max(0, self.view_combo.findText(selected)))
             else:
                 self.view_combo.addItem("no deformation")
             self.view_combo.setEnabled(bool(views))
@@ -214,16 +238,15 @@ class FieldSliceView(QWidget):
         if not self.show_check.isChecked():
             return
         session = self._window.session
-        warp = session.model_warp()
-        views = field_views.views_for(warp)
-        self._set_views(views)
-        if not views:
+        entries = self._entries(session)
+        self._set_views(tuple(text for text, _, _ in entries))
+        if not entries:
             self._key, self._warp, self.slice = None, None, None
             kind = getattr(session, "kind", "none")
             # a wire field is built off the GUI thread: the session has no warp meanwhile
             self._show(None, "no deformation" if kind == "none" else f"no {kind} field yet", "")
             return
-        view = self.view_combo.currentText()
+        _, warp, view = entries[max(0, self.view_combo.currentIndex())]
         axis = self.axis_combo.currentIndex()
         fraction = self.fraction
         key = (

@@ -51,6 +51,7 @@ from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuil
 from voxwarp.errors import VoxwarpError
 from voxwarp.io.images import write_image
 from voxwarp.scene import Scene
+from voxwarp.ui.field_view import SEP
 from voxwarp.ui.tasks import Task, run_with_progress
 from voxwarp.ui.tf_editor import TransferFunctionEditor
 from voxwarp.ui.viewport import Viewport
@@ -62,6 +63,10 @@ SCENE_FILTER = "voxwarp scene (*.json)"
 OPEN_FILTER = (
     "Volumes and scenes (*.json *.nrrd *.nhdr *.nii *.nii.gz *.mha *.mhd *.tif *.tiff *.npy"
     " *.npz *.dcm *.raw);;All files (*)"
+)
+FIELD_FILTER = (
+    "Displacement fields and transforms (*.nii *.nii.gz *.nrrd *.nhdr *.mha *.mhd *.h5"
+    " *.hdf5 *.tfm *.txt *.npz);;All files (*)"
 )
 
 #: shortcuts of the anatomical views (Shift: R, P and S are taken by reset, projection
@@ -307,6 +312,11 @@ class MainWindow(QMainWindow):
         self._action(f, "&Save Scene", self.save, QKeySequence.StandardKey.Save)
         self._action(f, "Save Scene &As…", self.save_as, "Ctrl+Shift+S")
         self._action(f, "&Export Screenshot…", self.export_dialog, "Ctrl+E")
+        f.addSeparator()
+        self._action(f, "Add &Displacement Field…", self.add_field_dialog)
+        self.remove_fields_action = self._action(
+            f, "Remove Displacement Fields", self.remove_fields
+        )
         f.addSeparator()
         self._action(f, "&Quit", self.close, QKeySequence.StandardKey.Quit)
 
@@ -650,6 +660,40 @@ class MainWindow(QMainWindow):
         )
         if path:
             self.open_path(path)
+
+    def add_field_dialog(self) -> None:
+        """Choose a displacement field or ITK transform file to add to the warp chain."""
+        path, _ = QFileDialog.getOpenFileName(
+            self, "Add displacement field", self._last_dir(), FIELD_FILTER
+        )
+        if path:
+            self.add_field(path)
+
+    def add_field(self, path: str | Path) -> bool:
+        """Read a field or transform file (:func:`voxwarp.io.fields.load_transform`) and put
+        its warps first in the scene's chain (undoable); errors become the one-line dialog."""
+        from voxwarp.deform.warp import WarpError
+        from voxwarp.io.fields import load_transform
+
+        try:
+            warps = load_transform(path)
+        except (VoxwarpError, WarpError, OSError) as exc:
+            self.show_error(f"could not add {Path(path).name}: {exc}")
+            return False
+        name = Path(path).name
+        if self.edit(f"Add {name}", lambda: self.session.add_warps_front(warps)) is None:
+            return False
+        self.statusBar().showMessage(f"Added {name}: {_describe(warps)}", 10000)
+        self.display_panel.field_view.select(f"field |u|{SEP}{name}")
+        return True
+
+    def remove_fields(self) -> None:
+        """Take the imported displacement fields out of the warp chain (undoable)."""
+        if not self.session.imported_warps:
+            self.statusBar().showMessage("No displacement fields to remove", 4000)
+            return
+        n = self.edit("Remove displacement fields", self.session.remove_imported_warps)
+        self.statusBar().showMessage(f"Removed {n} imported warp(s)", 4000)
 
     def open_path(self, path: str | Path, wait: bool = False, refit: bool = False) -> Task:
         """Open a volume or a scene JSON off the GUI thread (progress, cancel); with
@@ -1002,6 +1046,18 @@ def _add_recent(path: str) -> None:
     p = str(Path(path).resolve())
     files = [p] + [f for f in recent_files() if f != p]
     QSettings("voxwarp", "voxwarp").setValue("recent", files[:MAX_RECENT])
+
+
+def _describe(warps: list[Any]) -> str:
+    """Grid and max ``|u|`` of each displacement field, the kind of other warps."""
+    parts = []
+    for w in warps:
+        if callable(getattr(w, "max_displacement", None)):
+            grid = " x ".join(str(n) for n in w.shape)
+            parts.append(f"{w.kind} grid {grid}, max |u| {w.max_displacement():.3g} mm")
+        else:
+            parts.append(str(w.kind))
+    return "; ".join(parts)
 
 
 def _rss_mb() -> float:

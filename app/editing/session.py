@@ -45,6 +45,7 @@ import numpy as np
 
 from voxwarp.core.camera import Camera
 from voxwarp.deform.chainmail import ChainMail
+from voxwarp.deform.displacement_field import DisplacementFieldWarp
 from voxwarp.deform.elements import ElementGrid
 from voxwarp.deform.lattice_warp import LatticeWarp
 from voxwarp.deform.trilinear import TrilinearGrid
@@ -180,6 +181,9 @@ class Snapshot:
     look: dict[str, Any] = field(default_factory=dict)
     #: the keyframes (``Animation.to_dict()``) or None
     animation: dict[str, Any] | None = None
+    #: the imported warps (:attr:`EditSession.imported_warps`; warps are not edited in
+    #: place, so holding them is a copy)
+    imported: tuple[Warp, ...] = ()
 
     def same_as(self, other: Snapshot) -> bool:
         """True when both hold the same state (exact comparison of every array)."""
@@ -257,6 +261,10 @@ class EditSession:
         #: keyframes (:mod:`voxwarp.editing.keyframes`; saved in scene JSON for ``voxwarp
         #: animate``)
         self.animation: Any = None
+        #: warps read from files (displacement fields, ITK transforms), first in the
+        #: scene's chain: they map the displayed (fixed) space to the volume's
+        #: (:meth:`add_warps_front`)
+        self.imported_warps: list[Warp] = []
         #: ``() -> context manager`` making the GL context of GPU models current (the
         #: GUI's viewport sets it; a headless caller's context is current already)
         self.gl_scope: Callable[[], Any] = contextlib.nullcontext
@@ -402,17 +410,56 @@ class EditSession:
         return self.family.warp()
 
     def sync_warps(self) -> None:
-        """Put the family's warp (placed by :attr:`placement`) in the scene."""
+        """Put the imported warps, then the family's warp (placed by :attr:`placement`),
+        in the scene."""
+        self.scene.warps = [*self.imported_warps, *self._model_chain()]
+        self._touch()
+
+    def _model_chain(self) -> list[Warp]:
         w = self.model_warp()
         if w is None:
-            self.scene.warps = []
-        elif self.placement.is_identity:
-            self.scene.warps = [w]
-        else:
-            m = self.placement_matrix
-            # deformed world -> grid frame, the model, grid frame -> original world
-            self.scene.warps = [AffineWarp(m), w, AffineWarp(np.linalg.inv(m))]
-        self._touch()
+            return []
+        if self.placement.is_identity:
+            return [w]
+        m = self.placement_matrix
+        # deformed world -> grid frame, the model, grid frame -> original world
+        return [AffineWarp(m), w, AffineWarp(np.linalg.inv(m))]
+
+    def add_warps_front(self, warps: Sequence[Warp]) -> int:
+        """Put warps read from a file (:func:`voxwarp.io.fields.load_transform`) at the
+        front of the scene's chain, before earlier imported warps and the model's: a
+        registration field maps the displayed (fixed) space to the volume's. Returns
+        how many imported warps there are now."""
+        new = list(warps)
+        if not new or not all(isinstance(w, Warp) for w in new):
+            raise EditorError(
+                "add_warps_front needs a non-empty list of warps (voxwarp.io.fields.load_transform)"
+            )
+        self.imported_warps = [*new, *self.imported_warps]
+        self.sync_warps()
+        return len(self.imported_warps)
+
+    def field_view_warps(self) -> list[tuple[str, Warp]]:
+        """The warps the field slice view offers, with a label each: ``("model", w)`` for
+        :meth:`model_warp` (if any), then one per imported warp named by its file."""
+        out: list[tuple[str, Warp]] = []
+        w = self.model_warp()
+        if w is not None:
+            out.append(("model", w))
+        for i, imp in enumerate(self.imported_warps):
+            path = getattr(imp, "path", None)
+            label = Path(path).name if path else f"imported {imp.kind} {i + 1}"
+            part = getattr(imp, "part", None)
+            out.append((label if part is None else f"{label} #{part}", imp))
+        return out
+
+    def remove_imported_warps(self) -> int:
+        """Take every imported warp out of the chain; returns how many there were."""
+        gone, self.imported_warps = self.imported_warps, []
+        for w in gone:
+            self.release_warp(w)
+        self.sync_warps()
+        return len(gone)
 
     def model_moved(self) -> None:
         """Call after moving the element model directly (``model.move``, ``settle``) so
@@ -780,6 +827,7 @@ class EditSession:
             wire_settings=dict(self.wire_settings),
             look=scene_look(self.scene),
             animation=self.animation.to_dict() if self.animation is not None else None,
+            imported=tuple(self.imported_warps),
         )
 
     def restore(self, snap: Snapshot) -> None:
@@ -801,6 +849,10 @@ class EditSession:
         if snap.look:
             set_scene_look(self.scene, snap.look)
         self.animation = _animation_from(snap.animation)
+        for w in self.imported_warps:
+            if w not in snap.imported:
+                self.release_warp(w)
+        self.imported_warps = list(snap.imported)
         self.sync_warps()
 
     # ------------------------------------------------------------------ files
@@ -813,8 +865,10 @@ class EditSession:
         wires as they are."""
         self.family.before_save()
         d = self.scene.to_dict(base_dir=base_dir)
-        model_index = {0: None, 1: 0, 3: 1}[len(self.scene.warps)]
+        n = len(self.imported_warps)
+        model_index = {0: None, 1: n, 3: n + 1}[len(self.scene.warps) - n]
         d[EDITOR_KEY] = {
+            "imported_warps": n,
             "deformation": self.kind,
             "backend": self.backend,
             "resolution": list(self.resolution),
@@ -868,8 +922,10 @@ class EditSession:
         warps = list(self.scene.warps)
         try:
             self._read_editor_entry(entry)
+            n = _imported_count(warps, entry)
+            self.imported_warps, warps = warps[:n], warps[n:]
             if warps:
-                self.family = self._resume(warps, entry)
+                self.family = self._resume(warps, _shift(entry, n))
         except (WarpError, KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, EditorError):
                 raise
@@ -935,6 +991,28 @@ def set_scene_look(scene: Scene, look: dict[str, Any]) -> None:
             setattr(scene, k, tuple(v) if k == "background" else v)
     if "transfer_function" in look:
         scene.transfer_function = look["transfer_function"]
+
+
+def _imported_count(warps: list[Warp], entry: dict[str, Any]) -> int:
+    """How many leading warps of a saved scene are imported (the editor entry's
+    ``"imported_warps"``; without one, the leading displacement fields)."""
+    if "imported_warps" in entry:
+        n = int(entry["imported_warps"])
+        if not 0 <= n <= len(warps):
+            raise EditorError(f"imported_warps must be 0..{len(warps)}; got {n}")
+        return n
+    n = 0
+    while n < len(warps) and isinstance(warps[n], DisplacementFieldWarp):
+        n += 1
+    return n
+
+
+def _shift(entry: dict[str, Any], n: int) -> dict[str, Any]:
+    """The editor entry with its ``"model_warp"`` index (into the scene's whole chain)
+    counted after the ``n`` imported warps."""
+    if entry.get("model_warp") is None or n == 0:
+        return entry
+    return {**entry, "model_warp": int(entry["model_warp"]) - n}
 
 
 def _animation_from(d: Any) -> Any:

@@ -21,6 +21,12 @@ axis-aligned plane through the volume, as an RGB image:
   ChainMail): ``"offset |d|"``, the length of the node displacement field ``u(X)``
   interpolated trilinearly onto the pixels (original space, 0 outside the grid box).
 
+* displacement fields read from files
+  (:class:`~voxwarp.deform.displacement_field.DisplacementFieldWarp`, any warp with a
+  ``displacement_at(points)``): ``"field |u|"``, the length of the field's vector
+  ``u(p)`` at the pixels' world points (trilinear on the field's own grid, 0 beyond
+  half a node outside it), in mm.
+
 * every warp: ``"displacement"``, ``|w(p) - p|`` of the inverse map ``w`` the raycaster
   samples through (:meth:`~voxwarp.deform.warp.Warp.apply`) on a coarser grid
   (:data:`DISPLACEMENT_PIXELS` across); pixels that show nothing (a wire's vacated
@@ -50,6 +56,7 @@ VIEWS: dict[str, tuple[str, ...]] = {
     "wires": ("attribute t", "wire id", "swept / vacated", "displacement"),
     "offset_field": ("offset |d|", "displacement"),
     "lattice": ("displacement",),
+    "displacement_field": ("field |u|", "displacement"),
 }
 #: views of any warp (through its CPU reference :meth:`~voxwarp.deform.warp.Warp.apply`)
 GENERIC_VIEWS: tuple[str, ...] = ("displacement",)
@@ -287,6 +294,26 @@ def _offset_view(warp: Any, pts: np.ndarray, ctx: Any) -> tuple[np.ndarray, str]
     return image, legend
 
 
+# ---------------------------------------------------------------------- field |u|
+def _field_magnitude_view(warp: Any, pts: np.ndarray) -> tuple[np.ndarray, str]:
+    """``|u(p)|`` of a warp with ``displacement_at`` (sampled at the pixels' world points:
+    the field has its own, maybe rotated, grid)."""
+    sample = getattr(warp, "displacement_at", None)
+    if not callable(sample):
+        raise FieldViewError(f"'field |u|' needs a displacement field; got {type(warp).__name__}")
+    try:
+        u = np.asarray(sample(pts.reshape(-1, 3)), dtype=np.float64)
+    except (WarpError, VoxwarpError) as exc:
+        raise FieldViewError(f"cannot sample the displacement field: {exc}") from exc
+    mag = np.sqrt(np.sum(u * u, axis=-1)).reshape(pts.shape[:2])
+    image, top = _scalar_image(mag)
+    legend = f"|u| 0 (dark) .. {_mm(top)} mm (yellow)"
+    whole = getattr(warp, "max_displacement", None)
+    if callable(whole):
+        legend += f"; whole field max {_mm(float(whole()))} mm"
+    return image, legend
+
+
 # ---------------------------------------------------------------------- any warp
 def _displacement_view(warp: Any, pts: np.ndarray, ctx: Any) -> tuple[np.ndarray, str]:
     flat = pts.reshape(-1, 3)
@@ -377,6 +404,7 @@ TITLES: dict[str, str] = {
     "wire id": "wire id",
     "swept / vacated": "swept / vacated",
     "offset |d|": "offset |d|",
+    "field |u|": "displacement field |u|",
     "displacement": "displacement |w(p) - p|",
 }
 
@@ -441,6 +469,8 @@ def field_slice(
     pts = _pixel_grid(elo, ehi, axis, position, pixels)
     if view == "offset |d|":
         image, legend = _offset_view(warp, pts, ctx)
+    elif view == "field |u|":
+        image, legend = _field_magnitude_view(warp, pts)
     elif view == "displacement":
         image, legend = _displacement_view(warp, pts, ctx)
     else:
