@@ -1504,8 +1504,9 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
 
 
 def _add_heavy_bench_parsers(bsub: Any) -> None:
-    """``bench wires|lattice|interactive``: their modules define their options (and load
+    """``bench wires|lattice|interactive|fields``: their modules define their options (and load
     numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
+    from voxwarp.bench.fields import add_bench_fields_parser
     from voxwarp.bench.interactive import add_bench_interactive_parser
     from voxwarp.bench.lattice import add_bench_lattice_parser
     from voxwarp.bench.wires import add_bench_wires_parser
@@ -1513,6 +1514,7 @@ def _add_heavy_bench_parsers(bsub: Any) -> None:
     add_bench_wires_parser(bsub)
     add_bench_lattice_parser(bsub)
     add_bench_interactive_parser(bsub)
+    add_bench_fields_parser(bsub)
 
 
 def wants_bench(argv: Sequence[str] | None) -> bool:
