@@ -17,7 +17,7 @@ import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -47,6 +47,9 @@ from voxwarp.deform.warp import (
     warp_from_dict,
 )
 from voxwarp.errors import FieldError, MeshError, SceneError, VolumeError
+
+if TYPE_CHECKING:
+    from voxwarp.deform.displacement_field import DisplacementFieldWarp
 
 #: Largest volume (bytes) a scene JSON embeds instead of referring to a file.
 EMBED_LIMIT_BYTES = 8 * 1024 * 1024
@@ -599,6 +602,36 @@ class Scene:
         """Read a scene JSON written by :meth:`save`; raises :class:`SceneError`."""
         path = Path(path)
         return cls.from_dict(read_scene_dict(path), base_dir=path.parent.resolve())
+
+    def displacement_field(self, spacing: Any = None, box: Any = None) -> DisplacementFieldWarp:
+        """The warp chain sampled as a displacement field, ``u(p) = warps(p) - p``.
+
+        ITK's pull-back convention (as SimpleITK's ``DisplacementFieldTransform``, ANTs
+        and 3D Slicer read it once saved by
+        :func:`voxwarp.io.fields.save_displacement_field`): a point ``p`` of the deformed
+        picture takes the original volume's value at ``p + u(p)``, so
+        ``Resample(volume, DisplacementFieldTransform(field))`` reproduces the volume
+        voxwarp draws deformed. Between nodes the field is trilinear, so the export is
+        exact only where the chain is smooth at the node spacing.
+
+        Parameters
+        ----------
+        spacing
+            ``None`` (default): the volume's own grid (its affine, direction included).
+            One number or three (mm): nodes at that spacing over the volume's box,
+            keeping its direction.
+        box
+            ``(lo, hi)`` in world mm: sample this axis-aligned box instead, at
+            ``spacing`` (default the smallest voxel size).
+
+        Raises :class:`SceneError` for a bad ``spacing`` or ``box`` or a grid over the
+        memory budget.
+        """
+        from voxwarp.core.field_grid import chain_field, field_grid
+
+        affine, shape = field_grid(self.volume, spacing, box)
+        lo, hi = self.volume.bounds
+        return chain_field(self.warps, affine, shape, vacated=lo - (hi - lo))
 
     def __repr__(self) -> str:
         return (
