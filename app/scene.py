@@ -810,6 +810,7 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
         return d
     if src is not None and os.path.exists(src):
         d["path"] = path_entry(src, base_dir)
+        d["shape"] = list(volume.shape)  # a downsampled file is loaded downsampled again
         return d
     if volume.nbytes > EMBED_LIMIT_BYTES:
         raise SceneError(
@@ -824,6 +825,30 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
         "data": base64.b64encode(volume.data.tobytes(order="F")).decode("ascii"),
     }
     return d
+
+
+def _with_stated_shape(volume: Volume, shape: Any, what: str) -> Volume:
+    """``volume`` reduced to the scene's ``shape`` when the scene was saved from a
+    downsampled copy (``--downsample``: an integer factor per axis); a shape that no
+    factor explains means the file changed since the scene was saved."""
+    if shape is None:
+        return volume
+    try:
+        want = np.asarray([int(v) for v in shape])
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"scene volume 'shape' must be three integers; got {shape!r}") from exc
+    have = np.asarray(volume.shape)
+    if want.shape != (3,) or np.any(want < 1):
+        raise SceneError(f"scene volume 'shape' must be three positive integers; got {shape!r}")
+    if np.array_equal(want, have):
+        return volume
+    factor = have // want
+    if np.any(factor < 1) or not np.array_equal(have // factor, want):
+        raise SceneError(
+            f"{what} has {tuple(have.tolist())} voxels but the scene was saved with"
+            f" {tuple(want.tolist())}; the file changed since: save the scene again"
+        )
+    return volume.downsample(tuple(int(f) for f in factor))
 
 
 def _with_stated_geometry(volume: Volume, spacing: Any, origin: Any) -> Volume:
@@ -908,12 +933,16 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
             kwargs: dict[str, Any] = {}
             if name in GENERATED_SAMPLES and d.get("shape") is not None:
                 kwargs["shape"] = tuple(int(v) for v in d["shape"])
-            return load_sample(name, spacing=spacing, origin=origin, **kwargs)
+            if kwargs:
+                return load_sample(name, spacing=spacing, origin=origin, **kwargs)
+            vol = _with_stated_shape(load_sample(name), d.get("shape"), f"sample:{name}")
+            return _with_stated_geometry(vol, spacing, origin)
         if "path" in d:
             from voxwarp.io.volumes import load_volume
 
             p = scene_file(d["path"], base_dir, "volume", SceneError)
-            return _with_stated_geometry(load_volume(p), spacing, origin)
+            vol = _with_stated_shape(load_volume(p), d.get("shape"), str(p))
+            return _with_stated_geometry(vol, spacing, origin)
     except SceneError:
         raise  # names the scene volume already
     except (VolumeError, TypeError, ValueError, OverflowError) as exc:
