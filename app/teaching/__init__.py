@@ -3,7 +3,7 @@ reproduction. The demo names live here so the command line lists them without lo
 the demos."""
 
 #: the teaching demos, in the order ``voxwarp reproduce`` runs them
-DEMOS: tuple[str, ...] = ("massspring", "chainmail", "wires", "lattice", "compare")
+DEMOS: tuple[str, ...] = ("massspring", "chainmail", "wires", "lattice", "compare", "registration")
 #: one line per demo (``voxwarp demo --help``, the reproduction report)
 DEMO_TITLES: dict[str, str] = {
     "massspring": "Mass-spring: explicit vs semi-implicit Euler",
@@ -11,4 +11,5 @@ DEMO_TITLES: dict[str, str] = {
     "wires": "Wires: attribute field scale 1:1 ... 1:4096 (wire paper Figure 12, Table 1)",
     "lattice": "Trilinear lattices vs 4x4 matrices (GRAPP 2010 table)",
     "compare": "Mass-spring vs ChainMail on the same drag; CPU vs GPU (thesis Figures 12-13)",
+    "registration": "A SimpleITK registration rendered through its displacement field",
 }

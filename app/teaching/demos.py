@@ -22,6 +22,9 @@ and puts their numbers beside the papers'.
 * ``lattice`` (GRAPP 2010, its table): frame rate of trilinear lattices against 4x4
   matrices (vertex throughput, composition of many objects), and renders of a bent
   volume and of the lattice-wrapped torus of the paper's Figure 1.
+* ``registration`` (no paper; :mod:`voxwarp.teaching.registration_demo`): colin27 deformed
+  by known Gaussian bumps, registered back with SimpleITK demons, the moving image
+  rendered through the recovered field beside the fixed one (``registration`` extra).
 
 ``quick=True`` shrinks every measurement (small volumes, images and grids, one repeat) so
 that a demo runs in seconds: the test suite runs every demo that way. With ``tour=True``
@@ -251,6 +254,7 @@ def run_demo(
         "wires": _demo_wires,
         "lattice": _demo_lattice,
         "compare": _demo_compare,
+        "registration": _demo_registration,
     }[name]
     with warnings.catch_warnings():
         # numpy overflow of the blown-up explicit integrator is the point, not a bug
@@ -265,6 +269,15 @@ def run_demo(
     numbers["seconds"] = seconds
     say(f"demo {name}: {', '.join(str(f) for f in figures)} ({seconds:.1f} s)")
     return DemoResult(name, figures, numbers, seconds, tour_path)
+
+
+def _demo_registration(
+    settings: _Settings, out: Path, say: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+    """``registration``: see :mod:`voxwarp.teaching.registration_demo`."""
+    from voxwarp.teaching.registration_demo import demo_registration
+
+    return demo_registration(settings.quick, out, say)
 
 
 # ====================================================================== shared helpers
