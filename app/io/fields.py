@@ -51,6 +51,7 @@ from voxwarp.core.orientation import PATIENT_SPACES
 from voxwarp.deform.displacement_field import DisplacementFieldWarp, set_field_reader
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.errors import FieldError, VolumeError
+from voxwarp.io.loaded import native_stderr
 
 #: Suffixes of displacement field images.
 IMAGE_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd", ".npz")
@@ -340,18 +341,31 @@ def _read_metaimage(path: Path) -> tuple[np.ndarray, Any, str, str]:
     sitk = _sitk(f"reading the MetaImage field {path.name}")
     if field_suffix(path) == ".mhd":
         _metaimage_data_file(path)
-    try:
-        reader = sitk.ImageFileReader()
-        reader.SetFileName(str(path))
-        reader.ReadImageInformation()
-        size = reader.GetSize()
-        comps = reader.GetNumberOfComponents()
-        _limits.check_load_bytes((*size, comps), 4, path.name)
-        image = reader.Execute()
-    except RuntimeError as exc:
-        raise FieldError(f"cannot read the MetaImage field {path}: {_first_line(exc)}") from exc
+    with native_stderr() as said:
+        try:
+            reader = sitk.ImageFileReader()
+            reader.SetFileName(str(path))
+            reader.ReadImageInformation()
+            size = reader.GetSize()
+            comps = reader.GetNumberOfComponents()
+            _limits.check_load_bytes((*size, comps), 4, path.name)
+            image, error = reader.Execute(), None
+        except RuntimeError as exc:
+            image, error = None, exc
+    if error is not None:
+        raise FieldError(
+            f"cannot read the MetaImage field {path}: {_library_reason(said, error)}"
+        ) from error
     u, affine = _sitk_field(image, path.name)
     return u, affine, "LPS", "mm"
+
+
+def _library_reason(said: list[str], exc: BaseException) -> str:
+    """The most telling line of what ITK/HDF5 printed (held back) or raised."""
+    for line in reversed(said):
+        if "():" in line:  # an HDF5 stack entry: "... in H5F__super_read(): truncated file"
+            return line.split("():", 1)[1].strip()
+    return _first_line(exc)
 
 
 def _first_line(exc: BaseException) -> str:
@@ -362,10 +376,16 @@ def _first_line(exc: BaseException) -> str:
 def _read_transform_file(path: Path) -> list[Warp]:
     sitk = _sitk(f"reading the ITK transform file {path.name}")
     _check_file_budget(path)
-    try:
-        transform = sitk.ReadTransform(str(path))
-    except RuntimeError as exc:
-        raise FieldError(f"cannot read the ITK transform {path}: {_first_line(exc)}") from exc
+    with native_stderr() as said:
+        try:
+            transform = sitk.ReadTransform(str(path))
+        except RuntimeError as exc:
+            transform, error = None, exc
+    if transform is None:
+        raise FieldError(
+            f"cannot read the ITK transform {path}: damaged, truncated or not an ITK"
+            f" transform file ({_library_reason(said, error)})"
+        ) from error
     parts = _flatten(sitk, transform)
     warps: list[Warp] = []
     fields = 0

@@ -11,8 +11,12 @@ RAS axis order (a lossless permutation and flip) and ``spacing``, ``origin``,
 from __future__ import annotations
 
 import math
+import os
 import sys
+import tempfile
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -162,3 +166,31 @@ def loaded_geometry(loaded: Loaded, where: str) -> tuple[np.ndarray, dict[str, A
         "file_axes": file_axes,
     }
     return data, geometry
+
+
+@contextmanager
+def native_stderr() -> Iterator[list[str]]:
+    """Hold back what C libraries print to stderr (file descriptor 2) during the block.
+
+    ITK's bundled HDF5 prints its whole error stack there when a file is damaged;
+    voxwarp reports one line instead. Yields a list that holds the held-back lines
+    once the block ends (to quote the useful one). Where fd 2 cannot be redirected,
+    nothing is held back.
+    """
+    lines: list[str] = []
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield lines
+        return
+    with tempfile.TemporaryFile() as held:
+        sys.stderr.flush()
+        os.dup2(held.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            held.seek(0)
+            lines.extend(held.read().decode("utf-8", "replace").splitlines())

@@ -406,3 +406,19 @@ def test_volumes_are_not_taken_for_fields(tmp_path: Path) -> None:
     vol = load_sample("colin27")
     for suffix in (".nii.gz", ".nrrd", ".npz"):
         assert not is_field_file(save_volume(vol, tmp_path / f"v{suffix}"))
+
+
+def test_a_damaged_h5_is_one_line_without_the_hdf5_error_stack(
+    field: DisplacementFieldWarp, tmp_path: Path
+) -> None:
+    path = save_displacement_field(field, tmp_path / "field.h5")
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    run = subprocess.run(
+        [sys.executable, "-m", "voxwarp", "info", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines() == [run.stderr.strip()]  # no HDF5-DIAG stack
+    assert "truncated" in run.stderr
