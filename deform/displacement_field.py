@@ -183,6 +183,8 @@ class DisplacementFieldWarp(Warp):
         self.path = None if path is None else str(path)
         self.part = None if part is None else int(part)
         self._textures: dict[int, tuple[Any, Any]] = {}
+        self._ranges: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._cells: tuple[np.ndarray, np.ndarray] | None = None
 
     # ---------------------------------------------------------------- properties
     @property
@@ -327,26 +329,23 @@ class DisplacementFieldWarp(Warp):
             c = self.index_of(np.where(pick, hi, lo))
             np.minimum(cmin, c, out=cmin)
             np.maximum(cmax, c, out=cmax)
-        u = self._u.astype(np.float64)
-        slack = np.abs(u) * 2.0**-10 + np.where(u != 0, 6e-8, 0.0)
-        cell_lo = cell_reduce(u - slack, np.minimum)
-        cell_hi = cell_reduce(u + slack, np.maximum)
         cells = n - 1
         ilo = np.clip(np.floor(cmin), 0, cells - 1).astype(np.int64)
-        ihi = np.clip(np.floor(cmax), 0, cells - 1).astype(np.int64)
-        width = 1 << np.ceil(np.log2(ihi - ilo + 1)).astype(np.int64)
+        # the cells from floor(cmin) to floor(cmax): at most ceil(cmax - cmin) + 1 of
+        # them, the same count for boxes of one size wherever they lie; rounded up to a
+        # power of two (a wider window only loosens a range), so there are few widths,
+        # their min/max grids cached per width (the field never changes)
+        span = np.minimum(np.ceil(cmax - cmin), cells)
+        k = np.ceil(np.log2(span + 1)).astype(np.int64)
+        key = (k[:, 0] * 16 + k[:, 1]) * 16 + k[:, 2]
         out_lo, out_hi = np.empty(lo.shape), np.empty(lo.shape)
-        sizes, which = np.unique(width, axis=0, return_inverse=True)
-        caches: tuple[dict, dict] = ({}, {})
-        for s, size in enumerate(sizes):
-            sel = np.flatnonzero(which.ravel() == s)
-            i, w = ilo[sel], tuple(int(v) for v in size)
-            out_lo[sel] = window_reduce(cell_lo, w, np.minimum, caches[0])[
-                i[:, 0], i[:, 1], i[:, 2]
-            ]
-            out_hi[sel] = window_reduce(cell_hi, w, np.maximum, caches[1])[
-                i[:, 0], i[:, 1], i[:, 2]
-            ]
+        for code in np.unique(key):
+            sel = np.flatnonzero(key == code)
+            width = (1 << int(code // 256), 1 << int(code // 16 % 16), 1 << int(code % 16))
+            win_lo, win_hi = self._window_ranges(width)
+            i = ilo[sel].T
+            out_lo[sel] = win_lo[i[0], i[1], i[2]]
+            out_hi[sel] = win_hi[i[0], i[1], i[2]]
         leaves = np.any((cmin < -0.5) | (cmax > n - 0.5), axis=1)
         away = np.any((cmax < -0.5) | (cmin > n - 0.5), axis=1)
         out_lo[leaves] = np.minimum(out_lo[leaves], 0.0)
@@ -354,6 +353,29 @@ class DisplacementFieldWarp(Warp):
         out_lo[away] = 0.0
         out_hi[away] = 0.0
         return out_lo, out_hi
+
+    def _window_ranges(self, width: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """Per cell, the min and max of ``u`` (with RGBA16F rounding slack) over the
+        nodes of the ``width`` cells starting there; cached per width (the field never
+        changes)."""
+        hit = self._ranges.get(width)
+        if hit is None:
+            cell_lo, cell_hi = self._cell_ranges()
+            hit = (
+                window_reduce(cell_lo, width, np.minimum),
+                window_reduce(cell_hi, width, np.maximum),
+            )
+            self._ranges[width] = hit
+        return hit
+
+    def _cell_ranges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per grid cell, the min and max of ``u`` over its 8 nodes, widened by the
+        RGBA16F rounding of the texture (``|u| 2^-10``, or a subnormal step)."""
+        if self._cells is None:
+            u = self._u
+            slack = np.abs(u) * np.float32(2.0**-10) + np.where(u != 0, 6e-8, 0).astype(np.float32)
+            self._cells = (cell_reduce(u - slack, np.minimum), cell_reduce(u + slack, np.maximum))
+        return self._cells
 
     # ---------------------------------------------------------------- GPU side
     def uniforms(self) -> dict[str, Any]:

@@ -442,8 +442,11 @@ def warped_cell_visibility(
     blo = d_lo[moved[:, 0], moved[:, 1], moved[:, 2]]
     bhi = d_hi[moved[:, 0], moved[:, 1], moved[:, 2]]
     near = count_visible(moved * block + blo, moved * block + block + bhi) > 0
-    for m in moved[~near]:
-        out[tuple(slice(m[a] * block, (m[a] + 1) * block) for a in range(3))] = False
+    cleared = np.zeros(tuple(nb), dtype=bool)
+    cleared[tuple(moved[~near].T)] = True
+    for axis in range(3):  # blocks -> cells
+        cleared = np.repeat(cleared, block, axis=axis)
+    out &= ~cleared[: shape[0], : shape[1], : shape[2]]
     moved = moved[near]
     local = np.stack(np.meshgrid(*(np.arange(block),) * 3, indexing="ij"), -1).reshape(-1, 3)
     for chunk in np.array_split(moved, max(1, len(moved) // 4096)) if len(moved) else []:
