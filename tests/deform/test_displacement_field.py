@@ -120,15 +120,12 @@ def test_glsl_matches_the_cpu_reference(gl_ctx: Any) -> None:
         # float32 index arithmetic and float filter weights: measured max 2e-5 mm on
         # llvmpipe; GPUs with 8-bit filter weights are off by up to |du| / 256 per fetch
         np.testing.assert_allclose(q, half.apply(p), atol=1e-4 if llvmpipe else 5e-2)
-        # the GLSL Jacobian by central differences at +-0.5 node: equal to the analytic
-        # one inside a cell, a mix of neighbouring cells' slopes near cell faces
-        inner = np.all(
-            np.abs(w.index_of(p) - (np.asarray(SHAPE) - 1) / 2) < np.asarray(SHAPE) / 2 - 1.5,
-            axis=1,
-        )
-        err = np.abs(jac - half.jacobian(p)).max(axis=(1, 2))[inner]
-        assert np.median(err) < 0.05
-        assert err.max() < 0.5
+        # the GLSL Jacobian is the analytic one of the trilinear interpolant, as the CPU
+        # reference, over the whole range (the half-node border and outside included)
+        err = np.abs(jac - half.jacobian(p)).max(axis=(1, 2))
+        # measured on llvmpipe: max 2.2e-7, median 2.9e-8
+        assert np.median(err) < 1e-4
+        assert np.quantile(err, 0.99) < (1e-3 if llvmpipe else 5e-2)
     finally:
         w.release()
         w.release()  # idempotent
