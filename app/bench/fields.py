@@ -222,6 +222,7 @@ def bench_fields(
     modes: tuple[str, ...] = ("dvr", "mip"),
     resample: bool = True,
     export: bool = True,
+    zero: bool = False,
     log: Callable[[str], Any] | None = print,
 ) -> FieldsReport:
     """Time rendering through imported fields, the resample alternative and the export
@@ -233,7 +234,13 @@ def bench_fields(
 
     tf = suggested_transfer_function("stent") if volume is None else "grayscale"
     cam = bench_camera(vol)
-    warps = {f"field {n}³": smooth_field(vol, n) for n in nodes}
+    fields = {f"field {n}³": smooth_field(vol, n) for n in nodes}
+    warps = dict(fields)
+    if zero:  # the same grids holding zeros: the cost of the field's texture alone
+        for n, w in zip(nodes, fields.values(), strict=True):
+            warps[f"zero field {n}³"] = DisplacementFieldWarp(
+                np.zeros_like(w.displacements), w.affine
+            )
     base = {m: Scene(vol, mode=m, transfer_function=tf, camera=cam) for m in modes}
     with OffscreenRenderer(*size) as r:
         report = FieldsReport(
@@ -242,18 +249,18 @@ def bench_fields(
             size=size,
             frames=frames,
             gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
-            max_displacement_mm=max(w.max_displacement() for w in warps.values()),
+            max_displacement_mm=max(w.max_displacement() for w in fields.values()),
         )
         r.renderer.warped_skip_maps = "always"  # built in the first (warm-up) frame
         keep: list[DisplacementFieldWarp] = []
         for scene in base.values():
             report.frame_rows.extend(_frame_rows(r, scene, warps, frames, warmup, keep, say))
         if resample:
-            for name, w in warps.items():
+            for name, w in fields.items():
                 report.resample_rows.append(_resample_row(r, base, vol, name, w))
                 say(f"resample through {name}: {report.resample_rows[-1].resample_s:.2f} s")
     if export:
-        report.export_rows.extend(_export_rows(vol, list(warps.values())[-1], say))
+        report.export_rows.extend(_export_rows(vol, list(fields.values())[-1], say))
     report.load = (load_before, load_average())
     return report
 
@@ -398,6 +405,7 @@ def cmd_bench_fields(args: argparse.Namespace) -> int:
         frames=1 if quick else args.frames,
         warmup=1 if quick else args.warmup,
         resample=not args.no_resample,
+        zero=bool(args.zero),
         log=lambda s: print(s, file=sys.stderr),
     )
     argv = sys.argv[3:] if sys.argv[1:3] == ["bench", "fields"] else []
@@ -431,6 +439,11 @@ def add_bench_fields_parser(bsub: Any) -> None:
         help="fields of N³ nodes (default 64,128)",
     )
     p.add_argument("--no-resample", action="store_true", help="skip the SimpleITK reference")
+    p.add_argument(
+        "--zero",
+        action="store_true",
+        help="also time fields of the same grids holding zeros (the texture's cost alone)",
+    )
     p.add_argument(
         "--quick", action="store_true", help="tiny sizes (a 32³ volume, 64x64, 4³ and 8³ fields)"
     )
