@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.bench.render import bench_camera, benchmark_volume, load_average
-from voxwarp.core.checks import image_size, positive_int
+from voxwarp.core.checks import image_size, int_list, positive_int
 from voxwarp.core.volume import Volume
 from voxwarp.deform.displacement_field import DisplacementFieldWarp, sample_chain_field
 from voxwarp.deform.warp import chain_apply
@@ -381,16 +381,8 @@ def _export_rows(
     return rows
 
 
-def _nodes(text: str) -> tuple[int, ...]:
-    try:
-        nodes = tuple(int(v) for v in text.split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(
-            f"nodes must be comma-separated integers like 64,128; got {text!r}"
-        ) from exc
-    if not nodes or not all(2 <= n <= 256 for n in nodes):
-        raise argparse.ArgumentTypeError(f"each field must have 2..256 nodes a side; got {text!r}")
-    return nodes
+#: ``--nodes``: fields of N³ nodes
+_nodes = int_list(2, 256, "node count", "64,128")
 
 
 def cmd_bench_fields(args: argparse.Namespace) -> int:

@@ -22,6 +22,7 @@ from voxwarp.cli import render_options as ropt
 from voxwarp.cli.animate import add_animate_parser
 from voxwarp.core import limits
 from voxwarp.core.checks import image_size as _size
+from voxwarp.core.checks import int_list
 from voxwarp.core.checks import positive_int as _positive_int
 from voxwarp.core.modes import MODES
 from voxwarp.errors import InputError as CliOptionError
@@ -1032,16 +1033,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _sizes(text: str) -> tuple[int, ...]:
-    try:
-        sizes = tuple(int(v) for v in text.split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(
-            f"sizes must be comma-separated integers like 16,32,64; got {text!r}"
-        ) from exc
-    if not sizes or not all(2 <= n <= 128 for n in sizes):
-        raise argparse.ArgumentTypeError(f"each size must be 2..128 elements; got {text!r}")
-    return sizes
+#: ``--sizes`` of ``bench massspring`` / ``bench chainmail``: element grids per axis
+_sizes = int_list(2, 128, "size", "16,32,64")
 
 
 def cmd_bench_massspring(args: argparse.Namespace) -> int:

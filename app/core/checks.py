@@ -33,6 +33,24 @@ def positive_int(text: str) -> int:
     return n
 
 
+def int_list(lo: int, hi: int, what: str, example: str) -> Any:
+    """argparse type of comma-separated integers in ``lo..hi``, e.g. ``int_list(2, 128,
+    "size", "16,32,64")``; the error names ``what`` and the ``example``."""
+
+    def parse(text: str) -> tuple[int, ...]:
+        try:
+            values = tuple(int(v) for v in text.split(","))
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(
+                f"{what}s must be comma-separated integers like {example}; got {text!r}"
+            ) from exc
+        if not values or not all(lo <= n <= hi for n in values):
+            raise argparse.ArgumentTypeError(f"each {what} must be {lo}..{hi}; got {text!r}")
+        return values
+
+    return parse
+
+
 def finite_vector(x: Any, n: int, what: str, error: type[Exception]) -> np.ndarray:
     """``x`` as ``n`` finite float64 numbers; else ``error`` naming ``what``."""
     import numpy as np  # here: the command line imports this module and must start fast
