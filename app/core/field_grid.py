@@ -101,14 +101,12 @@ def field_grid(
 
 
 def _check_budget(shape: Sequence[int]) -> None:
-    need = float(np.prod(np.asarray(shape, dtype=np.float64))) * NODE_BYTES
-    budget = limits.current_memory_budget()
-    if need > budget:
+    over = limits.over_budget(shape, NODE_BYTES)
+    if over is not None:
         dims = "x".join(str(int(n)) for n in shape)
         raise SceneError(
-            f"a {dims} displacement field needs {limits.format_bytes(need)}, over the memory"
-            f" budget of {limits.format_bytes(budget)}; use a coarser spacing or a smaller box"
-            " (or raise --memory-budget)"
+            f"a {dims} displacement field needs {over[0]}, over the memory budget of"
+            f" {over[1]}; use a coarser spacing or a smaller box (or raise --memory-budget)"
         )
 
 

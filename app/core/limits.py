@@ -152,18 +152,25 @@ def current_memory_budget() -> float:
     return float(default_memory_budget())
 
 
-def check_load_bytes(shape: Sequence[int], itemsize: int, what: str) -> None:
-    """Raise :class:`VolumeError` if voxels of ``shape`` and ``itemsize`` bytes each would
-    exceed the memory budget; call it before reading them."""
+def over_budget(shape: Sequence[int], itemsize: int) -> tuple[str, str] | None:
+    """``(need, budget)`` as text when ``shape`` items of ``itemsize`` bytes exceed the
+    memory budget, else ``None``; the caller words the error."""
     count = 1
     for n in shape:
         count *= max(int(n), 0)
     need = count * int(itemsize)
     budget = current_memory_budget()
-    if need > budget:
+    return (format_bytes(need), format_bytes(budget)) if need > budget else None
+
+
+def check_load_bytes(shape: Sequence[int], itemsize: int, what: str) -> None:
+    """Raise :class:`VolumeError` if voxels of ``shape`` and ``itemsize`` bytes each would
+    exceed the memory budget; call it before reading them."""
+    over = over_budget(shape, itemsize)
+    if over is not None:
         dims = "x".join(str(int(n)) for n in shape)
         raise VolumeError(
-            f"{what}: {dims} voxels need {format_bytes(need)}, over the memory budget of"
-            f" {format_bytes(budget)}; raise it with --memory-budget SIZE (load_volume(...,"
+            f"{what}: {dims} voxels need {over[0]}, over the memory budget of"
+            f" {over[1]}; raise it with --memory-budget SIZE (load_volume(...,"
             " memory_budget=...)) if the machine has the memory, or crop the file first."
         )
