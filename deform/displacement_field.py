@@ -38,11 +38,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from voxwarp.deform.offset_field import cell_reduce, window_reduce
+from voxwarp.deform.offset_field import MAX_DISPLACEMENT_MM as MAX_DISPLACEMENT_MM
+from voxwarp.deform.offset_field import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
 
-#: Largest displacement a half-float texture holds (mm).
-MAX_DISPLACEMENT_MM = 6.0e4
 #: Spaces a field's affine and vectors may be given in.
 FIELD_SPACES: tuple[str, ...] = ("RAS", "LPS")
 #: Units of the vectors: mm (ITK, ANTs, SimpleITK) or voxels of the field's grid
@@ -102,14 +101,7 @@ def _vectors(displacements: Any) -> np.ndarray:
             f"a displacement field needs at least 2 nodes per axis; got {u.shape[:3]}"
             " (a 2-D field cannot deform a volume)"
         )
-    bad = int(np.count_nonzero(~np.isfinite(u)))
-    if bad:
-        raise WarpError(f"the displacement field has {bad} NaN/Inf components; fix the file")
-    if np.max(np.abs(u), initial=0.0) > MAX_DISPLACEMENT_MM:
-        raise WarpError(
-            f"displacements above {MAX_DISPLACEMENT_MM:g} mm; check the units (mm expected,"
-            " or units='voxel')"
-        )
+    check_vectors(u, "check the units (mm expected, or units='voxel')")
     return u
 
 

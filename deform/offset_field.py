@@ -105,14 +105,21 @@ def _field(displacements: Any, shape: tuple[int, int, int] | None) -> np.ndarray
     grid = _shape3(tuple(int(s) for s in u.shape[:3]))
     if shape is not None and grid != shape:
         raise WarpError(f"displacements have {grid} nodes but shape={shape} was given")
-    if not np.all(np.isfinite(u)):
-        raise WarpError(f"displacements have {int(np.sum(~np.isfinite(u)))} NaN/Inf entries")
+    check_vectors(u, "check the units (mm expected)")
+    return u
+
+
+def check_vectors(u: np.ndarray, units_hint: str) -> None:
+    """Raise :class:`WarpError` for NaN/Inf displacements or ones beyond
+    :data:`MAX_DISPLACEMENT_MM` (the half-float texture); ``units_hint`` ends the latter."""
+    bad = int(np.count_nonzero(~np.isfinite(u)))
+    if bad:
+        raise WarpError(f"the displacements have {bad} NaN/Inf entries; fix the field")
     if np.max(np.abs(u), initial=0.0) > MAX_DISPLACEMENT_MM:
         raise WarpError(
             f"displacements above {MAX_DISPLACEMENT_MM:g} mm do not fit the half-float"
-            " texture; check the units (mm expected)"
+            f" texture; {units_hint}"
         )
-    return u
 
 
 def _model_dict(model: Any) -> dict[str, Any] | None:
