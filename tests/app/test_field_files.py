@@ -356,7 +356,8 @@ def test_rendering_through_an_imported_field_matches_sitk_resampling(
             )
         corr = np.corrcoef(ours.mean(-1).ravel(), ref.mean(-1).ravel())[0, 1]
         mean_abs = float(np.abs(ours - ref).mean())
-        # measured (llvmpipe): corr >= 0.9996, mean abs <= 1.2/255 over these cases
+        # measured (llvmpipe): corr >= 0.9985, mean abs <= 1.34/255 over these cases;
+        # the undeformed render is 2.6-7.4/255 away from the reference
         assert corr >= 0.99, (mode, corr)
         assert mean_abs <= 2 / 255, (mode, mean_abs * 255)
         # the field matters: the undeformed render is far from both
