@@ -66,7 +66,7 @@ OPEN_FILTER = (
 )
 FIELD_FILTER = (
     "Displacement fields and transforms (*.nii *.nii.gz *.nrrd *.nhdr *.mha *.mhd *.h5"
-    " *.hdf5 *.tfm *.txt *.npz);;All files (*)"
+    " *.hdf5 *.tfm *.txt *.mat *.npz);;All files (*)"
 )
 
 #: shortcuts of the anatomical views (Shift: R, P and S are taken by reset, projection

@@ -1133,9 +1133,10 @@ def _add_field_args(p: argparse.ArgumentParser) -> None:
         "Render the volume through registration results without resampling it: the"
         " volume is the moving image, shown in the fixed image's space. ITK/ANTs/SimpleITK"
         " fields (pull-back, LPS) as NIfTI, NRRD, MetaImage, .npz, or ITK transform files"
-        " (.h5, .tfm: displacement fields, B-splines, affines, composites). Repeat the"
-        " option to compose: the first field is applied first to the displayed point"
-        " (the reverse of antsApplyTransforms' -t order).",
+        " (.h5, .tfm, ANTs' .mat: displacement fields, B-splines, affines, composites). Repeat the"
+        " option to compose: the first file is applied first to the displayed (fixed)"
+        " point, the order antsApplyTransforms takes its -t files in (e.g. --displacement"
+        " 1Warp.nii.gz --displacement 0GenericAffine.mat).",
     )
     g.add_argument(
         "--displacement",

@@ -19,7 +19,8 @@ Formats (by suffix):
   Detached data only beside the header, as for volumes.
 * ``.mha``/``.mhd``: MetaImage vector image (LPS), read by SimpleITK (``registration``
   extra); a ``.mhd``'s data file must lie beside it.
-* ``.h5``/``.hdf5``/``.tfm``/``.txt``: ITK transform files (SimpleITK): a
+* ``.h5``/``.hdf5``/``.tfm``/``.txt``/``.mat``: ITK transform files (SimpleITK; ANTs
+  writes its affine as ``0GenericAffine.mat``): a
   ``DisplacementFieldTransform``, a ``BSplineTransform`` (sampled to a field over its
   domain), linear transforms, or a ``CompositeTransform`` of them (ANTs'
   ``Composite.h5``). :func:`load_transform` returns the chain in voxwarp's order.
@@ -56,7 +57,7 @@ from voxwarp.io.loaded import native_stderr
 #: Suffixes of displacement field images.
 IMAGE_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd", ".npz")
 #: Suffixes of ITK transform files.
-TRANSFORM_SUFFIXES = (".h5", ".hdf5", ".tfm", ".txt")
+TRANSFORM_SUFFIXES = (".h5", ".hdf5", ".tfm", ".txt", ".mat")
 #: What a file's vectors mean when its header does not say (see the module docstring).
 CONVENTIONS = ("itk", "ras", "voxel")
 #: Most nodes per axis when a B-spline transform is sampled to a field.

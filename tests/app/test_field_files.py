@@ -445,3 +445,29 @@ def test_an_oblique_volume_through_an_imported_field_matches_sitk_resampling(
     assert corr >= 0.99  # measured 0.9963
     assert mean_abs <= 2 / 255  # measured 1.57/255
     assert float(np.abs(still - ref).mean()) > 2.5 * mean_abs  # measured 6.6/255
+
+
+def test_an_ants_warp_and_affine_pair_composes_in_antsapplytransforms_order(
+    field: DisplacementFieldWarp, tmp_path: Path
+) -> None:
+    # antsApplyTransforms -t 1Warp.nii.gz -t 0GenericAffine.mat adds its -t files to an
+    # ITK CompositeTransform last first, so the warp (on the fixed grid) is applied
+    # first to a fixed point: q = A(W(p)). voxwarp takes the files in the same order.
+    warp_path = tmp_path / "1Warp.nii.gz"
+    from voxwarp.io.fields import field_image
+
+    sitk.WriteImage(field_image(field), str(warp_path))  # 5-D NIfTI, intent vector
+    affine = sitk.AffineTransform(3)
+    affine.SetMatrix((1.05, 0.02, 0, -0.03, 0.97, 0, 0, 0.01, 1.0))
+    affine.SetTranslation((3.0, -2.0, 1.5))
+    affine.SetCenter((10.0, 20.0, 30.0))
+    mat_path = tmp_path / "0GenericAffine.mat"
+    sitk.WriteTransform(affine, str(mat_path))
+    ants = sitk.CompositeTransform(3)
+    ants.AddTransform(sitk.ReadTransform(str(mat_path)))  # the last -t first
+    img = sitk.Cast(sitk.ReadImage(str(warp_path)), sitk.sitkVectorFloat64)
+    ants.AddTransform(sitk.DisplacementFieldTransform(img))
+    chain = load_transform(warp_path) + load_transform(mat_path)
+    assert [type(w) for w in chain] == [DisplacementFieldWarp, AffineWarp]
+    p = probe_points(field)
+    np.testing.assert_allclose(chain_apply(chain, p), sitk_points(ants, p), atol=1e-4)
