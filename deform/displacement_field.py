@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -388,12 +389,28 @@ class DisplacementFieldWarp(Warp):
         z-slices, linear filtering, clamp to edge), uploaded once per context."""
         entry = self._textures.get(id(ctx))
         if entry is None or entry[0] is not ctx:
+            _check_texture_size(ctx, self.shape)
             tex = ctx.texture_array(self.shape, 4, self.texture_data().tobytes(), dtype="f2")
             tex.filter = (ctx.LINEAR, ctx.LINEAR)
             tex.repeat_x = tex.repeat_y = False
             entry = (ctx, tex)
             self._textures[id(ctx)] = entry
         return {"displacement": entry[1]}
+
+    def bind_volume(self, volume: Any) -> None:
+        """Warn (one line) when the field's grid does not reach the volume at all: the
+        field then moves nothing, which usually means it belongs to another image."""
+        lo, hi = self.support_bounds()
+        c = np.asarray(volume.corners(), float)
+        if np.any(lo > c.max(axis=0)) or np.any(hi < c.min(axis=0)):
+            warnings.warn(
+                f"the displacement field {self.path or ''} covers RAS"
+                f" {np.round(lo, 1).tolist()}..{np.round(hi, 1).tolist()} mm, which misses"
+                f" the volume {getattr(volume, 'name', '')!r} entirely: it moves nothing"
+                " (a field for another image, or another space?)",
+                UserWarning,
+                stacklevel=2,
+            )
 
     def release(self) -> None:
         """Free the field's textures (call with their context current); idempotent."""
@@ -452,6 +469,20 @@ class DisplacementFieldWarp(Warp):
             )
         u = np.frombuffer(raw, dtype="<f4").reshape(*shape, 3)
         return cls(u, affine)
+
+
+def _check_texture_size(ctx: Any, shape: tuple[int, int, int]) -> None:
+    """Raise :class:`WarpError` when a field of ``shape`` nodes exceeds the context's 2D
+    texture size or array layers (its texture is a 2D array of z-slices)."""
+    side = int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+    layers = int(ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 2048))
+    if max(shape[:2]) > side or shape[2] > layers:
+        raise WarpError(
+            f"a {shape[0]}x{shape[1]}x{shape[2]} displacement field exceeds this GPU's"
+            f" texture limits ({side} per slice side, {layers} slices); resample it"
+            " coarser (e.g. SimpleITK.Resample of the field image, or voxwarp"
+            " export-field --spacing)"
+        )
 
 
 def sample_chain_field(

@@ -769,6 +769,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
     scene = _scene_from_args(obj, args)
     fields = _field_warps(args)
+    for w in fields:
+        w.bind_volume(scene.volume)  # a field that misses the volume warns
     if fields:  # nearest the displayed (fixed) space; the models act in the volume's
         scene = scene.copy(warps=[*fields, *scene.warps])
     grid = _deform_grid(args, scene.volume)

@@ -471,3 +471,65 @@ def test_an_ants_warp_and_affine_pair_composes_in_antsapplytransforms_order(
     assert [type(w) for w in chain] == [DisplacementFieldWarp, AffineWarp]
     p = probe_points(field)
     np.testing.assert_allclose(chain_apply(chain, p), sitk_points(ants, p), atol=1e-4)
+
+
+def test_a_field_that_misses_the_volume_warns_once_on_one_line(
+    field: DisplacementFieldWarp, tmp_path: Path
+) -> None:
+    far = np.array(field.affine)
+    far[:3, 3] += 5000.0  # another space
+    path = save_displacement_field(
+        DisplacementFieldWarp(field.displacements, far), tmp_path / "far.nrrd"
+    )
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "voxwarp",
+            "render",
+            "sample:colin27",
+            "--displacement",
+            str(path),
+            "--size",
+            "32x32",
+            "-o",
+            str(tmp_path / "x.png"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0
+    warned = [line for line in run.stderr.splitlines() if "misses" in line]
+    assert len(warned) == 1
+    assert "moves nothing" in warned[0]
+    run = subprocess.run(  # a field over the volume: no such warning
+        [
+            sys.executable,
+            "-m",
+            "voxwarp",
+            "render",
+            "sample:colin27",
+            "--displacement",
+            str(save_displacement_field(field, tmp_path / "near.nrrd")),
+            "--size",
+            "32x32",
+            "-o",
+            str(tmp_path / "y.png"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0
+    assert "misses" not in run.stderr
+
+
+def test_a_field_beyond_the_gpu_texture_limits_is_one_line(gl_ctx: Any) -> None:
+    from voxwarp.deform.warp import WarpError
+
+    layers = int(gl_ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 2048))
+    tall = DisplacementFieldWarp(np.zeros((2, 2, layers + 1, 3), np.float32), np.eye(4))
+    with pytest.raises(WarpError, match="texture limits") as info:
+        tall.textures(gl_ctx)
+    assert "\n" not in str(info.value)
