@@ -43,6 +43,23 @@ class WarpError(VoxwarpError, ValueError):
     """A warp was given invalid parameters (message names the fix)."""
 
 
+class ForwardMapError(WarpError):
+    """A forward map found no solution at some points (the warp folds or tears there).
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        The best estimates (N, 3) at every point, solved or not.
+    failed : numpy.ndarray
+        (N,) bool: the points whose residual stayed above the tolerance.
+    """
+
+    def __init__(self, message: str, points: np.ndarray, failed: np.ndarray) -> None:
+        super().__init__(message)
+        self.points = points
+        self.failed = failed
+
+
 _REGISTRY: dict[str, type[Warp]] = {}
 #: the warp kinds voxwarp ships and the modules that register them: loaded when a scene
 #: names one, so that reading a warp entry never depends on what was imported before
@@ -456,17 +473,21 @@ def box_corners(lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
 
 def check_forward(warp: Warp, p: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Return ``p`` if ``warp.apply(p)`` is within the warp's forward tolerance of ``x``;
-    otherwise raise :class:`WarpError` saying where the forward map failed."""
+    otherwise raise :class:`ForwardMapError` saying where the forward map failed (it
+    carries the estimates, for :func:`chain_forward_lenient`)."""
     err = np.linalg.norm(warp.apply(p) - x, axis=1)
     bad = ~(err <= warp.forward_tolerance)
     if np.any(bad):
         worst = int(np.nanargmax(np.where(np.isfinite(err), err, np.inf)))
-        raise WarpError(
+        p = np.where(np.isfinite(p), p, x)  # an estimate everywhere, for lenient callers
+        raise ForwardMapError(
             f"the {warp.kind} warp has no forward map at {int(bad.sum())} of {len(x)} points"
             f" (largest residual {float(err[worst]):.3g} mm at"
             f" {np.round(x[worst], 2).tolist()}): the deformation folds or tears there (e.g."
             " at the edge of a displacement field's grid); smooth it or keep meshes out of"
-            " that region"
+            " that region",
+            p,
+            bad,
         )
     return p
 
@@ -476,12 +497,35 @@ def chain_forward(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:
 
     The inverse of :func:`chain_apply`: ``chain_apply(warps, chain_forward(warps, x))``
     is ``x`` within the warps' forward tolerances. Meshes and handles follow the volume
-    through it.
+    through it. Raises :class:`ForwardMapError` where a warp has no forward map; see
+    :func:`chain_forward_lenient` to keep the best estimates instead.
     """
     p = np.atleast_2d(np.asarray(points, dtype=np.float64))
     for w in reversed(list(warps)):
         p = w.forward(p)
     return p
+
+
+def chain_forward_lenient(
+    warps: Sequence[Warp], points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """:func:`chain_forward` that keeps going where a warp has no forward map.
+
+    Returns the moved points (the best estimates where unsolved), an (N,) bool mask of
+    the points some warp could not solve, and the first failure's one-line message
+    (empty when every point was solved). A mesh vertex at a displacement field's edge,
+    where ITK's field stops, is the common case.
+    """
+    p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    failed = np.zeros(len(p), dtype=bool)
+    message = ""
+    for w in reversed(list(warps)):
+        try:
+            p = w.forward(p)
+        except ForwardMapError as exc:
+            p, failed = exc.points, failed | exc.failed
+            message = message or str(exc)
+    return p, failed, message
 
 
 def chain_jacobian(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:

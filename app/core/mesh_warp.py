@@ -3,7 +3,7 @@
 A scene's warps map deformed points to original ones (``chain_apply``); meshes live in
 the original world (they are drawn on the anatomy), so to move with the volume a vertex
 goes the other way, through the chain's forward map
-(:func:`voxwarp.deform.warp.chain_forward`). Normals follow the Jacobian: for a surface
+(:func:`voxwarp.deform.warp.chain_forward_lenient`). Normals follow the Jacobian: for a surface
 ``f(x) = 0`` of the original space seen in deformed space as ``f(A(p)) = 0`` (A the
 chain), the normal is ``J_A(p)^T n`` (:func:`voxwarp.deform.warp.chain_jacobian`).
 
@@ -15,6 +15,7 @@ and revisions, so an unchanged scene is not baked again each frame. Only the
 
 from __future__ import annotations
 
+import warnings
 import weakref
 from collections import OrderedDict
 from collections.abc import Hashable, Sequence
@@ -22,7 +23,12 @@ from collections.abc import Hashable, Sequence
 import numpy as np
 
 from voxwarp.core.mesh import MeshInstance
-from voxwarp.deform.warp import Warp, chain_forward, chain_jacobian, fold_affine
+from voxwarp.deform.warp import Warp, chain_forward_lenient, chain_jacobian, fold_affine
+
+
+class MeshWarpWarning(UserWarning):
+    """Some vertices of a mesh could not be moved through the warp chain exactly."""
+
 
 #: baked instances kept (least recently used dropped first)
 CACHE_SIZE = 32
@@ -63,8 +69,10 @@ def warped_geometry(
     """World positions (N, 3) and unit normals (N, 3) of an instance's vertices moved
     by the chain's forward map, and the cache key they are stored under.
 
-    Raises :class:`~voxwarp.deform.warp.WarpError` (one line) where the forward map
-    has no solution (the deformation folds there).
+    Where the chain has no forward map at some vertices (a fold, or a tear such as
+    the edge of a displacement field's grid, which the moving anatomy often reaches)
+    those vertices keep the best estimate and one :class:`MeshWarpWarning` line says
+    how many; the rest of the mesh is exact.
     """
     key = geometry_key(instance, warps)
     hit = _CACHE.get(key)
@@ -72,7 +80,14 @@ def warped_geometry(
         _CACHE.move_to_end(key)
         return hit[1], hit[2], key
     world, normals = _placed(instance)
-    p = chain_forward(warps, world)
+    p, failed, message = chain_forward_lenient(warps, world)
+    if np.any(failed):
+        warnings.warn(
+            f"mesh {instance.name!r}: {int(failed.sum())} of {len(failed)} vertices have no"
+            f" forward map and keep their nearest estimate ({message})",
+            MeshWarpWarning,
+            stacklevel=3,
+        )
     j = chain_jacobian(warps, p)
     n = np.einsum("nji,nj->ni", j, normals)  # J^T n
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
