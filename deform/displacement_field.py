@@ -102,7 +102,7 @@ def _vectors(displacements: Any) -> np.ndarray:
             f"a displacement field needs at least 2 nodes per axis; got {u.shape[:3]}"
             " (a 2-D field cannot deform a volume)"
         )
-    check_vectors(u, "check the units (mm expected, or units='voxel')")
+    check_vectors(u, "check the units: mm expected (voxel units: --field-convention voxel)")
     return u
 
 

@@ -114,7 +114,11 @@ def check_vectors(u: np.ndarray, units_hint: str) -> None:
     :data:`MAX_DISPLACEMENT_MM` (the half-float texture); ``units_hint`` ends the latter."""
     bad = int(np.count_nonzero(~np.isfinite(u)))
     if bad:
-        raise WarpError(f"the displacements have {bad} NaN/Inf entries; fix the field")
+        first = np.argwhere(~np.isfinite(u))[0][:3].tolist()
+        raise WarpError(
+            f"the displacements have {bad} NaN/Inf entries (the first at node {first});"
+            " fix the field"
+        )
     if np.max(np.abs(u), initial=0.0) > MAX_DISPLACEMENT_MM:
         raise WarpError(
             f"displacements above {MAX_DISPLACEMENT_MM:g} mm do not fit the half-float"

@@ -710,7 +710,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     from voxwarp.scene import Scene
 
     if is_field_file(args.input):  # a registration result, not a volume
-        warps = load_transform(args.input)
+        warps = load_transform(args.input, convention=args.field_convention)
         text = json.dumps([field_info(w) for w in warps], indent=2)
         print(text if args.json else field_summary(warps))
         return 0
@@ -841,6 +841,8 @@ def cmd_export_field(args: argparse.Namespace) -> int:
     if not isinstance(scene, Scene):
         raise CliOptionError(f"{args.scene} is not a voxwarp scene JSON (render --save-scene)")
     box = None if args.box is None else (args.box[:3], args.box[3:])
+    if not scene.warps:
+        warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
     field = scene.displacement_field(spacing=args.spacing, box=box)
     save_displacement_field(field, out)
     grid = "x".join(str(n) for n in field.shape)
@@ -1373,9 +1375,18 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"voxwarp {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
-    pi = sub.add_parser("info", help="print dims, dtype, spacing, value range, histogram")
+    pi = sub.add_parser(
+        "info",
+        help="print dims, dtype, spacing, value range, histogram; for a displacement field"
+        " or transform file its grid, extent and |u|",
+    )
     pi.add_argument("input")
     pi.add_argument("--json", action="store_true", help="machine-readable output")
+    pi.add_argument(
+        "--field-convention",
+        choices=("itk", "ras", "voxel"),
+        help="a displacement field's vectors where its header does not say (as render)",
+    )
     _add_volume_args(pi)
     pi.set_defaults(func=cmd_info)
 

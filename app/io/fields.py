@@ -603,7 +603,10 @@ def is_field_file(path: str | os.PathLike[str]) -> bool:
             import nibabel as nib
 
             hdr = nib.load(str(p)).header
-            return len(hdr.get_data_shape()) in (4, 5) and hdr.get_data_shape()[-1] == 3
+            shape = hdr.get_data_shape()
+            vector_intent = int(hdr["intent_code"]) in (1006, 1007)
+            itk_layout = len(shape) == 5 and shape[3] == 1  # (x, y, z, 1, c): ITK vectors
+            return vector_intent or itk_layout or (len(shape) == 4 and shape[-1] == 3)
         if suffix in (".nrrd", ".nhdr"):
             import nrrd
 
@@ -638,6 +641,8 @@ def field_info(warp: Warp) -> dict[str, Any]:
 def field_summary(warps: Sequence[Warp]) -> str:
     """Lines describing a chain read from a field or transform file (``voxwarp info``)."""
     lines = []
+    if len(warps) > 1:
+        lines.append(f"{len(warps)} transforms, applied in this order to a fixed point:")
     for i, w in enumerate(warps):
         if isinstance(w, DisplacementFieldWarp):
             lo, hi = w.support_bounds()

@@ -959,7 +959,8 @@ def _read_nifti(path: Path) -> _Loaded:
         raise VolumeError(
             f"{path} is a 4D NIfTI with shape {tuple(img.shape)} (a time series or several"
             " channels); voxwarp renders one 3D volume. Extract one, e.g. with nibabel:"
-            " nib.save(img.slicer[..., 0], 'volume0.nii.gz')."
+            " nib.save(img.slicer[..., 0], 'volume0.nii.gz'); a displacement field goes"
+            " to render --displacement FILE instead."
         )
     if len(shape) < 3:
         raise VolumeError(

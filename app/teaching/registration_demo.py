@@ -88,7 +88,10 @@ def demo_registration(
         files=[str(moving_path), str(field_nii), str(field_h5)],
         gl_renderer=renders.pop("gl_renderer"),
     )
-    cli = f"voxwarp render {moving_path} --displacement {field_h5} -o registered.png"
+    cli = (
+        f"voxwarp render {Path(moving_path).resolve()} --displacement"
+        f" {Path(field_h5).resolve()} -o registered.png"
+    )
     numbers["cli"] = cli
     say(
         f"registration: mean |fixed - moving| {numbers['render_mad_before']:.1f} -> "

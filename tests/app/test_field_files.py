@@ -533,3 +533,26 @@ def test_a_field_beyond_the_gpu_texture_limits_is_one_line(gl_ctx: Any) -> None:
     with pytest.raises(WarpError, match="texture limits") as info:
         tall.textures(gl_ctx)
     assert "\n" not in str(info.value)
+
+
+def test_info_reads_a_voxelmorph_field_with_a_convention_and_names_bad_components(
+    field: DisplacementFieldWarp, tmp_path: Path
+) -> None:
+    vxm = nifti(tmp_path / "vxm.nii.gz", np.zeros((*field.shape, 3)), field.affine, intent="none")
+    two = nifti(tmp_path / "two.nii.gz", np.zeros((*field.shape, 1, 2)), field.affine)
+
+    def info(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, "-m", "voxwarp", "info", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+
+    assert "--field-convention" in info(str(vxm)).stderr
+    ok = info(str(vxm), "--field-convention", "voxel")
+    assert ok.returncode == 0
+    assert "displacement field" in ok.stdout
+    bad = info(str(two))  # a field with 2 components, not "a 4D NIfTI ... extract one"
+    assert bad.returncode == 2
+    assert "needs 3" in bad.stderr
