@@ -760,12 +760,13 @@ def _check_distinct_outputs(args: argparse.Namespace) -> None:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """``voxwarp render INPUT -o out.png``: render one image headless."""
-    from voxwarp.io.images import write_image
+    from voxwarp.io.images import check_image_format, write_image
     from voxwarp.render.raycaster import OffscreenRenderer
 
     _check_deform_options(args)
     ropt.check_render_options(args)
     _check_distinct_outputs(args)
+    check_image_format(args.output)  # a bad -o fails before any work or other output
     obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
     scene = _scene_from_args(obj, args)
     fields = _field_warps(args)

@@ -14,6 +14,22 @@ from voxwarp.errors import OutputError, VoxwarpError
 FLOAT_FORMATS = (".exr", ".hdr", ".tif", ".tiff")
 
 
+def check_image_format(path: str | os.PathLike) -> str:
+    """The lower-case extension of ``path`` when OpenImageIO can write it; otherwise a
+    one-line :class:`~voxwarp.errors.VoxwarpError` naming the formats to use. Call it
+    before rendering, so a bad ``-o`` fails before any work (or any other output)."""
+    import OpenImageIO as oiio
+
+    ext = Path(path).suffix.lower()
+    if not ext:
+        raise VoxwarpError(f"output {path} has no extension; use .png, .exr or .tif")
+    oiio.geterror()  # clear a stale error of this thread
+    if oiio.ImageOutput.create("image" + ext) is None:  # finds a writer, opens nothing
+        oiio.geterror()
+        raise VoxwarpError(f"cannot write {ext} images ({path}); use .png, .exr or .tif")
+    return ext
+
+
 def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     """Write an (H, W, C) uint8 or float32 image, row 0 = top, atomically.
 
@@ -28,9 +44,7 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     img = np.ascontiguousarray(image)
     if img.ndim != 3 or img.shape[2] not in (1, 3, 4):
         raise VoxwarpError(f"write_image needs an (H, W, 1|3|4) array; got shape {img.shape}")
-    ext = path.suffix.lower()
-    if not ext:
-        raise VoxwarpError(f"output {path} has no extension; use .png, .exr or .tif")
+    ext = check_image_format(path)
     if img.dtype == np.float32 and ext not in FLOAT_FORMATS:
         img = np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
     fmt = oiio.FLOAT if img.dtype == np.float32 else oiio.UINT8

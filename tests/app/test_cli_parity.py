@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -550,3 +552,30 @@ def test_gui_takes_series(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
     assert seen["spec"] == str(folder)
     assert seen["series"] == 2
     assert load_session_input(str(folder), series=2).scene.volume.shape == (64, 64, 2)
+
+
+def test_a_bad_output_format_fails_before_rendering_or_saving_the_scene(tmp_path: Path) -> None:
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "voxwarp",
+            "render",
+            "sample:colin27",
+            "--size",
+            "16x16",
+            "-o",
+            str(tmp_path / "image.json"),
+            "--save-scene",
+            str(tmp_path / "scene.json"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines() == [
+        f"voxwarp: error: cannot write .json images ({tmp_path / 'image.json'}); use .png,"
+        " .exr or .tif"
+    ]
+    assert list(tmp_path.iterdir()) == []  # no scene, no temporary file
