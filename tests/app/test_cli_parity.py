@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -555,23 +553,15 @@ def test_gui_takes_series(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
 
 
 def test_a_bad_output_format_fails_before_rendering_or_saving_the_scene(tmp_path: Path) -> None:
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "voxwarp",
-            "render",
-            "sample:colin27",
-            "--size",
-            "16x16",
-            "-o",
-            str(tmp_path / "image.json"),
-            "--save-scene",
-            str(tmp_path / "scene.json"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
+    run = run_cli(
+        "render",
+        "sample:colin27",
+        "--size",
+        "16x16",
+        "-o",
+        str(tmp_path / "image.json"),
+        "--save-scene",
+        str(tmp_path / "scene.json"),
     )
     assert run.returncode == 2
     assert run.stderr.strip().splitlines() == [

@@ -9,7 +9,6 @@ imported field against the volume SimpleITK resampled through the same field.
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from tests.app.test_cli import run_cli
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.volume import Volume
 from voxwarp.deform.displacement_field import DisplacementFieldWarp
@@ -245,21 +245,8 @@ def test_bad_field_files_give_one_line_errors(tmp_path: Path) -> None:
 
 def test_cli_bad_field_is_one_line_on_stderr(tmp_path: Path) -> None:
     path = nifti(tmp_path / "two.nii.gz", np.zeros((4, 4, 4, 1, 2)), np.eye(4))
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "voxwarp",
-            "render",
-            "sample:colin27",
-            "--displacement",
-            str(path),
-            "-o",
-            str(tmp_path / "x.png"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
+    run = run_cli(
+        "render", "sample:colin27", "--displacement", str(path), "-o", str(tmp_path / "x.png")
     )
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
@@ -387,13 +374,8 @@ def test_info_describes_a_field_file(
 
     path = save_displacement_field(field, tmp_path / f"field{suffix}")
     assert is_field_file(path)
-    run = subprocess.run(
-        [sys.executable, "-m", "voxwarp", "info", str(path), "--json"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    )
+    run = run_cli("info", str(path), "--json")
+    assert run.returncode == 0, run.stderr
     (info,) = json.loads(run.stdout)
     assert info["shape"] == list(field.shape)
     assert info["max_displacement_mm"] == pytest.approx(field.max_displacement(), rel=1e-5)
@@ -414,12 +396,7 @@ def test_a_damaged_h5_is_one_line_without_the_hdf5_error_stack(
 ) -> None:
     path = save_displacement_field(field, tmp_path / "field.h5")
     path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    run = subprocess.run(
-        [sys.executable, "-m", "voxwarp", "info", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = run_cli("info", str(path))
     assert run.returncode == 2
     assert run.stderr.strip().splitlines() == [run.stderr.strip()]  # no HDF5-DIAG stack
     assert "truncated" in run.stderr
@@ -481,46 +458,30 @@ def test_a_field_that_misses_the_volume_warns_once_on_one_line(
     path = save_displacement_field(
         DisplacementFieldWarp(field.displacements, far), tmp_path / "far.nrrd"
     )
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "voxwarp",
-            "render",
-            "sample:colin27",
-            "--displacement",
-            str(path),
-            "--size",
-            "32x32",
-            "-o",
-            str(tmp_path / "x.png"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
+    run = run_cli(
+        "render",
+        "sample:colin27",
+        "--displacement",
+        str(path),
+        "--size",
+        "32x32",
+        "-o",
+        str(tmp_path / "x.png"),
     )
     assert run.returncode == 0
     warned = [line for line in run.stderr.splitlines() if "misses" in line]
     assert len(warned) == 1
     assert "moves nothing" in warned[0]
-    run = subprocess.run(  # a field over the volume: no such warning
-        [
-            sys.executable,
-            "-m",
-            "voxwarp",
-            "render",
-            "sample:colin27",
-            "--displacement",
-            str(save_displacement_field(field, tmp_path / "near.nrrd")),
-            "--size",
-            "32x32",
-            "-o",
-            str(tmp_path / "y.png"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = run_cli(
+        "render",
+        "sample:colin27",
+        "--displacement",
+        str(save_displacement_field(field, tmp_path / "near.nrrd")),
+        "--size",
+        "32x32",
+        "-o",
+        str(tmp_path / "y.png"),
+    )  # a field over the volume: no such warning
     assert run.returncode == 0
     assert "misses" not in run.stderr
 
@@ -542,12 +503,7 @@ def test_info_reads_a_voxelmorph_field_with_a_convention_and_names_bad_component
     two = nifti(tmp_path / "two.nii.gz", np.zeros((*field.shape, 1, 2)), field.affine)
 
     def info(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(
-            [sys.executable, "-m", "voxwarp", "info", *args],
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        return run_cli("info", *args)
 
     assert "--field-convention" in info(str(vxm)).stderr
     ok = info(str(vxm), "--field-convention", "voxel")
