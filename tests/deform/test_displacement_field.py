@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from tests.deform.test_offset_field import gpu_warp
+from tests.warp_gpu import gpu_warp
 from voxwarp.deform.displacement_field import DisplacementFieldWarp, sample_chain_field
 from voxwarp.deform.warp import WarpError, rotation_matrix, warp_from_dict
 

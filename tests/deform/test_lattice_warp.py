@@ -21,6 +21,7 @@ import pytest
 from scipy import ndimage
 
 from tests.app.test_render import aligned_camera, grey_scene
+from tests.warp_gpu import gpu_warp
 from voxwarp.core.volume import Volume
 from voxwarp.deform.lattice_warp import (
     DEFAULT_ITERATIONS,
@@ -32,7 +33,7 @@ from voxwarp.deform.lattice_warp import (
     lattice_eval,
 )
 from voxwarp.deform.trilinear import TrilinearGrid
-from voxwarp.deform.warp import AffineWarp, WarpError, chain_apply, compose_glsl, warp_from_dict
+from voxwarp.deform.warp import AffineWarp, WarpError, chain_apply, warp_from_dict
 
 BOX = (np.array([-10.0, 0.0, 5.0]), np.array([54.0, 48.0, 61.0]))
 SIZE = BOX[1] - BOX[0]
@@ -337,69 +338,6 @@ def test_lattice_eval_matches_the_grid() -> None:
 
 
 # ---------------------------------------------------------------------- GLSL at points
-VERTEX = """#version 430
-void main() {
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
-
-FRAGMENT = """#version 430
-uniform sampler2D u_points;
-out vec4 frag;
-{warps}
-void main() {{
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    vec3 p = texelFetch(u_points, ivec2(px.x, 0), 0).xyz;
-    frag = vec4(px.y == 0 ? warp_chain(p) : warp_chain_jacobian(p)[px.y - 1], 1.0);
-}}
-"""
-
-
-def gpu_warp(
-    ctx: Any, w: LatticeWarp | list[LatticeWarp], points: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """warp(p) (N, 3) and warp_jacobian(p) (N, 3, 3) of the GLSL (a warp or a chain), one
-    pixel column a point."""
-    n = len(points)
-    chain = w if isinstance(w, list) else [w]
-    prog = ctx.program(
-        vertex_shader=VERTEX, fragment_shader=FRAGMENT.format(warps=compose_glsl(chain))
-    )
-    ctx.detect_framebuffer(0).use()
-    fbo = ctx.simple_framebuffer((n, 4), components=4, dtype="f4")
-    pts = ctx.texture((n, 1), 4, np.c_[points, np.ones(n)].astype("f4").tobytes(), dtype="f4")
-    pts.filter = (ctx.NEAREST, ctx.NEAREST)
-    vao = ctx.vertex_array(prog, [])
-    try:
-        unit = 1
-        for i, warp in enumerate(chain):
-            for name, value in warp.uniforms().items():
-                v = np.asarray(value, dtype=np.float64)
-                if v.ndim == 2:  # GLSL matrices are column-major
-                    prog[f"w{i}_{name}"].write(np.ascontiguousarray(v.T, dtype="f4").tobytes())
-                else:
-                    prog[f"w{i}_{name}"].value = tuple(float(c) for c in v)
-            for name, tex in warp.textures(ctx).items():
-                tex.use(unit)
-                prog[f"w{i}_{name}"].value = unit
-                unit += 1
-        pts.use(0)
-        prog["u_points"].value = 0
-        fbo.use()
-        vao.render(mode=ctx.TRIANGLES, vertices=3)
-        out = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(4, n, 4)
-        q = out[0, :, :3].astype(np.float64)
-        jac = np.transpose(out[1:, :, :3], (1, 2, 0)).astype(np.float64)  # columns -> matrix
-        return q, jac
-    finally:
-        ctx.detect_framebuffer(0).use()
-        vao.release()
-        pts.release()
-        fbo.release()
-        prog.release()
-
-
 @pytest.mark.parametrize(
     ("kind", "inverse", "k"),
     [("bent", "baked", 0), ("bent", "newton", 1), ("bent", "newton", 2), ("bulged", "newton", 2)],

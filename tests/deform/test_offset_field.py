@@ -19,6 +19,7 @@ import pytest
 from scipy import ndimage
 
 from tests.app.test_render import aligned_camera, grey_scene, phantom
+from tests.warp_gpu import gpu_warp
 from voxwarp.core.volume import Volume
 from voxwarp.deform.offset_field import (
     DEFAULT_BAKED_ITERATIONS,
@@ -28,8 +29,7 @@ from voxwarp.deform.offset_field import (
     gaussian_drag_field,
     inverse_error_table,
 )
-from voxwarp.deform.warp import Warp, WarpError, compose_glsl, warp_from_dict
-from voxwarp.render.raycaster import _set_uniform
+from voxwarp.deform.warp import WarpError, compose_glsl, warp_from_dict
 from voxwarp.scene import Scene
 
 SAVE_IMAGES = os.environ.get("VOXWARP_SAVE_IMAGES")  # folder for the comparison PNGs
@@ -385,58 +385,6 @@ def test_bad_dicts_raise_clear_errors(d: dict, pattern: str) -> None:
 
 
 # ---------------------------------------------------------------------- GLSL at points
-VERTEX = """#version 430
-void main() {
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
-
-FRAGMENT = """#version 430
-uniform sampler2D u_points;
-out vec4 frag;
-{warps}
-void main() {{
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    vec3 p = texelFetch(u_points, ivec2(px.x, 0), 0).xyz;
-    frag = vec4(px.y == 0 ? warp_chain(p) : warp_chain_jacobian(p)[px.y - 1], 1.0);
-}}
-"""
-
-
-def gpu_warp(ctx: Any, w: Warp, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """warp(p) (N, 3) and warp_jacobian(p) (N, 3, 3) of the GLSL, one pixel column a point."""
-    n = len(points)
-    prog = ctx.program(
-        vertex_shader=VERTEX, fragment_shader=FRAGMENT.format(warps=compose_glsl([w]))
-    )
-    ctx.detect_framebuffer(0).use()
-    fbo = ctx.simple_framebuffer((n, 4), components=4, dtype="f4")
-    pts = ctx.texture((n, 1), 4, np.c_[points, np.ones(n)].astype("f4").tobytes(), dtype="f4")
-    pts.filter = (ctx.NEAREST, ctx.NEAREST)
-    vao = ctx.vertex_array(prog, [])
-    try:
-        for name, value in w.uniforms().items():
-            _set_uniform(prog, f"w0_{name}", value)
-        pts.use(0)
-        prog["u_points"].value = 0
-        for unit, (name, tex) in enumerate(w.textures(ctx).items(), start=1):
-            tex.use(unit)
-            prog[f"w0_{name}"].value = unit
-        fbo.use()
-        vao.render(mode=ctx.TRIANGLES, vertices=3)
-        out = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(4, n, 4)
-        q = out[0, :, :3].astype(np.float64)
-        jac = np.transpose(out[1:, :, :3], (1, 2, 0)).astype(np.float64)  # columns -> matrix
-        return q, jac
-    finally:
-        ctx.detect_framebuffer(0).use()
-        vao.release()
-        pts.release()
-        fbo.release()
-        prog.release()
-
-
 def central_jacobian(w: OffsetFieldWarp, p: np.ndarray) -> np.ndarray:
     """The GLSL's Jacobian on the CPU: central differences of u at +-h/2 around q."""
     q = w.apply(p)

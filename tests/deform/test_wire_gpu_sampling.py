@@ -23,61 +23,11 @@ import numpy as np
 import pytest
 
 from tests.deform.test_wires import AXIS_Y, AXIS_Z, axis_points, build, cylinder, wire
-from voxwarp.deform.warp import compose_glsl
-from voxwarp.deform.wires import FAR, WireFieldWarp
+from tests.warp_gpu import gpu_warp
+from voxwarp.deform.wires import FAR
 
 #: max |GPU - CPU| of warp(p), mm (see the module docstring)
 TOL_MM = 2e-3
-
-VERTEX = """#version 430
-void main() {
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
-
-FRAGMENT = """#version 430
-uniform sampler2D u_points;
-out vec4 frag;
-{warps}
-void main() {{
-    vec3 p = texelFetch(u_points, ivec2(int(gl_FragCoord.x), 0), 0).xyz;
-    frag = vec4(warp_chain(p), 1.0);
-}}
-"""
-
-
-def gpu_warp(ctx: Any, w: WireFieldWarp, points: np.ndarray) -> np.ndarray:
-    """warp(p) (N, 3) of the GLSL, one pixel a point."""
-    n = len(points)
-    prog = ctx.program(
-        vertex_shader=VERTEX, fragment_shader=FRAGMENT.format(warps=compose_glsl([w]))
-    )
-    ctx.detect_framebuffer(0).use()
-    fbo = ctx.simple_framebuffer((n, 1), components=4, dtype="f4")
-    pts = ctx.texture((n, 1), 4, np.c_[points, np.ones(n)].astype("f4").tobytes(), dtype="f4")
-    pts.filter = (ctx.NEAREST, ctx.NEAREST)
-    vao = ctx.vertex_array(prog, [])
-    try:
-        for name, value in w.uniforms().items():
-            v = np.atleast_1d(np.asarray(value, dtype=np.float64))
-            prog[f"w0_{name}"].value = float(v[0]) if v.size == 1 else tuple(map(float, v))
-        for unit, (name, tex) in enumerate(w.textures(ctx).items(), start=1):
-            tex.use(unit)
-            prog[f"w0_{name}"].value = unit
-        pts.use(0)
-        prog["u_points"].value = 0
-        fbo.use()
-        vao.render(mode=ctx.TRIANGLES, vertices=3)
-        out = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, 4)
-        assert np.all(out[:, 3] == 1.0), "every pixel was written"
-        return out[:, :3].astype(np.float64)
-    finally:
-        ctx.detect_framebuffer(0).use()
-        vao.release()
-        pts.release()
-        fbo.release()
-        prog.release()
 
 
 @pytest.mark.parametrize("layout", ["packed", "float"])
@@ -92,7 +42,7 @@ def test_gpu_wire_warp_equals_the_cpu_sampler_at_points(gl_ctx: Any, layout: str
         hi = np.array([62.0, AXIS_Y + 12.0, AXIS_Z + 8.0])
         p = rng.uniform(lo, hi, (4096, 3))
         state, _, _ = w._lookup(p)
-        q_gpu = gpu_warp(gl_ctx, w, p)
+        q_gpu, _ = gpu_warp(gl_ctx, w, p)
     finally:
         w.release()
     q_cpu = w.apply(p)
