@@ -12,6 +12,7 @@ import pytest
 from PySide6.QtWidgets import QFileDialog
 
 from tests.ui.test_main_window import _session, frame
+from tests.ui.windows import shown_window
 from voxwarp.deform.displacement_field import DisplacementFieldWarp
 from voxwarp.io.fields import save_displacement_field
 
@@ -19,19 +20,7 @@ from voxwarp.io.fields import save_displacement_field
 @pytest.fixture
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A shown main window on the fish (64³), first frame drawn, simulation paused."""
-    monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
-    from voxwarp.ui.app import configure_qt
-
-    configure_qt()
-    from voxwarp.ui.main_window import MainWindow
-
-    w = MainWindow(_session())
-    w.resize(1000, 700)
-    qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
-    qtbot.waitUntil(lambda: w.viewport.frames_drawn > 0, timeout=30000)
-    w.set_running(False)
+    w = shown_window(qtbot, monkeypatch, _session(), (1000, 700))
     yield w
     w.close()
 

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.ui.windows import shown_window
 from voxwarp.editing.session import EditSession
 from voxwarp.scene import Scene
 
@@ -18,22 +19,12 @@ from voxwarp.scene import Scene
 @pytest.fixture
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A small shown main window on a tiny volume, its first frame drawn."""
-    monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
-    from voxwarp.ui.app import configure_qt
-
-    configure_qt()
     from voxwarp.core.volume import Volume
-    from voxwarp.ui.main_window import MainWindow
 
     data = np.zeros((8, 8, 8), np.uint8)
     data[2:6, 2:6, 2:6] = 200
-    w = MainWindow(EditSession(Scene(Volume(data), mode="mip", jitter=False)))
-    w.resize(640, 480)
-    qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
-    qtbot.waitUntil(lambda: w.viewport.frames_drawn > 0, timeout=30000)
-    w.set_running(False)
+    session = EditSession(Scene(Volume(data), mode="mip", jitter=False))
+    w = shown_window(qtbot, monkeypatch, session, (640, 480))
     yield w
     w.close()
 

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QPoint, Qt
 
+from tests.ui.windows import shown_window
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.io.images import read_image
 from voxwarp.io.samples import load_sample, suggested_transfer_function
@@ -39,21 +40,7 @@ def _session() -> EditSession:
 @pytest.fixture
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A shown main window on the fish, its first frame drawn, simulation paused."""
-    monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
-    from voxwarp.ui.app import configure_qt
-
-    configure_qt()
-    from voxwarp.ui.main_window import MainWindow
-
-    w = MainWindow(_session())
-    w.resize(*SIZE)
-    qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
-    qtbot.waitUntil(lambda: w.viewport.frames_drawn > 0, timeout=30000)
-    w.set_running(False)
-    w.activateWindow()
-    qtbot.waitActive(w)  # keyboard shortcuts go to the active window
+    w = shown_window(qtbot, monkeypatch, _session(), SIZE, active=True)
     yield w
     w.close()
 

@@ -18,6 +18,7 @@ from PySide6.QtWidgets import QApplication, QLabel
 
 from tests.app.test_orientation_marker import find_letter
 from tests.ui.test_panels import TF, FakeWindow, make_panel
+from tests.ui.windows import shown_window
 from voxwarp.core.camera import view_rotation
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
@@ -140,22 +141,9 @@ def test_placement_controls_show_patient_letters(qtbot: Any) -> None:
 @pytest.fixture
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A main window of 1280x800 on a RAS volume (anterior view), first frame drawn."""
-    monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
-    from voxwarp.ui.app import configure_qt
-
-    configure_qt()
-    from voxwarp.ui.main_window import MainWindow
-
     vol = volume("RAS", shape=(32, 32, 32))
-    w = MainWindow(EditSession(Scene(vol, transfer_function=TF, view="+y", jitter=False)))
-    w.resize(*SIZE)
-    qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
-    qtbot.waitUntil(lambda: w.viewport.frames_drawn > 0, timeout=30000)
-    w.set_running(False)
-    w.activateWindow()
-    qtbot.waitActive(w)
+    session = EditSession(Scene(vol, transfer_function=TF, view="+y", jitter=False))
+    w = shown_window(qtbot, monkeypatch, session, SIZE, active=True)
     settle()
     yield w
     w.close()

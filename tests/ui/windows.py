@@ -1,0 +1,37 @@
+"""The shown main window the GUI tests drive (Xvfb; see tests/ui/conftest.py)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+
+def shown_window(
+    qtbot: Any,
+    monkeypatch: pytest.MonkeyPatch,
+    session: Any,
+    size: tuple[int, int],
+    *,
+    active: bool = False,
+) -> Any:
+    """A main window on ``session``, resized, shown, its first frame drawn and the
+    simulation paused; ``active``: also the active window (keyboard shortcuts go to it).
+    No dialogs pop up (``VOXWARP_GUI_NO_DIALOGS``). The caller closes it."""
+    monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
+    from voxwarp.ui.app import configure_qt
+
+    configure_qt()
+    from voxwarp.ui.main_window import MainWindow
+
+    w = MainWindow(session)
+    w.resize(*size)
+    qtbot.addWidget(w)
+    w.show()
+    qtbot.waitExposed(w)
+    qtbot.waitUntil(lambda: w.viewport.frames_drawn > 0, timeout=30000)
+    w.set_running(False)
+    if active:
+        w.activateWindow()
+        qtbot.waitActive(w)
+    return w
