@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.app.test_mesh_render import render_target
 from voxwarp import mesh_from_labels
 from voxwarp.core import mesh_warp
 from voxwarp.core.camera import Camera, view_rotation
@@ -77,15 +78,8 @@ def renderer(gl_ctx: Any) -> Iterator[MeshRenderer]:
 
 @pytest.fixture(scope="module")
 def target(gl_ctx: Any) -> Iterator[Any]:
-    color = gl_ctx.texture((SIZE, SIZE), 4, dtype="f4")
-    depth = gl_ctx.depth_texture((SIZE, SIZE))
-    fbo = gl_ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
-    yield fbo
-    if gl_ctx.fbo is fbo:  # never leave a released framebuffer bound for later modules
-        gl_ctx.detect_framebuffer(0).use()
-    fbo.release()
-    depth.release()
-    color.release()
+    with render_target(gl_ctx, SIZE) as fbo:
+        yield fbo
 
 
 def draw(r: MeshRenderer, fbo: Any, inst: MeshInstance, warps: list) -> np.ndarray:

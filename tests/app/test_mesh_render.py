@@ -12,6 +12,7 @@ Images are float32 (``f4``) framebuffers; colours are premultiplied RGBA.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -43,15 +44,27 @@ def mesh_renderer(gl_ctx: Any) -> Iterator[MeshRenderer]:
     r.release()
 
 
+@contextmanager
+def render_target(ctx: Any, size: int) -> Iterator[Any]:
+    """A size x size float colour + depth framebuffer, released (and never left bound
+    for later modules) at the end."""
+    color = ctx.texture((size, size), 4, dtype="f4")
+    depth = ctx.depth_texture((size, size))
+    fbo = ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    try:
+        yield fbo
+    finally:
+        if ctx.fbo is fbo:
+            ctx.detect_framebuffer(0).use()
+        fbo.release()
+        depth.release()
+        color.release()
+
+
 @pytest.fixture(scope="module")
 def target(gl_ctx: Any) -> Iterator[Any]:
-    color = gl_ctx.texture((SIZE, SIZE), 4, dtype="f4")
-    depth = gl_ctx.depth_texture((SIZE, SIZE))
-    fbo = gl_ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
-    yield fbo
-    fbo.release()
-    depth.release()
-    color.release()
+    with render_target(gl_ctx, SIZE) as fbo:
+        yield fbo
 
 
 def draw(renderer: MeshRenderer, fbo: Any, instances: list, cam: Camera, clear: Any = None) -> Any:
