@@ -1149,7 +1149,13 @@ def _add_field_args(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="a displacement field or ITK transform file (repeatable)",
     )
-    g.add_argument(
+    _add_field_convention_arg(g)
+
+
+def _add_field_convention_arg(p: Any) -> None:
+    """``--field-convention`` of ``render`` and ``info``: voxwarp.io.fields.CONVENTIONS,
+    spelled out so that building the parser loads no field reader."""
+    p.add_argument(
         "--field-convention",
         choices=("itk", "ras", "voxel"),
         help="what the vectors of a field whose header does not say mean: itk (LPS mm),"
@@ -1383,11 +1389,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     )
     pi.add_argument("input")
     pi.add_argument("--json", action="store_true", help="machine-readable output")
-    pi.add_argument(
-        "--field-convention",
-        choices=("itk", "ras", "voxel"),
-        help="a displacement field's vectors where its header does not say (as render)",
-    )
+    _add_field_convention_arg(pi)
     _add_volume_args(pi)
     pi.set_defaults(func=cmd_info)
 

@@ -512,3 +512,17 @@ def test_info_reads_a_voxelmorph_field_with_a_convention_and_names_bad_component
     bad = info(str(two))  # a field with 2 components, not "a 4D NIfTI ... extract one"
     assert bad.returncode == 2
     assert "needs 3" in bad.stderr
+
+
+def test_the_cli_offers_exactly_the_readers_conventions() -> None:
+    from voxwarp.cli.main import build_parser
+    from voxwarp.io.fields import CONVENTIONS
+
+    parser = build_parser(bench=False)
+    for command in ("render", "info"):
+        args = parser.parse_args([command, "x.nii.gz", "--field-convention", CONVENTIONS[-1]])
+        assert args.field_convention == CONVENTIONS[-1]
+    sub = next(a for a in parser._actions if a.dest == "command" or a.choices)
+    for command in ("render", "info"):
+        action = next(a for a in sub.choices[command]._actions if a.dest == "field_convention")
+        assert tuple(action.choices) == CONVENTIONS
