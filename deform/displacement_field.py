@@ -41,7 +41,7 @@ import numpy as np
 
 from voxwarp.deform.offset_field import MAX_DISPLACEMENT_MM as MAX_DISPLACEMENT_MM
 from voxwarp.deform.offset_field import cell_reduce, check_vectors, window_reduce
-from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
+from voxwarp.deform.warp import Warp, WarpError, box_corners, check_forward, register_warp
 
 #: Spaces a field's affine and vectors may be given in.
 FIELD_SPACES: tuple[str, ...] = ("RAS", "LPS")
@@ -205,10 +205,9 @@ class DisplacementFieldWarp(Warp):
 
     def support_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World box (mm) around the grid's half-node border, where ``u`` may be non-zero."""
-        n = np.asarray(self.shape, float)
-        idx = np.array([[i, j, k] for k in (0, 1) for j in (0, 1) for i in (0, 1)], float)
-        corners = (idx * n - 0.5) @ self.affine[:3, :3].T + self.affine[:3, 3]
-        return corners.min(axis=0), corners.max(axis=0)
+        corners = box_corners(np.full(3, -0.5), np.asarray(self.shape) - 0.5)
+        world = corners @ self.affine[:3, :3].T + self.affine[:3, 3]
+        return world.min(axis=0), world.max(axis=0)
 
     # ---------------------------------------------------------------- CPU reference
     def index_of(self, points: np.ndarray) -> np.ndarray:

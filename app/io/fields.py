@@ -425,11 +425,9 @@ def _warp_of(sitk: Any, t: Any, path: Path, index: int) -> Warp:
             " displacement field (SimpleITK.TransformToDisplacementField)"
         )
     try:
-        warp = DisplacementFieldWarp(u, affine, space="LPS", path=str(path))
+        return DisplacementFieldWarp(u, affine, space="LPS", path=str(path), part=index)
     except WarpError as exc:
         raise FieldError(f"{path.name}: {exc}") from exc
-    warp.part = index
-    return warp
 
 
 def _linear_ras(t: Any) -> np.ndarray:
