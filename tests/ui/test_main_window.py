@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QPoint, Qt
 
-from tests.ui.windows import shown_window
+from tests.ui.windows import press_shortcut, shown_window
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.io.images import read_image
 from voxwarp.io.samples import load_sample, suggested_transfer_function
@@ -210,8 +210,7 @@ def test_rubber_band_selects_and_fix_key_fixes(window: Any, qtbot: Any) -> None:
         QPoint(int(hi[0]), int(hi[1])),
     )
     assert len(w.session.selection) == len(xy)
-    w.viewport.setFocus()
-    qtbot.keyClick(w.viewport, Qt.Key.Key_F)
+    press_shortcut(qtbot, w, Qt.Key.Key_F)
     assert w.session.model.grid.fixed.all()
     w.undo_action.trigger()
     assert w.session.model.grid.fixed.sum() == 8  # the corners, as before
@@ -345,7 +344,7 @@ def test_keys_orbit_pan_and_zoom(window: Any, qtbot: Any) -> None:
     d = vp.camera.distance
     qtbot.keyClick(vp, Qt.Key.Key_Plus)
     assert vp.camera.distance == pytest.approx(d / 1.15)
-    qtbot.keyClick(vp, Qt.Key.Key_5)  # view from +z: looking down -z
+    press_shortcut(qtbot, w, Qt.Key.Key_5)  # view from +z: looking down -z
     np.testing.assert_allclose(vp.camera.rotation[:, 2], [0, 0, 1], atol=1e-12)
 
 
@@ -356,7 +355,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     w = window
     vp = w.viewport
     vp.setFocus()
-    qtbot.keyClick(vp, Qt.Key.Key_W)
+    press_shortcut(qtbot, w, Qt.Key.Key_W)
     assert vp.laying_wire
     assert w.session.kind == "wires"
     assert w.wait_for_wire_build(60)
@@ -364,7 +363,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     for p in clicks:
         qtbot.mouseClick(vp, Qt.MouseButton.LeftButton, pos=p)
     assert len(w.session.pending_wire) == 3
-    qtbot.keyClick(vp, Qt.Key.Key_Return)
+    press_shortcut(qtbot, w, Qt.Key.Key_Return)
     assert not vp.laying_wire
     assert len(w.session.wires) == 2
     new = w.session.wires[1].base.control_points

@@ -18,7 +18,7 @@ from PySide6.QtWidgets import QApplication, QLabel
 
 from tests.app.test_orientation_marker import find_letter
 from tests.ui.test_panels import TF, FakeWindow, make_panel
-from tests.ui.windows import shown_window
+from tests.ui.windows import press_shortcut, shown_window
 from voxwarp.core.camera import view_rotation
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
@@ -258,7 +258,7 @@ def test_anatomical_view_keys(
     steps: list[int] = []
     monkeypatch.setattr(w, "single_step", lambda: steps.append(1))
     w.viewport.set_view("+x" if view != "right" else "-x")  # start elsewhere
-    qtbot.keyClick(w.viewport, key, Qt.KeyboardModifier.ShiftModifier)
+    press_shortcut(qtbot, w, key, Qt.KeyboardModifier.ShiftModifier)
     np.testing.assert_allclose(
         w.viewport.camera.rotation, view_rotation(ANATOMICAL_VIEWS[view]), atol=1e-12
     )

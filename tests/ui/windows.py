@@ -35,3 +35,15 @@ def shown_window(
         w.activateWindow()
         qtbot.waitActive(w)
     return w
+
+
+def press_shortcut(qtbot: Any, w: Any, key: Any, modifiers: Any = None) -> None:
+    """Press a window shortcut on the viewport. Qt routes a shortcut only to the active
+    window, and Xvfb without a window manager can drop activation between events, so the
+    window is activated again (and waited for) right before the key."""
+    from PySide6.QtCore import Qt
+
+    w.activateWindow()
+    qtbot.waitActive(w)
+    w.viewport.setFocus()
+    qtbot.keyClick(w.viewport, key, modifiers or Qt.KeyboardModifier.NoModifier)
