@@ -60,8 +60,8 @@ from __future__ import annotations
 import os
 import threading
 import warnings
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -77,6 +77,8 @@ BACKENDS: tuple[str, ...] = ("auto", "opencl", "scipy")
 OPENCL_FIX = "pip install pocl-binary-distribution, or install your GPU's OpenCL ICD"
 #: Environment variable; ``0`` / ``false`` / ``off`` / ``no`` disables the OpenCL backend.
 ENV_VAR = "VOXWARP_OPENCL"
+
+T = TypeVar("T")
 
 
 class OpenCLUnavailableWarning(RuntimeWarning):
@@ -399,6 +401,15 @@ def _nearest_opencl(seeds: np.ndarray, sampling: tuple[float, float, float]) -> 
 def _run_kernels(
     st: dict[str, Any], seeds: np.ndarray, sampling: tuple[float, float, float]
 ) -> np.ndarray:
+    out = np.empty(seeds.shape, dtype=np.int32)
+    st["cl"].enqueue_copy(st["queue"], out, _enqueue_passes(st, seeds, sampling), is_blocking=True)
+    return out
+
+
+def _enqueue_passes(
+    st: dict[str, Any], seeds: np.ndarray, sampling: tuple[float, float, float]
+) -> Any:
+    """Enqueue the three passes; the device buffer that will hold the C-order indices."""
     cl, queue, k = st["cl"], st["queue"], st["kernels"]
     shape = seeds.shape
     # Memory axes, slowest first: the permutation that makes the array C-contiguous
@@ -447,9 +458,7 @@ def _run_kernels(
         *strides,
         *strides,
     )
-    out = np.empty(shape, dtype=np.int32)
-    cl.enqueue_copy(queue, out, out_buf, is_blocking=True)
-    return out
+    return out_buf
 
 
 def nearest_seed(
@@ -547,6 +556,27 @@ def nearest_seed(
             use = "scipy"
     _last_backend = use
     return _nearest_scipy(np.ascontiguousarray(arr), spacing)
+
+
+def on_device_nearest(
+    seeds: np.ndarray, sampling: Sequence[float], use: Callable[[dict[str, Any], Any], T]
+) -> T:
+    """Run the OpenCL transform and hand its device buffer (int32 C-order nearest-seed
+    indices) to ``use(state, buffer)``, under the lock that guards the shared buffers.
+
+    For callers that consume the indices on the device (the wire field's classification,
+    :mod:`voxwarp.deform.wire_classify`); the caller checks :func:`opencl_available`, the
+    axis limit :data:`MAX_LINE` and that ``seeds`` holds a seed first. OpenCL errors
+    propagate (``state["cl"].Error``).
+    """
+    global _last_backend
+    arr = _check_seeds(seeds)
+    spacing = check_sampling(sampling)
+    with _lock:
+        st = _opencl_state()
+        result = use(st, _enqueue_passes(st, arr, spacing))
+    _last_backend = "opencl"
+    return result
 
 
 def seed_distance(nearest: np.ndarray, sampling: float | Sequence[float] = 1.0) -> np.ndarray:

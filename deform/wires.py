@@ -66,7 +66,10 @@ leave the original box). It is built in deformed space:
    (turned and scaled as the sweep does), marks it, and samples landing there (unswept)
    show nothing, so the bent object leaves no copy behind. A field voxel counts when its
    footprint touches a mask (the masks grow by half a field voxel), so coarse fields
-   neither cut the object's edges nor leave thin parts of it behind.
+   neither cut the object's edges nor leave thin parts of it behind. Where the OpenCL
+   device has double precision, steps 4-5 run as one pass on it
+   (:mod:`voxwarp.deform.wire_classify`: the nearest-seed indices never leave the device,
+   and the refinement and mask tests give the numpy path's bits); else in numpy.
 
 Storage (7.2). Two layouts, chosen by ``layout``:
 
@@ -740,39 +743,35 @@ class WireDeformer:
         seeds_b = self._seeds(tables, lo, h, shape, "base")
         timings["seeds"] = time.perf_counter() - t0
 
-        # 4. propagation of (wire, u) from the seeds over each side's region
-        t0 = time.perf_counter()
-        region_lo, rshape, r_wire, r_u, r_near, seed_count = self._propagate(
-            seeds_m, tables, lo, h, shape, "modified"
-        )
-        b_lo, b_shape, b_wire, b_u, b_near, _ = self._propagate(
-            seeds_b, tables, lo, h, shape, "base"
-        )
-        backend = last_backend()
-        timings["propagate"] = time.perf_counter() - t0
-
-        # 5. flags: the mask bit under each voxel's projection on its plane; the
-        # swept object's original place (the same masks seen from the base wires) is
-        # vacated
-        t0 = time.perf_counter()
-        # a field voxel counts when its footprint touches a mask, not only its centre:
+        # 4-5. propagation of (wire, u) from the seeds over each side's region, then the
+        # flags: the mask bit under each voxel's projection on its plane; the swept
+        # object's original place (the same masks seen from the base wires) is vacated.
+        # A field voxel counts when its footprint touches a mask, not only its centre:
         # the masks grow by half a field voxel (else the object's edges would be cut at
         # coarse field scales, and thin parts of it, such as a fin's edge, would stay
         # behind as a ghost); what this adds is the background around the object
+        t0 = time.perf_counter()
         grow = math.ceil(0.5 * float(h.max()) / self.mask_resolution)
-        box = np.ones((3, 3, 3), dtype=bool)  # the footprint is a box
+        # (a box dilated `grow` times is one box of side 2 grow + 1: separable maxima)
         grown = [
-            (ndimage.binary_dilation(m, box, iterations=grow), k, half) for m, k, half in masks
+            (ndimage.maximum_filter(m, size=2 * grow + 1, mode="constant"), k, half)
+            for m, k, half in masks
         ]
-        swept = self._flags(
-            tables, grown, lo, h, region_lo, rshape, r_wire, r_u, r_near, "modified"
+        timings["flags"] = time.perf_counter() - t0
+        timings["propagate"] = 0.0
+        region_lo, rshape, r_wire, r_u, swept, seed_count = self._side(
+            seeds_m, tables, grown, lo, h, shape, "modified", timings
         )
-        gone = self._flags(tables, grown, lo, h, b_lo, b_shape, b_wire, b_u, b_near, "base")
+        b_lo, b_shape, _, _, gone, _ = self._side(
+            seeds_b, tables, grown, lo, h, shape, "base", timings
+        )
+        backend = last_backend()
+        t0 = time.perf_counter()
         region = _box_slices(region_lo, rshape)
         vacated = np.zeros(shape, dtype=bool)
         vacated[_box_slices(b_lo, b_shape)] = gone
         vacated[region] &= ~swept
-        timings["flags"] = time.perf_counter() - t0
+        timings["flags"] += time.perf_counter() - t0
 
         # 6. storage
         t0 = time.perf_counter()
@@ -819,7 +818,121 @@ class WireDeformer:
             self._warp._set_field(fld)
         return self.stats
 
-    def _propagate(
+    def _side(
+        self,
+        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tables: list[WireTables],
+        grown: list[tuple[np.ndarray, int, float]],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        side: str,
+        timings: dict[str, float],
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+        """Propagation and flags of one side: the region's first voxel and shape, wire
+        id and refined u per region voxel, the mask bits and the seed count. One OpenCL
+        pass (:mod:`voxwarp.deform.wire_classify`) where the device allows, else numpy;
+        adds the stages' seconds to ``timings``."""
+        fast = self._fast_side(seeds, tables, grown, lo, h, shape, side, timings)
+        if fast is not None:
+            return fast
+        t0 = time.perf_counter()
+        region_lo, rshape, r_wire, r_u, r_near, count = self._propagate(
+            seeds, tables, lo, h, shape, side
+        )
+        t1 = time.perf_counter()
+        bits = self._flags(tables, grown, lo, h, region_lo, rshape, r_wire, r_u, r_near, side)
+        timings["propagate"] += t1 - t0
+        timings["flags"] += time.perf_counter() - t1
+        return region_lo, rshape, r_wire, r_u, bits, count
+
+    def _fast_side(
+        self,
+        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tables: list[WireTables],
+        grown: list[tuple[np.ndarray, int, float]],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        side: str,
+        timings: dict[str, float],
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int] | None:
+        """:meth:`_side` in one OpenCL pass; None where OpenCL (with double precision)
+        is unavailable, not asked for, or fails (the numpy path then runs)."""
+        from voxwarp.deform import propagation as prop
+        from voxwarp.deform.wire_classify import ClassifyInput, WireGeometry, classify
+
+        if self.backend not in ("auto", "opencl") or not self.classify_on_device():
+            return None
+        t0 = time.perf_counter()
+        c_lo, rshape, grid, flat, s_wire, s_u = self._region(seeds, tables, lo, h, shape, side)
+        if max(rshape) > prop.MAX_LINE:
+            return None
+        order = np.argsort(flat, kind="stable")
+        modified = side == "modified"
+        reach = self._reach(h, side)
+        geoms = []
+        for wi, (w, tab) in enumerate(zip(self.wires, tables, strict=True)):
+            frames = tab.modified_frames if modified else tab.base_frames
+            geoms.append(
+                WireGeometry(
+                    points=tab.modified_points if modified else tab.base_points,
+                    tangents=frames[:, :, 2],
+                    frames=frames,
+                    length=tab.length_modified if modified else tab.length_base,
+                    reach=float(reach[wi]),
+                    mask=grown[wi][0],
+                    half=grown[wi][2],
+                    twist=w.twist,
+                    scale=w.scale,
+                )
+            )
+        inp = ClassifyInput(
+            seed_idx=flat[order],
+            seed_wire=s_wire[order],
+            seed_u=s_u[order],
+            rshape=rshape,
+            lo=lo,
+            h=h,
+            region_lo=c_lo,
+            wires=geoms,
+            px=self.mask_resolution,
+            cap=float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + self.mask_resolution,
+            base_side=not modified,
+            refine_steps=REFINE_STEPS,
+        )
+        sampling = tuple(float(v) for v in h)
+        if modified:
+            self.propagation_input = (grid, sampling)
+        split: list[float] = []
+
+        def use(st: dict[str, Any], buf: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            st["queue"].finish()
+            split.append(time.perf_counter())
+            return classify(st, buf, inp)
+
+        try:
+            r_wire, r_u, bits = prop.on_device_nearest(grid, sampling, use)
+        except (prop._opencl_state()["cl"].Error, MemoryError) as exc:  # e.g. out of memory
+            if self.backend == "opencl":
+                raise WarpError(
+                    f"the OpenCL wire field pass failed ({type(exc).__name__}); use"
+                    " backend='scipy' or a larger field_scale"
+                ) from exc
+            return None
+        timings["propagate"] += split[0] - t0
+        timings["flags"] += time.perf_counter() - split[0]
+        return c_lo, rshape, r_wire, r_u, bits, len(flat)
+
+    def classify_on_device(self) -> bool:
+        """Whether :meth:`build` propagates and flags in one OpenCL pass (an OpenCL
+        device with double precision), rather than with numpy."""
+        from voxwarp.deform import propagation as prop
+        from voxwarp.deform.wire_classify import classify_available
+
+        return prop.opencl_available() and classify_available(prop._opencl_state())
+
+    def _region(
         self,
         seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
         tables: list[WireTables],
@@ -827,12 +940,9 @@ class WireDeformer:
         h: np.ndarray,
         shape: tuple[int, int, int],
         side: str,
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
-        """(wire, u) of the nearest seed for every voxel of the wires' region on one
-        side: the region's first voxel and shape, the two grids, which voxels lie within
-        their wire's reach, and the seed count."""
-        from voxwarp.deform.propagation import nearest_seed
-
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The wires' region on one side (the box of their reach): its first voxel and
+        shape, the seed mask over it, and the seeds' flat region indices, wires and u."""
         seed_idx, seed_wire, seed_u = seeds
         c_lo = np.full(3, np.iinfo(np.int64).max)
         c_hi = np.full(3, -1)
@@ -860,6 +970,34 @@ class WireDeformer:
             )
         grid[sidx[:, 0], sidx[:, 1], sidx[:, 2]] = True
         flat = np.ravel_multi_index(sidx.T, rshape)
+        return c_lo, rshape, grid, flat, s_wire, s_u
+
+    def _reach(self, h: np.ndarray, side: str) -> np.ndarray:
+        """Per wire: how far (mm) from its nearest seed a voxel can still be flagged."""
+        return np.array(
+            [
+                w.radius * (float(w.scale[:, 1].max()) if side == "modified" else 1.0)
+                + 2 * self.mask_resolution
+                + float(np.linalg.norm(h))
+                for w in self.wires
+            ]
+        )
+
+    def _propagate(
+        self,
+        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tables: list[WireTables],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        side: str,
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+        """(wire, u) of the nearest seed for every voxel of the wires' region on one
+        side (the reference, numpy path): the region's first voxel and shape, the two
+        grids, which voxels lie within their wire's reach, and the seed count."""
+        from voxwarp.deform.propagation import nearest_seed
+
+        c_lo, rshape, grid, flat, s_wire, s_u = self._region(seeds, tables, lo, h, shape, side)
         wire_of = np.zeros(int(np.prod(rshape)), dtype=np.int16)
         u_of = np.zeros(int(np.prod(rshape)), dtype=np.float32)
         wire_of[flat], u_of[flat] = s_wire, s_u
@@ -873,14 +1011,7 @@ class WireDeformer:
             self.propagation_input = (grid, sampling)
         # voxels farther from their nearest seed than that wire's reach cannot be
         # flagged: only the others are refined and tested against the masks
-        reach = np.array(
-            [
-                w.radius * (float(w.scale[:, 1].max()) if side == "modified" else 1.0)
-                + 2 * self.mask_resolution
-                + float(np.linalg.norm(h))
-                for w in self.wires
-            ]
-        )
+        reach = self._reach(h, side)
         near = np.zeros(len(nearest), dtype=bool)
         chunk = 1 << 21
         for start in range(0, len(nearest), chunk):
@@ -895,7 +1026,7 @@ class WireDeformer:
             wire_of[nearest].reshape(rshape),
             u_of[nearest].reshape(rshape),
             near.reshape(rshape),
-            len(sidx),
+            len(flat),
         )
 
     def _flags(
@@ -967,27 +1098,12 @@ class WireDeformer:
         # the radius is the region of influence on the base side: a scaled cross-section
         # covers s * radius on the modified side
         tt = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
-        a, b = tab.lookup(tt)
-        m = _lerp_table(tab.modified_points, tt)
-        fm = _lerp_table(tab.modified_frames, tt)
         s_at = wire.scale_at(tt / (LUT_SIZE - 1))
         in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.radius * s_at[:, None, None]) ** 2
-        # deformed points p = M + x N_m + y B_m -> base points q = C + A (p - M)
-        local = (
-            x[None, ..., None] * fm[:, None, None, :, 0]
-            + y[None, ..., None] * fm[:, None, None, :, 1]
-        )
-        q = (np.einsum("pij,pj->pi", a, m) + b)[:, None, None, :] + np.einsum(
-            "pij,pabj->pabi", a, local
-        )
-        ijk = ((q - self.origin) @ self._direction) / self.spacing
-        vlo = np.zeros(3)
-        vhi = np.asarray(self.data.shape) - 1.0
-        inside_vol = np.all((ijk >= vlo - 0.5) & (ijk <= vhi + 0.5), axis=-1)
-        vals = ndimage.map_coordinates(
-            self.data, ijk.reshape(-1, 3).T, order=1, mode="nearest", prefilter=False
-        ).reshape(ijk.shape[:-1])
-        obj = wire.classify(vals) & inside_vol & in_disc & disc[None]
+        obj = self._object_pixels(wire, tab, tt, x[disc], y[disc], in_disc[:, disc])
+        obj_full = np.zeros((n_planes, k, k), dtype=bool)
+        obj_full[:, disc] = obj
+        obj = obj_full
         if self.masks:
             # seed: the object pixel nearest the wire on each plane ("searching outward
             # from the wire"); the fill is 2.5D: a plane's pixel joins when it connects,
@@ -1001,15 +1117,15 @@ class WireDeformer:
             has = np.isfinite(flat[np.arange(n_planes), seed])
             labels, _ = ndimage.label(obj, structure=ndimage.generate_binary_structure(3, 1))
             seed_labels = np.unique(labels.reshape(n_planes, -1)[np.arange(n_planes), seed][has])
-            mask = np.isin(labels, seed_labels[seed_labels > 0])
+            keep = np.zeros(int(labels.max()) + 1, dtype=bool)
+            keep[seed_labels[seed_labels > 0]] = True
+            mask = keep[labels]
             has = mask.reshape(n_planes, -1).any(axis=1)
         else:
             mask = obj.copy()
             has = mask.reshape(n_planes, -1).any(axis=1)
         # cavities (a vessel's lumen, a swim bladder) move with their object
-        in_plane = np.zeros((3, 3, 3), dtype=bool)
-        in_plane[1] = ndimage.generate_binary_structure(2, 1)
-        mask = ndimage.binary_fill_holes(mask, structure=in_plane)
+        mask = _fill_holes_in_planes(mask)
         if self.dilation:
             structure = np.zeros((3, 3, 3), dtype=bool)
             structure[1] = ndimage.generate_binary_structure(2, 1)
@@ -1017,6 +1133,41 @@ class WireDeformer:
             mask &= in_disc & disc[None]
         mask[~has] = False
         return mask, k, int((~has).sum())
+
+    def _object_pixels(
+        self,
+        wire: Wire,
+        tab: WireTables,
+        tt: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        in_disc: np.ndarray,
+    ) -> np.ndarray:
+        """β of the volume under the pixels (x, y) (mm, in the modified frame) of the
+        planes at table coordinates ``tt``, (planes, pixels) bool; False outside the
+        volume and outside ``in_disc``. Planes go in blocks (their temporaries stay in
+        the cache) and only pixels in the disc and the volume are sampled."""
+        a, b = tab.lookup(tt)
+        m = _lerp_table(tab.modified_points, tt)
+        fm = _lerp_table(tab.modified_frames, tt)
+        centre = np.einsum("pij,pj->pi", a, m) + b
+        vlo = np.zeros(3)
+        vhi = np.asarray(self.data.shape) - 1.0
+        out = np.zeros((len(tt), len(x)), dtype=bool)
+        step = max(1, MASK_BLOCK_PIXELS // max(len(x), 1))
+        for p0 in range(0, len(tt), step):
+            sl = slice(p0, p0 + step)
+            # deformed points p = M + x N_m + y B_m -> base points q = C + A (p - M)
+            local = x[None, :, None] * fm[sl, None, :, 0] + y[None, :, None] * fm[sl, None, :, 1]
+            q = centre[sl, None, :] + np.einsum("pij,pnj->pni", a[sl], local)
+            ijk = ((q - self.origin) @ self._direction) / self.spacing
+            use = np.all((ijk >= vlo - 0.5) & (ijk <= vhi + 0.5), axis=-1) & in_disc[sl]
+            vals = ndimage.map_coordinates(
+                self.data, ijk[use].T, order=1, mode="nearest", prefilter=False
+            )
+            block = out[sl]
+            block[use] = wire.classify(vals)
+        return out
 
     def _seeds(
         self,
@@ -1113,6 +1264,8 @@ class WireDeformer:
         return u, out
 
 
+#: mask pixels per block of planes while the masks are sampled (keeps temporaries small)
+MASK_BLOCK_PIXELS = 1 << 16
 #: Newton steps that refine the propagated u to the closest point of the wire
 REFINE_STEPS = 2
 
@@ -1135,6 +1288,20 @@ def _refine_u(
         z = np.einsum("ni,ni->n", p - points[i], tangents[i])
         u = np.clip(i / n + z / length, 0.0, 1.0)
     return u
+
+
+def _fill_holes_in_planes(mask: np.ndarray) -> np.ndarray:
+    """``mask`` (planes, K, K) with the holes of each plane filled: background pixels
+    not 4-connected within their plane to the plane's edge (what
+    ``ndimage.binary_fill_holes`` does with an in-plane structure, by one labelling)."""
+    in_plane = np.zeros((3, 3, 3), dtype=bool)
+    in_plane[1] = ndimage.generate_binary_structure(2, 1)
+    labels, n = ndimage.label(~mask, structure=in_plane)
+    outside = np.zeros(n + 1, dtype=bool)
+    for edge in (labels[:, 0, :], labels[:, -1, :], labels[:, :, 0], labels[:, :, -1]):
+        outside[edge] = True
+    outside[0] = True  # the mask itself
+    return mask | ~outside[labels]
 
 
 def _box_slices(first: np.ndarray, shape: tuple[int, int, int]) -> tuple[slice, slice, slice]:

@@ -1,0 +1,306 @@
+"""Wire attribute field: propagation and flag classification in one OpenCL pass.
+
+About this technique (the wire paper's sections 5.1 and 7.1, on the device)
+----------------------------------------------------------------------------
+:meth:`voxwarp.deform.wires.WireDeformer.build` gives every voxel of a wire's region the
+wire id and arc-length fraction u of its nearest seed (the exact distance transform of
+:mod:`voxwarp.deform.propagation`), then, for the voxels within their wire's reach of
+that seed, refines u to the closest point of the wire (Newton steps along the table's
+tangents) and looks the voxel's projection up in the plane mask at u (turned and scaled
+as the sweep does on the base side). The reference does those steps in numpy, one
+full-region float64 temporary per operation; here one OpenCL work-item per region voxel
+reads the nearest-seed index straight from the propagation's device buffer (never
+copied to the host), finds that seed's (wire, u) by a binary search of the sorted seed
+list, and writes the three results the field needs: wire id (int16), u (float32) and
+the mask bit (uint8).
+
+Exactness: the kernel repeats the reference's arithmetic operation by operation, in
+the same precision (float64 where numpy computes in float64, float32 where it computes
+in float32, no fused multiply-adds: ``FP_CONTRACT OFF``), so both give the same bits;
+the one exception is the twist's cos/sin on the base side (the device's libm against
+the host's, within a few ulp), which can flip a mask pixel only where a voxel projects
+onto a pixel edge to within ~1e-15 mm. The pass needs double precision
+(``cl_khr_fp64``); :func:`classify_available` says whether the device has it, and the
+caller keeps the numpy path otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+_KERNEL = r"""
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+
+/* np.interp(x, xp, fp) for sorted xp (numpy's arithmetic, compiled_base.c). */
+static double interp_keys(double x, __global const double *xp, __global const double *fp,
+                          int n) {
+    if (x < xp[0]) return fp[0];
+    if (x > xp[n - 1]) return fp[n - 1];
+    if (x == xp[n - 1]) return fp[n - 1];
+    int j = 0;
+    while (j + 1 < n && xp[j + 1] <= x) j++;
+    if (x == xp[j]) return fp[j];
+    double slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]);
+    double r = slope * (x - xp[j]) + fp[j];
+    if (isnan(r)) {
+        r = slope * (x - xp[j + 1]) + fp[j + 1];
+        if (isnan(r) && fp[j] == fp[j + 1]) r = fp[j];
+    }
+    return r;
+}
+
+__kernel void classify(
+    __global const int *nearest,      /* C-order flat seed index per region voxel */
+    __global const int *seed_idx,     /* sorted flat indices of the seeds */
+    __global const short *seed_wire,
+    __global const float *seed_u,
+    const int n_seeds,
+    const int n0, const int n1, const int n2,
+    const double lo0, const double lo1, const double lo2,
+    const double h0, const double h1, const double h2,
+    const long r0, const long r1, const long r2,
+    __global const double *reach2,     /* per wire */
+    __global const double *points,     /* per wire 256 x 3 */
+    __global const double *tangents,   /* per wire 256 x 3 */
+    __global const float *frames,      /* per wire 256 x 3 x 3, float32 */
+    __global const double *length,     /* per wire */
+    __global const int *n_planes,
+    __global const int *k_side,
+    __global const double *mask_half,
+    __global const long *mask_off,
+    __global const uchar *masks,
+    __global const int *key_off,       /* per wire: twist first, then scale, counts */
+    __global const int *key_n,
+    __global const double *key_t,
+    __global const double *key_v,
+    const double px,
+    const float cap32,
+    const int base_side,
+    const int refine_steps,
+    __global short *out_wire,
+    __global float *out_u,
+    __global uchar *out_flag)
+{
+    const int k = get_global_id(0), j = get_global_id(1), i = get_global_id(2);
+    if (k >= n2 || j >= n1 || i >= n0) return;
+    const long v = ((long)i * n1 + j) * n2 + k;
+    const int s = nearest[v];
+    int a = 0, b = n_seeds - 1;
+    while (a < b) {
+        int m = (a + b) >> 1;
+        if (seed_idx[m] < s) a = m + 1; else b = m;
+    }
+    const int w = seed_wire[a];
+    const float u0 = seed_u[a];
+    out_wire[v] = (short)w;
+    out_u[v] = u0;
+    out_flag[v] = 0;
+    const int sk = s % n2, sr = s / n2;
+    const int sj = sr % n1, si = sr / n1;
+    const double e0 = (double)(i - si) * h0, e1 = (double)(j - sj) * h1;
+    const double e2 = (double)(k - sk) * h2;
+    const double d2 = (e0 * e0 + e1 * e1) + e2 * e2;
+    if (!(d2 <= reach2[w])) return;
+
+    const double p0 = lo0 + ((double)(i + r0) + 0.5) * h0;
+    const double p1 = lo1 + ((double)(j + r1) + 0.5) * h1;
+    const double p2 = lo2 + ((double)(k + r2) + 0.5) * h2;
+    __global const double *P = points + (long)w * 256 * 3;
+    __global const double *T = tangents + (long)w * 256 * 3;
+    const double len = length[w];
+    double u = (double)u0;
+    for (int step = 0; step < refine_steps; step++) {
+        long q = (long)rint(u * 255.0);
+        q = q < 0 ? 0 : (q > 255 ? 255 : q);
+        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
+                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
+        u = (double)q / 255.0 + z / len;
+        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
+    }
+    out_u[v] = (float)u;
+
+    const long q = (long)rint(u * 255.0);
+    __global const float *F = frames + ((long)w * 256 + q) * 9;
+    const float d0 = (float)(p0 - P[3 * q]), d1 = (float)(p1 - P[3 * q + 1]);
+    const float dz = (float)(p2 - P[3 * q + 2]);
+    const float x32 = (d0 * F[0] + d1 * F[3]) + dz * F[6];
+    const float y32 = (d0 * F[1] + d1 * F[4]) + dz * F[7];
+    const float z32 = (d0 * F[2] + d1 * F[5]) + dz * F[8];
+    const int np = n_planes[w], ks = k_side[w];
+    long plane = (long)rint(u * (double)(np - 1));
+    plane = plane < 0 ? 0 : (plane > np - 1 ? np - 1 : plane);
+    long ia, ib;
+    if (base_side) {
+        const int o = key_off[w];
+        const double th = interp_keys(u, key_t + o, key_v + o, key_n[2 * w]);
+        const int o2 = o + key_n[2 * w];
+        const double sc = interp_keys(u, key_t + o2, key_v + o2, key_n[2 * w + 1]);
+        const double c = cos(th), sn = sin(th);
+        const double x = sc * (c * (double)x32 - sn * (double)y32);
+        const double y = sc * (sn * (double)x32 + c * (double)y32);
+        ia = (long)rint(x / px + mask_half[w]);
+        ib = (long)rint(y / px + mask_half[w]);
+    } else {
+        ia = (long)rint(x32 / (float)px + (float)mask_half[w]);
+        ib = (long)rint(y32 / (float)px + (float)mask_half[w]);
+    }
+    if (ia < 0 || ia >= ks || ib < 0 || ib >= ks) return;
+    const int ends = (u <= 0.0) || (u >= 1.0);
+    if (ends && !(fabs(z32) <= cap32)) return;
+    out_flag[v] = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
+}
+"""
+
+
+@dataclass
+class WireGeometry:
+    """One wire's data for the classification on one side (modified or base)."""
+
+    #: (256, 3) table points, unit tangents (float64) and frames (256, 3, 3)
+    points: np.ndarray
+    tangents: np.ndarray
+    frames: np.ndarray
+    length: float
+    #: reach (mm) from the nearest seed beyond which nothing is flagged
+    reach: float
+    #: the grown masks (planes, K, K) and (K - 1) / 2
+    mask: np.ndarray
+    half: float
+    #: twist and scale keys ((K, 2): u, value); used on the base side only
+    twist: np.ndarray
+    scale: np.ndarray
+
+
+@dataclass
+class ClassifyInput:
+    """What the classification pass needs besides the nearest-seed buffer."""
+
+    seed_idx: np.ndarray  # sorted flat region indices of the seeds
+    seed_wire: np.ndarray
+    seed_u: np.ndarray
+    rshape: tuple[int, int, int]
+    lo: np.ndarray
+    h: np.ndarray
+    region_lo: np.ndarray
+    wires: Sequence[WireGeometry]
+    px: float
+    cap: float
+    base_side: bool
+    refine_steps: int
+
+
+_programs: dict[int, object] = {}
+
+
+def classify_available(st: dict) -> bool:
+    """Whether the OpenCL state ``st`` (of :mod:`voxwarp.deform.propagation`) can run the
+    pass: a device with double precision whose program builds."""
+    if "error" in st:
+        return False
+    if "cl_khr_fp64" not in st["device"].extensions:
+        return False
+    return _program(st) is not None
+
+
+def _program(st: dict) -> object | None:
+    key = id(st["ctx"])
+    if key not in _programs:
+        try:
+            prg = st["cl"].Program(st["ctx"], _KERNEL).build(options=["-w"])
+            _programs[key] = st["cl"].Kernel(prg, "classify")
+        except Exception:  # any build failure: the caller keeps the numpy path
+            _programs[key] = None
+    return _programs[key]
+
+
+def _device(st: dict, a: np.ndarray) -> object:
+    cl = st["cl"]
+    flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    a = np.ascontiguousarray(a)
+    if a.nbytes == 0:
+        a = np.zeros(1, dtype=a.dtype)
+    return cl.Buffer(st["ctx"], flags, hostbuf=a)
+
+
+def _wire_buffers(st: dict, wires: Sequence[WireGeometry]) -> list[object]:
+    masks = [np.ascontiguousarray(g.mask, dtype=np.uint8).ravel() for g in wires]
+    mask_off = np.cumsum([0] + [len(m) for m in masks[:-1]]).astype(np.int64)
+    keys = [np.concatenate([g.twist, g.scale]) for g in wires]
+    key_off = np.cumsum([0] + [len(k) for k in keys[:-1]]).astype(np.int32)
+    key_n = np.array([[len(g.twist), len(g.scale)] for g in wires], dtype=np.int32)
+    allkeys = np.concatenate(keys)
+    arrays = [
+        np.array([g.reach**2 for g in wires], dtype=np.float64),
+        np.stack([g.points for g in wires]).astype(np.float64),
+        np.stack([g.tangents for g in wires]).astype(np.float64),
+        np.stack([g.frames for g in wires]).astype(np.float32),
+        np.array([g.length for g in wires], dtype=np.float64),
+        np.array([g.mask.shape[0] for g in wires], dtype=np.int32),
+        np.array([g.mask.shape[1] for g in wires], dtype=np.int32),
+        np.array([g.half for g in wires], dtype=np.float64),
+        mask_off,
+        np.concatenate(masks),
+        key_off,
+        key_n.ravel(),
+        allkeys[:, 0].copy(),
+        allkeys[:, 1].copy(),
+    ]
+    return [_device(st, a) for a in arrays]
+
+
+def classify(
+    st: dict, nearest_buf: object, inp: ClassifyInput
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run the pass over a region whose nearest-seed indices are in ``nearest_buf``.
+
+    Parameters
+    ----------
+    st
+        The OpenCL state of :mod:`voxwarp.deform.propagation` (its lock held).
+    nearest_buf
+        Device buffer of int32 C-order nearest-seed indices over ``inp.rshape``.
+    inp
+        Seeds, region geometry and per-wire data.
+
+    Returns
+    -------
+    tuple of np.ndarray
+        (wire int16, u float32, flag bool), each of shape ``inp.rshape`` (C order).
+    """
+    cl, queue = st["cl"], st["queue"]
+    kernel = _program(st)
+    out_wire = np.empty(inp.rshape, dtype=np.int16)
+    out_u = np.empty(inp.rshape, dtype=np.float32)
+    out_flag = np.empty(inp.rshape, dtype=np.uint8)
+    bufs = [
+        cl.Buffer(st["ctx"], cl.mem_flags.WRITE_ONLY, a.nbytes) for a in (out_wire, out_u, out_flag)
+    ]
+    i32, f64, i64 = np.int32, np.float64, np.int64
+    args = [
+        nearest_buf,
+        _device(st, inp.seed_idx.astype(np.int32)),
+        _device(st, inp.seed_wire.astype(np.int16)),
+        _device(st, inp.seed_u.astype(np.float32)),
+        i32(len(inp.seed_idx)),
+        *(i32(v) for v in inp.rshape),
+        *(f64(v) for v in inp.lo),
+        *(f64(v) for v in inp.h),
+        *(i64(v) for v in inp.region_lo),
+        *_wire_buffers(st, inp.wires),
+        f64(inp.px),
+        np.float32(inp.cap),
+        i32(1 if inp.base_side else 0),
+        i32(inp.refine_steps),
+        *bufs,
+    ]
+    n0, n1, n2 = inp.rshape
+    lx = 16  # PoCL picks huge work-groups by itself (see voxwarp.deform.propagation)
+    kernel(queue, ((n2 + lx - 1) // lx * lx, n1, n0), (lx, 1, 1), *args)  # type: ignore[operator]
+    for host, dev in zip((out_wire, out_u, out_flag), bufs, strict=True):
+        cl.enqueue_copy(queue, host, dev, is_blocking=False)
+    queue.finish()
+    return out_wire, out_u, out_flag.view(bool)
