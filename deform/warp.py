@@ -607,7 +607,8 @@ def _constants_glsl(constants: Mapping[str, Any]) -> str:
 
 
 def compose_glsl(warps: Sequence[Warp], loader: Callable[[str], str] = shaders.read) -> str:
-    """GLSL text defining ``warp_chain(p)`` and ``warp_chain_jacobian(p)`` for ``warps``.
+    """GLSL text defining ``warp_chain(p)``, ``warp_chain_jacobian(p)`` and both at once,
+    ``warp_chain_and_jacobian(p, out J)``, for ``warps``.
 
     Each warp's file is inserted with its names prefixed ``w{i}_``; the chain's
     Jacobian is the product ``J_{n-1}(q_{n-1}) ... J_0(p)`` (chain rule).
@@ -620,8 +621,10 @@ def compose_glsl(warps: Sequence[Warp], loader: Callable[[str], str] = shaders.r
         parts.append(f"// ---- warp {i}: {w.kind}\n{src}")
     body = ["vec3 warp_chain(vec3 p) {"]
     body += [f"    p = w{i}_warp(p);" for i in range(len(warps))]
-    body += ["    return p;", "}", "mat3 warp_chain_jacobian(vec3 p) {", "    mat3 J = mat3(1.0);"]
+    body += ["    return p;", "}", "vec3 warp_chain_and_jacobian(vec3 p, out mat3 J) {"]
+    body += ["    J = mat3(1.0);"]
     for i in range(len(warps)):
         body += [f"    J = w{i}_warp_jacobian(p) * J;", f"    p = w{i}_warp(p);"]
-    body += ["    return J;", "}"]
+    body += ["    return p;", "}", "mat3 warp_chain_jacobian(vec3 p) {", "    mat3 J;"]
+    body += ["    warp_chain_and_jacobian(p, J);", "    return J;", "}"]
     return "\n".join([*parts, *body]) + "\n"

@@ -78,7 +78,66 @@ mat3 jacobian_at(float t) { return u_jacobian; }
 #else
 #include "warps.glsl"
 vec3 texel_at(float t) { return world_to_texel(warp_chain(g_ro + t * g_rd)); }
+#ifdef PIECEWISE
+// Piecewise-linear warped rays: the chain is evaluated exactly at the ends of segments
+// of up to u_segment samples (the current one: ray parameters g_ta..g_tb, texel
+// positions g_ua..g_ub) and interpolated linearly in between, with its Jacobian.
+// app/render/ray_segments.py measures how long a segment may be, per region.
+#ifdef SEGMENT_MAP
+uniform int u_max_segment;              // up to this many samples, from the map:
+uniform sampler3D u_segment_map;        // R32F: longest segment (mm) starting in a cell
+uniform mat4 u_segment_world_to_map;    // deformed world -> map cell coordinates
+uniform ivec3 u_segment_map_dims;
+#else
+uniform int u_segment;                  // fixed samples per segment
+#endif
+float g_ta = 0.0;
+float g_tb = 0.0;
+vec3 g_ua;
+vec3 g_ub;
+float segment_weight(float t) { return clamp((t - g_ta) / max(g_tb - g_ta, 1e-30), 0.0, 1.0); }
+vec3 segment_texel(float t) { return mix(g_ua, g_ub, segment_weight(t)); }
+#ifdef SHADING
+mat3 g_Ja;
+mat3 g_Jb;
+mat3 jacobian_at(float t) {
+    float f = segment_weight(t);
+    return g_Ja * (1.0 - f) + g_Jb * f;
+}
+#else
 mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
+#endif
+// Samples the segment starting at ray parameter t may span (at least 1).
+int segment_samples(float t) {
+#ifndef SEGMENT_MAP
+    return max(u_segment, 1);
+#else
+    vec3 m = (u_segment_world_to_map * vec4(g_ro + t * g_rd, 1.0)).xyz;
+    ivec3 c = clamp(ivec3(floor(m)), ivec3(0), u_segment_map_dims - 1);
+    float len = texelFetch(u_segment_map, c, 0).r;
+    return clamp(int(len / u_step), 1, u_max_segment);
+#endif
+}
+// Start a new segment ending at ray parameter te: from the previous end when the
+// samples join up (joined), else from te itself (a segment of one sample).
+void segment_to(float te, bool joined) {
+    vec3 p = g_ro + te * g_rd;
+#ifdef SHADING
+    mat3 J;
+    vec3 ue = world_to_texel(warp_chain_and_jacobian(p, J));
+    g_Ja = joined ? g_Jb : J;
+    g_Jb = J;
+#else
+    vec3 ue = world_to_texel(warp_chain(p));
+#endif
+    g_ta = joined ? g_tb : te;
+    g_ua = joined ? g_ub : ue;
+    g_tb = te;
+    g_ub = ue;
+}
+#else
+mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
+#endif
 #ifdef CELL_SKIP
 // Warped rays skip through *deformed* space: the skip map's cells are those of the
 // original cell grid padded to the ray box, their visibility the original one dilated
@@ -256,6 +315,48 @@ void main() {
     }
 #endif
     if (k >= n && !finished) discard;
+#ifdef PIECEWISE
+    // One chain evaluation per outer iteration, for every lane of a SIMD group at once
+    // (a CPU rasteriser runs both sides of a branch: evaluating only where a lane
+    // needs a new segment would cost every lane every time); the inner loop walks the
+    // segment's samples with the same skipping as below. A jump past the segment
+    // starts the next one at the landing sample.
+    int kb = -2;   // lattice index of the last evaluated point (g_ub)
+    while (k < n && !finished) {
+        bool joined = k == kb + 1;
+        int ke = joined ? min(kb + segment_samples(g_tb), n - 1) : k;
+        segment_to(t0 + (float(ke) + j) * u_step, joined);
+        kb = ke;
+        while (k <= ke) {
+            float t = t0 + (float(k) + j) * u_step;
+            ivec3 c;
+            float d = cell_skip(skip_at(t), c);
+            if (d > 0.5) {
+                k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
+                if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) {
+                    finished = true;
+                    break;
+                }
+                if (k > ke) break;
+                t = t0 + (float(k) + j) * u_step;
+            }
+            vec3 u = segment_texel(t);
+            if (!inside_texels(u)) {
+                if (mode_skip(s, -1.0)) {
+                    finished = true;
+                    break;
+                }
+                ++k;
+                continue;
+            }
+            if (mode_sample(s, sample_value(u), u, t)) {
+                finished = true;
+                break;
+            }
+            ++k;
+        }
+    }
+#else
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
         ivec3 c;
@@ -281,6 +382,7 @@ void main() {
         if (mode_sample(s, sample_value(u), u, t)) break;
         ++k;
     }
+#endif
 #elif defined(LINEAR_PATH)
     ivec3 cur = ivec3(-1000000);
     while (k < n) {

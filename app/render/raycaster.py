@@ -49,6 +49,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render.mesh_pass import MeshRenderer
+from voxwarp.render.ray_segments import MAX_SAMPLES
 from voxwarp.render.skip_cache import SkipMapCache, VolumeSkipMaps
 from voxwarp.render.skipping import (
     BLOCK,
@@ -58,6 +59,7 @@ from voxwarp.render.skipping import (
     octant_regions,
     ray_direction_coefficients,
 )
+from voxwarp.render.volume_texture import upload_volume_texture
 from voxwarp.scene import Scene
 
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
@@ -81,28 +83,19 @@ class _VolumeGPU:
 
     def __init__(self, ctx: Any, volume: Volume, slice_pairs: bool) -> None:
         fmt, scale, offset = _TEX_FORMAT[volume.dtype]
-        arr = volume.texture_array()  # (nz, ny, nx), x fastest
-        if volume.dtype == np.int16:
-            arr = (arr.astype(np.int32) + 32768).astype(np.uint16)
-        nx, ny, nz = volume.shape
         self.slice_pairs = slice_pairs
-        if slice_pairs:
-            upper = np.concatenate([arr[1:], arr[-1:]], axis=0)
-            pairs = np.stack([arr, upper], axis=-1)  # layer k: (v[k], v[k+1])
-            self.texture = ctx.texture_array(
-                (nx, ny, nz), 2, pairs.tobytes(), dtype=fmt, alignment=1
-            )
-            self.texture.repeat_x = self.texture.repeat_y = False
-        else:
-            self.texture = ctx.texture3d((nx, ny, nz), 1, arr.tobytes(), dtype=fmt, alignment=1)
-            self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
+        # slab by slab: no full-volume copy (int16 -> uint16 + 32768, layer pairs)
+        self.texture = upload_volume_texture(ctx, volume.data, fmt, slice_pairs)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        if not slice_pairs:
+            self.texture.repeat_z = False
         self.texture.filter = (ctx.LINEAR, ctx.LINEAR)
         self.value_map = (scale, offset)
         bmin, bmax = block_min_max(volume.data, BLOCK)
         self.blocks = bmin.shape
         #: block info, cell and warped skip maps, filled by the renderer's SkipMapCache
         self.skip = VolumeSkipMaps(ctx, volume.data, bmin, bmax)
-        self.nbytes = arr.nbytes * (2 if slice_pairs else 1)
+        self.nbytes = volume.data.nbytes * (2 if slice_pairs else 1)
 
     def release(self) -> None:
         if self.texture is not None:
@@ -136,6 +129,9 @@ class _Frame:
     prog: Any
     #: the scene's background, premultiplied
     background: tuple
+    #: warped rays: 1 evaluates the chain at every sample, 0 interpolates along
+    #: segments from the warp state's segment map, K > 1 along segments of K samples
+    segment: int = 1
 
     @property
     def linear(self) -> bool:
@@ -204,6 +200,9 @@ class Renderer:
         self._skip_maps = SkipMapCache(ctx, empty_space_skipping=bool(empty_space_skipping))
         #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
         self.last_skip_kind = "none"
+        #: the last draw's warped rays: 1 evaluated the chain at every sample, 0 used the
+        #: warp state's segment map, K > 1 fixed segments of K samples
+        self.last_ray_segment = 1
         if sampling not in ("auto", "texture3d", "slice_pairs"):
             raise RenderError(
                 f"sampling must be 'auto', 'texture3d' or 'slice_pairs'; got {sampling!r}"
@@ -344,6 +343,29 @@ class Renderer:
         self._skip_maps.cell_skipping = value
 
     @property
+    def ray_segment(self) -> int | str:
+        """Samples per piecewise-linear segment of warped rays
+        (:mod:`voxwarp.render.ray_segments`): ``"auto"`` lets each region use the
+        longest segment whose measured chord error stays within :attr:`ray_tolerance`;
+        ``1`` (default) evaluates the warp chain at every sample; K > 1 forces K
+        everywhere (for measurements). Only rays that skip through
+        deformed-space cell maps (``last_skip_kind == "cells"``) use segments."""
+        return self._skip_maps.segments.setting
+
+    @ray_segment.setter
+    def ray_segment(self, value: int | str) -> None:
+        self._skip_maps.segments.setting = value
+
+    @property
+    def ray_tolerance(self) -> float:
+        """Largest chord error of a warped-ray segment, in texels (default 0.1)."""
+        return self._skip_maps.segments.tolerance
+
+    @ray_tolerance.setter
+    def ray_tolerance(self, value: float) -> None:
+        self._skip_maps.segments.tolerance = value
+
+    @property
     def warped_skip_maps(self) -> str:
         """Deformed-space skip maps of warped rays: "auto" builds them when a warp state
         is drawn a second time, "always" on first use, "never" keeps per-block checks,
@@ -375,7 +397,8 @@ class Renderer:
         uploads and uses it."""
         self._skip_maps.install(key, result)
 
-    def _program(self, scene: Scene, linear: bool, kind: str) -> Any:
+    def _program(self, scene: Scene, linear: bool, kind: str, segment: int) -> Any:
+        piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
         warps = [] if linear else scene.warps
         meshes = bool(scene.meshes)
         key = (
@@ -386,6 +409,7 @@ class Renderer:
             self.sampling,
             tuple(w.signature() for w in warps),
             meshes,
+            piecewise,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -403,6 +427,10 @@ class Renderer:
             defines.append("#define CELL_SKIP")
         if meshes:
             defines.append("#define MESH_DEPTH")
+        if piecewise:
+            defines.append("#define PIECEWISE")
+        if piecewise == "map":
+            defines.append("#define SEGMENT_MAP")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -465,10 +493,14 @@ class Renderer:
         linear = fold is not None
         skip_kind = self._skip_maps.kind(scene, linear, gpu.skip)
         self.last_skip_kind = skip_kind
-        prog = self._program(scene, linear, skip_kind)
+        segment = 1
+        if skip_kind == "cells" and not linear:
+            segment = self._skip_maps.segments.fixed()
+        self.last_ray_segment = segment
+        prog = self._program(scene, linear, skip_kind, segment)
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
-        return _Frame(scene, gpu, cam, (x, y, w, h), fold, skip_kind, prog, bg_premul)
+        return _Frame(scene, gpu, cam, (x, y, w, h), fold, skip_kind, prog, bg_premul, segment)
 
     def _set_uniforms(self, frame: _Frame) -> dict[str, Any]:
         """Set the raycast program's uniforms for ``frame``; returns them by name."""
@@ -532,10 +564,16 @@ class Renderer:
         maps = frame.gpu.skip
         visible = self._skip_maps.warped_visibility(maps, frame.scene)
         to_texel[:3, 3] -= maps.warped_offset
-        return {
+        values = {
             "u_skip_world_to_texel": to_texel,
             "u_cell_dims": tuple(int(c) for c in visible.shape),
         }
+        values["u_segment"] = max(frame.segment, 1)
+        if frame.segment == 0 and maps.warped_segments is not None:
+            values["u_segment_world_to_map"] = maps.warped_segments.world_to_map()
+            values["u_segment_map_dims"] = maps.warped_segments.lengths.shape
+            values["u_max_segment"] = MAX_SAMPLES
+        return values
 
     def _draw_mesh_pass(self, frame: _Frame) -> np.ndarray | None:
         """Draw a mixed scene's meshes into the internal colour + depth target of the
@@ -602,6 +640,10 @@ class Renderer:
                     tex.use(unit)
                     _set_uniform(prog, f"w{i}_{name}", unit)
                     unit += 1
+        if frame.segment == 0 and frame.gpu.skip.segment_texture is not None:
+            frame.gpu.skip.segment_texture.use(unit)
+            _set_uniform(prog, "u_segment_map", unit)
+            unit += 1
         return unit
 
     def _bind_mesh_target(

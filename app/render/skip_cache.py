@@ -21,11 +21,12 @@ import numpy as np
 
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
+from voxwarp.render.ray_segments import RaySegments, SegmentMap, segment_lengths
 from voxwarp.render.skipping import (
     Octant,
     block_skip_distances,
     cell_grid_shape,
-    cell_min_max,
+    cell_visibility,
     octant_skip_distances,
     skip_map_key,
     static_block_visibility,
@@ -38,6 +39,9 @@ if TYPE_CHECKING:
 
 #: modes whose visibility is sparse enough for cell-resolution skipping
 SPARSE_MODES = ("dvr", "iso", "flm")
+#: with ``cell_skip_maps`` "auto", the straight-ray cell maps of a volume of more trilinear
+#: cells than this are built when it is drawn a second time (see SkipMapCache.kind)
+EAGER_CELLS = 1 << 22
 
 
 class VolumeSkipMaps:
@@ -58,7 +62,6 @@ class VolumeSkipMaps:
         self.info.filter = (ctx.NEAREST, ctx.NEAREST)
         self.info_key: Any = None
         self.volume_data = data
-        self.cell_range: tuple[np.ndarray, np.ndarray] | None = None
         self.cell_visible: np.ndarray | None = None
         #: octant -> R8 texture of octant skip distances, for the scene key cell_key
         self.cell_skip: dict[Octant, Any] = {}
@@ -68,15 +71,19 @@ class VolumeSkipMaps:
         self.warped_key: Any = None
         self.warped_visible: np.ndarray | None = None
         self.warped_offset = np.zeros(3, dtype=int)
+        #: the warp state's piecewise-linear segment lengths (ray_segments.py) and texture
+        self.warped_segments: SegmentMap | None = None
+        self.segment_texture: Any = None
 
     def release(self) -> None:
         """Free every texture (idempotent)."""
-        for tex in (self.info, *self.cell_skip.values(), *self.warped_skip.values()):
+        textures = (self.info, self.segment_texture, *self.cell_skip.values())
+        for tex in (*textures, *self.warped_skip.values()):
             if tex is not None:
                 tex.release()
         self.cell_skip.clear()
         self.warped_skip.clear()
-        self.info = None
+        self.info = self.segment_texture = None
 
 
 class SkipMapCache:
@@ -104,16 +111,25 @@ class SkipMapCache:
         #: per-block checks, "background" offers them as :meth:`take_job`
         self.warped_skip_maps = "auto"
         self._warped_seen: dict[int, Any] = {}
+        #: straight-ray cell maps (see :meth:`kind`): "auto" builds those of a volume of
+        #: more than EAGER_CELLS cells when it is drawn a second time with the same
+        #: visibility (its first frame skips per block, the same image), "always" at once
+        self.cell_skip_maps = "auto"
+        self._cells_seen: dict[int, Any] = {}
         #: "background" mode: the job the last draw wanted, and finished results
         self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
         self._skip_ready: dict[Any, Any] = {}
+        #: piecewise-linear warped rays: settings; their maps come with the warped maps
+        self.segments = RaySegments()
 
     # ------------------------------------------------------------------ policy
     def kind(self, scene: Scene, linear: bool, maps: VolumeSkipMaps | None = None) -> str:
         """Which empty-space skipping a draw uses: "cells", "blocks" or "none".
 
         Straight rays (affine chains) skip at trilinear-cell resolution for the modes
-        whose visibility is sparse (dvr, iso, flm). mip, minip, average and xray must
+        whose visibility is sparse (dvr, iso, flm), from the first draw of a volume of
+        at most EAGER_CELLS cells, else from its second (:meth:`_cells_now`; the first
+        skips per block). mip, minip, average and xray must
         look at (nearly) every sample along the ray; on the benchmark CT their skip checks
         cost more than they saved (docs/benchmarks.md), so they march plainly.
         Warped (non-affine) rays skip at cell resolution too, through deformed space,
@@ -144,10 +160,27 @@ class SkipMapCache:
             self._warped_seen[id(maps)] = key
             return "blocks"
         if sparse:
-            return "cells" if self._fits(cell_grid_shape(scene.volume.shape)) else "blocks"
+            cells = cell_grid_shape(scene.volume.shape)
+            return "cells" if self._fits(cells) and self._cells_now(scene, maps) else "blocks"
         if scene.mode in ("mip", "minip", "average", "xray"):
             return "none"
         return "blocks"
+
+    def _cells_now(self, scene: Scene, maps: VolumeSkipMaps | None) -> bool:
+        """Whether a straight-ray draw of ``scene`` uses (and so builds) cell maps now:
+        with :attr:`cell_skip_maps` "auto", a volume of more than EAGER_CELLS cells
+        first draws with block skipping (building its cell maps costs seconds, more than
+        the frame they speed up) and gets them on its second draw with the same
+        visibility, or as soon as they are built."""
+        if self.cell_skip_maps == "always" or maps is None:
+            return True
+        if int(np.prod(cell_grid_shape(scene.volume.shape))) <= EAGER_CELLS:
+            return True
+        key = skip_map_key(scene)
+        if maps.cell_key == key or self._cells_seen.get(id(maps)) == key:
+            return True
+        self._cells_seen[id(maps)] = key
+        return False
 
     def _background_kind(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> str:
         """ "background" mode: cells when this warp state's maps are built or ready,
@@ -224,14 +257,31 @@ class SkipMapCache:
         lo, hi = scene.ray_bounds()
         warps = list(scene.warps)
         spacing, origin = vol.spacing, vol.origin
-        return lambda: warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
+        to_texel = vol.world_to_texel_matrix()
+        tol, longest = self.segments.tolerance, self.segments.max_length(vol)
+        auto = self.segments.setting == "auto"
+
+        def job() -> Any:
+            cells = warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
+            if cells is None:
+                return None
+            if not auto:
+                return (*cells, None)
+            return (*cells, segment_lengths(warps, lo, hi, to_texel, tol, longest))
+
+        return job
 
     def _install_warped(self, maps: VolumeSkipMaps, key: Any, result: Any) -> None:
-        """Keep a deformed-space visibility on the volume (its old skip maps go)."""
-        for tex in maps.warped_skip.values():
-            tex.release()
+        """Keep a deformed-space visibility and segment map on the volume (its old skip
+        maps go)."""
+        for tex in (*maps.warped_skip.values(), maps.segment_texture):
+            if tex is not None:
+                tex.release()
         maps.warped_skip.clear()
-        maps.warped_visible, maps.warped_offset = result
+        maps.warped_visible, maps.warped_offset, maps.warped_segments = result
+        maps.segment_texture = None
+        if maps.warped_segments is not None:
+            maps.segment_texture = self.segments.texture(self.ctx, maps.warped_segments)
         maps.warped_key = key
 
     # ------------------------------------------------------------------ maps
@@ -263,17 +313,18 @@ class SkipMapCache:
             for tex in maps.cell_skip.values():
                 tex.release()
             maps.cell_skip.clear()
-            if maps.cell_range is None:
-                maps.cell_range = cell_min_max(maps.volume_data)
-            maps.cell_visible = static_block_visibility(scene, *maps.cell_range)
+            maps.cell_visible = None  # the old one goes before the new one is built
+            maps.cell_visible = cell_visibility(
+                scene, maps.volume_data, maps.block_min, maps.block_max
+            )
             maps.cell_key = key
         assert maps.cell_visible is not None
         return maps.cell_visible
 
     def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
         dist = octant_skip_distances(visible, octant)
-        data = np.ascontiguousarray(dist.transpose(2, 1, 0))
-        tex = self.ctx.texture3d(dist.shape, 1, data.tobytes(), dtype="f1", alignment=1)
+        data = np.ascontiguousarray(dist.transpose(2, 1, 0))  # no copy: built in this layout
+        tex = self.ctx.texture3d(dist.shape, 1, data, dtype="f1", alignment=1)
         tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
         return tex
 
@@ -300,6 +351,7 @@ class SkipMapCache:
             ),
             tuple(np.round(np.asarray(lo, float), 9)),
             tuple(np.round(np.asarray(hi, float), 9)),
+            self.segments.tolerance if self.segments.setting == "auto" else None,
         )
 
     def warped_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
