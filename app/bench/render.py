@@ -52,6 +52,10 @@ class BenchReport:
     frames: int
     gl_renderer: str
     rows: list[BenchRow] = field(default_factory=list)
+    #: which case of the standard run this is ("sparse", "dense", ...; "" for one volume)
+    label: str = ""
+    #: share of the image's pixels the dvr image covers (alpha > 0; -1: not measured)
+    covered: float = -1.0
 
     def find(self, renderer: str, mode: str) -> BenchRow | None:
         """The row of ``renderer`` in ``mode`` (None if absent or skipped)."""
@@ -69,12 +73,16 @@ class BenchReport:
 
     def markdown(self, command: str) -> str:
         """A markdown table of the run, headed by the command that produced it."""
+        covered = ""
+        if self.covered >= 0:
+            covered = f" dvr covers {100 * self.covered:.1f} % of the image;"
         lines = [
             f"Command: `{command}`",
             "",
-            f"Volume: {self.volume} {self.shape[0]}x{self.shape[1]}x{self.shape[2]},"
+            f"{self.label + ': ' if self.label else ''}Volume: {self.volume}"
+            f" {self.shape[0]}x{self.shape[1]}x{self.shape[2]},"
             f" image {self.size[0]}x{self.size[1]}, sample distance {self.step} voxel,"
-            f" median of {self.frames} frames after warm-up; GL: {self.gl_renderer};"
+            f" median of {self.frames} frames after warm-up;{covered} GL: {self.gl_renderer};"
             f" CPU: {platform.processor() or platform.machine()}",
             "",
             "| renderer | mode | median ms | min ms | voxwarp speed-up | note |",
@@ -143,10 +151,93 @@ def benchmark_volume(volume: Volume | None = None) -> Volume:
     return Volume(data, spacing, name="stent CT (real scan, trilinearly upsampled to 256³)")
 
 
-def bench_camera(volume: Volume) -> Camera:
-    """Oblique perspective camera (30° field of view) with the volume filling the image."""
+def bench_camera(volume: Volume, view: Any = None) -> Camera:
+    """Perspective camera (30° field of view) with the volume filling the image, from
+    ``view`` (default the oblique (30°, 20°))."""
     lo, hi = volume.bounds
-    return Camera.fit(lo, hi, view=(30.0, 20.0), projection="perspective", fov=30.0, zoom=1.6)
+    view = (30.0, 20.0) if view is None else view
+    return Camera.fit(lo, hi, view=view, projection="perspective", fov=30.0, zoom=1.6)
+
+
+def covered_fraction(image: np.ndarray) -> float:
+    """Share of the pixels of an (H, W, 4) image rendered on a transparent background
+    that the volume touched (alpha > 0)."""
+    alpha = image[..., 3]
+    return float(np.count_nonzero(alpha > 0)) / max(alpha.size, 1)
+
+
+def body_phantom(
+    shape: tuple[int, int, int] = (256, 256, 133),
+    spacing: tuple[float, float, float] = (1.4, 1.4, 2.5),
+    noise: float = 10.0,
+    seed: int = 0,
+) -> Volume:
+    """A CT-like body (int16, HU): an elliptic trunk of soft tissue (~40 HU) in a fat
+    layer (~-100 HU) with a spine (~700 HU) and ribs, air (-1000 HU) around; Gaussian
+    noise of ``noise`` HU inside the body. The dense benchmark case."""
+    nx, ny, nz = shape
+    x = (np.arange(nx, dtype=np.float32) - (nx - 1) / 2) / (0.44 * nx)
+    y = (np.arange(ny, dtype=np.float32) - (ny - 1) / 2) / (0.30 * ny)
+    r = np.sqrt(x[:, None] ** 2 + y[None, :] ** 2)  # 1 on the skin
+    plane = np.full((nx, ny), -1000, dtype=np.int16)
+    plane[r < 1.0] = -100
+    plane[r < 0.9] = 40
+    spine_y = -0.55  # posterior (RAS: -y)
+    plane[np.hypot(x[:, None] / 0.66, y[None, :] - spine_y) < 0.16] = 700
+    with_ribs = np.where((r > 0.8) & (r < 0.86) & (y[None, :] > spine_y), np.int16(700), plane)
+    rib_slices = (np.arange(nz) % 12) < 4  # a rib every 12 slices, 4 slices thick
+    data = np.empty((nx, ny, nz), dtype=np.int16)
+    data[:, :, :] = plane[:, :, None]
+    data[:, :, rib_slices] = with_ribs[:, :, None]
+    if noise > 0:
+        rng = np.random.default_rng(seed)
+        body = data > -1000
+        values = data[body].astype(np.float32) + rng.normal(0.0, noise, int(body.sum()))
+        data[body] = np.clip(np.rint(values), -1024, 3071).astype(np.int16)
+    return Volume(data, spacing, name="CT-like body phantom (int16 HU)")
+
+
+def dense_transfer_function() -> Any:
+    """Air transparent; fat and soft tissue at opacity 0.05 over the whole body; bone
+    brighter and more opaque (HU). Makes :func:`body_phantom` a dense case."""
+    from voxwarp.core.transfer_function import TransferFunction
+
+    return TransferFunction(
+        [
+            (-1000.0, 0.0, 0.0, 0.0, 0.0),
+            (-300.0, 0.0, 0.0, 0.0, 0.0),
+            (-200.0, 0.9, 0.7, 0.5, 0.05),
+            (300.0, 0.9, 0.45, 0.35, 0.05),
+            (500.0, 1.0, 0.95, 0.85, 0.4),
+            (1200.0, 1.0, 1.0, 1.0, 0.8),
+        ],
+        name="dense: soft tissue 0.05",
+    )
+
+
+@dataclass
+class RenderCase:
+    """One volume of the standard ``bench render`` run."""
+
+    label: str
+    volume: Volume
+    transfer_function: Any
+    modes: tuple[str, ...] = ("dvr",)
+
+
+def standard_cases(modes: tuple[str, ...] = ("dvr", "mip")) -> list[RenderCase]:
+    """The standard run: sparse (the stent CT at 256³, in ``modes``), dense (the CT-like
+    :func:`body_phantom` with soft tissue at 0.05) and the bundled MRI (colin27, mri),
+    both dvr."""
+    from voxwarp.io.samples import load_sample, suggested_transfer_function
+
+    return [
+        RenderCase(
+            "sparse", benchmark_volume(), suggested_transfer_function("stent"), tuple(modes)
+        ),
+        RenderCase("dense CT phantom", body_phantom(), dense_transfer_function()),
+        RenderCase("dense MRI", load_sample("colin27"), "mri"),
+    ]
 
 
 def bench_render(
@@ -159,15 +250,19 @@ def bench_render(
     step: float = 1.0,
     transfer_function: Any = None,
     use_vtk: bool = True,
+    view: Any = None,
+    label: str = "",
+    no_skipping: bool = True,
     log: Any = print,
 ) -> BenchReport:
-    """Time voxwarp and the references on one volume (see the module docstring)."""
+    """Time voxwarp and the references on one volume (see the module docstring); also
+    measure the share of the image the dvr image covers (``report.covered``)."""
     vol = benchmark_volume(volume)
     if transfer_function is None:
         from voxwarp.io.samples import suggested_transfer_function
 
         transfer_function = suggested_transfer_function("stent" if volume is None else vol.name)
-    cam = bench_camera(vol)
+    cam = bench_camera(vol, view)
     scenes = {
         m: Scene(vol, mode=m, transfer_function=transfer_function, step=step, camera=cam)
         for m in modes
@@ -180,13 +275,18 @@ def bench_render(
             step=step,
             frames=frames,
             gl_renderer=str(r.ctx.info.get("GL_RENDERER", "?")),
+            label=label,
         )
         for m, scene in scenes.items():
             t = r.time_frames(scene, frames=frames, warmup=warmup)
             report.rows.append(BenchRow("voxwarp", m, statistics.median(t), min(t)))
             log(f"voxwarp {m}: {statistics.median(t):.1f} ms")
+        if "dvr" in scenes:
+            clear = scenes["dvr"].copy(background=(0.0, 0.0, 0.0, 0.0))
+            report.covered = covered_fraction(r.render(clear))
+            log(f"dvr covers {100 * report.covered:.1f} % of the image")
         r.renderer.empty_space_skipping = False
-        for m, scene in scenes.items():
+        for m, scene in (scenes if no_skipping else {}).items():
             t = r.time_frames(scene, frames=frames, warmup=warmup)
             row = BenchRow("voxwarp, no skipping", m, statistics.median(t), min(t))
             report.rows.append(row)
@@ -212,8 +312,10 @@ def _bench_vtk(
     names = {"fixed_point": "VTK fixed-point (CPU)", "gpu": "VTK GPU raycaster"}
     if not bench_vtk.vtk_available():
         for name in names.values():
-            report.rows.append(BenchRow(name, "-", 0, 0, "skipped: pip install '.[bench]'"))
-        log("vtk not installed: VTK rows skipped (pip install '.[bench]')")
+            report.rows.append(
+                BenchRow(name, "-", 0, 0, "skipped: VTK not installed (pip install '.[bench]')")
+            )
+        log("VTK not installed: VTK rows skipped (pip install '.[bench]')")
         return
     near, far = cam.near_far()
     spec = bench_vtk.CameraSpec(
@@ -249,6 +351,40 @@ def _bench_vtk(
                 continue
             report.rows.append(BenchRow(name, m, res.median_ms, res.min_ms))
             log(f"{name} {m}: {res.median_ms:.1f} ms")
+
+
+def bench_render_cases(cases: list[RenderCase], **kwargs: Any) -> list[BenchReport]:
+    """:func:`bench_render` of each case (``kwargs`` as there), one report per case."""
+    return [
+        bench_render(
+            c.volume,
+            transfer_function=c.transfer_function,
+            modes=c.modes,
+            label=c.label,
+            **kwargs,
+        )
+        for c in cases
+    ]
+
+
+def case_summary(report: BenchReport) -> dict[str, Any]:
+    """The key numbers of one case: voxwarp dvr ms, covered share, ms per covered
+    megapixel and the speed-ups over the references measured (JSON-ready)."""
+    ours = report.find("voxwarp", "dvr")
+    pixels = report.size[0] * report.size[1] * max(report.covered, 0.0)
+    out: dict[str, Any] = {
+        "case": report.label or report.volume,
+        "volume": report.volume,
+        "voxwarp_dvr_ms": None if ours is None else round(ours.median_ms, 2),
+        "covered": round(report.covered, 4),
+        "ms_per_covered_mpixel": (
+            None if ours is None or pixels <= 0 else round(ours.median_ms / (pixels / 1e6), 2)
+        ),
+    }
+    for ref in ("voxwarp, no skipping", "VTK fixed-point (CPU)", "VTK GPU raycaster"):
+        ratio = report.ratio(ref, "dvr")
+        out[f"speedup_vs_{ref}"] = None if ratio is None else round(ratio, 3)
+    return out
 
 
 # ---------------------------------------------------------------------- deformed DVR
@@ -304,6 +440,7 @@ def bench_warp_render(
     grid: int = 16,
     drag_spacings: float = 1.5,
     transfer_function: Any = None,
+    only: tuple[str, ...] | None = None,
     log: Any = print,
 ) -> WarpRenderReport:
     """Cost of rendering through the mass-spring offset-field warp (dvr).
@@ -315,7 +452,8 @@ def bench_warp_render(
     offset warp with the ``approx`` inverse (the thesis' one fetch per sample), the
     ``baked`` inverse (the default) and the ``exact`` inverse, each with deformed-space
     empty-space skipping; and the ``exact`` warp with per-block checks only (what
-    skipping through deformed space buys).
+    skipping through deformed space buys). ``only`` keeps just the rows of those names
+    (e.g. ``("undeformed", "offset warp, baked")`` for a quick run).
     """
     from voxwarp.deform import ElementGrid, MassSpring
     from voxwarp.deform.offset_field import OffsetFieldWarp
@@ -374,6 +512,8 @@ def bench_warp_render(
             "no skipping through deformed space",
         ),
     ]
+    if only is not None:
+        configs = [c for c in configs if c[0] in only]
     with OffscreenRenderer(*size) as r:
         report = WarpRenderReport(
             volume=vol.name,

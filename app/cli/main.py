@@ -1004,22 +1004,27 @@ def cmd_samples(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """``voxwarp bench render``: timings against references (see voxwarp.bench.render)."""
-    from voxwarp.bench.render import bench_render
+    """``voxwarp bench render``: timings against references (see voxwarp.bench.render);
+    without an input the standard run: a sparse and two dense cases."""
+    from voxwarp.bench.render import RenderCase, bench_render_cases, standard_cases
     from voxwarp.core.files import atomic_write_text
 
-    vol = None
-    if args.input:
-        obj = load_input(args.input)
-        vol = getattr(obj, "volume", obj)
-    report = bench_render(
-        vol,
+    path = args.input_file or args.input
+    if path:
+        obj = load_input(path)
+        cases = [RenderCase("", getattr(obj, "volume", obj), _tf_arg(args.tf), ("dvr", "mip"))]
+    else:
+        cases = standard_cases()
+        if args.tf:  # applies to the sparse case only: the dense ones define their TF
+            cases[0].transfer_function = _tf_arg(args.tf)
+    reports = bench_render_cases(
+        cases,
         size=args.size,
         frames=args.frames,
         warmup=args.warmup,
         use_vtk=not args.no_vtk,
         step=args.step,
-        transfer_function=_tf_arg(args.tf),
+        view=args.view,
         log=lambda s: print(s, file=sys.stderr),
     )
     command = (
@@ -1027,12 +1032,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
         if sys.argv[0].endswith("voxwarp")
         else ("voxwarp bench render")
     )
-    text = report.markdown(command)
+    text = "\n".join(report.markdown(command) for report in reports)
     print(text)
-    for mode in ("dvr", "mip"):
-        ratio = report.ratio("VTK fixed-point (CPU)", mode)
-        if ratio is not None:
-            print(f"{mode}: voxwarp is {ratio:.2f}x the speed of VTK's fixed-point raycaster")
+    for report in reports:
+        for mode in ("dvr", "mip"):
+            ratio = report.ratio("VTK fixed-point (CPU)", mode)
+            if ratio is not None:
+                print(
+                    f"{report.label or report.volume} {mode}: voxwarp is {ratio:.2f}x the"
+                    " speed of VTK's fixed-point raycaster"
+                )
     if args.markdown:
         atomic_write_text(Path(args.markdown), text)
     return 0
@@ -1486,12 +1495,21 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pb = sub.add_parser("bench", help="benchmarks")
     bsub = pb.add_subparsers(dest="bench", required=True)
     pbr = bsub.add_parser("render", help="raycaster timings vs VTK and no-skipping")
-    pbr.add_argument("input", nargs="?", help="volume (default: real CT upsampled to 256³)")
+    pbr.add_argument(
+        "input",
+        nargs="?",
+        help="volume (default: the standard run: the real CT upsampled to 256³, a dense CT-like"
+        " phantom and the bundled MRI)",
+    )
+    pbr.add_argument("--input", dest="input_file", metavar="FILE", help="same as INPUT")
+    pbr.add_argument("--view", type=_view, help=ropt.VIEW_HELP)
     pbr.add_argument("--size", type=_size, default=(512, 512))
     pbr.add_argument("--frames", type=int, default=10)
     pbr.add_argument("--warmup", type=int, default=2)
     pbr.add_argument("--step", type=float, default=1.0)
-    pbr.add_argument("--tf", help="preset or tf.json (default: suits the bench volume)")
+    pbr.add_argument(
+        "--tf", help="preset or tf.json (default: suits the bench volume; standard run: sparse)"
+    )
     pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
     pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbr.set_defaults(func=cmd_bench)
@@ -1592,17 +1610,21 @@ def _add_export_field_parser(sub: Any) -> None:
 
 
 def _add_heavy_bench_parsers(bsub: Any) -> None:
-    """``bench wires|lattice|interactive|fields``: their modules define their options (and load
-    numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
+    """``bench wires|lattice|interactive|fields|scale|all``: their modules define their options
+    (and load numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
+    from voxwarp.bench.all import add_bench_all_parser
     from voxwarp.bench.fields import add_bench_fields_parser
     from voxwarp.bench.interactive import add_bench_interactive_parser
     from voxwarp.bench.lattice import add_bench_lattice_parser
+    from voxwarp.bench.scale import add_bench_scale_parser
     from voxwarp.bench.wires import add_bench_wires_parser
 
     add_bench_wires_parser(bsub)
     add_bench_lattice_parser(bsub)
     add_bench_interactive_parser(bsub)
     add_bench_fields_parser(bsub)
+    add_bench_scale_parser(bsub)
+    add_bench_all_parser(bsub)
 
 
 def wants_bench(argv: Sequence[str] | None) -> bool:
