@@ -51,36 +51,28 @@ def tf_key(tf: TransferFunction) -> tuple:
     return tuple(tf.points)
 
 
+def _texture_order(data: np.ndarray) -> np.ndarray:
+    """``data.T`` as a C-contiguous (nz, ny, nx) array (no copy for a Volume's F-ordered data)."""
+    return np.ascontiguousarray(np.asarray(data).T)
+
+
 def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
     """Per-block (min, max) of ``data`` (nx, ny, nz) with a one-voxel apron.
 
     Block ``b`` along an axis covers voxels ``[b*block - 1, (b+1)*block]`` (clamped), the
     voxels trilinear interpolation reads for any sample inside the block. Returns two
-    float32 arrays of shape ``ceil(n / block)`` per axis, in data units.
+    float32 arrays of shape ``ceil(n / block)`` per axis, in data units (a compiled
+    kernel in the data's own dtype, :func:`voxwarp.render.skip_kernels.block_range`).
     """
-    lo = np.asarray(data)
-    hi = lo
-    for axis in range(3):
-        lo = _reduce_axis(lo, axis, block, np.minimum)
-        hi = _reduce_axis(hi, axis, block, np.maximum)
-    return lo.astype(np.float32), hi.astype(np.float32)
+    from voxwarp.render import skip_kernels
 
-
-def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
-    n = a.shape[axis]
-    nb = -(-n // block)
-    pad = nb * block - n
-    a = np.moveaxis(a, axis, 0)
-    if pad:
-        a = np.concatenate([a, np.repeat(a[-1:], pad, axis=0)], axis=0)
-    r = op.reduce(a.reshape(nb, block, *a.shape[1:]), axis=1)
-    if nb > 1:
-        # apron: last voxel of the previous block and first voxel of the next one
-        prev_last = a[block - 1 : (nb - 1) * block : block]
-        next_first = a[block : nb * block : block]
-        r[1:] = op(r[1:], prev_last)
-        r[:-1] = op(r[:-1], next_first)
-    return np.moveaxis(r, 0, axis)
+    t = _texture_order(data)
+    nb = tuple(-(-n // block) for n in t.shape)
+    lo = np.empty(nb, dtype=t.dtype)
+    hi = np.empty(nb, dtype=t.dtype)
+    if t.size:
+        skip_kernels.block_range(t, block, lo, hi)
+    return lo.T.astype(np.float32), hi.T.astype(np.float32)
 
 
 def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,16 +81,73 @@ def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Cell ``c`` covers texel coordinates ``[c - 1/2, c + 1/2]`` per axis, whose samples
     interpolate voxels ``c - 1`` and ``c`` (clamped to the edge). The data's dtype
     (integer ranges keep :meth:`TransferFunction.visible_ranges` on its fast path).
+    Two full-size arrays: the renderer uses :func:`cell_visibility`, which keeps none.
     """
-    p = np.pad(np.asarray(data), 1, mode="edge")
-    lo = hi = None
-    for i in (0, 1):
-        for j in (0, 1):
-            for k in (0, 1):
-                v = p[i : i + p.shape[0] - 1, j : j + p.shape[1] - 1, k : k + p.shape[2] - 1]
-                lo = v if lo is None else np.minimum(lo, v)
-                hi = v if hi is None else np.maximum(hi, v)
-    return lo, hi  # type: ignore[return-value]
+    return _cell_range_slab(_texture_order(data), 0, np.asarray(data).shape[2] + 1)
+
+
+def _cell_range_slab(t: np.ndarray, z0: int, z1: int) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) of the cells ``z0 .. z1`` (z) of texture-order data, (x, y, z)-indexed."""
+    from voxwarp.render import skip_kernels
+
+    shape = (z1 - z0, t.shape[1] + 1, t.shape[2] + 1)
+    lo = np.empty(shape, dtype=t.dtype)
+    hi = np.empty(shape, dtype=t.dtype)
+    skip_kernels.cell_range(t, z0, lo, hi)
+    return lo.T, hi.T
+
+
+#: cells per slab of the generic (float data) path of :func:`cell_visibility`
+_SLAB_CELLS = 1 << 22
+#: integer data whose value range spans at most this many values uses a lookup table
+_TABLE_VALUES = 1 << 17
+
+
+def cell_visibility(
+    scene: Scene, data: np.ndarray, block_min: np.ndarray, block_max: np.ndarray
+) -> np.ndarray:
+    """Which trilinear cells of ``data`` (n + 1 per axis) ``scene``'s mode can see.
+
+    The same as ``static_block_visibility(scene, *cell_min_max(data))`` without the two
+    full-size range arrays: integer data of at most 2 bytes goes through one compiled
+    pass and a table of, per lower end ``lo`` of a cell's range, the lowest upper end
+    that makes it visible (visibility only grows with the upper end, in every mode);
+    other data is classified slab by slab. ``block_min``/``block_max`` (from
+    :func:`block_min_max`) give the data's value range. Returns a bool array, a
+    transposed view of a C-contiguous (z, y, x) array.
+    """
+    from voxwarp.render import skip_kernels
+
+    t = _texture_order(data)
+    out = np.empty((t.shape[0] + 1, t.shape[1] + 1, t.shape[2] + 1), dtype=bool)
+    if t.size == 0:
+        return out.T
+    vmin, vmax = int(np.min(block_min)), int(np.max(block_max))
+    if t.dtype.kind in "ui" and t.dtype.itemsize <= 2 and vmax - vmin < _TABLE_VALUES:
+        first_hi = _first_visible_hi(scene, t.dtype, vmin, vmax)
+        skip_kernels.cell_visibility_table(t, vmin, first_hi, out)
+        return out.T
+    step = max(1, _SLAB_CELLS // (out.shape[1] * out.shape[2]))
+    for z0 in range(0, out.shape[0], step):
+        z1 = min(z0 + step, out.shape[0])
+        out[z0:z1] = static_block_visibility(scene, *_cell_range_slab(t, z0, z1)).T
+    return out.T
+
+
+def _first_visible_hi(scene: Scene, dtype: np.dtype, vmin: int, vmax: int) -> np.ndarray:
+    """Per value ``lo`` in [vmin, vmax]: the lowest ``hi`` in [lo, vmax] for which a cell
+    of range [lo, hi] is visible to ``scene``'s mode, or ``vmax + 1`` (int64; a binary
+    search over :func:`static_block_visibility`, which is non-decreasing in ``hi``)."""
+    lo = np.arange(vmin, vmax + 1, dtype=np.int64)
+    left = lo.copy()  # the answer lies in [left, right]; right = vmax + 1 means never
+    right = np.full_like(lo, vmax + 1)
+    while np.any(left < right):
+        mid = np.minimum((left + right) // 2, vmax)
+        ok = static_block_visibility(scene, lo.astype(dtype), mid.astype(dtype))
+        ok = np.asarray(ok, dtype=bool) & (left < right)
+        right = np.where(ok, mid, right)
+        left = np.where(ok | (left >= right), left, mid + 1)
+    return right
 
 
 def static_block_visibility(
@@ -132,16 +181,20 @@ def block_skip_distances(visible: np.ndarray) -> np.ndarray:
     """Chessboard distance (in blocks, capped at 255) from each block to a visible one.
 
     0 marks a visible block. A ray in a block at distance d may jump out of the cube of
-    (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8.
+    (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8
+    (a compiled two-pass chamfer transform, exact for the chessboard metric).
     """
-    from scipy.ndimage import distance_transform_cdt
-
+    visible = np.asarray(visible, dtype=bool)
     if not visible.any():
         return np.full(visible.shape, 255, dtype=np.uint8)
     if visible.all():
         return np.zeros(visible.shape, dtype=np.uint8)
-    d = distance_transform_cdt(~visible, metric="chessboard")
-    return np.clip(d, 0, 255).astype(np.uint8)
+    from voxwarp.render import skip_kernels
+
+    v = _texture_order(visible)
+    d = np.empty(v.shape, dtype=np.int32)
+    skip_kernels.chessboard_distance(v, d)
+    return np.minimum(d, 255).astype(np.uint8).T
 
 
 def skip_map_key(scene: Scene) -> tuple:
@@ -158,44 +211,6 @@ def skip_map_key(scene: Scene) -> tuple:
     return (mode,)
 
 
-def _flip(signs: Octant) -> tuple[slice, ...]:
-    return tuple(slice(None, None, -1) if s < 0 else slice(None) for s in signs)
-
-
-def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
-    """Per element ``min over k >= 0 of max(k, g[c + k])`` along each axis in turn, capped.
-
-    Applied to g = 0 (visible) / cap (invisible) along x, y and z, this is the forward
-    chessboard distance ``min over visible o >= c of max_i(o_i - c_i)`` (max distributes
-    over min, so the three 1D passes compose exactly), i.e. the edge of the largest
-    invisible cube starting at c and extending towards +x, +y, +z. uint8, in place on a
-    C-contiguous copy.
-
-    ``cap`` (at most 255, the uint8 maximum) must be >= every value of ``g``: shifts
-    ``k >= cap`` cannot lower a result (``max(k, .) >= cap``), so the loop stops there
-    and axes of any length (more than 256 cells or blocks) give the capped distance.
-    """
-    if not 1 <= cap <= 255:
-        raise ValueError(f"cap must be in [1, 255]; got {cap}")
-    src = np.ascontiguousarray(g, dtype=np.uint8).copy()
-    if src.size and int(src.max()) > cap:
-        raise ValueError(f"values of g must be at most cap {cap}; got {int(src.max())}")
-    out = src.copy()
-    tmp = np.empty_like(src)
-    for axis in range(3):
-        n = src.shape[axis]
-        for k in range(1, min(cap, n)):
-            head = [slice(None)] * 3
-            tail = [slice(None)] * 3
-            head[axis] = slice(0, n - k)
-            tail[axis] = slice(k, n)
-            t = tmp[tuple(head)]
-            np.maximum(src[tuple(tail)], np.uint8(k), out=t)
-            np.minimum(out[tuple(head)], t, out=out[tuple(head)])
-        src[...] = out
-    return out
-
-
 def octant_skip_distances(
     visible: np.ndarray, signs: Octant, cell_cap: int = CELL_CAP, block: int = BLOCK
 ) -> np.ndarray:
@@ -204,42 +219,56 @@ def octant_skip_distances(
 
     The cube of edge ``r`` at cell ``c`` covers cells ``c + s * [0, r - 1]`` per axis
     (s = ``signs``). It is exact up to ``cell_cap`` cells; beyond that it is the bound
-    given by the block-level map (blocks of ``block`` cells, exact in blocks): the
-    cube of ``R`` invisible blocks starting at the cell's block contains the cell's
-    cube of edge ``R * block - max_i(offset of the cell in its block)``. Both are
-    lower bounds of the true edge, so every jump stays inside invisible cells.
-    Returns uint8 of ``visible``'s shape.
+    given by the block-level map (blocks of ``block`` cells, counted from the corner the
+    rays start at, exact in blocks): the cube of ``R`` invisible blocks starting at the
+    cell's block contains the cell's cube of edge ``R * block - max_i(offset of the cell
+    in its block)``. Both are lower bounds of the true edge, so every jump stays inside
+    invisible cells. Returns uint8 of ``visible``'s shape (a transposed view of a
+    C-contiguous (z, y, x) array: the texture's layout).
+
+    Each distance is a forward chessboard distance, built as three 1D passes
+    ``min over 0 <= k < cap of max(k, g[c + s k])`` (max distributes over min, so the
+    passes compose exactly), compiled, in place in the output
+    (:mod:`voxwarp.render.skip_kernels`).
     """
+    from voxwarp.render import skip_kernels as kern
+
     visible = np.asarray(visible, dtype=bool)
     if visible.ndim != 3:
         raise ValueError(f"visible must be a 3D bool array; got shape {visible.shape}")
     if any(s not in (-1, 1) for s in signs) or len(signs) != 3:
         raise ValueError(f"signs must be three of +1/-1; got {signs}")
-    flip = _flip(signs)
-    v = np.ascontiguousarray(visible[flip])
+    v = _texture_order(visible)
+    out = np.empty(v.shape, dtype=np.uint8)
+    if v.size == 0:
+        return out.T
+    sz, sy, sx = (int(s) for s in reversed(tuple(signs)))
     cap = int(min(max(cell_cap, 1), 255))
-    near = _forward_chessboard(np.where(v, 0, cap).astype(np.uint8), cap)
-    # block level (in the flipped frame, blocks start at the flipped origin)
-    shape = v.shape
-    nb = tuple(-(-n // block) for n in shape)
-    padded = np.zeros(tuple(b * block for b in nb), dtype=bool)
-    padded[: shape[0], : shape[1], : shape[2]] = v
-    bvis = padded.reshape(nb[0], block, nb[1], block, nb[2], block).any(axis=(1, 3, 5))
-    # block distances beyond far_cap give a cell bound over 255 anyway (clipped below):
-    # far_cap * block - (block - 1) >= 255, so the capped block map loses nothing and
-    # its loop length does not grow with the number of blocks along an axis
+    kern.scan_z(v, sz, cap, out)
+    kern.pass_y(out, sy, cap)
+    kern.pass_x(out, sx, cap)
+    # block level, in the frame where the rays run towards +x, +y, +z; block distances
+    # beyond far_cap give a cell bound over 255 anyway: far_cap * block - (block - 1)
+    # >= 255, so the capped block map loses nothing
     far_cap = min(-(-(255 + block - 1) // block), 255)
-    far = _forward_chessboard(np.where(bvis, 0, far_cap).astype(np.uint8), far_cap)
-    r = far.astype(np.int16) * block
-    r = r.repeat(block, 0).repeat(block, 1).repeat(block, 2)[: shape[0], : shape[1], : shape[2]]
-    offs = [np.arange(n, dtype=np.int16) % block for n in shape]
-    inner = np.maximum(
-        np.maximum(offs[0][:, None, None], offs[1][None, :, None]), offs[2][None, None, :]
-    )
-    r -= inner
-    bound = np.clip(r, 0, 255).astype(np.uint8)
-    out = np.maximum(near, bound)
-    return np.ascontiguousarray(out[flip])
+    maps = [_flipped_block_index(n, s, block) for n, s in zip(v.shape, (sz, sy, sx), strict=True)]
+    far = np.zeros(tuple(-(-n // block) for n in v.shape), dtype=np.uint8)
+    kern.flipped_blocks(v, maps[0][0], maps[1][0], maps[2][0], far)
+    dist = np.empty_like(far)
+    kern.scan_z(far, 1, far_cap, dist)
+    kern.pass_y(dist, 1, far_cap)
+    kern.pass_x(dist, 1, far_cap)
+    kern.raise_to_block_bound(out, dist, *(m[0] for m in maps), *(m[1] for m in maps), block)
+    return out.T
+
+
+def _flipped_block_index(n: int, sign: int, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell index of an axis of ``n`` cells: its block and its offset in that block,
+    counting from the end the rays start at (the last cell for ``sign`` -1)."""
+    c = np.arange(n, dtype=np.int64)
+    if sign < 0:
+        c = n - 1 - c
+    return c // block, c % block
 
 
 def ray_direction_coefficients(inv_view_proj: np.ndarray, to_texel: np.ndarray) -> np.ndarray:

@@ -1,0 +1,96 @@
+"""The numpy skip-map builders voxwarp used before the compiled kernels (issue 19, lever
+6), kept verbatim as the oracle of tests/app/test_skip_kernels.py."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from voxwarp.render.skipping import BLOCK, CELL_CAP, Octant
+
+
+def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.asarray(data)
+    hi = lo
+    for axis in range(3):
+        lo = _reduce_axis(lo, axis, block, np.minimum)
+        hi = _reduce_axis(hi, axis, block, np.maximum)
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
+    n = a.shape[axis]
+    nb = -(-n // block)
+    pad = nb * block - n
+    a = np.moveaxis(a, axis, 0)
+    if pad:
+        a = np.concatenate([a, np.repeat(a[-1:], pad, axis=0)], axis=0)
+    r = op.reduce(a.reshape(nb, block, *a.shape[1:]), axis=1)
+    if nb > 1:
+        prev_last = a[block - 1 : (nb - 1) * block : block]
+        next_first = a[block : nb * block : block]
+        r[1:] = op(r[1:], prev_last)
+        r[:-1] = op(r[:-1], next_first)
+    return np.moveaxis(r, 0, axis)
+
+
+def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    p = np.pad(np.asarray(data), 1, mode="edge")
+    lo = hi = None
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                v = p[i : i + p.shape[0] - 1, j : j + p.shape[1] - 1, k : k + p.shape[2] - 1]
+                lo = v if lo is None else np.minimum(lo, v)
+                hi = v if hi is None else np.maximum(hi, v)
+    return lo, hi  # type: ignore[return-value]
+
+
+def _flip(signs: Octant) -> tuple[slice, ...]:
+    return tuple(slice(None, None, -1) if s < 0 else slice(None) for s in signs)
+
+
+def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
+    src = np.ascontiguousarray(g, dtype=np.uint8).copy()
+    out = src.copy()
+    tmp = np.empty_like(src)
+    for axis in range(3):
+        n = src.shape[axis]
+        for k in range(1, min(cap, n)):
+            head = [slice(None)] * 3
+            tail = [slice(None)] * 3
+            head[axis] = slice(0, n - k)
+            tail[axis] = slice(k, n)
+            t = tmp[tuple(head)]
+            np.maximum(src[tuple(tail)], np.uint8(k), out=t)
+            np.minimum(out[tuple(head)], t, out=out[tuple(head)])
+        src[...] = out
+    return out
+
+
+def octant_skip_distances(
+    visible: np.ndarray, signs: Octant, cell_cap: int = CELL_CAP, block: int = BLOCK
+) -> np.ndarray:
+    visible = np.asarray(visible, dtype=bool)
+    flip = _flip(signs)
+    v = np.ascontiguousarray(visible[flip])
+    cap = int(min(max(cell_cap, 1), 255))
+    near = _forward_chessboard(np.where(v, 0, cap).astype(np.uint8), cap)
+    shape = v.shape
+    nb = tuple(-(-n // block) for n in shape)
+    padded = np.zeros(tuple(b * block for b in nb), dtype=bool)
+    padded[: shape[0], : shape[1], : shape[2]] = v
+    bvis = padded.reshape(nb[0], block, nb[1], block, nb[2], block).any(axis=(1, 3, 5))
+    far_cap = min(-(-(255 + block - 1) // block), 255)
+    far = _forward_chessboard(np.where(bvis, 0, far_cap).astype(np.uint8), far_cap)
+    r = far.astype(np.int16) * block
+    r = r.repeat(block, 0).repeat(block, 1).repeat(block, 2)[: shape[0], : shape[1], : shape[2]]
+    offs = [np.arange(n, dtype=np.int16) % block for n in shape]
+    inner = np.maximum(
+        np.maximum(offs[0][:, None, None], offs[1][None, :, None]), offs[2][None, None, :]
+    )
+    r -= inner
+    bound = np.clip(r, 0, 255).astype(np.uint8)
+    out = np.maximum(near, bound)
+    return np.ascontiguousarray(out[flip])
