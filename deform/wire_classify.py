@@ -26,14 +26,28 @@ caller keeps the numpy path otherwise.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-_KERNEL = r"""
+_KERNEL_TEMPLATE = r"""
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
+
+/* rint (round half to even): for |x| < 2^52 (float: 2^23) adding 2^52 leaves a unit in
+   the last place of 1, so the sum rounds x as rint does (in the default rounding mode)
+   and the subtraction is exact; larger values are whole already. PoCL's rint is a
+   library call, several times slower. */
+static inline double rint_d(double x) {
+    if (!(fabs(x) < 0x1p52)) return x;  /* already whole (or NaN) */
+    return x >= 0.0 ? (x + 0x1p52) - 0x1p52 : -((-x + 0x1p52) - 0x1p52);
+}
+static inline float rint_f(float x) {
+    if (!(fabs(x) < 0x1p23f)) return x;
+    return x >= 0.0f ? (x + 0x1p23f) - 0x1p23f : -((-x + 0x1p23f) - 0x1p23f);
+}
 
 /* np.interp(x, xp, fp) for sorted xp (numpy's arithmetic, compiled_base.c). */
 static double interp_keys(double x, __global const double *xp, __global const double *fp,
@@ -53,7 +67,91 @@ static double interp_keys(double x, __global const double *xp, __global const do
     return r;
 }
 
+static void classify_one(
+@PARAMS@,
+    const int k, const int j, const int i)
+{
+    const long v = ((long)i * n1 + j) * n2 + k;
+    const int s = nearest[v];
+    int a = 0, b = n_seeds - 1;
+    while (a < b) {
+        int m = (a + b) >> 1;
+        if (seed_idx[m] < s) a = m + 1; else b = m;
+    }
+    const int w = seed_wire[a];
+    const float u0 = seed_u[a];
+    out_wire[v] = (short)w;
+    out_u[v] = u0;
+    out_flag[v] = 0;
+    const int sk = s % n2, sr = s / n2;
+    const int sj = sr % n1, si = sr / n1;
+    const double e0 = (double)(i - si) * h0, e1 = (double)(j - sj) * h1;
+    const double e2 = (double)(k - sk) * h2;
+    const double d2 = (e0 * e0 + e1 * e1) + e2 * e2;
+    if (!(d2 <= reach2[w])) return;
+
+    const double p0 = lo0 + ((double)(i + r0) + 0.5) * h0;
+    const double p1 = lo1 + ((double)(j + r1) + 0.5) * h1;
+    const double p2 = lo2 + ((double)(k + r2) + 0.5) * h2;
+    __global const double *P = points + (long)w * 256 * 3;
+    __global const double *T = tangents + (long)w * 256 * 3;
+    const double len = length[w];
+    double u = (double)u0;
+    for (int step = 0; step < refine_steps; step++) {
+        long q = (long)rint_d(u * 255.0);
+        q = q < 0 ? 0 : (q > 255 ? 255 : q);
+        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
+                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
+        u = (double)q / 255.0 + z / len;
+        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
+    }
+    out_u[v] = (float)u;
+
+    const long q = (long)rint_d(u * 255.0);
+    __global const float *F = frames + ((long)w * 256 + q) * 9;
+    const float d0 = (float)(p0 - P[3 * q]), d1 = (float)(p1 - P[3 * q + 1]);
+    const float dz = (float)(p2 - P[3 * q + 2]);
+    const float x32 = (d0 * F[0] + d1 * F[3]) + dz * F[6];
+    const float y32 = (d0 * F[1] + d1 * F[4]) + dz * F[7];
+    const float z32 = (d0 * F[2] + d1 * F[5]) + dz * F[8];
+    const int np = n_planes[w], ks = k_side[w];
+    long plane = (long)rint_d(u * (double)(np - 1));
+    plane = plane < 0 ? 0 : (plane > np - 1 ? np - 1 : plane);
+    long ia, ib;
+    if (base_side) {
+        const int o = key_off[w];
+        const double th = interp_keys(u, key_t + o, key_v + o, key_n[2 * w]);
+        const int o2 = o + key_n[2 * w];
+        const double sc = interp_keys(u, key_t + o2, key_v + o2, key_n[2 * w + 1]);
+        const double c = cos(th), sn = sin(th);
+        const double x = sc * (c * (double)x32 - sn * (double)y32);
+        const double y = sc * (sn * (double)x32 + c * (double)y32);
+        ia = (long)rint_d(x / px + mask_half[w]);
+        ib = (long)rint_d(y / px + mask_half[w]);
+    } else {
+        ia = (long)rint_f(x32 / (float)px + (float)mask_half[w]);
+        ib = (long)rint_f(y32 / (float)px + (float)mask_half[w]);
+    }
+    if (ia < 0 || ia >= ks || ib < 0 || ib >= ks) return;
+    const int ends = (u <= 0.0) || (u >= 1.0);
+    if (ends && !(fabs(z32) <= cap32)) return;
+    out_flag[v] = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
+}
+
+/* One work-item per line along the contiguous axis (few work-groups: PoCL pays per
+   work-group). */
 __kernel void classify(
+@PARAMS@)
+{
+    const int j = get_global_id(0), i = get_global_id(1);
+    if (j >= n1 || i >= n0) return;
+    for (int k = 0; k < n2; k++)
+        classify_one(@ARGS@, k, j, i);
+}
+"""
+
+#: the arguments of the kernel (and of its per-voxel body)
+_PARAMS = r"""
     __global const int *nearest,      /* C-order flat seed index per region voxel */
     __global const int *seed_idx,     /* sorted flat indices of the seeds */
     __global const short *seed_wire,
@@ -83,77 +181,13 @@ __kernel void classify(
     const int refine_steps,
     __global short *out_wire,
     __global float *out_u,
-    __global uchar *out_flag)
-{
-    const int k = get_global_id(0), j = get_global_id(1), i = get_global_id(2);
-    if (k >= n2 || j >= n1 || i >= n0) return;
-    const long v = ((long)i * n1 + j) * n2 + k;
-    const int s = nearest[v];
-    int a = 0, b = n_seeds - 1;
-    while (a < b) {
-        int m = (a + b) >> 1;
-        if (seed_idx[m] < s) a = m + 1; else b = m;
-    }
-    const int w = seed_wire[a];
-    const float u0 = seed_u[a];
-    out_wire[v] = (short)w;
-    out_u[v] = u0;
-    out_flag[v] = 0;
-    const int sk = s % n2, sr = s / n2;
-    const int sj = sr % n1, si = sr / n1;
-    const double e0 = (double)(i - si) * h0, e1 = (double)(j - sj) * h1;
-    const double e2 = (double)(k - sk) * h2;
-    const double d2 = (e0 * e0 + e1 * e1) + e2 * e2;
-    if (!(d2 <= reach2[w])) return;
-
-    const double p0 = lo0 + ((double)(i + r0) + 0.5) * h0;
-    const double p1 = lo1 + ((double)(j + r1) + 0.5) * h1;
-    const double p2 = lo2 + ((double)(k + r2) + 0.5) * h2;
-    __global const double *P = points + (long)w * 256 * 3;
-    __global const double *T = tangents + (long)w * 256 * 3;
-    const double len = length[w];
-    double u = (double)u0;
-    for (int step = 0; step < refine_steps; step++) {
-        long q = (long)rint(u * 255.0);
-        q = q < 0 ? 0 : (q > 255 ? 255 : q);
-        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
-                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
-        u = (double)q / 255.0 + z / len;
-        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
-    }
-    out_u[v] = (float)u;
-
-    const long q = (long)rint(u * 255.0);
-    __global const float *F = frames + ((long)w * 256 + q) * 9;
-    const float d0 = (float)(p0 - P[3 * q]), d1 = (float)(p1 - P[3 * q + 1]);
-    const float dz = (float)(p2 - P[3 * q + 2]);
-    const float x32 = (d0 * F[0] + d1 * F[3]) + dz * F[6];
-    const float y32 = (d0 * F[1] + d1 * F[4]) + dz * F[7];
-    const float z32 = (d0 * F[2] + d1 * F[5]) + dz * F[8];
-    const int np = n_planes[w], ks = k_side[w];
-    long plane = (long)rint(u * (double)(np - 1));
-    plane = plane < 0 ? 0 : (plane > np - 1 ? np - 1 : plane);
-    long ia, ib;
-    if (base_side) {
-        const int o = key_off[w];
-        const double th = interp_keys(u, key_t + o, key_v + o, key_n[2 * w]);
-        const int o2 = o + key_n[2 * w];
-        const double sc = interp_keys(u, key_t + o2, key_v + o2, key_n[2 * w + 1]);
-        const double c = cos(th), sn = sin(th);
-        const double x = sc * (c * (double)x32 - sn * (double)y32);
-        const double y = sc * (sn * (double)x32 + c * (double)y32);
-        ia = (long)rint(x / px + mask_half[w]);
-        ib = (long)rint(y / px + mask_half[w]);
-    } else {
-        ia = (long)rint(x32 / (float)px + (float)mask_half[w]);
-        ib = (long)rint(y32 / (float)px + (float)mask_half[w]);
-    }
-    if (ia < 0 || ia >= ks || ib < 0 || ib >= ks) return;
-    const int ends = (u <= 0.0) || (u >= 1.0);
-    if (ends && !(fabs(z32) <= cap32)) return;
-    out_flag[v] = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
-}
+    __global uchar *out_flag
 """
+_ARGS = ", ".join(
+    re.split(r"[\s*]+", p.strip())[-1]
+    for p in re.sub(r"/\*.*?\*/", "", _PARAMS).replace("\n", " ").split(",")
+)
+_KERNEL = _KERNEL_TEMPLATE.replace("@PARAMS@", _PARAMS.strip("\n")).replace("@ARGS@", _ARGS)
 
 
 @dataclass
@@ -297,9 +331,9 @@ def classify(
         i32(inp.refine_steps),
         *bufs,
     ]
-    n0, n1, n2 = inp.rshape
+    n0, n1, _ = inp.rshape
     lx = 16  # PoCL picks huge work-groups by itself (see voxwarp.deform.propagation)
-    kernel(queue, ((n2 + lx - 1) // lx * lx, n1, n0), (lx, 1, 1), *args)  # type: ignore[operator]
+    kernel(queue, ((n1 + lx - 1) // lx * lx, n0), (lx, 1), *args)  # type: ignore[operator]
     for host, dev in zip((out_wire, out_u, out_flag), bufs, strict=True):
         cl.enqueue_copy(queue, host, dev, is_blocking=False)
     queue.finish()

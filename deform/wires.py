@@ -768,9 +768,12 @@ class WireDeformer:
         backend = last_backend()
         t0 = time.perf_counter()
         region = _box_slices(region_lo, rshape)
-        vacated = np.zeros(shape, dtype=bool)
-        vacated[_box_slices(b_lo, b_shape)] = gone
-        vacated[region] &= ~swept
+        b_region = _box_slices(b_lo, b_shape)
+        # vacated: the base side's bits, less the swept voxels (within the base box)
+        vacated = gone
+        both = _box_overlap(b_lo, b_shape, region_lo, rshape)
+        if both is not None:
+            vacated[both[0]] &= ~swept[both[1]]
         timings["flags"] += time.perf_counter() - t0
 
         # 6. storage
@@ -778,10 +781,8 @@ class WireDeformer:
         tscale = LUT_SIZE - 1
         if self.layout == "float":
             state = np.zeros(shape, dtype=np.uint8, order="F")
-            state[vacated] = 1
-            sub = state[region]
-            sub[swept] = (2 + r_wire[swept]).astype(np.uint8)
-            state[region] = sub
+            state[b_region] = vacated
+            np.copyto(state[region], (2 + r_wire).astype(np.uint8), where=swept)
             tf = np.zeros(shape, dtype=np.float32, order="F")
             tf[region] = r_u * tscale
             fld = WireField(lo, h, shape, "float", state, tf, None, tables, region_lo, rshape)
@@ -792,7 +793,7 @@ class WireDeformer:
             c = np.where(c == PACKED_VACATED, PACKED_VACATED - 1, c)
             c = np.where(swept, c | 0x8000, c)
             code[region] = c.astype(np.uint16)
-            code[vacated] = PACKED_VACATED
+            np.copyto(code[b_region], PACKED_VACATED, where=vacated)
             fld = WireField(lo, h, shape, "packed", None, None, code, tables, region_lo, rshape)
         timings["store"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_all
@@ -1288,6 +1289,19 @@ def _refine_u(
         z = np.einsum("ni,ni->n", p - points[i], tangents[i])
         u = np.clip(i / n + z / length, 0.0, 1.0)
     return u
+
+
+def _box_overlap(
+    a_lo: np.ndarray, a_shape: tuple[int, int, int], b_lo: np.ndarray, b_shape: tuple[int, int, int]
+) -> tuple[tuple[slice, ...], tuple[slice, ...]] | None:
+    """The overlap of boxes a and b (first voxel, shape) as slices into each, or None."""
+    first = np.maximum(a_lo, b_lo)
+    end = np.minimum(np.asarray(a_lo) + a_shape, np.asarray(b_lo) + b_shape)
+    if np.any(end <= first):
+        return None
+    into_a = tuple(slice(int(f - a), int(e - a)) for f, e, a in zip(first, end, a_lo, strict=True))
+    into_b = tuple(slice(int(f - b), int(e - b)) for f, e, b in zip(first, end, b_lo, strict=True))
+    return into_a, into_b
 
 
 def _fill_holes_in_planes(mask: np.ndarray) -> np.ndarray:
