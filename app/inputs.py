@@ -49,7 +49,6 @@ def load_input(
     """
     from voxwarp.core.modality import mask_padding
     from voxwarp.io.samples import load_sample
-    from voxwarp.io.volumes import load_volume
     from voxwarp.scene import Scene
 
     path = Path(spec)
@@ -68,6 +67,8 @@ def load_input(
     if is_scene_json(path):
         scene = Scene.load(path)
         return scene if keep_padding else _scene_without_padding(scene)
+    from voxwarp.io.volumes import load_volume  # the file readers: only for files
+
     extra: dict[str, Any] = {} if series is None else {"series": series}
     vol = load_volume(
         path,

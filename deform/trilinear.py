@@ -77,7 +77,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
 
 from voxwarp.deform.warp import WarpError
 
@@ -186,35 +185,6 @@ def _corner_weights(t: np.ndarray) -> np.ndarray:
     # index = x + 2 y + 4 z: z slowest -> (N, z, y, x)
     w = bz[:, :, None, None] * by[:, None, :, None] * bx[:, None, None, :]
     return w.reshape(-1, 8)
-
-
-@njit(parallel=True, cache=True)
-def _eval_grid_kernel(
-    nodes: np.ndarray, t: np.ndarray, out: np.ndarray
-) -> None:  # pragma: no cover
-    """Trilinear evaluation of a node grid (nx+1, ny+1, nz+1, 3) at unit points t (N, 3)
-    into out (N, 3): the cell of the clamped floor index, local coordinates unclamped
-    (border cells extrapolate), the corner form of eq. 1. Compiled (numba): scene graphs
-    evaluate every leaf's nodes through their ancestors' lattices each frame."""
-    nx = nodes.shape[0] - 1
-    ny = nodes.shape[1] - 1
-    nz = nodes.shape[2] - 1
-    for p in prange(t.shape[0]):
-        sx = t[p, 0] * nx
-        sy = t[p, 1] * ny
-        sz = t[p, 2] * nz
-        i = min(max(int(np.floor(sx)), 0), nx - 1)
-        j = min(max(int(np.floor(sy)), 0), ny - 1)
-        k = min(max(int(np.floor(sz)), 0), nz - 1)
-        x = sx - i
-        y = sy - j
-        z = sz - k
-        for c in range(3):
-            c00 = nodes[i, j, k, c] * (1.0 - x) + nodes[i + 1, j, k, c] * x
-            c10 = nodes[i, j + 1, k, c] * (1.0 - x) + nodes[i + 1, j + 1, k, c] * x
-            c01 = nodes[i, j, k + 1, c] * (1.0 - x) + nodes[i + 1, j, k + 1, c] * x
-            c11 = nodes[i, j + 1, k + 1, c] * (1.0 - x) + nodes[i + 1, j + 1, k + 1, c] * x
-            out[p, c] = (c00 * (1.0 - y) + c10 * y) * (1.0 - z) + (c01 * (1.0 - y) + c11 * y) * z
 
 
 def _monomials(t: np.ndarray) -> np.ndarray:
@@ -1031,8 +1001,10 @@ class TrilinearGrid:
             a, tr, _ = self._fit()
             out = t @ a.T + tr
         else:
+            from voxwarp.deform.trilinear_kernel import eval_grid_kernel
+
             out = np.empty_like(t)
-            _eval_grid_kernel(self._contiguous_nodes(), np.ascontiguousarray(t), out)
+            eval_grid_kernel(self._contiguous_nodes(), np.ascontiguousarray(t), out)
         return out.reshape(*lead, 3)
 
     def _contiguous_nodes(self) -> np.ndarray:

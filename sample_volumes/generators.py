@@ -22,9 +22,9 @@ from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
-from scipy import ndimage
-from scipy.interpolate import PchipInterpolator
-from scipy.spatial import cKDTree
+
+# scipy (ndimage, interpolate, spatial) loads inside the generators that use it, so
+# loading a bundled scan (e.g. ``stent``) does not pay for its import.
 
 #: Standard deviation of the additive noise, in HU.
 NOISE_STD = 10.0
@@ -84,6 +84,8 @@ def _spacing(fov: tuple[float, float, float], shape: tuple[int, int, int]) -> tu
 def _finish(vol: np.ndarray, seed: int, blur: float = 0.0) -> np.ndarray:
     """Optional partial-volume blur (sigma in voxels), seeded noise, round to int16."""
     if blur > 0:
+        from scipy import ndimage
+
         vol = ndimage.gaussian_filter(vol, blur, mode="nearest", truncate=3.0)
     rng = np.random.default_rng(seed)
     vol += rng.standard_normal(vol.shape, dtype=np.float32) * np.float32(NOISE_STD)
@@ -122,6 +124,8 @@ _VERT_FILL = 0.62  # fraction of a period that is centrum (the rest is disc)
 
 def _fish_profiles(x: np.ndarray) -> dict[str, np.ndarray]:
     """1D profiles along the fish (x in fish units): half-height, half-width, spine, centre."""
+    from scipy.interpolate import PchipInterpolator
+
     h = np.clip(PchipInterpolator(_BODY_X, _BODY_H, extrapolate=False)(x), 0.0, None)
     h = np.nan_to_num(h, nan=0.0)
     w = h * np.interp(x, *_BODY_WR)
@@ -503,6 +507,8 @@ def tubes(shape: tuple[int, int, int] = (128, 128, 96), seed: int = 0) -> Sample
     best = np.full(shape, np.inf, dtype=np.float32)  # distance to the closest centre line
     wall = np.full(shape, _TUBE_BACKGROUND_HU, dtype=np.float32)  # that tube's wall HU
     step = max(4, int(np.ceil(2 * bound / sp[2])))  # slabs of about one tube diameter
+    from scipy.spatial import cKDTree
+
     for curve, hu in zip(curves, _TUBE_WALL_HU, strict=True):
         tree = cKDTree(curve)
         for k0 in range(0, nz, step):

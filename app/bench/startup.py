@@ -1,14 +1,18 @@
 """``voxwarp bench startup``: how long the command line takes to start, against Python.
 
 Each run starts a fresh interpreter: ``python -c pass`` (the reference, measured in the
-same run), ``python -m voxwarp --help`` and ``python -c "import voxwarp"``. The report
-gives the medians, their ratio to the reference, and the heavy modules each one loaded
-(none is the target: numba, scipy, pyopencl, Qt, dask and matplotlib load when used).
+same run), ``python -m voxwarp --help``, ``python -c "import voxwarp"`` and a whole
+``voxwarp render sample:stent -o x.png`` (start, load, render, write the PNG). The
+report gives the medians of wall and CPU time, the wall ratio to the reference, and the
+heavy modules each one loaded (none is the target for ``--help`` and ``import``: numba,
+scipy, pyopencl, Qt, dask and matplotlib load when used; the render must not load the
+readers and mesh modules it does not use, :data:`RENDER_UNUSED`).
 """
 
 from __future__ import annotations
 
 import json
+import resource
 import statistics
 import subprocess
 import sys
@@ -17,6 +21,23 @@ from dataclasses import dataclass
 
 #: modules ``import voxwarp`` and ``voxwarp --help`` must not load
 HEAVY = ("numba", "scipy", "pyopencl", "PySide6", "dask", "distributed", "matplotlib")
+#: modules ``voxwarp render sample:stent -o x.png`` has no use for (it writes the PNG
+#: through OpenImageIO, which it does load)
+RENDER_UNUSED = (
+    "trimesh",
+    "pyopencl",
+    "nibabel",
+    "SimpleITK",
+    "PIL",
+    "tifffile",
+    "pydicom",
+    "PySide6",
+    "dask",
+    "distributed",
+    "matplotlib",
+)
+#: the label of the end-to-end render case
+RENDER_CASE = "voxwarp render sample:stent -o x.png"
 #: what is timed: label -> Python code run by a fresh interpreter
 CASES: dict[str, str] = {
     "python -c pass (reference)": "pass",
@@ -26,38 +47,59 @@ CASES: dict[str, str] = {
         "try:\n    main()\nexcept SystemExit:\n    pass"
     ),
     "import voxwarp": "import voxwarp",
+    RENDER_CASE: (
+        "import sys, tempfile\n"
+        "with tempfile.TemporaryDirectory() as tmp:\n"
+        "    sys.argv = ['voxwarp', 'render', 'sample:stent', '-o', tmp + '/x.png']\n"
+        "    from voxwarp.ui.cli import main\n"
+        "    assert main() == 0"
+    ),
 }
 
 
 @dataclass
 class StartupRow:
-    """One case: median wall seconds of ``repeats`` runs and the heavy modules loaded."""
+    """One case: median wall seconds of ``repeats`` runs, the heavy modules (of
+    :data:`HEAVY` and :data:`RENDER_UNUSED`) it loaded, and its median CPU seconds (user +
+    system, all threads; less disturbed than wall time by other work on the machine)."""
 
     label: str
     seconds: float
     heavy: list[str]
+    cpu_seconds: float | None = None
 
 
-def _run(code: str) -> tuple[float, list[str]]:
+def _run(code: str) -> tuple[float, float, list[str]]:
     probe = f"{code}\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))"
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
     seconds = time.perf_counter() - t0
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
     if res.returncode != 0:
-        raise RuntimeError(res.stderr.strip().splitlines()[-1])
+        raise RuntimeError((res.stderr.strip().splitlines() or ["(no output)"])[-1])
     loaded = json.loads(res.stdout.strip().splitlines()[-1])
-    return seconds, sorted({m.split(".")[0] for m in loaded} & set(HEAVY))
+    watched = set(HEAVY) | set(RENDER_UNUSED)
+    return seconds, cpu, sorted({m.split(".")[0] for m in loaded} & watched)
 
 
-def bench_startup(repeats: int = 5) -> list[StartupRow]:
-    """Time every case of :data:`CASES` ``repeats`` times (interleaved), medians."""
-    times: dict[str, list[float]] = {label: [] for label in CASES}
+def bench_startup(repeats: int = 5, cases: dict[str, str] | None = None) -> list[StartupRow]:
+    """Time every case of ``cases`` (default :data:`CASES`, whose first entry is the
+    reference) ``repeats`` times, interleaved; medians."""
+    cases = CASES if cases is None else cases
+    times: dict[str, list[float]] = {label: [] for label in cases}
+    cpus: dict[str, list[float]] = {label: [] for label in cases}
     heavy: dict[str, list[str]] = {}
     for _ in range(repeats):
-        for label, code in CASES.items():
-            seconds, heavy[label] = _run(code)
+        for label, code in cases.items():
+            seconds, cpu, heavy[label] = _run(code)
             times[label].append(seconds)
-    return [StartupRow(k, statistics.median(v), heavy[k]) for k, v in times.items()]
+            cpus[label].append(cpu)
+    return [
+        StartupRow(k, statistics.median(v), heavy[k], statistics.median(cpus[k]))
+        for k, v in times.items()
+    ]
 
 
 def markdown(rows: list[StartupRow], command: str) -> str:
@@ -66,10 +108,13 @@ def markdown(rows: list[StartupRow], command: str) -> str:
     lines = [
         f"`{command}`",
         "",
-        "| case | median wall (ms) | / python startup | heavy modules loaded |",
-        "|---|---|---|---|",
+        "| case | median wall (ms) | / python startup | heavy modules loaded | median CPU (ms) |",
+        "|---|---|---|---|---|",
     ]
     for r in rows:
         heavy = ", ".join(r.heavy) or "none"
-        lines.append(f"| {r.label} | {1e3 * r.seconds:.0f} | {r.seconds / ref:.2f}x | {heavy} |")
+        cpu = "—" if r.cpu_seconds is None else f"{1e3 * r.cpu_seconds:.0f}"
+        lines.append(
+            f"| {r.label} | {1e3 * r.seconds:.0f} | {r.seconds / ref:.2f}x | {heavy} | {cpu} |"
+        )
     return "\n".join(lines)

@@ -412,13 +412,13 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     (None without either): fixed elements and materials set, drags checked against
     rigid elements (mass-spring) and cutting planes against the grid (ChainMail), all
     before any GL work."""
+    model = _deform_model(args)
+    if model is None:
+        return None
     import numpy as np
 
     from voxwarp.deform.elements import ElementGrid, ElementGridError
 
-    model = _deform_model(args)
-    if model is None:
-        return None
     grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
     if args.drag_at:  # to the nearest elements, then checked as --drag elements are
         picks = ropt.pick_elements(grid, args.drag_at)
@@ -784,6 +784,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
+        # one frame: the per-cell octant distance maps (CPU-built) cost more than they
+        # save on a single draw, so skip by 4³ blocks (the same image; docs/benchmarks.md)
+        r.renderer.cell_skipping = False
         model = None
         # the GPU backends run on the renderer's context (made current here)
         with r._current():
@@ -1175,6 +1178,8 @@ def _add_field_convention_arg(p: Any) -> None:
 
 def _field_warps(args: argparse.Namespace) -> list[Any]:
     """The warps of every ``--displacement`` file, in order (fails before any GL work)."""
+    if not args.displacement:
+        return []
     from voxwarp.io.fields import load_transform
 
     warps: list[Any] = []
@@ -1378,6 +1383,21 @@ class OneLineErrorParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: prints the installed version, which it looks up only when asked
+    (``importlib.metadata`` is slow to import, and every command builds the parser)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        kwargs.setdefault("help", "show the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> NoReturn:
+        from voxwarp import __version__
+
+        print(f"voxwarp {__version__}")
+        parser.exit()
+
+
 def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     """The argument parser of the ``voxwarp`` command.
 
@@ -1385,10 +1405,8 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     wires``, ``lattice``, ``interactive``): :func:`main` does so unless a ``bench``
     command runs, which keeps ``voxwarp --help`` and every other command quick to start.
     """
-    from voxwarp import __version__
-
     p = OneLineErrorParser(prog="voxwarp", description=__doc__.split("\n")[0])
-    p.add_argument("--version", action="version", version=f"voxwarp {__version__}")
+    p.add_argument("--version", action=_VersionAction)
     sub = p.add_subparsers(dest="command", required=True)
 
     pi = sub.add_parser(
@@ -1542,7 +1560,9 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbm.set_defaults(func=cmd_bench_massspring)
     pbs = bsub.add_parser(
-        "startup", help="start-up time of voxwarp --help and import voxwarp vs python"
+        "startup",
+        help="start-up time of voxwarp --help, import voxwarp and a whole render of the"
+        " stent sample vs python",
     )
     pbs.add_argument("--repeats", type=_positive_int, default=5, help="runs per case")
     pbs.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
