@@ -377,6 +377,19 @@ class Renderer:
     def warped_skip_maps(self, value: str) -> None:
         self._skip_maps.warped_skip_maps = value
 
+    @property
+    def cell_skip_maps(self) -> str:
+        """Straight-ray cell skip maps: "auto" builds those of a volume of more than
+        :data:`voxwarp.render.skip_cache.EAGER_CELLS` cells on its second draw (the
+        first skips per block, the same image), "always" on its first."""
+        return self._skip_maps.cell_skip_maps
+
+    @cell_skip_maps.setter
+    def cell_skip_maps(self, value: str) -> None:
+        if value not in ("auto", "always"):
+            raise RenderError(f"cell_skip_maps must be 'auto' or 'always'; got {value!r}")
+        self._skip_maps.cell_skip_maps = value
+
     def needs_skip_maps(self, scene: Scene) -> bool:
         """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
         would march block by block only because its warp state's deformed-space skip

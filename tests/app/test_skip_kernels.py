@@ -194,7 +194,7 @@ def test_a_big_volume_draws_its_first_frame_with_blocks(
         second = r.render(scene)
         assert r.renderer.last_skip_kind == "cells"
     with OffscreenRenderer(64, 48, ctx=gl_ctx, dtype="f4") as r:
-        r.renderer._skip_maps.cell_skip_maps = "always"
+        r.renderer.cell_skip_maps = "always"
         eager = r.render(scene)
         assert r.renderer.last_skip_kind == "cells"
     assert first[..., 3].max() > 0.2  # something is drawn
