@@ -79,7 +79,7 @@ class InteractiveReport:
         return "\n".join(lines) + "\n"
 
 
-def _edit(session: EditSession, family: str) -> str:
+def edit_family(session: EditSession, family: str) -> str:
     """Make the family's benchmark edit; returns what was done."""
     lo, hi = session.box
     size = hi - lo
@@ -149,7 +149,7 @@ def bench_interactive(
         report.renderer = str(r.ctx.info.get("GL_RENDERER", ""))
         for family in families:
             session = EditSession(base.copy(warps=[]))
-            edit = _edit(session, family)
+            edit = edit_family(session, family)
             scene = session.scene
             rr.warped_skip_maps = "never"
             draw(scene, 0.5)

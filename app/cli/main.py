@@ -1637,6 +1637,7 @@ def _add_heavy_bench_parsers(bsub: Any) -> None:
     from voxwarp.bench.interactive import add_bench_interactive_parser
     from voxwarp.bench.lattice import add_bench_lattice_parser
     from voxwarp.bench.scale import add_bench_scale_parser
+    from voxwarp.bench.segments import add_bench_segments_parser
     from voxwarp.bench.wires import add_bench_wires_parser
 
     add_bench_wires_parser(bsub)
@@ -1644,6 +1645,7 @@ def _add_heavy_bench_parsers(bsub: Any) -> None:
     add_bench_interactive_parser(bsub)
     add_bench_fields_parser(bsub)
     add_bench_scale_parser(bsub)
+    add_bench_segments_parser(bsub)
     add_bench_all_parser(bsub)
 
 

@@ -66,6 +66,8 @@ class SegmentMap:
     lengths: np.ndarray
     lo: np.ndarray
     cell: np.ndarray
+    #: the chord error (texels) it was measured for
+    tolerance: float = 0.0
 
     def world_to_map(self) -> np.ndarray:
         """4x4 map from deformed world (mm) to this grid's cell coordinates."""
@@ -169,7 +171,7 @@ def segment_lengths(
         c = np.minimum(
             c, at_nodes[off[0] :, off[1] :, off[2] :][: cells[0], : cells[1], : cells[2]]
         )
-    return SegmentMap(_reachable(c, step, max_length), lo, step)
+    return SegmentMap(_reachable(c, step, max_length), lo, step, float(tolerance))
 
 
 def _reachable(allowed: np.ndarray, step: np.ndarray, max_length: float) -> np.ndarray:

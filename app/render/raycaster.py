@@ -582,7 +582,8 @@ class Renderer:
             "u_cell_dims": tuple(int(c) for c in visible.shape),
         }
         values["u_segment"] = max(frame.segment, 1)
-        if frame.segment == 0 and maps.warped_segments is not None:
+        if frame.segment == 0:
+            self._skip_maps.warped_segments(maps, frame.scene)
             values["u_segment_world_to_map"] = maps.warped_segments.world_to_map()
             values["u_segment_map_dims"] = maps.warped_segments.lengths.shape
             values["u_max_segment"] = MAX_SAMPLES

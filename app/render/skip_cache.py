@@ -274,14 +274,11 @@ class SkipMapCache:
     def _install_warped(self, maps: VolumeSkipMaps, key: Any, result: Any) -> None:
         """Keep a deformed-space visibility and segment map on the volume (its old skip
         maps go)."""
-        for tex in (*maps.warped_skip.values(), maps.segment_texture):
-            if tex is not None:
-                tex.release()
+        for tex in maps.warped_skip.values():
+            tex.release()
         maps.warped_skip.clear()
-        maps.warped_visible, maps.warped_offset, maps.warped_segments = result
-        maps.segment_texture = None
-        if maps.warped_segments is not None:
-            maps.segment_texture = self.segments.texture(self.ctx, maps.warped_segments)
+        maps.warped_visible, maps.warped_offset, segments = result
+        self._install_segments(maps, segments)
         maps.warped_key = key
 
     # ------------------------------------------------------------------ maps
@@ -351,7 +348,6 @@ class SkipMapCache:
             ),
             tuple(np.round(np.asarray(lo, float), 9)),
             tuple(np.round(np.asarray(hi, float), 9)),
-            self.segments.tolerance if self.segments.setting == "auto" else None,
         )
 
     def warped_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
@@ -366,6 +362,28 @@ class SkipMapCache:
             self._install_warped(maps, key, result)
         assert maps.warped_visible is not None
         return maps.warped_visible
+
+    def warped_segments(self, maps: VolumeSkipMaps, scene: Scene) -> Any:
+        """The R32F texture of the warp state's segment map (:mod:`ray_segments`) at the
+        current tolerance, built now if the warped maps came without it."""
+        self.warped_visibility(maps, scene)
+        have = maps.warped_segments
+        if have is None or have.tolerance != self.segments.tolerance:
+            vol = scene.volume
+            lo, hi = scene.ray_bounds()
+            tol, longest = self.segments.tolerance, self.segments.max_length(vol)
+            to_texel = vol.world_to_texel_matrix()
+            self._install_segments(
+                maps, segment_lengths(scene.warps, lo, hi, to_texel, tol, longest)
+            )
+        return maps.segment_texture
+
+    def _install_segments(self, maps: VolumeSkipMaps, segments: SegmentMap | None) -> None:
+        if maps.segment_texture is not None:
+            maps.segment_texture.release()
+        maps.warped_segments, maps.segment_texture = segments, None
+        if segments is not None:
+            maps.segment_texture = self.segments.texture(self.ctx, segments)
 
     def warped_cell_skip(self, maps: VolumeSkipMaps, scene: Scene, octant: Octant) -> Any:
         """R8 octant skip map of the deformed-space cells (see :meth:`warped_visibility`)."""
