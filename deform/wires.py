@@ -94,6 +94,7 @@ Limits: at most :data:`MAX_WIRES` (128) wires per field (the packed layout's 7-b
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -1147,27 +1148,38 @@ class WireDeformer:
         """β of the volume under the pixels (x, y) (mm, in the modified frame) of the
         planes at table coordinates ``tt``, (planes, pixels) bool; False outside the
         volume and outside ``in_disc``. Planes go in blocks (their temporaries stay in
-        the cache) and only pixels in the disc and the volume are sampled."""
+        the cache; a few threads sample blocks at once, numpy and scipy release the GIL)
+        and only pixels in the disc and the volume are sampled."""
+        from concurrent.futures import ThreadPoolExecutor
+
         a, b = tab.lookup(tt)
         m = _lerp_table(tab.modified_points, tt)
         fm = _lerp_table(tab.modified_frames, tt)
         centre = np.einsum("pij,pj->pi", a, m) + b
-        vlo = np.zeros(3)
-        vhi = np.asarray(self.data.shape) - 1.0
-        out = np.zeros((len(tt), len(x)), dtype=bool)
-        step = max(1, MASK_BLOCK_PIXELS // max(len(x), 1))
-        for p0 in range(0, len(tt), step):
-            sl = slice(p0, p0 + step)
+        vlo = np.zeros(3) - 0.5
+        vhi = np.asarray(self.data.shape) - 1.0 + 0.5
+        # an identity rotation changes no bit of the product: skip it
+        rotated = not np.array_equal(self._direction, np.eye(3))
+
+        def sample(sl: slice) -> tuple[slice, np.ndarray, np.ndarray]:
             # deformed points p = M + x N_m + y B_m -> base points q = C + A (p - M)
             local = x[None, :, None] * fm[sl, None, :, 0] + y[None, :, None] * fm[sl, None, :, 1]
             q = centre[sl, None, :] + np.einsum("pij,pnj->pni", a[sl], local)
-            ijk = ((q - self.origin) @ self._direction) / self.spacing
-            use = np.all((ijk >= vlo - 0.5) & (ijk <= vhi + 0.5), axis=-1) & in_disc[sl]
+            ijk = ((q - self.origin) @ self._direction) if rotated else q - self.origin
+            ijk /= self.spacing
+            use = np.all((ijk >= vlo) & (ijk <= vhi), axis=-1) & in_disc[sl]
             vals = ndimage.map_coordinates(
                 self.data, ijk[use].T, order=1, mode="nearest", prefilter=False
             )
-            block = out[sl]
-            block[use] = wire.classify(vals)
+            return sl, use, vals
+
+        out = np.zeros((len(tt), len(x)), dtype=bool)
+        step = max(1, MASK_BLOCK_PIXELS // max(len(x), 1))
+        blocks = [slice(p0, p0 + step) for p0 in range(0, len(tt), step)]
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            for sl, use, vals in pool.map(sample, blocks):
+                block = out[sl]
+                block[use] = wire.classify(vals)  # β in this thread: it may be any callable
         return out
 
     def _seeds(
@@ -1267,6 +1279,8 @@ class WireDeformer:
 
 #: mask pixels per block of planes while the masks are sampled (keeps temporaries small)
 MASK_BLOCK_PIXELS = 1 << 16
+#: threads sampling the mask blocks
+MASK_THREADS = max(1, min(4, os.cpu_count() or 1))
 #: Newton steps that refine the propagated u to the closest point of the wire
 REFINE_STEPS = 2
 

@@ -1315,6 +1315,124 @@ def _phantom_row(
 
 
 # ---------------------------------------------------------------------- command line
+# ---------------------------------------------------------------------- MRI head build
+#: the head case of issue 19 (lever 4): the bundled Colin27 MRI (91x109x91, 2 mm)
+#: upsampled trilinearly to HEAD_EDGE³ (no real 256³ MRI head is bundled), one Bézier
+#: wire of radius 40 mm bent and twisted through it, β = MRI values 40..255
+HEAD_EDGE = 256
+HEAD_WIRE: dict[str, Any] = {
+    "base": [[0, -20, -60], [0, -20, -10], [0, -20, 40], [0, -20, 90]],
+    "modified": [[0, -20, -60], [0, -10, -10], [15, 0, 40], [25, 0, 80]],
+    "kind": "bezier",
+    "radius": 40.0,
+    "beta": [40, 255],
+    "twist": [[0, 0], [1, 0.5]],
+}
+#: field scales of the head case (1:8, 1:1) and its targets (s)
+HEAD_SCALES: tuple[int, ...] = (2, 1)
+TARGET_HEAD_BUILD_S: dict[int, float] = {2: 0.2, 1: 1.0}
+#: the build paths the head case compares in one run (see :func:`bench_head_builds`)
+HEAD_PATHS: tuple[str, ...] = ("opencl pass", "numpy classification")
+
+
+@dataclass
+class HeadBuildRow:
+    """Medians of the head case's builds at one scale on one path."""
+
+    scale: int
+    path: str
+    field_shape: tuple[int, int, int]
+    median_s: float
+    stages: dict[str, float]
+    swept: int
+    vacated: int
+
+
+def head_volume(edge: int = HEAD_EDGE) -> Volume:
+    """The Colin27 MRI upsampled (trilinear) to ``edge``³, covering the same mm box."""
+    from scipy import ndimage
+
+    from voxwarp.io.samples import load_sample
+
+    v = load_sample("colin27")
+    d = np.asarray(v.data)
+    up = ndimage.zoom(d, [edge / n for n in d.shape], order=1)
+    spacing = np.asarray(v.spacing) * np.asarray(d.shape) / np.asarray(up.shape)
+    origin = np.asarray(v.origin) - 0.5 * np.asarray(v.spacing) + 0.5 * spacing
+    return Volume(np.asfortranarray(up), spacing, origin, name=f"colin27 upsampled to {edge}³")
+
+
+def bench_head_builds(
+    volume: Volume | None = None,
+    scales: Sequence[int] = HEAD_SCALES,
+    repeats: int = 3,
+    log: Callable[[str], None] = print,
+) -> list[HeadBuildRow]:
+    """Time the head case's field build per scale on both paths, interleaved.
+
+    ``"opencl pass"`` propagates and flags in one OpenCL pass
+    (:mod:`voxwarp.deform.wire_classify`; the numpy path where the device cannot);
+    ``"numpy classification"`` is the same build with the flags computed in numpy after
+    the OpenCL propagation (the path of a device without double precision). One untimed
+    build each, then ``repeats`` builds alternating the two paths; medians per stage.
+    """
+    from voxwarp.deform.wires import Wire, WireDeformer
+
+    volume = head_volume() if volume is None else volume
+    rows = []
+    for scale in check_scales(scales):
+        builds = {}
+        for path in HEAD_PATHS:
+            wd = WireDeformer(volume, [Wire(**HEAD_WIRE)], field_scale=scale)
+            if path != HEAD_PATHS[0]:
+                wd.classify_on_device = lambda: False  # type: ignore[method-assign]
+            wd.build()  # untimed: kernels, buffers
+            builds[path] = (wd, [])
+        for _ in range(max(1, int(repeats))):
+            for wd, timings in builds.values():
+                timings.append(wd.build().timings)
+        for path, (wd, timings) in builds.items():
+            st = wd.stats
+            row = HeadBuildRow(
+                scale=scale,
+                path=path,
+                field_shape=tuple(int(n) for n in st.field_shape),  # type: ignore[arg-type]
+                median_s=statistics.median(t["total"] for t in timings),
+                stages={s: statistics.median(t.get(s, 0.0) for t in timings) for s in STAGES},
+                swept=st.swept,
+                vacated=st.vacated,
+            )
+            rows.append(row)
+            log(f"head 1:{scale**3} {path}: {row.median_s:.3f} s")
+    return rows
+
+
+def head_markdown(rows: Sequence[HeadBuildRow], command: str) -> str:
+    """The head case's table and targets in markdown."""
+    lines = [
+        f"Command: `{command}`",
+        "",
+        "| field | path | shape | build s | " + " | ".join(STAGES) + " | swept | vacated |",
+        "|---|---|---|---:|" + "---:|" * len(STAGES) + "---:|---:|",
+    ]
+    for r in rows:
+        stages = " | ".join(f"{r.stages[s]:.3f}" for s in STAGES)
+        lines.append(
+            f"| 1:{r.scale**3} | {r.path} | {'x'.join(map(str, r.field_shape))} |"
+            f" {r.median_s:.3f} | {stages} | {r.swept} | {r.vacated} |"
+        )
+    lines.append("")
+    for r in rows:
+        limit = TARGET_HEAD_BUILD_S.get(r.scale)
+        if r.path == HEAD_PATHS[0] and limit is not None:
+            verdict = "PASS" if r.median_s <= limit else "FAIL"
+            lines.append(
+                f"* Target: head field build at 1:{r.scale**3} <= {limit:g} s:"
+                f" {r.median_s:.3f} s -> {verdict}"
+            )
+    return "\n".join(lines) + "\n"
+
+
 def _scales_arg(text: str) -> tuple[int, ...]:
     try:
         return check_scales([int(v) for v in text.split(",") if v.strip()])
@@ -1377,6 +1495,13 @@ def add_bench_wires_parser(bsub: Any) -> None:
         " the image)",
     )
     p.add_argument("--no-render", action="store_true", help="skip the render timings")
+    p.add_argument(
+        "--head",
+        action="store_true",
+        help="instead: the MRI head field build of issue 19 (Colin27 upsampled to 256³, one"
+        " Bézier wire of radius 40 mm) at --scales (default 2,1), OpenCL pass vs numpy"
+        " classification, interleaved",
+    )
     p.add_argument("--markdown", metavar="FILE", help="also write the report to FILE")
     p.set_defaults(func=cmd_bench_wires)
 
@@ -1401,6 +1526,8 @@ def command_line(args: argparse.Namespace) -> str:
         parts += ["--camera", cam]
     if args.no_render:
         parts.append("--no-render")
+    if getattr(args, "head", False):
+        parts.append("--head")
     if args.markdown:
         parts += ["--markdown", shlex.quote(str(args.markdown))]
     return " ".join(parts)
@@ -1410,6 +1537,14 @@ def cmd_bench_wires(args: argparse.Namespace) -> int:
     """``voxwarp bench wires``: see the module docstring."""
     from voxwarp.core.files import atomic_write_text
 
+    if args.head:
+        scales = HEAD_SCALES if tuple(args.scales) == DEFAULT_SCALES else args.scales
+        rows = bench_head_builds(None, scales, args.repeats, lambda s: print(s, file=sys.stderr))
+        text = head_markdown(rows, command_line(args))
+        print(text)
+        if args.markdown:
+            atomic_write_text(Path(args.markdown), text)
+        return 0
     report = bench_wires(
         scales=args.scales,
         repeats=args.repeats,
@@ -1438,9 +1573,12 @@ __all__ = [
     "WireBenchReport",
     "add_bench_wires_parser",
     "bench_curve_speed",
+    "bench_head_builds",
     "bench_wires",
     "camera_rays",
     "cmd_bench_wires",
+    "head_markdown",
+    "head_volume",
     "padded_fish",
     "ray_sample_stats",
 ]
