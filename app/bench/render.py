@@ -186,7 +186,7 @@ def body_phantom(
     plane[np.hypot(x[:, None] / 0.66, y[None, :] - spine_y) < 0.16] = 700
     with_ribs = np.where((r > 0.8) & (r < 0.86) & (y[None, :] > spine_y), np.int16(700), plane)
     rib_slices = (np.arange(nz) % 12) < 4  # a rib every 12 slices, 4 slices thick
-    data = np.empty((nx, ny, nz), dtype=np.int16)
+    data = np.empty((nx, ny, nz), dtype=np.int16, order="F")  # as Volume keeps it
     data[:, :, :] = plane[:, :, None]
     data[:, :, rib_slices] = with_ribs[:, :, None]
     if noise > 0:

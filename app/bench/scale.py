@@ -8,14 +8,18 @@ For synthetic uint8 volumes of N³ voxels (default 128³, 256³, 512³; ``--long
 * **first frame**: a new :class:`~voxwarp.core.volume.Volume` made from the array (the
   array itself exists already) to the first image read back; shader programs are compiled
   beforehand on a tiny volume so the frame holds no compilation;
-* **phases** of a second first frame (another new Volume of the same array), drawn step
-  by step with the renderer's skipping settings: skipping off (upload with block min/max
-  + a plain draw), block skipping on (transfer-function visibility of the 4³ blocks and
-  their skip distances), cell skipping on (cell visibility and the octant distance maps);
-  each phase is that first draw minus a repeated draw of the same setting. Block min/max
-  alone is timed through :func:`voxwarp.render.skipping.block_min_max`, which the upload
-  calls;
-* **steady frame**: median of later frames of the same scene;
+* **second frame**: with the renderer's default ``cell_skip_maps`` "auto", a large
+  volume's first frame skips by blocks and its second builds the cell maps (the report
+  names the skipping of both);
+* **phases** of another first frame (a new Volume of the same array), drawn into a
+  16x16 image (same camera, so the draw itself costs little) step by step with the
+  renderer's skipping settings: skipping off (upload with block min/max + a plain draw),
+  block skipping on (transfer-function visibility of the 4³ blocks and their skip
+  distances), cell skipping on with ``cell_skip_maps`` "always" (cell visibility and the
+  octant distance maps); each phase is that first draw minus the faster of two repeated
+  draws of the same setting. Block min/max alone is timed through
+  :func:`voxwarp.render.skipping.block_min_max`, which the upload calls;
+* **steady frame**: median of the frames after the second;
 * **memory beyond the array** during the first frame: the process' peak resident set
   (``VmHWM`` of ``/proc/self/status``, reset through ``/proc/self/clear_refs`` just before,
   minus ``VmRSS`` then; on llvmpipe textures live in process memory, so it includes them)
@@ -46,6 +50,8 @@ QUICK_SIZES: tuple[int, ...] = (128, 256)
 #: the ``--long`` volume: a CT-like int16 phantom of this shape
 LONG_SHAPE: tuple[int, int, int] = (512, 512, 1100)
 IMAGE_SIZE: tuple[int, int] = (512, 512)
+#: the image the phases are drawn into: small, so that a draw costs little beside them
+PHASE_IMAGE: tuple[int, int] = (16, 16)
 #: the phases of a first frame, in drawing order
 PHASES: tuple[str, ...] = (
     "upload + block min/max",
@@ -65,6 +71,8 @@ class ScaleRow:
     nbytes: int
     first_ms: float
     steady_ms: float
+    #: the second frame (where a large volume builds its cell maps; see skip_kind)
+    second_ms: float = -1.0
     phases: dict[str, float] = field(default_factory=dict)
     peak_rss_mib: float = -1.0
     traced_mib: float = -1.0
@@ -128,9 +136,10 @@ class ScaleReport:
             f" 1-minute load average {self.load[0]:.2f} before, {self.load[1]:.2f} after."
             f" Growth = value / value of {first.label}.",
             "",
-            "| volume | MiB | first frame ms | steady frame ms | peak RSS beyond array MiB"
-            " (x volume) | tracemalloc peak MiB | growth: voxels | first | steady | RSS |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            "| volume | MiB | first frame ms | second frame ms | steady frame ms | skipping"
+            " (first, then) | peak RSS beyond array MiB (x volume) | tracemalloc peak MiB |"
+            " growth: voxels | first | steady | RSS |",
+            "|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
         ]
         for r in self.rows:
             mib = r.nbytes / 2**20
@@ -147,7 +156,8 @@ class ScaleReport:
             ]
             gs = " | ".join("—" if v is None else f"{v:.1f}x" for v in g)
             lines.append(
-                f"| {r.label} | {mib_text} | {r.first_ms:.0f} | {r.steady_ms:.1f} | {rss} |"
+                f"| {r.label} | {mib_text} | {r.first_ms:.0f} | {r.second_ms:.0f} |"
+                f" {r.steady_ms:.1f} | {r.skip_kind} | {rss} |"
                 f" {traced} | {gs} |"
             )
         names = [*PHASES, BLOCK_MIN_MAX]
@@ -164,13 +174,15 @@ class ScaleReport:
 
 # ---------------------------------------------------------------------- volumes
 def synthetic_cube(n: int) -> np.ndarray:
-    """An n³ uint8 volume (x, y, z): a ball of 200 in a shell of 80 with a dimmer core
-    rod of 140, air (0) around, built slice by slice (no full-size float temporaries)."""
+    """An n³ uint8 volume (x, y, z), Fortran-ordered as :class:`~voxwarp.core.volume.Volume`
+    keeps it (so making the Volume copies nothing): a ball of 200 in a shell of 80 with a
+    dimmer core rod of 140, air (0) around, built slice by slice (no full-size float
+    temporaries)."""
     c = (n - 1) / 2
     x = (np.arange(n, dtype=np.float32) - c) / n
     r2_xy = x[:, None] ** 2 + x[None, :] ** 2
     rod = (r2_xy < 0.06**2).astype(bool)
-    out = np.empty((n, n, n), dtype=np.uint8)
+    out = np.empty((n, n, n), dtype=np.uint8, order="F")
     for k in range(n):
         r2 = r2_xy + x[k] ** 2
         sl = np.where(r2 < 0.45**2, np.uint8(80), np.uint8(0))
@@ -250,15 +262,23 @@ def rss_method() -> str:
 
 # ---------------------------------------------------------------------- measuring
 class _Bench:
-    """The renderer, scene settings and helpers of one run."""
+    """The renderers, scene settings and helpers of one run: ``r`` draws the timed frames,
+    ``small`` (16x16 on the same context) the phases, where the drawing costs little."""
 
     def __init__(self, r: Any, frames: int) -> None:
+        from voxwarp.render.raycaster import OffscreenRenderer
         from voxwarp.scene import Scene
 
         self.r = r
+        with r._current():
+            self.small = OffscreenRenderer(*PHASE_IMAGE, ctx=r.ctx)
         self.frames = frames
         self.tf = scale_transfer_function()
         self._scene_type = Scene
+
+    def release(self) -> None:
+        with self.r._current():
+            self.small.release()
 
     def scene(self, volume: Any) -> Any:
         from voxwarp.bench.render import bench_camera
@@ -267,15 +287,21 @@ class _Bench:
             volume, mode="dvr", transfer_function=self.tf, camera=bench_camera(volume)
         )
 
-    def draw_ms(self, scene: Any) -> float:
-        """One frame: draw, finish and read back, in ms."""
+    def draw_ms(self, scene: Any, small: bool = False) -> float:
+        """One frame (of ``small`` or the timed renderer): draw, finish and read back, ms."""
         t = time.perf_counter()
-        self.r.render(scene)
+        if small:
+            with self.r._current():
+                self.small.render(scene)
+        else:
+            self.r.render(scene)
         return (time.perf_counter() - t) * 1000
 
-    def settings(self, skipping: bool, cells: bool) -> None:
-        self.r.renderer.empty_space_skipping = skipping
-        self.r.renderer.cell_skipping = cells
+    def settings(self, skipping: bool, cells: bool, cell_maps: str = "auto") -> None:
+        for r in (self.r.renderer, self.small.renderer):
+            r.empty_space_skipping = skipping
+            r.cell_skipping = cells
+            r.cell_skip_maps = cell_maps
 
     def warm(self) -> None:
         """Compile every program variant the run draws with on a tiny volume, and drop
@@ -286,8 +312,10 @@ class _Bench:
         for skipping, cells in ((False, False), (True, False), (True, True)):
             self.settings(skipping, cells)
             self.draw_ms(tiny)
+            self.draw_ms(tiny, small=True)
         gc.collect()
         self.draw_ms(tiny)  # evicts the textures of dead volumes
+        self.draw_ms(tiny, small=True)
 
 
 def _new_volume(data: np.ndarray, label: str) -> Any:
@@ -304,9 +332,12 @@ def measure(bench: _Bench, data: np.ndarray, label: str, memory: bool = True) ->
         scene = bench.scene(_new_volume(data, label))
         bench.r.render(scene)
         first = (time.perf_counter() - t) * 1000
+    first_kind = bench.r.renderer.last_skip_kind
+    second = bench.draw_ms(scene)
     steady = statistics.median(bench.draw_ms(scene) for _ in range(bench.frames))
     row = ScaleRow(label, tuple(data.shape), str(data.dtype), int(data.nbytes), first, steady)
-    row.skip_kind = bench.r.renderer.last_skip_kind
+    row.second_ms = second
+    row.skip_kind = f"{first_kind}, then {bench.r.renderer.last_skip_kind}"
     row.peak_rss_mib = peak.mib if memory else -1.0
     del scene
     bench.warm()
@@ -329,19 +360,18 @@ def _phases(bench: _Bench, data: np.ndarray, label: str) -> dict[str, float]:
 
     scene = bench.scene(_new_volume(data, label))
     out: dict[str, float] = {}
-    bench.r.renderer.cell_skip_maps = "always"  # the cell phase builds its maps at once
     for name, (skipping, cells) in zip(
         PHASES, ((False, False), (True, False), (True, True)), strict=True
     ):
-        bench.settings(skipping, cells)
-        first = bench.draw_ms(scene)
-        again = min(bench.draw_ms(scene) for _ in range(2))
+        # "always": the cell phase builds its maps at once, whatever the volume's size
+        bench.settings(skipping, cells, "always")
+        first = bench.draw_ms(scene, small=True)
+        again = min(bench.draw_ms(scene, small=True) for _ in range(2))
         out[name] = max(first - again, 0.0)
     t = time.perf_counter()
     block_min_max(data)
     out[BLOCK_MIN_MAX] = (time.perf_counter() - t) * 1000
     bench.settings(True, True)
-    bench.r.renderer.cell_skip_maps = "auto"
     return out
 
 
@@ -369,21 +399,29 @@ def bench_scale(
             rss_method(),
         )
         bench = _Bench(r, int(frames))
-        for n in sorted(set(int(s) for s in sizes)):
-            data = synthetic_cube(n)
-            row = measure(bench, data, f"{n}³ uint8", memory)
-            report.rows.append(row)
-            log(f"{row.label}: first frame {row.first_ms:.0f} ms, steady {row.steady_ms:.1f} ms")
-            del data
-        if long:
-            nx, ny, nz = LONG_SHAPE
-            vol = body_phantom(LONG_SHAPE, (0.7, 0.7, 0.8), noise=0.0)
-            bench.tf = _long_tf()
-            row = measure(bench, vol.data, f"{nx}x{ny}x{nz} int16 CT-like", memory)
-            report.rows.append(row)
-            log(f"{row.label}: first frame {row.first_ms:.0f} ms, steady {row.steady_ms:.1f} ms")
+        try:
+            for n in sorted(set(int(s) for s in sizes)):
+                row = measure(bench, synthetic_cube(n), f"{n}³ uint8", memory)
+                report.rows.append(row)
+                log(_row_line(row))
+            if long:
+                nx, ny, nz = LONG_SHAPE
+                vol = body_phantom(LONG_SHAPE, (0.7, 0.7, 0.8), noise=0.0)
+                bench.tf = _long_tf()
+                row = measure(bench, vol.data, f"{nx}x{ny}x{nz} int16 CT-like", memory)
+                report.rows.append(row)
+                log(_row_line(row))
+        finally:
+            bench.release()
     report.load = (load0, load_average())
     return report
+
+
+def _row_line(row: ScaleRow) -> str:
+    return (
+        f"{row.label}: first frame {row.first_ms:.0f} ms, second {row.second_ms:.0f} ms,"
+        f" steady {row.steady_ms:.1f} ms ({row.skip_kind})"
+    )
 
 
 def _long_tf() -> Any:
