@@ -45,6 +45,16 @@ OCTANT_EPS = 1e-5
 Octant = tuple[int, int, int]
 """Signs (+1 or -1) of a ray direction's x, y and z components (see OCTANT_EPS)."""
 
+#: Arrays of at least this many elements (voxels, cells, blocks) are classified and
+#: measured by the compiled kernels of :mod:`voxwarp.render.skip_kernels`; smaller ones
+#: by the numpy builders of :mod:`voxwarp.render.skip_numpy` (the same arrays), so that
+#: a small volume's first render does not pay numba's start-up (once per process).
+COMPILED_MIN_SIZE = 1 << 22
+
+
+def _compiled(size: int) -> bool:
+    return int(size) >= COMPILED_MIN_SIZE
+
 
 def tf_key(tf: TransferFunction) -> tuple:
     """What a transfer function's visibility depends on (cache key)."""
@@ -61,9 +71,14 @@ def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.
 
     Block ``b`` along an axis covers voxels ``[b*block - 1, (b+1)*block]`` (clamped), the
     voxels trilinear interpolation reads for any sample inside the block. Returns two
-    float32 arrays of shape ``ceil(n / block)`` per axis, in data units (a compiled
-    kernel in the data's own dtype, :func:`voxwarp.render.skip_kernels.block_range`).
+    float32 arrays of shape ``ceil(n / block)`` per axis, in data units (from
+    COMPILED_MIN_SIZE voxels on, a compiled kernel in the data's own dtype,
+    :func:`voxwarp.render.skip_kernels.block_range`).
     """
+    if not _compiled(np.asarray(data).size):
+        from voxwarp.render import skip_numpy
+
+        return skip_numpy.block_min_max(data, block)
     from voxwarp.render import skip_kernels
 
     t = _texture_order(data)
@@ -83,6 +98,10 @@ def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (integer ranges keep :meth:`TransferFunction.visible_ranges` on its fast path).
     Two full-size arrays: the renderer uses :func:`cell_visibility`, which keeps none.
     """
+    if not _compiled(np.asarray(data).size):
+        from voxwarp.render import skip_numpy
+
+        return skip_numpy.cell_min_max(data)
     return _cell_range_slab(_texture_order(data), 0, np.asarray(data).shape[2] + 1)
 
 
@@ -109,13 +128,16 @@ def cell_visibility(
     """Which trilinear cells of ``data`` (n + 1 per axis) ``scene``'s mode can see.
 
     The same as ``static_block_visibility(scene, *cell_min_max(data))`` without the two
-    full-size range arrays: integer data of at most 2 bytes goes through one compiled
+    full-size range arrays (from COMPILED_MIN_SIZE cells on; smaller volumes build
+    them): integer data of at most 2 bytes goes through one compiled
     pass and a table of, per lower end ``lo`` of a cell's range, the lowest upper end
     that makes it visible (visibility only grows with the upper end, in every mode);
     other data is classified slab by slab. ``block_min``/``block_max`` (from
     :func:`block_min_max`) give the data's value range. Returns a bool array, a
     transposed view of a C-contiguous (z, y, x) array.
     """
+    if not _compiled(np.prod(cell_grid_shape(np.shape(data)))):
+        return static_block_visibility(scene, *cell_min_max(data))
     from voxwarp.render import skip_kernels
 
     t = _texture_order(data)
@@ -182,13 +204,18 @@ def block_skip_distances(visible: np.ndarray) -> np.ndarray:
 
     0 marks a visible block. A ray in a block at distance d may jump out of the cube of
     (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8
-    (a compiled two-pass chamfer transform, exact for the chessboard metric).
+    (scipy's chamfer transform, from COMPILED_MIN_SIZE blocks on a compiled one: both
+    exact for the chessboard metric).
     """
     visible = np.asarray(visible, dtype=bool)
     if not visible.any():
         return np.full(visible.shape, 255, dtype=np.uint8)
     if visible.all():
         return np.zeros(visible.shape, dtype=np.uint8)
+    if not _compiled(visible.size):
+        from voxwarp.render import skip_numpy
+
+        return skip_numpy.block_skip_distances(visible)
     from voxwarp.render import skip_kernels
 
     v = _texture_order(visible)
@@ -228,22 +255,26 @@ def octant_skip_distances(
 
     Each distance is a forward chessboard distance, built as three 1D passes
     ``min over 0 <= k < cap of max(k, g[c + s k])`` (max distributes over min, so the
-    passes compose exactly), compiled, in place in the output
-    (:mod:`voxwarp.render.skip_kernels`).
+    passes compose exactly); from COMPILED_MIN_SIZE cells on compiled, in place in the
+    output (:mod:`voxwarp.render.skip_kernels`), else in numpy.
     """
-    from voxwarp.render import skip_kernels as kern
-
     visible = np.asarray(visible, dtype=bool)
     if visible.ndim != 3:
         raise ValueError(f"visible must be a 3D bool array; got shape {visible.shape}")
     if any(s not in (-1, 1) for s in signs) or len(signs) != 3:
         raise ValueError(f"signs must be three of +1/-1; got {signs}")
+    cap = int(min(max(cell_cap, 1), 255))
+    if not _compiled(visible.size):
+        from voxwarp.render import skip_numpy
+
+        return skip_numpy.octant_skip_distances(visible, signs, cap, block)
+    from voxwarp.render import skip_kernels as kern
+
     v = _texture_order(visible)
     out = np.empty(v.shape, dtype=np.uint8)
     if v.size == 0:
         return out.T
     sz, sy, sx = (int(s) for s in reversed(tuple(signs)))
-    cap = int(min(max(cell_cap, 1), 255))
     kern.scan_z(v, sz, cap, out)
     kern.pass_y(out, sy, cap)
     kern.pass_x(out, sx, cap)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 #: bytes of texels per uploaded slab
-SLAB_BYTES = 16 * 1024**2
+SLAB_BYTES = 4 * 1024**2
 
 
 def _texels(layers: np.ndarray) -> np.ndarray:

@@ -2,17 +2,18 @@
 voxwarp.render.skipping), the slab-wise volume upload and the block-first policy for big
 volumes (issue 19, lever 6).
 
-Oracles: the numpy builders voxwarp used before (tests/app/skip_reference.py, verbatim),
-scipy's chamfer distance transform, the old one-shot texture upload, and renders with
-block skipping, which must equal the cell-skipping image.
+Oracles: the numpy builders voxwarp used before (voxwarp.render.skip_numpy, verbatim, still
+used below skipping.COMPILED_MIN_SIZE), scipy's chamfer distance transform, the old
+one-shot texture upload, and renders with block skipping, which must equal the
+cell-skipping image. Every test here forces the compiled path in its own process.
 """
 
 from __future__ import annotations
 
 import itertools
+import subprocess
 import sys
 import tracemalloc
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,18 +21,21 @@ import pytest
 
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
-from voxwarp.render import skip_cache, skipping, volume_texture
+from voxwarp.render import skip_cache, skip_numpy, skipping, volume_texture
 from voxwarp.render.raycaster import OffscreenRenderer
 from voxwarp.scene import Scene
-
-sys.path.insert(0, str(Path(__file__).parent))
-import skip_reference as ref
 
 OCTANTS = list(itertools.product((1, -1), repeat=3))
 SHAPES = [(37, 50, 23), (5, 1, 9), (16, 12, 8)]
 TF = TransferFunction(
     [(0, 0, 0, 0, 0), (90, 0, 0, 0, 0), (120, 1, 0.8, 0.6, 0.4), (255, 1, 1, 1, 0.9)]
 )
+
+
+@pytest.fixture(autouse=True)
+def compiled(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every array of this process through the compiled kernels."""
+    monkeypatch.setattr(skipping, "COMPILED_MIN_SIZE", 0)
 
 
 def _blobs(shape: tuple, dtype: Any, seed: int = 0) -> np.ndarray:
@@ -54,10 +58,10 @@ def test_block_and_cell_ranges_match_the_numpy_builders(shape: tuple, dtype: Any
     data = _blobs(shape, dtype)
     for block in (4, 3):
         for got, exp in zip(
-            skipping.block_min_max(data, block), ref.block_min_max(data, block), strict=True
+            skipping.block_min_max(data, block), skip_numpy.block_min_max(data, block), strict=True
         ):
             np.testing.assert_array_equal(got, exp)
-    for got, exp in zip(skipping.cell_min_max(data), ref.cell_min_max(data), strict=True):
+    for got, exp in zip(skipping.cell_min_max(data), skip_numpy.cell_min_max(data), strict=True):
         assert got.dtype == exp.dtype
         np.testing.assert_array_equal(got, exp)
 
@@ -81,7 +85,7 @@ def test_cell_visibility_matches_the_numpy_builder(
     )
     monkeypatch.setattr(skipping, "_SLAB_CELLS", 3000)  # float data: several slabs
     got = skipping.cell_visibility(scene, data, *skipping.block_min_max(data))
-    expected = skipping.static_block_visibility(scene, *ref.cell_min_max(data))
+    expected = skipping.static_block_visibility(scene, *skip_numpy.cell_min_max(data))
     assert got.shape == expected.shape == (38, 51, 24)
     np.testing.assert_array_equal(got, expected)
     if mode not in ("average", "minip"):
@@ -97,7 +101,7 @@ def test_octant_skip_distances_match_the_numpy_builder(shape: tuple, density: fl
     for signs in OCTANTS:
         for cap, block in ((8, 4), (255, 4), (3, 3), (1, 4)):
             got = skipping.octant_skip_distances(visible, signs, cell_cap=cap, block=block)
-            expected = ref.octant_skip_distances(visible, signs, cell_cap=cap, block=block)
+            expected = skip_numpy.octant_skip_distances(visible, signs, cap, block)
             assert got.dtype == np.uint8
             np.testing.assert_array_equal(got, expected, err_msg=f"{signs} {cap} {block}")
 
@@ -111,7 +115,7 @@ def test_octant_maps_of_a_rendered_volume_match_the_numpy_builder() -> None:
     for signs in OCTANTS:
         np.testing.assert_array_equal(
             skipping.octant_skip_distances(visible, signs),
-            ref.octant_skip_distances(visible, signs),
+            skip_numpy.octant_skip_distances(visible, signs, 8, 4),
         )
 
 
@@ -146,7 +150,7 @@ def test_octant_map_memory_is_its_output() -> None:
         for name, build in (
             ("visibility", lambda: skipping.cell_visibility(scene, data, bmin, bmax)),
             ("octant", lambda: skipping.octant_skip_distances(visible, (1, -1, 1))),
-            ("reference", lambda: ref.octant_skip_distances(visible, (1, -1, 1))),
+            ("reference", lambda: skip_numpy.octant_skip_distances(visible, (1, -1, 1), 8, 4)),
         ):
             tracemalloc.reset_peak()
             before = tracemalloc.get_traced_memory()[0]
@@ -200,3 +204,25 @@ def test_a_big_volume_draws_its_first_frame_with_blocks(
     assert first[..., 3].max() > 0.2  # something is drawn
     assert np.abs(first - eager).max() <= 1 / 255
     np.testing.assert_array_equal(second, eager)
+
+
+def test_small_volumes_build_their_maps_without_numba() -> None:
+    """Below COMPILED_MIN_SIZE the numpy builders run: no numba start-up for a small
+    volume (a fresh interpreter)."""
+    code = (
+        "import sys, numpy as np\n"
+        "from voxwarp.core.transfer_function import TransferFunction\n"
+        "from voxwarp.core.volume import Volume\n"
+        "from voxwarp.render import skipping as s\n"
+        "from voxwarp.scene import Scene\n"
+        "d = np.asfortranarray(np.random.default_rng(0).integers(0, 255, (40, 30, 20), np.uint8))\n"
+        "tf = TransferFunction([(0, 0, 0, 0, 0), (200, 1, 1, 1, 1)])\n"
+        "sc = Scene(Volume(d, (1, 1, 1)), mode='dvr', transfer_function=tf)\n"
+        "lo, hi = s.block_min_max(d)\n"
+        "v = s.cell_visibility(sc, d, lo, hi)\n"
+        "s.octant_skip_distances(v, (1, -1, 1))\n"
+        "s.block_skip_distances(s.static_block_visibility(sc, lo, hi))\n"
+        "assert 'numba' not in sys.modules, 'numba was imported'\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]

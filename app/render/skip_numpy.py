@@ -1,5 +1,10 @@
-"""The numpy skip-map builders voxwarp used before the compiled kernels (issue 19, lever
-6), kept verbatim as the oracle of tests/app/test_skip_kernels.py."""
+"""The numpy builders of the skip maps, for volumes below
+:data:`voxwarp.render.skipping.COMPILED_MIN_SIZE` (the maths and the public functions are
+:mod:`voxwarp.render.skipping`, which picks these or the compiled kernels of
+:mod:`voxwarp.render.skip_kernels`; both give the same arrays). A small volume's first
+render then needs neither numba nor its start-up; these make full-size temporaries
+(int16 and padded copies), which only a small volume can afford.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.render.skipping import BLOCK, CELL_CAP, Octant
+Octant = tuple[int, int, int]
 
 
-def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
+def block_min_max(data: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-block (min, max) with a one-voxel apron, float32 (one axis at a time)."""
     lo = np.asarray(data)
     hi = lo
     for axis in range(3):
@@ -36,6 +42,7 @@ def _reduce_axis(a: np.ndarray, axis: int, block: int, op: Any) -> np.ndarray:
 
 
 def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per trilinear cell (min, max) of its 8 corner voxels (n + 1 per axis), data dtype."""
     p = np.pad(np.asarray(data), 1, mode="edge")
     lo = hi = None
     for i in (0, 1):
@@ -52,6 +59,7 @@ def _flip(signs: Octant) -> tuple[slice, ...]:
 
 
 def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
+    """``min over 0 <= k < cap of max(k, g[c + k])`` along x, y and z in turn (uint8)."""
     src = np.ascontiguousarray(g, dtype=np.uint8).copy()
     out = src.copy()
     tmp = np.empty_like(src)
@@ -70,8 +78,10 @@ def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
 
 
 def octant_skip_distances(
-    visible: np.ndarray, signs: Octant, cell_cap: int = CELL_CAP, block: int = BLOCK
+    visible: np.ndarray, signs: Octant, cell_cap: int, block: int
 ) -> np.ndarray:
+    """Octant skip distances (see :func:`voxwarp.render.skipping.octant_skip_distances`),
+    in the frame flipped towards ``signs``."""
     visible = np.asarray(visible, dtype=bool)
     flip = _flip(signs)
     v = np.ascontiguousarray(visible[flip])
@@ -94,3 +104,11 @@ def octant_skip_distances(
     bound = np.clip(r, 0, 255).astype(np.uint8)
     out = np.maximum(near, bound)
     return np.ascontiguousarray(out[flip])
+
+
+def block_skip_distances(visible: np.ndarray) -> np.ndarray:
+    """Chessboard distance to the nearest visible block, capped at 255 (scipy)."""
+    from scipy.ndimage import distance_transform_cdt
+
+    d = distance_transform_cdt(~visible, metric="chessboard")
+    return np.clip(d, 0, 255).astype(np.uint8)
