@@ -38,6 +38,7 @@ from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.errors import VoxwarpError
+from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, scene_at
 from voxwarp.render.orientation_marker import draw_orientation_marker
 from voxwarp.render.overlay import OverlayRenderer
 from voxwarp.render.raycaster import Renderer
@@ -121,9 +122,12 @@ class Viewport(QOpenGLWidget):
         self.camera_moved = False
         self._skip_task: Task | None = None
         self._skip_key: Any = None
-        #: resolution scale of frames drawn while interacting (dragging, orbiting, a
-        #: running simulation): the level of detail that keeps the view responsive
-        self.interactive_scale = 0.5
+        #: the level of detail of frames drawn while interacting (dragging, orbiting, a
+        #: running simulation): resolution and sample distance, adapted to the frame
+        #: times so that the view stays responsive (full quality once it rests)
+        self.adaptive = AdaptiveQuality()
+        #: the level the last frame was drawn at
+        self.last_quality = FULL
         self._last_input = 0.0
         self._refine = QTimer(self)
         self._refine.setSingleShot(True)
@@ -164,7 +168,7 @@ class Viewport(QOpenGLWidget):
         if self.renderer is None or self.overlay is None:
             return
         t0 = time.perf_counter()
-        start_now = False
+        start_now = interactive = False
         w, h = self.size_px()
         fbo = self.ctx.detect_framebuffer(self.defaultFramebufferObject())
         try:
@@ -180,10 +184,13 @@ class Viewport(QOpenGLWidget):
                 waiting = self._waiting_for_skip_maps()
                 interactive = self.interacting()
                 start_now = waiting and not interactive
-                scale = self.interactive_scale if interactive or waiting else 1.0
-                self.renderer.draw_scaled(scene, fbo, (0, 0, w, h), self.camera, scale)
-                if scale < 1.0:
-                    self._refine.start()  # full resolution once the interaction stops
+                quality = self.adaptive.quality if interactive or waiting else FULL
+                self.last_quality = quality
+                self.renderer.draw_scaled(
+                    scene_at(scene, quality), fbo, (0, 0, w, h), self.camera, quality.scale
+                )
+                if quality != FULL:
+                    self._refine.start()  # full quality once the interaction stops
             self.overlay.draw(
                 self.session.overlay_layers(self.display), fbo, self.camera, (0, 0, w, h)
             )
@@ -195,6 +202,8 @@ class Viewport(QOpenGLWidget):
             fbo.clear(0.15, 0.0, 0.0, 1.0)
             self.failed.emit(str(exc))
         self.last_frame_ms = (time.perf_counter() - t0) * 1000
+        if interactive:
+            self.adaptive.frame_drawn(self.last_frame_ms / 1000)
         self.frames_drawn += 1
         self._start_skip_map_job(start_now)
         self.frameDrawn.emit(self.last_frame_ms)

@@ -10,7 +10,14 @@ moved), then the frame is timed the ways the GUI draws it:
 * ``rest, no maps``: full resolution with per-block checks (what a naive viewer draws
   when the motion stops);
 * ``rest, maps``: full resolution with the deformed-space skip maps (what the GUI
-  draws once its worker thread built them), and the seconds that build took.
+  draws once its worker thread built them), and the seconds that build took;
+* ``coarse``: half resolution and twice the sample distance (the GUI's first
+  interactive level, :data:`voxwarp.render.adaptive_quality.START_LEVEL`);
+* ``adaptive``: :data:`ORBIT_FRAMES` frames of an orbit (the camera turns before each),
+  each drawn at the level :class:`~voxwarp.render.adaptive_quality.AdaptiveQuality`
+  chose from the frame before (as the GUI does while the user drags, without the
+  handles' overlay): their frames per second, beside the fixed half resolution's
+  (``1000 / interactive``), and the level the last frame used.
 
 Every time is also given as a ratio to the undeformed full-resolution frame measured
 in the same run (these machines are shared; ratios hold better than times).
@@ -19,6 +26,7 @@ in the same run (these machines are shared; ratios hold better than times).
 from __future__ import annotations
 
 import argparse
+import copy
 import statistics
 import sys
 import time
@@ -30,10 +38,20 @@ import numpy as np
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
+from voxwarp.render.adaptive_quality import (
+    LEVELS,
+    START_LEVEL,
+    AdaptiveQuality,
+    Quality,
+    scene_at,
+)
 from voxwarp.render.raycaster import OffscreenRenderer
 from voxwarp.scene import Scene
 
 FAMILIES = ("none", "massspring", "chainmail", "wires", "lattice")
+#: frames of the adaptive orbit, and the degrees the camera turns before each
+ORBIT_FRAMES = 24
+ORBIT_DEG = 3.0
 
 
 @dataclass
@@ -46,6 +64,9 @@ class InteractiveRow:
     rest_cells_ms: float
     maps_s: float
     edit: str
+    coarse_ms: float = 0.0
+    adaptive_fps: float = 0.0
+    adaptive_level: Quality | None = None
 
 
 @dataclass
@@ -66,15 +87,20 @@ class InteractiveReport:
             f" ratios against the undeformed full-resolution frame ({ref:.0f} ms)",
             "",
             "| deformation | edit | interactive (half res) | at rest, block checks |"
-            " at rest, skip maps | skip maps built in |",
-            "|---|---|---|---|---|---|",
+            " at rest, skip maps | skip maps built in | coarse (half res, 2x distance) |"
+            " dragging fps: half res / adaptive (last level) |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for r in self.rows:
+            level = r.adaptive_level
+            last = "-" if level is None else f"{level.scale:g}, {level.step_factor:g}x"
             lines.append(
                 f"| {r.family} | {r.edit} | {r.interactive_ms:.0f} ms"
                 f" ({r.interactive_ms / ref:.2f}x) | {r.rest_blocks_ms:.0f} ms"
                 f" ({r.rest_blocks_ms / ref:.2f}x) | {r.rest_cells_ms:.0f} ms"
-                f" ({r.rest_cells_ms / ref:.2f}x) | {r.maps_s:.2f} s |"
+                f" ({r.rest_cells_ms / ref:.2f}x) | {r.maps_s:.2f} s | {r.coarse_ms:.0f} ms"
+                f" ({r.coarse_ms / ref:.2f}x) | {1000 / r.interactive_ms:.1f} /"
+                f" {r.adaptive_fps:.1f} ({last}) |"
             )
         return "\n".join(lines) + "\n"
 
@@ -117,6 +143,23 @@ def edit_family(session: EditSession, family: str) -> str:
     return "-"
 
 
+def _adaptive_orbit(draw: Any, scene: Scene, camera: Any) -> tuple[float, Quality]:
+    """Frames per second of :data:`ORBIT_FRAMES` orbit frames at adaptive quality (the
+    controller starts afresh), and the level of the last frame."""
+    aq = AdaptiveQuality()
+    cam = copy.deepcopy(camera)
+    total = 0.0
+    for _ in range(ORBIT_FRAMES):
+        cam.orbit(ORBIT_DEG, 0.0)
+        q = aq.quality
+        t = time.perf_counter()
+        draw(scene_at(scene, q), q.scale, cam)
+        dt = time.perf_counter() - t
+        total += dt
+        aq.frame_drawn(dt)
+    return ORBIT_FRAMES / total, q
+
+
 def _median_ms(fn: Any, frames: int) -> float:
     times = []
     for _ in range(frames):
@@ -138,9 +181,9 @@ def bench_interactive(
     with OffscreenRenderer(*size) as r:
         rr = r.renderer
 
-        def draw(scene: Scene, scale: float) -> None:
+        def draw(scene: Scene, scale: float, camera: Any = None) -> None:
             with r._current():
-                rr.draw_scaled(scene, r.framebuffer, None, None, scale)
+                rr.draw_scaled(scene, r.framebuffer, None, camera, scale)
                 r.ctx.finish()
 
         base = Scene(vol, transfer_function=tf, view=(-60, 20), zoom=1.2, jitter=False)
@@ -154,6 +197,11 @@ def bench_interactive(
             rr.warped_skip_maps = "never"
             draw(scene, 0.5)
             interactive = _median_ms(lambda s=scene: draw(s, 0.5), frames)
+            coarse = scene_at(scene, LEVELS[START_LEVEL])
+            half = LEVELS[START_LEVEL].scale
+            draw(coarse, half)
+            coarse_ms = _median_ms(lambda s=coarse, k=half: draw(s, k), frames)
+            fps, level = _adaptive_orbit(draw, scene, scene.resolved_camera())
             rest_blocks = _median_ms(lambda s=scene: draw(s, 1.0), frames)
             rr.warped_skip_maps = "background"
             maps_s = 0.0
@@ -168,11 +216,14 @@ def bench_interactive(
             draw(scene, 1.0)
             rest_cells = _median_ms(lambda s=scene: draw(s, 1.0), frames)
             rr.warped_skip_maps = "auto"
-            row = InteractiveRow(family, interactive, rest_blocks, rest_cells, maps_s, edit)
+            row = InteractiveRow(
+                family, interactive, rest_blocks, rest_cells, maps_s, edit, coarse_ms, fps, level
+            )
             report.rows.append(row)
             if log:
                 log(
-                    f"{family}: interactive {interactive:.0f} ms, rest {rest_blocks:.0f} ms"
+                    f"{family}: interactive {interactive:.0f} ms, coarse {coarse_ms:.0f} ms,"
+                    f" adaptive drag {fps:.1f} fps, rest {rest_blocks:.0f} ms"
                     f" (blocks) / {rest_cells:.0f} ms (maps, built in {maps_s:.2f} s)"
                 )
             session.close()

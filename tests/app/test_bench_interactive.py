@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from voxwarp.bench.interactive import bench_interactive
+from voxwarp.render.adaptive_quality import LEVELS
 
 
 def test_bench_interactive_times_each_family_three_ways() -> None:
@@ -15,6 +16,9 @@ def test_bench_interactive_times_each_family_three_ways() -> None:
     assert lattice.maps_s > 0.0  # the bent lattice needed them, and they were built
     for row in report.rows:
         assert min(row.interactive_ms, row.rest_blocks_ms, row.rest_cells_ms) > 0
+        assert row.coarse_ms > 0
+        assert row.adaptive_fps > 0
+        assert row.adaptive_level in LEVELS
     text = report.markdown("voxwarp bench interactive --size 64x48")
     assert "`voxwarp bench interactive --size 64x48`" in text
     assert "| lattice | node (1, 1, 2) of 3³ cells moved" in text

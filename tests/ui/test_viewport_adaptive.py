@@ -1,0 +1,67 @@
+"""Interactive frames of the viewport (Xvfb, see conftest): while the user orbits, the
+frame is drawn at the adaptive level (lower resolution, longer sample distance); once
+the view rests, the frame is exactly the one drawn without any interaction."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import pytest
+from PySide6.QtCore import QPoint, Qt
+
+from tests.ui.test_main_window import frame
+from tests.ui.windows import shown_window
+from voxwarp.editing.session import EditSession
+from voxwarp.io.samples import load_sample, suggested_transfer_function
+from voxwarp.render.adaptive_quality import FULL, LEVELS
+from voxwarp.scene import Scene
+
+SIZE = (900, 700)
+
+
+@pytest.fixture
+def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
+    """A shown main window on the fish phantom (64³, DVR: the sample distance shows)."""
+    vol = load_sample("fish", shape=(64, 64, 64))
+    tf = suggested_transfer_function("fish")
+    scene = Scene(vol, mode="dvr", transfer_function=tf, view=(-70, 25), zoom=1.2, jitter=False)
+    w = shown_window(qtbot, monkeypatch, EditSession(scene), SIZE)
+    yield w
+    w.close()
+
+
+def _next_frame(qtbot: Any, vp: Any) -> None:
+    n = vp.frames_drawn
+    vp.update()
+    qtbot.waitUntil(lambda: vp.frames_drawn > n, timeout=30000)
+
+
+def test_orbit_draws_coarse_frames_and_the_rest_frame_equals_the_uninteracted_one(
+    window: Any, qtbot: Any
+) -> None:
+    vp = window.viewport
+    rest = frame(window)
+    camera = copy.deepcopy(vp.camera)
+    # orbit from an empty corner (no handles without a deformation), button held
+    start = QPoint(30, 30)
+    qtbot.mousePress(vp, Qt.MouseButton.LeftButton, pos=start)
+    for k in range(1, 5):
+        qtbot.mouseMove(vp, pos=start + QPoint(25 * k, 10 * k))
+    assert vp.interacting()
+    assert not np.allclose(vp.camera.rotation, camera.rotation)  # it orbited
+    _next_frame(qtbot, vp)
+    assert vp.last_quality != FULL
+    assert vp.last_quality in LEVELS
+    # back to the first view while still dragging: the coarse frame is not the rest frame
+    vp.camera = copy.deepcopy(camera)
+    coarse = vp.screenshot()[..., :3].astype(np.float64)
+    assert vp.last_quality != FULL
+    assert np.abs(coarse - rest).max() > 8  # lower resolution and sampling show
+    assert np.abs(coarse - rest).mean() < 20  # but it is the same picture
+    qtbot.mouseRelease(vp, Qt.MouseButton.LeftButton, pos=start + QPoint(100, 40))
+    vp.camera = copy.deepcopy(camera)  # the release does not move it; be explicit
+    after = frame(window)
+    assert vp.last_quality == FULL
+    assert np.array_equal(after, rest)
