@@ -39,6 +39,13 @@ bool inside_texels(vec3 u) {
 }
 
 // Gradient of the data in original world units (per mm), central differences.
+#ifdef GRADIENT_TEXTURE
+// precomputed: half the central differences per voxel (app/render/gradients.py)
+uniform sampler3D u_gradient;
+vec3 gradient_original(vec3 u) {
+    return u_direction * (textureLod(u_gradient, u * u_inv_dims, 0.0).xyz / u_spacing);
+}
+#else
 vec3 gradient_original(vec3 u) {
     vec3 g;
     g.x = sample_value(u + vec3(1, 0, 0)) - sample_value(u - vec3(1, 0, 0));
@@ -46,3 +53,4 @@ vec3 gradient_original(vec3 u) {
     g.z = sample_value(u + vec3(0, 0, 1)) - sample_value(u - vec3(0, 0, 1));
     return u_direction * (0.5 * g / u_spacing);
 }
+#endif

@@ -48,6 +48,7 @@ from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
+from voxwarp.render import gradients
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.ray_segments import MAX_SAMPLES
 from voxwarp.render.skip_cache import SkipMapCache, VolumeSkipMaps
@@ -96,10 +97,23 @@ class _VolumeGPU:
         #: block info, cell and warped skip maps, filled by the renderer's SkipMapCache
         self.skip = VolumeSkipMaps(ctx, volume.data, bmin, bmax)
         self.nbytes = volume.data.nbytes * (2 if slice_pairs else 1)
+        #: RGBA16F data gradients for shading (app/render/gradients.py), made on demand
+        self.gradient: Any = None
+
+    def gradient_texture(self, ctx: Any, volume: Volume) -> Any:
+        """The volume's gradient texture, built on the GPU on first use."""
+        if self.gradient is None:
+            self.gradient = gradients.gradient_texture(
+                ctx, self.texture, volume.shape, self.value_map[0], self.slice_pairs
+            )
+        return self.gradient
 
     def release(self) -> None:
         if self.texture is not None:
             self.texture.release()
+        if self.gradient is not None:
+            self.gradient.release()
+            self.gradient = None
         self.skip.release()
         self.texture = None  # type: ignore[assignment]
 
@@ -129,6 +143,8 @@ class _Frame:
     prog: Any
     #: the scene's background, premultiplied
     background: tuple
+    #: shading reads the precomputed gradient texture
+    gradients: bool = False
     #: warped rays: 1 evaluates the chain at every sample, 0 interpolates along
     #: segments from the warp state's segment map, K > 1 along segments of K samples
     segment: int = 1
@@ -200,6 +216,11 @@ class Renderer:
         self._skip_maps = SkipMapCache(ctx, empty_space_skipping=bool(empty_space_skipping))
         #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
         self.last_skip_kind = "none"
+        #: shading from a precomputed gradient texture (app/render/gradients.py): "auto"
+        #: for volumes of at most gradients.MAX_VOXELS voxels, True always, False never
+        self.gradient_texture: bool | str = "auto"
+        #: whether the last draw shaded from the gradient texture
+        self.last_gradient_texture = False
         #: the last draw's warped rays: 1 evaluated the chain at every sample, 0 used the
         #: warp state's segment map, K > 1 fixed segments of K samples
         self.last_ray_segment = 1
@@ -410,7 +431,9 @@ class Renderer:
         uploads and uses it."""
         self._skip_maps.install(key, result)
 
-    def _program(self, scene: Scene, linear: bool, kind: str, segment: int) -> Any:
+    def _program(
+        self, scene: Scene, linear: bool, kind: str, segment: int, gradient_texture: bool
+    ) -> Any:
         piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
         warps = [] if linear else scene.warps
         meshes = bool(scene.meshes)
@@ -423,6 +446,7 @@ class Renderer:
             tuple(w.signature() for w in warps),
             meshes,
             piecewise,
+            gradient_texture,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -444,6 +468,8 @@ class Renderer:
             defines.append("#define PIECEWISE")
         if piecewise == "map":
             defines.append("#define SEGMENT_MAP")
+        if gradient_texture:
+            defines.append("#define GRADIENT_TEXTURE")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -510,10 +536,20 @@ class Renderer:
         if skip_kind == "cells" and not linear:
             segment = self._skip_maps.segments.fixed()
         self.last_ray_segment = segment
-        prog = self._program(scene, linear, skip_kind, segment)
+        shade_tex = self.last_gradient_texture = self._use_gradients(scene)
+        prog = self._program(scene, linear, skip_kind, segment, shade_tex)
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
-        return _Frame(scene, gpu, cam, (x, y, w, h), fold, skip_kind, prog, bg_premul, segment)
+        view = (x, y, w, h)
+        return _Frame(scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment)
+
+    def _use_gradients(self, scene: Scene) -> bool:
+        """Whether shading reads a gradient texture (see :attr:`gradient_texture`)."""
+        if not scene.use_shading() or self.gradient_texture is False:
+            return False
+        if self.gradient_texture is True:
+            return True
+        return scene.volume.data.size <= gradients.MAX_VOXELS
 
     def _set_uniforms(self, frame: _Frame) -> dict[str, Any]:
         """Set the raycast program's uniforms for ``frame``; returns them by name."""
@@ -654,6 +690,10 @@ class Renderer:
                     tex.use(unit)
                     _set_uniform(prog, f"w{i}_{name}", unit)
                     unit += 1
+        if frame.gradients:
+            frame.gpu.gradient_texture(self.ctx, scene.volume).use(unit)
+            _set_uniform(prog, "u_gradient", unit)
+            unit += 1
         if frame.segment == 0 and frame.gpu.skip.segment_texture is not None:
             frame.gpu.skip.segment_texture.use(unit)
             _set_uniform(prog, "u_segment_map", unit)
