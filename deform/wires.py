@@ -98,6 +98,7 @@ import os
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -1013,15 +1014,21 @@ class WireDeformer:
             self.propagation_input = (grid, sampling)
         # voxels farther from their nearest seed than that wire's reach cannot be
         # flagged: only the others are refined and tested against the masks
-        reach = self._reach(h, side)
+        reach2 = self._reach(h, side) ** 2
         near = np.zeros(len(nearest), dtype=bool)
-        chunk = 1 << 21
-        for start in range(0, len(nearest), chunk):
-            idx = np.arange(start, min(start + chunk, len(nearest)))
-            own = np.stack(np.unravel_index(idx, rshape), -1)
-            seed = np.stack(np.unravel_index(nearest[idx], rshape), -1)
-            d2 = (((own - seed) * h) ** 2).sum(axis=1)
-            near[idx] = d2 <= reach[wire_of[nearest[idx]]] ** 2
+
+        def near_chunk(start: int) -> None:
+            # squared distance to the nearest seed, summed over the axes in order
+            idx = np.arange(start, min(start + FLAG_CHUNK, len(nearest)))
+            own = np.unravel_index(idx, rshape)
+            seed = np.unravel_index(nearest[idx], rshape)
+            d2 = ((own[0] - seed[0]) * h[0]) ** 2
+            d2 += ((own[1] - seed[1]) * h[1]) ** 2
+            d2 += ((own[2] - seed[2]) * h[2]) ** 2
+            near[idx] = d2 <= reach2[wire_of[nearest[idx]]]
+
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            list(pool.map(near_chunk, range(0, len(nearest), FLAG_CHUNK)))
         return (
             c_lo,
             rshape,
@@ -1054,15 +1061,22 @@ class WireDeformer:
         bounds = np.searchsorted(r_wire.ravel()[order], np.arange(len(self.wires) + 1))
         flat_u = r_u.reshape(-1)
         flat_out = out.reshape(-1)
-        for wi in range(len(self.wires)):
-            sel = order[bounds[wi] : bounds[wi + 1]]
-            if len(sel) == 0:
-                continue
+
+        def run(wi: int, sel: np.ndarray) -> None:
             ii, jj, kk = np.unravel_index(sel, rshape)
             p = np.stack([centres[0][ii], centres[1][jj], centres[2][kk]], -1)
             u, bits = self._mask_bits(self.wires[wi], tables[wi], masks[wi], flat_u[sel], p, side)
             flat_u[sel] = u
             flat_out[sel] = bits
+
+        # chunks of voxels (small temporaries), a few threads (numpy releases the GIL)
+        jobs = [
+            (wi, order[a : min(a + FLAG_CHUNK, bounds[wi + 1])])
+            for wi in range(len(self.wires))
+            for a in range(int(bounds[wi]), int(bounds[wi + 1]), FLAG_CHUNK)
+        ]
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            list(pool.map(lambda job: run(*job), jobs))
         return out
 
     def warp(self) -> WireFieldWarp:
@@ -1150,8 +1164,6 @@ class WireDeformer:
         volume and outside ``in_disc``. Planes go in blocks (their temporaries stay in
         the cache; a few threads sample blocks at once, numpy and scipy release the GIL)
         and only pixels in the disc and the volume are sampled."""
-        from concurrent.futures import ThreadPoolExecutor
-
         a, b = tab.lookup(tt)
         m = _lerp_table(tab.modified_points, tt)
         fm = _lerp_table(tab.modified_frames, tt)
@@ -1279,7 +1291,9 @@ class WireDeformer:
 
 #: mask pixels per block of planes while the masks are sampled (keeps temporaries small)
 MASK_BLOCK_PIXELS = 1 << 16
-#: threads sampling the mask blocks
+#: voxels per chunk of the numpy classification (keeps temporaries small)
+FLAG_CHUNK = 1 << 16
+#: threads sampling the mask blocks (and classifying chunks on the numpy path)
 MASK_THREADS = max(1, min(4, os.cpu_count() or 1))
 #: Newton steps that refine the propagated u to the closest point of the wire
 REFINE_STEPS = 2
