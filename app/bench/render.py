@@ -250,6 +250,7 @@ def bench_render(
     step: float = 1.0,
     transfer_function: Any = None,
     use_vtk: bool = True,
+    vtk_mappers: tuple[str, ...] = ("fixed_point", "gpu"),
     view: Any = None,
     label: str = "",
     no_skipping: bool = True,
@@ -293,7 +294,7 @@ def bench_render(
             log(f"voxwarp without skipping {m}: {statistics.median(t):.1f} ms")
         r.renderer.empty_space_skipping = True
     if use_vtk:
-        _bench_vtk(report, vol, scenes, cam, size, frames, warmup, log)
+        _bench_vtk(report, vol, scenes, cam, size, frames, warmup, log, vtk_mappers)
     return report
 
 
@@ -306,10 +307,12 @@ def _bench_vtk(
     frames: int,
     warmup: int,
     log: Any,
+    mappers: tuple[str, ...] = ("fixed_point", "gpu"),
 ) -> None:
     from voxwarp.bench import vtk as bench_vtk
 
     names = {"fixed_point": "VTK fixed-point (CPU)", "gpu": "VTK GPU raycaster"}
+    names = {k: v for k, v in names.items() if k in mappers}
     if not bench_vtk.vtk_available():
         for name in names.values():
             report.rows.append(

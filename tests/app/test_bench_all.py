@@ -131,18 +131,35 @@ def test_body_phantom_tissues() -> None:
     assert abs(float(noisy[28:36, 36:44, :].mean()) - 40.0) < 3.0
 
 
-def test_bench_render_input_file(gl_ctx: Any, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bench_render_input_file() -> None:
     """``bench render --input FILE --tf --view``: one case, its covered share, and the VTK
-    rows skipped with a note (not a failure) where VTK is not installed."""
+    rows skipped with a note (not a failure) where VTK is not installed. In a subprocess:
+    the command makes and releases its own GL context."""
     from voxwarp.bench import vtk as bench_vtk
 
+    from .test_cli import run_cli
+
     argv = ["bench", "render", "--input", "sample:colin27", "--tf", "mri", "--view", "-y"]
-    rc = main([*argv, "--size", "64x64", "--frames", "1", "--warmup", "1"])
-    assert rc == 0
-    out = capsys.readouterr().out
+    proc = run_cli(*argv, "--size", "64x64", "--frames", "1", "--warmup", "1")
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
     assert "Volume: colin27 91x109x91" in out
     covered = float(out.split("dvr covers ")[1].split(" %")[0])
     assert 10.0 < covered < 100.0  # the head is in the picture, not all of it
     assert "| voxwarp | dvr |" in out
     if not bench_vtk.vtk_available():
-        assert "skipped: VTK not installed" in out
+        assert "VTK not installed" in proc.stderr
+
+
+def test_missing_vtk_is_a_note_not_a_failure(monkeypatch: pytest.MonkeyPatch) -> None:
+    from voxwarp.bench import render
+    from voxwarp.bench import vtk as bench_vtk
+
+    monkeypatch.setattr(bench_vtk, "vtk_available", lambda: False)
+    report = render.BenchReport("v", (8, 8, 8), (8, 8), 1.0, 1, "gl")
+    logs: list[str] = []
+    render._bench_vtk(report, None, {}, None, (8, 8), 1, 0, logs.append)  # type: ignore[arg-type]
+    assert [r.renderer for r in report.rows] == ["VTK fixed-point (CPU)", "VTK GPU raycaster"]
+    assert all(r.note.startswith("skipped: VTK not installed") for r in report.rows)
+    assert logs[0].startswith("VTK not installed")
+    assert report.ratio("VTK fixed-point (CPU)", "dvr") is None
