@@ -38,6 +38,7 @@ BENCHMARKS: tuple[str, ...] = (
     "lattice",
     "interactive",
     "fields",
+    "segments",
 )
 #: seconds one benchmark may run before it is stopped (quick, full)
 TIMEOUT_S: tuple[float, float] = (240.0, 3600.0)
@@ -67,6 +68,11 @@ ISSUE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("first_frame", "first frame of a new volume (load -> image, 512², dvr)", "512³ <= 2 s"),
     ("memory", "memory of the first render beyond the array", "<= 2x the volume's bytes"),
     ("gpu_table", "datacenter GPU: 512³ -> 1024², deformed dvr", ">= 60 fps"),
+    (
+        "segments",
+        "piecewise-linear warped rays ('auto') / the chain at every sample",
+        "< 1.0x, image within the stated tolerance",
+    ),
 )
 
 
@@ -322,6 +328,24 @@ def run_fields(quick: bool) -> dict[str, Any]:
     return {"ratios": ratios, "issue": {}, "markdown": report.markdown(command)}
 
 
+def run_segments(quick: bool) -> dict[str, Any]:
+    """``bench segments`` (with ``quick``: 256², 2 frames)."""
+    from voxwarp.bench.segments import bench_segments
+
+    size, frames = ((256, 256), 2) if quick else ((512, 512), 5)
+    report = bench_segments(size=size, frames=frames, log=_log)
+    ratios = {}
+    for r in report.rows:
+        ratios[f"{r.case} auto / per-sample"] = r.ratios["auto"] / r.ratios["1"]
+        ratios[f"{r.case} per-sample / undeformed"] = r.ratios["1"]
+    text = ", ".join(
+        f"{r.case} {r.ratios['auto'] / r.ratios['1']:.2f}x (max diff {r.max_diff['auto']:.0f})"
+        for r in report.rows
+    )
+    command = f"voxwarp bench segments --size {size[0]}x{size[1]} --frames {frames}"
+    return {"ratios": ratios, "issue": {"segments": text}, "markdown": report.markdown(command)}
+
+
 #: benchmark name -> runner(quick) -> {"ratios", "issue", "markdown"}
 RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "startup": run_startup,
@@ -333,6 +357,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "lattice": run_lattice,
     "interactive": run_interactive,
     "fields": run_fields,
+    "segments": run_segments,
 }
 
 
