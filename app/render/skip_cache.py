@@ -290,16 +290,11 @@ class SkipMapCache:
             dist = block_skip_distances(
                 static_block_visibility(scene, maps.block_min, maps.block_max)
             )
-            info = np.stack(
-                [
-                    dist.astype(np.float32),
-                    maps.block_min,
-                    maps.block_max,
-                    np.zeros_like(maps.block_min),
-                ],
-                axis=-1,
-            )
-            maps.info.write(np.ascontiguousarray(info.transpose(2, 1, 0, 3)).tobytes())
+            # written straight in the texture's (z, y, x, channel) layout: one array
+            info = np.zeros((*maps.block_min.shape[::-1], 4), dtype=np.float32)
+            for c, part in enumerate((dist, maps.block_min, maps.block_max)):
+                info[..., c] = part.T
+            maps.info.write(info)
             maps.info_key = key
         return maps.info
 
