@@ -147,6 +147,7 @@ def test_bench_render_input_file() -> None:
     covered = float(out.split("dvr covers ")[1].split(" %")[0])
     assert 10.0 < covered < 100.0  # the head is in the picture, not all of it
     assert "| voxwarp | dvr |" in out
+    assert "| voxwarp, gradients on the fly | dvr |" in out  # the mri preset shades
     if not bench_vtk.vtk_available():
         assert "VTK not installed" in proc.stderr
 
