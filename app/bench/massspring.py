@@ -1,7 +1,7 @@
 """``voxwarp bench massspring``: mass-spring steps per second, CPU, GPU and taichi.
 
 For each grid size ``n`` (n³ elements, by default 16, 32, 64 and 128) the same model is
-stepped by three solvers in one process:
+stepped by up to four solvers in one process:
 
 * ``numpy``: :class:`voxwarp.deform.massspring.CpuSpringSolver` (float64, vectorised numpy),
   through ``MassSpring(backend="cpu")``;
@@ -9,7 +9,10 @@ stepped by three solvers in one process:
   through ``MassSpring(backend="gpu")`` on a standalone EGL context (on a machine
   without a GPU: Mesa llvmpipe);
 * ``taichi``: :class:`voxwarp.bench.taichi.TaichiSpringSolver` (float32, taichi's CPU
-  backend on all cores), when ``taichi`` is installed (extra ``[bench]``).
+  backend on all cores), when ``taichi`` is installed (extra ``[bench]``);
+* ``taichi-min``: :class:`voxwarp.bench.taichi.MinimalTaichiSprings`, the least a step
+  can do (6 springs, one material for the grid, no pinning; issue 19's floor for the
+  GPU step), with taichi.
 
 Model (the defaults of :class:`voxwarp.deform.massspring.MassSpring`): structural springs, an
 ``ElementGrid`` over a 100 mm box with its 8 corners fixed, default materials, the
@@ -49,11 +52,12 @@ BOX: tuple[tuple[float, float, float], tuple[float, float, float]] = (
 #: drag of the centre element (mm)
 DRAG_MM: tuple[float, float, float] = (0.0, 0.0, 10.0)
 #: backends in report order, and their names in the table
-BACKENDS: tuple[str, ...] = ("numpy", "gpu", "taichi")
+BACKENDS: tuple[str, ...] = ("numpy", "gpu", "taichi", "taichi-min")
 BACKEND_NAMES: dict[str, str] = {
     "numpy": "numpy CPU",
     "gpu": "GPU",
     "taichi": "taichi CPU",
+    "taichi-min": "taichi minimal",
 }
 
 
@@ -133,8 +137,9 @@ class SpringBenchReport:
             f" {self.load[1]:.2f}.",
             "",
             "| grid | numpy CPU steps/s | GPU steps/s | taichi CPU steps/s"
-            " | GPU / taichi | GPU / numpy | steps x blocks (numpy, GPU, taichi) |",
-            "|---|---:|---:|---:|---:|---:|---|",
+            " | taichi minimal steps/s | GPU / taichi | GPU / taichi minimal | GPU / numpy"
+            " | steps x blocks (numpy, GPU, taichi, minimal) |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---|",
         ]
         for n in self.sizes:
             cells = []
@@ -144,9 +149,10 @@ class SpringBenchReport:
                 cells.append(_rate(r))
                 blocks.append(f"{r.steps}x{r.repeats}" if r else "—")
             gt = self.ratio(n, "gpu", "taichi")
+            gm = self.ratio(n, "gpu", "taichi-min")
             gn = self.ratio(n, "gpu", "numpy")
             lines.append(
-                f"| {n}³ | {' | '.join(cells)} | {_ratio(gt)} | {_ratio(gn)}"
+                f"| {n}³ | {' | '.join(cells)} | {_ratio(gt)} | {_ratio(gm)} | {_ratio(gn)}"
                 f" | {', '.join(blocks)} |"
             )
         notes = [f"{n}³ {note}" for n in self.sizes for note in self.notes(n)]
@@ -265,6 +271,7 @@ def bench_massspring(
     repeats: int = 5,
     use_taichi: bool = True,
     use_gpu: bool = True,
+    use_numpy: bool = True,
     ctx: Any = None,
     max_block_s: float = 2.0,
     log: Any = print,
@@ -283,6 +290,8 @@ def bench_massspring(
         Time the taichi solver (skipped with a note when taichi is not installed).
     use_gpu
         Time the GPU solver (skipped with a note when no OpenGL 4.3 context can be made).
+    use_numpy
+        Time the numpy solver (the slowest by far at 64³ and above).
     ctx
         moderngl context of the GPU solver, made current by the caller; by default a
         standalone EGL context is created (and released at the end).
@@ -316,9 +325,9 @@ def bench_massspring(
         report.taichi = bench_taichi.taichi_version()
     try:
         for n in report.sizes:
-            report.rows += _bench_size(
-                n, ctx, gpu_skip, taichi_skip, steps, repeats, max_block_s, log
-            )
+            skips = {"gpu": gpu_skip, "taichi": taichi_skip}
+            skips["numpy"] = "" if use_numpy else "skipped (--no-numpy)"
+            report.rows += _bench_size(n, ctx, skips, steps, repeats, max_block_s, log)
     finally:
         if own_ctx:
             ctx.release()
@@ -331,33 +340,41 @@ def bench_massspring(
 def _bench_size(
     n: int,
     ctx: Any,
-    gpu_skip: str,
-    taichi_skip: str,
+    skips: dict[str, str],
     steps: int,
     repeats: int,
     max_block_s: float,
     log: Any,
 ) -> list[SpringBenchRow]:
-    """Rows of the three backends at n³, their timed blocks interleaved.
+    """Rows of the backends at n³, their timed blocks interleaved.
 
-    The blocks take turns (numpy, taichi, GPU, numpy, ...), so that a change of the
-    machine's load during the run affects every backend alike.
+    The blocks take turns (numpy, taichi, taichi minimal, GPU, numpy, ...), so that a
+    change of the machine's load during the run affects every backend alike. ``skips``
+    maps "numpy", "gpu" and "taichi" (which also skips the minimal kernel) to a skip note
+    ("" to run it).
     """
     from voxwarp.bench import taichi as bench_taichi
 
     runners: list[_Runner] = []
     skipped: list[SpringBenchRow] = []
+    ms = None
     try:
         ms = _dragged_mass_spring(n)
-        runners.append(_Runner("numpy", ms.step, lambda: None, ms.close))
-        if taichi_skip:
-            skipped.append(SpringBenchRow(n, "taichi", 0, 0, 0, 0, 0, taichi_skip))
+        if skips["numpy"]:
+            skipped.append(SpringBenchRow(n, "numpy", 0, 0, 0, 0, 0, skips["numpy"]))
+        else:
+            runners.append(_Runner("numpy", ms.step, lambda: None, ms.close))
+        if skips["taichi"]:
+            for b in ("taichi", "taichi-min"):
+                skipped.append(SpringBenchRow(n, b, 0, 0, 0, 0, 0, skips["taichi"]))
         else:  # the same model and constraints
             solver = bench_taichi.make_taichi_solver(ms.model)
             solver.set_constraints(*_constraints(ms))
             runners.append(_Runner("taichi", solver.step, solver.sync, solver.release))
-        if gpu_skip:
-            skipped.append(SpringBenchRow(n, "gpu", 0, 0, 0, 0, 0, gpu_skip))
+            mini = bench_taichi.make_minimal_taichi_solver(ms.model)
+            runners.append(_Runner("taichi-min", mini.step, mini.sync, mini.release))
+        if skips["gpu"]:
+            skipped.append(SpringBenchRow(n, "gpu", 0, 0, 0, 0, 0, skips["gpu"]))
         else:
             gms = _dragged_mass_spring(n, "gpu", ctx)
             runners.append(_Runner("gpu", gms.step, ctx.finish, gms.close))
@@ -369,6 +386,8 @@ def _bench_size(
     finally:
         for r in runners:
             r.close()
+        if skips["numpy"] and ms is not None:
+            ms.close()
     rows = [_row(n, r.backend, r.block, r.rates) for r in runners] + skipped
     for row in rows:
         if row.median_sps > 0:

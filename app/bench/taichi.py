@@ -298,3 +298,136 @@ def _solver_class() -> type:
 
     _SOLVER_CLASS = TaichiSpringSolver
     return TaichiSpringSolver
+
+
+def make_minimal_taichi_solver(model: SpringModel) -> Any:
+    """A :class:`MinimalTaichiSprings` of ``model`` (the lower bound the GPU step is held to)."""
+    return _minimal_class()(model)
+
+
+_MINIMAL_CLASS: Any = None
+
+
+def _minimal_class() -> type:
+    """Define the minimal taichi kernel's class on first use (it needs taichi)."""
+    global _MINIMAL_CLASS
+    if _MINIMAL_CLASS is not None:
+        return _MINIMAL_CLASS
+    ti = taichi_module()
+
+    @ti.func
+    def _clamp(b, o: ti.template(), n: ti.template()):
+        """Index ``b = a + o`` clamped into ``[0, n)`` (only the side ``o`` points to)."""
+        if ti.static(o > 0):
+            return ti.min(b, n - 1)
+        elif ti.static(o < 0):
+            return ti.max(b, 0)
+        else:
+            return b
+
+    @ti.data_oriented
+    class MinimalTaichiSprings:
+        """The least a mass-spring step can do: issue 19's reference for the GPU step.
+
+        Float32 positions and velocities only (``ti.Vector.field(3)``, two of each,
+        ping-pong; 24 bytes read and 24 written per element and step), the 6 structural
+        springs with compile-time offsets and rest lengths, neighbours outside the grid
+        clamped (on the side the spring points to) and weighted 0; ONE stiffness, damping
+        and mass for the whole grid (the model's first element's, run-time scalars), no
+        pinned elements, explicit Euler with the displacement clamp. Not the model of
+        :class:`TaichiSpringSolver` (no per-element material, no pinning): a speed floor,
+        not a reference for the physics.
+
+        Parameters
+        ----------
+        model
+            Grid shape, spacing, constants and the state it starts from (its rest).
+        """
+
+        def __init__(self, model: SpringModel) -> None:
+            self.model = model
+            self.shape: tuple[int, int, int] = model.shape
+            spacing = [float(s) for s in np.asarray(model.spacing)]
+            self._axes = tuple(
+                (tuple(int(a == b) * sgn for b in range(3)), spacing[a])
+                for a in range(3)
+                for sgn in (-1, 1)
+            )
+            self._x = [ti.Vector.field(3, ti.f32, shape=self.shape) for _ in range(2)]
+            self._v = [ti.Vector.field(3, ti.f32, shape=self.shape) for _ in range(2)]
+            rest = np.ascontiguousarray(model.rest, np.float32)
+            self._x[0].from_numpy(rest)
+            self._v[0].from_numpy(np.zeros_like(rest))
+            self._cur = 0
+
+        def set_state(self, positions: np.ndarray, velocities: np.ndarray) -> None:
+            """Replace the state ((n_x, n_y, n_z, 3) positions in mm, velocities in mm/s)."""
+            self._x[self._cur].from_numpy(np.ascontiguousarray(positions, np.float32))
+            self._v[self._cur].from_numpy(np.ascontiguousarray(velocities, np.float32))
+
+        def positions(self) -> np.ndarray:
+            """(n_x, n_y, n_z, 3) float64 copy of the element positions (mm)."""
+            return self._x[self._cur].to_numpy().astype(np.float64)
+
+        def sync(self) -> None:
+            """Wait until the launched kernels are done (for timing)."""
+            ti.sync()
+
+        def release(self) -> None:
+            """Nothing to free explicitly (taichi frees fields with the program)."""
+
+        def step(self, n: int = 1) -> None:
+            """Advance ``n`` time steps of ``model.dt`` (one kernel launch per step)."""
+            m = self.model
+            args = (
+                float(m.dt),
+                0.5 * float(m.spring_constant) * 2.0 * float(np.ravel(m.stiffness)[0]),
+                float(m.spring_damping),
+                float(np.ravel(m.damping)[0]),
+                1.0 / float(np.ravel(m.mass)[0]),
+                float(m.max_step),
+            )
+            for _ in range(int(n)):
+                src, dst = self._cur, 1 - self._cur
+                self._step(self._x[src], self._v[src], self._x[dst], self._v[dst], *args)
+                self._cur = dst
+
+        @ti.kernel
+        def _step(
+            self,
+            xs: ti.template(),
+            vs: ti.template(),
+            xd: ti.template(),
+            vd: ti.template(),
+            dt: ti.f32,
+            k: ti.f32,
+            kd: ti.f32,
+            damping: ti.f32,
+            inv_mass: ti.f32,
+            max_step: ti.f32,
+        ):
+            nx, ny, nz = self.shape
+            for i, j, kk in xs:
+                xa = xs[i, j, kk]
+                va = vs[i, j, kk]
+                f = -damping * va
+                for s in ti.static(range(6)):
+                    o = ti.static(self._axes[s][0])
+                    rest = ti.static(self._axes[s][1])
+                    bi, bj, bk = i + o[0], j + o[1], kk + o[2]
+                    ci, cj, ck = _clamp(bi, o[0], nx), _clamp(bj, o[1], ny), _clamp(bk, o[2], nz)
+                    d = xs[ci, cj, ck] - xa
+                    length = d.norm()
+                    inside = (ci == bi) & (cj == bj) & (ck == bk) & (length > 1e-12)
+                    w = ti.select(inside, 1.0, 0.0)
+                    dh = d * (w / ti.max(length, 1e-12))
+                    f += (k * (length - rest) + kd * (vs[ci, cj, ck] - va).dot(dh)) * dh
+                v_new = va + dt * inv_mass * f
+                step_x = dt * va
+                size = step_x.norm()
+                scale = ti.select(size > max_step, max_step / ti.max(size, 1e-30), 1.0)
+                xd[i, j, kk] = xa + scale * step_x
+                vd[i, j, kk] = scale * v_new
+
+    _MINIMAL_CLASS = MinimalTaichiSprings
+    return MinimalTaichiSprings

@@ -1064,6 +1064,7 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
         steps=args.steps,
         repeats=args.repeats,
         use_taichi=not args.no_taichi,
+        use_numpy=not args.no_numpy,
         log=lambda s: print(s, file=sys.stderr),
     )
     command = (
@@ -1077,6 +1078,9 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
         ratio = report.ratio(n, "gpu", "taichi")
         if ratio is not None:
             print(f"{n}³: the GPU solver runs {ratio:.2f}x the steps/s of taichi on the CPU")
+        ratio = report.ratio(n, "gpu", "taichi-min")
+        if ratio is not None:
+            print(f"{n}³: the GPU solver runs {ratio:.2f}x the minimal taichi kernel's steps/s")
     if args.render:
         from voxwarp.bench.render import bench_warp_render
 
@@ -1548,6 +1552,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     )
     pbm.add_argument("--repeats", type=_positive_int, default=5, help="timed blocks per solver")
     pbm.add_argument("--no-taichi", action="store_true", help="skip the taichi reference")
+    pbm.add_argument("--no-numpy", action="store_true", help="skip the numpy solver")
     pbm.add_argument(
         "--render",
         action=argparse.BooleanOptionalAction,

@@ -253,7 +253,7 @@ def test_bench_massspring_smoke(gl_ctx: Any) -> None:
             rows = [r for r in report.rows if r.size == n and r.backend == b]
             assert len(rows) == 1, (n, b)
             row = rows[0]
-            if b == "taichi" and not taichi_available():
+            if b in ("taichi", "taichi-min") and not taichi_available():
                 assert row.median_sps == 0
                 assert "not installed" in row.note
                 continue
@@ -284,6 +284,11 @@ def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str])
     text = out.read_text(encoding="utf-8")
     assert "| 3³ |" in text
     assert "taichi CPU: skipped (--no-taichi)" in text
+    assert "taichi minimal: skipped (--no-taichi)" in text
+    assert main([*argv, "--no-numpy", "--no-taichi", "--no-render", "--markdown", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    assert "numpy CPU: skipped (--no-numpy)" in text
+    assert "| 3³ | — |" in text  # no numpy rate, the GPU's still there
     assert text in capsys.readouterr().out
     for bad in (["--sizes", "1"], ["--sizes", "16,x"], ["--steps", "0"]):
         with pytest.raises(SystemExit):
