@@ -7,8 +7,9 @@ volume of anisotropic voxels with two objects, one Bézier wire (bent, twisted, 
 and one Catmull-Rom wire (moved, twisted), field scales 1 and 2, both layouts, for the
 OpenCL and the scipy propagation (they resolve equidistant seeds differently, so each
 has its own reference). Every path must reproduce them exactly: the one-pass OpenCL
-classification, the numpy classification after the OpenCL propagation, and the scipy
-fallback.
+classification, the numpy classification after the OpenCL propagation (both where the
+OpenCL device is PoCL's, as the reference's was), and the scipy fallback; on any OpenCL
+device the one-pass classification must equal the numpy one after the same propagation.
 """
 
 from __future__ import annotations
@@ -97,22 +98,31 @@ def test_scipy_fallback_gives_the_reference_bits() -> None:
 
 
 @pytest.mark.skipif(not opencl_available(), reason="no OpenCL platform")
-def test_opencl_pass_gives_the_reference_bits() -> None:
+def test_opencl_pass_gives_the_numpy_classification_bits() -> None:
     wd = WireDeformer(volume(), wires())
-    if "cl_khr_fp64" in _device_extensions():
+    if "cl_khr_fp64" in _device().extensions:
         assert wd.classify_on_device()  # the one-pass path really runs
-    assert_reference(reference_fields("opencl"))
+    device = reference_fields("opencl")
+    host = reference_fields("opencl", classify_on_device=lambda: False)
+    for key, arr in device.items():
+        np.testing.assert_array_equal(arr, host[key], err_msg=key)
 
 
 @pytest.mark.skipif(not opencl_available(), reason="no OpenCL platform")
-def test_numpy_classification_after_opencl_gives_the_reference_bits() -> None:
+def test_opencl_paths_give_the_reference_bits() -> None:
+    # the reference's OpenCL propagation ran on PoCL's CPU device: another device may
+    # resolve seeds at equal distance within float32 rounding differently (see
+    # voxwarp.deform.propagation, "Ties"), so the saved bits bind PoCL only
+    if "Portable Computing Language" not in _device().platform.name:
+        pytest.skip("reference propagated on PoCL; this OpenCL device may break ties otherwise")
+    assert_reference(reference_fields("opencl"))
     assert_reference(reference_fields("opencl", classify_on_device=lambda: False))
 
 
-def _device_extensions() -> str:
+def _device() -> Any:
     from voxwarp.deform import propagation
 
-    return str(propagation._opencl_state()["device"].extensions)
+    return propagation._opencl_state()["device"]
 
 
 def test_plane_hole_fill_equals_scipy_fill_holes() -> None:
