@@ -194,11 +194,14 @@ def run_massspring(quick: bool) -> dict[str, Any]:
     for n in sizes:
         ratios[f"{n}³ gpu / numpy"] = report.ratio(n, "gpu", "numpy")
         ratios[f"{n}³ gpu / taichi"] = report.ratio(n, "gpu", "taichi")
+        ratios[f"{n}³ gpu / taichi minimal"] = report.ratio(n, "gpu", "taichi-min")
     big = max(sizes)
     taichi = report.ratio(big, "gpu", "taichi")
     gpu = report.find(big, "gpu")
     gpu_text = "not measured" if gpu is None else f"{big}³ GPU {gpu.median_sps:.0f} steps/s"
     gpu_text += ", taichi not installed" if taichi is None else f", {taichi:.2f}x taichi"
+    minimal = report.ratio(big, "gpu", "taichi-min")
+    gpu_text += "" if minimal is None else f", {minimal:.2f}x the minimal kernel"
     command = "voxwarp bench massspring" + (" (quick)" if quick else "")
     return {
         "ratios": ratios,
