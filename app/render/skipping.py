@@ -204,15 +204,15 @@ def block_skip_distances(visible: np.ndarray) -> np.ndarray:
 
     0 marks a visible block. A ray in a block at distance d may jump out of the cube of
     (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8
-    (scipy's chamfer transform, from COMPILED_MIN_SIZE blocks on a compiled one: both
-    exact for the chessboard metric).
+    (scipy's chamfer transform; the blocks of a volume of COMPILED_MIN_SIZE voxels or
+    more, a compiled one: both exact for the chessboard metric).
     """
     visible = np.asarray(visible, dtype=bool)
     if not visible.any():
         return np.full(visible.shape, 255, dtype=np.uint8)
     if visible.all():
         return np.zeros(visible.shape, dtype=np.uint8)
-    if not _compiled(visible.size):
+    if not _compiled(visible.size * BLOCK**3):  # the blocks of a volume that large
         from voxwarp.render import skip_numpy
 
         return skip_numpy.block_skip_distances(visible)
