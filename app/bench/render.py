@@ -26,7 +26,7 @@ import numpy as np
 
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.raycaster import LIGHT, OffscreenRenderer
 from voxwarp.scene import Scene
 
 #: the reference row of shaded scenes without the gradient texture
@@ -374,6 +374,7 @@ def _bench_vtk(
                     camera=spec,
                     frames=frames,
                     warmup=warmup,
+                    shading=LIGHT if scene.use_shading() else None,
                 )
             except (RuntimeError, ValueError) as exc:
                 report.rows.append(BenchRow(name, m, 0, 0, f"skipped: {exc}"))

@@ -121,6 +121,7 @@ def render_vtk(
     warmup: int = 2,
     background: Vec3 | tuple[float, ...] = (0.0, 0.0, 0.0),
     rgba: bool = False,
+    shading: tuple[float, float, float, float] | None = None,
 ) -> VtkResult:
     """Render ``data_xyz`` with a VTK volume mapper offscreen and time ``frames`` renders.
 
@@ -145,6 +146,8 @@ def render_vtk(
         background: background RGB in ``[0, 1]``.
         rgba: return an ``(H, W, 4)`` image whose alpha is the volume's coverage
             instead of ``(H, W, 3)``.
+        shading: ``(ambient, diffuse, specular, specular power)`` to shade as voxwarp
+            does (gradient-lit), or None for no shading.
 
     Each timed frame is ``Render()`` followed by ``WaitForCompletion()`` (a
     ``glFinish``), so GPU work is included; the image is read back once, after the
@@ -216,7 +219,14 @@ def render_vtk(
         prop.SetScalarOpacity(opacity)
         prop.SetScalarOpacityUnitDistance(float(opacity_unit_distance_mm))
         prop.SetInterpolationTypeToLinear()
-        prop.ShadeOff()
+        if shading is None:
+            prop.ShadeOff()
+        else:
+            prop.ShadeOn()
+            prop.SetAmbient(shading[0])
+            prop.SetDiffuse(shading[1])
+            prop.SetSpecular(shading[2])
+            prop.SetSpecularPower(shading[3])
         prop.DisableGradientOpacityOn()
         prop.SetIndependentComponents(True)
 
