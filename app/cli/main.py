@@ -785,8 +785,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
         # one frame: the per-cell octant distance maps (CPU-built) cost more than they
-        # save on a single draw, so skip by 4³ blocks (the same image; docs/benchmarks.md)
+        # save on a single draw, so skip by 4³ blocks (the same image; docs/benchmarks.md);
+        # likewise the gradient texture (a pass over every voxel) for shading
         r.renderer.cell_skipping = False
+        r.renderer.gradient_texture = False
         model = None
         # the GPU backends run on the renderer's context (made current here)
         with r._current():

@@ -49,7 +49,7 @@ Octant = tuple[int, int, int]
 #: measured by the compiled kernels of :mod:`voxwarp.render.skip_kernels`; smaller ones
 #: by the numpy builders of :mod:`voxwarp.render.skip_numpy` (the same arrays), so that
 #: a small volume's first render does not pay numba's start-up (once per process).
-COMPILED_MIN_SIZE = 1 << 22
+COMPILED_MIN_SIZE = 1 << 23
 
 
 def _compiled(size: int) -> bool:
@@ -204,8 +204,8 @@ def block_skip_distances(visible: np.ndarray) -> np.ndarray:
 
     0 marks a visible block. A ray in a block at distance d may jump out of the cube of
     (2d - 1)³ blocks centred on it in one step: none of them is visible. Returns uint8
-    (scipy's chamfer transform; the blocks of a volume of COMPILED_MIN_SIZE voxels or
-    more, a compiled one: both exact for the chessboard metric).
+    (the visible set grown one chessboard step at a time; the blocks of a volume of
+    COMPILED_MIN_SIZE voxels or more, a compiled chamfer transform: both exact).
     """
     visible = np.asarray(visible, dtype=bool)
     if not visible.any():

@@ -207,8 +207,8 @@ def test_a_big_volume_draws_its_first_frame_with_blocks(
 
 
 def test_small_volumes_build_their_maps_without_numba() -> None:
-    """Below COMPILED_MIN_SIZE the numpy builders run: no numba start-up for a small
-    volume (a fresh interpreter)."""
+    """Below COMPILED_MIN_SIZE the numpy builders run: no numba (or scipy) start-up for
+    a small volume (a fresh interpreter)."""
     code = (
         "import sys, numpy as np\n"
         "from voxwarp.core.transfer_function import TransferFunction\n"
@@ -223,6 +223,7 @@ def test_small_volumes_build_their_maps_without_numba() -> None:
         "s.octant_skip_distances(v, (1, -1, 1))\n"
         "s.block_skip_distances(s.static_block_visibility(sc, lo, hi))\n"
         "assert 'numba' not in sys.modules, 'numba was imported'\n"
+        "assert 'scipy' not in sys.modules, 'scipy was imported'\n"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr[-2000:]
