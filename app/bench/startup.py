@@ -22,8 +22,11 @@ from dataclasses import dataclass
 #: modules ``import voxwarp`` and ``voxwarp --help`` must not load
 HEAVY = ("numba", "scipy", "pyopencl", "PySide6", "dask", "distributed", "matplotlib")
 #: modules ``voxwarp render sample:stent -o x.png`` has no use for (it writes the PNG
-#: through OpenImageIO, which it does load)
+#: through OpenImageIO, which it does load; its skip maps stay on numpy below
+#: ``voxwarp.render.skipping.COMPILED_MIN_SIZE`` voxels)
 RENDER_UNUSED = (
+    "numba",
+    "scipy",
     "trimesh",
     "pyopencl",
     "nibabel",
