@@ -92,6 +92,26 @@ def make_taichi_solver(model: SpringModel, dtype: str = "f32") -> Any:
 
 
 _SOLVER_CLASS: Any = None
+_CLAMP: Any = None
+
+
+def _clamp_func(ti: Any) -> Any:
+    """The taichi function ``_clamp(b, o, n)`` both solvers use, defined once."""
+    global _CLAMP
+    if _CLAMP is None:
+
+        @ti.func
+        def _clamp(b, o: ti.template(), n: ti.template()):
+            """Index ``b = a + o`` clamped into ``[0, n)`` (only the side ``o`` points to)."""
+            if ti.static(o > 0):
+                return ti.min(b, n - 1)
+            elif ti.static(o < 0):
+                return ti.max(b, 0)
+            else:
+                return b
+
+        _CLAMP = _clamp
+    return _CLAMP
 
 
 def _solver_class() -> type:
@@ -101,15 +121,7 @@ def _solver_class() -> type:
         return _SOLVER_CLASS
     ti = taichi_module()
 
-    @ti.func
-    def _clamp(b, o: ti.template(), n: ti.template()):
-        """Index ``b = a + o`` clamped into ``[0, n)`` (only the side ``o`` points to)."""
-        if ti.static(o > 0):
-            return ti.min(b, n - 1)
-        elif ti.static(o < 0):
-            return ti.max(b, 0)
-        else:
-            return b
+    _clamp = _clamp_func(ti)
 
     @ti.data_oriented
     class TaichiSpringSolver:
@@ -315,15 +327,7 @@ def _minimal_class() -> type:
         return _MINIMAL_CLASS
     ti = taichi_module()
 
-    @ti.func
-    def _clamp(b, o: ti.template(), n: ti.template()):
-        """Index ``b = a + o`` clamped into ``[0, n)`` (only the side ``o`` points to)."""
-        if ti.static(o > 0):
-            return ti.min(b, n - 1)
-        elif ti.static(o < 0):
-            return ti.max(b, 0)
-        else:
-            return b
+    _clamp = _clamp_func(ti)
 
     @ti.data_oriented
     class MinimalTaichiSprings:
