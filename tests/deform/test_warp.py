@@ -280,7 +280,11 @@ def test_compose_glsl_with_a_custom_loader_touches_only_warp_names() -> None:
 def test_compose_glsl_of_an_empty_chain_is_the_identity() -> None:
     src = compose_glsl([])
     assert "vec3 warp_chain(vec3 p) {\n    return p;\n}" in src
-    assert "mat3 J = mat3(1.0);\n    return J;" in src
+    assert (
+        "vec3 warp_chain_and_jacobian(vec3 p, out mat3 J) {\n    J = mat3(1.0);\n    return p;"
+        in src
+    )
+    assert "warp_chain_and_jacobian(p, J);\n    return J;" in src  # warp_chain_jacobian
 
 
 # ---------------------------------------------------------------------- CPU/GPU agreement
