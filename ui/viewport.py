@@ -150,6 +150,7 @@ class Viewport(QOpenGLWidget):
         # deformed-space skip maps take 0.5-3 s of CPU: never in a frame, but on a
         # worker thread once a warp state holds still (see _start_skip_map_job)
         self.renderer.warped_skip_maps = "background"
+        self.renderer.cell_skip_maps = "background"  # a big volume's cell maps too
         self.overlay = OverlayRenderer(self.ctx)
         self.session.ctx = self.ctx
 

@@ -402,19 +402,22 @@ class Renderer:
     def cell_skip_maps(self) -> str:
         """Straight-ray cell skip maps: "auto" builds those of a volume of more than
         :data:`voxwarp.render.skip_cache.EAGER_CELLS` cells on its second draw (the
-        first skips per block, the same image), "always" on its first."""
+        first skips per block, the same image), "always" on its first, "background"
+        offers their CPU work as :meth:`skip_map_job` (blocks until it is installed)."""
         return self._skip_maps.cell_skip_maps
 
     @cell_skip_maps.setter
     def cell_skip_maps(self, value: str) -> None:
-        if value not in ("auto", "always"):
-            raise RenderError(f"cell_skip_maps must be 'auto' or 'always'; got {value!r}")
+        if value not in ("auto", "always", "background"):
+            raise RenderError(
+                f"cell_skip_maps must be 'auto', 'always' or 'background'; got {value!r}"
+            )
         self._skip_maps.cell_skip_maps = value
 
     def needs_skip_maps(self, scene: Scene) -> bool:
-        """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
-        would march block by block only because its warp state's deformed-space skip
-        maps are not built yet (no side effects)."""
+        """With :attr:`warped_skip_maps` (straight rays: :attr:`cell_skip_maps`)
+        "background": whether drawing ``scene`` now would march block by block only
+        because its skip maps are not built yet (no side effects)."""
         entry = self._volumes.get(id(scene.volume))
         return self._skip_maps.needs_maps(scene, None if entry is None else entry[1].skip)
 

@@ -113,7 +113,8 @@ class SkipMapCache:
         self._warped_seen: dict[int, Any] = {}
         #: straight-ray cell maps (see :meth:`kind`): "auto" builds those of a volume of
         #: more than EAGER_CELLS cells when it is drawn a second time with the same
-        #: visibility (its first frame skips per block, the same image), "always" at once
+        #: visibility (its first frame skips per block, the same image), "always" at
+        #: once, "background" offers their CPU work as :meth:`take_job` (the GUI)
         self.cell_skip_maps = "auto"
         self._cells_seen: dict[int, Any] = {}
         #: "background" mode: the job the last draw wanted, and finished results
@@ -177,10 +178,35 @@ class SkipMapCache:
         if int(np.prod(cell_grid_shape(scene.volume.shape))) <= EAGER_CELLS:
             return True
         key = skip_map_key(scene)
-        if maps.cell_key == key or self._cells_seen.get(id(maps)) == key:
+        if maps.cell_key == key:
+            return True
+        if self.cell_skip_maps == "background":
+            return self._background_cells(maps, scene, key)
+        if self._cells_seen.get(id(maps)) == key:
             return True
         self._cells_seen[id(maps)] = key
         return False
+
+    def _background_cells(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> bool:
+        """ "background" straight-ray cell maps: installed when a worker built them for
+        this visibility, else the work is offered as :meth:`take_job` (blocks meanwhile)."""
+        job_key = ("cells", id(maps), key)
+        ready = self._skip_ready.pop(job_key, None)
+        if ready is not None:
+            self._install_cells(maps, key, ready)
+            return True
+        data, bmin, bmax = maps.volume_data, maps.block_min, maps.block_max
+
+        self._skip_wanted = (job_key, lambda: cell_visibility(scene, data, bmin, bmax))
+        return False
+
+    def _install_cells(self, maps: VolumeSkipMaps, key: Any, visible: np.ndarray) -> None:
+        """Keep a worker's cell visibility (the octant maps of the octants a view needs
+        follow on first use, a fraction of the visibility's cost each)."""
+        for tex in maps.cell_skip.values():
+            tex.release()
+        maps.cell_skip.clear()
+        maps.cell_visible, maps.cell_key = visible, key
 
     def _background_kind(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> str:
         """ "background" mode: cells when this warp state's maps are built or ready,
@@ -224,22 +250,38 @@ class SkipMapCache:
 
     # ------------------------------------------------------------------ background builds
     def needs_maps(self, scene: Scene, maps: VolumeSkipMaps | None) -> bool:
-        """With :attr:`warped_skip_maps` "background": whether drawing ``scene`` now
-        would march block by block only because its warp state's deformed-space skip
-        maps are not built yet (``maps``: its volume's, None before its first draw; no
-        side effects)."""
-        if self.warped_skip_maps != "background" or fold_affine(scene.warps) is not None:
-            return False
-        if not self._warped_cells_possible(scene):
+        """With :attr:`warped_skip_maps` (or, for straight rays, :attr:`cell_skip_maps`)
+        "background": whether drawing ``scene`` now would march block by block only
+        because its skip maps are not built yet (``maps``: its volume's, None before its
+        first draw; no side effects)."""
+        if fold_affine(scene.warps) is not None:
+            return self._needs_cells(scene, maps)
+        if self.warped_skip_maps != "background" or not self._warped_cells_possible(scene):
             return False
         key = self._warped_key(scene)
         return not (maps is not None and maps.warped_key == key) and key not in self._skip_ready
 
+    def _needs_cells(self, scene: Scene, maps: VolumeSkipMaps | None) -> bool:
+        """Straight rays with :attr:`cell_skip_maps` "background": whether the draw
+        skips by blocks only because the volume's cell maps are not built yet."""
+        if self.cell_skip_maps != "background" or maps is None:
+            return False
+        if not (self.empty_space_skipping and self.cell_skipping):
+            return False
+        if scene.mode not in SPARSE_MODES:
+            return False
+        cells = cell_grid_shape(scene.volume.shape)
+        if int(np.prod(cells)) <= EAGER_CELLS or not self._fits(cells):
+            return False
+        key = skip_map_key(scene)
+        return maps.cell_key != key and ("cells", id(maps), key) not in self._skip_ready
+
     def take_job(self) -> tuple[Any, Callable[[], Any]] | None:
-        """With :attr:`warped_skip_maps` "background": ``(key, job)`` for the warp
-        state the last draw drew with block checks, or None (handed out once). ``job()``
-        is CPU work (no GL) that may run on any thread while the warps it was made from
-        stay alive; hand its result to :meth:`install`."""
+        """With :attr:`warped_skip_maps` or :attr:`cell_skip_maps` "background":
+        ``(key, job)`` for the warp state (or the big volume's cell visibility) the last
+        draw drew with block checks, or None (handed out once). ``job()`` is CPU work (no
+        GL) that may run on any thread while the warps it was made from stay alive; hand
+        its result to :meth:`install`."""
         wanted, self._skip_wanted = self._skip_wanted, None
         return wanted
 
