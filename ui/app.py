@@ -15,6 +15,8 @@ from voxwarp.errors import VoxwarpError
 
 #: after the first frame, the time given to the docks to paint before a screenshot (ms)
 SCREENSHOT_SETTLE_MS = 300
+#: with --screenshot, the longest wait for the final (full-quality, at rest) frame (ms)
+SCREENSHOT_TIMEOUT_MS = 120_000
 
 
 def guard_none_refcount() -> None:
@@ -127,10 +129,18 @@ def run_gui(
             window.close()
             app.quit()
 
-        def first_frame(_ms: float) -> None:
-            window.viewport.frameDrawn.disconnect(first_frame)
-            QTimer.singleShot(SCREENSHOT_SETTLE_MS, shoot)
+        def once() -> None:
+            if not status.get("shot"):
+                status["shot"] = 1
+                shoot()
 
-        window.viewport.frameDrawn.connect(first_frame)
+        def frame_drawn(_ms: float) -> None:
+            # a coarse frame drawn while a big volume's skip maps build is not the picture
+            if window.viewport.showing_final_frame():
+                window.viewport.frameDrawn.disconnect(frame_drawn)
+                QTimer.singleShot(SCREENSHOT_SETTLE_MS, once)
+
+        window.viewport.frameDrawn.connect(frame_drawn)
+        QTimer.singleShot(SCREENSHOT_TIMEOUT_MS, once)  # never wait forever
     app.exec()
     return status["code"]

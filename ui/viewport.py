@@ -329,6 +329,11 @@ class Viewport(QOpenGLWidget):
             return False
         return not self._waiting_for_skip_maps()
 
+    def showing_final_frame(self) -> bool:
+        """Whether the last frame drawn is the final one: at full quality, at rest, with
+        no skip maps still being built for it (scripts wait for this before a picture)."""
+        return self.last_quality == FULL and self.at_rest()
+
     def note_input(self) -> None:
         """Something changed the view (the next frames are interactive ones)."""
         self._last_input = time.perf_counter()
