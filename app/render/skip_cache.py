@@ -161,8 +161,11 @@ class SkipMapCache:
             self._warped_seen[id(maps)] = key
             return "blocks"
         if sparse:
-            cells = cell_grid_shape(scene.volume.shape)
-            return "cells" if self._fits(cells) and self._cells_now(scene, maps) else "blocks"
+            return (
+                "cells"
+                if self._straight_cells_possible(scene) and self._cells_now(scene, maps)
+                else "blocks"
+            )
         if scene.mode in ("mip", "minip", "average", "xray"):
             return "none"
         return "blocks"
@@ -173,9 +176,7 @@ class SkipMapCache:
         first draws with block skipping (building its cell maps costs seconds, more than
         the frame they speed up) and gets them on its second draw with the same
         visibility, or as soon as they are built."""
-        if self.cell_skip_maps == "always" or maps is None:
-            return True
-        if int(np.prod(cell_grid_shape(scene.volume.shape))) <= EAGER_CELLS:
+        if self.cell_skip_maps == "always" or maps is None or not self._big(scene):
             return True
         key = skip_map_key(scene)
         if maps.cell_key == key:
@@ -187,6 +188,18 @@ class SkipMapCache:
         self._cells_seen[id(maps)] = key
         return False
 
+    def _straight_cells_possible(self, scene: Scene) -> bool:
+        """Whether straight rays of ``scene`` may skip by cell maps: skipping on, a mode
+        with sparse visibility and a cell grid that fits in a 3D texture."""
+        if not (self.empty_space_skipping and self.cell_skipping):
+            return False
+        return scene.mode in SPARSE_MODES and self._fits(cell_grid_shape(scene.volume.shape))
+
+    @staticmethod
+    def _big(scene: Scene) -> bool:
+        """A volume of more than EAGER_CELLS cells: its cell maps come after its first draw."""
+        return int(np.prod(cell_grid_shape(scene.volume.shape))) > EAGER_CELLS
+
     def _background_cells(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> bool:
         """ "background" straight-ray cell maps: installed when a worker built them for
         this visibility, else the work is offered as :meth:`take_job` (blocks meanwhile)."""
@@ -196,13 +209,13 @@ class SkipMapCache:
             self._install_cells(maps, key, ready)
             return True
         data, bmin, bmax = maps.volume_data, maps.block_min, maps.block_max
-
         self._skip_wanted = (job_key, lambda: cell_visibility(scene, data, bmin, bmax))
         return False
 
-    def _install_cells(self, maps: VolumeSkipMaps, key: Any, visible: np.ndarray) -> None:
-        """Keep a worker's cell visibility (the octant maps of the octants a view needs
-        follow on first use, a fraction of the visibility's cost each)."""
+    @staticmethod
+    def _install_cells(maps: VolumeSkipMaps, key: Any, visible: np.ndarray | None) -> None:
+        """Keep a cell visibility for the visibility ``key``; the octant maps of the old
+        one go (those a view needs follow on first use, a fraction of its cost each)."""
         for tex in maps.cell_skip.values():
             tex.release()
         maps.cell_skip.clear()
@@ -266,12 +279,7 @@ class SkipMapCache:
         skips by blocks only because the volume's cell maps are not built yet."""
         if self.cell_skip_maps != "background" or maps is None:
             return False
-        if not (self.empty_space_skipping and self.cell_skipping):
-            return False
-        if scene.mode not in SPARSE_MODES:
-            return False
-        cells = cell_grid_shape(scene.volume.shape)
-        if int(np.prod(cells)) <= EAGER_CELLS or not self._fits(cells):
+        if not (self._straight_cells_possible(scene) and self._big(scene)):
             return False
         key = skip_map_key(scene)
         return maps.cell_key != key and ("cells", id(maps), key) not in self._skip_ready
@@ -299,19 +307,24 @@ class SkipMapCache:
         lo, hi = scene.ray_bounds()
         warps = list(scene.warps)
         spacing, origin = vol.spacing, vol.origin
-        to_texel = vol.world_to_texel_matrix()
-        tol, longest = self.segments.tolerance, self.segments.max_length(vol)
-        auto = self.segments.setting == "auto"
+        segments = self._segment_job(scene) if self.segments.setting == "auto" else None
 
         def job() -> Any:
             cells = warped_cell_visibility(visible, spacing, origin, warps, lo, hi)
             if cells is None:
                 return None
-            if not auto:
-                return (*cells, None)
-            return (*cells, segment_lengths(warps, lo, hi, to_texel, tol, longest))
+            return (*cells, None if segments is None else segments())
 
         return job
+
+    def _segment_job(self, scene: Scene) -> Callable[[], SegmentMap]:
+        """The CPU work of ``scene``'s segment map at the current tolerance (no GL)."""
+        vol = scene.volume
+        lo, hi = scene.ray_bounds()
+        warps = list(scene.warps)
+        to_texel = vol.world_to_texel_matrix()
+        tol, longest = self.segments.tolerance, self.segments.max_length(vol)
+        return lambda: segment_lengths(warps, lo, hi, to_texel, tol, longest)
 
     def _install_warped(self, maps: VolumeSkipMaps, key: Any, result: Any) -> None:
         """Keep a deformed-space visibility and segment map on the volume (its old skip
@@ -344,14 +357,9 @@ class SkipMapCache:
         """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
         key = skip_map_key(scene)
         if maps.cell_key != key:
-            for tex in maps.cell_skip.values():
-                tex.release()
-            maps.cell_skip.clear()
-            maps.cell_visible = None  # the old one goes before the new one is built
-            maps.cell_visible = cell_visibility(
-                scene, maps.volume_data, maps.block_min, maps.block_max
-            )
-            maps.cell_key = key
+            self._install_cells(maps, None, None)  # the old one goes before the new is built
+            visible = cell_visibility(scene, maps.volume_data, maps.block_min, maps.block_max)
+            self._install_cells(maps, key, visible)
         assert maps.cell_visible is not None
         return maps.cell_visible
 
@@ -406,13 +414,7 @@ class SkipMapCache:
         self.warped_visibility(maps, scene)
         have = maps.warped_segments
         if have is None or have.tolerance != self.segments.tolerance:
-            vol = scene.volume
-            lo, hi = scene.ray_bounds()
-            tol, longest = self.segments.tolerance, self.segments.max_length(vol)
-            to_texel = vol.world_to_texel_matrix()
-            self._install_segments(
-                maps, segment_lengths(scene.warps, lo, hi, to_texel, tol, longest)
-            )
+            self._install_segments(maps, self._segment_job(scene)())
         return maps.segment_texture
 
     def _install_segments(self, maps: VolumeSkipMaps, segments: SegmentMap | None) -> None:
