@@ -44,3 +44,10 @@ def source(name: str, extra: dict[str, str] | None = None) -> str:
         return _INCLUDE.sub(repl, text)
 
     return expand(read(name), (name,))
+
+
+def with_defines(text: str, defines: list[str]) -> str:
+    """``text`` with the lines ``defines`` (e.g. ``"#define SHADING"``) put right after
+    its first line, the ``#version`` directive, where GLSL requires them to follow it."""
+    head, _, rest = text.partition("\n")
+    return "\n".join([head, *defines, rest])

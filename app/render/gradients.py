@@ -33,8 +33,8 @@ def gradient_texture(ctx: Any, volume_texture: Any, shape: tuple, scale: float, 
     """An RGBA16F 3D texture (linear filtering, clamped) of the gradient of the volume in
     ``volume_texture`` (``shape`` voxels, ``scale`` data units per texel value; ``pairs``:
     the slice-pairs 2D array layout). ``ctx`` must be current."""
-    define = "#define SLICE_PAIRS\n" if pairs else ""
-    src = shaders.read("gradient.comp.glsl").replace("#version 430\n", "#version 430\n" + define)
+    defines = ["#define SLICE_PAIRS"] if pairs else []
+    src = shaders.with_defines(shaders.read("gradient.comp.glsl"), defines)
     hold = gl_programs.compute_shader(ctx, src)
     try:
         prog = hold.program

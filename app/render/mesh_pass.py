@@ -138,8 +138,7 @@ class MeshRenderer:
             defines.append("#define LINEAR")
         elif self.position == "hardware":
             defines.append("#define HW_TRILINEAR")
-        head, _, rest = shaders.source("mesh.vert.glsl").partition("\n")
-        vert = "\n".join([head, *defines, rest])
+        vert = shaders.with_defines(shaders.source("mesh.vert.glsl"), defines)
         try:  # compiled once per context, shared by its mesh renderers (gl_programs)
             if feedback:  # vertex stage only, its outputs captured (deformed_vertices)
                 hold = gl_programs.program(

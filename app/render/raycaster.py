@@ -480,8 +480,7 @@ class Renderer:
                 "warps.glsl": compose_glsl(warps),
             },
         )
-        head, _, rest = frag.partition("\n")
-        frag = "\n".join([head, *defines, rest])
+        frag = shaders.with_defines(frag, defines)
         from voxwarp.deform import gl_programs
 
         try:  # compiled once per context, shared by its renderers (gl_programs)

@@ -146,3 +146,9 @@ def test_every_shipped_shader_expands_with_each_file_once(name: str) -> None:
     for inc in begins:
         if inc not in extra:
             assert shaders.read(inc) in out
+
+
+def test_with_defines_follow_the_version_line() -> None:
+    text = shaders.with_defines("#version 430\nvoid main() {}\n", ["#define A", "#define B 2"])
+    assert text == "#version 430\n#define A\n#define B 2\nvoid main() {}\n"
+    assert shaders.with_defines("#version 430\nx\n", []) == "#version 430\nx\n"
