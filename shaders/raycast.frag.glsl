@@ -98,14 +98,8 @@ vec3 g_ub;
 float segment_weight(float t) { return clamp((t - g_ta) / max(g_tb - g_ta, 1e-30), 0.0, 1.0); }
 vec3 segment_texel(float t) { return mix(g_ua, g_ub, segment_weight(t)); }
 #ifdef SHADING
-mat3 g_Ja;
+mat3 g_Ja;   // the chain's Jacobian at the segment's ends
 mat3 g_Jb;
-mat3 jacobian_at(float t) {
-    float f = segment_weight(t);
-    return g_Ja * (1.0 - f) + g_Jb * f;
-}
-#else
-mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
 #endif
 // Samples the segment starting at ray parameter t may span (at least 1).
 int segment_samples(float t) {
@@ -134,6 +128,12 @@ void segment_to(float te, bool joined) {
     g_ua = joined ? g_ub : ue;
     g_tb = te;
     g_ub = ue;
+}
+#endif
+#if defined(PIECEWISE) && defined(SHADING)
+mat3 jacobian_at(float t) {   // interpolated along the segment, as the position
+    float f = segment_weight(t);
+    return g_Ja * (1.0 - f) + g_Jb * f;
 }
 #else
 mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
