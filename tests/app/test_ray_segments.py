@@ -66,7 +66,9 @@ def render(offscreen: Any, scene: Scene, segment: Any) -> np.ndarray:
 
 
 def shaded_scene(volume: Volume, warps: list) -> Scene:
-    return Scene(volume, transfer_function=TF, warps=warps, view=(-50, 25), jitter=False)
+    return Scene(
+        volume, transfer_function=TF, warps=warps, view=(-50, 25), jitter=False, shading=True
+    )
 
 
 def test_a_linear_field_renders_the_same_with_segments_of_8(offscreen: Any) -> None:
