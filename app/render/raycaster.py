@@ -216,8 +216,6 @@ class Renderer:
         self._skip_maps = SkipMapCache(ctx, empty_space_skipping=bool(empty_space_skipping))
         #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
         self.last_skip_kind = "none"
-        #: shading from a precomputed gradient texture (app/render/gradients.py): "auto"
-        #: for volumes of at most gradients.MAX_VOXELS voxels, True always, False never
         self.gradient_texture: bool | str = "auto"
         #: whether the last draw shaded from the gradient texture
         self.last_gradient_texture = False
@@ -362,6 +360,19 @@ class Renderer:
     @cell_skipping.setter
     def cell_skipping(self, value: bool) -> None:
         self._skip_maps.cell_skipping = value
+
+    @property
+    def gradient_texture(self) -> bool | str:
+        """Shading from a precomputed gradient texture (:mod:`voxwarp.render.gradients`):
+        ``"auto"`` for volumes of at most ``gradients.MAX_VOXELS`` voxels, True always,
+        False never (six volume fetches per shaded sample)."""
+        return self._gradient_texture
+
+    @gradient_texture.setter
+    def gradient_texture(self, value: bool | str) -> None:
+        if value not in ("auto", True, False):
+            raise RenderError(f"gradient_texture must be 'auto', True or False; got {value!r}")
+        self._gradient_texture = value if value == "auto" else bool(value)
 
     @property
     def ray_segment(self) -> int | str:

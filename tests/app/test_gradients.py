@@ -103,3 +103,12 @@ def test_released_with_its_volume(gl_ctx: Any) -> None:
         gpu = r.renderer._volume_gpu(vol)
         assert gpu.gradient is not None
     assert gpu.gradient is None
+
+
+def test_bad_setting_names_the_choices(offscreen: Any) -> None:
+    from voxwarp.errors import RenderError
+
+    r = offscreen(8, 8)
+    with pytest.raises(RenderError, match="gradient_texture must be 'auto', True or False"):
+        r.renderer.gradient_texture = "yes"
+    assert r.renderer.gradient_texture == "auto"
