@@ -27,6 +27,7 @@ from voxwarp.bench.interactive import edit_family
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
+from voxwarp.render.ray_segments import RaySegments, segment_lengths
 from voxwarp.render.raycaster import OffscreenRenderer
 from voxwarp.scene import Scene
 
@@ -90,6 +91,53 @@ def _time(draw: Any, scene: Scene) -> float:
     return (time.perf_counter() - t) * 1000
 
 
+def _long_cells(scene: Scene, tolerance: float) -> float:
+    """Share of the scene's segment-map cells that allow 4 samples or more."""
+    vol = scene.volume
+    lo, hi = scene.ray_bounds()
+    longest = RaySegments().max_length(vol)
+    m = segment_lengths(scene.warps, lo, hi, vol.world_to_texel_matrix(), tolerance, longest)
+    return float(np.mean(m.lengths >= 4 * scene.sample_distance_mm))
+
+
+def _case_row(
+    r: OffscreenRenderer, base: Scene, case: str, frames: int, tolerance: float, refs: list
+) -> SegmentRow:
+    """One deformation: its images per setting, then frames of every setting interleaved
+    with the undeformed one (appended to ``refs``)."""
+    scene, session = _scene(base, case)
+    rr = r.renderer
+
+    def draw(sc: Scene) -> None:
+        with r._current():
+            rr.draw(sc, r.framebuffer)
+            r.ctx.finish()
+
+    try:
+        images, times = {}, {str(s): [] for s in SETTINGS}
+        for s in SETTINGS:
+            rr.ray_segment = s
+            images[str(s)] = r.render(scene)[..., :3].astype(float)
+        for _ in range(frames):
+            refs.append(_time(draw, base))
+            for s in SETTINGS:
+                rr.ray_segment = s
+                times[str(s)].append(_time(draw, scene))
+        ref = statistics.median(refs[-frames:])
+        diffs = {k: np.abs(v - images["1"]) for k, v in images.items()}
+        return SegmentRow(
+            case,
+            {k: statistics.median(v) / ref for k, v in times.items()},
+            {k: float(d.max()) for k, d in diffs.items()},
+            {k: float(d.mean()) for k, d in diffs.items()},
+            _long_cells(scene, tolerance),
+        )
+    finally:
+        rr.ray_segment = 1
+        if session is not None:
+            session.close()
+
+
 def bench_segments(
     size: tuple[int, int] = (512, 512),
     frames: int = 5,
@@ -102,47 +150,15 @@ def bench_segments(
     tf = suggested_transfer_function(DEFAULT_SAMPLE)
     base = Scene(vol, transfer_function=tf, view=(-60, 20), zoom=1.2, jitter=False)
     with OffscreenRenderer(*size) as r:
-        rr = r.renderer
-        rr.warped_skip_maps = "always"
-        rr.ray_tolerance = tolerance
-
-        def draw(scene: Scene) -> None:
-            with r._current():
-                rr.draw(scene, r.framebuffer)
-                r.ctx.finish()
-
+        r.renderer.warped_skip_maps = "always"
+        r.renderer.ray_tolerance = tolerance
         report = SegmentReport(size, tolerance, 0.0, renderer=str(r.ctx.info.get("GL_RENDERER")))
         refs: list[float] = []
         for case in cases:
-            scene, session = _scene(base, case)
-            images, times = {}, {str(s): [] for s in SETTINGS}
-            for s in SETTINGS:
-                rr.ray_segment = s
-                images[str(s)] = r.render(scene)[..., :3].astype(float)
-            for _ in range(frames):
-                refs.append(_time(draw, base))
-                for s in SETTINGS:
-                    rr.ray_segment = s
-                    times[str(s)].append(_time(draw, scene))
-            rr.ray_segment = "auto"
-            draw(scene)
-            maps = rr._volume_gpu(vol).skip.warped_segments
-            long_cells = float(np.mean(maps.lengths >= 4 * scene.sample_distance_mm))
-            ref = statistics.median(refs[-frames:])
-            diffs = {k: np.abs(v - images["1"]) for k, v in images.items()}
-            row = SegmentRow(
-                case,
-                {k: statistics.median(v) / ref for k, v in times.items()},
-                {k: float(d.max()) for k, d in diffs.items()},
-                {k: float(d.mean()) for k, d in diffs.items()},
-                long_cells,
-            )
+            row = _case_row(r, base, case, frames, tolerance, refs)
             report.rows.append(row)
             if log:
                 log(f"{case}: " + ", ".join(f"K={k} {v:.2f}x" for k, v in row.ratios.items()))
-            if session is not None:
-                session.close()
-        rr.ray_segment = 1
         report.reference_ms = statistics.median(refs)
     return report
 
