@@ -213,6 +213,18 @@ class SampleStats:
     vacated: int
     swept: int
     outside_field: int
+    #: the paper's way (Table 1): samples inside the wires' regions of influence, and
+    #: those of them that need no mapping (0, 0 when no region was given)
+    region_samples: int = 0
+    region_identity: int = 0
+
+    @property
+    def percent_ignored_in_region(self) -> float | None:
+        """Ignored samples in % of the samples inside the regions of influence (the
+        paper's Table 1 statistic), or None without a region."""
+        if not self.region_samples:
+            return None
+        return 100.0 * self.region_identity / self.region_samples
 
     @property
     def ignored(self) -> int:
@@ -753,8 +765,11 @@ def ray_sample_stats(
     subsample: int = STATS_SUBSAMPLE,
     chunk: int = 1_000_000,
     label: str = "",
+    region: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> SampleStats:
-    """Classify the ray samples of ``scene`` (deformed by ``warp``) on the CPU."""
+    """Classify the ray samples of ``scene`` (deformed by ``warp``) on the CPU; with
+    ``region`` (points (N, 3) -> bool (N,), e.g. :func:`influence_region`) also count
+    the samples inside it (the paper's Table 1 counts only those)."""
     ro, rd, t_far = camera_rays(camera, size, subsample)
     lo, hi = (np.asarray(v, dtype=np.float64) for v in scene.ray_bounds())
     step = float(scene.sample_distance_mm)
@@ -772,7 +787,7 @@ def ray_sample_stats(
     n = np.clip(n, 0, max_steps).astype(np.int64)
     fld = warp.field
     counts = np.zeros(3, dtype=np.int64)
-    outside = 0
+    outside = in_region = region_identity = 0
     # rays in chunks of about `chunk` samples
     cum = np.cumsum(n)
     start = 0
@@ -790,6 +805,10 @@ def ray_sample_stats(
         p = ro[ray] + t[:, None] * rd[ray]
         state, _, _ = warp._lookup(p)
         counts += np.bincount(state, minlength=3)[:3]
+        if region is not None:
+            inside = np.asarray(region(p), dtype=bool)
+            in_region += int(np.count_nonzero(inside))
+            region_identity += int(np.count_nonzero(inside & (state == 0)))
         g = (p - fld.lo) / fld.spacing
         outside += int(np.count_nonzero(~np.all((g >= 0) & (g < np.asarray(fld.shape)), axis=1)))
     return SampleStats(
@@ -804,7 +823,35 @@ def ray_sample_stats(
         vacated=int(counts[1]),
         swept=int(counts[2]),
         outside_field=outside,
+        region_samples=in_region,
+        region_identity=region_identity,
     )
+
+
+def influence_region(
+    wires: Sequence[Any], samples: int = 1025
+) -> Callable[[np.ndarray], np.ndarray]:
+    """The wires' regions of influence as a point test: within ``radius`` times the
+    largest scale of a modified wire (where swept samples land) or within ``radius`` of
+    a base wire (the place they left). Distances are to ``samples`` points per curve
+    (their spacing, a fraction of a mm on these wires, is the test's tolerance)."""
+    from scipy.spatial import cKDTree
+
+    parts = []
+    u = np.linspace(0.0, 1.0, int(samples))
+    for w in wires:
+        smax = float(np.max(w.scale[:, 1]))
+        parts.append((cKDTree(w.modified.evaluate(u)), w.radius * smax))
+        parts.append((cKDTree(w.base.evaluate(u)), w.radius))
+
+    def inside(points: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(points), dtype=bool)
+        for tree, r in parts:
+            d, _ = tree.query(points, distance_upper_bound=r)
+            out |= np.isfinite(d)
+        return out
+
+    return inside
 
 
 # ---------------------------------------------------------------------- 3. render

@@ -8,7 +8,7 @@ DEMOS: tuple[str, ...] = ("massspring", "chainmail", "wires", "lattice", "compar
 DEMO_TITLES: dict[str, str] = {
     "massspring": "Mass-spring: explicit vs semi-implicit Euler",
     "chainmail": "3D ChainMail: propagation order and relaxation (thesis Figure 13)",
-    "wires": "Wires: attribute field scale 1:1 ... 1:4096 (wire paper Figure 12, Table 1)",
+    "wires": "Wires: field scales, samples ignored, identity cost (wire paper Fig. 12, Tables 1-3)",
     "lattice": "Trilinear lattices vs 4x4 matrices (GRAPP 2010 table)",
     "compare": "Mass-spring vs ChainMail on the same drag; CPU vs GPU (thesis Figures 12-13)",
     "registration": "A SimpleITK registration rendered through its displacement field",
