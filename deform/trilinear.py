@@ -85,6 +85,8 @@ __all__ = [
     "UNIT_CORNERS",
     "TrilinearGrid",
     "TrilinearTransform",
+    "carry_normals",
+    "cofactor_matrix",
     "corner_to_coefficient_matrix",
 ]
 
@@ -103,6 +105,11 @@ LINEAR_RTOL = 1e-10
 SINGULAR_RTOL = 1e-12
 #: How far (in cell coordinates) a grid inverse may land outside its cell and count.
 INSIDE_TOL = 1e-6
+#: Length of the direct normal ``J n`` (relative to ``|n|`` times J's largest column)
+#: below which :func:`carry_normals` falls back to the tangent-space normal.
+DIRECT_NORMAL_RTOL = 1e-6
+#: Normal methods of :func:`carry_normals` (GRAPP 2010, section 4.2).
+NORMAL_METHODS: tuple[str, ...] = ("normal", "tangent")
 #: Points per batch of the grid inverse (bounds the memory of its (point, cell) pairs).
 INVERSE_CHUNK = 65536
 #: Two accepted preimages further apart than this (unit-cube coordinates): a fold.
@@ -315,6 +322,54 @@ def _affine_inverse(a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarra
     if not abs(det) > SINGULAR_RTOL * scale:
         return None
     return np.linalg.inv(a), t
+
+
+def cofactor_matrix(a: np.ndarray) -> np.ndarray:
+    """Cofactor matrices of (..., 3, 3) matrices: ``cof(A) = det(A) A^-T`` where A is
+    invertible, still defined where it is singular. ``cof(A) (x cross y) = A x cross A y``."""
+    c0, c1, c2 = a[..., :, 0], a[..., :, 1], a[..., :, 2]
+    return np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=-1)
+
+
+def carry_normals(jac: Any, normals: Any, method: str = "normal") -> np.ndarray:
+    """Unit normals carried by Jacobians ``J = d world / d local`` (GRAPP 2010, section 4.2).
+
+    The paper lists two methods and numbers them differently in Figure 5's caption
+    (method 1: direct) and in section 4.2's text (first: tangent space), so they are
+    named by what they do. The vertex shader ``shaders/mesh.vert.glsl`` does the same.
+
+    Parameters
+    ----------
+    jac : array_like, shape (N, 3, 3)
+        Jacobians at the vertices.
+    normals : array_like, shape (N, 3)
+        Local vertex normals.
+    method : str
+        ``"normal"``, the direct transform ``J n``: smooth across cell faces (J's
+        columns along a shared face agree on both sides), not always orthogonal to the
+        deformed surface. ``"tangent"``: two tangents ``t1 x t2 = n`` through J, crossed,
+        ``= cof(J) n``: orthogonal to the deformed surface, but it jumps across cell
+        faces. Where ``J n`` nearly vanishes (``n`` in J's null space, a flattened
+        lattice) ``"normal"`` falls back to ``"tangent"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N, 3) float64 unit normals.
+    """
+    if method not in NORMAL_METHODS:
+        raise WarpError(f"normal method must be one of {', '.join(NORMAL_METHODS)}; got {method!r}")
+    j = np.asarray(jac, dtype=np.float64).reshape(-1, 3, 3)
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    out = np.einsum("nij,nj->ni", cofactor_matrix(j), n)
+    if method == "normal":
+        direct = np.einsum("nij,nj->ni", j, n)
+        scale = np.linalg.norm(j, axis=1).max(axis=1) * np.linalg.norm(n, axis=1)
+        ok = np.linalg.norm(direct, axis=1) > DIRECT_NORMAL_RTOL * scale
+        out[ok] = direct[ok]
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return out / length
 
 
 # ========================================================== TrilinearTransform

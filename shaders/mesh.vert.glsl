@@ -13,26 +13,38 @@
 //   which is the same map on paper, but GPUs filter with 8-bit fixed-point weights
 //   (1/256 of a cell), so it is an option, not the default. Vertices outside the box
 //   continue the border cell's trilinear map (as TrilinearGrid.__call__ does).
-// * Normals (section 4.2), per instance: u_normal_method 0 ("normal") carries n by the
-//   inverse transpose of the analytic Jacobian J = d world / d local, 1 ("tangent")
-//   carries two tangents t1, t2 (t1 x t2 = n) by J and takes their cross product, which
-//   equals cof(J) n = det(J) J^-T n: the same direction where det J > 0, the opposite
-//   where the lattice is mirrored or folded (det J < 0), and still defined where J is
-//   singular (there "normal" falls back to it). Normals are normalised per vertex before
-//   interpolation and the fragment shader lights both sides, so both methods shade alike.
+// * Normals (section 4.2), per instance. The paper names two methods and numbers them
+//   oppositely in Figure 5's caption (method 1: direct) and in the text of 4.2 (first:
+//   tangent space), so they go by what they do. u_normal_method 0 ("normal", the direct
+//   transform): J n, the normal carried as a vector. Where a surface crosses a shared
+//   cell face its normal lies nearly in the face, whose Jacobian columns agree on both
+//   sides, so J n is continuous there: smooth shading, though J n need not be orthogonal
+//   to the deformed surface. 1 ("tangent"): two tangents t1, t2 (t1 x t2 = n) through J,
+//   crossed, = cof(J) n = det(J) J^-T n: orthogonal to the deformed surface, but the
+//   derivative across a cell face of a C0 lattice jumps, so seams show. Where J n nearly
+//   vanishes (a flattened lattice) method 0 falls back to method 1. CPU reference:
+//   voxwarp.deform.trilinear.carry_normals.
+// * LINEAR draws matrix instances and lattices whose grid is one affine map (the paper's
+//   parallelepiped check, section 4.1) with J = the matrix's linear part: a lattice keeps
+//   its method (the same normals as the trilinear path). A matrix instance has no cell
+//   faces to smooth, so its "normal" is the exact inverse transpose (u_normal_method 2,
+//   u_normal_matrix; the cofactor matrix where it is singular) and its "tangent" is
+//   cof(J) n as above.
+//   Normals are normalised per vertex before interpolation; the fragment shader lights
+//   both sides.
 
 in vec3 in_position;    // local coordinates
 in vec3 in_normal;      // local unit normal
 
 uniform mat4 u_view_proj;       // world -> clip
-uniform int u_normal_method;    // 0: J^-T n; 1: cross(J t1, J t2)
+uniform int u_normal_method;    // 0: J n; 1: cross(J t1, J t2); 2 (LINEAR): u_normal_matrix n
 
 out vec3 v_world;
 out vec3 v_normal;
 
 #ifdef LINEAR
 uniform mat4 u_model;           // local -> world (affine)
-uniform mat3 u_normal_matrix;   // inverse transpose of the linear part
+uniform mat3 u_normal_matrix;   // matrix instances: inverse transpose of the linear part
 
 vec3 place(vec3 p, out mat3 J) {
     J = mat3(u_model);
@@ -76,14 +88,14 @@ vec3 place(vec3 p, out mat3 J) {
 #endif
 
 vec3 carry_normal(mat3 J, vec3 n) {
-    if (u_normal_method == 0) {
 #ifdef LINEAR
-        return u_normal_matrix * n;
-#else
-        float det = determinant(J);
-        if (abs(det) > 1e-30) return transpose(inverse(J)) * n;
-        // singular J: the cofactor form below stays defined
+    if (u_normal_method == 2) return u_normal_matrix * n;
 #endif
+    if (u_normal_method == 0) {
+        vec3 d = J * n;
+        float scale = max(max(length(J[0]), length(J[1])), length(J[2])) * length(n);
+        if (length(d) > 1e-6 * scale) return d;
+        // n in J's null space (a flattened lattice): the tangent form below stays defined
     }
     vec3 a = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
     vec3 t1 = normalize(cross(a, n));
@@ -95,8 +107,8 @@ void main() {
     mat3 J;
     vec3 world = place(in_position, J);
     v_world = world;
-    // unit length before interpolation: J^-T n and cof(J) n differ in length by det J,
-    // which varies over a bent lattice and would weight the interpolation differently
+    // unit length before interpolation: |J n| and |cof(J) n| vary over a bent lattice
+    // and would weight the interpolation differently
     v_normal = normalize(carry_normal(J, in_normal));
     gl_Position = u_view_proj * vec4(world, 1.0);
 }

@@ -60,7 +60,7 @@ import numpy as np
 from voxwarp.bench.papers import lattice_ratio_range
 from voxwarp.bench.render import best_times, cpu_count, load_average
 from voxwarp.core.camera import Camera
-from voxwarp.core.mesh import MeshInstance
+from voxwarp.core.mesh import DEFAULT_NORMAL_METHOD, MeshInstance
 from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.render.mesh_pass import POSITIONS, MeshRenderer
 
@@ -712,7 +712,7 @@ def wrap_instances(composed: Sequence[Any]) -> list[Any]:
                 transform,
                 box=None if box is None else (np.asarray(box[0]), np.asarray(box[1])),
                 color=PALETTE[len(out) % len(PALETTE)],
-                normal_method="normal",
+                normal_method=DEFAULT_NORMAL_METHOD,
                 name=c.node.name or mesh.name,
             )
         )

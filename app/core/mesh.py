@@ -38,7 +38,7 @@ import numpy as np
 
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.limits import MAX_MESH_TRIANGLES
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.trilinear import TrilinearGrid, carry_normals, cofactor_matrix
 from voxwarp.deform.warp import box_corners
 from voxwarp.errors import MeshError
 
@@ -48,6 +48,10 @@ MESH_FORMATS: tuple[str, ...] = (".obj", ".stl", ".ply", ".glb", ".gltf")
 MESH_EMBED_LIMIT_BYTES = 4 * 2**20
 #: How a lattice instance transforms vertex normals (see :mod:`voxwarp.render.mesh_pass`).
 NORMAL_METHODS: tuple[str, ...] = ("normal", "tangent")
+#: The default: the tangent-space normal, whose error against the smooth shape a
+#: lattice samples shrinks as its cells get finer (the direct one keeps the error of a
+#: non-uniform stretch; docs/benchmarks.md, "Lattice normals").
+DEFAULT_NORMAL_METHOD = "tangent"
 #: Colour of an instance when none is given (RGBA, straight alpha).
 DEFAULT_COLOR = (0.85, 0.82, 0.75, 1.0)
 #: Relative area below which a face counts as degenerate (of the squared bounding diagonal).
@@ -847,8 +851,13 @@ class MeshInstance:
     color
         RGBA (straight alpha) in [0, 1]; ``(r, g, b)`` means opaque.
     normal_method
-        How a lattice carries vertex normals (GRAPP 2010, section 4.2): ``"normal"``
-        ``J^-T n`` or ``"tangent"`` (two tangents through ``J``, then their cross product).
+        How a lattice carries vertex normals (GRAPP 2010, section 4.2; see
+        :func:`voxwarp.deform.trilinear.carry_normals`): ``"normal"``, the paper's direct
+        transform ``J n`` (smooth across cell faces, not always orthogonal to the
+        surface), or ``"tangent"``, two tangents through ``J`` crossed (orthogonal to the
+        surface, seams at cell faces; the default, :data:`DEFAULT_NORMAL_METHOD`). A
+        matrix has no cell faces: there ``"normal"`` is the exact inverse transpose and
+        ``"tangent"`` ``cof(A) n``.
     name
         Display name.
     """
@@ -859,7 +868,7 @@ class MeshInstance:
         transform: Any = None,
         box: tuple[Sequence[float], Sequence[float]] | None = None,
         color: Sequence[float] = DEFAULT_COLOR,
-        normal_method: str = "normal",
+        normal_method: str = DEFAULT_NORMAL_METHOD,
         name: str = "",
     ) -> None:
         if not isinstance(mesh, Mesh):
@@ -970,6 +979,47 @@ class MeshInstance:
         m = self.matrix()
         return p @ m[:3, :3].T + m[:3, 3]
 
+    def affine_matrix(self) -> np.ndarray | None:
+        """The 4x4 local -> world matrix when the instance is one affine map, else None.
+
+        A matrix (or None: identity), or a lattice whose grid is one affine map
+        (:attr:`TrilinearGrid.is_linear`: the paper's parallelepiped check, GRAPP 2010,
+        section 4.1), composed with the box normalisation.
+        """
+        if not self.is_lattice:
+            return self.matrix()
+        grid = self._transform
+        if not grid.is_linear:
+            return None
+        return grid.matrix() @ self.box_to_unit()
+
+    def world_normals(self, points: Any = None, normals: Any = None) -> np.ndarray:
+        """CPU reference of the vertex shader's normals: (N, 3) float64 unit vectors.
+
+        ``points``/``normals``: local positions and normals (default: the mesh's). Lattices
+        carry them by their Jacobian as :attr:`normal_method` says
+        (:func:`voxwarp.deform.trilinear.carry_normals`); a matrix by its inverse
+        transpose (``"normal"``; the cofactor matrix where it is singular) or its
+        cofactor matrix (``"tangent"``).
+        """
+        p = self.mesh.vertices if points is None else points
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+        n = self.mesh.normals if normals is None else normals
+        n = np.asarray(n, dtype=np.float64).reshape(-1, 3)
+        if self.is_lattice:
+            lo, hi = self.box
+            jac = np.asarray(self._transform.jacobian((p - lo) / (hi - lo))).reshape(-1, 3, 3)
+            return carry_normals(jac / (hi - lo)[None, None, :], n, self.normal_method)
+        a = self.matrix()[:3, :3]
+        singular = abs(float(np.linalg.det(a))) <= 1e-300
+        if self.normal_method == "tangent" or singular:
+            m = cofactor_matrix(a)
+        else:
+            m = np.linalg.inv(a).T
+        out = n @ m.T
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return out / np.linalg.norm(out, axis=1, keepdims=True)
+
     def world_vertices(self) -> np.ndarray:
         """(N, 3) float64 deformed vertex positions (CPU)."""
         return self.local_to_world(self.mesh.vertices)
@@ -1038,7 +1088,7 @@ class MeshInstance:
             transform,
             box=d.get("box"),
             color=d.get("color", DEFAULT_COLOR),
-            normal_method=d.get("normal_method", "normal"),
+            normal_method=d.get("normal_method", DEFAULT_NORMAL_METHOD),
             name=str(d.get("name", "")),
         )
 
@@ -1064,7 +1114,7 @@ PALETTE = (
 
 
 def instances_from_scene_graph(
-    root: Any, resolution: int | None = None, normal_method: str = "normal"
+    root: Any, resolution: int | None = None, normal_method: str = DEFAULT_NORMAL_METHOD
 ) -> list[MeshInstance]:
     """One :class:`MeshInstance` per scene-graph leaf whose geometry is a mesh.
 
@@ -1132,6 +1182,7 @@ def mesh_instances_bounds(
 
 
 __all__ = [
+    "DEFAULT_NORMAL_METHOD",
     "GENERATORS",
     "MESH_EMBED_LIMIT_BYTES",
     "MESH_FORMATS",

@@ -100,21 +100,10 @@ def warped_geometry(
 
 
 def _placed(instance: MeshInstance) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices and normals placed by the instance's own matrix or lattice (CPU)."""
-    mesh = instance.mesh
-    v = mesh.vertices.astype(np.float64)
-    n = mesh.normals.astype(np.float64)
-    world = instance.local_to_world(v)
-    if instance.is_lattice:
-        lo, hi = instance.box
-        jac = np.asarray(instance.transform.jacobian((v - lo) / (hi - lo)))  # type: ignore[union-attr]
-        jac = jac.reshape(-1, 3, 3) / (hi - lo)[None, None, :]
-    else:
-        jac = np.broadcast_to(instance.matrix()[:3, :3], (len(v), 3, 3))
-    ok = np.abs(np.linalg.det(jac)) > 1e-300
-    out = n.copy()
-    out[ok] = np.linalg.solve(np.transpose(jac[ok], (0, 2, 1)), n[ok][..., None])[..., 0]
-    return world, out
+    """Vertices and normals placed by the instance's own matrix or lattice (CPU; the
+    normals as the vertex shader carries them, :meth:`MeshInstance.world_normals`)."""
+    v = instance.mesh.vertices.astype(np.float64)
+    return instance.local_to_world(v), instance.world_normals(v)
 
 
 def warped_bounds(

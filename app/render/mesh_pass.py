@@ -8,15 +8,21 @@ leaf gets one composed transform, a 4x4 matrix or a grid of trilinear cells, and
 vertex shader applies it, so a vertex costs the same whatever the depth of the graph.
 Here (``shaders/mesh.vert.glsl``):
 
-* a matrix instance is drawn by the ``LINEAR`` program (one matrix product per vertex);
+* a matrix instance is drawn by the ``LINEAR`` program (one matrix product per vertex),
+  and so is a lattice whose grid is one affine map
+  (:meth:`voxwarp.core.mesh.MeshInstance.affine_matrix`): the paper's fast path for
+  parallelepipeds (section 4.1, last paragraph), same positions and normals;
 * a lattice instance uploads its grid nodes as an RGBA32F 3D texture
   (:meth:`voxwarp.deform.trilinear.TrilinearGrid.texture_data`); each vertex fetches the 8 nodes
   of its cell and evaluates the trilinear map and its analytic Jacobian (exact float
   arithmetic). ``position="hardware"`` evaluates the position with one hardware
   trilinear fetch at node-centred coordinates instead (the paper's texture lookup;
   GPUs quantise filter weights to 8 bits, 1/256 of a cell);
-* normals follow section 4.2, per instance: ``"normal"`` (``J^-T n``) or ``"tangent"``
-  (two tangents through ``J``, crossed).
+* normals follow section 4.2, per instance: ``"normal"``, the direct transform ``J n``
+  (smooth across cell faces), or ``"tangent"`` (two tangents through ``J``, crossed:
+  orthogonal to the surface, seams at cell faces); a matrix instance's ``"normal"`` is
+  its exact inverse transpose (:func:`voxwarp.deform.trilinear.carry_normals` and
+  ``shaders/mesh.vert.glsl`` say more).
 
 With a scene's warp chain (``draw(..., warps=...)``) the meshes move with the volume:
 an all-affine chain joins the instance matrix; any other chain is baked per vertex on the
@@ -47,7 +53,7 @@ from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance
 from voxwarp.core.mesh_warp import affine_forward, moves_meshes, warped_geometry
 from voxwarp.deform import gl_programs
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.trilinear import TrilinearGrid, cofactor_matrix
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.errors import RenderError
 
@@ -107,16 +113,22 @@ class MeshRenderer:
     position
         ``"exact"`` (default): lattice positions from the 8 fetched corner nodes;
         ``"hardware"``: one hardware-trilinear texture fetch (see the module docstring).
+    linear_fast_path
+        Draw lattices whose grid is one affine map with the ``LINEAR`` program (default
+        True; False keeps them on the trilinear program, for benchmarks).
 
     GPU buffers are cached per mesh object and node textures per grid object (both are
     immutable), programs per variant; :meth:`release` frees everything (idempotent).
     """
 
-    def __init__(self, ctx: Any, *, position: str = "exact") -> None:
+    def __init__(self, ctx: Any, *, position: str = "exact", linear_fast_path: bool = True) -> None:
         if position not in POSITIONS:
             raise RenderError(f"position must be one of {', '.join(POSITIONS)}; got {position!r}")
         self.ctx = ctx
         self.position = position
+        self.linear_fast_path = bool(linear_fast_path)
+        #: instances drawn or read back by each program ("linear", "trilinear")
+        self.program_uses: dict[str, int] = {"linear": 0, "trilinear": 0}
         self._programs: dict[tuple, Any] = {}
         self._meshes: dict[int, tuple[weakref.ref, _MeshGPU]] = {}
         #: buffers of instances baked through a warp chain, by mesh_warp.geometry_key
@@ -278,7 +290,9 @@ class MeshRenderer:
         if not isinstance(instance, MeshInstance):
             raise RenderError(f"deformed_vertices takes a MeshInstance; got {type(instance)}")
         self._evict_dead()
-        prog = self._program(not instance.is_lattice, feedback=True)
+        linear = self._is_linear(instance)
+        self.program_uses["linear" if linear else "trilinear"] += 1
+        prog = self._program(linear, feedback=True)
         self._set_instance_uniforms(prog, instance, np.eye(4), (0.0, 0.0, 1.0, 0.0))
         gpu = self._mesh_gpu(instance.mesh)
         n = instance.mesh.n_vertices
@@ -327,28 +341,40 @@ class MeshRenderer:
     def _draw_instance(
         self, inst: MeshInstance, gpu: _MeshGPU, view_proj: np.ndarray, eye: tuple
     ) -> None:
-        prog = self._program(not inst.is_lattice)
+        linear = self._is_linear(inst)
+        self.program_uses["linear" if linear else "trilinear"] += 1
+        prog = self._program(linear)
         self._set_instance_uniforms(prog, inst, view_proj, eye)
         gpu.vao(self.ctx, prog).render(mode=self.ctx.TRIANGLES, vertices=gpu.count)
+
+    def _is_linear(self, inst: MeshInstance) -> bool:
+        """Whether ``inst`` is drawn by the ``LINEAR`` program: a matrix, or (with the
+        fast path) a lattice that is one affine map."""
+        if not inst.is_lattice:
+            return True
+        return self.linear_fast_path and inst.affine_matrix() is not None
 
     def _set_instance_uniforms(
         self, prog: Any, inst: MeshInstance, view_proj: np.ndarray, eye: tuple
     ) -> None:
-        linear = not inst.is_lattice
+        linear = self._is_linear(inst)
+        method = 0 if inst.normal_method == "normal" else 1
         values: dict[str, Any] = {
             "u_view_proj": view_proj,
-            "u_normal_method": 0 if inst.normal_method == "normal" else 1,
             "u_color": inst.color,
             "u_eye": tuple(float(v) for v in eye),
             "u_light": MESH_LIGHT,
         }
         if linear:
-            m = inst.matrix()
+            m = inst.affine_matrix()
+            assert m is not None
             values["u_model"] = m
-            a = m[:3, :3]
-            # the inverse transpose; a singular matrix keeps the (defined) cofactor matrix
-            singular = abs(float(np.linalg.det(a))) <= 1e-300
-            values["u_normal_matrix"] = _cofactor(a) if singular else np.linalg.inv(a).T
+            if not inst.is_lattice and method == 0:
+                method = 2  # a matrix's exact normal: the inverse transpose
+                a = m[:3, :3]
+                # a singular matrix keeps the (defined) cofactor matrix
+                singular = abs(float(np.linalg.det(a))) <= 1e-300
+                values["u_normal_matrix"] = cofactor_matrix(a) if singular else np.linalg.inv(a).T
         else:
             grid = inst.transform
             assert isinstance(grid, TrilinearGrid)
@@ -358,6 +384,7 @@ class MeshRenderer:
             values["u_cells"] = tuple(float(c) for c in grid.shape)
             values["u_box_lo"] = tuple(float(v) for v in lo)
             values["u_box_inv_size"] = tuple(float(v) for v in 1.0 / (hi - lo))
+        values["u_normal_method"] = method
         for name, value in values.items():
             _set_uniform(prog, name, value)
 
@@ -386,17 +413,6 @@ class MeshRenderer:
                 obj.release()
             self._feedback_fbo = None
         self._released = True
-
-
-def _cofactor(a: np.ndarray) -> np.ndarray:
-    """Cofactor matrix of a 3x3 (``cof(A) = det(A) A^-T`` where A is invertible)."""
-    return np.array(
-        [
-            np.cross(a[:, 1], a[:, 2]),
-            np.cross(a[:, 2], a[:, 0]),
-            np.cross(a[:, 0], a[:, 1]),
-        ]
-    ).T
 
 
 def _set_uniform(prog: Any, name: str, value: Any) -> None:
