@@ -69,7 +69,9 @@ class Anchor:
     tangent: tuple[float, float, float]
 
     def __post_init__(self) -> None:
-        if int(self.triangle) != self.triangle or self.triangle < 0:
+        t = self.triangle
+        integral = isinstance(t, int | np.integer) or (isinstance(t, float) and t.is_integer())
+        if isinstance(t, bool) or not integral or not 0 <= t < 2**62:
             raise WarpError(f"anchor triangle must be a face index >= 0; got {self.triangle!r}")
         p = _barycentric(self.position, "position")
         q = _barycentric(self.tangent, "tangent point")
@@ -223,6 +225,8 @@ class AnchorStrip:
             raise WarpError("a 1D anchor array needs width > 0 (mm across the strip)")
         self.thickness = float(thickness)
         self.width = None if width is None else float(width)
+        if not np.isfinite(offset):
+            raise WarpError(f"offset must be a finite length in mm; got {offset!r}")
         self.offset = float(offset)
 
     def nodes(self, vertices: Any, faces: Any) -> np.ndarray:
@@ -246,9 +250,58 @@ class AnchorStrip:
         )
         return nodes  # (n, 2, 2, 3)
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: the anchors (a list, or a list of rows), thickness, width, offset."""
+        anchors: list[Any] = [[a.to_dict() for a in r] for r in self.anchors]
+        d: dict[str, Any] = {
+            "anchors": anchors if self.two_d else anchors[0],
+            "thickness": self.thickness,
+            "offset": self.offset,
+        }
+        if self.width is not None:
+            d["width"] = self.width
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Any) -> AnchorStrip:
+        """Inverse of :meth:`to_dict` (raises :class:`WarpError`)."""
+        if not isinstance(d, dict) or not {"anchors", "thickness"} <= set(d):
+            raise WarpError("an anchor array needs 'anchors' and 'thickness' (mm)")
+        unknown = set(d) - {"anchors", "thickness", "width", "offset"}
+        if unknown:
+            raise WarpError(
+                f"unknown anchor array keys {sorted(unknown)}; allowed: anchors, thickness,"
+                " width, offset"
+            )
+        rows = d["anchors"]
+        if not isinstance(rows, list) or not rows:
+            raise WarpError("an anchor array's 'anchors' must be a list of anchors (or of rows)")
+        if isinstance(rows[0], list):
+            anchors: Any = [[Anchor.from_dict(a) for a in _row(r)] for r in rows]
+        else:
+            anchors = [Anchor.from_dict(a) for a in rows]
+        return cls(
+            anchors,
+            _length(d["thickness"], "thickness"),
+            None if d.get("width") is None else _length(d["width"], "width"),
+            _length(d.get("offset", 0.0), "offset"),
+        )
+
     def grid(self, vertices: Any, faces: Any) -> Any:
         """The attached object's :class:`voxwarp.deform.trilinear.TrilinearGrid` for the base
         mesh's current vertices (call every frame the base moves)."""
         from voxwarp.deform.trilinear import TrilinearGrid
 
         return TrilinearGrid(self.nodes(vertices, faces))
+
+
+def _row(r: Any) -> list[Any]:
+    if not isinstance(r, list):
+        raise WarpError("a 2D anchor array's rows must be lists of anchors")
+    return r
+
+
+def _length(x: Any, what: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        raise WarpError(f"anchor array {what} must be a number (mm); got {x!r:.60}")
+    return float(x)

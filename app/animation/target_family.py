@@ -52,6 +52,9 @@ class TargetFamily:
     repeatable: ClassVar[bool] = False
     #: whether its tracks take an ``"elements"`` entry
     takes_elements: ClassVar[bool] = False
+    #: further entries its tracks take (kept in :attr:`Track.extras
+    #: <voxwarp.animation.tracks.Track.extras>`)
+    extra_keys: ClassVar[tuple[str, ...]] = ()
 
     def matches(self, target: str) -> bool:
         """Whether ``target`` is one of the family's."""
@@ -64,6 +67,11 @@ class TargetFamily:
     def elements(self, d: Mapping[str, Any], keys: Keys, where: str) -> list[list[int]]:
         """The checked ``"elements"`` entry of track ``d`` (families that take it)."""
         raise AnimationError(f"{where}: this target takes no 'elements'")
+
+    def extras(self, d: Mapping[str, Any], where: str) -> dict[str, Any]:
+        """The checked :attr:`extra_keys` entries of track ``d`` (JSON values), those
+        present only."""
+        return {}
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
         """Find the family's warp in ``base`` (``template``: its JSON form) for a track

@@ -14,11 +14,13 @@ from typing import Any
 
 from voxwarp.animation.element_targets import ElementTargets
 from voxwarp.animation.lattice_targets import LatticeTargets
+from voxwarp.animation.mesh_targets import MeshTargets
 from voxwarp.animation.target_family import Binding, Keys, TargetFamily
 from voxwarp.animation.values import AnimationError
 from voxwarp.animation.wire_targets import WireTargets
 
 __all__ = [
+    "EXTRA_KEYS",
     "FAMILY_TARGET_NAMES",
     "TARGET_FAMILIES",
     "Binding",
@@ -26,12 +28,20 @@ __all__ = [
     "family_of",
     "repeatable",
     "track_elements",
+    "track_extras",
 ]
 
 #: one handler per deformation family, in the order :data:`FAMILY_TARGET_NAMES` lists them
-TARGET_FAMILIES: tuple[TargetFamily, ...] = (WireTargets(), LatticeTargets(), ElementTargets())
+TARGET_FAMILIES: tuple[TargetFamily, ...] = (
+    WireTargets(),
+    LatticeTargets(),
+    ElementTargets(),
+    MeshTargets(),
+)
 #: every family target (``i``: a wire's index)
 FAMILY_TARGET_NAMES: tuple[str, ...] = tuple(n for f in TARGET_FAMILIES for n in f.names)
+#: track entries some family takes besides target, keys, interpolation and elements
+EXTRA_KEYS: tuple[str, ...] = tuple(k for f in TARGET_FAMILIES for k in f.extra_keys)
 
 
 def family_of(target: str) -> TargetFamily | None:
@@ -56,3 +66,13 @@ def track_elements(
         owners = [n for f in TARGET_FAMILIES if f.takes_elements for n in f.names]
         raise AnimationError(f"{where}: 'elements' belongs to {', '.join(owners)} tracks only")
     return None
+
+
+def track_extras(target: str, d: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """The checked family entries (:data:`EXTRA_KEYS`) of track entry ``d``."""
+    family = family_of(target)
+    for key in EXTRA_KEYS:
+        if key in d and (family is None or key not in family.extra_keys):
+            owners = [n for f in TARGET_FAMILIES if key in f.extra_keys for n in f.names]
+            raise AnimationError(f"{where}: {key!r} belongs to {', '.join(owners)} tracks only")
+    return family.extras(d, where) if family is not None else {}

@@ -33,8 +33,8 @@ increasing). Before the first key a track holds the first value, after the last 
 the last value.
 
 Targets and their values (the deformation families' targets, ``wires[i]...``,
-``lattice.nodes`` and ``elements.drag``, are handled by one module per family in
-:mod:`voxwarp.animation.targets`):
+``lattice.nodes``, ``elements.drag`` and ``meshes[NAME].nodes``, are handled by one
+module per family in :mod:`voxwarp.animation.targets`):
 
 ``camera``
     A camera object (:meth:`voxwarp.core.camera.Camera.to_dict`; missing fields come from the
@@ -63,6 +63,12 @@ Targets and their values (the deformation families' targets, ``wires[i]...``,
     The (nx + 1, ny + 1, nz + 1, 3) nodes (mm) of the scene's one ``"lattice"`` warp
     (the shape of the scene's lattice), or ``"rest"``: the undeformed lattice over the
     warp's box.
+``meshes[NAME].nodes``
+    The node grid (mm, the shape of its lattice) of the scene's mesh instance named
+    ``NAME``, or ``"rest"`` (its box, undeformed). The track's optional
+    ``"attachments"`` lists meshes anchored to its triangles (GRAPP 2010, section 5):
+    their lattices are rebuilt from the anchors on the moved mesh every frame, see
+    :mod:`voxwarp.animation.mesh_targets`.
 ``elements.drag``
     Which elements of the scene's mass-spring or ChainMail model (an ``offset_field``
     warp saved with its model) are held, and where: the track's ``"elements"`` lists
@@ -123,6 +129,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.animation.targets import (
+    EXTRA_KEYS,
     FAMILY_TARGET_NAMES,
     TARGET_FAMILIES,
     Binding,
@@ -130,6 +137,7 @@ from voxwarp.animation.targets import (
     family_of,
     repeatable,
     track_elements,
+    track_extras,
 )
 from voxwarp.animation.values import AnimationError, array, interpolate, key_weights, number
 from voxwarp.core.camera import Camera
@@ -333,12 +341,16 @@ class Track:
         ``"linear"`` or ``"smooth"``.
     elements
         For ``elements.drag``: the (m, 3) element indices the track holds.
+    extras
+        The family's further entries (JSON values by name), e.g. the ``"attachments"``
+        of a ``meshes[NAME].nodes`` track.
     """
 
     target: str
     keys: list[tuple[float, Any]]
     interpolation: str = "linear"
     elements: list[list[int]] | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
 
     @property
     def key_frames(self) -> list[float]:
@@ -354,6 +366,7 @@ class Track:
         }
         if self.elements is not None:
             d["elements"] = [list(e) for e in self.elements]
+        d.update({k: _jsonable(v) for k, v in self.extras.items()})
         return d
 
     @classmethod
@@ -380,11 +393,11 @@ class Track:
         """
         if not isinstance(d, Mapping):
             raise AnimationError(f"{where} must be an object with 'target' and 'keys'")
-        unknown = set(d) - {"target", "keys", "interpolation", "elements"}
+        allowed = ("target", "keys", "interpolation", "elements", *EXTRA_KEYS)
+        unknown = set(d) - set(allowed)
         if unknown:
             raise AnimationError(
-                f"{where}: unknown keys {sorted(unknown)}; allowed: target, keys,"
-                " interpolation, elements"
+                f"{where}: unknown keys {sorted(unknown)}; allowed: {', '.join(allowed)}"
             )
         if "target" not in d:
             raise AnimationError(f"{where} needs a 'target'; targets: {', '.join(TARGETS)}")
@@ -416,7 +429,7 @@ class Track:
                 )
             keys.append((f, _check_value(target, k[1], f"{where}: key {n}")))
         elements = track_elements(target, d, keys, where)
-        return cls(target, keys, interpolation, elements)
+        return cls(target, keys, interpolation, elements, track_extras(target, d, where))
 
 
 def _json_number(f: float) -> int | float:

@@ -1806,6 +1806,14 @@ def _demo_lattice(
             "e",
         ),
         TourStep(
+            "Attachments follow an animated mesh",
+            "Anchors sit on a base mesh's triangles; every frame they are evaluated on the"
+            " moved mesh and rebuild the lattices of the bands and the plate attached to it,"
+            " so they follow the swaying body (the paper's Figure 8); Render Movie renders it.",
+            bundled_dir() / "lattice_accessories_anim.json",
+            None,
+        ),
+        TourStep(
             "What it costs",
             "Panel a: frames per second with lattices relative to plain 4x4 matrices (the"
             " paper's table: 76.4-80.6 %); panel b: animating many objects, where every composed"

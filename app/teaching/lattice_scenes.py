@@ -9,6 +9,11 @@
 * :func:`accessories`: a tube-shaped body bent by its own lattice, with two bands and a
   plate attached through anchors on its triangles (section 5, Figures 6 and 8, with our
   own meshes): the attachments' grids are rebuilt from the bent body, so they follow it.
+* :func:`accessories_anim`: the same body swaying one way and the other over 25 frames
+  (Figure 8 as an animation): a ``meshes[body].nodes`` track keys its lattice and carries
+  the anchors, so each frame rebuilds the attachments' grids on the moved body
+  (:mod:`voxwarp.animation.mesh_targets`); ``voxwarp animate
+  sample_volumes/lattice_accessories_anim.json -o body.mp4`` renders it.
 
 Each returns a :class:`voxwarp.scene.Scene` (meshes over a 2³ empty volume, the documented
 mesh-only convention). ``scripts/make_lattice_demos.py`` writes them to
@@ -19,6 +24,7 @@ mesh-only convention). ``scripts/make_lattice_demos.py`` writes them to
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -141,10 +147,14 @@ def bend_map(length: float, radius: float, angle: float) -> Callable[[np.ndarray
     return f
 
 
-def accessories(angle: float = 1.2) -> Scene:
-    """Figures 6 and 8: two bands and a plate anchored to a body that a lattice bends."""
-    radius, length = 6.0, 60.0
-    body = tube_mesh(length, radius, rings=60, sections=32)
+ACCESSORY_RADIUS, ACCESSORY_LENGTH = 6.0, 60.0
+_RINGS, _SECTIONS = 60, 32
+
+
+def accessory_body() -> tuple[Mesh, tuple[np.ndarray, np.ndarray]]:
+    """The tube-shaped body standing along z, and the box its lattice acts on."""
+    radius, length = ACCESSORY_RADIUS, ACCESSORY_LENGTH
+    body = tube_mesh(length, radius, rings=_RINGS, sections=_SECTIONS)
     # the tube runs along x: stand it up along z
     turn = np.array([[0, 0, -1, 0], [0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1.0]])
     v = np.c_[body.vertices, np.ones(len(body.vertices))] @ turn.T
@@ -152,13 +162,23 @@ def accessories(angle: float = 1.2) -> Scene:
     # loader computes them
     body = Mesh.from_arrays(v[:, :3], body.faces, name="body")
     box = (np.array([-radius, -radius, 0.0]), np.array([radius, radius, length]))
-    bend = TrilinearGrid.from_function(bend_map(length, radius, angle), (2, 2, 24))
-    body_inst = MeshInstance(body, bend, box=box, color=PALETTE[0], name="body")
-    bent = body_inst.local_to_world(body.vertices)  # the base mesh as the lattice shows it
-    faces = np.asarray(body.faces, dtype=np.int64)
-    instances = [body_inst]
-    rings, sections = 60, 32
-    ring_step = length / (rings - 1)
+    return body, box
+
+
+def accessory_pose(angle: float) -> TrilinearGrid:
+    """The body's lattice bent by ``angle`` radians (0: straight, the box itself)."""
+    body_box = accessory_body()[1]
+    if angle == 0.0:
+        return TrilinearGrid.from_box(*body_box, (2, 2, 24))
+    return TrilinearGrid.from_function(
+        bend_map(ACCESSORY_LENGTH, ACCESSORY_RADIUS, angle), (2, 2, 24)
+    )
+
+
+def accessory_attachments() -> list[tuple[str, AnchorStrip, Mesh, tuple[float, ...]]]:
+    """The bands and the plate: ``(name, anchor array on the body, mesh, colour)``."""
+    ring_step = ACCESSORY_LENGTH / (_RINGS - 1)
+    sections = _SECTIONS
 
     def anchors(ring: int, sects: list[int]) -> list[Anchor]:
         # the centre of quad (ring, j)'s first triangle (a, c, b); the tangent point lies
@@ -172,16 +192,13 @@ def accessories(angle: float = 1.2) -> Scene:
             for j in sects
         ]
 
+    out = []
     # bands: a ring of anchors around the body, closed by repeating the first anchor
     for k, (z, colour) in enumerate(((30.0, PALETTE[2]), (48.0, PALETTE[1]))):
         ring = round(z / ring_step)
         strip = AnchorStrip(anchors(ring, list(range(sections + 1))), thickness=1.2, width=4.0)
         band = box_mesh_tessellated((1.0, 1.0, 1.0), (64, 2, 2))
-        instances.append(
-            MeshInstance(
-                band, strip.grid(bent, faces), box=band.bounds, color=colour, name=f"band {k}"
-            )
-        )
+        out.append((f"band {k}", strip, band, colour))
     # a plate on a 2 x 5 patch of anchors on the body's side, near its top
     top = round(54.0 / ring_step)
     patch = AnchorStrip(
@@ -190,12 +207,52 @@ def accessories(angle: float = 1.2) -> Scene:
         offset=0.3,
     )
     plate = box_mesh_tessellated((1.0, 1.0, 1.0), (4, 6, 2))
-    instances.append(
-        MeshInstance(
-            plate, patch.grid(bent, faces), box=plate.bounds, color=PALETTE[3], name="plate"
-        )
-    )
+    out.append(("plate", patch, plate, PALETTE[3]))
+    return out
+
+
+def accessories(angle: float = 1.2) -> Scene:
+    """Figures 6 and 8: two bands and a plate anchored to a body that a lattice bends."""
+    body, box = accessory_body()
+    body_inst = MeshInstance(body, accessory_pose(angle), box=box, color=PALETTE[0], name="body")
+    bent = body_inst.local_to_world(body.vertices)  # the base mesh as the lattice shows it
+    faces = np.asarray(body.faces, dtype=np.int64)
+    instances = [body_inst]
+    for name, strip, mesh, colour in accessory_attachments():
+        grid = strip.grid(bent, faces)
+        instances.append(MeshInstance(mesh, grid, box=mesh.bounds, color=colour, name=name))
     return _scene(instances, (-60.0, 20.0))
+
+
+#: the animated body's poses: (key frame, bend angle in radians; 0 = straight)
+ACCESSORY_KEYS: tuple[tuple[int, float], ...] = (
+    (0, 1.2),
+    (6, 0.0),
+    (12, -1.2),
+    (18, 0.0),
+    (24, 1.2),
+)
+
+
+_ANIM_DESCRIPTION = (
+    "GRAPP 2010 Figure 8 with our own meshes: a body bent by its lattice sways one way,"
+    " then the other; two bands and a plate anchored to its triangles follow it."
+)
+
+
+def accessories_anim(keys: tuple[tuple[int, float], ...] = ACCESSORY_KEYS) -> dict[str, Any]:
+    """Figure 8 animated: the body bends one way, then the other, and back; the bands and
+    the plate follow it through their anchors (scene JSON with an ``"animation"`` entry,
+    a ``meshes[body].nodes`` track with ``"attachments"``, smooth interpolation)."""
+    from voxwarp.animation.tracks import Animation, Track
+
+    scene = accessories(keys[0][1]).copy(zoom=0.8)  # room for every pose in the held view
+    values = [(f, "rest" if a == 0.0 else accessory_pose(a).nodes.tolist()) for f, a in keys]
+    attachments = [{"mesh": n, **s.to_dict()} for n, s, _, _ in accessory_attachments()]
+    track = Track("meshes[body].nodes", values, "smooth", extras={"attachments": attachments})
+    d = {"description": _ANIM_DESCRIPTION, **scene.to_dict()}
+    d["animation"] = Animation(keys[-1][0] + 1, 12.0, [track]).to_dict()
+    return d
 
 
 #: name -> builder of the bundled demo scenes (``sample_volumes/lattice_<name>.json``)
@@ -204,3 +261,5 @@ DEMOS: dict[str, Callable[[], Scene]] = {
     "torus_tiles": torus_tiles,
     "accessories": accessories,
 }
+#: name -> builder of the bundled animated scenes (``sample_volumes/lattice_<name>.json``)
+ANIMATED: dict[str, Callable[[], dict[str, Any]]] = {"accessories_anim": accessories_anim}

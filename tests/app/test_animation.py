@@ -477,7 +477,8 @@ def test_the_bundled_animated_scenes_are_small_and_cover_every_family() -> None:
     } <= names
     for p in BUNDLED:
         assert p.stat().st_size < 300_000, p.name
-        assert json.loads(p.read_text())["volume"]["sample"] == "fish"
+        volume = json.loads(p.read_text())["volume"]
+        assert volume.get("sample") == "fish" or p.name.startswith("lattice_"), p.name
 
 
 @pytest.mark.parametrize("path", BUNDLED, ids=lambda p: p.stem)
@@ -485,7 +486,8 @@ def test_bundled_animated_scenes_load_and_evaluate(path: Path) -> None:
     states = load_animated_scene(path)
     assert len(states) == states.animation.frames >= 24
     first, last = states.scenes[0], states.scenes[-1]
-    assert first != last
+    assert first != last or "meshes" in first  # a mesh sway may loop back to its start
     middle = copy.deepcopy(states.scenes[len(states) // 2])
-    assert middle["warps"] != first["warps"]  # the deformation moves
+    moved = (middle["warps"], middle.get("meshes")) != (first["warps"], first.get("meshes"))
+    assert moved  # the deformation moves
     Scene.from_dict(middle, base_dir=states.base_dir)  # every frame is valid scene JSON
