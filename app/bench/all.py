@@ -35,6 +35,7 @@ BENCHMARKS: tuple[str, ...] = (
     "massspring",
     "chainmail",
     "wires",
+    "wire-tables",
     "lattice",
     "interactive",
     "fields",
@@ -263,6 +264,22 @@ def run_wires(quick: bool) -> dict[str, Any]:
     }
 
 
+def run_wire_tables(quick: bool) -> dict[str, Any]:
+    """``bench wire-tables`` (with ``quick``: the tubes alone, 256x128, 2 frames)."""
+    from voxwarp.bench.wire_tables import DATASETS, bench_wire_tables, markdown
+
+    kw: dict[str, Any] = {"datasets": DATASETS}
+    if quick:
+        kw = {"datasets": ("tubes",), "size": (256, 128), "frames": 2, "repeats": 1}
+    rows = bench_wire_tables(log=_log, **kw)
+    ratios: dict[str, float] = {}
+    for r in rows:
+        ratios[f"{r.dataset} identity render / standard"] = round(r.render_ratio, 3)
+        ratios[f"{r.dataset} (build + identity render) / standard"] = round(r.total_ratio, 3)
+    command = "voxwarp bench wire-tables" + (" (quick)" if quick else "")
+    return {"ratios": ratios, "issue": {}, "markdown": markdown(rows, command)}
+
+
 def run_lattice(quick: bool) -> dict[str, Any]:
     """``bench lattice`` (with ``quick``: 100k triangles, 200 objects, 256², cells 1,4)."""
     from voxwarp.bench.lattice import bench_lattice
@@ -357,6 +374,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "massspring": run_massspring,
     "chainmail": run_chainmail,
     "wires": run_wires,
+    "wire-tables": run_wire_tables,
     "lattice": run_lattice,
     "interactive": run_interactive,
     "fields": run_fields,
