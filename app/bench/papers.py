@@ -107,6 +107,9 @@ LATTICE_FPS: tuple[LatticeFpsRow, ...] = (
     LatticeFpsRow("helix", "CPU composition", 4617, "164k", 16.5, 13.3),
     LatticeFpsRow("helix", "CPU composition", 2566, "656k", 10.8, 8.4),
 )
+#: section 6: the trilinear part of the vertex shader is "roughly two and a half times"
+#: as complex as a linear transform's four scalar products (no timing of it alone)
+LATTICE_SHADER_COMPLEXITY = 2.5
 #: the text of section 6 rounds the three ratios to 75, 80 and 77 percent
 LATTICE_TEXT_PERCENT: tuple[int, int, int] = (75, 80, 77)
 

@@ -66,7 +66,10 @@ def test_wire_numbers_are_printed_in_the_paper() -> None:
 
 
 def test_lattice_numbers_are_printed_in_the_paper() -> None:
-    found = _numbers(_text("trilinear-grapp2010.txt"))
+    text = _text("trilinear-grapp2010.txt")
+    assert papers.LATTICE_SHADER_COMPLEXITY == 2.5
+    assert "two and a half" in text
+    found = _numbers(text)
     want = [str(r.objects) for r in papers.LATTICE_FPS]
     want += [f"{v:.1f}" for r in papers.LATTICE_FPS for v in (r.linear_fps, r.trilinear_fps)]
     assert [w for w in want if w not in found] == []
