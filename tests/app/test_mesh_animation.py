@@ -102,6 +102,13 @@ def test_in_between_anchors_sit_on_the_interpolated_base_triangles(
         else:  # band: (n, 2, 2, 3), centred across on the anchors
             bottom, top = nodes[:, :, 0].mean(axis=1), nodes[:, :, 1].mean(axis=1)
             np.testing.assert_allclose(bottom, p, atol=1e-9)
+            # across the band: the frame's y = n x (tangent point - P, flattened onto
+            # the triangle), the anchor's coordinate system of section 5
+            x = np.einsum("kc,kci->ki", [an.tangent for an in flat], corners) - p
+            x -= np.einsum("ki,ki->k", x, n)[:, None] * n
+            y = np.cross(n, x / np.linalg.norm(x, axis=1)[:, None])
+            across = nodes[:, 1, 0] - nodes[:, 0, 0]
+            np.testing.assert_allclose(across, strip.width * y, atol=1e-9)
         np.testing.assert_allclose(top - bottom, strip.thickness * n, atol=1e-9)
 
 
