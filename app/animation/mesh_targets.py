@@ -102,10 +102,9 @@ class MeshBinding(Binding):
         hits = [i for i, m in enumerate(self.meshes) if m.name == name]
         if len(hits) != 1:
             names = ", ".join(repr(m.name) for m in self.meshes) or "none"
-            problem = "no mesh" if not hits else f"{len(hits)} meshes"
+            fix = "use one of the scene's meshes" if not hits else "give each mesh its own name"
             raise AnimationError(
-                f"{what}: {problem} named {name!r}; give each mesh a distinct name (the"
-                f" scene's meshes: {names})"
+                f"{what}: {len(hits) or 'no'} mesh(es) named {name!r}; {fix} (meshes: {names})"
             )
         return hits[0]
 

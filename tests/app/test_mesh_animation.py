@@ -170,7 +170,7 @@ def _with_track(scene: dict[str, Any], **change: Any) -> dict[str, Any]:
     ("change", "message"),
     [
         ({"keys": [[0, [[[[0.0, 0.0, 0.0]] * 2] * 2] * 2]]}, "must have its lattice's shape"),
-        ({"target": "meshes[torso].nodes"}, "no mesh named 'torso'"),
+        ({"target": "meshes[torso].nodes"}, "no mesh(es) named 'torso'; use one of"),
         ({"target": "meshes[band 0].nodes", "attachments": []}, "placed by a matrix"),
         ({"attachments": [{"mesh": "body", "anchors": [], "thickness": 1}]}, "'anchors'"),
         ({"attachments": [{"anchors": [], "thickness": 1}]}, "needs 'mesh'"),
@@ -202,6 +202,10 @@ def test_anchors_off_the_base_mesh_and_misplaced_attachments_are_refused(
     d["animation"]["tracks"].append({"target": "step", "keys": [[0, 1.0]], "attachments": []})
     with pytest.raises(AnimationError, match=r"belongs to meshes\[NAME\].nodes tracks only"):
         Animation.from_scene_dict(d)
+    d = copy.deepcopy(scene)
+    d["meshes"][1]["name"] = "body"
+    with pytest.raises(AnimationError, match="2 mesh\\(es\\) named 'body'; give each mesh its own"):
+        evaluate(d)
     d = copy.deepcopy(scene)  # band 0 follows the body: it cannot be keyed as well
     d["animation"]["tracks"].append({"target": "meshes[band 0].nodes", "keys": [[0, "rest"]]})
     with pytest.raises(AnimationError, match=r"'band 0' is already moved by track meshes\[body\]"):
