@@ -130,11 +130,12 @@ class MeshBinding(Binding):
                 " transform ({'grid': ...}) to key its nodes"
             )
         strips = []
+        saved = base.world_vertices()  # the base as the scene saves it
         for a in track.extras.get("attachments", []):
             j = self._claim(a["mesh"], target, what)
             strip = AnchorStrip.from_dict({k: v for k, v in a.items() if k != "mesh"})
             try:
-                strip.nodes(base.world_vertices(), base.mesh.faces)
+                strip.nodes(saved, base.mesh.faces)
             except WarpError as exc:
                 raise AnimationError(f"{what}: attachment {a['mesh']!r}: {exc}") from exc
             strips.append((j, strip))
