@@ -27,17 +27,21 @@ solves ``grid(u) = p`` and returns ``q = lo + u (hi - lo)``:
   lattice cell's corners (a trilinear cell lies in the convex hull of its corners); a
   sample whose 8 baked corners are all 0 is outside the lattice for sure and skips the
   Newton steps.
-* *Newton* (``inverse="newton"``): ``iterations`` steps
-  ``u <- u - J(u)^-1 (grid(u) - p)``, written out (llvmpipe does not unroll loops).
-  ``grid(u)`` and ``J`` come from the 8 corners of u's cell, read with ``texelFetch``
-  from an RGBA32F texture of the nodes (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.
-  texture_data`). The alternative, a hardware-filtered fetch for ``grid(u)`` plus
-  forward differences towards the cell centre for ``J`` (exact, the map being linear
-  along each axis within a cell), needs 4 filtered fetches per step (32 texel reads);
-  the 8 plain fetches read a quarter of that, give ``grid`` and ``J`` together and are
-  exact in float32 on every GPU (filtered fetches interpolate with 8-bit weights on
-  most hardware: a 2^-9 cell error Newton would converge to). Outside ``[0, 1]³`` the
-  boundary cell's polynomial is extrapolated, so steps may cross the surface.
+* *Newton* (``inverse="newton"``): steps ``u <- u - du``, ``du = J(u)^-1 (grid(u) -
+  p)``, until one moves the original point by at most ``tolerance`` (``|du (hi - lo)|``,
+  mm; default :data:`DEFAULT_TOLERANCE`), at most ``max_iterations`` of them (default
+  :data:`DEFAULT_MAX_ITERATIONS`): a loop with an early exit in the shader, the same
+  rule in :meth:`LatticeWarp.solve`. With ``iterations=k`` instead, k fixed steps,
+  written out in the shader (the former default was 2). ``grid(u)`` and ``J`` come from
+  the 8 corners of u's cell, read with ``texelFetch`` from an RGBA32F texture of the
+  nodes (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.texture_data`). The alternative,
+  a hardware-filtered fetch for ``grid(u)`` plus forward differences towards the cell
+  centre for ``J`` (exact, the map being linear along each axis within a cell), needs 4
+  filtered fetches per step (32 texel reads); the 8 plain fetches read a quarter of
+  that, give ``grid`` and ``J`` together and are exact in float32 on every GPU (filtered
+  fetches interpolate with 8-bit weights on most hardware: a 2^-9 cell error Newton
+  would converge to). Outside ``[0, 1]³`` the boundary cell's polynomial is
+  extrapolated, so steps may cross the surface.
   A singular ``J`` (folded lattice) leaves u unchanged.
 
 The point is inside the lattice when the final u lies in ``[0, 1]³``. Outside:
@@ -59,7 +63,8 @@ renders exactly like no warp.
 
 The CPU reference (:meth:`LatticeWarp.apply`, :meth:`LatticeWarp.jacobian`) computes
 what the shader computes, in float64: the same baked seed, the same trilinear seed
-interpolation, the same Newton steps and outside rule (GPU and CPU agree to ~3e-5 mm).
+interpolation, the same Newton steps, stopping rule and outside rule (the tests bound
+their difference).
 
 Empty-space skipping through deformed space (:meth:`LatticeWarp.displacement_range`):
 within a baked cell the seed's displacement ``q - p`` is the trilinear interpolation of
@@ -70,15 +75,28 @@ mm), so the raycaster keeps skipping empty space.
 
 Accuracy
 --------
-The baked seed is good almost everywhere but poor where the lattice map has kinks (its
-cells' faces: the inverse of a piecewise-trilinear map is not smooth there); Newton
-converges quadratically from it. The default, ``"newton"`` with
-:data:`DEFAULT_ITERATIONS` = 2 steps, is the fewest steps whose worst residual in
-:func:`inverse_error_table` is below 0.01 mm (a hundredth of a voxel). Each Newton step
-costs 8 texel fetches per sample, the seed one filtered fetch.
+The GRAPP paper leaves the inverse aside (its conclusion points to Gomes et al. for it,
+and names the inversion a drawback of trilinear transformations); here it is Newton's
+method. The baked seed is good almost everywhere but poor where the lattice map has kinks
+(its cells' faces: the inverse of a piecewise-trilinear map is not smooth there), so a
+fixed number of steps leaves some points far off on some lattices. Newton converges
+quadratically near a root where J is regular: the last step, at most ``tolerance``, is
+to first order the error of the point before it, and the error after it is of the order
+of its square. So a point stopped by the rule lies within ``tolerance`` (mm) of its true
+original point, and its residual ``|grid(u) - p|`` within ``tolerance`` times the
+lattice's stretch ``|J diag(1 / (hi - lo))|``: the bound the tests assert on random
+lattices proven not to fold (:func:`random_lattice`, :func:`certified_nonfolding`).
+Where J is singular or the lattice folds, the iteration may stop at its cap:
+:meth:`LatticeWarp.solve` reports those points, and only their residual bounds the
+error. The default tolerance, 1e-3 mm, is a thousandth of a 1 mm voxel and well above
+float32's rounding of coordinates of a few hundred mm (~1e-5 mm); below that the GPU
+cannot meet the rule and runs to the cap. Each Newton step costs 8 texel fetches per
+sample, the seed one filtered fetch.
 
-Measurements (inverse error per mode, render cost, CPU preparation): docs/benchmarks.md,
-section 'voxwarp.deform.lattice_warp: inverse accuracy and render cost'.
+Measurements (error distribution over random lattices per variant, render cost against
+the seed alone and the former 2 fixed steps, CPU preparation): docs/benchmarks.md,
+section 'voxwarp.deform.lattice_warp: inverse accuracy and render cost', from
+``voxwarp bench lattice --inverse-only``.
 """
 
 from __future__ import annotations
@@ -96,10 +114,16 @@ from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
 
 #: Inverse modes: the baked seed alone, or the seed refined by Newton steps.
 INVERSE_MODES: tuple[str, ...] = ("newton", "baked")
-#: Newton steps of ``inverse="newton"`` (see "Accuracy" in the module docstring).
-DEFAULT_ITERATIONS = 2
-#: Most Newton steps (each is written out in the shader).
+#: Newton stops once a step moves the original point ``q`` by at most this (mm): a
+#: thousandth of a 1 mm voxel, about 100 float32 roundings of a 100 mm coordinate
+#: (see "Accuracy" in the module docstring).
+DEFAULT_TOLERANCE = 1e-3
+#: Most Newton steps of the default ``inverse="newton"`` (the loop's cap).
+DEFAULT_MAX_ITERATIONS = 8
+#: Most Newton steps of any mode (the cap of the loop, or fixed steps written out).
 MAX_ITERATIONS = 8
+#: Fixed Newton steps of the former default (``iterations=2``; the benchmark's reference).
+DEFAULT_ITERATIONS = 2
 #: Baked inverse nodes per lattice cell and axis (on the deformed bounding box) when
 #: Newton steps follow the seed, and for the seed alone (``iterations=0``).
 BAKE_FACTOR = 4
@@ -143,9 +167,9 @@ def _box(box: Any) -> tuple[np.ndarray, np.ndarray]:
     return a[0].copy(), a[1].copy()
 
 
-def _iterations(value: Any, inverse: str) -> int:
+def _iterations(value: Any, inverse: str) -> int | None:
     if value is None:
-        return DEFAULT_ITERATIONS if inverse == "newton" else 0
+        return None if inverse == "newton" else 0
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise WarpError(f"iterations must be an integer 0..{MAX_ITERATIONS}; got {value!r}")
     low = 1 if inverse == "newton" else 0
@@ -155,6 +179,37 @@ def _iterations(value: Any, inverse: str) -> int:
             + (" (the seed alone is inverse='baked')" if inverse == "newton" else "")
         )
     return int(value)
+
+
+def _convergence(
+    tolerance: Any, max_iterations: Any, inverse: str, iterations: int | None
+) -> tuple[float | None, int | None]:
+    """The checked ``(tolerance, max_iterations)``; ``(None, None)`` for fixed steps."""
+    if iterations is not None:
+        if tolerance is not None or max_iterations is not None:
+            what = "the seed alone" if inverse == "baked" else f"{iterations} fixed Newton steps"
+            raise WarpError(
+                f"tolerance/max_iterations do not apply to {what}: give inverse='newton'"
+                " without iterations to iterate until the step is below the tolerance"
+            )
+        return None, None
+    if tolerance is None:
+        tol = DEFAULT_TOLERANCE
+    elif isinstance(tolerance, bool) or not isinstance(tolerance, int | float | np.number):
+        raise WarpError(f"tolerance must be a number of mm > 0 (e.g. 1e-3); got {tolerance!r}")
+    else:
+        tol = float(tolerance)
+    if not (np.isfinite(tol) and tol > 0.0):
+        raise WarpError(f"tolerance must be a finite number of mm > 0 (e.g. 1e-3); got {tol}")
+    if max_iterations is None:
+        return tol, DEFAULT_MAX_ITERATIONS
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int | np.integer):
+        raise WarpError(
+            f"max_iterations must be an integer 1..{MAX_ITERATIONS}; got {max_iterations!r}"
+        )
+    if not 1 <= int(max_iterations) <= MAX_ITERATIONS:
+        raise WarpError(f"max_iterations must be 1..{MAX_ITERATIONS}; got {max_iterations}")
+    return tol, int(max_iterations)
 
 
 def lattice_eval(
@@ -215,6 +270,11 @@ def lattice_eval(
 def _newton_update(u: np.ndarray, r: np.ndarray, j: np.ndarray) -> np.ndarray:
     """``u - J^-1 r`` by Cramer's rule (as the shader); rows with a (nearly) singular J
     (``|det J| <= SINGULAR |J_0| |J_1| |J_2|``) stay."""
+    return u - _newton_delta(r, j)
+
+
+def _newton_delta(r: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """``J^-1 r`` by Cramer's rule (as the shader); 0 where J is (nearly) singular."""
     j0, j1, j2 = j[:, :, 0], j[:, :, 1], j[:, :, 2]
     a = np.cross(j1, j2)
     det = np.sum(j0 * a, axis=1)
@@ -228,7 +288,7 @@ def _newton_update(u: np.ndarray, r: np.ndarray, j: np.ndarray) -> np.ndarray:
         ],
         axis=1,
     )
-    return u - np.where(ok[:, None], num / np.where(ok, det, 1.0)[:, None], 0.0)
+    return np.where(ok[:, None], num / np.where(ok, det, 1.0)[:, None], 0.0)
 
 
 def _newton_step(nodes: np.ndarray, u: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -282,11 +342,18 @@ class LatticeWarp(Warp):
         ``(lo, hi)``: the box (original world, mm) whose content the lattice deforms,
         mapped onto the unit cube; usually the volume's box (``volume.bounds``).
     inverse
-        ``"newton"`` (default): the baked seed refined by ``iterations`` Newton steps;
-        ``"baked"``: the seed alone (``iterations`` steps may still be added).
+        ``"newton"`` (default): the baked seed refined by Newton steps until a step moves
+        the original point by at most ``tolerance`` (or by ``iterations`` fixed steps);
+        ``"baked"``: the seed alone (``iterations`` fixed steps may still be added).
     iterations
-        Newton steps, 1..8 for ``"newton"`` (default :data:`DEFAULT_ITERATIONS`), 0..8
-        for ``"baked"`` (default 0).
+        Fixed Newton steps instead of iterating to the tolerance: 1..8 for
+        ``"newton"`` (default None: iterate), 0..8 for ``"baked"`` (default 0).
+    tolerance
+        ``"newton"`` without ``iterations``: stop once a step moves ``q`` by at most this
+        many mm (default :data:`DEFAULT_TOLERANCE`).
+    max_iterations
+        ... and after at most this many steps, 1..8 (default
+        :data:`DEFAULT_MAX_ITERATIONS`).
     fold_linear
         True (default): a linear lattice is an affine warp that the raycaster folds into
         the ray. False: it is inverted per sample like any other (for tests and
@@ -303,6 +370,8 @@ class LatticeWarp(Warp):
         inverse: str = "newton",
         iterations: int | None = None,
         *,
+        tolerance: float | None = None,
+        max_iterations: int | None = None,
         fold_linear: bool = True,
     ) -> None:
         if not isinstance(grid, TrilinearGrid):
@@ -316,7 +385,12 @@ class LatticeWarp(Warp):
         self.grid = grid
         self.lo, self.hi = _box(box)
         self.inverse = inverse
+        #: fixed Newton steps (None: iterate to :attr:`tolerance`)
         self.iterations = _iterations(iterations, inverse)
+        #: the stopping rule of the iteration (both None with fixed steps)
+        self.tolerance, self.max_iterations = _convergence(
+            tolerance, max_iterations, inverse, self.iterations
+        )
         self.fold_linear = bool(fold_linear)
         self._nodes = np.asarray(grid.nodes, dtype=np.float64)
         if self._nodes.ndim != 4 or self._nodes.shape[3] != 3 or min(self._nodes.shape[:3]) < 2:
@@ -352,8 +426,14 @@ class LatticeWarp(Warp):
 
     @property
     def steps(self) -> int:
-        """Newton steps actually taken after the seed."""
-        return self.iterations
+        """Most Newton steps after the seed: the fixed :attr:`iterations`, or the cap
+        :attr:`max_iterations` of the iteration to the tolerance."""
+        return self.iterations if self.iterations is not None else int(self.max_iterations or 0)
+
+    @property
+    def adaptive(self) -> bool:
+        """True when Newton iterates until its step is below :attr:`tolerance`."""
+        return self.iterations is None
 
     @property
     def boundary_on_box(self) -> bool:
@@ -407,9 +487,25 @@ class LatticeWarp(Warp):
     def lattice_coordinates(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The shader's inverse of deformed points: ``(u, inside)``.
 
-        ``u`` (N, 3): seed plus :attr:`steps` Newton steps (0 where the seed says the
-        point is far from the lattice); ``inside``: u in ``[0, 1]³`` and near the lattice.
+        ``u`` (N, 3): the seed refined by Newton steps (0 where the seed says the point
+        is far from the lattice); ``inside``: u in ``[0, 1]³`` and near the lattice.
         (Also for a linear lattice: what ``fold_linear=False`` renders.)
+        """
+        u, inside, _, _ = self.solve(points)
+        return u, inside
+
+    def solve(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`lattice_coordinates`, the Newton steps each point took and whether the
+        iteration stopped by its rule: ``(u, inside, steps, converged)``.
+
+        Fixed steps: :attr:`iterations` everywhere. Iterating: each step
+        ``du = J(u)^-1 (grid(u) - p)`` is applied, and the point stops once
+        ``|du (hi - lo)| <= tolerance`` (mm), or after :attr:`max_iterations` steps; a
+        point stopped by the cap has not converged (near a fold, a singular J): there,
+        only its residual ``|grid(u) - p|`` says how far off it is. A singular J gives
+        ``du = 0``: the point stops where it is. ``steps`` is 0 where the seed says the
+        point is far from the lattice; ``converged`` is False there and everywhere with
+        fixed steps (no rule).
         """
         p = np.atleast_2d(np.asarray(points, dtype=np.float64))
         seed, seed_lo, seed_hi = self.baked_inverse()
@@ -420,13 +516,40 @@ class LatticeWarp(Warp):
             val[near] = _trilinear_sample(seed, s[near])
         near &= val[:, 3] != 0.0
         u = np.where(near[:, None], val[:, :3], 0.0)
+        steps = np.zeros(len(p), dtype=np.int64)
+        converged = np.zeros(len(p), dtype=bool)
         if np.any(near):
             un, pn = u[near], p[near]
-            for _ in range(self.steps):
-                un = _newton_step(self._nodes, un, pn)
+            if self.adaptive:
+                un, steps[near], converged[near] = self._iterate(un, pn)
+            else:
+                for _ in range(self.steps):
+                    un = _newton_step(self._nodes, un, pn)
+                steps[near] = self.steps
             u[near] = un
         inside = near & np.all((u >= 0.0) & (u <= 1.0), axis=1)
-        return u, inside
+        return u, inside, steps, converged
+
+    def _iterate(self, u: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Newton from ``u`` on ``grid(u) = p`` until the step is below the tolerance (the
+        shader's loop); returns u, the steps taken and whether the rule stopped them."""
+        u = u.copy()
+        steps = np.zeros(len(u), dtype=np.int64)
+        converged = np.zeros(len(u), dtype=bool)
+        active = np.arange(len(u))
+        tol2 = float(self.tolerance or 0.0) ** 2
+        for _ in range(self.steps):
+            f, j = lattice_eval(self._nodes, u[active])
+            assert j is not None
+            du = _newton_delta(f - p[active], j)
+            u[active] -= du
+            steps[active] += 1
+            small = np.sum((du * self.size) ** 2, axis=1) <= tol2
+            converged[active[small]] = True
+            active = active[~small]
+            if len(active) == 0:
+                break
+        return u, steps, converged
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original, as the GLSL computes it (outside: the identity or
@@ -764,28 +887,33 @@ class LatticeWarp(Warp):
 
     # ---------------------------------------------------------------- GPU side
     def glsl_constants(self) -> dict[str, Any]:
-        """``LINEAR`` and ``OUTSIDE_IDENTITY`` (``#define`` 0/1), ``ITERATIONS``, the
-        far point and ``ITERATE``, the Newton steps written out (llvmpipe does not
-        unroll loops)."""
+        """``LINEAR``, ``OUTSIDE_IDENTITY`` and ``ADAPTIVE`` (``#define`` 0/1),
+        ``ITERATIONS`` (the most steps: the loop's cap when adaptive), the far point and
+        ``ITERATE``, the fixed Newton steps written out (empty when adaptive)."""
+        fixed = 0 if self.adaptive else int(self.steps)
         return {
             "LINEAR": "1" if self._affine else "0",
             "OUTSIDE_IDENTITY": "1" if self.boundary_on_box else "0",
+            "ADAPTIVE": "1" if self.adaptive else "0",
             "ITERATIONS": int(self.steps),
             "FAR": FAR,
-            "ITERATE": " ".join(["WARP_NEWTON(u, p)"] * int(self.steps)),
+            "ITERATE": " ".join(["WARP_NEWTON(u, p)"] * fixed),
         }
 
     def signature(self) -> str:
-        """``lattice:linear``, or ``lattice:lattice:<identity|far>:<steps>`` (the
-        compile-time constants)."""
+        """``lattice:linear``, or ``lattice:lattice:<identity|far>:<steps>`` with
+        ``steps`` ``k`` (fixed) or ``<=k`` (iterating, at most k) (the compile-time
+        constants; the tolerance is a uniform)."""
         if self._affine:
             return f"{self.kind}:linear"
         outside = "identity" if self.boundary_on_box else "far"
-        return f"{self.kind}:lattice:{outside}:{self.steps}"
+        steps = f"<={self.steps}" if self.adaptive else str(self.steps)
+        return f"{self.kind}:lattice:{outside}:{steps}"
 
     def uniforms(self) -> dict[str, Any]:
         """Linear lattice: ``matrix`` (deformed -> original). Otherwise the box (``lo``,
-        ``size``), ``cells`` and the baked seed's box and node counts."""
+        ``size``), ``cells``, the baked seed's box and node counts and the ``tolerance``
+        (mm; 0 with fixed steps)."""
         if self._affine:
             return {"matrix": self.affine_matrix()}
         _, slo, shi = self.baked_inverse()
@@ -796,6 +924,7 @@ class LatticeWarp(Warp):
             "seed_lo": slo.copy(),
             "seed_size": shi - slo,
             "seed_shape": np.asarray(self.bake_shape, dtype=np.float64),
+            "tolerance": float(self.tolerance or 0.0),
         }
 
     def textures(self, ctx: Any) -> dict[str, Any]:
@@ -830,29 +959,38 @@ class LatticeWarp(Warp):
 
     # ---------------------------------------------------------------- serialisation
     def to_dict(self) -> dict[str, Any]:
-        """``{"type": "lattice", "grid": ..., "box": [lo, hi], "inverse", "iterations"}``
+        """``{"type": "lattice", "grid": ..., "box": [lo, hi], "inverse"}`` with
+        ``"tolerance"`` and ``"max_iterations"`` when iterating, else ``"iterations"``
         (and ``"fold_linear": false`` when set)."""
         d: dict[str, Any] = {
             "type": self.kind,
             "grid": self.grid.to_dict(),
             "box": [self.lo.tolist(), self.hi.tolist()],
             "inverse": self.inverse,
-            "iterations": self.iterations,
         }
+        if self.adaptive:
+            d["tolerance"] = self.tolerance
+            d["max_iterations"] = self.max_iterations
+        else:
+            d["iterations"] = self.iterations
         if not self.fold_linear:
             d["fold_linear"] = False
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LatticeWarp:
-        """Build from :meth:`to_dict`'s form (``inverse``, ``iterations`` optional)."""
+        """Build from :meth:`to_dict`'s form (``inverse``, ``iterations``, ``tolerance``,
+        ``max_iterations`` optional)."""
         missing = [k for k in ("grid", "box") if k not in d]
         if missing:
             raise WarpError(
                 f"a lattice warp entry needs {missing}: 'grid' (a TrilinearGrid dict with"
                 " 'nodes') and 'box' ([lo, hi] in mm)"
             )
-        allowed = ("type", "grid", "box", "inverse", "iterations", "fold_linear")
+        allowed = (
+            "type", "grid", "box", "inverse", "iterations", "tolerance", "max_iterations",
+            "fold_linear",
+        )  # fmt: skip
         unknown = set(d) - set(allowed)
         if unknown:
             raise WarpError(
@@ -874,6 +1012,8 @@ class LatticeWarp(Warp):
             d["box"],
             inverse=d.get("inverse", "newton"),
             iterations=d.get("iterations"),
+            tolerance=d.get("tolerance"),
+            max_iterations=d.get("max_iterations"),
             fold_linear=bool(d.get("fold_linear", True)),
         )
         warn_if_folded(grid)
@@ -883,6 +1023,7 @@ class LatticeWarp(Warp):
         return (
             f"LatticeWarp(cells={self.cells}, box=({self.lo.tolist()}, {self.hi.tolist()}),"
             f" inverse={self.inverse!r}, iterations={self.iterations},"
+            f" tolerance={self.tolerance}, max_iterations={self.max_iterations},"
             f" linear={self._linear})"
         )
 
@@ -943,6 +1084,188 @@ def bent_grid(
     return TrilinearGrid.from_function(f, c)
 
 
+def _cell_dets(nodes: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """``det J`` of every cell at local coordinates ``f`` (M, 3) in ``[0, 1]³``: ``(cells
+    flattened, M)``."""
+    n = np.asarray(nodes.shape[:3]) - 1
+    c = {
+        o: nodes[o[0] : o[0] + n[0], o[1] : o[1] + n[1], o[2] : o[2] + n[2]].reshape(-1, 1, 3)
+        for o in np.ndindex(2, 2, 2)
+    }
+    fx, fy, fz = (f[None, :, a : a + 1] for a in range(3))
+
+    def mix(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return a + (b - a) * t
+
+    x00, x10 = mix(c[0, 0, 0], c[1, 0, 0], fx), mix(c[0, 1, 0], c[1, 1, 0], fx)
+    x01, x11 = mix(c[0, 0, 1], c[1, 0, 1], fx), mix(c[0, 1, 1], c[1, 1, 1], fx)
+    dx = mix(
+        mix(c[1, 0, 0] - c[0, 0, 0], c[1, 1, 0] - c[0, 1, 0], fy),
+        mix(c[1, 0, 1] - c[0, 0, 1], c[1, 1, 1] - c[0, 1, 1], fy),
+        fz,
+    )
+    dy = mix(x10 - x00, x11 - x01, fz)
+    dz = mix(x01, x11, fy) - mix(x00, x10, fy)
+    return np.sum(dx * np.cross(dy, dz), axis=-1)
+
+
+def certified_nonfolding(grid: TrilinearGrid) -> bool:
+    """True when ``det J > 0`` is proven everywhere in the lattice.
+
+    Within a cell ``det J`` is a polynomial of degree 2 in each local coordinate (each
+    column of J is bilinear in the other two), so it is the combination of the 27
+    tensor-product Bernstein polynomials of degree 2 with the coefficients computed here
+    from its values at the 3x3x3 points ``{0, 1/2, 1}³``. The Bernstein polynomials are
+    non-negative and sum to 1: when all coefficients are positive, so is ``det J``. (A
+    sufficient test: a lattice can be non-folding and fail it.)
+    """
+    nodes = np.asarray(grid.nodes, dtype=np.float64)
+    t = np.array([0.0, 0.5, 1.0])
+    f = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
+    vals = _cell_dets(nodes, f).reshape(-1, 3, 3, 3)
+    # values at 0, 1/2, 1 of b0 + 2 t (1 - t) b1 + ... -> Bernstein coefficients, per axis
+    to_bernstein = np.linalg.inv(np.array([[1.0, 0.0, 0.0], [0.25, 0.5, 0.25], [0.0, 0.0, 1.0]]))
+    coef = np.einsum("ai,bj,ck,nijk->nabc", to_bernstein, to_bernstein, to_bernstein, vals)
+    return bool(np.all(coef > 0.0))
+
+
+def random_lattice(
+    rng: np.random.Generator,
+    cells: int,
+    box: tuple[np.ndarray, np.ndarray],
+    fraction: float,
+    moved: str = "all",
+) -> TrilinearGrid:
+    """A random non-folding lattice over ``box``: the error study's test cases.
+
+    The box's regular lattice of ``cells`` cells per axis with every node (``moved="all"``)
+    or one random node (``"one"``) moved by up to ``fraction`` of a cell per axis
+    (uniform), drawn again with half the fraction until :func:`certified_nonfolding`
+    proves ``det J > 0`` everywhere.
+    """
+    lo, hi = np.asarray(box[0], float), np.asarray(box[1], float)
+    base = np.asarray(TrilinearGrid.from_box(lo, hi, cells=cells).nodes, dtype=np.float64)
+    h = (hi - lo) / cells
+    while True:
+        move = rng.uniform(-fraction, fraction, base.shape) * h
+        if moved == "one":
+            keep = np.zeros(base.shape[:3], bool)
+            keep[tuple(rng.integers(0, cells + 1, 3))] = True
+            move = np.where(keep[..., None], move, 0.0)
+        grid = TrilinearGrid(base + move)
+        if certified_nonfolding(grid):
+            return grid
+        fraction *= 0.5
+
+
+#: The inverse variants of :func:`inverse_error_study`: (label, LatticeWarp keywords).
+STUDY_VARIANTS: tuple[tuple[str, dict[str, Any]], ...] = (
+    ("baked seed", {"inverse": "baked"}),
+    ("newton k=1", {"iterations": 1}),
+    ("newton k=2 (former default)", {"iterations": 2}),
+    ("newton k=3", {"iterations": 3}),
+    ("newton tol=1e-2 mm", {"tolerance": 1e-2}),
+    ("newton tol=1e-3 mm (default)", {}),
+    ("newton tol=1e-4 mm", {"tolerance": 1e-4}),
+)
+
+
+def study_cases(
+    trials: int = 24, points: int = 4000, seed: int = 0
+) -> list[tuple[TrilinearGrid, tuple[np.ndarray, np.ndarray], np.ndarray]]:
+    """The random non-folding lattices of :func:`inverse_error_study`: ``(grid, box, u)``.
+
+    Trial t: ``1 + t % 4`` cells per axis over a box of 40-120 mm per axis; every node
+    moved by up to 0.3 of a cell (even t) or one node by up to 0.6 (odd t), per axis
+    (:func:`random_lattice`: proven non-folding); ``points`` unit-cube points u, two
+    thirds uniform and a third on the lattice's inner cell faces (its kinks, where the
+    seed is worst).
+    """
+    rng = np.random.default_rng(seed)
+    cases = []
+    for t in range(trials):
+        cells = 1 + t % 4
+        lo = rng.uniform(-50.0, 50.0, 3)
+        box = (lo, lo + rng.uniform(40.0, 120.0, 3))
+        one = t % 2 == 1
+        grid = random_lattice(rng, cells, box, 0.6 if one else 0.3, "one" if one else "all")
+        u = rng.uniform(0.0, 1.0, (points, 3))
+        if cells > 1:
+            rows = np.arange(points // 3)
+            axis = rng.integers(0, 3, len(rows))
+            u[rows, axis] = rng.integers(1, cells, len(rows)) / cells
+        cases.append((grid, box, u))
+    return cases
+
+
+def inverse_error_study(
+    trials: int = 24,
+    points: int = 4000,
+    seed: int = 0,
+    variants: Sequence[tuple[str, Mapping[str, Any]]] = STUDY_VARIANTS,
+) -> list[dict[str, Any]]:
+    """Accuracy of each inverse variant over random non-folding lattices.
+
+    On :func:`study_cases` (``trials``, ``points``, ``seed``), with the general path
+    (``fold_linear=False``), for each variant: the point error ``|q' - q|`` (mm) between
+    the computed original point and the true one, its median, 99th percentile and
+    maximum over all points; the largest residual ``|grid(u') - p|`` (mm); the mean and
+    most Newton steps; the points where the iteration stopped at its cap (not
+    converged); and the share of points declared outside (lost).
+
+    Returns
+    -------
+    list of dict
+        Rows ``{"label", "median", "p99", "max", "residual", "mean_steps", "max_steps",
+        "capped", "lost"}``.
+    """
+    cases = study_cases(trials, points, seed)
+    rows = []
+    for label, kw in variants:
+        err, res, steps, capped, lost = [], [], [], 0, 0
+        for grid, box, u in cases:
+            w = LatticeWarp(grid, box, fold_linear=False, **kw)
+            nodes = np.asarray(grid.nodes, dtype=np.float64)
+            p = lattice_eval(nodes, u, jacobian=False)[0]
+            uc, inside, st, conv = w.solve(p)
+            err.append(np.linalg.norm((uc - u) * w.size, axis=1))
+            res.append(np.linalg.norm(lattice_eval(nodes, uc, jacobian=False)[0] - p, axis=1))
+            steps.append(st)
+            capped += int(np.sum(~conv)) if w.adaptive else 0
+            lost += int(np.sum(~inside))
+        e, st_all = np.concatenate(err), np.concatenate(steps)
+        rows.append(
+            {
+                "label": label,
+                "median": float(np.median(e)),
+                "p99": float(np.percentile(e, 99)),
+                "max": float(e.max()),
+                "residual": float(np.concatenate(res).max()),
+                "mean_steps": float(st_all.mean()),
+                "max_steps": int(st_all.max()),
+                "capped": capped,
+                "lost": lost / len(e),
+            }
+        )
+    return rows
+
+
+def format_error_study(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Markdown table of :func:`inverse_error_study` rows."""
+    lines = [
+        "| inverse | median (mm) | 99th pct (mm) | max (mm) | max residual (mm) |"
+        " steps mean / max | capped | lost |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['label']} | {r['median']:.2g} | {r['p99']:.2g} | {r['max']:.2g} |"
+            f" {r['residual']:.2g} | {r['mean_steps']:.2f} / {r['max_steps']} |"
+            f" {r['capped']} | {100 * r['lost']:.3f} % |"
+        )
+    return "\n".join(lines)
+
+
 def inverse_error_table(
     cells: int = 4,
     bend: float = 0.25,
@@ -950,11 +1273,13 @@ def inverse_error_table(
     points: int = 20000,
     seed: int = 0,
 ) -> list[dict[str, Any]]:
-    """Accuracy of the inverse on a bent lattice: the study behind the default.
+    """Accuracy of the inverse on one bent lattice (random lattices:
+    :func:`inverse_error_study`).
 
     :func:`bent_grid` (``cells``, ``bend``) over a 128 mm box; ``points`` points
     ``p = grid(u)`` with u uniform in the unit cube (``seed``); for ``"baked"`` (the
-    seed alone) and ``"newton"`` with each of ``iterations``, the residual
+    seed alone), ``"newton"`` with each of ``iterations`` fixed steps and the default
+    ``"newton"`` (to :data:`DEFAULT_TOLERANCE`; ``iterations`` None), the residual
     ``|grid(u') - p|`` (mm) of the computed u' (before the inside test) and the share of
     points declared outside.
 
@@ -970,7 +1295,8 @@ def inverse_error_table(
     nodes = np.asarray(grid.nodes, dtype=np.float64)
     p = lattice_eval(nodes, u, jacobian=False)[0]
     rows: list[dict[str, Any]] = []
-    variants = [("baked", 0)] + [("newton", int(k)) for k in iterations]
+    variants: list[tuple[str, int | None]] = [("baked", 0)]
+    variants += [("newton", int(k)) for k in iterations] + [("newton", None)]
     for mode, k in variants:
         w = LatticeWarp(grid, box, inverse=mode, iterations=k)
         uc, inside = w.lattice_coordinates(p)
@@ -989,10 +1315,14 @@ def inverse_error_table(
 
 def format_error_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Markdown table of :func:`inverse_error_table` rows."""
+
+    def steps(k: int | None) -> str:
+        return f"tol={DEFAULT_TOLERANCE:g} mm" if k is None else f"k={k}"
+
     lines = ["| inverse | max (mm) | median (mm) | lost |", "|---|---|---|---|"]
     for r in rows:
         lines.append(
-            f"| {r['inverse']} k={r['iterations']} | {r['max']:.3g} | {r['median']:.3g}"
+            f"| {r['inverse']} {steps(r['iterations'])} | {r['max']:.3g} | {r['median']:.3g}"
             f" | {100 * r['lost']:.2f} % |"
         )
     return "\n".join(lines)

@@ -6,16 +6,18 @@
 // * Seed: the inverse baked on the CPU on a node grid over the deformed lattice's bounds
 //   (WARP_seed: xyz = u, a = 1 near the lattice, 0 where no sample can be inside it),
 //   one hardware-trilinear fetch.
-// * WARP_ITERATIONS Newton steps u <- u - J(u)^-1 (grid(u) - p), written out in the
-//   macro WARP_ITERATE (llvmpipe does not unroll loops). grid(u) and J come from the 8
+// * Newton steps u <- u - du, du = J(u)^-1 (grid(u) - p). WARP_ADAPTIVE 1: a loop of at
+//   most WARP_ITERATIONS steps that stops after the first step with
+//   |du * WARP_size| <= WARP_tolerance (mm), the rule of LatticeWarp.solve. WARP_ADAPTIVE 0:
+//   WARP_ITERATIONS fixed steps written out in the macro WARP_ITERATE. grid(u) and J come from the 8
 //   corners of u's cell (texelFetch of the node texture WARP_nodes, RGBA32F): exact in
 //   float32 on every GPU, with no filter-weight rounding; outside [0, 1]³ the boundary
 //   cell's polynomial is extrapolated, so Newton steps may cross the lattice's surface.
 // * Outside the lattice (u not in [0, 1]³): the identity where the lattice's boundary
 //   is the box itself (WARP_OUTSIDE_IDENTITY 1), else nothing (q = WARP_FAR).
 // A linear lattice (WARP_LINEAR 1) is one affine map of all space: q = WARP_matrix p.
-// WARP_LINEAR, WARP_OUTSIDE_IDENTITY, WARP_ITERATIONS, WARP_ITERATE and WARP_FAR are
-// prepended by the warp (Warp.glsl_constants).
+// WARP_LINEAR, WARP_OUTSIDE_IDENTITY, WARP_ADAPTIVE, WARP_ITERATIONS, WARP_ITERATE and
+// WARP_FAR are prepended by the warp (Warp.glsl_constants).
 #if WARP_LINEAR
 uniform mat4 WARP_matrix;   // deformed world -> original world (mm)
 
@@ -30,6 +32,7 @@ uniform sampler3D WARP_seed;    // baked inverse: xyz = u, a = near-lattice flag
 uniform vec3 WARP_seed_lo;      // the baked nodes' box (deformed world, mm)
 uniform vec3 WARP_seed_size;
 uniform vec3 WARP_seed_shape;   // baked nodes per axis
+uniform float WARP_tolerance;   // WARP_ADAPTIVE: stop once a step moves q by <= this (mm)
 
 // grid(U) -> F and dF/dU -> J (columns), from the 8 corners of U's cell (the cell of
 // clamp(U, 0, 1); its polynomial extrapolated beyond). A macro: llvmpipe is slow with
@@ -59,9 +62,9 @@ uniform vec3 WARP_seed_shape;   // baked nodes per axis
     J = mat3(dx_ * WARP_cells.x, dy_ * WARP_cells.y, (y1_ - y0_) * WARP_cells.z);  \
 }
 
-// One Newton step on grid(U) = P, solved by cross products (Cramer's rule); a (nearly)
-// singular J (a folded lattice) leaves U unchanged.
-#define WARP_NEWTON(U, P) {                                                        \
+// The Newton step D = J(U)^-1 (grid(U) - P) on grid(U) = P, solved by cross products
+// (Cramer's rule); 0 where J is (nearly) singular (a folded lattice).
+#define WARP_NEWTON_DELTA(U, P, D) {                                               \
     vec3 fn_;                                                                      \
     mat3 jn_;                                                                      \
     WARP_EVAL(U, fn_, jn_)                                                         \
@@ -69,10 +72,18 @@ uniform vec3 WARP_seed_shape;   // baked nodes per axis
     vec3 a_ = cross(jn_[1], jn_[2]);                                               \
     float det_ = dot(jn_[0], a_);                                                  \
     float scale_ = length(jn_[0]) * length(jn_[1]) * length(jn_[2]);               \
+    D = vec3(0.0);                                                                 \
     if (abs(det_) > 1.0e-6 * scale_) {                                             \
-        U -= vec3(dot(a_, r_), dot(cross(jn_[2], jn_[0]), r_),                     \
-                  dot(cross(jn_[0], jn_[1]), r_)) / det_;                          \
+        D = vec3(dot(a_, r_), dot(cross(jn_[2], jn_[0]), r_),                      \
+                 dot(cross(jn_[0], jn_[1]), r_)) / det_;                           \
     }                                                                              \
+}
+
+// One Newton step; a (nearly) singular J leaves U unchanged.
+#define WARP_NEWTON(U, P) {                                                        \
+    vec3 dn_;                                                                      \
+    WARP_NEWTON_DELTA(U, P, dn_)                                                   \
+    U -= dn_;                                                                      \
 }
 
 // The last sample's u (the raycaster asks for the Jacobian where it just warped).
@@ -96,7 +107,18 @@ bool WARP_invert(vec3 p, out vec3 u) {
     vec4 seed = textureLod(WARP_seed, (s * (WARP_seed_shape - 1.0) + 0.5) / WARP_seed_shape, 0.0);
     if (seed.a == 0.0) return false;   // no baked node near: far from the lattice
     u = seed.xyz;
+#if WARP_ADAPTIVE
+    float tol2 = WARP_tolerance * WARP_tolerance;
+    for (int k = 0; k < WARP_ITERATIONS; ++k) {
+        vec3 du;
+        WARP_NEWTON_DELTA(u, p, du)
+        u -= du;
+        vec3 dq = du * WARP_size;
+        if (dot(dq, dq) <= tol2) break;
+    }
+#else
     WARP_ITERATE   // WARP_ITERATIONS times WARP_NEWTON(u, p), unrolled
+#endif
     return all(greaterThanEqual(u, vec3(0.0))) && all(lessThanEqual(u, vec3(1.0)));
 }
 

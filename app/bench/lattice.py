@@ -37,6 +37,11 @@ things here, every ratio against a linear reference timed in the same run:
    previous frame's). The *static* draw redraws the same instances (textures cached): a
    scene whose composition did not change. Frames of the two graphs alternate.
 
+3. *Lattice over a volume* (:mod:`voxwarp.bench.lattice_inverse`): the accuracy of the
+   volume's inverse (Newton to a tolerance, fixed steps, the baked seed) over random
+   non-folding lattices beside its render cost, against the baked seed and the former
+   fixed 2 steps in the same run (``--inverse-frames``; ``--inverse-only`` skips 1-2).
+
 The image is ``size`` (default 512x512), ``frames`` timed frames per configuration
 (default 5), medians everywhere.
 """
@@ -57,6 +62,8 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.lattice_inverse import DEFAULT_FRAMES as INVERSE_FRAMES
+from voxwarp.bench.lattice_inverse import bench_inverse
 from voxwarp.bench.papers import lattice_ratio_range
 from voxwarp.bench.render import best_times, cpu_count, load_average
 from voxwarp.core.camera import Camera
@@ -213,6 +220,8 @@ class LatticeBenchReport:
     crosscheck: CrossCheck | None = None
     composition: list[CompositionRow] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: section 3 (:class:`voxwarp.bench.lattice_inverse.InverseReport`), None when skipped
+    inverse: Any = None
 
     def row(self, cells: int, stage: str, normal_method: str, position: str = "exact") -> Any:
         """The section 1 row of a configuration (None if not measured)."""
@@ -313,6 +322,7 @@ class LatticeBenchReport:
             "",
             *self._throughput_md(),
             *self._composition_md(),
+            *(self.inverse.markdown_lines() if self.inverse is not None else []),
         ]
         if self.notes:
             lines += ["## Notes", "", *[f"* {n}" for n in self.notes], ""]
@@ -834,8 +844,13 @@ def bench_lattice(
     crosscheck: bool = True,
     ctx: Any = None,
     log: Callable[[str], None] = print,
+    inverse_frames: int | None = None,
+    mesh_sections: bool = True,
 ) -> LatticeBenchReport:
-    """Run both sections (see the module docstring) on ``ctx`` (else a new context)."""
+    """Run the sections (see the module docstring) on ``ctx`` (else a new context):
+    1-2 unless ``mesh_sections`` is False; 3 when ``inverse_frames`` is given (its
+    render rounds; 0: its accuracy rows only; the command line's default
+    :data:`INVERSE_FRAMES`)."""
     t_start = time.perf_counter()
     load_start = load_average()
     cells = tuple(dict.fromkeys(int(c) for c in cells))
@@ -846,7 +861,7 @@ def bench_lattice(
     if not MIN_TRIANGLES <= int(triangles) <= MAX_TRIANGLES:
         raise ValueError(f"triangles must be {MIN_TRIANGLES}..{MAX_TRIANGLES}; got {triangles}")
     log(f"building a torus of about {int(triangles)} triangles")
-    mesh = torus_for(int(triangles))
+    mesh = torus_for(int(triangles) if mesh_sections else MIN_TRIANGLES)
     report = LatticeBenchReport(
         triangles_requested=int(triangles),
         triangles=mesh.n_faces,
@@ -869,9 +884,12 @@ def bench_lattice(
     try:
         report.gl_renderer = str(ctx.info.get("GL_RENDERER", "?"))
         log(f"GL: {report.gl_renderer}")
-        bench_throughput(report, ctx, mesh, log, crosscheck=crosscheck)
-        del mesh
-        bench_composition(report, ctx, log)
+        if mesh_sections:
+            bench_throughput(report, ctx, mesh, log, crosscheck=crosscheck)
+            del mesh
+            bench_composition(report, ctx, log)
+        if inverse_frames is not None:
+            report.inverse = bench_inverse(ctx, frames=int(inverse_frames), log=log)
     finally:
         if own_ctx:
             ctx.release()
@@ -969,6 +987,15 @@ def add_bench_lattice_parser(bsub: Any) -> None:
         metavar="C,C,...",
         help="lattice cells per axis of the vertex-throughput rows (default 1,4,16)",
     )
+    p.add_argument(
+        "--inverse-frames",
+        type=_int_arg(0, 10_000, "--inverse-frames"),
+        default=INVERSE_FRAMES,
+        metavar="N",
+        help=f"render rounds of section 3, the volume's inverse (default {INVERSE_FRAMES};"
+        " 0: its accuracy rows only)",
+    )
+    p.add_argument("--inverse-only", action="store_true", help="run section 3 only (skip 1-2)")
     p.add_argument("--markdown", metavar="FILE", help="also write the report to FILE")
     p.set_defaults(func=cmd_bench_lattice)
 
@@ -989,6 +1016,10 @@ def command_line(args: argparse.Namespace) -> str:
         parts += ["--size", f"{args.size[0]}x{args.size[1]}"]
     if tuple(args.cells) != DEFAULT_CELLS:
         parts += ["--cells", ",".join(map(str, args.cells))]
+    if args.inverse_frames != INVERSE_FRAMES:
+        parts += ["--inverse-frames", str(args.inverse_frames)]
+    if args.inverse_only:
+        parts += ["--inverse-only"]
     if args.markdown:
         parts += ["--markdown", shlex.quote(str(args.markdown))]
     return " ".join(parts)
@@ -1005,6 +1036,8 @@ def cmd_bench_lattice(args: argparse.Namespace) -> int:
         size=tuple(args.size),
         cells=tuple(args.cells),
         log=lambda s: print(s, file=sys.stderr),
+        inverse_frames=args.inverse_frames,
+        mesh_sections=not args.inverse_only,
     )
     text = report.markdown(command_line(args))
     print(text)

@@ -25,6 +25,7 @@ from tests.warp_gpu import gpu_warp
 from voxwarp.core.volume import Volume
 from voxwarp.deform.lattice_warp import (
     DEFAULT_ITERATIONS,
+    DEFAULT_TOLERANCE,
     FAR,
     LatticeWarp,
     bent_grid,
@@ -138,19 +139,23 @@ def test_the_inverse_undoes_the_lattice(inverse: str, k: int, tol: float, lost: 
     )
 
 
-def test_default_iterations_come_from_the_error_table() -> None:
+def test_error_table_of_the_bent_lattice() -> None:
     rows = inverse_error_table(points=4000)
     by = {(r["inverse"], r["iterations"]): r for r in rows}
-    assert DEFAULT_ITERATIONS == 2
-    assert bent().iterations == DEFAULT_ITERATIONS
+    assert bent().adaptive
+    assert bent().iterations is None
+    assert (bent().tolerance, bent().max_iterations) == (DEFAULT_TOLERANCE, 8)
     assert bent(inverse="baked").iterations == 0
-    # the default: the fewest steps whose worst residual is below 0.01 mm
-    assert by["newton", 2]["max"] < 0.01 < by["newton", 1]["max"]
+    assert bent(iterations=DEFAULT_ITERATIONS).steps == 2  # the former default
+    # the default iterates to a residual far below its tolerance (quadratic convergence)
+    assert by["newton", None]["max"] < 1e-3 * DEFAULT_TOLERANCE
+    assert by["newton", 1]["max"] > 0.01
     # each step helps; the seed alone is the least accurate
     assert by["baked", 0]["max"] > by["newton", 1]["max"] > by["newton", 2]["max"]
     assert by["newton", 3]["max"] < 1e-8
     assert by["baked", 0]["median"] < 0.05  # good almost everywhere, poor at the kinks
     assert "| newton k=2 |" in format_error_table(rows)
+    assert "| newton tol=0.001 mm |" in format_error_table(rows)
 
 
 def test_outside_rule_far_unless_the_surface_is_the_box() -> None:
