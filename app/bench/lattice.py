@@ -41,6 +41,9 @@ things here, every ratio against a linear reference timed in the same run:
    volume's inverse (Newton to a tolerance, fixed steps, the baked seed) over random
    non-folding lattices beside its render cost, against the baked seed and the former
    fixed 2 steps in the same run (``--inverse-frames``; ``--inverse-only`` skips 1-2).
+4. *Linear fast path* (GRAPP 2010, section 4.1, last paragraph): the torus of section 1
+   under an affine lattice, drawn by the trilinear program and by the ``LINEAR`` one that
+   :class:`~voxwarp.render.mesh_pass.MeshRenderer` picks for it, frames alternated.
 
 The image is ``size`` (default 512x512), ``frames`` timed frames per configuration
 (default 5), medians everywhere.
@@ -91,6 +94,14 @@ THROUGHPUT_CONFIGS: tuple[tuple[str, str, str], ...] = (
     ("frame", "normal", "hardware"),
     ("vertex", "normal", "exact"),
     ("vertex", "tangent", "exact"),
+)
+#: section 4: cells per axis of the affine lattice timed through both programs
+FAST_PATH_CELLS = 4
+#: section 4: the affine lattice's linear part (a shear with non-uniform scale)
+FAST_PATH_MATRIX: tuple[tuple[float, ...], ...] = (
+    (1.2, 0.3, 0.0),
+    (-0.1, 0.9, 0.2),
+    (0.1, 0.0, 1.1),
 )
 #: the torus of section 1 and the box its lattice acts on (bench_mesh_throughput's)
 TORUS_RADII = (1.0, 0.35)
@@ -149,6 +160,26 @@ class ThroughputRow:
     @property
     def linear_fps(self) -> float:
         return 1000.0 / self.linear_ms
+
+
+@dataclass
+class FastPathRow:
+    """Section 4: an affine lattice through the trilinear program vs the LINEAR one."""
+
+    stage: str  # "frame" or "vertex"
+    cells: int
+    frames: int
+    trilinear_ms: float  # median
+    trilinear_min_ms: float
+    fast_ms: float  # median
+    fast_min_ms: float
+    #: pixels whose colour differs between the two programs (> 2/255), %; None: vertex
+    changed: float | None = None
+
+    @property
+    def speedup(self) -> float:
+        """Trilinear ms / fast-path ms (> 1: the fast path is faster)."""
+        return self.trilinear_ms / self.fast_ms
 
 
 @dataclass
@@ -219,6 +250,7 @@ class LatticeBenchReport:
     throughput: list[ThroughputRow] = field(default_factory=list)
     crosscheck: CrossCheck | None = None
     composition: list[CompositionRow] = field(default_factory=list)
+    fast_path: list[FastPathRow] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     #: section 3 (:class:`voxwarp.bench.lattice_inverse.InverseReport`), None when skipped
     inverse: Any = None
@@ -298,6 +330,12 @@ class LatticeBenchReport:
                 f" {self.static_fps_ratio:.0%} for a static redraw ({tri.static_draw_ms:.1f} vs"
                 f" {lin.static_draw_ms:.1f} ms)."
             )
+        for r in self.fast_path:
+            out.append(
+                f"Linear fast path (section 4.1), {r.stage} stage: an affine {r.cells}³-cell"
+                f" lattice drawn by the trilinear program takes {r.speedup:.2f}x the time of the"
+                " LINEAR program."
+            )
         return out
 
     def markdown(self, command: str) -> str:
@@ -323,6 +361,7 @@ class LatticeBenchReport:
             *self._throughput_md(),
             *self._composition_md(),
             *(self.inverse.markdown_lines() if self.inverse is not None else []),
+            *self._fast_path_md(),
         ]
         if self.notes:
             lines += ["## Notes", "", *[f"* {n}" for n in self.notes], ""]
@@ -445,6 +484,31 @@ class LatticeBenchReport:
                 f" alone trilinear / linear time {self.compose_ratio:.1f}x"
                 f" ({tri.compose_ms:.1f} / {lin.compose_ms:.1f} ms).",
             ]
+        return [*lines, ""]
+
+    def _fast_path_md(self) -> list[str]:
+        lines = ["## 4. Linear fast path: an affine lattice through both programs", ""]
+        if not self.fast_path:
+            return [*lines, "Not run.", ""]
+        lines += [
+            f"The torus of section 1 under an affine {self.fast_path[0].cells}³-cell lattice"
+            " (a shear with non-uniform scale; `TrilinearGrid.is_linear`), drawn by"
+            " `MeshRenderer(linear_fast_path=False)` (the trilinear vertex shader: 8 node"
+            " fetches and the Jacobian per vertex) and by the default `MeshRenderer`, which"
+            " draws it with the LINEAR program (one 4x4 product; GRAPP 2010 section 4.1's"
+            " parallelepiped check). Frames alternate as in section 1; ms are median (min);"
+            " speed-up = trilinear ms / fast-path ms; changed: pixels whose colour differs"
+            " between the two images (> 2/255).",
+            "",
+            "| stage | trilinear program ms | LINEAR program ms | speed-up | changed |",
+            "|---|---:|---:|---:|---:|",
+        ]
+        for r in self.fast_path:
+            changed = "—" if r.changed is None else f"{r.changed:.2f}%"
+            lines.append(
+                f"| {r.stage} | {r.trilinear_ms:.1f} ({r.trilinear_min_ms:.1f}) |"
+                f" {r.fast_ms:.1f} ({r.fast_min_ms:.1f}) | {r.speedup:.2f} | {changed} |"
+            )
         return [*lines, ""]
 
 
@@ -579,6 +643,71 @@ def bench_throughput(
         depth.release()
     if crosscheck:
         report.crosscheck = run_crosscheck(report, ctx, log)
+
+
+def affine_lattice(box: tuple[np.ndarray, np.ndarray], cells: int) -> TrilinearGrid:
+    """Section 4's lattice: :data:`FAST_PATH_MATRIX` about the box centre, ``cells`` per axis."""
+    lo, hi = box
+    a = np.asarray(FAST_PATH_MATRIX)
+    mid = 0.5 * (lo + hi)
+    return TrilinearGrid.from_function(lambda u: (lo + u * (hi - lo) - mid) @ a.T + mid, cells)
+
+
+def bench_fast_path(
+    report: LatticeBenchReport, ctx: Any, mesh: Any, log: Callable[[str], None]
+) -> None:
+    """Section 4 (see the module docstring); appends to ``report.fast_path``."""
+    w, h = report.size
+    box = (np.array(TORUS_BOX[0]), np.array(TORUS_BOX[1]))
+    cam = Camera.fit(box[0] - 0.3, box[1] + 0.3, VIEW, "perspective")
+    color = ctx.texture((w, h), 4, dtype="f1")
+    depth = ctx.depth_texture((w, h))
+    fbo = ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    slow, fast = MeshRenderer(ctx, linear_fast_path=False), MeshRenderer(ctx)
+    inst = MeshInstance(mesh, affine_lattice(box, FAST_PATH_CELLS), box=box)
+    try:
+        images = []
+        for r in (slow, fast):
+            r.draw([inst], fbo, cam)
+            ctx.finish()
+            images.append(_pixels(color).copy())
+        for stage in ("frame", "vertex"):
+            if stage == "vertex":
+                ctx.enable(ctx.RASTERIZER_DISCARD)
+            try:
+                t_slow, t_fast = _alternate(
+                    ctx,
+                    lambda: slow.draw([inst], fbo, cam),
+                    lambda: fast.draw([inst], fbo, cam),
+                    report.frames,
+                )
+            finally:
+                if stage == "vertex":
+                    ctx.disable(ctx.RASTERIZER_DISCARD)
+            row = FastPathRow(
+                stage=stage,
+                cells=FAST_PATH_CELLS,
+                frames=report.frames,
+                trilinear_ms=statistics.median(t_slow),
+                trilinear_min_ms=min(t_slow),
+                fast_ms=statistics.median(t_fast),
+                fast_min_ms=min(t_fast),
+                changed=_changed(*images) if stage == "frame" else None,
+            )
+            report.fast_path.append(row)
+            log(
+                f"fast path {stage}: trilinear program {row.trilinear_ms:.1f} ms, LINEAR"
+                f" {row.fast_ms:.1f} ms, speed-up {row.speedup:.2f}"
+            )
+        if slow.program_uses["linear"] or not fast.program_uses["linear"]:
+            raise RuntimeError("the affine lattice did not take the programs it was meant to")
+    finally:
+        slow.release()
+        fast.release()
+        _unbind_fbo(ctx)
+        fbo.release()
+        color.release()
+        depth.release()
 
 
 def run_crosscheck(
@@ -886,6 +1015,7 @@ def bench_lattice(
         log(f"GL: {report.gl_renderer}")
         if mesh_sections:
             bench_throughput(report, ctx, mesh, log, crosscheck=crosscheck)
+            bench_fast_path(report, ctx, mesh, log)
             del mesh
             bench_composition(report, ctx, log)
         if inverse_frames is not None:

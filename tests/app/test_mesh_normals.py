@@ -216,3 +216,27 @@ def test_bent_lattice_stays_on_the_trilinear_program(gl_ctx: Any) -> None:
     assert m is not None
     p = tube().vertices.astype(np.float64)
     np.testing.assert_allclose(p @ m[:3, :3].T + m[:3, 3], grid((p - BOX[0]) / (BOX[1] - BOX[0])))
+
+
+def test_bench_fast_path_rows(gl_ctx: Any) -> None:
+    from voxwarp.bench.lattice import LatticeBenchReport, bench_fast_path, torus_for
+
+    mesh = torus_for(2000)
+    report = LatticeBenchReport(
+        triangles_requested=2000,
+        triangles=mesh.n_faces,
+        vertices=mesh.n_vertices,
+        objects=1,
+        cells=(1,),
+        frames=1,
+        size=(48, 48),
+    )
+    bench_fast_path(report, gl_ctx, mesh, log=lambda _: None)
+    assert [r.stage for r in report.fast_path] == ["frame", "vertex"]
+    frame = report.fast_path[0]
+    assert frame.changed is not None
+    assert frame.changed < 1.0  # the same image through both programs
+    assert all(r.speedup > 0 for r in report.fast_path)
+    text = report.markdown("voxwarp bench lattice")
+    assert "## 4. Linear fast path" in text
+    assert f"| frame | {frame.trilinear_ms:.1f}" in text
