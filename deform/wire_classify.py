@@ -227,7 +227,10 @@ class ClassifyInput:
     refine_steps: int
 
 
-_programs: dict[int, object] = {}
+#: compiled kernel per OpenCL context, keyed by id() but kept with its context: a
+#: context made after another was freed may reuse its id (the tests reset the state),
+#: and the old context's kernel then fails with INVALID_CONTEXT
+_programs: dict[int, tuple[object, object | None]] = {}
 
 
 def classify_available(st: dict) -> bool:
@@ -241,14 +244,17 @@ def classify_available(st: dict) -> bool:
 
 
 def _program(st: dict) -> object | None:
-    key = id(st["ctx"])
-    if key not in _programs:
+    ctx = st["ctx"]
+    entry = _programs.get(id(ctx))
+    if entry is None or entry[0] is not ctx:
         try:
-            prg = st["cl"].Program(st["ctx"], _KERNEL).build(options=["-w"])
-            _programs[key] = st["cl"].Kernel(prg, "classify")
+            prg = st["cl"].Program(ctx, _KERNEL).build(options=["-w"])
+            kernel: object | None = st["cl"].Kernel(prg, "classify")
         except Exception:  # any build failure: the caller keeps the numpy path
-            _programs[key] = None
-    return _programs[key]
+            kernel = None
+        entry = (ctx, kernel)
+        _programs[id(ctx)] = entry
+    return entry[1]
 
 
 def _device(st: dict, a: np.ndarray) -> object:
