@@ -60,6 +60,13 @@ leave the original box). It is built in deformed space:
    Distances are discarded. ε is then refined to the closest point of the wire
    (:data:`REFINE_STEPS` Newton steps): the nearest seed's u is off by up to a voxel
    along the wire, which a fast twist would turn into a visible rotation error.
+   That is ``propagate="region"`` (the default). The paper propagates only over the
+   voxels flagged by the plane masks (5.1, 7.1): ``propagate="flagged"`` first marks the
+   voxels holding a set mask pixel (grown by a voxel; the end planes carried along the
+   end tangents as far as step 5 reaches), then finds the nearest seed (a k-d tree)
+   only for them and their neighbours (which swept samples interpolate t from), and
+   keeps step 5's test on them. Same field up to nearest-seed ties; which one builds
+   faster depends on the device (docs/benchmarks.md).
 5. *Flags*: a voxel is swept where the mask of its plane (at ε) covers its projection;
    the rest of the field is the identity. The original place of the swept object is
    *vacated*: the same propagation from the base wires, tested against the same masks
@@ -81,14 +88,39 @@ Storage (7.2). Two layouts, chosen by ``layout``:
   voxels keep their γ and t so that swept neighbours can interpolate t, and the code
   ``0x7FFF`` marks a vacated voxel. The shader interpolates t itself from the 8
   neighbours of the same wire.
+* ``"paper"``: the paper's own 2-byte example (section 7.2): bit 15 the swept flag, bits
+  11-14 the wire id γ (16 wires), bits 7-10 the segment index of the modified curve
+  holding the voxel's closest point (16 segments; the segments of
+  :meth:`voxwarp.deform.curves.Curve.segment_of`, found through the wire's table of
+  curve parameters), bits 0-6 the integer t within that segment (128 steps). The t
+  steps are equally spaced in arc length within the segment: with ``u_s`` the fraction
+  where segment s starts, ``u = u_s + (t / 127) (u_{s+1} - u_s)``, so every code maps
+  exactly to the fraction u that indexes the lookup tables (``WireField.segments``
+  holds ``u_s`` per wire, in table units; the shader reads it from a 17-texel row per
+  wire). The paper caches wire points and frames "at each integer t"; here those are
+  the same tables, read at that u. Neighbours are interpolated in u, never in the
+  per-segment t (two neighbours in different segments would otherwise mix unrelated t
+  values). Unswept voxels keep their wire, segment and t (flag 0), and ``0x7FFF`` marks
+  a vacated voxel, as in the packed layout (an unswept code that would collide becomes
+  t = 126). At most :data:`PAPER_MAX_WIRES` wires of at most
+  :data:`PAPER_MAX_SEGMENTS` segments each.
+
+Mask memory (7.1). The paper counts ``sum_p a(p) s / 8`` bytes per wire: one bit per
+mask pixel, ``a(p)`` the area of plane p and ``s`` the pixels per unit area. Here each
+kept plane (planes without object are dropped, as in the paper) is a square of K x K
+pixels of ``mask_resolution`` mm: ``a(p) = (K mask_resolution)^2`` mm^2 and
+``s = 1 / mask_resolution^2`` pixels per mm^2, so a wire needs ``kept planes x K^2 / 8``
+bytes (:attr:`WireFieldStats.mask_bytes`).
 
 Rendering: per sample one field fetch decides identity / vacated / swept; a swept
-sample adds the t fetch (8 in the packed layout) and 3 fetches of the tiny lookup table
+sample adds the t fetch (8 in the packed layout; 8 plus two segment-start texels per
+neighbour of the same wire in the paper layout) and 3 fetches of the tiny lookup table
 (``q = A p + b``, A and b linear in t).
 :meth:`WireFieldWarp.displacement_range` bounds ``warp(p) - p`` per box from the field,
 so the raycaster keeps skipping empty space through the deformed volume.
 
-Limits: at most :data:`MAX_WIRES` (128) wires per field (the packed layout's 7-bit id).
+Limits: at most :data:`MAX_WIRES` (128) wires per field (the packed layout's 7-bit id);
+16 wires of at most 16 segments with ``layout="paper"``.
 """
 
 from __future__ import annotations
@@ -115,9 +147,17 @@ LUT_SIZE = 256
 #: allowed field scales (per-axis reduction; 1:1, 1:8, 1:64, 1:512, 1:4096 in voxels)
 FIELD_SCALES = (1, 2, 4, 8, 16)
 #: attribute field layouts
-LAYOUTS = ("float", "packed")
+LAYOUTS = ("float", "packed", "paper")
 #: packed code of a vacated voxel (flag 0, wire 127, t 255)
 PACKED_VACATED = 0x7FFF
+#: the paper layout's limits: 4-bit wire id, 4-bit segment index, 7-bit t per segment
+PAPER_MAX_WIRES = 16
+PAPER_MAX_SEGMENTS = 16
+PAPER_T_MAX = 127
+#: paper code of a vacated voxel (flag 0, wire 15, segment 15, t 127)
+PAPER_VACATED = 0x7FFF
+#: propagation domains of :class:`WireDeformer` (``propagate``)
+PROPAGATE_MODES = ("region", "flagged")
 #: a vacated sample is sent this far away (it then lies outside every volume)
 FAR = 1.0e20
 #: most control points of a wire's base or modified curve (its tables cost time per point)
@@ -476,11 +516,21 @@ class WireFieldStats:
     #: seconds per stage: tables, masks, seeds, propagate, flags, store, total (seeds,
     #: propagation and flags of both sides: the swept voxels and the vacated place)
     timings: dict[str, float] = field(default_factory=dict)
+    #: plane-mask memory per wire, bytes: kept planes x K^2 / 8 (section 7.1's
+    #: sum_p a(p) s / 8, see the module docstring)
+    mask_bytes: tuple[int, ...] = ()
+    #: the propagation domain (``WireDeformer(propagate=...)``)
+    propagate: str = "region"
 
     @property
     def voxels(self) -> int:
         """Voxels of the attribute field."""
         return int(np.prod(self.field_shape))
+
+    @property
+    def mask_bytes_total(self) -> int:
+        """Plane-mask memory of all wires, bytes."""
+        return int(sum(self.mask_bytes))
 
     @property
     def percent_ignored(self) -> float:
@@ -504,6 +554,9 @@ class WireFieldStats:
             "voxels": self.voxels,
             "percent_ignored": self.percent_ignored,
             "timings": dict(self.timings),
+            "mask_bytes": list(self.mask_bytes),
+            "mask_bytes_total": self.mask_bytes_total,
+            "propagate": self.propagate,
         }
 
 
@@ -518,12 +571,16 @@ class WireField:
     #: float layout: state (0 identity, 1 vacated, 2 + wire) and t (u * (LUT_SIZE - 1))
     state: np.ndarray | None
     t: np.ndarray | None
-    #: packed layout: the uint16 codes
+    #: packed and paper layouts: the uint16 codes
     code: np.ndarray | None
     tables: list[WireTables]
     #: the propagated region (first voxel, shape): swept voxels lie inside it
     region_lo: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
     region_shape: tuple[int, int, int] = (0, 0, 0)
+    #: paper layout: where each segment of each modified wire starts, in table units
+    #: (wires, PAPER_MAX_SEGMENTS + 1) float32; entries past a wire's last segment
+    #: repeat its end
+    segments: np.ndarray | None = None
 
     @property
     def hi(self) -> np.ndarray:
@@ -549,6 +606,9 @@ class WireField:
         c = self.code.astype(np.int32)
         swept = (c & 0x8000) != 0
         state = np.where(swept, 2, np.where(c == PACKED_VACATED, 1, 0)).astype(np.uint8)
+        if self.layout == "paper":
+            assert self.segments is not None
+            return state, (c >> 11) & 0xF, _paper_t(c, self.segments).astype(np.float32)
         return state, (c >> 8) & 0x7F, (c & 0xFF).astype(np.float32)
 
 
@@ -584,7 +644,8 @@ class WireDeformer:
     ctx
         Optional moderngl context: :meth:`warp` then uploads its textures at once.
     layout
-        ``"float"`` or ``"packed"`` (2 bytes per voxel), see the module docstring.
+        ``"float"``, ``"packed"`` (2 bytes per voxel) or ``"paper"`` (2 bytes per voxel,
+        the paper's wire / segment / t split), see the module docstring.
     masks
         Sweep only the seed-filled cross-section of the object the wire runs through
         (True, the paper's plane masks), or every β voxel in the region (False).
@@ -598,6 +659,11 @@ class WireDeformer:
         Propagation backend of :func:`voxwarp.deform.propagation.nearest_seed`.
     precision
         Arc-length precision p (eq. 4) and closest-point precision (in t).
+    propagate
+        ``"region"``: nearest-seed propagation over the whole box of the wires' reach,
+        then the mask test; ``"flagged"``: the paper's order (sections 5.1, 7.1): the
+        voxels the plane masks touch are flagged first and only they (and their
+        neighbours, which swept samples interpolate) get a nearest seed.
     """
 
     def __init__(
@@ -613,6 +679,7 @@ class WireDeformer:
         dilation: int = 1,
         backend: str = "auto",
         precision: float = 1e-4,
+        propagate: str = "region",
     ) -> None:
         self.data, self.spacing, self.origin = _volume_parts(volume)
         # oblique scans: world <-> index through the volume's rotation
@@ -639,6 +706,10 @@ class WireDeformer:
         if layout not in LAYOUTS:
             raise WarpError(f"layout must be one of {LAYOUTS}; got {layout!r}")
         self.layout = layout
+        self._check_layout_limits()
+        if propagate not in PROPAGATE_MODES:
+            raise WarpError(f"propagate must be one of {PROPAGATE_MODES}; got {propagate!r}")
+        self.propagate = propagate
         self.masks = bool(masks)
         if mask_resolution is None:
             # the volume's voxel for a 1:1 field; two of them for coarser fields, whose
@@ -682,6 +753,23 @@ class WireDeformer:
                     " the object (control points are world mm, not voxel indices)"
                 )
 
+    def _check_layout_limits(self) -> None:
+        """The paper layout's 4-bit wire id and segment index (a one-line WarpError)."""
+        if self.layout != "paper":
+            return
+        if len(self.wires) > PAPER_MAX_WIRES:
+            raise WarpError(
+                f"layout='paper' holds at most {PAPER_MAX_WIRES} wires (4-bit wire id); got"
+                f" {len(self.wires)}: use layout='packed' (up to {MAX_WIRES} wires)"
+            )
+        for i, w in enumerate(self.wires):
+            if w.modified.n_segments > PAPER_MAX_SEGMENTS:
+                raise WarpError(
+                    f"layout='paper' holds at most {PAPER_MAX_SEGMENTS} segments per wire"
+                    f" (4-bit segment index); wire {i}'s modified curve has"
+                    f" {w.modified.n_segments}: use fewer control points or layout='packed'"
+                )
+
     # ------------------------------------------------------------------ geometry
     def _field_geometry(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
         """Field box lo, voxel spacing and shape: the volume box grown (in whole field
@@ -720,6 +808,7 @@ class WireDeformer:
 
         t_all = time.perf_counter()
         timings: dict[str, float] = {}
+        self._check_layout_limits()  # the wires may have been edited since __init__
         lo, h, shape = self._field_geometry()
 
         t0 = time.perf_counter()
@@ -731,11 +820,14 @@ class WireDeformer:
         masks: list[tuple[np.ndarray, int, float]] = []  # (planes, K, K) masks, K, half
         dropped = 0
         planes_total = 0
+        mask_bytes = []
         for w, tab in zip(self.wires, tables, strict=True):
             mask, k_side, n_dropped = self._plane_masks(w, tab)
             masks.append((mask, k_side, (k_side - 1) / 2.0))
             dropped += n_dropped
             planes_total += mask.shape[0]
+            # section 7.1: one bit per pixel of every kept plane
+            mask_bytes.append(math.ceil((mask.shape[0] - n_dropped) * k_side * k_side / 8))
         timings["masks"] = time.perf_counter() - t0
 
         # 3. seeds: the 8 voxels of every field cell a wire enters; the modified wires
@@ -788,7 +880,7 @@ class WireDeformer:
             tf = np.zeros(shape, dtype=np.float32, order="F")
             tf[region] = r_u * tscale
             fld = WireField(lo, h, shape, "float", state, tf, None, tables, region_lo, rshape)
-        else:
+        elif self.layout == "packed":
             code = np.zeros(shape, dtype=np.uint16, order="F")
             ti = np.clip(np.rint(r_u * tscale), 0, tscale).astype(np.int32)
             c = (r_wire.astype(np.int32) << 8) | ti
@@ -797,6 +889,15 @@ class WireDeformer:
             code[region] = c.astype(np.uint16)
             np.copyto(code[b_region], PACKED_VACATED, where=vacated)
             fld = WireField(lo, h, shape, "packed", None, None, code, tables, region_lo, rshape)
+        elif self.layout == "paper":
+            starts = _segment_starts(self.wires, tables)
+            code = np.zeros(shape, dtype=np.uint16, order="F")
+            counts = np.array([w.modified.n_segments for w in self.wires])
+            code[region] = _paper_codes(r_wire, r_u, swept, starts, counts)
+            np.copyto(code[b_region], PAPER_VACATED, where=vacated)
+            fld = WireField(
+                lo, h, shape, "paper", None, None, code, tables, region_lo, rshape, segments=starts
+            )
         timings["store"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_all
 
@@ -816,6 +917,8 @@ class WireDeformer:
             vacated=n_vac,
             ignored=int(np.prod(shape)) - n_swept - n_vac,
             timings=timings,
+            mask_bytes=tuple(mask_bytes),
+            propagate=self.propagate,
         )
         if self._warp is not None:
             self._warp._set_field(fld)
@@ -836,6 +939,9 @@ class WireDeformer:
         id and refined u per region voxel, the mask bits and the seed count. One OpenCL
         pass (:mod:`voxwarp.deform.wire_classify`) where the device allows, else numpy;
         adds the stages' seconds to ``timings``."""
+        if self.propagate == "flagged":
+            flagged = self._flagged_side(seeds, tables, grown, lo, h, shape, side, timings)
+            return flagged
         fast = self._fast_side(seeds, tables, grown, lo, h, shape, side, timings)
         if fast is not None:
             return fast
@@ -1037,6 +1143,98 @@ class WireDeformer:
             near.reshape(rshape),
             len(flat),
         )
+
+    def _flagged_side(
+        self,
+        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tables: list[WireTables],
+        grown: list[tuple[np.ndarray, int, float]],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        side: str,
+        timings: dict[str, float],
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+        """:meth:`_side` the paper's way (sections 5.1, 7.1): flag the voxels that a set
+        pixel of a plane mask touches (grown by one voxel, so that planes fanning out
+        on the outside of a bend leave no gap), propagate the nearest seed only over
+        them and their neighbours (the voxels a swept sample interpolates t from; a
+        k-d tree of the seeds, exact Euclidean), then the mask test of the numpy path on
+        them: a voxel is swept where both say so."""
+        from scipy.spatial import cKDTree
+
+        t0 = time.perf_counter()
+        c_lo, rshape, grid, flat, s_wire, s_u = self._region(seeds, tables, lo, h, shape, side)
+        if side == "modified":
+            self.propagation_input = (grid, tuple(float(v) for v in h))
+        touched = self._touched(tables, grown, lo, h, c_lo, rshape, side)
+        cand = ndimage.maximum_filter(touched, size=3, mode="constant")
+        domain = ndimage.maximum_filter(cand, size=3, mode="constant")
+        dom = np.flatnonzero(domain)
+        seed_pts = np.stack(np.unravel_index(flat, rshape), -1) * h
+        dist, which = cKDTree(seed_pts).query(
+            np.stack(np.unravel_index(dom, rshape), -1) * h, workers=-1
+        )
+        n = int(np.prod(rshape))
+        r_wire = np.zeros(n, dtype=np.int16)
+        r_u = np.zeros(n, dtype=np.float32)
+        near = np.zeros(n, dtype=bool)
+        r_wire[dom], r_u[dom] = s_wire[which], s_u[which]
+        near[dom] = dist <= self._reach(h, side)[s_wire[which]]
+        r_wire, r_u, near = r_wire.reshape(rshape), r_u.reshape(rshape), near.reshape(rshape)
+        t1 = time.perf_counter()
+        bits = self._flags(tables, grown, lo, h, c_lo, rshape, r_wire, r_u, near, side) & cand
+        timings["propagate"] += t1 - t0
+        timings["flags"] += time.perf_counter() - t1
+        return c_lo, rshape, r_wire, r_u, bits, len(flat)
+
+    def _touched(
+        self,
+        tables: list[WireTables],
+        grown: list[tuple[np.ndarray, int, float]],
+        lo: np.ndarray,
+        h: np.ndarray,
+        c_lo: np.ndarray,
+        rshape: tuple[int, int, int],
+        side: str,
+    ) -> np.ndarray:
+        """Region voxels holding a set pixel of a (grown) plane mask: the paper's flags.
+        On the base side the pixels are mapped as the sweep maps them (``q = A p + b``).
+        The end planes also flag along the end tangents as far as the mask test reaches
+        past them."""
+        out = np.zeros(rshape, dtype=bool)
+        rs = np.asarray(rshape)
+        px = self.mask_resolution
+        for wi, tab in enumerate(tables):
+            mask, k, half = grown[wi]
+            n_planes = mask.shape[0]
+            tt_all = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
+            reach = float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + px
+            steps = np.arange(1, math.ceil(reach / px) + 1) * px
+            block = max(1, TOUCH_BLOCK_PIXELS // (k * k))
+            for p0 in range(0, n_planes, block):
+                pl, a, b = np.nonzero(mask[p0 : p0 + block])
+                pl = pl + p0
+                tt = tt_all[pl]
+                fm = _lerp_table(tab.modified_frames, tt)
+                x, y = (a - half) * px, (b - half) * px
+                p = _lerp_table(tab.modified_points, tt)
+                p += x[:, None] * fm[:, :, 0] + y[:, None] * fm[:, :, 1]
+                tangent = fm[:, :, 2]
+                if side == "base":  # where the sweep takes these pixels from
+                    a_t, b_t = tab.lookup(tt)
+                    p = np.einsum("nij,nj->ni", a_t, p) + b_t
+                    tangent = _lerp_table(tab.base_frames, tt)[:, :, 2]
+                pts = [p]
+                for end, sign in ((0, -1.0), (n_planes - 1, 1.0)):
+                    at = pl == end
+                    if at.any():
+                        pts += [p[at] + sign * d * tangent[at] for d in steps]
+                p = np.concatenate(pts)
+                idx = np.floor((p - lo) / h).astype(np.int64) - c_lo
+                ok = np.all((idx >= 0) & (idx < rs), axis=1)
+                out[idx[ok, 0], idx[ok, 1], idx[ok, 2]] = True
+        return out
 
     def _flags(
         self,
@@ -1293,6 +1491,8 @@ class WireDeformer:
 MASK_BLOCK_PIXELS = 1 << 16
 #: voxels per chunk of the numpy classification (keeps temporaries small)
 FLAG_CHUNK = 1 << 16
+#: mask pixels per block while the flagged propagation rasterises the planes
+TOUCH_BLOCK_PIXELS = 1 << 18
 #: threads sampling the mask blocks (and classifying chunks on the numpy path)
 MASK_THREADS = max(1, min(4, os.cpu_count() or 1))
 #: Newton steps that refine the propagated u to the closest point of the wire
@@ -1386,6 +1586,55 @@ def _lerp_table(table: np.ndarray, t: np.ndarray) -> np.ndarray:
     return table[i0] * (1 - f) + table[i0 + 1] * f
 
 
+def _segment_starts(wires: Sequence[Wire], tables: Sequence[WireTables]) -> np.ndarray:
+    """Where each segment of each modified wire starts, in table units (the paper
+    layout's segments): (wires, PAPER_MAX_SEGMENTS + 1) float32, the last real entry
+    the wire's end (LUT_SIZE - 1), repeated to the right. A segment s starts at curve
+    parameter s / n_segments, turned into a table coordinate through the wire's table
+    of curve parameters (the same piecewise-linear map the tables interpolate)."""
+    top = float(LUT_SIZE - 1)
+    out = np.full((len(wires), PAPER_MAX_SEGMENTS + 1), top, dtype=np.float64)
+    for wi, (w, tab) in enumerate(zip(wires, tables, strict=True)):
+        n = w.modified.n_segments
+        knots = np.arange(n + 1) / n
+        out[wi, : n + 1] = np.interp(knots, tab.t_modified, tab.u) * top
+        out[wi, 0], out[wi, n] = 0.0, top
+    return out.astype(np.float32)
+
+
+def _paper_codes(
+    wire: np.ndarray, u: np.ndarray, swept: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> np.ndarray:
+    """The paper layout's uint16 codes of voxels with wire ids, fractions u and swept
+    flags (``starts`` from :func:`_segment_starts`, ``counts`` the wires' segment
+    counts): ``flag << 15 | wire << 11 | segment << 7 | t``, t = round(127 x the
+    position of u within its segment); an unswept code equal to :data:`PAPER_VACATED`
+    takes t = 126."""
+    w = wire.astype(np.int64)
+    tu = np.asarray(u, dtype=np.float64) * (LUT_SIZE - 1)
+    st = starts.astype(np.float64)
+    seg = np.zeros(w.shape, dtype=np.int64)
+    for k in range(1, PAPER_MAX_SEGMENTS):  # segment = inner starts at or below tu
+        seg += st[w, k] <= tu
+    seg = np.minimum(seg, np.asarray(counts, dtype=np.int64)[w] - 1)
+    a, b = st[w, seg], st[w, seg + 1]
+    frac = np.where(b > a, (tu - a) / np.where(b > a, b - a, 1.0), 0.0)
+    t = np.clip(np.rint(frac * PAPER_T_MAX), 0, PAPER_T_MAX).astype(np.int64)
+    c = (w << 11) | (seg << 7) | t
+    c = np.where(c == PAPER_VACATED, PAPER_VACATED - 1, c)
+    return np.where(swept, c | 0x8000, c).astype(np.uint16)
+
+
+def _paper_t(code: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Table coordinate of paper codes: ``u_s + (t / 127) (u_{s+1} - u_s)``."""
+    c = np.asarray(code, dtype=np.int64)
+    w, seg, t = (c >> 11) & 0xF, (c >> 7) & 0xF, c & 0x7F
+    st = starts.astype(np.float64)
+    w = np.minimum(w, len(st) - 1)  # the vacated code names wire 15
+    a, b = st[w, seg], st[w, seg + 1]
+    return a + (b - a) * (t / PAPER_T_MAX)
+
+
 # ---------------------------------------------------------------------- the warp
 def _sample_t_float(t_field: np.ndarray, g: np.ndarray) -> np.ndarray:
     """Trilinear t at continuous voxel coordinates g (voxel i centred at i + 1/2), with
@@ -1420,6 +1669,31 @@ def _sample_t_packed(code: np.ndarray, g: np.ndarray, wire: np.ndarray) -> np.nd
         ws += w
     near = np.floor(g).astype(np.int64)
     own = code[near[:, 0], near[:, 1], near[:, 2]].astype(np.int64) & 0xFF
+    return np.where(ws > 0, ts / np.where(ws > 0, ws, 1.0), own)
+
+
+def _sample_t_paper(
+    code: np.ndarray, g: np.ndarray, wire: np.ndarray, starts: np.ndarray
+) -> np.ndarray:
+    """t at g (table units) from the 8 paper-layout neighbours of the same wire (vacated
+    ones excluded), each turned into its table coordinate before the weighted mean (so
+    neighbours in different segments mix their u, not their per-segment t); the
+    nearest voxel's own value where none qualifies (as the shader)."""
+    shape = np.asarray(code.shape)
+    gc = np.clip(g - 0.5, 0.0, shape - 1.0)
+    i0 = np.floor(gc).astype(np.int64)
+    f = gc - i0
+    ts = np.zeros(len(g))
+    ws = np.zeros(len(g))
+    for c in _CORNERS:
+        idx = np.minimum(i0 + c, shape - 1)
+        v = code[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.int64)
+        ok = (((v >> 11) & 0xF) == wire) & (v != PAPER_VACATED)
+        w = np.prod(np.where(c == 1, f, 1.0 - f), axis=1) * ok
+        ts += w * _paper_t(v, starts)
+        ws += w
+    near = np.floor(g).astype(np.int64)
+    own = _paper_t(code[near[:, 0], near[:, 1], near[:, 2]], starts)
     return np.where(ws > 0, ts / np.where(ws > 0, ws, 1.0), own)
 
 
@@ -1493,6 +1767,7 @@ class WireFieldWarp(Warp):
             masks=spec.get("masks", True),
             mask_resolution=spec.get("mask_resolution"),
             dilation=spec.get("dilation", 1),
+            propagate=spec.get("propagate", "region"),
         )
         self._deformer._warp = self
         self._deformer.build()
@@ -1525,7 +1800,7 @@ class WireFieldWarp(Warp):
             tt = np.zeros(len(gi))
             if sw.any():
                 tt[sw] = _sample_t_float(fld.t, gi[sw])
-        else:
+        elif fld.layout == "packed":
             assert fld.code is not None
             c = fld.code[v[:, 0], v[:, 1], v[:, 2]].astype(np.int64)
             sw = (c & 0x8000) != 0
@@ -1534,6 +1809,16 @@ class WireFieldWarp(Warp):
             tt = np.zeros(len(gi))
             if sw.any():
                 tt[sw] = _sample_t_packed(fld.code, gi[sw], w[sw])
+        else:
+            assert fld.code is not None
+            assert fld.segments is not None
+            c = fld.code[v[:, 0], v[:, 1], v[:, 2]].astype(np.int64)
+            sw = (c & 0x8000) != 0
+            st = np.where(sw, 2, np.where(c == PAPER_VACATED, 1, 0))
+            w = (c >> 11) & 0xF
+            tt = np.zeros(len(gi))
+            if sw.any():
+                tt[sw] = _sample_t_paper(fld.code, gi[sw], w[sw], fld.segments)
         state[inside], wire[inside], t[inside] = st, w, tt
         return state, wire, t
 
@@ -1717,16 +2002,18 @@ class WireFieldWarp(Warp):
 
     # ------------------------------------------------------------------ GPU side
     def glsl_constants(self) -> dict[str, Any]:
-        """The layout (``#define WARP_LAYOUT_PACKED 0|1``), table size and the far point."""
+        """The layout (``#define WARP_LAYOUT_PACKED 0|1``, ``WARP_LAYOUT_PAPER 0|1``),
+        table size and the far point."""
         return {
             "LAYOUT_PACKED": "1" if self.field.layout == "packed" else "0",
+            "LAYOUT_PAPER": "1" if self.field.layout == "paper" else "0",
             "LUT_SIZE": LUT_SIZE,
             "FAR": FAR,
         }
 
     def signature(self) -> str:
-        """Kind and layout (the two layouts compile differently)."""
         return f"{self.kind}:{self.field.layout}"
+        """Kind and layout (the layouts compile differently)."""
 
     def uniforms(self) -> dict[str, Any]:
         """Field box, shape and lookup-table rows."""
@@ -1773,6 +2060,12 @@ class WireFieldWarp(Warp):
         else:
             assert fld.code is not None
             texs["code"] = tex3d(fld.code, "u2", False)
+        if fld.layout == "paper":
+            assert fld.segments is not None
+            seg = ctx.texture(fld.segments.shape[::-1], 1, fld.segments.tobytes(), dtype="f4")
+            seg.filter = (ctx.NEAREST, ctx.NEAREST)
+            seg.repeat_x = seg.repeat_y = False
+            texs["seg"] = seg
         rows = np.concatenate([tab.gpu_rows() for tab in fld.tables], axis=0)
         lut = ctx.texture((LUT_SIZE, rows.shape[0]), 4, rows.tobytes(), dtype="f4")
         lut.filter = (ctx.LINEAR, ctx.LINEAR)
@@ -1815,15 +2108,31 @@ class WireFieldWarp(Warp):
         layout = d.get("layout", "float")
         if layout not in LAYOUTS:
             raise WarpError(f"layout must be one of {LAYOUTS}; got {layout!r}")
+        if layout == "paper" and len(wires) > PAPER_MAX_WIRES:
+            raise WarpError(
+                f"layout='paper' holds at most {PAPER_MAX_WIRES} wires (4-bit wire id); got"
+                f" {len(wires)}: use layout='packed'"
+            )
+        propagate = d.get("propagate", "region")
+        if propagate not in PROPAGATE_MODES:
+            raise WarpError(f"propagate must be one of {PROPAGATE_MODES}; got {propagate!r}")
         spec = {k: d[k] for k in _SPEC_KEYS if k in d}
         return cls(spec=spec)
 
 
-_SPEC_KEYS = ("wires", "field_scale", "layout", "masks", "mask_resolution", "dilation")
+_SPEC_KEYS = (
+    "wires",
+    "field_scale",
+    "layout",
+    "masks",
+    "mask_resolution",
+    "dilation",
+    "propagate",
+)
 
 
 def _deformer_spec(deformer: WireDeformer) -> dict[str, Any]:
-    return {
+    spec = {
         "wires": [w.to_dict() for w in deformer.wires],
         "field_scale": deformer.field_scale,
         "layout": deformer.layout,
@@ -1831,6 +2140,9 @@ def _deformer_spec(deformer: WireDeformer) -> dict[str, Any]:
         "mask_resolution": deformer.mask_resolution,
         "dilation": deformer.dilation,
     }
+    if deformer.propagate != "region":  # written only when not the default
+        spec["propagate"] = deformer.propagate
+    return spec
 
 
 def _grow(bound: np.ndarray, sign: float) -> np.ndarray:

@@ -9,16 +9,42 @@
 //   0: WARP_state (R8UI: 0 identity, 1 vacated, 2 + wire) and WARP_t (R32F, linear filter);
 //   1: WARP_code (R16UI: bit 15 swept, bits 8-14 wire, bits 0-7 integer t; 0x7FFF vacated),
 //      t interpolated here from the 8 neighbours of the same wire.
+// WARP_LAYOUT_PAPER 1 (the paper's section 7.2 split): WARP_code (R16UI: bit 15 swept,
+//      bits 11-14 wire, bits 7-10 segment s, bits 0-6 integer t in s; 0x7FFF vacated) and
+//      WARP_seg (R32F, 17 texels per wire: where segment s starts, in table units); each
+//      neighbour's (s, t) becomes its table coordinate before the 8 are interpolated.
 uniform vec3 WARP_lo;
 uniform vec3 WARP_size;
 uniform vec3 WARP_shape;
 uniform float WARP_rows;      // rows of WARP_lut (3 per wire)
 uniform sampler2D WARP_lut;
-#if WARP_LAYOUT_PACKED
+#if WARP_LAYOUT_PAPER
+uniform usampler3D WARP_code;
+uniform sampler2D WARP_seg;
+#elif WARP_LAYOUT_PACKED
 uniform usampler3D WARP_code;
 #else
 uniform usampler3D WARP_state;
 uniform sampler3D WARP_t;
+#endif
+
+#if WARP_LAYOUT_PAPER
+// table coordinate of a paper code: segment start + (t / 127) x the segment's extent
+float WARP_paper_t(uint c) {
+    int w = int((c >> 11u) & 0xFu);
+    int s = int((c >> 7u) & 0xFu);
+    float a = texelFetch(WARP_seg, ivec2(s, w), 0).r;
+    float b = texelFetch(WARP_seg, ivec2(s + 1, w), 0).r;
+    return a + (b - a) * (float(c & 0x7Fu) / 127.0);
+}
+// weight and table coordinate of neighbour OFF, counted when it belongs to wire W
+#define WARP_PCORNER(OFF, WT) {                                                   \
+    uint c_ = texelFetch(WARP_code, min(i0 + OFF, top), 0).r;                     \
+    if (((c_ >> 11u) & 0xFu) == wire && c_ != 0x7FFFu) {                          \
+        ts += (WT) * WARP_paper_t(c_);                                            \
+        ws += (WT);                                                               \
+    }                                                                             \
+}
 #endif
 
 #if WARP_LAYOUT_PACKED
@@ -40,7 +66,30 @@ int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
     ivec3 v = ivec3(g);
     float t;
     uint wire;
-#if WARP_LAYOUT_PACKED
+#if WARP_LAYOUT_PAPER
+    uint c = texelFetch(WARP_code, v, 0).r;
+    if ((c & 0x8000u) == 0u) {
+        if (c == 0x7FFFu) { q = vec3(WARP_FAR); return 1; }
+        return 0;
+    }
+    wire = (c >> 11u) & 0xFu;
+    vec3 gc = clamp(g - 0.5, vec3(0.0), WARP_shape - 1.0);
+    ivec3 i0 = ivec3(floor(gc));
+    ivec3 top = ivec3(WARP_shape) - 1;
+    vec3 f = gc - vec3(i0);
+    vec3 e = 1.0 - f;
+    float ts = 0.0;
+    float ws = 0.0;
+    WARP_PCORNER(ivec3(0, 0, 0), e.x * e.y * e.z)
+    WARP_PCORNER(ivec3(1, 0, 0), f.x * e.y * e.z)
+    WARP_PCORNER(ivec3(0, 1, 0), e.x * f.y * e.z)
+    WARP_PCORNER(ivec3(1, 1, 0), f.x * f.y * e.z)
+    WARP_PCORNER(ivec3(0, 0, 1), e.x * e.y * f.z)
+    WARP_PCORNER(ivec3(1, 0, 1), f.x * e.y * f.z)
+    WARP_PCORNER(ivec3(0, 1, 1), e.x * f.y * f.z)
+    WARP_PCORNER(ivec3(1, 1, 1), f.x * f.y * f.z)
+    t = ws > 0.0 ? ts / ws : WARP_paper_t(c);
+#elif WARP_LAYOUT_PACKED
     uint c = texelFetch(WARP_code, v, 0).r;
     if ((c & 0x8000u) == 0u) {
         if (c == 0x7FFFu) { q = vec3(WARP_FAR); return 1; }

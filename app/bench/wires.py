@@ -539,7 +539,8 @@ class WireBenchReport:
                 f" {'x'.join(map(str, f['field_shape']))} = {f['voxels']} voxels, swept"
                 f" {f['swept']}, vacated {f['vacated']}, ignored {f['ignored']}"
                 f" ({f['percent_ignored']:.2f} %); {f['planes']} mask planes"
-                f" ({f['planes_dropped']} dropped), {f['seeds']} seeds, propagated region"
+                f" ({f['planes_dropped']} dropped; {f.get('mask_bytes_total', 0)} bytes of"
+                f" masks, section 7.1's sum a(p) s / 8), {f['seeds']} seeds, propagated region"
                 f" {f['region_voxels']} voxels.",
                 "",
             ]
@@ -1555,6 +1556,13 @@ def add_bench_wires_parser(bsub: Any) -> None:
         " Bézier wire of radius 40 mm) at --scales (default 2,1), OpenCL pass vs numpy"
         " classification, interleaved",
     )
+    p.add_argument(
+        "--storage",
+        action="store_true",
+        help="instead: the wire paper's storage (float / packed / paper layouts, mask"
+        " memory) and propagation over the region vs flagged voxels, on the fish and tubes"
+        " (voxwarp.bench.wire_storage); --repeats interleaved builds",
+    )
     p.add_argument("--markdown", metavar="FILE", help="also write the report to FILE")
     p.set_defaults(func=cmd_bench_wires)
 
@@ -1581,6 +1589,8 @@ def command_line(args: argparse.Namespace) -> str:
         parts.append("--no-render")
     if getattr(args, "head", False):
         parts.append("--head")
+    if getattr(args, "storage", False):
+        parts.append("--storage")
     if args.markdown:
         parts += ["--markdown", shlex.quote(str(args.markdown))]
     return " ".join(parts)
@@ -1590,6 +1600,17 @@ def cmd_bench_wires(args: argparse.Namespace) -> int:
     """``voxwarp bench wires``: see the module docstring."""
     from voxwarp.core.files import atomic_write_text
 
+    if getattr(args, "storage", False):
+        from voxwarp.bench.wire_storage import bench_storage, markdown
+
+        storage, modes = bench_storage(
+            args.repeats, images=not args.no_render, log=lambda s: print(s, file=sys.stderr)
+        )
+        text = markdown(storage, modes, command_line(args))
+        print(text)
+        if args.markdown:
+            atomic_write_text(Path(args.markdown), text)
+        return 0
     if args.head:
         scales = HEAD_SCALES if tuple(args.scales) == DEFAULT_SCALES else args.scales
         rows = bench_head_builds(None, scales, args.repeats, lambda s: print(s, file=sys.stderr))

@@ -400,8 +400,9 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
     assert st is not None
     summary = (
         f"wires: {len(warp.wires)} wire(s), field {'x'.join(map(str, st.field_shape))}"
-        f" (1:{st.field_scale**3}, {st.layout}), {st.planes - st.planes_dropped} planes,"
-        f" {st.swept} voxels swept, {st.percent_ignored:.1f}% ignored,"
+        f" (1:{st.field_scale**3}, {st.layout}), {st.planes - st.planes_dropped} planes"
+        f" ({st.mask_bytes_total} bytes of masks), {st.swept} voxels swept,"
+        f" {st.percent_ignored:.1f}% ignored,"
         f" built in {st.timings['total']:.2f} s ({st.backend})"
     )
     return warp, summary
@@ -1217,9 +1218,10 @@ def _add_wire_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--layout",
-        choices=("float", "packed"),
-        help="attribute field storage: float (5 bytes/voxel, hardware-filtered t) or packed"
-        " (the paper's 2 bytes/voxel); default: the file's, else float",
+        choices=("float", "packed", "paper"),
+        help="attribute field storage: float (5 bytes/voxel, hardware-filtered t), packed"
+        " (2 bytes/voxel: flag, 7-bit wire, 8-bit t) or paper (2 bytes/voxel, the wire"
+        " paper's flag, 4-bit wire, 4-bit segment, 7-bit t); default: the file's, else float",
     )
     p.add_argument(
         "--lattice",

@@ -706,7 +706,8 @@ class EditSession:
 
     def set_wire_settings(self, **settings: Any) -> None:
         """Change how the wire field is built: ``field_scale`` (1, 2, 4, 8 or 16),
-        ``layout`` (``"float"``/``"packed"``), ``masks`` (bool); the field is then stale."""
+        ``layout`` (``"float"``/``"packed"``/``"paper"``), ``masks`` (bool); the field is
+        then stale."""
         allowed = {"field_scale", "layout", "masks"}
         unknown = set(settings) - allowed
         if unknown:
@@ -717,8 +718,10 @@ class EditSession:
             raise EditorError(
                 f"field_scale must be 1, 2, 4, 8 or 16; got {settings['field_scale']!r}"
             )
-        if "layout" in settings and settings["layout"] not in ("float", "packed"):
-            raise EditorError(f"layout must be 'float' or 'packed'; got {settings['layout']!r}")
+        if "layout" in settings and settings["layout"] not in ("float", "packed", "paper"):
+            raise EditorError(
+                f"layout must be 'float', 'packed' or 'paper'; got {settings['layout']!r}"
+            )
         if "masks" in settings and not isinstance(settings["masks"], bool):
             raise EditorError(f"masks must be true or false; got {settings['masks']!r}")
         self.wire_settings.update(settings)
