@@ -1727,6 +1727,8 @@ def _demo_lattice(
         renders.append(("(c) fish, undeformed", _rgb(r, plain, size)))
         renders.append(("(d) fish bent by a 12x4x2-cell lattice", _rgb(r, bent, size)))
         renders.append(("(e) tubes wrapped round a torus (paper Fig. 1)", _rgb(r, torus, size)))
+        normal_scenes = _normal_scenes(size)
+        normal_renders = [(title, _rgb(r, sc, size)) for title, sc in normal_scenes]
         log("lattice: timing trilinear vs linear")
         rep = bench_lattice(
             triangles=s.lattice_triangles,
@@ -1772,13 +1774,16 @@ def _demo_lattice(
         },
         "gl_renderer": gl,
     }
-    fig = _figure(16.0, 9.5, DEMO_TITLES["lattice"])
-    grid = fig.add_gridspec(2, 1, height_ratios=[1.0, 1.0])
+    fig = _figure(16.0, 14.0, DEMO_TITLES["lattice"])
+    grid = fig.add_gridspec(3, 1, height_ratios=[1.0, 1.0, 1.1])
     top = grid[0].subgridspec(1, 2, width_ratios=[1.5, 1.0])
     _plot_throughput(fig.add_subplot(top[0, 0]), numbers)
     _plot_composition(fig.add_subplot(top[0, 1]), numbers)
-    bottom = grid[1].subgridspec(1, 3)
+    middle = grid[1].subgridspec(1, 3)
     for i, (title, img) in enumerate(renders):
+        _show_image(fig.add_subplot(middle[0, i]), img, title)
+    bottom = grid[2].subgridspec(1, 2)
+    for i, (title, img) in enumerate(normal_renders):
         _show_image(fig.add_subplot(bottom[0, i]), img, title)
     path = _save_figure(fig, out / "lattice.png")
 
@@ -1821,8 +1826,48 @@ def _demo_lattice(
             None,
             "a",
         ),
+        TourStep(
+            "Normals across cells",
+            "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel f transforms"
+            " the normal itself (J n): the shading flows smoothly over cell borders but is"
+            " not exactly perpendicular to the surface. Panel g transforms two tangents and"
+            " crosses them: exactly perpendicular, but the shading jumps at every border of"
+            " these 30-degree cells. The tangent way is voxwarp's default.",
+            _snap(normal_scenes[1][1]),
+            "g",
+        ),
     ]
     return [path], numbers, tour
+
+
+#: The lattice demo's normal panels: cells of the coarse torus lattice (30 degrees per cell
+#: around the major circle) and the view of the close-up.
+NORMALS_CELLS = (12, 2, 1)
+NORMALS_VIEW = (60.0, 30.0)
+
+
+def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
+    """The torus of tubes on a coarse lattice, close up, with each normal method
+    (GRAPP 2010, Figure 5): (title, scene) for the direct and the tangent-space normals."""
+    from voxwarp.teaching.lattice_scenes import torus_tubes
+
+    out = []
+    for method, title in (
+        ("normal", "(f) direct normals J n (Fig. 5 left): smooth"),
+        ("tangent", "(g) tangent-space normals (Fig. 5 right): seams"),
+    ):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # the mesh scene's empty volume's TF
+            scene = torus_tubes()
+        for inst in scene.meshes:
+            inst.transform = inst.transform.resample(NORMALS_CELLS)
+            inst.normal_method = method
+        w = np.concatenate([inst.world_vertices() for inst in scene.meshes])
+        lo, hi = w.min(axis=0), w.max(axis=0)
+        quarter = np.r_[0.1 * hi[:2], lo[2]], hi  # the quadrant facing the camera
+        scene.camera = _framing_camera(*quarter, NORMALS_VIEW, size)
+        out.append((title, scene))
+    return out
 
 
 def _plot_throughput(ax: Any, n: dict[str, Any]) -> None:
@@ -1830,7 +1875,7 @@ def _plot_throughput(ax: Any, n: dict[str, Any]) -> None:
     groups = [f"{c}³ cells" for c in n["cells"]]
     series: dict[str, list[float | None]] = {}
     for stage, method, position, label in (
-        ("frame", "normal", "exact", "frame, normals by J⁻ᵀ"),
+        ("frame", "normal", "exact", "frame, direct normals (J n)"),
         ("frame", "tangent", "exact", "frame, normals by tangents"),
         ("frame", "normal", "hardware", "frame, hardware position"),
         ("vertex", "normal", "exact", "vertex stage only"),
