@@ -1005,9 +1005,29 @@ class TrilinearGrid:
             :data:`LINEAR_RTOL` times the grid's extent.
         """
         if "linear" not in self._cache:
-            _, _, res = self._fit()
-            self._cache["linear"] = bool(res <= LINEAR_RTOL * self._extent())
+            tol = LINEAR_RTOL * self._extent()
+            # cheap rejection first (animated scenes ask this of every new composed grid):
+            # the affine map through four corners misses the nodes of a grid within tol
+            # of an affine map by at most 6 tol
+            if self._corner_residual() > 8 * tol:
+                self._cache["linear"] = False
+            else:
+                self._cache["linear"] = bool(self._fit()[2] <= tol)
         return self._cache["linear"]
+
+    def _corner_residual(self) -> float:
+        """Max node distance from the affine map through the corners (0,0,0), (1,0,0),
+        (0,1,0) and (0,0,1)."""
+        n = self.nodes
+        o = n[0, 0, 0]
+        f = [np.arange(c + 1) / c for c in self.shape]
+        pred = (
+            o
+            + f[0][:, None, None, None] * (n[-1, 0, 0] - o)
+            + f[1][None, :, None, None] * (n[0, -1, 0] - o)
+            + f[2][None, None, :, None] * (n[0, 0, -1] - o)
+        )
+        return float(np.abs(pred - n).max())
 
     def matrix(self) -> np.ndarray:
         """The 4x4 affine matrix of a linear grid (unit cube -> world).

@@ -240,3 +240,15 @@ def test_bench_fast_path_rows(gl_ctx: Any) -> None:
     text = report.markdown("voxwarp bench lattice")
     assert "## 4. Linear fast path" in text
     assert f"| frame | {frame.trilinear_ms:.1f}" in text
+
+
+def test_is_linear_tolerance_survives_the_quick_rejection() -> None:
+    grid = affine_lattice(BOX)
+    extent = float(np.ptp(grid.nodes.reshape(-1, 3), axis=0).max())
+    for bump, linear in ((1e-12, True), (1e-7, False)):
+        nodes = grid.nodes.copy()
+        nodes[2, 1, 1, 0] += bump * extent  # an inner node: only the full fit sees it
+        assert TrilinearGrid(nodes).is_linear is linear
+        corner = grid.nodes.copy()
+        corner[-1, -1, -1, 2] += bump * extent
+        assert TrilinearGrid(corner).is_linear is linear
