@@ -44,6 +44,9 @@ things here, every ratio against a linear reference timed in the same run:
 4. *Linear fast path* (GRAPP 2010, section 4.1, last paragraph): the torus of section 1
    under an affine lattice, drawn by the trilinear program and by the ``LINEAR`` one that
    :class:`~voxwarp.render.mesh_pass.MeshRenderer` picks for it, frames alternated.
+5. *Lattice normals* (:mod:`voxwarp.bench.lattice_normals`, GRAPP 2010 section 4.2): the
+   direct and the tangent-space normals against the exact normals of the smooth shape a
+   lattice samples, and their seams at cell faces (not timed).
 
 The image is ``size`` (default 512x512), ``frames`` timed frames per configuration
 (default 5), medians everywhere.
@@ -67,6 +70,8 @@ import numpy as np
 
 from voxwarp.bench.lattice_inverse import DEFAULT_FRAMES as INVERSE_FRAMES
 from voxwarp.bench.lattice_inverse import bench_inverse
+from voxwarp.bench.lattice_normals import markdown_lines as normals_markdown
+from voxwarp.bench.lattice_normals import normals_study
 from voxwarp.bench.papers import lattice_ratio_range
 from voxwarp.bench.render import best_times, cpu_count, load_average
 from voxwarp.core.camera import Camera
@@ -251,6 +256,8 @@ class LatticeBenchReport:
     crosscheck: CrossCheck | None = None
     composition: list[CompositionRow] = field(default_factory=list)
     fast_path: list[FastPathRow] = field(default_factory=list)
+    #: section 5 (:class:`voxwarp.bench.lattice_normals.NormalsRow`)
+    normals: list[Any] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     #: section 3 (:class:`voxwarp.bench.lattice_inverse.InverseReport`), None when skipped
     inverse: Any = None
@@ -362,6 +369,7 @@ class LatticeBenchReport:
             *self._composition_md(),
             *(self.inverse.markdown_lines() if self.inverse is not None else []),
             *self._fast_path_md(),
+            *(normals_markdown(self.normals) if self.normals else []),
         ]
         if self.notes:
             lines += ["## Notes", "", *[f"* {n}" for n in self.notes], ""]
@@ -1016,6 +1024,7 @@ def bench_lattice(
         if mesh_sections:
             bench_throughput(report, ctx, mesh, log, crosscheck=crosscheck)
             bench_fast_path(report, ctx, mesh, log)
+            report.normals = normals_study()
             del mesh
             bench_composition(report, ctx, log)
         if inverse_frames is not None:

@@ -252,3 +252,21 @@ def test_is_linear_tolerance_survives_the_quick_rejection() -> None:
         corner = grid.nodes.copy()
         corner[-1, -1, -1, 2] += bump * extent
         assert TrilinearGrid(corner).is_linear is linear
+
+
+def test_bench_normals_study() -> None:
+    from voxwarp.bench.lattice_normals import markdown_lines, normals_study
+
+    rows = {(r.scene, r.cells[0], r.method): r for r in normals_study()}
+    assert len(rows) == 8
+    # a bend keeps the cross-section: the direct normal is near exact, without seams
+    bend = rows["bend", 4, "normal"], rows["bend", 4, "tangent"]
+    assert bend[0].max_deg < 0.1 * bend[1].max_deg
+    assert bend[1].seam_deg > 0.9 * 22.5 > 100 * bend[0].seam_deg  # 22.5 deg per cell
+    # a non-uniform stretch: the direct normal stays off however fine the lattice,
+    # the tangent-space normal converges (4x the cells: about 1/4 the max error)
+    torus = {c: (rows["torus", c, "normal"], rows["torus", c, "tangent"]) for c in (12, 48)}
+    assert torus[48][1].mean_deg < 0.5 * torus[48][0].mean_deg
+    assert torus[48][1].max_deg < 0.6 * torus[12][1].max_deg
+    assert torus[48][0].mean_deg > 0.9 * torus[12][0].mean_deg
+    assert "| torus | 48x2x1 | tangent |" in "\n".join(markdown_lines(list(rows.values())))
