@@ -13,8 +13,8 @@ things here, every ratio against a linear reference timed in the same run:
    drawn
    at ``size`` under the twist + bend lattice of ``voxwarp.bench.lattice.bend_grid`` at each
    cell count (``cells`` per axis), against the same mesh drawn with a 4x4 (identity)
-   matrix. Per cell count: both normal methods (``normal``: J^-T n; ``tangent``: two
-   tangents through J) with exact positions, and ``normal`` with the hardware trilinear
+   matrix. Per cell count: both normal methods (``normal``: the direct J n; ``tangent``:
+   two tangents through J, crossed) with exact positions, and ``normal`` with the hardware trilinear
    position fetch. Each row alternates lattice and linear frames (the order flips every
    frame, each frame bound by ``ctx.finish()``) after one warm-up draw of each, and
    reports the medians and FPS ratio = linear median / lattice median (= lattice FPS /
