@@ -40,7 +40,7 @@ things here, every ratio against a linear reference timed in the same run:
 3. *Lattice over a volume* (:mod:`voxwarp.bench.lattice_inverse`): the accuracy of the
    volume's inverse (Newton to a tolerance, fixed steps, the baked seed) over random
    non-folding lattices beside its render cost, against the baked seed and the former
-   fixed 2 steps in the same run (``--inverse-frames``; ``--inverse-only`` skips 1-2).
+   fixed 2 steps in the same run (``--inverse-frames``; ``--inverse-only``: this alone).
 4. *Linear fast path* (GRAPP 2010, section 4.1, last paragraph): the torus of section 1
    under an affine lattice, drawn by the trilinear program and by the ``LINEAR`` one that
    :class:`~voxwarp.render.mesh_pass.MeshRenderer` picks for it, frames alternated.
@@ -985,7 +985,7 @@ def bench_lattice(
     mesh_sections: bool = True,
 ) -> LatticeBenchReport:
     """Run the sections (see the module docstring) on ``ctx`` (else a new context):
-    1-2 unless ``mesh_sections`` is False; 3 when ``inverse_frames`` is given (its
+    1, 2 and 4 unless ``mesh_sections`` is False; 3 when ``inverse_frames`` is given (its
     render rounds; 0: its accuracy rows only; the command line's default
     :data:`INVERSE_FRAMES`)."""
     t_start = time.perf_counter()
@@ -997,7 +997,8 @@ def bench_lattice(
         raise ValueError(f"frames and objects must be >= 1; got {frames}, {objects}")
     if not MIN_TRIANGLES <= int(triangles) <= MAX_TRIANGLES:
         raise ValueError(f"triangles must be {MIN_TRIANGLES}..{MAX_TRIANGLES}; got {triangles}")
-    log(f"building a torus of about {int(triangles)} triangles")
+    if mesh_sections:
+        log(f"building a torus of about {int(triangles)} triangles")
     mesh = torus_for(int(triangles) if mesh_sections else MIN_TRIANGLES)
     report = LatticeBenchReport(
         triangles_requested=int(triangles),
@@ -1134,7 +1135,7 @@ def add_bench_lattice_parser(bsub: Any) -> None:
         help=f"render rounds of section 3, the volume's inverse (default {INVERSE_FRAMES};"
         " 0: its accuracy rows only)",
     )
-    p.add_argument("--inverse-only", action="store_true", help="run section 3 only (skip 1-2)")
+    p.add_argument("--inverse-only", action="store_true", help="run section 3 alone")
     p.add_argument("--markdown", metavar="FILE", help="also write the report to FILE")
     p.set_defaults(func=cmd_bench_lattice)
 
@@ -1179,6 +1180,10 @@ def cmd_bench_lattice(args: argparse.Namespace) -> int:
         mesh_sections=not args.inverse_only,
     )
     text = report.markdown(command_line(args))
+    if args.inverse_only:
+        text = report.inverse.standalone_markdown(
+            command_line(args), report.gl_renderer, report.load, report.wall_s
+        )
     print(text)
     if args.markdown:
         atomic_write_text(Path(args.markdown), text)

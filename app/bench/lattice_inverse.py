@@ -43,7 +43,7 @@ from voxwarp.deform.lattice_warp import (
 DEFAULT_TRIALS = 24
 DEFAULT_POINTS = 4000
 #: timed rounds of the render rows (0: accuracy only)
-DEFAULT_FRAMES = 7
+DEFAULT_FRAMES = 15
 #: the rendered volume (voxels per axis) and image
 VOLUME_SIZE = 128
 IMAGE: tuple[int, int] = (256, 256)
@@ -51,7 +51,9 @@ IMAGE: tuple[int, int] = (256, 256)
 RENDER_VARIANTS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("baked seed", {"inverse": "baked"}),
     ("newton k=2 (former default)", {"iterations": 2}),
-    ("loop forced to 2 steps (tol=1e-9 mm, max 2)", {"tolerance": 1e-9, "max_iterations": 2}),
+    ("newton k=1", {"iterations": 1}),
+    # the loop's own cost: every sample leaves it after its first step
+    ("loop left after 1 step (tol=1e3 mm)", {"tolerance": 1e3}),
     ("newton tol=1e-2 mm", {"tolerance": 1e-2}),
     (f"newton tol={DEFAULT_TOLERANCE:g} mm (default)", {}),
     ("newton tol=1e-4 mm", {"tolerance": 1e-4}),
@@ -83,6 +85,28 @@ class InverseReport:
             if r.label.startswith(label_start):
                 return r.median_ms
         return None
+
+    def standalone_markdown(
+        self, command: str, gl_renderer: str, load: tuple[float, float], wall_s: float
+    ) -> str:
+        """The section alone (``bench lattice --inverse-only``), headed by the command, the
+        device and the load."""
+        import platform
+        import sys
+
+        from voxwarp.bench.render import cpu_count
+
+        lines = [
+            f"Command: `{command}`",
+            "",
+            f"Device: GL {gl_renderer}; CPU {platform.processor() or platform.machine()},"
+            f" {cpu_count()} cores; Python {sys.version.split()[0]}, numpy {np.__version__};"
+            f" 1-minute load average before / after {load[0]:.2f} / {load[1]:.2f}; the run"
+            f" took {wall_s:.1f} s.",
+            "",
+            *self.markdown_lines(),
+        ]
+        return "\n".join(lines).rstrip() + "\n"
 
     def markdown_lines(self) -> list[str]:
         """Section 3 in markdown."""

@@ -43,6 +43,10 @@ def test_accuracy_only_section() -> None:
     report = li.bench_inverse(None, trials=1, points=100, frames=0, log=lambda s: None)
     assert report.render == []
     assert "Render cost" not in "\n".join(report.markdown_lines())
+    text = report.standalone_markdown("voxwarp bench lattice --inverse-only", "gl", (0.5, 1), 2)
+    assert text.startswith("Command: `voxwarp bench lattice --inverse-only`")
+    assert "## 3. Lattice over a volume" in text
+    assert "## 1." not in text
 
 
 def test_command_line_options() -> None:
