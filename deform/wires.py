@@ -78,6 +78,20 @@ leave the original box). It is built in deformed space:
    (:mod:`voxwarp.deform.wire_classify`: the nearest-seed indices never leave the device,
    and the refinement and mask tests give the numpy path's bits); else in numpy.
 
+Wire ends (not in the paper). The rigid sweep (``ends="rigid"``) moves nothing past the
+end planes and the radius: a wire that ends inside an object, or an object wider than
+the radius, is cut there, and the build warns when a moving end lies inside its object.
+``ends="smooth"`` (the default) blends the sweep with the identity beyond them:
+``warp(p) = p + w(p) (A p + b - p)``, with w = 1 inside the radius and between the end
+planes, falling smoothly (a smoothstep) to 0 over ``falloff`` mm beyond each end along
+its tangent (the mapping there is the end plane's, extended) and over
+:data:`RADIAL_FADE` times the radius beyond the radius. Planes beyond the ends use the
+end plane's mask. w is stored per field voxel (float32, trilinearly filtered); the
+Jacobian is taken as ``I + w (A - I)`` (the gradient of w is left out, as that of u).
+The object's place is vacated only out to the middle of the fades: past it the content
+has mostly stayed and shows in place, so a fade leaves no hole; a move larger than the
+fade still folds (a doubled strip), so give a falloff of at least twice the end's move.
+
 Storage (7.2). Two layouts, chosen by ``layout``:
 
 * ``"float"``: ``state`` uint8 per voxel (0 identity, 1 vacated, 2 + γ swept) and ``t``
@@ -172,6 +186,15 @@ MAX_MASK_PIXELS = 1 << 25
 #: what float32 arithmetic can add to a mapped point (mm): displacement bounds grow by it
 #: (the filtered lookups of t and of the tables need none, see _box_mapping_range)
 FLOAT32_MARGIN = 1e-4
+#: what a wire does beyond its ends and near its radius (see :class:`Wire`)
+ENDS = ("smooth", "rigid")
+#: the default of :attr:`Wire.ends`
+DEFAULT_ENDS = "smooth"
+#: :attr:`Wire.ends` of a wire saved without it (files from before the option: the
+#: paper's rigid sweep, as they were made)
+SAVED_ENDS = "rigid"
+#: with ``ends="smooth"``, the width of the fade beyond the radius, as a share of it
+RADIAL_FADE = 0.25
 
 Beta = Callable[[np.ndarray], np.ndarray]
 
@@ -249,7 +272,8 @@ class Wire:
         ``[(t, s), ...]`` (s > 0): scale of the cross-section, keyed the same way.
     radius
         Region of influence (mm): how far from the wire the object is swept (Maya's
-        dropoffDistance); the sweep is rigid inside it, nothing moves beyond.
+        dropoffDistance); the sweep is rigid inside it; beyond it nothing moves
+        (``ends="rigid"``) or the sweep fades out (``ends="smooth"``).
     beta
         Object classification: a value range ``(lo, hi)`` of the volume, a callable
         ``values -> bool array``, or ``None`` (everything inside the radius).
@@ -258,6 +282,16 @@ class Wire:
         aligned with the start tangent); twist angles are measured from it.
     name
         Optional label (saved in scene JSON).
+    ends
+        What happens beyond the wire's ends and its radius: ``"smooth"`` fades the
+        sweep's displacement to zero over ``falloff`` mm beyond each end (along the end
+        tangents) and over :data:`RADIAL_FADE` times the radius beyond the radius (the
+        sweep inside stays rigid), so a wire that ends inside an object, or an object
+        wider than the radius, bends without being cut; ``"rigid"`` is the paper's sweep
+        (nothing beyond the end planes or the radius moves).
+    falloff
+        Length (mm) of the fade beyond each end with ``ends="smooth"``; default the
+        radius.
     """
 
     def __init__(
@@ -271,6 +305,8 @@ class Wire:
         beta: Any = None,
         initial_normal: Any = None,
         name: str = "",
+        ends: str = DEFAULT_ENDS,
+        falloff: float | None = None,
     ) -> None:
         for what, points in (("base", base), ("modified", modified)):
             count = len(points.control_points) if isinstance(points, Curve) else _count(points)
@@ -305,6 +341,44 @@ class Wire:
             initial_normal = n
         self.initial_normal = initial_normal
         self.name = str(name)
+        if ends not in ENDS:
+            raise WarpError(f"wire ends must be one of {ENDS}; got {ends!r:.40}")
+        self.ends = ends
+        self.falloff_mm: float | None = None
+        if falloff is not None:
+            try:
+                length = float(falloff)
+            except (TypeError, ValueError) as exc:
+                raise WarpError(
+                    f"wire falloff must be a number of mm; got {falloff!r:.40}"
+                ) from exc
+            if not math.isfinite(length) or length <= 0:
+                raise WarpError(f"wire falloff must be a finite number of mm > 0; got {falloff!r}")
+            self.falloff_mm = length
+
+    @property
+    def falloff(self) -> float:
+        """Length (mm) of the fade beyond each end (the radius unless given)."""
+        return self.radius if self.falloff_mm is None else self.falloff_mm
+
+    @property
+    def influence(self) -> float:
+        """How far (mm, before scaling) from the wire anything moves: the radius, and
+        the radial fade beyond it with ``ends="smooth"``."""
+        return self.radius * (1.0 + RADIAL_FADE) if self.smooth else self.radius
+
+    @property
+    def smooth(self) -> bool:
+        """Whether the sweep fades out beyond the ends and near the radius."""
+        return self.ends == "smooth"
+
+    def end_reach(self, side: str = "modified") -> float:
+        """How far (mm) beyond its end planes the wire moves anything (``side``
+        ``"modified"``), or vacates the object's place (``"base"``: to the middle of
+        the fade, where the content has mostly moved away)."""
+        if not self.smooth:
+            return 0.0
+        return self.falloff if side == "modified" else 0.5 * self.falloff
 
     @property
     def kind(self) -> str:
@@ -353,7 +427,10 @@ class Wire:
             "scale": self.scale.tolist(),
             "radius": self.radius,
             "beta": None if self.beta is None else list(self.beta),
+            "ends": self.ends,
         }
+        if self.falloff_mm is not None:
+            d["falloff"] = self.falloff_mm
         if self.initial_normal is not None:
             d["initial_normal"] = self.initial_normal.tolist()
         if self.name:
@@ -375,6 +452,8 @@ class Wire:
             "beta",
             "initial_normal",
             "name",
+            "ends",
+            "falloff",
         }
         if unknown:
             raise WarpError(f"unknown wire keys {sorted(unknown)}; see voxwarp.deform.wires.Wire")
@@ -392,12 +471,14 @@ class Wire:
             beta=d.get("beta"),
             initial_normal=d.get("initial_normal"),
             name=d.get("name", ""),
+            ends=d.get("ends", SAVED_ENDS),
+            falloff=d.get("falloff"),
         )
 
     def __repr__(self) -> str:
         return (
             f"Wire(kind={self.kind!r}, points={len(self.base.control_points)},"
-            f" radius={self.radius:g}, beta={self.beta!r})"
+            f" radius={self.radius:g}, beta={self.beta!r}, ends={self.ends!r})"
         )
 
 
@@ -581,6 +662,9 @@ class WireField:
     #: (wires, PAPER_MAX_SEGMENTS + 1) float32; entries past a wire's last segment
     #: repeat its end
     segments: np.ndarray | None = None
+    #: with any ``ends="smooth"`` wire: float32 weight in [0, 1] per voxel (trilinearly
+    #: filtered) by which a swept sample's displacement is scaled; None: all rigid
+    weight: np.ndarray | None = None
 
     @property
     def hi(self) -> np.ndarray:
@@ -590,7 +674,8 @@ class WireField:
     @property
     def nbytes(self) -> int:
         """Bytes of the per-voxel data."""
-        return sum(a.nbytes for a in (self.state, self.t, self.code) if a is not None)
+        arrays = (self.state, self.t, self.code, self.weight)
+        return sum(a.nbytes for a in arrays if a is not None)
 
     def decode(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(state, wire, t) per voxel for either layout: state 0 identity, 1 vacated,
@@ -779,8 +864,9 @@ class WireDeformer:
         lo, hi = vlo.copy(), vhi.copy()
         for w in self.wires:
             clo, chi = _curve_box(w.modified)
-            lo = np.minimum(lo, clo - w.radius * float(w.scale[:, 1].max()))
-            hi = np.maximum(hi, chi + w.radius * float(w.scale[:, 1].max()))
+            grow = max(w.influence * float(w.scale[:, 1].max()), w.end_reach())
+            lo = np.minimum(lo, clo - grow)
+            hi = np.maximum(hi, chi + grow)
         grow_lo = np.ceil((vlo - lo) / h - 1e-9)
         lo = vlo - grow_lo * h
         count = np.maximum(np.ceil((hi - lo) / h - 1e-9), 1)
@@ -829,6 +915,7 @@ class WireDeformer:
             # section 7.1: one bit per pixel of every kept plane
             mask_bytes.append(math.ceil((mask.shape[0] - n_dropped) * k_side * k_side / 8))
         timings["masks"] = time.perf_counter() - t0
+        self._warn_ends_inside(tables, masks)
 
         # 3. seeds: the 8 voxels of every field cell a wire enters; the modified wires
         # for the swept voxels, the base wires for the place the object leaves
@@ -898,6 +985,7 @@ class WireDeformer:
             fld = WireField(
                 lo, h, shape, "paper", None, None, code, tables, region_lo, rshape, segments=starts
             )
+        fld.weight = self._weights(tables, lo, h, shape, region_lo, rshape, r_wire, r_u, swept)
         timings["store"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_all
 
@@ -941,10 +1029,10 @@ class WireDeformer:
         adds the stages' seconds to ``timings``."""
         if self.propagate == "flagged":
             flagged = self._flagged_side(seeds, tables, grown, lo, h, shape, side, timings)
-            return flagged
+            return self._smooth_trim(tables, lo, h, flagged, side)
         fast = self._fast_side(seeds, tables, grown, lo, h, shape, side, timings)
         if fast is not None:
-            return fast
+            return self._smooth_trim(tables, lo, h, fast, side)
         t0 = time.perf_counter()
         region_lo, rshape, r_wire, r_u, r_near, count = self._propagate(
             seeds, tables, lo, h, shape, side
@@ -953,7 +1041,8 @@ class WireDeformer:
         bits = self._flags(tables, grown, lo, h, region_lo, rshape, r_wire, r_u, r_near, side)
         timings["propagate"] += t1 - t0
         timings["flags"] += time.perf_counter() - t1
-        return region_lo, rshape, r_wire, r_u, bits, count
+        out = (region_lo, rshape, r_wire, r_u, bits, count)
+        return self._smooth_trim(tables, lo, h, out, side)
 
     def _fast_side(
         self,
@@ -1006,7 +1095,8 @@ class WireDeformer:
             region_lo=c_lo,
             wires=geoms,
             px=self.mask_resolution,
-            cap=float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + self.mask_resolution,
+            # smooth ends reach further (trimmed per wire later)
+            cap=self._end_cap() + max(w.end_reach(side) for w in self.wires),
             base_side=not modified,
             refine_steps=REFINE_STEPS,
         )
@@ -1058,7 +1148,8 @@ class WireDeformer:
         for w, tab in zip(self.wires, tables, strict=True):
             pts = tab.modified_points if side == "modified" else tab.base_points
             smax = float(w.scale[:, 1].max()) if side == "modified" else 1.0
-            r = w.radius * smax + 2 * self.mask_resolution
+            ends = w.end_reach(side)
+            r = max(w.influence * smax, ends) + 2 * self.mask_resolution
             a = np.floor((pts.min(0) - r - lo) / h - 0.5).astype(int) - 1
             b = np.ceil((pts.max(0) + r - lo) / h - 0.5).astype(int) + 1
             c_lo, c_hi = np.minimum(c_lo, a), np.maximum(c_hi, b)
@@ -1083,14 +1174,145 @@ class WireDeformer:
 
     def _reach(self, h: np.ndarray, side: str) -> np.ndarray:
         """Per wire: how far (mm) from its nearest seed a voxel can still be flagged."""
+        modified = side == "modified"
         return np.array(
             [
-                w.radius * (float(w.scale[:, 1].max()) if side == "modified" else 1.0)
+                math.hypot(
+                    w.influence * (float(w.scale[:, 1].max()) if modified else 1.0),
+                    w.end_reach(side),
+                )
                 + 2 * self.mask_resolution
                 + float(np.linalg.norm(h))
                 for w in self.wires
             ]
         )
+
+    def _end_cap(self) -> float:
+        """How far (mm) beyond its end planes a rigid wire still sweeps: the along-wire
+        offset of a voxel centre within half a field voxel (and a mask pixel) of them."""
+        return float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + self.mask_resolution
+
+    def _smooth_trim(
+        self,
+        tables: list[WireTables],
+        lo: np.ndarray,
+        h: np.ndarray,
+        out: tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int],
+        side: str,
+    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+        """One side's result with the bits of ``ends="smooth"`` wires as they need them.
+
+        A flag beyond an end reaches as far as its own wire's :meth:`Wire.end_reach`
+        (the OpenCL pass takes the largest of all wires): the falloff on the modified
+        side, half of it on the base side. A smooth wire's place is vacated out to the
+        middle of its fades (along the wire and across its radius, plus the half field
+        voxel by which masks grow), not beyond: the fades move their content
+        continuously, so what lies past their middle mostly stays and is shown.
+        """
+        region_lo, rshape, r_wire, r_u, bits, count = out
+        if not any(w.smooth for w in self.wires):
+            return out
+        flat = np.flatnonzero(bits)
+        wire_of = r_wire.ravel()[flat]
+        for wi, w in enumerate(self.wires):
+            sel = flat[wire_of == wi]
+            if len(sel) == 0:
+                continue
+            p = _region_centres(lo, h, region_lo, rshape, sel)
+            x, y, z, u = _wire_local(tables[wi], side, r_u.ravel()[sel], p)
+            ends = (u <= 0.0) | (u >= 1.0)
+            drop = ends & (np.abs(z) > self._end_cap() + w.end_reach(side))
+            if side == "base" and w.smooth:
+                core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
+                drop |= np.hypot(x, y) > core
+            bits.reshape(-1)[sel[drop]] = False
+        return region_lo, rshape, r_wire, r_u, bits, count
+
+    def _weights(
+        self,
+        tables: list[WireTables],
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        region_lo: np.ndarray,
+        rshape: tuple[int, int, int],
+        r_wire: np.ndarray,
+        r_u: np.ndarray,
+        swept: np.ndarray,
+    ) -> np.ndarray | None:
+        """The field's displacement weights (see :attr:`WireField.weight`): 1 where a
+        rigid wire is nearest, the smooth fade of the nearest smooth wire elsewhere;
+        None when every wire is rigid. Only the swept voxels and their neighbours (the
+        corners a swept sample interpolates) are computed; the rest hold 1, unused."""
+        if not any(w.smooth for w in self.wires):
+            return None
+        weight = np.ones(shape, dtype=np.float32, order="F")
+        inner = np.ones(rshape, dtype=np.float32)
+        flat_wire = r_wire.ravel()
+        need = np.flatnonzero(ndimage.maximum_filter(swept, size=3, mode="constant"))
+        for wi, w in enumerate(self.wires):
+            if not w.smooth:
+                continue
+            for start in range(0, len(need), FLAG_CHUNK):
+                chunk = need[start : start + FLAG_CHUNK]
+                sel = chunk[flat_wire[chunk] == wi]
+                if len(sel) == 0:
+                    continue
+                p = _region_centres(lo, h, region_lo, rshape, sel)
+                inner.reshape(-1)[sel] = _fade(w, tables[wi], r_u.ravel()[sel], p)
+        weight[_box_slices(region_lo, rshape)] = inner
+        return weight
+
+    def _warn_ends_inside(
+        self, tables: list[WireTables], masks: list[tuple[np.ndarray, int, float]]
+    ) -> None:
+        """Warn (one line per end) where a rigid wire ends inside the object it sweeps
+        and moves it there: the object under its end plane's mask goes on beyond the
+        end, its cross-section moves (by more than half a voxel), and the rigid sweep
+        cuts it there. An end at rest inside the object cuts nothing visible."""
+        px = self.mask_resolution
+        for wi, (w, tab, (mask, _, half)) in enumerate(zip(self.wires, tables, masks, strict=True)):
+            if w.smooth:
+                continue
+            for end, plane, sign in (("start", 0, -1.0), ("end", -1, 1.0)):
+                a, b = np.nonzero(mask[plane])
+                if len(a) < 4:
+                    continue
+                i = 0 if plane == 0 else LUT_SIZE - 1
+                fm = tab.modified_frames[i]
+                step = sign * 3.0 * px * tab.length_modified / tab.length_base
+                p = (
+                    tab.modified_points[i]
+                    + np.outer((a - half) * px, fm[:, 0])
+                    + np.outer((b - half) * px, fm[:, 1])
+                    + step * fm[:, 2]
+                )
+                q = p @ tab.matrices[i].T + tab.offsets[i]
+                moves = np.linalg.norm(q - p, axis=1).max() > 0.5 * float(self.spacing.min())
+                inside = self._beta_at(w, q)
+                if moves and inside.sum() > max(4, 0.1 * len(a)):
+                    label = f"{w.name!r}" if w.name else str(wi)
+                    warnings.warn(
+                        f"wire {label}: its {end} lies inside the object it sweeps"
+                        f" ({100 * inside.mean():.0f}% of the end's cross-section goes on"
+                        " past it), and the rigid sweep cuts the object there; use"
+                        " ends='smooth' or extend the wire past the object",
+                        stacklevel=3,
+                    )
+
+    def _beta_at(self, wire: Wire, q: np.ndarray) -> np.ndarray:
+        """β of the volume at world points q (False outside the volume)."""
+        rotated = not np.array_equal(self._direction, np.eye(3))
+        ijk = ((q - self.origin) @ self._direction) if rotated else q - self.origin
+        ijk = ijk / self.spacing
+        use = np.all((ijk >= -0.5) & (ijk <= np.asarray(self.data.shape) - 0.5), axis=1)
+        out = np.zeros(len(q), dtype=bool)
+        if use.any():
+            vals = ndimage.map_coordinates(
+                self.data, ijk[use].T, order=1, mode="nearest", prefilter=False
+            )
+            out[use] = wire.classify(vals)
+        return out
 
     def _propagate(
         self,
@@ -1201,15 +1423,15 @@ class WireDeformer:
         """Region voxels holding a set pixel of a (grown) plane mask: the paper's flags.
         On the base side the pixels are mapped as the sweep maps them (``q = A p + b``).
         The end planes also flag along the end tangents as far as the mask test reaches
-        past them."""
+        past them (the end cap, plus a smooth wire's :meth:`Wire.end_reach`)."""
         out = np.zeros(rshape, dtype=bool)
         rs = np.asarray(rshape)
         px = self.mask_resolution
-        for wi, tab in enumerate(tables):
+        for wi, (w, tab) in enumerate(zip(self.wires, tables, strict=True)):
             mask, k, half = grown[wi]
             n_planes = mask.shape[0]
             tt_all = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
-            reach = float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + px
+            reach = self._end_cap() + w.end_reach(side)
             steps = np.arange(1, math.ceil(reach / px) + 1) * px
             block = max(1, TOUCH_BLOCK_PIXELS // (k * k))
             for p0 in range(0, n_planes, block):
@@ -1297,7 +1519,7 @@ class WireDeformer:
         px = self.mask_resolution
         n_planes = max(2, math.ceil(tab.length_modified / px) + 1)
         smax = float(wire.scale[:, 1].max())
-        half = math.ceil(wire.radius * smax / px)
+        half = math.ceil(wire.influence * smax / px)
         k = 2 * half + 1
         if n_planes * k * k > MAX_MASK_PIXELS:
             raise WarpError(
@@ -1308,12 +1530,12 @@ class WireDeformer:
             )
         ax = (np.arange(k) - half) * px
         x, y = np.meshgrid(ax, ax, indexing="ij")
-        disc = x**2 + y**2 <= (wire.radius * smax) ** 2
+        disc = x**2 + y**2 <= (wire.influence * smax) ** 2
         # the radius is the region of influence on the base side: a scaled cross-section
         # covers s * radius on the modified side
         tt = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
         s_at = wire.scale_at(tt / (LUT_SIZE - 1))
-        in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.radius * s_at[:, None, None]) ** 2
+        in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.influence * s_at[:, None, None]) ** 2
         obj = self._object_pixels(wire, tab, tt, x[disc], y[disc], in_disc[:, disc])
         obj_full = np.zeros((n_planes, k, k), dtype=bool)
         obj_full[:, disc] = obj
@@ -1479,7 +1701,7 @@ class WireDeformer:
         ok = (a >= 0) & (a < k) & (b >= 0) & (b < k)
         # beyond the end planes nothing is swept (the along-wire offset stays within a
         # field voxel of the plane)
-        cap = float(np.linalg.norm(self.spacing * self.field_scale)) * 0.5 + px
+        cap = self._end_cap() + wire.end_reach(side)
         ends = (u <= 0.0) | (u >= 1.0)
         ok &= ~ends | (np.abs(z) <= cap)
         out = np.zeros(len(u), dtype=bool)
@@ -1517,6 +1739,58 @@ def _refine_u(
         z = np.einsum("ni,ni->n", p - points[i], tangents[i])
         u = np.clip(i / n + z / length, 0.0, 1.0)
     return u
+
+
+def _region_centres(
+    lo: np.ndarray,
+    h: np.ndarray,
+    region_lo: np.ndarray,
+    rshape: tuple[int, int, int],
+    flat: np.ndarray,
+) -> np.ndarray:
+    """World centres (mm) of region voxels given by flat region indices."""
+    ii = np.stack(np.unravel_index(flat, rshape), -1)
+    return lo + (ii + region_lo + 0.5) * h
+
+
+def _wire_local(
+    tab: WireTables, side: str, u: np.ndarray, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Coordinates (x, y, z) of points p in the frame of ``side``'s wire at their
+    closest point (u refined from the given u), and that u."""
+    if side == "modified":
+        points, frames, length = tab.modified_points, tab.modified_frames, tab.length_modified
+    else:
+        points, frames, length = tab.base_points, tab.base_frames, tab.length_base
+    u = _refine_u(points, frames[:, :, 2], length, u, p)
+    i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
+    d = p - points[i]
+    f = frames[i]
+    return (
+        np.einsum("ni,ni->n", d, f[:, :, 0]),
+        np.einsum("ni,ni->n", d, f[:, :, 1]),
+        np.einsum("ni,ni->n", d, f[:, :, 2]),
+        u,
+    )
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def _fade(wire: Wire, tab: WireTables, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Displacement weight of deformed points p of a smooth wire: 1 within its (scaled)
+    radius and between its end planes, fading smoothly to 0 over :data:`RADIAL_FADE`
+    times the radius beyond the radius and over ``falloff`` mm beyond each end plane."""
+    x, y, z, u = _wire_local(tab, "modified", u, p)
+    rm = wire.radius * wire.scale_at(u)
+    radial = 1.0 - _smoothstep((np.hypot(x, y) - rm) / (RADIAL_FADE * rm))
+    beyond = np.where(u >= 1.0, np.maximum(z, 0.0), 0.0) + np.where(
+        u <= 0.0, np.maximum(-z, 0.0), 0.0
+    )
+    along = 1.0 - _smoothstep(beyond / wire.falloff)
+    return (radial * along).astype(np.float32)
 
 
 def _box_overlap(
@@ -1831,7 +2105,18 @@ class WireFieldWarp(Warp):
         for wi in np.unique(wire[state == 2]):
             sel = (state == 2) & (wire == wi)
             out[sel] = map_points(self.field.tables[int(wi)], t[sel], p[sel])
+        weight = self._weight(p, state)
+        if weight is not None:  # smooth ends: p + w (sweep(p) - p), as the shader
+            out[state == 2] = p[state == 2] + weight[:, None] * (out[state == 2] - p[state == 2])
         return out
+
+    def _weight(self, p: np.ndarray, state: np.ndarray) -> np.ndarray | None:
+        """Displacement weight of the swept points among p (trilinear, as the GPU's
+        filtered texture), or None when every wire is rigid."""
+        fld = self.field
+        if fld.weight is None:
+            return None
+        return _sample_t_float(fld.weight, (p[state == 2] - fld.lo) / fld.spacing)
 
     def forward(self, points: np.ndarray) -> np.ndarray:
         """Original -> deformed for (N, 3) points (mm): meshes follow the swept object.
@@ -1889,6 +2174,9 @@ class WireFieldWarp(Warp):
         for wi in np.unique(wire[state == 2]):
             sel = (state == 2) & (wire == wi)
             out[sel] = self.field.tables[int(wi)].lookup(t[sel])[0]
+        weight = self._weight(p, state)
+        if weight is not None:  # I + w (A - I): the weight's own gradient is left out
+            out[state == 2] = np.eye(3) + weight[:, None, None] * (out[state == 2] - np.eye(3))
         return out
 
     def swept(self, points: np.ndarray) -> np.ndarray:
@@ -1944,7 +2232,9 @@ class WireFieldWarp(Warp):
             tight_lo, tight_hi = _box_mapping_range(
                 fld.tables, info_lo[sel, 1].astype(np.int64), t_lo, t_hi, lo[sel], hi[sel]
             )
-            keep0 = (outside[sel] | (info_hi[sel, 2] > 0))[:, None]
+            # (a smooth wire's weight scales the displacement towards 0)
+            smooth = fld.weight is not None
+            keep0 = (outside[sel] | (info_hi[sel, 2] > 0) | smooth)[:, None]
             rlo[sel] = _grow(np.where(keep0, np.minimum(tight_lo, 0.0), tight_lo), -1.0)
             rhi[sel] = _grow(np.where(keep0, np.maximum(tight_hi, 0.0), tight_hi), 1.0)
         none = rlo > rhi  # only vacated voxels: nothing shows; any interval is sound
@@ -1990,6 +2280,8 @@ class WireFieldWarp(Warp):
         )
         dlo = np.repeat(np.where(st == 0, 0.0, np.inf)[..., None], 3, axis=-1)
         dhi = np.repeat(np.where(st == 0, 0.0, -np.inf)[..., None], 3, axis=-1)
+        if fld.weight is not None:  # weights in [0, 1] scale each displacement towards 0
+            d_lo, d_hi = np.minimum(d_lo, 0.0), np.maximum(d_hi, 0.0)
         dlo.reshape(-1, 3)[idx] = _grow(d_lo, -1.0)
         dhi.reshape(-1, 3)[idx] = _grow(d_hi, 1.0)
         ident = (st == 0).astype(np.float64)
@@ -2007,13 +2299,15 @@ class WireFieldWarp(Warp):
         return {
             "LAYOUT_PACKED": "1" if self.field.layout == "packed" else "0",
             "LAYOUT_PAPER": "1" if self.field.layout == "paper" else "0",
+            "SMOOTH": "1" if self.field.weight is not None else "0",
             "LUT_SIZE": LUT_SIZE,
             "FAR": FAR,
         }
 
     def signature(self) -> str:
-        return f"{self.kind}:{self.field.layout}"
         """Kind and layout (the layouts compile differently)."""
+        smooth = ":smooth" if self.field.weight is not None else ""
+        return f"{self.kind}:{self.field.layout}{smooth}"
 
     def uniforms(self) -> dict[str, Any]:
         """Field box, shape and lookup-table rows."""
@@ -2060,6 +2354,8 @@ class WireFieldWarp(Warp):
         else:
             assert fld.code is not None
             texs["code"] = tex3d(fld.code, "u2", False)
+        if fld.weight is not None:
+            texs["weight"] = tex3d(fld.weight, "f4", True)
         if fld.layout == "paper":
             assert fld.segments is not None
             seg = ctx.texture(fld.segments.shape[::-1], 1, fld.segments.tobytes(), dtype="f4")

@@ -18,6 +18,11 @@ uniform vec3 WARP_size;
 uniform vec3 WARP_shape;
 uniform float WARP_rows;      // rows of WARP_lut (3 per wire)
 uniform sampler2D WARP_lut;
+#if WARP_SMOOTH
+// smooth wire ends (deform/wires.py Wire.ends): per-voxel weight of the displacement,
+// fading to 0 beyond the wire ends and its radius (linear filter)
+uniform sampler3D WARP_weight;
+#endif
 #if WARP_LAYOUT_PAPER
 uniform usampler3D WARP_code;
 uniform sampler2D WARP_seg;
@@ -128,6 +133,11 @@ int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
     vec4 r2 = textureLod(WARP_lut, vec2(x, (row + 2.0) / WARP_rows), 0.0);
     A = transpose(mat3(r0.xyz, r1.xyz, r2.xyz));  // GLSL matrices are built by columns
     q = A * p + vec3(r0.w, r1.w, r2.w);
+#if WARP_SMOOTH
+    float wt = textureLod(WARP_weight, g / WARP_shape, 0.0).r;
+    q = p + wt * (q - p);
+    A = mat3(1.0) + wt * (A - mat3(1.0));  // the weight's own gradient is left out
+#endif
     return 2;
 }
 

@@ -954,9 +954,11 @@ def _demo_volume(args: argparse.Namespace) -> int:
         paths.append(write_image(out / f"{vol.name}_dvr_massspring.png", r.render(dvr)))
         dvr.save(out / f"{vol.name}_massspring_scene.json")
         wired = Scene(vol, mode="dvr", transfer_function=tf, view=args.view, zoom=1.3)
-        wired.warps.append(_demo_wire(vol))
-        paths.append(write_image(out / f"{vol.name}_dvr_wires.png", r.render(wired)))
-        wired.save(out / f"{vol.name}_wires_scene.json")
+        wire_warp = _demo_wire(vol, wired.resolved_camera().rotation[:, 2])
+        if wire_warp is not None:
+            wired.warps.append(wire_warp)
+            paths.append(write_image(out / f"{vol.name}_dvr_wires.png", r.render(wired)))
+            wired.save(out / f"{vol.name}_wires_scene.json")
     for p in paths:
         print(p)
     return 0
@@ -978,24 +980,18 @@ def _demo_bend(vol: Any) -> Any:
     return ms.warp()  # a CPU model: nothing to release
 
 
-def _demo_wire(vol: Any) -> Any:
-    """A wire bend of ``vol``: a wire up the middle of the box (z from 10% to 95%), its
-    top half bent sideways by 25% of the box width and twisted by 60 degrees; it sweeps
-    the column of radius 30% of the box width around it (no value classification)."""
-    import numpy as np
+def _demo_wire(vol: Any, view: Any) -> Any:
+    """A wire bend of ``vol`` laid where it is safe (:mod:`voxwarp.teaching.auto_wire`:
+    along the largest object's principal axis, ends outside it, bent across ``view``),
+    built; None, with one line on stderr saying why, when no object stands out."""
+    from voxwarp.deform.wires import WireDeformer
+    from voxwarp.teaching.auto_wire import auto_wire
 
-    from voxwarp.deform.wires import Wire, WireDeformer
-
-    lo, hi = vol.bounds
-    c = 0.5 * (lo + hi)
-    zs = lo[2] + (hi[2] - lo[2]) * np.array([0.1, 0.4, 0.7, 0.95])
-    base = [[c[0], c[1], z] for z in zs]
-    s = (zs - zs[0]) / (zs[-1] - zs[0])
-    shift = 0.25 * float(hi[0] - lo[0]) * s**2
-    modified = [[c[0] + dx, c[1], z] for dx, z in zip(shift, zs, strict=True)]
-    radius = 0.3 * float(min(hi[0] - lo[0], hi[1] - lo[1]))
-    wire = Wire(base, modified, twist=[(0.0, 0.0), (1.0, np.pi / 3)], radius=radius)
-    wd = WireDeformer(vol, [wire], field_scale=2)
+    auto = auto_wire(vol, view)
+    print(f"voxwarp: demo: {auto.message}", file=sys.stderr)
+    if auto.wire is None:
+        return None
+    wd = WireDeformer(vol, [auto.wire], field_scale=2)
     wd.build()
     return wd.warp()
 

@@ -57,8 +57,16 @@ def wires() -> list[Wire]:
         beta=(50, 2000),
         twist=[(0, 0), (1, 1.2)],
         scale=[(0, 1.0), (1, 1.3)],
+        ends="rigid",
     )
-    b = Wire(pts(28, 26), pts(28, 26, dy=1.5, dz=2.0), radius=6.0, beta=(50, 2000), twist=0.4)
+    b = Wire(
+        pts(28, 26),
+        pts(28, 26, dy=1.5, dz=2.0),
+        radius=6.0,
+        beta=(50, 2000),
+        twist=0.4,
+        ends="rigid",
+    )
     return [a, b]
 
 

@@ -182,7 +182,8 @@ def test_mask_memory_is_kept_planes_times_pixels_over_8() -> None:
     # 1 mm pixels and planes -> 41 planes of (2 * 9 + 1)^2 pixels, one bit each
     vol = cylinder()
     straight = [[x, AXIS_Y, AXIS_Z] for x in (10.0, 30.0, 50.0)]
-    wd = WireDeformer(vol, [Wire(straight, radius=9.0, beta=(50.0, 2000.0))], mask_resolution=1.0)
+    rigid = Wire(straight, radius=9.0, beta=(50.0, 2000.0), ends="rigid")  # no radial fade
+    wd = WireDeformer(vol, [rigid], mask_resolution=1.0)
     stats = wd.build()
     assert stats.planes == 41
     assert stats.planes_dropped == 0
@@ -191,7 +192,7 @@ def test_mask_memory_is_kept_planes_times_pixels_over_8() -> None:
     assert stats.as_dict()["mask_bytes_total"] == 1851
     # a wire running out of the object (x 4..60): planes beyond its ends are dropped and
     # cost nothing; two wires add up
-    two = [wire(), Wire(straight, radius=9.0, beta=(50.0, 2000.0))]
+    two = [wire(), rigid]
     st2 = WireDeformer(vol, two, mask_resolution=1.0).build()
     kept0 = 57 - st2.planes_dropped
     assert st2.mask_bytes == (math.ceil(kept0 * 19 * 19 / 8), 1851)
