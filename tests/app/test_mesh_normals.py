@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance, torus_mesh
 from voxwarp.deform.trilinear import TrilinearGrid, carry_normals
 from voxwarp.render.mesh_pass import MeshRenderer
@@ -182,14 +183,30 @@ def test_affine_lattice_takes_the_linear_program(gl_ctx: Any, method: str) -> No
     assert grid.is_linear
     inst = MeshInstance(torus, grid, box=box, normal_method=method)
     fast, slow = MeshRenderer(gl_ctx), MeshRenderer(gl_ctx, linear_fast_path=False)
+    color = gl_ctx.texture((96, 96), 4, dtype="f4")
+    depth = gl_ctx.depth_texture((96, 96))
+    fbo = gl_ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    cam = Camera.fit(*MeshInstance(torus, grid, box=box).world_bounds(), (30.0, 35.0))
+    images = []
     try:
         p_fast, n_fast = fast.deformed_vertices(inst)
         p_slow, n_slow = slow.deformed_vertices(inst)
-        assert fast.program_uses == {"linear": 1, "trilinear": 0}
-        assert slow.program_uses == {"linear": 0, "trilinear": 1}
+        for r in (fast, slow):
+            r.draw([inst], fbo, cam)
+            images.append(np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32))
+        assert fast.program_uses == {"linear": 2, "trilinear": 0}
+        assert slow.program_uses == {"linear": 0, "trilinear": 2}
     finally:
         fast.release()
         slow.release()
+        gl_ctx.detect_framebuffer(0).use()  # never release the bound framebuffer
+        fbo.release()
+        depth.release()
+        color.release()
+    # the same image: float rounding moves the coverage of a few edge pixels at most
+    diff = np.abs(images[0] - images[1]).reshape(-1, 4).max(axis=1)
+    assert np.mean(diff <= 1e-4) >= 0.995
+    assert np.count_nonzero(images[0].reshape(-1, 4)[:, 3]) > 0.05 * 96 * 96
     # float32 arithmetic on coordinates of size ~2: a few ulps
     np.testing.assert_allclose(p_fast, p_slow, atol=2e-6 * 4)
     np.testing.assert_allclose(n_fast, n_slow, atol=1e-5)
