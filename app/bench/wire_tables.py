@@ -257,9 +257,7 @@ def table1_markdown(rows: Sequence[TablesRow]) -> list[str]:
         "|---|---:|---:|---:|---:|",
     ]
     for p in WIRE_TABLE1:
-        lines.append(
-            f"| paper (Table 1): {p.dataset} | — | — | {p.samples:,} | {p.percent:.1f} |"
-        )
+        lines.append(f"| paper (Table 1): {p.dataset} | — | — | {p.samples:,} | {p.percent:.1f} |")
     for r in rows:
         s = r.samples
         inside = s.percent_ignored_in_region
