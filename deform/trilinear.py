@@ -1076,10 +1076,10 @@ class TrilinearGrid:
             a, tr, _ = self._fit()
             out = t @ a.T + tr
         else:
-            from voxwarp.deform.trilinear_kernel import eval_grid_kernel
+            from voxwarp.deform.trilinear_kernel import eval_grid
 
             out = np.empty_like(t)
-            eval_grid_kernel(self._contiguous_nodes(), np.ascontiguousarray(t), out)
+            eval_grid(self._contiguous_nodes(), np.ascontiguousarray(t), out)
         return out.reshape(*lead, 3)
 
     def _contiguous_nodes(self) -> np.ndarray:

@@ -488,3 +488,18 @@ def test_vectorised_maps_equal_point_by_point_maps() -> None:
     back = g.inverse(x)
     np.testing.assert_allclose(back, u, atol=1e-8)
     np.testing.assert_allclose(back, np.array([g.inverse(p[None])[0] for p in x]), atol=1e-10)
+
+
+def test_serial_and_threaded_grid_kernels_agree_bit_for_bit() -> None:
+    from voxwarp.deform import trilinear_kernel as k
+
+    rng = np.random.default_rng(7)
+    nodes = rng.normal(size=(4, 3, 5, 3))
+    t = rng.uniform(-0.2, 1.2, (k.PARALLEL_MIN_POINTS + 3, 3))  # border cells extrapolate
+    threaded, serial, picked = (np.empty_like(t) for _ in range(3))
+    k.eval_grid_kernel(nodes, t, threaded)
+    k.eval_grid_serial(nodes, t, serial)
+    assert np.array_equal(threaded, serial)
+    for n in (1, 125, k.PARALLEL_MIN_POINTS + 3):
+        k.eval_grid(nodes, t[:n], picked[:n])
+        assert np.array_equal(picked[:n], serial[:n])
