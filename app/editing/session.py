@@ -697,11 +697,13 @@ class EditSession:
         kind: str | None = None,
         radius: float | None = None,
         beta: tuple[float, float] | Literal["keep"] | None = "keep",
+        ends: str | None = None,
     ) -> None:
-        """Change a wire's curve kind, influence radius (mm) or β (value range or None);
-        the field is then stale (rebuild it with :meth:`wire_build`)."""
+        """Change a wire's curve kind, influence radius (mm), β (value range or None) or
+        ends (``"smooth"``/``"rigid"``, see :class:`voxwarp.deform.wires.Wire`); the field
+        is then stale (rebuild it with :meth:`wire_build`)."""
         self._wire(wire)
-        self._wire_family().set_parameters(wire, kind, radius, beta)
+        self._wire_family().set_parameters(wire, kind, radius, beta, ends)
         self._touch()
 
     def set_wire_settings(self, **settings: Any) -> None:

@@ -21,6 +21,7 @@ from PySide6.QtWidgets import (
     QPushButton,
 )
 
+from voxwarp.deform.wires import ENDS
 from voxwarp.editing.session import WIRE_KINDS, EditorError, EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel
 from voxwarp.ui.panel_base import combo, double_spin, value_decimals
@@ -70,6 +71,7 @@ class WiresPanel(FamilyPanel):
         "wire_label",
         "wire_kind_combo",
         "radius_spin",
+        "wire_ends_combo",
         "beta_check",
         "beta_lo_spin",
         "beta_hi_spin",
@@ -118,6 +120,13 @@ class WiresPanel(FamilyPanel):
         )
         self.radius_spin.valueChanged.connect(self._radius_changed)
         form.addRow("Radius", self.radius_spin)
+        self.wire_ends_combo = combo(
+            ENDS,
+            "Past the selected wire's ends and radius: smooth fades the sweep out (an object"
+            " the wire ends in bends); rigid is the paper's sweep (it cuts there)",
+        )
+        self.wire_ends_combo.currentTextChanged.connect(self._ends_changed)
+        form.addRow("Ends", self.wire_ends_combo)
         self.beta_check = QCheckBox("Object classification")
         self.beta_check.setToolTip(
             "β: only voxels with values in [low, high] follow the selected wire;"
@@ -286,6 +295,7 @@ class WiresPanel(FamilyPanel):
             self.wire_kind_combo.setCurrentText(wire.kind)
             self.radius_spin.setMaximum(max(self.radius_spin.maximum(), wire.radius))
             self.radius_spin.setValue(wire.radius)
+        self.wire_ends_combo.setCurrentText(wire.ends)
         self._refresh_beta(s, wire)
         fraction = self._reference_fraction(s) if point is not None else None
         if fraction is not None:
@@ -343,6 +353,12 @@ class WiresPanel(FamilyPanel):
             lambda: self.session.set_wire_parameters(w, radius=float(radius)),
             merge=f"wire radius {w}",
         )
+
+    def _ends_changed(self, ends: str) -> None:
+        w = self._wire_index()
+        if self._updating or w is None or self.session.wires[w].ends == ends:
+            return
+        self._wire_edit(f"Wire ends {ends}", lambda: self.session.set_wire_parameters(w, ends=ends))
 
     def _beta_toggled(self, on: bool) -> None:
         if self._updating:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from voxwarp.deform.warp import Warp, WarpError
-from voxwarp.deform.wires import Wire, WireDeformer, WireFieldWarp
+from voxwarp.deform.wires import DEFAULT_ENDS, ENDS, Wire, WireDeformer, WireFieldWarp
 from voxwarp.editing.common import COLORS, WIRE_KINDS, DisplayOptions, EditorError, choice
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
@@ -235,10 +235,14 @@ class WiresFamily(Family):
         kind: str | None,
         radius: float | None,
         beta: tuple[float, float] | Literal["keep"] | None,
+        ends: str | None = None,
     ) -> None:
-        """Change a wire's curve kind, influence radius (mm) or β (see the session)."""
+        """Change a wire's curve kind, influence radius (mm), β or ends (see the
+        session)."""
         w = self.wire(index)
         d = w.to_dict()
+        if ends is not None:
+            d["ends"] = choice(ends, ENDS, "wire ends")
         if kind is not None:
             kind = choice(kind, WIRE_KINDS, "wire kind")
             if kind != w.kind:
@@ -278,6 +282,7 @@ class WiresFamily(Family):
                 "modified": points.tolist(),
                 "kind": kind,
                 "radius": radius,
+                "ends": self._wires[-1].ends if self._wires else DEFAULT_ENDS,
                 "name": f"wire {len(self._wires) + 1}",
             }
         )
