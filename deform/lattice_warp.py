@@ -273,13 +273,18 @@ def _newton_update(u: np.ndarray, r: np.ndarray, j: np.ndarray) -> np.ndarray:
     return u - _newton_delta(r, j)
 
 
+def _regular(j: np.ndarray) -> np.ndarray:
+    """Rows where J is not (nearly) singular: ``|det J| > SINGULAR |J_0| |J_1| |J_2|``."""
+    det = np.sum(j[:, :, 0] * np.cross(j[:, :, 1], j[:, :, 2]), axis=1)
+    return np.abs(det) > SINGULAR * np.prod(np.linalg.norm(j, axis=1), axis=1)
+
+
 def _newton_delta(r: np.ndarray, j: np.ndarray) -> np.ndarray:
     """``J^-1 r`` by Cramer's rule (as the shader); 0 where J is (nearly) singular."""
     j0, j1, j2 = j[:, :, 0], j[:, :, 1], j[:, :, 2]
     a = np.cross(j1, j2)
     det = np.sum(j0 * a, axis=1)
-    scale = np.linalg.norm(j0, axis=1) * np.linalg.norm(j1, axis=1) * np.linalg.norm(j2, axis=1)
-    ok = np.abs(det) > SINGULAR * scale
+    ok = _regular(j)
     num = np.stack(
         [
             np.sum(a * r, axis=1),
@@ -503,9 +508,9 @@ class LatticeWarp(Warp):
         ``|du (hi - lo)| <= tolerance`` (mm), or after :attr:`max_iterations` steps; a
         point stopped by the cap has not converged (near a fold, a singular J): there,
         only its residual ``|grid(u) - p|`` says how far off it is. A singular J gives
-        ``du = 0``: the point stops where it is. ``steps`` is 0 where the seed says the
-        point is far from the lattice; ``converged`` is False there and everywhere with
-        fixed steps (no rule).
+        ``du = 0``: the point stops where it is, not converged. ``steps`` is 0 where the
+        seed says the point is far from the lattice; ``converged`` is False there and
+        everywhere with fixed steps (no rule).
         """
         p = np.atleast_2d(np.asarray(points, dtype=np.float64))
         seed, seed_lo, seed_hi = self.baked_inverse()
@@ -544,8 +549,9 @@ class LatticeWarp(Warp):
             du = _newton_delta(f - p[active], j)
             u[active] -= du
             steps[active] += 1
+            # a singular J gives du = 0: the point stops (as in the shader), unconverged
             small = np.sum((du * self.size) ** 2, axis=1) <= tol2
-            converged[active[small]] = True
+            converged[active[small & _regular(j)]] = True
             active = active[~small]
             if len(active) == 0:
                 break
@@ -1210,19 +1216,21 @@ def inverse_error_study(
     (``fold_linear=False``), for each variant: the point error ``|q' - q|`` (mm) between
     the computed original point and the true one, its median, 99th percentile and
     maximum over all points; the largest residual ``|grid(u') - p|`` (mm); the mean and
-    most Newton steps; the points where the iteration stopped at its cap (not
-    converged); and the share of points declared outside (lost).
+    most Newton steps; the points where the iteration stopped at its cap or at a
+    singular J, not converged (None for fixed steps); and the share of points declared
+    outside (lost).
 
     Returns
     -------
     list of dict
         Rows ``{"label", "median", "p99", "max", "residual", "mean_steps", "max_steps",
-        "capped", "lost"}``.
+        "unconverged", "lost"}``.
     """
     cases = study_cases(trials, points, seed)
     rows = []
     for label, kw in variants:
-        err, res, steps, capped, lost = [], [], [], 0, 0
+        err, res, steps, lost = [], [], [], 0
+        unconverged: int | None = None
         for grid, box, u in cases:
             w = LatticeWarp(grid, box, fold_linear=False, **kw)
             nodes = np.asarray(grid.nodes, dtype=np.float64)
@@ -1231,7 +1239,8 @@ def inverse_error_study(
             err.append(np.linalg.norm((uc - u) * w.size, axis=1))
             res.append(np.linalg.norm(lattice_eval(nodes, uc, jacobian=False)[0] - p, axis=1))
             steps.append(st)
-            capped += int(np.sum(~conv)) if w.adaptive else 0
+            if w.adaptive:
+                unconverged = (unconverged or 0) + int(np.sum(~conv))
             lost += int(np.sum(~inside))
         e, st_all = np.concatenate(err), np.concatenate(steps)
         rows.append(
@@ -1243,7 +1252,7 @@ def inverse_error_study(
                 "residual": float(np.concatenate(res).max()),
                 "mean_steps": float(st_all.mean()),
                 "max_steps": int(st_all.max()),
-                "capped": capped,
+                "unconverged": unconverged,
                 "lost": lost / len(e),
             }
         )
@@ -1254,14 +1263,15 @@ def format_error_study(rows: Sequence[Mapping[str, Any]]) -> str:
     """Markdown table of :func:`inverse_error_study` rows."""
     lines = [
         "| inverse | median (mm) | 99th pct (mm) | max (mm) | max residual (mm) |"
-        " steps mean / max | capped | lost |",
+        " steps mean / max | not converged | lost |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
             f"| {r['label']} | {r['median']:.2g} | {r['p99']:.2g} | {r['max']:.2g} |"
             f" {r['residual']:.2g} | {r['mean_steps']:.2f} / {r['max_steps']} |"
-            f" {r['capped']} | {100 * r['lost']:.3f} % |"
+            f" {'-' if r['unconverged'] is None else r['unconverged']} |"
+            f" {100 * r['lost']:.3f} % |"
         )
     return "\n".join(lines)
 

@@ -116,7 +116,8 @@ class InverseReport:
             f"Accuracy: `inverse_error_study` on {self.trials} random lattices proven not to"
             f" fold, {self.points} points each (a third on inner cell faces); point error"
             " |q' - q| (mm) against the true original point; residual |grid(u') - p|;"
-            " capped: points where the iteration stopped at its cap; lost: inside points"
+            " not converged: points where the iteration stopped at its cap or at a singular J"
+            " (only their residual bounds their error); lost: inside points"
             " declared outside.",
             "",
             format_error_study(self.accuracy),

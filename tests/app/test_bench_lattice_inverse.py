@@ -28,7 +28,7 @@ def test_tiny_section(gl_ctx: Any, monkeypatch: pytest.MonkeyPatch) -> None:
         assert r["median"] <= r["p99"] <= r["max"]
     default = next(r for r in report.accuracy if "(default)" in r["label"])
     assert default["max"] < DEFAULT_TOLERANCE
-    assert default["capped"] == 0
+    assert default["unconverged"] == 0
     assert [r.label for r in report.render] == [v[0] for v in li.RENDER_VARIANTS]
     text = "\n".join(report.markdown_lines())
     seed = report.render[0].median_ms

@@ -111,16 +111,27 @@ def test_the_convergence_flag_is_honest() -> None:
     assert capped_any
 
 
-def test_singular_jacobian_stops_the_point_where_it_is() -> None:
-    # a lattice whose middle cell collapses onto a plane: J is singular on that face,
-    # du = 0 there, the point stops (converged by the rule, but its residual is honest)
+def test_a_singular_jacobian_is_reported_not_converged() -> None:
+    # the middle cell collapsed onto a plane: J is singular in it, du = 0 there and the
+    # point stops unconverged; its inverse is not unique (the whole cell maps onto the
+    # plane), so only the residual bounds anything, and that is what solve() reports
     nodes = np.array(TrilinearGrid.from_box(*BOX, cells=(3, 1, 1)).nodes)
     nodes[2, :, :, 0] = nodes[1, :, :, 0]
-    w = LatticeWarp(TrilinearGrid(nodes), BOX, fold_linear=False)
-    u = np.array([[0.5, 0.5, 0.5]])
-    uc, _, steps, _ = w.solve(np.asarray(w.grid(u)))
-    assert np.all(np.isfinite(uc))
-    assert steps[0] <= DEFAULT_MAX_ITERATIONS
+    grid = TrilinearGrid(nodes)
+    w = LatticeWarp(grid, BOX, fold_linear=False)
+    u = np.random.default_rng(0).uniform(0.0, 1.0, (2000, 3))
+    p = np.asarray(grid(u))
+    uc, _, steps, converged = w.solve(p)
+    assert steps.max() <= DEFAULT_MAX_ITERATIONS
+    res = np.linalg.norm(np.asarray(grid(np.clip(uc, 0, 1))) - p, axis=1)
+    err = np.linalg.norm((uc - u) * w.size, axis=1)
+    collapsed = (u[:, 0] > 1 / 3) & (u[:, 0] < 2 / 3)
+    assert not converged[collapsed].any()
+    assert err[collapsed].max() > 1.0  # another point of the plane's preimage
+    # the rule's bound holds wherever it claims convergence
+    bound = stretch(grid, BOX, uc[converged]) * DEFAULT_TOLERANCE
+    np.testing.assert_array_less(res[converged], bound)
+    np.testing.assert_array_less(err[converged], DEFAULT_TOLERANCE)
 
 
 # ---------------------------------------------------------------------- options
