@@ -9,7 +9,9 @@ safe instead:
    tissue in a CT, background against head in an MRI, whatever the units); the largest
    6-connected part above it is the object.
 2. **Axis.** The wire runs along the object's principal axis (the largest eigenvector of
-   its voxels' covariance, in world mm) through its centroid, from
+   its voxels' covariance, in world mm) through its centroid (when a view is given and
+   that axis points along it, along the second axis instead if the object is at least
+   :data:`SIDE_EXTENT` as long that way: a bend along the view would hardly show), from
    :data:`END_MARGIN` of the object's length before its first voxel along that axis to as
    far after its last, so both ends lie outside the object.
 3. **Radius.** It covers the object: the 99.5th percentile of the object voxels' distance
@@ -43,6 +45,9 @@ MAX_SAMPLES = 96**3
 END_MARGIN = 0.1
 #: sideways lean of the modified wire's far end, as a share of the wire's length
 BEND = 0.2
+#: how long (a share of the principal extent) the second axis must be to carry the wire
+#: when the principal axis points along the view
+SIDE_EXTENT = 0.6
 #: the smallest and largest object, as shares of the (thinned) volume's voxels
 MIN_OBJECT = 0.005
 MAX_OBJECT = 0.9
@@ -107,7 +112,7 @@ def auto_wire(volume: Any, view: Any = None) -> AutoWire:
     idx = np.argwhere(labels == int(np.argmax(sizes)) + 1) * stride
     pts = volume.index_to_world(idx.astype(np.float64))
     wire = _wire_along(pts, volume, level, float(data.max()), view)
-    return AutoWire(wire, _summary(pts, level))
+    return AutoWire(wire, _summary(wire, level))
 
 
 def _axes(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,6 +126,10 @@ def _wire_along(pts: np.ndarray, volume: Any, level: float, top: float, view: An
     """The demo wire along the principal axis of the object points ``pts``."""
     centre, axis, side = _axes(pts)
     if view is not None:
+        v = np.asarray(view, dtype=np.float64) / np.linalg.norm(view)
+        extent = [float(np.ptp((pts - centre) @ a)) for a in (axis, side)]
+        if abs(axis @ v) > 0.7 and extent[1] >= SIDE_EXTENT * extent[0]:
+            axis, side = side, axis
         across = np.cross(axis, np.asarray(view, dtype=np.float64))
         if np.linalg.norm(across) > 0.3 * np.linalg.norm(view):  # not along the wire
             side = across / np.linalg.norm(across)
@@ -143,10 +152,11 @@ def _wire_along(pts: np.ndarray, volume: Any, level: float, top: float, view: An
     )
 
 
-def _summary(pts: np.ndarray, level: float) -> str:
-    centre, axis, _ = _axes(pts)
-    length = float(np.ptp((pts - centre) @ axis))
+def _summary(wire: Wire, level: float) -> str:
+    ends = wire.base.control_points[[0, -1]]
+    axis = (ends[1] - ends[0]) / np.linalg.norm(ends[1] - ends[0])
     return (
-        f"wire along the largest object (values above {level:.4g}, {length:.0f} mm long,"
-        f" axis {np.round(axis, 2).tolist()}), ends outside it"
+        f"wire along the largest object (values above {level:.4g}): axis"
+        f" {np.round(axis, 2).tolist()}, {np.linalg.norm(ends[1] - ends[0]):.0f} mm,"
+        f" radius {wire.radius:.0f} mm, both ends outside it"
     )

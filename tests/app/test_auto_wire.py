@@ -70,12 +70,28 @@ def test_it_picks_the_largest_object_with_ends_outside() -> None:
     assert 10.0 < lo < 90.0
     assert hi >= 100.0
     assert "largest object" in auto.message
+    assert "both ends outside it" in auto.message
     assert_ends_outside(vol, wire, field_scale=2)
     # the view picks the bend: across it, never along it
     bent = auto_wire(vol, view=(0.0, 0.0, 1.0)).wire
     assert bent is not None
     lean = bent.modified.control_points[-1] - bent.base.control_points[-1]
     assert abs(lean[2]) < 1e-6 < abs(lean[1])
+
+
+def test_a_principal_axis_along_the_view_gives_way_to_the_second() -> None:
+    # a flat ellipsoid, 60 mm along x, 50 along y: seen along x, the wire runs along y
+    x, y, z = np.meshgrid(*(np.arange(n, dtype=np.float32) for n in (72, 64, 32)), indexing="ij")
+    inside = ((x - 36) / 30) ** 2 + ((y - 32) / 25) ** 2 + ((z - 16) / 8) ** 2 <= 1
+    vol = Volume(np.asfortranarray(np.where(inside, 100.0, 0.0).astype(np.float32)))
+    for view, along in (((0.0, 0.0, 1.0), 0), ((1.0, 0.0, 0.0), 1)):
+        wire = auto_wire(vol, view=view).wire
+        assert wire is not None
+        base = wire.base.control_points
+        axis = (base[-1] - base[0]) / np.linalg.norm(base[-1] - base[0])
+        assert abs(axis[along]) > 0.99, (view, axis)
+        lean = wire.modified.control_points[-1] - base[-1]
+        assert abs(lean @ np.asarray(view)) < 1e-6  # bent across the view
 
 
 @pytest.mark.parametrize("data", ["constant", "speck"])
