@@ -127,9 +127,9 @@ pixels of ``mask_resolution`` mm: ``a(p) = (K mask_resolution)^2`` mm^2 and
 bytes (:attr:`WireFieldStats.mask_bytes`).
 
 Rendering: per sample one field fetch decides identity / vacated / swept; a swept
-sample adds the t fetch (8 in the packed layout; 8 plus two segment-start texels per
-neighbour of the same wire in the paper layout) and 3 fetches of the tiny lookup table
-(``q = A p + b``, A and b linear in t).
+sample adds the t fetch (8 in the packed and paper layouts; the paper layout turns each
+into its table coordinate through two entries of a uniform array of segment starts) and
+3 fetches of the tiny lookup table (``q = A p + b``, A and b linear in t).
 :meth:`WireFieldWarp.displacement_range` bounds ``warp(p) - p`` per box from the field,
 so the raycaster keeps skipping empty space through the deformed volume.
 
@@ -2310,14 +2310,21 @@ class WireFieldWarp(Warp):
         return f"{self.kind}:{self.field.layout}{smooth}"
 
     def uniforms(self) -> dict[str, Any]:
-        """Field box, shape and lookup-table rows."""
+        """Field box, shape and lookup-table rows (and the paper layout's segment
+        starts, ``PAPER_MAX_WIRES`` rows of ``PAPER_MAX_SEGMENTS + 1``, as one array)."""
         fld = self.field
-        return {
+        out: dict[str, Any] = {
             "lo": tuple(float(v) for v in fld.lo),
             "size": tuple(float(v) for v in fld.hi - fld.lo),
             "shape": tuple(float(v) for v in fld.shape),
             "rows": float(3 * len(fld.tables)),
         }
+        if fld.layout == "paper":
+            assert fld.segments is not None
+            seg = np.zeros((PAPER_MAX_WIRES, PAPER_MAX_SEGMENTS + 1), dtype=np.float32)
+            seg[: len(fld.segments)] = fld.segments
+            out["seg"] = seg.ravel()
+        return out
 
     def textures(self, ctx: Any) -> dict[str, Any]:
         """The field (``state`` + ``t``, or ``code``) and ``lut`` textures on ``ctx``,
@@ -2356,12 +2363,6 @@ class WireFieldWarp(Warp):
             texs["code"] = tex3d(fld.code, "u2", False)
         if fld.weight is not None:
             texs["weight"] = tex3d(fld.weight, "f4", True)
-        if fld.layout == "paper":
-            assert fld.segments is not None
-            seg = ctx.texture(fld.segments.shape[::-1], 1, fld.segments.tobytes(), dtype="f4")
-            seg.filter = (ctx.NEAREST, ctx.NEAREST)
-            seg.repeat_x = seg.repeat_y = False
-            texs["seg"] = seg
         rows = np.concatenate([tab.gpu_rows() for tab in fld.tables], axis=0)
         lut = ctx.texture((LUT_SIZE, rows.shape[0]), 4, rows.tobytes(), dtype="f4")
         lut.filter = (ctx.LINEAR, ctx.LINEAR)

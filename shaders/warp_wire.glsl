@@ -11,8 +11,9 @@
 //      t interpolated here from the 8 neighbours of the same wire.
 // WARP_LAYOUT_PAPER 1 (the paper's section 7.2 split): WARP_code (R16UI: bit 15 swept,
 //      bits 11-14 wire, bits 7-10 segment s, bits 0-6 integer t in s; 0x7FFF vacated) and
-//      WARP_seg (R32F, 17 texels per wire: where segment s starts, in table units); each
-//      neighbour's (s, t) becomes its table coordinate before the 8 are interpolated.
+//      WARP_seg (16 wires x 17 floats: where segment s of wire w starts, in table units, at
+//      [17 w + s]); each neighbour's (s, t) becomes its table coordinate before the 8 are
+//      interpolated.
 uniform vec3 WARP_lo;
 uniform vec3 WARP_size;
 uniform vec3 WARP_shape;
@@ -25,7 +26,8 @@ uniform sampler3D WARP_weight;
 #endif
 #if WARP_LAYOUT_PAPER
 uniform usampler3D WARP_code;
-uniform sampler2D WARP_seg;
+uniform float WARP_seg[272];   // 16 wires x 17 segment starts (a uniform array: cheaper
+                               // than texel fetches on llvmpipe)
 #elif WARP_LAYOUT_PACKED
 uniform usampler3D WARP_code;
 #else
@@ -36,19 +38,16 @@ uniform sampler3D WARP_t;
 #if WARP_LAYOUT_PAPER
 // table coordinate of a paper code: segment start + (t / 127) x the segment's extent
 float WARP_paper_t(uint c) {
-    int w = int((c >> 11u) & 0xFu);
-    int s = int((c >> 7u) & 0xFu);
-    float a = texelFetch(WARP_seg, ivec2(s, w), 0).r;
-    float b = texelFetch(WARP_seg, ivec2(s + 1, w), 0).r;
-    return a + (b - a) * (float(c & 0x7Fu) / 127.0);
+    int i = 17 * int((c >> 11u) & 0xFu) + int((c >> 7u) & 0xFu);
+    float a = WARP_seg[i];
+    return a + (WARP_seg[i + 1] - a) * (float(c & 0x7Fu) / 127.0);
 }
 // weight and table coordinate of neighbour OFF, counted when it belongs to wire W
 #define WARP_PCORNER(OFF, WT) {                                                   \
     uint c_ = texelFetch(WARP_code, min(i0 + OFF, top), 0).r;                     \
-    if (((c_ >> 11u) & 0xFu) == wire && c_ != 0x7FFFu) {                          \
-        ts += (WT) * WARP_paper_t(c_);                                            \
-        ws += (WT);                                                               \
-    }                                                                             \
+    float w_ = ((c_ >> 11u) & 0xFu) == wire && c_ != 0x7FFFu ? (WT) : 0.0;         \
+    ts += w_ * WARP_paper_t(c_);                                                  \
+    ws += w_;                                                                     \
 }
 #endif
 

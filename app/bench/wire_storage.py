@@ -7,7 +7,9 @@ For the fish (padded to 256³, ``sample_volumes/fish_spine_wires.json``) and the
 1. *Storage*: one build per layout (``float``, ``packed``, ``paper``): bytes per field
    voxel, field size, the plane masks' memory (``sum_p a(p) s / 8`` per wire) and how
    far each 2-byte layout's mapping lies from the float layout's at points inside the
-   swept voxels (the float layout's t is exact up to float32): median and maximum mm.
+   swept voxels (the float layout's t is exact up to float32): median and maximum mm;
+   with images on, each layout's steady dvr frame (framed camera, 512x256) over the
+   undeformed one, alternated frame by frame as in the wire bench's render section.
 2. *Propagation domain*: :class:`~voxwarp.deform.wires.WireDeformer` with
    ``propagate="region"`` (the whole box of the wires' reach; today's default build,
    the OpenCL pass where a double-precision device exists, and the same on the numpy
@@ -43,6 +45,8 @@ MODES: tuple[tuple[str, dict[str, str]], ...] = (
 IMAGE_SIZE: tuple[int, int] = (256, 128)
 #: points compared per layout (inside swept voxels)
 COMPARE_POINTS = 200_000
+#: image of the layouts' render cost (the paper's 512x256)
+RENDER_SIZE: tuple[int, int] = (512, 256)
 
 
 @dataclass
@@ -59,6 +63,10 @@ class StorageRow:
     #: |mapping - float layout's mapping| over points in swept voxels (mm)
     median_mm: float
     max_mm: float
+    #: steady dvr frame (framed camera, :data:`RENDER_SIZE`) over the undeformed one,
+    #: alternated frame by frame (None: not rendered)
+    render_ratio: float | None = None
+    frame_ms: float | None = None
 
 
 @dataclass
@@ -118,8 +126,17 @@ def phantoms() -> list[tuple[str, Any, list[Any], int]]:
     return out
 
 
-def storage_rows(label: str, volume: Any, wires: Sequence[Any], scale: int) -> list[StorageRow]:
-    """Section 1 of the module docstring on one phantom."""
+def storage_rows(
+    label: str,
+    volume: Any,
+    wires: Sequence[Any],
+    scale: int,
+    ctx: Any = None,
+    frames: int = 5,
+    log: Callable[[str], None] = print,
+) -> list[StorageRow]:
+    """Section 1 of the module docstring on one phantom (with ``ctx``: and each
+    layout's steady dvr cost, ``frames`` frames alternated with the undeformed ones)."""
     from voxwarp.deform.wires import WireDeformer
 
     warps = {}
@@ -153,7 +170,45 @@ def storage_rows(label: str, volume: Any, wires: Sequence[Any], scale: int) -> l
                 max_mm=float(d.max()),
             )
         )
+    if ctx is not None:
+        _render_costs(rows, volume, wires, [wd for wd, _ in warps.values()], ctx, frames, log)
     return rows
+
+
+def _render_costs(
+    rows: Sequence[StorageRow],
+    volume: Any,
+    wires: Sequence[Any],
+    deformers: Sequence[Any],
+    ctx: Any,
+    frames: int,
+    log: Callable[[str], None],
+) -> None:
+    """Each layout's steady dvr frame against the undeformed one (the wire bench's
+    :func:`voxwarp.bench.wires._render_layout`: field upload and skip maps first, then
+    frames alternated with the undeformed volume)."""
+    from voxwarp.bench.wires import _prime, _render_layout, make_camera
+    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.scene import Scene
+
+    tf = _sample_tf(volume)
+    cam = make_camera("framed", volume, wires, RENDER_SIZE)
+    base = Scene(volume, mode="dvr", transfer_function=tf, camera=cam)
+    with OffscreenRenderer(*RENDER_SIZE, ctx=ctx) as r:
+        r.render(base)
+        for row, wd in zip(rows, deformers, strict=True):
+            _prime(r, base.copy(warps=[wd.warp()]))
+            rr = _render_layout(r, base, wd, RENDER_SIZE, "framed", tf, frames, log)
+            row.render_ratio, row.frame_ms = rr.ratio, rr.median_ms
+
+
+def _sample_tf(volume: Any) -> str:
+    """The suggested transfer function of a bundled sample (the fish's otherwise)."""
+    from voxwarp.io.samples import suggested_transfer_function
+
+    source = str(getattr(volume, "source", "") or "")
+    sample = source.split(":", 1)[1] if source.startswith("sample:") else "fish"
+    return str(suggested_transfer_function(sample))
 
 
 def propagate_row(
@@ -217,13 +272,10 @@ def _image_difference(
     """Largest channel difference (0..255) and % of pixels over 1/255 between the dvr
     images of the region and flagged fields (framed camera, the sample's TF)."""
     from voxwarp.bench.wires import make_camera
-    from voxwarp.io.samples import suggested_transfer_function
     from voxwarp.render.raycaster import OffscreenRenderer
     from voxwarp.scene import Scene
 
-    source = str(getattr(volume, "source", "") or "")
-    sample = source.split(":", 1)[1] if source.startswith("sample:") else "fish"
-    tf = str(suggested_transfer_function(sample))
+    tf = _sample_tf(volume)
     cam = make_camera("framed", volume, wires, IMAGE_SIZE)
     base = Scene(volume, mode="dvr", transfer_function=tf, camera=cam)
     with OffscreenRenderer(*IMAGE_SIZE, ctx=ctx) as r:
@@ -250,15 +302,18 @@ def markdown(storage: Sequence[StorageRow], modes: Sequence[PropagateRow], comma
         " layout's mapped point and the float layout's, at random points in swept voxels.",
         "",
         "| phantom | scale | field | layout | bytes/voxel | field MB | mask bytes per wire |"
-        " mask bytes total | median abs delta vs float mm | max abs delta vs float mm |",
-        "|---|---:|---|---|---:|---:|---|---:|---:|---:|",
+        " mask bytes total | median abs delta vs float mm | max abs delta vs float mm |"
+        f" dvr {RENDER_SIZE[0]}x{RENDER_SIZE[1]} / undeformed | frame ms |",
+        "|---|---:|---|---|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in storage:
+        ratio = "—" if r.render_ratio is None else f"{r.render_ratio:.2f}x"
+        ms = "—" if r.frame_ms is None else f"{r.frame_ms:.0f}"
         lines.append(
             f"| {r.phantom} | {r.scale} | {'x'.join(map(str, r.field_shape))} | {r.layout} |"
             f" {r.bytes_per_voxel:g} | {r.field_bytes / 1e6:.2f} |"
             f" {', '.join(map(str, r.mask_bytes))} | {sum(r.mask_bytes)} |"
-            f" {r.median_mm:.4f} | {r.max_mm:.3f} |"
+            f" {r.median_mm:.4f} | {r.max_mm:.3f} | {ratio} | {ms} |"
         )
     lines += [
         "",
@@ -296,11 +351,13 @@ def markdown(storage: Sequence[StorageRow], modes: Sequence[PropagateRow], comma
 def bench_storage(
     repeats: int = 5,
     images: bool = True,
+    frames: int = 5,
     ctx: Any = None,
     log: Callable[[str], None] = print,
 ) -> tuple[list[StorageRow], list[PropagateRow]]:
-    """Both sections on every phantom of :func:`phantoms`; ``images``: also compare
-    the dvr images (on ``ctx``, by default a standalone EGL context)."""
+    """Both sections on every phantom of :func:`phantoms`; ``images``: also time each
+    layout's dvr (``frames`` frames) and compare the propagation modes' images (on
+    ``ctx``, by default a standalone EGL context)."""
     if images and ctx is None:
         from voxwarp.render.raycaster import create_context
 
@@ -310,6 +367,6 @@ def bench_storage(
     storage: list[StorageRow] = []
     modes: list[PropagateRow] = []
     for label, vol, wires, scale in phantoms():
-        storage += storage_rows(label, vol, wires, scale)
+        storage += storage_rows(label, vol, wires, scale, ctx, frames, log)
         modes.append(propagate_row(label, vol, wires, scale, repeats, ctx, log))
     return storage, modes

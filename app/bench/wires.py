@@ -1561,7 +1561,8 @@ def add_bench_wires_parser(bsub: Any) -> None:
         action="store_true",
         help="instead: the wire paper's storage (float / packed / paper layouts, mask"
         " memory) and propagation over the region vs flagged voxels, on the fish and tubes"
-        " (voxwarp.bench.wire_storage); --repeats interleaved builds",
+        " (voxwarp.bench.wire_storage); --repeats interleaved builds, --frames dvr frames"
+        " per layout (--no-render: no images)",
     )
     p.add_argument("--markdown", metavar="FILE", help="also write the report to FILE")
     p.set_defaults(func=cmd_bench_wires)
@@ -1604,7 +1605,10 @@ def cmd_bench_wires(args: argparse.Namespace) -> int:
         from voxwarp.bench.wire_storage import bench_storage, markdown
 
         storage, modes = bench_storage(
-            args.repeats, images=not args.no_render, log=lambda s: print(s, file=sys.stderr)
+            args.repeats,
+            images=not args.no_render,
+            frames=args.frames,
+            log=lambda s: print(s, file=sys.stderr),
         )
         text = markdown(storage, modes, command_line(args))
         print(text)

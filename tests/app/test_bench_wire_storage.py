@@ -60,8 +60,8 @@ def test_cli_storage_writes_the_report(
     rows, mode = cyl_rows
     seen: dict[str, Any] = {}
 
-    def fake(repeats: int, images: bool, log: Any) -> Any:
-        seen.update(repeats=repeats, images=images)
+    def fake(repeats: int, images: bool, frames: int, log: Any) -> Any:
+        seen.update(repeats=repeats, images=images, frames=frames)
         return rows, [mode]
 
     monkeypatch.setattr(ws, "bench_storage", fake)
@@ -70,10 +70,10 @@ def test_cli_storage_writes_the_report(
     sub = p.add_subparsers(dest="command", required=True)
     bw.add_bench_wires_parser(sub.add_parser("bench").add_subparsers(dest="bench"))
     out = tmp_path / "storage.md"
-    argv = ["bench", "wires", "--storage", "--repeats", "2", "--no-render"]
+    argv = ["bench", "wires", "--storage", "--repeats", "2", "--frames", "3", "--no-render"]
     args = p.parse_args([*argv, "--markdown", str(out)])
     assert args.func(args) == 0
-    assert seen == {"repeats": 2, "images": False}
+    assert seen == {"repeats": 2, "images": False, "frames": 3}
     text = out.read_text()
     assert text in capsys.readouterr().out
     assert "--storage" in text.splitlines()[0]
@@ -96,3 +96,16 @@ def test_render_summary_names_the_paper_layout_and_mask_bytes(tmp_path: Path) ->
     assert f"paper), {st.planes - st.planes_dropped} planes" in summary
     assert f"({st.mask_bytes_total} bytes of masks)" in summary
     assert st.mask_bytes_total > 0
+
+
+def test_storage_rows_time_each_layouts_render(gl_ctx: Any, monkeypatch: Any) -> None:
+    monkeypatch.setattr(ws, "RENDER_SIZE", (64, 32))  # small: the rows, not the speed
+    vol = cylinder()
+    wires = [wire(modified=axis_points(dy=3.0, dz=-3.0))]
+    rows = ws.storage_rows("cylinder", vol, wires, 2, ctx=gl_ctx, frames=1, log=lambda s: None)
+    for r in rows:
+        assert r.frame_ms is not None
+        assert r.frame_ms > 0
+        assert r.render_ratio is not None
+        assert r.render_ratio > 0
+    assert "x |" in ws.markdown(rows, [], "voxwarp x")  # the ratio column is filled
