@@ -225,6 +225,13 @@ def test_flagged_propagation_gives_the_region_field() -> None:
     assert np.mean(b.t[far] == 0.0) > 0.5
 
 
+def test_flagged_propagation_keeps_smooth_ends() -> None:
+    ws = [wire(modified=axis_points(dy=3.0), radius=9.0, ends="smooth")]
+    region = build(cylinder(), ws, field_scale=2)
+    flagged = build(cylinder(), ws, field_scale=2, propagate="flagged")
+    np.testing.assert_array_equal(region.field.state, flagged.field.state)
+
+
 def test_propagate_option_is_checked_and_saved() -> None:
     with pytest.raises(WarpError, match=r"propagate must be one of \('region', 'flagged'\)"):
         WireDeformer(cylinder(), [wire()], propagate="all")
