@@ -1540,35 +1540,64 @@ class WireDeformer:
         obj_full = np.zeros((n_planes, k, k), dtype=bool)
         obj_full[:, disc] = obj
         obj = obj_full
-        if self.masks:
-            # seed: the object pixel nearest the wire on each plane ("searching outward
-            # from the wire"); the fill is 2.5D: a plane's pixel joins when it connects,
-            # in its plane or through the masks of the neighbouring planes, to a seed, so
-            # an object that splits along the wire (a forked tail fin) stays whole,
-            # while an object that never touches the seeded one (a neighbouring vessel)
-            # stays out
-            r2 = np.where(obj, (x**2 + y**2)[None], np.inf)
-            flat = r2.reshape(n_planes, -1)
-            seed = flat.argmin(axis=1)
-            has = np.isfinite(flat[np.arange(n_planes), seed])
-            labels, _ = ndimage.label(obj, structure=ndimage.generate_binary_structure(3, 1))
-            seed_labels = np.unique(labels.reshape(n_planes, -1)[np.arange(n_planes), seed][has])
-            keep = np.zeros(int(labels.max()) + 1, dtype=bool)
-            keep[seed_labels[seed_labels > 0]] = True
-            mask = keep[labels]
-            has = mask.reshape(n_planes, -1).any(axis=1)
-        else:
-            mask = obj.copy()
-            has = mask.reshape(n_planes, -1).any(axis=1)
+        # the object is chosen within the radius (as the rigid sweep does); a smooth
+        # wire's fade beyond it takes the parts of the same objects that lie there
+        core = (x[None] ** 2 + y[None] ** 2) <= (wire.radius * s_at[:, None, None]) ** 2
+        mask, has = self._seed_fill(obj & core, x, y)
         # cavities (a vessel's lumen, a swim bladder) move with their object
         mask = _fill_holes_in_planes(mask)
+        structure = np.zeros((3, 3, 3), dtype=bool)
+        structure[1] = ndimage.generate_binary_structure(2, 1)
         if self.dilation:
-            structure = np.zeros((3, 3, 3), dtype=bool)
-            structure[1] = ndimage.generate_binary_structure(2, 1)
             mask = ndimage.binary_dilation(mask, structure=structure, iterations=self.dilation)
             mask &= in_disc & disc[None]
+        if wire.smooth:
+            mask |= self._fade_pixels(obj, core, mask, structure) & in_disc
         mask[~has] = False
         return mask, k, int((~has).sum())
+
+    def _seed_fill(
+        self, obj: np.ndarray, x: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The object pixels of the planes' masks (before holes and dilation) and which
+        planes hold any: with ``masks``, the 2.5D seed fill; else every β pixel."""
+        n_planes = obj.shape[0]
+        if not self.masks:
+            return obj.copy(), obj.reshape(n_planes, -1).any(axis=1)
+        # seed: the object pixel nearest the wire on each plane ("searching outward
+        # from the wire"); the fill is 2.5D: a plane's pixel joins when it connects,
+        # in its plane or through the masks of the neighbouring planes, to a seed, so
+        # an object that splits along the wire (a forked tail fin) stays whole,
+        # while an object that never touches the seeded one (a neighbouring vessel)
+        # stays out
+        r2 = np.where(obj, (x**2 + y**2)[None], np.inf)
+        flat = r2.reshape(n_planes, -1)
+        seed = flat.argmin(axis=1)
+        has = np.isfinite(flat[np.arange(n_planes), seed])
+        labels, _ = ndimage.label(obj, structure=ndimage.generate_binary_structure(3, 1))
+        seed_labels = np.unique(labels.reshape(n_planes, -1)[np.arange(n_planes), seed][has])
+        keep = np.zeros(int(labels.max()) + 1, dtype=bool)
+        keep[seed_labels[seed_labels > 0]] = True
+        mask = keep[labels]
+        return mask, mask.reshape(n_planes, -1).any(axis=1)
+
+    def _fade_pixels(
+        self, obj: np.ndarray, core: np.ndarray, mask: np.ndarray, structure: np.ndarray
+    ) -> np.ndarray:
+        """A smooth wire's mask pixels beyond its radius (``core``): the β pixels there
+        that connect (2.5D) to the mask within it, or all of them without ``masks``;
+        dilated as the mask is."""
+        if self.masks:
+            labels, _ = ndimage.label(obj, structure=ndimage.generate_binary_structure(3, 1))
+            keep = np.zeros(int(labels.max()) + 1, dtype=bool)
+            keep[labels[mask & obj]] = True
+            keep[0] = False
+            extra = keep[labels] & ~core
+        else:
+            extra = obj & ~core
+        if self.dilation:
+            extra = ndimage.binary_dilation(extra, structure=structure, iterations=self.dilation)
+        return extra
 
     def _object_pixels(
         self,
