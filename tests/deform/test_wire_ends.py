@@ -108,8 +108,9 @@ def test_rigid_end_inside_the_object_warns_and_outside_does_not() -> None:
         build(vol, [short_wire("smooth")])  # smooth ends bend instead of cutting: no warning
 
 
-def test_smooth_mode_gpu_equals_cpu(gl_ctx: Any) -> None:
-    w = quiet_build("smooth", field_scale=2)
+@pytest.mark.parametrize("layout", ["float", "packed", "paper"])
+def test_smooth_mode_gpu_equals_cpu(gl_ctx: Any, layout: str) -> None:
+    w = quiet_build("smooth", field_scale=2, layout=layout)
     try:
         rng = np.random.default_rng(7)
         lo = np.array([2.0, AXIS_Y - 10.0, AXIS_Z - 10.0])
@@ -180,3 +181,21 @@ def test_smooth_sweep_of_an_object_inside_its_radius_leaves_no_copy() -> None:
     shifted = np.roll(np.roll(np.asarray(vol.data), 3, axis=1), -2, axis=2)
     np.testing.assert_allclose(res["smooth"][inner], shifted[inner], atol=1e-3)
     np.testing.assert_allclose(res["smooth"], res["rigid"], atol=1e-3)
+
+
+def test_displacement_range_holds_the_faded_displacements() -> None:
+    # the skip maps' intervals must hold every displacement the fades scale down
+    w = quiet_build("smooth", field_scale=2)
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(
+        [20.0, AXIS_Y - 10.0, AXIS_Z - 10.0], [56.0, AXIS_Y + 6.0, AXIS_Z + 6.0], (200, 3)
+    )
+    hi = lo + rng.uniform(0.5, 6.0, size=(200, 3))
+    a, b = w.displacement_range(lo, hi)
+    for i in range(len(lo)):
+        pts = rng.uniform(lo[i], hi[i], size=(200, 3))
+        q = w.apply(pts)
+        keep = q[:, 0] < FAR / 2
+        d = q[keep] - pts[keep]
+        assert np.all(d >= a[i] - 1e-6), i
+        assert np.all(d <= b[i] + 1e-6), i
