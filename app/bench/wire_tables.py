@@ -155,6 +155,7 @@ def axis_wire(volume: Volume, threshold: float, bend: float = 0.15) -> Any:
         radius=float(np.percentile(radial, 99)) + 2.0 * float(max(volume.spacing)),
         beta=(threshold, hi),
         name="principal axis",
+        ends="rigid",  # the paper's sweep
     )
 
 
