@@ -245,3 +245,22 @@ def test_propagate_option_is_checked_and_saved() -> None:
     assert back.deformer.propagate == "flagged"
     with pytest.raises(WarpError, match="propagate"):
         warp_from_dict({**d, "propagate": "everywhere"})
+
+
+def test_paper_layout_displacement_range_holds_every_displacement() -> None:
+    # the skip maps' bounds come from the decoded table coordinates (as the packed test)
+    w = _twisted("paper")
+    rng = np.random.default_rng(5)
+    lo = rng.uniform([0, 0, 0], [60, 36, 36], size=(200, 3))
+    hi = lo + rng.uniform(0.5, 6.0, size=(200, 3))
+    a, b = w.displacement_range(lo, hi)
+    moved = 0
+    for i in range(len(lo)):
+        pts = rng.uniform(lo[i], hi[i], size=(200, 3))
+        q = w.apply(pts)
+        keep = q[:, 0] < FAR / 2  # vacated samples show nothing
+        d = q[keep] - pts[keep]
+        assert np.all(d >= a[i] - 1e-6), i
+        assert np.all(d <= b[i] + 1e-6), i
+        moved += int(np.any(np.abs(d) > 0.5))
+    assert moved > 20  # boxes in the swept region were tested
