@@ -170,7 +170,8 @@ def load_lattice_file(path: str | Path, volume: Any) -> Any:
     """Read a lattice file (a ``"lattice"`` warp entry of scene JSON: ``grid`` with its
     ``nodes``, optional ``box`` (default: the volume's box), ``inverse``, and either
     ``tolerance`` / ``max_iterations`` (Newton steps until a step moves the point by at
-    most ``tolerance`` mm) or ``iterations`` (a fixed count); plus the free-text notes ``description`` and ``sample``) and build the warp."""
+    most ``tolerance`` mm) or ``iterations`` (a fixed count); plus the free-text notes
+    ``description`` and ``sample``) and build the warp."""
     from voxwarp.deform.lattice_warp import LatticeWarp
     from voxwarp.deform.warp import WarpError
 
