@@ -291,7 +291,9 @@ class Wire:
         (nothing beyond the end planes or the radius moves).
     falloff
         Length (mm) of the fade beyond each end with ``ends="smooth"``; default the
-        radius.
+        radius, or twice the largest move of an end's cross-section if that is longer
+        (:meth:`end_moves`: a fade shorter than twice the move folds and shows a strip
+        twice).
     """
 
     def __init__(
@@ -344,6 +346,7 @@ class Wire:
         if ends not in ENDS:
             raise WarpError(f"wire ends must be one of {ENDS}; got {ends!r:.40}")
         self.ends = ends
+        self._end_moves: tuple[Any, tuple[float, float]] | None = None
         self.falloff_mm: float | None = None
         if falloff is not None:
             try:
@@ -358,8 +361,37 @@ class Wire:
 
     @property
     def falloff(self) -> float:
-        """Length (mm) of the fade beyond each end (the radius unless given)."""
-        return self.radius if self.falloff_mm is None else self.falloff_mm
+        """Length (mm) of the fade beyond each end: as given, else the larger of the
+        radius and twice the largest end move (:meth:`end_moves`)."""
+        if self.falloff_mm is not None:
+            return self.falloff_mm
+        return max(self.radius, 2.0 * max(self.end_moves()))
+
+    def end_moves(self) -> tuple[float, float]:
+        """How far (mm) the sweep moves each end's cross-section at most: the end point
+        and 16 points on the circle of the (scaled) radius around it, in the modified
+        wire's end plane, mapped back through the wire's tables. Cached per shape of
+        the wire."""
+        key = (
+            self.base.control_points.tobytes(),
+            self.modified.control_points.tobytes(),
+            self.twist.tobytes(),
+            self.scale.tobytes(),
+            self.radius,
+        )
+        if self._end_moves is None or self._end_moves[0] != key:
+            tab = self.tables()
+            angle = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
+            moves = []
+            for i, u in ((0, 0.0), (tab.size - 1, 1.0)):
+                m, f = tab.modified_points[i], tab.modified_frames[i]
+                r = self.radius * float(self.scale_at(u))
+                ring = np.cos(angle)[:, None] * f[:, 0] + np.sin(angle)[:, None] * f[:, 1]
+                p = np.vstack([m, m + r * ring])
+                q = map_points(tab, np.full(len(p), float(i)), p)
+                moves.append(float(np.linalg.norm(q - p, axis=1).max()))
+            self._end_moves = (key, (moves[0], moves[1]))
+        return self._end_moves[1]
 
     @property
     def influence(self) -> float:

@@ -199,3 +199,27 @@ def test_displacement_range_holds_the_faded_displacements() -> None:
         d = q[keep] - pts[keep]
         assert np.all(d >= a[i] - 1e-6), i
         assert np.all(d <= b[i] + 1e-6), i
+
+
+def _straight(shift: float, twist: float = 0.0, radius: float = 5.0) -> Wire:
+    base = [[x, 0.0, 0.0] for x in (0.0, 10.0, 20.0, 30.0)]
+    mod = [[x, shift, 0.0] for x in (0.0, 10.0, 20.0, 30.0)]
+    return Wire(base, mod, twist=[(0.0, 0.0), (1.0, twist)], radius=radius, ends="smooth")
+
+
+def test_end_moves_are_the_sweeps_largest_move_of_each_end() -> None:
+    # a translated wire moves both ends' cross-sections by the translation
+    assert _straight(12.0).end_moves() == pytest.approx((12.0, 12.0), abs=1e-6)
+    # a twist of theta at the far end moves its rim by 2 r sin(theta / 2)
+    start, end = _straight(0.0, twist=np.pi / 2).end_moves()
+    assert start == pytest.approx(0.0, abs=1e-6)
+    assert end == pytest.approx(2 * 5.0 * np.sin(np.pi / 4), rel=1e-3)
+
+
+def test_default_falloff_grows_with_the_end_move() -> None:
+    assert _straight(1.0).falloff == 5.0  # the radius
+    assert _straight(12.0).falloff == pytest.approx(24.0, abs=1e-5)
+    assert Wire.from_dict({**_straight(12.0).to_dict(), "falloff": 7.0}).falloff == 7.0
+    w = _straight(12.0)
+    w.modified = _straight(3.0).modified  # edited: the cached moves follow the shape
+    assert w.falloff == pytest.approx(6.0, abs=1e-5)
