@@ -36,6 +36,7 @@ for a student and a scene JSON to show.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -1533,6 +1534,7 @@ def _demo_wires(
                 render_cost["ratio"] = render_cost["deformed_ms"] / render_cost["undeformed_ms"]
     numbers: dict[str, Any] = {
         "tables": _wire_tables(s, log),
+        "storage": _wire_storage(vol, wires),
         "volume": vol.name,
         "volume_shape": vol.shape,
         "wire_file": "sample_volumes/fish_spine_wires.json",
@@ -1610,6 +1612,28 @@ def _demo_wires(
         )
     )
     return [path], numbers, tour
+
+
+def _wire_storage(vol: Any, wires: Sequence[Any]) -> list[dict[str, Any]]:
+    """Bytes per field voxel of each layout and the plane masks' memory (section 7.2 and
+    7.1) for the fish's field at the render scale."""
+    from voxwarp.bench.wires import RENDER_SCALE
+    from voxwarp.deform.wires import LAYOUTS, WireDeformer
+
+    rows = []
+    for layout in LAYOUTS:
+        wd = WireDeformer(vol, wires, field_scale=RENDER_SCALE, layout=layout)
+        st = wd.build()
+        rows.append(
+            {
+                "layout": layout,
+                "field_shape": list(st.field_shape),
+                "bytes_per_voxel": wd.field.nbytes / st.voxels,
+                "field_bytes": wd.field.nbytes,
+                "mask_bytes": st.mask_bytes_total,
+            }
+        )
+    return rows
 
 
 def _wire_tables(s: _Settings, log: Callable[[str], None]) -> dict[str, Any]:
@@ -1703,6 +1727,7 @@ def _demo_lattice(
     s: _Settings, out: Path, log: Callable[[str], None]
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
     from voxwarp.bench.lattice import PAPER_RATIO, bench_lattice
+    from voxwarp.bench.lattice_normals import normals_study
     from voxwarp.deform.lattice_warp import LatticeWarp
     from voxwarp.teaching.lattice_scenes import torus_tubes
 
@@ -1772,6 +1797,7 @@ def _demo_lattice(
             "linear_compose_ms": lin.compose_ms,
             "groups": tri.groups,
         },
+        "normals": [dataclasses.asdict(r) for r in normals_study()],
         "gl_renderer": gl,
     }
     fig = _figure(16.0, 14.0, DEMO_TITLES["lattice"])

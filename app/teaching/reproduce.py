@@ -32,6 +32,8 @@ from voxwarp.bench.papers import (
     LATTICE_SHADER_COMPLEXITY,
     PAPER_HAS_NONE,
     WIRE_FIG12_BUILD_S,
+    WIRE_FLOAT_BYTES_PER_VOXEL,
+    WIRE_PAPER_LAYOUT_BITS,
     WIRE_TABLE1,
     WIRE_TIMING_IMAGE,
     WIRE_TIMING_MACHINE,
@@ -490,6 +492,8 @@ def _compare_section(n: dict[str, Any], quick: bool = False) -> list[str]:
 
 def _wires_section(n: dict[str, Any], quick: bool = False) -> list[str]:
     lines = _wires_fig12(n, quick)
+    if n.get("storage"):
+        lines += _wires_storage(n["storage"])
     if n.get("tables"):
         lines += _wires_table1(n["tables"])
         lines += _wires_tables23(n["tables"], quick)
@@ -552,6 +556,37 @@ def _wires_fig12(n: dict[str, Any], quick: bool) -> list[str]:
             ],
             rows,
             "llrrrrrr",
+        ),
+    ]
+
+
+def _wires_storage(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """Section 7.2's storage per layout and 7.1's plane-mask memory."""
+    flag, wire, segment, t = WIRE_PAPER_LAYOUT_BITS
+    paper = {
+        "float": f"at least {WIRE_FLOAT_BYTES_PER_VOXEL} (float t, 7-bit wire, flag)",
+        "packed": "none (voxwarp's: flag, 7-bit wire, 8-bit t over the wire)",
+        "paper": f"2 (flag {flag} bit, wire {wire}, segment {segment}, t {t})",
+    }
+    table = [
+        [
+            r["layout"],
+            paper.get(r["layout"], PAPER_HAS_NONE),
+            f"{r['bytes_per_voxel']:g}",
+            f"{r['field_bytes'] / 2**20:.2f}",
+            f"{r['mask_bytes']:,}",
+        ]
+        for r in rows
+    ]
+    shape = "x".join(map(str, rows[0]["field_shape"]))
+    return [
+        f"Storage (section 7.2) of the fish's {shape} field, and the plane masks' memory"
+        " (section 7.1: the sum over the planes of area times resolution / 8 bytes; the"
+        " paper gives the formula, no number).",
+        "",
+        *_table(
+            ["layout", "paper bytes / voxel", "bytes / voxel", "field MiB", "mask bytes"],
+            table,
         ),
     ]
 
@@ -695,4 +730,51 @@ def _lattice_section(n: dict[str, Any], quick: bool = False) -> list[str]:
         " 77 %).",
         "",
         *_table(["configuration", "paper", "lattice FPS / 4x4 FPS", "ms (lattice / 4x4)"], rows),
+        *_lattice_normals(n.get("normals", [])),
+        "Figure 8 (attachments following an animated base mesh): `voxwarp animate"
+        " sample_volumes/lattice_accessories_anim.json -o body.mp4` (the paper's figure has"
+        " no numbers).",
+        "",
+    ]
+
+
+def _lattice_normals(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """Figure 5: both normal methods against the exact normals of the smooth shape."""
+    if not rows:
+        return []
+    by: dict[tuple[str, str], dict[str, dict[str, Any]]] = {}
+    for r in rows:
+        cells = "x".join(map(str, r["cells"]))
+        by.setdefault((r["scene"], cells), {})[r["method"]] = r
+
+    def cell(r: dict[str, Any] | None) -> str:
+        if r is None:
+            return "—"
+        return f"{r['mean_deg']:.2f}° / {r['max_deg']:.2f}° / {r['seam_deg']:.2f}°"
+
+    table = [
+        [
+            f"{scene}, {cells} cells",
+            "Figure 5: images, no numbers",
+            cell(m.get("normal")),
+            cell(m.get("tangent")),
+        ]
+        for (scene, cells), m in by.items()
+    ]
+    return [
+        "Normals (section 4.2, Figure 5): angle to the exact normals of the smooth shape the"
+        " lattice samples, mean / max over the vertices, and the largest jump across an"
+        " inner cell face (seam); `voxwarp bench lattice` section 5. The default is the"
+        " tangent-space method: it converges as the cells get finer, while the direct one"
+        " stays off wherever the lattice stretches unevenly.",
+        "",
+        *_table(
+            [
+                "scene",
+                "paper",
+                "direct (J n): mean / max / seam",
+                "tangent space: mean / max / seam",
+            ],
+            table,
+        ),
     ]

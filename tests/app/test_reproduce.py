@@ -57,6 +57,10 @@ def test_quick_reproduction_writes_the_report_and_its_figures(gl_ctx: Any, tmp_p
     assert "2.2-5.3x" not in wires
     for number in ("11.74", "4.45", "2.61", "2.17", "2.12", "59.7", "86.3", "2.20x", "5.31x"):
         assert number in wires, number
+    assert "| paper | 2 (flag 1 bit, wire 4, segment 4, t 7) | 2 |" in wires  # section 7.2
+    assert "| float | at least 5 (float t, 7-bit wire, flag) | 5 |" in wires
+    assert "Figure 5: images, no numbers" in lattice
+    assert "lattice_accessories_anim.json" in lattice  # Figure 8
     assert "not in the repo" not in text
     massspring = next(s for s in sections if s.startswith(f"{DEMOS.index('massspring') + 1}."))
     assert THESIS_HAS_NONE in massspring
