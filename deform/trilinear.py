@@ -1005,15 +1005,33 @@ class TrilinearGrid:
             :data:`LINEAR_RTOL` times the grid's extent.
         """
         if "linear" not in self._cache:
-            tol = LINEAR_RTOL * self._extent()
-            # cheap rejection first (animated scenes ask this of every new composed grid):
-            # the affine map through four corners misses the nodes of a grid within tol
-            # of an affine map by at most 6 tol
-            if self._corner_residual() > 8 * tol:
+            # cheap rejections first (animated scenes ask this of every new composed
+            # grid): the affine map through four corners misses the nodes of a grid within
+            # tol of an affine map by at most 6 tol; the 8 corners alone first (an affine
+            # grid's extent is its corners' extent)
+            if self._far_corner_residual() > 8 * LINEAR_RTOL * self._corner_extent():
                 self._cache["linear"] = False
             else:
-                self._cache["linear"] = bool(self._fit()[2] <= tol)
+                tol = LINEAR_RTOL * self._extent()
+                linear = self._corner_residual() <= 8 * tol and self._fit()[2] <= tol
+                self._cache["linear"] = bool(linear)
         return self._cache["linear"]
+
+    def _corners(self) -> np.ndarray:
+        """The 8 corner nodes, (2, 2, 2, 3) (a view)."""
+        n = self.nodes
+        return n[:: n.shape[0] - 1, :: n.shape[1] - 1, :: n.shape[2] - 1]
+
+    def _corner_extent(self) -> float:
+        c = self._corners().reshape(8, 3)
+        return float((c.max(axis=0) - c.min(axis=0)).max())
+
+    def _far_corner_residual(self) -> float:
+        """Distance of the corner (1,1,1) from the affine map through the corners
+        (0,0,0), (1,0,0), (0,1,0), (0,0,1): O(1), rejects most bent grids at once."""
+        c = self._corners()
+        far = c[1, 1, 1] - c[1, 0, 0] - c[0, 1, 0] - c[0, 0, 1] + 2.0 * c[0, 0, 0]
+        return float(np.abs(far).max())
 
     def _corner_residual(self) -> float:
         """Max node distance from the affine map through the corners (0,0,0), (1,0,0),
