@@ -36,6 +36,7 @@ BENCHMARKS: tuple[str, ...] = (
     "chainmail",
     "wires",
     "wire-tables",
+    "wire-ends",
     "lattice",
     "interactive",
     "fields",
@@ -280,6 +281,18 @@ def run_wire_tables(quick: bool) -> dict[str, Any]:
     return {"ratios": ratios, "issue": {}, "markdown": markdown(rows, command)}
 
 
+def run_wire_ends(quick: bool) -> dict[str, Any]:
+    """``bench wire-ends`` (with ``quick``: the MRI head alone at 192x192)."""
+    from voxwarp.bench.wire_ends import CASES, bench_wire_ends, markdown
+
+    rows = bench_wire_ends(
+        ("colin27",) if quick else CASES, (192, 192) if quick else (384, 384), _log
+    )
+    ratios = {f"{r.case} {r.ends} 1:8 % pixels off 1:1": round(r.seams[2][0], 3) for r in rows}
+    command = "voxwarp bench wire-ends" + (" (quick)" if quick else "")
+    return {"ratios": ratios, "issue": {}, "markdown": markdown(rows, command)}
+
+
 def run_lattice(quick: bool) -> dict[str, Any]:
     """``bench lattice`` (with ``quick``: 100k triangles, 200 objects, 256², cells 1,4)."""
     from voxwarp.bench.lattice import bench_lattice
@@ -375,6 +388,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "chainmail": run_chainmail,
     "wires": run_wires,
     "wire-tables": run_wire_tables,
+    "wire-ends": run_wire_ends,
     "lattice": run_lattice,
     "interactive": run_interactive,
     "fields": run_fields,
