@@ -22,6 +22,7 @@ import math
 import os
 import platform
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -91,16 +92,32 @@ def reproduce(
     started = datetime.datetime.now(datetime.UTC)
     t0 = time.perf_counter()
     load = [load_average()]
-    results: dict[str, DemoResult] = {}
-    for name in DEMOS:
-        say(f"reproduce: {name} ...")
-        results[name] = run_demo(name, fig_dir, quick=quick, log=say)
+    results = {name: _run_keeping_figures(name, fig_dir, quick, say) for name in DEMOS}
     seconds = time.perf_counter() - t0
     load.append(load_average())
     text = report_markdown(results, out, command, started, seconds, quick, load=tuple(load))
     atomic_write_text(out, text)
     say(f"reproduce: {out} ({seconds:.0f} s)")
     return out
+
+
+def _run_keeping_figures(
+    name: str, fig_dir: Path, quick: bool, say: Callable[[str], None]
+) -> DemoResult:
+    """Run demo ``name`` in a scratch folder and move only its figure sheets into
+    ``fig_dir`` (demos also write data for the reader to try, e.g. the registration's
+    transform files: tens of MB that do not belong beside a report)."""
+    say(f"reproduce: {name} ...")
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".reproduce-", dir=fig_dir) as tmp:
+        result = run_demo(name, Path(tmp), quick=quick, log=say)
+        kept = []
+        for fig in result.figures:
+            dest = fig_dir / fig.name
+            os.replace(fig, dest)
+            kept.append(dest)
+    result.figures = kept
+    return result
 
 
 # ---------------------------------------------------------------------- hardware

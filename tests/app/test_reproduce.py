@@ -68,8 +68,10 @@ def test_quick_reproduction_writes_the_report_and_its_figures(gl_ctx: Any, tmp_p
     assert QUICK_SKIP in wires
     assert QUICK_SKIP in lattice
     assert not re.search(r"\| \d+% \|", lattice)
-    # nothing half-written left behind
+    # nothing half-written left behind, and only the figure sheets beside the report (the
+    # registration demo's transform files stay out of docs/)
     assert not [p for p in out.parent.rglob(".*")]
+    assert {p.suffix for p in (tmp_path / "docs" / "reproduction").iterdir()} == {".png"}
 
 
 def test_cli_reproduce_passes_its_options(
