@@ -42,21 +42,20 @@ float WARP_paper_t(uint c) {
     float a = WARP_seg[i];
     return a + (WARP_seg[i + 1] - a) * (float(c & 0x7Fu) / 127.0);
 }
-// weight and table coordinate of neighbour OFF, counted when it belongs to wire W
-#define WARP_PCORNER(OFF, WT) {                                                   \
-    uint c_ = texelFetch(WARP_code, min(i0 + OFF, top), 0).r;                     \
-    float w_ = ((c_ >> 11u) & 0xFu) == wire && c_ != 0x7FFFu ? (WT) : 0.0;         \
-    ts += w_ * WARP_paper_t(c_);                                                  \
-    ws += w_;                                                                     \
-}
+// wire id and table coordinate of a code
+#define WARP_WIRE_OF(C) (((C) >> 11u) & 0xFu)
+#define WARP_T_OF(C) WARP_paper_t(C)
+#elif WARP_LAYOUT_PACKED
+#define WARP_WIRE_OF(C) (((C) >> 8u) & 0x7Fu)
+#define WARP_T_OF(C) float((C) & 0xFFu)
 #endif
 
-#if WARP_LAYOUT_PACKED
-// weight and t of neighbour OFF of the packed field, counted when it belongs to wire W
+#if WARP_LAYOUT_PAPER || WARP_LAYOUT_PACKED
+// weight and table coordinate of neighbour OFF, counted when it belongs to wire W
 #define WARP_CORNER(OFF, WT) {                                                    \
     uint c_ = texelFetch(WARP_code, min(i0 + OFF, top), 0).r;                     \
-    float w_ = ((c_ >> 8u) & 0x7Fu) == wire && c_ != 0x7FFFu ? (WT) : 0.0;         \
-    ts += w_ * float(c_ & 0xFFu);                                                 \
+    float w_ = WARP_WIRE_OF(c_) == wire && c_ != 0x7FFFu ? (WT) : 0.0;            \
+    ts += w_ * WARP_T_OF(c_);                                                     \
     ws += w_;                                                                     \
 }
 #endif
@@ -70,36 +69,13 @@ int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
     ivec3 v = ivec3(g);
     float t;
     uint wire;
-#if WARP_LAYOUT_PAPER
+#if WARP_LAYOUT_PAPER || WARP_LAYOUT_PACKED
     uint c = texelFetch(WARP_code, v, 0).r;
     if ((c & 0x8000u) == 0u) {
         if (c == 0x7FFFu) { q = vec3(WARP_FAR); return 1; }
         return 0;
     }
-    wire = (c >> 11u) & 0xFu;
-    vec3 gc = clamp(g - 0.5, vec3(0.0), WARP_shape - 1.0);
-    ivec3 i0 = ivec3(floor(gc));
-    ivec3 top = ivec3(WARP_shape) - 1;
-    vec3 f = gc - vec3(i0);
-    vec3 e = 1.0 - f;
-    float ts = 0.0;
-    float ws = 0.0;
-    WARP_PCORNER(ivec3(0, 0, 0), e.x * e.y * e.z)
-    WARP_PCORNER(ivec3(1, 0, 0), f.x * e.y * e.z)
-    WARP_PCORNER(ivec3(0, 1, 0), e.x * f.y * e.z)
-    WARP_PCORNER(ivec3(1, 1, 0), f.x * f.y * e.z)
-    WARP_PCORNER(ivec3(0, 0, 1), e.x * e.y * f.z)
-    WARP_PCORNER(ivec3(1, 0, 1), f.x * e.y * f.z)
-    WARP_PCORNER(ivec3(0, 1, 1), e.x * f.y * f.z)
-    WARP_PCORNER(ivec3(1, 1, 1), f.x * f.y * f.z)
-    t = ws > 0.0 ? ts / ws : WARP_paper_t(c);
-#elif WARP_LAYOUT_PACKED
-    uint c = texelFetch(WARP_code, v, 0).r;
-    if ((c & 0x8000u) == 0u) {
-        if (c == 0x7FFFu) { q = vec3(WARP_FAR); return 1; }
-        return 0;
-    }
-    wire = (c >> 8u) & 0x7Fu;
+    wire = WARP_WIRE_OF(c);
     vec3 gc = clamp(g - 0.5, vec3(0.0), WARP_shape - 1.0);
     ivec3 i0 = ivec3(floor(gc));
     ivec3 top = ivec3(WARP_shape) - 1;
@@ -115,7 +91,7 @@ int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
     WARP_CORNER(ivec3(1, 0, 1), f.x * e.y * f.z)
     WARP_CORNER(ivec3(0, 1, 1), e.x * f.y * f.z)
     WARP_CORNER(ivec3(1, 1, 1), f.x * f.y * f.z)
-    t = ws > 0.0 ? ts / ws : float(c & 0xFFu);
+    t = ws > 0.0 ? ts / ws : WARP_T_OF(c);
 #else
     uint s = texelFetch(WARP_state, v, 0).r;
     if (s < 2u) {
