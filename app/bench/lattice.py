@@ -577,6 +577,21 @@ def _alternate(
     return ta, tb
 
 
+def _torus_target(report: LatticeBenchReport, ctx: Any) -> tuple[Any, Any, tuple[Any, Any, Any]]:
+    """The torus's box, a camera on it and an RGBA8 + depth framebuffer of the report's
+    size: (box, camera, (color, depth, framebuffer))."""
+    w, h = report.size
+    box = (np.array(TORUS_BOX[0]), np.array(TORUS_BOX[1]))
+    cam = Camera.fit(box[0] - 0.3, box[1] + 0.3, VIEW, "perspective")
+    color = ctx.texture((w, h), 4, dtype="f1")
+    depth = ctx.depth_texture((w, h))
+    return (
+        box,
+        cam,
+        (color, depth, ctx.framebuffer(color_attachments=[color], depth_attachment=depth)),
+    )
+
+
 def bench_throughput(
     report: LatticeBenchReport,
     ctx: Any,
@@ -586,12 +601,7 @@ def bench_throughput(
 ) -> None:
     """Section 1 (see the module docstring); appends to ``report.throughput``."""
 
-    w, h = report.size
-    box = (np.array(TORUS_BOX[0]), np.array(TORUS_BOX[1]))
-    cam = Camera.fit(box[0] - 0.3, box[1] + 0.3, VIEW, "perspective")
-    color = ctx.texture((w, h), 4, dtype="f1")
-    depth = ctx.depth_texture((w, h))
-    fbo = ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    box, cam, (color, depth, fbo) = _torus_target(report, ctx)
     renderers = {p: MeshRenderer(ctx, position=p) for p in ("exact", "hardware")}
     linear = MeshInstance(mesh, np.eye(4))
     try:
@@ -665,12 +675,7 @@ def bench_fast_path(
     report: LatticeBenchReport, ctx: Any, mesh: Any, log: Callable[[str], None]
 ) -> None:
     """Section 4 (see the module docstring); appends to ``report.fast_path``."""
-    w, h = report.size
-    box = (np.array(TORUS_BOX[0]), np.array(TORUS_BOX[1]))
-    cam = Camera.fit(box[0] - 0.3, box[1] + 0.3, VIEW, "perspective")
-    color = ctx.texture((w, h), 4, dtype="f1")
-    depth = ctx.depth_texture((w, h))
-    fbo = ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    box, cam, (color, depth, fbo) = _torus_target(report, ctx)
     slow, fast = MeshRenderer(ctx, linear_fast_path=False), MeshRenderer(ctx)
     inst = MeshInstance(mesh, affine_lattice(box, FAST_PATH_CELLS), box=box)
     try:
