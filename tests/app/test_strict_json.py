@@ -200,4 +200,7 @@ def test_lattice_file_unknown_key_lists_the_allowed(tmp_path: Path) -> None:
         load_lattice_file(path, Volume(np.zeros((4, 4, 4), np.uint8)))
     msg = _one_line(err.value)
     assert "'itertions'" in msg
-    assert "allowed: type, grid, box, inverse, iterations, fold_linear" in msg
+    assert (
+        "allowed: type, grid, box, inverse, iterations, tolerance, max_iterations, fold_linear"
+        in msg
+    )
