@@ -27,6 +27,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from voxwarp.bench.command import add_bench_parser
+
 #: every benchmark, in running order
 BENCHMARKS: tuple[str, ...] = (
     "startup",
@@ -529,10 +531,11 @@ def _names_arg(text: str) -> tuple[str, ...]:
 
 def add_bench_all_parser(bsub: Any) -> None:
     """Add ``all`` to the ``bench`` sub-commands."""
-    p = bsub.add_parser(
+    p = add_bench_parser(
+        bsub,
         "all",
-        help="every benchmark in one command: hardware, JSON and one markdown table",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        "every benchmark in one command: hardware, JSON and one markdown table",
+        __doc__,
     )
     p.add_argument("--quick", action="store_true", help="small options: a few minutes in all")
     p.add_argument("--json", metavar="FILE", help="write every record as JSON")

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import add_bench_parser
 from voxwarp.bench.render import bench_camera, benchmark_volume, load_average
 from voxwarp.core.checks import image_size, int_list, positive_int
 from voxwarp.core.volume import Volume
@@ -415,10 +416,11 @@ def cmd_bench_fields(args: argparse.Namespace) -> int:
 
 def add_bench_fields_parser(bsub: Any) -> None:
     """Add ``fields`` to the ``bench`` sub-commands."""
-    p = bsub.add_parser(
+    p = add_bench_parser(
+        bsub,
         "fields",
-        help="rendering through imported displacement fields vs resampling; field export",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        "rendering through imported displacement fields vs resampling; field export",
+        __doc__,
     )
     p.add_argument("--size", type=image_size, default=(512, 512), help="image WxH")
     p.add_argument("--frames", type=positive_int, default=10, help="timed frames per case")

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
@@ -232,10 +233,6 @@ def bench_interactive(
 
 def cmd_bench_interactive(args: argparse.Namespace) -> int:
     """``voxwarp bench interactive``."""
-    from pathlib import Path
-
-    from voxwarp.core.files import atomic_write_text
-
     report = bench_interactive(
         size=args.size, frames=args.frames, log=lambda s: print(s, file=sys.stderr)
     )
@@ -245,18 +242,13 @@ def cmd_bench_interactive(args: argparse.Namespace) -> int:
             f" {a}" for a in (sys.argv[3:] if sys.argv[1:3] == ["bench", "interactive"] else [])
         )
     )
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return emit_report(text, args.markdown)
 
 
 def add_bench_interactive_parser(bsub: Any) -> None:
     """Add ``interactive`` to the ``bench`` sub-commands."""
-    p = bsub.add_parser(
-        "interactive",
-        help="the GUI's frame costs while editing each deformation family",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    p = add_bench_parser(
+        bsub, "interactive", "the GUI's frame costs while editing each deformation family", __doc__
     )
     p.add_argument("--size", type=image_size, default=(750, 830), help="viewport WxH")
     p.add_argument("--frames", type=positive_int, default=5, help="timed frames per case")

@@ -63,11 +63,11 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import emit_report
 from voxwarp.bench.lattice_inverse import DEFAULT_FRAMES as INVERSE_FRAMES
 from voxwarp.bench.lattice_inverse import bench_inverse
 from voxwarp.bench.lattice_normals import markdown_lines as normals_markdown
@@ -1172,8 +1172,6 @@ def command_line(args: argparse.Namespace) -> str:
 
 def cmd_bench_lattice(args: argparse.Namespace) -> int:
     """``voxwarp bench lattice``: see the module docstring."""
-    from voxwarp.core.files import atomic_write_text
-
     report = bench_lattice(
         triangles=args.triangles,
         objects=args.objects,
@@ -1189,10 +1187,7 @@ def cmd_bench_lattice(args: argparse.Namespace) -> int:
         text = report.inverse.standalone_markdown(
             command_line(args), report.gl_renderer, report.load, report.wall_s
         )
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return emit_report(text, args.markdown)
 
 
 __all__ = [

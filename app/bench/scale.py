@@ -44,6 +44,8 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import add_bench_parser
+
 #: default cube edges, and those of ``--quick``
 DEFAULT_SIZES: tuple[int, ...] = (128, 256, 512)
 QUICK_SIZES: tuple[int, ...] = (128, 256)
@@ -447,10 +449,11 @@ def add_bench_scale_parser(bsub: Any) -> None:
     """Add ``scale`` to the ``bench`` sub-commands."""
     from voxwarp.core.checks import positive_int
 
-    p = bsub.add_parser(
+    p = add_bench_parser(
+        bsub,
         "scale",
-        help="first frame, its phases, steady frame and memory of 128³/256³/512³ volumes",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        "first frame, its phases, steady frame and memory of 128³/256³/512³ volumes",
+        __doc__,
     )
     p.add_argument(
         "--sizes",

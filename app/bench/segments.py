@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.bench.fields import smooth_field
 from voxwarp.bench.interactive import edit_family
 from voxwarp.core.checks import image_size, positive_int
@@ -165,10 +166,6 @@ def bench_segments(
 
 def cmd_bench_segments(args: argparse.Namespace) -> int:
     """``voxwarp bench segments``."""
-    from pathlib import Path
-
-    from voxwarp.core.files import atomic_write_text
-
     report = bench_segments(
         size=args.size,
         frames=args.frames,
@@ -176,18 +173,13 @@ def cmd_bench_segments(args: argparse.Namespace) -> int:
         log=lambda s: print(s, file=sys.stderr),
     )
     text = report.markdown("voxwarp bench segments " + " ".join(sys.argv[3:]))
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return emit_report(text, args.markdown)
 
 
 def add_bench_segments_parser(bsub: Any) -> None:
     """Add ``segments`` to the ``bench`` sub-commands."""
-    p = bsub.add_parser(
-        "segments",
-        help="piecewise-linear warped rays vs the chain at every sample",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    p = add_bench_parser(
+        bsub, "segments", "piecewise-linear warped rays vs the chain at every sample", __doc__
     )
     p.add_argument("--size", type=image_size, default=(512, 512), help="image WxH")
     p.add_argument("--frames", type=positive_int, default=5, help="timed frames per setting")

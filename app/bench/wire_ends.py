@@ -29,11 +29,11 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.bench.wire_tables import axis_wire
 from voxwarp.bench.wires import content_box
 from voxwarp.core.checks import image_size
@@ -191,24 +191,20 @@ def markdown(rows: Sequence[EndsRow], command: str) -> str:
 
 def cmd_bench_wire_ends(args: argparse.Namespace) -> int:
     """``voxwarp bench wire-ends``."""
-    from voxwarp.core.files import atomic_write_text
-
     rows = bench_wire_ends(
         args.cases or CASES, size=args.size, log=lambda s: print(s, file=sys.stderr)
     )
     text = markdown(rows, "voxwarp bench wire-ends " + " ".join(sys.argv[3:]))
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return emit_report(text, args.markdown)
 
 
 def add_bench_wire_ends_parser(bsub: Any) -> None:
     """Add ``wire-ends`` to the ``bench`` sub-commands."""
-    p = bsub.add_parser(
+    p = add_bench_parser(
+        bsub,
         "wire-ends",
-        help="rigid vs smooth wire ends: seams at coarse fields on real scans, and cost",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        "rigid vs smooth wire ends: seams at coarse fields on real scans, and cost",
+        __doc__,
     )
     p.add_argument(
         "--case",

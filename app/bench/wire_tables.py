@@ -33,11 +33,11 @@ import statistics
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.bench.papers import WIRE_TABLE1, WIRE_TIMINGS, fmt_ratio
 from voxwarp.bench.wires import (
     FISH_SHAPE,
@@ -305,8 +305,6 @@ def markdown(rows: Sequence[TablesRow], command: str) -> str:
 
 def cmd_bench_wire_tables(args: argparse.Namespace) -> int:
     """``voxwarp bench wire-tables``."""
-    from voxwarp.core.files import atomic_write_text
-
     rows = bench_wire_tables(
         args.datasets or DATASETS,
         size=args.size,
@@ -315,18 +313,16 @@ def cmd_bench_wire_tables(args: argparse.Namespace) -> int:
         log=lambda s: print(s, file=sys.stderr),
     )
     text = markdown(rows, "voxwarp bench wire-tables " + " ".join(sys.argv[3:]))
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return emit_report(text, args.markdown)
 
 
 def add_bench_wire_tables_parser(bsub: Any) -> None:
     """Add ``wire-tables`` to the ``bench`` sub-commands."""
-    p = bsub.add_parser(
+    p = add_bench_parser(
+        bsub,
         "wire-tables",
-        help="the wire paper's Tables 1-3 measured its way (identity deformation)",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        "the wire paper's Tables 1-3 measured its way (identity deformation)",
+        __doc__,
     )
     p.add_argument(
         "--dataset",

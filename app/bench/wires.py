@@ -64,6 +64,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.bench.command import emit_report
 from voxwarp.bench.render import bench_camera, best_times, cpu_count, load_average
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.core.volume import Volume
@@ -1634,10 +1635,7 @@ def cmd_bench_wires(args: argparse.Namespace) -> int:
         log=lambda s: print(s, file=sys.stderr),
     )
     text = report.markdown(command_line(args))
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return emit_report(text, args.markdown)
 
 
 __all__ = [
