@@ -30,7 +30,7 @@ from voxwarp.deform.wires import FAR
 TOL_MM = 2e-3
 
 
-@pytest.mark.parametrize("layout", ["packed", "float"])
+@pytest.mark.parametrize("layout", ["packed", "float", "paper"])
 def test_gpu_wire_warp_equals_the_cpu_sampler_at_points(gl_ctx: Any, layout: str) -> None:
     vol = cylinder()
     ws = [wire(modified=axis_points(dy=3.0, dz=-3.0), twist=[(0, 0), (1, math.pi)])]

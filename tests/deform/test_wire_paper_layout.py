@@ -4,8 +4,10 @@ plane-mask memory of section 7.1.
 Oracles: the 16-bit code of a voxel decoded by hand against the curve's own segment
 of the voxel's closest point (the float layout's u for the same voxel, through the
 curve parameter and :meth:`Curve.segment_of`); paper vs float mapping within a bound
-derived from the 7-bit t (below); the GLSL decode against the CPU one at points; the
-mask memory against a count of planes and pixels by hand.
+derived from the 7-bit t (below); the mask memory against a count of planes and pixels
+by hand. The GLSL decode against the CPU one, and the rendered image against the float
+layout's, are parametrized with the other layouts in tests/deform/test_wire_gpu_sampling.py
+and tests/deform/test_wires.py.
 
 Tolerance of paper vs float: where all 8 neighbours of a sample are swept by the same
 wire, both layouts interpolate t with the same trilinear weights, so the paper
@@ -18,8 +20,6 @@ per-segment t: half a step, ``(u_{s+1} - u_s) / (2 * 127)`` in table units. The 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 import pytest
@@ -27,14 +27,12 @@ import pytest
 from tests.deform.test_wires import (
     AXIS_Y,
     AXIS_Z,
-    _mip,
     axis_points,
     build,
     cylinder,
     voxel_centres,
     wire,
 )
-from tests.warp_gpu import gpu_warp
 from voxwarp.deform.warp import WarpError, warp_from_dict
 from voxwarp.deform.wires import (
     FAR,
@@ -44,9 +42,6 @@ from voxwarp.deform.wires import (
     WireDeformer,
     WireFieldWarp,
 )
-
-#: max |GPU - CPU| of warp(p), mm (as tests/deform/test_wire_gpu_sampling.py)
-TOL_GPU_MM = 2e-3
 
 
 def _twisted(layout: str) -> WireFieldWarp:
@@ -108,45 +103,6 @@ def test_paper_layout_maps_like_float_within_the_t_step() -> None:
     assert err.max() > 1e-3  # the quantisation shows: the comparison is not vacuous
     # mixing per-segment t across a boundary (not the table coordinate) would be far off
     assert np.all(err[mixed] <= half_step * lip[mixed] + 1e-6)
-
-
-def test_gpu_paper_decode_equals_the_cpu_at_points(gl_ctx: Any) -> None:
-    w = _twisted("paper")
-    try:
-        rng = np.random.default_rng(7)
-        lo = np.array([2.0, AXIS_Y - 8.0, AXIS_Z - 12.0])
-        hi = np.array([62.0, AXIS_Y + 12.0, AXIS_Z + 8.0])
-        p = rng.uniform(lo, hi, (4096, 3))
-        state, _, _ = w._lookup(p)
-        q_gpu, _ = gpu_warp(gl_ctx, w, p)
-    finally:
-        w.release()
-    q_cpu = w.apply(p)
-    swept = state == 2
-    assert swept.sum() > 1000
-    assert (state == 1).sum() > 50
-    np.testing.assert_array_equal(q_gpu[:, 0] >= FAR / 2, q_cpu[:, 0] >= FAR / 2)
-    np.testing.assert_allclose(q_gpu[state == 0], p[state == 0], atol=1e-4)
-    err = np.linalg.norm(q_gpu[swept] - q_cpu[swept], axis=1)
-    assert err.max() <= TOL_GPU_MM, f"max |GPU - CPU| = {err.max():.2e} mm"
-    assert np.median(np.linalg.norm(q_cpu[swept] - p[swept], axis=1)) > 1.0
-
-
-def test_gpu_paper_layout_renders_like_float(offscreen: Callable[..., Any]) -> None:
-    f, pp = _twisted("float"), _twisted("paper")
-    vol = cylinder()
-    try:
-        for view in ("+z", "+x"):
-            a = _mip(offscreen, vol, [f], view)
-            b = _mip(offscreen, vol, [pp], view)
-            diff = np.abs(a - b)
-            # as the packed layout's test: t steps move the marker's edge by a fraction
-            # of a voxel where the twist turns fast
-            assert np.mean(diff) < 0.005, view
-            assert np.mean(diff > 0.1) < 0.01, view
-    finally:
-        f.release()
-        pp.release()
 
 
 def test_paper_layout_limits_are_one_line_errors() -> None:
