@@ -55,13 +55,14 @@ The image is ``size`` (default 512x512), ``frames`` timed frames per configurati
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import platform
 import shlex
 import statistics
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -558,38 +559,56 @@ def _unbind_fbo(ctx: Any) -> None:
 
 
 def _alternate(
-    ctx: Any, a: Callable[[], None], b: Callable[[], None], frames: int
+    ctx: Any, a: Callable[[], None], b: Callable[[], None], frames: int, stage: str = "frame"
 ) -> tuple[list[float], list[float]]:
     """One warm-up call of each, then ``frames`` timed calls of each, alternated (the order
-    flips every frame); ms per call, each bound by ``ctx.finish()``."""
-    a()
-    b()
-    ctx.finish()
+    flips every frame); ms per call, each bound by ``ctx.finish()``. ``stage`` ``"vertex"``
+    times the vertex stage alone (rasterizer discard on)."""
     ta: list[float] = []
     tb: list[float] = []
-    for i in range(frames):
-        order = ((a, ta), (b, tb)) if i % 2 == 0 else ((b, tb), (a, ta))
-        for fn, out in order:
-            t = time.perf_counter()
-            fn()
-            ctx.finish()
-            out.append((time.perf_counter() - t) * 1000.0)
+    with _rasterizer_discard(ctx, stage != "frame"):
+        a()
+        b()
+        ctx.finish()
+        for i in range(frames):
+            order = ((a, ta), (b, tb)) if i % 2 == 0 else ((b, tb), (a, ta))
+            for fn, out in order:
+                t = time.perf_counter()
+                fn()
+                ctx.finish()
+                out.append((time.perf_counter() - t) * 1000.0)
     return ta, tb
 
 
-def _torus_target(report: LatticeBenchReport, ctx: Any) -> tuple[Any, Any, tuple[Any, Any, Any]]:
-    """The torus's box, a camera on it and an RGBA8 + depth framebuffer of the report's
-    size: (box, camera, (color, depth, framebuffer))."""
+@contextlib.contextmanager
+def _rasterizer_discard(ctx: Any, on: bool) -> Iterator[None]:
+    """With ``on``: ``GL_RASTERIZER_DISCARD`` inside the block (the vertex stage alone)."""
+    if on:
+        ctx.enable(ctx.RASTERIZER_DISCARD)
+    try:
+        yield
+    finally:
+        if on:
+            ctx.disable(ctx.RASTERIZER_DISCARD)
+
+
+@contextlib.contextmanager
+def _torus_target(report: LatticeBenchReport, ctx: Any) -> Iterator[tuple[Any, Any, Any, Any]]:
+    """The torus's box, a camera on it, and an RGBA8 colour texture with its framebuffer
+    (plus depth) of the report's size, released on exit: (box, camera, color, fbo)."""
     w, h = report.size
     box = (np.array(TORUS_BOX[0]), np.array(TORUS_BOX[1]))
     cam = Camera.fit(box[0] - 0.3, box[1] + 0.3, VIEW, "perspective")
     color = ctx.texture((w, h), 4, dtype="f1")
     depth = ctx.depth_texture((w, h))
-    return (
-        box,
-        cam,
-        (color, depth, ctx.framebuffer(color_attachments=[color], depth_attachment=depth)),
-    )
+    fbo = ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+    try:
+        yield box, cam, color, fbo
+    finally:
+        _unbind_fbo(ctx)
+        fbo.release()
+        color.release()
+        depth.release()
 
 
 def bench_throughput(
@@ -601,7 +620,23 @@ def bench_throughput(
 ) -> None:
     """Section 1 (see the module docstring); appends to ``report.throughput``."""
 
-    box, cam, (color, depth, fbo) = _torus_target(report, ctx)
+    with _torus_target(report, ctx) as (box, cam, color, fbo):
+        _throughput_rows(report, ctx, mesh, box, cam, color, fbo, log)
+    if crosscheck:
+        report.crosscheck = run_crosscheck(report, ctx, log)
+
+
+def _throughput_rows(
+    report: LatticeBenchReport,
+    ctx: Any,
+    mesh: Any,
+    box: Any,
+    cam: Any,
+    color: Any,
+    fbo: Any,
+    log: Callable[[str], None],
+) -> None:
+    """Section 1's rows on an open torus target (see :func:`bench_throughput`)."""
     renderers = {p: MeshRenderer(ctx, position=p) for p in ("exact", "hardware")}
     linear = MeshInstance(mesh, np.eye(4))
     try:
@@ -620,18 +655,13 @@ def bench_throughput(
                     ctx.finish()
                     cov = _coverage(color)
                     changed = _changed(_pixels(color), linear_img)
-                else:
-                    ctx.enable(ctx.RASTERIZER_DISCARD)
-                try:
-                    t_lat, t_lin = _alternate(
-                        ctx,
-                        lambda r=r, inst=inst: r.draw([inst], fbo, cam),
-                        lambda: renderers["exact"].draw([linear], fbo, cam),
-                        report.frames,
-                    )
-                finally:
-                    if stage != "frame":
-                        ctx.disable(ctx.RASTERIZER_DISCARD)
+                t_lat, t_lin = _alternate(
+                    ctx,
+                    lambda r=r, inst=inst: r.draw([inst], fbo, cam),
+                    lambda: renderers["exact"].draw([linear], fbo, cam),
+                    report.frames,
+                    stage,
+                )
                 row = ThroughputRow(
                     cells=c,
                     stage=stage,
@@ -655,12 +685,6 @@ def bench_throughput(
     finally:
         for rr in renderers.values():
             rr.release()
-        _unbind_fbo(ctx)
-        fbo.release()
-        color.release()
-        depth.release()
-    if crosscheck:
-        report.crosscheck = run_crosscheck(report, ctx, log)
 
 
 def affine_lattice(box: tuple[np.ndarray, np.ndarray], cells: int) -> TrilinearGrid:
@@ -675,52 +699,43 @@ def bench_fast_path(
     report: LatticeBenchReport, ctx: Any, mesh: Any, log: Callable[[str], None]
 ) -> None:
     """Section 4 (see the module docstring); appends to ``report.fast_path``."""
-    box, cam, (color, depth, fbo) = _torus_target(report, ctx)
-    slow, fast = MeshRenderer(ctx, linear_fast_path=False), MeshRenderer(ctx)
-    inst = MeshInstance(mesh, affine_lattice(box, FAST_PATH_CELLS), box=box)
-    try:
-        images = []
-        for r in (slow, fast):
-            r.draw([inst], fbo, cam)
-            ctx.finish()
-            images.append(_pixels(color).copy())
-        for stage in ("frame", "vertex"):
-            if stage == "vertex":
-                ctx.enable(ctx.RASTERIZER_DISCARD)
-            try:
+    with _torus_target(report, ctx) as (box, cam, color, fbo):
+        slow, fast = MeshRenderer(ctx, linear_fast_path=False), MeshRenderer(ctx)
+        inst = MeshInstance(mesh, affine_lattice(box, FAST_PATH_CELLS), box=box)
+        try:
+            images = []
+            for r in (slow, fast):
+                r.draw([inst], fbo, cam)
+                ctx.finish()
+                images.append(_pixels(color).copy())
+            for stage in ("frame", "vertex"):
                 t_slow, t_fast = _alternate(
                     ctx,
                     lambda: slow.draw([inst], fbo, cam),
                     lambda: fast.draw([inst], fbo, cam),
                     report.frames,
+                    stage,
                 )
-            finally:
-                if stage == "vertex":
-                    ctx.disable(ctx.RASTERIZER_DISCARD)
-            row = FastPathRow(
-                stage=stage,
-                cells=FAST_PATH_CELLS,
-                frames=report.frames,
-                trilinear_ms=statistics.median(t_slow),
-                trilinear_min_ms=min(t_slow),
-                fast_ms=statistics.median(t_fast),
-                fast_min_ms=min(t_fast),
-                changed=_changed(*images) if stage == "frame" else None,
-            )
-            report.fast_path.append(row)
-            log(
-                f"fast path {stage}: trilinear program {row.trilinear_ms:.1f} ms, LINEAR"
-                f" {row.fast_ms:.1f} ms, speed-up {row.speedup:.2f}"
-            )
-        if slow.program_uses["linear"] or not fast.program_uses["linear"]:
-            raise RuntimeError("the affine lattice did not take the programs it was meant to")
-    finally:
-        slow.release()
-        fast.release()
-        _unbind_fbo(ctx)
-        fbo.release()
-        color.release()
-        depth.release()
+                row = FastPathRow(
+                    stage=stage,
+                    cells=FAST_PATH_CELLS,
+                    frames=report.frames,
+                    trilinear_ms=statistics.median(t_slow),
+                    trilinear_min_ms=min(t_slow),
+                    fast_ms=statistics.median(t_fast),
+                    fast_min_ms=min(t_fast),
+                    changed=_changed(*images) if stage == "frame" else None,
+                )
+                report.fast_path.append(row)
+                log(
+                    f"fast path {stage}: trilinear program {row.trilinear_ms:.1f} ms, LINEAR"
+                    f" {row.fast_ms:.1f} ms, speed-up {row.speedup:.2f}"
+                )
+            if slow.program_uses["linear"] or not fast.program_uses["linear"]:
+                raise RuntimeError("the affine lattice did not take the programs it was meant to")
+        finally:
+            slow.release()
+            fast.release()
 
 
 def run_crosscheck(
@@ -1266,21 +1281,16 @@ def bench_mesh_throughput(
     }
 
     def median_ms(renderer: MeshRenderer, inst: MeshInstance, discard: bool) -> float:
-        if discard:
-            ctx.enable(ctx.RASTERIZER_DISCARD)
-        try:
+        times = []
+        with _rasterizer_discard(ctx, discard):
             for _ in range(warmup):
                 renderer.draw([inst], fbo, cam)
             ctx.finish()
-            times = []
             for _ in range(frames):
                 t = time.perf_counter()
                 renderer.draw([inst], fbo, cam)
                 ctx.finish()
                 times.append((time.perf_counter() - t) * 1000)
-        finally:
-            if discard:
-                ctx.disable(ctx.RASTERIZER_DISCARD)
         return statistics.median(times)
 
     try:
