@@ -244,6 +244,17 @@ def _beta(beta: Any) -> tuple[float, float] | Beta | None:
     return (lo, hi)
 
 
+def _positive_mm(value: Any, what: str) -> float:
+    """``value`` as a finite length in mm > 0 (a one-line WarpError naming ``what``)."""
+    try:
+        mm = float(value)
+    except (TypeError, ValueError) as exc:
+        raise WarpError(f"wire {what} must be a number of mm; got {value!r:.40}") from exc
+    if not math.isfinite(mm) or mm <= 0:
+        raise WarpError(f"wire {what} must be a finite number of mm > 0; got {value!r}")
+    return mm
+
+
 def _count(points: Any) -> int:
     """Number of control points in ``points`` (0 when it is not a sequence: the curve
     reports that)."""
@@ -328,13 +339,7 @@ class Wire:
             )
         self.twist = _keys(twist, "twist", 0.0)
         self.scale = _keys(scale, "scale", 1.0, positive=True)
-        try:
-            r = float(radius)
-        except (TypeError, ValueError) as exc:
-            raise WarpError(f"wire radius must be a number of mm; got {radius!r:.40}") from exc
-        if not math.isfinite(r) or r <= 0:
-            raise WarpError(f"wire radius must be a finite number of mm > 0; got {radius!r}")
-        self.radius = r
+        self.radius = _positive_mm(radius, "radius")
         self.beta = _beta(beta)
         if initial_normal is not None:
             n = np.asarray(initial_normal, dtype=np.float64).reshape(-1)
@@ -347,17 +352,7 @@ class Wire:
             raise WarpError(f"wire ends must be one of {ENDS}; got {ends!r:.40}")
         self.ends = ends
         self._end_moves: tuple[Any, tuple[float, float]] | None = None
-        self.falloff_mm: float | None = None
-        if falloff is not None:
-            try:
-                length = float(falloff)
-            except (TypeError, ValueError) as exc:
-                raise WarpError(
-                    f"wire falloff must be a number of mm; got {falloff!r:.40}"
-                ) from exc
-            if not math.isfinite(length) or length <= 0:
-                raise WarpError(f"wire falloff must be a finite number of mm > 0; got {falloff!r}")
-            self.falloff_mm = length
+        self.falloff_mm = None if falloff is None else _positive_mm(falloff, "falloff")
 
     @property
     def falloff(self) -> float:
