@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from voxwarp.core.mesh import NORMAL_METHODS, Mesh, MeshInstance
+from voxwarp.core.mesh import NORMAL_METHODS, Mesh, MeshInstance, tube_mesh
 from voxwarp.deform.trilinear import TrilinearGrid
 
 #: rings this far (in units of the tube's length) either side of each inner cell face
@@ -56,18 +56,11 @@ def _tube(length: float, radius: float, cells: int) -> tuple[Mesh, np.ndarray, n
     xs = np.linspace(0.0, length, RINGS_PER_CELL * cells + 1)
     xs = xs[np.all(np.abs(xs[:, None] - faces_x[None, :]) > 2 * gap, axis=1)]
     xs = np.unique(np.r_[xs, faces_x - gap, faces_x + gap])
-    phi = 2 * np.pi * (np.arange(SECTIONS) + 0.25) / SECTIONS
-    xx, pp = np.meshgrid(xs, phi, indexing="ij")
-    n = np.stack([np.zeros_like(pp), np.cos(pp), np.sin(pp)], -1).reshape(-1, 3)
-    v = np.stack([xx, radius * np.cos(pp), radius * np.sin(pp)], -1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(len(xs) - 1), np.arange(SECTIONS), indexing="ij")
-    a, b = i * SECTIONS + j, (i + 1) * SECTIONS + j
-    c, d = (i + 1) * SECTIONS + (j + 1) % SECTIONS, i * SECTIONS + (j + 1) % SECTIONS
-    f = np.concatenate([np.stack([a, c, b], -1), np.stack([a, d, c], -1)]).reshape(-1, 3)
+    mesh = tube_mesh(length, radius, sections=SECTIONS, ring_x=xs, phase=0.25)
     ring = np.searchsorted(xs, faces_x - gap), np.searchsorted(xs, faces_x + gap)
     before = (ring[0][:, None] * SECTIONS + np.arange(SECTIONS)).ravel()
     after = (ring[1][:, None] * SECTIONS + np.arange(SECTIONS)).ravel()
-    return Mesh(v, f, n, name="tube"), before, after
+    return mesh, before, after
 
 
 def _bend(length: float, radius: float) -> Callable[[np.ndarray], np.ndarray]:

@@ -28,6 +28,7 @@ GPU buffers per mesh object.
 from __future__ import annotations
 
 import base64
+import math
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -704,16 +705,35 @@ def tile_mesh(
 
 
 def tube_mesh(
-    length: float = 1.0, radius: float = 0.25, rings: int = 96, sections: int = 16
+    length: float = 1.0,
+    radius: float = 0.25,
+    rings: int = 96,
+    sections: int = 16,
+    ring_x: Sequence[float] | None = None,
+    phase: float = 0.0,
 ) -> Mesh:
     """An open tube along x from 0 to ``length``, axis y = z = 0, ``rings`` rings of
-    ``sections`` vertices (tessellated along its length, so a lattice can bend it)."""
-    rings, sections = int(rings), int(sections)
-    if rings < 2 or sections < 3:
-        raise MeshError(f"tube_mesh needs rings >= 2 and sections >= 3; got {rings}, {sections}")
+    ``sections`` vertices (tessellated along its length, so a lattice can bend it).
+
+    ``ring_x``: the rings' x positions instead (increasing; ``rings`` is then their
+    count); ``phase``: the first vertex of each ring a fraction of a section past the +y
+    axis (e.g. 0.25 keeps vertices off the planes y = 0 and z = 0).
+    """
+    if ring_x is not None:
+        x = np.asarray(ring_x, dtype=np.float64)
+        if x.ndim != 1 or len(x) < 2 or not np.all(np.isfinite(x)) or np.any(np.diff(x) <= 0):
+            raise MeshError("tube_mesh ring_x must be at least 2 finite, increasing x positions")
+        rings = len(x)
+    rings, sections, phase = int(rings), int(sections), float(phase)
+    if rings < 2 or sections < 3 or not math.isfinite(phase):
+        raise MeshError(
+            f"tube_mesh needs rings >= 2, sections >= 3 and a finite phase; got {rings},"
+            f" {sections}, {phase}"
+        )
     _check_triangles("tube_mesh", 2 * (rings - 1) * sections)
-    x = np.linspace(0.0, length, rings)
-    phi = 2 * np.pi * np.arange(sections) / sections
+    if ring_x is None:
+        x = np.linspace(0.0, length, rings)
+    phi = 2 * np.pi * (np.arange(sections) + phase) / sections
     xx, pp = np.meshgrid(x, phi, indexing="ij")
     n = np.stack([np.zeros_like(pp), np.cos(pp), np.sin(pp)], -1)
     v = np.stack([xx, radius * np.cos(pp), radius * np.sin(pp)], -1)
@@ -723,6 +743,11 @@ def tube_mesh(
     f = np.concatenate(
         [np.stack([a, c, b], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)]
     )
+    extra: dict[str, Any] = {}  # recorded only when given: older recipes stay as they were
+    if ring_x is not None:
+        extra["ring_x"] = x.tolist()
+    if phase:
+        extra["phase"] = phase
     return _generated(
         v.reshape(-1, 3),
         f,
@@ -732,6 +757,7 @@ def tube_mesh(
         radius=float(radius),
         rings=int(rings),
         sections=int(sections),
+        **extra,
     )
 
 

@@ -25,6 +25,7 @@ from voxwarp.core.mesh import (
     mesh_instances_bounds,
     tile_mesh,
     torus_mesh,
+    tube_mesh,
     uv_sphere,
 )
 from voxwarp.core.volume import Volume
@@ -428,3 +429,23 @@ def test_save_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None
         torus_mesh(major_sections=12).save(path)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ring.ply"]
+
+
+def test_tube_mesh_at_given_rings_and_phase() -> None:
+    xs = [0.0, 0.4, 0.41, 1.0]
+    m = tube_mesh(1.0, 0.5, sections=8, ring_x=xs, phase=0.25)
+    v = m.vertices.reshape(4, 8, 3)
+    np.testing.assert_allclose(v[:, 0, 0], xs, atol=1e-6)  # rings where asked
+    first = 2 * np.pi * 0.25 / 8  # a quarter section past +y
+    np.testing.assert_allclose(v[0, 0, 1:], [0.5 * np.cos(first), 0.5 * np.sin(first)], atol=1e-6)
+    np.testing.assert_allclose(np.hypot(v[..., 1], v[..., 2]), 0.5, atol=1e-6)
+    # the recipe rebuilds the same mesh; a default tube's recipe has no new keys
+    back = Mesh.from_dict(m.to_dict())
+    np.testing.assert_array_equal(back.vertices, m.vertices)
+    assert set(tube_mesh(1.0).recipe["args"]) == {"length", "radius", "rings", "sections"}
+    with pytest.raises(MeshError, match="ring_x must be at least 2 finite, increasing"):
+        tube_mesh(1.0, ring_x=[0.0, 0.5, 0.5])
+    with pytest.raises(MeshError, match="ring_x must be"):
+        Mesh.from_dict({"generator": "tube_mesh", "args": {"ring_x": [[0, 1], [2, 3]]}})
+    with pytest.raises(MeshError, match="finite phase"):
+        tube_mesh(1.0, phase=float("nan"))

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from voxwarp.core.camera import Camera
-from voxwarp.core.mesh import Mesh, MeshInstance, torus_mesh
+from voxwarp.core.mesh import Mesh, MeshInstance, torus_mesh, tube_mesh
 from voxwarp.deform.trilinear import TrilinearGrid, carry_normals
 from voxwarp.render.mesh_pass import MeshRenderer
 
@@ -53,17 +53,7 @@ def tube() -> Mesh:
     """Open tube along x: 8 rings per cell, plus rings DELTA either side of each face."""
     xs = np.unique(np.r_[np.linspace(0.0, LENGTH, 8 * CELLS + 1), FACES - DELTA, FACES + DELTA])
     xs = xs[np.all(np.abs(xs[:, None] - FACES[None, :]) > DELTA / 2, axis=1)]  # none on a face
-    phi = 2 * np.pi * (np.arange(SECTIONS) + 0.25) / SECTIONS
-    xx, pp = np.meshgrid(xs, phi, indexing="ij")
-    n = np.stack([np.zeros_like(pp), np.cos(pp), np.sin(pp)], -1).reshape(-1, 3)
-    v = np.stack([xx, RADIUS * np.cos(pp), RADIUS * np.sin(pp)], -1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(len(xs) - 1), np.arange(SECTIONS), indexing="ij")
-    a, b = i * SECTIONS + j, (i + 1) * SECTIONS + j
-    c, d = (i + 1) * SECTIONS + (j + 1) % SECTIONS, i * SECTIONS + (j + 1) % SECTIONS
-    f = np.concatenate(
-        [np.stack([a, c, b], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)]
-    )
-    return Mesh(v, f, n, name="tube")
+    return tube_mesh(LENGTH, RADIUS, sections=SECTIONS, ring_x=xs, phase=0.25)
 
 
 def angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
