@@ -204,9 +204,11 @@ def measure(
     cam = framed_camera(vol, wires, size)
     bent = WireDeformer(vol, wires, field_scale=FIELD_SCALE)
     bent.build()
-    bent_scene = Scene(vol, mode="dvr", transfer_function=tf, camera=cam, warps=[bent.warp()])
-    region = influence_region(wires)
-    stats = ray_sample_stats(bent_scene, cam, size, bent.warp(), STATS_SUBSAMPLE, region=region)
+    warp = bent.warp()  # classified on the CPU only: no GPU textures to release
+    bent_scene = Scene(vol, mode="dvr", transfer_function=tf, camera=cam, warps=[warp])
+    stats = ray_sample_stats(
+        bent_scene, cam, size, warp, STATS_SUBSAMPLE, region=influence_region(wires)
+    )
     wd = WireDeformer(vol, identity_wires(wires), field_scale=FIELD_SCALE)
     build_s = _median_build(wd, repeats)
     standard = Scene(vol, mode="dvr", transfer_function=tf, camera=cam, jitter=False)
@@ -219,6 +221,7 @@ def measure(
             times["standard"] += r.time_frames(standard, frames=1, warmup=0)
             times["identity"] += r.time_frames(identity, frames=1, warmup=0)
         changed = _changed(r.render(standard), r.render(identity))
+        wd.warp().release()  # its textures live on the renderer's (maybe shared) context
     row = TablesRow(
         dataset=f"{name} {'x'.join(map(str, vol.shape))}",
         volume_shape=tuple(int(n) for n in vol.shape),  # type: ignore[arg-type]
