@@ -740,6 +740,41 @@ def _volume_parts(volume: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return data, spacing, origin
 
 
+#: what one side's propagation gives: the region's first voxel and shape, wire id and
+#: u per region voxel, the mask bits, and the seed count
+_SideResult = tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]
+
+
+@dataclass
+class _SideJob:
+    """One side's propagation and flags in :meth:`WireDeformer.build`: the seeds (flat
+    field index, wire, u), the wires' tables, their grown plane masks, the field's box
+    corner, voxel size and shape, the side (``"modified"`` or ``"base"``), and the
+    stage timings to add to."""
+
+    seeds: tuple[np.ndarray, np.ndarray, np.ndarray]
+    tables: list[WireTables]
+    grown: list[tuple[np.ndarray, int, float]]
+    lo: np.ndarray
+    h: np.ndarray
+    shape: tuple[int, int, int]
+    side: str
+    timings: dict[str, float]
+
+    def parts(self) -> tuple[Any, ...]:
+        """The fields in order (for unpacking into locals)."""
+        return (
+            self.seeds,
+            self.tables,
+            self.grown,
+            self.lo,
+            self.h,
+            self.shape,
+            self.side,
+            self.timings,
+        )
+
+
 class WireDeformer:
     """Builds the attribute field of a set of wires on a volume (paper sections 5, 7).
 
@@ -968,10 +1003,10 @@ class WireDeformer:
         timings["flags"] = time.perf_counter() - t0
         timings["propagate"] = 0.0
         region_lo, rshape, r_wire, r_u, swept, seed_count = self._side(
-            seeds_m, tables, grown, lo, h, shape, "modified", timings
+            _SideJob(seeds_m, tables, grown, lo, h, shape, "modified", timings)
         )
         b_lo, b_shape, _, _, gone, _ = self._side(
-            seeds_b, tables, grown, lo, h, shape, "base", timings
+            _SideJob(seeds_b, tables, grown, lo, h, shape, "base", timings)
         )
         backend = last_backend()
         t0 = time.perf_counter()
@@ -1039,25 +1074,16 @@ class WireDeformer:
             self._warp._set_field(fld)
         return self.stats
 
-    def _side(
-        self,
-        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
-        tables: list[WireTables],
-        grown: list[tuple[np.ndarray, int, float]],
-        lo: np.ndarray,
-        h: np.ndarray,
-        shape: tuple[int, int, int],
-        side: str,
-        timings: dict[str, float],
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+    def _side(self, job: _SideJob) -> _SideResult:
         """Propagation and flags of one side: the region's first voxel and shape, wire
         id and refined u per region voxel, the mask bits and the seed count. One OpenCL
         pass (:mod:`voxwarp.deform.wire_classify`) where the device allows, else numpy;
         adds the stages' seconds to ``timings``."""
+        seeds, tables, grown, lo, h, shape, side, timings = job.parts()
         if self.propagate == "flagged":
-            flagged = self._flagged_side(seeds, tables, grown, lo, h, shape, side, timings)
+            flagged = self._flagged_side(job)
             return self._smooth_trim(tables, lo, h, flagged, side)
-        fast = self._fast_side(seeds, tables, grown, lo, h, shape, side, timings)
+        fast = self._fast_side(job)
         if fast is not None:
             return self._smooth_trim(tables, lo, h, fast, side)
         t0 = time.perf_counter()
@@ -1071,19 +1097,10 @@ class WireDeformer:
         out = (region_lo, rshape, r_wire, r_u, bits, count)
         return self._smooth_trim(tables, lo, h, out, side)
 
-    def _fast_side(
-        self,
-        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
-        tables: list[WireTables],
-        grown: list[tuple[np.ndarray, int, float]],
-        lo: np.ndarray,
-        h: np.ndarray,
-        shape: tuple[int, int, int],
-        side: str,
-        timings: dict[str, float],
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int] | None:
+    def _fast_side(self, job: _SideJob) -> _SideResult | None:
         """:meth:`_side` in one OpenCL pass; None where OpenCL (with double precision)
         is unavailable, not asked for, or fails (the numpy path then runs)."""
+        seeds, tables, grown, lo, h, shape, side, timings = job.parts()
         from voxwarp.deform import propagation as prop
         from voxwarp.deform.wire_classify import ClassifyInput, WireGeometry, classify
 
@@ -1224,9 +1241,9 @@ class WireDeformer:
         tables: list[WireTables],
         lo: np.ndarray,
         h: np.ndarray,
-        out: tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int],
+        out: _SideResult,
         side: str,
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+    ) -> _SideResult:
         """One side's result with the bits of ``ends="smooth"`` wires as they need them.
 
         A flag beyond an end reaches as far as its own wire's :meth:`Wire.end_reach`
@@ -1349,7 +1366,7 @@ class WireDeformer:
         h: np.ndarray,
         shape: tuple[int, int, int],
         side: str,
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+    ) -> _SideResult:
         """(wire, u) of the nearest seed for every voxel of the wires' region on one
         side (the reference, numpy path): the region's first voxel and shape, the two
         grids, which voxels lie within their wire's reach, and the seed count."""
@@ -1393,23 +1410,14 @@ class WireDeformer:
             len(flat),
         )
 
-    def _flagged_side(
-        self,
-        seeds: tuple[np.ndarray, np.ndarray, np.ndarray],
-        tables: list[WireTables],
-        grown: list[tuple[np.ndarray, int, float]],
-        lo: np.ndarray,
-        h: np.ndarray,
-        shape: tuple[int, int, int],
-        side: str,
-        timings: dict[str, float],
-    ) -> tuple[np.ndarray, tuple[int, int, int], np.ndarray, np.ndarray, np.ndarray, int]:
+    def _flagged_side(self, job: _SideJob) -> _SideResult:
         """:meth:`_side` the paper's way (sections 5.1, 7.1): flag the voxels that a set
         pixel of a plane mask touches (grown by one voxel, so that planes fanning out
         on the outside of a bend leave no gap), propagate the nearest seed only over
         them and their neighbours (the voxels a swept sample interpolates t from; a
         k-d tree of the seeds, exact Euclidean), then the mask test of the numpy path on
         them: a voxel is swept where both say so."""
+        seeds, tables, grown, lo, h, shape, side, timings = job.parts()
         from scipy.spatial import cKDTree
 
         t0 = time.perf_counter()
