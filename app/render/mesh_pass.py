@@ -290,10 +290,7 @@ class MeshRenderer:
         if not isinstance(instance, MeshInstance):
             raise RenderError(f"deformed_vertices takes a MeshInstance; got {type(instance)}")
         self._evict_dead()
-        linear = self._is_linear(instance)
-        self.program_uses["linear" if linear else "trilinear"] += 1
-        prog = self._program(linear, feedback=True)
-        self._set_instance_uniforms(prog, instance, np.eye(4), (0.0, 0.0, 1.0, 0.0))
+        prog = self._instance_program(instance, np.eye(4), (0.0, 0.0, 1.0, 0.0), feedback=True)
         gpu = self._mesh_gpu(instance.mesh)
         n = instance.mesh.n_vertices
         if self._feedback_fbo is None:
@@ -341,23 +338,30 @@ class MeshRenderer:
     def _draw_instance(
         self, inst: MeshInstance, gpu: _MeshGPU, view_proj: np.ndarray, eye: tuple
     ) -> None:
-        linear = self._is_linear(inst)
-        self.program_uses["linear" if linear else "trilinear"] += 1
-        prog = self._program(linear)
-        self._set_instance_uniforms(prog, inst, view_proj, eye)
+        prog = self._instance_program(inst, view_proj, eye)
         gpu.vao(self.ctx, prog).render(mode=self.ctx.TRIANGLES, vertices=gpu.count)
 
-    def _is_linear(self, inst: MeshInstance) -> bool:
-        """Whether ``inst`` is drawn by the ``LINEAR`` program: a matrix, or (with the
-        fast path) a lattice that is one affine map."""
-        if not inst.is_lattice:
-            return True
-        return self.linear_fast_path and inst.affine_matrix() is not None
+    def _instance_program(
+        self, inst: MeshInstance, view_proj: np.ndarray, eye: tuple, feedback: bool = False
+    ) -> Any:
+        """The program that draws ``inst`` (counted in :attr:`program_uses`), with its
+        uniforms set: ``LINEAR`` for a matrix or (with the fast path) a lattice that is one
+        affine map, else the trilinear one."""
+        m = inst.affine_matrix() if not inst.is_lattice or self.linear_fast_path else None
+        self.program_uses["linear" if m is not None else "trilinear"] += 1
+        prog = self._program(m is not None, feedback=feedback)
+        self._set_instance_uniforms(prog, inst, m, view_proj, eye)
+        return prog
 
     def _set_instance_uniforms(
-        self, prog: Any, inst: MeshInstance, view_proj: np.ndarray, eye: tuple
+        self,
+        prog: Any,
+        inst: MeshInstance,
+        m: np.ndarray | None,
+        view_proj: np.ndarray,
+        eye: tuple,
     ) -> None:
-        linear = self._is_linear(inst)
+        """``m``: the instance's affine matrix when the ``LINEAR`` program draws it."""
         method = 0 if inst.normal_method == "normal" else 1
         values: dict[str, Any] = {
             "u_view_proj": view_proj,
@@ -365,9 +369,7 @@ class MeshRenderer:
             "u_eye": tuple(float(v) for v in eye),
             "u_light": MESH_LIGHT,
         }
-        if linear:
-            m = inst.affine_matrix()
-            assert m is not None
+        if m is not None:
             values["u_model"] = m
             if not inst.is_lattice and method == 0:
                 method = 2  # a matrix's exact normal: the inverse transpose
