@@ -56,6 +56,7 @@ from voxwarp.deform import gl_programs
 from voxwarp.deform.trilinear import TrilinearGrid, cofactor_matrix
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.errors import RenderError
+from voxwarp.render.gl_uniforms import set_uniform
 
 #: Blinn-Phong ambient, diffuse, specular, shininess (as the raycaster's
 #: voxwarp.render.raycaster.LIGHT).
@@ -388,7 +389,7 @@ class MeshRenderer:
             values["u_box_inv_size"] = tuple(float(v) for v in 1.0 / (hi - lo))
         values["u_normal_method"] = method
         for name, value in values.items():
-            _set_uniform(prog, name, value)
+            set_uniform(prog, name, value)
 
     def release(self) -> None:
         """Free every GPU resource this renderer made; idempotent."""
@@ -415,13 +416,3 @@ class MeshRenderer:
                 obj.release()
             self._feedback_fbo = None
         self._released = True
-
-
-def _set_uniform(prog: Any, name: str, value: Any) -> None:
-    if name not in prog:
-        return  # optimised out
-    u = prog[name]
-    if isinstance(value, np.ndarray) and value.ndim == 2:
-        u.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())  # column-major
-    else:
-        u.value = value

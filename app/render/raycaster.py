@@ -44,11 +44,13 @@ from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import mesh_instances_bounds
 from voxwarp.core.modes import xray_reference_length
+from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
+from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.ray_segments import MAX_SAMPLES
 from voxwarp.render.skip_cache import SkipMapCache, VolumeSkipMaps
@@ -60,6 +62,8 @@ from voxwarp.render.skipping import (
     octant_regions,
     ray_direction_coefficients,
 )
+from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.render.slices import SliceRenderer
 from voxwarp.render.volume_texture import upload_volume_texture
 from voxwarp.scene import Scene
 
@@ -246,6 +250,8 @@ class Renderer:
         self._mesh_renderer: MeshRenderer | None = None
         #: (size, colour texture, depth texture, framebuffer) of the mesh pass
         self._mesh_target: tuple[tuple[int, int], Any, Any, Any] | None = None
+        #: draws slice views (made on first use)
+        self._slice_renderer: SliceRenderer | None = None
         #: (size, colour texture, framebuffer) of draw_scaled, and its upscaling program
         self._lod_target: tuple[tuple[int, int], Any, Any] | None = None
         self._upscale: tuple[Any, Any] | None = None
@@ -570,7 +576,7 @@ class Renderer:
         values.update(_mode_uniforms(frame.scene))
         values.update(self._texel_uniforms(frame))
         for name, value in values.items():
-            _set_uniform(frame.prog, name, value)
+            set_uniform(frame.prog, name, value)
         return values
 
     def _frame_uniforms(self, frame: _Frame) -> dict[str, Any]:
@@ -689,27 +695,21 @@ class Renderer:
         scene, prog = frame.scene, frame.prog
         # the warps' textures first: making them may run GPU passes (an offset field
         # bakes its inverse) that bind texture units of their own
-        warp_textures = [] if frame.linear else [w.textures(self.ctx) for w in scene.warps]
+        textures = [] if frame.linear else warp_textures(self.ctx, scene.warps)
         frame.gpu.texture.use(0)
         ratio = scene.sample_distance_mm / scene.opacity_reference_mm
         self._tf_texture(scene.transfer_function, ratio).use(1)
         self._skip_maps.block_info(frame.gpu.skip, scene).use(2)
         unit = 4
         if not frame.linear:
-            for i, warp in enumerate(scene.warps):
-                for name, value in warp.uniforms().items():
-                    _set_uniform(prog, f"w{i}_{name}", value)
-                for name, tex in warp_textures[i].items():
-                    tex.use(unit)
-                    _set_uniform(prog, f"w{i}_{name}", unit)
-                    unit += 1
+            unit = bind_warps(prog, scene.warps, textures, unit)
         if frame.gradients:
             frame.gpu.gradient_texture(self.ctx, scene.volume).use(unit)
-            _set_uniform(prog, "u_gradient", unit)
+            set_uniform(prog, "u_gradient", unit)
             unit += 1
         if frame.segment == 0 and frame.gpu.skip.segment_texture is not None:
             frame.gpu.skip.segment_texture.use(unit)
-            _set_uniform(prog, "u_segment_map", unit)
+            set_uniform(prog, "u_segment_map", unit)
             unit += 1
         return unit
 
@@ -723,9 +723,9 @@ class Renderer:
         assert self._mesh_target is not None
         self._mesh_target[1].use(unit)
         self._mesh_target[2].use(unit + 1)
-        _set_uniform(frame.prog, "u_mesh_color", unit)
-        _set_uniform(frame.prog, "u_mesh_depth", unit + 1)
-        _set_uniform(frame.prog, "u_mesh_inv_view_proj", mesh_inv_view_proj)
+        set_uniform(frame.prog, "u_mesh_color", unit)
+        set_uniform(frame.prog, "u_mesh_depth", unit + 1)
+        set_uniform(frame.prog, "u_mesh_inv_view_proj", mesh_inv_view_proj)
 
     @staticmethod
     def _octant_regions(frame: _Frame, values: dict[str, Any]) -> list[_Region]:
@@ -755,10 +755,43 @@ class Renderer:
         for octant, polygon in regions:
             if octant is not None:
                 skip(frame.gpu.skip, frame.scene, octant).use(3)
-                _set_uniform(prog, "u_octant", tuple(float(c) for c in octant))
+                set_uniform(prog, "u_octant", tuple(float(c) for c in octant))
             corners = [*polygon, *[(0.0, 0.0)] * (MAX_POLYGON - len(polygon))]
             prog["u_polygon"].value = corners
             vao.render(mode=self.ctx.TRIANGLE_FAN, vertices=len(polygon))
+
+    def slice_values(
+        self,
+        scene: Scene,
+        pixel_to_world: np.ndarray,
+        size: tuple[int, int],
+        *,
+        slab_mm: float = 0.0,
+        slab_mode: str = "mip",
+        interpolation: str = "linear",
+    ) -> np.ndarray:
+        """One slice of ``scene`` through its warp chain, as data: (H, W, 4) float32,
+        row 0 at the top, channels (deformed value, coverage, rest value, coverage).
+
+        Pixel ``(col, row)`` samples the world point ``pixel_to_world @ (col, row, 0, 1)``;
+        a slab ``slab_mm`` thick runs along the matrix's third column, combined by
+        ``slab_mode`` (``"mip"``, ``"minip"``, ``"average"``); ``interpolation`` is
+        ``"linear"`` (trilinear) or ``"nearest"``. See :mod:`voxwarp.render.slices`.
+        """
+        if self._released:
+            raise RenderError("this Renderer was released")
+        gpu = self._volume_gpu(scene.volume)
+        if self._slice_renderer is None:
+            self._slice_renderer = SliceRenderer(self.ctx)
+        return self._slice_renderer.values(
+            gpu,
+            scene,
+            pixel_to_world,
+            size,
+            slab_mm=slab_mm,
+            slab_mode=slab_mode,
+            interpolation=interpolation,
+        )
 
     def draw_scaled(
         self,
@@ -837,6 +870,9 @@ class Renderer:
         if self._mesh_renderer is not None:
             self._mesh_renderer.release()
             self._mesh_renderer = None
+        if self._slice_renderer is not None:
+            self._slice_renderer.release()
+            self._slice_renderer = None
         self._release_mesh_target()
         self._released = True
 
@@ -856,19 +892,6 @@ def _mode_uniforms(scene: Scene) -> dict[str, Any]:
         values["u_iso"] = iso
         values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
     return values
-
-
-def _set_uniform(prog: Any, name: str, value: Any) -> None:
-    if name not in prog:
-        return  # optimised out or not used by this variant
-    u = prog[name]
-    if isinstance(value, np.ndarray) and value.ndim == 2:
-        # GLSL matrices are column-major
-        u.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())
-    elif isinstance(value, np.ndarray):
-        u.value = tuple(float(v) for v in value)
-    else:
-        u.value = value
 
 
 @functools.cache
@@ -1014,6 +1037,51 @@ class OffscreenRenderer:
         w, h = self.size
         img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
         return img.reshape(h, w, 4)[::-1].copy()
+
+    def render_slice(
+        self,
+        scene: Scene,
+        plane: SlicePlane | str,
+        *,
+        size: tuple[int, int] | None = None,
+        at: float | None = None,
+        slab_mm: float = 0.0,
+        slab_mode: str = "mip",
+        interpolation: str = "linear",
+        look: str = "window",
+        window: tuple[float, float] | None = None,
+        show: str = "deformed",
+    ) -> SliceImage:
+        """One slice of ``scene`` through its warp chain (multi-planar reformatting).
+
+        ``plane`` is a :class:`~voxwarp.core.slice_plane.SlicePlane` or a name
+        (``"axial"``, ``"coronal"``, ``"sagittal"``, ``"x"``, ``"y"``, ``"z"``) framed
+        on the scene's deformed box at ``at`` mm along its axis. ``size`` defaults to
+        this renderer's. Returns a :class:`~voxwarp.render.slice_image.SliceImage`: its
+        ``rgba`` (coloured by ``look`` ``"window"`` with ``window = (level, width)``,
+        default the scene's, or ``"tf"``; ``show`` one of ``"deformed"``, ``"rest"``,
+        ``"checkerboard"``, ``"difference"``), the deformed and rest ``values`` and
+        ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to world mm.
+        """
+        w, h = self.size if size is None else (int(size[0]), int(size[1]))
+        if isinstance(plane, str):
+            plane = SlicePlane.named(plane, scene.deformed_bounds(), at=at, aspect=w / h)
+        elif at is not None:
+            plane = plane.at(at)
+        matrix = plane.pixel_to_world((w, h))
+        with self._current():
+            data = self.renderer.slice_values(
+                scene,
+                matrix,
+                (w, h),
+                slab_mm=slab_mm,
+                slab_mode=slab_mode,
+                interpolation=interpolation,
+            )
+        image = SliceImage.from_data(data, matrix, plane)
+        win = scene.window if window is None else window
+        colorize(image, look=look, window=win, tf=scene.transfer_function, show=show)
+        return image
 
     def time_frames(
         self, scene: Scene, frames: int = 10, warmup: int = 2, camera: Camera | None = None

@@ -1,0 +1,168 @@
+"""Slice images: a slice's data and its colours (no GL, no Qt).
+
+A :class:`SliceImage` holds what :class:`voxwarp.render.slices.SliceRenderer` computed
+for one plane: the deformed and rest-state values per pixel (NaN where the pixel shows
+nothing of the volume) and the pixel -> world mapping. :func:`colorize` turns it into
+RGBA, so the GUI re-colours on a window/level drag without drawing again.
+
+Looks (``look``)
+----------------
+* ``"window"``: grey from the window ``(level, width)``, as radiology viewers show CT and
+  MRI: ``level - width / 2`` black, ``level + width / 2`` white.
+* ``"tf"``: the transfer function's colour, its opacity scaled so that the most opaque
+  value of the function shows at full strength (a slice has no depth to accumulate
+  opacity over), over black.
+
+Shown state (``show``)
+----------------------
+``"deformed"`` (default), ``"rest"`` (the undeformed volume on the same plane),
+``"checkerboard"`` (tiles of ``checker_px`` pixels alternating rest and deformed, the
+registration check) and ``"difference"`` (deformed minus rest over a dim rest image:
+red where the deformation raised the value, blue where it lowered it, full strength at
+one window width).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Literal
+
+import numpy as np
+
+from voxwarp.core.slice_plane import SlicePlane
+from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.errors import RenderError
+
+Look = Literal["window", "tf"]
+LOOKS: tuple[str, ...] = ("window", "tf")
+Show = Literal["deformed", "rest", "checkerboard", "difference"]
+SHOWS: tuple[str, ...] = ("deformed", "rest", "checkerboard", "difference")
+#: a pixel shows the volume when at least this fraction of its slab samples lie inside
+COVERED = 1e-6
+
+
+@dataclasses.dataclass
+class SliceImage:
+    """One slice plane's data.
+
+    Attributes
+    ----------
+    plane
+        The plane (None for an image drawn from a bare pixel -> world matrix).
+    pixel_to_world
+        4x4: ``(col, row, 0, 1)`` -> world centre (mm) of pixel ``[row, col]``.
+    values, rest
+        (H, W) float32 deformed and rest-state values; NaN where the pixel's point
+        (its whole slab) lies outside the volume.
+    rgba
+        (H, W, 4) uint8 colours (:func:`colorize`), or None before colouring.
+    """
+
+    plane: SlicePlane | None
+    pixel_to_world: np.ndarray
+    values: np.ndarray
+    rest: np.ndarray
+    rgba: np.ndarray | None = None
+
+    @classmethod
+    def from_data(
+        cls, data: np.ndarray, pixel_to_world: np.ndarray, plane: SlicePlane | None = None
+    ) -> SliceImage:
+        """From the (H, W, 4) float data of :meth:`SliceRenderer.values`."""
+        values = np.where(data[..., 1] > COVERED, data[..., 0], np.nan).astype(np.float32)
+        rest = np.where(data[..., 3] > COVERED, data[..., 2], np.nan).astype(np.float32)
+        return cls(plane, np.asarray(pixel_to_world, np.float64), values, rest)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) in pixels."""
+        return int(self.values.shape[1]), int(self.values.shape[0])
+
+    def world(self, col: float, row: float) -> np.ndarray:
+        """World point (mm) of the (fractional) pixel position ``(col, row)``."""
+        return (self.pixel_to_world @ np.array([col, row, 0.0, 1.0]))[:3]
+
+    def value_at(self, col: float, row: float) -> tuple[float, float]:
+        """(deformed, rest) values of the pixel holding ``(col, row)``; NaN outside."""
+        w, h = self.size
+        c, r = int(np.floor(col)), int(np.floor(row))
+        if not (0 <= c < w and 0 <= r < h):
+            return float("nan"), float("nan")
+        return float(self.values[r, c]), float(self.rest[r, c])
+
+
+def _grey(values: np.ndarray, window: tuple[float, float]) -> np.ndarray:
+    level, width = (float(v) for v in window)
+    if not width > 0:
+        raise RenderError(f"window width must be positive; got {width}")
+    return np.clip((values - (level - width / 2)) / width, 0.0, 1.0)
+
+
+def colour_values(
+    values: np.ndarray,
+    look: str = "window",
+    window: tuple[float, float] = (0.5, 1.0),
+    tf: TransferFunction | None = None,
+) -> np.ndarray:
+    """(H, W) values -> (H, W, 3) float RGB in [0, 1]; NaN (nothing) is black."""
+    inside = np.isfinite(values)
+    v = np.where(inside, values, 0.0)
+    if look == "window":
+        rgb = np.repeat(_grey(v, window)[..., None], 3, axis=2)
+    elif look == "tf":
+        if tf is None:
+            raise RenderError("look 'tf' needs a transfer function")
+        table = tf(v.reshape(-1)).reshape(*v.shape, 4)
+        top = float(np.max(np.asarray(tf.points)[:, 4])) or 1.0
+        rgb = table[..., :3] * np.clip(table[..., 3:4] / top, 0.0, 1.0)
+    else:
+        raise RenderError(f"look must be one of {', '.join(LOOKS)}; got {look!r}")
+    return np.where(inside[..., None], rgb, 0.0)
+
+
+def colorize(
+    image: SliceImage,
+    *,
+    look: str = "window",
+    window: tuple[float, float] = (0.5, 1.0),
+    tf: TransferFunction | None = None,
+    show: str = "deformed",
+    checker_px: int = 32,
+) -> np.ndarray:
+    """The slice's (H, W, 4) uint8 RGBA (opaque; see the module docstring for
+    ``look`` and ``show``); also kept as ``image.rgba``."""
+    options: dict[str, Any] = {"look": look, "window": window, "tf": tf}
+    if show == "deformed":
+        rgb = colour_values(image.values, **options)
+    elif show == "rest":
+        rgb = colour_values(image.rest, **options)
+    elif show == "checkerboard":
+        h, w = image.values.shape
+        k = max(int(checker_px), 1)
+        tiles = ((np.arange(h)[:, None] // k) + (np.arange(w)[None, :] // k)) % 2 == 1
+        rest = colour_values(image.rest, **options)
+        rgb = np.where(tiles[..., None], rest, colour_values(image.values, **options))
+    elif show == "difference":
+        rgb = _difference(image, window)
+    else:
+        raise RenderError(f"show must be one of {', '.join(SHOWS)}; got {show!r}")
+    out = np.empty((*rgb.shape[:2], 4), np.uint8)
+    out[..., :3] = np.round(rgb * 255)
+    out[..., 3] = 255
+    image.rgba = out
+    return out
+
+
+def _difference(image: SliceImage, window: tuple[float, float]) -> np.ndarray:
+    """Deformed - rest over a dim grey rest image: red up, blue down, full at one width."""
+    width = float(window[1])
+    rest = np.where(np.isfinite(image.rest), image.rest, np.nan)
+    under = 0.35 * colour_values(rest, "window", window)
+    a = np.where(np.isfinite(image.values), image.values, window[0] - width / 2)
+    b = np.where(np.isfinite(image.rest), image.rest, window[0] - width / 2)
+    t = np.clip((a - b) / width, -1.0, 1.0)
+    rgb = under.copy()
+    rgb[..., 0] = np.maximum(under[..., 0], np.maximum(t, 0.0))
+    rgb[..., 2] = np.maximum(under[..., 2], np.maximum(-t, 0.0))
+    rgb[..., 1] = under[..., 1] * (1 - np.abs(t))
+    return rgb

@@ -1,0 +1,208 @@
+"""Slice views through the warp chain on the GPU: multi-planar reformatting (MPR).
+
+:class:`SliceRenderer` draws one plane of a :class:`~voxwarp.scene.Scene` per call, on
+the renderer's context, with the technique of ``shaders/slice.frag.glsl``: each pixel's
+world point goes through the scene's warp chain, as a raycaster sample does, and the
+original volume is sampled there (never resampled). The result is data, not colour: an
+RGBA32F image holding per pixel the deformed value, the fraction of its slab inside the
+volume, and the same two for the rest state. Colour (window/level, the transfer
+function, rest vs deformed overlays) is applied afterwards on the CPU by
+:mod:`voxwarp.render.slice_image`, so a window/level drag costs no GPU work.
+
+Use it through :meth:`voxwarp.render.raycaster.Renderer.slice_values` (any
+pixel -> world affine, e.g. an output grid's slices for ``export-volume``) or
+:meth:`voxwarp.render.raycaster.OffscreenRenderer.render_slice` (a
+:class:`~voxwarp.core.slice_plane.SlicePlane`, coloured).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import numpy as np
+
+from voxwarp import shaders
+from voxwarp.deform.warp import compose_glsl
+from voxwarp.errors import RenderError
+from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
+from voxwarp.scene import Scene
+
+SlabMode = Literal["mip", "minip", "average"]
+#: slab combinations and their shader codes
+SLAB_MODES: dict[str, int] = {"mip": 0, "minip": 1, "average": 2}
+Interpolation = Literal["linear", "nearest"]
+INTERPOLATIONS: tuple[str, ...] = ("linear", "nearest")
+#: most samples across one slab
+MAX_SLAB_SAMPLES = 1024
+#: largest slice image side
+MAX_SLICE_SIDE = 16384
+
+
+def slab_sampling(slab_mm: float, sample_mm: float) -> tuple[int, float]:
+    """Samples across a slab ``slab_mm`` thick (at most ``sample_mm`` apart, at most
+    :data:`MAX_SLAB_SAMPLES`) and their spacing in mm; ``(1, 0.0)`` for a thin slice."""
+    slab = float(slab_mm)
+    if not (math.isfinite(slab) and slab >= 0):
+        raise RenderError(f"slab thickness must be a finite number of mm >= 0; got {slab_mm}")
+    if slab == 0:
+        return 1, 0.0
+    n = min(max(1, math.ceil(slab / float(sample_mm))), MAX_SLAB_SAMPLES)
+    return n, slab / n
+
+
+def check_slice_options(slab_mode: str, interpolation: str) -> None:
+    """Raise :class:`RenderError` naming the allowed values for a bad mode."""
+    if slab_mode not in SLAB_MODES:
+        raise RenderError(f"slab mode must be one of {', '.join(SLAB_MODES)}; got {slab_mode!r}")
+    if interpolation not in INTERPOLATIONS:
+        raise RenderError(
+            f"interpolation must be one of {', '.join(INTERPOLATIONS)}; got {interpolation!r}"
+        )
+
+
+class SliceRenderer:
+    """Draws slice planes of scenes on a given moderngl context (owned by the caller).
+
+    GPU resources: one compiled program per warp chain signature, texture layout and
+    interpolation, one empty vertex array per program, and the float target of
+    :meth:`values`; freed by :meth:`release`.
+    """
+
+    def __init__(self, ctx: Any) -> None:
+        self.ctx = ctx
+        self._programs: dict[tuple, Any] = {}
+        self._vaos: dict[int, Any] = {}
+        self._target: tuple[tuple[int, int], Any, Any] | None = None
+        self._released = False
+
+    def _program(self, scene: Scene, slice_pairs: bool, nearest: bool) -> Any:
+        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest)
+        hold = self._programs.get(key)
+        if hold is not None:
+            return hold.program
+        frag = shaders.source(
+            "slice.frag.glsl", extra={"warps.glsl": compose_glsl(list(scene.warps))}
+        )
+        defines = (["#define SLICE_PAIRS"] if slice_pairs else []) + (
+            ["#define NEAREST"] if nearest else []
+        )
+        frag = shaders.with_defines(frag, defines)
+        from voxwarp.deform import gl_programs
+
+        try:
+            hold = gl_programs.program(
+                self.ctx, vertex_shader=shaders.read("upscale.vert.glsl"), fragment_shader=frag
+            )
+        except Exception as exc:
+            raise RenderError(f"slice shader failed to compile/link for {key}: {exc}") from exc
+        self._programs[key] = hold
+        return hold.program
+
+    def draw(
+        self,
+        gpu: Any,
+        scene: Scene,
+        pixel_to_world: np.ndarray,
+        framebuffer: Any,
+        viewport: tuple[int, int, int, int],
+        *,
+        slab_mm: float = 0.0,
+        slab_mode: str = "mip",
+        interpolation: str = "linear",
+    ) -> None:
+        """Draw the slice whose pixel ``(col, row)`` (row 0 at the top) lies at
+        ``pixel_to_world @ (col, row, 0, 1)`` into ``viewport`` of ``framebuffer``;
+        the slab runs along ``pixel_to_world``'s third column (unit length expected).
+        ``gpu`` is the renderer's copy of the scene's volume."""
+        if self._released:
+            raise RenderError("this SliceRenderer was released")
+        check_slice_options(slab_mode, interpolation)
+        m = np.asarray(pixel_to_world, dtype=np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise RenderError("pixel_to_world must be a finite 4x4 matrix")
+        samples, spacing = slab_sampling(slab_mm, scene.sample_distance_mm)
+        normal = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-12)
+        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest")
+        textures = warp_textures(self.ctx, scene.warps)  # first: may run GPU passes
+        vol = scene.volume
+        values: dict[str, Any] = {
+            "u_pixel_to_world": m,
+            "u_viewport": tuple(float(v) for v in viewport),
+            "u_slab_step": tuple(float(v) for v in normal * spacing),
+            "u_slab_samples": int(samples),
+            "u_slab_mode": SLAB_MODES[slab_mode],
+            "u_dims": tuple(float(s) for s in vol.shape),
+            "u_inv_dims": tuple(1.0 / s for s in vol.shape),
+            "u_value_map": gpu.value_map,
+            "u_spacing": tuple(float(s) for s in vol.spacing),
+            "u_origin": tuple(float(o) for o in vol.origin),
+            "u_direction": vol.direction,
+            "u_volume": 0,
+        }
+        for name, value in values.items():
+            set_uniform(prog, name, value)
+        gpu.texture.use(0)
+        bind_warps(prog, scene.warps, textures, 1)
+        vao = self._vaos.get(id(prog))
+        if vao is None:
+            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
+        framebuffer.use()
+        framebuffer.viewport = viewport
+        with self.ctx.scope(framebuffer, enable_only=0):  # no blending or depth: data
+            vao.render(self.ctx.TRIANGLES, vertices=3)
+
+    def values(
+        self,
+        gpu: Any,
+        scene: Scene,
+        pixel_to_world: np.ndarray,
+        size: tuple[int, int],
+        **options: Any,
+    ) -> np.ndarray:
+        """The slice as data: an (H, W, 4) float32 array, row 0 at the top, channels
+        (deformed value, deformed coverage, rest value, rest coverage); see
+        :meth:`draw` for the options."""
+        w, h = (int(v) for v in size)
+        if not (1 <= w <= MAX_SLICE_SIDE and 1 <= h <= MAX_SLICE_SIDE):
+            raise RenderError(f"slice size must be 1..{MAX_SLICE_SIDE} pixels a side; got {w}x{h}")
+        fbo = self._framebuffer(w, h)
+        self.draw(gpu, scene, pixel_to_world, fbo, (0, 0, w, h), **options)
+        raw = fbo.read(viewport=(0, 0, w, h), components=4, dtype="f4", alignment=1)
+        return np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)[::-1].copy()
+
+    def _framebuffer(self, w: int, h: int) -> Any:
+        """The RGBA32F target of :meth:`values`, grown (never shrunk) to hold (w, h)."""
+        if self._target is not None:
+            (tw, th), _, fbo = self._target
+            if tw >= w and th >= h:
+                return fbo
+            w, h = max(w, tw), max(h, th)
+        self._release_target()
+        tex = self.ctx.texture((w, h), 4, dtype="f4")
+        self._target = ((w, h), tex, self.ctx.framebuffer(color_attachments=[tex]))
+        return self._target[2]
+
+    def _release_target(self) -> None:
+        if self._target is not None:
+            _, tex, fbo = self._target
+            try:  # never delete the bound framebuffer (moderngl would re-bind its name)
+                self.ctx.detect_framebuffer(0).use()
+            except Exception:
+                pass
+            fbo.release()
+            tex.release()
+            self._target = None
+
+    def release(self) -> None:
+        """Free every GPU resource this renderer made; idempotent."""
+        if self._released:
+            return
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        for hold in self._programs.values():
+            hold.release()
+        self._programs.clear()
+        self._release_target()
+        self._released = True
