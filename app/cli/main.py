@@ -8,15 +8,16 @@ bundled sample (``voxwarp samples`` lists them).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import math
 import os
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NamedTuple, NoReturn
 
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.animate import add_animate_parser
@@ -759,17 +760,19 @@ def _check_distinct_outputs(args: argparse.Namespace) -> None:
         seen[key] = flag
 
 
-def cmd_render(args: argparse.Namespace) -> int:
-    """``voxwarp render INPUT -o out.png``: render one image headless."""
-    from voxwarp.io.images import check_image_format, write_image
-    from voxwarp.render.raycaster import OffscreenRenderer
+class PendingDeformation(NamedTuple):
+    """The deformation options of ``render`` (and ``slice``) prepared before any GL work:
+    the element grid of ``--massspring``/``--chainmail`` and the warp of ``--wires`` or
+    ``--lattice`` (None when not given)."""
 
-    _check_deform_options(args)
-    ropt.check_render_options(args)
-    _check_distinct_outputs(args)
-    check_image_format(args.output)  # a bad -o fails before any work or other output
-    obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
-    scene = _scene_from_args(obj, args)
+    grid: Any
+    file_warp: Any
+
+
+def prepare_deformation(args: argparse.Namespace, scene: Any) -> tuple[Any, PendingDeformation]:
+    """``scene`` with the ``--displacement`` fields in its chain, and the model grid and
+    file warp still to add (:func:`deformed_scene`); every check that needs no GL runs
+    here, so bad options fail before a context is made."""
     fields = _field_warps(args)
     for w in fields:
         w.bind_volume(scene.volume)  # a field that misses the volume warns
@@ -782,6 +785,44 @@ def cmd_render(args: argparse.Namespace) -> int:
         print(summary, file=sys.stderr)
     if args.lattice is not None:
         file_warp = load_lattice_file(args.lattice, scene.volume)
+    return scene, PendingDeformation(grid, file_warp)
+
+
+@contextlib.contextmanager
+def deformed_scene(
+    args: argparse.Namespace, scene: Any, pending: PendingDeformation, ctx: Any
+) -> Iterator[Any]:
+    """The finished scene: the model of ``pending`` run on ``ctx`` (current) and its warp
+    last in the chain, then the file warp, then the clip/camera options; the model is
+    closed when the block ends."""
+    model = None
+    try:
+        if pending.grid is not None:
+            run = _run_massspring if args.massspring is not None else _run_chainmail
+            model, summary = run(args, pending.grid, ctx)
+            print(summary, file=sys.stderr)
+            # last in the chain: it deforms the volume itself, before the
+            # scene's own warps move the result
+            scene = scene.copy(warps=[*scene.warps, model.warp()])
+        if pending.file_warp is not None:
+            scene = scene.copy(warps=[*scene.warps, pending.file_warp])
+        yield ropt.apply_render_options(scene, args)  # every warp is in place
+    finally:
+        if model is not None:
+            model.close()
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    """``voxwarp render INPUT -o out.png``: render one image headless."""
+    from voxwarp.io.images import check_image_format, write_image
+    from voxwarp.render.raycaster import OffscreenRenderer
+
+    _check_deform_options(args)
+    ropt.check_render_options(args)
+    _check_distinct_outputs(args)
+    check_image_format(args.output)  # a bad -o fails before any work or other output
+    obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
+    scene, pending = prepare_deformation(args, _scene_from_args(obj, args))
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:
@@ -790,26 +831,11 @@ def cmd_render(args: argparse.Namespace) -> int:
         # likewise the gradient texture (a pass over every voxel) for shading
         r.renderer.cell_skipping = False
         r.renderer.gradient_texture = False
-        model = None
         # the GPU backends run on the renderer's context (made current here)
-        with r._current():
-            try:
-                if grid is not None:
-                    run = _run_massspring if args.massspring is not None else _run_chainmail
-                    model, summary = run(args, grid, r.ctx)
-                    print(summary, file=sys.stderr)
-                    # last in the chain: it deforms the volume itself, before the
-                    # scene's own warps move the result
-                    scene = scene.copy(warps=[*scene.warps, model.warp()])
-                if file_warp is not None:
-                    scene = scene.copy(warps=[*scene.warps, file_warp])
-                scene = ropt.apply_render_options(scene, args)  # every warp is in place
-                img = r.render(scene)
-                if args.save_scene:  # inside: a GPU-owned field is read back to save it
-                    scene.save(args.save_scene)
-            finally:
-                if model is not None:
-                    model.close()
+        with r._current(), deformed_scene(args, scene, pending, r.ctx) as scene:
+            img = r.render(scene)
+            if args.save_scene:  # inside: a GPU-owned field is read back to save it
+                scene.save(args.save_scene)
     # what was chosen, once the image exists (a refused render prints only its error)
     print(scene.display_note(), file=sys.stderr)
     ropt.spacing_notice(scene.volume, args)
