@@ -528,6 +528,28 @@ class EditSession:
         key = np.where(ok, d + 1e-6 * depth, np.inf)
         return int(np.argmin(key))
 
+    def pick_near_plane(
+        self,
+        camera: Camera,
+        size: tuple[int, int],
+        pixel: Sequence[float],
+        max_distance: float,
+        radius: float = PICK_RADIUS_PX,
+    ) -> int | None:
+        """:meth:`pick` among the handles within ``max_distance`` mm of the camera's view
+        plane through its centre (a slice view's plane: ``SlicePlane.camera()``); ties:
+        the one nearest the plane."""
+        pts = self.handles()
+        if len(pts) == 0:
+            return None
+        xy = camera.project(pts, size)
+        d = np.hypot(xy[:, 0] - pixel[0], xy[:, 1] - pixel[1])
+        off = np.abs((pts - camera.center) @ camera.rotation[:, 2])
+        ok = (d <= radius) & (off <= max_distance) & np.isfinite(d)
+        if not np.any(ok):
+            return None
+        return int(np.argmin(np.where(ok, d + 1e-6 * off, np.inf)))
+
     def pick_rect(
         self,
         camera: Camera,
