@@ -588,19 +588,21 @@ class _Progress:
     """Frames done of ``total``: a tqdm bar on a terminal, else a line every
     :data:`PROGRESS_LINE_S` seconds (and at the end); nothing when disabled."""
 
-    def __init__(self, total: int, enabled: bool) -> None:
-        self.total, self.done = total, 0
+    def __init__(self, total: int, enabled: bool, unit: str = "frame") -> None:
+        self.total, self.done, self.unit = total, 0, unit
         self.bar: Any = None
         self.lines = False
         self._last = time.monotonic()
         if not enabled:
             return
         tty = getattr(sys.stderr, "isatty", lambda: False)()
-        if tty:
+        try:  # the movie extra's; without it, lines as on a non-terminal
             from tqdm import tqdm
-
+        except ImportError:
+            tty = False
+        if tty:
             self.bar = tqdm(
-                total=total, unit="frame", desc="frames", file=sys.stderr, dynamic_ncols=True
+                total=total, unit=unit, desc=f"{unit}s", file=sys.stderr, dynamic_ncols=True
             )
         else:
             self.lines = True
@@ -615,7 +617,7 @@ class _Progress:
     def _line(self) -> None:
         self._last = time.monotonic()
         pct = 100.0 * self.done / max(self.total, 1)
-        print(f"frames: {self.done}/{self.total} ({pct:.0f}%)", file=sys.stderr, flush=True)
+        print(f"{self.unit}s: {self.done}/{self.total} ({pct:.0f}%)", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

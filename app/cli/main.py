@@ -21,6 +21,8 @@ from typing import Any, NamedTuple, NoReturn
 
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.animate import add_animate_parser
+from voxwarp.cli.export_volume import add_export_volume_parser
+from voxwarp.cli.slice import add_slice_parser
 from voxwarp.core import limits
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.checks import int_list
@@ -851,11 +853,28 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def load_scene_json(path: str, command: str) -> Any:
+    """The :class:`~voxwarp.scene.Scene` of the scene JSON ``path`` that ``command``
+    (``export-field``, ``export-volume``) reads; one line for anything else."""
+    from voxwarp.scene import Scene
+
+    scene_path = Path(path)
+    if scene_path.suffix.lower() != ".json" or not scene_path.is_file():
+        what = "is not a .json file" if scene_path.is_file() else "does not exist"
+        raise CliOptionError(
+            f"{path} {what}; {command} reads a scene JSON (write one with voxwarp"
+            " render INPUT ... --save-scene SCENE.json)"
+        )
+    scene = load_input(path)
+    if not isinstance(scene, Scene):
+        raise CliOptionError(f"{path} is not a voxwarp scene JSON (render --save-scene)")
+    return scene
+
+
 def cmd_export_field(args: argparse.Namespace) -> int:
     """``voxwarp export-field SCENE.json -o field.nii.gz``: the scene's warp chain as a
     displacement field in the ITK convention (:meth:`voxwarp.scene.Scene.displacement_field`)."""
     from voxwarp.io.fields import WRITE_SUFFIXES, field_suffix, save_displacement_field
-    from voxwarp.scene import Scene
 
     out = Path(args.output)
     if field_suffix(out) not in WRITE_SUFFIXES:
@@ -863,16 +882,7 @@ def cmd_export_field(args: argparse.Namespace) -> int:
             f"-o {out}: cannot write a displacement field as {field_suffix(out) or '(no suffix)'};"
             f" use one of {', '.join(WRITE_SUFFIXES)}"
         )
-    scene_path = Path(args.scene)
-    if scene_path.suffix.lower() != ".json" or not scene_path.is_file():
-        what = "is not a .json file" if scene_path.is_file() else "does not exist"
-        raise CliOptionError(
-            f"{args.scene} {what}; export-field reads a scene JSON (write one with voxwarp"
-            " render INPUT ... --save-scene SCENE.json)"
-        )
-    scene = load_input(args.scene)
-    if not isinstance(scene, Scene):
-        raise CliOptionError(f"{args.scene} is not a voxwarp scene JSON (render --save-scene)")
+    scene = load_scene_json(args.scene, "export-field")
     box = None if args.box is None else (args.box[:3], args.box[3:])
     if not scene.warps:
         warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
@@ -1482,6 +1492,8 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pr.set_defaults(func=cmd_render)
     add_animate_parser(sub)
     _add_export_field_parser(sub)
+    add_slice_parser(sub)
+    add_export_volume_parser(sub)
 
     from voxwarp.teaching import DEMO_TITLES, DEMOS
 
