@@ -289,3 +289,27 @@ def test_real_scans(gl_ctx: Any) -> None:
     grey, doc, _ = slice_cli(Path("sample:stent"), "stent", "--slab", "10", "--mode", "mip")
     assert doc["plane"] == "z"
     assert grey.max() > 200
+
+
+def test_scene_json_input_is_the_same_slice(gl_ctx: Any, tmp_path: Path) -> None:
+    """A scene JSON saved by ``render --wires ... --save-scene`` slices as the volume with
+    the same --wires option (the shared scene assembly), and the wire bends the slice."""
+    wires = str(REPO / "sample_volumes" / "fish_spine_wires.json")
+    scene = tmp_path / "fish_wires.json"
+    proc = run_cli(
+        "render", "sample:fish", "--wires", wires, "--size", "16x16", "--save-scene", str(scene),
+        "-o", str(tmp_path / "r.png"),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    common = ["--plane", "z", "--interpolation", "nearest", "--window", "127.5,255"]
+    from_json, doc_json, _ = slice_cli(scene, "fish_scene_json", *common)
+    inline, doc_inline, err = slice_cli(
+        Path("sample:fish"), "fish_wires", *common, "--wires", wires
+    )
+    rest, _, _ = slice_cli(
+        Path("sample:fish"), "fish_wires_rest", *common, "--wires", wires, "--show", "rest"
+    )
+    assert "wires: 1 wire(s)" in err
+    assert doc_json["pixel_to_world"] == doc_inline["pixel_to_world"]
+    np.testing.assert_array_equal(from_json, inline)
+    assert np.mean(inline != rest) > 0.01
