@@ -1702,15 +1702,26 @@ def wants_bench(argv: Sequence[str] | None) -> bool:
     return bool(args) and args[0] == "bench"
 
 
+#: options whose value may start with "-" (a negative number or "-y"): joined as --opt=value
+_NEGATIVE_VALUE_OPTIONS = (
+    "--view",
+    "--stiffness-from-volume",
+    "--cut",
+    "--clip",
+    "--drag-at",
+    "--plane",
+)
+
+
 def _join_negative_views(argv: list[str]) -> list[str]:
     # "--view -y" / "--view -30,20": argparse would take the value for an option
     out: list[str] = []
     i = 0
     while i < len(argv):
         negative = i + 1 < len(argv) and argv[i + 1].startswith("-")
-        if argv[i] in ("--view", "--stiffness-from-volume", "--cut", "--clip", "--drag-at") and (
-            negative
-        ):
+        # slice's --window LEVEL,WIDTH (render's takes two values, never a comma)
+        pair = argv[i] == "--window" and negative and "," in argv[i + 1]
+        if pair or (argv[i] in _NEGATIVE_VALUE_OPTIONS and negative):
             out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
             continue

@@ -313,3 +313,18 @@ def test_scene_json_input_is_the_same_slice(gl_ctx: Any, tmp_path: Path) -> None
     assert doc_json["pixel_to_world"] == doc_inline["pixel_to_world"]
     np.testing.assert_array_equal(from_json, inline)
     assert np.mean(inline != rest) > 0.01
+
+
+def test_negative_values_parse() -> None:
+    """``--plane -10,0,0:1,0,0`` and ``--window -100,400`` start with "-" and still parse
+    as values (render's two-value ``--window -100 400`` too)."""
+    from voxwarp.cli.main import _join_negative_views, build_parser
+
+    parser = build_parser(bench=False)
+    argv = ["slice", "v.nii", "--plane", "-10,0,0:1,0,0", "--window", "-100,400", "--at", "-5"]
+    args = parser.parse_args(_join_negative_views(argv))
+    assert args.plane == "-10,0,0:1,0,0"
+    assert args.window == (-100.0, 400.0)
+    assert args.at == -5.0
+    args = parser.parse_args(_join_negative_views(["render", "v.nii", "--window", "-100", "400"]))
+    assert args.window == [-100.0, 400.0]
