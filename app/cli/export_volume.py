@@ -123,15 +123,21 @@ def export_grid(
     """``(affine, (nx, ny, nz))`` of the output grid (see the module docstring)."""
     import numpy as np
 
-    from voxwarp.core.field_grid import field_grid
     from voxwarp.deform.warp import box_corners
 
     vol = scene.volume
     if grid not in GRIDS:
         raise InputError(f"--grid must be one of {', '.join(GRIDS)}; got {grid!r}")
-    if grid == "volume":
-        affine, shape = field_grid(vol, spacing)
-        return np.asarray(affine, dtype=np.float64), tuple(int(n) for n in shape)  # type: ignore[return-value]
+    if grid == "volume" and spacing is None:
+        return np.asarray(vol.affine, dtype=np.float64), vol.shape
+    if grid == "volume":  # the box at another voxel size, centred in it (as export-field);
+        # no memory check: the output is streamed, never held
+        s = np.asarray(spacing, dtype=np.float64)
+        n = np.maximum(np.rint(np.asarray(vol.shape) * np.asarray(vol.spacing) / s), 1)
+        affine = np.eye(4)
+        affine[:3, :3] = np.asarray(vol.direction, dtype=np.float64) * s
+        affine[:3, 3] = vol.center - affine[:3, :3] @ ((n - 1) / 2.0)
+        return affine, (int(n[0]), int(n[1]), int(n[2]))
     d = np.asarray(vol.direction, dtype=np.float64)
     s = np.asarray(vol.spacing if spacing is None else spacing, dtype=np.float64)
     origin = np.asarray(vol.origin, dtype=np.float64)
