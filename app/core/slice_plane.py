@@ -201,26 +201,29 @@ class SlicePlane:
 
     @property
     def position(self) -> float:
-        """Signed position of the plane along its normal (``center @ normal``, mm); for a
-        named plane, the world coordinate of its scroll axis with that axis's sign."""
+        """Signed position of the plane along :attr:`scroll_axis` (``center @ axis``, mm);
+        for a named plane, the world coordinate of its scroll axis with that axis's sign."""
         if self.name in PLANE_AXIS:
             return float(self.center[PLANE_AXIS[self.name]])
-        return float(self.center @ self.normal)
+        return float(self.center @ self.scroll_axis)
 
     def moved(self, mm: float) -> SlicePlane:
         """The plane shifted by ``mm`` along its scroll direction (named planes: their
-        world axis, +S/+A/+R or +z/+y/+x; oblique: the normal)."""
+        world axis, +S/+A/+R or +z/+y/+x; oblique: the normal, signed so that its
+        largest component is positive, as the named plane it was tilted from scrolls)."""
         shift = _finite(mm, "move") * self.scroll_axis
         return dataclasses.replace(self, center=self.center + shift)
 
     @property
     def scroll_axis(self) -> np.ndarray:
-        """Unit direction :meth:`moved` and :attr:`position` count along."""
+        """Unit direction :meth:`moved` and :attr:`position` count along (oblique: the
+        normal, its largest component positive, so a slight tilt keeps the direction)."""
         if self.name in PLANE_AXIS:
             axis = np.zeros(3)
             axis[PLANE_AXIS[self.name]] = 1.0
             return axis
-        return self.normal
+        n = self.normal  # signed like the named planes' axes: its main component positive
+        return n if n[int(np.argmax(np.abs(n)))] > 0 else -n
 
     def through(self, point: Sequence[float]) -> SlicePlane:
         """The plane moved along its scroll axis to contain ``point`` (its framing kept)."""
