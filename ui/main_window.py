@@ -105,6 +105,10 @@ SHORTCUTS: list[tuple[str, str]] = [
         " orientation",
     ),
     ("M", "show / hide the orientation marker"),
+    ("Ctrl+1 / Ctrl+2 / Ctrl+3", "3D and three slices / slices in a column / 3D only"),
+    ("Slice view: left click / drag", "set the crosshair in all views; on a handle: drag it"),
+    ("Slice view: wheel / Ctrl + wheel", "next or previous slice / zoom"),
+    ("Slice view: right drag / middle drag", "window (horizontal) and level (vertical) / pan"),
     ("R", "reset the camera"),
     ("P", "perspective / orthographic"),
     ("W", "lay a new wire (click points; Enter finishes, Esc cancels)"),
@@ -177,7 +181,11 @@ class MainWindow(QMainWindow):
         self.source: str | None = str(path) if path is not None else None
         self.undo_stack = QUndoStack(self)
         self.viewport = Viewport(session, self)
-        self.setCentralWidget(self.viewport)
+        from voxwarp.ui.mpr import SliceLayout
+
+        #: the central area: the viewport and the linked slice views
+        self.mpr = SliceLayout(self)
+        self.setCentralWidget(self.mpr)
         self.setAcceptDrops(True)
         self.resize(1280, 820)
         self._pending_before: Snapshot | None = None
@@ -197,6 +205,11 @@ class MainWindow(QMainWindow):
         self.viewport.failed.connect(self.show_error)
         self.viewport.contextMenuAt.connect(self._context_menu)
         self.viewport.wirePointLaid.connect(self.refresh_panels)
+        for view in self.mpr.views:
+            view.editStarted.connect(self._begin_mouse_edit)
+            view.editFinished.connect(self._end_mouse_edit)
+            view.dragged.connect(self._dragged)
+            view.failed.connect(self.show_error)
         self.undo_stack.cleanChanged.connect(self._clean_changed)
         self.sim_timer = QTimer(self)
         self.sim_timer.setInterval(int(1000 / SIM_FPS))
@@ -355,6 +368,10 @@ class MainWindow(QMainWindow):
             v, "Orientation &Marker", self.toggle_marker, "M", checkable=True
         )
         self.marker_action.setChecked(self.viewport.show_marker)
+        v.addSeparator()
+        from voxwarp.ui.mpr import install_slice_controls
+
+        install_slice_controls(self, v)
         v.addSeparator()
         for dock in self.docks.values():
             v.addAction(dock.toggleViewAction())
@@ -731,6 +748,7 @@ class MainWindow(QMainWindow):
         session.sync_wires = False
         self.session = session
         self.viewport.set_session(session, keep_camera=session.scene.camera is not None)
+        self.mpr.set_session(session)
         if session.scene.camera is not None:
             self.viewport.camera = session.scene.camera
         self.undo_stack.clear()

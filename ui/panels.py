@@ -101,6 +101,7 @@ DISPLAY_LABELS: dict[str, str] = {
     "lattice_cells": "Lattice cells",
     "grid_box": "Deformation grid box",
     "clip_box": "Clipping box",
+    "slice_planes": "Slice planes",
 }
 AXES = ("x", "y", "z")
 

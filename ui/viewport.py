@@ -111,6 +111,8 @@ class Viewport(QOpenGLWidget):
         self.show_marker = True
         self._marker: tuple[Any, np.ndarray] | None = None
         self._marker_gl: dict[str, Any] = {}
+        #: more overlay layers to draw, ``(display) -> layers`` (the slice planes)
+        self.extra_overlays: list[Callable[[DisplayOptions], list[Any]]] = []
         self.ctx: Any = None
         self.renderer: Renderer | None = None
         self.overlay: OverlayRenderer | None = None
@@ -192,9 +194,9 @@ class Viewport(QOpenGLWidget):
                 )
                 if quality != FULL:
                     self._refine.start()  # full quality once the interaction stops
-            self.overlay.draw(
-                self.session.overlay_layers(self.display), fbo, self.camera, (0, 0, w, h)
-            )
+            layers = self.session.overlay_layers(self.display)
+            layers += [layer for extra in self.extra_overlays for layer in extra(self.display)]
+            self.overlay.draw(layers, fbo, self.camera, (0, 0, w, h))
             if self.show_marker:
                 self._draw_marker(fbo)
             self.ctx.finish()  # honest frame times: wait for the GPU, not just the submission

@@ -55,6 +55,8 @@ class DisplayOptions:
     grid_box: bool = True
     clip_box: bool = False
     selection: bool = True
+    #: the slice views' planes as outlines in the 3D view (when slice views are shown)
+    slice_planes: bool = True
 
 
 COLORS = {

@@ -14,9 +14,12 @@ def shown_window(
     size: tuple[int, int],
     *,
     active: bool = False,
+    layout: str = "3d",
 ) -> Any:
     """A main window on ``session``, resized, shown, its first frame drawn and the
     simulation paused; ``active``: also the active window (keyboard shortcuts go to it).
+    ``layout``: the central area's layout (:mod:`voxwarp.ui.mpr`); the 3D view alone by
+    default, as the tests of the viewport click at pixels of a full-size view.
     No dialogs pop up (``VOXWARP_GUI_NO_DIALOGS``). The caller closes it."""
     monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
     from voxwarp.ui.app import configure_qt
@@ -25,6 +28,7 @@ def shown_window(
     from voxwarp.ui.main_window import MainWindow
 
     w = MainWindow(session)
+    w.mpr.set_layout(layout)
     w.resize(*size)
     qtbot.addWidget(w)
     w.show()
