@@ -43,6 +43,7 @@ BENCHMARKS: tuple[str, ...] = (
     "interactive",
     "fields",
     "segments",
+    "slices",
 )
 #: seconds one benchmark may run before it is stopped (quick, full)
 TIMEOUT_S: tuple[float, float] = (240.0, 3600.0)
@@ -381,6 +382,26 @@ def run_segments(quick: bool) -> dict[str, Any]:
     return {"ratios": ratios, "issue": {"segments": text}, "markdown": report.markdown(command)}
 
 
+def run_slices(quick: bool) -> dict[str, Any]:
+    """``bench slices`` (with ``quick``: 256² only, 3 rounds)."""
+    from voxwarp.bench.slices import bench_slices
+
+    sizes, rounds = ((256,), 3) if quick else ((512, 256), 5)
+    report = bench_slices(sizes=sizes, rounds=rounds, log=_log)
+    ratios: dict[str, Any] = {
+        f"{r.volume} {r.deformation} {r.size}² slice / 3D": round(r.slice_ratio, 4)
+        for r in report.rows
+    }
+    for r in report.rows:
+        ratios[f"{r.volume} {r.deformation} {r.size}² slab / slice"] = round(r.slab_ratio, 2)
+    for d in report.drags:
+        ratios[f"{d.volume} {d.size}² drag step + 3 slices / 3D"] = round(
+            d.drag_slices_ms / d.frame_ms, 3
+        )
+    command = f"voxwarp bench slices --sizes {','.join(map(str, sizes))} --rounds {rounds}"
+    return {"ratios": ratios, "issue": {}, "markdown": report.markdown(command)}
+
+
 #: benchmark name -> runner(quick) -> {"ratios", "issue", "markdown"}
 RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "startup": run_startup,
@@ -395,6 +416,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "interactive": run_interactive,
     "fields": run_fields,
     "segments": run_segments,
+    "slices": run_slices,
 }
 
 

@@ -1681,6 +1681,7 @@ def _add_heavy_bench_parsers(bsub: Any) -> None:
     from voxwarp.bench.lattice import add_bench_lattice_parser
     from voxwarp.bench.scale import add_bench_scale_parser
     from voxwarp.bench.segments import add_bench_segments_parser
+    from voxwarp.bench.slices import add_bench_slices_parser
     from voxwarp.bench.wire_ends import add_bench_wire_ends_parser
     from voxwarp.bench.wire_tables import add_bench_wire_tables_parser
     from voxwarp.bench.wires import add_bench_wires_parser
@@ -1693,6 +1694,7 @@ def _add_heavy_bench_parsers(bsub: Any) -> None:
     add_bench_fields_parser(bsub)
     add_bench_scale_parser(bsub)
     add_bench_segments_parser(bsub)
+    add_bench_slices_parser(bsub)
     add_bench_all_parser(bsub)
 
 
