@@ -108,6 +108,10 @@ SHORTCUTS: list[tuple[str, str]] = [
     ("Ctrl+1 / Ctrl+2 / Ctrl+3", "3D and three slices / slices in a column / 3D only"),
     ("Slice view: left click / drag", "set the crosshair in all views; on a handle: drag it"),
     ("Slice view: wheel / Ctrl + wheel", "next or previous slice / zoom"),
+    (
+        "Slice view: Shift + wheel / Alt + wheel",
+        "tilt the plane (oblique) about its vertical / horizontal axis",
+    ),
     ("Slice view: right drag / middle drag", "window (horizontal) and level (vertical) / pan"),
     ("R", "reset the camera"),
     ("P", "perspective / orthographic"),

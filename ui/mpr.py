@@ -9,7 +9,8 @@ right), ``"1x3"`` (the 3D view large, the slices in a column on the right) or ``
 outlines (:meth:`SliceViews.outline_layers`, ``Display -> Slice planes``).
 
 The slices follow the 3D view: after every frame the viewport draws (a drag, a running
-simulation, an undo) one single-shot timer redraws the visible slices once; their own
+simulation, an undo) one single-shot timer redraws the visible slices once (at half
+resolution while the deformation changes, in full once it rests); their own
 changes (crosshair, scrolling) redraw them at once and the 3D view (at its interactive
 quality) for the outlines. :func:`install_slice_controls` adds the View menu's layout
 actions and the "Slices" toolbar (layout, look, shown state, slab, interpolation).
@@ -37,6 +38,10 @@ LAYOUT_KEYS: dict[str, tuple[str, str]] = {
     "1x3": ("3D Large, Slices in a Column", "Ctrl+2"),
     "3d": ("3D Only", "Ctrl+3"),
 }
+#: resolution of the slices (fraction of the view's) while the deformation changes
+LIVE_SCALE = 0.5
+#: the slices are drawn in full this long after the last change (ms)
+REFINE_AFTER_MS = 250
 #: smallest size of the 3D view alone and of each view in a grid (pixels)
 VIEWPORT_MIN = (320, 240)
 SLICE_MIN = (160, 120)
@@ -67,6 +72,10 @@ class SliceLayout(QWidget):
         self._pending.setSingleShot(True)
         self._pending.setInterval(0)
         self._pending.timeout.connect(self.render_all)
+        self._refine = QTimer(self)
+        self._refine.setSingleShot(True)
+        self._refine.setInterval(REFINE_AFTER_MS)
+        self._refine.timeout.connect(self._refine_slices)
         self.viewport.frameDrawn.connect(lambda _ms: self._pending.start())
         self.viewport.extra_overlays.append(self._outlines)
         self.set_layout(self.state.layout)
@@ -139,9 +148,25 @@ class SliceLayout(QWidget):
         self.planes_changed()
 
     def render_all(self) -> None:
-        """Draw every visible slice again (the scene or the planes changed)."""
+        """Draw every visible slice again (the scene or the planes changed): at
+        :data:`LIVE_SCALE` of their resolution while a handle is dragged or the
+        simulation moves, in full once that stops."""
+        live = self.live()
         for view in self.views:
-            view.render()
+            view.render(LIVE_SCALE if live else 1.0)
+        if live:
+            self._refine.start()
+
+    def live(self) -> bool:
+        """Whether the deformation is changing right now (a drag, a running model)."""
+        s = self.window.session
+        return bool(s.dragging or (s.running and s.model is not None and not s.settled))
+
+    def _refine_slices(self) -> None:
+        if self.live():
+            self._refine.start()
+        else:
+            self.render_all()
 
     def recolor_all(self) -> None:
         """Colour every slice again (window, look or shown state changed; no GPU)."""
@@ -163,6 +188,7 @@ class SliceLayout(QWidget):
         except VoxwarpError as exc:
             self.window.show_error(str(exc))
             return
+        self._sync_controls()
         if name in ("look", "show"):
             self.recolor_all()
         else:
@@ -196,7 +222,7 @@ def install_slice_controls(window: Any, menu: QMenu) -> None:
         menu.addAction(a)
         window.addAction(a)
         window.layout_actions[layout] = a
-    reset = QAction("Reset Slice Views", window)
+    reset = QAction("Reset Slice Views (untilted, unzoomed)", window)
     reset.triggered.connect(lambda *_: mpr.reset())
     menu.addAction(reset)
 

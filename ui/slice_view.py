@@ -10,8 +10,9 @@ the orientation letters, a scale bar and the position readout.
 
 Mouse: left click sets the crosshair in all views (left press on a handle picks it and
 a drag moves it in the slice plane, one undoable edit); wheel scrolls through slices
-(Ctrl + wheel zooms); right drag changes the window (horizontal: width, vertical:
-level); middle drag pans.
+(Ctrl + wheel zooms, Shift + wheel and Alt + wheel tilt the plane about its vertical and
+horizontal axes through the crosshair: an oblique plane); right drag changes the window
+(horizontal: width, vertical: level); middle drag pans.
 """
 
 from __future__ import annotations
@@ -51,6 +52,8 @@ __all__ = ["SliceView"]
 CLICK_SLOP_PX = 3
 #: zoom per wheel notch with Ctrl
 ZOOM_PER_STEP = 1.15
+#: degrees a plane tilts per wheel notch with Shift (about its up axis) or Alt (right)
+TILT_PER_STEP = 5.0
 #: smallest size of a slice view (pixels)
 SLICE_MIN_PX = (160, 120)
 #: diameter of a handle's dot (pixels)
@@ -417,13 +420,22 @@ class SliceView(QWidget):
         super().leaveEvent(event)
 
     def wheelEvent(self, event: QWheelEvent) -> None:
-        """Scroll through slices (one voxel spacing a notch); Ctrl: zoom."""
-        steps = event.angleDelta().y() / 120.0
+        """Scroll through slices (one voxel spacing a notch); Ctrl: zoom; Shift / Alt:
+        tilt the plane (:data:`TILT_PER_STEP` a notch)."""
+        delta = event.angleDelta()
+        # (with Alt or Shift some platforms turn the wheel into a horizontal one)
+        steps = (delta.y() or delta.x()) / 120.0
         if not steps:
             return
-        if event.modifiers() & Qt.KeyboardModifier.ControlModifier:
+        mods = event.modifiers()
+        if mods & Qt.KeyboardModifier.ControlModifier:
             self.mpr.state.zoom(self.name, ZOOM_PER_STEP**steps)
             self.render()
+            return
+        if mods & (Qt.KeyboardModifier.ShiftModifier | Qt.KeyboardModifier.AltModifier):
+            about = "up" if mods & Qt.KeyboardModifier.ShiftModifier else "right"
+            self.mpr.state.rotate(self.name, TILT_PER_STEP * steps, about=about)
+            self.mpr.planes_changed()
             return
         self.mpr.state.scroll(self.name, steps)
         self.mpr.planes_changed()

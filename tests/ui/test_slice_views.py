@@ -54,8 +54,12 @@ def point(xy: np.ndarray) -> QPoint:
     return QPoint(round(float(xy[0])), round(float(xy[1])))
 
 
-def wheel(widget: Any, pos: QPoint, notches: int, ctrl: bool = False) -> None:
-    mods = Qt.KeyboardModifier.ControlModifier if ctrl else Qt.KeyboardModifier.NoModifier
+def wheel(widget: Any, pos: QPoint, notches: int, ctrl: bool = False, shift: bool = False) -> None:
+    mods = Qt.KeyboardModifier.NoModifier
+    if ctrl:
+        mods |= Qt.KeyboardModifier.ControlModifier
+    if shift:
+        mods |= Qt.KeyboardModifier.ShiftModifier
     event = QWheelEvent(
         QPointF(pos),
         QPointF(widget.mapToGlobal(pos)),
@@ -189,10 +193,15 @@ def test_slices_follow_the_running_simulation(window: Any, qtbot: Any) -> None:
     session.drag_to(xy + np.array([30.0, 0.0]))
     session.end_drag()
     w.set_running(True)
-    renders = w.mpr.views[0].renders
-    qtbot.waitUntil(lambda: w.mpr.views[0].renders >= renders + 3, timeout=30000)
+    view = w.mpr.views[0]
+    renders = view.renders
+    qtbot.waitUntil(lambda: view.renders >= renders + 3, timeout=30000)
+    # while the model moves the slices are drawn at half resolution, then in full
+    live = view.image.values.shape
+    assert live[0] < 0.6 * before.shape[0]
     w.set_running(False)
-    after = w.mpr.views[0].image.values
+    qtbot.waitUntil(lambda: view.image.values.shape == before.shape, timeout=30000)
+    after = view.image.values
     changed = np.mean(np.abs(np.nan_to_num(after) - np.nan_to_num(before)) > 1)
     assert changed > 0.01, f"only {changed:.2%} of the slice changed"
 
@@ -242,3 +251,31 @@ def test_readout_shows_the_array_value_under_the_cursor(window: Any, qtbot: Any)
         r, a, s = (float(v) for v in re.findall(r"[RAS] ([+-][\d.]+)", text))
         hovered = view.world_at(pos.x(), pos.y())
         np.testing.assert_allclose([r, a, s], hovered, atol=0.051)
+
+
+def test_shift_wheel_tilts_a_plane_through_the_crosshair(window: Any) -> None:
+    w = window
+    axial, coronal, _ = w.mpr.views
+    crosshair = w.mpr.state.crosshair.copy()
+    wheel(axial, QPoint(30, 30), 3, shift=True)  # 15 degrees about the view's vertical
+    plane = axial.plane()
+    assert plane.name == "oblique"
+    assert np.degrees(np.arccos(abs(plane.normal[2]))) == pytest.approx(15.0)
+    assert abs((crosshair - plane.center) @ plane.normal) < 1e-9
+    np.testing.assert_array_equal(w.mpr.state.crosshair, crosshair)
+    # the coronal view draws the tilted plane's line through the crosshair, tilted
+    line = np.cross(coronal.plane().normal, plane.normal)
+    assert abs(line @ coronal.plane().up) > 0.2
+    w.mpr.reset()
+    assert axial.plane().name == "axial"
+
+
+def test_opening_another_volume_gives_its_planes(window: Any, qtbot: Any) -> None:
+    w = window
+    vol = Volume(np.random.default_rng(0).random((24, 20, 16), dtype=np.float32), (1, 1, 2))
+    w.set_session(EditSession(Scene(vol, jitter=False)))
+    assert w.mpr.state.names == ("z", "y", "x")
+    renders = w.mpr.views[0].renders
+    qtbot.waitUntil(lambda: w.mpr.views[0].renders > renders, timeout=30000)
+    assert w.mpr.views[0].image.values.shape[::-1] == w.mpr.views[0].size_px()
+    assert np.nanmax(w.mpr.views[0].image.values) <= 1.0
