@@ -8,12 +8,14 @@ bend, drawn through its wire field), at each image size, the run times in turns:
 * ``slice``: one slice view as the GUI draws it (``render_slice``: the plane through
   the warp chain, read back, coloured with the window), the mean over the three
   orthogonal planes;
+* ``values``: the same three planes' data alone (the GPU draw and the float read-back,
+  no colouring on the CPU);
 * ``slab``: the axial (or z) view as a 10 mm MIP slab.
 
 and, per volume and size, a drag: one mass-spring step of a held element through
 :class:`~voxwarp.editing.session.EditSession` (the model's new state re-uploaded as a
-new warp, whose textures the next draw makes), then either the three slice views or the
-3D frame (without the deformed-space skip maps, as the GUI draws while the model
+new warp, whose textures the next draw makes) alone, then with the three slice views,
+then with the 3D frame (without the deformed-space skip maps, as the GUI draws while the model
 moves), against the undeformed 3D frame. Every case is timed once per round, the cases
 of a volume and size alternating, so the shared machine's load falls on all of them
 alike; the tables give medians over the rounds (one warm-up round, which compiles the
@@ -34,7 +36,7 @@ import numpy as np
 
 from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.core.checks import positive_int
-from voxwarp.core.slice_plane import plane_names
+from voxwarp.core.slice_plane import SlicePlane, plane_names
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements import ElementGrid
 from voxwarp.deform.massspring import MassSpring
@@ -62,6 +64,7 @@ class SliceRow:
     frame_ms: float
     slice_ms: float
     slab_ms: float
+    values_ms: float = 0.0
 
     @property
     def slice_ratio(self) -> float:
@@ -83,6 +86,7 @@ class DragRow:
     frame_ms: float
     drag_slices_ms: float
     drag_frame_ms: float
+    step_ms: float = 0.0
 
 
 @dataclass
@@ -109,27 +113,28 @@ class SlicesReport:
             " scene and size",
             "",
             "| volume | deformation | size | 3D frame | one slice view | slice / 3D |"
+            " of which GPU + read-back |"
             f" {SLAB_MM:g} mm MIP slab | slab / thin slice |",
-            "|---|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in self.rows:
             lines.append(
                 f"| {r.volume} | {r.deformation} | {r.size}² | {r.frame_ms:.0f} ms |"
-                f" {r.slice_ms:.1f} ms | {r.slice_ratio:.3f}x | {r.slab_ms:.1f} ms |"
-                f" {r.slab_ratio:.1f}x |"
+                f" {r.slice_ms:.1f} ms | {r.slice_ratio:.3f}x | {r.values_ms:.1f} ms |"
+                f" {r.slab_ms:.1f} ms | {r.slab_ratio:.1f}x |"
             )
         lines += [
             "",
             "While dragging (mass-spring: one step of a held element, the warp re-made),"
             " against the undeformed 3D frame:",
             "",
-            "| volume | size | step + three slice views | / 3D frame |"
+            "| volume | size | step alone | step + three slice views | / 3D frame |"
             " step + 3D frame | / 3D frame |",
-            "|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|",
         ]
         for d in self.drags:
             lines.append(
-                f"| {d.volume} | {d.size}² | {d.drag_slices_ms:.0f} ms |"
+                f"| {d.volume} | {d.size}² | {d.step_ms:.0f} ms | {d.drag_slices_ms:.0f} ms |"
                 f" {d.drag_slices_ms / d.frame_ms:.2f}x | {d.drag_frame_ms:.0f} ms |"
                 f" {d.drag_frame_ms / d.frame_ms:.2f}x |"
             )
@@ -200,11 +205,29 @@ def _slice_rows(
         cases[f"{d} 3D"] = lambda s=scene: _frame(r, s)
         cases[f"{d} slices"] = lambda s=scene: [r.render_slice(s, p) for p in planes]
         cases[f"{d} slab"] = lambda s=scene: r.render_slice(s, planes[0], slab_mm=SLAB_MM)
+        cases[f"{d} values"] = lambda s=scene: _values(r, s, planes)
     ms = _interleaved(cases, rounds)
     return [
-        SliceRow(vol.name, d, n, ms[f"{d} 3D"], ms[f"{d} slices"] / 3, ms[f"{d} slab"])
+        SliceRow(
+            vol.name,
+            d,
+            n,
+            ms[f"{d} 3D"],
+            ms[f"{d} slices"] / 3,
+            ms[f"{d} slab"],
+            ms[f"{d} values"] / 3,
+        )
         for d in scenes
     ]
+
+
+def _values(r: OffscreenRenderer, scene: Scene, planes: Sequence[str]) -> None:
+    """The three planes' data alone (GPU draw and read-back, no colouring)."""
+    size = r.size
+    with r._current():
+        for p in planes:
+            m = SlicePlane.named(p, scene.deformed_bounds()).pixel_to_world(size)
+            r.renderer.slice_values(scene, m, size)
 
 
 def _drag_row(r: OffscreenRenderer, vol: Volume, scene: Scene, rounds: int) -> DragRow:
@@ -230,13 +253,18 @@ def _drag_row(r: OffscreenRenderer, vol: Volume, scene: Scene, rounds: int) -> D
             session.single_step()
             _frame(r, session.scene)
 
-        cases = {"3D": lambda: _frame(r, scene), "slices": step_slices, "frame": step_frame}
+        cases = {
+            "3D": lambda: _frame(r, scene),
+            "step": session.single_step,
+            "slices": step_slices,
+            "frame": step_frame,
+        }
         r.renderer.warped_skip_maps = "never"  # as the GUI draws while the model moves
         ms = _interleaved(cases, rounds)
     finally:
         r.renderer.warped_skip_maps = "auto"
         session.close()
-    return DragRow(vol.name, r.size[0], ms["3D"], ms["slices"], ms["frame"])
+    return DragRow(vol.name, r.size[0], ms["3D"], ms["slices"], ms["frame"], ms["step"])
 
 
 def bench_slices(
