@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core.orientation import axis_letters
 from voxwarp.core.slice_plane import SlicePlane, plane_names
 from voxwarp.deform.warp import box_corners, rotation_matrix
 from voxwarp.errors import SceneError
@@ -276,16 +277,20 @@ def layer_spacing(points: np.ndarray, normal: np.ndarray) -> float:
 
 
 def readout(point: Sequence[float], space: str, deformed: float, rest: float) -> str:
-    """The position line of a slice view: patient mm with signs (``R``, ``A``, ``S``
-    axes for RAS volumes, else ``x``, ``y``, ``z``) and the deformed and rest values."""
+    """The position line of a slice view: patient mm as Slicer writes it for RAS
+    volumes (the letter of the side, then the distance: ``L 12.2  A 3.0  S 0.0``), signed
+    ``x``, ``y``, ``z`` otherwise, then the deformed and rest values (5 significant
+    digits: the texture's float interpolation is not exact to more)."""
     p = np.asarray(point, dtype=np.float64).reshape(3)
-    axes = ("R", "A", "S") if space == "RAS" else ("x", "y", "z")
-    where = "  ".join(f"{a} {v:+.1f}" for a, v in zip(axes, p, strict=True))
-    return f"{where} mm   deformed {_value(deformed)}   rest {_value(rest)}"
+    if space == "RAS":
+        parts = [f"{axis_letters(a, v)} {abs(v):.1f}" for a, v in enumerate(p)]
+    else:
+        parts = [f"{a} {v:+.1f}" for a, v in zip(("x", "y", "z"), p, strict=True)]
+    return f"{'  '.join(parts)} mm   deformed {_value(deformed)}   rest {_value(rest)}"
 
 
 def _value(v: float) -> str:
-    return "—" if not math.isfinite(v) else f"{v:.6g}"
+    return "—" if not math.isfinite(v) else f"{v:.5g}"
 
 
 def scale_bar_mm(pixel_mm: float, max_px: float) -> float:

@@ -219,7 +219,9 @@ def test_pick_near_plane_ignores_handles_off_the_plane() -> None:
 
 def test_readout_edge_labels_and_scale_bar() -> None:
     text = readout([12.25, -3.0, 0.04], "RAS", 7.0, float("nan"))
-    assert text.startswith("R +12.2  A -3.0  S +0.0 mm")
+    assert text.startswith("R 12.2  P 3.0  S 0.0 mm")
+    assert readout([-1, 2, -3], "RAS", 81.0001, 0).startswith("L 1.0  A 2.0  I 3.0 mm")
+    assert "deformed 81   rest 0" in readout([0, 0, 0], "RAS", 81.0001, 0)
     assert "deformed 7" in text
     assert "rest —" in text
     assert readout([1, 2, 3], "", 1.5, 2.5).startswith("x +1.0  y +2.0  z +3.0 mm")

@@ -248,7 +248,9 @@ def test_readout_shows_the_array_value_under_the_cursor(window: Any, qtbot: Any)
         assert got is not None, text
         assert float(got.group(1)) == value, text
         assert float(got.group(2)) == value, text
-        r, a, s = (float(v) for v in re.findall(r"[RAS] ([+-][\d.]+)", text))
+        sign = {"R": 1, "L": -1, "A": 1, "P": -1, "S": 1, "I": -1}
+        found = re.findall(r"([RLAPSI]) ([\d.]+)", text)
+        r, a, s = (sign[letter] * float(v) for letter, v in found)
         hovered = view.world_at(pos.x(), pos.y())
         np.testing.assert_allclose([r, a, s], hovered, atol=0.051)
 
