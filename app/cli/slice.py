@@ -25,9 +25,6 @@ from voxwarp.errors import InputError
 if TYPE_CHECKING:
     import numpy as np
 
-#: anatomical plane names and the world axis plane they mean on a volume without
-#: a patient orientation
-_AXIS_OF: dict[str, str] = {"axial": "z", "coronal": "y", "sagittal": "x"}
 _NAMES = ("axial", "coronal", "sagittal", "x", "y", "z")
 PLANE_FORM = "axial, coronal, sagittal, x, y, z or X,Y,Z:NX,NY,NZ (a point and a normal, mm)"
 
@@ -186,17 +183,18 @@ def _base_scene(obj: Any, args: argparse.Namespace) -> Any:
 def resolve_plane_name(spec: str | None, space: str) -> str:
     """The plane to draw: ``spec`` (default axial, or z without an orientation); an
     anatomical name on a volume without one becomes its world axis, with a note."""
+    from voxwarp.core.slice_plane import plane_for_space
+
     if spec is None:
         return "axial" if space == "RAS" else "z"
-    if spec in _AXIS_OF and space != "RAS":
-        axis = _AXIS_OF[spec]
+    axis = plane_for_space(spec, space)
+    if axis != spec:
         print(
             f"voxwarp: note: the volume has no patient orientation; --plane {spec} is"
             f" the plane normal to its {axis} axis (--plane {axis})",
             file=sys.stderr,
         )
-        return axis
-    return spec
+    return axis
 
 
 def slice_plane(scene: Any, args: argparse.Namespace) -> tuple[Any, tuple[int, int]]:

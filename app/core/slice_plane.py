@@ -68,6 +68,19 @@ PLANE_NAMES: tuple[str, ...] = (*ANATOMICAL_PLANES, *AXIS_PLANES)
 MAX_SLICE_PIXELS = 4096
 
 
+#: the world axis plane each anatomical plane name means on a volume without a patient
+#: orientation
+AXIS_OF: dict[str, str] = {"axial": "z", "coronal": "y", "sagittal": "x"}
+
+
+def plane_for_space(name: str, space: str) -> str:
+    """The named plane to draw for a volume in ``space``: an anatomical name on a
+    volume without a patient orientation (``space != "RAS"``) becomes the plane normal
+    to its world axis (axial -> z, coronal -> y, sagittal -> x), whose layout does not
+    pretend to know where the patient's left is; other names are kept."""
+    return AXIS_OF.get(name, name) if space != "RAS" else name
+
+
 def plane_names(space: str) -> tuple[str, str, str]:
     """The three orthogonal planes a volume's views show: anatomical for patient RAS
     space (``space == "RAS"``), x/y/z otherwise (order: axial/z, coronal/y, sagittal/x)."""

@@ -44,7 +44,7 @@ from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import mesh_instances_bounds
 from voxwarp.core.modes import xray_reference_length
-from voxwarp.core.slice_plane import SlicePlane
+from voxwarp.core.slice_plane import SlicePlane, plane_for_space
 from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
@@ -1064,8 +1064,9 @@ class OffscreenRenderer:
         ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to world mm.
         """
         w, h = self.size if size is None else (int(size[0]), int(size[1]))
-        if isinstance(plane, str):
-            plane = SlicePlane.named(plane, scene.deformed_bounds(), at=at, aspect=w / h)
+        if isinstance(plane, str):  # axial etc. of a volume without orientation: z etc.
+            name = plane_for_space(plane, scene.volume.space)
+            plane = SlicePlane.named(name, scene.deformed_bounds(), at=at, aspect=w / h)
         elif at is not None:
             plane = plane.at(at)
         matrix = plane.pixel_to_world((w, h))

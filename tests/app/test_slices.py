@@ -186,6 +186,23 @@ def test_outside_is_nan_everywhere(renderer: Any) -> None:
     assert (image.rgba[..., :3] == 0).all()
 
 
+@pytest.mark.parametrize(
+    ("anatomical", "axis"), [("axial", "z"), ("coronal", "y"), ("sagittal", "x")]
+)
+def test_anatomical_names_on_a_volume_without_orientation_mean_its_axes(
+    renderer: Any, anatomical: str, axis: str
+) -> None:
+    vol = _volume()
+    plain = Scene(Volume(vol.data, vol.spacing, vol.origin))  # space "": no orientation
+    named = renderer.render_slice(plain, anatomical, size=(24, 20))
+    assert named.plane.name == axis
+    np.testing.assert_array_equal(
+        named.values, renderer.render_slice(plain, axis, size=(24, 20)).values
+    )
+    oriented = renderer.render_slice(Scene(vol), anatomical, size=(24, 20))
+    assert oriented.plane.name == anatomical
+
+
 def test_linear_halfway_between_voxel_planes_is_their_mean(renderer: Any) -> None:
     vol = _volume()
     plane, size = _voxel_plane(vol, "axial", 3)
