@@ -110,8 +110,9 @@ def add_slice_parser(sub: Any) -> None:
         "--at",
         type=_finite_mm,
         metavar="MM",
-        help="position in mm along the plane's axis (named: world z/y/x; oblique: the"
-        " normal, from the point); default the centre of the deformed volume",
+        help="position in mm along the plane's axis (named: world z/y/x; oblique: a shift"
+        " from the point along the normal, turned so its largest component is positive);"
+        " default the centre of the deformed volume",
     )
     p.add_argument(
         "--slab",
