@@ -517,16 +517,8 @@ class EditSession:
         """The handle nearest ``pixel`` on screen within ``radius`` pixels (ties: the
         one nearest the eye), or None."""
         pts = self.handles()
-        if len(pts) == 0:
-            return None
-        xy = camera.project(pts, size)
-        d = np.hypot(xy[:, 0] - pixel[0], xy[:, 1] - pixel[1])
         depth = (pts - camera.eye) @ -camera.rotation[:, 2]
-        ok = (d <= radius) & (depth > 0) & np.isfinite(d)
-        if not np.any(ok):
-            return None
-        key = np.where(ok, d + 1e-6 * depth, np.inf)
-        return int(np.argmin(key))
+        return _nearest_on_screen(camera, size, pixel, radius, pts, depth, depth > 0)
 
     def pick_near_plane(
         self,
@@ -540,15 +532,8 @@ class EditSession:
         plane through its centre (a slice view's plane: ``SlicePlane.camera()``); ties:
         the one nearest the plane."""
         pts = self.handles()
-        if len(pts) == 0:
-            return None
-        xy = camera.project(pts, size)
-        d = np.hypot(xy[:, 0] - pixel[0], xy[:, 1] - pixel[1])
         off = np.abs((pts - camera.center) @ camera.rotation[:, 2])
-        ok = (d <= radius) & (off <= max_distance) & np.isfinite(d)
-        if not np.any(ok):
-            return None
-        return int(np.argmin(np.where(ok, d + 1e-6 * off, np.inf)))
+        return _nearest_on_screen(camera, size, pixel, radius, pts, off, off <= max_distance)
 
     def pick_rect(
         self,
@@ -1066,3 +1051,24 @@ def warm_up_kernels() -> None:
     lo, hi = np.zeros(3), np.ones(3)
     u = np.stack(np.meshgrid(*(np.linspace(0.0, 1.0, 3),) * 3, indexing="ij"), -1)
     LatticeWarp(TrilinearGrid(u), (lo, hi)).apply(np.full((1, 3), 0.5))
+
+
+def _nearest_on_screen(
+    camera: Camera,
+    size: tuple[int, int],
+    pixel: Sequence[float],
+    radius: float,
+    points: np.ndarray,
+    tie: np.ndarray,
+    allowed: np.ndarray,
+) -> int | None:
+    """Index of the allowed point whose projection lies nearest ``pixel`` within
+    ``radius`` pixels (ties broken by the smaller ``tie``), or None."""
+    if len(points) == 0:
+        return None
+    xy = camera.project(points, size)
+    d = np.hypot(xy[:, 0] - pixel[0], xy[:, 1] - pixel[1])
+    ok = (d <= radius) & allowed & np.isfinite(d)
+    if not np.any(ok):
+        return None
+    return int(np.argmin(np.where(ok, d + 1e-6 * tie, np.inf)))
