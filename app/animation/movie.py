@@ -82,6 +82,7 @@ from voxwarp.animation import FRAME_FORMATS
 from voxwarp.animation.frames import canonical_json, file_record, render_frame_to_file
 from voxwarp.animation.tracks import MAX_FRAMES, FrameStream, stream_animated_scene
 from voxwarp.core.extras import require
+from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import VoxwarpError
 
 #: movie containers accepted for ``-o``
@@ -98,8 +99,6 @@ MANIFEST_VERSION = 2
 MANIFEST_COST_FRACTION = 0.05
 #: H.264 constant rate factor of the movie (18: visually lossless)
 MOVIE_CRF = 18
-#: seconds between progress lines when stderr is not a terminal
-PROGRESS_LINE_S = 5.0
 
 _FRAME_FILE = re.compile(r"^frame_(\d{5})\.(png|exr)$")
 
@@ -584,50 +583,6 @@ class AnimateResult:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-class _Progress:
-    """Frames done of ``total``: a tqdm bar on a terminal, else a line every
-    :data:`PROGRESS_LINE_S` seconds (and at the end); nothing when disabled."""
-
-    def __init__(self, total: int, enabled: bool, unit: str = "frame") -> None:
-        self.total, self.done, self.unit = total, 0, unit
-        self.bar: Any = None
-        self.lines = False
-        self._last = time.monotonic()
-        if not enabled:
-            return
-        tty = getattr(sys.stderr, "isatty", lambda: False)()
-        try:  # the movie extra's; without it, lines as on a non-terminal
-            from tqdm import tqdm
-        except ImportError:
-            tty = False
-        if tty:
-            self.bar = tqdm(
-                total=total, unit=unit, desc=f"{unit}s", file=sys.stderr, dynamic_ncols=True
-            )
-        else:
-            self.lines = True
-
-    def update(self, n: int = 1) -> None:
-        self.done += n
-        if self.bar is not None:
-            self.bar.update(n)
-        elif self.lines and time.monotonic() - self._last >= PROGRESS_LINE_S:
-            self._line()
-
-    def _line(self) -> None:
-        self._last = time.monotonic()
-        pct = 100.0 * self.done / max(self.total, 1)
-        print(f"{self.unit}s: {self.done}/{self.total} ({pct:.0f}%)", file=sys.stderr, flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
-        elif self.lines:
-            self._line()
-            self.lines = False
-
-
 class _Timed:
     """Iterates ``it``, adding the time spent in it to ``self.seconds``."""
 
@@ -799,7 +754,7 @@ def _animate_frames(
             FramesChangedWarning,
             stacklevel=3,
         )
-    bar = _Progress(stream.count, progress)
+    bar = ProgressBar(stream.count, progress)
 
     def todo() -> Iterator[FrameJob]:
         for job in plan_jobs(itertools.chain([first], scenes), folder, header, ext):

@@ -210,8 +210,8 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     """``voxwarp export-volume SCENE.json -o deformed.nii.gz``."""
     import numpy as np
 
-    from voxwarp.animation.movie import _Progress
     from voxwarp.cli.main import load_scene_json
+    from voxwarp.core.progress import ProgressBar
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
     from voxwarp.render.raycaster import OffscreenRenderer
     from voxwarp.render.slices import MAX_SLICE_SIDE
@@ -231,7 +231,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     dtype = vol.dtype if args.dtype == "same" else np.dtype(np.float32)
     outside = vol.value_range[0] if args.outside is None else args.outside
     t0 = time.perf_counter()
-    bar = _Progress(shape[2], args.progress, unit="slice")
+    bar = ProgressBar(shape[2], args.progress, unit="slice")
     try:
         with OffscreenRenderer(16, 16) as r, r._current():
             slices = resampled_slices(
