@@ -76,11 +76,15 @@ def gl_ctx() -> Iterator[Any]:
 
 @pytest.fixture(autouse=True)
 def _gl_error_check(request: pytest.FixtureRequest) -> Iterator[None]:
-    """For tests using ``gl_ctx``: no GL error pending before the test, none left after it."""
+    """For tests using ``gl_ctx``: the session context is the current one (a test that
+    made and dropped a context of its own may have left another current, and a
+    renderer given a context does not switch to it), no GL error pending before the
+    test, none left after it."""
     if "gl_ctx" not in request.fixturenames:
         yield
         return
     ctx = request.getfixturevalue("gl_ctx")
+    ctx.mglo.__enter__()  # eglMakeCurrent(the session context), as OffscreenRenderer does
     before = ctx.error  # reading the flag also clears it
     assert before == "GL_NO_ERROR", f"GL error pending before the test: {before}"
     yield

@@ -22,12 +22,14 @@ class, falling back from X to EGL to OSMesa by itself.
 from __future__ import annotations
 
 import ctypes.util
+import dataclasses
 import importlib
 import os
 import statistics
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -184,7 +186,100 @@ def render_vtk(
         raise ValueError(f"need frames >= 1 and warmup >= 0, got {frames} and {warmup}")
     _check_camera(camera)
     bg = _vec3(background, "background")
+    options = {
+        "spacing": list(spacing3),
+        "origin": list(origin3),
+        "tf_points": [[float(v) for v in p] for p in tf_points],
+        "mapper": mapper,
+        "mode": mode,
+        "sample_distance_mm": float(sample_distance_mm),
+        "opacity_unit_distance_mm": float(opacity_unit_distance_mm),
+        "size": [width, height],
+        "camera": dataclasses.asdict(camera),
+        "frames": int(frames),
+        "warmup": int(warmup),
+        "background": list(bg),
+        "rgba": bool(rgba),
+        "shading": None if shading is None else [float(v) for v in shading],
+    }
+    return _render_in_child(volume_arr, options)
 
+
+def _render_in_child(volume_arr: np.ndarray, options: dict[str, Any]) -> VtkResult:
+    """Run :func:`_render_here` in a child Python process and return its result.
+
+    VTK's EGL render window terminates the EGL display when it is finalized, which
+    destroys every other EGL context of the process on that display (a voxwarp
+    renderer's, a test session's); in its own process it harms nobody. Inputs and
+    outputs travel as ``.npy`` + JSON files in a temporary folder (no pickle)."""
+    import json
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="voxwarp-vtk-") as tmp:
+        folder = Path(tmp)
+        np.save(folder / "volume.npy", volume_arr, allow_pickle=False)
+        (folder / "options.json").write_text(json.dumps(options), encoding="utf-8")
+        proc = subprocess.run(
+            [sys.executable, "-m", "voxwarp.bench.vtk", str(folder)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        result_file = folder / "result.json"
+        if not result_file.is_file():
+            tail = (proc.stderr or proc.stdout or "").strip().splitlines()[-1:] or ["no output"]
+            raise RuntimeError(f"the VTK child process failed (exit {proc.returncode}): {tail[0]}")
+        result = json.loads(result_file.read_text(encoding="utf-8"))
+        if "error" in result:
+            kind = {"ValueError": ValueError, "ImportError": ImportError}.get(
+                result["error"], RuntimeError
+            )
+            raise kind(result["message"])
+        image = np.load(folder / "image.npy", allow_pickle=False)
+    return VtkResult(image=image, **result)
+
+
+def _child_main(folder: str) -> int:
+    """The child side of :func:`_render_in_child`: render, write the result files."""
+    import json
+
+    where = Path(folder)
+    options = json.loads((where / "options.json").read_text(encoding="utf-8"))
+    volume_arr = np.load(where / "volume.npy", allow_pickle=False)
+    options["camera"] = CameraSpec(**options["camera"])
+    try:
+        res = _render_here(volume_arr, **options)
+    except (ValueError, RuntimeError, ImportError) as exc:
+        out = {"error": type(exc).__name__, "message": str(exc)}
+    else:
+        np.save(where / "image.npy", res.image, allow_pickle=False)
+        out = {k: v for k, v in dataclasses.asdict(res).items() if k != "image"}
+    (where / "result.json").write_text(json.dumps(out), encoding="utf-8")
+    return 0
+
+
+def _render_here(
+    volume_arr: np.ndarray,
+    *,
+    spacing: list[float],
+    origin: list[float],
+    tf_points: list[list[float]],
+    mapper: str,
+    mode: str,
+    sample_distance_mm: float,
+    opacity_unit_distance_mm: float,
+    size: list[int],
+    camera: CameraSpec,
+    frames: int,
+    warmup: int,
+    background: list[float],
+    rgba: bool,
+    shading: list[float] | None,
+) -> VtkResult:
+    """:func:`render_vtk` in this process (its arguments checked)."""
+    spacing3, origin3, bg = tuple(spacing), tuple(origin), tuple(background)
+    width, height = size
     _import_vtk_rendering()
     from vtkmodules.vtkCommonCore import vtkOutputWindow, vtkStringOutputWindow
     from vtkmodules.vtkCommonDataModel import vtkPiecewiseFunction
@@ -481,3 +576,7 @@ def _raise_on_vtk_error(log: Any, start: int, mapper: str) -> None:
     text = (log.GetOutput() or "")[start:]
     if "ERROR" in text:
         raise RuntimeError(f"VTK {mapper} mapper failed to render: {text.strip()[:2000]}")
+
+
+if __name__ == "__main__":
+    sys.exit(_child_main(sys.argv[1]))
