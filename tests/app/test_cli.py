@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.run_cli import run_cli
 from voxwarp.cli.main import main
 from voxwarp.core.volume import Volume
 from voxwarp.io.images import read_image
@@ -64,19 +65,6 @@ def volume_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "npz": save_volume(vol, folder / "ball.npz"),
         "nrrd": save_volume(vol, folder / "ball.nrrd"),
     }
-
-
-def run_cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run(
-        [sys.executable, "-m", "voxwarp.cli.main", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=REPO,
-        timeout=timeout,
-        check=False,
-    )
 
 
 def render(*args: str) -> subprocess.CompletedProcess:

@@ -16,9 +16,6 @@ the PNGs are kept in /tmp/voxwarp_cli_slice/ to look at.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 from typing import Any
@@ -26,6 +23,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.run_cli import run_cli
 from voxwarp.cli.main import main
 from voxwarp.io.images import read_image
 from voxwarp.io.volumes import load_volume
@@ -57,19 +55,6 @@ def lps_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     img.set_qform(affine, code=1)
     nib.save(img, str(path))
     return path
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run(
-        [sys.executable, "-m", "voxwarp.cli.main", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=REPO,
-        timeout=120,
-        check=False,
-    )
 
 
 def slice_cli(src: Path, name: str, *args: str) -> tuple[np.ndarray, dict[str, Any], str]:

@@ -28,9 +28,6 @@ Oracles:
 from __future__ import annotations
 
 import errno
-import os
-import subprocess
-import sys
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -39,23 +36,20 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.model_scenes import massspring_push, padded_colin, wire_bend
+from tests.run_cli import run_cli
 from voxwarp.cli.export_volume import export_grid, resampled_slices, slice_matrix
 from voxwarp.cli.main import main
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.volume import Volume
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
 from voxwarp.deform.warp import AffineWarp, Warp
-from voxwarp.deform.wires import Wire, WireDeformer
 from voxwarp.errors import OutputError
-from voxwarp.io.samples import load_sample
 from voxwarp.io.volume_stream import write_volume_slices
 from voxwarp.io.volumes import load_volume, save_volume
 from voxwarp.scene import Scene
 
 sitk = pytest.importorskip("SimpleITK")
 
-REPO = Path(__file__).resolve().parents[2]
 PAD = 9  # voxels of air around colin27 at 4 mm: more than any displacement
 
 
@@ -67,30 +61,15 @@ def _keep_warning_state(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.fixture(scope="module")
 def colin() -> Volume:
-    vol = load_sample("colin27").downsample(2)
-    data = np.pad(np.asarray(vol.data), PAD)
-    origin = np.asarray(vol.origin) - PAD * np.asarray(vol.spacing)
-    return Volume(data, vol.spacing, tuple(origin), name="colin27-padded", space=vol.space)
+    return padded_colin(PAD)
 
 
 def _massspring(vol: Volume) -> list[Warp]:
-    ms = MassSpring(ElementGrid(vol, shape=6))
-    ms.fix([(i, j, 0) for i in range(6) for j in range(6)])
-    top = [(i, j, 4) for i in range(1, 5) for j in range(1, 5)]
-    ms.move(top, np.tile([28.0, 0.0, 0.0], (len(top), 1)))
-    ms.settle(max_steps=2000)
-    return [ms.warp()]
+    return massspring_push(vol, 6, 2000)
 
 
 def _wires(vol: Volume) -> list[Warp]:
-    c = vol.center
-    lo, hi = (b + s * PAD * 4.0 for b, s in zip(vol.bounds, (1, -1), strict=True))
-    ys = np.linspace(lo[1] + 10, hi[1] - 10, 4)
-    base = [[c[0], y, c[2]] for y in ys]
-    bent = [[c[0] + dx, y, c[2]] for y, dx in zip(ys, (0.0, 30.0, 30.0, 0.0), strict=True)]
-    wd = WireDeformer(vol, [Wire(base, bent, radius=45.0, beta=(60.0, 2000.0), ends="rigid")])
-    wd.build()
-    return [wd.warp()]
+    return wire_bend(vol, 30.0, 45.0, PAD)
 
 
 def export_array(
@@ -239,19 +218,6 @@ def test_write_failing_midway_leaves_nothing(tmp_path: Path, suffix: str) -> Non
             out, np.eye(4), (5, 4, 6), "uint8", _slices_then(KeyboardInterrupt()), oriented=False
         )
     assert list(tmp_path.iterdir()) == []
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run(
-        [sys.executable, "-m", "voxwarp.cli.main", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=REPO,
-        timeout=120,
-        check=False,
-    )
 
 
 @pytest.fixture(scope="module")

@@ -34,14 +34,11 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from tests.model_scenes import massspring_push, padded_colin, wire_bend
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.volume import Volume
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
 from voxwarp.deform.warp import AffineWarp, Warp, chain_apply, rotation_matrix
-from voxwarp.deform.wires import Wire, WireDeformer
 from voxwarp.errors import RenderError
-from voxwarp.io.samples import load_sample
 from voxwarp.render.slice_image import SliceImage, colorize
 from voxwarp.scene import Scene
 
@@ -286,35 +283,19 @@ def test_slab_half_outside_averages_the_inside_samples(renderer: Any) -> None:
 
 
 # ---------------------------------------------------------------------- (e) models
-PAD = 6
 
 
 @pytest.fixture(scope="module")
 def colin() -> Volume:
-    vol = load_sample("colin27").downsample(2)
-    data = np.pad(np.asarray(vol.data), PAD)
-    origin = np.asarray(vol.origin) - PAD * np.asarray(vol.spacing)
-    return Volume(data, vol.spacing, tuple(origin), name="colin27-padded", space=vol.space)
+    return padded_colin()
 
 
 def _massspring(vol: Volume) -> list[Warp]:
-    ms = MassSpring(ElementGrid(vol, shape=5))
-    ms.fix([(i, j, 0) for i in range(5) for j in range(5)])
-    top = [(i, j, 4) for i in range(1, 4) for j in range(1, 4)]
-    ms.move(top, np.tile([28.0, 0.0, 0.0], (len(top), 1)))
-    ms.settle(max_steps=1000)
-    return [ms.warp()]
+    return massspring_push(vol, 5, 1000)
 
 
 def _wires(vol: Volume) -> list[Warp]:
-    c = vol.center
-    lo, hi = (b + s * PAD * 4.0 for b, s in zip(vol.bounds, (1, -1), strict=True))
-    ys = np.linspace(lo[1] + 10, hi[1] - 10, 4)
-    base = [[c[0], y, c[2]] for y in ys]
-    bent = [[c[0] + dx, y, c[2]] for y, dx in zip(ys, (0.0, 25.0, 25.0, 0.0), strict=True)]
-    wd = WireDeformer(vol, [Wire(base, bent, radius=40.0, beta=(60.0, 2000.0), ends="rigid")])
-    wd.build()
-    return [wd.warp()]
+    return wire_bend(vol, 25.0, 40.0)
 
 
 @pytest.mark.parametrize("model", ["massspring", "wires"])

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.run_cli import run_cli
 from voxwarp.core.files import (
     atomic_open,
     atomic_write,
@@ -44,7 +45,6 @@ from voxwarp.io.images import write_image
 from voxwarp.io.volumes import load_volume, save_volume
 from voxwarp.scene import Scene
 
-REPO = Path(__file__).resolve().parents[2]
 OLD = b"old content\n"
 
 
@@ -346,17 +346,6 @@ def test_output_error_is_one_line_for_library_text() -> None:
 
 
 # ---------------------------------------------------------------------------- CLI
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run(
-        [sys.executable, "-m", "voxwarp.cli.main", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=REPO,
-        timeout=120,
-        check=False,
-    )
 
 
 def _one_error_line(proc: subprocess.CompletedProcess, dest: Path, cause: str) -> None:
@@ -378,7 +367,7 @@ def test_cli_render_on_full_disk(
     outputs = {opt: str(tmp_path / name) for opt, name in names.items()}
     outputs[option] = str(dest)
     args = [x for opt in ("-o", "--save-scene", "--save-camera") for x in (opt, outputs[opt])]
-    proc = _cli("render", str(tiny_volume), "--size", "32x32", *args)
+    proc = run_cli("render", str(tiny_volume), "--size", "32x32", *args)
     _one_error_line(proc, dest, "disk full (No space left on device")
     assert dest.read_bytes() == OLD
     _check_folder(full_fs, {dest.name, "filler"})
