@@ -34,15 +34,12 @@ def plane_arg(text: str) -> str:
     spec = text.strip().lower()
     if spec in _NAMES:
         return spec
-    point, sep, normal = spec.partition(":")
-    try:
-        p = [float(v) for v in point.split(",")]
-        n = [float(v) for v in normal.split(",")]
-    except ValueError:
-        p = n = []
-    if not sep or len(p) != 3 or len(n) != 3 or not all(map(math.isfinite, p + n)):
+    from voxwarp.core.slice_plane import split_point_normal
+
+    parts = split_point_normal(spec)
+    if parts is None or not all(map(math.isfinite, parts[0] + parts[1])):
         raise argparse.ArgumentTypeError(f"{text!r}: expected {PLANE_FORM}")
-    if not any(n):
+    if not any(parts[1]):
         raise argparse.ArgumentTypeError(f"{text!r}: the normal must not be 0,0,0")
     return spec
 

@@ -324,6 +324,21 @@ def _finite(value: object, what: str) -> float:
     return v
 
 
+def split_point_normal(text: str) -> tuple[list[float], list[float]] | None:
+    """``"X,Y,Z:NX,NY,NZ"`` as (point, normal) lists of 3 numbers, or None when the
+    text is not of that form (the numbers may be infinite or the normal zero: the
+    callers check)."""
+    point_text, sep, normal_text = str(text).partition(":")
+    try:
+        point = [float(v) for v in point_text.split(",")]
+        normal = [float(v) for v in normal_text.split(",")]
+    except ValueError:
+        return None
+    if not sep or len(point) != 3 or len(normal) != 3:
+        return None
+    return point, normal
+
+
 def parse_plane(
     text: str,
     bounds: tuple[Sequence[float], Sequence[float]],
@@ -336,18 +351,13 @@ def parse_plane(
     spec = str(text).strip().lower()
     if spec in _AXES:
         return SlicePlane.named(spec, bounds, at=at, aspect=aspect)
-    point_text, sep, normal_text = spec.partition(":")
-    try:
-        point = [float(v) for v in point_text.split(",")]
-        normal = [float(v) for v in normal_text.split(",")]
-    except ValueError:
-        point = normal = []
-    if not sep or len(point) != 3 or len(normal) != 3:
+    parts = split_point_normal(spec)
+    if parts is None:
         raise SceneError(
             f"plane {text!r} is neither a plane name ({', '.join(PLANE_NAMES)}) nor"
             " POINT:NORMAL such as 0,0,10:0,0.3,1 (world mm)"
         )
-    plane = SlicePlane.oblique(point, normal, bounds, aspect)
+    plane = SlicePlane.oblique(*parts, bounds, aspect)
     if at is not None:
         plane = plane.moved(at)
     return plane
