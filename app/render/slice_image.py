@@ -92,10 +92,14 @@ class SliceImage:
 
 
 def _grey(values: np.ndarray, window: tuple[float, float]) -> np.ndarray:
+    """(H, W) float32 grey in [0, 1] of ``values`` through ``window``; NaN is black."""
     level, width = (float(v) for v in window)
     if not width > 0:
         raise RenderError(f"window width must be positive; got {width}")
-    return np.clip((values - (level - width / 2)) / width, 0.0, 1.0)
+    g = np.asarray(values, dtype=np.float32) - np.float32(level - width / 2)
+    g *= np.float32(1.0 / width)
+    np.clip(g, 0.0, 1.0, out=g)
+    return np.nan_to_num(g, copy=False, nan=0.0)
 
 
 def colour_values(
@@ -104,19 +108,19 @@ def colour_values(
     window: tuple[float, float] = (0.5, 1.0),
     tf: TransferFunction | None = None,
 ) -> np.ndarray:
-    """(H, W) values -> (H, W, 3) float RGB in [0, 1]; NaN (nothing) is black."""
+    """(H, W) values -> colours in [0, 1]: (H, W) grey for ``look="window"``, (H, W, 3)
+    RGB for ``"tf"``; NaN (nothing) is black."""
+    if look == "window":
+        return _grey(values, window)
+    if look != "tf":
+        raise RenderError(f"look must be one of {', '.join(LOOKS)}; got {look!r}")
+    if tf is None:
+        raise RenderError("look 'tf' needs a transfer function")
     inside = np.isfinite(values)
     v = np.where(inside, values, 0.0)
-    if look == "window":
-        rgb = np.repeat(_grey(v, window)[..., None], 3, axis=2)
-    elif look == "tf":
-        if tf is None:
-            raise RenderError("look 'tf' needs a transfer function")
-        table = tf(v.reshape(-1)).reshape(*v.shape, 4)
-        top = float(np.max(np.asarray(tf.points)[:, 4])) or 1.0
-        rgb = table[..., :3] * np.clip(table[..., 3:4] / top, 0.0, 1.0)
-    else:
-        raise RenderError(f"look must be one of {', '.join(LOOKS)}; got {look!r}")
+    table = tf(v.reshape(-1)).reshape(*v.shape, 4)
+    top = float(np.max(np.asarray(tf.points)[:, 4])) or 1.0
+    rgb = table[..., :3] * np.clip(table[..., 3:4] / top, 0.0, 1.0)
     return np.where(inside[..., None], rgb, 0.0)
 
 
@@ -133,21 +137,23 @@ def colorize(
     ``look`` and ``show``); also kept as ``image.rgba``."""
     options: dict[str, Any] = {"look": look, "window": window, "tf": tf}
     if show == "deformed":
-        rgb = colour_values(image.values, **options)
+        colours = colour_values(image.values, **options)
     elif show == "rest":
-        rgb = colour_values(image.rest, **options)
+        colours = colour_values(image.rest, **options)
     elif show == "checkerboard":
         h, w = image.values.shape
         k = max(int(checker_px), 1)
         tiles = ((np.arange(h)[:, None] // k) + (np.arange(w)[None, :] // k)) % 2 == 1
         rest = colour_values(image.rest, **options)
-        rgb = np.where(tiles[..., None], rest, colour_values(image.values, **options))
+        deformed = colour_values(image.values, **options)
+        colours = np.where(tiles if rest.ndim == 2 else tiles[..., None], rest, deformed)
     elif show == "difference":
-        rgb = _difference(image, window)
+        colours = _difference(image, window)
     else:
         raise RenderError(f"show must be one of {', '.join(SHOWS)}; got {show!r}")
-    out = np.empty((*rgb.shape[:2], 4), np.uint8)
-    out[..., :3] = np.round(rgb * 255)
+    out = np.empty((*colours.shape[:2], 4), np.uint8)
+    u8 = (np.asarray(colours, dtype=np.float32) * 255 + 0.5).astype(np.uint8)
+    out[..., :3] = u8[..., None] if u8.ndim == 2 else u8
     out[..., 3] = 255
     image.rgba = out
     return out
@@ -157,7 +163,7 @@ def _difference(image: SliceImage, window: tuple[float, float]) -> np.ndarray:
     """Deformed - rest over a dim grey rest image: red up, blue down, full at one width."""
     width = float(window[1])
     rest = np.where(np.isfinite(image.rest), image.rest, np.nan)
-    under = 0.35 * colour_values(rest, "window", window)
+    under = np.repeat(0.35 * colour_values(rest, "window", window)[..., None], 3, axis=2)
     a = np.where(np.isfinite(image.values), image.values, window[0] - width / 2)
     b = np.where(np.isfinite(image.rest), image.rest, window[0] - width / 2)
     t = np.clip((a - b) / width, -1.0, 1.0)
