@@ -98,6 +98,13 @@ def _check_json_input(path: Path) -> None:
         raise InputError(f"{path} is not valid JSON: {json_error_text(exc)}") from exc
     if not isinstance(d, dict) or "format" in d or "dims" in d:
         return  # a scene, another voxwarp file or a raw sidecar: their readers check it
+    kind = "wire" if "wires" in d else "lattice" if d.get("type") == "lattice" else ""
+    if kind:
+        raise InputError(
+            f"{path} is a {kind} file, not a volume or a scene; deform a volume with it:"
+            f" voxwarp render INPUT --{kind if kind == 'lattice' else 'wires'} {path}"
+            " (add --save-scene SCENE.json to keep the result as a scene)"
+        )
     hints = [k for k in _SCENE_HINT_KEYS if k in d]
     if hints:
         raise InputError(

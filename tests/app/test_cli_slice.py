@@ -246,6 +246,13 @@ def test_missing_input_and_bad_format(
 ) -> None:
     _refused(capsys, [str(tmp_path / "nope.nii.gz")], tmp_path / "s.png", "nope.nii.gz")
     _refused(capsys, [str(lps_file)], tmp_path / "s.xyz", "cannot write .xyz")
+    # a wire or lattice file given as INPUT: say what it is and how to use it
+    for name, option in (
+        ("fish_spine_wires.json", "--wires"),
+        ("fish_lattice_bend.json", "--lattice"),
+    ):
+        path = str(REPO / "sample_volumes" / name)
+        _refused(capsys, [path], tmp_path / "s.png", f"voxwarp render INPUT {option} {path}")
 
 
 def test_refusals_after_loading(gl_ctx: Any, lps_file: Path, tmp_path: Path) -> None:
