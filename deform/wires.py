@@ -1992,22 +1992,9 @@ def _sample_t_float(t_field: np.ndarray, g: np.ndarray) -> np.ndarray:
 def _sample_t_packed(code: np.ndarray, g: np.ndarray, wire: np.ndarray) -> np.ndarray:
     """t at g from the 8 packed neighbours of the same wire (vacated ones excluded),
     renormalised; the nearest voxel's integer t where none qualifies (as the shader)."""
-    shape = np.asarray(code.shape)
-    gc = np.clip(g - 0.5, 0.0, shape - 1.0)
-    i0 = np.floor(gc).astype(np.int64)
-    f = gc - i0
-    ts = np.zeros(len(g))
-    ws = np.zeros(len(g))
-    for c in _CORNERS:
-        idx = np.minimum(i0 + c, shape - 1)
-        v = code[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.int64)
-        ok = (((v >> 8) & 0x7F) == wire) & (v != PACKED_VACATED)
-        w = np.prod(np.where(c == 1, f, 1.0 - f), axis=1) * ok
-        ts += w * (v & 0xFF)
-        ws += w
-    near = np.floor(g).astype(np.int64)
-    own = code[near[:, 0], near[:, 1], near[:, 2]].astype(np.int64) & 0xFF
-    return np.where(ws > 0, ts / np.where(ws > 0, ws, 1.0), own)
+    return _sample_t_same_wire(
+        code, g, wire, lambda v: (v >> 8) & 0x7F, lambda v: v & 0xFF, PACKED_VACATED
+    )
 
 
 def _sample_t_paper(
@@ -2017,6 +2004,22 @@ def _sample_t_paper(
     ones excluded), each turned into its table coordinate before the weighted mean (so
     neighbours in different segments mix their u, not their per-segment t); the
     nearest voxel's own value where none qualifies (as the shader)."""
+    return _sample_t_same_wire(
+        code, g, wire, lambda v: (v >> 11) & 0xF, lambda v: _paper_t(v, starts), PAPER_VACATED
+    )
+
+
+def _sample_t_same_wire(
+    code: np.ndarray,
+    g: np.ndarray,
+    wire: np.ndarray,
+    wire_of: Callable[[np.ndarray], np.ndarray],
+    t_of: Callable[[np.ndarray], np.ndarray],
+    vacated: int,
+) -> np.ndarray:
+    """The trilinear mean of ``t_of(code)`` at field points ``g`` over the neighbours
+    whose ``wire_of(code)`` is ``wire`` and which are not ``vacated``, renormalised by
+    their weights; the nearest voxel's own t where none qualifies."""
     shape = np.asarray(code.shape)
     gc = np.clip(g - 0.5, 0.0, shape - 1.0)
     i0 = np.floor(gc).astype(np.int64)
@@ -2026,12 +2029,12 @@ def _sample_t_paper(
     for c in _CORNERS:
         idx = np.minimum(i0 + c, shape - 1)
         v = code[idx[:, 0], idx[:, 1], idx[:, 2]].astype(np.int64)
-        ok = (((v >> 11) & 0xF) == wire) & (v != PAPER_VACATED)
+        ok = (wire_of(v) == wire) & (v != vacated)
         w = np.prod(np.where(c == 1, f, 1.0 - f), axis=1) * ok
-        ts += w * _paper_t(v, starts)
+        ts += w * t_of(v)
         ws += w
     near = np.floor(g).astype(np.int64)
-    own = _paper_t(code[near[:, 0], near[:, 1], near[:, 2]], starts)
+    own = t_of(code[near[:, 0], near[:, 1], near[:, 2]].astype(np.int64))
     return np.where(ws > 0, ts / np.where(ws > 0, ws, 1.0), own)
 
 
