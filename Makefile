@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: setup run test lint format bench clean
+.PHONY: setup run test lint docs format bench clean
 
 $(STAMP): pyproject.toml scripts/install-system-deps.sh
 	@bash scripts/install-system-deps.sh
@@ -21,14 +21,19 @@ setup: $(STAMP)
 run: $(STAMP)
 	$(VENV)/bin/voxwarp gui
 
-## lint + the whole test suite, headless (GL tests fail, not skip, without an EGL context)
-test: $(STAMP) lint
+## lint + the documentation site + the whole test suite, headless (GL tests fail, not skip,
+## without an EGL context; the teaching notebooks are executed, the napari manifest validated)
+test: $(STAMP) lint docs
 	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 	$(PY) scripts/lint_imports.py
+
+## the documentation site into site/ (warnings are errors); `mkdocs serve` to browse it
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict --quiet -d site
 
 format: $(STAMP)
 	$(VENV)/bin/ruff check --fix .
@@ -43,4 +48,4 @@ bench: $(BENCH_STAMP)
 	$(VENV)/bin/voxwarp bench render --markdown docs/bench-render.md
 
 clean:
-	rm -rf out .pytest_cache tests/_failures
+	rm -rf out site .pytest_cache tests/_failures

@@ -1,0 +1,1 @@
+"""The napari plugin: reader, sample data and dock widget (``pip install voxwarp[napari]``)."""

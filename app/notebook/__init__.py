@@ -1,0 +1,1 @@
+"""Jupyter support: the interactive :class:`Viewer` widget (``pip install voxwarp[notebook]``)."""
