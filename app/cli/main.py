@@ -662,12 +662,9 @@ def _add_volume_args(p: argparse.ArgumentParser) -> None:
 
 
 def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
-    from voxwarp.core.transfer_function import TransferFunction
     from voxwarp.scene import Scene
 
-    tf: Any = None
-    if args.tf is not None:
-        tf = TransferFunction.load(args.tf) if args.tf.endswith(".json") else args.tf
+    tf = _tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
     if isinstance(obj, Scene):
         changes: dict[str, Any] = {}
         if tf is not None:
@@ -699,12 +696,15 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
     return Scene(obj, **kw)
 
 
-def _tf_arg(tf: str | None) -> Any:
-    from voxwarp.core.transfer_function import TransferFunction
+def _tf_arg(tf: str | None, volume: Any = None) -> Any:
+    """``--tf`` (the one resolver): None, a preset or matplotlib colour-map name (kept as
+    a name, the scene resolves it for its mode), or a file, ``FILE:NAME`` too (voxwarp,
+    ParaView or Slicer; read now against ``volume``)."""
+    from voxwarp.core.transfer_function import TransferFunction, file_spec
 
-    if tf is not None and tf.endswith(".json"):
-        return TransferFunction.load(tf)
-    return tf
+    if tf is None or file_spec(tf) is None:
+        return tf
+    return TransferFunction.load(tf, volume)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -973,7 +973,7 @@ def _demo_volume(args: argparse.Namespace) -> int:
     obj = load_input(spec)
     vol = obj.volume if isinstance(obj, Scene) else obj
     out = Path(args.out)
-    tf = _tf_arg(args.tf)
+    tf = _tf_arg(args.tf, vol)
     if tf is None:
         # samples: a function tuned to them; files: the modality's default (None)
         tf = suggested_transfer_function(vol.name) if spec.startswith("sample:") else None
@@ -1050,11 +1050,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     path = args.input_file or args.input
     if path:
         obj = load_input(path)
-        cases = [RenderCase("", getattr(obj, "volume", obj), _tf_arg(args.tf), ("dvr", "mip"))]
+        vol = getattr(obj, "volume", obj)
+        cases = [RenderCase("", vol, _tf_arg(args.tf, vol), ("dvr", "mip"))]
     else:
         cases = standard_cases()
         if args.tf:  # applies to the sparse case only: the dense ones define their TF
-            cases[0].transfer_function = _tf_arg(args.tf)
+            cases[0].transfer_function = _tf_arg(args.tf, cases[0].volume)
     reports = bench_render_cases(
         cases,
         size=args.size,
@@ -1467,7 +1468,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pr.add_argument("--projection", choices=("perspective", "orthographic"))
     pr.add_argument("--view", type=_view, help=ropt.VIEW_HELP)
     pr.add_argument("--size", type=_size, default=(512, 512), help="WxH pixels")
-    pr.add_argument("--tf", help="preset name or transfer function JSON file")
+    pr.add_argument("--tf", help=TF_HELP)
     pr.add_argument("--step", type=float, help="sample distance in voxels (default 1)")
     pr.add_argument("--window", nargs=2, type=float, metavar=("LEVEL", "WIDTH"))
     pr.add_argument("--iso", dest="iso_value", type=float, help="isovalue for --mode iso")
@@ -1516,7 +1517,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     )
     pd.add_argument("--out", default="out", help="output folder (default out)")
     pd.add_argument("--size", type=_size, default=(512, 512), help="INPUT: image WxH")
-    pd.add_argument("--tf", help="INPUT: preset or tf.json (default: suits the sample)")
+    pd.add_argument("--tf", help=TF_HELP + " (default: suits the sample)")
     pd.add_argument(
         "--view", type=_view, help="INPUT: view (default anterior for oriented volumes, else -y)"
     )
@@ -1568,7 +1569,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     pbr.add_argument("--warmup", type=int, default=2)
     pbr.add_argument("--step", type=float, default=1.0)
     pbr.add_argument(
-        "--tf", help="preset or tf.json (default: suits the bench volume; standard run: sparse)"
+        "--tf", help=TF_HELP + " (default: suits the bench volume; standard run: sparse)"
     )
     pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
     pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
@@ -1703,6 +1704,12 @@ def wants_bench(argv: Sequence[str] | None) -> bool:
     args = list(sys.argv[1:] if argv is None else argv)
     return bool(args) and args[0] == "bench"
 
+
+#: ``--tf`` help, the same wherever it is accepted (one resolver: :func:`_tf_arg`).
+TF_HELP = (
+    "preset (ct-bone, mri, ...), matplotlib colour map (viridis, ...), or a file: voxwarp"
+    " or ParaView colour-map JSON, Slicer presets.xml or .vp; FILE:NAME picks one map"
+)
 
 #: options whose value may start with "-" (a negative number or "-y"): joined as --opt=value
 _NEGATIVE_VALUE_OPTIONS = (

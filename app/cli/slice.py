@@ -139,7 +139,7 @@ def add_slice_parser(sub: Any) -> None:
         metavar="LEVEL,WIDTH",
         help="grey window in data units (default the scene's or the volume's)",
     )
-    p.add_argument("--tf", help="preset name or transfer function JSON file (--look tf)")
+    p.add_argument("--tf", help=m.TF_HELP + " (--look tf)")
     p.add_argument(
         "--show",
         choices=("deformed", "rest", "checkerboard", "difference"),
@@ -172,7 +172,7 @@ def _base_scene(obj: Any, args: argparse.Namespace) -> Any:
     from voxwarp.cli.main import _tf_arg
     from voxwarp.scene import Scene
 
-    tf = _tf_arg(args.tf)
+    tf = _tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
     if isinstance(obj, Scene):
         return obj if tf is None else obj.copy(transfer_function=tf)
     return Scene(obj, transfer_function=tf)

@@ -14,10 +14,25 @@ On a volume whose values are not HU (:func:`voxwarp.core.modality.is_hu`), they
 are rescaled from [-1000, 2000] HU onto the volume's 0.5-99.5 percentile range, with a
 warning. ``mri``, ``grayscale`` and ``hot`` are relative: defined on [0, 1] and mapped
 onto the volume's percentile range.
+
+Any other name is looked up as a **matplotlib colour map** (``viridis``, ``magma_r``...;
+needs matplotlib, the ``teach`` extra): its colours (all of a listed map of at most
+:data:`~voxwarp.core.tf_formats.COLORMAP_SAMPLES` colours, else that many samples) over
+the same percentile range, with opacity rising linearly from 0 to
+:data:`~voxwarp.core.tf_formats.RAMP_OPACITY`. Preset names win (``hot`` is voxwarp's).
+
+Files
+-----
+:meth:`TransferFunction.load` reads voxwarp's JSON, ParaView colour-map JSON and 3D Slicer
+``presets.xml`` / ``.vp`` files (see :mod:`voxwarp.core.tf_formats` and
+docs/transfer-functions.md for the conversion rules); ``FILE:NAME`` picks one map of a
+file holding several.
 """
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -25,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core import tf_formats
 from voxwarp.core.volume import Volume
 from voxwarp.errors import SceneError
 
@@ -149,10 +165,10 @@ class TransferFunction:
             lo, hi = _percentile_range(volume) if volume is not None else (0.0, 1.0)
             pts = [(lo + v * (hi - lo), r, g, b, a) for v, r, g, b, a in _RELATIVE_PRESETS[name]]
             return cls(pts, name=name)
-        raise SceneError(
-            f"unknown transfer function preset {name!r}; presets: {', '.join(PRESETS)},"
-            " or give a list of (value, r, g, b, a) control points"
-        )
+        tf = _colormap(name, volume)
+        if tf is not None:
+            return tf
+        raise SceneError(_unknown_name(name))
 
     @classmethod
     def coerce(cls, tf: Any, volume: Volume | None = None) -> TransferFunction:
@@ -263,22 +279,129 @@ class TransferFunction:
         raise SceneError("a transfer function entry needs 'points' or 'preset'")
 
     @classmethod
-    def load(cls, path: str) -> TransferFunction:
-        """Read a transfer function JSON file (``to_dict`` form or a bare list of points)."""
-        import json
+    def load(
+        cls, path: str, volume: Volume | None = None, name: str | None = None
+    ) -> TransferFunction:
+        """Read a transfer function file: voxwarp JSON (``to_dict`` form or a bare list of
+        points), ParaView colour-map JSON, or a Slicer ``presets.xml`` / ``.vp``.
 
-        try:
-            with open(path, encoding="utf-8") as fh:
-                d = json.load(fh)
-        except FileNotFoundError as exc:
-            raise SceneError(f"no such transfer function file: {path}") from exc
-        except (OSError, ValueError) as exc:  # ValueError: bad JSON or not UTF-8
-            raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
+        ``path`` may end in ``:NAME`` (an existing file, then a map name) to pick a map of
+        a file holding several, as ``name`` does; without either the first is taken, with
+        a warning naming the others. ``volume`` resolves ``{"preset": ...}``, stretches
+        normalised ParaView maps onto its default window and converts Slicer opacities to
+        its reference sample distance (see :func:`voxwarp.core.tf_formats.to_control_points`).
+        """
+        spec = file_spec(path)
+        if spec is not None:
+            path, name = spec[0], name if name is not None else spec[1]
+        text = tf_formats.read_text(path)
+        if tf_formats.file_kind(text, path) == "json":
+            doc = _json(text, path)
+            if not tf_formats.is_paraview(doc):
+                return cls._from_voxwarp_json(doc, path, volume)
+        maps = tf_formats.read_maps(text, path)
+        if name is None and len(maps) > 1:
+            warnings.warn(
+                f"{path} holds {len(maps)} maps; using the first, {maps[0].name!r} (pick one"
+                f" with {path}:NAME; names: {', '.join(m.name for m in maps[:12])}"
+                + (" ...)" if len(maps) > 12 else ")"),
+                stacklevel=2,
+            )
+        return cls._from_imported(tf_formats.pick(maps, name, path), volume)
+
+    @classmethod
+    def _from_voxwarp_json(cls, d: Any, path: str, volume: Volume | None) -> TransferFunction:
         if isinstance(d, list):
             return cls(d)
         if not isinstance(d, Mapping):
             raise SceneError(f"{path}: expected a JSON object or list of control points")
-        return cls.from_dict(d)
+        return cls.from_dict(d, volume)
+
+    @classmethod
+    def _from_imported(cls, m: tf_formats.ImportedMap, volume: Volume | None) -> TransferFunction:
+        window = _percentile_range(volume) if volume is not None else None
+        ref = float(min(volume.spacing)) if volume is not None else None
+        pts, _mapped = tf_formats.to_control_points(m, window, ref)
+        for note in m.notes:
+            warnings.warn(f"{m.kind} map {m.name!r}: {note}", stacklevel=3)
+        return cls(pts, name=m.name)
+
+    @staticmethod
+    def map_names(path: str) -> list[str]:
+        """Names of the maps in a ParaView / Slicer file; ``[]`` for voxwarp JSON."""
+        text = tf_formats.read_text(path)
+        if tf_formats.file_kind(text, path) == "json":
+            if not tf_formats.is_paraview(_json(text, path)):
+                return []
+        return [m.name for m in tf_formats.read_maps(text, path)]
+
+
+#: File suffixes ``--tf`` treats as a file even before it exists (so a typo says so).
+TF_FILE_SUFFIXES = (".json", ".xml", ".vp")
+
+
+def file_spec(spec: str) -> tuple[str, str | None] | None:
+    """``(path, map name or None)`` when ``spec`` names a file, else None (a name).
+
+    A file is: an existing path; ``EXISTING:NAME``; or a path ending in
+    :data:`TF_FILE_SUFFIXES` (``FILE.json:NAME`` too). Preset names are never files.
+    """
+    if spec in PRESETS or not spec:
+        return None
+    if os.path.exists(spec):
+        return spec, None
+    head, sep, tail = spec.rpartition(":")
+    if sep and head and (os.path.exists(head) or head.lower().endswith(TF_FILE_SUFFIXES)):
+        return head, tail or None
+    if spec.lower().endswith(TF_FILE_SUFFIXES) or os.sep in spec or "/" in spec:
+        return spec, None
+    return None
+
+
+def _json(text: str, path: str) -> Any:
+    import json
+
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
+
+
+def _colormap(name: str, volume: Volume | None) -> TransferFunction | None:
+    """matplotlib colour map ``name`` as a ramp over the volume's window, None if unknown."""
+    if not _have_matplotlib():
+        return None
+    colours = tf_formats.colormap_colours(name)
+    if colours is None:
+        return None
+    m = tf_formats.ImportedMap(name, colours, None, "matplotlib")
+    window = _percentile_range(volume) if volume is not None else (0.0, 1.0)
+    pts, _ = tf_formats.to_control_points(m, window)
+    return TransferFunction(pts, name=name)
+
+
+def _have_matplotlib() -> bool:
+    """Whether matplotlib (of the ``teach`` extra) can be imported."""
+    return importlib.util.find_spec("matplotlib") is not None
+
+
+def _unknown_name(name: str) -> str:
+    import difflib
+
+    have_mpl = _have_matplotlib()
+    known = list(PRESETS) + (tf_formats.colormap_names() if have_mpl else [])
+    close = difflib.get_close_matches(name, known, n=3)
+    hint = f" (did you mean {', '.join(close)}?)" if close else ""
+    maps = (
+        "a matplotlib colour-map name (viridis, magma, ...)"
+        if have_mpl
+        else "a matplotlib colour-map name (needs matplotlib: pip install 'voxwarp[teach]')"
+    )
+    return (
+        f"unknown transfer function preset {name!r}{hint}; presets: {', '.join(PRESETS)};"
+        f" or {maps}, a transfer function file (.json, ParaView .json, Slicer .xml/.vp),"
+        " or a list of (value, r, g, b, a) control points"
+    )
 
 
 def _looks_like_hu(volume: Volume) -> bool:

@@ -201,7 +201,7 @@ def test_bad_render_options_are_argparse_errors(
 @pytest.mark.parametrize(
     ("args", "needles"),
     [
-        (["--tf", "rainbow"], ("rainbow", "ct-bone")),
+        (["--tf", "rainbowz"], ("rainbowz", "ct-bone")),
         (["--step", "-1"], ("step",)),
         (["--step", "1000"], ("step", "100")),
         pytest.param(["--step", "0"], ("step",)),
@@ -254,8 +254,8 @@ def test_no_command_is_an_argparse_error(capsys: pytest.CaptureFixture) -> None:
 def test_negative_views_can_follow_the_view_option(
     volume_files: dict[str, Path], tmp_path: Path, view: str
 ) -> None:
-    # --tf rainbow makes the command fail cleanly after parsing, before any rendering
-    rc = main(["render", str(volume_files["npz"]), "--view", view, "--tf", "rainbow"])
+    # --tf rainbowz (neither preset nor colour map) fails cleanly before any rendering
+    rc = main(["render", str(volume_files["npz"]), "--view", view, "--tf", "rainbowz"])
     assert rc == 2
 
 

@@ -131,7 +131,7 @@ def assert_same_scene(a: Scene, b: Scene) -> None:
         ({"zoom": -2.0}, ("zoom", "positive")),
         ({"fov": 0}, ("fov", "positive")),
         ({"fov": 179.5}, ("fov", "179")),
-        ({"transfer_function": "rainbow"}, ("ct-bone", "mri", "control points")),
+        ({"transfer_function": "rainbowz"}, ("ct-bone", "mri", "control points")),
     ],
 )
 def test_bad_argument_raises_scene_error_naming_allowed_values(

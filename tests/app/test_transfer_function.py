@@ -103,7 +103,7 @@ def test_relative_preset_maps_onto_the_percentile_range(name: str) -> None:
 
 def test_unknown_preset_lists_the_presets() -> None:
     with pytest.raises(SceneError) as info:
-        TransferFunction.preset("rainbow")
+        TransferFunction.preset("rainbowz")  # neither preset nor colour map
     for name in PRESETS:
         assert name in str(info.value)
 

@@ -1,0 +1,415 @@
+"""Transfer functions from other tools: ParaView colour maps, 3D Slicer volume properties,
+matplotlib colour maps.
+
+Pure parsing: text (or a colour-map name) -> an :class:`ImportedMap` of colour and
+opacity control points, still in the file's own units. Turning one into voxwarp control
+points against a volume (normalised ranges, opacity unit distance) is
+:func:`to_control_points`; :meth:`voxwarp.core.transfer_function.TransferFunction.load`
+and ``.preset`` call these. Every problem is a one-line
+:class:`~voxwarp.errors.SceneError`.
+
+Formats
+-------
+* **ParaView colour map JSON** (Color Map Editor -> "Save to preset" -> Export, and
+  ParaView's own ``Remoting/Views/ColorMaps.json``): a JSON list of objects with
+  ``Name``, ``RGBPoints`` ``[x, r, g, b, ...]``, optional ``Points``
+  ``[x, opacity, midpoint, sharpness, ...]``, ``ColorSpace``, ``NanColor``, ``Creator``...
+  Categorical maps (``IndexedColors``) are rejected.
+* **3D Slicer ``presets.xml``** (``<VolumeProperty name=... scalarOpacity="N x o ..."
+  colorTransfer="N x r g b ..." .../>`` elements) and the **``.vp``** file Slicer saves
+  (lines: interpolation, shade, diffuse, ambient, specular, specular power, scalar
+  opacity, gradient opacity, colour transfer; the last three as ``N x ...``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from voxwarp.errors import SceneError
+
+#: Largest transfer-function file read (bytes); ParaView's full preset list is ~2 MB.
+MAX_FILE_BYTES = 32 * 1024 * 1024
+#: Control points sampled from a continuous matplotlib colour map (a ListedColormap
+#: with at most this many colours gives all of them).
+COLORMAP_SAMPLES = 32
+#: Opacity at the top of the ramp that colour-only maps get (0 at the bottom, linear).
+RAMP_OPACITY = 0.5
+#: VTK's default scalar opacity unit distance (world units, mm), which Slicer keeps.
+SLICER_UNIT_DISTANCE_MM = 1.0
+
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+
+
+@dataclass(frozen=True)
+class ImportedMap:
+    """One colour/opacity map read from a file, in the file's units.
+
+    ``colour`` is ``(n, 4)``: x, r, g, b; ``opacity`` ``(m, 2)``: x, opacity, or None
+    (colour only: the default ramp applies). ``kind`` is ``"paraview"``, ``"slicer"``
+    or ``"matplotlib"``; ``unit_distance`` the length (mm) an opacity refers to, None
+    when the tool ties it to the data (voxwarp's reference sample is used as is).
+    """
+
+    name: str
+    colour: np.ndarray
+    opacity: np.ndarray | None
+    kind: str
+    unit_distance: float | None = None
+    notes: tuple[str, ...] = ()
+
+
+# ---------------------------------------------------------------------------- reading
+def read_text(path: str) -> str:
+    """The UTF-8 text of ``path`` (at most :data:`MAX_FILE_BYTES`), one-line errors."""
+    cannot = f"cannot read transfer function file {path}"
+    if os.path.isdir(path):
+        raise SceneError(f"{cannot}: it is a folder")
+    try:
+        size = os.path.getsize(path)
+        if size > MAX_FILE_BYTES:
+            raise SceneError(
+                f"{cannot}: {size / 1e6:.0f} MB; a transfer function file is at most"
+                f" {MAX_FILE_BYTES // (1024 * 1024)} MB"
+            )
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)
+    except FileNotFoundError as exc:
+        raise SceneError(f"no such transfer function file: {path}") from exc
+    except OSError as exc:
+        raise SceneError(f"{cannot}: {exc.strerror}") from exc
+    if len(raw) > MAX_FILE_BYTES:
+        raise SceneError(f"{cannot}: it is larger than {MAX_FILE_BYTES} bytes")
+    if b"\0" in raw:
+        raise SceneError(f"{cannot}: a binary file, not JSON, XML or .vp text")
+    if not raw.strip():
+        raise SceneError(f"{cannot}: it is empty")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{cannot}: not UTF-8 text (byte {exc.start})") from exc
+
+
+def file_kind(text: str, path: str = "") -> str:
+    """``"json"``, ``"slicer-xml"`` or ``"slicer-vp"``: by suffix (.json, .xml, .vp),
+    else by content."""
+    by_suffix = {".json": "json", ".xml": "slicer-xml", ".vp": "slicer-vp"}
+    kind = by_suffix.get(os.path.splitext(path)[1].lower())
+    if kind:
+        return kind
+    head = text.lstrip()[:1]
+    if head in "[{" and head:
+        return "json"
+    if head == "<":
+        return "slicer-xml"
+    if head and (head.isdigit() or head in "+-."):
+        return "slicer-vp"
+    raise SceneError(
+        f"{path or 'text'}: not a transfer function file (voxwarp or ParaView JSON,"
+        " Slicer presets.xml or .vp)"
+    )
+
+
+def is_paraview(doc: object) -> bool:
+    """Whether parsed JSON ``doc`` is a ParaView colour map (list or single object)."""
+    items = doc if isinstance(doc, list) else [doc]
+    return bool(items) and all(
+        isinstance(m, dict) and ({"RGBPoints", "IndexedColors", "Points"} & set(m)) for m in items
+    )
+
+
+# ---------------------------------------------------------------------------- numbers
+def _numbers(values: Sequence[object], what: str) -> np.ndarray:
+    """Finite floats from JSON numbers or strings; one-line errors."""
+    out = np.empty(len(values))
+    for i, v in enumerate(values):
+        if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+            raise SceneError(f"{what}: entry {i + 1} is {v!r}, not a number")
+        if isinstance(v, str) and not _NUMBER.match(v.strip()):
+            raise SceneError(f"{what}: entry {i + 1} is {v[:20]!r}, not a number")
+        f = float(v)
+        if not math.isfinite(f):
+            raise SceneError(f"{what}: entry {i + 1} is {v!r}; values must be finite")
+        out[i] = f
+    return out
+
+
+def _rows(flat: np.ndarray, width: int, what: str, lo: int = 1) -> np.ndarray:
+    """``flat`` as rows of ``width``: x non-decreasing, the rest within [0, 1]."""
+    if flat.size % width or flat.size < width * lo:
+        raise SceneError(
+            f"{what}: {flat.size} numbers; expected groups of {width} (x then"
+            f" {width - 1} values), at least {lo}"
+        )
+    rows = flat.reshape(-1, width)
+    if np.any(np.diff(rows[:, 0]) < 0):
+        i = int(np.nonzero(np.diff(rows[:, 0]) < 0)[0][0])
+        raise SceneError(
+            f"{what}: x values must not decrease (point {i + 2}: {rows[i + 1, 0]:g} after"
+            f" {rows[i, 0]:g})"
+        )
+    vals = rows[:, 1:]
+    if np.any(vals < 0) or np.any(vals > 1):
+        bad = float(vals[(vals < 0) | (vals > 1)][0])
+        raise SceneError(f"{what}: colour/opacity values must lie in [0, 1] (found {bad:g})")
+    return rows
+
+
+def vtk_string(text: str, width: int, what: str) -> np.ndarray:
+    """Slicer/VTK ``"N v0 v1 ..."`` (N numbers follow) as rows of ``width``."""
+    parts = text.split()
+    if not parts:
+        raise SceneError(f"{what} is empty")
+    head = parts[0]
+    if not head.isdigit() or not head.isascii():
+        raise SceneError(f"{what}: starts with {head[:20]!r}; expected the count N")
+    n = int(head) if len(head) < 13 else -1
+    if n < 0:
+        raise SceneError(f"{what}: count N {head[:20]}... is too large")
+    if n != len(parts) - 1:
+        raise SceneError(f"{what}: says {n} numbers but has {len(parts) - 1}")
+    return _rows(_numbers(parts[1:], what), width, what)
+
+
+# ---------------------------------------------------------------------------- ParaView
+def paraview_maps(doc: object, path: str = "") -> list[ImportedMap]:
+    """The maps of a ParaView colour-map JSON document (list of objects, or one)."""
+    items = doc if isinstance(doc, list) else [doc]
+    if not items:
+        raise SceneError(f"{path}: the ParaView colour map list is empty")
+    return [_paraview_map(m, i, path) for i, m in enumerate(items)]
+
+
+def _paraview_map(m: object, i: int, path: str) -> ImportedMap:
+    if not isinstance(m, dict):
+        raise SceneError(f"{path}: colour map {i + 1} is not a JSON object")
+    name = str(m.get("Name", f"map {i + 1}"))
+    where = f"{path}: {name!r}"
+    if "IndexedColors" in m and "RGBPoints" not in m:
+        raise SceneError(
+            f"{where} is a categorical (IndexedColors) map; voxwarp needs a continuous one"
+            " with RGBPoints"
+        )
+    rgb = m.get("RGBPoints")
+    if not isinstance(rgb, list):
+        raise SceneError(f"{where} has no RGBPoints list [x, r, g, b, ...]")
+    colour = _rows(_numbers(rgb, f"{where} RGBPoints"), 4, f"{where} RGBPoints")
+    opacity = None
+    notes: list[str] = []
+    if "Points" in m:
+        pts = m["Points"]
+        if not isinstance(pts, list):
+            raise SceneError(
+                f"{where}: Points must be a list [x, opacity, midpoint, sharpness, ...]"
+            )
+        rows = _rows(_numbers(pts, f"{where} Points"), 4, f"{where} Points")
+        opacity, sharp = _expand_midpoints(rows)
+        if sharp:
+            notes.append("opacity sharpness ignored (linear between points)")
+    space = str(m.get("ColorSpace", "RGB"))
+    if space not in ("RGB", "Step") and len(colour) < 64:
+        notes.append(f"{space} colour space interpolated in RGB between the points")
+    if m.get("UseLogScale"):
+        notes.append("log scale ignored (linear in data value)")
+    if space == "Step":
+        colour = _step(colour)
+    return ImportedMap(name, colour, opacity, "paraview", None, tuple(notes))
+
+
+def _expand_midpoints(rows: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Opacity (x, a) with each segment's midpoint as an extra point.
+
+    VTK's midpoint ``m`` puts the value halfway between two points at ``m`` of the way
+    (0.5: linear); sharpness 0 is linear. Here a segment with ``m != 0.5`` gets a point at
+    ``x0 + m (x1 - x0)`` with the mean opacity, so it stays piecewise linear; sharpness
+    (a smooth S-curve in VTK) is ignored (reported).
+    """
+    out: list[tuple[float, float]] = []
+    sharp = False
+    for k, (x, a, mid, s) in enumerate(rows):
+        out.append((float(x), float(a)))
+        sharp = sharp or (s > 1e-6 and k < len(rows) - 1)
+        if k < len(rows) - 1 and abs(mid - 0.5) > 1e-6 and 0.0 < mid < 1.0:
+            x1, a1 = rows[k + 1, 0], rows[k + 1, 1]
+            out.append((float(x + mid * (x1 - x)), float(0.5 * (a + a1))))
+    return np.asarray(out), sharp
+
+
+def _step(colour: np.ndarray) -> np.ndarray:
+    """ParaView's Step colour space: each colour held until the next point."""
+    rows = [colour[0]]
+    for k in range(1, len(colour)):
+        rows.append(np.concatenate([[colour[k, 0]], colour[k - 1, 1:]]))
+        rows.append(colour[k])
+    return np.asarray(rows)
+
+
+# ---------------------------------------------------------------------------- Slicer
+def slicer_presets(text: str, path: str = "") -> list[ImportedMap]:
+    """The ``VolumeProperty`` elements of a Slicer ``presets.xml`` (or MRML scene)."""
+    import xml.etree.ElementTree as ET
+
+    head = text[:4096].upper()
+    if "<!DOCTYPE" in head or "<!ENTITY" in text.upper():
+        raise SceneError(f"{path}: XML with a DTD or entities is not accepted")
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise SceneError(f"{path}: not well-formed XML ({exc})") from exc
+    elems = [root] if root.tag == "VolumeProperty" else list(root.iter("VolumeProperty"))
+    if not elems:
+        raise SceneError(f"{path}: no <VolumeProperty> element (a Slicer presets.xml has them)")
+    return [_slicer_element(e, i, path) for i, e in enumerate(elems)]
+
+
+def _slicer_element(e: object, i: int, path: str) -> ImportedMap:
+    attrs = e.attrib  # type: ignore[attr-defined]
+    name = str(attrs.get("name") or f"preset {i + 1}")
+    where = f"{path}: {name!r}"
+    for key in ("scalarOpacity", "colorTransfer"):
+        if key not in attrs:
+            raise SceneError(f"{where} has no {key} attribute")
+    return _slicer_map(name, attrs["scalarOpacity"], attrs["colorTransfer"], where)
+
+
+def _slicer_map(name: str, opacity: str, colour: str, where: str) -> ImportedMap:
+    o = vtk_string(opacity, 2, f"{where} scalarOpacity")
+    c = vtk_string(colour, 4, f"{where} colorTransfer")
+    return ImportedMap(
+        name, c, o, "slicer", SLICER_UNIT_DISTANCE_MM, ("gradient opacity and lighting ignored",)
+    )
+
+
+def slicer_vp(text: str, path: str = "") -> list[ImportedMap]:
+    """A Slicer ``.vp`` file: six property lines, then scalar opacity, gradient opacity
+    and colour transfer (vtkMRMLVolumePropertyStorageNode::WriteData)."""
+    lines = text.splitlines()
+    if len(lines) < 9:
+        raise SceneError(
+            f"{path}: a Slicer .vp file has 9 lines (6 properties, scalar opacity, gradient"
+            f" opacity, colour transfer); this one has {len(lines)}"
+        )
+    name = os.path.splitext(os.path.basename(path))[0] or "slicer"
+    return [_slicer_map(name, lines[6], lines[8], path or "vp")]
+
+
+# ---------------------------------------------------------------------------- dispatch
+def read_maps(text: str, path: str = "") -> list[ImportedMap]:
+    """The maps in a ParaView JSON or Slicer XML/.vp text (voxwarp JSON is not one)."""
+    kind = file_kind(text, path)
+    if kind == "slicer-xml":
+        return slicer_presets(text, path)
+    if kind == "slicer-vp":
+        return slicer_vp(text, path)
+    try:
+        doc = json.loads(text)
+    except ValueError as exc:
+        raise SceneError(f"{path}: not valid JSON ({exc})") from exc
+    if not is_paraview(doc):
+        raise SceneError(f"{path}: not a ParaView colour map (no RGBPoints)")
+    return paraview_maps(doc, path)
+
+
+def pick(maps: Sequence[ImportedMap], name: str | None, path: str = "") -> ImportedMap:
+    """The map called ``name`` (exact, then case-insensitive); the first when None."""
+    if name is not None:
+        for test in (lambda m: m.name == name, lambda m: m.name.lower() == name.lower()):
+            hits = [m for m in maps if test(m)]
+            if hits:
+                return hits[0]
+        shown = ", ".join(m.name for m in maps[:40]) + (" ..." if len(maps) > 40 else "")
+        raise SceneError(f"{path} has no map {name!r}; names: {shown}")
+    return maps[0]
+
+
+# ---------------------------------------------------------------------------- matplotlib
+def colormap_colours(name: str) -> np.ndarray | None:
+    """``(n, 4)`` rows ``t, r, g, b`` (t in [0, 1]) of matplotlib colour map ``name``,
+    or None when matplotlib has no such map. Requires matplotlib (ImportError otherwise).
+    """
+    import matplotlib
+
+    try:
+        cmap = matplotlib.colormaps[name]
+    except KeyError:
+        return None
+    n = int(getattr(cmap, "N", COLORMAP_SAMPLES))
+    listed = type(cmap).__name__ == "ListedColormap" and n <= COLORMAP_SAMPLES
+    count = n if listed else COLORMAP_SAMPLES
+    t = np.linspace(0.0, 1.0, max(count, 2))
+    rgba = np.asarray(cmap(t), dtype=np.float64)
+    return np.column_stack([t, rgba[:, :3]])
+
+
+def colormap_names() -> list[str]:
+    """matplotlib's colour-map names (empty without matplotlib)."""
+    try:
+        import matplotlib
+    except ImportError:
+        return []
+    return sorted(matplotlib.colormaps)
+
+
+# ---------------------------------------------------------------------------- conversion
+def looks_normalised(xs: np.ndarray) -> bool:
+    """The rule for ParaView ranges: first x 0 or -1 and last x 1 (ParaView's presets)."""
+    return bool(xs.size) and float(xs[-1]) == 1.0 and float(xs[0]) in (0.0, -1.0)
+
+
+def to_control_points(
+    m: ImportedMap,
+    window: tuple[float, float] | None = None,
+    reference_mm: float | None = None,
+) -> tuple[list[tuple[float, float, float, float, float]], bool]:
+    """voxwarp control points ``(value, r, g, b, a)`` for ``m``, and whether it was mapped
+    onto ``window``.
+
+    ``window`` ``(lo, hi)``: the volume's default window; matplotlib maps always, and
+    ParaView maps whose x run 0..1 or -1..1 (:func:`looks_normalised`), are stretched
+    onto it. ``reference_mm``: voxwarp's reference sample distance; a Slicer opacity
+    (per :attr:`ImportedMap.unit_distance` mm) becomes ``1 - (1 - a) ** (ref / unit)``.
+    Colour and opacity points are merged: each x of either gets both, interpolated.
+    """
+    colour = m.colour
+    opacity = m.opacity if m.opacity is not None else _ramp(colour[0, 0], colour[-1, 0])
+    xs_all = np.concatenate([colour[:, 0], opacity[:, 0]])
+    mapped = window is not None and (
+        m.kind == "matplotlib" or (m.kind == "paraview" and looks_normalised(np.sort(xs_all)))
+    )
+    if mapped:
+        lo, hi = window  # type: ignore[misc]
+        x0, x1 = float(np.min(xs_all)), float(np.max(xs_all))
+        scale = (hi - lo) / (x1 - x0) if x1 > x0 else 0.0
+        colour = np.column_stack([lo + (colour[:, 0] - x0) * scale, colour[:, 1:]])
+        opacity = np.column_stack([lo + (opacity[:, 0] - x0) * scale, opacity[:, 1]])
+    a = opacity[:, 1]
+    if m.unit_distance and reference_mm:
+        a = 1.0 - np.power(1.0 - np.clip(a, 0.0, 1.0), reference_mm / m.unit_distance)
+    xs = np.unique(np.concatenate([colour[:, 0], opacity[:, 0]]))
+    pts = []
+    for x in xs:
+        rgb = [float(np.interp(x, colour[:, 0], colour[:, c])) for c in (1, 2, 3)]
+        pts.append((float(x), *rgb, float(np.interp(x, opacity[:, 0], a))))
+    return _keep_steps(pts, colour), mapped
+
+
+def _ramp(x0: float, x1: float) -> np.ndarray:
+    return np.array([[x0, 0.0], [x1 if x1 > x0 else x0 + 1.0, RAMP_OPACITY]])
+
+
+def _keep_steps(pts: list, colour: np.ndarray) -> list:
+    """Repeated x in the colour points (steps) survive the merge as two points."""
+    dup = np.nonzero(np.diff(colour[:, 0]) == 0)[0]
+    for k in dup:
+        x = float(colour[k, 0])
+        i = next(j for j, p in enumerate(pts) if p[0] == x)
+        a = pts[i][4]
+        pts[i] = (x, *map(float, colour[k + 1, 1:]), a)
+        pts.insert(i, (x, *map(float, colour[k, 1:]), a))
+    return pts
