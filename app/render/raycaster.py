@@ -51,6 +51,7 @@ from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
+from voxwarp.render.inline_image import RenderedImage, rendered
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.ray_segments import MAX_SAMPLES
 from voxwarp.render.skip_cache import SkipMapCache, VolumeSkipMaps
@@ -1002,6 +1003,12 @@ class OffscreenRenderer:
             if saved is not None:
                 _egl_restore(saved)
 
+    def current(self) -> contextlib.AbstractContextManager[Any]:
+        """A block with this renderer's context current and the previous one restored
+        after (a context passed in is the caller's to make current): for GPU work beside
+        :meth:`render`, such as an edit session's ``gl_scope``."""
+        return self._current()
+
     def _unbind_fbo(self) -> None:
         # never delete the bound framebuffer: moderngl would re-bind the dead name later
         try:
@@ -1029,14 +1036,15 @@ class OffscreenRenderer:
         """The moderngl framebuffer images are drawn into."""
         return self._fbo
 
-    def render(self, scene: Scene, camera: Camera | None = None) -> np.ndarray:
-        """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top."""
+    def render(self, scene: Scene, camera: Camera | None = None) -> RenderedImage:
+        """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top (a
+        :class:`~voxwarp.render.inline_image.RenderedImage`: an array Jupyter shows)."""
         with self._current():
             self.renderer.draw(scene, self._fbo, camera=camera)
             raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
         w, h = self.size
         img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
-        return img.reshape(h, w, 4)[::-1].copy()
+        return rendered(img.reshape(h, w, 4)[::-1].copy())
 
     def render_slice(
         self,
@@ -1082,6 +1090,7 @@ class OffscreenRenderer:
         image = SliceImage.from_data(data, matrix, plane)
         win = scene.window if window is None else window
         colorize(image, look=look, window=win, tf=scene.transfer_function, show=show)
+        image.rgba = rendered(image.rgba)  # shows inline in Jupyter
         return image
 
     def time_frames(
