@@ -1,0 +1,397 @@
+"""The interactive notebook viewer: voxwarp's renderer in a ``jupyter_rfb`` widget.
+
+:class:`Viewer` is a :class:`jupyter_rfb.RemoteFrameBuffer`: the browser sends pointer,
+wheel, key and resize events to :meth:`Viewer.handle_event`, which turns them into
+camera moves and edits of an :class:`~voxwarp.editing.session.EditSession` (the desktop
+GUI's Qt-free session; the controls are those of
+:mod:`voxwarp.notebook.interaction`) and asks for a frame; :meth:`Viewer.get_frame`
+renders the scene headless (:class:`~voxwarp.render.raycaster.OffscreenRenderer`) with
+the editing handles drawn on top (:mod:`voxwarp.notebook.handles`) and returns it.
+
+While the view is being changed (a drag, an orbit, a running mass-spring or ChainMail
+model that has not come to rest) frames are drawn at the level of detail the desktop
+GUI uses (:class:`~voxwarp.render.adaptive_quality.AdaptiveQuality`: a fraction of the
+resolution, which the browser scales up, and a longer sample distance), and the model
+advances one frame (``steps_per_frame`` steps) before each; once it rests, the full
+frame follows. The same actions are methods for scripts and tests: :meth:`orbit`,
+:meth:`zoom`, :meth:`pan`, :meth:`pick`, :meth:`drag`, :meth:`undo`, :meth:`snapshot`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.volume import Volume
+from voxwarp.editing.common import DisplayOptions
+from voxwarp.editing.session import EditorError, EditSession
+from voxwarp.errors import MissingExtraError, VoxwarpError
+from voxwarp.notebook.handles import draw_layers
+from voxwarp.notebook.interaction import SETTLE_S, Interaction
+from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
+from voxwarp.render.inline_image import RenderedImage, png_bytes, rendered
+from voxwarp.scene import Scene
+
+try:
+    from jupyter_rfb import RemoteFrameBuffer
+except ImportError as exc:  # pragma: no cover - the notebook extra is missing
+    raise MissingExtraError(
+        "voxwarp.notebook.Viewer needs the notebook extra (missing: jupyter_rfb):"
+        " pip install 'voxwarp[notebook]'"
+    ) from exc
+
+#: default view size in CSS pixels
+DEFAULT_SIZE = (480, 360)
+#: the longest side rendered (device pixels): larger views are scaled up by the browser
+MAX_RENDER_PX = 1024
+#: least seconds between frames of a running simulation
+SIM_FRAME_S = 1 / 30
+
+
+def session_for(source: Any, deformation: str | None = None, **settings: Any) -> EditSession:
+    """An edit session for ``source``: a :class:`~voxwarp.scene.Scene`, an
+    :class:`~voxwarp.editing.session.EditSession`, a :class:`~voxwarp.core.volume.Volume`,
+    or INPUT as ``voxwarp gui`` takes it (a scene JSON, resuming its deformation; a volume
+    file; ``sample:NAME``). ``deformation`` (``"massspring"``, ``"chainmail"``,
+    ``"wires"``, ``"lattice"``) starts that family with ``settings`` (``resolution``,
+    ``stiffness``, ``integrator``, ``variant``, ``backend``)."""
+    if isinstance(source, EditSession):
+        session = source
+    elif isinstance(source, Scene):
+        session = EditSession(source)
+    elif isinstance(source, Volume):
+        session = EditSession(Scene(source))
+    elif isinstance(source, str | Path):
+        session = _session_from_input(str(source))
+    else:
+        raise EditorError(
+            "Viewer takes a Scene, an EditSession, a Volume, a scene JSON path, a volume"
+            f" path or 'sample:NAME'; got {type(source).__name__}"
+        )
+    if deformation is not None:
+        session.set_deformation(deformation, **settings)
+    elif settings:
+        raise EditorError(f"deformation settings {', '.join(sorted(settings))} need a deformation")
+    session.sync_wires = False  # wire fields are rebuilt when a drag ends
+    return session
+
+
+def _session_from_input(spec: str) -> EditSession:
+    from voxwarp.inputs import load_input
+    from voxwarp.io.samples import suggested_transfer_function
+
+    if spec.lower().endswith(".json") and Path(spec).is_file():
+        return EditSession.load(spec)
+    obj = load_input(spec)
+    if isinstance(obj, Scene):
+        return EditSession(obj)
+    tf = suggested_transfer_function(obj.name) if spec.startswith("sample:") else None
+    return EditSession(Scene(obj, transfer_function=tf))
+
+
+class Viewer(RemoteFrameBuffer):
+    """An interactive view of a scene in Jupyter: orbit, zoom, pick and drag handles.
+
+    Parameters
+    ----------
+    source
+        What to show and edit (see :func:`session_for`): a Scene, an EditSession, a
+        Volume, a scene JSON path, a volume path or ``"sample:NAME"``.
+    deformation
+        Start a deformation family on it: ``"massspring"``, ``"chainmail"``, ``"wires"``
+        or ``"lattice"`` (a scene JSON saved with one resumes it without this).
+    size
+        (width, height) of the view in CSS pixels.
+    running
+        Whether a mass-spring or ChainMail model runs between frames.
+    ctx
+        A moderngl context to render with (its owner makes it current); default: a
+        headless EGL context of the viewer's own.
+    settings
+        Deformation settings: ``resolution``, ``stiffness``, ``integrator``,
+        ``variant``, ``backend``.
+
+    Use it as the last expression of a cell (or ``viewer.display()``); the viewer's
+    :attr:`session` is the full editing API (``viewer.session.model``, ``.selection``,
+    ``.set_option(...)``), :attr:`camera` its camera.
+    """
+
+    def __init__(
+        self,
+        source: Any,
+        deformation: str | None = None,
+        *,
+        size: tuple[int, int] = DEFAULT_SIZE,
+        running: bool = True,
+        ctx: Any = None,
+        **settings: Any,
+    ) -> None:
+        from voxwarp.render.raycaster import OffscreenRenderer
+
+        w, h = (max(1, int(v)) for v in size)
+        super().__init__(css_width=f"{w}px", css_height=f"{h}px")
+        self.session = session_for(source, deformation, **settings)
+        self.session.running = bool(running)
+        self.pixel_ratio = 1.0
+        self.interaction = Interaction(self.session, (w, h))
+        self.interaction.changed = self.request_draw
+        self.display_options = DisplayOptions()
+        self.adaptive = AdaptiveQuality()
+        self.last_quality: Quality = FULL
+        self.frames_drawn = 0
+        self.last_frame_ms = 0.0
+        self._renderer = OffscreenRenderer(w, h, ctx=ctx)
+        self.session.ctx = self._renderer.ctx
+        self.session.gl_scope = self._renderer.current
+        self._refine: Any = None
+        self._released = False
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def camera(self) -> Any:
+        """The view's :class:`~voxwarp.core.camera.Camera` (orbit, pan and zoom move it)."""
+        return self.interaction.camera
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """The view's (width, height) in CSS pixels."""
+        return self.interaction.size
+
+    @property
+    def running(self) -> bool:
+        """Whether a mass-spring or ChainMail model runs between frames (settable)."""
+        return bool(self.session.running)
+
+    @running.setter
+    def running(self, value: bool) -> None:
+        self.session.set_option("running", bool(value))
+        self.request_draw()
+
+    # ------------------------------------------------------------------ scripting API
+    def orbit(self, d_azimuth: float, d_elevation: float = 0.0) -> None:
+        """Turn the camera (degrees about its up axis, then its right axis)."""
+        self.interaction.orbit(d_azimuth, d_elevation)
+        self.request_draw()
+
+    def zoom(self, factor: float) -> None:
+        """Magnify by ``factor`` (> 1 zooms in)."""
+        self.interaction.zoom(factor)
+        self.request_draw()
+
+    def pan(self, dx: float, dy: float) -> None:
+        """Move the view by fractions of its height (right, up)."""
+        self.interaction.pan(dx, dy)
+        self.request_draw()
+
+    def reset_camera(self) -> None:
+        """Refit the camera to the scene."""
+        self.interaction.reset_camera()
+        self.request_draw()
+
+    def handle_pixels(self) -> np.ndarray:
+        """(N, 2) CSS pixel positions of the handles (to pick or drag them by script)."""
+        with self._renderer.current():
+            return self.interaction.handle_pixels()
+
+    def pick(self, x: float, y: float, mode: str = "replace") -> int | None:
+        """Select the handle under CSS pixel ``(x, y)``; its index, or None."""
+        with self._renderer.current():
+            hit = self.interaction.pick(x, y, mode)
+        self.request_draw()
+        return hit
+
+    def drag(self, start: Sequence[float], end: Sequence[float], steps: int = 8) -> int | None:
+        """Drag the handle at CSS pixel ``start`` to ``end`` (one undo step); the model
+        advances a frame per step. Returns the handle, or None when none is at ``start``."""
+        with self._renderer.current():
+            hit = self.interaction.drag(start, end, steps)
+        self.request_draw()
+        return hit
+
+    def step(self, frames: int = 1) -> None:
+        """Advance the running model by ``frames`` frames (``steps_per_frame`` steps each)."""
+        with self._renderer.current():
+            for _ in range(max(0, int(frames))):
+                self.session.advance()
+        self.request_draw()
+
+    def undo(self) -> bool:
+        """Undo the last edit (a drag, a selection); False when there is none."""
+        with self._renderer.current():
+            return self.interaction.undo()
+
+    def redo(self) -> bool:
+        """Redo the last undone edit; False when there is none."""
+        with self._renderer.current():
+            return self.interaction.redo()
+
+    def snapshot(self, pixel_ratio: float | None = None) -> RenderedImage:  # type: ignore[override]
+        """The view at full quality now: (H, W, 4) uint8 at the view's device pixels
+        (shows inline; ``pixel_ratio`` overrides the browser's)."""
+        return self._draw(FULL, self.pixel_ratio if pixel_ratio is None else float(pixel_ratio))
+
+    # ------------------------------------------------------------------ jupyter_rfb
+    def handle_event(self, event: dict) -> bool:  # type: ignore[override]
+        """Act on one ``jupyter_rfb`` event (pointer_down/move/up, wheel, key_down,
+        resize, ...); returns whether it was used. A malformed or unknown event is
+        ignored; an error of the edit is printed in the widget's output, in one line."""
+        if not isinstance(event, dict):
+            return False
+        kind = event.get("type", event.get("event_type"))
+        handler = _HANDLERS.get(kind) if isinstance(kind, str) else None
+        if handler is None:
+            return False
+        try:
+            with self._renderer.current():
+                used = bool(handler(self, event))
+        except (KeyError, TypeError, ValueError):
+            return False  # a malformed event (missing or non-numeric fields)
+        except VoxwarpError as exc:
+            self.print(f"voxwarp: {exc}")
+            return False
+        if used:
+            self.request_draw()
+        return used
+
+    def get_frame(self) -> np.ndarray | None:  # type: ignore[override]
+        """The next frame (called by ``jupyter_rfb`` when the browser is ready): the
+        model advances one frame if it runs, then the scene is drawn, at the
+        interactive level of detail while anything moves."""
+        interacting = self.interaction.interacting()
+        try:
+            with self._renderer.current():
+                if self.interaction.simulating():
+                    self.session.advance()
+            quality = self.adaptive.quality if interacting else FULL
+            frame = self._draw(quality, self.pixel_ratio)
+        except VoxwarpError as exc:
+            self.print(f"voxwarp: {exc}")
+            return None
+        if interacting:
+            self.adaptive.frame_drawn(self.last_frame_ms / 1000)
+            self._schedule_next()
+        return frame
+
+    def _repr_mimebundle_(self, **kwargs: Any) -> Any:
+        """The widget, plus a PNG of the view for front ends without widgets (a
+        notebook on GitHub, nbconvert)."""
+        self._rfb_pending_display = None  # jupyter_rfb's HTML snapshot: the PNG below instead
+        result = super()._repr_mimebundle_(**kwargs)
+        data = result[0] if isinstance(result, tuple) else result
+        if isinstance(data, dict):
+            try:
+                data["image/png"] = png_bytes(self.snapshot())
+            except VoxwarpError:
+                pass
+        return result
+
+    # ------------------------------------------------------------------ drawing
+    def _draw(self, quality: Quality, ratio: float) -> RenderedImage:
+        """Render the scene and the handles at ``quality`` (device pixels: CSS size x
+        ``ratio`` x the quality's scale, at most :data:`MAX_RENDER_PX` a side)."""
+        t0 = time.perf_counter()
+        w, h = self.size
+        scale = ratio * quality.scale * min(1.0, MAX_RENDER_PX / (max(w, h) * ratio))
+        size = (max(1, round(w * scale)), max(1, round(h * scale)))
+        r = self._renderer
+        with r.current():
+            for warp in self.session.take_released_warps():
+                warp.release()
+            if r.size != size:
+                r.resize(*size)
+            img = np.array(r.render(scene_at(self.session.scene, quality), self.camera))
+            layers = self.session.overlay_layers(self.display_options)
+        draw_layers(img, layers, self.camera, scale)
+        self.last_quality = quality
+        self.last_frame_ms = (time.perf_counter() - t0) * 1000
+        self.frames_drawn += 1
+        return rendered(img)
+
+    def _schedule_next(self) -> None:
+        """Another frame soon: the next simulation frame, or the full-quality one once
+        the interaction has settled."""
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return  # no event loop (a script or a test): frames are drawn on request
+        if self.interaction.simulating():
+            loop.call_later(SIM_FRAME_S, self.request_draw)
+        else:
+            if self._refine is not None:
+                self._refine.cancel()
+            self._refine = loop.call_later(SETTLE_S + 0.05, self.request_draw)
+
+    def close(self, *args: Any, **kwargs: Any) -> None:
+        """Close the widget and free its GPU resources."""
+        super().close(*args, **kwargs)
+        self.release()
+
+    def release(self) -> None:
+        """Free the renderer (and its context, if the viewer made it); idempotent."""
+        if self._released:
+            return
+        self._released = True
+        with self._renderer.current():
+            for warp in self.session.take_released_warps():
+                warp.release()
+        self._renderer.release()
+
+
+# ---------------------------------------------------------------------- event handlers
+def _xy(event: dict) -> tuple[float, float]:
+    x, y = float(event["x"]), float(event["y"])
+    if not (np.isfinite(x) and np.isfinite(y)):
+        raise ValueError("non-finite pointer position")
+    return x, y
+
+
+def _on_resize(v: Viewer, e: dict) -> bool:
+    w, h = float(e["width"]), float(e["height"])
+    if not (np.isfinite(w) and np.isfinite(h) and w >= 1 and h >= 1):
+        raise ValueError("bad size")
+    ratio = float(e.get("ratio", e.get("pixel_ratio", 1.0)))
+    v.pixel_ratio = ratio if np.isfinite(ratio) and 0.25 <= ratio <= 8 else 1.0
+    v.interaction.resize((round(w), round(h)))
+    return True
+
+
+def _on_down(v: Viewer, e: dict) -> bool:
+    v.interaction.press(*_xy(e), int(e.get("button", 1)), tuple(e.get("modifiers", ())))
+    return True
+
+
+def _on_move(v: Viewer, e: dict) -> bool:
+    if not v.interaction.pressed:
+        return False
+    v.interaction.move(*_xy(e))
+    return True
+
+
+def _on_up(v: Viewer, e: dict) -> bool:
+    x, y = _xy(e) if "x" in e and "y" in e else (None, None)
+    v.interaction.release(x, y)
+    return True
+
+
+def _on_wheel(v: Viewer, e: dict) -> bool:
+    v.interaction.wheel(float(e["dy"]))
+    return True
+
+
+def _on_key(v: Viewer, e: dict) -> bool:
+    return v.interaction.key(str(e["key"]), tuple(e.get("modifiers", ())))
+
+
+_HANDLERS = {
+    "resize": _on_resize,
+    "pointer_down": _on_down,
+    "pointer_move": _on_move,
+    "pointer_up": _on_up,
+    "wheel": _on_wheel,
+    "key_down": _on_key,
+}
