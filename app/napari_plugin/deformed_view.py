@@ -1,0 +1,102 @@
+"""voxwarp's deformed view of a volume as an RGB image for napari (no Qt).
+
+:func:`deformation_warps` builds the warps of one of :data:`DEFORMATIONS` through
+voxwarp's public models; :func:`render_rgb` draws a scene headless
+(:class:`~voxwarp.render.raycaster.OffscreenRenderer`, its own EGL context) and
+returns ``(height, width, 3)`` uint8 for ``viewer.add_image(image, rgb=True)``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.volume import Volume
+from voxwarp.errors import SceneError
+
+#: What "Render deformed view" can apply: nothing, a mass-spring push through the
+#: volume's centre, or the warps of a scene JSON the user picks.
+DEFORMATIONS: tuple[str, ...] = ("mass-spring push", "none", "scene file")
+#: Elements per axis of the push's mass-spring grid (corners fixed).
+PUSH_GRID = 8
+#: How far the centre element is pushed, as a fraction of the volume's extent.
+PUSH_FRACTION = 0.2
+#: The pixel size of the rendered view (square), the widget's default.
+DEFAULT_SIZE = 256
+
+
+def push_warps(
+    volume: Volume, direction: Any = (0.0, 0.0, 1.0), fraction: float = PUSH_FRACTION
+) -> list[Any]:
+    """A mass-spring push: the element grid's centre element moved along world
+    ``direction`` by ``fraction`` of the volume's extent that way, the rest settled by
+    the springs (corners fixed)."""
+    from voxwarp.deform import ElementGrid, MassSpring
+
+    unit = np.asarray(direction, dtype=np.float64)
+    unit = unit / np.linalg.norm(unit)
+    grid = ElementGrid(volume, shape=(PUSH_GRID,) * 3)
+    model = MassSpring(grid, integrator="semi-implicit", shear=True)
+    extent = float(np.abs(unit) @ np.asarray(volume.size_mm))
+    model.move((PUSH_GRID // 2,) * 3, tuple(fraction * extent * unit))
+    model.settle()
+    return [model.warp()]
+
+
+def scene_file_warps(path: str | os.PathLike, volume: Volume) -> list[Any]:
+    """The warp chain of the scene JSON at ``path``, bound to ``volume`` (warps live in
+    world mm: they act where they were made, so they fit a volume in the same world
+    space). The scene's own volume is loaded too (its warps are read against it)."""
+    from voxwarp.scene import Scene
+
+    warps = list(Scene.load(path).warps)
+    if not warps:
+        raise SceneError(f"{path} has no warps; pick a scene saved with a deformation")
+    for w in warps:
+        w.bind_volume(volume)
+    return warps
+
+
+def deformation_warps(
+    kind: str,
+    volume: Volume,
+    scene_path: str | os.PathLike | None = None,
+    direction: Any = (0.0, 0.0, 1.0),
+) -> list[Any]:
+    """The warps of deformation ``kind`` (one of :data:`DEFORMATIONS`) for ``volume``;
+    ``direction`` (world) is where the mass-spring push goes."""
+    if kind == "none":
+        return []
+    if kind == "mass-spring push":
+        return push_warps(volume, direction)
+    if kind == "scene file":
+        if not scene_path:
+            raise SceneError("deformation 'scene file' needs a scene JSON: pick one")
+        return scene_file_warps(scene_path, volume)
+    raise SceneError(f"deformation must be one of {', '.join(DEFORMATIONS)}; got {kind!r}")
+
+
+def deformed_scene(
+    volume: Volume,
+    options: dict[str, Any],
+    kind: str,
+    scene_path: str | os.PathLike | None = None,
+) -> Any:
+    """A :class:`~voxwarp.scene.Scene` of ``volume`` with ``options`` and deformation
+    ``kind``; the push goes up the screen of the scene's camera, so it shows."""
+    from voxwarp.scene import Scene
+
+    scene = Scene(volume, **options)
+    up = scene.resolved_camera().rotation[:, 1]
+    return scene.copy(warps=deformation_warps(kind, volume, scene_path, up))
+
+
+def render_rgb(scene: Any, size: int = DEFAULT_SIZE) -> np.ndarray:
+    """``scene`` rendered headless to a ``(size, size, 3)`` uint8 image (row 0 = top)."""
+    from voxwarp.render.raycaster import OffscreenRenderer
+
+    with OffscreenRenderer(int(size), int(size)) as renderer:
+        image = renderer.render(scene)
+    return np.ascontiguousarray(np.asarray(image)[..., :3])

@@ -1,0 +1,100 @@
+"""Drive a real napari viewer with the voxwarp dock widget (run by test_viewer.py in a
+child process on a private Xvfb display).
+
+Usage: ``python tests/napari/viewer_check.py OUT_DIR [SIZE]`` (SIZE: rendered pixels).
+Opens the voxwarp ``fish`` sample through the plugin's sample data, docks the widget
+through the plugin, renders the layer with no deformation and with the mass-spring
+push, starts "Open in voxwarp", and writes ``result.json`` (layers, shapes, image
+statistics) and ``window.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def wait_for(widget, worker, timeout: float = 120.0) -> None:
+    from qtpy.QtWidgets import QApplication
+
+    done: list[bool] = []
+    worker.finished.connect(lambda: done.append(True))
+    start = time.monotonic()
+    while not done and time.monotonic() - start < timeout:
+        QApplication.processEvents()
+        time.sleep(0.01)
+    QApplication.processEvents()
+    if not done:
+        raise SystemExit(f"render did not finish in {timeout} s: {widget.status.text()}")
+
+
+def render(viewer, widget, deformation: str) -> dict:
+    widget.deformation_box.setCurrentText(deformation)
+    start = time.perf_counter()
+    worker = widget.render_deformed()
+    if worker is None:
+        raise SystemExit(f"render refused: {widget.status.text()}")
+    wait_for(widget, worker)
+    layer = viewer.layers[-1]
+    image = np.asarray(layer.data)
+    return {
+        "name": layer.name,
+        "rgb": bool(layer.rgb),
+        "shape": list(image.shape),
+        "std": float(image.std()),
+        "seconds": time.perf_counter() - start,
+        "status": widget.status.text(),
+        "image": image,
+    }
+
+
+def main(out: Path, size: int = 160) -> None:
+    import napari
+
+    out.mkdir(parents=True, exist_ok=True)
+    viewer = napari.Viewer(show=False)
+    viewer.window.resize(1280, 760)
+    viewer.open_sample("voxwarp", "fish")
+    viewer.add_image(np.zeros((16, 16)), name="flat")  # 2D: the widget must not list it
+    viewer.layers.selection.active = viewer.layers["fish"]
+    _, widget = viewer.window.add_plugin_dock_widget("voxwarp", "voxwarp deformed view")
+    widget.size_box.setValue(size)
+    widget.view_box.setCurrentText("+z")
+    listed = [widget.layer_box.itemText(i) for i in range(widget.layer_box.count())]
+    plain = render(viewer, widget, "none")
+    pushed = render(viewer, widget, "mass-spring push")
+    changed = float(np.abs(plain.pop("image").astype(int) - pushed.pop("image")).mean())
+    widget.layer_box.setCurrentText("fish")
+    process = widget.open_in_voxwarp()
+    started = process is not None and process.poll() is None
+    if process is not None:
+        process.terminate()
+        process.wait(30)
+    for name in ("flat", "fish"):  # the two renders side by side: before and after the push
+        viewer.layers[name].visible = False
+    viewer.canvas.grid.enabled = True
+    viewer.reset_view()
+    shot = viewer.screenshot(canvas_only=False, flash=False)
+    from voxwarp.io.images import write_image
+
+    write_image(out / "window.png", np.ascontiguousarray(shot))
+    result = {
+        "listed": listed,
+        "layers": [layer.name for layer in viewer.layers],
+        "none": plain,
+        "push": pushed,
+        "push_vs_none_mean_abs": changed,
+        "voxwarp_started": started,
+        "scene": widget.status.text(),
+        "screenshot_shape": list(shot.shape),
+    }
+    (out / "result.json").write_text(json.dumps(result, indent=2))
+    viewer.close()
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), *(int(a) for a in sys.argv[2:3]))
