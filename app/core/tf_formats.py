@@ -119,8 +119,9 @@ def file_kind(text: str, path: str = "") -> str:
 def is_paraview(doc: object) -> bool:
     """Whether parsed JSON ``doc`` is a ParaView colour map (list or single object)."""
     items = doc if isinstance(doc, list) else [doc]
-    return bool(items) and all(
-        isinstance(m, dict) and ({"RGBPoints", "IndexedColors", "Points"} & set(m)) for m in items
+    return any(
+        isinstance(m, dict) and bool({"RGBPoints", "IndexedColors", "Points"} & set(m))
+        for m in items
     )
 
 
@@ -281,9 +282,8 @@ def _slicer_element(e: object, i: int, path: str) -> ImportedMap:
 def _slicer_map(name: str, opacity: str, colour: str, where: str) -> ImportedMap:
     o = vtk_string(opacity, 2, f"{where} scalarOpacity")
     c = vtk_string(colour, 4, f"{where} colorTransfer")
-    return ImportedMap(
-        name, c, o, "slicer", SLICER_UNIT_DISTANCE_MM, ("gradient opacity and lighting ignored",)
-    )
+    # gradient opacity and the lighting attributes are not used (documented, not warned)
+    return ImportedMap(name, c, o, "slicer", SLICER_UNIT_DISTANCE_MM)
 
 
 def slicer_vp(text: str, path: str = "") -> list[ImportedMap]:

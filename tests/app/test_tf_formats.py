@@ -1,0 +1,436 @@
+"""Transfer functions imported from ParaView, 3D Slicer and matplotlib (voxwarp.core.tf_formats).
+
+The test files are written the way those tools write them:
+
+* ParaView: a JSON list of colour-map objects as in Kitware/ParaView
+  ``Remoting/Views/ColorMaps.json`` ("Cool to Warm", "Black-Body Radiation", "X Ray" with
+  their RGBPoints copied from it) and as the Choose Preset dialog's *Export* writes a
+  user's map (jsoncpp's styled writer: 3-space indent, ``"Key" : value``; ``Points`` saved
+  with the opacity function, fields as in ``vtkSMTransferFunctionProxy::GetStateAsPreset``).
+* Slicer: ``<VolumeProperty>`` elements copied from
+  Slicer/Slicer ``Modules/Loadable/VolumeRendering/Resources/presets.xml`` (CT-AAA,
+  CT-Bone, MR-Default verbatim), and a ``.vp`` file in the line order of
+  ``vtkMRMLVolumePropertyStorageNode::WriteData`` (Libs/MRML/Core).
+
+Oracles: the imported function evaluated at the file's control values equals the file's
+colours and opacities (opacity converted by the stated unit-distance rule); matplotlib
+colours at the sample points equal ``matplotlib.colormaps[name](t)`` within 1/255.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from voxwarp.core import tf_formats
+from voxwarp.core import transfer_function as tfmod
+from voxwarp.core.transfer_function import PRESETS, TransferFunction, file_spec
+from voxwarp.core.volume import Volume
+from voxwarp.errors import SceneError
+
+# ---------------------------------------------------------------------------- files
+PRESETS_XML = """<?xml version="1.0" encoding="utf-8"?>
+<MRML>
+  <VolumeProperty selected="false" hideFromEditors="false" name="CT-AAA" gradientOpacity="4 0 1 255 1" userTags="" specularPower="10" scalarOpacity="12 -3024 0 143.556 0 166.222 0.686275 214.389 0.696078 419.736 0.833333 3071 0.803922" id="vtkMRMLVolumePropertyNode1" specular="0.2" shade="1" ambient="0.1" colorTransfer="24 -3024 0 0 0 143.556 0.615686 0.356863 0.184314 166.222 0.882353 0.603922 0.290196 214.389 1 1 1 419.736 1 0.937033 0.954531 3071 0.827451 0.658824 1" selectable="true" diffuse="0.9" interpolation="1"/>
+  <VolumeProperty selected="false" hideFromEditors="false" name="CT-Bone" gradientOpacity="4 0 1 255 1" userTags="" specularPower="10" scalarOpacity="8 -3024 0 -16.4458 0 641.385 0.715686 3071 0.705882" id="vtkMRMLVolumePropertyNode3" specular="0.2" shade="1" ambient="0.1" colorTransfer="16 -3024 0 0 0 -16.4458 0.729412 0.254902 0.301961 641.385 0.905882 0.815686 0.552941 3071 1 1 1" selectable="true" diffuse="0.9" interpolation="1"/>
+  <VolumeProperty selected="false" hideFromEditors="false" name="MR-Default" gradientOpacity="4 0 1 255 1" userTags="" specularPower="1" scalarOpacity="12 0 0 20 0 40 0.15 120 0.3 220 0.375 1024 0.5" id="vtkMRMLVolumePropertyNode22" specular="0" shade="1" ambient="0.2" colorTransfer="24 0 0 0 0 20 0.168627 0 0 40 0.403922 0.145098 0.0784314 120 0.780392 0.607843 0.380392 220 0.847059 0.835294 0.788235 1024 1 1 1" selectable="true" diffuse="1" interpolation="1"/>
+</MRML>
+"""  # noqa: E501 (copied verbatim from Slicer's presets.xml)
+CT_BONE_OPACITY = [(-3024, 0), (-16.4458, 0), (641.385, 0.715686), (3071, 0.705882)]
+CT_BONE_COLOUR = [
+    (-3024, 0, 0, 0),
+    (-16.4458, 0.729412, 0.254902, 0.301961),
+    (641.385, 0.905882, 0.815686, 0.552941),
+    (3071, 1, 1, 1),
+]
+
+#: From ParaView's ColorMaps.json (0..1 ranges, no opacity).
+PARAVIEW_PRESETS = [
+    {
+        "ColorSpace": "Diverging",
+        "Name": "Cool to Warm",
+        "NanColor": [1, 1, 0],
+        "DefaultMap": True,
+        "RGBPoints": [0, 0.23137254902, 0.298039215686, 0.752941176471, 0.5, 0.865, 0.865,
+                      0.865, 1, 0.705882352941, 0.0156862745098, 0.149019607843],
+    },
+    {
+        "ColorSpace": "RGB",
+        "Name": "Black-Body Radiation",
+        "DefaultMap": True,
+        "NanColor": [0, 0.498039215686, 1],
+        "RGBPoints": [0, 0, 0, 0, 0.4, 0.901960784314, 0, 0, 0.8, 0.901960784314,
+                      0.901960784314, 0, 1, 1, 1, 1],
+    },
+    {
+        "ColorSpace": "RGB",
+        "Name": "X Ray",
+        "DefaultMap": True,
+        "NanColor": [1, 0, 0],
+        "RGBPoints": [0, 1, 1, 1, 1, 0, 0, 0],
+    },
+]  # fmt: skip
+
+#: A user's map exported with its opacity, in data units (HU).
+PARAVIEW_EXPORT = [
+    {
+        "ColorSpace": "RGB",
+        "Creator": "voxwarp test",
+        "Name": "bone-hu",
+        "NanColor": [1, 1, 0],
+        "Points": [-1000.0, 0.0, 0.5, 0.0, 200.0, 0.0, 0.5, 0.0, 700.0, 0.6, 0.5, 0.0,
+                   2000.0, 0.8, 0.5, 0.0],
+        "RGBPoints": [-1000.0, 0.0, 0.0, 0.0, 200.0, 0.6, 0.3, 0.2, 700.0, 0.95, 0.9, 0.8,
+                      2000.0, 1.0, 1.0, 1.0],
+    }
+]  # fmt: skip
+
+
+def paraview_json(maps: list[dict]) -> str:
+    """As ParaView's export writes it (jsoncpp StyledWriter: 3 spaces, ' : ')."""
+    return json.dumps(maps, indent=3, separators=(",", " : ")) + "\n"
+
+
+def vp_text(opacity: str, colour: str) -> str:
+    """A Slicer .vp: interpolation, shade, diffuse, ambient, specular, specular power,
+    scalar opacity, gradient opacity, colour transfer (WriteData's order)."""
+    return "\n".join(["1", "1", "0.9", "0.1", "0.2", "10", opacity, "4 0 1 255 1", colour]) + "\n"
+
+
+def write(tmp_path: Path, name: str, text: str) -> str:
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return str(p)
+
+
+def hu_volume(spacing: float = 1.0) -> Volume:
+    data = np.linspace(-1000, 2000, 16 * 16 * 8).reshape(16, 16, 8).astype(np.int16)
+    return Volume(data, spacing=(spacing, spacing, spacing), name="hu")
+
+
+def window(volume: Volume) -> tuple[float, float]:
+    level, width = volume.default_window()
+    return level - width / 2, level + width / 2
+
+
+# ---------------------------------------------------------------------------- Slicer
+def test_slicer_preset_by_name_matches_the_file(tmp_path: Path) -> None:
+    path = write(tmp_path, "presets.xml", PRESETS_XML)
+    tf = TransferFunction.load(f"{path}:CT-Bone", hu_volume(1.0))
+    assert tf.name == "CT-Bone"
+    for x, r, g, b in CT_BONE_COLOUR:
+        np.testing.assert_allclose(tf(x)[:3], (r, g, b), atol=1e-9)
+    for x, a in CT_BONE_OPACITY:  # 1 mm voxels: Slicer's 1 mm unit distance, unchanged
+        assert tf(x)[3] == pytest.approx(a, abs=1e-9)
+
+
+def test_slicer_opacity_follows_the_unit_distance(tmp_path: Path) -> None:
+    path = write(tmp_path, "presets.xml", PRESETS_XML)
+    tf = TransferFunction.load(path, hu_volume(0.5), name="CT-Bone")
+    for x, a in CT_BONE_OPACITY:  # half-mm reference sample: 1 - (1 - a) ** 0.5
+        assert tf(x)[3] == pytest.approx(1 - (1 - a) ** 0.5, abs=1e-9)
+    assert tf(641.385)[3] < 0.715686
+
+
+def test_slicer_file_without_a_name_takes_the_first_with_a_warning(tmp_path: Path) -> None:
+    path = write(tmp_path, "presets.xml", PRESETS_XML)
+    with pytest.warns(UserWarning, match="CT-AAA.*CT-Bone, MR-Default"):
+        tf = TransferFunction.load(path)
+    assert tf.name == "CT-AAA"
+    assert TransferFunction.map_names(path) == ["CT-AAA", "CT-Bone", "MR-Default"]
+
+
+def test_unknown_map_name_lists_the_names(tmp_path: Path) -> None:
+    path = write(tmp_path, "presets.xml", PRESETS_XML)
+    with pytest.raises(SceneError) as info:
+        TransferFunction.load(f"{path}:CT-Bones")
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert "'CT-Bones'" in msg
+    assert "CT-AAA, CT-Bone, MR-Default" in msg
+    # case-insensitive as a fallback
+    assert TransferFunction.load(f"{path}:ct-bone").name == "CT-Bone"
+
+
+def test_slicer_vp_file(tmp_path: Path) -> None:
+    opacity = "8 -3024 0 -16.4458 0 641.385 0.715686 3071 0.705882"
+    colour = (
+        "16 -3024 0 0 0 -16.4458 0.729412 0.254902 0.301961 641.385 0.905882 0.815686"
+        " 0.552941 3071 1 1 1"
+    )
+    path = write(tmp_path, "bone.vp", vp_text(opacity, colour))
+    tf = TransferFunction.load(path, hu_volume(1.0))
+    assert tf.name == "bone"
+    for x, r, g, b in CT_BONE_COLOUR:
+        np.testing.assert_allclose(tf(x)[:3], (r, g, b), atol=1e-9)
+    for x, a in CT_BONE_OPACITY:
+        assert tf(x)[3] == pytest.approx(a, abs=1e-9)
+    assert TransferFunction.map_names(path) == ["bone"]
+
+
+# ---------------------------------------------------------------------------- ParaView
+def test_paraview_export_in_data_units(tmp_path: Path) -> None:
+    path = write(tmp_path, "bone.json", paraview_json(PARAVIEW_EXPORT))
+    tf = TransferFunction.load(path, hu_volume())
+    rgb = np.reshape(PARAVIEW_EXPORT[0]["RGBPoints"], (-1, 4))
+    pts = np.reshape(PARAVIEW_EXPORT[0]["Points"], (-1, 4))
+    assert tf.name == "bone-hu"
+    for x, r, g, b in rgb:
+        np.testing.assert_allclose(tf(x)[:3], (r, g, b), atol=1e-9)
+    for x, a, _mid, _sharp in pts:  # ParaView opacities are taken per reference sample
+        assert tf(x)[3] == pytest.approx(a, abs=1e-9)
+
+
+def test_paraview_normalised_map_is_stretched_onto_the_window(tmp_path: Path) -> None:
+    path = write(tmp_path, "ColorMaps.json", paraview_json(PARAVIEW_PRESETS))
+    vol = hu_volume()
+    lo, hi = window(vol)
+    tf = TransferFunction.load(f"{path}:Black-Body Radiation", vol)
+    rgb = np.reshape(PARAVIEW_PRESETS[1]["RGBPoints"], (-1, 4))
+    for t, r, g, b in rgb:
+        np.testing.assert_allclose(tf(lo + t * (hi - lo))[:3], (r, g, b), atol=1e-9)
+    # no Points: the opacity ramp, 0 at the bottom to RAMP_OPACITY at the top
+    assert tf(lo)[3] == pytest.approx(0.0)
+    assert tf(hi)[3] == pytest.approx(tf_formats.RAMP_OPACITY)
+    assert tf(0.5 * (lo + hi))[3] == pytest.approx(0.5 * tf_formats.RAMP_OPACITY)
+
+
+def test_paraview_minus_one_to_one_is_normalised_too(tmp_path: Path) -> None:
+    m = {"Name": "sym", "ColorSpace": "RGB", "RGBPoints": [-1, 0, 0, 1, 0, 1, 1, 1, 1, 1, 0, 0]}
+    path = write(tmp_path, "sym.json", paraview_json([m]))
+    vol = hu_volume()
+    lo, hi = window(vol)
+    tf = TransferFunction.load(path, vol)
+    np.testing.assert_allclose(tf(0.5 * (lo + hi))[:3], (1, 1, 1), atol=1e-9)
+    np.testing.assert_allclose(tf(lo)[:3], (0, 0, 1), atol=1e-9)
+    # without a volume the file's own units stay
+    assert TransferFunction.load(path).value_range == (-1.0, 1.0)
+
+
+def test_paraview_midpoint_adds_a_halfway_point(tmp_path: Path) -> None:
+    m = {
+        "Name": "mid",
+        "RGBPoints": [0, 0, 0, 0, 10, 1, 1, 1],
+        "Points": [0, 0.0, 0.25, 0.0, 10, 0.8, 0.5, 0.0],
+    }
+    tf = TransferFunction.load(write(tmp_path, "mid.json", paraview_json([m])))
+    assert tf(2.5)[3] == pytest.approx(0.4)  # halfway opacity at 25 % of the segment
+    assert tf(10)[3] == pytest.approx(0.8)
+
+
+def test_paraview_sharpness_and_colour_space_are_reported(tmp_path: Path) -> None:
+    m = dict(PARAVIEW_PRESETS[0])
+    m["Points"] = [0, 0.0, 0.5, 0.7, 1, 1.0, 0.5, 0.0]
+    path = write(tmp_path, "cw.json", paraview_json([m]))
+    with pytest.warns(UserWarning, match="Cool to Warm") as caught:
+        TransferFunction.load(path)
+    text = " ".join(str(w.message) for w in caught)
+    assert "sharpness" in text
+    assert "Diverging colour space interpolated in RGB" in text
+
+
+def test_paraview_step_colour_space_holds_each_colour(tmp_path: Path) -> None:
+    m = {"Name": "steps", "ColorSpace": "Step", "RGBPoints": [0, 1, 0, 0, 5, 0, 1, 0, 10, 0, 0, 1]}
+    tf = TransferFunction.load(write(tmp_path, "s.json", paraview_json([m])))
+    np.testing.assert_allclose(tf(4.9)[:3], (1, 0, 0), atol=1e-9)
+    np.testing.assert_allclose(tf(5.1)[:3], (0, 1, 0), atol=1e-9)
+    np.testing.assert_allclose(tf(9.9)[:3], (0, 1, 0), atol=1e-9)
+
+
+def test_single_paraview_object_and_voxwarp_json_still_load(tmp_path: Path) -> None:
+    one = write(tmp_path, "one.json", json.dumps(PARAVIEW_PRESETS[2]))
+    assert TransferFunction.load(one).name == "X Ray"
+    own = write(tmp_path, "own.json", json.dumps({"preset": "viridis"}))
+    assert TransferFunction.load(own, hu_volume()).name == "viridis"
+    assert TransferFunction.map_names(own) == []
+
+
+# ---------------------------------------------------------------------------- matplotlib
+def test_colormap_name_gives_its_colours_and_a_rising_opacity() -> None:
+    import matplotlib
+
+    vol = hu_volume()
+    lo, hi = window(vol)
+    for name in ("viridis", "magma_r", "gray"):
+        tf = TransferFunction.preset(name, vol)
+        cmap = matplotlib.colormaps[name]
+        pts = np.asarray(tf.points)
+        assert len(pts) == tf_formats.COLORMAP_SAMPLES
+        t = (pts[:, 0] - lo) / (hi - lo)
+        np.testing.assert_allclose(t, np.linspace(0, 1, len(pts)), atol=1e-12)
+        np.testing.assert_allclose(pts[:, 1:4], cmap(t)[:, :3], atol=1 / 255)
+        assert np.all(np.diff(pts[:, 4]) >= 0)
+        assert pts[0, 4] == 0.0
+        assert pts[-1, 4] == pytest.approx(tf_formats.RAMP_OPACITY)
+    # reversed maps as matplotlib has them
+    fwd, rev = TransferFunction.preset("viridis", vol), TransferFunction.preset("viridis_r", vol)
+    np.testing.assert_allclose(np.asarray(rev.points)[::-1, 1:4], np.asarray(fwd.points)[:, 1:4])
+
+
+def test_small_listed_colormap_keeps_all_its_colours() -> None:
+    import matplotlib
+
+    tf = TransferFunction.preset("tab10", hu_volume())
+    colours = np.asarray(matplotlib.colormaps["tab10"].colors)
+    np.testing.assert_allclose(np.asarray(tf.points)[:, 1:4], colours, atol=1e-9)
+
+
+def test_presets_win_and_scene_json_accepts_colormap_names() -> None:
+    vol = hu_volume()
+    assert TransferFunction.coerce("hot", vol).points == TransferFunction.preset("hot", vol).points
+    assert len(TransferFunction.coerce("hot", vol).points) == 4  # voxwarp's hot, not matplotlib's
+    tf = TransferFunction.from_dict({"preset": "cividis"}, vol)
+    assert tf.name == "cividis"
+    assert TransferFunction.coerce("cividis", vol).points == tf.points
+
+
+def test_colormap_without_matplotlib_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(tfmod, "_have_matplotlib", lambda: False)
+    with pytest.raises(SceneError) as info:
+        TransferFunction.preset("viridis")
+    msg = str(info.value)
+    assert "pip install 'voxwarp[teach]'" in msg
+    assert "\n" not in msg
+    for name in PRESETS:
+        assert name in msg
+
+
+def test_unknown_name_lists_presets_and_suggests() -> None:
+    with pytest.raises(SceneError) as info:
+        TransferFunction.preset("virdis")
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert "did you mean viridis" in msg
+    assert "ct-bone" in msg
+    assert "matplotlib colour-map name" in msg
+
+
+# ---------------------------------------------------------------------------- specs
+def test_file_spec_rules(tmp_path: Path) -> None:
+    path = write(tmp_path, "presets.xml", PRESETS_XML)
+    assert file_spec("viridis") is None
+    assert file_spec("ct-bone") is None
+    assert file_spec(path) == (path, None)
+    assert file_spec(f"{path}:CT-Bone") == (path, "CT-Bone")
+    assert file_spec("missing.json") == ("missing.json", None)
+    assert file_spec("missing.xml:CT-Bone") == ("missing.xml", "CT-Bone")
+    assert file_spec("dir/tf") == ("dir/tf", None)
+
+
+# ---------------------------------------------------------------------------- hostile input
+_OK_COLOUR = "8 0 0 0 0 1 1 1 1"
+HOSTILE_XML = {
+    "huge N": ('<MRML><VolumeProperty name="x" scalarOpacity="999999999 0 0 1 1"'
+               f' colorTransfer="{_OK_COLOUR}"/></MRML>', "says 999999999 numbers but has 4"),
+    "N of 40 digits": ('<MRML><VolumeProperty name="x" scalarOpacity="' + "9" * 40
+                       + f' 0 0" colorTransfer="{_OK_COLOUR}"/></MRML>', "too large"),
+    "N not matching": ('<MRML><VolumeProperty name="x" scalarOpacity="6 0 0 1 1"'
+                       f' colorTransfer="{_OK_COLOUR}"/></MRML>', "says 6 numbers but has 4"),
+    "NaN": ('<MRML><VolumeProperty name="x" scalarOpacity="4 0 nan 1 1"'
+            f' colorTransfer="{_OK_COLOUR}"/></MRML>', "not a number"),
+    "inf": ('<MRML><VolumeProperty name="x" scalarOpacity="4 0 0 1e999 1"'
+            f' colorTransfer="{_OK_COLOUR}"/></MRML>', "finite"),
+    "word": ('<MRML><VolumeProperty name="x" scalarOpacity="4 0 zero 1 1"'
+             f' colorTransfer="{_OK_COLOUR}"/></MRML>', "not a number"),
+    "opacity 1.5": ('<MRML><VolumeProperty name="x" scalarOpacity="4 0 0 1 1.5"'
+                    f' colorTransfer="{_OK_COLOUR}"/></MRML>', r"\[0, 1\]"),
+    "negative colour": ('<MRML><VolumeProperty name="x" scalarOpacity="4 0 0 1 1"'
+                        ' colorTransfer="8 0 -0.1 0 0 1 1 1 1"/></MRML>', r"\[0, 1\]"),
+    "x decreasing": ('<MRML><VolumeProperty name="x" scalarOpacity="4 5 0 1 1"'
+                     f' colorTransfer="{_OK_COLOUR}"/></MRML>', "must not decrease"),
+    "odd count": ('<MRML><VolumeProperty name="x" scalarOpacity="3 0 0 1"'
+                  f' colorTransfer="{_OK_COLOUR}"/></MRML>', "groups of 2"),
+    "empty opacity": ('<MRML><VolumeProperty name="x" scalarOpacity=""'
+                      f' colorTransfer="{_OK_COLOUR}"/></MRML>', "empty"),
+    "no colour": ('<MRML><VolumeProperty name="x" scalarOpacity="4 0 0 1 1"/></MRML>',
+                  "no colorTransfer"),
+    "no VolumeProperty": ("<MRML><Other/></MRML>", "no <VolumeProperty>"),
+    "not XML": ("<MRML><VolumeProperty", "not well-formed"),
+    "entities": ('<?xml version="1.0"?><!DOCTYPE lolz [<!ENTITY lol "lol">'
+                 '<!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">]>'
+                 '<MRML><VolumeProperty name="&lol2;"/></MRML>', "DTD or entities"),
+}  # fmt: skip
+
+HOSTILE_JSON = {
+    "categorical": ([{"Name": "cat", "IndexedColors": [1, 0, 0, 0, 1, 0]}], "categorical"),
+    "RGBPoints 5 numbers": ([{"Name": "a", "RGBPoints": [0, 1, 1, 1, 1]}], "groups of 4"),
+    "RGBPoints strings": ([{"Name": "a", "RGBPoints": ["x", 1, 1, 1]}], "not a number"),
+    "RGBPoints null": ([{"Name": "a", "RGBPoints": [None, 1, 1, 1]}], "not a number"),
+    "RGBPoints not a list": ([{"Name": "a", "RGBPoints": 5}], "no RGBPoints list"),
+    "Points not a list": ([{"Name": "a", "RGBPoints": [0, 0, 0, 0], "Points": {}}], "Points"),
+    "colour 2": ([{"Name": "a", "RGBPoints": [0, 2, 0, 0]}], r"\[0, 1\]"),
+    "x decreasing": ([{"Name": "a", "RGBPoints": [1, 0, 0, 0, 0, 1, 1, 1]}], "must not decrease"),
+    "empty list of maps": ([], "control point"),
+    "list of non-maps": ([{"RGBPoints": [0, 0, 0, 0]}, 5], "not a JSON object"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_XML))
+def test_hostile_slicer_xml_is_one_line(tmp_path: Path, case: str) -> None:
+    text, pattern = HOSTILE_XML[case]
+    path = write(tmp_path, "presets.xml", text)
+    with pytest.raises(SceneError, match=pattern) as info:
+        TransferFunction.load(path)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_JSON))
+def test_hostile_paraview_json_is_one_line(tmp_path: Path, case: str) -> None:
+    doc, pattern = HOSTILE_JSON[case]
+    path = write(tmp_path, "map.json", json.dumps(doc))
+    with pytest.raises(SceneError, match=pattern) as info:
+        TransferFunction.load(path)
+    assert "\n" not in str(info.value)
+
+
+def test_hostile_files_are_one_line(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.xml"
+    junk.write_bytes(bytes(range(256)) * 4)
+    latin = tmp_path / "latin.vp"
+    latin.write_bytes(b"1\n\xe9\xe9\n")
+    short = write(tmp_path, "short.vp", "1\n1\n0.9\n")
+    big = tmp_path / "big.json"
+    with open(big, "wb") as fh:  # a sparse 1 GB file: refused by its size, not read
+        fh.truncate(1 << 30)
+    cases = {
+        str(junk): "binary",
+        str(latin): "not UTF-8",
+        short: "9 lines",
+        str(big): "at most 32 MB",
+        str(tmp_path): "folder",
+        str(tmp_path / "none.xml"): "no such transfer function file",
+        write(tmp_path, "empty.xml", "  \n"): "empty",
+    }
+    for path, pattern in cases.items():
+        t0 = time.perf_counter()
+        with pytest.raises(SceneError, match=pattern) as info:
+            TransferFunction.load(path)
+        assert time.perf_counter() - t0 < 1.0
+        assert "\n" not in str(info.value)
+
+
+def test_billion_laughs_is_refused_quickly(tmp_path: Path) -> None:
+    ents = "".join(f'<!ENTITY l{i} "{("&l" + str(i - 1) + ";") * 10}">' for i in range(1, 10))
+    text = f'<?xml version="1.0"?><!DOCTYPE m [<!ENTITY l0 "ha">{ents}]><MRML>&l9;</MRML>'
+    path = write(tmp_path, "laughs.xml", text)
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError, match="DTD"):
+        TransferFunction.load(path)
+    assert time.perf_counter() - t0 < 1.0
+
+
+def test_slicer_presets_keep_their_data_units() -> None:
+    maps = tf_formats.slicer_presets(PRESETS_XML, "presets.xml")
+    assert [m.name for m in maps] == ["CT-AAA", "CT-Bone", "MR-Default"]
+    assert all(m.unit_distance == 1.0 for m in maps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pts, mapped = tf_formats.to_control_points(maps[1], (-1000.0, 2000.0), 1.0)
+    assert not mapped  # Slicer presets keep their data units (HU)
+    assert pts[0][0] == -3024
+    assert pts[-1][0] == 3071
