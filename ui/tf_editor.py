@@ -51,6 +51,7 @@ from PySide6.QtWidgets import (
     QComboBox,
     QFileDialog,
     QHBoxLayout,
+    QInputDialog,
     QLabel,
     QMessageBox,
     QPushButton,
@@ -60,7 +61,12 @@ from PySide6.QtWidgets import (
 )
 
 from voxwarp.core.files import atomic_write_text
-from voxwarp.core.transfer_function import PRESETS, ControlPoint, TransferFunction
+from voxwarp.core.transfer_function import (
+    PRESETS,
+    ControlPoint,
+    TransferFunction,
+    colormaps_available,
+)
 from voxwarp.core.volume import Volume
 from voxwarp.errors import VoxwarpError
 
@@ -80,6 +86,19 @@ HISTOGRAM_MAX_SAMPLES = 2_000_000
 CUSTOM_ENTRY = "custom"
 
 _JSON_FILTER = "Transfer function JSON (*.json);;All files (*)"
+#: Load accepts voxwarp's JSON, ParaView colour maps and Slicer volume properties.
+_LOAD_FILTER = (
+    "Transfer functions (*.json *.xml *.vp);;voxwarp or ParaView colour map JSON (*.json)"
+    ";;3D Slicer presets.xml or .vp (*.xml *.vp);;All files (*)"
+)
+#: matplotlib colour maps the preset combo offers after the presets (with matplotlib).
+COLORMAP_ENTRIES = ("viridis", "magma", "inferno", "plasma", "cividis", "gray")
+
+
+def preset_entries() -> list[str]:
+    """The preset combo's names after ``custom``: the presets, then, when matplotlib is
+    installed, :data:`COLORMAP_ENTRIES`."""
+    return [*PRESETS, *(COLORMAP_ENTRIES if colormaps_available() else ())]
 
 
 def value_histogram(
@@ -546,7 +565,8 @@ class TransferFunctionEditor(QWidget):
     canvas : TransferFunctionCanvas
         The painted plot that receives the mouse and key edits.
     preset_combo : QComboBox
-        ``"custom"`` followed by the names of :data:`voxwarp.core.transfer_function.PRESETS`.
+        ``"custom"`` followed by :func:`preset_entries` (the presets, then a few
+        matplotlib colour maps when matplotlib is installed).
     save_button, load_button : QPushButton
         Open a file dialog, then call :meth:`save_to` / :meth:`load_from`.
     """
@@ -566,14 +586,16 @@ class TransferFunctionEditor(QWidget):
 
         self.preset_combo = QComboBox(self)
         self.preset_combo.addItem(CUSTOM_ENTRY)
-        self.preset_combo.addItems(list(PRESETS))
+        self.preset_combo.addItems(preset_entries())
         self.preset_combo.setToolTip("Replace the transfer function by a preset")
         self.preset_combo.currentIndexChanged.connect(self._on_preset_index)
         self.save_button = QPushButton("Save…", self)
         self.save_button.setToolTip("Save the transfer function as JSON")
         self.save_button.clicked.connect(self._on_save_clicked)
         self.load_button = QPushButton("Load…", self)
-        self.load_button.setToolTip("Load a transfer function JSON file")
+        self.load_button.setToolTip(
+            "Load a transfer function: voxwarp or ParaView JSON, Slicer presets.xml or .vp"
+        )
         self.load_button.clicked.connect(self._on_load_clicked)
         self.readout = QLabel(self)
         self.message = QLabel(self)
@@ -649,23 +671,42 @@ class TransferFunctionEditor(QWidget):
             return False
         return True
 
-    def load_from(self, path: str | Path) -> bool:
-        """Read a transfer function JSON file and make it current (a user edit: emits).
+    def load_from(self, path: str | Path, name: str | None = None) -> bool:
+        """Read a transfer function file and make it current (a user edit: emits).
 
-        Errors (missing file, bad JSON, invalid points) are shown in a warning box, not
-        raised, and leave the current transfer function unchanged.
+        voxwarp JSON, ParaView colour-map JSON or a Slicer ``presets.xml`` / ``.vp`` (see
+        :meth:`TransferFunction.load`), resolved against the editor's volume. A file with
+        several maps asks which one (a list dialog) unless ``name`` is given. Errors
+        (missing file, bad content, unknown name) are shown in a warning box, not raised,
+        and leave the current transfer function unchanged; conversion notes are shown
+        below the plot.
 
         Returns
         -------
         bool
-            Whether the file was loaded.
+            Whether a transfer function was loaded (False also when the choice is cancelled).
         """
         try:
-            tf = TransferFunction.load(str(path))
+            if name is None:
+                names = TransferFunction.map_names(str(path))
+                if len(names) > 1:
+                    name, ok = QInputDialog.getItem(
+                        self,
+                        "Load transfer function",
+                        f"{Path(path).name} holds several maps:",
+                        names,
+                        0,
+                        False,
+                    )
+                    if not ok:
+                        return False
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                tf = TransferFunction.load(str(path), self._volume, name=name)
         except (OSError, VoxwarpError) as exc:
             QMessageBox.warning(self, "Load transfer function", str(exc))
             return False
-        self._show_message("")
+        self._show_message(" ".join(str(w.message) for w in caught))
         self._user_set(tf)
         return True
 
@@ -683,12 +724,12 @@ class TransferFunctionEditor(QWidget):
 
     def _on_preset_index(self, index: int) -> None:
         name = self.preset_combo.itemText(index)
-        if index > 0 and name in PRESETS:
+        if index > 0 and name in preset_entries():
             self.apply_preset(name)
 
     def _sync_combo(self) -> None:
         name = self.transfer_function.name
-        index = self.preset_combo.findText(name) if name in PRESETS else 0
+        index = self.preset_combo.findText(name) if name in preset_entries() else 0
         was = self.preset_combo.blockSignals(True)
         self.preset_combo.setCurrentIndex(max(0, index))
         self.preset_combo.blockSignals(was)
@@ -720,7 +761,7 @@ class TransferFunctionEditor(QWidget):
 
     def _on_load_clicked(self) -> None:
         path, _filter = QFileDialog.getOpenFileName(
-            self, "Load transfer function", self._last_dir, _JSON_FILTER
+            self, "Load transfer function", self._last_dir, _LOAD_FILTER
         )
         if not path:
             return

@@ -369,7 +369,7 @@ def _json(text: str, path: str) -> Any:
 
 def _colormap(name: str, volume: Volume | None) -> TransferFunction | None:
     """matplotlib colour map ``name`` as a ramp over the volume's window, None if unknown."""
-    if not _have_matplotlib():
+    if not colormaps_available():
         return None
     colours = tf_formats.colormap_colours(name)
     if colours is None:
@@ -380,15 +380,15 @@ def _colormap(name: str, volume: Volume | None) -> TransferFunction | None:
     return TransferFunction(pts, name=name)
 
 
-def _have_matplotlib() -> bool:
-    """Whether matplotlib (of the ``teach`` extra) can be imported."""
+def colormaps_available() -> bool:
+    """Whether matplotlib colour-map names work here (matplotlib, of the ``teach`` extra)."""
     return importlib.util.find_spec("matplotlib") is not None
 
 
 def _unknown_name(name: str) -> str:
     import difflib
 
-    have_mpl = _have_matplotlib()
+    have_mpl = colormaps_available()
     known = list(PRESETS) + (tf_formats.colormap_names() if have_mpl else [])
     close = difflib.get_close_matches(name, known, n=3)
     hint = f" (did you mean {', '.join(close)}?)" if close else ""

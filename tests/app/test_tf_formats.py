@@ -290,7 +290,7 @@ def test_presets_win_and_scene_json_accepts_colormap_names() -> None:
 
 
 def test_colormap_without_matplotlib_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(tfmod, "_have_matplotlib", lambda: False)
+    monkeypatch.setattr(tfmod, "colormaps_available", lambda: False)
     with pytest.raises(SceneError) as info:
         TransferFunction.preset("viridis")
     msg = str(info.value)
