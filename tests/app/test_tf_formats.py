@@ -434,3 +434,19 @@ def test_slicer_presets_keep_their_data_units() -> None:
     assert not mapped  # Slicer presets keep their data units (HU)
     assert pts[0][0] == -3024
     assert pts[-1][0] == 3071
+
+
+def test_the_docs_snippets_load(tmp_path: Path) -> None:
+    """docs/transfer-functions.md's ParaView and Slicer examples are valid files."""
+    import re
+
+    page = Path(__file__).resolve().parents[2] / "docs" / "transfer-functions.md"
+    blocks = dict(re.findall(r"```(json|xml)\n(.*?)```", page.read_text(encoding="utf-8"), re.S))
+    vol = hu_volume()
+    pv = TransferFunction.load(write(tmp_path, "bb.json", blocks["json"]), vol)
+    assert pv.name == "Black-Body Radiation"
+    lo, hi = window(vol)
+    np.testing.assert_allclose(pv(lo + 0.4 * (hi - lo))[:3], (0.901960784314, 0, 0), atol=1e-9)
+    bone = TransferFunction.load(write(tmp_path, "ct-bone.xml", blocks["xml"]) + ":CT-Bone", vol)
+    for x, r, g, b in CT_BONE_COLOUR:
+        np.testing.assert_allclose(bone(x)[:3], (r, g, b), atol=1e-9)
