@@ -78,3 +78,72 @@ def test_notebook_runs_and_shows_its_pictures(name: str, tmp_path: Path, gl_ctx:
         assert max(w, h) <= 1024
     widgets = [o for o in outputs if WIDGET in o.get("data", {}) and "image/png" in o.data]
     assert len(widgets) == 1, "the Viewer cell shows the widget, with a PNG for static views"
+
+
+LIVE_CELLS = [
+    """\
+import asyncio, json
+import numpy as np
+from voxwarp import Scene, load_sample
+from voxwarp.notebook import Viewer
+
+scene = Scene(load_sample("fish", shape=(64, 32, 28)), view="+z")
+v = Viewer(scene, "massspring", resolution=5, size=(200, 150))
+v._has_visible_views = True  # what the browser reports once the view is on screen
+
+
+def msg(**event):
+    v._rfb_handle_msg(v, event, [])  # the path of a browser event (jupyter_rfb's comm handler)
+
+
+async def confirm(seconds):
+    for _ in range(int(seconds / 0.05)):  # the browser confirms each frame it shows
+        v._frame_feedback = {"index": v._rfb_frame_index, "timestamp": 0, "localtime": 0}
+        await asyncio.sleep(0.05)
+
+
+msg(type="resize", width=200, height=150, pwidth=400, pheight=300, ratio=2.0, timestamp=0)
+await confirm(0.5)
+print(json.dumps({"resize_frames": v.get_stats()["sent_frames"]}))""",
+    """\
+g = v.session.model.grid
+h = int(np.ravel_multi_index((3, 2, g.shape[2] - 1), g.shape))
+x, y = (float(c) for c in v.handle_pixels()[h])
+rest = v.session.handles()[h].copy()
+press = dict(button=1, buttons=[1], modifiers=[])
+msg(type="pointer_down", x=x, y=y, timestamp=1, **press)
+for i in range(1, 5):
+    msg(type="pointer_move", x=x, y=y - 5 * i, timestamp=1 + i, **press)
+    await confirm(0.1)
+msg(type="pointer_up", x=x, y=y - 20, button=1, buttons=[], modifiers=[], timestamp=9)
+n0 = v.frames_drawn
+await confirm(1.0)  # no more events: the running model asks for its own frames
+print(json.dumps({
+    "moved_mm": float(np.linalg.norm(v.session.handles()[h] - rest)),
+    "frames_while_running": v.frames_drawn - n0,
+    "undo": v.interaction.undo_texts,
+    "frame_shape": list(v._rfb_last_frame.shape),
+}))
+v.display()""",
+]
+
+
+def test_viewer_live_in_a_kernel(tmp_path: Path, gl_ctx: object) -> None:
+    """The widget in a real kernel: browser events through jupyter_rfb's message handler,
+    frames sent through its comm, the simulation drawing frames on its own."""
+    from nbclient import NotebookClient
+    from nbformat.v4 import new_code_cell, new_notebook
+
+    nb = new_notebook(cells=[new_code_cell(c) for c in LIVE_CELLS])
+    NotebookClient(nb, km=_kernel_manager(tmp_path), timeout=CELL_TIMEOUT_S).execute()
+    outputs = [o for c in nb.cells for o in c.outputs]
+    printed = [json.loads(o.text) for o in outputs if o.output_type == "stream"]
+    assert printed[0]["resize_frames"] >= 1
+    live = printed[1]
+    assert live["moved_mm"] > 3.0
+    assert live["undo"] == ["Drag"]
+    assert live["frames_while_running"] >= 3
+    assert live["frame_shape"][2] == 4
+    shown = outputs[-1]
+    assert WIDGET in shown.data
+    assert "image/png" in shown.data
