@@ -2,33 +2,55 @@
 
 pyproject maps the design card's top-level folders into one package (``voxwarp`` is
 app/, ``voxwarp.deform`` is deform/, ...). mkdocstrings reads a package from one folder
-tree, so this copies the Python files under their installed names into build/docs-src
-(git-ignored; ``lay_out`` of scripts/lint_imports.py, as ``make lint`` does), which
-mkdocs.yml gives the python handler as its ``paths``. A fresh copy on every build and
-every reload of ``mkdocs serve``. Named in mkdocs.yml under ``hooks``.
+tree, so this mirrors the Python files under their installed names into build/docs-src
+(git-ignored), which mkdocs.yml gives the python handler as its ``paths``. Files are
+replaced one by one, atomically and only when they changed, so a second build running
+at the same time (``make docs`` twice, ``mkdocs serve``) never reads a half-made tree.
+Named in mkdocs.yml under ``hooks``.
 """
 
 from __future__ import annotations
 
-import shutil
-import sys
+import os
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 DEST = ROOT / "build" / "docs-src"
 
 
-def lay_out() -> None:
-    """Replace build/docs-src with the package laid out as it installs."""
-    sys.path.insert(0, str(ROOT / "scripts"))
-    try:
-        from lint_imports import lay_out as copy_package
-    finally:
-        sys.path.remove(str(ROOT / "scripts"))
-    shutil.rmtree(DEST, ignore_errors=True)
-    copy_package(DEST)
+def installed_files() -> dict[Path, Path]:
+    """Source file -> its path under DEST, from pyproject's ``package-dir``."""
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    package_dir = config["tool"]["setuptools"]["package-dir"]
+    files = {}
+    for name, folder in package_dir.items():
+        target = DEST.joinpath(*name.split("."))
+        for src in (ROOT / folder).rglob("*.py"):
+            rel = src.relative_to(ROOT / folder)
+            if rel.parts[0] in package_dir.values() or "__pycache__" in rel.parts:
+                continue
+            files[src] = target / rel
+    return files
+
+
+def sync() -> None:
+    """Bring DEST up to date: changed files replaced atomically, vanished ones removed."""
+    files = installed_files()
+    for src, dest in files.items():
+        data = src.read_bytes()
+        if dest.is_file() and dest.read_bytes() == data:
+            continue
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dest.with_name(f".{dest.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        tmp.replace(dest)
+    wanted = set(files.values())
+    for old in DEST.rglob("*.py"):
+        if old not in wanted:
+            old.unlink(missing_ok=True)
 
 
 # at import: mkdocs imports its hooks while it validates mkdocs.yml, before any plugin's
 # on_config (mkdocstrings keeps only the ``paths`` that exist when its on_config runs)
-lay_out()
+sync()
