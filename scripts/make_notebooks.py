@@ -3,11 +3,16 @@ registration) from the cells below, without outputs.
 
 Usage: ``python scripts/make_notebooks.py`` (then review ``git diff notebooks/``). The
 notebooks are small enough to execute headless in CI (tests/notebook/test_notebooks.py):
-reduced volumes, images of about 200 pixels.
+reduced volumes, images of about 200 pixels. ``--pictures DIR`` also executes them
+(nbclient, kernel ``python3``) and writes every picture they show to
+``DIR/NAME_CELL_OUTPUT.png`` (docs/notebooks.md shows two of them, copied to
+docs/images/notebooks/).
 """
 
 from __future__ import annotations
 
+import argparse
+import base64
 import sys
 from pathlib import Path
 
@@ -462,14 +467,37 @@ NOTEBOOKS = {
 }
 
 
-def main() -> int:
+def write_pictures(nb: nbformat.NotebookNode, name: str, folder: Path) -> None:
+    """Execute ``nb`` (a copy) and write each image/png output it shows to ``folder``."""
+    from nbclient import NotebookClient
+
+    nb = nbformat.from_dict(nb)
+    NotebookClient(nb, timeout=300, resources={"metadata": {"path": str(OUT)}}).execute()
+    folder.mkdir(parents=True, exist_ok=True)
+    for i, cell in enumerate(nb.cells):
+        for j, out in enumerate(cell.get("outputs", [])):
+            png = out.get("data", {}).get("image/png")
+            if png:
+                path = folder / f"{name}_{i}_{j}.png"
+                path.write_bytes(base64.b64decode(png))
+                print(f"  {path}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pictures", type=Path, help="also execute them; pictures go here")
+    args = parser.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     for name, make in NOTEBOOKS.items():
         nb = make()
+        for i, cell in enumerate(nb.cells):
+            cell.id = f"{name}-{i}"  # stable ids: regenerating changes nothing
         nbformat.validate(nb)
         path = OUT / f"{name}.ipynb"
         nbformat.write(nb, str(path))
         print(path.relative_to(ROOT))
+        if args.pictures is not None:
+            write_pictures(nb, name, args.pictures)
     return 0
 
 
