@@ -145,11 +145,14 @@ class Interaction:
         selection); returns its index, or None (the selection is then unchanged)."""
         hit = self.session.pick(self.camera, self.size, (float(x), float(y)))
         if hit is not None:
-            if mode == "replace" and hit in self.session.selection:
-                self.session.set_reference(hit)
-            else:
-                self.session.select([hit], mode)  # type: ignore[arg-type]
+            self._select(hit, mode)
         return hit
+
+    def _select(self, hit: int, mode: str) -> None:
+        if mode == "replace" and hit in self.session.selection:
+            self.session.set_reference(hit)  # keep the selection: drag all of it
+        else:
+            self.session.select([hit], mode)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ pointer
     def press(self, x: float, y: float, button: int = 1, modifiers: Sequence[str] = ()) -> None:
@@ -161,12 +164,12 @@ class Interaction:
             return
         shift, ctrl = "Shift" in mods, bool({"Control", "Meta"} & mods)
         mode = "toggle" if ctrl else "add" if shift else "replace"
-        before = self.session.snapshot()
-        hit = self.pick(x, y, mode)
+        hit = self.session.pick(self.camera, self.size, (float(x), float(y)))
         if hit is None:
             p["mode"] = "pan" if shift else "orbit"
             return
-        p["before"] = before
+        p["before"] = self.session.snapshot()  # only edits pay for a snapshot
+        self._select(hit, mode)
         begun = self.session.begin_drag(self.camera, self.size, (x, y))
         p["mode"] = "drag" if begun else "select"
 

@@ -73,12 +73,17 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
             "Viewer takes a Scene, an EditSession, a Volume, a scene JSON path, a volume"
             f" path or 'sample:NAME'; got {type(source).__name__}"
         )
+    session.sync_wires = False  # wire fields are rebuilt when a drag ends
+    start_deformation(session, deformation, settings)
+    return session
+
+
+def start_deformation(session: EditSession, deformation: str | None, settings: dict) -> None:
+    """Start ``deformation`` (None: keep the session's) with ``settings``."""
     if deformation is not None:
         session.set_deformation(deformation, **settings)
     elif settings:
         raise EditorError(f"deformation settings {', '.join(sorted(settings))} need a deformation")
-    session.sync_wires = False  # wire fields are rebuilt when a drag ends
-    return session
 
 
 def _session_from_input(spec: str) -> EditSession:
@@ -135,7 +140,18 @@ class Viewer(RemoteFrameBuffer):
 
         w, h = (max(1, int(v)) for v in size)
         super().__init__(css_width=f"{w}px", css_height=f"{h}px")
-        self.session = session_for(source, deformation, **settings)
+        self._renderer = OffscreenRenderer(w, h, ctx=ctx)
+        self._released = False
+        try:
+            self.session = session_for(source)
+            self.session.ctx = self._renderer.ctx  # GPU models step on the viewer's context
+            self.session.gl_scope = self._renderer.current
+            with self._renderer.current():
+                start_deformation(self.session, deformation, settings)
+        except BaseException:
+            self._released = True  # the widget's __del__ closes it again: nothing left
+            self._renderer.release()
+            raise
         self.session.running = bool(running)
         self.pixel_ratio = 1.0
         self.interaction = Interaction(self.session, (w, h))
@@ -145,11 +161,7 @@ class Viewer(RemoteFrameBuffer):
         self.last_quality: Quality = FULL
         self.frames_drawn = 0
         self.last_frame_ms = 0.0
-        self._renderer = OffscreenRenderer(w, h, ctx=ctx)
-        self.session.ctx = self._renderer.ctx
-        self.session.gl_scope = self._renderer.current
         self._refine: Any = None
-        self._released = False
 
     # ------------------------------------------------------------------ properties
     @property

@@ -154,3 +154,14 @@ def test_side_by_side() -> None:
     assert (out[:2, 5:, :3] == 128).all()
     assert (out[2:, 5:, :3] == 0).all()
     assert (out[..., 3] == 255).all()
+
+
+def test_load_ext_registers_the_scene_formatter() -> None:
+    from voxwarp import Scene
+    from voxwarp.notebook import load_ipython_extension
+
+    shell = _Shell()
+    png = shell.display_formatter.formatters["image/png"]
+    assert Scene not in png.type_printers
+    load_ipython_extension(shell)
+    assert Scene in png.type_printers

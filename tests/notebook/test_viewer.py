@@ -209,3 +209,35 @@ def test_chainmail_from_sample_input(gl_ctx: Any) -> None:
         assert np.allclose(v.session.handles()[h], rest)
     finally:
         v.release()
+
+
+def test_gpu_backend_drag_and_undo(gl_ctx: Any) -> None:
+    from voxwarp.notebook import Viewer
+
+    v = Viewer(_scene(), "massspring", size=SIZE, ctx=gl_ctx, resolution=5, backend="gpu")
+    try:
+        assert v.session.model.backend == "gpu"
+        grid = v.session.model.grid
+        h = int(np.ravel_multi_index((3, 2, grid.shape[2] - 1), grid.shape))
+        rest = v.session.handles()[h].copy()
+        x, y = v.handle_pixels()[h]
+        assert v.drag((x, y), (x, y - 20)) == h
+        v.step(10)
+        assert np.linalg.norm(v.session.handles()[h] - rest) > 5.0
+        assert v.undo()
+        assert np.allclose(v.session.handles()[h], rest)
+    finally:
+        v.close()
+        v.close()  # idempotent
+
+
+def test_bad_sources_are_refused_in_one_line(gl_ctx: Any) -> None:
+    from voxwarp.editing.session import EditorError
+    from voxwarp.notebook import Viewer
+
+    with pytest.raises(EditorError, match="Viewer takes a Scene"):
+        Viewer(42, ctx=gl_ctx)
+    with pytest.raises(EditorError, match="need a deformation"):
+        Viewer(_scene(), ctx=gl_ctx, resolution=4)
+    with pytest.raises(EditorError, match="deformation"):
+        Viewer(_scene(), "origami", ctx=gl_ctx)
