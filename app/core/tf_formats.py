@@ -63,6 +63,8 @@ class ImportedMap:
     kind: str
     unit_distance: float | None = None
     notes: tuple[str, ...] = ()
+    #: Why this map of a several-map file cannot be used (e.g. categorical), else None.
+    error: str | None = None
 
 
 # ---------------------------------------------------------------------------- reading
@@ -114,6 +116,21 @@ def file_kind(text: str, path: str = "") -> str:
         f"{path or 'text'}: not a transfer function file (voxwarp or ParaView JSON,"
         " Slicer presets.xml or .vp)"
     )
+
+
+_TRAILING_COMMA = re.compile(r",(\s*[\]}])")
+
+
+def parse_json(text: str, path: str = "") -> object:
+    """JSON, also with trailing commas before ``]``/``}`` as ParaView's jsoncpp accepts
+    (its own ColorMaps.json ends with one)."""
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        try:
+            return json.loads(_TRAILING_COMMA.sub(r"\1", text))
+        except ValueError:
+            raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
 
 
 def is_paraview(doc: object) -> bool:
@@ -184,7 +201,18 @@ def paraview_maps(doc: object, path: str = "") -> list[ImportedMap]:
     items = doc if isinstance(doc, list) else [doc]
     if not items:
         raise SceneError(f"{path}: the ParaView colour map list is empty")
-    return [_paraview_map(m, i, path) for i, m in enumerate(items)]
+    if len(items) == 1:
+        return [_paraview_map(items[0], 0, path)]
+    maps = []
+    for i, m in enumerate(items):  # a bad map is an error only when it is picked
+        try:
+            maps.append(_paraview_map(m, i, path))
+        except SceneError as exc:
+            name = str(m.get("Name", f"map {i + 1}")) if isinstance(m, dict) else f"map {i + 1}"
+            maps.append(ImportedMap(name, np.zeros((0, 4)), None, "paraview", error=str(exc)))
+    if all(m.error for m in maps):
+        raise SceneError(maps[0].error)
+    return maps
 
 
 def _paraview_map(m: object, i: int, path: str) -> ImportedMap:
@@ -214,13 +242,67 @@ def _paraview_map(m: object, i: int, path: str) -> ImportedMap:
         if sharp:
             notes.append("opacity sharpness ignored (linear between points)")
     space = str(m.get("ColorSpace", "RGB"))
-    if space not in ("RGB", "Step") and len(colour) < 64:
+    if space not in ("RGB", "Step", "Lab", "CIELAB") and len(colour) < 64:
         notes.append(f"{space} colour space interpolated in RGB between the points")
     if m.get("UseLogScale"):
         notes.append("log scale ignored (linear in data value)")
     if space == "Step":
         colour = _step(colour)
+    elif space in ("Lab", "CIELAB"):
+        colour = lab_subdivided(colour)
     return ImportedMap(name, colour, opacity, "paraview", None, tuple(notes))
+
+
+# VTK's sRGB <-> CIE L*a*b* (vtkMath::RGBToLab / LabToRGB: sRGB gamma, D65 white
+# 0.9505, 1, 1.089, and out-of-gamut colours scaled down by their largest component)
+_RGB_TO_XYZ = np.array(
+    [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]
+)
+_XYZ_TO_RGB = np.array(
+    [[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]]
+)
+_WHITE = np.array([0.9505, 1.0, 1.089])
+
+
+def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    """sRGB in [0, 1] (..., 3) -> L*a*b* (..., 3), as VTK computes it."""
+    c = np.asarray(rgb, dtype=np.float64)
+    lin = np.where(c > 0.04045, ((c + 0.055) / 1.055) ** 2.4, c / 12.92)
+    v = (lin @ _RGB_TO_XYZ.T) / _WHITE
+    f = np.where(v > 0.008856, np.cbrt(v), 7.787 * v + 16.0 / 116.0)
+    return np.stack(
+        [116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1
+    )
+
+
+def lab_to_rgb(lab: np.ndarray) -> np.ndarray:
+    """L*a*b* (..., 3) -> sRGB in [0, 1], as VTK computes it (gamut clipped by scaling)."""
+    lab = np.asarray(lab, dtype=np.float64)
+    fy = (lab[..., 0] + 16) / 116
+    f = np.stack([lab[..., 1] / 500 + fy, fy, fy - lab[..., 2] / 200], -1)
+    v = np.where(f**3 > 0.008856, f**3, (f - 16.0 / 116.0) / 7.787) * _WHITE
+    lin = v @ _XYZ_TO_RGB.T
+    c = np.where(lin > 0.0031308, 1.055 * np.abs(lin) ** (1 / 2.4) - 0.055, 12.92 * lin)
+    top = np.max(c, axis=-1, keepdims=True)
+    c = np.where(top > 1.0, c / np.where(top > 1.0, top, 1.0), c)
+    return np.clip(c, 0.0, 1.0)
+
+
+def lab_subdivided(colour: np.ndarray, steps: int = 16, tol: float = 0.5 / 255) -> np.ndarray:
+    """Colour points (x, r, g, b) interpolated in L*a*b* as VTK's Lab space does, as RGB
+    points: a segment whose Lab path leaves the RGB line by more than ``tol`` gets
+    ``steps - 1`` points on the Lab path."""
+    rows = [colour[0]]
+    t = np.linspace(0.0, 1.0, steps + 1)[1:-1, None]
+    for k in range(1, len(colour)):
+        (x0, *c0), (x1, *c1) = colour[k - 1], colour[k]
+        if x1 > x0:
+            lab = (1 - t) * rgb_to_lab(np.array(c0)) + t * rgb_to_lab(np.array(c1))
+            rgb = lab_to_rgb(lab)
+            if np.max(np.abs(rgb - ((1 - t) * np.array(c0) + t * np.array(c1)))) > tol:
+                rows.extend(np.column_stack([x0 + t[:, 0] * (x1 - x0), rgb]))
+        rows.append(colour[k])
+    return np.asarray(rows)
 
 
 def _expand_midpoints(rows: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -307,25 +389,33 @@ def read_maps(text: str, path: str = "") -> list[ImportedMap]:
         return slicer_presets(text, path)
     if kind == "slicer-vp":
         return slicer_vp(text, path)
-    try:
-        doc = json.loads(text)
-    except ValueError as exc:
-        raise SceneError(f"{path}: not valid JSON ({exc})") from exc
+    doc = parse_json(text, path)
     if not is_paraview(doc):
         raise SceneError(f"{path}: not a ParaView colour map (no RGBPoints)")
     return paraview_maps(doc, path)
 
 
+def usable(maps: Sequence[ImportedMap]) -> list[ImportedMap]:
+    """The maps of a file that can be used (not categorical or broken)."""
+    return [m for m in maps if m.error is None]
+
+
 def pick(maps: Sequence[ImportedMap], name: str | None, path: str = "") -> ImportedMap:
-    """The map called ``name`` (exact, then case-insensitive); the first when None."""
-    if name is not None:
-        for test in (lambda m: m.name == name, lambda m: m.name.lower() == name.lower()):
-            hits = [m for m in maps if test(m)]
-            if hits:
-                return hits[0]
-        shown = ", ".join(m.name for m in maps[:40]) + (" ..." if len(maps) > 40 else "")
-        raise SceneError(f"{path} has no map {name!r}; names: {shown}")
-    return maps[0]
+    """The map called ``name`` (exact, then case-insensitive); the first usable when None.
+    Picking an unusable map raises its error."""
+    good = usable(maps)
+    if name is None:
+        return good[0]
+    for test in (lambda m: m.name == name, lambda m: m.name.lower() == name.lower()):
+        hits = [m for m in maps if test(m)]
+        if hits:
+            if hits[0].error:
+                raise SceneError(hits[0].error)
+            return hits[0]
+    shown = ", ".join(m.name for m in good[:40]) + (" ..." if len(good) > 40 else "")
+    left = len(maps) - len(good)
+    extra = f" ({left} categorical or broken maps left out)" if left else ""
+    raise SceneError(f"{path} has no map {name!r}; names: {shown}{extra}")
 
 
 # ---------------------------------------------------------------------------- matplotlib

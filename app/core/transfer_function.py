@@ -296,15 +296,16 @@ class TransferFunction:
             path, name = spec[0], name if name is not None else spec[1]
         text = tf_formats.read_text(path)
         if tf_formats.file_kind(text, path) == "json":
-            doc = _json(text, path)
+            doc = tf_formats.parse_json(text, path)
             if not tf_formats.is_paraview(doc):
                 return cls._from_voxwarp_json(doc, path, volume)
         maps = tf_formats.read_maps(text, path)
-        if name is None and len(maps) > 1:
+        good = tf_formats.usable(maps)
+        if name is None and len(good) > 1:
             warnings.warn(
-                f"{path} holds {len(maps)} maps; using the first, {maps[0].name!r} (pick one"
-                f" with {path}:NAME; names: {', '.join(m.name for m in maps[:12])}"
-                + (" ...)" if len(maps) > 12 else ")"),
+                f"{path} holds {len(good)} maps; using the first, {good[0].name!r} (pick one"
+                f" with {path}:NAME; names: {', '.join(m.name for m in good[:12])}"
+                + (" ...)" if len(good) > 12 else ")"),
                 stacklevel=2,
             )
         return cls._from_imported(tf_formats.pick(maps, name, path), volume)
@@ -328,12 +329,13 @@ class TransferFunction:
 
     @staticmethod
     def map_names(path: str) -> list[str]:
-        """Names of the maps in a ParaView / Slicer file; ``[]`` for voxwarp JSON."""
+        """Names of the usable maps in a ParaView / Slicer file (categorical ParaView maps
+        left out); ``[]`` for voxwarp JSON."""
         text = tf_formats.read_text(path)
         if tf_formats.file_kind(text, path) == "json":
-            if not tf_formats.is_paraview(_json(text, path)):
+            if not tf_formats.is_paraview(tf_formats.parse_json(text, path)):
                 return []
-        return [m.name for m in tf_formats.read_maps(text, path)]
+        return [m.name for m in tf_formats.usable(tf_formats.read_maps(text, path))]
 
 
 #: File suffixes ``--tf`` treats as a file even before it exists (so a typo says so).
@@ -356,15 +358,6 @@ def file_spec(spec: str) -> tuple[str, str | None] | None:
     if spec.lower().endswith(TF_FILE_SUFFIXES) or os.sep in spec or "/" in spec:
         return spec, None
     return None
-
-
-def _json(text: str, path: str) -> Any:
-    import json
-
-    try:
-        return json.loads(text)
-    except ValueError as exc:
-        raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
 
 
 def _colormap(name: str, volume: Volume | None) -> TransferFunction | None:

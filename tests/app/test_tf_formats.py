@@ -234,6 +234,44 @@ def test_paraview_sharpness_and_colour_space_are_reported(tmp_path: Path) -> Non
     assert "Diverging colour space interpolated in RGB" in text
 
 
+def test_paraview_lab_maps_interpolate_in_lab(tmp_path: Path) -> None:
+    from skimage import color  # an independent sRGB <-> CIE Lab (D65)
+
+    c0, c1 = np.array([0.05, 0.1, 0.4]), np.array([0.95, 0.85, 0.2])
+    m = {"Name": "lab", "ColorSpace": "Lab", "RGBPoints": [0, *c0, 10, *c1]}
+    tf = TransferFunction.load(write(tmp_path, "lab.json", paraview_json([m])))
+    for t in (0.25, 0.5, 0.8):
+        lab = (1 - t) * color.rgb2lab(c0[None]) + t * color.rgb2lab(c1[None])
+        want = color.lab2rgb(lab)[0]
+        assert np.all((want > 0.01) & (want < 0.99))  # inside the gamut: no clipping rule
+        np.testing.assert_allclose(tf(10 * t)[:3], want, atol=1 / 255)
+    # the RGB line would be off by far more than that
+    assert np.abs(tf(5)[:3] - 0.5 * (c0 + c1)).max() > 10 / 255
+    grey = TransferFunction.load(
+        write(tmp_path, "bw.json", paraview_json([{**m, "RGBPoints": [0, 0, 0, 0, 1, 1, 1, 1]}]))
+    )
+    np.testing.assert_allclose(grey(0.5)[:3], color.lab2rgb([[50.0, 0, 0]])[0], atol=1 / 255)
+
+
+def test_categorical_maps_in_a_file_are_left_out_until_picked(tmp_path: Path) -> None:
+    cat = {"Name": "KAAMS", "IndexedColors": [1, 1, 1, 1, 0, 0], "Annotations": ["0", "zero"]}
+    path = write(tmp_path, "mixed.json", paraview_json([cat, *PARAVIEW_PRESETS]))
+    assert TransferFunction.map_names(path) == ["Cool to Warm", "Black-Body Radiation", "X Ray"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert TransferFunction.load(path).name == "Cool to Warm"
+    assert any("holds 3 maps" in str(w.message) for w in caught)
+    with pytest.raises(SceneError, match="'KAAMS' is a categorical"):
+        TransferFunction.load(f"{path}:KAAMS")
+    with pytest.raises(SceneError, match="1 categorical or broken maps left out"):
+        TransferFunction.load(f"{path}:nope")
+
+
+def test_trailing_commas_as_in_paraviews_own_file(tmp_path: Path) -> None:
+    text = '[\n  {\n    "Name": "X Ray",\n    "RGBPoints": [0, 1, 1, 1, 1, 0, 0, 0,]\n  },\n]\n'
+    assert TransferFunction.load(write(tmp_path, "tc.json", text)).name == "X Ray"
+
+
 def test_paraview_step_colour_space_holds_each_colour(tmp_path: Path) -> None:
     m = {"Name": "steps", "ColorSpace": "Step", "RGBPoints": [0, 1, 0, 0, 5, 0, 1, 0, 10, 0, 0, 1]}
     tf = TransferFunction.load(write(tmp_path, "s.json", paraview_json([m])))
@@ -366,7 +404,11 @@ HOSTILE_JSON = {
     "colour 2": ([{"Name": "a", "RGBPoints": [0, 2, 0, 0]}], r"\[0, 1\]"),
     "x decreasing": ([{"Name": "a", "RGBPoints": [1, 0, 0, 0, 0, 1, 1, 1]}], "must not decrease"),
     "empty list of maps": ([], "control point"),
-    "list of non-maps": ([{"RGBPoints": [0, 0, 0, 0]}, 5], "not a JSON object"),
+    "every map broken": (
+        [{"Name": "a", "RGBPoints": 5}, {"Name": "b", "IndexedColors": [1, 0, 0]}],
+        "no RGBPoints list",
+    ),
+    "one non-map": ([5, {"Name": "a", "RGBPoints": "x"}], "not a JSON object"),
 }
 
 
