@@ -19,8 +19,8 @@ from voxwarp.errors import SceneError
 #: What "Render deformed view" can apply: nothing, a mass-spring push through the
 #: volume's centre, or the warps of a scene JSON the user picks.
 DEFORMATIONS: tuple[str, ...] = ("mass-spring push", "none", "scene file")
-#: Elements per axis of the push's mass-spring grid (corners fixed).
-PUSH_GRID = 8
+#: Elements per axis of the push's mass-spring grid (odd: a block at the centre).
+PUSH_GRID = 7
 #: How far the centre element is pushed, as a fraction of the volume's extent.
 PUSH_FRACTION = 0.2
 #: The pixel size of the rendered view (square), the widget's default.
@@ -30,9 +30,10 @@ DEFAULT_SIZE = 256
 def push_warps(
     volume: Volume, direction: Any = (0.0, 0.0, 1.0), fraction: float = PUSH_FRACTION
 ) -> list[Any]:
-    """A mass-spring push: the element grid's centre element moved along world
+    """A mass-spring push: the grid's central 3x3x3 elements moved along world
     ``direction`` by ``fraction`` of the volume's extent that way, the rest settled by
-    the springs (corners fixed)."""
+    the springs (the eight corners fixed). Moving a block, not one element, keeps the
+    material ahead of it from folding (one element pushed past its neighbour would)."""
     from voxwarp.deform import ElementGrid, MassSpring
 
     unit = np.asarray(direction, dtype=np.float64)
@@ -40,7 +41,10 @@ def push_warps(
     grid = ElementGrid(volume, shape=(PUSH_GRID,) * 3)
     model = MassSpring(grid, integrator="semi-implicit", shear=True)
     extent = float(np.abs(unit) @ np.asarray(volume.size_mm))
-    model.move((PUSH_GRID // 2,) * 3, tuple(fraction * extent * unit))
+    block = np.zeros(grid.shape, dtype=bool)
+    middle = slice(PUSH_GRID // 2 - 1, PUSH_GRID // 2 + 2)
+    block[middle, middle, middle] = True
+    model.move(block, tuple(fraction * extent * unit))
     model.settle()
     return [model.warp()]
 

@@ -16,6 +16,7 @@ line in the widget's status (and as a napari notification).
 
 from __future__ import annotations
 
+import traceback
 from typing import TYPE_CHECKING, Any
 
 from qtpy.QtWidgets import (
@@ -128,6 +129,9 @@ class VoxwarpWidget(QWidget):
             self._report(exc)
             return None
         kind = self.deformation_box.currentText()
+        if kind == "scene file" and not self.scene_edit.text():
+            self._report(VoxwarpError("deformation 'scene file' needs a scene JSON: pick one"))
+            return None
         view = self.view_box.currentText()
         if view != "default":
             options["view"] = view
@@ -139,14 +143,19 @@ class VoxwarpWidget(QWidget):
 
         self.render_button.setEnabled(False)
         self._set_status(f"rendering {name} ...")
+        # the job returns its error wrapped instead of raising: napari 0.9.2's task status
+        # handler of `errored` itself fails (TypeError), and errors are one line here
         self.worker = create_worker(job.run)
-        self.worker.returned.connect(lambda image: self._add_render(image, name))
-        self.worker.errored.connect(self._report)
+        self.worker.returned.connect(lambda result: self._finish(result, name))
         self.worker.finished.connect(lambda: self.render_button.setEnabled(True))
         self.worker.start()
         return self.worker
 
-    def _add_render(self, image: Any, name: str) -> None:
+    def _finish(self, result: Any, name: str) -> None:
+        if isinstance(result, _Failed):
+            self._worker_error(result.error)
+            return
+        image = result
         self.viewer.add_image(image, rgb=True, name=name, metadata={"voxwarp": {"render": name}})
         self._set_status(f"added {name}: {image.shape[1]}x{image.shape[0]} px")
 
@@ -174,6 +183,12 @@ class VoxwarpWidget(QWidget):
     def _set_status(self, text: str) -> None:
         self.status.setText(text)
 
+    def _worker_error(self, exc: BaseException) -> None:
+        """A voxwarp error is one status line; anything else also prints its traceback."""
+        if not isinstance(exc, VoxwarpError):
+            traceback.print_exception(exc)
+        self._report(exc)
+
     def _report(self, exc: BaseException) -> None:
         from napari.utils.notifications import show_warning
 
@@ -192,9 +207,21 @@ class _RenderJob:
         self.scene, self.size = scene, size
 
     def run(self) -> Any:
-        scene_path = self.scene or None
-        scene = deformed_view.deformed_scene(self.volume, self.options, self.kind, scene_path)
-        return deformed_view.render_rgb(scene, self.size)
+        """The RGB image, or the error that stopped it (wrapped: a worker that returns an
+        exception raises it)."""
+        try:
+            scene_path = self.scene or None
+            scene = deformed_view.deformed_scene(self.volume, self.options, self.kind, scene_path)
+            return deformed_view.render_rgb(scene, self.size)
+        except Exception as exc:  # handed to the GUI thread, reported there
+            return _Failed(exc)
+
+
+class _Failed:
+    """What a render job returns when it fails: the exception, for the GUI thread."""
+
+    def __init__(self, error: Exception) -> None:
+        self.error = error
 
 
 def _usable(layer: Any) -> bool:

@@ -40,4 +40,8 @@ def test_widget_renders_the_deformed_view_into_napari(tmp_path: Path) -> None:
     assert r["layers"][-2:] == ["fish (voxwarp, none)", "fish (voxwarp, mass-spring push)"]
     assert r["push_vs_none_mean_abs"] > 1.0  # the push changes the picture
     assert r["voxwarp_started"], r["scene"]
+    assert r["refused"]
+    assert r["error_status"] == "voxwarp: deformation 'scene file' needs a scene JSON: pick one"
+    assert r["worker_error_status"].startswith("voxwarp: no such scene file: ")
+    assert r["layer_count_after_error"] == 4  # nothing added
     assert (tmp_path / "window.png").stat().st_size > 10_000

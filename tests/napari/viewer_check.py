@@ -21,14 +21,13 @@ import numpy as np
 def wait_for(widget, worker, timeout: float = 120.0) -> None:
     from qtpy.QtWidgets import QApplication
 
-    done: list[bool] = []
-    worker.finished.connect(lambda: done.append(True))
+    # the widget re-enables its button on the worker's `finished` (connected before start)
     start = time.monotonic()
-    while not done and time.monotonic() - start < timeout:
+    while not widget.render_button.isEnabled() and time.monotonic() - start < timeout:
         QApplication.processEvents()
         time.sleep(0.01)
     QApplication.processEvents()
-    if not done:
+    if not widget.render_button.isEnabled():
         raise SystemExit(f"render did not finish in {timeout} s: {widget.status.text()}")
 
 
@@ -68,6 +67,14 @@ def main(out: Path, size: int = 160) -> None:
     plain = render(viewer, widget, "none")
     pushed = render(viewer, widget, "mass-spring push")
     changed = float(np.abs(plain.pop("image").astype(int) - pushed.pop("image")).mean())
+    widget.deformation_box.setCurrentText("scene file")  # no file picked: an error line
+    refused = widget.render_deformed() is None
+    error = widget.status.text()
+    widget.scene_edit.setText(str(out / "missing.json"))  # a worker error: one line too
+    wait_for(widget, widget.render_deformed())
+    worker_error = widget.status.text()
+    widget.scene_edit.setText("")
+    widget.deformation_box.setCurrentText("mass-spring push")
     widget.layer_box.setCurrentText("fish")
     process = widget.open_in_voxwarp()
     started = process is not None and process.poll() is None
@@ -89,6 +96,10 @@ def main(out: Path, size: int = 160) -> None:
         "push": pushed,
         "push_vs_none_mean_abs": changed,
         "voxwarp_started": started,
+        "refused": refused,
+        "error_status": error,
+        "worker_error_status": worker_error,
+        "layer_count_after_error": len(viewer.layers),
         "scene": widget.status.text(),
         "screenshot_shape": list(shot.shape),
     }
