@@ -54,7 +54,8 @@ SIM_FRAME_S = 1 / 30
 
 
 def session_for(source: Any, deformation: str | None = None, **settings: Any) -> EditSession:
-    """An edit session for ``source``: a :class:`~voxwarp.scene.Scene`, an
+    """An edit session for ``source``: a :class:`~voxwarp.scene.Scene` (a copy of it is
+    edited; its warps resume as the session's deformation), an
     :class:`~voxwarp.editing.session.EditSession`, a :class:`~voxwarp.core.volume.Volume`,
     or INPUT as ``voxwarp gui`` takes it (a scene JSON, resuming its deformation; a volume
     file; ``sample:NAME``). ``deformation`` (``"massspring"``, ``"chainmail"``,
@@ -63,7 +64,7 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
     if isinstance(source, EditSession):
         session = source
     elif isinstance(source, Scene):
-        session = EditSession(source)
+        session = EditSession(source.copy())  # the caller's scene keeps its warps
     elif isinstance(source, Volume):
         session = EditSession(Scene(source))
     elif isinstance(source, str | Path):
@@ -123,7 +124,8 @@ class Viewer(RemoteFrameBuffer):
 
     Use it as the last expression of a cell (or ``viewer.display()``); the viewer's
     :attr:`session` is the full editing API (``viewer.session.model``, ``.selection``,
-    ``.set_option(...)``), :attr:`camera` its camera.
+    ``.set_option(...)``; ``viewer.session.scene`` is the scene being edited, a copy of
+    a scene passed in), :attr:`camera` its camera.
     """
 
     def __init__(

@@ -241,3 +241,27 @@ def test_bad_sources_are_refused_in_one_line(gl_ctx: Any) -> None:
         Viewer(_scene(), ctx=gl_ctx, resolution=4)
     with pytest.raises(EditorError, match="deformation"):
         Viewer(_scene(), "origami", ctx=gl_ctx)
+
+
+def test_scene_is_copied_and_a_saved_session_resumes(gl_ctx: Any, tmp_path: Any) -> None:
+    from voxwarp.notebook import Viewer
+
+    scene = _scene()
+    v = Viewer(scene, "massspring", size=SIZE, ctx=gl_ctx, resolution=4)
+    try:
+        assert scene.warps == []  # the caller's scene is not edited
+        assert len(v.session.scene.warps) == 1
+        g = v.session.model.grid
+        h = int(np.ravel_multi_index((2, 1, g.shape[2] - 1), g.shape))
+        x, y = v.handle_pixels()[h]
+        assert v.drag((x, y), (x + 15, y)) == h
+        path = v.session.save(tmp_path / "edited.json")
+        positions = v.session.model.positions()
+    finally:
+        v.release()
+    v = Viewer(str(path), size=SIZE, ctx=gl_ctx)  # a scene JSON, as `voxwarp gui` opens it
+    try:
+        assert v.session.kind == "massspring"  # its model resumes, drags and all
+        assert np.allclose(v.session.model.positions(), positions)
+    finally:
+        v.release()
