@@ -15,6 +15,8 @@ from typing import Any
 
 import griffe
 
+#: an RST code-block directive line; the indented block after it is a Markdown code block
+CODE_BLOCK = re.compile(r"^[ \t]*\.\. code-block::.*\n", re.M)
 ROLE = re.compile(r":(?:py:)?(class|meth|func|mod|data|attr|exc|obj|const):`(~?)([^`<>]+)`")
 
 
@@ -26,7 +28,8 @@ def _identifier(target: str, obj: griffe.Object) -> str:
 
 
 def rewrite(text: str, obj: griffe.Object) -> str:
-    """``text`` with every Sphinx role replaced by an optional autorefs link in code."""
+    """``text`` with every Sphinx role replaced by an optional autorefs link in code, and
+    without RST ``code-block`` directive lines."""
 
     def link(match: re.Match[str]) -> str:
         short, target = match[2] == "~", match[3].strip().rstrip("()")
@@ -36,7 +39,7 @@ def rewrite(text: str, obj: griffe.Object) -> str:
         ident = _identifier(target, obj)
         return f'<autoref identifier="{ident}" optional><code>{shown}</code></autoref>'
 
-    return ROLE.sub(link, text)
+    return ROLE.sub(link, CODE_BLOCK.sub("", text))
 
 
 class SphinxRoles(griffe.Extension):
