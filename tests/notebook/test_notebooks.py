@@ -122,8 +122,10 @@ print(json.dumps({
     "moved_mm": float(np.linalg.norm(v.session.handles()[h] - rest)),
     "frames_while_running": v.frames_drawn - n0,
     "undo": v.interaction.undo_texts,
-    "frame_shape": list(v._rfb_last_frame.shape),
 }))
+v.running = False  # pause: the view rests, the full-resolution frame follows
+await confirm(0.8)
+print(json.dumps({"rest_shape": list(v._rfb_last_frame.shape), "rest_scale": v.last_quality.scale}))
 v.display()""",
 ]
 
@@ -143,7 +145,7 @@ def test_viewer_live_in_a_kernel(tmp_path: Path, gl_ctx: object) -> None:
     assert live["moved_mm"] > 3.0
     assert live["undo"] == ["Drag"]
     assert live["frames_while_running"] >= 3
-    assert live["frame_shape"][2] == 4
+    assert printed[2] == {"rest_shape": [300, 400, 4], "rest_scale": 1.0}  # 2 device px per px
     shown = outputs[-1]
     assert WIDGET in shown.data
     assert "image/png" in shown.data
