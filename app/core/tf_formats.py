@@ -16,9 +16,11 @@ Formats
   ``[x, opacity, midpoint, sharpness, ...]``, ``ColorSpace``, ``NanColor``, ``Creator``...
   Categorical maps (``IndexedColors``) are rejected.
 * **3D Slicer ``presets.xml``** (``<VolumeProperty name=... scalarOpacity="N x o ..."
-  colorTransfer="N x r g b ..." .../>`` elements) and the **``.vp``** file Slicer saves
-  (lines: interpolation, shade, diffuse, ambient, specular, specular power, scalar
-  opacity, gradient opacity, colour transfer; the last three as ``N x ...``).
+  colorTransfer="N x r g b ..." .../>`` elements), the **``.vp``** file older Slicer
+  saves (lines: interpolation, shade, diffuse, ambient, specular, specular power, scalar
+  opacity, gradient opacity, colour transfer; the last three as ``N x ...``) and the
+  **``.vp.json``** newer Slicer saves (``volumeProperties[].components[]`` with
+  ``rgbTransferFunction``, ``scalarOpacity``, ``scalarOpacityUnitDistance``).
 """
 
 from __future__ import annotations
@@ -306,21 +308,26 @@ def lab_subdivided(colour: np.ndarray, steps: int = 16, tol: float = 0.5 / 255) 
 
 
 def _expand_midpoints(rows: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Opacity (x, a) with each segment's midpoint as an extra point.
+    """Rows ``(x, values..., midpoint, sharpness)`` -> ``(x, values...)`` with each
+    segment's midpoint as an extra point, and whether any sharpness was dropped.
 
     VTK's midpoint ``m`` puts the value halfway between two points at ``m`` of the way
     (0.5: linear); sharpness 0 is linear. Here a segment with ``m != 0.5`` gets a point at
-    ``x0 + m (x1 - x0)`` with the mean opacity, so it stays piecewise linear; sharpness
+    ``x0 + m (x1 - x0)`` with the mean value, so it stays piecewise linear; sharpness
     (a smooth S-curve in VTK) is ignored (reported).
     """
-    out: list[tuple[float, float]] = []
+    out: list[np.ndarray] = []
     sharp = False
-    for k, (x, a, mid, s) in enumerate(rows):
-        out.append((float(x), float(a)))
-        sharp = sharp or (s > 1e-6 and k < len(rows) - 1)
-        if k < len(rows) - 1 and abs(mid - 0.5) > 1e-6 and 0.0 < mid < 1.0:
-            x1, a1 = rows[k + 1, 0], rows[k + 1, 1]
-            out.append((float(x + mid * (x1 - x)), float(0.5 * (a + a1))))
+    for k, row in enumerate(rows):
+        out.append(row[:-2])
+        if k == len(rows) - 1:
+            break
+        mid, s = row[-2], row[-1]
+        sharp = sharp or s > 1e-6
+        if abs(mid - 0.5) > 1e-6 and 0.0 < mid < 1.0:
+            nxt = rows[k + 1, :-2]
+            x = row[0] + mid * (nxt[0] - row[0])
+            out.append(np.concatenate([[x], 0.5 * (row[1:-2] + nxt[1:])]))
     return np.asarray(out), sharp
 
 
@@ -368,6 +375,58 @@ def _slicer_map(name: str, opacity: str, colour: str, where: str) -> ImportedMap
     return ImportedMap(name, c, o, "slicer", SLICER_UNIT_DISTANCE_MM)
 
 
+def is_slicer_json(doc: object) -> bool:
+    """Whether parsed JSON ``doc`` is a Slicer ``.vp.json`` volume property file."""
+    return isinstance(doc, dict) and "volumeProperties" in doc
+
+
+def slicer_json(doc: dict, path: str = "") -> list[ImportedMap]:
+    """The volume properties of a Slicer ``.vp.json`` (vtkMRMLVolumePropertyJsonStorageNode:
+    ``volumeProperties[].components[0]`` with ``rgbTransferFunction``, ``scalarOpacity``
+    and ``scalarOpacityUnitDistance``)."""
+    props = doc.get("volumeProperties")
+    if not isinstance(props, list) or not props:
+        raise SceneError(f"{path}: 'volumeProperties' must be a non-empty list")
+    base = os.path.basename(path)
+    stem = base[: -len(".vp.json")] if base.endswith(".vp.json") else os.path.splitext(base)[0]
+    maps = []
+    for i, prop in enumerate(props):
+        name = stem if len(props) == 1 else f"{stem} {i + 1}"
+        comps = prop.get("components") if isinstance(prop, dict) else None
+        if not isinstance(comps, list) or not comps or not isinstance(comps[0], dict):
+            raise SceneError(f"{path}: volume property {i + 1} has no 'components' list")
+        maps.append(_slicer_component(comps[0], name, f"{path}: {name!r}"))
+    return maps
+
+
+def _slicer_component(comp: dict, name: str, where: str) -> ImportedMap:
+    colour = _json_points(comp.get("rgbTransferFunction"), ("color",), 3, f"{where} colours")
+    opacity = _json_points(comp.get("scalarOpacity"), ("y",), 1, f"{where} scalarOpacity")
+    unit = _numbers([comp.get("scalarOpacityUnitDistance", 1.0)], f"{where} unit distance")[0]
+    if unit <= 0:
+        raise SceneError(f"{where}: scalarOpacityUnitDistance must be positive, not {unit:g}")
+    (colour, sharp_c), (opacity, sharp_o) = _expand_midpoints(colour), _expand_midpoints(opacity)
+    notes = ("sharpness ignored (linear between points)",) if sharp_c or sharp_o else ()
+    return ImportedMap(name, colour, opacity, "slicer", float(unit), notes)
+
+
+def _json_points(tf: object, keys: tuple[str, ...], width: int, what: str) -> np.ndarray:
+    """``{"points": [{"x", <keys>, "midpoint", "sharpness"}, ...]}`` as checked rows."""
+    pts = tf.get("points") if isinstance(tf, dict) else None
+    if not isinstance(pts, list) or not pts:
+        raise SceneError(f"{what}: expected {{'points': [{{'x': ..., ...}}, ...]}}")
+    flat: list[object] = []
+    for k, p in enumerate(pts):
+        if not isinstance(p, dict):
+            raise SceneError(f"{what}: point {k + 1} is not an object")
+        vals = p.get(keys[0])
+        vals = vals if isinstance(vals, list) else [vals]
+        if len(vals) != width:
+            raise SceneError(f"{what}: point {k + 1} needs {width} value(s) in {keys[0]!r}")
+        flat += [p.get("x"), *vals, p.get("midpoint", 0.5), p.get("sharpness", 0.0)]
+    return _rows(_numbers(flat, what), width + 3, what)
+
+
 def slicer_vp(text: str, path: str = "") -> list[ImportedMap]:
     """A Slicer ``.vp`` file: six property lines, then scalar opacity, gradient opacity
     and colour transfer (vtkMRMLVolumePropertyStorageNode::WriteData)."""
@@ -390,9 +449,16 @@ def read_maps(text: str, path: str = "") -> list[ImportedMap]:
     if kind == "slicer-vp":
         return slicer_vp(text, path)
     doc = parse_json(text, path)
+    if is_slicer_json(doc):
+        return slicer_json(doc, path)  # type: ignore[arg-type]
     if not is_paraview(doc):
         raise SceneError(f"{path}: not a ParaView colour map (no RGBPoints)")
     return paraview_maps(doc, path)
+
+
+def is_foreign(doc: object) -> bool:
+    """Whether parsed JSON ``doc`` is a ParaView or Slicer file (not voxwarp's own)."""
+    return is_paraview(doc) or is_slicer_json(doc)
 
 
 def usable(maps: Sequence[ImportedMap]) -> list[ImportedMap]:

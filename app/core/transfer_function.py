@@ -297,7 +297,7 @@ class TransferFunction:
         text = tf_formats.read_text(path)
         if tf_formats.file_kind(text, path) == "json":
             doc = tf_formats.parse_json(text, path)
-            if not tf_formats.is_paraview(doc):
+            if not tf_formats.is_foreign(doc):
                 return cls._from_voxwarp_json(doc, path, volume)
         maps = tf_formats.read_maps(text, path)
         good = tf_formats.usable(maps)
@@ -333,7 +333,7 @@ class TransferFunction:
         left out); ``[]`` for voxwarp JSON."""
         text = tf_formats.read_text(path)
         if tf_formats.file_kind(text, path) == "json":
-            if not tf_formats.is_paraview(tf_formats.parse_json(text, path)):
+            if not tf_formats.is_foreign(tf_formats.parse_json(text, path)):
                 return []
         return [m.name for m in tf_formats.usable(tf_formats.read_maps(text, path))]
 

@@ -9,8 +9,11 @@ The test files are written the way those tools write them:
   with the opacity function, fields as in ``vtkSMTransferFunctionProxy::GetStateAsPreset``).
 * Slicer: ``<VolumeProperty>`` elements copied from
   Slicer/Slicer ``Modules/Loadable/VolumeRendering/Resources/presets.xml`` (CT-AAA,
-  CT-Bone, MR-Default verbatim), and a ``.vp`` file in the line order of
-  ``vtkMRMLVolumePropertyStorageNode::WriteData`` (Libs/MRML/Core).
+  CT-Bone, MR-Default verbatim), ``.vp`` files in the line order of
+  ``vtkMRMLVolumePropertyStorageNode::WriteData`` (Libs/MRML/Core in older Slicer,
+  Modules/Loadable/VolumeRendering/MRML now) including Slicer's own test file
+  ``Testing/Data/Input/VolumeProperty.vp``, and ``.vp.json`` as
+  ``vtkMRMLVolumePropertyJsonStorageNode`` writes it.
 
 Oracles: the imported function evaluated at the file's control values equals the file's
 colours and opacities (opacity converted by the stated unit-distance rule); matplotlib
@@ -171,6 +174,111 @@ def test_slicer_vp_file(tmp_path: Path) -> None:
     for x, a in CT_BONE_OPACITY:
         assert tf(x)[3] == pytest.approx(a, abs=1e-9)
     assert TransferFunction.map_names(path) == ["bone"]
+
+
+#: Slicer's test file Modules/Loadable/VolumeRendering/Testing/Data/Input/VolumeProperty.vp
+SLICER_TEST_VP = """1
+1
+0.42
+0.44
+0.46
+38.5
+8 -17 0 13 0 103 1 235 1
+4 -17 1 235 1
+28 -17 1 0 0.498039215686275 13 1 0.333333333333333 1 35.5882339477539 1 0.333333333333333 0.498039215686275 58.1764717102051 1 0.333333333333333 1 80.7647094726563 1 1 0.498039215686275 103 0.333333333333333 0.666666666666667 1 235 1 1 1
+"""  # noqa: E501
+
+
+def test_slicers_own_vp_test_file(tmp_path: Path) -> None:
+    tf = TransferFunction.load(write(tmp_path, "VolumeProperty.vp", SLICER_TEST_VP), hu_volume())
+    np.testing.assert_allclose(tf(-17)[:3], (1, 0, 0.498039215686275), atol=1e-9)
+    np.testing.assert_allclose(tf(103)[:3], (0.333333333333333, 0.666666666666667, 1), atol=1e-9)
+    assert tf(13)[3] == pytest.approx(0.0)
+    assert tf(58)[3] == pytest.approx(0.5)  # halfway between (13, 0) and (103, 1)
+    assert tf(235)[3] == pytest.approx(1.0)
+
+
+def slicer_vp_json(unit: float, mid: float = 0.5) -> str:
+    """A .vp.json as vtkMRMLVolumePropertyJsonStorageNode writes it (rapidjson, 4 spaces)."""
+
+    def pts(rows: list, key: str) -> list:
+        return [{"x": x, key: v, "midpoint": mid if k == 0 else 0.5, "sharpness": 0.0}
+                for k, (x, v) in enumerate(rows)]  # fmt: skip
+
+    component = {
+        "componentWeight": 1.0,
+        "shade": True,
+        "lighting": {"diffuse": 0.9, "ambient": 0.1, "specular": 0.2, "specularPower": 10.0},
+        "disableGradientOpacity": False,
+        "scalarOpacityUnitDistance": unit,
+        "rgbTransferFunction": {
+            "type": "colorTransferFunction",
+            "points": pts([(x, [r, g, b]) for x, r, g, b in CT_BONE_COLOUR], "color"),
+        },
+        "scalarOpacity": {"type": "piecewiseLinearFunction", "points": pts(CT_BONE_OPACITY, "y")},
+        "gradientOpacity": {
+            "type": "piecewiseLinearFunction",
+            "points": pts([(0, 1.0), (255, 1.0)], "y"),
+        },
+    }
+    doc = {
+        "@schema": "https://raw.githubusercontent.com/slicer/slicer/main/Modules/Loadable/"
+        "VolumeRendering/Resources/Schema/volume-property-schema-v1.0.0.json#",
+        "volumeProperties": [
+            {
+                "effectiveRange": [-16.4458, 641.385],
+                "isoSurfaceValues": [],
+                "independentComponents": True,
+                "interpolationType": "linear",
+                "useClippedVoxelIntensity": False,
+                "clippedVoxelIntensity": -10000000000.0,
+                "scatteringAnisotropy": 0.0,
+                "components": [component],
+            }
+        ],
+    }
+    return json.dumps(doc, indent=4)
+
+
+def test_slicer_vp_json_uses_its_unit_distance(tmp_path: Path) -> None:
+    path = write(tmp_path, "bone.vp.json", slicer_vp_json(unit=2.0))
+    tf = TransferFunction.load(path, hu_volume(1.0))
+    assert tf.name == "bone"
+    for x, r, g, b in CT_BONE_COLOUR:
+        np.testing.assert_allclose(tf(x)[:3], (r, g, b), atol=1e-9)
+    for x, a in CT_BONE_OPACITY:  # per 2 mm in the file, per 1 mm voxel here
+        assert tf(x)[3] == pytest.approx(1 - (1 - a) ** 0.5, abs=1e-9)
+    assert TransferFunction.map_names(path) == ["bone"]
+
+
+def test_slicer_vp_json_colour_midpoint(tmp_path: Path) -> None:
+    path = write(tmp_path, "mid.vp.json", slicer_vp_json(unit=1.0, mid=0.25))
+    tf = TransferFunction.load(path, hu_volume(1.0))
+    x0, x1 = CT_BONE_COLOUR[0][0], CT_BONE_COLOUR[1][0]
+    halfway = 0.5 * (np.array(CT_BONE_COLOUR[0][1:]) + CT_BONE_COLOUR[1][1:])
+    np.testing.assert_allclose(tf(x0 + 0.25 * (x1 - x0))[:3], halfway, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("edit", "pattern"),
+    [
+        (lambda d: d.update(volumeProperties=[]), "non-empty list"),
+        (lambda d: d["volumeProperties"][0].pop("components"), "no 'components'"),
+        (lambda d: d["volumeProperties"][0]["components"][0].update(scalarOpacityUnitDistance=0),
+         "must be positive"),
+        (lambda d: d["volumeProperties"][0]["components"][0]["scalarOpacity"]["points"][1]
+         .update(y="NaN"), "not a number"),
+        (lambda d: d["volumeProperties"][0]["components"][0]["rgbTransferFunction"]["points"][0]
+         .update(color=[1, 0]), "3 value"),
+        (lambda d: d["volumeProperties"][0]["components"][0].pop("scalarOpacity"), "points"),
+    ],
+)  # fmt: skip
+def test_hostile_slicer_vp_json(tmp_path: Path, edit: object, pattern: str) -> None:
+    doc = json.loads(slicer_vp_json(1.0))
+    edit(doc)  # type: ignore[operator]
+    with pytest.raises(SceneError, match=pattern) as info:
+        TransferFunction.load(write(tmp_path, "x.vp.json", json.dumps(doc)))
+    assert "\n" not in str(info.value)
 
 
 # ---------------------------------------------------------------------------- ParaView
