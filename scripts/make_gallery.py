@@ -234,6 +234,20 @@ GALLERY: tuple[Entry, ...] = (
 )
 
 
+def shell_lines(command: str, width: int = 84) -> str:
+    """``command`` broken before its options into lines of at most ``width`` characters,
+    continued with a backslash as a shell reads them."""
+    lines, line = [], ""
+    for part in command.split(" --"):
+        piece = part if not line else f"--{part}"
+        if line and len(line) + 1 + len(piece) > width:
+            lines.append(line)
+            line = "    " + piece
+        else:
+            line = f"{line} {piece}" if line else piece
+    return " \\\n".join([*lines, line])
+
+
 def page(entries: tuple[Entry, ...] = GALLERY) -> str:
     """The Markdown of docs/gallery.md for ``entries``."""
     parts = [
@@ -244,7 +258,7 @@ def page(entries: tuple[Entry, ...] = GALLERY) -> str:
         " minutes on two cores). The full-size images are in `out/gallery/`.\n",
     ]
     for e in entries:
-        cmds = "\n".join(e.commands)
+        cmds = "\n".join(shell_lines(c) for c in e.commands)
         parts.append(
             f"## {e.title}\n\n![{e.title}](gallery/{e.name}.png)\n\n{e.caption}\n\n"
             f"```sh\n{cmds}\n```\n"

@@ -124,3 +124,13 @@ def test_readme_shows_top_images_before_the_quick_start() -> None:
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     top = text[: text.index("## Quick start")]
     assert 3 <= top.count('<img src="docs/images/readme_') <= 4
+
+
+def test_gallery_page_shows_each_command_word_for_word() -> None:
+    """The page breaks long commands into backslash-continued lines; a shell reading
+    them gets the same words as the command the script runs."""
+    for e in GALLERY.GALLERY:
+        for command in e.commands:
+            shown = GALLERY.shell_lines(command)
+            assert max(len(line) for line in shown.splitlines()) <= 86, shown
+            assert shlex.split(shown.replace("\\\n", " ")) == shlex.split(command)
