@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.napari.xvfb import x_env, xvfb_display
@@ -45,3 +46,14 @@ def test_widget_renders_the_deformed_view_into_napari(tmp_path: Path) -> None:
     assert r["worker_error_status"].startswith("voxwarp: no such scene file: ")
     assert r["layer_count_after_error"] == 4  # nothing added
     assert (tmp_path / "window.png").stat().st_size > 10_000
+    # File > Open of a scene JSON: voxwarp is its only reader; the volume and its render
+    assert r["scene_layers"] == [
+        ["head", [24, 24, 24]],
+        ["head (voxwarp deformed view)", [256, 256, 3]],
+    ]
+    (name, shape), *_ = r["nifti_layers"]
+    assert name == "tilted"
+    assert sorted(shape) == [16, 20, 24]
+    rotation = np.asarray(r["nifti_affine"])[:3, :3]
+    assert abs(abs(rotation[1, 2]) - np.sin(np.radians(25))) < 1e-4  # the tilt, zyx order
+    assert r["canvas_3d_std"] > 1  # napari draws the oblique volume in 3D

@@ -51,6 +51,41 @@ def render(viewer, widget, deformation: str) -> dict:
     }
 
 
+def open_files(viewer, out: Path) -> dict:
+    """Open a scene JSON as napari's File > Open does (``plugin=None``: the only reader
+    for it) and an oblique NIfTI with ``plugin="voxwarp"``; show them in 3D."""
+    import nibabel as nib
+
+    from voxwarp import Scene, load_sample
+    from voxwarp.napari_plugin.deformed_view import push_warps
+
+    head = load_sample("head", shape=(24, 24, 24))
+    scene_path = Scene(head, warps=push_warps(head)).save(out / "scene.json")
+    affine = np.diag([-0.8, 1.1, 2.5, 1.0])
+    c, s = np.cos(np.radians(25)), np.sin(np.radians(25))
+    affine[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ affine[:3, :3]
+    data = np.zeros((20, 24, 16), np.int16)
+    data[4:16, 6:18, 3:13] = 1000
+    nib.save(nib.Nifti1Image(data, affine), out / "tilted.nii.gz")
+    viewer.layers.clear()
+    viewer.canvas.grid.enabled = False
+    scene_layers = viewer.open(scene_path, plugin=None)
+    nifti_layers = viewer.open(out / "tilted.nii.gz", plugin="voxwarp")
+    viewer.dims.ndisplay = 3
+    viewer.layers[scene_layers[1].name].visible = False
+    viewer.reset_view()
+    canvas = viewer.screenshot(canvas_only=True, flash=False)
+    from voxwarp.io.images import write_image
+
+    write_image(out / "canvas_3d.png", np.ascontiguousarray(canvas))
+    return {
+        "scene_layers": [(layer.name, list(layer.data.shape)) for layer in scene_layers],
+        "nifti_layers": [(layer.name, list(layer.data.shape)) for layer in nifti_layers],
+        "nifti_affine": np.asarray(nifti_layers[0].affine.affine_matrix).tolist(),
+        "canvas_3d_std": float(np.asarray(canvas)[..., :3].std()),
+    }
+
+
 def main(out: Path, size: int = 160) -> None:
     import napari
 
@@ -89,6 +124,7 @@ def main(out: Path, size: int = 160) -> None:
     from voxwarp.io.images import write_image
 
     write_image(out / "window.png", np.ascontiguousarray(shot))
+    opened = open_files(viewer, out)
     result = {
         "listed": listed,
         "layers": [layer.name for layer in viewer.layers],
@@ -102,6 +138,7 @@ def main(out: Path, size: int = 160) -> None:
         "layer_count_after_error": len(viewer.layers),
         "scene": widget.status.text(),
         "screenshot_shape": list(shot.shape),
+        **opened,
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
     viewer.close()
