@@ -32,6 +32,7 @@ GALLERY_DIR = ROOT / "docs" / "gallery"
 README_DIR = ROOT / "docs" / "images"
 PAGE = ROOT / "docs" / "gallery.md"
 MAX_BYTES = 60_000  # per gallery PNG
+README_HEIGHT = 200  # px: the README's top images share one height
 
 
 @dataclass(frozen=True)
@@ -305,6 +306,8 @@ def small_png(
 
 def main(argv: list[str] | None = None) -> int:
     """Run the chosen entries (default all), then write the page."""
+    from PIL import Image
+
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("names", nargs="*", help="entries to rerun (default: all)")
     p.add_argument(
@@ -319,7 +322,9 @@ def main(argv: list[str] | None = None) -> int:
         size = small_png(ROOT / e.image, GALLERY_DIR / f"{e.name}.png", e.width, octree=e.octree)
         print(f"{e.name}: {seconds:.1f} s, {size / 1000:.0f} kB", flush=True)
         if e.readme:
-            small_png(ROOT / e.image, README_DIR / f"readme_{e.name}.png", 220, 40_000)
+            with Image.open(ROOT / e.image) as img:
+                width = round(img.width * README_HEIGHT / img.height)
+            small_png(ROOT / e.image, README_DIR / f"readme_{e.name}.png", width, 40_000)
     PAGE.write_text(page(), encoding="utf-8")
     return 0
 
