@@ -124,10 +124,11 @@ def main(out: Path, size: int = 160) -> None:
     from voxwarp.io.images import write_image
 
     write_image(out / "window.png", np.ascontiguousarray(shot))
+    layer_names = [layer.name for layer in viewer.layers]
     opened = open_files(viewer, out)
     result = {
         "listed": listed,
-        "layers": [layer.name for layer in viewer.layers],
+        "layers": layer_names,
         "none": plain,
         "push": pushed,
         "push_vs_none_mean_abs": changed,
