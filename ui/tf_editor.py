@@ -89,7 +89,7 @@ _JSON_FILTER = "Transfer function JSON (*.json);;All files (*)"
 #: Load accepts voxwarp's JSON, ParaView colour maps and Slicer volume properties.
 _LOAD_FILTER = (
     "Transfer functions (*.json *.xml *.vp);;voxwarp or ParaView colour map JSON (*.json)"
-    ";;3D Slicer presets.xml or .vp (*.xml *.vp);;All files (*)"
+    ";;3D Slicer presets.xml, .vp or .vp.json (*.xml *.vp *.json);;All files (*)"
 )
 #: matplotlib colour maps the preset combo offers after the presets (with matplotlib).
 COLORMAP_ENTRIES = ("viridis", "magma", "inferno", "plasma", "cividis", "gray")

@@ -172,7 +172,8 @@ class TransferFunction:
 
     @classmethod
     def coerce(cls, tf: Any, volume: Volume | None = None) -> TransferFunction:
-        """Accept a TransferFunction, a preset name, a list of points or a dict."""
+        """Accept a TransferFunction, a preset or matplotlib colour-map name, a list of
+        points or a dict (:meth:`from_dict`). Files: :meth:`load`."""
         if isinstance(tf, TransferFunction):
             return tf
         if isinstance(tf, str):
