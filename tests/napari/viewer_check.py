@@ -108,6 +108,7 @@ def main(out: Path, size: int = 160) -> None:
     widget.scene_edit.setText(str(out / "missing.json"))  # a worker error: one line too
     wait_for(widget, widget.render_deformed())
     worker_error = widget.status.text()
+    count_after_errors = len(viewer.layers)
     widget.scene_edit.setText("")
     widget.deformation_box.setCurrentText("mass-spring push")
     widget.layer_box.setCurrentText("fish")
@@ -136,7 +137,7 @@ def main(out: Path, size: int = 160) -> None:
         "refused": refused,
         "error_status": error,
         "worker_error_status": worker_error,
-        "layer_count_after_error": len(viewer.layers),
+        "layer_count_after_error": count_after_errors,
         "scene": widget.status.text(),
         "screenshot_shape": list(shot.shape),
         **opened,
