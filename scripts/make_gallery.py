@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -235,17 +236,23 @@ GALLERY: tuple[Entry, ...] = (
 )
 
 
-def shell_lines(command: str, width: int = 84) -> str:
-    """``command`` broken before its options into lines of at most ``width`` characters,
-    continued with a backslash as a shell reads them."""
-    lines, line = [], ""
-    for part in command.split(" --"):
-        piece = part if not line else f"--{part}"
-        if line and len(line) + 1 + len(piece) > width:
-            lines.append(line)
-            line = "    " + piece
+def shell_lines(command: str, width: int = 76) -> str:
+    """``command`` broken before its options into lines of at most ``width`` characters
+    (where an option and its values fit), continued with a backslash as a shell reads them."""
+    groups: list[str] = []
+    for word in command.split(" "):
+        starts_option = word.startswith("-") and not re.match(r"-[\d.]", word)
+        if groups and not starts_option:
+            groups[-1] += f" {word}"
         else:
-            line = f"{line} {piece}" if line else piece
+            groups.append(word)
+    lines, line = [], ""
+    for group in groups:
+        if line and len(line) + 1 + len(group) > width - 2:
+            lines.append(line)
+            line = "    " + group
+        else:
+            line = f"{line} {group}" if line else group
     return " \\\n".join([*lines, line])
 
 

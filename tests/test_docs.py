@@ -132,5 +132,5 @@ def test_gallery_page_shows_each_command_word_for_word() -> None:
     for e in GALLERY.GALLERY:
         for command in e.commands:
             shown = GALLERY.shell_lines(command)
-            assert max(len(line) for line in shown.splitlines()) <= 86, shown
+            assert max(len(line) for line in shown.splitlines()) <= 78, shown
             assert shlex.split(shown.replace("\\\n", " ")) == shlex.split(command)
