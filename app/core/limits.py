@@ -2,9 +2,9 @@
 
 A number read from a file, a scene JSON or the command line can ask for far more memory
 or time than the machine has (a sample ``shape`` of 3000³ is 101 GiB; ``--relax
-100000000`` runs for days). Each such number has a documented limit here (the README's
-*Limits* section lists them), checked **before** anything is allocated or looped, and a
-value over it raises a one-line :class:`voxwarp.errors.VoxwarpError` naming the value,
+100000000`` runs for days). Each such number has a documented limit here
+(docs/reference/limits.md lists them), checked **before** anything is allocated or
+looped, and a value over it raises a one-line :class:`voxwarp.errors.VoxwarpError` naming the value,
 the limit and the fix.
 
 The limits of the lower layers live with their code (those layers cannot import this

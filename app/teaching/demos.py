@@ -61,8 +61,8 @@ DPI = 90
 
 # ---------------------------------------------------------------------- the fish drag
 #: the element grid over the fish, its fixed head layers (i < HEAD_LAYERS) and the drag
-#: of two tail elements sideways (+y), as the README's render example (corners not fixed:
-#: the head holds the grid)
+#: of two tail elements sideways (+y), as the mass-spring example of
+#: docs/howto/command-line.md (corners not fixed: the head holds the grid)
 FISH_GRID: tuple[int, int, int] = (8, 8, 8)
 HEAD_LAYERS = 3
 FISH_DRAGGED: tuple[tuple[int, int, int], ...] = ((6, 4, 3), (6, 3, 3))
