@@ -4,8 +4,8 @@ A number read from a file, a scene JSON or the command line can ask for far more
 or time than the machine has (a sample ``shape`` of 3000³ is 101 GiB; ``--relax
 100000000`` runs for days). Each such number has a documented limit here
 (docs/reference/limits.md lists them), checked **before** anything is allocated or
-looped, and a value over it raises a one-line :class:`voxwarp.errors.VoxwarpError` naming the value,
-the limit and the fix.
+looped, and a value over it raises a one-line :class:`voxwarp.errors.VoxwarpError`
+naming the value, the limit and the fix.
 
 The limits of the lower layers live with their code (those layers cannot import this
 one): the sample phantoms' ``MAX_SAMPLE_VOXELS`` and ``MAX_SAMPLE_AXIS`` in
