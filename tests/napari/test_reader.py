@@ -147,3 +147,20 @@ def test_answers_fast_on_a_large_non_scene_json(tmp_path: Path) -> None:
     start = time.perf_counter()
     assert get_reader(str(path)) is None
     assert time.perf_counter() - start < 0.05
+
+
+def test_dicom_folder_voxels_land_at_their_patient_positions(tmp_path: Path) -> None:
+    pytest.importorskip("pydicom")
+    from tests.orientation_layouts import write_dicom_series
+
+    data = np.arange(6 * 5 * 4, dtype=np.int16).reshape(6, 5, 4) * 7 - 300  # unique, HU-like
+    affine = np.diag([0.7, 0.9, 2.0, 1.0])  # RAS index axes
+    affine[:3, 3] = (-20.0, 15.0, 40.0)
+    folder = write_dicom_series(tmp_path / "series", data, affine)
+    assert get_reader(str(folder)) is read_volume
+    layer = _layer(read_volume(str(folder))[0])
+    assert layer.metadata["voxwarp"]["modality"] == "CT"
+    for ijk in [(0, 0, 0), (5, 4, 3), (2, 1, 3)]:
+        (n,) = np.argwhere(np.asarray(layer.data) == data[ijk])
+        world_zyx = np.asarray(layer.data_to_world(tuple(n)))
+        np.testing.assert_allclose(world_zyx[::-1], (affine @ (*ijk, 1))[:3], atol=1e-4)
