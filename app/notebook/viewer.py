@@ -103,6 +103,11 @@ def _session_from_input(spec: str) -> EditSession:
 class Viewer(RemoteFrameBuffer):
     """An interactive view of a scene in Jupyter: orbit, zoom, pick and drag handles.
 
+    Use it as the last expression of a cell (or ``viewer.display()``); the viewer's
+    :attr:`session` is the full editing API (``viewer.session.model``, ``.selection``,
+    ``.set_option(...)``; ``viewer.session.scene`` is the scene being edited, a copy of
+    a scene passed in), :attr:`camera` its camera.
+
     Parameters
     ----------
     source
@@ -121,11 +126,6 @@ class Viewer(RemoteFrameBuffer):
     settings
         Deformation settings: ``resolution``, ``stiffness``, ``integrator``,
         ``variant``, ``backend``.
-
-    Use it as the last expression of a cell (or ``viewer.display()``); the viewer's
-    :attr:`session` is the full editing API (``viewer.session.model``, ``.selection``,
-    ``.set_option(...)``; ``viewer.session.scene`` is the scene being edited, a copy of
-    a scene passed in), :attr:`camera` its camera.
     """
 
     def __init__(
