@@ -32,14 +32,16 @@ from qtpy.QtWidgets import (
     QWidget,
 )
 
+from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.errors import VoxwarpError
 from voxwarp.napari_plugin import convert, deformed_view, handoff
 
 if TYPE_CHECKING:
     import napari
 
-#: The camera views offered (voxwarp's axis views; "default" lets voxwarp choose).
-VIEWS: tuple[str, ...] = ("default", "-y", "+y", "-x", "+x", "+z", "-z")
+#: The camera views offered: "default" lets voxwarp choose, then the axis views and the
+#: anatomical views (for layers with a patient orientation, e.g. from voxwarp's reader).
+VIEWS: tuple[str, ...] = ("default", "-y", "+y", "-x", "+x", "+z", "-z", *ANATOMICAL_VIEWS)
 
 
 class VoxwarpWidget(QWidget):

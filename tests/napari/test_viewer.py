@@ -44,6 +44,7 @@ def test_widget_renders_the_deformed_view_into_napari(tmp_path: Path) -> None:
     assert r["refused"]
     assert r["error_status"] == "voxwarp: deformation 'scene file' needs a scene JSON: pick one"
     assert r["worker_error_status"].startswith("voxwarp: no such scene file: ")
+    assert r["view_error_status"].startswith("voxwarp: view 'anterior' needs a patient")
     assert r["layer_count_after_error"] == 4  # nothing added
     assert (tmp_path / "window.png").stat().st_size > 10_000
     # File > Open of a scene JSON: voxwarp is its only reader; the volume and its render

@@ -108,9 +108,13 @@ def main(out: Path, size: int = 160) -> None:
     widget.scene_edit.setText(str(out / "missing.json"))  # a worker error: one line too
     wait_for(widget, widget.render_deformed())
     worker_error = widget.status.text()
-    count_after_errors = len(viewer.layers)
     widget.scene_edit.setText("")
     widget.deformation_box.setCurrentText("mass-spring push")
+    widget.view_box.setCurrentText("anterior")  # the fish has no patient orientation
+    wait_for(widget, widget.render_deformed())
+    view_error = widget.status.text()
+    count_after_errors = len(viewer.layers)
+    widget.view_box.setCurrentText("+z")
     widget.layer_box.setCurrentText("fish")
     process = widget.open_in_voxwarp()
     started = process is not None and process.poll() is None
@@ -137,6 +141,7 @@ def main(out: Path, size: int = 160) -> None:
         "refused": refused,
         "error_status": error,
         "worker_error_status": worker_error,
+        "view_error_status": view_error,
         "layer_count_after_error": count_after_errors,
         "scene": widget.status.text(),
         "screenshot_shape": list(shot.shape),
