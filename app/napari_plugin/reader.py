@@ -119,13 +119,17 @@ def read_scene(path: str | list[str]) -> list[LayerData]:
 
 
 def _deformed_view(scene: Any) -> Any:
-    """The scene rendered headless, or ``None`` with a warning when rendering fails
-    (no OpenGL here): the volume layer still opens."""
+    """The scene rendered headless on a thread of its own (its EGL context never meets
+    the Qt GL context of napari's thread), or ``None`` with a warning when rendering
+    fails (no OpenGL here): the volume layer still opens."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from voxwarp.errors import VoxwarpError
     from voxwarp.napari_plugin.deformed_view import render_rgb
 
     try:
-        return render_rgb(scene)
+        with ThreadPoolExecutor(1, thread_name_prefix="voxwarp-render") as pool:
+            return pool.submit(render_rgb, scene).result()
     except (VoxwarpError, RuntimeError, OSError) as exc:
         warnings.warn(f"voxwarp: the deformed view was not rendered: {exc}", stacklevel=2)
         return None

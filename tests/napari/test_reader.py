@@ -164,3 +164,20 @@ def test_dicom_folder_voxels_land_at_their_patient_positions(tmp_path: Path) -> 
         (n,) = np.argwhere(np.asarray(layer.data) == data[ijk])
         world_zyx = np.asarray(layer.data_to_world(tuple(n)))
         np.testing.assert_allclose(world_zyx[::-1], (affine @ (*ijk, 1))[:3], atol=1e-4)
+
+
+def test_scene_opens_without_its_render_where_rendering_fails(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from voxwarp.errors import RenderError
+    from voxwarp.napari_plugin import deformed_view
+
+    def no_gl(*_: object) -> None:
+        raise RenderError("no OpenGL 4.3 context through EGL")
+
+    monkeypatch.setattr(deformed_view, "render_rgb", no_gl)
+    path = _scene_file(tmp_path, warps=True)
+    with pytest.warns(UserWarning, match="deformed view was not rendered: no OpenGL"):
+        layers = read_scene(str(path))
+    assert len(layers) == 1
+    assert layers[0][0].shape == (24, 24, 24)
