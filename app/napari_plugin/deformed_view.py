@@ -21,7 +21,7 @@ from voxwarp.errors import SceneError
 DEFORMATIONS: tuple[str, ...] = ("mass-spring push", "none", "scene file")
 #: Elements per axis of the push's mass-spring grid (odd: a block at the centre).
 PUSH_GRID = 7
-#: How far the centre element is pushed, as a fraction of the volume's extent.
+#: How far the centre block is pushed, as a fraction of the volume's extent that way.
 PUSH_FRACTION = 0.2
 #: The pixel size of the rendered view (square), the widget's default.
 DEFAULT_SIZE = 256
@@ -36,8 +36,11 @@ def push_warps(
     material ahead of it from folding (one element pushed past its neighbour would)."""
     from voxwarp.deform import ElementGrid, MassSpring
 
-    unit = np.asarray(direction, dtype=np.float64)
-    unit = unit / np.linalg.norm(unit)
+    unit = np.asarray(direction, dtype=np.float64).reshape(3)
+    length = float(np.linalg.norm(unit))
+    if not (np.isfinite(length) and length > 0):
+        raise SceneError(f"the push direction must be a non-zero vector; got {direction!r}")
+    unit = unit / length
     grid = ElementGrid(volume, shape=(PUSH_GRID,) * 3)
     model = MassSpring(grid, integrator="semi-implicit", shear=True)
     extent = float(np.abs(unit) @ np.asarray(volume.size_mm))

@@ -81,3 +81,8 @@ def test_scene_file_without_warps_is_refused(tmp_path: Path, head: object) -> No
     path = Scene(head).save(tmp_path / "plain.json")
     with pytest.raises(SceneError, match="has no warps"):
         deformation_warps("scene file", head, path)
+
+
+def test_push_needs_a_direction(head: object) -> None:
+    with pytest.raises(SceneError, match="non-zero vector"):
+        push_warps(head, direction=(0.0, 0.0, 0.0))
