@@ -33,7 +33,7 @@ lint: $(STAMP)
 
 ## the documentation site into site/ (warnings are errors); `mkdocs serve` to browse it
 docs: $(STAMP)
-	$(VENV)/bin/mkdocs build --strict --quiet -d site
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet -d site
 
 format: $(STAMP)
 	$(VENV)/bin/ruff check --fix .
