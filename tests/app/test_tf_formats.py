@@ -332,14 +332,53 @@ def test_paraview_midpoint_adds_a_halfway_point(tmp_path: Path) -> None:
 
 
 def test_paraview_sharpness_and_colour_space_are_reported(tmp_path: Path) -> None:
-    m = dict(PARAVIEW_PRESETS[0])
-    m["Points"] = [0, 0.0, 0.5, 0.7, 1, 1.0, 0.5, 0.0]
-    path = write(tmp_path, "cw.json", paraview_json([m]))
-    with pytest.warns(UserWarning, match="Cool to Warm") as caught:
+    m = {**PARAVIEW_PRESETS[0], "ColorSpace": "Lab/CIEDE2000", "Name": "de2000"}
+    path = write(tmp_path, "de.json", paraview_json([m]))
+    with pytest.warns(UserWarning, match="'de2000'") as caught:
         TransferFunction.load(path)
     text = " ".join(str(w.message) for w in caught)
-    assert "sharpness" in text
-    assert "Diverging colour space interpolated in RGB" in text
+    assert "Lab/CIEDE2000 colour space interpolated in RGB" in text
+
+
+#: VTK 9.7.2's vtkPiecewiseFunction (AddPoint(x, y, midpoint, sharpness), GetValue):
+#: name -> (points, [[x, opacity], ...]).
+VTK_OPACITIES = {
+    "mid 0.25": (
+        [(0, 0.0, 0.25, 0.0), (10, 0.8, 0.5, 0.0)],
+        [[1.25, 0.2], [2.5, 0.4], [3.75, 0.466667], [5.0, 0.533333], [6.25, 0.6], [7.5, 0.666667],
+         [8.75, 0.733333]],
+    ),
+    "sharp 0.7": (
+        [(0, 0.0, 0.5, 0.7), (10, 0.8, 0.5, 0.0)],
+        [[1.25, 2e-06], [2.5, 0.000475], [3.75, 0.016083], [5.0, 0.4], [6.25, 0.783917],
+         [7.5, 0.799525], [8.75, 0.799998]],
+    ),
+    "sharp 0.3 mid 0.7 falling": (
+        [(0, 0.9, 0.7, 0.3), (4, 0.1, 0.5, 0.0), (10, 0.6, 0.5, 0.0)],
+        [[1.25, 0.888598], [2.5, 0.664756], [3.75, 0.100528], [5.0, 0.183333], [6.25, 0.2875],
+         [7.5, 0.391667], [8.75, 0.495833]],
+    ),
+    "sharpness 1": (
+        [(0, 0.1, 0.4, 1.0), (10, 0.7, 0.5, 0.0)],
+        [[1.25, 0.1], [2.5, 0.100015], [3.75, 0.190958], [5.0, 0.692214], [6.25, 0.699985],
+         [7.5, 0.7], [8.75, 0.7]],
+    ),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(VTK_OPACITIES))
+def test_paraview_opacity_midpoint_and_sharpness_match_vtk(tmp_path: Path, name: str) -> None:
+    pts, expected = VTK_OPACITIES[name]
+    m = {
+        "Name": name,
+        "RGBPoints": [0, 1, 1, 1, 10, 1, 1, 1],
+        "Points": [v for p in pts for v in p],
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # reproduced: no note
+        tf = TransferFunction.load(write(tmp_path, "o.json", paraview_json([m])))
+    for x, a in expected:
+        assert tf(x)[3] == pytest.approx(a, abs=1 / 255), f"{name} at {x}"
 
 
 def test_paraview_lab_maps_interpolate_in_lab(tmp_path: Path) -> None:
@@ -380,12 +419,146 @@ def test_trailing_commas_as_in_paraviews_own_file(tmp_path: Path) -> None:
     assert TransferFunction.load(write(tmp_path, "tc.json", text)).name == "X Ray"
 
 
-def test_paraview_step_colour_space_holds_each_colour(tmp_path: Path) -> None:
-    m = {"Name": "steps", "ColorSpace": "Step", "RGBPoints": [0, 1, 0, 0, 5, 0, 1, 0, 10, 0, 0, 1]}
-    tf = TransferFunction.load(write(tmp_path, "s.json", paraview_json([m])))
-    np.testing.assert_allclose(tf(4.9)[:3], (1, 0, 0), atol=1e-9)
-    np.testing.assert_allclose(tf(5.1)[:3], (0, 1, 0), atol=1e-9)
-    np.testing.assert_allclose(tf(9.9)[:3], (0, 1, 0), atol=1e-9)
+#: VTK 9.7.2's vtkColorTransferFunction (SetColorSpaceTo<space>, AddRGBPoint, GetColor) at
+#: a few x: name -> (ColorSpace, RGBPoints as (x, r, g, b), [[x, r, g, b], ...]).
+VTK_COLOURS = {
+    "Cool to Warm": (
+        "Diverging",
+        [
+            (0, 0.23137254902, 0.298039215686, 0.752941176471),
+            (0.5, 0.865, 0.865, 0.865),
+            (1, 0.705882352941, 0.0156862745098, 0.149019607843),
+        ],
+        [
+            [0.05, 0.290072, 0.384649, 0.82742],
+            [0.15, 0.417015, 0.547998, 0.939854],
+            [0.3, 0.622446, 0.746198, 0.999142],
+            [0.45, 0.812704, 0.854156, 0.919695],
+            [0.55, 0.914136, 0.836315, 0.793055],
+            [0.7, 0.969594, 0.677194, 0.559698],
+            [0.85, 0.893788, 0.427776, 0.3341],
+            [0.95, 0.779139, 0.210043, 0.204745],
+        ],
+    ),
+    "blue-red": (
+        "Diverging",
+        [(0, 0.1, 0.2, 0.9), (1, 0.9, 0.1, 0.1)],
+        [
+            [0.05, 0.369014, 0.324632, 1.0],
+            [0.15, 0.579803, 0.48713, 1.0],
+            [0.3, 0.7713, 0.692447, 1.0],
+            [0.45, 0.938345, 0.911334, 1.0],
+            [0.55, 1.0, 0.922956, 0.867071],
+            [0.7, 1.0, 0.720228, 0.560771],
+            [0.85, 1.0, 0.508734, 0.326693],
+            [0.95, 0.99616, 0.308448, 0.18375],
+        ],
+    ),
+    "lab": (
+        "Lab",
+        [(0, 0.05, 0.1, 0.4), (1, 0.95, 0.85, 0.2)],
+        [
+            [0.05, 0.153179, 0.129119, 0.398872],
+            [0.15, 0.271685, 0.192449, 0.395426],
+            [0.3, 0.407664, 0.295587, 0.386507],
+            [0.45, 0.529127, 0.405573, 0.371593],
+            [0.55, 0.606999, 0.481962, 0.357228],
+            [0.7, 0.721852, 0.600522, 0.326537],
+            [0.85, 0.835879, 0.723351, 0.279366],
+            [0.95, 0.911911, 0.807395, 0.23213],
+        ],
+    ),
+    "lab red-blue-green": (
+        "Lab",
+        [(0, 1, 0, 0), (0.3, 0, 0, 1), (1, 0, 1, 0)],
+        [
+            [0.05, 0.94199, 0.0, 0.233802],
+            [0.15, 0.790313, 0.0, 0.535188],
+            [0.3, 0.000299, 0.0, 1.0],
+            [0.45, 0.402226, 0.322275, 0.853604],
+            [0.55, 0.469107, 0.454188, 0.754167],
+            [0.7, 0.489193, 0.638874, 0.596858],
+            [0.85, 0.415425, 0.819422, 0.41202],
+            [0.95, 0.266281, 0.939692, 0.232469],
+        ],
+    ),
+    "step": (
+        "Step",
+        [(0, 1, 0, 0), (5, 0, 1, 0), (10, 0, 0, 1)],
+        [
+            [0.5, 0.0, 1.0, 0.0],
+            [1.5, 0.0, 1.0, 0.0],
+            [3.0, 0.0, 1.0, 0.0],
+            [4.5, 0.0, 1.0, 0.0],
+            [5.5, 0.0, 0.0, 1.0],
+            [7.0, 0.0, 0.0, 1.0],
+            [8.5, 0.0, 0.0, 1.0],
+            [9.5, 0.0, 0.0, 1.0],
+        ],
+    ),
+    "hsv rainbow": (
+        "HSV",
+        [(0, 0, 0, 1), (1, 1, 0, 0)],
+        [
+            [0.05, 0.0, 0.2, 1.0],
+            [0.15, 0.0, 0.6, 1.0],
+            [0.3, 0.0, 1.0, 0.8],
+            [0.45, 0.0, 1.0, 0.2],
+            [0.55, 0.2, 1.0, 0.0],
+            [0.7, 0.8, 1.0, 0.0],
+            [0.85, 1.0, 0.6, 0.0],
+            [0.95, 1.0, 0.2, 0.0],
+        ],
+    ),
+    "hsv wrapped": (  # HSVWrap on: the short way round the hue circle
+        "HSV",
+        [(0, 1, 0, 0.2), (1, 0.9, 0.2, 0)],
+        [
+            [0.05, 0.995, 0.0, 0.177994],
+            [0.15, 0.985, 0.0, 0.134617],
+            [0.3, 0.97, 0.0, 0.071133],
+            [0.45, 0.955, 0.0, 0.00955],
+            [0.55, 0.945, 0.03045, 0.0],
+            [0.7, 0.93, 0.088867, 0.0],
+            [0.85, 0.915, 0.145383, 0.0],
+            [0.95, 0.905, 0.182006, 0.0],
+        ],
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(VTK_COLOURS))
+def test_paraview_colour_spaces_match_vtk(tmp_path: Path, name: str) -> None:
+    space, pts, expected = VTK_COLOURS[name]
+    m = {"Name": name, "ColorSpace": space, "RGBPoints": [v for p in pts for v in p]}
+    m["HSVWrap"] = "wrapped" in name
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # reproduced spaces: no "interpolated in RGB" note
+        tf = TransferFunction.load(write(tmp_path, "m.json", paraview_json([m])))
+    for x, *rgb in expected:
+        np.testing.assert_allclose(tf(x)[:3], rgb, atol=1 / 255, err_msg=f"{name} at {x}")
+
+
+def test_vtk_itself_agrees_when_installed() -> None:
+    """With vtk installed (the bench extra), the same comparison on a fine grid."""
+    vtk = pytest.importorskip("vtk")
+    for name, (space, pts, _) in VTK_COLOURS.items():
+        ctf = vtk.vtkColorTransferFunction()
+        getattr(ctf, f"SetColorSpaceTo{space}")()
+        ctf.SetHSVWrap("wrapped" in name)
+        for p in pts:
+            ctf.AddRGBPoint(*p)
+        col = np.asarray(pts, dtype=float)
+        wrap = "wrapped" in name
+        col = (
+            tf_formats._step(col)
+            if space == "Step"
+            else tf_formats.subdivided(col, space, hsv_wrap=wrap)
+        )
+        tf = TransferFunction([(r[0], *r[1:], 0.5) for r in col])
+        xs = np.linspace(pts[0][0], pts[-1][0], 200)[1:-1]  # not on the nodes (steps)
+        want = np.array([ctf.GetColor(float(x)) for x in xs])
+        np.testing.assert_allclose(tf(xs)[:, :3], want, atol=1 / 255, err_msg=name)
 
 
 def test_single_paraview_object_and_voxwarp_json_still_load(tmp_path: Path) -> None:

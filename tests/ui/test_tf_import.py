@@ -108,8 +108,9 @@ def test_single_map_file_loads_without_asking(
 def test_conversion_notes_are_shown_and_errors_are_boxed(
     editor: TransferFunctionEditor, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    path = tmp_path / "cw.json"
-    path.write_text(paraview_json(PARAVIEW_PRESETS[:1]))  # Diverging, 3 points: a note
+    path = tmp_path / "de.json"
+    de = {**PARAVIEW_PRESETS[0], "ColorSpace": "Lab/CIEDE2000"}  # not reproduced: a note
+    path.write_text(paraview_json([de]))
     assert editor.load_from(path) is True
     assert editor.message.isVisibleTo(editor)
     assert "interpolated in RGB" in editor.message.text()
