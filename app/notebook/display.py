@@ -4,9 +4,10 @@ A :class:`~voxwarp.scene.Scene` sits below the renderer in voxwarp's layers, so 
 cannot render itself; instead, importing :mod:`voxwarp.notebook` (or ``%load_ext
 voxwarp.notebook``) registers :func:`scene_png` with IPython: a cell that ends with a
 scene then shows a small render of it (:data:`PREVIEW_PX`), drawn by one
-:class:`~voxwarp.render.raycaster.OffscreenRenderer` shared by all previews and made on
-first use. A scene that cannot be drawn (no OpenGL here, a bad warp) shows its text form
-instead, with one warning line saying why. Images returned by
+:class:`~voxwarp.render.raycaster.OffscreenRenderer` shared by all previews, made on
+first use on a thread of its own (:mod:`voxwarp.notebook.gl_thread`). A scene that
+cannot be drawn (no OpenGL here, a bad warp) shows its text form instead, with one
+warning line saying why. Images returned by
 :meth:`~voxwarp.render.raycaster.OffscreenRenderer.render` show themselves
 (:class:`~voxwarp.render.inline_image.RenderedImage`); :func:`side_by_side` puts a few of
 them in one picture.
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.errors import VoxwarpError
+from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.render.inline_image import RenderedImage, png_bytes, rendered
 from voxwarp.scene import Scene
 
@@ -30,22 +32,33 @@ PREVIEW_PX = 256
 _shared: dict[str, Any] = {}
 
 
+def _gl() -> GLThread | SameThread:
+    """The thread previews render on (their context is current there only)."""
+    if "gl" not in _shared:
+        _shared["gl"] = GLThread("voxwarp-preview")
+    return _shared["gl"]
+
+
 def preview_renderer() -> Any:
-    """The renderer shared by scene previews (made on first use; raises
-    :class:`~voxwarp.errors.RenderError` without OpenGL)."""
+    """The renderer shared by scene previews (made on first use, on the previews' thread;
+    raises :class:`~voxwarp.errors.RenderError` without OpenGL)."""
     from voxwarp.render.raycaster import OffscreenRenderer
 
     if "renderer" not in _shared:
-        _shared["renderer"] = OffscreenRenderer(PREVIEW_PX, PREVIEW_PX)
+        _shared["renderer"] = _gl().run(OffscreenRenderer, PREVIEW_PX, PREVIEW_PX)
     return _shared["renderer"]
 
 
 def preview(scene: Scene, size: int = PREVIEW_PX) -> RenderedImage:
     """A ``size`` x ``size`` render of ``scene`` (shows inline)."""
     r = preview_renderer()
-    if r.size != (size, size):
-        r.resize(size, size)
-    return r.render(scene)
+
+    def draw() -> RenderedImage:
+        if r.size != (size, size):
+            r.resize(size, size)
+        return r.render(scene)
+
+    return _gl().run(draw)
 
 
 def scene_png(scene: Scene) -> bytes | None:

@@ -65,8 +65,6 @@ class Interaction:
         self._undo: list[tuple[str, Snapshot, Snapshot]] = []
         self._redo: list[tuple[str, Snapshot, Snapshot]] = []
         self._last_input = 0.0
-        #: called after an undoable edit, undo or redo (the viewer redraws)
-        self.changed: Callable[[], None] = lambda: None
 
     # ------------------------------------------------------------------ camera
     def fitted_camera(self) -> Camera:
@@ -282,7 +280,6 @@ class Interaction:
         if not after.same_as(before):
             self._undo.append((text, before, after))
             self._redo.clear()
-        self.changed()
 
     def undo(self) -> bool:
         """Go back one edit; returns False when there is none."""
@@ -292,7 +289,6 @@ class Interaction:
         self.session.restore(before)
         self._redo.append((text, before, after))
         self.note_input()
-        self.changed()
         return True
 
     def redo(self) -> bool:
@@ -303,7 +299,6 @@ class Interaction:
         self.session.restore(after)
         self._undo.append((text, before, after))
         self.note_input()
-        self.changed()
         return True
 
     @property

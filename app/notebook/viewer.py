@@ -31,6 +31,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.editing.common import DisplayOptions
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.errors import MissingExtraError, VoxwarpError
+from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.notebook.handles import draw_layers
 from voxwarp.notebook.interaction import SETTLE_S, Interaction
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
@@ -142,22 +143,28 @@ class Viewer(RemoteFrameBuffer):
 
         w, h = (max(1, int(v)) for v in size)
         super().__init__(css_width=f"{w}px", css_height=f"{h}px")
-        self._renderer = OffscreenRenderer(w, h, ctx=ctx)
+        # an own context lives on a thread of its own (Jupyter calls from several)
+        self._gl: GLThread | SameThread = GLThread() if ctx is None else SameThread()
         self._released = False
         try:
-            self.session = session_for(source)
-            self.session.ctx = self._renderer.ctx  # GPU models step on the viewer's context
-            self.session.gl_scope = self._renderer.current
-            with self._renderer.current():
-                start_deformation(self.session, deformation, settings)
+            self._renderer = self._gl.run(OffscreenRenderer, w, h, ctx=ctx)
         except BaseException:
             self._released = True  # the widget's __del__ closes it again: nothing left
-            self._renderer.release()
+            self._gl.shutdown()
+            raise
+        try:
+            self.session = self._on_gl(session_for, source)
+            self.session.ctx = self._renderer.ctx  # GPU models step on the viewer's context
+            self.session.gl_scope = self._renderer.current
+            self._on_gl(start_deformation, self.session, deformation, settings)
+        except BaseException:
+            self._released = True
+            self._gl.run(self._renderer.release)
+            self._gl.shutdown()
             raise
         self.session.running = bool(running)
         self.pixel_ratio = 1.0
         self.interaction = Interaction(self.session, (w, h))
-        self.interaction.changed = self.request_draw
         self.display_options = DisplayOptions()
         self.adaptive = AdaptiveQuality()
         self.last_quality: Quality = FULL
@@ -183,71 +190,77 @@ class Viewer(RemoteFrameBuffer):
 
     @running.setter
     def running(self, value: bool) -> None:
-        self.session.set_option("running", bool(value))
+        self._on_gl(self.session.set_option, "running", bool(value))
         self.request_draw()
+
+    def _on_gl(self, fn: Any, *args: Any, **kwargs: Any) -> Any:
+        """``fn(*args, **kwargs)`` on the viewer's GL thread with its context current
+        (every use of the session and the renderer goes through here, one at a time)."""
+
+        def call() -> Any:
+            with self._renderer.current():
+                return fn(*args, **kwargs)
+
+        return self._gl.run(call)
+
+    def _redrawn(self, result: Any) -> Any:
+        """``result``, after asking for a frame (from the caller's thread: jupyter_rfb
+        schedules it on that thread's event loop)."""
+        self.request_draw()
+        return result
 
     # ------------------------------------------------------------------ scripting API
     def orbit(self, d_azimuth: float, d_elevation: float = 0.0) -> None:
         """Turn the camera (degrees about its up axis, then its right axis)."""
-        self.interaction.orbit(d_azimuth, d_elevation)
-        self.request_draw()
+        self._redrawn(self._on_gl(self.interaction.orbit, d_azimuth, d_elevation))
 
     def zoom(self, factor: float) -> None:
         """Magnify by ``factor`` (> 1 zooms in)."""
-        self.interaction.zoom(factor)
-        self.request_draw()
+        self._redrawn(self._on_gl(self.interaction.zoom, factor))
 
     def pan(self, dx: float, dy: float) -> None:
         """Move the view by fractions of its height (right, up)."""
-        self.interaction.pan(dx, dy)
-        self.request_draw()
+        self._redrawn(self._on_gl(self.interaction.pan, dx, dy))
 
     def reset_camera(self) -> None:
         """Refit the camera to the scene."""
-        self.interaction.reset_camera()
-        self.request_draw()
+        self._redrawn(self._on_gl(self.interaction.reset_camera))
 
     def handle_pixels(self) -> np.ndarray:
         """(N, 2) CSS pixel positions of the handles (to pick or drag them by script)."""
-        with self._renderer.current():
-            return self.interaction.handle_pixels()
+        return self._on_gl(self.interaction.handle_pixels)
 
     def pick(self, x: float, y: float, mode: str = "replace") -> int | None:
         """Select the handle under CSS pixel ``(x, y)``; its index, or None."""
-        with self._renderer.current():
-            hit = self.interaction.pick(x, y, mode)
-        self.request_draw()
-        return hit
+        return self._redrawn(self._on_gl(self.interaction.pick, x, y, mode))
 
     def drag(self, start: Sequence[float], end: Sequence[float], steps: int = 8) -> int | None:
         """Drag the handle at CSS pixel ``start`` to ``end`` (one undo step); the model
         advances a frame per step. Returns the handle, or None when none is at ``start``."""
-        with self._renderer.current():
-            hit = self.interaction.drag(start, end, steps)
-        self.request_draw()
-        return hit
+        return self._redrawn(self._on_gl(self.interaction.drag, start, end, steps))
 
     def step(self, frames: int = 1) -> None:
         """Advance the running model by ``frames`` frames (``steps_per_frame`` steps each)."""
-        with self._renderer.current():
+
+        def run() -> None:
             for _ in range(max(0, int(frames))):
                 self.session.advance()
-        self.request_draw()
+
+        self._redrawn(self._on_gl(run))
 
     def undo(self) -> bool:
         """Undo the last edit (a drag, a selection); False when there is none."""
-        with self._renderer.current():
-            return self.interaction.undo()
+        return self._redrawn(self._on_gl(self.interaction.undo))
 
     def redo(self) -> bool:
         """Redo the last undone edit; False when there is none."""
-        with self._renderer.current():
-            return self.interaction.redo()
+        return self._redrawn(self._on_gl(self.interaction.redo))
 
     def snapshot(self, pixel_ratio: float | None = None) -> RenderedImage:  # type: ignore[override]
         """The view at full quality now: (H, W, 4) uint8 at the view's device pixels
         (shows inline; ``pixel_ratio`` overrides the browser's)."""
-        return self._draw(FULL, self.pixel_ratio if pixel_ratio is None else float(pixel_ratio))
+        ratio = self.pixel_ratio if pixel_ratio is None else float(pixel_ratio)
+        return self._on_gl(self._draw, FULL, ratio)
 
     # ------------------------------------------------------------------ jupyter_rfb
     def handle_event(self, event: dict) -> bool:  # type: ignore[override]
@@ -261,8 +274,7 @@ class Viewer(RemoteFrameBuffer):
         if handler is None:
             return False
         try:
-            with self._renderer.current():
-                used = bool(handler(self, event))
+            used = bool(self._on_gl(handler, self, event))
         except (KeyError, TypeError, ValueError):
             return False  # a malformed event (missing or non-numeric fields)
         except VoxwarpError as exc:
@@ -276,20 +288,24 @@ class Viewer(RemoteFrameBuffer):
         """The next frame (called by ``jupyter_rfb`` when the browser is ready): the
         model advances one frame if it runs, then the scene is drawn, at the
         interactive level of detail while anything moves."""
-        interacting = self.interaction.interacting()
         try:
-            with self._renderer.current():
-                if self.interaction.simulating():
-                    self.session.advance()
-            quality = self.adaptive.quality if interacting else FULL
-            frame = self._draw(quality, self.pixel_ratio)
+            frame, interacting = self._on_gl(self._next_frame)
         except VoxwarpError as exc:
             self.print(f"voxwarp: {exc}")
             return None
         if interacting:
-            self.adaptive.frame_drawn(self.last_frame_ms / 1000)
             self._schedule_next()
         return frame
+
+    def _next_frame(self) -> tuple[RenderedImage, bool]:
+        """Advance a running model, draw; (frame, whether it was an interactive one)."""
+        interacting = self.interaction.interacting()
+        if self.interaction.simulating():
+            self.session.advance()
+        frame = self._draw(self.adaptive.quality if interacting else FULL, self.pixel_ratio)
+        if interacting:
+            self.adaptive.frame_drawn(self.last_frame_ms / 1000)
+        return frame, interacting
 
     def _repr_mimebundle_(self, **kwargs: Any) -> Any:
         """The widget, plus a PNG of the view for front ends without widgets (a
@@ -350,10 +366,15 @@ class Viewer(RemoteFrameBuffer):
         if self._released:
             return
         self._released = True
-        with self._renderer.current():
-            for warp in self.session.take_released_warps():
-                warp.release()
-        self._renderer.release()
+
+        def free() -> None:
+            with self._renderer.current():
+                for warp in self.session.take_released_warps():
+                    warp.release()
+            self._renderer.release()
+
+        self._gl.run(free)
+        self._gl.shutdown()
 
 
 # ---------------------------------------------------------------------- event handlers

@@ -102,9 +102,11 @@ class _Shell:
 @pytest.fixture
 def preview_renderer(offscreen, monkeypatch: pytest.MonkeyPatch):
     from voxwarp.notebook import display
+    from voxwarp.notebook.gl_thread import SameThread
 
     r = offscreen(display.PREVIEW_PX, display.PREVIEW_PX)
     monkeypatch.setitem(display._shared, "renderer", r)
+    monkeypatch.setitem(display._shared, "gl", SameThread())  # the session context is here
     return r
 
 

@@ -265,3 +265,37 @@ def test_scene_is_copied_and_a_saved_session_resumes(gl_ctx: Any, tmp_path: Any)
         assert np.allclose(v.session.model.positions(), positions)
     finally:
         v.release()
+
+
+def test_own_context_serves_calls_from_any_thread(gl_ctx: Any) -> None:
+    """JupyterLab (ipykernel 7) sends widget messages on a subshell thread while cells run
+    on the main thread: a viewer with its own context renders on a thread of its own, so
+    both work (an EGL context is current in one thread only)."""
+    import threading
+
+    from voxwarp.notebook import Viewer
+
+    v = Viewer(_scene(), "massspring", size=(96, 64), resolution=4)  # its own context
+    try:
+        out: dict[str, Any] = {}
+
+        def browser() -> None:  # what a subshell thread does with the widget
+            try:
+                v.handle_event({"type": "resize", "width": 96, "height": 64, "ratio": 1.0})
+                v.handle_event(_ev("pointer_down", 2.0, 2.0))
+                v.handle_event(_ev("pointer_move", 30.0, 2.0))
+                v.handle_event(_ev("pointer_up", 30.0, 2.0, buttons=()))
+                out["frame"] = v.get_frame()
+            except Exception as exc:  # reported below, in the test's thread
+                out["error"] = exc
+
+        before = v.snapshot()  # the main thread
+        t = threading.Thread(target=browser, name="subshell")
+        t.start()
+        t.join(60)
+        assert "error" not in out, out.get("error")
+        assert out["frame"].shape[2] == 4
+        after = np.asarray(v.snapshot(), np.int16)
+        assert _changed_pixels(after, np.asarray(before, np.int16)) > 50  # the orbit took
+    finally:
+        v.close()
