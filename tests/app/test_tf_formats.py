@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from voxwarp.core import tf_formats
+from voxwarp.core import tf_curves, tf_formats
 from voxwarp.core import transfer_function as tfmod
 from voxwarp.core.transfer_function import PRESETS, TransferFunction, file_spec
 from voxwarp.core.volume import Volume
@@ -551,9 +551,9 @@ def test_vtk_itself_agrees_when_installed() -> None:
         col = np.asarray(pts, dtype=float)
         wrap = "wrapped" in name
         col = (
-            tf_formats._step(col)
+            tf_curves.step(col)
             if space == "Step"
-            else tf_formats.subdivided(col, space, hsv_wrap=wrap)
+            else tf_curves.subdivided(col, space, hsv_wrap=wrap)
         )
         tf = TransferFunction([(r[0], *r[1:], 0.5) for r in col])
         xs = np.linspace(pts[0][0], pts[-1][0], 200)[1:-1]  # not on the nodes (steps)
