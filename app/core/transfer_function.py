@@ -284,7 +284,7 @@ class TransferFunction:
         cls, path: str, volume: Volume | None = None, name: str | None = None
     ) -> TransferFunction:
         """Read a transfer function file: voxwarp JSON (``to_dict`` form or a bare list of
-        points), ParaView colour-map JSON, or a Slicer ``presets.xml`` / ``.vp``.
+        points), ParaView colour-map JSON, or a Slicer ``presets.xml``, ``.vp`` or ``.vp.json``.
 
         ``path`` may end in ``:NAME`` (an existing file, then a map name) to pick a map of
         a file holding several, as ``name`` does; without either the first is taken, with
@@ -393,7 +393,7 @@ def _unknown_name(name: str) -> str:
     )
     return (
         f"unknown transfer function preset {name!r}{hint}; presets: {', '.join(PRESETS)};"
-        f" or {maps}, a transfer function file (.json, ParaView .json, Slicer .xml/.vp),"
+        f" or {maps}, a transfer function file (voxwarp or ParaView .json, Slicer .xml/.vp),"
         " or a list of (value, r, g, b, a) control points"
     )
 
