@@ -326,6 +326,15 @@ class TransferFunction:
         pts, _mapped = tf_formats.to_control_points(m, window, ref)
         for note in m.notes:
             warnings.warn(f"{m.kind} map {m.name!r}: {note}", stacklevel=3)
+        if m.kind == "slicer" and m.name.upper().startswith("CT") and volume is not None:
+            if not _looks_like_hu(volume):
+                lo, hi = volume.value_range
+                warnings.warn(
+                    f"Slicer preset {m.name!r} is in Hounsfield units but volume"
+                    f" {volume.name!r} is not (values {lo:g}..{hi:g}); its points are kept,"
+                    " so it may show little or a haze (try a voxwarp preset or a colour map)",
+                    stacklevel=3,
+                )
         return cls(pts, name=m.name)
 
     @staticmethod

@@ -35,6 +35,7 @@ from voxwarp.core import transfer_function as tfmod
 from voxwarp.core.transfer_function import PRESETS, TransferFunction, file_spec
 from voxwarp.core.volume import Volume
 from voxwarp.errors import SceneError
+from voxwarp.io.samples import load_sample
 
 # ---------------------------------------------------------------------------- files
 PRESETS_XML = """<?xml version="1.0" encoding="utf-8"?>
@@ -113,7 +114,7 @@ def write(tmp_path: Path, name: str, text: str) -> str:
 
 def hu_volume(spacing: float = 1.0) -> Volume:
     data = np.linspace(-1000, 2000, 16 * 16 * 8).reshape(16, 16, 8).astype(np.int16)
-    return Volume(data, spacing=(spacing, spacing, spacing), name="hu")
+    return Volume(data, spacing=(spacing, spacing, spacing), name="hu", units="HU")
 
 
 def window(volume: Volume) -> tuple[float, float]:
@@ -138,6 +139,18 @@ def test_slicer_opacity_follows_the_unit_distance(tmp_path: Path) -> None:
     for x, a in CT_BONE_OPACITY:  # half-mm reference sample: 1 - (1 - a) ** 0.5
         assert tf(x)[3] == pytest.approx(1 - (1 - a) ** 0.5, abs=1e-9)
     assert tf(641.385)[3] < 0.715686
+
+
+def test_slicer_ct_preset_on_a_volume_that_is_not_hu_warns(tmp_path: Path) -> None:
+    path = write(tmp_path, "presets.xml", PRESETS_XML)
+    grey = Volume(np.linspace(0, 255, 16 * 16 * 8).reshape(16, 16, 8).astype(np.uint8), name="u8")
+    with pytest.warns(UserWarning, match="'CT-Bone' is in Hounsfield units but volume 'u8'"):
+        tf = TransferFunction.load(f"{path}:CT-Bone", grey)
+    assert tf.value_range == (-3024.0, 3071.0)  # kept
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an MR preset on it, or a CT preset on HU: no warning
+        TransferFunction.load(f"{path}:MR-Default", grey)
+        TransferFunction.load(f"{path}:CT-Bone", load_sample("fish"))  # HU
 
 
 def test_slicer_file_without_a_name_takes_the_first_with_a_warning(tmp_path: Path) -> None:
