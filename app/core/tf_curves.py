@@ -226,3 +226,22 @@ def step(colour: np.ndarray) -> np.ndarray:
         rows.append(np.concatenate([[colour[k - 1, 0]], colour[k, 1:]]))
         rows.append(colour[k])
     return np.asarray(rows)
+
+
+def simplify(t: np.ndarray, values: np.ndarray, tol: float) -> np.ndarray:
+    """Indices of the fewest samples (Ramer-Douglas-Peucker) whose linear interpolation
+    keeps every sample of ``values`` (n, k) at ``t`` (n,) within ``tol`` per channel;
+    the first and last are always kept."""
+    keep = {0, len(t) - 1}
+    stack = [(0, len(t) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        w = (t[i + 1 : j] - t[i]) / (t[j] - t[i])
+        dev = np.abs(values[i + 1 : j] - (values[i] + w[:, None] * (values[j] - values[i])))
+        k = int(np.argmax(dev.max(axis=1)))
+        if dev[k].max() > tol:
+            keep.add(i + 1 + k)
+            stack += [(i, i + 1 + k), (i + 1 + k, j)]
+    return np.array(sorted(keep))

@@ -39,9 +39,9 @@ from voxwarp.errors import SceneError
 
 #: Largest transfer-function file read (bytes); ParaView's full preset list is ~2 MB.
 MAX_FILE_BYTES = 32 * 1024 * 1024
-#: Control points sampled from a continuous matplotlib colour map (a ListedColormap
-#: with at most this many colours gives all of them).
-COLORMAP_SAMPLES = 32
+#: How far (per channel) a matplotlib map's control points may let any of its colours
+#: stray: the fewest points that keep every colour within it are kept.
+COLORMAP_TOLERANCE = 1.0 / 255
 #: Opacity at the top of the ramp that colour-only maps get (0 at the bottom, linear).
 RAMP_OPACITY = 0.5
 #: VTK's default scalar opacity unit distance (world units, mm), which Slicer keeps.
@@ -402,6 +402,10 @@ def pick(maps: Sequence[ImportedMap], name: str | None, path: str = "") -> Impor
 def colormap_colours(name: str) -> np.ndarray | None:
     """``(n, 4)`` rows ``t, r, g, b`` (t in [0, 1]) of matplotlib colour map ``name``,
     or None when matplotlib has no such map. Requires matplotlib (ImportError otherwise).
+
+    The map's ``N`` colours at ``t = i / (N - 1)`` (a listed map's own colours), thinned to
+    the fewest that keep every one within :data:`COLORMAP_TOLERANCE` when interpolated
+    (:func:`voxwarp.core.tf_curves.simplify`): viridis keeps 23 of 256, tab10 all 10.
     """
     import matplotlib
 
@@ -409,12 +413,10 @@ def colormap_colours(name: str) -> np.ndarray | None:
         cmap = matplotlib.colormaps[name]
     except KeyError:
         return None
-    n = int(getattr(cmap, "N", COLORMAP_SAMPLES))
-    listed = type(cmap).__name__ == "ListedColormap" and n <= COLORMAP_SAMPLES
-    count = n if listed else COLORMAP_SAMPLES
-    t = np.linspace(0.0, 1.0, max(count, 2))
-    rgba = np.asarray(cmap(t), dtype=np.float64)
-    return np.column_stack([t, rgba[:, :3]])
+    t = np.linspace(0.0, 1.0, max(int(getattr(cmap, "N", 256)), 2))
+    rgb = np.asarray(cmap(t), dtype=np.float64)[:, :3]
+    keep = tf_curves.simplify(t, rgb, COLORMAP_TOLERANCE)
+    return np.column_stack([t[keep], rgb[keep]])
 
 
 def colormap_names() -> list[str]:

@@ -16,10 +16,11 @@ warning. ``mri``, ``grayscale`` and ``hot`` are relative: defined on [0, 1] and 
 onto the volume's percentile range.
 
 Any other name is looked up as a **matplotlib colour map** (``viridis``, ``magma_r``...;
-needs matplotlib, the ``teach`` extra): its colours (all of a listed map of at most
-:data:`~voxwarp.core.tf_formats.COLORMAP_SAMPLES` colours, else that many samples) over
-the same percentile range, with opacity rising linearly from 0 to
-:data:`~voxwarp.core.tf_formats.RAMP_OPACITY`. Preset names win (``hot`` is voxwarp's).
+needs matplotlib, the ``teach`` extra): its colours (the fewest control points that keep
+every colour of the map within 1/255, see
+:func:`~voxwarp.core.tf_formats.colormap_colours`) over the same percentile range, with
+opacity rising linearly from 0 to :data:`~voxwarp.core.tf_formats.RAMP_OPACITY`. Preset
+names win (``hot`` is voxwarp's).
 
 Files
 -----
