@@ -5,7 +5,9 @@ Core voxwarp renders headless and runs every deformation family; the rest is opt
 ``teach`` (matplotlib, Pillow), ``dicom`` (pylibjpeg and its JPEG, JPEG 2000 and RLE
 decoders, for compressed DICOM), ``registration`` (SimpleITK: ITK transform files,
 MetaImage fields, the registration demo), ``segmentation`` (scikit-image: meshes from
-label volumes) and ``all``. Call :func:`require` where a feature starts,
+label volumes), ``notebook`` (jupyter_rfb, ipywidgets: the Jupyter Viewer), ``napari``
+(napari, npe2: the napari plugin), ``docs`` (mkdocs and its plugins: ``make docs``) and
+``all``. Call :func:`require` where a feature starts,
 so a user learns which extra to install before any work is done.
 """
 
@@ -24,6 +26,9 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "dicom": ("pylibjpeg", "libjpeg", "openjpeg", "rle"),
     "registration": ("SimpleITK",),
     "segmentation": ("skimage",),
+    "notebook": ("jupyter_rfb", "ipywidgets"),
+    "napari": ("napari", "npe2"),
+    "docs": ("mkdocs", "material", "mkdocstrings"),
 }
 
 
