@@ -45,6 +45,8 @@ def run_tiny_suite(tmp_path: Path, require: str | None) -> subprocess.CompletedP
     (tmp_path / "conftest.py").write_text(BROKEN_EGL_CONFTEST)
     (tmp_path / "test_tiny_gl.py").write_text(TINY_GL_TEST)
     env = {k: v for k, v in os.environ.items() if k != "VOXWARP_REQUIRE_GL"}
+    # only the tiny suite's own conftest: installed plugins (napari's, npe2's) add warnings
+    env["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = "1"
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     if require is not None:
         env["VOXWARP_REQUIRE_GL"] = require
