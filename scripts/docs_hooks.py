@@ -12,31 +12,18 @@ Named in mkdocs.yml under ``hooks``.
 from __future__ import annotations
 
 import os
-import tomllib
+import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lint_imports import ROOT, installed_files  # a sibling script
+
 DEST = ROOT / "build" / "docs-src"
-
-
-def installed_files() -> dict[Path, Path]:
-    """Source file -> its path under DEST, from pyproject's ``package-dir``."""
-    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    package_dir = config["tool"]["setuptools"]["package-dir"]
-    files = {}
-    for name, folder in package_dir.items():
-        target = DEST.joinpath(*name.split("."))
-        for src in (ROOT / folder).rglob("*.py"):
-            rel = src.relative_to(ROOT / folder)
-            if rel.parts[0] in package_dir.values() or "__pycache__" in rel.parts:
-                continue
-            files[src] = target / rel
-    return files
 
 
 def sync() -> None:
     """Bring DEST up to date: changed files replaced atomically, vanished ones removed."""
-    files = installed_files()
+    files = installed_files(DEST)
     for src, dest in files.items():
         data = src.read_bytes()
         if dest.is_file() and dest.read_bytes() == data:

@@ -20,19 +20,27 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def lay_out(dest: Path) -> None:
-    """Copy every package's ``*.py`` files to ``dest`` under their installed names."""
+def installed_files(dest: Path) -> dict[Path, Path]:
+    """Every package ``*.py`` file -> its path under ``dest`` by its installed name (from
+    pyproject's ``package-dir``); scripts/docs_hooks.py lays out the API pages' tree too."""
     config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     package_dir = config["tool"]["setuptools"]["package-dir"]
+    files = {}
     for name, folder in package_dir.items():
         target = dest.joinpath(*name.split("."))
         for src in (ROOT / folder).rglob("*.py"):
             rel = src.relative_to(ROOT / folder)
             if rel.parts[0] in package_dir.values() or "__pycache__" in rel.parts:
                 continue
-            out = target / rel
-            out.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(src, out)
+            files[src] = target / rel
+    return files
+
+
+def lay_out(dest: Path) -> None:
+    """Copy every package's ``*.py`` files to ``dest`` under their installed names."""
+    for src, out in installed_files(dest).items():
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, out)
 
 
 def main() -> int:
