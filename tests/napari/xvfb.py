@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 import pytest
+
+from tests.xvfb import start_xvfb
 
 
 @contextmanager
@@ -17,16 +18,7 @@ def xvfb_display(screen: str = "1280x1024x24") -> Iterator[str]:
     """Start ``Xvfb`` on a free display for the block; yields ``":N"``."""
     if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed (bash scripts/install-system-deps.sh)")
-    read_fd, write_fd = os.pipe()
-    proc = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", screen, "-nolisten", "tcp"],
-        pass_fds=(write_fd,),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write_fd)
-    with os.fdopen(read_fd) as f:
-        number = f.readline().strip()
+    proc, number = start_xvfb(screen)
     try:
         if not number:
             pytest.fail("Xvfb did not start (no display number reported)")

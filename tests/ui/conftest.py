@@ -13,9 +13,10 @@ from __future__ import annotations
 import atexit
 import os
 import shutil
-import subprocess
 
 import pytest
+
+from tests.xvfb import start_xvfb
 
 
 def _start_xvfb() -> None:
@@ -25,16 +26,7 @@ def _start_xvfb() -> None:
             "the GUI tests need Xvfb: run `bash scripts/install-system-deps.sh` as root"
             " (Debian package xvfb and the xcb libraries it lists)"
         )
-    read_fd, write_fd = os.pipe()
-    proc = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1600x1200x24", "-nolisten", "tcp"],
-        pass_fds=(write_fd,),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write_fd)
-    with os.fdopen(read_fd) as f:
-        number = f.readline().strip()
+    proc, number = start_xvfb("1600x1200x24")
     if not number:
         proc.kill()
         raise pytest.UsageError("Xvfb did not start (no display number reported)")
