@@ -67,6 +67,28 @@ def _version() -> str:
 __getattr__, __dir__ = exports(__name__, _PUBLIC, {"__version__": _version})
 
 
+def _scene_png(scene: object) -> bytes | None:
+    from voxwarp.notebook.display import scene_png
+
+    return scene_png(scene)  # type: ignore[arg-type]
+
+
+def _show_scenes_inline() -> None:
+    """In a running IPython (Jupyter), a cell ending in a ``Scene`` shows a small render
+    of it from ``import voxwarp`` on: the formatter is registered by the class's name, so
+    nothing is imported until a scene is shown (:mod:`voxwarp.notebook.display`)."""
+    import sys
+
+    ipython = sys.modules.get("IPython")
+    shell = ipython.get_ipython() if ipython is not None else None
+    if shell is not None:
+        formatter = shell.display_formatter.formatters["image/png"]
+        formatter.for_type_by_name("voxwarp.scene", "Scene", _scene_png)
+
+
+_show_scenes_inline()
+
+
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
     from voxwarp.core.camera import Camera
     from voxwarp.core.labels_mesh import mesh_from_labels

@@ -27,7 +27,7 @@ import numpy as np
 
 from voxwarp import OffscreenRenderer, Scene, load_sample
 
-# importing voxwarp.notebook also makes a Scene at the end of a cell show a picture of itself
+# in Jupyter, a Scene at the end of a cell shows a picture of itself (import voxwarp does it)
 from voxwarp.notebook import Viewer, side_by_side"""
 
 FISH = """\

@@ -1,9 +1,10 @@
 """Inline pictures of scenes in Jupyter (IPython's ``image/png`` formatter).
 
 A :class:`~voxwarp.scene.Scene` sits below the renderer in voxwarp's layers, so it
-cannot render itself; instead, importing :mod:`voxwarp.notebook` (or ``%load_ext
-voxwarp.notebook``) registers :func:`scene_png` with IPython: a cell that ends with a
-scene then shows a small render of it (:data:`PREVIEW_PX`), drawn by one
+cannot render itself; instead, ``import voxwarp`` in a running IPython (or importing
+:mod:`voxwarp.notebook`, or ``%load_ext voxwarp.notebook``) registers :func:`scene_png`
+with IPython: a cell that ends with a scene then shows a small render of it
+(:data:`PREVIEW_PX`), drawn by one
 :class:`~voxwarp.render.raycaster.OffscreenRenderer` shared by all previews, made on
 first use on a thread of its own (:mod:`voxwarp.notebook.gl_thread`). A scene that
 cannot be drawn (no OpenGL here, a bad warp) shows its text form instead, with one

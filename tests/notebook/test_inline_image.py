@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -167,3 +169,23 @@ def test_load_ext_registers_the_scene_formatter() -> None:
     assert Scene not in png.type_printers
     load_ipython_extension(shell)
     assert Scene in png.type_printers
+
+
+def test_import_voxwarp_in_ipython_shows_scenes_inline(gl_ctx) -> None:
+    """In a fresh IPython shell, ``import voxwarp`` alone (no voxwarp.notebook) makes a
+    Scene format as a 256 x 256 PNG preview."""
+    code = (
+        "import sys\n"
+        "from IPython.core.interactiveshell import InteractiveShell\n"
+        "shell = InteractiveShell.instance()\n"
+        "from voxwarp import Scene, load_sample\n"
+        "assert 'voxwarp.notebook' not in sys.modules\n"
+        "scene = Scene(load_sample('fish', shape=(32, 16, 16)))\n"
+        "data, _ = shell.display_formatter.format(scene)\n"
+        "png = data['image/png']\n"
+        "assert png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', png[:8]\n"
+        "import struct; print(struct.unpack('>II', png[16:24]))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "(256, 256)"
