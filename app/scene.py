@@ -100,9 +100,12 @@ class Scene:
         fixed length; see :mod:`voxwarp.core.modes`), ``flm`` (first local maximum) or
         ``iso`` (shaded isosurface).
     transfer_function
-        Preset name (see :data:`voxwarp.core.transfer_function.PRESETS`), a list of
+        Preset name (see :data:`voxwarp.core.transfer_function.PRESETS`), a matplotlib
+        colour-map name (``"viridis"``: a ramp over the volume's window), a list of
         ``(value, r, g, b, a)`` control points in data units, or a
-        :class:`~voxwarp.core.transfer_function.TransferFunction`; ``None`` (default)
+        :class:`~voxwarp.core.transfer_function.TransferFunction` (files of voxwarp,
+        ParaView and 3D Slicer: :meth:`TransferFunction.load
+        <voxwarp.core.transfer_function.TransferFunction.load>`); ``None`` (default)
         picks one for the volume's modality (:mod:`voxwarp.core.modality`: ``ct-bone``
         for CT in HU, ``mri`` for MR, a percentile ramp for other data).
     view
