@@ -992,6 +992,11 @@ class OffscreenRenderer:
     @contextlib.contextmanager
     def _current(self) -> Any:
         """Make an owned context current for a block, then restore the previous one."""
+        if getattr(self, "_released", False):
+            raise RenderError(
+                "this OffscreenRenderer is closed (released, or its with block has ended):"
+                " use it inside the block, or make a new one"
+            )
         if not self._owns_ctx:
             yield
             return

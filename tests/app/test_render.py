@@ -639,3 +639,17 @@ def test_background_skip_maps_are_offered_as_a_job_and_do_not_change_the_image(
         assert rr.needs_skip_maps(scene)
     finally:
         rr.warped_skip_maps = old
+
+
+def test_a_closed_renderer_says_so_in_one_line(gl_ctx: Any) -> None:
+    """Rendering after the ``with`` block (or release) is a RenderError naming the fix,
+    not a moderngl traceback; releasing twice stays harmless."""
+    from voxwarp.errors import RenderError
+
+    scene = Scene(Volume(np.zeros((4, 4, 4), np.uint8), spacing=(1, 1, 1)))
+    with OffscreenRenderer(16, 16, ctx=gl_ctx) as r:
+        assert r.render(scene).shape == (16, 16, 4)
+    for use in (lambda: r.render(scene), lambda: r.render_slice(scene, "z")):
+        with pytest.raises(RenderError, match="closed.*make a new one"):
+            use()
+    r.release()
