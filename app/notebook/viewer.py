@@ -373,7 +373,10 @@ class Viewer(RemoteFrameBuffer):
                     warp.release()
             self._renderer.release()
 
-        self._gl.run(free)
+        try:
+            self._gl.run(free)
+        except RuntimeError:  # Python is exiting: no new work, the driver frees it all
+            return
         self._gl.shutdown()
 
 
