@@ -37,7 +37,7 @@ from voxwarp.core.modes import MODES as MODES
 from voxwarp.core.modes import Mode as Mode
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.scene_paths import path_entry, scene_file
-from voxwarp.core.transfer_function import TransferFunction
+from voxwarp.core.transfer_function import TransferFunction, file_spec
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.deform.warp import (
     Warp,
@@ -544,6 +544,12 @@ class Scene:
         except (WarpError, FieldError, TypeError) as exc:
             raise SceneError(f"invalid warp in scene: {exc}") from exc
         tf = d.get("transfer_function")  # absent: the modality's default
+        if isinstance(tf, str) and file_spec(tf) is not None:
+            raise SceneError(
+                f"scene 'transfer_function' {tf!r} names a file; a scene JSON holds a preset,"
+                " a colour-map name or control points: render it with --tf FILE, or save the"
+                " scene from voxwarp to store the file's points in it"
+            )
         if isinstance(tf, Mapping):
             tf = TransferFunction.from_dict(tf, volume)
         camera = d.get("camera")
@@ -650,6 +656,8 @@ def _scene_transfer_function(tf: Any, volume: Volume, mode: str) -> TransferFunc
     draws without it (mip, minip, average, xray) leaves out the HU-preset warning."""
     if tf is None:
         return display_defaults(volume, mode).transfer_function
+    if isinstance(tf, str) and file_spec(tf) is not None:
+        return TransferFunction.load(tf, volume)  # FILE or FILE:NAME
     if uses_transfer_function(mode):
         return TransferFunction.coerce(tf, volume)
     with warnings.catch_warnings():

@@ -689,3 +689,31 @@ def test_a_scene_of_a_downsampled_volume_reloads_downsampled(tmp_path: Path, sou
         save_volume(full.with_geometry(full.data[:50]), tmp_path / "head.nrrd")
         with pytest.raises(SceneError, match="changed since"):
             Scene.load(tmp_path / "s.json")
+
+
+def test_transfer_function_file_in_python_but_not_in_scene_json(tmp_path: Path) -> None:
+    """``Scene(..., transfer_function="FILE:NAME")`` reads the file as ``--tf`` does; a
+    scene JSON naming a file is refused in one line (it would read outside the scene)."""
+    from voxwarp.core.transfer_function import TransferFunction
+
+    tf_file = tmp_path / "maps.json"
+    tf_file.write_text(
+        json.dumps(
+            [
+                {"Name": "A", "ColorSpace": "RGB", "RGBPoints": [0, 0, 0, 0, 10, 1, 0, 0]},
+                {"Name": "B", "ColorSpace": "RGB", "RGBPoints": [0, 0, 0, 1, 10, 0, 1, 0]},
+            ]
+        ),
+        encoding="utf-8",
+    )
+    vol = small_volume()
+    scene = Scene(vol, transfer_function=f"{tf_file}:B")
+    expected = TransferFunction.load(str(tf_file), vol, name="B")
+    assert scene.transfer_function.points == expected.points
+    assert scene.transfer_function(10.0)[:3].tolist() == [0.0, 1.0, 0.0]
+    with pytest.raises(SceneError, match=r"no such|cannot read"):
+        Scene(vol, transfer_function=str(tmp_path / "missing.json"))
+    d = Scene(vol).to_dict()
+    d["transfer_function"] = f"{tf_file}:B"
+    with pytest.raises(SceneError, match="names a file"):
+        Scene.from_dict(d)
