@@ -393,8 +393,9 @@ def _unknown_name(name: str) -> str:
     import difflib
 
     have_mpl = colormaps_available()
-    known = list(PRESETS) + (tf_formats.colormap_names() if have_mpl else [])
-    close = difflib.get_close_matches(name, known, n=3)
+    known = list(dict.fromkeys([*PRESETS, *(tf_formats.colormap_names() if have_mpl else [])]))
+    by_lower = {k.lower(): k for k in reversed(known)}  # the first spelling of each name
+    close = [by_lower[k] for k in difflib.get_close_matches(name.lower(), list(by_lower), n=3)]
     hint = f" (did you mean {', '.join(close)}?)" if close else ""
     maps = (
         "a matplotlib colour-map name (viridis, magma, ...)"
