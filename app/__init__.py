@@ -1,10 +1,12 @@
 """voxwarp: deform 3D volumes and meshes at render time, without resampling the volume.
 
->>> from voxwarp import load_volume, Scene, OffscreenRenderer
->>> vol = load_volume("sample:fish")
->>> scene = Scene(vol, mode="dvr", transfer_function="ct-bone", view="+z", step=1.0)
->>> with OffscreenRenderer(512, 512) as r:
-...     img = r.render(scene)          # (512, 512, 4) uint8, row 0 = top
+```python
+from voxwarp import load_volume, Scene, OffscreenRenderer
+vol = load_volume("sample:fish")
+scene = Scene(vol, mode="dvr", transfer_function="ct-bone", view="+z", step=1.0)
+with OffscreenRenderer(512, 512) as r:
+    img = r.render(scene)  # (512, 512, 4) uint8, row 0 = top
+```
 
 The deformation models are in :mod:`voxwarp.deform`. Names load on first use, so
 ``import voxwarp`` stays cheap (no numba, scipy, OpenCL or Qt until they are needed).
@@ -68,9 +70,11 @@ __getattr__, __dir__ = exports(__name__, _PUBLIC, {"__version__": _version})
 
 
 def _scene_png(scene: object) -> bytes | None:
-    from voxwarp.notebook.display import scene_png
+    # loaded by name on first use, as the _PUBLIC names are: the package's face hands on
+    # to the layer that draws (voxwarp.notebook) without tying the layers below to it
+    from importlib import import_module
 
-    return scene_png(scene)  # type: ignore[arg-type]
+    return import_module("voxwarp.notebook.display").scene_png(scene)
 
 
 def _show_scenes_inline() -> None:
