@@ -650,6 +650,6 @@ def test_a_closed_renderer_says_so_in_one_line(gl_ctx: Any) -> None:
     with OffscreenRenderer(16, 16, ctx=gl_ctx) as r:
         assert r.render(scene).shape == (16, 16, 4)
     for use in (lambda: r.render(scene), lambda: r.render_slice(scene, "z")):
-        with pytest.raises(RenderError, match="closed.*make a new one"):
+        with pytest.raises(RenderError, match=r"closed.*make a new one"):
             use()
     r.release()
