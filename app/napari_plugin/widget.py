@@ -100,7 +100,8 @@ class VoxwarpWidget(QWidget):
 
     # ------------------------------------------------------------------ layers
     def refresh_layers(self, *_: Any) -> None:
-        """List the 3D single-channel Image layers; the active one is chosen."""
+        """List the 3D single-channel Image layers; the active one is chosen. An active
+        layer voxwarp does not take says why in the status line (what to do instead)."""
         names = [layer.name for layer in self.viewer.layers if _usable(layer)]
         active = self.viewer.layers.selection.active
         current = active.name if active is not None and active.name in names else None
@@ -111,6 +112,8 @@ class VoxwarpWidget(QWidget):
         if current in names:
             self.layer_box.setCurrentText(current)
         self.layer_box.blockSignals(False)
+        if active is not None and active.name not in names:
+            self._set_status(f"voxwarp: {_refusal(active)}")
 
     def selected_layer(self) -> Any:
         """The chosen layer; :class:`VoxwarpError` when there is none."""
@@ -224,6 +227,15 @@ class _Failed:
 
     def __init__(self, error: Exception) -> None:
         self.error = error
+
+
+def _refusal(layer: Any) -> str:
+    """Why voxwarp does not take ``layer`` (empty when it does)."""
+    try:
+        convert.check_layer(layer)
+    except VoxwarpError as exc:
+        return str(exc)
+    return ""
 
 
 def _usable(layer: Any) -> bool:

@@ -34,6 +34,9 @@ def test_widget_renders_the_deformed_view_into_napari(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     r = json.loads((tmp_path / "result.json").read_text())
     assert r["listed"] == ["fish"]  # the 2D layer is not offered
+    # ... and selecting it says why, keeping the layer that can be rendered
+    assert r["flat_status"].startswith("voxwarp: layer 'flat' has 2 dimensions"), r["flat_status"]
+    assert r["flat_choice"] == "fish"
     for key in ("none", "push"):
         assert r[key]["rgb"] is True
         assert r[key]["shape"] == [160, 160, 3]

@@ -99,6 +99,9 @@ def main(out: Path, size: int = 160) -> None:
     widget.size_box.setValue(size)
     widget.view_box.setCurrentText("+z")
     listed = [widget.layer_box.itemText(i) for i in range(widget.layer_box.count())]
+    viewer.layers.selection.active = viewer.layers["flat"]  # not taken: the status says why
+    flat_status, flat_choice = widget.status.text(), widget.layer_box.currentText()
+    viewer.layers.selection.active = viewer.layers["fish"]
     plain = render(viewer, widget, "none")
     pushed = render(viewer, widget, "mass-spring push")
     changed = float(np.abs(plain.pop("image").astype(int) - pushed.pop("image")).mean())
@@ -133,6 +136,8 @@ def main(out: Path, size: int = 160) -> None:
     opened = open_files(viewer, out)
     result = {
         "listed": listed,
+        "flat_status": flat_status,
+        "flat_choice": flat_choice,
         "layers": layer_names,
         "none": plain,
         "push": pushed,
