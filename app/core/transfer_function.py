@@ -314,11 +314,12 @@ class TransferFunction:
 
     @classmethod
     def _from_voxwarp_json(cls, d: Any, path: str, volume: Volume | None) -> TransferFunction:
-        if isinstance(d, list):
-            return cls(d)
-        if not isinstance(d, Mapping):
+        if not isinstance(d, Mapping | list):
             raise SceneError(f"{path}: expected a JSON object or list of control points")
-        return cls.from_dict(d, volume)
+        try:
+            return cls(d) if isinstance(d, list) else cls.from_dict(d, volume)
+        except SceneError as exc:  # name the file: the message is about its content
+            raise SceneError(f"{path}: {exc}") from exc
 
     @classmethod
     def _from_imported(cls, m: tf_formats.ImportedMap, volume: Volume | None) -> TransferFunction:
@@ -363,6 +364,11 @@ def file_spec(spec: str) -> tuple[str, str | None] | None:
         return None
     if os.path.exists(spec):
         return spec, None
+    parts = spec.split(":")
+    for i in range(1, len(parts)):  # the shortest existing file: a map name may hold ':'
+        head = ":".join(parts[:i])
+        if os.path.isfile(head):
+            return head, ":".join(parts[i:]) or None
     head, sep, tail = spec.rpartition(":")
     if sep and head and (os.path.exists(head) or head.lower().endswith(TF_FILE_SUFFIXES)):
         return head, tail or None

@@ -787,3 +787,27 @@ def test_the_docs_snippets_load(tmp_path: Path) -> None:
     bone = TransferFunction.load(write(tmp_path, "ct-bone.xml", blocks["xml"]) + ":CT-Bone", vol)
     for x, r, g, b in CT_BONE_COLOUR:
         np.testing.assert_allclose(bone(x)[:3], (r, g, b), atol=1e-9)
+
+
+def test_a_map_name_may_hold_a_colon(tmp_path: Path) -> None:
+    """``FILE:NAME`` splits after the shortest existing file, so ``maps.json:a:b`` picks
+    the map called ``a:b`` (and a folder with ':' in its name still works)."""
+    folder = tmp_path / "my:maps"
+    folder.mkdir()
+    maps = [
+        {"Name": "a", "ColorSpace": "RGB", "RGBPoints": [0, 1, 0, 0, 1, 1, 0, 0]},
+        {"Name": "a:b", "ColorSpace": "RGB", "RGBPoints": [0, 0, 0, 1, 1, 0, 0, 1]},
+    ]
+    path = write(folder, "maps.json", json.dumps(maps))
+    assert file_spec(f"{path}:a:b") == (path, "a:b")
+    tf = TransferFunction.load(f"{path}:a:b")
+    assert tf(0.5)[:3].tolist() == [0.0, 0.0, 1.0]
+
+
+@pytest.mark.parametrize("text", ["[]", "{}", '{"points": [[0, 2, 0, 0, 0]]}'])
+def test_errors_about_a_voxwarp_json_file_name_it(tmp_path: Path, text: str) -> None:
+    path = write(tmp_path, "tf.json", text)
+    with pytest.raises(SceneError) as info:
+        TransferFunction.load(path)
+    assert str(info.value).startswith(f"{path}: ")
+    assert "\n" not in str(info.value)
