@@ -31,6 +31,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.editing.common import DisplayOptions
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.errors import MissingExtraError, VoxwarpError
+from voxwarp.io.volumes import load_volume
 from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.notebook.handles import draw_layers
 from voxwarp.notebook.interaction import SETTLE_S, Interaction
@@ -58,8 +59,9 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
     """An edit session for ``source``: a :class:`~voxwarp.scene.Scene` (a copy of it is
     edited; its warps resume as the session's deformation), an
     :class:`~voxwarp.editing.session.EditSession`, a :class:`~voxwarp.core.volume.Volume`,
-    or INPUT as ``voxwarp gui`` takes it (a scene JSON, resuming its deformation; a volume
-    file; ``sample:NAME``). ``deformation`` (``"massspring"``, ``"chainmail"``,
+    a 3D array (as :func:`~voxwarp.io.volumes.load_volume` takes it), or INPUT as
+    ``voxwarp gui`` takes it (a scene JSON, resuming its deformation; a volume file;
+    ``sample:NAME``). ``deformation`` (``"massspring"``, ``"chainmail"``,
     ``"wires"``, ``"lattice"``) starts that family with ``settings`` (``resolution``,
     ``stiffness``, ``integrator``, ``variant``, ``backend``)."""
     if isinstance(source, EditSession):
@@ -68,12 +70,14 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
         session = EditSession(source.copy())  # the caller's scene keeps its warps
     elif isinstance(source, Volume):
         session = EditSession(Scene(source))
+    elif isinstance(source, np.ndarray):  # as load_volume takes it: (x, y, z), 1 mm voxels
+        session = EditSession(Scene(load_volume(source)))
     elif isinstance(source, str | Path):
         session = _session_from_input(str(source))
     else:
         raise EditorError(
-            "Viewer takes a Scene, an EditSession, a Volume, a scene JSON path, a volume"
-            f" path or 'sample:NAME'; got {type(source).__name__}"
+            "Viewer takes a Scene, an EditSession, a Volume, a 3D array, a scene JSON path,"
+            f" a volume path or 'sample:NAME'; got {type(source).__name__}"
         )
     session.sync_wires = False  # wire fields are rebuilt when a drag ends
     start_deformation(session, deformation, settings)

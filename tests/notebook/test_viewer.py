@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from voxwarp.editing.common import DisplayOptions
+from voxwarp.errors import VolumeError
 
 SIZE = (160, 120)
 NO_OVERLAY = DisplayOptions(
@@ -241,6 +242,16 @@ def test_bad_sources_are_refused_in_one_line(gl_ctx: Any) -> None:
         Viewer(_scene(), ctx=gl_ctx, resolution=4)
     with pytest.raises(EditorError, match="deformation"):
         Viewer(_scene(), "origami", ctx=gl_ctx)
+    with pytest.raises(VolumeError):  # a 2D array: load_volume's one line
+        Viewer(np.zeros((8, 8), np.float32), ctx=gl_ctx)
+
+
+def test_a_3d_array_is_a_volume_of_1_mm_voxels() -> None:
+    from voxwarp.notebook import session_for
+
+    session = session_for(np.arange(6 * 5 * 4, dtype=np.float32).reshape(6, 5, 4))
+    assert session.scene.volume.shape == (6, 5, 4)
+    assert tuple(session.scene.volume.spacing) == (1.0, 1.0, 1.0)
 
 
 def test_scene_is_copied_and_a_saved_session_resumes(gl_ctx: Any, tmp_path: Any) -> None:
