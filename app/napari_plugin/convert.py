@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.modality import display_defaults
+from voxwarp.core.orientation import shear_of, split_affine, to_closest_ras
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.errors import VolumeError
@@ -47,6 +48,8 @@ RENDERING_MODES: dict[str, str] = {
 TF_SAMPLES = 9
 #: Opacity of the top of the contrast range (a ramp rising with the square of the value).
 TF_MAX_OPACITY = 0.85
+#: Largest |cosine| between two voxel axes of a layer taken as orthogonal.
+SHEAR_TOLERANCE = 1e-5
 _REVERSE = np.eye(4)[[2, 1, 0, 3]]  # swaps x and z: napari <-> voxwarp axis order
 
 
@@ -106,24 +109,18 @@ def layer_to_volume(layer: Any) -> Volume:
     render: not an image, RGB, multiscale, not 3D, or sheared.
     """
     check_layer(layer)
-    data = np.asarray(layer.data)  # a dask or zarr array is read here
     matrix = napari_affine(layer_affine(layer))  # now index (x, y, z) -> world (x, y, z)
-    linear = matrix[:3, :3]
-    spacing = np.linalg.norm(linear, axis=0)
-    if np.any(spacing <= 0) or not np.all(np.isfinite(matrix)):
+    if not np.all(np.isfinite(matrix)) or np.any(np.linalg.norm(matrix[:3, :3], axis=0) <= 0):
         raise VolumeError(f"layer {layer.name!r} has a degenerate scale/affine; fix its scale")
-    direction = linear / spacing
-    if not np.allclose(direction.T @ direction, np.eye(3), atol=1e-5):
+    if shear_of(matrix) > SHEAR_TOLERANCE:
         raise VolumeError(
             f"layer {layer.name!r} is sheared (its affine is not a rotation and scale);"
             " voxwarp needs orthogonal voxel axes: remove the layer's shear"
         )
-    volume_data = data.T  # (x, y, z) indexing, Fortran-contiguous view
-    origin = matrix[:3, 3].copy()
-    if np.linalg.det(direction) < 0:  # mirrored grid: flip the x axis, keep every voxel's place
-        origin += direction[:, 0] * spacing[0] * (volume_data.shape[0] - 1)
-        direction[:, 0] *= -1
-        volume_data = volume_data[::-1]
+    # a dask or zarr array is read here; a mirrored or turned grid is reordered as the
+    # file readers do it (a view: every voxel keeps its world place)
+    volume_data, matrix = to_closest_ras(np.asarray(layer.data).T, matrix)
+    spacing, origin, direction = split_affine(matrix)
     meta = (getattr(layer, "metadata", None) or {}).get(METADATA_KEY, {})
     return Volume(
         volume_data,

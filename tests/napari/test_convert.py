@@ -70,11 +70,22 @@ def test_translate_and_scale_of_a_plain_layer() -> None:
     assert not vol.is_oblique
 
 
-def test_mirrored_layer_keeps_every_voxel_in_place() -> None:
+_TURNED = np.array([[1, 0, 0, 0], [0, 0, -1, 5.0], [0, 1, 0, 0], [0, 0, 0, 1]])  # y <-> x
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"scale": (1.0, 1.0, -2.0), "translate": (0.0, 0.0, 7.0)},  # x mirrored
+        {"scale": (3.0, 1.0, 2.0), "affine": _TURNED},  # turned 90 degrees about z
+    ],
+)
+def test_mirrored_or_turned_layer_keeps_every_voxel_in_place(kwargs: dict) -> None:
     data = np.arange(4 * 3 * 2, dtype=np.float32).reshape(4, 3, 2)
-    layer = Image(data, scale=(1.0, 1.0, -2.0), translate=(0.0, 0.0, 7.0))  # x mirrored
+    layer = Image(data, **kwargs)
     vol = layer_to_volume(layer)
     assert np.linalg.det(vol.direction) > 0
+    assert not vol.is_oblique  # reordered to the closest RAS axes, as files are
     for n in np.ndindex(data.shape):
         ijk = np.argwhere(vol.data == data[n])[0]
         np.testing.assert_allclose(
