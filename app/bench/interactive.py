@@ -128,9 +128,7 @@ def edit_family(session: EditSession, family: str) -> str:
         pts = wire.modified.control_points.copy()
         pts[2, 0] += 0.25 * size[0]
         session.set_wire_points(0, pts)
-        job = session.wire_build()
-        job.run()
-        session.install_wire_build(job)
+        session.rebuild_wire_field()
         return f"control point 3 of 4 moved {0.25 * size[0]:.0f} mm"
     if family == "lattice":
         session.set_deformation("lattice", resolution=4)

@@ -682,6 +682,12 @@ class EditSession:
         """Whether the drawn field lags the wires (a rebuild is due)."""
         return self.family.field_stale
 
+    def rebuild_wire_field(self) -> None:
+        """Rebuild a stale wire field now, on this thread (scripts, the notebook viewer;
+        the GUI builds off its thread with :meth:`wire_build`)."""
+        if self.wire_field_stale:
+            self._wire_family().rebuild_if_stale()
+
     def install_wire_build(self, job: WireBuild) -> bool:
         """Put a finished :class:`WireBuild` in the scene (GUI thread). Returns False
         when it was cancelled (dropped) or when the wires changed while it ran (then it

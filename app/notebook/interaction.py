@@ -200,7 +200,7 @@ class Interaction:
             return
         if p["mode"] in ("drag", "select"):
             self.session.end_drag()
-            self._rebuild_stale_wires()
+            self.session.rebuild_wire_field()
             self._push("Drag" if p["moved"] else "Select", p["before"])
         elif p["mode"] == "orbit" and not p["moved"]:
             self.session.select([], "replace")  # a click on nothing clears the selection
@@ -305,10 +305,3 @@ class Interaction:
     def undo_texts(self) -> list[str]:
         """What each undo step undoes, oldest first."""
         return [t for t, _, _ in self._undo]
-
-    def _rebuild_stale_wires(self) -> None:
-        s = self.session
-        if s.kind == "wires" and s.wire_field_stale:
-            job = s.wire_build()
-            job.run()
-            s.install_wire_build(job)

@@ -373,6 +373,27 @@ def test_dragging_a_wire_point_moves_only_that_point_and_stales_the_field(
     assert session.scene.warps == [drawn]  # the old field is drawn until a rebuild
 
 
+def test_rebuild_wire_field_builds_a_stale_field_here_and_only_then(
+    session: EditSession,
+) -> None:
+    """The same-thread rebuild (scripts, the notebook viewer): a stale field is replaced
+    by one of the current wires; a fresh one is left alone."""
+    session, cam = wire_session(session)
+    fresh = session.scene.warps[0]
+    session.rebuild_wire_field()
+    assert session.scene.warps == [fresh]  # nothing was stale
+    session.select([2])
+    drag(session, cam, (10.0, 20.0))
+    assert session.wire_field_stale
+    session.rebuild_wire_field()
+    assert not session.wire_field_stale
+    (warp,) = session.scene.warps
+    assert warp is not fresh
+    np.testing.assert_array_equal(
+        warp.wires[0].modified.control_points, session.wires[0].modified.control_points
+    )
+
+
 def test_wire_build_clears_the_stale_field_and_changes_the_warp(session: EditSession) -> None:
     """A WireBuild after the drag installs a field of the dragged wires in the scene."""
     session, cam = wire_session(session)

@@ -160,7 +160,8 @@ class WiresFamily(Family):
         self.field = warp
         self.built = generation
 
-    def _build_now(self) -> None:
+    def build_now(self) -> None:
+        """Rebuild the field of the current wires on this thread and draw it."""
         job = self.build_job()
         warp = job.run()
         assert warp is not None
@@ -171,7 +172,7 @@ class WiresFamily(Family):
         """After a change of the wires: rebuild the field now (the session's
         ``sync_wires``) or leave it stale for an off-thread :meth:`build_job` (the GUI)."""
         if self.session.sync_wires:
-            self._build_now()
+            self.build_now()
 
     def install(self, job: WireBuild) -> bool:
         """Put a finished build in the scene; whether it is of the current wires."""
@@ -183,8 +184,12 @@ class WiresFamily(Family):
         return job.generation == self.session.wire_generation
 
     def before_save(self) -> None:
+        self.rebuild_if_stale()
+
+    def rebuild_if_stale(self) -> None:
+        """Rebuild a stale field on this thread and draw it (saving, scripts)."""
         if self.field_stale:
-            self._build_now()
+            self.build_now()
             self.session.sync_warps()
 
     # ---------------------------------------------------------------- handles
