@@ -6,7 +6,9 @@ camera moves and edits of an :class:`~voxwarp.editing.session.EditSession` (the 
 GUI's Qt-free session; the controls are those of
 :mod:`voxwarp.notebook.interaction`) and asks for a frame; :meth:`Viewer.get_frame`
 renders the scene headless (:class:`~voxwarp.render.raycaster.OffscreenRenderer`) with
-the editing handles drawn on top (:mod:`voxwarp.notebook.handles`) and returns it.
+the editing handles drawn on top by the desktop viewport's pass
+(:class:`~voxwarp.render.overlay.OverlayRenderer`, point sizes scaled to the frame's
+resolution) and returns it.
 
 While the view is being changed (a drag, an orbit, a running mass-spring or ChainMail
 model that has not come to rest) frames are drawn at the level of detail the desktop
@@ -33,10 +35,10 @@ from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.errors import MissingExtraError, VoxwarpError
 from voxwarp.io.volumes import load_volume
 from voxwarp.notebook.gl_thread import GLThread, SameThread
-from voxwarp.notebook.handles import draw_layers
 from voxwarp.notebook.interaction import SETTLE_S, Interaction
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
-from voxwarp.render.inline_image import RenderedImage, png_bytes, rendered
+from voxwarp.render.inline_image import RenderedImage, png_bytes
+from voxwarp.render.overlay import OverlayRenderer
 from voxwarp.scene import Scene
 
 try:
@@ -150,6 +152,7 @@ class Viewer(RemoteFrameBuffer):
         # an own context lives on a thread of its own (Jupyter calls from several)
         self._gl: GLThread | SameThread = GLThread() if ctx is None else SameThread()
         self._released = False
+        self._overlay: OverlayRenderer | None = None  # the handles' pass, made on first draw
         try:
             self._renderer = self._gl.run(OffscreenRenderer, w, h, ctx=ctx)
         except BaseException:
@@ -338,13 +341,18 @@ class Viewer(RemoteFrameBuffer):
                 warp.release()
             if r.size != size:
                 r.resize(*size)
-            img = np.array(r.render(scene_at(self.session.scene, quality), self.camera))
+            r.renderer.draw(
+                scene_at(self.session.scene, quality), r.framebuffer, camera=self.camera
+            )
+            if self._overlay is None:
+                self._overlay = OverlayRenderer(r.ctx)
             layers = self.session.overlay_layers(self.display_options)
-        draw_layers(img, layers, self.camera, scale)
+            self._overlay.draw(layers, r.framebuffer, self.camera, point_scale=scale)
+            img = r.read()
         self.last_quality = quality
         self.last_frame_ms = (time.perf_counter() - t0) * 1000
         self.frames_drawn += 1
-        return rendered(img)
+        return img
 
     def _schedule_next(self) -> None:
         """Another frame soon: the next simulation frame, or the full-quality one once
@@ -375,6 +383,8 @@ class Viewer(RemoteFrameBuffer):
             with self._renderer.current():
                 for warp in self.session.take_released_warps():
                     warp.release()
+                if self._overlay is not None:
+                    self._overlay.release()
             self._renderer.release()
 
         try:

@@ -223,6 +223,7 @@ class OverlayRenderer:
         framebuffer: Any,
         camera: Camera,
         viewport: tuple[int, int, int, int] | None = None,
+        point_scale: float = 1.0,
     ) -> None:
         """Draw ``layers`` seen by ``camera`` over what ``framebuffer`` holds.
 
@@ -238,6 +239,9 @@ class OverlayRenderer:
         viewport
             ``(x, y, width, height)`` in pixels, origin bottom-left, as given to the
             raycaster; default the whole framebuffer.
+        point_scale
+            Multiplies the points' ``size`` (device pixels per layer pixel: a frame drawn
+            at a lower or higher resolution than it is shown keeps its handles' size).
 
         Raises
         ------
@@ -304,7 +308,8 @@ class OverlayRenderer:
                 ctx.blend_func = (ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA)  # premultiplied over
                 for layer, start, n in ranges:
                     points = layer.kind == "points"
-                    sprite = min(float(layer.size) + 2 * OUTLINE_WIDTH, self.max_sprite_size)
+                    disc = float(layer.size) * float(point_scale)
+                    sprite = min(disc + 2 * OUTLINE_WIDTH, self.max_sprite_size)
                     _set(prog, "u_points", int(points))
                     _set(prog, "u_sprite_size", sprite)
                     mode = ctx.POINTS if points else ctx.LINES

@@ -1046,6 +1046,12 @@ class OffscreenRenderer:
         :class:`~voxwarp.render.inline_image.RenderedImage`: an array Jupyter shows)."""
         with self._current():
             self.renderer.draw(scene, self._fbo, camera=camera)
+            return self.read()
+
+    def read(self) -> RenderedImage:
+        """What :attr:`framebuffer` holds, as :meth:`render` returns it: after drawing
+        more into it (e.g. an :class:`~voxwarp.render.overlay.OverlayRenderer` pass)."""
+        with self._current():
             raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
         w, h = self.size
         img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)

@@ -146,6 +146,28 @@ def test_points_are_discs_at_projected_pixels(
     np.testing.assert_allclose(img[far], np.broadcast_to(BG, (far.sum(), 4)), atol=1e-6)
 
 
+def test_point_scale_scales_the_disc_not_the_ring(overlay: OverlayRenderer, target: Any) -> None:
+    """``point_scale`` (a frame drawn at another resolution than shown): a 4 px point at
+    scale 2 is an 8 px disc inside the same 1 px ring."""
+    cam = camera("orthographic")
+    layer = OverlayLayer("points", POINTS[:1], COLORS[:1], 4.0)
+    target.use()
+    target.clear(*BG)
+    overlay.draw([layer], target, cam, point_scale=2.0)
+    img = read(target)
+    p = cam.project(POINTS[:1], (W, H))[0]
+    x, y = pixel_centres()
+    r = np.hypot(x - p[0], y - p[1])
+    disc = r <= 4.0 - EDGE
+    np.testing.assert_allclose(img[disc], np.broadcast_to(COLORS[0], (disc.sum(), 4)), atol=1e-6)
+    ring = (r > 4.0 + EDGE) & (r <= 5.0 - EDGE)
+    assert ring.sum() >= 8
+    np.testing.assert_allclose(
+        img[ring], np.broadcast_to(premultiplied(OUTLINE_COLOR), (ring.sum(), 4)), atol=1e-6
+    )
+    assert np.allclose(img[r > 5.0 + EDGE], BG, atol=1e-6)
+
+
 def test_points_in_a_viewport(overlay: OverlayRenderer, target: Any) -> None:
     cam = camera("perspective")
     vx, vy, vw, vh = 30, 10, 50, 40  # origin bottom-left, as the raycaster's viewport
