@@ -723,13 +723,12 @@ class TransferFunctionEditor(QWidget):
         self.transferFunctionChanged.emit(tf)
 
     def _on_preset_index(self, index: int) -> None:
-        name = self.preset_combo.itemText(index)
-        if index > 0 and name in preset_entries():
-            self.apply_preset(name)
+        if index > 0:  # every entry after "custom" is a preset or colour-map name
+            self.apply_preset(self.preset_combo.itemText(index))
 
     def _sync_combo(self) -> None:
         name = self.transfer_function.name
-        index = self.preset_combo.findText(name) if name in preset_entries() else 0
+        index = self.preset_combo.findText(name)  # -1 (shown as custom) when not offered
         was = self.preset_combo.blockSignals(True)
         self.preset_combo.setCurrentIndex(max(0, index))
         self.preset_combo.blockSignals(was)
