@@ -355,24 +355,21 @@ def slicer_vp(text: str, path: str = "") -> list[ImportedMap]:
 
 
 # ---------------------------------------------------------------------------- dispatch
-def read_maps(text: str, path: str = "") -> list[ImportedMap]:
-    """The maps in a ParaView JSON or Slicer XML/.vp text (voxwarp JSON is not one)."""
+def read_file(path: str) -> tuple[list[ImportedMap] | None, object]:
+    """Read a transfer function file once: ``(maps, None)`` for a ParaView JSON or Slicer
+    XML/.vp/.vp.json file; ``(None, doc)`` for voxwarp's own JSON (``doc`` parsed)."""
+    text = read_text(path)
     kind = file_kind(text, path)
     if kind == "slicer-xml":
-        return slicer_presets(text, path)
+        return slicer_presets(text, path), None
     if kind == "slicer-vp":
-        return slicer_vp(text, path)
+        return slicer_vp(text, path), None
     doc = parse_json(text, path)
     if is_slicer_json(doc):
-        return slicer_json(doc, path)  # type: ignore[arg-type]
-    if not is_paraview(doc):
-        raise SceneError(f"{path}: not a ParaView colour map (no RGBPoints)")
-    return paraview_maps(doc, path)
-
-
-def is_foreign(doc: object) -> bool:
-    """Whether parsed JSON ``doc`` is a ParaView or Slicer file (not voxwarp's own)."""
-    return is_paraview(doc) or is_slicer_json(doc)
+        return slicer_json(doc, path), None  # type: ignore[arg-type]
+    if is_paraview(doc):
+        return paraview_maps(doc, path), None
+    return None, doc
 
 
 def usable(maps: Sequence[ImportedMap]) -> list[ImportedMap]:

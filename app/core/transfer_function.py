@@ -296,12 +296,9 @@ class TransferFunction:
         spec = file_spec(path)
         if spec is not None:
             path, name = spec[0], name if name is not None else spec[1]
-        text = tf_formats.read_text(path)
-        if tf_formats.file_kind(text, path) == "json":
-            doc = tf_formats.parse_json(text, path)
-            if not tf_formats.is_foreign(doc):
-                return cls._from_voxwarp_json(doc, path, volume)
-        maps = tf_formats.read_maps(text, path)
+        maps, doc = tf_formats.read_file(path)
+        if maps is None:
+            return cls._from_voxwarp_json(doc, path, volume)
         good = tf_formats.usable(maps)
         if name is None and len(good) > 1:
             warnings.warn(
@@ -343,11 +340,8 @@ class TransferFunction:
     def map_names(path: str) -> list[str]:
         """Names of the usable maps in a ParaView / Slicer file (categorical ParaView maps
         left out); ``[]`` for voxwarp JSON."""
-        text = tf_formats.read_text(path)
-        if tf_formats.file_kind(text, path) == "json":
-            if not tf_formats.is_foreign(tf_formats.parse_json(text, path)):
-                return []
-        return [m.name for m in tf_formats.usable(tf_formats.read_maps(text, path))]
+        maps, _doc = tf_formats.read_file(path)
+        return [m.name for m in tf_formats.usable(maps or [])]
 
 
 #: File suffixes ``--tf`` treats as a file even before it exists (so a typo says so).
