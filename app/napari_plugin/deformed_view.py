@@ -74,15 +74,21 @@ def deformation_warps(
 ) -> list[Any]:
     """The warps of deformation ``kind`` (one of :data:`DEFORMATIONS`) for ``volume``;
     ``direction`` (world) is where the mass-spring push goes."""
+    check_deformation(kind, scene_path)
     if kind == "none":
         return []
     if kind == "mass-spring push":
         return push_warps(volume, direction)
-    if kind == "scene file":
-        if not scene_path:
-            raise SceneError("deformation 'scene file' needs a scene JSON: pick one")
-        return scene_file_warps(scene_path, volume)
-    raise SceneError(f"deformation must be one of {', '.join(DEFORMATIONS)}; got {kind!r}")
+    return scene_file_warps(scene_path, volume)  # type: ignore[arg-type]
+
+
+def check_deformation(kind: str, scene_path: str | os.PathLike | None = None) -> None:
+    """Raise :class:`SceneError` (one line) unless ``kind`` is one of
+    :data:`DEFORMATIONS` with what it needs (a scene JSON for ``"scene file"``)."""
+    if kind not in DEFORMATIONS:
+        raise SceneError(f"deformation must be one of {', '.join(DEFORMATIONS)}; got {kind!r}")
+    if kind == "scene file" and not scene_path:
+        raise SceneError("deformation 'scene file' needs a scene JSON: pick one")
 
 
 def deformed_scene(

@@ -130,12 +130,10 @@ class VoxwarpWidget(QWidget):
             layer = self.selected_layer()
             volume = convert.layer_to_volume(layer)
             options = convert.layer_scene_options(layer)
+            kind = self.deformation_box.currentText()
+            deformed_view.check_deformation(kind, self.scene_edit.text())  # before a worker
         except (VoxwarpError, ValueError) as exc:
             self._report(exc)
-            return None
-        kind = self.deformation_box.currentText()
-        if kind == "scene file" and not self.scene_edit.text():
-            self._report(VoxwarpError("deformation 'scene file' needs a scene JSON: pick one"))
             return None
         view = self.view_box.currentText()
         if view != "default":
