@@ -42,9 +42,9 @@ _PUBLIC: dict[str, str] = {
     "instances_from_scene_graph": "voxwarp.core.mesh",
     "load_mesh": "voxwarp.core.mesh",
     "mesh_from_labels": "voxwarp.core.labels_mesh",
-    "OffscreenRenderer": "voxwarp.render.raycaster",
+    "OffscreenRenderer": "voxwarp.render.offscreen",
     "Renderer": "voxwarp.render.raycaster",
-    "create_context": "voxwarp.render.raycaster",
+    "create_context": "voxwarp.render.context",
     "load_sample": "voxwarp.io.samples",
     "sample_names": "voxwarp.io.samples",
     "MODES": "voxwarp.scene",
@@ -112,5 +112,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads t
     from voxwarp.io.images import read_image, write_image
     from voxwarp.io.samples import load_sample, sample_names
     from voxwarp.io.volumes import load_volume, save_volume, volume_info, volume_summary
-    from voxwarp.render.raycaster import OffscreenRenderer, Renderer, create_context
+    from voxwarp.render.context import create_context
+    from voxwarp.render.offscreen import OffscreenRenderer
+    from voxwarp.render.raycaster import Renderer
     from voxwarp.scene import MODES, Scene

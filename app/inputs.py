@@ -147,7 +147,7 @@ def load_wire_file(path: str | Path) -> dict[str, Any]:
     """Read a wire file: JSON ``{"wires": [...], "field_scale": ..., ...}``.
 
     The keys are those of a ``"wires"`` warp in scene JSON (see
-    :class:`voxwarp.deform.wires.WireFieldWarp`), plus the free-text notes ``description`` and
+    :class:`voxwarp.deform.wires.field.WireFieldWarp`), plus the free-text notes ``description`` and
     ``sample``. Returns the warp entry (``{"type": "wires", ...}``); raises
     :class:`InputError` naming the problem.
     """
@@ -179,7 +179,7 @@ def load_lattice_file(path: str | Path, volume: Any) -> Any:
     ``tolerance`` / ``max_iterations`` (Newton steps until a step moves the point by at
     most ``tolerance`` mm) or ``iterations`` (a fixed count); plus the free-text notes
     ``description`` and ``sample``) and build the warp."""
-    from voxwarp.deform.lattice_warp import LatticeWarp
+    from voxwarp.deform.lattice.warp import LatticeWarp
     from voxwarp.deform.warp import WarpError
 
     d = read_json_option("--lattice", path)

@@ -49,7 +49,7 @@ from voxwarp.deform.warp import (
 from voxwarp.errors import FieldError, MeshError, SceneError, VolumeError
 
 if TYPE_CHECKING:
-    from voxwarp.deform.displacement_field import DisplacementFieldWarp
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 
 #: Largest volume (bytes) a scene JSON embeds instead of referring to a file.
 EMBED_LIMIT_BYTES = 8 * 1024 * 1024
@@ -86,7 +86,7 @@ class Scene:
     """A renderable scene description: what to draw and how, but no GPU state.
 
     Build one from a volume and pass it to
-    :meth:`voxwarp.render.raycaster.OffscreenRenderer.render`; :meth:`copy` makes a
+    :meth:`voxwarp.render.offscreen.OffscreenRenderer.render`; :meth:`copy` makes a
     variant with some arguments changed, and :meth:`save` / :meth:`load` write and read
     it as scene JSON. Invalid values raise :class:`~voxwarp.errors.SceneError`.
 

@@ -13,21 +13,21 @@ from voxwarp.lazy import exports
 
 #: public name -> module that defines it (imported on first access)
 _PUBLIC: dict[str, str] = {
-    "ChainMail": "voxwarp.deform.chainmail",
-    "MoveStats": "voxwarp.deform.chainmail",
-    "ChainMailError": "voxwarp.deform.chainmail_model",
-    "DisplacementFieldWarp": "voxwarp.deform.displacement_field",
-    "ElementGrid": "voxwarp.deform.elements",
-    "ElementGridError": "voxwarp.deform.elements",
-    "ElementModel": "voxwarp.deform.element_model",
-    "LatticeWarp": "voxwarp.deform.lattice_warp",
-    "CpuSpringSolver": "voxwarp.deform.massspring",
-    "MassSpring": "voxwarp.deform.massspring",
-    "OffsetFieldWarp": "voxwarp.deform.offset_field",
-    "SceneNode": "voxwarp.deform.scene_graph",
-    "compose_scene": "voxwarp.deform.scene_graph",
-    "TrilinearGrid": "voxwarp.deform.trilinear",
-    "TrilinearTransform": "voxwarp.deform.trilinear",
+    "ChainMail": "voxwarp.deform.elements.chainmail",
+    "MoveStats": "voxwarp.deform.elements.chainmail",
+    "ChainMailError": "voxwarp.deform.elements.chainmail_model",
+    "DisplacementFieldWarp": "voxwarp.deform.fields.displacement",
+    "ElementGrid": "voxwarp.deform.elements.grid",
+    "ElementGridError": "voxwarp.deform.elements.grid",
+    "ElementModel": "voxwarp.deform.elements.model",
+    "LatticeWarp": "voxwarp.deform.lattice.warp",
+    "CpuSpringSolver": "voxwarp.deform.elements.massspring",
+    "MassSpring": "voxwarp.deform.elements.massspring",
+    "OffsetFieldWarp": "voxwarp.deform.elements.offset_field",
+    "SceneNode": "voxwarp.deform.lattice.scene_graph",
+    "compose_scene": "voxwarp.deform.lattice.scene_graph",
+    "TrilinearGrid": "voxwarp.deform.lattice.trilinear",
+    "TrilinearTransform": "voxwarp.deform.lattice.trilinear",
     "AffineWarp": "voxwarp.deform.warp",
     "IdentityWarp": "voxwarp.deform.warp",
     "Warp": "voxwarp.deform.warp",
@@ -37,9 +37,9 @@ _PUBLIC: dict[str, str] = {
     "known_warps": "voxwarp.deform.warp",
     "register_warp": "voxwarp.deform.warp",
     "warp_from_dict": "voxwarp.deform.warp",
-    "Wire": "voxwarp.deform.wires",
-    "WireDeformer": "voxwarp.deform.wires",
-    "WireFieldWarp": "voxwarp.deform.wires",
+    "Wire": "voxwarp.deform.wires.field",
+    "WireDeformer": "voxwarp.deform.wires.field",
+    "WireFieldWarp": "voxwarp.deform.wires.field",
 }
 
 __all__ = sorted(_PUBLIC)
@@ -49,16 +49,16 @@ __getattr__, __dir__ = exports(__name__, _PUBLIC)
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads these
-    from voxwarp.deform.chainmail import ChainMail, MoveStats
-    from voxwarp.deform.chainmail_model import ChainMailError
-    from voxwarp.deform.displacement_field import DisplacementFieldWarp
-    from voxwarp.deform.element_model import ElementModel
-    from voxwarp.deform.elements import ElementGrid, ElementGridError
-    from voxwarp.deform.lattice_warp import LatticeWarp
-    from voxwarp.deform.massspring import CpuSpringSolver, MassSpring
-    from voxwarp.deform.offset_field import OffsetFieldWarp
-    from voxwarp.deform.scene_graph import SceneNode, compose_scene
-    from voxwarp.deform.trilinear import TrilinearGrid, TrilinearTransform
+    from voxwarp.deform.elements.chainmail import ChainMail, MoveStats
+    from voxwarp.deform.elements.chainmail_model import ChainMailError
+    from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
+    from voxwarp.deform.elements.massspring import CpuSpringSolver, MassSpring
+    from voxwarp.deform.elements.model import ElementModel
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+    from voxwarp.deform.lattice.scene_graph import SceneNode, compose_scene
+    from voxwarp.deform.lattice.trilinear import TrilinearGrid, TrilinearTransform
+    from voxwarp.deform.lattice.warp import LatticeWarp
     from voxwarp.deform.warp import (
         AffineWarp,
         IdentityWarp,
@@ -70,4 +70,4 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads t
         register_warp,
         warp_from_dict,
     )
-    from voxwarp.deform.wires import Wire, WireDeformer, WireFieldWarp
+    from voxwarp.deform.wires.field import Wire, WireDeformer, WireFieldWarp

@@ -64,10 +64,10 @@ _REGISTRY: dict[str, type[Warp]] = {}
 #: the warp kinds voxwarp ships and the modules that register them: loaded when a scene
 #: names one, so that reading a warp entry never depends on what was imported before
 _BUILT_IN: dict[str, str] = {
-    "offset_field": "voxwarp.deform.offset_field",
-    "wires": "voxwarp.deform.wires",
-    "lattice": "voxwarp.deform.lattice_warp",
-    "displacement_field": "voxwarp.deform.displacement_field",
+    "offset_field": "voxwarp.deform.elements.offset_field",
+    "wires": "voxwarp.deform.wires.field",
+    "lattice": "voxwarp.deform.lattice.warp",
+    "displacement_field": "voxwarp.deform.fields.displacement",
 }
 
 
@@ -209,7 +209,7 @@ class Warp(ABC):
             default). The raycaster uses them to carry empty-space skipping into
             deformed space: a deformed-space point samples original content only
             within that interval of offsets (see
-            :func:`voxwarp.render.skipping.warped_cell_visibility`). Signed intervals matter: a
+            :func:`voxwarp.render.skipping.maps.warped_cell_visibility`). Signed intervals matter: a
             smooth field moves a region mostly one way, so the content a sample can
             reach is a shifted window, not a ball.
         """

@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from voxwarp.deform.chainmail import ChainMail
-from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.elements.chainmail import ChainMail
+from voxwarp.deform.elements.grid import ElementGrid
 
 
 def main(n: int = 128) -> None:

@@ -31,12 +31,12 @@ sys.path.insert(0, str(ROOT))
 
 from voxwarp.animation.tracks import Animation, Track  # noqa: E402
 from voxwarp.core.volume import Volume  # noqa: E402
-from voxwarp.deform.chainmail import ChainMail  # noqa: E402
-from voxwarp.deform.elements import ElementGrid  # noqa: E402
-from voxwarp.deform.lattice_warp import LatticeWarp  # noqa: E402
-from voxwarp.deform.massspring import MassSpring  # noqa: E402
-from voxwarp.deform.trilinear import TrilinearGrid  # noqa: E402
-from voxwarp.deform.wires import Wire, WireDeformer  # noqa: E402
+from voxwarp.deform.elements.chainmail import ChainMail  # noqa: E402
+from voxwarp.deform.elements.grid import ElementGrid  # noqa: E402
+from voxwarp.deform.elements.massspring import MassSpring  # noqa: E402
+from voxwarp.deform.lattice.trilinear import TrilinearGrid  # noqa: E402
+from voxwarp.deform.lattice.warp import LatticeWarp  # noqa: E402
+from voxwarp.deform.wires.field import Wire, WireDeformer  # noqa: E402
 from voxwarp.io.samples import load_sample  # noqa: E402
 from voxwarp.scene import Scene  # noqa: E402
 

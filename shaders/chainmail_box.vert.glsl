@@ -1,5 +1,5 @@
 #version 430 core
-// GPU ChainMail passes (deform/chainmail_gpu.py): the box [u_box_lo, u_box_hi) of
+// GPU ChainMail passes (deform/elements/chainmail_gpu.py): the box [u_box_lo, u_box_hi) of
 // elements as one quad per z-slice of the atlas (instance i: slice u_box_lo.z + i),
 // in NDC; no vertex buffer (gl_VertexID 0..5 are the quad's two triangles).
 #include "chainmail_config.glsl"

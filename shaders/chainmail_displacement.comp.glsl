@@ -1,5 +1,5 @@
 #version 430 core
-// Writes the GPU ChainMail displacement texture (deform/chainmail_gpu.py) over the box
+// Writes the GPU ChainMail displacement texture (deform/elements/chainmail_gpu.py) over the box
 // [u_lo, u_hi) of elements: texel (i, j) of layer k = (position - rest, 0), read from
 // the z-slice atlas; one invocation per element.
 #include "chainmail_config.glsl"

@@ -1,5 +1,5 @@
 #version 430 core
-// One constraint pass of the GPU ChainMail (deform/chainmail_gpu.py): one fragment per
+// One constraint pass of the GPU ChainMail (deform/elements/chainmail_gpu.py): one fragment per
 // element of the z-slice atlas (massspring_atlas.glsl with one element per cell), drawn
 // only over the pass's box (chainmail_box.vert.glsl). Reads the previous state with
 // imageLoad and writes the new position into the other framebuffer of a ping-pong pair.

@@ -1,4 +1,4 @@
-// Mass-spring block atlas (see deform/massspring_gpu.py): the (NX, NY, NZ) element grid
+// Mass-spring block atlas (see deform/elements/massspring_gpu.py): the (NX, NY, NZ) element grid
 // is cut into blocks of SX x SY x SZ elements, one fragment each; the (BX, BY, BZ)
 // block grid is stored as z-slices tiled TX per row in 2D textures (one texture per
 // element of a block); slice k is the BX x BY tile at column k % TX, row k / TX. All

@@ -1,5 +1,5 @@
 #version 430 core
-// Writes the mass-spring displacement texture (deform/massspring_gpu.py): texel
+// Writes the mass-spring displacement texture (deform/elements/massspring_gpu.py): texel
 // (i, j, k) = (position - rest position, stiffness), read from the block atlas; one
 // invocation per block, one store per block element (massspring_pass.glsl, generated).
 #include "massspring_config.glsl"

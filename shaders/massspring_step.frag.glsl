@@ -1,5 +1,5 @@
 #version 430 core
-// One integration step of the mass-spring model (deform/spring_model.py): one fragment
+// One integration step of the mass-spring model (deform/elements/spring_model.py): one fragment
 // per block of MS_E elements of the atlas (massspring_atlas.glsl). Reads the state of
 // the previous step, writes the new position and velocity of each block element into
 // the MS_STATE colour attachments (p0 v0 p1 v1 ...) of the other framebuffer.
@@ -9,7 +9,7 @@
 // elements unrolled, each distinct neighbour texel loaded once with imageLoad (about
 // 1.5x cheaper than texelFetch on llvmpipe), neighbours outside the grid clamped into
 // it and weighted 0 (no branches). With MS_PIN_PASS defined the same file is the pin
-// pass instead (deform/massspring_gpu.py: set_constraints).
+// pass instead (deform/elements/massspring_gpu.py: set_constraints).
 #include "massspring_config.glsl"
 #include "massspring_atlas.glsl"
 

@@ -3,7 +3,7 @@
 // trilinear cells (Knuth, Kohlhammer, Kuijper, GRAPP 2010, sections 3-5). About this
 // technique:
 // * The lattice is a grid of (nx+1)(ny+1)(nz+1) node points in an RGBA32F 3D texture
-//   (voxwarp.deform.trilinear.TrilinearGrid.texture_data). It acts on the box-normalised vertex
+//   (voxwarp.deform.lattice.trilinear.TrilinearGrid.texture_data). It acts on the box-normalised vertex
 //   coordinate u = (p - lo) / (hi - lo); the cell holding u is a trilinear map of its 8
 //   corner nodes. Each vertex costs O(1) fetches, however deep the scene graph that
 //   composed the lattice (voxwarp.core.mesh.instances_from_scene_graph).
@@ -23,7 +23,7 @@
 //   crossed, = cof(J) n = det(J) J^-T n: orthogonal to the deformed surface, but the
 //   derivative across a cell face of a C0 lattice jumps, so seams show. Where J n nearly
 //   vanishes (a flattened lattice) method 0 falls back to method 1. CPU reference:
-//   voxwarp.deform.trilinear.carry_normals.
+//   voxwarp.deform.lattice.trilinear.carry_normals.
 // * LINEAR draws matrix instances and lattices whose grid is one affine map (the paper's
 //   parallelepiped check, section 4.1) with J = the matrix's linear part: a lattice keeps
 //   its method (the same normals as the trilinear path). A matrix instance has no cell

@@ -21,7 +21,7 @@ uniform float u_xray_length;   // reference length L in mm
 struct State { float sum; };
 void mode_init(inout State s) { s.sum = 0.0; }
 // a block adds nothing unless some value in it lies above the window's low end (used
-// by warped rays; straight rays march without skip checks, app/render/skip_cache.py)
+// by warped rays; straight rays march without skip checks, app/render/skipping/cache.py)
 bool block_visible(vec2 range, inout State s) { return range.y > u_window.x; }
 bool mode_skip(inout State s, float t_clear) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {

@@ -1,5 +1,5 @@
 #version 430
-// Bakes the inverse of an offset field (deform/offset_field.py,
+// Bakes the inverse of an offset field (deform/elements/offset_field.py,
 // OffsetFieldWarp.baked_inverse is the CPU reference) on a node grid over the same box,
 // bake_factor times finer than the field: for each baked node X, solve q + u(q) = X by
 // u_iterations fixed-point steps q <- X - u(q) from q = X, and store v = X - q (mm) in

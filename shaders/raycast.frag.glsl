@@ -16,11 +16,11 @@
 //   the same sample lattice, so skipping never changes the image. With CELL_SKIP
 //   (dvr, iso, flm) the map is kept per trilinear cell instead of per block, and per
 //   ray-direction octant: the cube a ray may jump through starts at its cell and
-//   extends ahead of it (app/render/skipping.py). One nearest fetch per sample.
+//   extends ahead of it (app/render/skipping/maps.py). One nearest fetch per sample.
 // * otherwise: each sample goes through warp_chain(p). When every warp bounds its
 //   displacement (and the mode is dvr, iso or flm), CELL_SKIP applies in *deformed*
 //   space: the ray walks octant skip maps of the original cell visibility dilated by
-//   the local displacement bound (app/render/skipping.py warped_cell_visibility), so it jumps
+//   the local displacement bound (app/render/skipping/maps.py warped_cell_visibility), so it jumps
 //   wherever no sample could land on visible content, again on the sample lattice.
 //   Without a bound, invisible blocks still save the volume fetch and classification.
 // Early ray termination: the mode returns true from mode_sample when nothing further
@@ -82,7 +82,7 @@ vec3 texel_at(float t) { return world_to_texel(warp_chain(g_ro + t * g_rd)); }
 // Piecewise-linear warped rays: the chain is evaluated exactly at the ends of segments
 // of up to u_segment samples (the current one: ray parameters g_ta..g_tb, texel
 // positions g_ua..g_ub) and interpolated linearly in between, with its Jacobian.
-// app/render/ray_segments.py measures how long a segment may be, per region.
+// app/render/skipping/segments.py measures how long a segment may be, per region.
 #ifdef SEGMENT_MAP
 uniform int u_max_segment;              // up to this many samples, from the map:
 uniform sampler3D u_segment_map;        // R32F: longest segment (mm) starting in a cell
@@ -141,7 +141,7 @@ mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
 #ifdef CELL_SKIP
 // Warped rays skip through *deformed* space: the skip map's cells are those of the
 // original cell grid padded to the ray box, their visibility the original one dilated
-// by the warps' local displacement bound (app/render/skipping.py warped_cell_visibility).
+// by the warps' local displacement bound (app/render/skipping/maps.py warped_cell_visibility).
 uniform mat4 u_skip_world_to_texel;   // deformed world -> skip-map texel coordinates
 uniform ivec3 u_cell_dims;            // cells of the skip map
 vec3 g_u0;
@@ -236,7 +236,7 @@ void main() {
 #ifdef CELL_SKIP
     // This pass draws the rays of octant u_octant only (each pixel exactly once). A
     // component counts as negative only below -OCTANT_EPS * max|du|, so directions
-    // along an axis (components ~0 of either sign) agree with app/render/skipping.py.
+    // along an axis (components ~0 of either sign) agree with app/render/skipping/maps.py.
     float du_max = max(max(abs(g_du.x), abs(g_du.y)), abs(g_du.z));
     vec3 ray_octant = mix(vec3(1.0), vec3(-1.0), lessThan(g_du, vec3(-OCTANT_EPS * du_max)));
     if (any(notEqual(ray_octant, u_octant))) discard;

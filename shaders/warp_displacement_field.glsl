@@ -1,4 +1,4 @@
-// Imported displacement field (deform/displacement_field.py): the pull-back convention of
+// Imported displacement field (deform/fields/displacement.py): the pull-back convention of
 // ITK, ANTs and SimpleITK, warp(p) = p + u(p). u is trilinear between the nodes of the
 // field's own grid (WARP_world_to_grid: world mm -> continuous node index), held in the
 // RGBA16F 2D array texture WARP_displacement (layer k = z-slice k; xyz = u in RAS mm).

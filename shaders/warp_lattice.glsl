@@ -1,4 +1,4 @@
-// Trilinear-lattice warp (deform/lattice_warp.py; Knuth, Kohlhammer, Kuijper, GRAPP 2010).
+// Trilinear-lattice warp (deform/lattice/warp.py; Knuth, Kohlhammer, Kuijper, GRAPP 2010).
 // A grid of WARP_cells trilinear cells maps the unit cube (u) onto the deformed lattice;
 // the content of the box [WARP_lo, WARP_lo + WARP_size] (original world, mm) is shown at
 // grid(u), u = (x - lo) / size. The warp inverts it per sample: u with grid(u) = p, then

@@ -1,4 +1,4 @@
-// Offset-field warp (deform/offset_field.py). Grid nodes ("elements") rest at
+// Offset-field warp (deform/elements/offset_field.py). Grid nodes ("elements") rest at
 // X = lo + (i, j, k) * spacing and are displaced by u (mm), stored per node in the RGBA16F
 // 2D array texture WARP_displacement (layer k = z-slice k; xyz = u, a = material); u is
 // trilinear between nodes and 0 outside the grid box [lo, lo + size]. The material

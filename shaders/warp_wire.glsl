@@ -1,4 +1,4 @@
-// Wire-field warp (deform/wires.py; Journal of WSCG 2006 wire paper, section 6).
+// Wire-field warp (deform/wires/field.py; Journal of WSCG 2006 wire paper, section 6).
 // The attribute field covers the box [WARP_lo, WARP_lo + WARP_size] with WARP_shape voxels
 // (voxel i centred at i + 1/2). Per sample: the nearest voxel says identity, vacated (the
 // original place of a swept object: shows nothing) or swept by wire w; a swept sample
@@ -20,7 +20,7 @@ uniform vec3 WARP_shape;
 uniform float WARP_rows;      // rows of WARP_lut (3 per wire)
 uniform sampler2D WARP_lut;
 #if WARP_SMOOTH
-// smooth wire ends (deform/wires.py Wire.ends): per-voxel weight of the displacement,
+// smooth wire ends (deform/wires/field.py Wire.ends): per-voxel weight of the displacement,
 // fading to 0 beyond the wire ends and its radius (linear filter)
 uniform sampler3D WARP_weight;
 #endif

@@ -7,7 +7,7 @@
   with ``VOXWARP_REQUIRE_GL=1`` in the environment (``make test`` and CI set it) they
   fail instead, so a machine that cannot create the context cannot pass the suite with
   most checks skipped.
-* ``offscreen``: factory of :class:`voxwarp.render.raycaster.OffscreenRenderer` objects sharing
+* ``offscreen``: factory of :class:`voxwarp.render.offscreen.OffscreenRenderer` objects sharing
   ``gl_ctx``; all are released at the end of the session.
 * ``golden``: compares an image with ``tests/golden/NAME.png``; ``pytest
   --regenerate-golden`` rewrites the files instead. On a mismatch the actual, expected
@@ -58,7 +58,7 @@ def gl_ctx() -> Iterator[Any]:
     """One headless OpenGL 4.3+ context (EGL) for the session; skips GL tests without one
     (fails them when ``VOXWARP_REQUIRE_GL=1``)."""
     from voxwarp.errors import RenderError
-    from voxwarp.render.raycaster import create_context
+    from voxwarp.render.context import create_context
 
     try:
         ctx = create_context()
@@ -99,7 +99,7 @@ def offscreen(gl_ctx: Any) -> Iterator[Callable[..., Any]]:
     Renderers are cached per (width, height, dtype), so programs and textures are reused
     across tests; all are released at the end of the session.
     """
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     made: dict[tuple[int, int, str], Any] = {}
 

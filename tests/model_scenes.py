@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring
 from voxwarp.deform.warp import Warp
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.io.samples import load_sample
 
 #: voxels of zeros around the head: the deformations move anatomy into them

@@ -9,7 +9,7 @@ with its task. No GL object ever leaves a process.
 
 Workers
     Each worker process makes its own EGL context and
-    :class:`~voxwarp.render.raycaster.OffscreenRenderer` on its first frame and keeps it, with the
+    :class:`~voxwarp.render.offscreen.OffscreenRenderer` on its first frame and keeps it, with the
     volume and the warps, for the next frames (:func:`voxwarp.animation.movie.render_frame`);
     frames of
     one process are drawn one at a time. Workers write the frame files themselves

@@ -51,8 +51,8 @@ class ElementTargets(TargetFamily):
         return elements
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
-        from voxwarp.deform.chainmail import ChainMail
-        from voxwarp.deform.massspring import MassSpring
+        from voxwarp.deform.elements.chainmail import ChainMail
+        from voxwarp.deform.elements.massspring import MassSpring
 
         k = _model_warp(base)
         w = base.warps[k]
@@ -65,7 +65,7 @@ class ElementTargets(TargetFamily):
 
 def _model_warp(base: Scene) -> int:
     """Index of the scene's one offset-field warp saved with its element model."""
-    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     hits = [
         n
@@ -106,7 +106,7 @@ class ElementBinding(Binding):
         self.drags.append((np.asarray(track.elements), offsets))
 
     def step(self, d: dict[str, Any], index: int, steps: int, relax: int) -> None:
-        from voxwarp.deform.massspring import MassSpring
+        from voxwarp.deform.elements.massspring import MassSpring
 
         drags, self.drags = self.drags, []
         try:

@@ -41,7 +41,7 @@ class _ProcessRenderer:
 
     def render(self, header: Mapping[str, Any], scene: Mapping[str, Any]) -> np.ndarray:
         from voxwarp.deform.warp import WarpError, warp_from_dict
-        from voxwarp.render.raycaster import OffscreenRenderer
+        from voxwarp.render.offscreen import OffscreenRenderer
         from voxwarp.scene import Scene
 
         w, h = (int(v) for v in header["size"])
@@ -86,7 +86,7 @@ class _ProcessRenderer:
     def _release_warps(self, warps: Sequence[Any]) -> None:
         if not warps or self.renderer is None:
             return
-        with self.renderer._current():  # their textures live in the renderer's context
+        with self.renderer.current():  # their textures live in the renderer's context
             for w in warps:
                 w.release()
 

@@ -24,7 +24,7 @@ class LatticeTargets(TargetFamily):
             array(value, f"{what} (lattice nodes)", (None, None, None, 3))
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
-        from voxwarp.deform.lattice_warp import LatticeWarp
+        from voxwarp.deform.lattice.warp import LatticeWarp
 
         k = find_warp(base, LatticeWarp, "lattice", target)
         return LatticeBinding(base.warps[k], k)
@@ -59,6 +59,6 @@ class LatticeBinding(Binding):
         d["warps"][self.warp] = entry
 
     def check(self, d: dict[str, Any]) -> None:
-        from voxwarp.deform.lattice_warp import LatticeWarp
+        from voxwarp.deform.lattice.warp import LatticeWarp
 
         LatticeWarp.from_dict(d["warps"][self.warp])

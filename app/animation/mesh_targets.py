@@ -12,10 +12,11 @@ its optional ``"attachments"`` entry lists the meshes that follow it::
      "attachments": [{"mesh": "band 0", "anchors": [{"triangle": 5, "position": [...],
                       "tangent": [...]}, ...], "thickness": 1.2, "width": 4.0}]}
 
-An attachment is :meth:`voxwarp.deform.anchors.AnchorStrip.to_dict` plus the attached
+An attachment is :meth:`voxwarp.deform.lattice.anchors.AnchorStrip.to_dict` plus the attached
 instance's ``"mesh"`` name. For every frame the base's nodes are interpolated, its
 vertices mapped through them, the anchors evaluated on those vertices and each
-attachment's grid set to :meth:`AnchorStrip.nodes <voxwarp.deform.anchors.AnchorStrip.nodes>`
+attachment's grid set to :meth:`AnchorStrip.nodes
+<voxwarp.deform.lattice.anchors.AnchorStrip.nodes>`
 there: the attached geometry follows the base exactly as the static scene built at that
 pose would place it.
 """
@@ -35,7 +36,7 @@ from voxwarp.deform.warp import WarpError
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Track
     from voxwarp.core.mesh import MeshInstance
-    from voxwarp.deform.anchors import AnchorStrip
+    from voxwarp.deform.lattice.anchors import AnchorStrip
     from voxwarp.scene import Scene
 
 _TARGET = re.compile(r"^meshes\[([^\]]+)\]\.nodes$")
@@ -50,7 +51,7 @@ def mesh_name(target: str) -> str:
 
 def _attachment(a: Any, where: str) -> dict[str, Any]:
     """One checked attachment entry (its anchor array parsed, then kept as JSON)."""
-    from voxwarp.deform.anchors import AnchorStrip
+    from voxwarp.deform.lattice.anchors import AnchorStrip
 
     if not isinstance(a, Mapping) or not isinstance(a.get("mesh"), str):
         raise AnimationError(f"{where}: an attachment needs 'mesh' (the attached mesh's name)")
@@ -120,7 +121,7 @@ class MeshBinding(Binding):
 
     def _bind_track(self, track: Track, what: str) -> None:
         """Claim the track's base mesh and attachments; check the anchors fit the base."""
-        from voxwarp.deform.anchors import AnchorStrip
+        from voxwarp.deform.lattice.anchors import AnchorStrip
 
         target = track.target
         base = self.meshes[self._claim(mesh_name(target), target, what)]
@@ -142,7 +143,7 @@ class MeshBinding(Binding):
         self.attached[target] = strips
 
     def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
-        from voxwarp.deform.trilinear import TrilinearGrid
+        from voxwarp.deform.lattice.trilinear import TrilinearGrid
 
         if track.target not in self.attached:
             self._bind_track(track, what)
@@ -160,7 +161,7 @@ class MeshBinding(Binding):
         return a
 
     def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
-        from voxwarp.deform.trilinear import TrilinearGrid
+        from voxwarp.deform.lattice.trilinear import TrilinearGrid
 
         if d.get("meshes") is self.template.get("meshes"):  # first mesh track of this frame
             d["meshes"] = list(self.template["meshes"])

@@ -47,7 +47,7 @@ Movie
     is killed when voxwarp fails or is interrupted (on Linux also when voxwarp itself is
     killed). ``.mp4``, ``.mov`` or ``.mkv``.
 Rendering
-    One :class:`~voxwarp.render.raycaster.OffscreenRenderer` per process (made on first use, kept
+    One :class:`~voxwarp.render.offscreen.OffscreenRenderer` per process (made on first use, kept
     for
     the next frames: see :func:`render_frame`), with the volume loaded once and warps
     rebuilt only when their entry changes. Deformed-space skip maps are off

@@ -58,7 +58,7 @@ module per family in :mod:`voxwarp.animation.targets`):
 ``wires[i].twist``, ``wires[i].scale``
     Wire ``i``'s twist (radians) or scale keys along the wire: a number (constant along
     the wire) or ``[[u, value], ...]`` (u the fraction of the wire's length; the same
-    number of pairs in every key), see :class:`voxwarp.deform.wires.Wire`.
+    number of pairs in every key), see :class:`voxwarp.deform.wires.field.Wire`.
 ``lattice.nodes``
     The (nx + 1, ny + 1, nz + 1, 3) nodes (mm) of the scene's one ``"lattice"`` warp
     (the shape of the scene's lattice), or ``"rest"``: the undeformed lattice over the

@@ -43,7 +43,7 @@ class WireTargets(TargetFamily):
             number(value, what)
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
-        from voxwarp.deform.wires import WireFieldWarp
+        from voxwarp.deform.wires.field import WireFieldWarp
 
         return WireBinding(template, find_warp(base, WireFieldWarp, "wires", target))
 
@@ -56,7 +56,7 @@ class WireBinding(Binding):
         self.warp = warp
 
     def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
-        from voxwarp.deform.wires import Wire
+        from voxwarp.deform.wires.field import Wire
 
         wires = self.template["warps"][self.warp]["wires"]
         i, part = _parts(track.target)
@@ -88,7 +88,7 @@ class WireBinding(Binding):
         d["warps"][k]["wires"][i][part] = value.tolist()
 
     def check(self, d: dict[str, Any]) -> None:
-        from voxwarp.deform.wires import Wire
+        from voxwarp.deform.wires.field import Wire
 
         for w in d["warps"][self.warp]["wires"]:
             Wire.from_dict(w)

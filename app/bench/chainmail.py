@@ -11,7 +11,8 @@ centre element are timed:
 * ``large``: 20 spacings along the oblique direction (2, 1, 1) / sqrt(6): about 20
   spacings of taut links in every direction, so at 32³ and less every element moves.
 
-Solvers: the CPU kernels of :class:`voxwarp.deform.chainmail.ChainMail` (numba, float64), in
+Solvers: the CPU kernels of :class:`voxwarp.deform.elements.chainmail.ChainMail` (numba, float64),
+in
 both variants (``"gibson"``: sponsor lists, ``"enhanced"``: priority queue), and the
 GPU backend (``backend="gpu"``; fragment-shader passes on a standalone EGL context, on
 a machine without a GPU Mesa llvmpipe) when it can be created; otherwise its rows say
@@ -44,9 +45,9 @@ from typing import Any
 import numpy as np
 
 from voxwarp.bench.render import cpu_count, gpu_context, load_average
-from voxwarp.deform.chainmail_gpu import GpuChainMailSolver
-from voxwarp.deform.chainmail_model import ChainMailModel
-from voxwarp.render.raycaster import create_context
+from voxwarp.deform.elements.chainmail_gpu import GpuChainMailSolver
+from voxwarp.deform.elements.chainmail_model import ChainMailModel
+from voxwarp.render.context import create_context
 
 #: the benchmark's grid sizes (elements per axis)
 DEFAULT_SIZES: tuple[int, ...] = (16, 32, 64, 128)
@@ -225,7 +226,7 @@ def drag_offset(n: int, drag: str) -> np.ndarray:
 
 
 def _grid(n: int) -> Any:
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.grid import ElementGrid
 
     grid = ElementGrid(BOX, shape=n)
     grid.free(grid.corner_mask())
@@ -310,7 +311,7 @@ def bench_chainmail(
 def _compile_kernels() -> None:
     """One drag and one relaxation step of each variant on a 3³ grid: numba compiles
     (or loads from its cache) the kernels here, not in a timed or warm-up move."""
-    from voxwarp.deform.chainmail import ChainMail
+    from voxwarp.deform.elements.chainmail import ChainMail
 
     for variant in ("gibson", "enhanced"):
         cm = ChainMail(_grid(3), variant=variant)
@@ -322,7 +323,7 @@ def _bench_size(
     n: int, ctx: Any, gpu_skip: str, repeats: int, slow_s: float, log: Any
 ) -> tuple[list[ChainBenchRow], str]:
     """Rows of every solver and drag at n³ (the solvers' timed moves interleaved)."""
-    from voxwarp.deform.chainmail import ChainMail
+    from voxwarp.deform.elements.chainmail import ChainMail
 
     rows: list[ChainBenchRow] = []
     runners: list[_Runner] = []
@@ -418,7 +419,7 @@ def gpu_enforce_table(
 
     One element at the centre of the top face of an n³ grid (:func:`_bench_model`) is
     held. ``frame``: it is dragged by (0.05, 0, -0.02) spacing per frame, one
-    :meth:`~voxwarp.deform.chainmail_gpu.GpuChainMailSolver.enforce` each, from the
+    :meth:`~voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver.enforce` each, from the
     last frame's state. ``jump``: it is moved by (2, 0, -1) spacing in one enforce, from
     rest. Each enforce is timed to the end of its GPU work; both variants run on the
     same solver and context, one after the other, each from the same state

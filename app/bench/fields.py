@@ -2,7 +2,7 @@
 
 A smooth random displacement field (a few mm; a grid slightly larger than the volume,
 rotated 5° about z) on ``n``³ nodes (default 64³ and 128³) is imported as a
-:class:`~voxwarp.deform.displacement_field.DisplacementFieldWarp` over the benchmark
+:class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp` over the benchmark
 volume (the bundled CT upsampled to 256³, as ``voxwarp bench render``) and timed in
 three parts, in one process:
 
@@ -20,7 +20,7 @@ three parts, in one process:
   the transform and the result still held; transient peaks are not seen) and
   voxwarp's field texture (RGBA16F);
 * **export**: the pull-back field of the warp chain sampled on the volume's grid
-  (:func:`~voxwarp.deform.displacement_field.sample_chain_field`) and written as
+  (:func:`~voxwarp.deform.fields.displacement.sample_chain_field`) and written as
   ``.nii.gz`` and ``.nrrd`` (:func:`voxwarp.io.fields.save_displacement_field`).
 
 Ratios are against the undeformed frame (frames) or voxwarp's warped frame (resample)
@@ -47,9 +47,9 @@ from voxwarp.bench.command import add_bench_parser
 from voxwarp.bench.render import bench_camera, benchmark_volume, load_average
 from voxwarp.core.checks import image_size, int_list, positive_int
 from voxwarp.core.volume import Volume
-from voxwarp.deform.displacement_field import DisplacementFieldWarp, sample_chain_field
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field
 from voxwarp.deform.warp import chain_apply
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 MIB = float(1 << 20)

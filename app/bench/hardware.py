@@ -19,7 +19,7 @@ def gl_info() -> dict[str, str]:
     """``GL_RENDERER``, ``GL_VERSION`` and ``GL_VENDOR`` of a new standalone EGL context
     (released again); ``{"error": ...}`` when none can be made."""
     from voxwarp.errors import RenderError
-    from voxwarp.render.raycaster import create_context
+    from voxwarp.render.context import create_context
 
     try:
         ctx = create_context()

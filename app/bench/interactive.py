@@ -46,7 +46,7 @@ from voxwarp.render.adaptive_quality import (
     Quality,
     scene_at,
 )
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 FAMILIES = ("none", "massspring", "chainmail", "wires", "lattice")
@@ -181,7 +181,7 @@ def bench_interactive(
         rr = r.renderer
 
         def draw(scene: Scene, scale: float, camera: Any = None) -> None:
-            with r._current():
+            with r.current():
                 rr.draw_scaled(scene, r.framebuffer, None, camera, scale)
                 r.ctx.finish()
 

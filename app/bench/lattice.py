@@ -3,7 +3,8 @@
 Knuth, Kohlhammer and Kuijper ("Embedding hierarchical deformation within a realtime
 scene graph", GRAPP 2010) replace the 4x4 matrices of a scene graph by grids of trilinear
 cells, compose the transforms of every root-to-leaf path into one per geometry leaf
-(:func:`voxwarp.deform.scene_graph.compose_scene`) and apply that one transform in the vertex
+(:func:`voxwarp.deform.lattice.scene_graph.compose_scene`) and apply that one transform in the
+vertex
 shader (:class:`voxwarp.render.mesh_pass.MeshRenderer`); their evaluation found the trilinear
 version at 75-80 % of the linear frame rate. This benchmark measures the same two
 things here, every ratio against a linear reference timed in the same run:
@@ -28,7 +29,7 @@ things here, every ratio against a linear reference timed in the same run:
    cells per axis), every object a 4x4 (rotation, scale, translation into its group's
    box). The linear graph is the same with the root's and groups' lattices replaced by
    4x4 matrices (identity for the root, the group's translation for a group). A frame is
-   what an animated scene pays: :func:`~voxwarp.deform.scene_graph.compose_scene` (the
+   what an animated scene pays: :func:`~voxwarp.deform.lattice.scene_graph.compose_scene` (the
    propagation world -> leaves, timed alone), wrapping each composed transform in a
    :class:`~voxwarp.core.mesh.MeshInstance` (as
    :func:`voxwarp.core.mesh.instances_from_scene_graph` does),
@@ -77,7 +78,7 @@ from voxwarp.bench.papers import lattice_ratio_range
 from voxwarp.bench.render import best_times, cpu_count, load_average
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import DEFAULT_NORMAL_METHOD, MeshInstance
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.render.mesh_pass import POSITIONS, MeshRenderer
 
 #: the paper's scene size (triangles) and image
@@ -551,7 +552,7 @@ def _changed(a: np.ndarray, b: np.ndarray) -> float:
 def _unbind_fbo(ctx: Any) -> None:
     """Bind the default framebuffer: never release the bound one (moderngl re-binds the
     dead name when the next framebuffer is made: GL_INVALID_OPERATION), as
-    :class:`voxwarp.render.raycaster.OffscreenRenderer` does."""
+    :class:`voxwarp.render.offscreen.OffscreenRenderer` does."""
     try:
         ctx.detect_framebuffer(0).use()
     except Exception:
@@ -806,7 +807,7 @@ def build_scene_graph(objects: int, lattice: bool, mesh: Any = None) -> tuple[An
     the same 4x4s in both (deterministic). Groups hold ``ceil(sqrt(objects))`` objects
     each (the last one the rest), in a cube of slots; groups lie side by side in a square.
     """
-    from voxwarp.deform.scene_graph import SceneNode
+    from voxwarp.deform.lattice.scene_graph import SceneNode
 
     n = int(objects)
     if n < 1:
@@ -889,7 +890,7 @@ def wrap_instances(composed: Sequence[Any]) -> list[Any]:
 def bench_composition(report: LatticeBenchReport, ctx: Any, log: Callable[[str], None]) -> None:
     """Section 2 (see the module docstring); appends one row per variant."""
     from voxwarp.core.mesh import mesh_instances_bounds
-    from voxwarp.deform.scene_graph import compose_scene
+    from voxwarp.deform.lattice.scene_graph import compose_scene
 
     mesh = object_mesh()
     graphs = {v: build_scene_graph(report.objects, v == "trilinear", mesh) for v in VARIANTS}
@@ -1032,7 +1033,7 @@ def bench_lattice(
     )
     own_ctx = ctx is None
     if own_ctx:
-        from voxwarp.render.raycaster import create_context
+        from voxwarp.render.context import create_context
 
         ctx = create_context()
     else:
@@ -1259,7 +1260,7 @@ def bench_mesh_throughput(
     slower), for ``voxwarp bench lattice``.
     """
     from voxwarp.core.mesh import torus_mesh
-    from voxwarp.render.raycaster import create_context
+    from voxwarp.render.context import create_context
 
     owns = ctx is None
     if owns:
@@ -1331,14 +1332,14 @@ def bench_cpu_grid(
 ) -> dict[str, float]:
     """Seconds (best of ``repeats``) of the CPU trilinear maps on ``points`` parameters.
 
-    ``forward``: a ``cells``³-cell :class:`~voxwarp.deform.trilinear.TrilinearGrid`
+    ``forward``: a ``cells``³-cell :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid`
     (a box of 10 x 20 x 30 mm, nodes jittered by up to 0.1 cell, no folds) and a
-    one-cell :class:`~voxwarp.deform.trilinear.TrilinearTransform` evaluated at
+    one-cell :class:`~voxwarp.deform.lattice.trilinear.TrilinearTransform` evaluated at
     ``points`` uniform parameters together; ``inverse``: the grid's inverse of the
     mapped points (its bucket grid built before timing). Run it with
     ``python -c "from voxwarp.bench.lattice import bench_cpu_grid; print(bench_cpu_grid())"``.
     """
-    from voxwarp.deform.trilinear import UNIT_CORNERS, TrilinearTransform
+    from voxwarp.deform.lattice.trilinear import UNIT_CORNERS, TrilinearTransform
 
     rng = np.random.default_rng(seed)
     g = TrilinearGrid.identity(int(cells))

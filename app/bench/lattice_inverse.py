@@ -1,19 +1,19 @@
 """Section 3 of ``voxwarp bench lattice``: the lattice-on-volume inverse, accuracy beside cost.
 
-A :class:`~voxwarp.deform.lattice_warp.LatticeWarp` renders a volume through the inverse of
+A :class:`~voxwarp.deform.lattice.warp.LatticeWarp` renders a volume through the inverse of
 the lattice: a baked seed refined by Newton steps until a step moves the original point by
 at most ``tolerance`` mm (the default), or by fixed steps (the former default: 2). Two
 measurements, each variant against references from the same run:
 
 * *Accuracy* (CPU, exactly the shader's rule in float64):
-  :func:`~voxwarp.deform.lattice_warp.inverse_error_study` over random lattices proven
+  :func:`~voxwarp.deform.lattice.warp.inverse_error_study` over random lattices proven
   not to fold (1-4 cells per axis, 40-120 mm boxes, every node or one node moved by a
   large part of a cell), points uniform and on the cells' faces: the distribution of the
   point error ``|q' - q|`` (median, 99th percentile, max), the largest residual, the
   Newton steps taken and the points stopped by the cap.
 * *Render cost*: the ``stent`` CT downsampled to :data:`VOLUME_SIZE`³, dvr with its
   suggested transfer function, :data:`IMAGE` pixels, deformed-space skip maps, under the
-  bent 4³-cell lattice of :func:`~voxwarp.deform.lattice_warp.bent_grid` on the volume's
+  bent 4³-cell lattice of :func:`~voxwarp.deform.lattice.warp.bent_grid` on the volume's
   box (one copy of the volume per variant, so that each keeps its skip maps). After two
   warm-up frames of each variant (shader compile, skip maps), each round
   draws every variant once (the order rotates each round, every frame bound by
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.lattice_warp import (
+from voxwarp.deform.lattice.warp import (
     DEFAULT_TOLERANCE,
     STUDY_VARIANTS,
     LatticeWarp,
@@ -166,7 +166,7 @@ def time_render_variants(
     """Interleaved median frame times of each variant (see the module docstring)."""
     from voxwarp.bench.render import bench_camera
     from voxwarp.io.samples import suggested_transfer_function
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     vol = render_volume()

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from voxwarp.core.mesh import NORMAL_METHODS, Mesh, MeshInstance, tube_mesh
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 
 #: rings this far (in units of the tube's length) either side of each inner cell face
 SEAM_GAP = 1e-4

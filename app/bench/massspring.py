@@ -3,10 +3,10 @@
 For each grid size ``n`` (n³ elements, by default 16, 32, 64 and 128) the same model is
 stepped by up to four solvers in one process:
 
-* ``numpy``: :class:`voxwarp.deform.massspring.CpuSpringSolver` (float64, vectorised numpy),
-  through ``MassSpring(backend="cpu")``;
-* ``gpu``: :class:`voxwarp.deform.massspring_gpu.GpuSpringSolver` (float32 fragment shaders)
-  through ``MassSpring(backend="gpu")`` on a standalone EGL context (on a machine
+* ``numpy``: :class:`voxwarp.deform.elements.massspring.CpuSpringSolver` (float64,
+  vectorised numpy), through ``MassSpring(backend="cpu")``;
+* ``gpu``: :class:`voxwarp.deform.elements.massspring_gpu.GpuSpringSolver` (float32
+  fragment shaders) through ``MassSpring(backend="gpu")`` on a standalone EGL context (on a machine
   without a GPU: Mesa llvmpipe);
 * ``taichi``: :class:`voxwarp.bench.taichi.TaichiSpringSolver` (float32, taichi's CPU
   backend on all cores), when ``taichi`` is installed (extra ``[bench]``);
@@ -14,7 +14,8 @@ stepped by up to four solvers in one process:
   can do (6 springs, one material for the grid, no pinning; issue 19's floor for the
   GPU step), with taichi.
 
-Model (the defaults of :class:`voxwarp.deform.massspring.MassSpring`): structural springs, an
+Model (the defaults of :class:`voxwarp.deform.elements.massspring.MassSpring`): structural springs,
+an
 ``ElementGrid`` over a 100 mm box with its 8 corners fixed, default materials, the
 explicit integrator at its stable time step, the displacement clamp at half the
 spacing; the centre element is dragged 10 mm along +z so the whole grid is in motion.
@@ -224,7 +225,7 @@ class _Runner:
 
 
 def _grid(n: int) -> Any:
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.grid import ElementGrid
 
     return ElementGrid(BOX, shape=n)
 
@@ -235,7 +236,7 @@ def _centre(n: int) -> tuple[int, int, int]:
 
 def _dragged_mass_spring(n: int, backend: str = "cpu", ctx: Any = None) -> Any:
     """The benchmark's ``MassSpring`` of an n³ grid, centre element dragged."""
-    from voxwarp.deform.massspring import MassSpring
+    from voxwarp.deform.elements.massspring import MassSpring
 
     ms = MassSpring(_grid(n), backend=backend, ctx=ctx)
     ms.move(_centre(n), DRAG_MM)

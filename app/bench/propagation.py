@@ -1,6 +1,6 @@
 """Nearest-seed propagation (the wire field's distance transform): OpenCL vs scipy.
 
-:func:`benchmark_nearest_seed` times :func:`voxwarp.deform.propagation.nearest_seed` with
+:func:`benchmark_nearest_seed` times :func:`voxwarp.deform.wires.propagation.nearest_seed` with
 both backends on a synthetic helix of seeds (:func:`helix_seeds`); ``voxwarp bench
 wires`` reports it.
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.propagation import (
+from voxwarp.deform.wires.propagation import (
     MAX_LINE,
     check_sampling,
     nearest_seed,

@@ -26,7 +26,8 @@ import numpy as np
 
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
-from voxwarp.render.raycaster import LIGHT, OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.raycaster import LIGHT
 from voxwarp.scene import Scene
 
 #: the reference row of shaded scenes without the gradient texture
@@ -119,7 +120,7 @@ def gpu_context(ctx: Any, use_gpu: bool) -> tuple[Any, bool, str]:
     if ctx is not None:
         return ctx, False, ""
     from voxwarp.errors import RenderError
-    from voxwarp.render.raycaster import create_context
+    from voxwarp.render.context import create_context
 
     try:
         return create_context(), True, ""
@@ -484,7 +485,8 @@ def bench_warp_render(
 ) -> WarpRenderReport:
     """Cost of rendering through the mass-spring offset-field warp (dvr).
 
-    A ``grid``³ :class:`~voxwarp.deform.massspring.MassSpring` (CPU; semi-implicit Euler, shear
+    A ``grid``³ :class:`~voxwarp.deform.elements.massspring.MassSpring` (CPU; semi-implicit Euler,
+    shear
     springs, as ``voxwarp render --massspring``) over the benchmark volume has its
     centre element dragged ``drag_spacings`` element spacings along x and
     settled. Rows, in one process and on one context: the undeformed volume; the
@@ -495,7 +497,7 @@ def bench_warp_render(
     (e.g. ``("undeformed", "offset warp, baked")`` for a quick run).
     """
     from voxwarp.deform import ElementGrid, MassSpring
-    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     vol = benchmark_volume(volume)
     if transfer_function is None:

@@ -18,7 +18,7 @@ For synthetic uint8 volumes of N³ voxels (default 128³, 256³, 512³; ``--long
   distances), cell skipping on with ``cell_skip_maps`` "always" (cell visibility and the
   octant distance maps); each phase is that first draw minus the faster of two repeated
   draws of the same setting. Block min/max alone is timed through
-  :func:`voxwarp.render.skipping.block_min_max`, which the upload calls;
+  :func:`voxwarp.render.skipping.maps.block_min_max`, which the upload calls;
 * **steady frame**: median of the frames after the second;
 * **memory beyond the array** during the first frame: the process' peak resident set
   (``VmHWM`` of ``/proc/self/status``, reset through ``/proc/self/clear_refs`` just before,
@@ -268,18 +268,18 @@ class _Bench:
     ``small`` (16x16 on the same context) the phases, where the drawing costs little."""
 
     def __init__(self, r: Any, frames: int) -> None:
-        from voxwarp.render.raycaster import OffscreenRenderer
+        from voxwarp.render.offscreen import OffscreenRenderer
         from voxwarp.scene import Scene
 
         self.r = r
-        with r._current():
+        with r.current():
             self.small = OffscreenRenderer(*PHASE_IMAGE, ctx=r.ctx)
         self.frames = frames
         self.tf = scale_transfer_function()
         self._scene_type = Scene
 
     def release(self) -> None:
-        with self.r._current():
+        with self.r.current():
             self.small.release()
 
     def scene(self, volume: Any) -> Any:
@@ -293,7 +293,7 @@ class _Bench:
         """One frame (of ``small`` or the timed renderer): draw, finish and read back, ms."""
         t = time.perf_counter()
         if small:
-            with self.r._current():
+            with self.r.current():
                 self.small.render(scene)
         else:
             self.r.render(scene)
@@ -358,7 +358,7 @@ def measure(bench: _Bench, data: np.ndarray, label: str, memory: bool = True) ->
 
 
 def _phases(bench: _Bench, data: np.ndarray, label: str) -> dict[str, float]:
-    from voxwarp.render.skipping import block_min_max
+    from voxwarp.render.skipping.maps import block_min_max
 
     scene = bench.scene(_new_volume(data, label))
     out: dict[str, float] = {}
@@ -390,7 +390,7 @@ def bench_scale(
     """Measure every size (ascending) and, with ``long``, the long CT-like volume, at
     ``size`` pixels on ``ctx`` (default: a new headless context)."""
     from voxwarp.bench.render import body_phantom, load_average
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     load0 = load_average()
     with OffscreenRenderer(*size, ctx=ctx) as r:

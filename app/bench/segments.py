@@ -28,8 +28,8 @@ from voxwarp.bench.interactive import edit_family
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
-from voxwarp.render.ray_segments import RaySegments, segment_lengths
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.skipping.segments import RaySegments, segment_lengths
 from voxwarp.scene import Scene
 
 CASES = ("massspring", "wires", "lattice", "field")
@@ -110,7 +110,7 @@ def _case_row(
     rr = r.renderer
 
     def draw(sc: Scene) -> None:
-        with r._current():
+        with r.current():
             rr.draw(sc, r.framebuffer)
             r.ctx.finish()
 

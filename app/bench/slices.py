@@ -38,13 +38,13 @@ from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.core.checks import positive_int
 from voxwarp.core.slice_plane import SlicePlane, plane_names
 from voxwarp.core.volume import Volume
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring
 from voxwarp.deform.warp import Warp
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import load_sample, suggested_transfer_function
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 VOLUMES: tuple[str, ...] = ("colin27", "stent")
@@ -190,7 +190,7 @@ def _scenes(name: str, deformations: Sequence[str]) -> tuple[Volume, dict[str, S
 
 
 def _frame(r: OffscreenRenderer, scene: Scene) -> None:
-    with r._current():
+    with r.current():
         r.renderer.draw_scaled(scene, r.framebuffer, None, None, 1.0)
         r.ctx.finish()
 
@@ -224,7 +224,7 @@ def _slice_rows(
 def _values(r: OffscreenRenderer, scene: Scene, planes: Sequence[str]) -> None:
     """The three planes' data alone (GPU draw and read-back, no colouring)."""
     size = r.size
-    with r._current():
+    with r.current():
         for p in planes:
             m = SlicePlane.named(p, scene.deformed_bounds()).pixel_to_world(size)
             r.renderer.slice_values(scene, m, size)

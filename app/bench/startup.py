@@ -23,7 +23,7 @@ from dataclasses import dataclass
 HEAVY = ("numba", "scipy", "pyopencl", "PySide6", "dask", "distributed", "matplotlib")
 #: modules ``voxwarp render sample:stent -o x.png`` has no use for (it writes the PNG
 #: through OpenImageIO, which it does load; its skip maps stay on numpy below
-#: ``voxwarp.render.skipping.COMPILED_MIN_SIZE`` voxels)
+#: ``voxwarp.render.skipping.maps.COMPILED_MIN_SIZE`` voxels)
 RENDER_UNUSED = (
     "numba",
     "scipy",

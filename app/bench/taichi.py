@@ -1,8 +1,9 @@
 """The mass-spring model in taichi on the CPU: the reference of ``voxwarp bench massspring``.
 
-:class:`TaichiSpringSolver` integrates exactly the physics of :mod:`voxwarp.deform.spring_model`
-(the same as :class:`voxwarp.deform.massspring.CpuSpringSolver` and
-:class:`voxwarp.deform.massspring_gpu.GpuSpringSolver`, to float32 round-off) with taichi's
+:class:`TaichiSpringSolver` integrates exactly the physics of
+:mod:`voxwarp.deform.elements.spring_model`
+(the same as :class:`voxwarp.deform.elements.massspring.CpuSpringSolver` and
+:class:`voxwarp.deform.elements.massspring_gpu.GpuSpringSolver`, to float32 round-off) with taichi's
 LLVM CPU backend (``ti.init(arch=ti.cpu)``, once per process, all cores). It is written
 the way one would write it for speed in taichi, so that the benchmark compares against
 a fair implementation:
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
+from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 
 _ti: Any = None
 
@@ -125,9 +126,10 @@ def _solver_class() -> type:
 
     @ti.data_oriented
     class TaichiSpringSolver:
-        """Solver of :mod:`voxwarp.deform.spring_model` in taichi (see the module doc).
+        """Solver of :mod:`voxwarp.deform.elements.spring_model` in taichi (see the module doc).
 
-        Same interface as :class:`voxwarp.deform.massspring.CpuSpringSolver`: ``set_state``,
+        Same interface as :class:`voxwarp.deform.elements.massspring.CpuSpringSolver`:
+        ``set_state``,
         ``set_constraints``, ``step``, ``positions``, ``velocities``, ``max_speed``.
         The grid, materials and springs are read from ``model`` once; ``dt``,
         ``integrator``, ``max_step``, ``spring_constant`` and ``spring_damping`` at

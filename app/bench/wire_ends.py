@@ -62,7 +62,7 @@ class EndsRow:
 
 def head_wire(vol: Volume, ends: str) -> Any:
     """The colin27 case: up the middle of the head, ending 14 mm below its top."""
-    from voxwarp.deform.wires import Wire
+    from voxwarp.deform.wires.field import Wire
 
     lo, hi = content_box(vol)
     c = 0.5 * (lo + hi)
@@ -75,7 +75,7 @@ def head_wire(vol: Volume, ends: str) -> Any:
 
 def graft_wire(vol: Volume, ends: str) -> Any:
     """The stent case: along the graft's upper part, moved sideways."""
-    from voxwarp.deform.wires import Wire
+    from voxwarp.deform.wires.field import Wire
 
     zs = np.array([150.0, 190.0, 230.0, 262.0])
     s = (zs - zs[0]) / (zs[-1] - zs[0])
@@ -86,7 +86,7 @@ def graft_wire(vol: Volume, ends: str) -> Any:
 
 def body_wire(vol: Volume, ends: str) -> Any:
     """The stentbody case: along the body's principal axis, bent sideways."""
-    from voxwarp.deform.wires import Wire
+    from voxwarp.deform.wires.field import Wire
 
     lo, hi = vol.value_range
     w = axis_wire(vol, lo + 0.25 * (hi - lo), bend=0.2)
@@ -110,9 +110,9 @@ def measure_case(
     case: str, size: tuple[int, int] = (384, 384), frames: int = 3, repeats: int = 2
 ) -> list[EndsRow]:
     """Both ends modes of one case (see the module docstring)."""
-    from voxwarp.deform.wires import WireDeformer
+    from voxwarp.deform.wires.field import WireDeformer
     from voxwarp.io.samples import load_sample, suggested_transfer_function
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     sample, make = _CASES[case]

@@ -10,7 +10,7 @@ For the fish (padded to 256³, ``sample_volumes/fish_spine_wires.json``) and the
    swept voxels (the float layout's t is exact up to float32): median and maximum mm;
    with images on, each layout's steady dvr frame (framed camera, 512x256) over the
    undeformed one, alternated frame by frame as in the wire bench's render section.
-2. *Propagation domain*: :class:`~voxwarp.deform.wires.WireDeformer` with
+2. *Propagation domain*: :class:`~voxwarp.deform.wires.field.WireDeformer` with
    ``propagate="region"`` (the whole box of the wires' reach; today's default build,
    the OpenCL pass where a double-precision device exists, and the same on the numpy
    path) against ``propagate="flagged"`` (the voxels the plane masks touch, the paper's
@@ -137,7 +137,7 @@ def storage_rows(
 ) -> list[StorageRow]:
     """Section 1 of the module docstring on one phantom (with ``ctx``: and each
     layout's steady dvr cost, ``frames`` frames alternated with the undeformed ones)."""
-    from voxwarp.deform.wires import WireDeformer
+    from voxwarp.deform.wires.field import WireDeformer
 
     warps = {}
     for layout in STORAGE_LAYOUTS:
@@ -188,7 +188,7 @@ def _render_costs(
     :func:`voxwarp.bench.wires._render_layout`: field upload and skip maps first, then
     frames alternated with the undeformed volume)."""
     from voxwarp.bench.wires import _prime, _render_layout, make_camera
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     tf = _sample_tf(volume)
@@ -221,7 +221,7 @@ def propagate_row(
     log: Callable[[str], None] = print,
 ) -> PropagateRow:
     """Section 2 of the module docstring on one phantom."""
-    from voxwarp.deform.wires import WireDeformer
+    from voxwarp.deform.wires.field import WireDeformer
 
     wds = {m: WireDeformer(volume, wires, field_scale=scale, **kw) for m, kw in MODES}
     for wd in wds.values():
@@ -272,7 +272,7 @@ def _image_difference(
     """Largest channel difference (0..255) and % of pixels over 1/255 between the dvr
     images of the region and flagged fields (framed camera, the sample's TF)."""
     from voxwarp.bench.wires import make_camera
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     tf = _sample_tf(volume)
@@ -359,7 +359,7 @@ def bench_storage(
     layout's dvr (``frames`` frames) and compare the propagation modes' images (on
     ``ctx``, by default a standalone EGL context)."""
     if images and ctx is None:
-        from voxwarp.render.raycaster import create_context
+        from voxwarp.render.context import create_context
 
         ctx = create_context()
     elif not images:

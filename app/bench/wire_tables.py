@@ -110,7 +110,7 @@ class TablesRow:
 def identity_wires(wires: Sequence[Any]) -> list[Any]:
     """Copies of ``wires`` whose modified curve is the base curve, without twist or
     scale: the paper's identity deformation of Tables 2-3."""
-    from voxwarp.deform.wires import Wire
+    from voxwarp.deform.wires.field import Wire
 
     out = []
     for w in wires:
@@ -126,7 +126,7 @@ def axis_wire(volume: Volume, threshold: float, bend: float = 0.15) -> Any:
     object), through the centroid of each quarter; radius = the 99th percentile of
     their distances from the axis; the modified wire bends the second half sideways by
     ``bend`` times the length. β is ``(threshold, max)``."""
-    from voxwarp.deform.wires import Wire
+    from voxwarp.deform.wires.field import Wire
 
     idx = np.argwhere(volume.data > threshold)
     if len(idx) < 8:
@@ -196,8 +196,8 @@ def measure(
     log: Callable[[str], None] = print,
 ) -> TablesRow:
     """Tables 1-3 for one dataset (see the module docstring)."""
-    from voxwarp.deform.wires import WireDeformer
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.deform.wires.field import WireDeformer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     vol, wires, tf = dataset(name)

@@ -1,17 +1,18 @@
 """``voxwarp bench wires``: the wire deformation's costs, against references of the same run.
 
-Measures, in one process, the wire deformation of :mod:`voxwarp.deform.wires` (Journal of WSCG
+Measures, in one process, the wire deformation of :mod:`voxwarp.deform.wires.field` (Journal of WSCG
 2006, non-linear, non-reconstructive volume deformation by sweeping) on a 256³ volume:
 the sample ``fish`` generated at (256, 128, 107) (about 0.375 mm isotropic) and padded
 with air (-1000 HU) to 256³ symmetrically in y and z, its origin shifted so that its
 voxels keep their mm coordinates and ``sample_volumes/fish_spine_wires.json`` (a bent,
 twisted spine) applies. Sections of the report:
 
-1. *Field generation* (the paper's Figure 12): :meth:`voxwarp.deform.wires.WireDeformer.build`
+1. *Field generation* (the paper's Figure 12): :meth:`voxwarp.deform.wires.field.WireDeformer.build`
    at field scales 1, 2, 4, 8, 16 (1:1 ... 1:4096 voxels), float layout, plus the packed
    layout at the render's scale; median over ``repeats`` builds after an untimed one
    (OpenCL kernels and buffers), each stage's median, and the field's voxel counts.
-2. *Propagation*: :func:`voxwarp.deform.propagation.nearest_seed` (OpenCL; :data:`OPENCL_WARMUP`
+2. *Propagation*: :func:`voxwarp.deform.wires.propagation.nearest_seed` (OpenCL;
+:data:`OPENCL_WARMUP`
    untimed calls first) against
    ``scipy.ndimage.distance_transform_edt(~seeds, sampling, return_indices=True)`` on the
    seeds and grid of the 1:1 build (``WireDeformer.propagation_input``), and
@@ -32,7 +33,7 @@ twisted spine) applies. Sections of the report:
    and y (each camera, pixel centres), sampled as the raycaster does (lattice anchored
    at the entry into the deformed scene's ray box, one sample per sample distance, no
    jitter: offset 1/2) over the whole ray box (no empty-space skipping, no early ray
-   termination), each sample classified by :meth:`voxwarp.deform.wires.WireFieldWarp._lookup`:
+   termination), each sample classified by :meth:`voxwarp.deform.wires.field.WireFieldWarp._lookup`:
    identity (ignored), vacated or swept.
 5. *Phantoms* (the paper's Tables 2-3): preprocessing (field build), render (first and
    steady frame) and total for the fish and, where present, the ``tubes`` twist
@@ -609,7 +610,7 @@ def padded_fish(shape: Sequence[int] = FISH_SHAPE, edge: int = PADDED_EDGE) -> V
 
 def load_wires(path: Path) -> tuple[list[Any], dict[str, Any]]:
     """The wires of a wire file and its whole JSON object."""
-    from voxwarp.deform.wires import Wire
+    from voxwarp.deform.wires.field import Wire
     from voxwarp.inputs import read_wire_file
 
     spec = read_wire_file(path)
@@ -618,7 +619,7 @@ def load_wires(path: Path) -> tuple[list[Any], dict[str, Any]]:
 
 def check_scales(scales: Sequence[int]) -> tuple[int, ...]:
     """Validate field scales (ValueError naming the allowed ones)."""
-    from voxwarp.deform.wires import FIELD_SCALES
+    from voxwarp.deform.wires.field import FIELD_SCALES
 
     out = tuple(int(s) for s in scales)
     bad = [s for s in out if s not in FIELD_SCALES]
@@ -635,7 +636,7 @@ def time_builds(
     volume: Volume, wires: Sequence[Any], scale: int, layout: str, repeats: int
 ) -> tuple[BuildRow, Any]:
     """Build the field ``1 + repeats`` times (the first untimed); the row and deformer."""
-    from voxwarp.deform.wires import WireDeformer
+    from voxwarp.deform.wires.field import WireDeformer
 
     wd = WireDeformer(volume, wires, field_scale=scale, layout=layout)
     wd.build()  # untimed: OpenCL kernels / buffers of this grid size
@@ -672,10 +673,10 @@ def time_builds(
 def bench_propagation(
     seeds: np.ndarray, sampling: Sequence[float], repeats: int, grid: str
 ) -> PropagationRow:
-    """OpenCL :func:`~voxwarp.deform.propagation.nearest_seed` vs scipy's EDT on ``seeds``."""
+    """OpenCL :func:`~voxwarp.deform.wires.propagation.nearest_seed` vs scipy's EDT on ``seeds``."""
     from scipy import ndimage
 
-    from voxwarp.deform.propagation import nearest_seed, opencl_available, seed_distance
+    from voxwarp.deform.wires.propagation import nearest_seed, opencl_available, seed_distance
 
     h = tuple(float(v) for v in sampling)
     call = "distance_transform_edt(~seeds, sampling, return_indices=True)"
@@ -715,7 +716,7 @@ def bench_propagation(
 def bench_full_grid(edge: int, sampling: Sequence[float], repeats: int) -> PropagationRow:
     """:func:`voxwarp.bench.propagation.benchmark_nearest_seed` on an ``edge``³ grid (helix)."""
     from voxwarp.bench.propagation import benchmark_nearest_seed, helix_seeds
-    from voxwarp.deform.propagation import MAX_LINE, nearest_seed, opencl_available
+    from voxwarp.deform.wires.propagation import MAX_LINE, nearest_seed, opencl_available
 
     if opencl_available() and edge <= MAX_LINE:
         # benchmark_nearest_seed makes one untimed call; on PoCL the second call on a
@@ -924,7 +925,7 @@ def _render_reference(
     log: Callable[[str], None],
 ) -> RenderRow:
     """The undeformed volume through the warped path (:data:`REFERENCE_LAYOUT`)."""
-    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     lo, hi = base.volume.bounds
     scene = base.copy(warps=[OffsetFieldWarp(lo, hi, np.zeros((2, 2, 2, 3)), inverse="approx")])
@@ -1069,7 +1070,7 @@ def bench_wires(
     log
         Progress messages go here.
     """
-    from voxwarp.deform.propagation import opencl_device_name
+    from voxwarp.deform.wires.propagation import opencl_device_name
 
     scales = check_scales(scales)
     repeats = max(1, int(repeats))
@@ -1173,7 +1174,7 @@ def bench_wires(
     own_ctx = False
     if render:
         from voxwarp.errors import RenderError
-        from voxwarp.render.raycaster import create_context
+        from voxwarp.render.context import create_context
 
         try:
             if ctx is None:
@@ -1240,7 +1241,7 @@ def _bench_renders(
     log: Callable[[str], None],
     reference: bool = True,
 ) -> None:
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     for size in sizes:
@@ -1348,7 +1349,7 @@ def _phantom_row(
     if ctx is None:
         row.note = "render not run"
         return row
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     cam = make_camera(camera, vol, wires, size)
     base = Scene(vol, mode="dvr", transfer_function=tf, camera=cam)
@@ -1426,12 +1427,12 @@ def bench_head_builds(
     """Time the head case's field build per scale on both paths, interleaved.
 
     ``"opencl pass"`` propagates and flags in one OpenCL pass
-    (:mod:`voxwarp.deform.wire_classify`; the numpy path where the device cannot);
+    (:mod:`voxwarp.deform.wires.classify`; the numpy path where the device cannot);
     ``"numpy classification"`` is the same build with the flags computed in numpy after
     the OpenCL propagation (the path of a device without double precision). One untimed
     build each, then ``repeats`` builds alternating the two paths; medians per stage.
     """
-    from voxwarp.deform.wires import Wire, WireDeformer
+    from voxwarp.deform.wires.field import Wire, WireDeformer
 
     volume = head_volume() if volume is None else volume
     rows = []
@@ -1668,7 +1669,7 @@ def bench_curve_speed(
     repeats: int = 3,
     seed: int = 24,
 ) -> dict[str, float]:
-    """Seconds (best of ``repeats``) of the vectorised :class:`~voxwarp.deform.curves.Curve`
+    """Seconds (best of ``repeats``) of the vectorised :class:`~voxwarp.deform.wires.curves.Curve`
     methods a wire uses, on a random Catmull-Rom curve of ``control_points`` points
     (normal, sd 30 mm).
 
@@ -1677,7 +1678,7 @@ def bench_curve_speed(
     default precision (the curve's k-d tree built before timing). Run it with
     ``python -c "from voxwarp.bench.wires import bench_curve_speed; print(bench_curve_speed())"``.
     """
-    from voxwarp.deform.curves import Curve
+    from voxwarp.deform.wires.curves import Curve
 
     rng = np.random.default_rng(seed)
     curve = Curve(rng.normal(scale=30.0, size=(int(control_points), 3)), kind="catmull-rom")

@@ -213,7 +213,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     from voxwarp.cli.main import load_scene_json
     from voxwarp.core.progress import ProgressBar
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.render.slices import MAX_SLICE_SIDE
 
     out = Path(args.output)
@@ -233,7 +233,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     bar = ProgressBar(shape[2], args.progress, unit="slice")
     try:
-        with OffscreenRenderer(16, 16) as r, r._current():
+        with OffscreenRenderer(16, 16) as r, r.current():
             slices = resampled_slices(
                 r.renderer,
                 scene,

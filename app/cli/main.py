@@ -80,8 +80,8 @@ class _Drag(tuple):
 
 
 def _grid_shape(text: str) -> tuple[int, int, int]:
-    from voxwarp.deform.elements import MAX_ELEMENTS_PER_AXIS as hi
-    from voxwarp.deform.elements import MIN_ELEMENTS_PER_AXIS as lo
+    from voxwarp.deform.elements.grid import MAX_ELEMENTS_PER_AXIS as hi
+    from voxwarp.deform.elements.grid import MIN_ELEMENTS_PER_AXIS as lo
 
     form = f"N or NX,NY,NZ elements per axis ({lo}..{hi}), e.g. 16 or 16,8,8"
     try:
@@ -385,7 +385,7 @@ def _check_wire_options(args: argparse.Namespace) -> None:
 def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
     """The wire warp of --wires on ``volume``, built, and a one-line summary."""
     from voxwarp.deform.warp import WarpError
-    from voxwarp.deform.wires import WireFieldWarp
+    from voxwarp.deform.wires.field import WireFieldWarp
 
     entry = load_wire_file(args.wires)
     if args.field_scale is not None:
@@ -421,7 +421,7 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
         return None
     import numpy as np
 
-    from voxwarp.deform.elements import ElementGrid, ElementGridError
+    from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
 
     grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
     if args.drag_at:  # to the nearest elements, then checked as --drag elements are
@@ -496,9 +496,9 @@ def _cut_crosses(grid: Any, cut: _Cut) -> bool:
 def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
     """Build, drag and run the mass-spring model of ``render --massspring`` on ``grid``.
 
-    Returns the :class:`~voxwarp.deform.massspring.MassSpring` and a one-line summary.
+    Returns the :class:`~voxwarp.deform.elements.massspring.MassSpring` and a one-line summary.
     """
-    from voxwarp.deform.massspring import MassSpring, MassSpringError
+    from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
     from voxwarp.deform.warp import WarpError
 
     backend = args.backend or "cpu"
@@ -551,15 +551,17 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
     """Build, cut, drag and relax the ChainMail model of ``render --chainmail``.
 
     Cuts come first (through the rest state), then all ``--drag`` elements move at once
-    (one :meth:`~voxwarp.deform.chainmail.ChainMail.move`), then ``--relax`` steps (also saved
-    as the model's ``relax_steps``). Returns the :class:`~voxwarp.deform.chainmail.ChainMail`
+    (one :meth:`~voxwarp.deform.elements.chainmail.ChainMail.move`), then ``--relax`` steps (also
+    saved
+    as the model's ``relax_steps``). Returns the
+    :class:`~voxwarp.deform.elements.chainmail.ChainMail`
     and a one-line summary.
     """
     import time
 
     import numpy as np
 
-    from voxwarp.deform.chainmail import ChainMail, ChainMailError
+    from voxwarp.deform.elements.chainmail import ChainMail, ChainMailError
 
     backend = args.backend or "cpu"
     relax = args.relax or 0
@@ -817,7 +819,7 @@ def deformed_scene(
 def cmd_render(args: argparse.Namespace) -> int:
     """``voxwarp render INPUT -o out.png``: render one image headless."""
     from voxwarp.io.images import check_image_format, write_image
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     _check_deform_options(args)
     ropt.check_render_options(args)
@@ -834,7 +836,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         r.renderer.cell_skipping = False
         r.renderer.gradient_texture = False
         # the GPU backends run on the renderer's context (made current here)
-        with r._current(), deformed_scene(args, scene, pending, r.ctx) as scene:
+        with r.current(), deformed_scene(args, scene, pending, r.ctx) as scene:
             img = r.render(scene)
             if args.save_scene:  # inside: a GPU-owned field is read back to save it
                 scene.save(args.save_scene)
@@ -966,7 +968,7 @@ def _demo_volume(args: argparse.Namespace) -> int:
     """``voxwarp demo [INPUT]``: render INPUT in every mode into a folder."""
     from voxwarp.io.images import write_image
     from voxwarp.io.samples import DEFAULT_SAMPLE, suggested_transfer_function
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     spec = args.input or f"sample:{DEFAULT_SAMPLE}"
@@ -1020,7 +1022,7 @@ def _demo_wire(vol: Any, view: Any) -> Any:
     """A wire bend of ``vol`` laid where it is safe (:mod:`voxwarp.teaching.auto_wire`:
     along the largest object's principal axis, ends outside it, bent across ``view``),
     built; None, with one line on stderr saying why, when no object stands out."""
-    from voxwarp.deform.wires import WireDeformer
+    from voxwarp.deform.wires.field import WireDeformer
     from voxwarp.teaching.auto_wire import auto_wire
 
     auto = auto_wire(vol, view)
@@ -1170,7 +1172,7 @@ def cmd_bench_chainmail(args: argparse.Namespace) -> int:
 
 
 def _field_scale(text: str) -> int:
-    from voxwarp.deform.wires import FIELD_SCALES
+    from voxwarp.deform.wires.field import FIELD_SCALES
 
     try:
         v = int(text)

@@ -5,7 +5,7 @@ JSON; the deformation options are ``render``'s (``--massspring``/``--chainmail``
 ``--wires``, ``--lattice``, ``--displacement``), assembled by the same functions
 (:func:`voxwarp.cli.main.prepare_deformation`, :func:`voxwarp.cli.main.deformed_scene`).
 The plane is sampled through the warp chain on the GPU
-(:meth:`voxwarp.render.raycaster.OffscreenRenderer.render_slice`): the volume is never
+(:meth:`voxwarp.render.offscreen.OffscreenRenderer.render_slice`): the volume is never
 resampled. Named planes follow the radiological layout (axial: the patient's left on
 the image's right, anterior up); see :mod:`voxwarp.core.slice_plane`.
 """
@@ -263,7 +263,7 @@ def cmd_slice(args: argparse.Namespace) -> int:
     from voxwarp.cli import render_options as ropt
     from voxwarp.inputs import load_input
     from voxwarp.io.images import check_image_format, write_image
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     m._check_deform_options(args)
     ext = check_image_format(args.output)  # a bad -o fails before any work
@@ -271,7 +271,7 @@ def cmd_slice(args: argparse.Namespace) -> int:
         raise InputError("--window sets the grey of --look window; drop it with --look tf")
     obj = load_input(args.input, **ropt.load_options(args))
     scene, pending = m.prepare_deformation(args, _base_scene(obj, args))
-    with OffscreenRenderer(16, 16) as r, r._current():
+    with OffscreenRenderer(16, 16) as r, r.current():
         with m.deformed_scene(args, scene, pending, r.ctx) as scene:
             plane, size = slice_plane(scene, args)
             image = r.render_slice(

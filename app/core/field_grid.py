@@ -24,7 +24,7 @@ import numpy as np
 
 from voxwarp.core import limits
 from voxwarp.core.volume import Volume
-from voxwarp.deform.displacement_field import (
+from voxwarp.deform.fields.displacement import (
     MAX_DISPLACEMENT_MM,
     DisplacementFieldWarp,
     sample_chain_field,

@@ -11,8 +11,8 @@ The limits of the lower layers live with their code (those layers cannot import 
 one): the sample phantoms' ``MAX_SAMPLE_VOXELS`` and ``MAX_SAMPLE_AXIS`` in
 :mod:`voxwarp.sample_volumes.generators`, the wires' ``MAX_WIRE_POINTS``,
 ``MAX_FIELD_VOXELS``, ``MAX_MASK_PIXELS`` and ``MAX_REACH_DIAGONALS`` in
-:mod:`voxwarp.deform.wires`, and the element grid's ``MAX_ELEMENTS_PER_AXIS`` in
-:mod:`voxwarp.deform.elements`.
+:mod:`voxwarp.deform.wires.field`, and the element grid's ``MAX_ELEMENTS_PER_AXIS`` in
+:mod:`voxwarp.deform.elements.grid`.
 
 Loading a volume is bounded by a **memory budget**: by default
 :data:`DEFAULT_MEMORY_FRACTION` of the physical memory, else what
@@ -40,7 +40,7 @@ MAX_RELAX_STEPS = 1000
 #: Most time steps ``render --massspring`` runs (``--steps``, also the ``--settle`` cap).
 MAX_MASSSPRING_STEPS = 100_000
 #: Largest ``--drag`` offset (mm): the range of the half-float displacement texture
-#: (equal to :data:`voxwarp.deform.offset_field.MAX_DISPLACEMENT_MM`).
+#: (equal to :data:`voxwarp.deform.node_grid.MAX_DISPLACEMENT_MM`).
 MAX_DRAG_MM = 60000.0
 #: Range of a scene's ``zoom`` (1 frames the volume; > 1 magnifies).
 MIN_ZOOM = 1e-3

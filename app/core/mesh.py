@@ -12,11 +12,12 @@ side of that: a :class:`Mesh` (vertices, faces, vertex normals), loaded through 
 :class:`MeshInstance`, one mesh placed in the world by
 
 * nothing (identity), a 4x4 affine matrix (local -> world), or
-* a :class:`voxwarp.deform.trilinear.TrilinearGrid` acting on the box-normalised coordinate
+* a :class:`voxwarp.deform.lattice.trilinear.TrilinearGrid` acting on the box-normalised coordinate
   ``u = (x - lo) / (hi - lo)`` of the instance's ``box`` (by default the mesh's
   bounding box: the paper's bounding box of the deformed object), ``world = grid(u)``.
 
-:func:`instances_from_scene_graph` turns a :mod:`voxwarp.deform.scene_graph` hierarchy into one
+:func:`instances_from_scene_graph` turns a :mod:`voxwarp.deform.lattice.scene_graph` hierarchy into
+one
 instance per mesh leaf, with the composed transform of its path (one matrix when every
 transform on the path is linear, else one grid), so a vertex costs O(1) on the GPU
 whatever the depth of the graph. :mod:`voxwarp.render.mesh_pass` draws the instances.
@@ -39,7 +40,7 @@ import numpy as np
 
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.limits import MAX_MESH_TRIANGLES
-from voxwarp.deform.trilinear import TrilinearGrid, carry_normals, cofactor_matrix
+from voxwarp.deform.lattice.trilinear import TrilinearGrid, carry_normals, cofactor_matrix
 from voxwarp.deform.warp import box_corners
 from voxwarp.errors import MeshError
 
@@ -868,7 +869,8 @@ class MeshInstance:
         The :class:`Mesh`.
     transform
         ``None`` (identity), a 4x4 affine matrix (local -> world), or a
-        :class:`voxwarp.deform.trilinear.TrilinearGrid` mapping the box-normalised coordinate
+        :class:`voxwarp.deform.lattice.trilinear.TrilinearGrid` mapping the box-normalised
+        coordinate
         ``u = (x - lo) / (hi - lo)`` to world. Vertices outside the box continue the
         boundary cells' trilinear maps.
     box
@@ -878,7 +880,7 @@ class MeshInstance:
         RGBA (straight alpha) in [0, 1]; ``(r, g, b)`` means opaque.
     normal_method
         How a lattice carries vertex normals (GRAPP 2010, section 4.2; see
-        :func:`voxwarp.deform.trilinear.carry_normals`): ``"normal"``, the paper's direct
+        :func:`voxwarp.deform.lattice.trilinear.carry_normals`): ``"normal"``, the paper's direct
         transform ``J n`` (smooth across cell faces, not always orthogonal to the
         surface), or ``"tangent"``, two tangents through ``J`` crossed (orthogonal to the
         surface, seams at cell faces; the default, :data:`DEFAULT_NORMAL_METHOD`). A
@@ -1024,7 +1026,7 @@ class MeshInstance:
 
         ``points``/``normals``: local positions and normals (default: the mesh's). Lattices
         carry them by their Jacobian as :attr:`normal_method` says
-        (:func:`voxwarp.deform.trilinear.carry_normals`); a matrix by its inverse
+        (:func:`voxwarp.deform.lattice.trilinear.carry_normals`); a matrix by its inverse
         transpose (``"normal"``; the cofactor matrix where it is singular) or its
         cofactor matrix (``"tangent"``).
         """
@@ -1144,14 +1146,15 @@ def instances_from_scene_graph(
 ) -> list[MeshInstance]:
     """One :class:`MeshInstance` per scene-graph leaf whose geometry is a mesh.
 
-    Uses :func:`voxwarp.deform.scene_graph.compose_scene` (GRAPP 2010, section 4.1): each leaf
+    Uses :func:`voxwarp.deform.lattice.scene_graph.compose_scene` (GRAPP 2010, section 4.1): each
+    leaf
     gets the composition of the transforms on its path from the root, one 4x4 matrix
     when all are linear, else one :class:`TrilinearGrid` over the leaf's box. A leaf's
     geometry may be a :class:`Mesh` (coloured from :data:`PALETTE` in turn) or an
     untransformed :class:`MeshInstance` (its colour and normal method are kept).
     Leaves with other geometry (volumes, ...) are skipped.
     """
-    from voxwarp.deform.scene_graph import compose_scene
+    from voxwarp.deform.lattice.scene_graph import compose_scene
 
     out: list[MeshInstance] = []
     for composed in compose_scene(root, resolution=resolution):

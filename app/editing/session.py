@@ -6,17 +6,17 @@ About the interaction (Knoche 2008, 3.2; Singh and Fiume, wires, section 8)
 The session holds a :class:`~voxwarp.scene.Scene` and one deformation family, through
 its adapter (:mod:`voxwarp.editing.families`; the session never switches on the family):
 
-* ``"massspring"`` / ``"chainmail"``: an :class:`~voxwarp.deform.elements.ElementGrid` of
-  elements over the volume, run by :class:`~voxwarp.deform.massspring.MassSpring` or
-  :class:`~voxwarp.deform.chainmail.ChainMail` (CPU or GPU backend); the handles are the
+* ``"massspring"`` / ``"chainmail"``: an :class:`~voxwarp.deform.elements.grid.ElementGrid` of
+  elements over the volume, run by :class:`~voxwarp.deform.elements.massspring.MassSpring` or
+  :class:`~voxwarp.deform.elements.chainmail.ChainMail` (CPU or GPU backend); the handles are the
   elements.
-* ``"wires"``: :class:`~voxwarp.deform.wires.Wire` objects and their attribute field; the
+* ``"wires"``: :class:`~voxwarp.deform.wires.field.Wire` objects and their attribute field; the
   handles are the control points of the *modified* wires (the base wires stay where
   they were laid). Editing one needs a rebuild of the field (~0.2 s): the session
   hands out a :class:`WireBuild` job that runs off the GUI thread and installs its
   result only if nothing changed meanwhile.
-* ``"lattice"``: a :class:`~voxwarp.deform.trilinear.TrilinearGrid` over the volume's box
-  (:class:`~voxwarp.deform.lattice_warp.LatticeWarp`); the handles are its nodes.
+* ``"lattice"``: a :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` over the volume's box
+  (:class:`~voxwarp.deform.lattice.warp.LatticeWarp`); the handles are its nodes.
 
 Handles are picked in screen space (the nearest projected handle within a radius of
 pixels), added to or removed from a selection (one of them the *reference*), and
@@ -44,11 +44,11 @@ from typing import Any, Literal
 import numpy as np
 
 from voxwarp.core.camera import Camera
-from voxwarp.deform.chainmail import ChainMail
-from voxwarp.deform.displacement_field import DisplacementFieldWarp
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.lattice_warp import LatticeWarp
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.elements.chainmail import ChainMail
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError, rotation_matrix
 from voxwarp.editing.common import (
     BACKENDS as BACKENDS,
@@ -713,7 +713,7 @@ class EditSession:
         ends: str | None = None,
     ) -> None:
         """Change a wire's curve kind, influence radius (mm), β (value range or None) or
-        ends (``"smooth"``/``"rigid"``, see :class:`voxwarp.deform.wires.Wire`); the field
+        ends (``"smooth"``/``"rigid"``, see :class:`voxwarp.deform.wires.field.Wire`); the field
         is then stale (rebuild it with :meth:`wire_build`)."""
         self._wire(wire)
         self._wire_family().set_parameters(wire, kind, radius, beta, ends)

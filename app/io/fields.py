@@ -5,7 +5,7 @@ Conventions (ITK, ANTs, SimpleITK, Slicer)
 A displacement field is a **pull-back** map: a point ``p`` of the fixed image samples the
 moving image at ``p + u(p)``. ITK keeps points and vectors in **LPS** mm; voxwarp's world
 is RAS, so both the grid's affine and the vectors are converted on reading (x and y
-negated) and back on writing. :class:`~voxwarp.deform.displacement_field.DisplacementFieldWarp`
+negated) and back on writing. :class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp`
 then renders the moving volume through the field without resampling it.
 
 Formats (by suffix):
@@ -49,7 +49,7 @@ from voxwarp.core import extras
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_output
 from voxwarp.core.orientation import PATIENT_SPACES
-from voxwarp.deform.displacement_field import DisplacementFieldWarp, set_field_reader
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp, set_field_reader
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.errors import FieldError, VolumeError
 from voxwarp.io.loaded import native_stderr

@@ -62,7 +62,7 @@ def from_sitk(image: Any, name: str = "volume", **fields: Any) -> Volume:
 def displacement_transform(warps: Sequence[Warp], reference: Volume) -> Any:
     """An ITK ``DisplacementFieldTransform`` of a warp chain, sampled on ``reference``'s
     grid (the pull-back field ``chain(p) - p``)."""
-    from voxwarp.deform.displacement_field import DisplacementFieldWarp, sample_chain_field
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field
 
     sitk = sitk_module("voxwarp.io.itk.displacement_transform")
     u = sample_chain_field(lambda p: chain_apply(warps, p), reference.affine, reference.shape)

@@ -2,7 +2,7 @@
 
 :func:`deformation_warps` builds the warps of one of :data:`DEFORMATIONS` through
 voxwarp's public models; :func:`render_rgb` draws a scene headless
-(:class:`~voxwarp.render.raycaster.OffscreenRenderer`, its own EGL context) and
+(:class:`~voxwarp.render.offscreen.OffscreenRenderer`, its own EGL context) and
 returns ``(height, width, 3)`` uint8 for ``viewer.add_image(image, rgb=True)``.
 """
 
@@ -108,7 +108,7 @@ def deformed_scene(
 
 def render_rgb(scene: Any, size: int = DEFAULT_SIZE) -> np.ndarray:
     """``scene`` rendered headless to a ``(size, size, 3)`` uint8 image (row 0 = top)."""
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     with OffscreenRenderer(int(size), int(size)) as renderer:
         image = renderer.render(scene)

@@ -5,11 +5,11 @@ cannot render itself; instead, ``import voxwarp`` in a running IPython (or impor
 :mod:`voxwarp.notebook`, or ``%load_ext voxwarp.notebook``) registers :func:`scene_png`
 with IPython: a cell that ends with a scene then shows a small render of it
 (:data:`PREVIEW_PX`), drawn by one
-:class:`~voxwarp.render.raycaster.OffscreenRenderer` shared by all previews, made on
+:class:`~voxwarp.render.offscreen.OffscreenRenderer` shared by all previews, made on
 first use on a thread of its own (:mod:`voxwarp.notebook.gl_thread`). A scene that
 cannot be drawn (no OpenGL here, a bad warp) shows its text form instead, with one
 warning line saying why. Images returned by
-:meth:`~voxwarp.render.raycaster.OffscreenRenderer.render` show themselves
+:meth:`~voxwarp.render.offscreen.OffscreenRenderer.render` show themselves
 (:class:`~voxwarp.render.inline_image.RenderedImage`); :func:`side_by_side` puts a few of
 them in one picture.
 """
@@ -43,7 +43,7 @@ def _gl() -> GLThread | SameThread:
 def preview_renderer() -> Any:
     """The renderer shared by scene previews (made on first use, on the previews' thread;
     raises :class:`~voxwarp.errors.RenderError` without OpenGL)."""
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     if "renderer" not in _shared:
         _shared["renderer"] = _gl().run(OffscreenRenderer, PREVIEW_PX, PREVIEW_PX)

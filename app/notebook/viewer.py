@@ -5,7 +5,7 @@ wheel, key and resize events to :meth:`Viewer.handle_event`, which turns them in
 camera moves and edits of an :class:`~voxwarp.editing.session.EditSession` (the desktop
 GUI's Qt-free session; the controls are those of
 :mod:`voxwarp.notebook.interaction`) and asks for a frame; :meth:`Viewer.get_frame`
-renders the scene headless (:class:`~voxwarp.render.raycaster.OffscreenRenderer`) with
+renders the scene headless (:class:`~voxwarp.render.offscreen.OffscreenRenderer`) with
 the editing handles drawn on top by the desktop viewport's pass
 (:class:`~voxwarp.render.overlay.OverlayRenderer`, point sizes scaled to the frame's
 resolution) and returns it.
@@ -145,7 +145,7 @@ class Viewer(RemoteFrameBuffer):
         ctx: Any = None,
         **settings: Any,
     ) -> None:
-        from voxwarp.render.raycaster import OffscreenRenderer
+        from voxwarp.render.offscreen import OffscreenRenderer
 
         w, h = (max(1, int(v)) for v in size)
         super().__init__(css_width=f"{w}px", css_height=f"{h}px")

@@ -1,3 +1,4 @@
-"""The renderer: the raycaster and its GL context, empty-space skipping, the mesh pass, the editing
-overlay, field views.
+"""The renderer: the raycaster (``raycaster``), its headless context and offscreen wrapper
+(``context``, ``offscreen``), empty-space skipping (``skipping/``), the mesh pass, the
+editing overlay, slices, field views.
 """

@@ -5,8 +5,8 @@ About the views
 The raycaster never shows what a warp computes per sample; these views do, on an
 axis-aligned plane through the volume, as an RGB image:
 
-* wires (:class:`~voxwarp.deform.wires.WireFieldWarp`): the attribute field
-  (:meth:`~voxwarp.deform.wires.WireField.decode`), sampled at the nearest field voxel as the
+* wires (:class:`~voxwarp.deform.wires.field.WireFieldWarp`): the attribute field
+  (:meth:`~voxwarp.deform.wires.field.WireField.decode`), sampled at the nearest field voxel as the
   shader decides a sample's state (field voxel ``i`` covers
   ``[lo + i h, lo + (i + 1) h)``, ``lo`` / ``h`` the field's own box corner and
   spacing, ``field_scale`` times the volume's):
@@ -17,12 +17,12 @@ axis-aligned plane through the volume, as an RGB image:
   - ``"swept / vacated"``: the sweep flags (the paper's plane masks carried into the
     field): swept orange, vacated blue, identity dark.
 
-* offset fields (:class:`~voxwarp.deform.offset_field.OffsetFieldWarp`, mass-spring and
+* offset fields (:class:`~voxwarp.deform.elements.offset_field.OffsetFieldWarp`, mass-spring and
   ChainMail): ``"offset |d|"``, the length of the node displacement field ``u(X)``
   interpolated trilinearly onto the pixels (original space, 0 outside the grid box).
 
 * displacement fields read from files
-  (:class:`~voxwarp.deform.displacement_field.DisplacementFieldWarp`, any warp with a
+  (:class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp`, any warp with a
   ``displacement_at(points)``): ``"field |u|"``, the length of the field's vector
   ``u(p)`` at the pixels' world points (trilinear on the field's own grid, 0 beyond
   half a node outside it), in mm.
@@ -46,9 +46,9 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.offset_field import OffsetFieldWarp, texture_field
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp, texture_field
 from voxwarp.deform.warp import WarpError
-from voxwarp.deform.wires import FAR, LUT_SIZE
+from voxwarp.deform.wires.field import FAR, LUT_SIZE
 from voxwarp.errors import VoxwarpError
 
 #: views per warp kind (``warp.kind``); other warps get :data:`GENERIC_VIEWS`
@@ -73,7 +73,8 @@ NOWHERE_MM = 1.0e6
 #: is exact only to ~1e-14 mm)
 TINY_MM = 1.0e-6
 #: fixed-point steps of the ``"displacement"`` view of a baked offset field (the CPU bake
-#: of :meth:`~voxwarp.deform.offset_field.OffsetFieldWarp.baked_inverse` takes seconds on big
+#: of :meth:`~voxwarp.deform.elements.offset_field.OffsetFieldWarp.baked_inverse` takes seconds on
+#: big
 #: grids; 8 plain steps are within ~0.1 % of a node spacing of it for unfolded fields)
 OFFSET_STEPS = 8
 

@@ -1,6 +1,6 @@
 """Rendered images that show themselves in Jupyter: PNG bytes in memory, no new dependency.
 
-:class:`RenderedImage` is what :meth:`voxwarp.render.raycaster.OffscreenRenderer.render`
+:class:`RenderedImage` is what :meth:`voxwarp.render.offscreen.OffscreenRenderer.render`
 returns: a plain ``numpy.ndarray`` subclass (same dtype, shape and values as before; every
 array operation works as on any array) with one addition, ``_repr_png_``, so a notebook
 cell ending in ``r.render(scene)`` shows the picture instead of a wall of numbers.

@@ -13,7 +13,8 @@ Here (``shaders/mesh.vert.glsl``):
   (:meth:`voxwarp.core.mesh.MeshInstance.affine_matrix`): the paper's fast path for
   parallelepipeds (section 4.1, last paragraph), same positions and normals;
 * a lattice instance uploads its grid nodes as an RGBA32F 3D texture
-  (:meth:`voxwarp.deform.trilinear.TrilinearGrid.texture_data`); each vertex fetches the 8 nodes
+  (:meth:`voxwarp.deform.lattice.trilinear.TrilinearGrid.texture_data`); each vertex fetches the 8
+  nodes
   of its cell and evaluates the trilinear map and its analytic Jacobian (exact float
   arithmetic). ``position="hardware"`` evaluates the position with one hardware
   trilinear fetch at node-centred coordinates instead (the paper's texture lookup;
@@ -21,7 +22,7 @@ Here (``shaders/mesh.vert.glsl``):
 * normals follow section 4.2, per instance: ``"normal"``, the direct transform ``J n``
   (smooth across cell faces), or ``"tangent"`` (two tangents through ``J``, crossed:
   orthogonal to the surface, seams at cell faces); a matrix instance's ``"normal"`` is
-  its exact inverse transpose (:func:`voxwarp.deform.trilinear.carry_normals` and
+  its exact inverse transpose (:func:`voxwarp.deform.lattice.trilinear.carry_normals` and
   ``shaders/mesh.vert.glsl`` say more).
 
 With a scene's warp chain (``draw(..., warps=...)``) the meshes move with the volume:
@@ -52,8 +53,8 @@ from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance
 from voxwarp.core.mesh_warp import affine_forward, moves_meshes, warped_geometry
-from voxwarp.deform import gl_programs
-from voxwarp.deform.trilinear import TrilinearGrid, cofactor_matrix
+from voxwarp.deform.elements import gl_programs
+from voxwarp.deform.lattice.trilinear import TrilinearGrid, cofactor_matrix
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.errors import RenderError
 from voxwarp.render.gl_uniforms import set_uniform

@@ -37,7 +37,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
-from voxwarp.deform import gl_programs
+from voxwarp.deform.elements import gl_programs
 from voxwarp.errors import RenderError
 
 #: Layer kinds: ``"points"`` or ``"lines"`` (consecutive pairs of positions).
@@ -361,7 +361,7 @@ def grid_edges(positions: np.ndarray) -> np.ndarray:
     """Segment pairs joining neighbouring nodes of a node grid along its three axes.
 
     These are the links / springs of a grid of elements and the cell edges of a lattice
-    (e.g. :attr:`voxwarp.deform.trilinear.TrilinearGrid.nodes`).
+    (e.g. :attr:`voxwarp.deform.lattice.trilinear.TrilinearGrid.nodes`).
 
     Parameters
     ----------

@@ -1,4 +1,6 @@
-"""The raycasting renderer (moderngl) and the headless :class:`OffscreenRenderer`.
+"""The raycasting renderer (moderngl); headless use wraps it in
+:class:`~voxwarp.render.offscreen.OffscreenRenderer` on a context from
+:mod:`voxwarp.render.context`.
 
 :class:`Renderer` draws a :class:`~voxwarp.scene.Scene` into a framebuffer it is given,
 on a ``moderngl.Context`` it is given (the GUI passes Qt's, scripts pass an EGL
@@ -8,8 +10,8 @@ volume / transfer function / program variant and freed by :meth:`Renderer.releas
 
 Each draw first clears its viewport to the scene's background, then draws one NDC
 polygon per ray-direction octant present in the image (one polygon covering the
-viewport unless octant skip maps are in use; see :mod:`voxwarp.render.skipping`). Rays that miss
-the volume, or see nothing visible, discard and leave the background.
+viewport unless octant skip maps are in use; see :mod:`voxwarp.render.skipping.maps`).
+Rays that miss the volume, or see nothing visible, discard and leave the background.
 
 Mixed scenes (``Scene(..., meshes=[...])``): the mesh instances are drawn first by
 :class:`voxwarp.render.mesh_pass.MeshRenderer` into an internal colour + depth target of the
@@ -28,12 +30,9 @@ CPU rasteriser.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import functools
 import math
 import os
-import time
 import weakref
 from collections.abc import Callable
 from typing import Any
@@ -44,18 +43,15 @@ from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import mesh_instances_bounds
 from voxwarp.core.modes import xray_reference_length
-from voxwarp.core.slice_plane import SlicePlane, plane_for_space
 from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
-from voxwarp.render.inline_image import RenderedImage, rendered
 from voxwarp.render.mesh_pass import MeshRenderer
-from voxwarp.render.ray_segments import MAX_SAMPLES
-from voxwarp.render.skip_cache import SkipMapCache, VolumeSkipMaps
-from voxwarp.render.skipping import (
+from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
+from voxwarp.render.skipping.maps import (
     BLOCK,
     OCTANT_EPS,
     Octant,
@@ -63,7 +59,7 @@ from voxwarp.render.skipping import (
     octant_regions,
     ray_direction_coefficients,
 )
-from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.render.skipping.segments import MAX_SAMPLES
 from voxwarp.render.slices import SliceRenderer
 from voxwarp.render.volume_texture import upload_volume_texture
 from voxwarp.scene import Scene
@@ -192,7 +188,7 @@ class Renderer:
     empty_space_skipping
         Jump over space the compositing mode cannot see (default). Turning it off
         never changes the image, only the time; benchmarks use it as a reference.
-        Straight rays of dvr/iso/flm use per-octant cell maps (:mod:`voxwarp.render.skipping`):
+        Straight rays of dvr/iso/flm use per-octant cell maps (:mod:`voxwarp.render.skipping.maps`):
         one byte per trilinear cell per octant the camera needs, computed on the CPU
         when first needed after a change of what the mode can see (~1 s per octant
         for 256³ on 2 cores) and kept on the volume (at most 8).
@@ -384,7 +380,7 @@ class Renderer:
     @property
     def ray_segment(self) -> int | str:
         """Samples per piecewise-linear segment of warped rays
-        (:mod:`voxwarp.render.ray_segments`): ``"auto"`` lets each region use the
+        (:mod:`voxwarp.render.skipping.segments`): ``"auto"`` lets each region use the
         longest segment whose measured chord error stays within :attr:`ray_tolerance`;
         ``1`` (default) evaluates the warp chain at every sample; K > 1 forces K
         everywhere (for measurements). Only rays that skip through
@@ -409,7 +405,7 @@ class Renderer:
         """Deformed-space skip maps of warped rays: "auto" builds them when a warp state
         is drawn a second time, "always" on first use, "never" keeps per-block checks,
         "background" offers them as :meth:`skip_map_job` (see
-        :meth:`voxwarp.render.skip_cache.SkipMapCache.kind`)."""
+        :meth:`voxwarp.render.skipping.cache.SkipMapCache.kind`)."""
         return self._skip_maps.warped_skip_maps
 
     @warped_skip_maps.setter
@@ -419,7 +415,7 @@ class Renderer:
     @property
     def cell_skip_maps(self) -> str:
         """Straight-ray cell skip maps: "auto" builds those of a volume of more than
-        :data:`voxwarp.render.skip_cache.EAGER_CELLS` cells on its second draw (the
+        :data:`voxwarp.render.skipping.cache.EAGER_CELLS` cells on its second draw (the
         first skips per block, the same image), "always" on its first, "background"
         offers their CPU work as :meth:`skip_map_job` (blocks until it is installed)."""
         return self._skip_maps.cell_skip_maps
@@ -499,7 +495,7 @@ class Renderer:
             },
         )
         frag = shaders.with_defines(frag, defines)
-        from voxwarp.deform import gl_programs
+        from voxwarp.deform.elements import gl_programs
 
         try:  # compiled once per context, shared by its renderers (gl_programs)
             hold = gl_programs.program(
@@ -823,7 +819,7 @@ class Renderer:
         _, tex, fbo = self._lod_target
         self.draw(scene, fbo, (0, 0, *size), camera)
         if self._upscale is None:
-            from voxwarp.deform import gl_programs
+            from voxwarp.deform.elements import gl_programs
 
             hold = gl_programs.program(
                 self.ctx,
@@ -893,255 +889,3 @@ def _mode_uniforms(scene: Scene) -> dict[str, Any]:
         values["u_iso"] = iso
         values["u_iso_color"] = tuple(float(c) for c in iso_rgb)
     return values
-
-
-@functools.cache
-def _egl_library() -> Any:
-    """libEGL through ctypes with the few entry points used here typed, or None."""
-    import ctypes
-
-    try:
-        lib = ctypes.CDLL("libEGL.so.1")
-    except OSError:
-        return None
-    for name in ("eglGetCurrentContext", "eglGetCurrentDisplay", "eglGetCurrentSurface"):
-        getattr(lib, name).restype = ctypes.c_void_p
-    lib.eglGetCurrentSurface.argtypes = [ctypes.c_int]
-    lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
-    return lib
-
-
-def _egl_current() -> tuple | None:
-    """The current EGL (display, draw, read, context), or None (no EGL or none current)."""
-    lib = _egl_library()
-    if lib is None:
-        return None
-    context = lib.eglGetCurrentContext()
-    if not context:
-        return None
-    return (
-        lib.eglGetCurrentDisplay(),
-        lib.eglGetCurrentSurface(0x3059),  # EGL_DRAW
-        lib.eglGetCurrentSurface(0x305A),  # EGL_READ
-        context,
-    )
-
-
-def _egl_restore(saved: tuple | None) -> None:
-    if saved is not None:
-        _egl_library().eglMakeCurrent(*saved)
-
-
-def create_context() -> Any:
-    """A standalone headless OpenGL 4.3+ context through EGL (the caller owns it).
-
-    Whatever EGL context was current before stays current (a new context is left
-    current only when none was).
-    """
-    import moderngl
-
-    saved = _egl_current()
-    try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=430)
-    except Exception as exc:
-        raise RenderError(
-            "could not create a headless OpenGL 4.3 context through EGL"
-            f" ({exc}). Install Mesa's EGL and GL libraries (Debian: libegl1 libgl1"
-            " libegl-mesa0 libgl1-mesa-dri; run `sudo scripts/install-system-deps.sh`)."
-        ) from exc
-    finally:
-        _egl_restore(saved)
-    return ctx
-
-
-class OffscreenRenderer:
-    """Headless rendering into an offscreen framebuffer.
-
-    Parameters
-    ----------
-    width, height
-        Image size in pixels.
-    ctx
-        Optional existing context; by default an EGL standalone context is created and
-        owned (released with the renderer).
-    dtype
-        ``"u1"`` for (H, W, 4) uint8 images, ``"f4"`` for float32 (tests, HDR/EXR output).
-
-    Use as a context manager; :meth:`render` returns the image with row 0 at the top.
-    """
-
-    def __init__(
-        self, width: int = 512, height: int = 512, *, ctx: Any = None, dtype: str = "u1"
-    ) -> None:
-        if int(width) < 1 or int(height) < 1 or int(width) > 16384 or int(height) > 16384:
-            raise RenderError(f"image size must be 1..16384 pixels per side; got {width}x{height}")
-        if dtype not in ("u1", "f4"):
-            raise RenderError(f"dtype must be 'u1' or 'f4'; got {dtype!r}")
-        self._owns_ctx = ctx is None
-        self.ctx = create_context() if ctx is None else ctx
-        self.size = (int(width), int(height))
-        self.dtype = dtype
-        self._gl_dtype = "f1" if dtype == "u1" else "f4"
-        self._fbo: Any = None
-        self._color: Any = None
-        with self._current():
-            self.renderer = Renderer(self.ctx)
-            self._make_fbo()
-        self._released = False
-
-    @contextlib.contextmanager
-    def _current(self) -> Any:
-        """Make an owned context current for a block, then restore the previous one."""
-        if getattr(self, "_released", False):
-            raise RenderError(
-                "this OffscreenRenderer is closed (released, or its with block has ended):"
-                " use it inside the block, or make a new one"
-            )
-        if not self._owns_ctx:
-            yield
-            return
-        saved = _egl_current()
-        self.ctx.mglo.__enter__()  # eglMakeCurrent(this context)
-        try:
-            yield
-        finally:
-            if saved is not None:
-                _egl_restore(saved)
-
-    def current(self) -> contextlib.AbstractContextManager[Any]:
-        """A block with this renderer's context current and the previous one restored
-        after (a context passed in is the caller's to make current): for GPU work beside
-        :meth:`render`, such as an edit session's ``gl_scope``."""
-        return self._current()
-
-    def _unbind_fbo(self) -> None:
-        # never delete the bound framebuffer: moderngl would re-bind the dead name later
-        try:
-            self.ctx.detect_framebuffer(0).use()
-        except Exception:
-            pass
-
-    def _make_fbo(self) -> None:
-        if self._fbo is not None:
-            self._unbind_fbo()
-            self._fbo.release()
-            self._color.release()
-        # moderngl "f1" is normalised RGBA8 ("u1" would be an integer format)
-        self._color = self.ctx.renderbuffer(self.size, 4, dtype=self._gl_dtype)
-        self._fbo = self.ctx.framebuffer(color_attachments=[self._color])
-
-    def resize(self, width: int, height: int) -> None:
-        """Change the image size."""
-        self.size = (int(width), int(height))
-        with self._current():
-            self._make_fbo()
-
-    @property
-    def framebuffer(self) -> Any:
-        """The moderngl framebuffer images are drawn into."""
-        return self._fbo
-
-    def render(self, scene: Scene, camera: Camera | None = None) -> RenderedImage:
-        """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top (a
-        :class:`~voxwarp.render.inline_image.RenderedImage`: an array Jupyter shows)."""
-        with self._current():
-            self.renderer.draw(scene, self._fbo, camera=camera)
-            return self.read()
-
-    def read(self) -> RenderedImage:
-        """What :attr:`framebuffer` holds, as :meth:`render` returns it: after drawing
-        more into it (e.g. an :class:`~voxwarp.render.overlay.OverlayRenderer` pass)."""
-        with self._current():
-            raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
-        w, h = self.size
-        img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
-        return rendered(img.reshape(h, w, 4)[::-1].copy())
-
-    def render_slice(
-        self,
-        scene: Scene,
-        plane: SlicePlane | str,
-        *,
-        size: tuple[int, int] | None = None,
-        at: float | None = None,
-        slab_mm: float = 0.0,
-        slab_mode: str = "mip",
-        interpolation: str = "linear",
-        look: str = "window",
-        window: tuple[float, float] | None = None,
-        show: str = "deformed",
-    ) -> SliceImage:
-        """One slice of ``scene`` through its warp chain (multi-planar reformatting).
-
-        ``plane`` is a :class:`~voxwarp.core.slice_plane.SlicePlane` or a name
-        (``"axial"``, ``"coronal"``, ``"sagittal"``, ``"x"``, ``"y"``, ``"z"``) framed
-        on the scene's deformed box at ``at`` mm along its axis. ``size`` defaults to
-        this renderer's. Returns a :class:`~voxwarp.render.slice_image.SliceImage`: its
-        ``rgba`` (coloured by ``look`` ``"window"`` with ``window = (level, width)``,
-        default the scene's, or ``"tf"``; ``show`` one of ``"deformed"``, ``"rest"``,
-        ``"checkerboard"``, ``"difference"``), the deformed and rest ``values`` and
-        ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to world mm.
-        """
-        w, h = self.size if size is None else (int(size[0]), int(size[1]))
-        if isinstance(plane, str):  # axial etc. of a volume without orientation: z etc.
-            name = plane_for_space(plane, scene.volume.space)
-            plane = SlicePlane.named(name, scene.deformed_bounds(), at=at, aspect=w / h)
-        elif at is not None:
-            plane = plane.at(at)
-        matrix = plane.pixel_to_world((w, h))
-        with self._current():
-            data = self.renderer.slice_values(
-                scene,
-                matrix,
-                (w, h),
-                slab_mm=slab_mm,
-                slab_mode=slab_mode,
-                interpolation=interpolation,
-            )
-        image = SliceImage.from_data(data, matrix, plane)
-        win = scene.window if window is None else window
-        colorize(image, look=look, window=win, tf=scene.transfer_function, show=show)
-        image.rgba = rendered(image.rgba)  # shows inline in Jupyter
-        return image
-
-    def time_frames(
-        self, scene: Scene, frames: int = 10, warmup: int = 2, camera: Camera | None = None
-    ) -> list[float]:
-        """Milliseconds per frame (``ctx.finish()`` bound) after ``warmup`` frames."""
-        with self._current():
-            return self._time_frames(scene, frames, warmup, camera)
-
-    def _time_frames(
-        self, scene: Scene, frames: int, warmup: int, camera: Camera | None
-    ) -> list[float]:
-        for _ in range(warmup):
-            self.renderer.draw(scene, self._fbo, camera=camera)
-        self.ctx.finish()
-        times = []
-        for _ in range(frames):
-            t = time.perf_counter()
-            self.renderer.draw(scene, self._fbo, camera=camera)
-            self.ctx.finish()
-            times.append((time.perf_counter() - t) * 1000)
-        return times
-
-    def release(self) -> None:
-        """Free GPU resources (and the context if this renderer created it); idempotent."""
-        if getattr(self, "_released", True):
-            return
-        with self._current():
-            self.renderer.release()
-            self._unbind_fbo()
-            self._fbo.release()
-            self._color.release()
-        if self._owns_ctx:
-            saved = _egl_current()  # releasing may clear the current context
-            self.ctx.release()
-            _egl_restore(saved)
-        self._released = True
-
-    def __enter__(self) -> OffscreenRenderer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()

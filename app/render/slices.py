@@ -11,7 +11,7 @@ function, rest vs deformed overlays) is applied afterwards on the CPU by
 
 Use it through :meth:`voxwarp.render.raycaster.Renderer.slice_values` (any
 pixel -> world affine, e.g. an output grid's slices for ``export-volume``) or
-:meth:`voxwarp.render.raycaster.OffscreenRenderer.render_slice` (a
+:meth:`voxwarp.render.offscreen.OffscreenRenderer.render_slice` (a
 :class:`~voxwarp.core.slice_plane.SlicePlane`, coloured).
 """
 
@@ -88,7 +88,7 @@ class SliceRenderer:
             ["#define NEAREST"] if nearest else []
         )
         frag = shaders.with_defines(frag, defines)
-        from voxwarp.deform import gl_programs
+        from voxwarp.deform.elements import gl_programs
 
         try:
             hold = gl_programs.program(

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from voxwarp.deform.wires import Wire
+from voxwarp.deform.wires.field import Wire
 
 #: most voxels the object search looks at (the volume is thinned by a whole stride)
 MAX_SAMPLES = 96**3

@@ -392,12 +392,12 @@ def _jsonable(x: Any) -> Any:
 
 @contextlib.contextmanager
 def _offscreen(size: tuple[int, int]) -> Iterator[Any]:
-    """An :class:`~voxwarp.render.raycaster.OffscreenRenderer` whose context is current for the
+    """An :class:`~voxwarp.render.offscreen.OffscreenRenderer` whose context is current for the
     block
     (the GPU solvers and benchmarks run on it too)."""
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
-    with OffscreenRenderer(*size) as r, r._current():
+    with OffscreenRenderer(*size) as r, r.current():
         yield r
 
 
@@ -449,7 +449,7 @@ def _fish_scene(vol: Any, camera: Any, warps: Sequence[Any] = ()) -> Any:
 
 def _fish_grid(vol: Any) -> Any:
     """The fish's element grid: the head layers fixed, the other corners free."""
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.grid import ElementGrid
 
     grid = ElementGrid(vol, shape=FISH_GRID)
     grid.free(grid.corner_mask())
@@ -461,7 +461,7 @@ def _fish_grid(vol: Any) -> Any:
 
 def _slice_grid() -> Any:
     """The teaching grid (:data:`SLICE_SHAPE`): the x = 0 layer fixed, no other corner."""
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.grid import ElementGrid
 
     grid = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE)
     grid.free(grid.corner_mask())
@@ -533,11 +533,11 @@ def _note(ax: Any, text: str, where: str = "lower left", width: int = 60) -> Non
 def _mass_spring(grid: Any, integrator: str, dt: float, clamp: bool) -> Any:
     """The fish drag's model with ``integrator`` at time step ``dt`` (s).
 
-    ``MassSpring`` clamps a ``dt`` above :meth:`~voxwarp.deform.massspring.MassSpring.
+    ``MassSpring`` clamps a ``dt`` above :meth:`~voxwarp.deform.elements.massspring.MassSpring.
     stable_time_step` to it; the CPU solver reads ``model.dt`` at every step, so the
     demo sets it there, beyond the limit, on purpose.
     """
-    from voxwarp.deform.massspring import MassSpring
+    from voxwarp.deform.elements.massspring import MassSpring
 
     ms = MassSpring(grid, integrator=integrator, shear=True, max_step=None if clamp else 0.0)
     ms.model.dt = float(dt)
@@ -863,7 +863,7 @@ def gibson_sponsor(index: Sequence[int], seed: Sequence[int]) -> tuple[int, int,
 
 def _chainmail_slice() -> dict[str, Any]:
     """The slice grid's drag in both variants, then 1 and 4 relaxation steps."""
-    from voxwarp.deform.chainmail import ChainMail
+    from voxwarp.deform.elements.chainmail import ChainMail
 
     res: dict[str, Any] = {}
     for variant in ("gibson", "enhanced"):
@@ -919,7 +919,7 @@ def _relaxed_states(
 def _demo_chainmail(
     s: _Settings, out: Path, log: Callable[[str], None]
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
-    from voxwarp.deform.chainmail import ChainMail
+    from voxwarp.deform.elements.chainmail import ChainMail
 
     sl = _chainmail_slice()
     cm = sl.pop("_enhanced_model")
@@ -1075,7 +1075,7 @@ def _slice_frame(ax: Any) -> None:
 
 
 def _plot_order(ax: Any, data: dict[str, Any], sponsors: bool) -> None:
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.grid import ElementGrid
 
     rest = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE).rest_positions
     xy = _slice_xy(rest)
@@ -1136,7 +1136,7 @@ def _plot_order(ax: Any, data: dict[str, Any], sponsors: bool) -> None:
 
 
 def _plot_slice_state(ax: Any, positions: np.ndarray, title: str, colorbar: bool = True) -> None:
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.grid import ElementGrid
 
     rest = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE).rest_positions
     xy = _slice_xy(positions)
@@ -1192,9 +1192,9 @@ def _demo_compare(
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
     from voxwarp.bench.chainmail import bench_chainmail
     from voxwarp.bench.massspring import bench_massspring
-    from voxwarp.deform.chainmail import ChainMail
-    from voxwarp.deform.elements import ElementGrid
-    from voxwarp.deform.massspring import MassSpring
+    from voxwarp.deform.elements.chainmail import ChainMail
+    from voxwarp.deform.elements.grid import ElementGrid
+    from voxwarp.deform.elements.massspring import MassSpring
 
     # the same grid and drag in both models
     t = time.perf_counter()
@@ -1460,8 +1460,8 @@ def _demo_wires(
         ray_sample_stats,
         time_builds,
     )
-    from voxwarp.deform.propagation import opencl_device_name
-    from voxwarp.deform.wires import WireFieldWarp
+    from voxwarp.deform.wires.field import WireFieldWarp
+    from voxwarp.deform.wires.propagation import opencl_device_name
     from voxwarp.io.samples import load_sample
     from voxwarp.scene import Scene
 
@@ -1618,7 +1618,7 @@ def _wire_storage(vol: Any, wires: Sequence[Any]) -> list[dict[str, Any]]:
     """Bytes per field voxel of each layout and the plane masks' memory (section 7.2 and
     7.1) for the fish's field at the render scale."""
     from voxwarp.bench.wires import RENDER_SCALE
-    from voxwarp.deform.wires import LAYOUTS, WireDeformer
+    from voxwarp.deform.wires.field import LAYOUTS, WireDeformer
 
     rows = []
     for layout in LAYOUTS:
@@ -1729,7 +1729,7 @@ def _demo_lattice(
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
     from voxwarp.bench.lattice import PAPER_RATIO, bench_lattice
     from voxwarp.bench.lattice_normals import normals_study
-    from voxwarp.deform.lattice_warp import LatticeWarp
+    from voxwarp.deform.lattice.warp import LatticeWarp
     from voxwarp.teaching.lattice_scenes import torus_tubes
 
     vol = _fish(s)

@@ -38,9 +38,9 @@ from voxwarp.core.mesh import (
     tube_mesh,
 )
 from voxwarp.core.volume import Volume
-from voxwarp.deform.anchors import Anchor, AnchorStrip
-from voxwarp.deform.scene_graph import SceneNode
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.anchors import Anchor, AnchorStrip
+from voxwarp.deform.lattice.scene_graph import SceneNode
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.scene import Scene
 
 

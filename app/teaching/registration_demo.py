@@ -111,8 +111,8 @@ def demo_registration(
 # ---------------------------------------------------------------------- the data
 def known_field(fixed: Any) -> Any:
     """The known pull-back field ``w`` on ``fixed``'s grid: :data:`BUMPS` seeded Gaussian
-    bumps in the head (a :class:`~voxwarp.deform.displacement_field.DisplacementFieldWarp`)."""
-    from voxwarp.deform.displacement_field import DisplacementFieldWarp
+    bumps in the head (a :class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp`)."""
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 
     rng = np.random.default_rng(SEED)
     xyz = _grid_points(fixed)
@@ -157,8 +157,8 @@ def deform_volume(fixed: Any, known: Any) -> Any:
 def register(fixed: Any, moving: Any, levels: tuple[int, ...], iterations: int) -> Any:
     """Demons registration (SimpleITK fast symmetric forces) of ``moving`` to ``fixed``,
     coarse to fine (``levels``: shrink factors); the pull-back field on ``fixed``'s grid
-    as a :class:`~voxwarp.deform.displacement_field.DisplacementFieldWarp`."""
-    from voxwarp.deform.displacement_field import DisplacementFieldWarp
+    as a :class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp`."""
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
     from voxwarp.io.fields import itk_affine
     from voxwarp.io.itk import sitk_module, to_sitk
 

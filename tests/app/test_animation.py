@@ -33,8 +33,8 @@ from voxwarp.animation.tracks import (
 )
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.volume import Volume
-from voxwarp.deform.chainmail import ChainMail
-from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.elements.chainmail import ChainMail
+from voxwarp.deform.elements.massspring import MassSpring
 from voxwarp.deform.warp import rotation_matrix
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import load_sample

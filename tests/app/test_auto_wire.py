@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.io.samples import load_sample
 from voxwarp.teaching.auto_wire import auto_wire, otsu_threshold
 

@@ -12,8 +12,8 @@ import pytest
 
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
-from voxwarp.render import skip_cache
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.skipping import cache as skip_cache
 from voxwarp.scene import Scene
 
 

@@ -185,7 +185,7 @@ def test_report_ratios_without_gl() -> None:
 @pytest.mark.parametrize("objects", [1, 7, 30])
 def test_scene_graphs_compose_as_described(objects: int) -> None:
     from voxwarp.core.mesh import instances_from_scene_graph
-    from voxwarp.deform.scene_graph import compose_scene
+    from voxwarp.deform.lattice.scene_graph import compose_scene
 
     composed = {}
     for lattice in (True, False):

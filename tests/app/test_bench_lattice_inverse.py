@@ -15,7 +15,7 @@ import pytest
 
 from voxwarp.bench import lattice_inverse as li
 from voxwarp.bench.lattice import add_bench_lattice_parser, command_line
-from voxwarp.deform.lattice_warp import DEFAULT_TOLERANCE, STUDY_VARIANTS
+from voxwarp.deform.lattice.warp import DEFAULT_TOLERANCE, STUDY_VARIANTS
 
 
 def test_tiny_section(gl_ctx: Any, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,9 +1,10 @@
 """voxwarp.bench.taichi, the taichi reference of ``voxwarp bench massspring`` (skipped without
 taichi).
 
-It must be the same model as voxwarp.deform.massspring.CpuSpringSolver (float64), stepped from
+It must be the same model as voxwarp.deform.elements.massspring.CpuSpringSolver (float64), stepped
+from
 the same state with the same drag: in float64 the two agree to round-off (so every term
-of deform/spring_model.py is there, with the same constants); in float32, the
+of deform/elements/spring_model.py is there, with the same constants); in float32, the
 benchmark's precision (as the GPU solver's), to a few 1e-5 of the largest displacement
 (float32 round-off of the positions, the same as the GPU solver's).
 """
@@ -20,9 +21,9 @@ from voxwarp.bench.taichi import (
     make_taichi_solver,
     taichi_available,
 )
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import CpuSpringSolver, MassSpring
-from voxwarp.deform.spring_model import SpringModel
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import CpuSpringSolver, MassSpring
+from voxwarp.deform.elements.spring_model import SpringModel
 
 BOX = ((0.0, 0.0, 0.0), (100.0, 80.0, 60.0))
 

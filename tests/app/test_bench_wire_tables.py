@@ -15,7 +15,7 @@ from voxwarp.bench.wire_tables import TablesRow, axis_wire, identity_wires, mark
 from voxwarp.bench.wires import influence_region, ray_sample_stats
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires.field import Wire, WireDeformer
 
 
 def _cylinder(axis: np.ndarray, radius: float = 6.0) -> Volume:

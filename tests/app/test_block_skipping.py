@@ -19,7 +19,7 @@ import pytest
 from voxwarp.core.volume import Volume
 from voxwarp.errors import VolumeTooLargeError
 from voxwarp.render.raycaster import Renderer
-from voxwarp.render.skipping import BLOCK, block_min_max
+from voxwarp.render.skipping.maps import BLOCK, block_min_max
 
 
 def brute_force_block_min_max(data: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
@@ -208,7 +208,7 @@ def test_texture_budget_from_the_environment(gl_ctx: Any, monkeypatch: pytest.Mo
 def test_cell_min_max_matches_brute_force() -> None:
     """Cell c covers texel coordinates [c - 1/2, c + 1/2]: its range is that of voxels
     c - 1 and c per axis (clamped to the edge)."""
-    from voxwarp.render.skipping import cell_min_max
+    from voxwarp.render.skipping.maps import cell_min_max
 
     rng = np.random.default_rng(3)
     data = rng.integers(-50, 50, size=(5, 4, 6)).astype(np.int16)

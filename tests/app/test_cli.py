@@ -46,7 +46,7 @@ class _NoRendering:
 @pytest.fixture
 def no_rendering(monkeypatch: pytest.MonkeyPatch) -> None:
     """In-process main() must not create a GL context (see the module docstring)."""
-    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.offscreen.OffscreenRenderer", _NoRendering)
 
 
 def ball() -> np.ndarray:
@@ -360,7 +360,8 @@ def test_in_process_render_leaves_other_contexts_usable(
         f"""
         import numpy as np
         from voxwarp.cli.main import main
-        from voxwarp.render.raycaster import OffscreenRenderer, create_context
+        from voxwarp.render.context import create_context
+        from voxwarp.render.offscreen import OffscreenRenderer
         from voxwarp.scene import Scene
         from voxwarp.core.volume import Volume
 

@@ -28,7 +28,7 @@ from voxwarp.cli import render_options as ropt
 from voxwarp.cli.main import main
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
-from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.elements.grid import ElementGrid
 from voxwarp.deform.warp import AffineWarp
 from voxwarp.errors import InputError, SceneError
 from voxwarp.io.images import read_image

@@ -119,7 +119,7 @@ def test_help_documents_wires(capsys: pytest.CaptureFixture) -> None:
     ("name", "sample"), [("fish_spine_wires.json", "fish"), ("tubes_twist_wires.json", "tubes")]
 )
 def test_bundled_wire_files_load_on_their_samples(name: str, sample: str) -> None:
-    from voxwarp.deform.wires import WireFieldWarp
+    from voxwarp.deform.wires.field import WireFieldWarp
     from voxwarp.io.samples import load_sample
 
     entry = load_wire_file(ROOT / "sample_volumes" / name)

@@ -269,7 +269,7 @@ class _NoRendering:
 def test_cli_unknown_demo_name_is_a_one_line_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.offscreen.OffscreenRenderer", _NoRendering)
     assert main(["demo", "springs", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
@@ -282,7 +282,7 @@ def test_cli_unknown_demo_name_is_a_one_line_error(
 def test_cli_quick_and_gui_need_a_demo_name(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.offscreen.OffscreenRenderer", _NoRendering)
     for flag in ("--quick", "--gui"):
         assert main(["demo", "sample:fish", flag, "--out", str(tmp_path)]) == 2
         err = capsys.readouterr().err.strip().splitlines()

@@ -23,11 +23,11 @@ from hypothesis import strategies as st
 from voxwarp.core.camera import PROJECTIONS, VIEWS, Camera
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
-from voxwarp.deform.lattice_warp import LatticeWarp
-from voxwarp.deform.massspring import MassSpring
-from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.elements.massspring import MassSpring
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.warp import AffineWarp, chain_apply
-from voxwarp.deform.wires import WireFieldWarp
+from voxwarp.deform.wires.field import WireFieldWarp
 from voxwarp.editing.session import (
     PICK_RADIUS_PX,
     DisplayOptions,

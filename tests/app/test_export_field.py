@@ -30,12 +30,12 @@ import pytest
 
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
-from voxwarp.deform.chainmail import ChainMail
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.lattice_warp import LatticeWarp, bent_grid
-from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.elements.chainmail import ChainMail
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring
+from voxwarp.deform.lattice.warp import LatticeWarp, bent_grid
 from voxwarp.deform.warp import AffineWarp, Warp
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.io.fields import save_displacement_field
 from voxwarp.io.samples import load_sample
 from voxwarp.scene import Scene

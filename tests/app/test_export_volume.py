@@ -277,7 +277,7 @@ def test_cli_refuses_before_any_work(
     what: str,
     text: str,
 ) -> None:
-    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.offscreen.OffscreenRenderer", _NoRendering)
     scene = {
         "bad-suffix": scene_json,
         "missing": tmp_path / "nope.json",

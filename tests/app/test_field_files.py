@@ -19,7 +19,7 @@ from scipy import ndimage
 from tests.app.test_cli import run_cli
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.volume import Volume
-from voxwarp.deform.displacement_field import DisplacementFieldWarp
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import AffineWarp, chain_apply, rotation_matrix
 from voxwarp.errors import FieldError
 from voxwarp.io.fields import (

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform.lattice_warp import LatticeWarp, bent_grid
-from voxwarp.deform.offset_field import OffsetFieldWarp, gaussian_drag_field
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.warp import LatticeWarp, bent_grid
 from voxwarp.deform.warp import AffineWarp
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.field_views import (
     DISPLACEMENT_PIXELS,
@@ -375,8 +375,8 @@ def test_wire_views_are_not_offered_for_lattices() -> None:
 
 
 def test_gpu_chainmail_field_is_read_back(gl_ctx: Any) -> None:
-    from voxwarp.deform.chainmail import ChainMail
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.chainmail import ChainMail
+    from voxwarp.deform.elements.grid import ElementGrid
 
     vol = cube(spacing=2.0)
     lo, hi = vol.bounds

@@ -1,4 +1,4 @@
-"""GPU programs shared per context (voxwarp.deform.gl_programs): one compiled program per
+"""GPU programs shared per context (voxwarp.deform.elements.gl_programs): one compiled program per
 shader text and context, whatever number of warps, solvers and renderers use it;
 releasing one user leaves the others working."""
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform import gl_programs
-from voxwarp.deform.offset_field import OffsetFieldWarp, texture_field
-from voxwarp.deform.spring_model import SpringModel
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.deform.elements import gl_programs
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp, texture_field
+from voxwarp.deform.elements.spring_model import SpringModel
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 FILL = """#version 430
@@ -143,7 +143,7 @@ def test_renderers_on_one_context_share_programs(gl_ctx: Any) -> None:
 
 
 def test_spring_solvers_share_programs_and_outlive_each_other(gl_ctx: Any) -> None:
-    from voxwarp.deform.massspring_gpu import GpuSpringSolver
+    from voxwarp.deform.elements.massspring_gpu import GpuSpringSolver
 
     shape = (4, 3, 5)
     rng = np.random.default_rng(7)

@@ -14,7 +14,8 @@ import pytest
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.render import gradients
-from voxwarp.render.raycaster import OffscreenRenderer, Renderer
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.raycaster import Renderer
 from voxwarp.scene import Scene
 
 

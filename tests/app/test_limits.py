@@ -27,7 +27,7 @@ from voxwarp.core import limits
 from voxwarp.core.mesh import GENERATORS, Mesh, tile_mesh
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import WarpError
-from voxwarp.deform.wires import (
+from voxwarp.deform.wires.field import (
     MAX_MASK_PIXELS,
     MAX_WIRE_POINTS,
     Wire,
@@ -277,7 +277,7 @@ def test_cli_numbers_at_their_limits_parse() -> None:
 
 
 def test_drag_limit_is_the_displacement_texture_range() -> None:
-    from voxwarp.deform.offset_field import MAX_DISPLACEMENT_MM
+    from voxwarp.deform.node_grid import MAX_DISPLACEMENT_MM
 
     assert limits.MAX_DRAG_MM == MAX_DISPLACEMENT_MM
 

@@ -7,7 +7,7 @@ draws a new wire warp. Each warp is released after its frame, as the warp contra
 After a warm-up (every program variant of the run compiled once) the test checks:
 
 * no GPU program is compiled any more: programs are shared per context
-  (``voxwarp.deform.gl_programs``), not compiled per warp instance;
+  (``voxwarp.deform.elements.gl_programs``), not compiled per warp instance;
 * the number of live GL objects on the context is the same as after the warm-up (moderngl
   wrappers still alive, plus wrappers collected without ``release()``, which the
   context's ``context_gc`` mode queues in ``ctx.objects``);
@@ -30,10 +30,10 @@ import numpy as np
 import pytest
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform.lattice_warp import LatticeWarp, bent_grid
-from voxwarp.deform.offset_field import OffsetFieldWarp
-from voxwarp.deform.wires import Wire, WireDeformer
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+from voxwarp.deform.lattice.warp import LatticeWarp, bent_grid
+from voxwarp.deform.wires.field import Wire, WireDeformer
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 FRAMES = int(os.environ.get("VOXWARP_LOAD_FRAMES", "1000"))

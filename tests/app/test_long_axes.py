@@ -25,8 +25,9 @@ from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
 from voxwarp.errors import VolumeTooLargeError
-from voxwarp.render.raycaster import OffscreenRenderer, Renderer
-from voxwarp.render.skipping import (
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.raycaster import Renderer
+from voxwarp.render.skipping.maps import (
     BLOCK,
     CELL_CAP,
     block_skip_distances,
@@ -113,7 +114,7 @@ def long_volume(shape: tuple[int, int, int]) -> Volume:
 
 
 def _zero_field_warp(vol: Volume) -> Any:
-    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     return OffsetFieldWarp(*vol.bounds, np.zeros((3, 3, 3, 3)))
 
@@ -247,7 +248,7 @@ def test_wire_field_over_the_texture_limit_is_one_line(gl_ctx: Any) -> None:
     from types import SimpleNamespace
 
     from voxwarp.deform.warp import WarpError
-    from voxwarp.deform.wires import Wire, WireDeformer
+    from voxwarp.deform.wires.field import Wire, WireDeformer
 
     data = np.zeros((40, 12, 12), np.float32)
     data[4:36, 3:9, 3:9] = 100.0

@@ -29,8 +29,8 @@ from voxwarp.core.mesh import (
     uv_sphere,
 )
 from voxwarp.core.volume import Volume
-from voxwarp.deform.scene_graph import SceneNode
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.scene_graph import SceneNode
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.warp import rotation_matrix
 from voxwarp.errors import MeshError, SceneError
 from voxwarp.scene import Scene

@@ -3,7 +3,7 @@
 
 Oracles: the smoothstep blend of the two keys, computed here; anchor points and normals
 recomputed here from the deformed base triangles (barycentric sums and cross products,
-not through :func:`~voxwarp.deform.anchors.anchor_frames`); the static scenes that
+not through :func:`~voxwarp.deform.lattice.anchors.anchor_frames`); the static scenes that
 :func:`~voxwarp.teaching.lattice_scenes.accessories` builds at the key poses; a direct
 render of the static pose for a frame ``voxwarp animate`` wrote.
 """
@@ -24,10 +24,10 @@ import voxwarp.animation.frames
 from voxwarp.animation.movie import animate
 from voxwarp.animation.tracks import Animation, AnimationError, evaluate
 from voxwarp.core.mesh import MeshInstance
-from voxwarp.deform.anchors import AnchorStrip
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.anchors import AnchorStrip
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.io.images import read_image
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 from voxwarp.teaching.lattice_scenes import (
     ACCESSORY_KEYS,

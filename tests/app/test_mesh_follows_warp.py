@@ -25,7 +25,7 @@ from voxwarp.core import mesh_warp
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds, vertex_normals
 from voxwarp.core.volume import Volume
-from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import AffineWarp, Warp
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.scene import Scene

@@ -19,7 +19,7 @@ import pytest
 
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance, torus_mesh, tube_mesh
-from voxwarp.deform.trilinear import TrilinearGrid, carry_normals
+from voxwarp.deform.lattice.trilinear import TrilinearGrid, carry_normals
 from voxwarp.render.mesh_pass import MeshRenderer
 
 LENGTH, RADIUS, CELLS = 2.0, 0.25, 4

@@ -22,8 +22,8 @@ from voxwarp.bench.lattice import bench_mesh_throughput, bend_grid
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.mesh import MeshInstance, box_mesh, tile_mesh, torus_mesh, uv_sphere
 from voxwarp.core.volume import Volume
-from voxwarp.deform.offset_field import OffsetFieldWarp
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.warp import rotation_matrix
 from voxwarp.errors import RenderError
 from voxwarp.render.mesh_pass import MESH_LIGHT, MeshRenderer

@@ -32,8 +32,9 @@ from tests.app.test_render import (
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
-from voxwarp.render.raycaster import OffscreenRenderer, xray_reference_length
-from voxwarp.render.skipping import BLOCK, block_min_max, static_block_visibility
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.raycaster import xray_reference_length
+from voxwarp.render.skipping.maps import BLOCK, block_min_max, static_block_visibility
 from voxwarp.scene import Scene
 
 BLUE = (0.0, 0.0, 1.0, 1.0)

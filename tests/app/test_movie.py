@@ -28,7 +28,7 @@ from voxwarp.cli.main import main
 from voxwarp.editing.session import EditSession
 from voxwarp.io.images import read_image
 from voxwarp.io.samples import load_sample
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 SIZE = (64, 48)

@@ -96,7 +96,7 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def offscreen() -> Any:
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
 
     with OffscreenRenderer(96, 96, dtype="f4") as r:
         yield r
@@ -199,7 +199,7 @@ def test_one_wire_file_bends_the_same_anatomy(
     offscreen: Any, layouts: dict[str, Path], name: str
 ) -> None:
     """A wire through the spine, its end pulled towards the patient's right, in world mm."""
-    from voxwarp.deform.wires import WireFieldWarp
+    from voxwarp.deform.wires.field import WireFieldWarp
 
     z0, z1 = CENTRE[2] - 45, CENTRE[2] + 45
     base = [[CENTRE[0], CENTRE[1] + SPINE_Y, z] for z in np.linspace(z0, z1, 5)]

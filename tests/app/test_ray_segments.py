@@ -1,4 +1,4 @@
-"""Piecewise-linear warped rays (voxwarp.render.ray_segments, PIECEWISE in the shader).
+"""Piecewise-linear warped rays (voxwarp.render.skipping.segments, PIECEWISE in the shader).
 
 Oracles: a displacement field that is linear in position (its chord error is zero, so
 segments must reproduce the per-sample image), the chord error measured densely along
@@ -14,11 +14,11 @@ import pytest
 
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
-from voxwarp.deform.displacement_field import DisplacementFieldWarp
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import IdentityWarp, chain_apply
 from voxwarp.editing.session import EditSession
 from voxwarp.errors import RenderError
-from voxwarp.render.ray_segments import RaySegments, segment_lengths
+from voxwarp.render.skipping.segments import RaySegments, segment_lengths
 from voxwarp.scene import Scene
 
 SIZE = 160

@@ -23,7 +23,8 @@ from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp, IdentityWarp
 from voxwarp.errors import VolumeTooLargeError
-from voxwarp.render.raycaster import OffscreenRenderer, Renderer
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.raycaster import Renderer
 from voxwarp.scene import MODES, Scene
 
 #: 8-bit texture filtering weights and float round-off: one grey level plus a little.
@@ -575,7 +576,7 @@ def test_cell_block_and_no_skipping_give_the_same_image(gl_ctx: Any, mode: str) 
 
 # ---------------------------------------------------------------------- interactive use
 def _warped_scene() -> Scene:
-    from voxwarp.deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
 
     vol = phantom()
     lo, hi = vol.bounds
@@ -585,7 +586,7 @@ def _warped_scene() -> Scene:
 
 
 def _draw(r: OffscreenRenderer, fn: Any) -> np.ndarray:
-    with r._current():
+    with r.current():
         fn()
         raw = r.framebuffer.read(components=4, alignment=1)
     w, h = r.size

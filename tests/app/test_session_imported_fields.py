@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform.displacement_field import DisplacementFieldWarp
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import AffineWarp, rotation_matrix
 from voxwarp.editing.session import EditorError, EditSession, Placement
 from voxwarp.io.fields import load_transform, save_displacement_field

@@ -1,8 +1,8 @@
-"""The compiled skip-map builders (voxwarp.render.skip_kernels behind
-voxwarp.render.skipping), the slab-wise volume upload and the block-first policy for big
+"""The compiled skip-map builders (voxwarp.render.skipping.kernels behind
+voxwarp.render.skipping.maps), the slab-wise volume upload and the block-first policy for big
 volumes (issue 19, lever 6).
 
-Oracles: the numpy builders voxwarp used before (voxwarp.render.skip_numpy, verbatim, still
+Oracles: the numpy builders voxwarp used before (voxwarp.render.skipping.numpy_maps, verbatim, still
 used below skipping.COMPILED_MIN_SIZE), scipy's chamfer distance transform, the old
 one-shot texture upload, and renders with block skipping, which must equal the
 cell-skipping image. Every test here forces the compiled path in its own process.
@@ -21,8 +21,9 @@ import pytest
 
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
-from voxwarp.render import skip_cache, skip_numpy, skipping, volume_texture
-from voxwarp.render.raycaster import OffscreenRenderer
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.skipping import cache as skip_cache
+from voxwarp.render.skipping import skip_numpy, skipping, volume_texture
 from voxwarp.scene import Scene
 
 OCTANTS = list(itertools.product((1, -1), repeat=3))

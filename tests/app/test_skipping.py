@@ -1,5 +1,5 @@
 """Tests of the directional (octant) empty-space-skipping maps and of the split of the
-image into ray-direction octants (voxwarp.render.skipping), plus their use by the renderer.
+image into ray-direction octants (voxwarp.render.skipping.maps), plus their use by the renderer.
 
 Oracles: a brute-force search for the largest invisible cube ahead of each cell; the
 isotropic chessboard distance (a cube centred on the cell is never larger than the best
@@ -20,8 +20,8 @@ from voxwarp.core.camera import Camera
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
-from voxwarp.render.raycaster import OffscreenRenderer
-from voxwarp.render.skipping import (
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.skipping.maps import (
     block_skip_distances,
     octant_of,
     octant_regions,
@@ -258,7 +258,7 @@ def test_visible_ranges_integer_path_equals_float_path(dtype: Any) -> None:
 
 # ---------------------------------------------------------------------- warped rays
 def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
-    from voxwarp.deform.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
 
     lo, hi = vol.bounds
     field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (amount, -0.5 * amount, 1.0), 1.0)
@@ -268,7 +268,7 @@ def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
 def _field_warp(vol: Volume, amount: float = 4.0) -> Any:
     """An imported (pull-back) field on its own rotated grid over the volume: one smooth
     bump of displacement, as a registration result."""
-    from voxwarp.deform.displacement_field import DisplacementFieldWarp
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
     from voxwarp.deform.warp import rotation_matrix
 
     n = np.array([8, 7, 6])
@@ -326,7 +326,7 @@ def test_displacement_range_holds_for_every_point_of_its_box(chain: str) -> None
 
 
 def test_offset_range_is_local_and_signed() -> None:
-    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     field = np.zeros((9, 9, 9, 3))
     field[2:5, 2:5, 2:5] = (3.0, 0.0, 0.0)  # a block of nodes dragged along +x
@@ -341,15 +341,15 @@ def test_offset_range_is_local_and_signed() -> None:
 
 
 def test_gpu_owned_field_gives_no_range() -> None:
-    from voxwarp.deform.offset_field import OffsetFieldWarp
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     w = OffsetFieldWarp((0, 0, 0), (1, 1, 1), shape=(2, 2, 2), texture_source=lambda ctx: None)
     assert w.displacement_range(np.zeros((1, 3)), np.ones((1, 3))) is None
 
 
 def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_truth() -> None:
-    from voxwarp.deform.offset_field import OffsetFieldWarp
-    from voxwarp.render.skipping import (
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+    from voxwarp.render.skipping.maps import (
         cell_min_max,
         static_block_visibility,
         warped_cell_visibility,
@@ -449,7 +449,7 @@ def test_warped_skip_maps_are_built_when_a_warp_state_is_drawn_again(gl_ctx: Any
         r.render(scene)
         assert r.renderer.last_skip_kind == "cells"
         # a warp without a displacement range (a GPU-owned field) keeps block checks
-        from voxwarp.deform.offset_field import OffsetFieldWarp
+        from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
         tex = warp.textures(gl_ctx)["displacement"]
         owned = OffsetFieldWarp(warp.lo, warp.hi, shape=warp.shape, texture_source=lambda c: tex)

@@ -190,7 +190,7 @@ def test_errors_are_voxwarp_errors() -> None:
 
 def test_lattice_file_unknown_key_lists_the_allowed(tmp_path: Path) -> None:
     from voxwarp.core.volume import Volume
-    from voxwarp.deform.trilinear import TrilinearGrid
+    from voxwarp.deform.lattice.trilinear import TrilinearGrid
     from voxwarp.inputs import load_lattice_file
 
     grid = TrilinearGrid.from_function(lambda u: u * 4.0, (1, 1, 1)).to_dict()

@@ -131,4 +131,4 @@ def no_rendering(monkeypatch: pytest.MonkeyPatch) -> None:
         def __init__(self, *args: object, **kwargs: object) -> None:
             raise AssertionError("this test must fail before rendering")
 
-    monkeypatch.setattr("voxwarp.render.raycaster.OffscreenRenderer", _NoRendering)
+    monkeypatch.setattr("voxwarp.render.offscreen.OffscreenRenderer", _NoRendering)

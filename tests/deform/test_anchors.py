@@ -1,4 +1,4 @@
-"""Anchors (deform/anchors.py): attached geometry follows a deforming base mesh.
+"""Anchors (deform/lattice/anchors.py): attached geometry follows a deforming base mesh.
 
 Oracles: anchor points are barycentric, so they equal the same combination of the moved
 triangle's corners; frames stay orthonormal and right-handed with z the triangle normal;
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from voxwarp.deform.anchors import Anchor, AnchorStrip, anchor_frames, anchors_at
+from voxwarp.deform.lattice.anchors import Anchor, AnchorStrip, anchor_frames, anchors_at
 from voxwarp.deform.warp import WarpError
 
 
@@ -75,7 +75,7 @@ def test_strip_nodes_touch_the_surface_at_the_anchors() -> None:
 
 
 def test_attached_grid_follows_a_bending_base() -> None:
-    pytest.importorskip("voxwarp.deform.trilinear")
+    pytest.importorskip("voxwarp.deform.lattice.trilinear")
     v, f = sheet(9)
     pts = np.array([[x, y, 0.0] for x in (2.0, 5.0, 8.0) for y in (3.0, 7.0)])
     flat = anchors_at(v, f, pts, np.tile([1.0, 0.0, 0.0], (6, 1)))

@@ -1,4 +1,5 @@
-"""Tests of voxwarp.deform.chainmail: the 3D ChainMail CPU solver (both variants) and its API.
+"""Tests of voxwarp.deform.elements.chainmail: the 3D ChainMail CPU solver (both variants) and its
+API.
 
 Oracles: :meth:`ChainMailModel.violation` (every link within its limits, to 1e-6 mm)
 after every move of random drag sequences on heterogeneous, anisotropic materials, and
@@ -24,10 +25,10 @@ import numpy as np
 import pytest
 
 from voxwarp.deform import ChainMail, ChainMailError, MoveStats
-from voxwarp.deform.chainmail import LIMIT_BISECTIONS
-from voxwarp.deform.chainmail_model import ChainMailModel
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.elements.chainmail import LIMIT_BISECTIONS
+from voxwarp.deform.elements.chainmail_model import ChainMailModel
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
 VARIANTS = ("gibson", "enhanced")
 TOL = 1e-6
@@ -399,7 +400,7 @@ def test_bad_constructor_arguments(monkeypatch: pytest.MonkeyPatch) -> None:
         ChainMail("grid")  # type: ignore[arg-type]
     with pytest.raises(ChainMailError, match="stretch"):
         ChainMail(g, stretch=1.5)
-    monkeypatch.setitem(sys.modules, "voxwarp.deform.chainmail_gpu", None)
+    monkeypatch.setitem(sys.modules, "voxwarp.deform.elements.chainmail_gpu", None)
     with pytest.raises(ChainMailError, match=r"deform\.chainmail_gpu.*backend=\"cpu\""):
         ChainMail(g, backend="gpu", ctx=object())
 
@@ -509,7 +510,7 @@ def test_zero_move_renders_like_no_warp(offscreen: Any, gl_ctx: Any) -> None:
 
 # ---------------------------------------------------------------------- GPU interface
 class _FakeGpuSolver:
-    """Stands in for voxwarp.deform.chainmail_gpu.GpuChainMailSolver; records the calls."""
+    """Stands in for voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver; records the calls."""
 
     instances: ClassVar[list[_FakeGpuSolver]] = []
 
@@ -553,9 +554,9 @@ class _FakeGpuSolver:
 
 
 def test_gpu_backend_drives_the_solver_interface(monkeypatch: pytest.MonkeyPatch) -> None:
-    fake = types.ModuleType("voxwarp.deform.chainmail_gpu")
+    fake = types.ModuleType("voxwarp.deform.elements.chainmail_gpu")
     fake.GpuChainMailSolver = _FakeGpuSolver  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "voxwarp.deform.chainmail_gpu", fake)
+    monkeypatch.setitem(sys.modules, "voxwarp.deform.elements.chainmail_gpu", fake)
     g = _grid((4, 4, 4))
     cm = ChainMail(g, backend="gpu", ctx="ctx")
     solver = _FakeGpuSolver.instances[-1]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from voxwarp.deform import ChainMail
-from voxwarp.deform.elements import ElementGrid
+from voxwarp.deform.elements.grid import ElementGrid
 
 pytestmark = pytest.mark.gl
 

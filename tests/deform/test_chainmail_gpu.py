@@ -1,7 +1,8 @@
-"""GpuChainMailSolver (deform/chainmail_gpu.py): constraints, locality, displacement texture.
+"""GpuChainMailSolver (deform/elements/chainmail_gpu.py): constraints, locality, displacement
+texture.
 
 The oracle is the small numpy clamp iteration below (float64), written from
-``deform/chainmail_model.py``: per coordinate, a lowering phase then a raising phase,
+``deform/elements/chainmail_model.py``: per coordinate, a lowering phase then a raising phase,
 each to a fixed point (their results are unique, whatever the order of updates, so
 the GPU's Jacobi passes must match it to float32 round-off).
 """
@@ -14,9 +15,9 @@ import moderngl
 import numpy as np
 import pytest
 
-from voxwarp.deform.chainmail_model import ChainMailModel
+from voxwarp.deform.elements.chainmail_model import ChainMailModel
 
-chainmail_gpu = pytest.importorskip("voxwarp.deform.chainmail_gpu")
+chainmail_gpu = pytest.importorskip("voxwarp.deform.elements.chainmail_gpu")
 GpuChainMailSolver = chainmail_gpu.GpuChainMailSolver
 
 SHAPE = (7, 6, 5)
@@ -459,8 +460,8 @@ def test_valid_positions_skip_the_full_check(gl_ctx: Any) -> None:
     the held elements: far fewer elements shaded than after an unverified upload, and
     the same result."""
     g = np.zeros((24, 24, 24), bool)
-    from voxwarp.deform.chainmail_model import ChainMailModel
-    from voxwarp.deform.elements import ElementGrid
+    from voxwarp.deform.elements.chainmail_model import ChainMailModel
+    from voxwarp.deform.elements.grid import ElementGrid
 
     grid = ElementGrid(((0, 0, 0), (230, 230, 230)), shape=(24, 24, 24))
     s = grid.spacing

@@ -1,4 +1,5 @@
-"""Tests of voxwarp.deform.curves: cubic curves, arc length, closest points, rotation-minimising
+"""Tests of voxwarp.deform.wires.curves: cubic curves, arc length, closest points,
+rotation-minimising
 frames.
 
 Oracles: straight lines (length = distance), the Bézier quarter circle (length against
@@ -18,8 +19,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from voxwarp.deform.curves import KINDS, Curve, minimal_rotation
 from voxwarp.deform.warp import WarpError
+from voxwarp.deform.wires.curves import KINDS, Curve, minimal_rotation
 
 R = 10.0
 KAPPA = 4.0 / 3.0 * (np.sqrt(2.0) - 1.0)  # handle length of the standard quarter circle

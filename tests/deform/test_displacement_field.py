@@ -13,7 +13,7 @@ import pytest
 from scipy import ndimage
 
 from tests.warp_gpu import gpu_warp
-from voxwarp.deform.displacement_field import DisplacementFieldWarp, sample_chain_field
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field
 from voxwarp.deform.warp import WarpError, rotation_matrix, warp_from_dict
 
 sitk = pytest.importorskip("SimpleITK")

@@ -1,4 +1,4 @@
-"""The interface mass-spring and ChainMail share (voxwarp.deform.element_model)."""
+"""The interface mass-spring and ChainMail share (voxwarp.deform.elements.model)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from voxwarp.deform import ChainMail, ElementGrid, ElementModel, MassSpring
-from voxwarp.deform.chainmail_model import ChainMailError
-from voxwarp.deform.massspring import MassSpringError
+from voxwarp.deform.elements.chainmail_model import ChainMailError
+from voxwarp.deform.elements.massspring import MassSpringError
 
 BOX = ((0.0, 0.0, 0.0), (30.0, 20.0, 10.0))
 

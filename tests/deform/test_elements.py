@@ -1,4 +1,4 @@
-"""Tests of voxwarp.deform.elements: grid geometry, constraints, materials, serialisation.
+"""Tests of voxwarp.deform.elements.grid: grid geometry, constraints, materials, serialisation.
 
 Oracles are hand-computed positions, explicit index lists and a step-function volume
 whose halves must map to the two stiffnesses.
@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from voxwarp.deform.elements import MAX_ELEMENTS_PER_AXIS, ElementGrid, ElementGridError
+from voxwarp.deform.elements.grid import MAX_ELEMENTS_PER_AXIS, ElementGrid, ElementGridError
 
 BOX = ((-10.0, 0.0, 5.0), (30.0, 20.0, 35.0))
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from voxwarp.deform.lattice_warp import FoldedLatticeWarning, LatticeWarp
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.warp import FoldedLatticeWarning, LatticeWarp
 
 BOX = [[0.0, 0.0, 0.0], [10.0, 10.0, 10.0]]
 

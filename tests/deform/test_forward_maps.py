@@ -22,9 +22,9 @@ import pytest
 from tests.deform.test_lattice_warp import BOX, bent
 from tests.deform.test_wires import build, cylinder, wire
 from voxwarp.deform import ChainMail
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
-from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import (
     AffineWarp,
     Warp,

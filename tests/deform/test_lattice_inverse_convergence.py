@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 
 from tests.warp_gpu import gpu_warp
-from voxwarp.deform.lattice_warp import (
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.warp import (
     DEFAULT_MAX_ITERATIONS,
     DEFAULT_TOLERANCE,
     FAR,
@@ -32,7 +33,6 @@ from voxwarp.deform.lattice_warp import (
     random_lattice,
     study_cases,
 )
-from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import WarpError, warp_from_dict
 
 BOX = (np.array([-10.0, 0.0, 5.0]), np.array([70.0, 60.0, 85.0]))

@@ -1,4 +1,4 @@
-"""Tests of voxwarp.deform.lattice_warp: the trilinear-lattice warp, CPU reference and GPU path.
+"""Tests of voxwarp.deform.lattice.warp: the trilinear-lattice warp, CPU reference and GPU path.
 
 CPU oracles: the lattice's forward map (the inverse must undo it: ``grid(apply(p)) = p``
 within each mode's measured error), the identity lattice (the identity everywhere), a
@@ -23,7 +23,8 @@ from scipy import ndimage
 from tests.app.test_render import aligned_camera, grey_scene
 from tests.warp_gpu import gpu_warp
 from voxwarp.core.volume import Volume
-from voxwarp.deform.lattice_warp import (
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.warp import (
     DEFAULT_ITERATIONS,
     DEFAULT_TOLERANCE,
     FAR,
@@ -33,7 +34,6 @@ from voxwarp.deform.lattice_warp import (
     inverse_error_table,
     lattice_eval,
 )
-from voxwarp.deform.trilinear import TrilinearGrid
 from voxwarp.deform.warp import AffineWarp, WarpError, chain_apply, warp_from_dict
 
 BOX = (np.array([-10.0, 0.0, 5.0]), np.array([54.0, 48.0, 61.0]))
@@ -289,8 +289,12 @@ def _flat_grid() -> TrilinearGrid:
         ((bent_grid(2, *BOX), (BOX[1], BOX[0])), {}, "degenerate"),
         ((bent_grid(2, *BOX), (BOX[0], [1, np.nan, 2])), {}, "NaN"),
         ((bent_grid(2, *BOX), [1, 2, 3]), {}, r"box must be \(lo, hi\)"),
-        ((np.zeros((3, 3, 3, 3)), BOX), {}, "needs a voxwarp.deform.trilinear.TrilinearGrid"),
-        (({"nodes": []}, BOX), {}, "needs a voxwarp.deform.trilinear.TrilinearGrid"),
+        (
+            (np.zeros((3, 3, 3, 3)), BOX),
+            {},
+            "needs a voxwarp.deform.lattice.trilinear.TrilinearGrid",
+        ),
+        (({"nodes": []}, BOX), {}, "needs a voxwarp.deform.lattice.trilinear.TrilinearGrid"),
         ((bent_grid(2, *BOX), BOX), {"inverse": "exact"}, "inverse must be one of"),
         ((bent_grid(2, *BOX), BOX), {"iterations": 0}, "1..8.*inverse='baked'"),
         ((bent_grid(2, *BOX), BOX), {"iterations": 9}, "1..8"),

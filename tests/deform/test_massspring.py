@@ -1,7 +1,7 @@
-"""Tests of voxwarp.deform.massspring: the CPU solver's physics and the MassSpring API.
+"""Tests of voxwarp.deform.elements.massspring: the CPU solver's physics and the MassSpring API.
 
 Oracles: a single step of one free element checked against the force formula of
-``deform/spring_model.py`` written out by hand; rigid motions exert no force; the
+``deform/elements/spring_model.py`` written out by hand; rigid motions exert no force; the
 static equilibrium of a stretched bar is a uniform stretch (displacement linear along
 the bar); the energy of a hand-built state; a derived energy bound under random drags;
 decay of the energy at the stable time step and growth well above the stability limit.
@@ -17,9 +17,9 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from voxwarp.deform.elements import ElementGrid, ElementGridError
-from voxwarp.deform.massspring import CpuSpringSolver, MassSpring, MassSpringError
-from voxwarp.deform.spring_model import SpringModel
+from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
+from voxwarp.deform.elements.massspring import CpuSpringSolver, MassSpring, MassSpringError
+from voxwarp.deform.elements.spring_model import SpringModel
 
 CUBE = ((0.0, 0.0, 0.0), (50.0, 50.0, 50.0))
 
@@ -353,7 +353,7 @@ def test_settle_stops_when_still_or_at_max_steps() -> None:
 
 
 def test_warp_follows_the_displacements() -> None:
-    pytest.importorskip("voxwarp.deform.offset_field")
+    pytest.importorskip("voxwarp.deform.elements.offset_field")
     g = ElementGrid(CUBE, shape=4)
     ms = MassSpring(g)
     w = ms.warp()
@@ -406,8 +406,8 @@ class _RecordingSolver:
 
 
 def test_gpu_backend_reads_back_only_when_asked(monkeypatch: pytest.MonkeyPatch) -> None:
-    gpu = pytest.importorskip("voxwarp.deform.massspring_gpu")
-    pytest.importorskip("voxwarp.deform.offset_field")
+    gpu = pytest.importorskip("voxwarp.deform.elements.massspring_gpu")
+    pytest.importorskip("voxwarp.deform.elements.offset_field")
     monkeypatch.setattr(gpu, "GpuSpringSolver", _RecordingSolver)
     g = ElementGrid(CUBE, shape=4)
     ms = MassSpring(g, backend="gpu", ctx="ctx")

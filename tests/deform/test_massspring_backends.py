@@ -23,10 +23,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring
 
-pytest.importorskip("voxwarp.deform.massspring_gpu")
+pytest.importorskip("voxwarp.deform.elements.massspring_gpu")
 
 BOX = ((0.0, 0.0, 0.0), (70.0, 60.0, 50.0))
 
@@ -315,7 +315,7 @@ def test_gpu_field_skips_through_deformed_space_once_it_holds_still(gl_ctx: Any)
     """A GPU-owned warp is bounded by reading the field back, but only when the same
     field state is drawn again: never while the simulation steps between frames."""
     from tests.app.test_render import phantom
-    from voxwarp.render.raycaster import OffscreenRenderer
+    from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
     vol = phantom()

@@ -1,8 +1,9 @@
-"""GpuSpringSolver (deform/massspring_gpu.py) against the CPU reference of the same physics.
+"""GpuSpringSolver (deform/elements/massspring_gpu.py) against the CPU reference of the same
+physics.
 
-The reference is ``voxwarp.deform.massspring.CpuSpringSolver`` when that module exists (the
+The reference is ``voxwarp.deform.elements.massspring.CpuSpringSolver`` when that module exists (the
 project's float64 reference), else the small numpy solver below, written straight from
-``deform/spring_model.py``.
+``deform/elements/spring_model.py``.
 """
 
 from __future__ import annotations
@@ -15,9 +16,9 @@ import moderngl
 import numpy as np
 import pytest
 
-from voxwarp.deform.spring_model import SpringModel
+from voxwarp.deform.elements.spring_model import SpringModel
 
-massspring_gpu = pytest.importorskip("voxwarp.deform.massspring_gpu")
+massspring_gpu = pytest.importorskip("voxwarp.deform.elements.massspring_gpu")
 GpuSpringSolver = massspring_gpu.GpuSpringSolver
 
 SHAPE = (5, 4, 6)
@@ -26,7 +27,7 @@ SPACING = np.array([2.0, 1.5, 1.0])
 
 # ---------------------------------------------------------------------- reference
 class _NumpyReference:
-    """Straight transcription of deform/spring_model.py (float64, loops over offsets)."""
+    """Straight transcription of deform/elements/spring_model.py (float64, loops over offsets)."""
 
     def __init__(self, model: SpringModel, ctx: Any = None) -> None:
         self.model = model
@@ -78,8 +79,8 @@ class _NumpyReference:
 
 def _reference_class() -> type:
     """The project's CpuSpringSolver when present, else the numpy transcription above."""
-    if importlib.util.find_spec("voxwarp.deform.massspring") is not None:
-        module = importlib.import_module("voxwarp.deform.massspring")
+    if importlib.util.find_spec("voxwarp.deform.elements.massspring") is not None:
+        module = importlib.import_module("voxwarp.deform.elements.massspring")
         if hasattr(module, "CpuSpringSolver"):
             return module.CpuSpringSolver
     return _NumpyReference

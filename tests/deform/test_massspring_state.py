@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring, MassSpringError
-from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import WarpError, warp_from_dict
 
 BOX = ((0.0, -10.0, 5.0), (60.0, 30.0, 45.0))

@@ -1,4 +1,4 @@
-"""Tests of voxwarp.deform.offset_field: the offset-field warp, CPU reference and GPU path.
+"""Tests of voxwarp.deform.elements.offset_field: the offset-field warp, CPU reference and GPU path.
 
 CPU oracles: the forward map ``X + u(X)`` (the inverse must undo it), finite
 differences (Jacobian), the error study behind the default iteration count. GPU
@@ -21,7 +21,7 @@ from scipy import ndimage
 from tests.app.test_render import aligned_camera, grey_scene, phantom
 from tests.warp_gpu import gpu_warp
 from voxwarp.core.volume import Volume
-from voxwarp.deform.offset_field import (
+from voxwarp.deform.elements.offset_field import (
     DEFAULT_BAKED_ITERATIONS,
     DEFAULT_ITERATIONS,
     OffsetFieldWarp,
@@ -625,7 +625,7 @@ def test_update_region_rewrites_only_its_block(gl_ctx: Any) -> None:
 
 @pytest.mark.parametrize("width", [(1, 1, 1), (2, 4, 1), (3, 5, 2), (8, 2, 16)])
 def test_window_reduce_matches_brute_force(width: tuple[int, int, int]) -> None:
-    from voxwarp.deform.offset_field import window_reduce
+    from voxwarp.deform.node_grid import window_reduce
 
     a = np.random.default_rng(9).normal(size=(9, 7, 6, 3))
     cache: dict = {}

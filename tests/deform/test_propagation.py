@@ -1,4 +1,4 @@
-"""Tests of voxwarp.deform.propagation: the nearest-seed transform (OpenCL vs scipy vs brute
+"""Tests of voxwarp.deform.wires.propagation: the nearest-seed transform (OpenCL vs scipy vs brute
 force).
 """
 
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from voxwarp.bench.propagation import benchmark_nearest_seed, helix_seeds
-from voxwarp.deform import propagation as prop
-from voxwarp.deform.propagation import (
+from voxwarp.deform.warp import WarpError
+from voxwarp.deform.wires import propagation as prop
+from voxwarp.deform.wires.propagation import (
     MAX_LINE,
     OpenCLUnavailableWarning,
     last_backend,
@@ -20,7 +21,6 @@ from voxwarp.deform.propagation import (
     opencl_available,
     seed_distance,
 )
-from voxwarp.deform.warp import WarpError
 
 requires_opencl = pytest.mark.skipif(
     not opencl_available(),

@@ -1,4 +1,5 @@
-"""Tests of voxwarp.deform.scene_graph: matrices and trilinear lattices in a hierarchy, one map per
+"""Tests of voxwarp.deform.lattice.scene_graph: matrices and trilinear lattices in a hierarchy, one
+map per
 leaf.
 
 Oracles: the matrix product of a linear chain; the chain applied step by step (each grid
@@ -17,16 +18,17 @@ import numpy as np
 import pytest
 
 pytest.importorskip(
-    "voxwarp.deform.trilinear", reason="deform/trilinear.py (TrilinearGrid) is not available yet"
+    "voxwarp.deform.lattice.trilinear",
+    reason="deform/lattice/trilinear.py (TrilinearGrid) is not available yet",
 )
 
-from voxwarp.deform.scene_graph import (
+from voxwarp.deform.lattice.scene_graph import (
     ComposedTransform,
     SceneNode,
     compose_path,
     compose_scene,
 )
-from voxwarp.deform.trilinear import TrilinearGrid, TrilinearTransform
+from voxwarp.deform.lattice.trilinear import TrilinearGrid, TrilinearTransform
 from voxwarp.deform.warp import WarpError
 
 RNG = np.random.default_rng(20100517)

@@ -1,4 +1,5 @@
-"""Tests of voxwarp.deform.trilinear: trilinear transformations and grids of trilinear cells.
+"""Tests of voxwarp.deform.lattice.trilinear: trilinear transformations and grids of trilinear
+cells.
 
 Oracles: the paper's corner form (eq. 1) against the coefficient form (eqs. 2-4) and
 the explicit alternating edge sums of ``C``; corners reproduced at the cube corners; an
@@ -16,7 +17,7 @@ import json
 import numpy as np
 import pytest
 
-from voxwarp.deform.trilinear import (
+from voxwarp.deform.lattice.trilinear import (
     MONOMIALS,
     UNIT_CORNERS,
     TrilinearGrid,
@@ -491,7 +492,7 @@ def test_vectorised_maps_equal_point_by_point_maps() -> None:
 
 
 def test_serial_and_threaded_grid_kernels_agree_bit_for_bit() -> None:
-    from voxwarp.deform import trilinear_kernel as k
+    from voxwarp.deform.lattice import kernel as k
 
     rng = np.random.default_rng(7)
     nodes = rng.normal(size=(4, 3, 5, 3))

@@ -441,7 +441,7 @@ def test_built_in_warps_load_without_importing_their_modules() -> None:
     code = (
         "import sys\n"
         "from voxwarp.deform.warp import known_warps, warp_from_dict\n"
-        "assert 'voxwarp.deform.lattice_warp' not in sys.modules\n"
+        "assert 'voxwarp.deform.lattice.warp' not in sys.modules\n"
         "print(known_warps())\n"
         "box = [[0, 0, 0], [1, 1, 1]]\n"
         "w = warp_from_dict({'type': 'lattice', 'grid': {'nodes': %r}, 'box': box})\n"
@@ -455,4 +455,4 @@ def test_built_in_warps_load_without_importing_their_modules() -> None:
     kinds, module = res.stdout.split("\n")[:2]
     for kind in ("affine", "identity", "lattice", "offset_field", "wires"):
         assert repr(kind) in kinds
-    assert module == "voxwarp.deform.lattice_warp"
+    assert module == "voxwarp.deform.lattice.warp"

@@ -1,4 +1,4 @@
-"""The OpenCL classification kernel cache (deform/wire_classify.py) never hands out a
+"""The OpenCL classification kernel cache (deform/wires/classify.py) never hands out a
 kernel of another context: a context made after one was freed can reuse its id()
 (tests reset the OpenCL state), and the stale kernel failed with INVALID_CONTEXT."""
 
@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from voxwarp.deform import propagation as prop
-from voxwarp.deform import wire_classify as wc
+from voxwarp.deform.wires import classify as wc
+from voxwarp.deform.wires import propagation as prop
 
 
 def test_a_reused_context_id_gets_its_own_kernel(monkeypatch: pytest.MonkeyPatch) -> None:

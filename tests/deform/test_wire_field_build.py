@@ -22,9 +22,9 @@ import pytest
 from scipy import ndimage
 
 from voxwarp.core.volume import Volume
-from voxwarp.deform import wires as wires_mod
-from voxwarp.deform.propagation import opencl_available
-from voxwarp.deform.wires import Wire, WireDeformer
+from voxwarp.deform.wires import field as wires_mod
+from voxwarp.deform.wires.field import Wire, WireDeformer
+from voxwarp.deform.wires.propagation import opencl_available
 
 REFERENCE = Path(__file__).parent / "data" / "wire_field_reference.npz"
 
@@ -120,7 +120,7 @@ def test_opencl_pass_gives_the_numpy_classification_bits() -> None:
 def test_opencl_paths_give_the_reference_bits() -> None:
     # the reference's OpenCL propagation ran on PoCL's CPU device: another device may
     # resolve seeds at equal distance within float32 rounding differently (see
-    # voxwarp.deform.propagation, "Ties"), so the saved bits bind PoCL only
+    # voxwarp.deform.wires.propagation, "Ties"), so the saved bits bind PoCL only
     if "Portable Computing Language" not in _device().platform.name:
         pytest.skip("reference propagated on PoCL; this OpenCL device may break ties otherwise")
     assert_reference(reference_fields("opencl"))
@@ -128,7 +128,7 @@ def test_opencl_paths_give_the_reference_bits() -> None:
 
 
 def _device() -> Any:
-    from voxwarp.deform import propagation
+    from voxwarp.deform.wires import propagation
 
     return propagation._opencl_state()["device"]
 

@@ -1,4 +1,4 @@
-"""The wire field's ``layout="paper"`` (deform/wires.py; wire paper section 7.2) and the
+"""The wire field's ``layout="paper"`` (deform/wires/field.py; wire paper section 7.2) and the
 plane-mask memory of section 7.1.
 
 Oracles: the 16-bit code of a voxel decoded by hand against the curve's own segment
@@ -34,7 +34,7 @@ from tests.deform.test_wires import (
     wire,
 )
 from voxwarp.deform.warp import WarpError, warp_from_dict
-from voxwarp.deform.wires import (
+from voxwarp.deform.wires.field import (
     FAR,
     LUT_SIZE,
     PAPER_VACATED,

@@ -1,4 +1,4 @@
-"""Wire field (deform/wires.py): the mapping, the attribute field, the GPU warp.
+"""Wire field (deform/wires/field.py): the mapping, the attribute field, the GPU warp.
 
 Oracles: the identity wire maps every point to itself; a translated wire translates the
 object (CPU exactly, GPU as an image shift); a twist of θ turns a cross-section's
@@ -20,9 +20,8 @@ from scipy import ndimage
 
 from tests.app.test_render import aligned_camera, grey_scene, projected
 from voxwarp.core.volume import Volume
-from voxwarp.deform.propagation import opencl_available
 from voxwarp.deform.warp import WarpError, warp_from_dict
-from voxwarp.deform.wires import (
+from voxwarp.deform.wires.field import (
     FAR,
     LUT_SIZE,
     MAX_WIRES,
@@ -30,6 +29,7 @@ from voxwarp.deform.wires import (
     WireDeformer,
     WireFieldWarp,
 )
+from voxwarp.deform.wires.propagation import opencl_available
 from voxwarp.scene import Scene
 
 N = (64, 40, 40)  # voxels, 1 mm
@@ -248,7 +248,7 @@ def test_opencl_field_equals_the_scipy_reference() -> None:
 
 
 def test_without_opencl_the_build_warns_and_uses_scipy(monkeypatch: pytest.MonkeyPatch) -> None:
-    from voxwarp.deform import propagation
+    from voxwarp.deform.wires import propagation
 
     vol = cylinder()
     ws = [wire(modified=axis_points(dz=-2.0))]

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from tests.fuzz._mutate import mutated_bytes
 from tests.fuzz._support import fuzz_settings, outcome
 from tests.fuzz.test_fuzz_volumes import nifti_field
-from voxwarp.deform.displacement_field import DisplacementFieldWarp
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.io.fields import load_transform, save_displacement_field
 
 pytest.importorskip("SimpleITK")

@@ -13,7 +13,7 @@ from PySide6.QtWidgets import QFileDialog
 
 from tests.ui.test_main_window import _session, frame
 from tests.ui.windows import shown_window
-from voxwarp.deform.displacement_field import DisplacementFieldWarp
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.io.fields import save_displacement_field
 
 

@@ -1,4 +1,4 @@
-"""The wire panel's Ends row (smooth / rigid, voxwarp.deform.wires.Wire.ends) and the
+"""The wire panel's Ends row (smooth / rigid, voxwarp.deform.wires.field.Wire.ends) and the
 session call behind it."""
 
 from __future__ import annotations

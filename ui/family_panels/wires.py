@@ -21,7 +21,7 @@ from PySide6.QtWidgets import (
     QPushButton,
 )
 
-from voxwarp.deform.wires import ENDS
+from voxwarp.deform.wires.field import ENDS
 from voxwarp.editing.session import WIRE_KINDS, EditorError, EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel
 from voxwarp.ui.panel_base import combo, double_spin, value_decimals

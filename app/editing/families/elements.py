@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from voxwarp.deform.chainmail import ChainMail
-from voxwarp.deform.elements import ElementGrid
-from voxwarp.deform.massspring import MassSpring
-from voxwarp.deform.offset_field import OffsetFieldWarp
+from voxwarp.deform.elements.chainmail import ChainMail
+from voxwarp.deform.elements.grid import ElementGrid
+from voxwarp.deform.elements.massspring import MassSpring
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.editing.common import COLORS, DisplayOptions, EditorError
 from voxwarp.editing.families.base import Family, ToWorld

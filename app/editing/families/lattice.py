@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from voxwarp.deform.lattice_warp import LatticeWarp
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.warp import Warp
 from voxwarp.editing.common import COLORS, DisplayOptions
 from voxwarp.editing.families.base import Family, ToWorld

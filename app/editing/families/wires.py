@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from voxwarp.deform.warp import Warp, WarpError
-from voxwarp.deform.wires import DEFAULT_ENDS, ENDS, Wire, WireDeformer, WireFieldWarp
+from voxwarp.deform.wires.field import DEFAULT_ENDS, ENDS, Wire, WireDeformer, WireFieldWarp
 from voxwarp.editing.common import COLORS, WIRE_KINDS, DisplayOptions, EditorError, choice
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track

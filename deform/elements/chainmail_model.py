@@ -3,7 +3,7 @@
 About this technique (Gibson 1997, "3D ChainMail"; Schill et al. 1998, "Enhanced
 ChainMail"; Knoche 2008, 2.4.2.2, 3.5.3)
 ------------------------------------------------------------------------------------
-The elements of an :class:`~voxwarp.deform.elements.ElementGrid` are linked to their 6
+The elements of an :class:`~voxwarp.deform.elements.grid.ElementGrid` are linked to their 6
 neighbours like the rings of a chain mail: a link has slack, so an element can move a
 little without disturbing its neighbours, and pulls or pushes them once the slack is
 used up. For the link from element ``a`` to ``b = a + e_i`` (the next element along
@@ -15,8 +15,9 @@ axis i) with ``d = x_b - x_a`` (world mm), the constraint is (Gibson)::
 Limits are given per element and axis (anisotropic, heterogeneous materials); a link
 uses the mean of its two elements' limits (:meth:`ChainMailModel.link_limits`). A link
 can be removed (:attr:`ChainMailModel.links`: cuts, and past the grid's faces), and
-fixed elements never move. Every solver (``voxwarp.deform.chainmail``'s CPU variants and the
-GPU backend of ``voxwarp.deform.chainmail_gpu``) moves elements only to satisfy these
+fixed elements never move. Every solver (``voxwarp.deform.elements.chainmail``'s CPU variants and
+the
+GPU backend of ``voxwarp.deform.elements.chainmail_gpu``) moves elements only to satisfy these
 constraints, and :meth:`ChainMailModel.violation` is the common check.
 """
 

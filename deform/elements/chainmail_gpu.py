@@ -3,18 +3,19 @@
 About this technique (Gibson 1997; Knoche 2008, 3.5.3.2)
 --------------------------------------------------------
 :class:`GpuChainMailSolver` enforces the link constraints of
-:class:`~voxwarp.deform.chainmail_model.ChainMailModel` on a ``moderngl`` context as the
+:class:`~voxwarp.deform.elements.chainmail_model.ChainMailModel` on a ``moderngl`` context as the
 thesis does: every *pass* is one draw, one fragment per element, that reads the
 previous positions with ``imageLoad`` and writes the new ones into the other
 framebuffer of a ping-pong pair; passes repeat until none changes anything. It writes
-the same offset texture as :class:`voxwarp.deform.massspring_gpu.GpuSpringSolver`. The thesis
+the same offset texture as :class:`voxwarp.deform.elements.massspring_gpu.GpuSpringSolver`. The
+thesis
 drew every pass over the whole grid, which loses ChainMail's locality (a drag that
 moves 300 elements costs a full-grid pass per step of its wave); here a pass covers
 only the box that can still change, so the cost follows the affected region (see
 "Locality").
 
 Measurements (growing box vs full-grid passes, cost of the per-pass sync, what was
-tried): docs/benchmarks.md, section 'voxwarp.deform.chainmail_gpu: growing box vs full
+tried): docs/benchmarks.md, section 'voxwarp.deform.elements.chainmail_gpu: growing box vs full
 grid'.
 
 The iteration
@@ -81,7 +82,7 @@ them (ping-pong; ``w`` 0 free, 1 fixed, 2 held), the targets ``(target - origin,
 if held)`` (read by the pin pass only), the rest positions (for the displacement
 texture) and the link limits, five per element: ``(min, max, shear)`` of its 3
 forward and 3 backward links packed in 18 floats (each link mean of its two
-elements' limits, :meth:`~voxwarp.deform.chainmail_model.ChainMailModel.link_limits`). A
+elements' limits, :meth:`~voxwarp.deform.elements.chainmail_model.ChainMailModel.link_limits`). A
 constraint pass loads 12 texels per element (own position, 6 neighbours, 5 limits).
 Grid and atlas sizes are compile-time constants (``chainmail_config.glsl``, generated
 per solver).
@@ -141,10 +142,10 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform import gl_programs
-from voxwarp.deform.chainmail_model import ChainMailModel
-from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
-from voxwarp.deform.massspring_gpu import atlas_layout
+from voxwarp.deform.elements import gl_programs
+from voxwarp.deform.elements.chainmail_model import ChainMailModel
+from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
+from voxwarp.deform.elements.massspring_gpu import atlas_layout
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
 CHECK_TOL_MM = 1e-4
@@ -219,7 +220,7 @@ class GpuChainMailSolver(GpuGridSolver):
         require_compute_context(
             ctx,
             "GpuChainMailSolver",
-            "use the CPU ChainMail of voxwarp.deform.chainmail without a GL context",
+            "use the CPU ChainMail of voxwarp.deform.elements.chainmail without a GL context",
             "compute shaders, SSBOs",
         )
         self.model = model

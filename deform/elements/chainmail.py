@@ -3,8 +3,8 @@
 About this technique (Gibson 1997, "3D ChainMail"; Schill et al. 1998, "Enhanced
 ChainMail"; Knoche 2008, 2.4.2.2, 3.5.3)
 ------------------------------------------------------------------------------------
-The elements of an :class:`~voxwarp.deform.elements.ElementGrid` are linked to their 6
-neighbours like the rings of a chain mail (:mod:`voxwarp.deform.chainmail_model` states the
+The elements of an :class:`~voxwarp.deform.elements.grid.ElementGrid` are linked to their 6
+neighbours like the rings of a chain mail (:mod:`voxwarp.deform.elements.chainmail_model` states the
 constraints exactly): per element and axis ``i`` a least and a largest distance
 ``min_i <= d_i <= max_i`` and a largest shear ``|d_j| <= shear_i`` (``d = x_b - x_a``
 for ``b = a + e_i``, world mm; a link uses the mean of its two elements' limits). The
@@ -13,7 +13,7 @@ the slack of its links and pulls or pushes its neighbours once a link is taut, a
 those their neighbours, so that after every move **every link satisfies its limits**
 and fixed elements have not moved. The displacements form an offset field that the
 raycaster inverts (:meth:`ChainMail.warp`), exactly as for
-:class:`~voxwarp.deform.massspring.MassSpring`.
+:class:`~voxwarp.deform.elements.massspring.MassSpring`.
 
 Limits from the material map
 ----------------------------
@@ -34,7 +34,8 @@ materials such as muscle, heterogeneous ones); the rest state must satisfy them.
 Moves
 -----
 :meth:`ChainMail.move` puts the dragged elements at ``rest + offset`` (as
-:meth:`MassSpring.move <voxwarp.deform.massspring.MassSpring.move>`) and **holds** them there
+:meth:`MassSpring.move <voxwarp.deform.elements.massspring.MassSpring.move>`) and **holds** them
+there
 until :meth:`ChainMail.release`: later moves and relaxation treat held elements like
 fixed ones. The constraints are then restored by moving every other element *as little
 as possible*. If that would need a fixed or held element to move (the drag pulls
@@ -67,7 +68,8 @@ Variants
   first and moves the element to the nearest value allowed by *all* its links
   (when they conflict, the side it was pushed to); neighbours whose link it then
   violates are queued. Because the constraints are difference bounds per coordinate
-  (see :mod:`voxwarp.deform.chainmail_cpu`), this is Dijkstra's order for a single drag: every
+  (see :mod:`voxwarp.deform.elements.chainmail_cpu`), this is Dijkstra's order for a single drag:
+  every
   element is settled by its most demanding neighbour first, also in heterogeneous
   materials.
 
@@ -99,13 +101,15 @@ Why numba
 ---------
 Propagation is a sequential, data-dependent queue walk that numpy cannot vectorise, and
 pure Python loops do not get a local drag on 128³ elements under 100 ms; the kernels
-in :mod:`voxwarp.deform.chainmail_cpu` are ``numba.njit(cache=True, nogil=True)``, imported on
-first use (so ``import deform`` does not pay for numba).
+in :mod:`voxwarp.deform.elements.chainmail_cpu` are
+``numba.njit(cache=True, nogil=True)``, imported on first use (so ``import deform`` does
+not pay for numba).
 
 Backends
 --------
 ``backend="cpu"`` runs the kernels above (float64). ``backend="gpu"`` drives
-``voxwarp.deform.chainmail_gpu.GpuChainMailSolver`` (created lazily) through ``set_positions``,
+``voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver`` (created lazily) through
+``set_positions``,
 ``enforce(held_mask, held_targets, max_passes) -> passes``, ``feasible`` (a check pass
 over the region the enforce changed), ``snapshot()``/``restore()`` (GPU copies of the
 state), ``positions()``, ``displacement_texture()``, ``revision`` and ``release()``;
@@ -125,9 +129,9 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.chainmail_model import ChainMailError, ChainMailModel, check_limits
-from voxwarp.deform.element_model import ElementWarpMixin
-from voxwarp.deform.elements import ElementGrid, ElementGridError, Selection, grid_from_entry
+from voxwarp.deform.elements.chainmail_model import ChainMailError, ChainMailModel, check_limits
+from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
+from voxwarp.deform.elements.model import ElementWarpMixin
 
 __all__ = [
     "BACKENDS",
@@ -231,7 +235,7 @@ def limits_from_stiffness(
 
 
 def _kernels() -> Any:
-    from voxwarp.deform import chainmail_cpu
+    from voxwarp.deform.elements import chainmail_cpu
 
     return chainmail_cpu
 
@@ -281,7 +285,8 @@ class ChainMail(ElementWarpMixin):
     ) -> None:
         if not isinstance(grid, ElementGrid):
             raise ChainMailError(
-                f"grid must be a voxwarp.deform.elements.ElementGrid; got {type(grid).__name__}"
+                "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
+                f" got {type(grid).__name__}"
             )
         if backend not in BACKENDS:
             raise ChainMailError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
@@ -331,7 +336,8 @@ class ChainMail(ElementWarpMixin):
     # ------------------------------------------------------------------ parameters
     @property
     def model(self) -> ChainMailModel:
-        """The :class:`~voxwarp.deform.chainmail_model.ChainMailModel` the solver runs (live;
+        """The :class:`~voxwarp.deform.elements.chainmail_model.ChainMailModel` the solver runs
+        (live;
         change it through :meth:`set_limits`, :meth:`cut`, :meth:`fix`, :meth:`free`)."""
         return self._model
 
@@ -581,7 +587,7 @@ class ChainMail(ElementWarpMixin):
         ------
         ChainMailError
             On offsets of the wrong shape or not finite.
-        voxwarp.deform.elements.ElementGridError
+        voxwarp.deform.elements.grid.ElementGridError
             On an index outside the grid.
         """
         t0 = time.perf_counter()
@@ -692,7 +698,7 @@ class ChainMail(ElementWarpMixin):
         commit: bool,
         repair: bool = False,
     ) -> tuple[bool, int, int, int, bool]:
-        """One propagation (see :func:`voxwarp.deform.chainmail_cpu.propagate`)."""
+        """One propagation (see :func:`voxwarp.deform.elements.chainmail_cpu.propagate`)."""
         k = _kernels()
         self._epoch += 1
         if self._epoch >= 2**62:
@@ -1033,11 +1039,11 @@ class ChainMail(ElementWarpMixin):
     # ------------------------------------------------------------------ GPU backend
     def _make_gpu_solver(self) -> Any:
         try:
-            from voxwarp.deform.chainmail_gpu import GpuChainMailSolver
+            from voxwarp.deform.elements.chainmail_gpu import GpuChainMailSolver
         except ImportError as exc:
             raise ChainMailError(
-                'backend="gpu" needs voxwarp.deform.chainmail_gpu.GpuChainMailSolver, which could'
-                f' not be imported ({exc}); use backend="cpu"'
+                'backend="gpu" needs voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver,'
+                f' which could not be imported ({exc}); use backend="cpu"'
             ) from exc
         return GpuChainMailSolver(self._model, self._ctx)
 

@@ -2,9 +2,9 @@
 
 About this technique (the wire paper's sections 5.1 and 7.1, on the device)
 ----------------------------------------------------------------------------
-:meth:`voxwarp.deform.wires.WireDeformer.build` gives every voxel of a wire's region the
+:meth:`voxwarp.deform.wires.field.WireDeformer.build` gives every voxel of a wire's region the
 wire id and arc-length fraction u of its nearest seed (the exact distance transform of
-:mod:`voxwarp.deform.propagation`), then, for the voxels within their wire's reach of
+:mod:`voxwarp.deform.wires.propagation`), then, for the voxels within their wire's reach of
 that seed, refines u to the closest point of the wire (Newton steps along the table's
 tangents) and looks the voxel's projection up in the plane mask at u (turned and scaled
 as the sweep does on the base side). The reference does those steps in numpy, one
@@ -234,7 +234,7 @@ _programs: dict[int, tuple[object, object | None]] = {}
 
 
 def classify_available(st: dict) -> bool:
-    """Whether the OpenCL state ``st`` (of :mod:`voxwarp.deform.propagation`) can run the
+    """Whether the OpenCL state ``st`` (of :mod:`voxwarp.deform.wires.propagation`) can run the
     pass: a device with double precision whose program builds."""
     if "error" in st:
         return False
@@ -300,7 +300,7 @@ def classify(
     Parameters
     ----------
     st
-        The OpenCL state of :mod:`voxwarp.deform.propagation` (its lock held).
+        The OpenCL state of :mod:`voxwarp.deform.wires.propagation` (its lock held).
     nearest_buf
         Device buffer of int32 C-order nearest-seed indices over ``inp.rshape``.
     inp
@@ -338,7 +338,7 @@ def classify(
         *bufs,
     ]
     n0, n1, _ = inp.rshape
-    lx = 16  # PoCL picks huge work-groups by itself (see voxwarp.deform.propagation)
+    lx = 16  # PoCL picks huge work-groups by itself (see voxwarp.deform.wires.propagation)
     kernel(queue, ((n1 + lx - 1) // lx * lx, n0), (lx, 1), *args)  # type: ignore[operator]
     for host, dev in zip((out_wire, out_u, out_flag), bufs, strict=True):
         cl.enqueue_copy(queue, host, dev, is_blocking=False)

@@ -81,7 +81,7 @@ below a few sample spacings (``length / samples``) is followed less accurately; 
 more ``samples`` for such curves.
 
 Measurements (speed of evaluation, closest points and frames; frame accuracy):
-docs/benchmarks.md, section 'voxwarp.deform.curves: speed and frame accuracy'.
+docs/benchmarks.md, section 'voxwarp.deform.wires.curves: speed and frame accuracy'.
 
 **Tangent.** ``T = alpha'(t) / |alpha'(t)|``. Where the derivative vanishes (coincident
 Bézier handles, e.g. ``P[1] == P[0]``; a cusp) it falls back to a finite-difference chord
@@ -306,7 +306,7 @@ class Curve:
     Notes
     -----
     Evaluation is vectorised over parameters and points; timings are in
-    docs/benchmarks.md, section 'voxwarp.deform.curves: speed and frame accuracy'.
+    docs/benchmarks.md, section 'voxwarp.deform.wires.curves: speed and frame accuracy'.
     """
 
     def __init__(self, control_points: Any, kind: str = "catmull-rom") -> None:
@@ -624,7 +624,7 @@ class Curve:
 
         Notes
         -----
-        Timings: docs/benchmarks.md, section 'voxwarp.deform.curves: speed and frame
+        Timings: docs/benchmarks.md, section 'voxwarp.deform.wires.curves: speed and frame
         accuracy'.
         """
         if not (isinstance(precision, int | float) and 0.0 < precision < 1.0):

@@ -11,9 +11,11 @@ barycentric, they follow the triangle exactly, whatever deforms or animates the 
 
 An array of anchors builds the deformation grid of an attached object *on the fly*,
 each frame: a 1D array (along a strap, a belt, a spine) or a 2D array (over a patch of
-skin) gives the nodes of a :class:`voxwarp.deform.trilinear.TrilinearGrid` by stepping from each
+skin) gives the nodes of a :class:`voxwarp.deform.lattice.trilinear.TrilinearGrid` by stepping from
+each
 anchor along its frame. The attached geometry lives in the unit cube of its own box
-(the scene-graph convention, :mod:`voxwarp.deform.scene_graph`); the grid maps it onto the base
+(the scene-graph convention, :mod:`voxwarp.deform.lattice.scene_graph`); the grid maps it onto the
+base
 mesh, bending with it:
 
 * 1D array of n anchors: nodes ``(n, 2, 2)``: node (i, j, k) = P_i + (j - 1/2) width y_i
@@ -288,9 +290,10 @@ class AnchorStrip:
         )
 
     def grid(self, vertices: Any, faces: Any) -> Any:
-        """The attached object's :class:`voxwarp.deform.trilinear.TrilinearGrid` for the base
+        """The attached object's :class:`voxwarp.deform.lattice.trilinear.TrilinearGrid` for the
+        base
         mesh's current vertices (call every frame the base moves)."""
-        from voxwarp.deform.trilinear import TrilinearGrid
+        from voxwarp.deform.lattice.trilinear import TrilinearGrid
 
         return TrilinearGrid(self.nodes(vertices, faces))
 

@@ -16,12 +16,12 @@ import numpy as np
 if TYPE_CHECKING:
     from typing import Self
 
-    from voxwarp.deform.elements import ElementGrid, Selection
+    from voxwarp.deform.elements.grid import ElementGrid, Selection
 
 
 @runtime_checkable
 class ElementModel(Protocol):
-    """An element model over an :class:`~voxwarp.deform.elements.ElementGrid`."""
+    """An element model over an :class:`~voxwarp.deform.elements.grid.ElementGrid`."""
 
     grid: ElementGrid
     #: ``"cpu"`` or ``"gpu"``
@@ -59,8 +59,8 @@ class ElementModel(Protocol):
 
 
 class ElementWarpMixin:
-    """The warp side shared by :class:`~voxwarp.deform.massspring.MassSpring` and
-    :class:`~voxwarp.deform.chainmail.ChainMail`.
+    """The warp side shared by :class:`~voxwarp.deform.elements.massspring.MassSpring` and
+    :class:`~voxwarp.deform.elements.chainmail.ChainMail`.
 
     A model sets :attr:`model_type` (its ``"type"`` in scene JSON), :attr:`label` (its
     name in messages) and :attr:`error` (its exception class), and keeps ``grid``,
@@ -86,14 +86,14 @@ class ElementWarpMixin:
 
         ``inverse`` and ``iterations``: the warp's inverse mode (``"approx"``,
         ``"exact"`` or ``"baked"``) and fixed-point iterations (see
-        :class:`voxwarp.deform.offset_field.OffsetFieldWarp`); ``None`` keeps the
+        :class:`voxwarp.deform.elements.offset_field.OffsetFieldWarp`); ``None`` keeps the
         current setting (``"baked"`` when first made). CPU backend: built from
         :meth:`displacements` and kept current by every change of the model. GPU
         backend: reads the solver's displacement texture (no read-back). Its
         ``to_dict()`` also writes this model and the field rendered, so a saved scene
         renders the same image and resumes (:meth:`from_warp`).
         """
-        from voxwarp.deform.offset_field import element_model_warp
+        from voxwarp.deform.elements.offset_field import element_model_warp
 
         self._warp = element_model_warp(
             self._warp,
@@ -118,7 +118,7 @@ class ElementWarpMixin:
 
     def _rendered_field(self) -> np.ndarray:
         """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        from voxwarp.deform.offset_field import texture_field
+        from voxwarp.deform.elements.offset_field import texture_field
 
         field = texture_field(self._solver.displacement_texture(), self.grid.shape)
         return self.displacements().astype(np.float64) if field is None else field
@@ -130,7 +130,7 @@ class ElementWarpMixin:
         its :meth:`warp` is a new warp, to put in the scene in place of ``warp``.
         Raises the model's error when the warp carries no such model or the model and
         the field do not fit together."""
-        from voxwarp.deform.offset_field import saved_model
+        from voxwarp.deform.elements.offset_field import saved_model
 
         state, positions = saved_model(warp, cls.model_type, cls.label, cls.__name__, cls.error)
         return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)  # type: ignore[attr-defined]

@@ -1,5 +1,5 @@
 """Numba kernels of the 3D ChainMail CPU solver (driven by
-:class:`voxwarp.deform.chainmail.ChainMail`).
+:class:`voxwarp.deform.elements.chainmail.ChainMail`).
 
 Why numba
 ---------

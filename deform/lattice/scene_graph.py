@@ -5,7 +5,7 @@ About this technique
 Knuth, Kohlhammer and Kuijper, "Embedding hierarchical deformation within a realtime
 scene graph" (GRAPP 2010) put free-form deformation into an ordinary scene graph: every
 node carries a *transform*, either a 4x4 matrix or a grid of trilinear cells (the
-lattice of section 3, :class:`voxwarp.deform.trilinear.TrilinearGrid`), and a *bounding box*
+lattice of section 3, :class:`voxwarp.deform.lattice.trilinear.TrilinearGrid`), and a *bounding box*
 that maps the node's content into the unit cube on which the lattice is defined
 (section 4). Before rendering, the transforms are propagated from the world down to
 every geometry leaf, which receives ONE composed transform (section 4.1); the vertex
@@ -18,7 +18,7 @@ Semantics implemented here:
 * A node's transform maps its *local* coordinates into its *parent's* coordinates; the
   root's parent is the world. ``None`` is the identity.
 * A 4x4 (affine) matrix acts on local coordinates directly: ``x_parent = M [x; 1]``.
-* A :class:`~voxwarp.deform.trilinear.TrilinearGrid` acts on the box-normalised coordinates
+* A :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` acts on the box-normalised coordinates
   ``u = (x - lo) / (hi - lo)`` of the node's box ``(lo, hi)`` (the node's content box,
   in its local coordinates) and returns parent coordinates: ``x_parent = G(u)``. A grid
   transform therefore needs a box (:class:`~voxwarp.deform.warp.WarpError` otherwise).
@@ -27,7 +27,7 @@ Semantics implemented here:
 
   - if every transform on the root-to-leaf path is a matrix (or ``None``), it is the
     4x4 product ``M_root @ ... @ M_leaf``: linear chains stay matrices;
-  - otherwise it is a :class:`~voxwarp.deform.trilinear.TrilinearGrid` over the leaf's
+  - otherwise it is a :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` over the leaf's
     box-unit cube, built by pushing the leaf's grid node points through the chain,
     child side first. This is the paper's composition ``G o L`` (section 4.1) applied
     pairwise: L's grid points are mapped into G's box-unit coordinates and then through
@@ -44,7 +44,7 @@ Semantics implemented here:
   refuses (``strict=True``, the default) when a leaf's node points fall outside the box
   of a grid node above it, naming the box to enlarge; ``strict=False`` hands such points
   to the grid as they are, which extends its border cells' trilinear polynomials beyond
-  the unit cube (:class:`~voxwarp.deform.trilinear.TrilinearGrid`'s extrapolation).
+  the unit cube (:class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid`'s extrapolation).
 
 Each node has at most one parent: adding a node twice, or into its own subtree, raises
 :class:`~voxwarp.deform.warp.WarpError`, and :meth:`SceneNode.walk` detects cycles made behind
@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.trilinear import TrilinearGrid, TrilinearTransform
+from voxwarp.deform.lattice.trilinear import TrilinearGrid, TrilinearTransform
 from voxwarp.deform.warp import WarpError
 
 __all__ = ["ComposedTransform", "SceneNode", "compose_path", "compose_scene"]
@@ -188,9 +188,10 @@ class SceneNode:
         Label used in error messages and saved by :meth:`to_dict`.
     transform
         ``None`` (the identity), a 4x4 affine matrix acting on local coordinates, or a
-        :class:`~voxwarp.deform.trilinear.TrilinearGrid` acting on the box-normalised coordinates
-        ``u = (x - lo) / (hi - lo)`` (a single :class:`~voxwarp.deform.trilinear.TrilinearTransform`
-        is taken as a one-cell grid). Either way the result is in the parent's coordinates.
+        :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` acting on the box-normalised
+        coordinates ``u = (x - lo) / (hi - lo)`` (a single
+        :class:`~voxwarp.deform.lattice.trilinear.TrilinearTransform` is taken as a one-cell
+        grid). Either way the result is in the parent's coordinates.
     box
         ``(lo, hi)``: the node's content box in its local coordinates, ``lo < hi`` on
         every axis. Required with a grid transform; for a node with geometry under a grid

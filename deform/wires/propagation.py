@@ -51,7 +51,7 @@ OpenCL backend off (``"auto"`` then uses scipy; ``"opencl"`` raises), e.g. to te
 or to work around a broken driver.
 
 Measurements (OpenCL against scipy, kernel build and buffer allocation): docs/benchmarks.md,
-section 'voxwarp.deform.propagation: OpenCL vs scipy'; the timing helper is
+section 'voxwarp.deform.wires.propagation: OpenCL vs scipy'; the timing helper is
 :func:`voxwarp.bench.propagation.benchmark_nearest_seed`.
 """
 
@@ -565,7 +565,7 @@ def on_device_nearest(
     indices) to ``use(state, buffer)``, under the lock that guards the shared buffers.
 
     For callers that consume the indices on the device (the wire field's classification,
-    :mod:`voxwarp.deform.wire_classify`); the caller checks :func:`opencl_available`, the
+    :mod:`voxwarp.deform.wires.classify`); the caller checks :func:`opencl_available`, the
     axis limit :data:`MAX_LINE` and that ``seeds`` holds a seed first. OpenCL errors
     propagate (``state["cl"].Error``).
     """

@@ -1,7 +1,7 @@
 """What the GPU solvers of the element models share: ownership of their GPU objects.
 
-:class:`~voxwarp.deform.massspring_gpu.GpuSpringSolver` and
-:class:`~voxwarp.deform.chainmail_gpu.GpuChainMailSolver` create textures, framebuffers and
+:class:`~voxwarp.deform.elements.massspring_gpu.GpuSpringSolver` and
+:class:`~voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver` create textures, framebuffers and
 programs on a context they are given; each keeps them (:meth:`GpuGridSolver._keep`)
 and frees all of them, once, in :meth:`GpuGridSolver.release`.
 """

@@ -18,7 +18,7 @@ Two resolutions, both computed on the CPU from the volume and the scene:
 
 :func:`octant_regions` splits the image into the regions whose rays share an octant,
 so the renderer can draw each region with its octant's map. When the maps are built,
-kept and dropped is :mod:`voxwarp.render.skip_cache`.
+kept and dropped is :mod:`voxwarp.render.skipping.cache`.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ Octant = tuple[int, int, int]
 """Signs (+1 or -1) of a ray direction's x, y and z components (see OCTANT_EPS)."""
 
 #: Arrays of at least this many elements (voxels, cells, blocks) are classified and
-#: measured by the compiled kernels of :mod:`voxwarp.render.skip_kernels`; smaller ones
-#: by the numpy builders of :mod:`voxwarp.render.skip_numpy` (the same arrays), so that
+#: measured by the compiled kernels of :mod:`voxwarp.render.skipping.kernels`; smaller ones
+#: by the numpy builders of :mod:`voxwarp.render.skipping.numpy_maps` (the same arrays), so that
 #: a small volume's first render does not pay numba's start-up (once per process).
 COMPILED_MIN_SIZE = 1 << 23
 
@@ -73,13 +73,13 @@ def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.
     voxels trilinear interpolation reads for any sample inside the block. Returns two
     float32 arrays of shape ``ceil(n / block)`` per axis, in data units (from
     COMPILED_MIN_SIZE voxels on, a compiled kernel in the data's own dtype,
-    :func:`voxwarp.render.skip_kernels.block_range`).
+    :func:`voxwarp.render.skipping.kernels.block_range`).
     """
     if not _compiled(np.asarray(data).size):
-        from voxwarp.render import skip_numpy
+        from voxwarp.render.skipping import numpy_maps as skip_numpy
 
         return skip_numpy.block_min_max(data, block)
-    from voxwarp.render import skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels
 
     t = _texture_order(data)
     nb = tuple(-(-n // block) for n in t.shape)
@@ -99,7 +99,7 @@ def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Two full-size arrays: the renderer uses :func:`cell_visibility`, which keeps none.
     """
     if not _compiled(np.asarray(data).size):
-        from voxwarp.render import skip_numpy
+        from voxwarp.render.skipping import numpy_maps as skip_numpy
 
         return skip_numpy.cell_min_max(data)
     return _cell_range_slab(_texture_order(data), 0, np.asarray(data).shape[2] + 1)
@@ -107,7 +107,7 @@ def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _cell_range_slab(t: np.ndarray, z0: int, z1: int) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) of the cells ``z0 .. z1`` (z) of texture-order data, (x, y, z)-indexed."""
-    from voxwarp.render import skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels
 
     shape = (z1 - z0, t.shape[1] + 1, t.shape[2] + 1)
     lo = np.empty(shape, dtype=t.dtype)
@@ -138,7 +138,7 @@ def cell_visibility(
     """
     if not _compiled(np.prod(cell_grid_shape(np.shape(data)))):
         return static_block_visibility(scene, *cell_min_max(data))
-    from voxwarp.render import skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels
 
     t = _texture_order(data)
     out = np.empty((t.shape[0] + 1, t.shape[1] + 1, t.shape[2] + 1), dtype=bool)
@@ -213,10 +213,10 @@ def block_skip_distances(visible: np.ndarray) -> np.ndarray:
     if visible.all():
         return np.zeros(visible.shape, dtype=np.uint8)
     if not _compiled(visible.size * BLOCK**3):  # the blocks of a volume that large
-        from voxwarp.render import skip_numpy
+        from voxwarp.render.skipping import numpy_maps as skip_numpy
 
         return skip_numpy.block_skip_distances(visible)
-    from voxwarp.render import skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels
 
     v = _texture_order(visible)
     d = np.empty(v.shape, dtype=np.int32)
@@ -256,7 +256,7 @@ def octant_skip_distances(
     Each distance is a forward chessboard distance, built as three 1D passes
     ``min over 0 <= k < cap of max(k, g[c + s k])`` (max distributes over min, so the
     passes compose exactly); from COMPILED_MIN_SIZE cells on compiled, in place in the
-    output (:mod:`voxwarp.render.skip_kernels`), else in numpy.
+    output (:mod:`voxwarp.render.skipping.kernels`), else in numpy.
     """
     visible = np.asarray(visible, dtype=bool)
     if visible.ndim != 3:
@@ -265,10 +265,10 @@ def octant_skip_distances(
         raise ValueError(f"signs must be three of +1/-1; got {signs}")
     cap = int(min(max(cell_cap, 1), 255))
     if not _compiled(visible.size):
-        from voxwarp.render import skip_numpy
+        from voxwarp.render.skipping import numpy_maps as skip_numpy
 
         return skip_numpy.octant_skip_distances(visible, signs, cap, block)
-    from voxwarp.render import skip_kernels as kern
+    from voxwarp.render.skipping import kernels as kern
 
     v = _texture_order(visible)
     out = np.empty(v.shape, dtype=np.uint8)

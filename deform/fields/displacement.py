@@ -39,8 +39,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from voxwarp.deform.offset_field import MAX_DISPLACEMENT_MM as MAX_DISPLACEMENT_MM
-from voxwarp.deform.offset_field import cell_reduce, check_vectors, window_reduce
+from voxwarp.deform.node_grid import MAX_DISPLACEMENT_MM as MAX_DISPLACEMENT_MM
+from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, box_corners, check_forward, register_warp
 
 #: Spaces a field's affine and vectors may be given in.

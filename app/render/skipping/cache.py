@@ -1,6 +1,6 @@
 """When the raycaster's empty-space skip maps are built, kept, reused and dropped.
 
-The maths of the maps is :mod:`voxwarp.render.skipping`; this module is their cache
+The maths of the maps is :mod:`voxwarp.render.skipping.maps`; this module is their cache
 policy, for :class:`voxwarp.render.raycaster.Renderer`:
 
 * :class:`VolumeSkipMaps` holds one volume's maps (GPU textures and the CPU arrays they
@@ -21,8 +21,7 @@ import numpy as np
 
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
-from voxwarp.render.ray_segments import RaySegments, SegmentMap, segment_lengths
-from voxwarp.render.skipping import (
+from voxwarp.render.skipping.maps import (
     Octant,
     block_skip_distances,
     cell_grid_shape,
@@ -33,6 +32,7 @@ from voxwarp.render.skipping import (
     warped_cell_grid,
     warped_cell_visibility,
 )
+from voxwarp.render.skipping.segments import RaySegments, SegmentMap, segment_lengths
 
 if TYPE_CHECKING:
     from voxwarp.scene import Scene
@@ -49,7 +49,7 @@ class VolumeSkipMaps:
     (straight and warped rays) and the CPU arrays they come from.
 
     Made beside the volume's texture from its data and block (min, max) grids
-    (:func:`voxwarp.render.skipping.block_min_max`); only a :class:`SkipMapCache` fills it.
+    (:func:`voxwarp.render.skipping.maps.block_min_max`); only a :class:`SkipMapCache` fills it.
     Free its textures with :meth:`release` while the context is current.
     """
 
@@ -136,7 +136,7 @@ class SkipMapCache:
         Warped (non-affine) rays skip at cell resolution too, through deformed space,
         when every warp of the chain bounds its displacement
         (:meth:`voxwarp.deform.warp.Warp.displacement_range`; see
-        :func:`voxwarp.render.skipping.warped_cell_visibility`); otherwise they test their
+        :func:`voxwarp.render.skipping.maps.warped_cell_visibility`); otherwise they test their
         4³ block per sample. Building those maps takes seconds on the CPU for a 256³
         volume (a one-frame render costs less with block checks, and a warp that
         changes every frame, as while dragging, would rebuild every frame), so with

@@ -2,8 +2,9 @@
 
 About this technique (Knoche 2008, 3.5)
 ---------------------------------------
-:class:`GpuSpringSolver` integrates exactly the physics of :mod:`voxwarp.deform.spring_model`
-(the same as :class:`voxwarp.deform.massspring.CpuSpringSolver`, to float32 round-off) on a
+:class:`GpuSpringSolver` integrates exactly the physics of
+:mod:`voxwarp.deform.elements.spring_model`
+(the same as :class:`voxwarp.deform.elements.massspring.CpuSpringSolver`, to float32 round-off) on a
 ``moderngl`` context. One draw call is one integration step: one fragment per *block*
 of elements (default 2 x 2 x 1) reads the previous state of the block's elements and
 of their spring neighbours with ``imageLoad`` and writes the new positions and
@@ -65,7 +66,7 @@ Performance
 On llvmpipe every texel fetch is a per-lane gather and both sides of every branch run,
 so the step's cost is its loads and its memory traffic; blocks of elements per fragment
 cut the loads per element. Measurements (steps/s against a taichi CPU kernel, block
-shapes, what was tried): docs/benchmarks.md, section 'voxwarp.deform.massspring_gpu:
+shapes, what was tried): docs/benchmarks.md, section 'voxwarp.deform.elements.massspring_gpu:
 step throughput'.
 
 Displacement texture
@@ -97,9 +98,9 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform import gl_programs
-from voxwarp.deform.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
-from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
+from voxwarp.deform.elements import gl_programs
+from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
+from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 
 #: Most springs per element the shaders accept (structural + shear + bend).
 MAX_SPRINGS = 24
@@ -187,7 +188,7 @@ class GpuSpringSolver(GpuGridSolver):
         require_compute_context(
             ctx,
             "GpuSpringSolver",
-            "use voxwarp.deform.massspring.CpuSpringSolver without a GL context",
+            "use voxwarp.deform.elements.massspring.CpuSpringSolver without a GL context",
             "compute shaders",
         )
         self.model = model

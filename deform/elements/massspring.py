@@ -2,14 +2,14 @@
 
 About this technique (Knoche 2008, 2.4, 3.5, 3.6)
 --------------------------------------------------
-An :class:`~voxwarp.deform.elements.ElementGrid` of point masses spans the volume, joined by
-springs (:mod:`voxwarp.deform.spring_model` states the physics exactly). The user drags
+An :class:`~voxwarp.deform.elements.grid.ElementGrid` of point masses spans the volume, joined by
+springs (:mod:`voxwarp.deform.elements.spring_model` states the physics exactly). The user drags
 elements (:meth:`MassSpring.move`); the springs pull the others along, and the
 elements' displacements from rest form an *offset field* that the raycaster inverts
 (:meth:`MassSpring.warp`), so the volume itself is never resampled.
 
 Two solvers implement the same physics: :class:`CpuSpringSolver` here (numpy, float64,
-the reference) and ``GpuSpringSolver`` in :mod:`voxwarp.deform.massspring_gpu` (fragment
+the reference) and ``GpuSpringSolver`` in :mod:`voxwarp.deform.elements.massspring_gpu` (fragment
 shaders, float32). :class:`MassSpring` drives either one through the same small
 interface and never reads GPU state back except in :meth:`MassSpring.displacements`,
 :meth:`MassSpring.energy` and :meth:`MassSpring.settle`.
@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.element_model import ElementWarpMixin
-from voxwarp.deform.elements import ElementGrid, Selection, grid_from_entry
-from voxwarp.deform.spring_model import INTEGRATORS, SpringModel
+from voxwarp.deform.elements.grid import ElementGrid, Selection, grid_from_entry
+from voxwarp.deform.elements.model import ElementWarpMixin
+from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 from voxwarp.errors import VoxwarpError
 
 #: solver backends of :class:`MassSpring`
@@ -127,7 +127,7 @@ def spring_energy(model: SpringModel, positions: np.ndarray, velocities: np.ndar
 
 class CpuSpringSolver:
     """Vectorised numpy (float64) solver of exactly the physics of
-    :mod:`voxwarp.deform.spring_model`.
+    :mod:`voxwarp.deform.elements.spring_model`.
 
     The materials, springs and grid are read from ``model`` once, at construction; the
     step parameters (``dt``, ``integrator``, ``max_step``, ``spring_constant``,
@@ -226,7 +226,7 @@ class CpuSpringSolver:
         """Accelerations (n_x, n_y, n_z, 3) of all elements in the given state.
 
         Spring, spring-damping and element-damping forces divided by mass, exactly as in
-        :mod:`voxwarp.deform.spring_model` (constraints are not applied here).
+        :mod:`voxwarp.deform.elements.spring_model` (constraints are not applied here).
         """
         x, v = positions, velocities
         m = self.model
@@ -333,7 +333,8 @@ class MassSpring(ElementWarpMixin):
     ) -> None:
         if not isinstance(grid, ElementGrid):
             raise MassSpringError(
-                f"grid must be a voxwarp.deform.elements.ElementGrid; got {type(grid).__name__}"
+                "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
+                f" got {type(grid).__name__}"
             )
         if backend not in BACKENDS:
             raise MassSpringError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
@@ -383,7 +384,7 @@ class MassSpring(ElementWarpMixin):
         self._offsets = np.zeros((*grid.shape, 3), dtype=np.float64)
         self._warp: Any = None
         if backend == "gpu":
-            from voxwarp.deform.massspring_gpu import GpuSpringSolver
+            from voxwarp.deform.elements.massspring_gpu import GpuSpringSolver
 
             self._solver: Any = GpuSpringSolver(self._model, ctx)
         else:
@@ -394,7 +395,7 @@ class MassSpring(ElementWarpMixin):
     # ------------------------------------------------------------------ parameters
     @property
     def model(self) -> SpringModel:
-        """The :class:`~voxwarp.deform.spring_model.SpringModel` the solver runs."""
+        """The :class:`~voxwarp.deform.elements.spring_model.SpringModel` the solver runs."""
         return self._model
 
     @property
@@ -484,7 +485,7 @@ class MassSpring(ElementWarpMixin):
         ------
         MassSpringError
             On offsets of the wrong shape or not finite.
-        voxwarp.deform.elements.ElementGridError
+        voxwarp.deform.elements.grid.ElementGridError
             On an index outside the grid.
         """
         try:

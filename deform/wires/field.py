@@ -14,7 +14,8 @@ fraction u in [0, 1] (0 = first control point), the same on both curves: this is
 paper's plane-to-plane mapping by t.
 
 Frames. Twist needs a frame on each curve that has no twist of its own: both curves
-carry rotation-minimising frames (double reflection, :meth:`voxwarp.deform.curves.Curve.frames`);
+carry rotation-minimising frames (double reflection,
+:meth:`voxwarp.deform.wires.curves.Curve.frames`);
 the base frame starts from ``initial_normal`` (default: the world axis least aligned
 with the base tangent), the modified frame from that normal carried by the minimal
 rotation between the two start tangents. So a wire that is only translated or bent in
@@ -55,7 +56,8 @@ leave the original box). It is built in deformed space:
 3. *Voxel initialisation* (5.1): where the modified wire enters a field cell, its eight
    voxels become seeds with (γ wire id, ε closest u, d distance), keeping the minimum d.
 4. *Propagation*: every voxel of the region takes (γ, ε) of its nearest seed, by an
-   exact Euclidean distance transform in OpenCL (:mod:`voxwarp.deform.propagation`, PoCL on the
+   exact Euclidean distance transform in OpenCL (:mod:`voxwarp.deform.wires.propagation`, PoCL on
+   the
    CPU here, any OpenCL GPU elsewhere; scipy when no platform exists, with a warning).
    Distances are discarded. ε is then refined to the closest point of the wire
    (:data:`REFINE_STEPS` Newton steps): the nearest seed's u is off by up to a voxel
@@ -75,7 +77,7 @@ leave the original box). It is built in deformed space:
    footprint touches a mask (the masks grow by half a field voxel), so coarse fields
    neither cut the object's edges nor leave thin parts of it behind. Where the OpenCL
    device has double precision, steps 4-5 run as one pass on it
-   (:mod:`voxwarp.deform.wire_classify`: the nearest-seed indices never leave the device,
+   (:mod:`voxwarp.deform.wires.classify`: the nearest-seed indices never leave the device,
    and the refinement and mask tests give the numpy path's bits); else in numpy.
 
 Wire ends (not in the paper). The rigid sweep (``ends="rigid"``) moves nothing past the
@@ -105,7 +107,7 @@ Storage (7.2). Two layouts, chosen by ``layout``:
 * ``"paper"``: the paper's own 2-byte example (section 7.2): bit 15 the swept flag, bits
   11-14 the wire id γ (16 wires), bits 7-10 the segment index of the modified curve
   holding the voxel's closest point (16 segments; the segments of
-  :meth:`voxwarp.deform.curves.Curve.segment_of`, found through the wire's table of
+  :meth:`voxwarp.deform.wires.curves.Curve.segment_of`, found through the wire's table of
   curve parameters), bits 0-6 the integer t within that segment (128 steps). The t
   steps are equally spaced in arc length within the segment: with ``u_s`` the fraction
   where segment s starts, ``u = u_s + (t / 127) (u_{s+1} - u_s)``, so every code maps
@@ -151,8 +153,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from voxwarp.deform.curves import Curve, minimal_rotation
 from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
+from voxwarp.deform.wires.curves import Curve, minimal_rotation
 
 #: most wires in one attribute field (7-bit wire id of the packed layout)
 MAX_WIRES = 128
@@ -483,7 +485,9 @@ class Wire:
             "falloff",
         }
         if unknown:
-            raise WarpError(f"unknown wire keys {sorted(unknown)}; see voxwarp.deform.wires.Wire")
+            raise WarpError(
+                f"unknown wire keys {sorted(unknown)}; see voxwarp.deform.wires.field.Wire"
+            )
         if "base" not in d:
             raise WarpError("a wire needs 'base': its control points [[x, y, z], ...] in mm")
         if "radius" not in d:
@@ -803,7 +807,7 @@ class WireDeformer:
     dilation
         Pixels of morphological dilation of each mask.
     backend
-        Propagation backend of :func:`voxwarp.deform.propagation.nearest_seed`.
+        Propagation backend of :func:`voxwarp.deform.wires.propagation.nearest_seed`.
     precision
         Arc-length precision p (eq. 4) and closest-point precision (in t).
     propagate
@@ -952,7 +956,7 @@ class WireDeformer:
             Field size, planes kept/dropped, seeds, swept/vacated/ignored voxel counts and
             the time of each stage.
         """
-        from voxwarp.deform.propagation import last_backend
+        from voxwarp.deform.wires.propagation import last_backend
 
         t_all = time.perf_counter()
         timings: dict[str, float] = {}
@@ -1077,7 +1081,7 @@ class WireDeformer:
     def _side(self, job: _SideJob) -> _SideResult:
         """Propagation and flags of one side: the region's first voxel and shape, wire
         id and refined u per region voxel, the mask bits and the seed count. One OpenCL
-        pass (:mod:`voxwarp.deform.wire_classify`) where the device allows, else numpy;
+        pass (:mod:`voxwarp.deform.wires.classify`) where the device allows, else numpy;
         adds the stages' seconds to ``timings``."""
         seeds, tables, grown, lo, h, shape, side, timings = job.parts()
         if self.propagate == "flagged":
@@ -1101,8 +1105,8 @@ class WireDeformer:
         """:meth:`_side` in one OpenCL pass; None where OpenCL (with double precision)
         is unavailable, not asked for, or fails (the numpy path then runs)."""
         seeds, tables, grown, lo, h, shape, side, timings = job.parts()
-        from voxwarp.deform import propagation as prop
-        from voxwarp.deform.wire_classify import ClassifyInput, WireGeometry, classify
+        from voxwarp.deform.wires import propagation as prop
+        from voxwarp.deform.wires.classify import ClassifyInput, WireGeometry, classify
 
         if self.backend not in ("auto", "opencl") or not self.classify_on_device():
             return None
@@ -1170,8 +1174,8 @@ class WireDeformer:
     def classify_on_device(self) -> bool:
         """Whether :meth:`build` propagates and flags in one OpenCL pass (an OpenCL
         device with double precision), rather than with numpy."""
-        from voxwarp.deform import propagation as prop
-        from voxwarp.deform.wire_classify import classify_available
+        from voxwarp.deform.wires import propagation as prop
+        from voxwarp.deform.wires.classify import classify_available
 
         return prop.opencl_available() and classify_available(prop._opencl_state())
 
@@ -1370,7 +1374,7 @@ class WireDeformer:
         """(wire, u) of the nearest seed for every voxel of the wires' region on one
         side (the reference, numpy path): the region's first voxel and shape, the two
         grids, which voxels lie within their wire's reach, and the seed count."""
-        from voxwarp.deform.propagation import nearest_seed
+        from voxwarp.deform.wires.propagation import nearest_seed
 
         c_lo, rshape, grid, flat, s_wire, s_u = self._region(seeds, tables, lo, h, shape, side)
         wire_of = np.zeros(int(np.prod(rshape)), dtype=np.int16)

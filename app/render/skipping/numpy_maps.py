@@ -1,7 +1,7 @@
 """The numpy builders of the skip maps, for volumes below
-:data:`voxwarp.render.skipping.COMPILED_MIN_SIZE` (the maths and the public functions are
-:mod:`voxwarp.render.skipping`, which picks these or the compiled kernels of
-:mod:`voxwarp.render.skip_kernels`; both give the same arrays). A small volume's first
+:data:`voxwarp.render.skipping.maps.COMPILED_MIN_SIZE` (the maths and the public functions are
+:mod:`voxwarp.render.skipping.maps`, which picks these or the compiled kernels of
+:mod:`voxwarp.render.skipping.kernels`; both give the same arrays). A small volume's first
 render then needs neither numba nor its start-up; these make full-size temporaries
 (int16 and padded copies), which only a small volume can afford.
 """
@@ -80,7 +80,7 @@ def _forward_chessboard(g: np.ndarray, cap: int) -> np.ndarray:
 def octant_skip_distances(
     visible: np.ndarray, signs: Octant, cell_cap: int, block: int
 ) -> np.ndarray:
-    """Octant skip distances (see :func:`voxwarp.render.skipping.octant_skip_distances`),
+    """Octant skip distances (see :func:`voxwarp.render.skipping.maps.octant_skip_distances`),
     in the frame flipped towards ``signs``."""
     visible = np.asarray(visible, dtype=bool)
     flip = _flip(signs)

@@ -1,4 +1,4 @@
-"""Compiled (numba) kernels behind the skip maps of :mod:`voxwarp.render.skipping`.
+"""Compiled (numba) kernels behind the skip maps of :mod:`voxwarp.render.skipping.maps`.
 
 A module of its own so that importing the raycaster does not import numba: it loads
 on the first skip map a renderer builds. Every kernel works in *texture order*: a

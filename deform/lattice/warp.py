@@ -11,13 +11,14 @@ opposite direction: it marches in deformed space and must know, per sample ``p``
 original point ``q`` is seen there. This module is that inverse, as a
 :class:`~voxwarp.deform.warp.Warp`.
 
-A :class:`~voxwarp.deform.trilinear.TrilinearGrid` ``grid`` deforms the content of the box
+A :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` ``grid`` deforms the content of the box
 ``[lo, hi]`` (original world, mm): the original point ``x`` has lattice coordinates
 ``u = (x - lo) / (hi - lo)`` in the unit cube and appears at ``grid(u)``. The warp
 solves ``grid(u) = p`` and returns ``q = lo + u (hi - lo)``:
 
 * *Seed* (``inverse="baked"``, and the start of ``"newton"``): ``grid^-1`` is baked on
-  the CPU (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.inverse`) at the nodes of a regular
+  the CPU (:meth:`~voxwarp.deform.lattice.trilinear.TrilinearGrid.inverse`) at the nodes of a
+  regular
   grid over the deformed lattice's bounding box, :data:`BAKE_FACTOR` nodes per lattice
   cell and axis (:data:`MIN_BAKE_NODES` to :data:`MAX_BAKE_NODES` per axis), stored as
   an RGBA32F 3D texture (xyz = u) and sampled with one hardware-trilinear fetch. Baked
@@ -34,7 +35,7 @@ solves ``grid(u) = p`` and returns ``q = lo + u (hi - lo)``:
   rule in :meth:`LatticeWarp.solve`. With ``iterations=k`` instead, k fixed steps,
   written out in the shader (the former default was 2). ``grid(u)`` and ``J`` come from
   the 8 corners of u's cell, read with ``texelFetch`` from an RGBA32F texture of the
-  nodes (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.texture_data`). The alternative,
+  nodes (:meth:`~voxwarp.deform.lattice.trilinear.TrilinearGrid.texture_data`). The alternative,
   a hardware-filtered fetch for ``grid(u)`` plus forward differences towards the cell
   centre for ``J`` (exact, the map being linear along each axis within a cell), needs 4
   filtered fetches per step (32 texel reads); the 8 plain fetches read a quarter of
@@ -95,7 +96,7 @@ sample, the seed one filtered fetch.
 
 Measurements (error distribution over random lattices per variant, render cost against
 the seed alone and the former 2 fixed steps, CPU preparation): docs/benchmarks.md,
-section 'voxwarp.deform.lattice_warp: inverse accuracy and render cost', from
+section 'voxwarp.deform.lattice.warp: inverse accuracy and render cost', from
 ``voxwarp bench lattice --inverse-only``.
 """
 
@@ -108,8 +109,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from voxwarp.deform.offset_field import cell_reduce, window_reduce
-from voxwarp.deform.trilinear import TrilinearGrid
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
+from voxwarp.deform.node_grid import cell_reduce, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
 
 #: Inverse modes: the baked seed alone, or the seed refined by Newton steps.
@@ -342,7 +343,8 @@ class LatticeWarp(Warp):
     Parameters
     ----------
     grid
-        The :class:`~voxwarp.deform.trilinear.TrilinearGrid`: unit cube -> deformed world (mm).
+        The :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid`: unit cube -> deformed world
+        (mm).
     box
         ``(lo, hi)``: the box (original world, mm) whose content the lattice deforms,
         mapped onto the unit cube; usually the volume's box (``volume.bounds``).
@@ -381,7 +383,7 @@ class LatticeWarp(Warp):
     ) -> None:
         if not isinstance(grid, TrilinearGrid):
             raise WarpError(
-                "LatticeWarp needs a voxwarp.deform.trilinear.TrilinearGrid;"
+                "LatticeWarp needs a voxwarp.deform.lattice.trilinear.TrilinearGrid;"
                 f" got {type(grid).__name__}"
                 " (build one with TrilinearGrid(nodes) or TrilinearGrid.from_function)"
             )
@@ -612,7 +614,8 @@ class LatticeWarp(Warp):
         """The baked seed: ``(field, lo, hi)``.
 
         ``field`` is ``bake_shape + (4,)``: xyz = u at the baked nodes
-        (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.inverse` inside the lattice, the inverse
+        (:meth:`~voxwarp.deform.lattice.trilinear.TrilinearGrid.inverse` inside the lattice, the
+        inverse
         of the lattice continued linearly beyond its surface outside), w = 1 for nodes
         near the lattice (see the module docstring), else 0. ``lo``, ``hi``: the box
         the nodes span (:meth:`seed_box`). Computed once.
@@ -1069,7 +1072,8 @@ def bent_grid(
     In box units: the middle is pushed along +z by ``bend sin(pi u_x)`` (an arc), twisted
     by ``0.15 (u_y - 0.5) sin(pi u_x)`` along z, shifted along y by ``0.1 sin(pi u_z)``
     and sheared along x by ``0.06 sin(pi u_z) (u_y - 0.5)``; sampled at the nodes of
-    ``cells`` cells per axis (:meth:`~voxwarp.deform.trilinear.TrilinearGrid.from_function`).
+    ``cells`` cells per axis
+    (:meth:`~voxwarp.deform.lattice.trilinear.TrilinearGrid.from_function`).
     """
     lo_a, hi_a = np.asarray(lo, float), np.asarray(hi, float)
     size = hi_a - lo_a

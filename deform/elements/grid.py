@@ -13,7 +13,8 @@ by itself either (:meth:`ElementGrid.pinned`).
 Materials can vary over the grid; :meth:`ElementGrid.materials_from_volume` derives the
 stiffness from the volume's values, e.g. bone stiffer than soft tissue.
 
-This module only describes the grid; :class:`voxwarp.deform.massspring.MassSpring` simulates it.
+This module only describes the grid; :class:`voxwarp.deform.elements.massspring.MassSpring`
+simulates it.
 """
 
 from __future__ import annotations

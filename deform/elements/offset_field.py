@@ -20,7 +20,7 @@ trilinear value, cheaper than one 3D trilinear fetch on llvmpipe. The field can 
 by this warp (uploaded from numpy) or by a GPU simulation (``texture_source``).
 
 Measurements (inverse error per mode and iteration count, GPU costs): docs/benchmarks.md,
-section 'voxwarp.deform.offset_field: inverse accuracy and cost'.
+section 'voxwarp.deform.elements.offset_field: inverse accuracy and cost'.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, register_warp
 
 #: Inverse modes: one step (thesis), the fixed-point iteration from ``q_0 = p``, or the
@@ -39,7 +40,7 @@ INVERSE_MODES: tuple[str, ...] = ("approx", "exact", "baked")
 MAX_ITERATIONS = 64
 #: Default number of fixed-point iterations of ``inverse="exact"``: the fewest whose
 #: worst residual in :func:`inverse_error_table` stays below 1 % of the node spacing
-#: (docs/benchmarks.md, section 'voxwarp.deform.offset_field: inverse accuracy and cost').
+#: (docs/benchmarks.md, section 'voxwarp.deform.elements.offset_field: inverse accuracy and cost').
 DEFAULT_ITERATIONS = 6
 #: Default fixed-point corrections of ``inverse="baked"`` after the baked seed, when the
 #: inverse is baked at least 3x finer than the field (grids up to 43 nodes per axis):
@@ -55,8 +56,6 @@ BAKE_ITERATIONS = 32
 MAX_BAKE_FACTOR = 4
 #: Most baked-inverse nodes per axis (a 128³ RGBA16F texture is 16 MB).
 MAX_BAKE_NODES = 128
-#: Largest displacement a half-float texture holds (mm).
-MAX_DISPLACEMENT_MM = 6.0e4
 
 #: ``callable() -> (model dict, displacements or None)``: see :class:`OffsetFieldWarp`.
 ModelSource = Callable[[], tuple[Mapping[str, Any], Any]]
@@ -109,23 +108,6 @@ def _field(displacements: Any, shape: tuple[int, int, int] | None) -> np.ndarray
     return u
 
 
-def check_vectors(u: np.ndarray, units_hint: str) -> None:
-    """Raise :class:`WarpError` for NaN/Inf displacements or ones beyond
-    :data:`MAX_DISPLACEMENT_MM` (the half-float texture); ``units_hint`` ends the latter."""
-    bad = int(np.count_nonzero(~np.isfinite(u)))
-    if bad:
-        first = np.argwhere(~np.isfinite(u))[0][:3].tolist()
-        raise WarpError(
-            f"the displacements have {bad} NaN/Inf entries (the first at node {first});"
-            " fix the field"
-        )
-    if np.max(np.abs(u), initial=0.0) > MAX_DISPLACEMENT_MM:
-        raise WarpError(
-            f"displacements above {MAX_DISPLACEMENT_MM:g} mm do not fit the half-float"
-            f" texture; {units_hint}"
-        )
-
-
 def _model_dict(model: Any) -> dict[str, Any] | None:
     """A model entry (``{"type": ..., ...}``) as a plain dict; ``None`` stays ``None``."""
     if model is None:
@@ -159,7 +141,7 @@ class OffsetFieldWarp(Warp):
     Give it the grid box and a ``(nx, ny, nz, 3)`` field of node displacements in mm,
     or a GPU texture owned by a simulation (``texture_source``); add it to a scene's
     ``warps``. The deformation models build one for you
-    (:meth:`voxwarp.deform.massspring.MassSpring.warp`). Change a CPU field with
+    (:meth:`voxwarp.deform.elements.massspring.MassSpring.warp`). Change a CPU field with
     :meth:`update` or :meth:`update_region`; the texture follows on the next draw.
 
     How it works: for a sample ``p`` in deformed space the warp finds the original
@@ -173,7 +155,7 @@ class OffsetFieldWarp(Warp):
     dragged across a face is cut off there), so give the grid a margin around the
     part of the volume that is to move.
 
-    Measurements: docs/benchmarks.md, section 'voxwarp.deform.offset_field: inverse
+    Measurements: docs/benchmarks.md, section 'voxwarp.deform.elements.offset_field: inverse
     accuracy and cost'.
 
     Parameters
@@ -198,7 +180,7 @@ class OffsetFieldWarp(Warp):
     inverse
         ``"approx"``, ``"exact"`` (default) or ``"baked"``, as described above.
         ``"approx"`` is ``"exact"`` with one iteration. ``"baked"`` is the default of
-        :meth:`voxwarp.deform.massspring.MassSpring.warp` and of ``voxwarp render
+        :meth:`voxwarp.deform.elements.massspring.MassSpring.warp` and of ``voxwarp render
         --massspring``.
     iterations
         Fixed-point steps of ``"exact"``, or corrections after the seed of
@@ -209,7 +191,7 @@ class OffsetFieldWarp(Warp):
         alpha channel (0 without it).
     model_source
         Optional ``callable() -> (model, displacements)``, set by the model that drives
-        this warp (e.g. :meth:`voxwarp.deform.massspring.MassSpring.warp`) so that
+        this warp (e.g. :meth:`voxwarp.deform.elements.massspring.MassSpring.warp`) so that
         :meth:`to_dict` saves the model with the field: ``model`` is a JSON-serialisable
         dict with a ``"type"`` key; ``displacements`` is the current field read back
         from the GPU, or ``None`` when this warp holds a CPU field. Called once per
@@ -231,7 +213,7 @@ class OffsetFieldWarp(Warp):
         The ``"model"`` entry of the scene JSON this warp was loaded from (e.g.
         ``{"type": "massspring", ...}``), or ``None``. It lets an application resume
         the simulation that produced the saved field
-        (:meth:`voxwarp.deform.massspring.MassSpring.from_warp`). The warp never reads
+        (:meth:`voxwarp.deform.elements.massspring.MassSpring.from_warp`). The warp never reads
         it; :meth:`to_dict` writes it back unchanged (also after :meth:`update`).
     model_source : callable or None
         See the parameter of the same name.
@@ -703,7 +685,7 @@ class OffsetFieldWarp(Warp):
 
         Unrolled in the text because llvmpipe (Mesa 22) keeps even a loop with a
         constant trip count of 1 as a loop, which is slower than straight-line code
-        (docs/benchmarks.md, section 'voxwarp.deform.offset_field: inverse accuracy and
+        (docs/benchmarks.md, section 'voxwarp.deform.elements.offset_field: inverse accuracy and
         cost').
         """
         return {
@@ -747,7 +729,7 @@ class OffsetFieldWarp(Warp):
             entry = None
         if entry is None:
             from voxwarp import shaders
-            from voxwarp.deform import gl_programs
+            from voxwarp.deform.elements import gl_programs
 
             # one compiled bake shader per context, shared by every warp (gl_programs)
             hold = gl_programs.compute_shader(ctx, shaders.source("offset_field_bake.comp.glsl"))
@@ -833,7 +815,8 @@ class OffsetFieldWarp(Warp):
         """JSON form: lo, hi, shape, inverse, iterations, displacements (nested lists).
 
         With a :attr:`model_source` (a warp driven by a model such as
-        :class:`~voxwarp.deform.massspring.MassSpring`) the entry also holds ``"model"``, the
+        :class:`~voxwarp.deform.elements.massspring.MassSpring`) the entry also holds ``"model"``,
+        the
         model's own dict, and a GPU-owned field is read back once (through the
         model source) so that ``"displacements"`` hold exactly the field that is
         rendered; :meth:`from_dict` then rebuilds a warp that renders the same image.
@@ -966,7 +949,7 @@ def saved_model(
     (state, positions)
         The model dict and ``rest + displacements`` (the saved field) of its grid.
     """
-    from voxwarp.deform.elements import grid_from_entry
+    from voxwarp.deform.elements.grid import grid_from_entry
 
     state = getattr(warp, "model_state", None)
     if not isinstance(state, Mapping) or state.get("type") != kind:
@@ -1003,7 +986,7 @@ def element_model_warp(
     warp
         The model's warp so far (``None``: make it).
     grid
-        The :class:`~voxwarp.deform.elements.ElementGrid` (``lo``, ``hi``, ``shape``).
+        The :class:`~voxwarp.deform.elements.grid.ElementGrid` (``lo``, ``hi``, ``shape``).
     displacements
         ``() -> (nx, ny, nz, 3)`` the model's displacements (mm): the CPU field, or for
         a GPU solver the read-back that bounds the field for empty-space skipping.
@@ -1053,59 +1036,6 @@ def element_model_warp(
             raise error(f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}")
         warp.iterations = int(iterations)
     return warp
-
-
-def cell_reduce(node: np.ndarray, op: Any) -> np.ndarray:
-    """Per grid cell, ``op`` over its (up to) 8 corner nodes; (cells..., 3)."""
-    cell = node
-    for axis in range(3):
-        if cell.shape[axis] > 1:
-            a = np.moveaxis(cell, axis, 0)
-            cell = np.moveaxis(op(a[:-1], a[1:]), 0, axis)
-    return cell
-
-
-def _part(ndim: int, axis: int, start: int, stop: int | None) -> tuple[slice, ...]:
-    """Index of ``start:stop`` along ``axis`` of an ``ndim``-array."""
-    sl = [slice(None)] * ndim
-    sl[axis] = slice(start, stop)
-    return tuple(sl)
-
-
-def window_reduce(
-    cell: np.ndarray,
-    width: Sequence[int],
-    op: Any,
-    cache: dict[tuple, np.ndarray] | None = None,
-) -> np.ndarray:
-    """Forward window reduction: ``out[i] = op(cell[i : i + width])`` per axis (clamped
-    at the end). Power-of-two widths take log2 doubling steps per axis, in place on
-    slices (no transposed copies); ``cache`` keeps the passes of width prefixes (x,
-    then x and y) for the next call."""
-    m = cell
-    for axis in range(3):
-        key = tuple(width[: axis + 1])
-        if cache is not None and key in cache:
-            m = cache[key]
-            continue
-        w = int(width[axis])
-        if w > 1:
-            src = m
-            m = m.copy()
-            nd = m.ndim
-            if w & (w - 1) == 0:  # doubling: spans 1, 2, 4, ... reach w
-                span = 1
-                while span < w and span < m.shape[axis]:
-                    head, tail = _part(nd, axis, 0, -span), _part(nd, axis, span, None)
-                    op(m[head], m[tail], out=m[head])
-                    span *= 2
-            else:
-                for k in range(1, min(w, m.shape[axis])):
-                    head, tail = _part(nd, axis, 0, -k), _part(nd, axis, k, None)
-                    op(m[head], src[tail], out=m[head])
-        if cache is not None:
-            cache[key] = m
-    return m
 
 
 def inverse_error_table(

@@ -7,8 +7,9 @@ An n_x x n_y x n_z grid of *elements* (point masses) spans the volume; springs j
 neighbouring elements. Dragging elements moves their neighbours through the springs;
 the elements' displacements form the *offset field* that the raycaster inverts.
 
-Every solver (``CpuSpringSolver`` in :mod:`voxwarp.deform.massspring`, ``GpuSpringSolver`` in
-:mod:`voxwarp.deform.massspring_gpu`) implements exactly this, so their results agree to
+Every solver (``CpuSpringSolver`` in :mod:`voxwarp.deform.elements.massspring`, ``GpuSpringSolver``
+in
+:mod:`voxwarp.deform.elements.massspring_gpu`) implements exactly this, so their results agree to
 float32 round-off:
 
 * Springs from element ``a`` to each neighbour ``b = a + o`` inside the grid, for the

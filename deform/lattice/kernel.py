@@ -1,7 +1,7 @@
 """The compiled (numba) trilinear grid evaluation behind
-:meth:`voxwarp.deform.trilinear.TrilinearGrid.forward`.
+:meth:`voxwarp.deform.lattice.trilinear.TrilinearGrid.forward`.
 
-A module of its own so that ``import voxwarp.deform.trilinear`` (and with it the
+A module of its own so that ``import voxwarp.deform.lattice.trilinear`` (and with it the
 raycaster and the mesh module) does not import numba: it loads on the first
 evaluation of a non-linear grid. :func:`eval_grid` picks the threaded kernel for many
 points and the serial one for few: a scene graph evaluates hundreds of small node

@@ -1,0 +1,210 @@
+"""Headless rendering: :class:`OffscreenRenderer` draws scenes and slices into an
+offscreen framebuffer on its own EGL context (or one it is given) and reads them back
+as arrays (row 0 at the top) that Jupyter shows inline."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from voxwarp.core.camera import Camera
+from voxwarp.core.slice_plane import SlicePlane, plane_for_space
+from voxwarp.errors import RenderError
+from voxwarp.render.context import create_context, egl_current, egl_restore
+from voxwarp.render.inline_image import RenderedImage, rendered
+from voxwarp.render.raycaster import Renderer
+from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.scene import Scene
+
+
+class OffscreenRenderer:
+    """Headless rendering into an offscreen framebuffer.
+
+    Parameters
+    ----------
+    width, height
+        Image size in pixels.
+    ctx
+        Optional existing context; by default an EGL standalone context is created and
+        owned (released with the renderer).
+    dtype
+        ``"u1"`` for (H, W, 4) uint8 images, ``"f4"`` for float32 (tests, HDR/EXR output).
+
+    Use as a context manager; :meth:`render` returns the image with row 0 at the top.
+    """
+
+    def __init__(
+        self, width: int = 512, height: int = 512, *, ctx: Any = None, dtype: str = "u1"
+    ) -> None:
+        if int(width) < 1 or int(height) < 1 or int(width) > 16384 or int(height) > 16384:
+            raise RenderError(f"image size must be 1..16384 pixels per side; got {width}x{height}")
+        if dtype not in ("u1", "f4"):
+            raise RenderError(f"dtype must be 'u1' or 'f4'; got {dtype!r}")
+        self._owns_ctx = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self.size = (int(width), int(height))
+        self.dtype = dtype
+        self._gl_dtype = "f1" if dtype == "u1" else "f4"
+        self._fbo: Any = None
+        self._color: Any = None
+        with self.current():
+            self.renderer = Renderer(self.ctx)
+            self._make_fbo()
+        self._released = False
+
+    @contextlib.contextmanager
+    def current(self) -> Iterator[None]:
+        """A block with this renderer's context current and the previous one restored
+        after (a context passed in is the caller's to make current): for GPU work beside
+        :meth:`render`, such as an edit session's ``gl_scope``."""
+        if getattr(self, "_released", False):
+            raise RenderError(
+                "this OffscreenRenderer is closed (released, or its with block has ended):"
+                " use it inside the block, or make a new one"
+            )
+        if not self._owns_ctx:
+            yield
+            return
+        saved = egl_current()
+        self.ctx.mglo.__enter__()  # eglMakeCurrent(this context)
+        try:
+            yield
+        finally:
+            if saved is not None:
+                egl_restore(saved)
+
+    def _unbind_fbo(self) -> None:
+        # never delete the bound framebuffer: moderngl would re-bind the dead name later
+        try:
+            self.ctx.detect_framebuffer(0).use()
+        except Exception:
+            pass
+
+    def _make_fbo(self) -> None:
+        if self._fbo is not None:
+            self._unbind_fbo()
+            self._fbo.release()
+            self._color.release()
+        # moderngl "f1" is normalised RGBA8 ("u1" would be an integer format)
+        self._color = self.ctx.renderbuffer(self.size, 4, dtype=self._gl_dtype)
+        self._fbo = self.ctx.framebuffer(color_attachments=[self._color])
+
+    def resize(self, width: int, height: int) -> None:
+        """Change the image size."""
+        self.size = (int(width), int(height))
+        with self.current():
+            self._make_fbo()
+
+    @property
+    def framebuffer(self) -> Any:
+        """The moderngl framebuffer images are drawn into."""
+        return self._fbo
+
+    def render(self, scene: Scene, camera: Camera | None = None) -> RenderedImage:
+        """Render ``scene``; returns (H, W, 4) uint8 or float32, row 0 = image top (a
+        :class:`~voxwarp.render.inline_image.RenderedImage`: an array Jupyter shows)."""
+        with self.current():
+            self.renderer.draw(scene, self._fbo, camera=camera)
+            return self.read()
+
+    def read(self) -> RenderedImage:
+        """What :attr:`framebuffer` holds, as :meth:`render` returns it: after drawing
+        more into it (e.g. an :class:`~voxwarp.render.overlay.OverlayRenderer` pass)."""
+        with self.current():
+            raw = self._fbo.read(components=4, dtype=self._gl_dtype, alignment=1)
+        w, h = self.size
+        img = np.frombuffer(raw, dtype=np.uint8 if self.dtype == "u1" else np.float32)
+        return rendered(img.reshape(h, w, 4)[::-1].copy())
+
+    def render_slice(
+        self,
+        scene: Scene,
+        plane: SlicePlane | str,
+        *,
+        size: tuple[int, int] | None = None,
+        at: float | None = None,
+        slab_mm: float = 0.0,
+        slab_mode: str = "mip",
+        interpolation: str = "linear",
+        look: str = "window",
+        window: tuple[float, float] | None = None,
+        show: str = "deformed",
+    ) -> SliceImage:
+        """One slice of ``scene`` through its warp chain (multi-planar reformatting).
+
+        ``plane`` is a :class:`~voxwarp.core.slice_plane.SlicePlane` or a name
+        (``"axial"``, ``"coronal"``, ``"sagittal"``, ``"x"``, ``"y"``, ``"z"``) framed
+        on the scene's deformed box at ``at`` mm along its axis. ``size`` defaults to
+        this renderer's. Returns a :class:`~voxwarp.render.slice_image.SliceImage`: its
+        ``rgba`` (coloured by ``look`` ``"window"`` with ``window = (level, width)``,
+        default the scene's, or ``"tf"``; ``show`` one of ``"deformed"``, ``"rest"``,
+        ``"checkerboard"``, ``"difference"``), the deformed and rest ``values`` and
+        ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to world mm.
+        """
+        w, h = self.size if size is None else (int(size[0]), int(size[1]))
+        if isinstance(plane, str):  # axial etc. of a volume without orientation: z etc.
+            name = plane_for_space(plane, scene.volume.space)
+            plane = SlicePlane.named(name, scene.deformed_bounds(), at=at, aspect=w / h)
+        elif at is not None:
+            plane = plane.at(at)
+        matrix = plane.pixel_to_world((w, h))
+        with self.current():
+            data = self.renderer.slice_values(
+                scene,
+                matrix,
+                (w, h),
+                slab_mm=slab_mm,
+                slab_mode=slab_mode,
+                interpolation=interpolation,
+            )
+        image = SliceImage.from_data(data, matrix, plane)
+        win = scene.window if window is None else window
+        colorize(image, look=look, window=win, tf=scene.transfer_function, show=show)
+        image.rgba = rendered(image.rgba)  # shows inline in Jupyter
+        return image
+
+    def time_frames(
+        self, scene: Scene, frames: int = 10, warmup: int = 2, camera: Camera | None = None
+    ) -> list[float]:
+        """Milliseconds per frame (``ctx.finish()`` bound) after ``warmup`` frames."""
+        with self.current():
+            return self._time_frames(scene, frames, warmup, camera)
+
+    def _time_frames(
+        self, scene: Scene, frames: int, warmup: int, camera: Camera | None
+    ) -> list[float]:
+        for _ in range(warmup):
+            self.renderer.draw(scene, self._fbo, camera=camera)
+        self.ctx.finish()
+        times = []
+        for _ in range(frames):
+            t = time.perf_counter()
+            self.renderer.draw(scene, self._fbo, camera=camera)
+            self.ctx.finish()
+            times.append((time.perf_counter() - t) * 1000)
+        return times
+
+    def release(self) -> None:
+        """Free GPU resources (and the context if this renderer created it); idempotent."""
+        if getattr(self, "_released", True):
+            return
+        with self.current():
+            self.renderer.release()
+            self._unbind_fbo()
+            self._fbo.release()
+            self._color.release()
+        if self._owns_ctx:
+            saved = egl_current()  # releasing may clear the current context
+            self.ctx.release()
+            egl_restore(saved)
+        self._released = True
+
+    def __enter__(self) -> OffscreenRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
