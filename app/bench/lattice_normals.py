@@ -17,7 +17,7 @@ Per scene, lattice size and method: the mean and max angle to the exact normals 
 vertices, and the seam: the largest angle between the normals of two rings a hair either
 side of an inner cell face (the exact normals turn by far less there). The normals are
 :meth:`voxwarp.core.mesh.MeshInstance.world_normals`, the CPU reference that the vertex
-shader matches (``tests/app/test_mesh_normals.py``). Nothing here is timed.
+shader matches (``tests/core/test_mesh_normals.py``). Nothing here is timed.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 The benchmarks and ``voxwarp reproduce`` put these beside voxwarp's measurements. Only
 numbers printed in the papers are here (``../shared/papers/`` holds their text); ratios
 are derived from them by the functions below, never typed in, so a misquote shows as a
-failing test (``tests/app/test_papers.py``).
+failing test (``tests/teaching/test_papers.py``).
 
 * **Wire paper** (Journal of WSCG 14, 2006; non-reconstructive volume deformation by
   sweeping along wires): Table 1 (ray samples ignored), Tables 2 and 3 (standard render

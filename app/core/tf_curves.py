@@ -5,7 +5,7 @@ diverging Msh, HSV, steps) and bend opacity segments with a midpoint and a sharp
 voxwarp's transfer functions are linear in RGB and opacity between points. These
 functions add points along VTK's path until the straight pieces are within half a grey
 level of it (checked against VTK 9.7.2's vtkColorTransferFunction / vtkPiecewiseFunction,
-tests/app/test_tf_formats.py). Pure numpy (and colorsys); used by
+tests/core/test_tf_formats.py). Pure numpy (and colorsys); used by
 :mod:`voxwarp.core.tf_formats`.
 """
 

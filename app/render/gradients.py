@@ -22,7 +22,7 @@ from __future__ import annotations
 from typing import Any
 
 from voxwarp import shaders
-from voxwarp.deform.elements import gl_programs
+from voxwarp.deform import gl_programs
 
 #: volumes up to this many voxels get a gradient texture by default (128 MiB of RGBA16F)
 MAX_VOXELS = 1 << 24

@@ -53,7 +53,7 @@ from voxwarp import shaders
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import Mesh, MeshInstance
 from voxwarp.core.mesh_warp import affine_forward, moves_meshes, warped_geometry
-from voxwarp.deform.elements import gl_programs
+from voxwarp.deform import gl_programs
 from voxwarp.deform.lattice.trilinear import TrilinearGrid, cofactor_matrix
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.errors import RenderError

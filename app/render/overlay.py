@@ -37,7 +37,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
-from voxwarp.deform.elements import gl_programs
+from voxwarp.deform import gl_programs
 from voxwarp.errors import RenderError
 
 #: Layer kinds: ``"points"`` or ``"lines"`` (consecutive pairs of positions).

@@ -495,7 +495,7 @@ class Renderer:
             },
         )
         frag = shaders.with_defines(frag, defines)
-        from voxwarp.deform.elements import gl_programs
+        from voxwarp.deform import gl_programs
 
         try:  # compiled once per context, shared by its renderers (gl_programs)
             hold = gl_programs.program(
@@ -819,7 +819,7 @@ class Renderer:
         _, tex, fbo = self._lod_target
         self.draw(scene, fbo, (0, 0, *size), camera)
         if self._upscale is None:
-            from voxwarp.deform.elements import gl_programs
+            from voxwarp.deform import gl_programs
 
             hold = gl_programs.program(
                 self.ctx,

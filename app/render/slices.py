@@ -88,7 +88,7 @@ class SliceRenderer:
             ["#define NEAREST"] if nearest else []
         )
         frag = shaders.with_defines(frag, defines)
-        from voxwarp.deform.elements import gl_programs
+        from voxwarp.deform import gl_programs
 
         try:
             hold = gl_programs.program(

@@ -3,6 +3,6 @@ ChainMail, each with a CPU reference and a GLSL backend, sampled as an offset-fi
 
 Modules: ``grid`` (elements, materials, selections), ``model`` (what both models share:
 save/load, drags, the warp), ``massspring``/``spring_model``/``massspring_gpu``,
-``chainmail``/``chainmail_model``/``chainmail_cpu``/``chainmail_gpu``, ``gpu_grid`` and
-``gl_programs`` (the GPU set-up both GPU solvers use), ``offset_field`` (the warp).
+``chainmail``/``chainmail_model``/``chainmail_cpu``/``chainmail_gpu``, ``gpu_grid`` (the
+GPU set-up both GPU solvers use), ``offset_field`` (the warp).
 """

@@ -62,7 +62,7 @@ Variants
   ``"enhanced"`` from every violated link of a moved element (the element that moved
   less follows), until no link is violated; :attr:`MoveStats.cleanup` counts its
   corrections (0 in homogeneous materials; in the heterogeneous random drags of
-  ``tests/deform/test_chainmail.py`` a few per move).
+  ``tests/deform/elements/test_chainmail.py`` a few per move).
 * ``"enhanced"`` (Schill et al. 1998): one priority queue of (element, coordinate)
   entries ordered by how far the entry asks the element to move; the largest goes
   first and moves the element to the nearest value allowed by *all* its links

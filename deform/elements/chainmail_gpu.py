@@ -142,7 +142,7 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform.elements import gl_programs
+from voxwarp.deform import gl_programs
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
 from voxwarp.deform.elements.massspring_gpu import atlas_layout

@@ -98,7 +98,7 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform.elements import gl_programs
+from voxwarp.deform import gl_programs
 from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
 from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 

@@ -729,7 +729,7 @@ class OffsetFieldWarp(Warp):
             entry = None
         if entry is None:
             from voxwarp import shaders
-            from voxwarp.deform.elements import gl_programs
+            from voxwarp.deform import gl_programs
 
             # one compiled bake shader per context, shared by every warp (gl_programs)
             hold = gl_programs.compute_shader(ctx, shaders.source("offset_field_bake.comp.glsl"))

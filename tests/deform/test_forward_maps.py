@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.deform.test_lattice_warp import BOX, bent
-from tests.deform.test_wires import build, cylinder, wire
+from tests.deform.lattice.test_lattice_warp import BOX, bent
+from tests.deform.wires.test_wires import build, cylinder, wire
 from voxwarp.deform import ChainMail
 from voxwarp.deform.elements.grid import ElementGrid
 from voxwarp.deform.elements.massspring import MassSpring

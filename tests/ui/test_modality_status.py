@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from tests.app.test_modality import PAD, padded_ct
+from tests.core.test_modality import PAD, padded_ct
 from tests.ui.test_main_window import window  # noqa: F401 - the fixture
 from voxwarp.io.volumes import save_volume
 

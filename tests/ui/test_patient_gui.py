@@ -16,7 +16,7 @@ import pytest
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QApplication, QLabel
 
-from tests.app.test_orientation_marker import find_letter
+from tests.render.test_orientation_marker import find_letter
 from tests.ui.test_panels import TF, FakeWindow, make_panel
 from tests.ui.windows import press_shortcut, shown_window
 from voxwarp.core.camera import view_rotation

@@ -2,7 +2,7 @@
 
 Runs on the private Xvfb of tests/ui/conftest.py; dialogs (file, list, message box) are
 replaced by stubs that record what they were asked. Files as in
-tests/app/test_tf_formats.py (copied from Slicer's presets.xml and ParaView's
+tests/core/test_tf_formats.py (copied from Slicer's presets.xml and ParaView's
 ColorMaps.json).
 """
 
@@ -17,7 +17,7 @@ import pytest
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFileDialog, QInputDialog, QMessageBox
 
-from tests.app.test_tf_formats import (
+from tests.core.test_tf_formats import (
     CT_BONE_COLOUR,
     PARAVIEW_EXPORT,
     PARAVIEW_PRESETS,

@@ -29,7 +29,7 @@ evaluate every sample.
 
 This is a measurement on a grid, not a proof: a kink narrower than the node step can
 be under-estimated (its midpoint error depends on where it falls between nodes), so
-the tolerance is a target rather than a guarantee; ``tests/app/test_ray_segments.py``
+the tolerance is a target rather than a guarantee; ``tests/render/test_ray_segments.py``
 states the image differences measured against the per-sample path, and
 ``Renderer.ray_segment = 1`` turns interpolation off.
 """
