@@ -137,7 +137,7 @@ def test_bench_render_input_file() -> None:
     the command makes and releases its own GL context."""
     from voxwarp.bench import vtk as bench_vtk
 
-    from .test_cli import run_cli
+    from tests.cli.test_cli import run_cli
 
     argv = ["bench", "render", "--input", "sample:colin27", "--tf", "mri", "--view", "-y"]
     proc = run_cli(*argv, "--size", "64x64", "--frames", "1", "--warmup", "1")
