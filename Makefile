@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: setup run test lint docs format bench clean
+.PHONY: setup run test test-fast lint docs format bench clean
 
 $(STAMP): pyproject.toml scripts/install-system-deps.sh
 	@bash scripts/install-system-deps.sh
@@ -25,6 +25,10 @@ run: $(STAMP)
 ## without an EGL context; the teaching notebooks are executed, the napari manifest validated)
 test: $(STAMP) lint docs
 	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest
+
+## the suite without the tests marked slow or load (a quick check while working; CI runs `make test`)
+test-fast: $(STAMP)
+	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest -m "not slow and not load"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

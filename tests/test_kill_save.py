@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from voxwarp.core.files import is_temp_name
 
 CHILD = r"""
@@ -36,6 +38,7 @@ while True:
 """
 
 
+@pytest.mark.slow
 def test_scene_save_killed_at_random_moments_keeps_a_whole_scene(tmp_path: Path) -> None:
     path = tmp_path / "scene.json"
     rng = random.Random(17)

@@ -50,6 +50,7 @@ def _hits(mod: str, prefixes: tuple[str, ...]) -> bool:
 
 
 @pytest.mark.parametrize("package", sorted(FORBIDDEN))
+@pytest.mark.slow
 def test_package_respects_layers(package: str) -> None:
     files = sorted((ROOT / package).rglob("*.py"))
     assert files, f"no python files found in {package}/"
@@ -64,6 +65,7 @@ def test_package_respects_layers(package: str) -> None:
 
 
 @pytest.mark.parametrize("folder", ["app", "deform", "ui", "shaders", "sample_volumes", "tests"])
+@pytest.mark.slow
 def test_no_generic_top_level_imports(folder: str) -> None:
     """Every import of the project's own code goes through ``voxwarp``."""
     bad = []

@@ -86,6 +86,7 @@ def test_no_generic_top_level_package_is_installed(tmp_path: Path) -> None:
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_renders_beside_a_users_own_app_package(tmp_path: Path) -> None:
     """The usual Flask/FastAPI layout has its own ``app/``: both must import."""
     (tmp_path / "app").mkdir()

@@ -189,6 +189,7 @@ def test_frames_of_another_scene_size_or_format_are_never_reused(
 
 
 # ---------------------------------------------------------------------- Dask
+@pytest.mark.slow
 def test_two_local_dask_workers_equal_the_serial_run_bit_exactly(
     scene_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, gl_ctx: Any
 ) -> None:

@@ -135,9 +135,8 @@ def test_bench_render_input_file() -> None:
     """``bench render --input FILE --tf --view``: one case, its covered share, and the VTK
     rows skipped with a note (not a failure) where VTK is not installed. In a subprocess:
     the command makes and releases its own GL context."""
-    from voxwarp.bench import vtk as bench_vtk
-
     from tests.cli.test_cli import run_cli
+    from voxwarp.bench import vtk as bench_vtk
 
     argv = ["bench", "render", "--input", "sample:colin27", "--tf", "mri", "--view", "-y"]
     proc = run_cli(*argv, "--size", "64x64", "--frames", "1", "--warmup", "1")

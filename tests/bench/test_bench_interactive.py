@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import pytest
+
 from voxwarp.bench.interactive import bench_interactive
 from voxwarp.render.adaptive_quality import LEVELS
 
 
+@pytest.mark.slow
 def test_bench_interactive_times_each_family_three_ways() -> None:
     report = bench_interactive(size=(64, 48), frames=1, families=("none", "lattice"))
     assert report.size == (64, 48)

@@ -269,6 +269,7 @@ def test_bad_options_are_rejected(capsys: pytest.CaptureFixture) -> None:
         bench_lattice(triangles=10, log=lambda s: None)
 
 
+@pytest.mark.slow
 def test_cli_writes_the_markdown(
     gl_ctx: Any, tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: Any
 ) -> None:

@@ -18,6 +18,7 @@ from voxwarp.bench.lattice import add_bench_lattice_parser, command_line
 from voxwarp.deform.lattice.warp import DEFAULT_TOLERANCE, STUDY_VARIANTS
 
 
+@pytest.mark.slow
 def test_tiny_section(gl_ctx: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(li, "VOLUME_SIZE", 24)
     monkeypatch.setattr(li, "IMAGE", (32, 24))

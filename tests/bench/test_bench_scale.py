@@ -44,6 +44,7 @@ def test_sizes_arg() -> None:
             scale._sizes_arg(bad)
 
 
+@pytest.mark.slow
 def test_bench_scale_tiny(gl_ctx: Any) -> None:
     """Two tiny volumes: positive timings, every phase, and growth ratios that are the
     quotients of the report's own numbers."""

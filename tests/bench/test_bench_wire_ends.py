@@ -22,6 +22,7 @@ def test_head_wire_ends_inside_the_head() -> None:
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_smooth_ends_leave_fewer_seams_than_the_rigid_cut(gl_ctx: Any) -> None:
     rows = measure_case("colin27", size=(160, 160), frames=1, repeats=1)
     assert [r.ends for r in rows] == ["rigid", "smooth"]

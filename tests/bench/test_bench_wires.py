@@ -86,6 +86,7 @@ def _check_report_invariants(report: WireBenchReport) -> None:
         assert 0 < s.rays_hitting <= s.rays
 
 
+@pytest.mark.slow
 def test_small_run_with_render(small_fish: Any, gl_ctx: Any, tmp_path: Path) -> None:
     missing = tmp_path / "no_such_wires.json"
     phantom = _small_phantom(tmp_path)

@@ -165,6 +165,7 @@ def test_a_stream_closed_early_frees_its_models(scene_file: Path) -> None:
 
 
 # ---------------------------------------------------------------------- kill -9 and resume
+@pytest.mark.slow
 def test_kill_9_at_random_points_then_resume_is_byte_identical(
     scene_file: Path, reference: dict[str, Any], tmp_path: Path
 ) -> None:
@@ -383,6 +384,7 @@ def _can_mount_tmpfs(where: Path) -> bool:
     return probe.returncode == 0
 
 
+@pytest.mark.slow
 def test_a_real_full_disk_fails_with_one_line_and_the_rerun_keeps_only_whole_frames(
     scene_file: Path, reference: dict[str, Any], tmp_path: Path
 ) -> None:

@@ -391,6 +391,7 @@ def test_in_process_render_leaves_other_contexts_usable(
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_demo_writes_every_mode_and_a_mass_spring_bend(tmp_path: Path) -> None:
     """`voxwarp demo` (what `make run` does): every mode of the bundled CT, plus the same
     dvr view bent by a settled mass-spring drag and by a wire, and scenes that reproduce

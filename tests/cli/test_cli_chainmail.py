@@ -149,6 +149,7 @@ def drags(gl_ctx: Any, ball_file: Path, tmp_path_factory: pytest.TempPathFactory
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_drag_along_x_moves_the_centroid_right(gl_ctx: Any, drags: dict) -> None:
     err = drags["relax0"].stderr
     assert "chainmail: 7x7x7 cpu enhanced, 1 dragged," in err
@@ -200,6 +201,7 @@ def test_relax_changes_the_image(gl_ctx: Any, drags: dict) -> None:
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_cut_keeps_the_far_side_at_rest(
     gl_ctx: Any,
     ball_file: Path,  # noqa: F811
@@ -244,6 +246,7 @@ def test_cut_keeps_the_far_side_at_rest(
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_gpu_and_cpu_backends_give_nearly_the_same_image(
     gl_ctx: Any,
     ball_file: Path,  # noqa: F811

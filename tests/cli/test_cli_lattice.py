@@ -52,6 +52,7 @@ def test_bad_lattice_options_are_one_line_errors(
     assert_render_refused(ball_file, tmp_path, capsys, args, message)
 
 
+@pytest.mark.slow
 def test_bundled_fish_bend_renders_and_round_trips(tmp_path: Path) -> None:
     plain, bent, again = (tmp_path / f"{n}.png" for n in ("plain", "bent", "again"))
     scene = tmp_path / "scene.json"

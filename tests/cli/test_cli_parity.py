@@ -110,6 +110,7 @@ def centroid(img: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- clip and slab
+@pytest.mark.slow
 def test_clip_cuts_the_projected_box(
     files: dict[str, Path], tmp_path: Path, gl_ctx: object
 ) -> None:

@@ -183,6 +183,7 @@ def test_json_mapping_inverts(gl_ctx: Any, lps_file: Path) -> None:
     assert abs(n @ np.array([0.2, 0.1, 1])) == pytest.approx(np.linalg.norm([0.2, 0.1, 1]))
 
 
+@pytest.mark.slow
 def test_deformation_options_apply(gl_ctx: Any, lps_file: Path, tmp_path: Path) -> None:
     """--massspring/--drag bend the slice (render's options, shared assembly); the rest
     view of the same command is the undeformed slice."""
@@ -283,6 +284,7 @@ def test_real_scans(gl_ctx: Any) -> None:
     assert grey.max() > 200
 
 
+@pytest.mark.slow
 def test_scene_json_input_is_the_same_slice(gl_ctx: Any, tmp_path: Path) -> None:
     """A scene JSON saved by ``render --wires ... --save-scene`` slices as the volume with
     the same --wires option (the shared scene assembly), and the wire bends the slice."""

@@ -51,6 +51,7 @@ def ct_bone_points(spacing_mm: float) -> list[list[float]]:
 
 
 @pytest.mark.usefixtures("gl_ctx")
+@pytest.mark.slow
 def test_render_with_a_slicer_preset_by_name(tmp_path: Path) -> None:
     presets = tmp_path / "presets.xml"
     presets.write_text(PRESETS_XML)

@@ -496,6 +496,7 @@ def test_a_field_beyond_the_gpu_texture_limits_is_one_line(gl_ctx: Any) -> None:
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.slow
 def test_info_reads_a_voxelmorph_field_with_a_convention_and_names_bad_components(
     field: DisplacementFieldWarp, tmp_path: Path
 ) -> None:

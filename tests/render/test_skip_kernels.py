@@ -57,6 +57,7 @@ def _blobs(shape: tuple, dtype: Any, seed: int = 0) -> np.ndarray:
 
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint16, np.float32])
+@pytest.mark.slow
 def test_block_and_cell_ranges_match_the_numpy_builders(shape: tuple, dtype: Any) -> None:
     data = _blobs(shape, dtype)
     for block in (4, 3):
@@ -71,6 +72,7 @@ def test_block_and_cell_ranges_match_the_numpy_builders(shape: tuple, dtype: Any
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.float32])
 @pytest.mark.parametrize("mode", ["dvr", "iso", "flm", "mip", "minip", "xray", "average"])
+@pytest.mark.slow
 def test_cell_visibility_matches_the_numpy_builder(
     dtype: Any, mode: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -97,6 +99,7 @@ def test_cell_visibility_matches_the_numpy_builder(
 
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("density", [0.002, 0.05])
+@pytest.mark.slow
 def test_octant_skip_distances_match_the_numpy_builder(shape: tuple, density: float) -> None:
     rng = np.random.default_rng(11)
     visible = rng.random(tuple(n + 1 for n in shape)) < density

@@ -403,6 +403,7 @@ def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_trut
 
 @pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
 @pytest.mark.parametrize("chain", ["offset", "baked", "offset+rotation", "field"])
+@pytest.mark.slow
 def test_warped_cell_skipping_matches_block_path(gl_ctx: Any, mode: str, chain: str) -> None:
     vol = _volume()
     lo, hi = vol.bounds

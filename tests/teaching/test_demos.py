@@ -50,6 +50,7 @@ def demos(gl_ctx: Any, tmp_path_factory: pytest.TempPathFactory) -> dict[str, De
 
 # ---------------------------------------------------------------------- every demo
 @pytest.mark.parametrize("name", DEMOS)
+@pytest.mark.slow
 def test_every_demo_writes_a_figure_sheet(demos: dict[str, DemoResult], name: str) -> None:
     res = demos[name]
     assert res.name == name
@@ -250,6 +251,7 @@ def test_a_tour_scene_resumes_in_the_editor(demos: dict[str, DemoResult]) -> Non
 
 # ---------------------------------------------------------------------- CLI
 @pytest.mark.gl
+@pytest.mark.slow
 def test_cli_demo_name_writes_the_sheet(
     gl_ctx: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -42,6 +42,7 @@ def _fixed() -> Any:
     return load_sample("colin27").downsample(2)  # the quick demo's fixed image
 
 
+@pytest.mark.slow
 def test_the_demo_writes_the_sheet_the_moving_image_and_the_field(demo: DemoResult) -> None:
     out = demo.figure.parent
     assert demo.figure == out / "registration.png"

@@ -25,6 +25,7 @@ def _keep_warning_state(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_quick_reproduction_writes_the_report_and_its_figures(gl_ctx: Any, tmp_path: Path) -> None:
     out = tmp_path / "docs" / "reproduction.md"
     assert reproduce(out, quick=True) == out

@@ -18,6 +18,7 @@ def _no_display_env() -> dict[str, str]:
     return env
 
 
+@pytest.mark.slow
 def test_gui_without_display_renders_headless_and_says_so(tmp_path: Path) -> None:
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "voxwarp.ui.cli", "gui", "--fallback-out", str(out)]
@@ -38,6 +39,7 @@ def test_gui_screenshot_without_display_is_a_clear_error(tmp_path: Path) -> None
     assert not (tmp_path / "w.png").exists()
 
 
+@pytest.mark.slow
 def test_demo_gui_opens_the_tour_in_the_window(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -60,6 +62,7 @@ def test_demo_gui_opens_the_tour_in_the_window(
     assert Path(calls[0][0]).parent == out / "massspring_tour"
 
 
+@pytest.mark.slow
 def test_demo_gui_without_display_says_where_the_tour_is(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:

@@ -101,6 +101,7 @@ def central_free_element(session: EditSession, camera: Any) -> int:
 
 
 @pytest.mark.parametrize("kind", ["massspring", "chainmail"])
+@pytest.mark.slow
 def test_drag_an_element_moves_the_model_and_the_picture(
     window: Any, qtbot: Any, kind: str
 ) -> None:
@@ -130,6 +131,7 @@ def test_drag_an_element_moves_the_model_and_the_picture(
     assert w.undo_stack.undoText().startswith("Drag")
 
 
+@pytest.mark.slow
 def test_undo_restores_the_state_exactly_and_redo_reapplies(window: Any, qtbot: Any) -> None:
     w = window
     w.edit("New mass-spring", lambda: w.session.set_deformation("massspring", resolution=5))
@@ -147,6 +149,7 @@ def test_undo_restores_the_state_exactly_and_redo_reapplies(window: Any, qtbot: 
     assert w.session.snapshot().same_as(dragged)
 
 
+@pytest.mark.slow
 def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any) -> None:
     w = window
     w.edit("Wire field", lambda: w.session.set_deformation("wires"))
@@ -174,6 +177,7 @@ def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any
     np.testing.assert_array_equal(frame(w), img0)
 
 
+@pytest.mark.slow
 def test_lattice_node_drag_bends_the_volume(window: Any, qtbot: Any) -> None:
     w = window
     w.edit("Lattice", lambda: w.session.set_deformation("lattice", resolution=4))
@@ -216,6 +220,7 @@ def test_rubber_band_selects_and_fix_key_fixes(window: Any, qtbot: Any) -> None:
     assert w.session.model.grid.fixed.sum() == 8  # the corners, as before
 
 
+@pytest.mark.slow
 def test_save_and_reopen_round_trip(window: Any, tmp_path: Path, qtbot: Any) -> None:
     w = window
     w.edit("New mass-spring", lambda: w.session.set_deformation("massspring", resolution=5))
@@ -265,6 +270,7 @@ def test_export_screenshot_png_and_exr(window: Any, tmp_path: Path) -> None:
     assert a[..., :3].max() > 100  # the fish is there
 
 
+@pytest.mark.slow
 def test_gui_command_screenshot_matches_golden(tmp_path: Path, golden: Any) -> None:
     """``voxwarp gui --screenshot`` on the bundled CT: a real window, first frame, the
     whole window saved (docks included) and compared with a golden image."""
@@ -289,6 +295,7 @@ def test_gui_command_screenshot_matches_golden(tmp_path: Path, golden: Any) -> N
 
 
 @pytest.mark.parametrize("kind", ["massspring", "chainmail"])
+@pytest.mark.slow
 def test_gpu_backend_runs_live_without_read_backs_while_dragging(
     window: Any, qtbot: Any, monkeypatch: pytest.MonkeyPatch, kind: str
 ) -> None:
@@ -348,6 +355,7 @@ def test_keys_orbit_pan_and_zoom(window: Any, qtbot: Any) -> None:
     np.testing.assert_allclose(vp.camera.rotation[:, 2], [0, 0, 1], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     """W starts laying a wire, clicks lay its control points in the view plane through
     the volume's centre, Enter makes it a wire; its field is built off the GUI thread;
@@ -429,6 +437,7 @@ def test_help_dialog_lists_the_shortcuts(window: Any) -> None:
     w.help_dialog.close()
 
 
+@pytest.mark.slow
 def test_keyframes_and_render_movie(window: Any, qtbot: Any, tmp_path: Path) -> None:
     """Set Key at two frames with a lattice drag between them, undo/redo a key, then
     Render Movie: the scene (with its animation) is saved beside the movie and rendered

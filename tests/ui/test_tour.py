@@ -64,6 +64,7 @@ def test_read_tour_checks_the_file(tmp_path: Path) -> None:
         read_tour(tmp_path / "nope.json")
 
 
+@pytest.mark.slow
 def test_tour_steps_open_their_scenes(qtbot: Any, tmp_path: Path, monkeypatch: Any) -> None:
     monkeypatch.setenv("VOXWARP_GUI_NO_DIALOGS", "1")
     from voxwarp.ui.app import configure_qt

@@ -271,6 +271,7 @@ def test_energy_of_hand_built_state() -> None:
     assert 0 < ms.energy() < 0.5 * expected
 
 
+@pytest.mark.slow
 def test_random_drags_stay_bounded() -> None:
     """10,000 random drags of a 6x6x6 grid with the displacement clamp on.
 

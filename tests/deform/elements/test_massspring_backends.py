@@ -120,6 +120,7 @@ def test_gpu_fixed_never_move_and_held_stay_exactly_where_held(gl_ctx: Any) -> N
 
 
 # ---------------------------------------------------------------------- random drags
+@pytest.mark.slow
 def test_gpu_random_drags_stay_bounded(gl_ctx: Any) -> None:
     """10,000 random drags of a 6x6x6 grid on the GPU, one step each, clamp on.
 

@@ -210,6 +210,7 @@ def test_content_cannot_leave_the_grid_box() -> None:
     np.testing.assert_array_equal(hi, HI)
 
 
+@pytest.mark.slow
 def test_inverse_error_table_supports_the_default() -> None:
     rows = inverse_error_table(points=5000)
     by = {(r["inverse"], r["iterations"]): r for r in rows}

@@ -346,6 +346,7 @@ def test_arc_length_table_rejects_bad_n(n: Any):
 
 # ----------------------------------------------------------------------- closest point
 @pytest.mark.parametrize("kind", ["catmull-rom", "bezier"])
+@pytest.mark.slow
 def test_closest_point_matches_brute_force(kind: str):
     c = random_curve(kind, 10, seed=12)
     rng = np.random.default_rng(13)
