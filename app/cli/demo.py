@@ -39,7 +39,9 @@ def add_parser(sub: Any) -> None:
         metavar="NAME|INPUT",
         help=f"a teaching demo ({', '.join(DEMOS)}) or a volume (default: the bundled real CT)",
     )
-    pd.add_argument("--out", default="out", help="output folder (default out)")
+    pd.add_argument(
+        "-o", "--output", "--out", dest="out", default="out", help="output folder (default out)"
+    )
     pd.add_argument("--size", type=_size, default=(512, 512), help="INPUT: image WxH")
     pd.add_argument("--tf", help=TF_HELP + " (default: suits the sample)")
     pd.add_argument(

@@ -5,6 +5,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -27,8 +29,19 @@ from voxwarp.cli.options import OneLineErrorParser, VersionAction, join_negative
 from voxwarp.core import limits
 from voxwarp.errors import VoxwarpError
 
-#: ``voxwarp --help``'s description
-DESCRIPTION = "The ``voxwarp`` command line: info, render, demo, samples, bench."
+#: ``voxwarp --help``'s description (the commands and their help lines follow it)
+DESCRIPTION = (
+    "voxwarp renders 3D volumes (CT, MRI, microscopy) deformed at render time, without"
+    " resampling them: mass-spring and 3D ChainMail element grids, wires, trilinear"
+    " lattices and registration fields bend what is drawn. INPUT is a volume file or"
+    " folder (npy, npz, raw + JSON sidecar, NRRD, NIfTI, DICOM folder, TIFF), a scene JSON"
+    " written by --save-scene, or sample:NAME (voxwarp samples lists them). Each command"
+    " has its own --help."
+)
+
+#: the exit status when stdout's reader has gone (``voxwarp samples | head -1``): 128 +
+#: SIGPIPE, what a shell reports for a program that the signal ended
+CLOSED_PIPE_EXIT = 141
 
 
 def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
@@ -40,7 +53,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     """
     p = OneLineErrorParser(prog="voxwarp", description=DESCRIPTION)
     p.add_argument("--version", action=VersionAction)
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, title="commands", metavar="command")
     info.add_parser(sub)
     render.add_parser(sub)
     animate.add_parser(sub)
@@ -55,23 +68,41 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
-    """Entry point of the ``voxwarp`` console script (and of ``python -m voxwarp``).
+def _quiet_closed_stdout() -> int:
+    """stdout's reader has gone: point stdout at the null device (the interpreter's last
+    flush must not fail again), print nothing, return :data:`CLOSED_PIPE_EXIT`."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    return CLOSED_PIPE_EXIT
 
-    ``argv`` defaults to ``sys.argv[1:]``; ``parser`` replaces :func:`build_parser`'s.
-    """
-    parser = parser or build_parser(bench=wants_bench(argv))
-    args = parser.parse_args(join_negative_views(list(sys.argv[1:] if argv is None else argv)))
+
+def _flush_stdout() -> None:
+    if sys.stdout is not None:
+        sys.stdout.flush()
+
+
+def _run(argv: Sequence[str] | None, parser: argparse.ArgumentParser) -> int:
+    try:
+        args = parser.parse_args(join_negative_views(list(sys.argv[1:] if argv is None else argv)))
+    except SystemExit:
+        _flush_stdout()  # --help into a closed pipe: a BrokenPipeError here, handled by main
+        raise
     with warnings.catch_warnings():
         warnings.simplefilter("default")
         old_format = warnings.formatwarning
         warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
         try:
             limits.set_memory_budget(getattr(args, "memory_budget", None))
-            return int(args.func(args) or 0)
+            code = int(args.func(args) or 0)
+            _flush_stdout()  # a closed pipe shows here, not in the interpreter's last flush
+            return code
         except VoxwarpError as exc:  # OutputError too: a write that failed, cleaned up
             print(f"voxwarp: error: {exc}", file=sys.stderr)
             return 2
+        except BrokenPipeError:
+            raise
         except OSError as exc:  # a file operation outside the checked writers: one line
             where = f"{exc.filename}: " if exc.filename else ""
             print(f"voxwarp: error: {where}{exc.strerror or exc}", file=sys.stderr)
@@ -81,6 +112,20 @@ def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | No
         finally:
             limits.set_memory_budget(None)
             warnings.formatwarning = old_format
+
+
+def main(argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
+    """Entry point of the ``voxwarp`` console script (and of ``python -m voxwarp``).
+
+    ``argv`` defaults to ``sys.argv[1:]``; ``parser`` replaces :func:`build_parser`'s.
+    Errors are one line on stderr and exit status 2; a closed stdout pipe (``voxwarp
+    samples | head -1``) ends quietly with :data:`CLOSED_PIPE_EXIT`.
+    """
+    parser = parser or build_parser(bench=wants_bench(argv))
+    try:
+        return _run(argv, parser)
+    except BrokenPipeError:
+        return _quiet_closed_stdout()
 
 
 if __name__ == "__main__":

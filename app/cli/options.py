@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import IO, Any, NoReturn
 
 from voxwarp.cli import render_options as ropt
 from voxwarp.core import limits
@@ -36,6 +37,7 @@ __all__ = [
     "tf_arg",
     "view_arg",
     "window_arg",
+    "window_pair_arg",
 ]
 
 
@@ -64,6 +66,18 @@ def window_arg(text: str) -> tuple[float, float]:
     if not (math.isfinite(level) and math.isfinite(width) and width > 0):
         raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
     return level, width
+
+
+def window_pair_arg(text: str) -> list[float]:
+    """``render --window LEVEL,WIDTH`` (also written ``--window LEVEL WIDTH``: see
+    :func:`join_negative_views`): two numbers, as a list; the scene checks their values."""
+    try:
+        level, width = (float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected LEVEL,WIDTH (or LEVEL WIDTH) in data units, e.g. 40,400"
+        ) from exc
+    return [level, width]
 
 
 #: ``--tf`` help, the same wherever it is accepted (one resolver: :func:`tf_arg`).
@@ -161,10 +175,23 @@ def load_scene_json(path: str, command: str) -> Any:
 class OneLineErrorParser(argparse.ArgumentParser):
     """An argument parser whose errors are one line: ``PROG: error: MESSAGE (see PROG
     --help)``, exit code 2, instead of argparse's usage block followed by the error.
-    Subcommand parsers inherit it (``add_subparsers`` uses the parent's class)."""
+    Subcommand parsers inherit it (``add_subparsers`` uses the parent's class). Unlike
+    argparse's, it lets a closed pipe's :class:`BrokenPipeError` through (``voxwarp --help
+    | head -1``), so that :func:`voxwarp.cli.main.main` ends every command alike then."""
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+    def _print_message(self, message: str, file: IO[str] | None = None) -> None:
+        stream = file or sys.stderr
+        if not message or stream is None:  # no stream at all under pythonw
+            return
+        try:
+            stream.write(message)
+        except BrokenPipeError:
+            raise
+        except OSError:  # as argparse: a stream that fails otherwise is ignored
+            pass
 
 
 class VersionAction(argparse.Action):
@@ -193,18 +220,36 @@ NEGATIVE_VALUE_OPTIONS = (
 )
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def join_negative_views(argv: Sequence[str]) -> list[str]:
     """``argv`` as the parser reads it (:func:`voxwarp.cli.main.main` does this first): a
     value that starts with "-" joined to its option (``--view -y`` -> ``--view=-y``;
-    argparse would take ``-y`` for an option)."""
+    argparse would take ``-y`` for an option), and ``--window LEVEL WIDTH`` (two numbers)
+    joined into ``--window=LEVEL,WIDTH``, the one form every ``--window`` parses."""
     out: list[str] = []
     i = 0
     while i < len(argv):
-        negative = i + 1 < len(argv) and argv[i + 1].startswith("-")
-        # slice's --window LEVEL,WIDTH (render's takes two values, never a comma)
-        pair = argv[i] == "--window" and negative and "," in argv[i + 1]
-        if pair or (argv[i] in NEGATIVE_VALUE_OPTIONS and negative):
-            out.append(f"{argv[i]}={argv[i + 1]}")
+        value = argv[i + 1] if i + 1 < len(argv) else None
+        if (
+            argv[i] == "--window"
+            and value is not None
+            and i + 2 < len(argv)
+            and _is_number(value)
+            and _is_number(argv[i + 2])
+        ):
+            out.append(f"--window={value},{argv[i + 2]}")
+            i += 3
+            continue
+        negative = value is not None and value.startswith("-")
+        if negative and argv[i] in (*NEGATIVE_VALUE_OPTIONS, "--window"):
+            out.append(f"{argv[i]}={value}")
             i += 2
             continue
         out.append(argv[i])

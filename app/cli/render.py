@@ -15,7 +15,7 @@ from voxwarp.cli.deform_options import add_field_args as _add_field_args
 from voxwarp.cli.deform_options import add_wire_args as _add_wire_args
 from voxwarp.cli.deformation import check_deform_options as _check_deform_options
 from voxwarp.cli.deformation import deformed_scene, prepare_deformation
-from voxwarp.cli.options import TF_HELP, CliOptionError
+from voxwarp.cli.options import TF_HELP, CliOptionError, window_pair_arg
 from voxwarp.cli.options import add_volume_args as _add_volume_args
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
@@ -35,7 +35,12 @@ def add_parser(sub: Any) -> None:
     pr.add_argument("--size", type=_size, default=(512, 512), help="WxH pixels")
     pr.add_argument("--tf", help=TF_HELP)
     pr.add_argument("--step", type=float, help="sample distance in voxels (default 1)")
-    pr.add_argument("--window", nargs=2, type=float, metavar=("LEVEL", "WIDTH"))
+    pr.add_argument(
+        "--window",
+        type=window_pair_arg,
+        metavar="LEVEL,WIDTH",
+        help="grey window in data units, e.g. 40,400 (also LEVEL WIDTH: two numbers)",
+    )
     pr.add_argument("--iso", dest="iso_value", type=float, help="isovalue for --mode iso")
     pr.add_argument("--zoom", type=float)
     pr.add_argument("--seed", type=int, help="jitter seed")

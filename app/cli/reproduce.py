@@ -20,7 +20,10 @@ def add_parser(sub: Any) -> None:
     )
     prp.add_argument("--quick", action="store_true", help="small sizes (seconds; not comparable)")
     prp.add_argument(
+        "-o",
+        "--output",
         "--out",
+        dest="out",
         default="docs/reproduction.md",
         metavar="FILE",
         help="the report (default docs/reproduction.md; figures in docs/reproduction/)",
