@@ -2,7 +2,7 @@
 
 import sys
 
-from voxwarp.ui.cli import main
+from voxwarp.cli.main import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -84,8 +84,10 @@ def test_gallery_folder_holds_only_listed_images() -> None:
 def test_gallery_commands_parse(entry) -> None:
     """Each command is a real subcommand with valid options (parsed, not run), and every
     repository file it reads exists."""
-    from voxwarp.cli.main import _join_negative_views  # what main() does before parsing
-    from voxwarp.ui.cli import build_parser
+    from voxwarp.cli.main import build_parser
+    from voxwarp.cli.options import (  # what main() does before parsing
+        join_negative_views as _join_negative_views,
+    )
 
     parser = build_parser()
     for argv in entry.argvs():
@@ -97,7 +99,7 @@ def test_gallery_commands_parse(entry) -> None:
 
 
 def test_gallery_command_parse_check_rejects_a_bad_option() -> None:
-    from voxwarp.ui.cli import build_parser
+    from voxwarp.cli.main import build_parser
 
     with pytest.raises(SystemExit):
         build_parser().parse_args(["render", "sample:stent", "--no-such-option"])

@@ -27,9 +27,10 @@ FORBIDDEN = {
         *(f"voxwarp.{m}" for m in (*APP_ALL, "ui", "deform", "shaders", "errors")),
     ),
 }
-#: entry points that stand outside the layers: ``python -m voxwarp`` runs the same
-#: ``voxwarp.ui.cli:main`` as the console script (the one that adds the ``gui`` command)
-ENTRY_POINTS = ("app/__main__.py",)
+#: entry points that stand outside the layers: ``python -m voxwarp`` runs the console
+#: script (``voxwarp.cli.main:main``), whose ``gui`` command (app/cli/gui.py) is the one
+#: door from the command line up to the window (it imports ``voxwarp.ui.app`` when run)
+ENTRY_POINTS = ("app/__main__.py", "app/cli/gui.py")
 #: generic top-level names the wheel must not provide any more
 OLD_NAMES = ("app", "deform", "ui", "shaders", "sample_volumes")
 

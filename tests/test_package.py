@@ -49,7 +49,7 @@ def test_import_voxwarp_loads_no_heavy_module(tmp_path: Path) -> None:
 
 
 def test_command_line_parser_loads_no_heavy_module(tmp_path: Path) -> None:
-    code = "from voxwarp.ui.cli import build_parser\nbuild_parser(bench=False)"
+    code = "from voxwarp.cli.main import build_parser\nbuild_parser(bench=False)"
     assert _loaded(code, tmp_path) == []
 
 

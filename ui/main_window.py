@@ -906,7 +906,7 @@ class MainWindow(QMainWindow):
         w, h = max(2, w - w % 2), max(2, h - h % 2)
         frames_dir = movie.with_name(movie.stem + "_frames")
         total = self.session.animation.frames
-        cmd = [sys.executable, "-m", "voxwarp.ui.cli", "animate", str(scene_path), "-o", str(movie)]
+        cmd = [sys.executable, "-m", "voxwarp", "animate", str(scene_path), "-o", str(movie)]
         cmd += ["--size", f"{w}x{h}", "--no-progress"]
 
         def job(progress: Callable[[float, str], None], cancelled: Callable[[], bool]) -> Any:

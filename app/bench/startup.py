@@ -46,7 +46,7 @@ CASES: dict[str, str] = {
     "python -c pass (reference)": "pass",
     "voxwarp --help": (
         "import sys; sys.argv = ['voxwarp', '--help']\n"
-        "from voxwarp.ui.cli import main\n"
+        "from voxwarp.cli.main import main\n"
         "try:\n    main()\nexcept SystemExit:\n    pass"
     ),
     "import voxwarp": "import voxwarp",
@@ -54,7 +54,7 @@ CASES: dict[str, str] = {
         "import sys, tempfile\n"
         "with tempfile.TemporaryDirectory() as tmp:\n"
         "    sys.argv = ['voxwarp', 'render', 'sample:stent', '-o', tmp + '/x.png']\n"
-        "    from voxwarp.ui.cli import main\n"
+        "    from voxwarp.cli.main import main\n"
         "    assert main() == 0"
     ),
 }

@@ -29,7 +29,7 @@ def _frames(text: str) -> int:
     return n
 
 
-def add_animate_parser(sub: Any) -> None:
+def add_parser(sub: Any) -> None:
     """Add ``animate`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
     p = sub.add_parser(
         "animate",

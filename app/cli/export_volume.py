@@ -32,6 +32,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from voxwarp.cli.options import add_memory_budget_arg, load_scene_json
 from voxwarp.errors import InputError
 
 if TYPE_CHECKING:
@@ -64,10 +65,8 @@ def _finite(text: str) -> float:
     return v
 
 
-def add_export_volume_parser(sub: Any) -> None:
+def add_parser(sub: Any) -> None:
     """Add ``export-volume`` to the ``voxwarp`` sub-commands."""
-    from voxwarp.cli.main import add_memory_budget_arg
-
     p = sub.add_parser(
         "export-volume",
         help="write a scene's deformed volume, resampled slice by slice, as NIfTI or NRRD",
@@ -210,7 +209,6 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     """``voxwarp export-volume SCENE.json -o deformed.nii.gz``."""
     import numpy as np
 
-    from voxwarp.cli.main import load_scene_json
     from voxwarp.core.progress import ProgressBar
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
     from voxwarp.render.offscreen import OffscreenRenderer

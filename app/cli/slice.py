@@ -3,7 +3,8 @@
 INPUT is a volume (any format ``voxwarp render`` reads, ``sample:NAME`` too) or a scene
 JSON; the deformation options are ``render``'s (``--massspring``/``--chainmail`` drags,
 ``--wires``, ``--lattice``, ``--displacement``), assembled by the same functions
-(:func:`voxwarp.cli.main.prepare_deformation`, :func:`voxwarp.cli.main.deformed_scene`).
+(:func:`voxwarp.cli.deformation.prepare_deformation`,
+:func:`voxwarp.cli.deformation.deformed_scene`).
 The plane is sampled through the warp chain on the GPU
 (:meth:`voxwarp.render.offscreen.OffscreenRenderer.render_slice`): the volume is never
 resampled. Named planes follow the radiological layout (axial: the patient's left on
@@ -19,6 +20,9 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
+from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
+from voxwarp.cli.options import TF_HELP, add_volume_args, tf_arg, window_arg
 from voxwarp.core.checks import image_size
 from voxwarp.errors import InputError
 
@@ -42,18 +46,6 @@ def plane_arg(text: str) -> str:
     if not any(parts[1]):
         raise argparse.ArgumentTypeError(f"{text!r}: the normal must not be 0,0,0")
     return spec
-
-
-def window_arg(text: str) -> tuple[float, float]:
-    """``--window LEVEL,WIDTH`` (data units; the width > 0)."""
-    form = "LEVEL,WIDTH in data units with WIDTH > 0, e.g. 40,400 for CT soft tissue"
-    try:
-        level, width = (float(v) for v in text.split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
-    if not (math.isfinite(level) and math.isfinite(width) and width > 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
-    return level, width
 
 
 def _mm(what: str, positive: bool) -> Any:
@@ -80,10 +72,8 @@ def _finite_mm(text: str) -> float:
     return v
 
 
-def add_slice_parser(sub: Any) -> None:
+def add_parser(sub: Any) -> None:
     """Add ``slice`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
-    from voxwarp.cli import main as m
-
     p = sub.add_parser(
         "slice",
         help="one slice plane of INPUT (volume or scene JSON), deformed, to an image",
@@ -139,7 +129,7 @@ def add_slice_parser(sub: Any) -> None:
         metavar="LEVEL,WIDTH",
         help="grey window in data units (default the scene's or the volume's)",
     )
-    p.add_argument("--tf", help=m.TF_HELP + " (--look tf)")
+    p.add_argument("--tf", help=TF_HELP + " (--look tf)")
     p.add_argument(
         "--show",
         choices=("deformed", "rest", "checkerboard", "difference"),
@@ -161,18 +151,17 @@ def add_slice_parser(sub: Any) -> None:
         action="store_true",
         help="print the plane and its pixel -> world 4x4 matrix as JSON on stdout",
     )
-    m._add_volume_args(p)
-    m._add_deform_args(p)
-    m._add_wire_args(p)
-    m._add_field_args(p)
+    add_volume_args(p)
+    add_deform_args(p)
+    add_wire_args(p)
+    add_field_args(p)
     p.set_defaults(func=cmd_slice)
 
 
 def _base_scene(obj: Any, args: argparse.Namespace) -> Any:
-    from voxwarp.cli.main import _tf_arg
     from voxwarp.scene import Scene
 
-    tf = _tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
+    tf = tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
     if isinstance(obj, Scene):
         return obj if tf is None else obj.copy(transfer_function=tf)
     return Scene(obj, transfer_function=tf)
@@ -259,20 +248,19 @@ def cmd_slice(args: argparse.Namespace) -> int:
     """``voxwarp slice INPUT -o slice.png``: one plane of the deformed volume."""
     import numpy as np
 
-    from voxwarp.cli import main as m
     from voxwarp.cli import render_options as ropt
     from voxwarp.inputs import load_input
     from voxwarp.io.images import check_image_format, write_image
     from voxwarp.render.offscreen import OffscreenRenderer
 
-    m._check_deform_options(args)
+    check_deform_options(args)
     ext = check_image_format(args.output)  # a bad -o fails before any work
     if args.look == "tf" and args.window is not None:
         raise InputError("--window sets the grey of --look window; drop it with --look tf")
     obj = load_input(args.input, **ropt.load_options(args))
-    scene, pending = m.prepare_deformation(args, _base_scene(obj, args))
+    scene, pending = prepare_deformation(args, _base_scene(obj, args))
     with OffscreenRenderer(16, 16) as r, r.current():
-        with m.deformed_scene(args, scene, pending, r.ctx) as scene:
+        with deformed_scene(args, scene, pending, r.ctx) as scene:
             plane, size = slice_plane(scene, args)
             image = r.render_slice(
                 scene,

@@ -1,5 +1,5 @@
 """Checks of values shared across voxwarp: argparse types of the ``voxwarp`` commands
-(``voxwarp.cli.main`` and the benchmark modules that add their own sub-commands) and
+(the modules of ``voxwarp.cli`` and the benchmark modules that add their own sub-commands) and
 :func:`finite_vector` for vectors given in Python or scene JSON."""
 
 from __future__ import annotations

@@ -82,7 +82,7 @@ def test_cli_storage_writes_the_report(
 
 def test_render_summary_names_the_paper_layout_and_mask_bytes(tmp_path: Path) -> None:
     from tests.cli.test_cli_wires import wire_file
-    from voxwarp.cli.main import _wire_warp
+    from voxwarp.cli.deformation import _wire_warp
     from voxwarp.core.volume import Volume
 
     data = np.zeros((24, 24, 24), dtype=np.float32)

@@ -538,7 +538,7 @@ def test_gui_takes_series(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
     tests/ui; here run_gui is replaced and the session loader called directly)."""
     pytest.importorskip("PySide6")
     import voxwarp.ui.app as ui_app
-    from voxwarp.ui import cli as ui_cli
+    from voxwarp.cli import main as ui_cli
     from voxwarp.ui.main_window import load_session_input
 
     folder = tmp_path / "two"

@@ -312,7 +312,8 @@ def test_scene_json_input_is_the_same_slice(gl_ctx: Any, tmp_path: Path) -> None
 def test_negative_values_parse() -> None:
     """``--plane -10,0,0:1,0,0`` and ``--window -100,400`` start with "-" and still parse
     as values (render's two-value ``--window -100 400`` too)."""
-    from voxwarp.cli.main import _join_negative_views, build_parser
+    from voxwarp.cli.main import build_parser
+    from voxwarp.cli.options import join_negative_views as _join_negative_views
 
     parser = build_parser(bench=False)
     argv = ["slice", "v.nii", "--plane", "-10,0,0:1,0,0", "--window", "-100,400", "--at", "-5"]

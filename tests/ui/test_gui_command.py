@@ -21,7 +21,7 @@ def _no_display_env() -> dict[str, str]:
 @pytest.mark.slow
 def test_gui_without_display_renders_headless_and_says_so(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "voxwarp.ui.cli", "gui", "--fallback-out", str(out)]
+    cmd = [sys.executable, "-m", "voxwarp", "gui", "--fallback-out", str(out)]
     res = subprocess.run(cmd, env=_no_display_env(), capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     assert "no display" in res.stderr
@@ -31,7 +31,7 @@ def test_gui_without_display_renders_headless_and_says_so(tmp_path: Path) -> Non
 
 
 def test_gui_screenshot_without_display_is_a_clear_error(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "voxwarp.ui.cli", "gui", "--screenshot", str(tmp_path / "w.png")]
+    cmd = [sys.executable, "-m", "voxwarp", "gui", "--screenshot", str(tmp_path / "w.png")]
     res = subprocess.run(cmd, env=_no_display_env(), capture_output=True, text=True, timeout=120)
     assert res.returncode == 2
     assert "xvfb-run" in res.stderr
@@ -45,16 +45,17 @@ def test_demo_gui_opens_the_tour_in_the_window(
 ) -> None:
     """``voxwarp demo NAME --gui``: figure sheet and tour, then the window on the tour's
     first scene, stepping through the tour (run_gui is replaced: it would block)."""
+    import voxwarp.cli.gui
+    import voxwarp.cli.main
     import voxwarp.ui.app
-    import voxwarp.ui.cli
 
     calls: list[tuple[str, str | None]] = []
     monkeypatch.setattr(
         voxwarp.ui.app, "run_gui", lambda spec, tour=None, **k: calls.append((spec, tour)) or 0
     )
-    monkeypatch.setattr(voxwarp.ui.cli, "has_display", lambda: True)
+    monkeypatch.setattr(voxwarp.cli.gui, "has_display", lambda: True)
     out = tmp_path / "demo"
-    assert voxwarp.ui.cli.main(["demo", "massspring", "--quick", "--gui", "--out", str(out)]) == 0
+    assert voxwarp.cli.main.main(["demo", "massspring", "--quick", "--gui", "--out", str(out)]) == 0
     tour = out / "massspring_tour.json"
     assert (out / "massspring.png").is_file()
     assert calls == [(calls[0][0], str(tour))]
@@ -66,11 +67,12 @@ def test_demo_gui_opens_the_tour_in_the_window(
 def test_demo_gui_without_display_says_where_the_tour_is(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
-    import voxwarp.ui.cli
+    import voxwarp.cli.gui
+    import voxwarp.cli.main
 
-    monkeypatch.setattr(voxwarp.ui.cli, "has_display", lambda: False)
+    monkeypatch.setattr(voxwarp.cli.gui, "has_display", lambda: False)
     out = tmp_path / "demo"
-    assert voxwarp.ui.cli.main(["demo", "lattice", "--quick", "--gui", "--out", str(out)]) == 0
+    assert voxwarp.cli.main.main(["demo", "lattice", "--quick", "--gui", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert f"voxwarp gui --tour {out / 'lattice_tour.json'}" in err
     assert (out / "lattice_tour.json").is_file()

@@ -278,7 +278,7 @@ def test_gui_command_screenshot_matches_golden(tmp_path: Path, golden: Any) -> N
     cmd = [
         sys.executable,
         "-m",
-        "voxwarp.ui.cli",
+        "voxwarp",
         "gui",
         "--screenshot",
         str(out),

@@ -1,10 +1,14 @@
-"""The ``voxwarp`` console script: :mod:`voxwarp.cli.main`'s commands plus ``gui``.
+"""``voxwarp gui`` and ``voxwarp demo NAME --gui``: the commands that open the desktop window.
 
 ``voxwarp gui [INPUT] [--screenshot PATH]`` opens the desktop window on INPUT (a volume
 file, a scene JSON or ``sample:NAME``; default the bundled sample). With
 ``--screenshot`` it waits for the first frame, saves a picture of the whole window and
 quits (for scripts and checks). Without a display it renders headless instead
 (``voxwarp demo``) and says so, unless ``--screenshot`` asked for the window.
+
+This is the one door from the command line up to ``voxwarp.ui``: :mod:`voxwarp.ui.app`
+(and with it Qt) is imported inside the commands, only when a window opens; the
+import-linter contracts in pyproject.toml name this door.
 """
 
 from __future__ import annotations
@@ -12,10 +16,11 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-from voxwarp.cli import main as app_cli
+from voxwarp.cli import demo
+from voxwarp.cli.options import CliOptionError, add_memory_budget_arg
 from voxwarp.cli.render_options import add_series_arg
 from voxwarp.core.checks import image_size
 from voxwarp.core.extras import require
@@ -27,11 +32,18 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+def _demo_args(out: str) -> argparse.Namespace:
+    """The options of ``voxwarp demo --out OUT`` (the headless fallback of ``gui``)."""
+    parser = argparse.ArgumentParser(prog="voxwarp")
+    demo.add_parser(parser.add_subparsers())
+    return parser.parse_args(["demo", "--out", out])
+
+
 def cmd_gui(args: argparse.Namespace) -> int:
     """``voxwarp gui``: the desktop window (see the module docstring)."""
     if not has_display():
         if args.screenshot:
-            raise app_cli.CliOptionError(
+            raise CliOptionError(
                 "gui --screenshot needs a display and none is set ($DISPLAY is empty); run"
                 " it under a virtual X server: xvfb-run -a voxwarp gui --screenshot PATH"
             )
@@ -40,7 +52,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
             " headless into out/ instead (voxwarp demo --out out)",
             file=sys.stderr,
         )
-        return app_cli.main(["demo", "--out", args.fallback_out])
+        return demo.cmd_demo(_demo_args(args.fallback_out))
     require("gui", "voxwarp gui")
     from voxwarp.ui.app import run_gui
 
@@ -51,10 +63,10 @@ def cmd_gui(args: argparse.Namespace) -> int:
 
 def cmd_demo_gui(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME --gui``: the teaching demo (figure sheet and tour, by
-    :func:`voxwarp.cli.main.cmd_demo`), then its guided step-through in the desktop window."""
+    :func:`voxwarp.cli.demo.cmd_demo`), then its guided step-through in the desktop window."""
     from voxwarp.teaching.demos import DEMOS
 
-    code = app_cli.cmd_demo(args)
+    code = demo.cmd_demo(args)
     if code != 0 or not getattr(args, "gui", False) or args.input not in DEMOS:
         return code
     tour_path = Path(args.out) / f"{args.input}_tour.json"
@@ -75,10 +87,9 @@ def cmd_demo_gui(args: argparse.Namespace) -> int:
     return run_gui(first or f"sample:{DEFAULT_SAMPLE}", tour=str(tour_path))
 
 
-def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
-    """:func:`voxwarp.cli.main.build_parser` plus the ``gui`` command."""
-    parser = app_cli.build_parser(bench=bench)
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+def add_parser(sub: Any) -> None:
+    """Add ``gui`` to the ``voxwarp`` sub-commands, and make ``demo`` (added before it)
+    run :func:`cmd_demo_gui`, which opens the window for ``demo NAME --gui``."""
     pg = sub.add_parser("gui", help="open the desktop window (INPUT: volume, scene or sample:NAME)")
     pg.add_argument("input", nargs="?", default=f"sample:{DEFAULT_SAMPLE}")
     pg.add_argument(
@@ -89,17 +100,7 @@ def build_parser(*, bench: bool = True) -> argparse.ArgumentParser:
         "--tour", metavar="FILE", help="step through a teaching demo's tour (NAME_tour.json)"
     )
     add_series_arg(pg)
-    app_cli.add_memory_budget_arg(pg)
+    add_memory_budget_arg(pg)
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
     sub.choices["demo"].set_defaults(func=cmd_demo_gui)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``voxwarp`` console script."""
-    return app_cli.main(argv, parser=build_parser(bench=app_cli.wants_bench(argv)))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

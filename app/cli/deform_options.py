@@ -1,0 +1,429 @@
+"""The deformation options of ``render`` and ``slice``: their argument types and option
+groups (``--massspring``/``--chainmail`` with ``--drag``, ``--drag-at``, ``--fix``,
+``--cut``, ...; ``--wires``; ``--lattice``; ``--displacement``).
+
+:mod:`voxwarp.cli.deformation` checks them and turns them into a model and a warp.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+
+from voxwarp.cli import render_options as ropt
+from voxwarp.cli.options import add_field_convention_arg
+from voxwarp.core import limits
+
+# ---------------------------------------------------------------------- mass-spring options
+#: Steps ``render --massspring`` runs without ``--settle`` (and no ``--steps``). With the
+#: CLI's defaults (semi-implicit, shear springs, dt ~ 24 ms) an 8³ grid is settled after
+#: about 600 steps and a 16³ grid within ~5 % of the dragged distance after 1000.
+MASSSPRING_STEPS = 1000
+#: Most steps ``--settle`` runs when ``--steps`` is not given.
+MASSSPRING_SETTLE_MAX_STEPS = 20000
+#: ``--settle`` stops once every element is slower than this (mm/s).
+MASSSPRING_SETTLE_TOL = 1e-3
+
+
+class Drag(tuple):
+    """One ``--drag I,J,K:DX,DY,DZ``: ``(text, (i, j, k), (dx, dy, dz))``, or one
+    ``--drag-at`` resolved to its element: ``(text, (i, j, k), (dx, dy, dz), "--drag-at")``."""
+
+    @property
+    def flag(self) -> str:
+        return self[3] if len(self) > 3 else "--drag"
+
+    @property
+    def text(self) -> str:
+        return self[0]
+
+    @property
+    def index(self) -> tuple[int, int, int]:
+        return self[1]
+
+    @property
+    def offset(self) -> tuple[float, float, float]:
+        return self[2]
+
+
+def _grid_shape(text: str) -> tuple[int, int, int]:
+    from voxwarp.deform.elements.grid import MAX_ELEMENTS_PER_AXIS as hi
+    from voxwarp.deform.elements.grid import MIN_ELEMENTS_PER_AXIS as lo
+
+    form = f"N or NX,NY,NZ elements per axis ({lo}..{hi}), e.g. 16 or 16,8,8"
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(vals) == 1:
+        vals = vals * 3
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if any(not lo <= v <= hi for v in vals):
+        raise argparse.ArgumentTypeError(f"{text!r}: out of range; expected {form}")
+    return vals  # type: ignore[return-value]
+
+
+def _drag(text: str) -> Drag:
+    form = "I,J,K:DX,DY,DZ (element index, then its offset in mm along x, y, z), e.g. 6,4,4:0,12,0"
+    try:
+        left, right = text.split(":")
+        idx = tuple(int(v) for v in left.split(","))
+        off = tuple(float(v) for v in right.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(idx) != 3 or len(off) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if not all(math.isfinite(v) for v in off):
+        raise argparse.ArgumentTypeError(f"{text!r}: offsets must be finite mm; expected {form}")
+    if max(abs(v) for v in off) > limits.MAX_DRAG_MM:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: offsets must be at most {limits.MAX_DRAG_MM:g} mm (the displacement"
+            " texture's range); check the units (mm expected)"
+        )
+    return Drag((text, idx, off))
+
+
+def _fix(text: str) -> tuple[str, tuple[tuple[int, int], ...]]:
+    form = "I,J,K with each an index or a range A..B, e.g. 3,4,4 or 0..1,0..7,0..7"
+    ranges = []
+    try:
+        parts = text.split(",")
+        for part in parts:
+            a, _, b = part.partition("..")
+            lo, hi = int(a), int(b if b else a)
+            if lo < 0 or hi < lo:
+                raise ValueError(part)
+            ranges.append((lo, hi))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(ranges) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    return text, tuple(ranges)
+
+
+class Cut(tuple):
+    """One ``--cut PX,PY,PZ:NX,NY,NZ[:RADIUS]``: ``(text, point, normal, radius)``."""
+
+    @property
+    def text(self) -> str:
+        return self[0]
+
+    @property
+    def point(self) -> tuple[float, float, float]:
+        return self[1]
+
+    @property
+    def normal(self) -> tuple[float, float, float]:
+        return self[2]
+
+    @property
+    def radius(self) -> float | None:
+        return self[3]
+
+
+def _cut(text: str) -> Cut:
+    form = (
+        "PX,PY,PZ:NX,NY,NZ[:RADIUS] (a point on the cutting plane in world mm, its normal,"
+        " optionally the radius in mm of the disk on it that cuts), e.g. 48,24,20:1,0,0"
+    )
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError(text)
+        point = tuple(float(v) for v in parts[0].split(","))
+        normal = tuple(float(v) for v in parts[1].split(","))
+        radius = float(parts[2]) if len(parts) == 3 else None
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if len(point) != 3 or len(normal) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    values = [*point, *normal, *([] if radius is None else [radius])]
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: numbers must be finite; expected {form}")
+    if not any(normal):
+        raise argparse.ArgumentTypeError(f"{text!r}: the normal must not be 0,0,0; expected {form}")
+    if radius is not None and radius <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the radius must be > 0 mm; expected {form}")
+    return Cut((text, point, normal, radius))
+
+
+def _relax(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a number of relaxation steps >= 0, e.g. 4"
+        )
+    if n > limits.MAX_RELAX_STEPS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: at most {limits.MAX_RELAX_STEPS} relaxation steps (each smooths the"
+            " whole grid); a few (e.g. 4) smooth a drag"
+        )
+    return n
+
+
+def _stiffness_points(text: str) -> list[tuple[float, float]]:
+    form = (
+        "VALUE:STIFFNESS[,VALUE:STIFFNESS...] in data units and 0..1, e.g. 100:0.2,400:0.95"
+        " (write --stiffness-from-volume=-500:0.1,... for a negative first value)"
+    )
+    try:
+        pts = [tuple(float(v) for v in pair.split(":")) for pair in text.split(",")]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if not pts or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    if any(not 0.0 <= s <= 1.0 for _, s in pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: stiffnesses must be in 0..1; expected {form}")
+    if len({v for v, _ in pts}) != len(pts):
+        raise argparse.ArgumentTypeError(f"{text!r}: values must differ; expected {form}")
+    return pts  # type: ignore[return-value]
+
+
+def _steps(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a step count >= 0, e.g. 1000")
+    if n > limits.MAX_MASSSPRING_STEPS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: at most {limits.MAX_MASSSPRING_STEPS} steps; use --settle to stop"
+            " once the grid is at rest"
+        )
+    return n
+
+
+def grid_text(shape: Sequence[int]) -> str:
+    """An element grid's shape as ``8x8x8``."""
+    return "x".join(str(n) for n in shape)
+
+
+def _field_scale(text: str) -> int:
+    from voxwarp.deform.wires.field import FIELD_SCALES
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v not in FIELD_SCALES:
+        raise argparse.ArgumentTypeError(
+            f"field scale must be one of {', '.join(map(str, FIELD_SCALES))} (per-axis"
+            f" reduction of the attribute field); got {text!r}"
+        )
+    return v
+
+
+def add_field_args(p: argparse.ArgumentParser) -> None:
+    """``--displacement FILE`` (repeatable) and ``--field-convention``."""
+    g = p.add_argument_group(
+        "displacement fields (--displacement FILE)",
+        "Render the volume through registration results without resampling it: the"
+        " volume is the moving image, shown in the fixed image's space. ITK/ANTs/SimpleITK"
+        " fields (pull-back, LPS) as NIfTI, NRRD, MetaImage, .npz, or ITK transform files"
+        " (.h5, .tfm, ANTs' .mat: displacement fields, B-splines, affines, composites). Repeat the"
+        " option to compose: the first file is applied first to the displayed (fixed)"
+        " point, the order antsApplyTransforms takes its -t files in (e.g. --displacement"
+        " 1Warp.nii.gz --displacement 0GenericAffine.mat).",
+    )
+    g.add_argument(
+        "--displacement",
+        action="append",
+        metavar="FILE",
+        help="a displacement field or ITK transform file (repeatable)",
+    )
+    add_field_convention_arg(g)
+
+
+def add_wire_args(p: argparse.ArgumentParser) -> None:
+    """``--wires FILE`` with its options, and ``--lattice FILE``."""
+    g = p.add_argument_group(
+        "wires (--wires FILE)",
+        "Bend, twist and scale objects along curves (the WSCG 2006 wire deformer for"
+        " volumes): each wire is a base curve laid through an object and a modified copy;"
+        " the object's cross-sections are swept from the base to the modified curve."
+        ' A wire file is JSON: {"wires": [{"kind": "catmull-rom"|"bezier", "base":'
+        ' [[x, y, z], ...], "modified": [...], "twist": [[t, radians], ...], "scale":'
+        ' [[t, s], ...], "radius": mm, "beta": [lo, hi]}], "field_scale": 2}'
+        " (points in world mm, t the fraction of the wire's length). Example:"
+        " voxwarp render sample:fish --view +z --wires"
+        " sample_volumes/fish_spine_wires.json -o bent.png",
+    )
+    g.add_argument("--wires", metavar="FILE", help="deform with the wires of this wire file")
+    g.add_argument(
+        "--field-scale",
+        type=_field_scale,
+        metavar="N",
+        help="attribute field N times coarser than the volume per axis: 1, 2, 4, 8 or 16"
+        " (1:1 ... 1:4096 voxels; default: the file's, else 2)",
+    )
+    g.add_argument(
+        "--layout",
+        choices=("float", "packed", "paper"),
+        help="attribute field storage: float (5 bytes/voxel, hardware-filtered t), packed"
+        " (2 bytes/voxel: flag, 7-bit wire, 8-bit t) or paper (2 bytes/voxel, the wire"
+        " paper's flag, 4-bit wire, 4-bit segment, 7-bit t); default: the file's, else float",
+    )
+    p.add_argument(
+        "--lattice",
+        metavar="FILE",
+        help="deform with a lattice of trilinear cells over the volume (a JSON 'lattice' warp"
+        " entry; e.g. sample_volumes/fish_lattice_bend.json on sample:fish)",
+    )
+    g.add_argument(
+        "--masks",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="plane masks: sweep only the connected cross-section the wire runs through"
+        " (default on; --no-masks sweeps every object voxel within the radius)",
+    )
+
+
+def add_deform_args(p: argparse.ArgumentParser) -> None:
+    """``--massspring``/``--chainmail`` and their options (drags, fixes, cuts, ...)."""
+    g = p.add_argument_group(
+        "deformation (--massspring or --chainmail)",
+        "Deform the volume before rendering: an element grid spans the volume's box (its"
+        " 8 corners fixed), --drag holds elements at offsets from rest, the model moves"
+        " the others along, and the resulting offset field warps the volume at render"
+        " time. --massspring runs a mass-spring simulation (springs pull the rest along"
+        " over time steps); --chainmail runs 3D ChainMail (links with slack: each drag is"
+        " settled at once, moving every other element as little as the links allow). With"
+        " --save-scene the JSON keeps the field and the model (grid, materials, held"
+        " elements; ChainMail also its limits and cuts), so rendering it again gives the"
+        " same image. Examples (bend the fish's tail sideways, head held):"
+        " voxwarp render sample:fish --view +z --massspring 8 --fix 0..2,0..7,0..7"
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png;"
+        " voxwarp render sample:fish --view +z --chainmail 8 --fix 0..2,0..7,0..7"
+        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
+    )
+    g.add_argument(
+        "--massspring",
+        type=_grid_shape,
+        metavar="N|NX,NY,NZ",
+        help="deform with a mass-spring model: its element grid over the volume's"
+        " bounding box (2..128 per axis, e.g. 16)",
+    )
+    g.add_argument(
+        "--chainmail",
+        type=_grid_shape,
+        metavar="N|NX,NY,NZ",
+        help="deform with 3D ChainMail: its element grid over the volume's bounding box"
+        " (2..128 per axis, e.g. 16)",
+    )
+    g.add_argument(
+        "--drag",
+        type=_drag,
+        action="append",
+        metavar="I,J,K:DX,DY,DZ",
+        help="hold element (i, j, k) at its rest position + (dx, dy, dz) mm (world x, y, z"
+        " axes); repeatable; indices run 0..N-1 along x, y, z; corners stay fixed",
+    )
+    g.add_argument(
+        "--drag-at",
+        type=ropt.drag_at_arg,
+        action="append",
+        metavar="X,Y,Z:DX,DY,DZ",
+        help="as --drag, on the element nearest the world point (x, y, z) mm (at rest; it"
+        " says which and how far); the point may lie at most one element spacing outside"
+        " the grid; repeatable",
+    )
+    g.add_argument(
+        "--fix",
+        type=_fix,
+        action="append",
+        metavar="I,J,K",
+        help="also fix these elements at rest (the 8 corners always are); each index may"
+        " be a range A..B, e.g. --fix 0..2,0..7,0..7 holds the x = low end; repeatable",
+    )
+    g.add_argument(
+        "--backend",
+        choices=("cpu", "gpu"),
+        help="solve on the CPU (default: numpy for mass-spring, numba for ChainMail) or"
+        " in shaders on the renderer's context (gpu)",
+    )
+    g.add_argument(
+        "--inverse",
+        choices=("approx", "exact", "baked"),
+        help="offset-field inverse: baked (default: fixed point seeded by the inverse baked"
+        " on a finer grid, 2 fetches), exact (fixed point from p, 6 fetches) or approx (one"
+        " step, q = p - u(p), the thesis')",
+    )
+    g.add_argument(
+        "--stiffness-from-volume",
+        type=_stiffness_points,
+        metavar="V:S,...",
+        help="element stiffness from the volume value at each element, piecewise linear"
+        " through VALUE:STIFFNESS points (data units : 0..1; constant beyond the ends),"
+        " e.g. 100:0.2,400:0.95 makes CT bone stiff; stiffness 1 is rigid (default:"
+        " 0.5 everywhere); ChainMail's link slack is 1 - stiffness",
+    )
+
+    m = p.add_argument_group("mass-spring options (with --massspring)")
+    m.add_argument(
+        "--settle",
+        action="store_true",
+        default=None,
+        help=f"run until every element is slower than {MASSSPRING_SETTLE_TOL:g} mm/s, at"
+        f" most --steps steps (default {MASSSPRING_SETTLE_MAX_STEPS})",
+    )
+    m.add_argument(
+        "--steps",
+        type=_steps,
+        metavar="N",
+        help=f"time steps to run (default {MASSSPRING_STEPS}: a smooth, nearly settled"
+        " deformation); with --settle the most steps",
+    )
+    m.add_argument(
+        "--integrator",
+        choices=("explicit", "semi-implicit"),
+        help="semi-implicit (default; ~10x larger stable steps) or explicit Euler (the thesis')",
+    )
+    m.add_argument(
+        "--shear",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="face-diagonal shear springs (default on; without them the grid does not"
+        " resist shearing and a sideways drag tears it)",
+    )
+    m.add_argument(
+        "--bend",
+        action="store_true",
+        default=None,
+        help="second-neighbour bend springs (default off)",
+    )
+
+    c = p.add_argument_group(
+        "3D ChainMail options (with --chainmail)",
+        "Each link lets its two elements stretch or compress by up to half a spacing and"
+        " shear by up to half a spacing, each times 1 - stiffness (0.5 by default); a drag"
+        " moves other elements only once a link is taut, which leaves straight, sheared"
+        " blocks; --relax smooths them within the same limits.",
+    )
+    c.add_argument(
+        "--relax",
+        type=_relax,
+        metavar="K",
+        help="relaxation steps after each drag (default 0; the thesis shows 0, 1 and 4):"
+        " constrained Laplacian smoothing that keeps every link within its limits",
+    )
+    c.add_argument(
+        "--variant",
+        choices=("gibson", "enhanced"),
+        help="propagation: enhanced (default; Schill et al.'s priority queue) or gibson"
+        " (Gibson's sponsor lists); a single drag ends in the same state",
+    )
+    c.add_argument(
+        "--cut",
+        type=_cut,
+        action="append",
+        metavar="PX,PY,PZ:NX,NY,NZ[:R]",
+        help="before the drags, remove the links crossing the plane through point P (world"
+        " mm) with normal N, or only a disk of radius R mm on it; the two sides then move"
+        " independently; repeatable, e.g. --cut 48,24,20:1,0,0",
+    )

@@ -1,0 +1,478 @@
+"""The deformation options of ``render`` and ``slice`` at work: the checks that need no
+volume, then the element grid, the mass-spring or ChainMail model, the wire, lattice and
+displacement-field warps, and the scene they deform (:func:`prepare_deformation` before
+any GL work, :func:`deformed_scene` on the renderer's context).
+
+The options themselves are defined in :mod:`voxwarp.cli.deform_options`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import warnings
+from collections.abc import Iterator
+from typing import Any, NamedTuple
+
+from voxwarp.cli import render_options as ropt
+from voxwarp.cli.deform_options import (
+    MASSSPRING_SETTLE_MAX_STEPS,
+    MASSSPRING_SETTLE_TOL,
+    MASSSPRING_STEPS,
+)
+
+# the moved bodies below keep the names they had in voxwarp.cli.main
+from voxwarp.cli.deform_options import Cut as _Cut
+from voxwarp.cli.deform_options import Drag as _Drag
+from voxwarp.cli.deform_options import grid_text as _grid_text
+from voxwarp.errors import InputError as CliOptionError
+from voxwarp.inputs import load_lattice_file, load_wire_file
+
+#: the options of ``render``'s deformation models, in the order of ``--help``: (flag,
+#: attribute, the model that takes it: "both", "massspring" or "chainmail")
+_DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
+    ("--drag", "drag", "both"),
+    ("--drag-at", "drag_at", "both"),
+    ("--fix", "fix", "both"),
+    ("--backend", "backend", "both"),
+    ("--inverse", "inverse", "both"),
+    ("--stiffness-from-volume", "stiffness_from_volume", "both"),
+    ("--settle", "settle", "massspring"),
+    ("--steps", "steps", "massspring"),
+    ("--integrator", "integrator", "massspring"),
+    ("--shear/--no-shear", "shear", "massspring"),
+    ("--bend", "bend", "massspring"),
+    ("--relax", "relax", "chainmail"),
+    ("--variant", "variant", "chainmail"),
+    ("--cut", "cut", "chainmail"),
+)
+#: why a mass-spring option does not apply to ChainMail
+_NOT_FOR_CHAINMAIL: dict[str, str] = {
+    "settle": "ChainMail settles each drag at once; --relax K smooths it",
+    "steps": "ChainMail settles each drag at once; --relax K smooths it",
+    "integrator": "ChainMail has no time steps",
+    "shear": "ChainMail's shear limits follow the stiffness",
+    "bend": "ChainMail has no bend springs",
+}
+
+
+def _given(args: argparse.Namespace, attr: str) -> bool:
+    return getattr(args, attr) is not None  # every deformation option defaults to None
+
+
+def _deform_model(args: argparse.Namespace) -> str | None:
+    """``"massspring"``, ``"chainmail"`` or None (no deformation)."""
+    if args.massspring is not None:
+        return "massspring"
+    if args.chainmail is not None:
+        return "chainmail"
+    return None
+
+
+def check_deform_options(args: argparse.Namespace) -> None:
+    """Option checks that need no volume: deformation options without their model, both
+    models at once, options of the other model, drags and fixes outside the grid, drags
+    of a fixed element or of one element twice."""
+    import numpy as np
+
+    if args.massspring is not None and args.chainmail is not None:
+        raise CliOptionError(
+            "--massspring and --chainmail cannot be combined: deform with one model per"
+            " render (a scene JSON saved with --save-scene can be rendered again with the"
+            " other, which then deforms the result)"
+        )
+    _check_wire_options(args)
+    _check_lattice_options(args)
+    model = _deform_model(args)
+    for opt, attr, owner in _DEFORM_OPTIONS:
+        if not _given(args, attr) or owner in ("both", model):
+            continue
+        if model is None and owner == "chainmail":
+            raise CliOptionError(
+                f"{opt} needs --chainmail: add --chainmail N (the element grid over the"
+                " volume, e.g. --chainmail 16)"
+            )
+        if model is None:
+            raise CliOptionError(
+                f"{opt} needs --massspring: add --massspring N (the element grid over the"
+                " volume, e.g. --massspring 16)"
+            )
+        if model == "chainmail":
+            raise CliOptionError(
+                f"{opt} is a mass-spring option (--massspring) and does not apply to"
+                f" --chainmail: {_NOT_FOR_CHAINMAIL[attr]}"
+            )
+        raise CliOptionError(
+            f"{opt} is a ChainMail option (--chainmail) and does not apply to"
+            " --massspring; deform with --chainmail N instead to use it"
+        )
+    if model is None:
+        for opt, attr, _ in _DEFORM_OPTIONS:
+            if _given(args, attr):  # an option of both models
+                raise CliOptionError(
+                    f"{opt} needs --massspring: add --massspring N (the element grid over"
+                    " the volume, e.g. --massspring 16) or --chainmail N (3D ChainMail)"
+                )
+        return
+    shape = args.massspring if model == "massspring" else args.chainmail
+    grid = _grid_text(shape)
+    if len(set(shape)) == 1:
+        ranges_text = f"indices run 0..{shape[0] - 1}"
+    else:
+        ranges_text = "indices run " + ", ".join(f"0..{n - 1}" for n in shape) + " (i, j, k)"
+    fixed = np.zeros(shape, dtype=bool)
+    fixed[:: shape[0] - 1, :: shape[1] - 1, :: shape[2] - 1] = True
+    for text, ranges in args.fix or []:
+        if any(hi >= n for (_, hi), n in zip(ranges, shape, strict=True)):
+            raise CliOptionError(f"--fix {text}: reaches outside the {grid} grid; {ranges_text}")
+        fixed[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+    seen: dict[tuple[int, int, int], str] = {}
+    for d in args.drag or []:
+        if any(not 0 <= v < n for v, n in zip(d.index, shape, strict=True)):
+            raise CliOptionError(
+                f"{d.flag} {d.text}: element {d.index} is outside the {grid} grid; {ranges_text}"
+            )
+        if fixed[d.index]:
+            corner = all(v in (0, n - 1) for v, n in zip(d.index, shape, strict=True))
+            what = (
+                f"a corner of the {grid} grid (corners stay fixed)" if corner else "fixed by --fix"
+            )
+            raise CliOptionError(
+                f"{d.flag} {d.text}: element {d.index} is {what}; drag an element that is not fixed"
+            )
+        if d.index in seen:
+            raise CliOptionError(
+                f"{d.flag} {d.text}: element {d.index} is already dragged by"
+                f" {seen[d.index]}; give each element once"
+            )
+        seen[d.index] = f"{d.flag} {d.text}"
+
+
+def _check_lattice_options(args: argparse.Namespace) -> None:
+    """--lattice deforms alone (one deformation per render on the command line)."""
+    if args.lattice is None:
+        return
+    if args.wires is not None or _deform_model(args) is not None:
+        raise CliOptionError(
+            "--lattice cannot be combined with --wires, --massspring or --chainmail in one"
+            " render: save one with --save-scene and render that scene with the other"
+        )
+
+
+def _check_wire_options(args: argparse.Namespace) -> None:
+    """--wires cannot be combined with a model; its options need it."""
+    if args.wires is None:
+        for opt, attr in (("--field-scale", "field_scale"), ("--layout", "layout")):
+            if getattr(args, attr) is not None:
+                raise CliOptionError(f"{opt} needs --wires FILE (a wire file, see --help)")
+        if args.masks is not None:
+            raise CliOptionError("--masks/--no-masks needs --wires FILE (a wire file)")
+        return
+    if _deform_model(args) is not None:
+        raise CliOptionError(
+            "--wires cannot be combined with --massspring or --chainmail in one render:"
+            " save one with --save-scene and render that scene with the other"
+        )
+
+
+def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
+    """The wire warp of --wires on ``volume``, built, and a one-line summary."""
+    from voxwarp.deform.warp import WarpError
+    from voxwarp.deform.wires.field import WireFieldWarp
+
+    entry = load_wire_file(args.wires)
+    if args.field_scale is not None:
+        entry["field_scale"] = args.field_scale
+    if args.layout is not None:
+        entry["layout"] = args.layout
+    if args.masks is not None:
+        entry["masks"] = args.masks
+    try:
+        warp = WireFieldWarp.from_dict(entry)
+        warp.bind_volume(volume)
+    except WarpError as exc:
+        raise CliOptionError(f"--wires {args.wires}: {exc}") from exc
+    st = warp.deformer.stats
+    assert st is not None
+    summary = (
+        f"wires: {len(warp.wires)} wire(s), field {'x'.join(map(str, st.field_shape))}"
+        f" (1:{st.field_scale**3}, {st.layout}), {st.planes - st.planes_dropped} planes"
+        f" ({st.mask_bytes_total} bytes of masks), {st.swept} voxels swept,"
+        f" {st.percent_ignored:.1f}% ignored,"
+        f" built in {st.timings['total']:.2f} s ({st.backend})"
+    )
+    return warp, summary
+
+
+def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
+    """The element grid of ``render --massspring`` / ``--chainmail`` over ``volume``
+    (None without either): fixed elements and materials set, drags checked against
+    rigid elements (mass-spring) and cutting planes against the grid (ChainMail), all
+    before any GL work."""
+    model = _deform_model(args)
+    if model is None:
+        return None
+    import numpy as np
+
+    from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
+
+    grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
+    if args.drag_at:  # to the nearest elements, then checked as --drag elements are
+        picks = ropt.pick_elements(grid, args.drag_at)
+        for pick in picks:
+            print(pick.summary(), file=sys.stderr)
+        args.drag = [
+            *(args.drag or []),
+            *(_Drag((k.drag.text, k.index, k.drag.offset, "--drag-at")) for k in picks),
+        ]
+        args.drag_at = None
+        check_deform_options(args)
+    for _, ranges in args.fix or []:
+        mask = np.zeros(grid.shape, dtype=bool)
+        mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+        grid.fix(mask)
+    if args.stiffness_from_volume:
+        # the voxel centres span origin .. origin + spacing * (shape - 1)
+        org = np.asarray(volume.origin, dtype=np.float64)
+        n = np.maximum(np.asarray(volume.shape) - 1, 1)
+        centres = (org, org + np.asarray(volume.spacing, dtype=np.float64) * n)
+        try:
+            grid.materials_from_volume(volume.data, centres, args.stiffness_from_volume)
+        except ElementGridError as exc:
+            raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
+    if model == "massspring":
+        rigid = grid.pinned()
+        for d in args.drag or []:
+            if rigid[d.index]:
+                raise CliOptionError(
+                    f"{d.flag} {d.text}: element {d.index} is rigid (stiffness 1 from"
+                    " --stiffness-from-volume) and cannot move; drag another element or"
+                    " map its value to a stiffness below 1"
+                )
+    for c in args.cut or []:
+        if not _cut_crosses(grid, c):
+            lo, hi = grid.lo, grid.hi
+            box = ", ".join(f"{a} {lo[i]:g}..{hi[i]:g}" for i, a in enumerate("xyz"))
+            where = "plane" if c.radius is None else f"disk of radius {c.radius:g} mm"
+            raise CliOptionError(
+                f"--cut {c.text}: the {where} crosses no link of the"
+                f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
+                " point inside that box (world mm, as --drag offsets)"
+            )
+    return grid
+
+
+def _cut_crosses(grid: Any, cut: _Cut) -> bool:
+    """Whether ``cut`` removes a link of ``grid`` at rest (the test of ChainMail.cut)."""
+    import numpy as np
+
+    p0 = np.asarray(cut.point, dtype=np.float64)
+    normal = np.asarray(cut.normal, dtype=np.float64)
+    x = grid.rest_positions
+    s = (x - p0) @ (normal / np.linalg.norm(normal))
+    for axis in range(3):
+        sa = np.moveaxis(s, axis, 0)[:-1]
+        sb = np.moveaxis(s, axis, 0)[1:]
+        cross = ((sa < 0) & (sb >= 0)) | ((sb < 0) & (sa >= 0))
+        if cut.radius is not None and np.any(cross):
+            xa = np.moveaxis(x, axis, 0)[:-1]
+            xb = np.moveaxis(x, axis, 0)[1:]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.where(cross, sa / (sa - sb), 0.0)
+            hit = xa + t[..., None] * (xb - xa)
+            cross &= np.linalg.norm(hit - p0, axis=-1) <= cut.radius
+        if np.any(cross):
+            return True
+    return False
+
+
+def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
+    """Build, drag and run the mass-spring model of ``render --massspring`` on ``grid``.
+
+    Returns the :class:`~voxwarp.deform.elements.massspring.MassSpring` and a one-line summary.
+    """
+    from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
+    from voxwarp.deform.warp import WarpError
+
+    backend = args.backend or "cpu"
+    try:
+        ms = MassSpring(
+            grid,
+            backend=backend,
+            ctx=ctx if backend == "gpu" else None,
+            integrator=args.integrator or "semi-implicit",
+            shear=True if args.shear is None else args.shear,
+            bend=bool(args.bend),
+        )
+    except MassSpringError as exc:
+        raise CliOptionError(f"--massspring: {exc}") from exc
+    try:
+        for d in args.drag or []:
+            ms.move(d.index, d.offset)
+        if args.settle:
+            limit = MASSSPRING_SETTLE_MAX_STEPS if args.steps is None else args.steps
+            steps = ms.settle(max_steps=limit, tol=MASSSPRING_SETTLE_TOL)
+            how = f"{steps} steps"
+            if steps >= limit and limit > 0:
+                warnings.warn(
+                    f"--settle stopped at the limit of {limit} steps; the grid may still"
+                    " be moving: raise --steps",
+                    RuntimeWarning,
+                    stacklevel=1,
+                )
+            else:
+                how += f" (settled: every element slower than {MASSSPRING_SETTLE_TOL:g} mm/s)"
+        else:
+            steps = MASSSPRING_STEPS if args.steps is None else args.steps
+            ms.step(steps)
+            how = f"{steps} steps"
+        ms.warp(inverse=args.inverse or "baked")
+    except WarpError as exc:  # e.g. displacements beyond the texture's range
+        ms.close()
+        raise CliOptionError(f"--massspring: {exc}") from exc
+    except BaseException:
+        ms.close()
+        raise
+    summary = (
+        f"massspring: {_grid_text(grid.shape)} {backend} {ms.integrator}, dt {ms.dt:.3g} s,"
+        f" {len(args.drag or [])} dragged, {how}"
+    )
+    return ms, summary
+
+
+def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
+    """Build, cut, drag and relax the ChainMail model of ``render --chainmail``.
+
+    Cuts come first (through the rest state), then all ``--drag`` elements move at once
+    (one :meth:`~voxwarp.deform.elements.chainmail.ChainMail.move`), then ``--relax`` steps (also
+    saved
+    as the model's ``relax_steps``). Returns the
+    :class:`~voxwarp.deform.elements.chainmail.ChainMail`
+    and a one-line summary.
+    """
+    import time
+
+    import numpy as np
+
+    from voxwarp.deform.elements.chainmail import ChainMail, ChainMailError
+
+    backend = args.backend or "cpu"
+    relax = args.relax or 0
+    drags = args.drag or []
+    try:
+        cm = ChainMail(
+            grid,
+            variant=args.variant or "enhanced",
+            backend=backend,
+            ctx=ctx if backend == "gpu" else None,
+        )
+    except ChainMailError as exc:
+        raise CliOptionError(f"--chainmail: {exc}") from exc
+    try:
+        cut = sum(cm.cut(c.point, c.normal, c.radius) for c in args.cut or [])
+        if backend == "cpu":  # load the numba kernels outside the timed move: no element
+            cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
+        touched, solve_ms = 0, 0.0
+        if drags:
+            stats = cm.move([d.index for d in drags], [d.offset for d in drags])
+            touched, solve_ms = stats.touched, stats.seconds * 1000
+            if stats.limited:
+                what = (
+                    f"{drags[0].flag} {drags[0].text}"
+                    if len(drags) == 1
+                    else "the dragged elements"
+                )
+                warnings.warn(
+                    f"{what} went only {stats.fraction:.0%} of the way: the links between"
+                    " the dragged and the fixed elements (the 8 corners always are fixed)"
+                    " ran out of slack; fix fewer elements or drag less",
+                    RuntimeWarning,
+                    stacklevel=1,
+                )
+        t = time.perf_counter()
+        cm.relax(relax)
+        relax_ms = (time.perf_counter() - t) * 1000
+        cm.relax_steps = relax  # saved with the model: a resumed one relaxes alike
+        cm.warp(inverse=args.inverse or "baked")
+        displaced = int(np.count_nonzero(np.any(cm.displacements() != 0.0, axis=-1)))
+    except BaseException:
+        cm.close()
+        raise
+    moved = (
+        f"{touched} elements touched in {solve_ms:.1f} ms"
+        if backend == "cpu"
+        else f"solved in {solve_ms:.1f} ms"
+    )
+    summary = f"chainmail: {_grid_text(grid.shape)} {backend} {cm.variant}, {len(drags)} dragged"
+    summary += f", {moved}"
+    if relax:
+        summary += f", relax {relax} step{'s' * (relax != 1)} in {relax_ms:.1f} ms"
+    if args.cut:
+        summary += f", {cut} links cut"
+    summary += f"; {displaced} elements displaced"
+    return cm, summary
+
+
+def _field_warps(args: argparse.Namespace) -> list[Any]:
+    """The warps of every ``--displacement`` file, in order (fails before any GL work)."""
+    if not args.displacement:
+        return []
+    from voxwarp.io.fields import load_transform
+
+    warps: list[Any] = []
+    for path in args.displacement or []:
+        warps += load_transform(path, convention=args.field_convention)
+    return warps
+
+
+class PendingDeformation(NamedTuple):
+    """The deformation options of ``render`` (and ``slice``) prepared before any GL work:
+    the element grid of ``--massspring``/``--chainmail`` and the warp of ``--wires`` or
+    ``--lattice`` (None when not given)."""
+
+    grid: Any
+    file_warp: Any
+
+
+def prepare_deformation(args: argparse.Namespace, scene: Any) -> tuple[Any, PendingDeformation]:
+    """``scene`` with the ``--displacement`` fields in its chain, and the model grid and
+    file warp still to add (:func:`deformed_scene`); every check that needs no GL runs
+    here, so bad options fail before a context is made."""
+    fields = _field_warps(args)
+    for w in fields:
+        w.bind_volume(scene.volume)  # a field that misses the volume warns
+    if fields:  # nearest the displayed (fixed) space; the models act in the volume's
+        scene = scene.copy(warps=[*fields, *scene.warps])
+    grid = _deform_grid(args, scene.volume)
+    file_warp = None  # --wires or --lattice (they exclude each other)
+    if args.wires is not None:  # built before any GL work: bad wires fail fast
+        file_warp, summary = _wire_warp(args, scene.volume)
+        print(summary, file=sys.stderr)
+    if args.lattice is not None:
+        file_warp = load_lattice_file(args.lattice, scene.volume)
+    return scene, PendingDeformation(grid, file_warp)
+
+
+@contextlib.contextmanager
+def deformed_scene(
+    args: argparse.Namespace, scene: Any, pending: PendingDeformation, ctx: Any
+) -> Iterator[Any]:
+    """The finished scene: the model of ``pending`` run on ``ctx`` (current) and its warp
+    last in the chain, then the file warp, then the clip/camera options; the model is
+    closed when the block ends."""
+    model = None
+    try:
+        if pending.grid is not None:
+            run = _run_massspring if args.massspring is not None else _run_chainmail
+            model, summary = run(args, pending.grid, ctx)
+            print(summary, file=sys.stderr)
+            # last in the chain: it deforms the volume itself, before the
+            # scene's own warps move the result
+            scene = scene.copy(warps=[*scene.warps, model.warp()])
+        if pending.file_warp is not None:
+            scene = scene.copy(warps=[*scene.warps, pending.file_warp])
+        yield ropt.apply_render_options(scene, args)  # every warp is in place
+    finally:
+        if model is not None:
+            model.close()

@@ -1,0 +1,59 @@
+"""``voxwarp info INPUT``: what a volume file, scene JSON or displacement field holds."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+from typing import Any
+
+from voxwarp.cli import render_options as ropt
+from voxwarp.cli.options import add_field_convention_arg as _add_field_convention_arg
+from voxwarp.cli.options import add_volume_args as _add_volume_args
+from voxwarp.inputs import load_input
+
+
+def add_parser(sub: Any) -> None:
+    """Add ``info`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
+    pi = sub.add_parser(
+        "info",
+        help="print dims, dtype, spacing, value range, histogram; for a displacement field"
+        " or transform file its grid, extent and |u|",
+    )
+    pi.add_argument("input")
+    pi.add_argument("--json", action="store_true", help="machine-readable output")
+    _add_field_convention_arg(pi)
+    _add_volume_args(pi)
+    pi.set_defaults(func=cmd_info)
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """``voxwarp info INPUT``: dims, dtype, spacing, value range, histogram."""
+    from voxwarp.io.fields import field_info, field_summary, is_field_file, load_transform
+    from voxwarp.io.volumes import dicom_series, volume_info, volume_summary
+    from voxwarp.scene import Scene
+
+    if is_field_file(args.input):  # a registration result, not a volume
+        warps = load_transform(args.input, convention=args.field_convention)
+        text = json.dumps([field_info(w) for w in warps], indent=2)
+        print(text if args.json else field_summary(warps))
+        return 0
+    # info shows the file's values: padding kept
+    obj = load_input(args.input, keep_padding=True, **ropt.load_options(args))
+    vol = obj.volume if isinstance(obj, Scene) else obj
+    series = dicom_series(args.input) if os.path.isdir(args.input) else []
+    if args.json:
+        info = volume_info(vol)
+        if series:
+            info["dicom_series"] = [dataclasses.asdict(s) for s in series]
+        print(json.dumps(info, indent=2))
+        return 0
+    print(volume_summary(vol))
+    if len(series) > 1:
+        chosen = str(getattr(args, "series", None) or 1)
+        print("DICOM series in this folder (choose with --series N or --series UID):")
+        for s in series:
+            mark = "*" if chosen in (str(s.index), s.uid) else " "
+            print(f" {mark} {s.line()}")
+    return 0

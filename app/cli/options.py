@@ -1,0 +1,257 @@
+"""Argument types and option groups that several ``voxwarp`` commands share.
+
+The volume options (``--spacing``, ``--downsample``, ``--memory-budget``, ``--nan`` and
+:func:`~voxwarp.cli.render_options.add_input_args`), ``--view``, ``--window``, ``--tf``
+and its help, ``--field-convention``, the scene JSON that the export commands read, the
+parser whose errors are one line, ``--version``, and the rewrite of ``argv`` that lets
+option values start with ``-``. Importing it loads no numpy or Qt (``voxwarp --help``
+stays quick).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO, Any, NoReturn
+
+from voxwarp.cli import render_options as ropt
+from voxwarp.core import limits
+from voxwarp.errors import InputError as CliOptionError
+from voxwarp.inputs import load_input
+
+__all__ = [
+    "NEGATIVE_VALUE_OPTIONS",
+    "TF_HELP",
+    "CliOptionError",
+    "OneLineErrorParser",
+    "VersionAction",
+    "add_field_convention_arg",
+    "add_memory_budget_arg",
+    "add_volume_args",
+    "downsample_arg",
+    "join_negative_views",
+    "load_scene_json",
+    "tf_arg",
+    "view_arg",
+    "window_arg",
+    "window_pair_arg",
+]
+
+
+def view_arg(text: str) -> Any:
+    """``--view``: a view name (``+z``, ``anterior``, ...) or ``AZIMUTH,ELEVATION`` degrees."""
+    from voxwarp.core.camera import VIEW_NAMES
+
+    if text in VIEW_NAMES:
+        return text
+    try:
+        az, el = (float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"view must be one of {','.join(VIEW_NAMES)} or AZIMUTH,ELEVATION degrees; got {text!r}"
+        ) from exc
+    return (az, el)
+
+
+def window_arg(text: str) -> tuple[float, float]:
+    """``--window LEVEL,WIDTH`` (data units; the width > 0)."""
+    form = "LEVEL,WIDTH in data units with WIDTH > 0, e.g. 40,400 for CT soft tissue"
+    try:
+        level, width = (float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
+    if not (math.isfinite(level) and math.isfinite(width) and width > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
+    return level, width
+
+
+def window_pair_arg(text: str) -> list[float]:
+    """``render --window LEVEL,WIDTH`` (also written ``--window LEVEL WIDTH``: see
+    :func:`join_negative_views`): two numbers, as a list; the scene checks their values."""
+    try:
+        level, width = (float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected LEVEL,WIDTH (or LEVEL WIDTH) in data units, e.g. 40,400"
+        ) from exc
+    return [level, width]
+
+
+#: ``--tf`` help, the same wherever it is accepted (one resolver: :func:`tf_arg`).
+TF_HELP = (
+    "preset (ct-bone, mri, ...), matplotlib colour map (viridis, ...), or a file: voxwarp"
+    " or ParaView colour-map JSON, Slicer presets.xml or .vp; FILE:NAME picks one map"
+)
+
+
+def tf_arg(tf: str | None, volume: Any = None) -> Any:
+    """``--tf`` (the one resolver): None, a preset or matplotlib colour-map name (kept as
+    a name, the scene resolves it for its mode), or a file, ``FILE:NAME`` too (voxwarp,
+    ParaView or Slicer; read now against ``volume``)."""
+    from voxwarp.core.transfer_function import TransferFunction, file_spec
+
+    if tf is None or file_spec(tf) is None:
+        return tf
+    return TransferFunction.load(tf, volume)
+
+
+def downsample_arg(text: str) -> int | tuple[int, int, int]:
+    """argparse type of ``--downsample N`` or ``--downsample NX,NY,NZ``."""
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 3) or min(values) < 1:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a positive integer N or three NX,NY,NZ, e.g. 2 or 8,1,1"
+        )
+    return values[0] if len(values) == 1 else (values[0], values[1], values[2])
+
+
+def add_memory_budget_arg(p: argparse.ArgumentParser) -> None:
+    """``--memory-budget SIZE`` (:func:`main` makes it the budget of every load)."""
+    p.add_argument(
+        "--memory-budget",
+        type=limits.size_arg,
+        metavar="SIZE",
+        help="most memory a volume file's voxels may take, e.g. 2G, 512M or unlimited"
+        f" (default {limits.DEFAULT_MEMORY_FRACTION * 100:.0f}%% of the physical memory); checked"
+        " before reading",
+    )
+
+
+def add_volume_args(p: argparse.ArgumentParser) -> None:
+    """How a volume file is read: spacing, downsampling, memory budget, NaNs, axis order, series."""
+    p.add_argument(
+        "--spacing", nargs=3, type=float, metavar=("SX", "SY", "SZ"), help="voxel size in mm"
+    )
+    p.add_argument(
+        "--downsample",
+        type=downsample_arg,
+        default=1,
+        metavar="N|NX,NY,NZ",
+        help="reduce by N per axis (or by NX, NY, NZ along x, y, z)",
+    )
+    add_memory_budget_arg(p)
+    p.add_argument(
+        "--nan", choices=("raise", "mask"), default="raise", help="NaN/Inf voxels: reject or mask"
+    )
+    ropt.add_input_args(p)
+
+
+def add_field_convention_arg(p: Any) -> None:
+    """``--field-convention`` of ``render`` and ``info``: voxwarp.io.fields.CONVENTIONS,
+    spelled out so that building the parser loads no field reader."""
+    p.add_argument(
+        "--field-convention",
+        choices=("itk", "ras", "voxel"),
+        help="what the vectors of a field whose header does not say mean: itk (LPS mm),"
+        " ras (RAS mm) or voxel (index units, as voxelmorph); NIfTI intents and NRRD"
+        " spaces say it themselves",
+    )
+
+
+def load_scene_json(path: str, command: str) -> Any:
+    """The :class:`~voxwarp.scene.Scene` of the scene JSON ``path`` that ``command``
+    (``export-field``, ``export-volume``) reads; one line for anything else."""
+    from voxwarp.scene import Scene
+
+    scene_path = Path(path)
+    if scene_path.suffix.lower() != ".json" or not scene_path.is_file():
+        what = "is not a .json file" if scene_path.is_file() else "does not exist"
+        raise CliOptionError(
+            f"{path} {what}; {command} reads a scene JSON (write one with voxwarp"
+            " render INPUT ... --save-scene SCENE.json)"
+        )
+    scene = load_input(path)
+    if not isinstance(scene, Scene):
+        raise CliOptionError(f"{path} is not a voxwarp scene JSON (render --save-scene)")
+    return scene
+
+
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line: ``PROG: error: MESSAGE (see PROG
+    --help)``, exit code 2, instead of argparse's usage block followed by the error.
+    Subcommand parsers inherit it (``add_subparsers`` uses the parent's class). Unlike
+    argparse's, it lets a closed pipe's :class:`BrokenPipeError` through (``voxwarp --help
+    | head -1``), so that :func:`voxwarp.cli.main.main` ends every command alike then."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+    def _print_message(self, message: str, file: IO[str] | None = None) -> None:
+        stream = file or sys.stderr
+        if not message or stream is None:  # no stream at all under pythonw
+            return
+        try:
+            stream.write(message)
+        except BrokenPipeError:
+            raise
+        except OSError:  # as argparse: a stream that fails otherwise is ignored
+            pass
+
+
+class VersionAction(argparse.Action):
+    """``--version``: prints the installed version, which it looks up only when asked
+    (``importlib.metadata`` is slow to import, and every command builds the parser)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        kwargs.setdefault("help", "show the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> NoReturn:
+        from voxwarp import __version__
+
+        print(f"voxwarp {__version__}")
+        parser.exit()
+
+
+#: options whose value may start with "-" (a negative number or "-y"): joined as --opt=value
+NEGATIVE_VALUE_OPTIONS = (
+    "--view",
+    "--stiffness-from-volume",
+    "--cut",
+    "--clip",
+    "--drag-at",
+    "--plane",
+)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def join_negative_views(argv: Sequence[str]) -> list[str]:
+    """``argv`` as the parser reads it (:func:`voxwarp.cli.main.main` does this first): a
+    value that starts with "-" joined to its option (``--view -y`` -> ``--view=-y``;
+    argparse would take ``-y`` for an option), and ``--window LEVEL WIDTH`` (two numbers)
+    joined into ``--window=LEVEL,WIDTH``, the one form every ``--window`` parses."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        value = argv[i + 1] if i + 1 < len(argv) else None
+        if (
+            argv[i] == "--window"
+            and value is not None
+            and i + 2 < len(argv)
+            and _is_number(value)
+            and _is_number(argv[i + 2])
+        ):
+            out.append(f"--window={value},{argv[i + 2]}")
+            i += 3
+            continue
+        negative = value is not None and value.startswith("-")
+        if negative and argv[i] in (*NEGATIVE_VALUE_OPTIONS, "--window"):
+            out.append(f"{argv[i]}={value}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
