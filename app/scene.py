@@ -25,7 +25,8 @@ from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.files import atomic_write_text
-from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
+from voxwarp.core.mesh import MeshInstance
+from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.modality import (
     default_shading,
     describe,

@@ -1188,28 +1188,6 @@ def instances_from_scene_graph(
     return out
 
 
-def mesh_instances_bounds(
-    instances: Sequence[MeshInstance], warps: Sequence[Any] = ()
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Union of the instances' :meth:`MeshInstance.world_bounds`, or None without any.
-
-    ``warps``: a scene's warp chain; the box then holds the meshes moved by its forward
-    map (:func:`voxwarp.core.mesh_warp.warped_bounds`), as they are drawn.
-    """
-    if not instances:
-        return None
-    from voxwarp.core.mesh_warp import moves_meshes, warped_bounds
-
-    if moves_meshes(warps):
-        return warped_bounds(instances, warps)
-    boxes = [inst.world_bounds() for inst in instances]
-    lo = np.min([b[0] for b in boxes], axis=0)
-    hi = np.max([b[1] for b in boxes], axis=0)
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise MeshError("mesh instance bounds are not finite (a lattice with NaN nodes?)")
-    return lo, hi
-
-
 __all__ = [
     "DEFAULT_NORMAL_METHOD",
     "GENERATORS",
@@ -1226,7 +1204,6 @@ __all__ = [
     "height_tile",
     "instances_from_scene_graph",
     "load_mesh",
-    "mesh_instances_bounds",
     "tile_mesh",
     "torus_mesh",
     "tube_mesh",

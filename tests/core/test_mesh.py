@@ -22,12 +22,12 @@ from voxwarp.core.mesh import (
     default_box,
     instances_from_scene_graph,
     load_mesh,
-    mesh_instances_bounds,
     tile_mesh,
     torus_mesh,
     tube_mesh,
     uv_sphere,
 )
+from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.volume import Volume
 from voxwarp.deform.lattice.scene_graph import SceneNode
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
