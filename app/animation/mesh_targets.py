@@ -66,6 +66,7 @@ class MeshTargets(TargetFamily):
     """The lattice nodes of a named mesh instance, and the meshes anchored to it."""
 
     names = ("meshes[NAME].nodes",)
+    pattern = _TARGET.pattern
     extra_keys = ("attachments",)
 
     def matches(self, target: str) -> bool:

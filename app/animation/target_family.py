@@ -56,6 +56,9 @@ class TargetFamily:
 
     #: the family's targets as listed in :data:`voxwarp.animation.tracks.TARGETS`
     names: ClassVar[tuple[str, ...]] = ()
+    #: the regular expression :meth:`matches` uses when :attr:`names` hold placeholders
+    #: (``wires[i]...``; the animation JSON Schema takes it too)
+    pattern: ClassVar[str | None] = None
     #: whether several tracks may key one target
     repeatable: ClassVar[bool] = False
     #: whether its tracks take an ``"elements"`` entry

@@ -156,6 +156,14 @@ DEFAULT_STEPS_PER_FRAME = 10
 DEFAULT_RELAX_STEPS = 1
 #: most frames of one animation
 MAX_FRAMES = 100_000
+#: most frames per second
+MAX_FPS = 1000.0
+#: most physics steps per frame (``steps_per_frame``, ``relax_steps``)
+MAX_PHYSICS_STEPS = 10000
+#: keys of the animation entry
+ANIMATION_KEYS: tuple[str, ...] = ("frames", "fps", "tracks", "steps_per_frame", "relax_steps")
+#: keys of a track entry (besides the families' :data:`EXTRA_KEYS`)
+TRACK_KEYS: tuple[str, ...] = ("target", "keys", "interpolation", "elements")
 #: scene attributes a track can key, with the shape of their values (() = a number)
 SCALAR_TARGETS: dict[str, tuple[int, ...]] = {
     "step": (),
@@ -322,7 +330,7 @@ class Track:
         """
         if not isinstance(d, Mapping):
             raise AnimationError(f"{where} must be an object with 'target' and 'keys'")
-        allowed = ("target", "keys", "interpolation", "elements", *EXTRA_KEYS)
+        allowed = (*TRACK_KEYS, *EXTRA_KEYS)
         unknown = set(d) - set(allowed)
         if unknown:
             raise AnimationError(
@@ -456,7 +464,7 @@ class Animation:
         """
         if not isinstance(d, Mapping):
             raise AnimationError("'animation' must be an object with 'frames' and 'tracks'")
-        allowed = {"frames", "fps", "tracks", "steps_per_frame", "relax_steps"}
+        allowed = set(ANIMATION_KEYS)
         unknown = set(d) - allowed
         if unknown:
             raise AnimationError(
@@ -466,14 +474,14 @@ class Animation:
             raise AnimationError("animation needs 'frames': the number of frames (>= 1)")
         frames = _count(d["frames"], "animation 'frames'", 1, MAX_FRAMES)
         fps = number(d.get("fps", DEFAULT_FPS), "animation 'fps'")
-        if not 0 < fps <= 1000:
-            raise AnimationError(f"animation 'fps' must be in (0, 1000]; got {fps:g}")
+        if not 0 < fps <= MAX_FPS:
+            raise AnimationError(f"animation 'fps' must be in (0, {MAX_FPS:g}]; got {fps:g}")
         steps = d.get("steps_per_frame")
         relax = d.get("relax_steps")
         if steps is not None:
-            steps = _count(steps, "animation 'steps_per_frame'", 0, 10000)
+            steps = _count(steps, "animation 'steps_per_frame'", 0, MAX_PHYSICS_STEPS)
         if relax is not None:
-            relax = _count(relax, "animation 'relax_steps'", 0, 10000)
+            relax = _count(relax, "animation 'relax_steps'", 0, MAX_PHYSICS_STEPS)
         tracks = d.get("tracks", [])
         if not isinstance(tracks, list):
             raise AnimationError("animation 'tracks' must be a list of track objects")
