@@ -139,6 +139,24 @@ def test_a_failing_ffmpeg_is_one_line_with_its_reason_and_leaves_no_movie(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f0.png", "f1.png"]
 
 
+def test_without_the_ffmpeg_process_the_log_still_tells_a_failure(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Should a later imageio-ffmpeg keep its process elsewhere, the movie is still
+    checked: ffmpeg at ``-v error`` logs nothing when it succeeds."""
+    real = voxwarp.animation.movie._start_encoder
+    monkeypatch.setattr(voxwarp.animation.movie, "_start_encoder", lambda *a: (real(*a)[0], None))
+    frames = [
+        write_image(tmp_path / f"f{i}.png", np.full((8, 8, 4), 9 * i, np.uint8)) for i in (0, 1)
+    ]
+    good = encode_movie(frames, tmp_path / "ok.mp4", 12.0)
+    assert len(_decode(good)[1]) == 2
+    monkeypatch.setattr(voxwarp.animation.movie, "MOVIE_CRF", "nope")
+    with pytest.raises(OutputError, match="Invalid argument"):
+        encode_movie(frames, tmp_path / "bad.mp4", 12.0)
+    assert not (tmp_path / "bad.mp4").exists()
+
+
 def test_an_interrupted_run_resumes_without_rendering_finished_frames_again(
     scene_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, gl_ctx: Any
 ) -> None:
