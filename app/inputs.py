@@ -126,8 +126,9 @@ def _scene_without_padding(scene: Any) -> Any:
     return scene.copy(volume=vol)
 
 
-_WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}
-_WIRE_FILE_NOTES = {"description", "sample", "type"}
+#: keys of a wire file (``--wires``) that make its warp entry, and its free notes
+WIRE_FILE_KEYS = {"wires", "field_scale", "layout", "masks", "mask_resolution", "dilation"}
+FILE_NOTES = {"description", "sample", "type"}
 
 
 def read_json_option(option: str, path: str | Path) -> Any:
@@ -152,7 +153,7 @@ def load_wire_file(path: str | Path) -> dict[str, Any]:
     :class:`InputError` naming the problem.
     """
     d = read_wire_file(path)
-    return {"type": "wires", **{k: v for k, v in d.items() if k in _WIRE_FILE_KEYS}}
+    return {"type": "wires", **{k: v for k, v in d.items() if k in WIRE_FILE_KEYS}}
 
 
 def read_wire_file(path: str | Path) -> dict[str, Any]:
@@ -164,11 +165,11 @@ def read_wire_file(path: str | Path) -> dict[str, Any]:
             f"--wires {path}: a wire file is a JSON object with a 'wires' list (see"
             " sample_volumes/fish_spine_wires.json)"
         )
-    unknown = set(d) - _WIRE_FILE_KEYS - _WIRE_FILE_NOTES
+    unknown = set(d) - WIRE_FILE_KEYS - FILE_NOTES
     if unknown:
         raise InputError(
             f"--wires {path}: unknown keys {sorted(unknown)}; allowed:"
-            f" {sorted(_WIRE_FILE_KEYS | _WIRE_FILE_NOTES)}"
+            f" {sorted(WIRE_FILE_KEYS | FILE_NOTES)}"
         )
     return d
 
@@ -188,7 +189,7 @@ def load_lattice_file(path: str | Path, volume: Any) -> Any:
             f"--lattice {path}: a lattice file is a JSON object with a 'grid' ({{'nodes':"
             " [...]}}, see sample_volumes/fish_lattice_bend.json)"
         )
-    entry = {k: v for k, v in d.items() if k not in _WIRE_FILE_NOTES}
+    entry = {k: v for k, v in d.items() if k not in FILE_NOTES}
     entry.setdefault("box", [list(map(float, b)) for b in volume.bounds])
     try:
         return LatticeWarp.from_dict(entry)

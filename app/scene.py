@@ -25,7 +25,8 @@ from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.files import atomic_write_text
-from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds
+from voxwarp.core.mesh import MeshInstance
+from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.modality import (
     default_shading,
     describe,
@@ -704,7 +705,7 @@ def json_error_text(exc: ValueError) -> str:
 SCENE_EXTRA_KEYS = ("description", "editor", "animation")
 _NUMBER = "a number (e.g. 1.5)"
 #: Scene JSON entry -> (JSON types it may hold, what the error says it must be).
-_SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
+SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
     "format": (("str",), f"the string {SCENE_FORMAT!r}"),
     "version": (("int",), "an integer"),
     "volume": (("object",), "an object with 'path', 'sample' or 'embedded'"),
@@ -729,7 +730,7 @@ _SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
     "meshes": (("list", "null"), "a list of mesh instance objects"),
 }
 #: Every key a scene JSON object may hold.
-SCENE_KEYS: tuple[str, ...] = (*_SCENE_TYPES, *SCENE_EXTRA_KEYS)
+SCENE_KEYS: tuple[str, ...] = (*SCENE_TYPES, *SCENE_EXTRA_KEYS)
 
 
 def _is_json_number(v: Any) -> bool:
@@ -769,7 +770,7 @@ def check_scene_json(d: Mapping[str, Any]) -> None:
             f"unknown scene key{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))};"
             f" a scene JSON holds only {', '.join(SCENE_KEYS)}"
         )
-    for key, (kinds, expected) in _SCENE_TYPES.items():
+    for key, (kinds, expected) in SCENE_TYPES.items():
         if key in d and not any(_JSON_TYPE_CHECKS[k](d[key]) for k in kinds):
             got = _short_json(d[key])
             raise SceneError(f"scene '{key}' must be {expected}; got {_json_kind(d[key])} {got}")

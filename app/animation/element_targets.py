@@ -7,11 +7,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from voxwarp.animation.target_family import Binding, Keys, TargetFamily
+from voxwarp.animation.target_family import Binding, Keys, TargetFamily, TrackLike
 from voxwarp.animation.values import AnimationError, array, key_weights
 
 if TYPE_CHECKING:
-    from voxwarp.animation.tracks import Track
     from voxwarp.scene import Scene
 
 _MODELS = ("massspring", "chainmail")
@@ -94,14 +93,14 @@ class ElementBinding(Binding):
         #: this frame's drags: (element indices, offsets or None to release)
         self.drags: list[tuple[np.ndarray, Any]] = []
 
-    def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
+    def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
         self.model.grid.indices(np.asarray(track.elements))  # inside the grid?
         if value is None:
             return None
         a = np.asarray(value, dtype=np.float64)
         return np.broadcast_to(a, (len(track.elements or []), 3)).copy()
 
-    def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
+    def apply(self, d: dict[str, Any], track: TrackLike, keys: Keys, f: float) -> None:
         offsets = drag_at(keys, f, track.interpolation)
         self.drags.append((np.asarray(track.elements), offsets))
 

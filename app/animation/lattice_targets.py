@@ -6,11 +6,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from voxwarp.animation.target_family import Binding, Keys, TargetFamily, find_warp
+from voxwarp.animation.target_family import Binding, Keys, TargetFamily, TrackLike, find_warp
 from voxwarp.animation.values import AnimationError, array, interpolate
 
 if TYPE_CHECKING:
-    from voxwarp.animation.tracks import Track
     from voxwarp.scene import Scene
 
 
@@ -37,7 +36,7 @@ class LatticeBinding(Binding):
         self.lattice = lattice
         self.warp = warp
 
-    def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
+    def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
         w = self.lattice
         shape = np.asarray(w.grid.nodes).shape
         if isinstance(value, str) and value == "rest":
@@ -53,7 +52,7 @@ class LatticeBinding(Binding):
             )
         return a
 
-    def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
+    def apply(self, d: dict[str, Any], track: TrackLike, keys: Keys, f: float) -> None:
         entry = dict(d["warps"][self.warp])
         entry["grid"] = {"nodes": interpolate(keys, f, track.interpolation).tolist()}
         d["warps"][self.warp] = entry

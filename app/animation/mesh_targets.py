@@ -29,12 +29,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from voxwarp.animation.target_family import Binding, Keys, TargetFamily
+from voxwarp.animation.target_family import Binding, Keys, TargetFamily, TrackLike
 from voxwarp.animation.values import AnimationError, array, interpolate
 from voxwarp.deform.warp import WarpError
 
 if TYPE_CHECKING:
-    from voxwarp.animation.tracks import Track
     from voxwarp.core.mesh import MeshInstance
     from voxwarp.deform.lattice.anchors import AnchorStrip
     from voxwarp.scene import Scene
@@ -67,6 +66,7 @@ class MeshTargets(TargetFamily):
     """The lattice nodes of a named mesh instance, and the meshes anchored to it."""
 
     names = ("meshes[NAME].nodes",)
+    pattern = _TARGET.pattern
     extra_keys = ("attachments",)
 
     def matches(self, target: str) -> bool:
@@ -119,7 +119,7 @@ class MeshBinding(Binding):
         self.claimed[name] = target
         return i
 
-    def _bind_track(self, track: Track, what: str) -> None:
+    def _bind_track(self, track: TrackLike, what: str) -> None:
         """Claim the track's base mesh and attachments; check the anchors fit the base."""
         from voxwarp.deform.lattice.anchors import AnchorStrip
 
@@ -142,7 +142,7 @@ class MeshBinding(Binding):
             strips.append((j, strip))
         self.attached[target] = strips
 
-    def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
+    def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
         from voxwarp.deform.lattice.trilinear import TrilinearGrid
 
         if track.target not in self.attached:
@@ -160,7 +160,7 @@ class MeshBinding(Binding):
             )
         return a
 
-    def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
+    def apply(self, d: dict[str, Any], track: TrackLike, keys: Keys, f: float) -> None:
         from voxwarp.deform.lattice.trilinear import TrilinearGrid
 
         if d.get("meshes") is self.template.get("meshes"):  # first mesh track of this frame

@@ -43,9 +43,11 @@ Movie
     Encoded with imageio-ffmpeg's bundled ffmpeg: H.264 (libx264, CRF 18), yuv420p, at
     ``--fps``; the RGB of each frame (alpha dropped: the background is already in), padded
     to an even size by repeating the last row/column. Written to a temporary name in the
-    output's folder and renamed when complete; ffmpeg's exit status is checked, and ffmpeg
-    is killed when voxwarp fails or is interrupted (on Linux also when voxwarp itself is
-    killed). ``.mp4``, ``.mov`` or ``.mkv``.
+    output's folder and renamed when complete; ffmpeg (started by
+    ``imageio_ffmpeg.write_frames``) has its exit status checked and is killed when
+    voxwarp fails or is interrupted; when voxwarp itself is killed, ffmpeg reads the end
+    of its input and stops, leaving a temporary movie the next run removes. ``.mp4``,
+    ``.mov`` or ``.mkv``.
 Rendering
     One :class:`~voxwarp.render.offscreen.OffscreenRenderer` per process (made on first use, kept
     for
@@ -65,13 +67,13 @@ import itertools
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -392,60 +394,52 @@ def _rgb8(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _pdeathsig() -> Callable[[], None] | None:
-    """A ``preexec_fn`` that has Linux kill the child when voxwarp dies (even by
-    ``kill -9``), so an ffmpeg is never left writing a movie nobody will rename."""
-    if not sys.platform.startswith("linux"):
-        return None
+@contextmanager
+def _stderr_into(fh: Any) -> Iterator[None]:
+    """Point this process's file descriptor 2 at ``fh`` while a child starts: the child
+    inherits it, so its messages land in ``fh`` (restored at once for this process)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
     try:
-        import ctypes
-
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
-    parent = os.getpid()
-
-    def setup() -> None:  # runs in the child between fork and exec
-        prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-        if os.getppid() != parent:  # the parent died before prctl took effect
-            os._exit(1)
-
-    return setup
+        os.dup2(fh.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
-def _ffmpeg_command(tmp: Path, width: int, height: int, fps: float) -> list[str]:
-    """The ffmpeg command of :func:`encode_movie` (raw RGB frames on stdin)."""
+def _start_encoder(
+    tmp: Path, width: int, height: int, fps: float, log: Any
+) -> tuple[Generator[None, Any, None], subprocess.Popen | None]:
+    """imageio-ffmpeg's frame writer of :func:`encode_movie`, started, and its ffmpeg.
+
+    ``imageio_ffmpeg.write_frames`` runs ffmpeg with stderr inherited and does not
+    return the process; ffmpeg's messages are sent to ``log`` by starting it with this
+    process's stderr pointed there, and the process (the generator's local ``p``) is
+    taken so its exit status can be checked and it can be killed and reaped (None if a
+    later imageio-ffmpeg keeps it elsewhere: then ``log`` alone says whether it failed).
+    """
     from fractions import Fraction
 
     import imageio_ffmpeg
 
-    rate = str(Fraction(float(fps)).limit_denominator())
-    return [
-        imageio_ffmpeg.get_ffmpeg_exe(),
-        "-y",
-        "-f",
-        "rawvideo",
-        "-vcodec",
-        "rawvideo",
-        "-s",
-        f"{width}x{height}",
-        "-pix_fmt",
-        "rgb24",
-        "-r",
-        rate,
-        "-i",
-        "-",
-        "-an",
-        "-vcodec",
-        "libx264",
-        "-pix_fmt",
-        "yuv420p",
-        "-v",
-        "error",
-        "-crf",
-        str(MOVIE_CRF),
+    writer = imageio_ffmpeg.write_frames(
         str(tmp),
-    ]
+        (width, height),
+        pix_fmt_in="rgb24",
+        pix_fmt_out="yuv420p",
+        fps=Fraction(float(fps)).limit_denominator(),
+        quality=None,  # the CRF below instead
+        codec="libx264",
+        macro_block_size=1,  # frames are padded to an even size, never rescaled
+        ffmpeg_log_level="error",
+        output_params=["-crf", str(MOVIE_CRF)],
+    )
+    with _stderr_into(log):
+        writer.send(None)  # starts ffmpeg
+    frame = writer.gi_frame
+    proc = frame.f_locals.get("p") if frame is not None else None
+    return writer, proc if all(hasattr(proc, n) for n in ("kill", "wait", "stdin")) else None
 
 
 def _last_line(fh: Any) -> str:
@@ -463,9 +457,9 @@ def encode_movie(
 ) -> Path:
     """Encode frame files into an H.264 movie (see the module doc), atomically.
 
-    ffmpeg runs as a child that is killed whenever this function does not finish
-    normally (an error, Ctrl+C), and on Linux also when this process is killed; its
-    exit status is checked, so a movie cut short (disk full) never replaces ``output``.
+    ffmpeg runs through ``imageio_ffmpeg.write_frames`` as a child that is killed
+    whenever this function does not finish normally (an error, Ctrl+C); its exit status
+    is checked, so a movie cut short (disk full) never replaces ``output``.
 
     Parameters
     ----------
@@ -499,16 +493,9 @@ def encode_movie(
     height, width = first.shape[:2]
     with atomic_output(out, out.suffix) as tmp, tempfile.TemporaryFile() as log:
         try:
-            proc = subprocess.Popen(
-                _ffmpeg_command(tmp, width, height, fps),
-                stdin=subprocess.PIPE,
-                stdout=subprocess.DEVNULL,
-                stderr=log,
-                preexec_fn=_pdeathsig(),  # kills ffmpeg with voxwarp (Linux)
-            )
+            writer, proc = _start_encoder(tmp, width, height, fps, log)
         except OSError as exc:
             raise VoxwarpError(f"cannot start ffmpeg to encode {out}: {exc}") from exc
-        assert proc.stdin is not None
         finished = False
         try:
             try:
@@ -519,23 +506,28 @@ def encode_movie(
                             f"frame {p} is {rgb.shape[1]}x{rgb.shape[0]}; the first frame is"
                             f" {width}x{height}"
                         )
-                    proc.stdin.write(rgb.tobytes())
-                proc.stdin.close()
-            except (BrokenPipeError, ConnectionResetError):
+                    writer.send(rgb)
+            except OSError:
                 pass  # ffmpeg stopped: its exit status and log say why
-            code = proc.wait()
+            writer.close()  # closes ffmpeg's input and waits for it
             finished = True
         finally:
-            if not finished:
-                proc.kill()
+            if proc is not None:
+                if not finished:
+                    proc.kill()
                 proc.wait()
-            try:
-                proc.stdin.close()
-            except OSError:
-                pass
-        if code != 0:
-            reason = _last_line(log) or f"ffmpeg exited with status {code}"
-            raise output_error(out, reason)
+                try:
+                    proc.stdin.close()  # what the killed ffmpeg did not read is dropped
+                except OSError:
+                    pass
+            writer.close()
+        reason = _last_line(log)
+        if proc is None:
+            failed = bool(reason)  # ffmpeg -v error writes nothing when it succeeds
+        else:
+            failed = proc.returncode != 0
+        if failed:
+            raise output_error(out, reason or f"ffmpeg exited with status {proc.returncode}")
     return out
 
 

@@ -9,26 +9,34 @@ The evaluator of :mod:`voxwarp.animation.tracks` only talks to these two classes
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from voxwarp.animation.values import AnimationError
 
 if TYPE_CHECKING:
-    from voxwarp.animation.tracks import Track
     from voxwarp.scene import Scene
 
 #: ``(frame, value)`` pairs of a track, resolved against the scene
 Keys = Sequence[tuple[float, Any]]
 
 
+class TrackLike(Protocol):
+    """What a family reads of a track (:class:`voxwarp.animation.tracks.Track` is one)."""
+
+    target: str
+    interpolation: str
+    elements: list[list[int]] | None
+    extras: dict[str, Any]
+
+
 class Binding:
     """A family's targets bound to one scene for one evaluation (keys, frames, physics)."""
 
-    def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
+    def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
         """A key value checked against the scene (``first``: the track's first, resolved)."""
         raise NotImplementedError
 
-    def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
+    def apply(self, d: dict[str, Any], track: TrackLike, keys: Keys, f: float) -> None:
         """Write ``track``'s value at animation time ``f`` into frame dict ``d``."""
         raise NotImplementedError
 
@@ -48,6 +56,9 @@ class TargetFamily:
 
     #: the family's targets as listed in :data:`voxwarp.animation.tracks.TARGETS`
     names: ClassVar[tuple[str, ...]] = ()
+    #: the regular expression :meth:`matches` uses when :attr:`names` hold placeholders
+    #: (``wires[i]...``; the animation JSON Schema takes it too)
+    pattern: ClassVar[str | None] = None
     #: whether several tracks may key one target
     repeatable: ClassVar[bool] = False
     #: whether its tracks take an ``"elements"`` entry

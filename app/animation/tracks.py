@@ -42,7 +42,7 @@ module per family in :mod:`voxwarp.animation.targets`):
     "projection": p}`` (optional zoom/fov/projection): a camera fitted, like the scene's
     own, to the scene's deformed box as saved. Centre, distance, field of view,
     orthographic height and radius are interpolated component-wise, the rotation by
-    quaternion slerp (the shorter way round); all keys need the same projection.
+    slerp (scipy's ``Slerp``, the shorter way round); all keys need the same projection.
 ``transfer_function``
     Control points ``[[value, r, g, b, a], ...]``, ``{"points": [...]}`` or a preset name
     (resolved on the scene's volume); every key must have the same number of points,
@@ -119,7 +119,6 @@ i.e. the key frames are scaled to the new length; the physics still runs
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -157,6 +156,14 @@ DEFAULT_STEPS_PER_FRAME = 10
 DEFAULT_RELAX_STEPS = 1
 #: most frames of one animation
 MAX_FRAMES = 100_000
+#: most frames per second
+MAX_FPS = 1000.0
+#: most physics steps per frame (``steps_per_frame``, ``relax_steps``)
+MAX_PHYSICS_STEPS = 10000
+#: keys of the animation entry
+ANIMATION_KEYS: tuple[str, ...] = ("frames", "fps", "tracks", "steps_per_frame", "relax_steps")
+#: keys of a track entry (besides the families' :data:`EXTRA_KEYS`)
+TRACK_KEYS: tuple[str, ...] = ("target", "keys", "interpolation", "elements")
 #: scene attributes a track can key, with the shape of their values (() = a number)
 SCALAR_TARGETS: dict[str, tuple[int, ...]] = {
     "step": (),
@@ -178,95 +185,27 @@ TARGETS: tuple[str, ...] = (
 
 
 # ---------------------------------------------------------------------------- interpolation
-def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion ``(w, x, y, z)`` of a 3x3 rotation matrix (Shepperd's method).
+def slerp_rotation(r0: np.ndarray, r1: np.ndarray, t: float) -> np.ndarray:
+    """The rotation a fraction ``t`` of the way from ``r0`` to ``r1``, the shorter way round.
+
+    Spherical linear interpolation by :class:`scipy.spatial.transform.Slerp`.
 
     Parameters
     ----------
-    r
-        Proper rotation matrix.
-
-    Returns
-    -------
-    numpy.ndarray
-        (4,) unit quaternion with ``w >= 0``.
-    """
-    m = np.asarray(r, dtype=np.float64)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = np.array(
-            [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-        )
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = np.array(
-            [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-        )
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = np.array(
-            [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-        )
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = np.array(
-            [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-        )
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0 else q
-
-
-def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
-    """3x3 rotation matrix of a quaternion ``(w, x, y, z)`` (normalised first).
-
-    Parameters
-    ----------
-    q
-        (4,) quaternion, any non-zero length.
+    r0, r1
+        (3, 3) proper rotation matrices.
+    t
+        Fraction in [0, 1] (0 gives ``r0``, 1 gives ``r1``).
 
     Returns
     -------
     numpy.ndarray
         (3, 3) proper rotation matrix.
     """
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    from scipy.spatial.transform import Rotation, Slerp  # scipy loads when used
 
-
-def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
-    """Spherical linear interpolation of unit quaternions, the shorter way round.
-
-    Parameters
-    ----------
-    q0, q1
-        (4,) unit quaternions ``(w, x, y, z)``.
-    t
-        Fraction in [0, 1] (0 gives ``q0``, 1 gives ``q1`` or ``-q1``).
-
-    Returns
-    -------
-    numpy.ndarray
-        (4,) unit quaternion.
-    """
-    a = np.asarray(q0, dtype=np.float64)
-    b = np.asarray(q1, dtype=np.float64)
-    dot = float(a @ b)
-    if dot < 0.0:  # q and -q are the same rotation: take the shorter arc
-        b, dot = -b, -dot
-    if dot > 0.9995:  # nearly the same rotation: normalised lerp is exact enough
-        q = a + t * (b - a)
-        return q / np.linalg.norm(q)
-    theta = math.acos(min(dot, 1.0))
-    s = math.sin(theta)
-    q = (math.sin((1.0 - t) * theta) / s) * a + (math.sin(t * theta) / s) * b
-    return q / np.linalg.norm(q)
+    keys = Rotation.from_matrix(np.stack([np.asarray(r0, float), np.asarray(r1, float)]))
+    return Slerp([0.0, 1.0], keys)(float(t)).as_matrix()
 
 
 _CAMERA_LINEAR = ("distance", "fov", "ortho_height", "radius")
@@ -296,9 +235,7 @@ def interpolate_camera(
     if t == 0.0:
         return Camera.from_dict(a.to_dict())
     b = keys[j][1]
-    rot = quaternion_to_rotation(
-        slerp(rotation_to_quaternion(a.rotation), rotation_to_quaternion(b.rotation), t)
-    )
+    rot = slerp_rotation(a.rotation, b.rotation, t)
     values = {n: (1.0 - t) * getattr(a, n) + t * getattr(b, n) for n in _CAMERA_LINEAR}
     return Camera(
         center=(1.0 - t) * a.center + t * b.center,
@@ -393,7 +330,7 @@ class Track:
         """
         if not isinstance(d, Mapping):
             raise AnimationError(f"{where} must be an object with 'target' and 'keys'")
-        allowed = ("target", "keys", "interpolation", "elements", *EXTRA_KEYS)
+        allowed = (*TRACK_KEYS, *EXTRA_KEYS)
         unknown = set(d) - set(allowed)
         if unknown:
             raise AnimationError(
@@ -527,7 +464,7 @@ class Animation:
         """
         if not isinstance(d, Mapping):
             raise AnimationError("'animation' must be an object with 'frames' and 'tracks'")
-        allowed = {"frames", "fps", "tracks", "steps_per_frame", "relax_steps"}
+        allowed = set(ANIMATION_KEYS)
         unknown = set(d) - allowed
         if unknown:
             raise AnimationError(
@@ -537,14 +474,14 @@ class Animation:
             raise AnimationError("animation needs 'frames': the number of frames (>= 1)")
         frames = _count(d["frames"], "animation 'frames'", 1, MAX_FRAMES)
         fps = number(d.get("fps", DEFAULT_FPS), "animation 'fps'")
-        if not 0 < fps <= 1000:
-            raise AnimationError(f"animation 'fps' must be in (0, 1000]; got {fps:g}")
+        if not 0 < fps <= MAX_FPS:
+            raise AnimationError(f"animation 'fps' must be in (0, {MAX_FPS:g}]; got {fps:g}")
         steps = d.get("steps_per_frame")
         relax = d.get("relax_steps")
         if steps is not None:
-            steps = _count(steps, "animation 'steps_per_frame'", 0, 10000)
+            steps = _count(steps, "animation 'steps_per_frame'", 0, MAX_PHYSICS_STEPS)
         if relax is not None:
-            relax = _count(relax, "animation 'relax_steps'", 0, 10000)
+            relax = _count(relax, "animation 'relax_steps'", 0, MAX_PHYSICS_STEPS)
         tracks = d.get("tracks", [])
         if not isinstance(tracks, list):
             raise AnimationError("animation 'tracks' must be a list of track objects")

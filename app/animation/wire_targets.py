@@ -8,11 +8,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from voxwarp.animation.target_family import Binding, Keys, TargetFamily, find_warp
+from voxwarp.animation.target_family import Binding, Keys, TargetFamily, TrackLike, find_warp
 from voxwarp.animation.values import AnimationError, array, interpolate, number
 
 if TYPE_CHECKING:
-    from voxwarp.animation.tracks import Track
     from voxwarp.scene import Scene
 
 _TARGET = re.compile(r"^wires\[(\d+)\]\.(modified|twist|scale)$")
@@ -29,6 +28,7 @@ class WireTargets(TargetFamily):
     """Wire ``i``'s modified curve, twist or scale keys in the scene's one wires warp."""
 
     names = ("wires[i].modified", "wires[i].twist", "wires[i].scale")
+    pattern = _TARGET.pattern
 
     def matches(self, target: str) -> bool:
         return _TARGET.match(target) is not None
@@ -55,7 +55,7 @@ class WireBinding(Binding):
         self.template = template
         self.warp = warp
 
-    def resolve(self, track: Track, value: Any, what: str, first: Any) -> Any:
+    def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
         from voxwarp.deform.wires.field import Wire
 
         wires = self.template["warps"][self.warp]["wires"]
@@ -79,7 +79,7 @@ class WireBinding(Binding):
         Wire.from_dict(entry)  # validates: Bézier counts, u in [0, 1], scale > 0
         return a
 
-    def apply(self, d: dict[str, Any], track: Track, keys: Keys, f: float) -> None:
+    def apply(self, d: dict[str, Any], track: TrackLike, keys: Keys, f: float) -> None:
         k = self.warp
         if d["warps"][k] is self.template["warps"][k]:  # first wire track of this frame
             d["warps"][k] = copy.deepcopy(d["warps"][k])

@@ -889,7 +889,7 @@ def wrap_instances(composed: Sequence[Any]) -> list[Any]:
 
 def bench_composition(report: LatticeBenchReport, ctx: Any, log: Callable[[str], None]) -> None:
     """Section 2 (see the module docstring); appends one row per variant."""
-    from voxwarp.core.mesh import mesh_instances_bounds
+    from voxwarp.core.mesh_warp import mesh_instances_bounds
     from voxwarp.deform.lattice.scene_graph import compose_scene
 
     mesh = object_mesh()

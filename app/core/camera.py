@@ -48,6 +48,9 @@ VIEWS: tuple[str, ...] = tuple(_VIEWS)
 VIEW_NAMES: tuple[str, ...] = (*VIEWS, *ANATOMICAL_VIEWS)
 
 View = str | tuple[float, float]
+#: camera entries holding arrays of numbers, with their shapes (the others: a projection
+#: name, or a number)
+CAMERA_ARRAYS: dict[str, tuple[int, ...]] = {"center": (3,), "rotation": (3, 3)}
 
 
 def view_rotation(view: View) -> np.ndarray:
@@ -340,9 +343,8 @@ class Camera:
         for key, value in d.items():
             if key == "projection":
                 ok = isinstance(value, str)
-            elif key in ("center", "rotation"):
-                shape = (3,) if key == "center" else (3, 3)
-                ok = _numbers_of_shape(value, shape)
+            elif key in CAMERA_ARRAYS:
+                ok = _numbers_of_shape(value, CAMERA_ARRAYS[key])
             else:
                 ok = _is_number(value)
             if not ok:

@@ -391,14 +391,20 @@ def _drop_degenerate(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, int]:
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(N, 3) unit vertex normals: area-weighted sum of the adjacent faces' normals
-    (``(0, 0, 1)`` for vertices no face uses)."""
+    (``(0, 0, 1)`` for vertices no face uses).
+
+    Summed through trimesh's vertex-face incidence matrix
+    (``trimesh.geometry.index_sparse``, as ``mean_vertex_normals`` does) over the faces'
+    cross products (twice the area times the unit normal): area weighting, not trimesh's
+    default angle weighting, and normalised here at any scale (trimesh's ``unitize``
+    zeroes sums shorter than 1e-13, e.g. a mesh in metres with sub-micron faces).
+    """
+    from trimesh.geometry import index_sparse  # trimesh loads when used
+
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2 * area * n
-    acc = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(acc, f[:, k], cross)
-    return _normalised(acc)
+    return _normalised(np.asarray(index_sparse(len(v), f) @ cross))
 
 
 def _jsonable(x: Any) -> Any:
@@ -500,6 +506,9 @@ def load_mesh(path_or_trimesh: Any, name: str | None = None) -> Mesh:
 
 
 # ---------------------------------------------------------------------- generators
+# voxwarp's own, not trimesh.creation's: scene JSON stores generated meshes as recipes, and
+# trimesh's box (8 shared vertices), uv_sphere (rounded counts, seam copies), cylinder
+# (caps sharing the side's vertices) and torus (the other quad diagonal) would change them.
 def _check_triangles(generator: str, count: int) -> None:
     """Raise :class:`MeshError` before ``generator`` allocates ``count`` triangles over
     :data:`voxwarp.core.limits.MAX_MESH_TRIANGLES`."""
@@ -1188,28 +1197,6 @@ def instances_from_scene_graph(
     return out
 
 
-def mesh_instances_bounds(
-    instances: Sequence[MeshInstance], warps: Sequence[Any] = ()
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Union of the instances' :meth:`MeshInstance.world_bounds`, or None without any.
-
-    ``warps``: a scene's warp chain; the box then holds the meshes moved by its forward
-    map (:func:`voxwarp.core.mesh_warp.warped_bounds`), as they are drawn.
-    """
-    if not instances:
-        return None
-    from voxwarp.core.mesh_warp import moves_meshes, warped_bounds
-
-    if moves_meshes(warps):
-        return warped_bounds(instances, warps)
-    boxes = [inst.world_bounds() for inst in instances]
-    lo = np.min([b[0] for b in boxes], axis=0)
-    hi = np.max([b[1] for b in boxes], axis=0)
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise MeshError("mesh instance bounds are not finite (a lattice with NaN nodes?)")
-    return lo, hi
-
-
 __all__ = [
     "DEFAULT_NORMAL_METHOD",
     "GENERATORS",
@@ -1226,7 +1213,6 @@ __all__ = [
     "height_tile",
     "instances_from_scene_graph",
     "load_mesh",
-    "mesh_instances_bounds",
     "tile_mesh",
     "torus_mesh",
     "tube_mesh",

@@ -24,6 +24,7 @@ import numpy as np
 
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.deform.warp import Warp, chain_forward_lenient, chain_jacobian, fold_affine
+from voxwarp.errors import MeshError
 
 
 class MeshWarpWarning(UserWarning):
@@ -119,4 +120,32 @@ def warped_bounds(
     )
 
 
-__all__ = ["affine_forward", "geometry_key", "moves_meshes", "warped_bounds", "warped_geometry"]
+def mesh_instances_bounds(
+    instances: Sequence[MeshInstance], warps: Sequence[Warp] = ()
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Union of the instances' :meth:`~voxwarp.core.mesh.MeshInstance.world_bounds`
+    (None without any).
+
+    ``warps``: a scene's warp chain; the box then holds the meshes moved by its forward
+    map (:func:`warped_bounds`), as they are drawn.
+    """
+    if not instances:
+        return None
+    if moves_meshes(warps):
+        return warped_bounds(instances, warps)
+    boxes = [inst.world_bounds() for inst in instances]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise MeshError("mesh instance bounds are not finite (a lattice with NaN nodes?)")
+    return lo, hi
+
+
+__all__ = [
+    "affine_forward",
+    "geometry_key",
+    "mesh_instances_bounds",
+    "moves_meshes",
+    "warped_bounds",
+    "warped_geometry",
+]

@@ -7,20 +7,7 @@ CT's field of view; :func:`iso_range_warning` names an iso value the data never 
 
 Modality
 --------
-* **CT**: the file's DICOM Modality is ``CT`` and the values are Hounsfield units, or
-  ``units == "HU"``, or the values *look like* HU: a signed type with a peak of air
-  voxels around -1000 (at least 0.5 % of the voxels in [-1100, -900] and twice as many
-  per HU there as in [-700, -500]), values up to at least +200, and anything below
-  -1100 concentrated on a few padding values. A float MRI (no air peak), a z-scored
-  array (no values near -1000), a phase image (values spread evenly over +-4096) or an
-  unsigned 0..32 array is not CT.
-* A CT whose values are **not** HU (the bundled ``sample:stent`` is a real CT stored as
-  0..32) counts as *other*: the HU presets and the -1024 HU padding rule need calibrated
-  values, and a percentile ramp shows it without guessing a calibration.
-* **MR**: the DICOM Modality (or the bundled sample's metadata) says ``MR``. NIfTI has no
-  modality field, so an MRI from a NIfTI file is *other* data; its defaults differ only
-  in colour (the ``grayscale``-like ramp instead of ``mri``).
-* **other**: everything else; no unit is assumed.
+Detected by :mod:`voxwarp.core.modality_detection` (the rules are listed there).
 
 Defaults
 --------
@@ -58,15 +45,20 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass, replace
-from typing import Literal
 
 import numpy as np
 
+from voxwarp.core.modality_detection import (
+    STAT_VOXELS,
+    Modality,
+    detect_modality,
+    is_hu,
+    sample_values,
+    volume_cache,
+)
 from voxwarp.core.modes import xray_reference_length
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
-
-ModalityKind = Literal["CT", "MR", "other"]
 
 #: Presets that show surfaces: DVR shades them by default (see module docstring).
 SURFACE_PRESETS: frozenset[str] = frozenset({"ct-bone", "ct-skin", "ct-muscle", "mri", "ramp"})
@@ -89,21 +81,6 @@ XRAY_ESTIMATE_VOXELS = 128
 RAMP_PERCENTILES: tuple[float, float] = (1.0, 99.9)
 #: In a CT (HU), values below this are padding outside the field of view.
 HU_PADDING_BELOW = -1024.0
-#: At most this many voxels enter the statistics (a regular subsample).
-_STAT_VOXELS = 2_000_000
-
-
-@dataclass(frozen=True)
-class Modality:
-    """What a volume is, for display: ``kind`` (``"CT"``, ``"MR"``, ``"other"``),
-    ``reason`` (the evidence, e.g. ``"DICOM Modality"``) and ``hu`` (values are HU)."""
-
-    kind: ModalityKind
-    reason: str
-    hu: bool = False
-
-    def __str__(self) -> str:
-        return f"{self.kind} ({self.reason})"
 
 
 @dataclass(frozen=True)
@@ -124,79 +101,6 @@ class DisplayDefaults:
 
 # volumes mask_padding produced -> (padding text, voxel count), for the description
 _MASKED: weakref.WeakKeyDictionary[Volume, tuple[str, int]] = weakref.WeakKeyDictionary()
-# per volume: detected modality and per-mode defaults (the volume's data never change)
-_CACHE: weakref.WeakKeyDictionary[Volume, dict[str, object]] = weakref.WeakKeyDictionary()
-
-
-def _cache(volume: Volume) -> dict[str, object]:
-    c = _CACHE.get(volume)
-    if c is None:
-        c = _CACHE[volume] = {}
-    return c
-
-
-def _sample(data: np.ndarray) -> np.ndarray:
-    """A regular subsample of at most about :data:`_STAT_VOXELS` voxels (flattened)."""
-    stride = max(1, int(np.ceil((data.size / _STAT_VOXELS) ** (1 / 3))))
-    return np.asarray(data[::stride, ::stride, ::stride]).ravel()
-
-
-# ---------------------------------------------------------------------------- modality
-def _hu_evidence(values: np.ndarray) -> str | None:
-    """Why ``values`` look like Hounsfield units, or None (see module docstring)."""
-    if values.dtype.kind not in "if" or values.size == 0:
-        return None
-    v = values.astype(np.float32, copy=False)
-    n = v.size
-    air = np.count_nonzero((v >= -1100) & (v <= -900))
-    between = np.count_nonzero((v >= -700) & (v <= -500))
-    if air < 0.005 * n or air < 2 * between:
-        return None
-    if float(v.max()) < 200:
-        return None
-    below = v[v < -1100]
-    if below.size:
-        _, counts = np.unique(below, return_counts=True)
-        top = np.sort(counts)[::-1][:3].sum()  # padding: one or a few constant values
-        if below.size - top > 0.01 * n:
-            return None
-    return "values look like HU: an air peak near -1000"
-
-
-def detect_modality(volume: Volume) -> Modality:
-    """The modality of ``volume`` and the evidence (see the module docstring)."""
-    cache = _cache(volume)
-    if "modality" in cache:
-        return cache["modality"]  # type: ignore[return-value]
-    result = _detect(volume)
-    cache["modality"] = result
-    return result
-
-
-def _detect(volume: Volume) -> Modality:
-    tag = (volume.modality or "").strip().upper()
-    units_hu = volume.units.strip().upper() == "HU"
-    lo, hi = volume.value_range
-    field = "sample metadata" if (volume.source or "").startswith("sample:") else "DICOM Modality"
-    if tag == "MR":
-        return Modality("MR", field)
-    if units_hu:
-        return Modality("CT", field if tag == "CT" else "units HU", hu=True)
-    evidence = _hu_evidence(_sample(volume.data))
-    if tag == "CT":
-        if evidence is not None:
-            return Modality("CT", field, hu=True)
-        return Modality("other", f"CT, but values {lo:g}..{hi:g} are not Hounsfield units")
-    if evidence is not None:
-        return Modality("CT", evidence, hu=True)
-    if tag:
-        return Modality("other", f"{field} {tag}")
-    return Modality("other", "no modality in the file, values not HU")
-
-
-def is_hu(volume: Volume) -> bool:
-    """Whether the values of ``volume`` are Hounsfield units."""
-    return detect_modality(volume).hu
 
 
 # ---------------------------------------------------------------------------- padding
@@ -244,7 +148,7 @@ def mask_padding(volume: Volume) -> tuple[Volume, int]:
     _MASKED[out] = (text, count)
     # the masked copy is the same modality (the evidence was read on the raw values),
     # and its statistics still leave the (former) padding out
-    _cache(out).update(modality=detect_modality(volume), inside=_thin(inside))
+    volume_cache(out).update(modality=detect_modality(volume), inside=_thin(inside))
     return out, count
 
 
@@ -259,19 +163,19 @@ def _count_text(n: int) -> str:
 # ---------------------------------------------------------------------------- defaults
 def _inside_values(volume: Volume) -> np.ndarray:
     """A subsample of the voxel values inside the field of view (padding excluded)."""
-    cache = _cache(volume)
+    cache = volume_cache(volume)
     if "inside" not in cache:
         mask = padding_mask(volume)
         if mask is None or mask.all():
-            cache["inside"] = _sample(volume.data)
+            cache["inside"] = sample_values(volume.data)
         else:
             cache["inside"] = _thin(volume.data[~mask])
     return cache["inside"]  # type: ignore[return-value]
 
 
 def _thin(values: np.ndarray) -> np.ndarray:
-    """Every n-th of the (flat) ``values``, at most about :data:`_STAT_VOXELS`."""
-    return values[:: max(1, values.size // _STAT_VOXELS)]
+    """Every n-th of the (flat) ``values``, at most about :data:`STAT_VOXELS`."""
+    return values[:: max(1, values.size // STAT_VOXELS)]
 
 
 def robust_range(volume: Volume, lo: float, hi: float) -> tuple[float, float]:
@@ -339,7 +243,7 @@ def default_shading(mode: str, tf: TransferFunction) -> bool:
 
 def display_defaults(volume: Volume, mode: str = "dvr") -> DisplayDefaults:
     """Transfer function, window, shading and a one-line description for ``mode``."""
-    cache = _cache(volume)
+    cache = volume_cache(volume)
     key = f"defaults:{mode}"
     if key in cache:
         return cache[key]  # type: ignore[return-value]

@@ -10,7 +10,7 @@ quality, not brightness.
 Presets
 -------
 ``ct-bone``, ``ct-skin``, ``ct-soft`` and ``ct-muscle`` are defined in Hounsfield units.
-On a volume whose values are not HU (:func:`voxwarp.core.modality.is_hu`), they
+On a volume whose values are not HU (:func:`voxwarp.core.modality_detection.is_hu`), they
 are rescaled from [-1000, 2000] HU onto the volume's 0.5-99.5 percentile range, with a
 warning. ``mri``, ``grayscale`` and ``hot`` are relative: defined on [0, 1] and mapped
 onto the volume's percentile range.
@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core import tf_formats
+from voxwarp.core.modality_detection import is_hu
 from voxwarp.core.volume import Volume
 from voxwarp.errors import SceneError
 
@@ -150,7 +151,7 @@ class TransferFunction:
         """A named preset resolved to the data units of ``volume`` (see module docstring)."""
         if name in _HU_PRESETS:
             pts = _HU_PRESETS[name]
-            if volume is not None and not _looks_like_hu(volume):
+            if volume is not None and not is_hu(volume):
                 lo, hi = _percentile_range(volume)
                 warnings.warn(
                     f"preset {name!r} is in Hounsfield units but volume {volume.name!r} is"
@@ -326,7 +327,7 @@ class TransferFunction:
         for note in m.notes:
             warnings.warn(f"{m.kind} map {m.name!r}: {note}", stacklevel=3)
         if m.kind == "slicer" and m.name.upper().startswith("CT") and volume is not None:
-            if not _looks_like_hu(volume):
+            if not is_hu(volume):
                 lo, hi = volume.value_range
                 warnings.warn(
                     f"Slicer preset {m.name!r} is in Hounsfield units but volume"
@@ -407,12 +408,6 @@ def _unknown_name(name: str) -> str:
         f" or {maps}, a transfer function file (voxwarp or ParaView .json, Slicer .xml/.vp),"
         " or a list of (value, r, g, b, a) control points"
     )
-
-
-def _looks_like_hu(volume: Volume) -> bool:
-    from voxwarp.core.modality import is_hu  # modality builds on this module
-
-    return is_hu(volume)
 
 
 def _percentile_range(volume: Volume) -> tuple[float, float]:

@@ -41,7 +41,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
-from voxwarp.core.mesh import mesh_instances_bounds
+from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.modes import xray_reference_length
 from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume

@@ -115,6 +115,12 @@ from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
 
 #: Inverse modes: the baked seed alone, or the seed refined by Newton steps.
 INVERSE_MODES: tuple[str, ...] = ("newton", "baked")
+#: keys of a lattice warp entry (:meth:`LatticeWarp.from_dict`), and those it needs
+LATTICE_KEYS: tuple[str, ...] = (
+    "type", "grid", "box", "inverse", "iterations", "tolerance", "max_iterations",
+    "fold_linear",
+)  # fmt: skip
+LATTICE_REQUIRED: tuple[str, ...] = ("grid", "box")
 #: Newton stops once a step moves the original point ``q`` by at most this (mm): a
 #: thousandth of a 1 mm voxel, about 100 float32 roundings of a 100 mm coordinate
 #: (see "Accuracy" in the module docstring).
@@ -990,21 +996,17 @@ class LatticeWarp(Warp):
     def from_dict(cls, d: Mapping[str, Any]) -> LatticeWarp:
         """Build from :meth:`to_dict`'s form (``inverse``, ``iterations``, ``tolerance``,
         ``max_iterations`` optional)."""
-        missing = [k for k in ("grid", "box") if k not in d]
+        missing = [k for k in LATTICE_REQUIRED if k not in d]
         if missing:
             raise WarpError(
                 f"a lattice warp entry needs {missing}: 'grid' (a TrilinearGrid dict with"
                 " 'nodes') and 'box' ([lo, hi] in mm)"
             )
-        allowed = (
-            "type", "grid", "box", "inverse", "iterations", "tolerance", "max_iterations",
-            "fold_linear",
-        )  # fmt: skip
-        unknown = set(d) - set(allowed)
+        unknown = set(d) - set(LATTICE_KEYS)
         if unknown:
             raise WarpError(
                 f"unknown keys {sorted(unknown)} in a lattice warp entry; allowed:"
-                f" {', '.join(allowed)}"
+                f" {', '.join(LATTICE_KEYS)}"
             )
         if not isinstance(d["grid"], Mapping):
             raise WarpError(

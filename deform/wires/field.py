@@ -195,6 +195,20 @@ DEFAULT_ENDS = "smooth"
 #: :attr:`Wire.ends` of a wire saved without it (files from before the option: the
 #: paper's rigid sweep, as they were made)
 SAVED_ENDS = "rigid"
+#: keys of a wire object (:meth:`Wire.from_dict`); ``base`` and ``radius`` are required
+WIRE_KEYS: tuple[str, ...] = (
+    "kind",
+    "base",
+    "modified",
+    "twist",
+    "scale",
+    "radius",
+    "beta",
+    "initial_normal",
+    "name",
+    "ends",
+    "falloff",
+)
 #: with ``ends="smooth"``, the width of the fade beyond the radius, as a share of it
 RADIAL_FADE = 0.25
 
@@ -471,19 +485,7 @@ class Wire:
         """Inverse of :meth:`to_dict` (``modified`` defaults to ``base``)."""
         if not isinstance(d, Mapping):
             raise WarpError(f"a wire must be a JSON object; got {d!r:.80}")
-        unknown = set(d) - {
-            "kind",
-            "base",
-            "modified",
-            "twist",
-            "scale",
-            "radius",
-            "beta",
-            "initial_normal",
-            "name",
-            "ends",
-            "falloff",
-        }
+        unknown = set(d) - set(WIRE_KEYS)
         if unknown:
             raise WarpError(
                 f"unknown wire keys {sorted(unknown)}; see voxwarp.deform.wires.field.Wire"
@@ -2465,7 +2467,7 @@ class WireFieldWarp(Warp):
             raise WarpError("a 'wires' warp needs 'wires': a non-empty list of wire objects")
         if len(wires) > MAX_WIRES:
             raise WarpError(f"at most {MAX_WIRES} wires fit one attribute field; got {len(wires)}")
-        unknown = set(d) - {"type", *_SPEC_KEYS}
+        unknown = set(d) - {"type", *SPEC_KEYS}
         if unknown:
             raise WarpError(f"unknown keys {sorted(unknown)} in a 'wires' warp")
         for w in wires:
@@ -2484,11 +2486,12 @@ class WireFieldWarp(Warp):
         propagate = d.get("propagate", "region")
         if propagate not in PROPAGATE_MODES:
             raise WarpError(f"propagate must be one of {PROPAGATE_MODES}; got {propagate!r}")
-        spec = {k: d[k] for k in _SPEC_KEYS if k in d}
+        spec = {k: d[k] for k in SPEC_KEYS if k in d}
         return cls(spec=spec)
 
 
-_SPEC_KEYS = (
+#: keys of a ``"wires"`` warp entry besides ``"type"`` (:meth:`WireFieldWarp.from_dict`)
+SPEC_KEYS: tuple[str, ...] = (
     "wires",
     "field_scale",
     "layout",

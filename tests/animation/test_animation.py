@@ -26,10 +26,8 @@ from voxwarp.animation.tracks import (
     interpolate_camera,
     key_weights,
     load_animated_scene,
-    quaternion_to_rotation,
-    rotation_to_quaternion,
     save_animated_scene,
-    slerp,
+    slerp_rotation,
 )
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.volume import Volume
@@ -103,28 +101,119 @@ def test_key_weights_names_the_segment() -> None:
     assert key_weights([0, 4, 8], 1.0, "smooth")[2] == pytest.approx(3 / 16 - 2 / 64)
 
 
-@pytest.mark.parametrize("deg", [0.0, 30.0, 90.0, 179.0, -120.0])
-def test_quaternion_round_trip(deg: float) -> None:
-    r = rotation_matrix(np.array([1.0, -2.0, 0.5]) / np.sqrt(5.25), deg)
-    q = rotation_to_quaternion(r)
-    assert np.linalg.norm(q) == pytest.approx(1.0)
-    np.testing.assert_allclose(quaternion_to_rotation(q), r, atol=1e-12)
-
-
 def test_slerp_between_rotations_about_one_axis_turns_by_the_fraction() -> None:
-    q0, q1 = rotation_to_quaternion(_rot_z(10.0)), rotation_to_quaternion(_rot_z(100.0))
+    r0, r1 = _rot_z(10.0), _rot_z(100.0)
     for t in (0.0, 0.25, 0.5, 0.9, 1.0):
-        r = quaternion_to_rotation(slerp(q0, q1, t))
+        r = slerp_rotation(r0, r1, t)
         np.testing.assert_allclose(r, _rot_z(10.0 + 90.0 * t), atol=1e-12)
         np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
         assert np.linalg.det(r) == pytest.approx(1.0)
 
 
 def test_slerp_takes_the_shorter_way_round() -> None:
-    q0 = rotation_to_quaternion(_rot_z(170.0))
-    q1 = -rotation_to_quaternion(_rot_z(-170.0))  # the same rotation as +190 degrees
-    r = quaternion_to_rotation(slerp(q0, q1, 0.5))
+    r = slerp_rotation(_rot_z(170.0), _rot_z(-170.0), 0.5)  # -170 is +190 degrees
     np.testing.assert_allclose(r, _rot_z(180.0), atol=1e-12)
+
+
+# Rotations of interpolate_camera as the hand-written quaternion slerp (Shepperd's method,
+# normalised lerp within about 3.6 degrees) gave them before scipy's Slerp replaced it:
+# pair -> (interpolation, frame) -> rotation, keys at frames 0 and 8.
+_OLD_SLERP_ROTATIONS: dict[tuple[str, str, float], list[list[float]]] = {
+    ("ab", "linear", 2.0): [
+        [0.8626328917221622, -0.19824469112003476, 0.4653638754370416],
+        [0.4839186419449515, 0.055591375663923914, -0.8733454911602548],
+        [0.14726588911629956, 0.9785748011238155, 0.14388925084338722],
+    ],
+    ("ab", "linear", 5.0): [
+        [0.24634457993612136, -0.46739454391946067, 0.8490327957449084],
+        [0.9508322768726778, -0.05310987824378066, -0.3051185377686032],
+        [0.18770276820871756, 0.8824520843350365, 0.4313304877463847],
+    ],
+    ("ab", "smooth", 2.0): [
+        [0.9455352215628542, -0.12137985884674354, 0.3020431668659777],
+        [0.3093999588919283, 0.046739171016886405, -0.9497826674194088],
+        [0.10116723887582053, 0.9915051082868906, 0.0817484557606063],
+    ],
+    ("ab", "smooth", 5.0): [
+        [0.12589170304933162, -0.49632055427559535, 0.8589628551380464],
+        [0.9770324247452205, -0.08802651625403524, -0.19405920084513661],
+        [0.1719270778551591, 0.8636650044083897, 0.4738394665500567],
+    ],
+    ("cd", "linear", 2.0): [
+        [-0.9961946980917458, -0.08715574274765812, 0.0],
+        [0.08715574274765812, -0.9961946980917458, 0.0],
+        [0.0, 0.0, 1.0],
+    ],
+    ("cd", "linear", 5.0): [
+        [-0.9990482215818579, 0.04361938736533597, 0.0],
+        [-0.04361938736533597, -0.9990482215818579, 0.0],
+        [0.0, 0.0, 1.0],
+    ],
+    ("cd", "smooth", 2.0): [
+        [-0.9928096670090554, -0.11970365530496249, 0.0],
+        [0.11970365530496249, -0.9928096670090554, 0.0],
+        [0.0, 0.0, 1.0],
+    ],
+    ("cd", "smooth", 5.0): [
+        [-0.9979471752662019, 0.06404244981423471, 0.0],
+        [-0.06404244981423471, -0.9979471752662019, 0.0],
+        [0.0, 0.0, 1.0],
+    ],
+    ("eg", "linear", 2.0): [
+        [0.9411956583315785, -0.27174363235455823, 0.20076386879251265],
+        [0.28983727594484177, 0.9547658910242911, -0.0664563526644747],
+        [-0.17362340340708735, 0.1207372834353253, 0.9773829455121456],
+    ],
+    ("eg", "linear", 5.0): [
+        [0.9368644151002364, -0.2808838313744322, 0.20830108254954263],
+        [0.30031016518974407, 0.9514341654617203, -0.06772616537106159],
+        [-0.17916158182657485, 0.12600516681699717, 0.9757170827308602],
+    ],
+    ("eg", "smooth", 2.0): [
+        [0.9422551871183703, -0.2694474720193789, 0.19887991897346247],
+        [0.2872151067521881, 0.9555809131679771, -0.06612564436271409],
+        [-0.17222846687424875, 0.11942854856114152, 0.9777904565839886],
+    ],
+    ("eg", "smooth", 5.0): [
+        [0.9361742452197728, -0.28230546452435246, 0.20947889460964406],
+        [0.3019441583028839, 0.9509032655536713, -0.06791689647007554],
+        [-0.1800208539418469, 0.12683297780566993, 0.9754516327768357],
+    ],
+}
+
+
+def _camera_pairs() -> dict[str, tuple[Camera, Camera]]:
+    axis = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    z = np.array([0.0, 0.0, 1.0])
+    return {
+        "ab": (
+            Camera(center=[0, 0, 0], rotation=view_rotation("-y"), distance=100.0, fov=30.0),
+            Camera(
+                center=[10, -20, 4], rotation=view_rotation((30.0, 40.0)), distance=60.0, fov=40.0
+            ),
+        ),
+        # across +-180 degrees: the shorter way round
+        "cd": (
+            Camera(center=[0, 0, 0], rotation=rotation_matrix(z, 170.0), distance=50.0),
+            Camera(center=[0, 0, 0], rotation=rotation_matrix(z, -170.0), distance=50.0),
+        ),
+        # two degrees apart: the old code's normalised-lerp branch
+        "eg": (
+            Camera(center=[0, 0, 0], rotation=rotation_matrix(axis, 20.0), distance=50.0),
+            Camera(center=[0, 0, 0], rotation=rotation_matrix(axis, 22.0), distance=50.0),
+        ),
+    }
+
+
+@pytest.mark.parametrize("key", sorted(_OLD_SLERP_ROTATIONS))
+def test_camera_rotations_match_the_old_quaternion_slerp(key: tuple[str, str, float]) -> None:
+    pair, mode, frame = key
+    a, b = _camera_pairs()[pair]
+    r = interpolate_camera([(0.0, a), (8.0, b)], frame, mode).rotation
+    # the old code blended keys closer than about 3.6 degrees by normalised lerp (an
+    # approximation of slerp, 1.3e-7 off at 2 degrees); elsewhere it was exact slerp
+    atol = 2e-7 if pair == "eg" else 1e-12
+    np.testing.assert_allclose(r, _OLD_SLERP_ROTATIONS[key], atol=atol, rtol=0.0)
 
 
 def test_camera_interpolation_hits_its_keys_and_stays_a_rotation() -> None:

@@ -22,11 +22,12 @@ import voxwarp.animation.distributed
 import voxwarp.animation.frames
 import voxwarp.animation.movie
 from tests.cli.test_cli import _keep_warning_state, no_rendering  # noqa: F401
-from voxwarp.animation.movie import animate, frames_dir_for
+from voxwarp.animation.movie import animate, encode_movie, frames_dir_for
 from voxwarp.animation.tracks import Animation, Track, load_animated_scene, save_animated_scene
 from voxwarp.cli.main import main
 from voxwarp.editing.session import EditSession
-from voxwarp.io.images import read_image
+from voxwarp.errors import OutputError
+from voxwarp.io.images import read_image, write_image
 from voxwarp.io.samples import load_sample
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
@@ -120,6 +121,40 @@ def test_odd_frame_sizes_are_padded_to_even_for_the_movie(
     size, decoded = _decode(tmp_path / "odd.mp4")
     assert size == (64, 48)
     assert len(decoded) == 3
+
+
+def test_a_failing_ffmpeg_is_one_line_with_its_reason_and_leaves_no_movie(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture
+) -> None:
+    frames = [write_image(tmp_path / f"f{i}.png", np.zeros((8, 8, 4), np.uint8)) for i in (0, 1)]
+    monkeypatch.setattr(voxwarp.animation.movie, "MOVIE_CRF", "nope")  # ffmpeg rejects it
+    out = tmp_path / "m.mp4"
+    with pytest.raises(OutputError) as exc:
+        encode_movie(frames, out, 12.0)
+    message = str(exc.value)
+    assert message.startswith(f"cannot write {out}: "), message
+    assert "Invalid argument" in message  # ffmpeg's last line (its option error)
+    assert "\n" not in message
+    assert capfd.readouterr().err == ""  # ffmpeg's messages went into the error, not stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f0.png", "f1.png"]
+
+
+def test_without_the_ffmpeg_process_the_log_still_tells_a_failure(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Should a later imageio-ffmpeg keep its process elsewhere, the movie is still
+    checked: ffmpeg at ``-v error`` logs nothing when it succeeds."""
+    real = voxwarp.animation.movie._start_encoder
+    monkeypatch.setattr(voxwarp.animation.movie, "_start_encoder", lambda *a: (real(*a)[0], None))
+    frames = [
+        write_image(tmp_path / f"f{i}.png", np.full((8, 8, 4), 9 * i, np.uint8)) for i in (0, 1)
+    ]
+    good = encode_movie(frames, tmp_path / "ok.mp4", 12.0)
+    assert len(_decode(good)[1]) == 2
+    monkeypatch.setattr(voxwarp.animation.movie, "MOVIE_CRF", "nope")
+    with pytest.raises(OutputError, match="Invalid argument"):
+        encode_movie(frames, tmp_path / "bad.mp4", 12.0)
+    assert not (tmp_path / "bad.mp4").exists()
 
 
 def test_an_interrupted_run_resumes_without_rendering_finished_frames_again(

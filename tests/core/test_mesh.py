@@ -20,14 +20,16 @@ from voxwarp.core.mesh import (
     box_mesh,
     cylinder_mesh,
     default_box,
+    height_tile,
     instances_from_scene_graph,
     load_mesh,
-    mesh_instances_bounds,
     tile_mesh,
     torus_mesh,
     tube_mesh,
     uv_sphere,
+    vertex_normals,
 )
+from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.volume import Volume
 from voxwarp.deform.lattice.scene_graph import SceneNode
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
@@ -215,6 +217,51 @@ def test_closed_generators_are_outward_and_watertight(mesh: Mesh, volume: float)
     fn = mesh.face_normals()
     for k in range(3):
         assert np.min(np.sum(fn * mesh.normals[mesh.faces[:, k]], axis=1)) > 0.3
+
+
+def _area_weighted_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The formula vertex_normals had before trimesh summed it: np.add.at of the faces'
+    cross products, normalised."""
+    cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    acc = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(acc, f[:, k], cross)
+    return acc / np.linalg.norm(acc, axis=1, keepdims=True)
+
+
+def test_vertex_normals_are_area_weighted_at_any_scale() -> None:
+    rng = np.random.default_rng(3)
+    sphere = uv_sphere(rows=12, cols=20)
+    noisy = sphere.vertices.astype(np.float64) * rng.uniform(0.8, 1.2, (sphere.n_vertices, 1))
+    for v, f in ((noisy, sphere.faces), (height_tile().vertices, height_tile().faces)):
+        v = np.asarray(v, np.float64)
+        ref = _area_weighted_normals(v, f)
+        np.testing.assert_allclose(vertex_normals(v, f), ref, rtol=0, atol=1e-15)
+        # trimesh's own vertex normals weight by angle: a different result, not used
+        angle = trimesh.Trimesh(v, f, process=False).vertex_normals
+        assert np.abs(angle - ref).max() > 1e-3
+    # sub-micron faces keep their normal (trimesh's unitize would zero these sums)
+    tiny = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [3.0, 3.0, 3.0]]) * 1e-9
+    np.testing.assert_allclose(
+        vertex_normals(tiny, np.array([[0, 1, 2]])),
+        [[0, -1, 0], [0, -1, 0], [0, -1, 0], [0, 0, 1]],  # unused vertex: +z
+    )
+
+
+def test_generators_keep_their_own_triangulation() -> None:
+    """Scene JSON stores generated meshes as recipes, so a generator must keep making
+    the same mesh: trimesh.creation's box (8 shared vertices, smooth normals), uv_sphere
+    (even rows, doubled columns, seam copies), cylinder (caps share the side's vertices)
+    and torus (the same vertices, the other quad diagonal) would change the scenes."""
+    assert (box_mesh().n_vertices, box_mesh().n_faces) == (24, 12)
+    assert (uv_sphere(rows=16, cols=32).n_vertices, uv_sphere(rows=16, cols=32).n_faces) == (
+        482,
+        960,
+    )
+    assert (cylinder_mesh().n_vertices, cylinder_mesh().n_faces) == (130, 128)
+    torus = torus_mesh(1.0, 0.3, 48, 24)
+    assert (torus.n_vertices, torus.n_faces) == (1152, 2304)
+    assert torus.faces[0].tolist() == [0, 24, 25]  # quad (i, j) split along a -> c
 
 
 def test_tile_mesh() -> None:

@@ -23,7 +23,8 @@ from tests.render.test_mesh_render import render_target
 from voxwarp import mesh_from_labels
 from voxwarp.core import mesh_warp
 from voxwarp.core.camera import Camera, view_rotation
-from voxwarp.core.mesh import MeshInstance, mesh_instances_bounds, vertex_normals
+from voxwarp.core.mesh import MeshInstance, vertex_normals
+from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import AffineWarp, Warp
