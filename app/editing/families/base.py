@@ -17,6 +17,7 @@ import numpy as np
 
 from voxwarp.deform.warp import Warp
 from voxwarp.editing.common import DisplayOptions, EditorError
+from voxwarp.editing.model_settings import BuildReport, Built
 from voxwarp.render.overlay import OverlayLayer
 
 if TYPE_CHECKING:
@@ -50,6 +51,15 @@ class Family:
 
     def __init__(self, session: EditSession) -> None:
         self.session = session
+
+    # ---------------------------------------------------------------- the builder
+    @classmethod
+    def build(cls, settings: Any, volume: Any, ctx: Any = None) -> Built:
+        """The model and warp of ``settings`` (the family's settings dataclass in
+        :mod:`voxwarp.editing.model_settings`) on ``volume``: the one builder that the
+        editor, the CLI, the napari widget and the notebook viewer use (``ctx``: the GL
+        context of a GPU backend, current). Nothing for the family ``"none"``."""
+        return Built(None, None, BuildReport())
 
     # ---------------------------------------------------------------- life cycle
     def start(self) -> None:

@@ -13,6 +13,7 @@ from voxwarp.deform.warp import Warp
 from voxwarp.editing.common import COLORS, DisplayOptions
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.editing.model_settings import BuildReport, Built, LatticeSettings
 from voxwarp.render.overlay import OverlayLayer, grid_edges
 
 if TYPE_CHECKING:
@@ -61,6 +62,17 @@ class LatticeFamily(Family):
         family._warp = warp
         return family
 
+    @classmethod
+    def build(cls, settings: LatticeSettings, volume: Any, ctx: Any = None) -> Built:
+        """The lattice warp of ``settings`` (its nodes over its box, default the
+        volume's; or its lattice file) for ``volume`` (no model: ``model`` is None)."""
+        if settings.file is not None:
+            from voxwarp.inputs import load_lattice_file
+
+            return Built(None, load_lattice_file(settings.file, volume), BuildReport())
+        box = volume.bounds if settings.box is None else settings.box
+        return Built(None, LatticeWarp(TrilinearGrid(settings.nodes), box), BuildReport())
+
     def set_nodes(self, nodes: np.ndarray) -> None:
         """Move every node (the warp follows at the next :meth:`warp`)."""
         shape = self.nodes.shape if self.nodes is not None else np.shape(nodes)
@@ -72,7 +84,8 @@ class LatticeFamily(Family):
         if self.nodes is None:
             return None
         if self._warp is None:
-            self._warp = LatticeWarp(TrilinearGrid(self.nodes), self.session.box)
+            settings = LatticeSettings(self.nodes, self.session.box)
+            self._warp = self.build(settings, self.session.volume).warp
         return self._warp
 
     def handles(self) -> np.ndarray:

@@ -20,6 +20,7 @@ from voxwarp.deform.wires.field import DEFAULT_ENDS, ENDS, Wire, WireDeformer, W
 from voxwarp.editing.common import COLORS, WIRE_KINDS, DisplayOptions, EditorError, choice
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.editing.model_settings import BuildReport, Built, WireSettings
 from voxwarp.render.overlay import OverlayLayer, polyline_segments
 
 if TYPE_CHECKING:
@@ -64,13 +65,12 @@ class WireBuild:
             progress(0.05, "laying the wires")
         if self.cancelled:
             return None
-        deformer = WireDeformer(self.volume, self.wires, **self.settings)
         if progress:
             progress(0.2, "propagating the attribute field")
-        deformer.build()
+        built = WiresFamily.build(WireSettings.of(self.wires, **self.settings), self.volume)
         if self.cancelled:
             return None
-        self.warp = deformer.warp()
+        self.warp = built.warp
         self.seconds = time.perf_counter() - t0
         if progress:
             progress(1.0, "done")
@@ -101,6 +101,18 @@ class WiresFamily(Family):
     @wires.setter
     def wires(self, value: list[Wire]) -> None:
         self._wires = list(value)
+
+    # ---------------------------------------------------------------- the builder
+    @classmethod
+    def build(cls, settings: WireSettings, volume: Any, ctx: Any = None) -> Built:
+        """The wire field of ``settings`` on ``volume``, built (no model: ``model`` is
+        None); a :class:`~voxwarp.deform.warp.WarpError` names a bad entry."""
+        WireFieldWarp.from_dict(settings.entry)  # checks every key and wire first
+        spec = {k: v for k, v in settings.entry.items() if k != "type"}
+        wires = [Wire.from_dict(w) for w in spec.pop("wires")]
+        deformer = WireDeformer(volume, wires, **spec)
+        deformer.build()
+        return Built(None, deformer.warp(), BuildReport())
 
     # ---------------------------------------------------------------- life cycle
     def start(self) -> None:
