@@ -48,6 +48,9 @@ class TargetFamily:
 
     #: the family's targets as listed in :data:`voxwarp.animation.tracks.TARGETS`
     names: ClassVar[tuple[str, ...]] = ()
+    #: the deformation families (:data:`voxwarp.editing.families.FAMILIES` keys) these
+    #: targets key (none for the meshes, which follow the scene's warps)
+    families: ClassVar[tuple[str, ...]] = ()
     #: whether several tracks may key one target
     repeatable: ClassVar[bool] = False
     #: whether its tracks take an ``"elements"`` entry

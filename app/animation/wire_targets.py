@@ -29,6 +29,7 @@ class WireTargets(TargetFamily):
     """Wire ``i``'s modified curve, twist or scale keys in the scene's one wires warp."""
 
     names = ("wires[i].modified", "wires[i].twist", "wires[i].scale")
+    families = ("wires",)
 
     def matches(self, target: str) -> bool:
         return _TARGET.match(target) is not None

@@ -29,11 +29,11 @@ from voxwarp.editing.model_settings import (
     chainmail_at_rest,
     is_settled,
 )
+from voxwarp.editing.state import DragState, SessionHost
 from voxwarp.render.overlay import OverlayLayer, grid_edges
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
-    from voxwarp.editing.session import EditSession
 
 
 class ElementFamily(Family):
@@ -45,7 +45,7 @@ class ElementFamily(Family):
     can_fix = True
     model_class: ClassVar[type[MassSpring] | type[ChainMail]]
 
-    def __init__(self, session: EditSession) -> None:
+    def __init__(self, session: SessionHost) -> None:
         super().__init__(session)
         self.model: MassSpring | ChainMail | None = None
         self._advances = 0
@@ -114,7 +114,7 @@ class ElementFamily(Family):
         self.model = None
 
     @classmethod
-    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+    def resume(cls, session: SessionHost, warp: Warp) -> Family | None:
         state = getattr(warp, "model_state", None)
         if not isinstance(warp, OffsetFieldWarp) or state is None:
             return None
@@ -136,7 +136,7 @@ class ElementFamily(Family):
         drag = self.session.drag_state
         if self.model.backend == "gpu" and drag is not None:
             # never read the GPU back while dragging: targets of the held elements
-            return drag["positions"].copy()
+            return drag.positions.copy()
         with self.session.gl_scope():
             return self.model.positions().reshape(-1, 3)
 
@@ -157,23 +157,23 @@ class ElementFamily(Family):
         else:
             self.model.free(ijk)
 
-    def begin_drag(self, drag: dict[str, Any]) -> None:
+    def begin_drag(self, drag: DragState) -> None:
         if self.model is None:
             return
         rest = self.model.grid.rest_positions.reshape(-1, 3)
-        sel = np.asarray(drag["selection"])
-        drag["start_offsets"] = drag["positions"][sel] - rest[sel]
+        sel = np.asarray(drag.selection)
+        drag.start_offsets = drag.positions[sel] - rest[sel]
 
-    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
-        if self.model is None:
+    def drag(self, drag: DragState, selection: np.ndarray, delta: np.ndarray) -> None:
+        if self.model is None or drag.start_offsets is None:
             return
         grid = self.model.grid
         ijk = np.array(np.unravel_index(selection, grid.shape)).T
-        offsets = drag["start_offsets"] + delta
+        offsets = drag.start_offsets + delta
         self.model.move(ijk, offsets)
         rest = grid.rest_positions.reshape(-1, 3)
         movable = ~grid.fixed.reshape(-1)[selection]
-        drag["positions"][selection[movable]] = rest[selection[movable]] + offsets[movable]
+        drag.positions[selection[movable]] = rest[selection[movable]] + offsets[movable]
 
     # ---------------------------------------------------------------- running
     def _steps(self) -> int:
