@@ -15,13 +15,14 @@ steps); a ChainMail model when a relaxation step moves no element by more than
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+import contextlib
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from voxwarp.editing.common import EditorError
+from voxwarp.editing.common import CHAINMAIL_VARIANTS, INTEGRATORS, EditorError, choice
 
 #: a mass-spring model whose elements are all slower than this (mm/s) is settled
 SETTLE_SPEED = 1e-3
@@ -164,6 +165,94 @@ class LatticeSettings:
     nodes: np.ndarray | None = None
     box: Any = None
     file: str | None = None
+
+
+# ---------------------------------------------------------------------------- the editor's
+@dataclass
+class FamilyOptions:
+    """The family settings an edit session keeps whichever family is chosen (they survive
+    a switch of family), saves in its scene's editor entry and undoes: the next element
+    model's ``integrator``, ``variant`` and ``stiffness``, the running model's
+    ``steps_per_frame`` and ``relax_steps``, and how the wire field is built
+    (``wire_settings``). The family adapters read them; the session never names them.
+    """
+
+    integrator: str = "semi-implicit"
+    variant: str = "enhanced"
+    #: element stiffness of new mass-spring/ChainMail models (0..1]
+    stiffness: float = 0.5
+    #: mass-spring steps and ChainMail relaxation steps per frame while running
+    steps_per_frame: int = 10
+    relax_steps: int = 1
+    wire_settings: dict[str, Any] = field(default_factory=lambda: {"field_scale": 2})
+
+    def copy(self) -> FamilyOptions:
+        """An independent copy."""
+        return replace(self, wire_settings=dict(self.wire_settings))
+
+    def with_model_settings(self, settings: dict[str, Any]) -> FamilyOptions:
+        """A copy with the model settings of ``EditSession.set_deformation``
+        (``integrator``, ``variant``, ``stiffness``; nothing else may be left in
+        ``settings``), checked; an :class:`EditorError` names a bad one."""
+        settings = dict(settings)
+        integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
+        variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
+        stiffness_value = settings.pop("stiffness", self.stiffness)
+        try:
+            stiffness = float(stiffness_value)
+        except (TypeError, ValueError) as exc:
+            raise EditorError(
+                f"stiffness must be a number in (0, 1]; got {stiffness_value!r}"
+            ) from exc
+        if settings:
+            raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
+        if not 0.0 < stiffness <= 1.0:
+            raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
+        return replace(self.copy(), integrator=integrator, variant=variant, stiffness=stiffness)
+
+    def set_run_option(self, name: str, value: Any) -> int:
+        """Set ``steps_per_frame`` or ``relax_steps`` (0..10000); returns the value."""
+        if name not in ("steps_per_frame", "relax_steps"):
+            raise EditorError(f"unknown option {name!r}")
+        v = int(value)
+        if not 0 <= v <= 10000:
+            raise EditorError(f"{name} must be 0..10000; got {value!r}")
+        setattr(self, name, v)
+        return v
+
+    @contextlib.contextmanager
+    def one_step(self) -> Iterator[None]:
+        """One model step per frame (mass-spring and ChainMail) inside the block."""
+        steps, relax = self.steps_per_frame, self.relax_steps
+        self.steps_per_frame = self.relax_steps = 1
+        try:
+            yield
+        finally:
+            self.steps_per_frame, self.relax_steps = steps, relax
+
+    def to_entry(self) -> dict[str, Any]:
+        """The keys of the scene's editor entry (as saved before the options had a type)."""
+        return {
+            "integrator": self.integrator,
+            "variant": self.variant,
+            "steps_per_frame": self.steps_per_frame,
+            "relax_steps": self.relax_steps,
+            "stiffness": self.stiffness,
+            "wire_settings": dict(self.wire_settings),
+        }
+
+    def read_entry(self, entry: dict[str, Any]) -> None:
+        """Take the options an editor entry holds (missing ones stay)."""
+        for key in ("integrator", "variant"):
+            if key in entry:
+                setattr(self, key, str(entry[key]))
+        for key in ("steps_per_frame", "relax_steps"):
+            if key in entry:
+                setattr(self, key, int(entry[key]))
+        if "stiffness" in entry:
+            self.stiffness = float(entry["stiffness"])
+        if isinstance(entry.get("wire_settings"), dict):
+            self.wire_settings = dict(entry["wire_settings"])
 
 
 # ---------------------------------------------------------------------------- results

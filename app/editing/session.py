@@ -73,6 +73,7 @@ from voxwarp.editing.common import (
     INTEGRATORS as INTEGRATORS,
 )
 from voxwarp.editing.families import FAMILIES, Family, WireBuild
+from voxwarp.editing.model_settings import FamilyOptions
 from voxwarp.editing.state import DragState, Placement, Snapshot
 from voxwarp.render.overlay import OverlayLayer, box_edges
 from voxwarp.scene import Scene, read_scene_dict, write_scene_json
@@ -84,7 +85,6 @@ SelectMode = Literal["replace", "add", "remove", "toggle"]
 #: pick radius in pixels around a handle
 PICK_RADIUS_PX = 12.0
 #: the session attributes that choose the deformation model
-MODEL_SETTINGS = ("kind", "backend", "resolution", "integrator", "variant", "stiffness")
 #: key of the editor's entry in scene JSON
 EDITOR_KEY = "editor"
 __all__ = [
@@ -133,17 +133,10 @@ class EditSession:
         self.backend: str = "cpu"
         self.resolution: tuple[int, int, int] = (8, 8, 8)
         self.placement = Placement()
-        #: mass-spring integrator and ChainMail variant of the next model
-        self.integrator: str = "semi-implicit"
-        self.variant: str = "enhanced"
-        #: mass-spring steps and ChainMail relaxation steps per frame while running
-        self.steps_per_frame: int = 10
-        self.relax_steps: int = 1
-        #: element stiffness of new mass-spring/ChainMail models (0..1)
-        self.stiffness: float = 0.5
+        #: the families' settings, kept across family switches, saved and undone (the
+        #: adapters read them: element integrator/variant/stiffness/steps, wire settings)
+        self.options = FamilyOptions()
         self.running: bool = True
-        #: how the wire family builds its field (kept across family switches and saved)
-        self.wire_settings: dict[str, Any] = {"field_scale": 2}
         #: build a family's field at once on model changes and undo (scripts, tests); the
         #: GUI sets False and builds it off its thread (``family.build_job()``)
         self.sync_builds = True
@@ -247,19 +240,19 @@ class EditSession:
         per axis (at most 8).
         """
         kind = choice(kind, DEFORMATIONS, "deformation")
-        wanted = self._checked_settings(kind, settings)
-        if wanted["backend"] == "gpu" and FAMILIES[kind].uses_backend and self.ctx is None:
+        backend, res, options = self._checked_settings(settings)
+        if backend == "gpu" and FAMILIES[kind].uses_backend and self.ctx is None:
             raise EditorError("the GPU backend needs the viewport's OpenGL context; use cpu")
-        settings_now = {name: getattr(self, name) for name in MODEL_SETTINGS[1:]}
+        now = (self.backend, self.resolution, self.options)
         # build the new family before closing the old: a refused setting leaves the
         # session as it was (the wire family builds its field after the switch)
         family = FAMILIES[kind](self)
-        self._set_settings(wanted)
+        self.backend, self.resolution, self.options = backend, res, options
         if family.uses_backend:
             try:
                 family.start()
             except EditorError:
-                self._set_settings(settings_now)
+                self.backend, self.resolution, self.options = now
                 raise
         self._close_family()
         self.timings.clear()
@@ -269,29 +262,14 @@ class EditSession:
             family.start()
         self.sync_warps()
 
-    def _checked_settings(self, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
+    def _checked_settings(
+        self, settings: dict[str, Any]
+    ) -> tuple[str, tuple[int, int, int], FamilyOptions]:
+        """The backend, resolution and family options ``settings`` ask for, checked."""
         settings = dict(settings)
         backend = choice(settings.pop("backend", self.backend), BACKENDS, "backend")
         res = resolution(settings.pop("resolution", self.resolution))
-        integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
-        variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
-        stiffness_value = settings.pop("stiffness", self.stiffness)
-        try:
-            stiffness = float(stiffness_value)
-        except (TypeError, ValueError) as exc:
-            raise EditorError(
-                f"stiffness must be a number in (0, 1]; got {stiffness_value!r}"
-            ) from exc
-        if settings:
-            raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
-        if not 0.0 < stiffness <= 1.0:
-            raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
-        values = (backend, res, integrator, variant, stiffness)
-        return dict(zip(MODEL_SETTINGS[1:], values, strict=True))
-
-    def _set_settings(self, values: dict[str, Any]) -> None:
-        for name, value in values.items():
-            setattr(self, name, value)
+        return backend, res, self.options.with_model_settings(settings)
 
     def _close_family(self) -> None:
         self.family.close()
@@ -381,14 +359,8 @@ class EditSession:
         ``relax_steps`` (ChainMail relaxation steps per frame), ``running``."""
         if name == "running":
             self.running = bool(value)
-        elif name in ("steps_per_frame", "relax_steps"):
-            v = int(value)
-            if not 0 <= v <= 10000:
-                raise EditorError(f"{name} must be 0..10000; got {value!r}")
-            setattr(self, name, v)
-            self.family.option_changed(name, v)
         else:
-            raise EditorError(f"unknown option {name!r}")
+            self.family.option_changed(name, self.options.set_run_option(name, value))
 
     # ------------------------------------------------------------------ handles
     def _grid_to_world(self, p: np.ndarray) -> np.ndarray:
@@ -548,12 +520,11 @@ class EditSession:
         """One step of the model even when paused."""
         running, self.running = self.running, True
         self.settled = False
-        steps, relax = self.steps_per_frame, self.relax_steps
-        self.steps_per_frame = self.relax_steps = 1
         try:
-            self.advance()
+            with self.options.one_step():
+                self.advance()
         finally:
-            self.running, self.steps_per_frame, self.relax_steps = running, steps, relax
+            self.running = running
 
     def reset_model(self) -> None:
         """Back to rest: elements released, wires straightened, lattice undeformed."""
@@ -598,14 +569,7 @@ class EditSession:
             state=self.family.snapshot(),
             selection=tuple(self.selection),
             reference=self.reference,
-            settings={
-                "integrator": self.integrator,
-                "variant": self.variant,
-                "steps_per_frame": self.steps_per_frame,
-                "relax_steps": self.relax_steps,
-                "stiffness": self.stiffness,
-            },
-            wire_settings=dict(self.wire_settings),
+            options=self.options.copy(),
             look=scene_look(self.scene),
             animation=self.animation.to_dict() if self.animation is not None else None,
             imported=tuple(self.imported_warps),
@@ -617,13 +581,9 @@ class EditSession:
         family = FAMILIES[snap.kind](self)
         family.adopt(self.family, snap)
         self._close_family()
-        s = snap.settings
         self.backend, self.resolution = snap.backend, snap.resolution
-        self.integrator, self.variant = s["integrator"], s["variant"]
-        self.steps_per_frame, self.relax_steps = s["steps_per_frame"], s["relax_steps"]
-        self.stiffness = s["stiffness"]
+        self.options = snap.options.copy()
         self.placement = Placement(**snap.placement.to_dict())
-        self.wire_settings = dict(snap.wire_settings)
         self.family = family
         family.restore(snap.state)
         self.selection, self.reference = list(snap.selection), snap.reference
@@ -655,12 +615,7 @@ class EditSession:
             "resolution": list(self.resolution),
             "placement": self.placement.to_dict(),
             "model_warp": model_index,
-            "integrator": self.integrator,
-            "variant": self.variant,
-            "steps_per_frame": self.steps_per_frame,
-            "relax_steps": self.relax_steps,
-            "stiffness": self.stiffness,
-            "wire_settings": dict(self.wire_settings),
+            **self.options.to_entry(),
         }
         if self.animation is not None:
             d["animation"] = self.animation.to_dict()
@@ -686,16 +641,7 @@ class EditSession:
             self.placement = Placement.from_dict(entry["placement"])
         if entry.get("resolution") is not None:
             self.resolution = resolution(entry["resolution"])
-        for key in ("integrator", "variant"):
-            if key in entry:
-                setattr(self, key, str(entry[key]))
-        for key in ("steps_per_frame", "relax_steps"):
-            if key in entry:
-                setattr(self, key, int(entry[key]))
-        if "stiffness" in entry:
-            self.stiffness = float(entry["stiffness"])
-        if isinstance(entry.get("wire_settings"), dict):
-            self.wire_settings = dict(entry["wire_settings"])
+        self.options.read_entry(entry)
 
     def _recover_from_scene(self, entry: dict[str, Any]) -> None:
         """Take over the deformation saved in the scene's warps (see :meth:`to_dict`),

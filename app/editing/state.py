@@ -14,6 +14,7 @@ import numpy as np
 from voxwarp.core.camera import Camera
 from voxwarp.deform.warp import Warp, rotation_matrix
 from voxwarp.editing.common import EditorError
+from voxwarp.editing.model_settings import FamilyOptions
 
 
 # ---------------------------------------------------------------------------- placement
@@ -91,10 +92,10 @@ class Snapshot:
     placement: Placement
     #: the family's own state (:meth:`Family.snapshot`: model, wires or lattice nodes)
     state: dict[str, Any] = field(default_factory=dict)
-    wire_settings: dict[str, Any] = field(default_factory=dict)
+    #: the families' settings (a copy)
+    options: FamilyOptions = field(default_factory=FamilyOptions)
     selection: tuple[int, ...] = ()
     reference: int | None = None
-    settings: dict[str, Any] = field(default_factory=dict)
     #: the scene's look: mode, transfer function, sample distance, window, clip box, ...
     look: dict[str, Any] = field(default_factory=dict)
     #: the keyframes (``Animation.to_dict()``) or None
@@ -151,14 +152,9 @@ class SessionHost(Protocol):
     backend: str
     resolution: tuple[int, int, int]
     placement: Placement
-    integrator: str
-    variant: str
-    steps_per_frame: int
-    relax_steps: int
-    stiffness: float
+    options: FamilyOptions
     settled: bool
     sync_builds: bool
-    wire_settings: dict[str, Any]
     selection: list[int]
     timings: dict[str, float]
     gl_scope: Callable[[], Any]

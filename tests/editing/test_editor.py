@@ -528,7 +528,7 @@ def test_set_wire_settings_rejects_bad_values(session: EditSession) -> None:
         session.adapter(WiresFamily).set_wire_settings(field_scale=3)
     with pytest.raises(EditorError, match=r"unknown wire settings \['resolution'\]"):
         session.adapter(WiresFamily).set_wire_settings(resolution=3)
-    assert session.wire_settings == {"field_scale": 2}
+    assert session.options.wire_settings == {"field_scale": 2}
     assert not session.family.field_stale
     session.adapter(WiresFamily).set_wire_settings(field_scale=4, layout="packed")
     assert session.family.field_stale
@@ -721,7 +721,7 @@ def test_restore_rebuilds_the_wire_field_with_the_restored_settings(
     session.adapter(WiresFamily).set_wire_settings(field_scale=4)
     build_wires(session)
     session.restore(snap)
-    assert session.wire_settings["field_scale"] == 2
+    assert session.options.wire_settings["field_scale"] == 2
     assert session.scene.warps[0].deformer.field_scale == 2
 
 
@@ -734,7 +734,7 @@ def test_save_and_load_round_trip(
     """save then load: kind, placement, wire settings and handles come back; the file is
     scene JSON that Scene.load reads (so `voxwarp render` renders it)."""
     if kind == "wires":
-        session.wire_settings = {"field_scale": 4}  # set before the first build
+        session.options.wire_settings = {"field_scale": 4}  # set before the first build
     deform_family(session, kind)
     if placed:
         session.set_placement(PLACEMENT)
@@ -749,7 +749,9 @@ def test_save_and_load_round_trip(
     loaded = EditSession.load(path)
     assert loaded.kind == kind
     assert loaded.placement == session.placement
-    assert loaded.wire_settings["field_scale"] == session.wire_settings["field_scale"]
+    assert (
+        loaded.options.wire_settings["field_scale"] == session.options.wire_settings["field_scale"]
+    )
     assert loaded.handles().shape == session.handles().shape
     np.testing.assert_allclose(loaded.handles(), session.handles(), atol=1e-6)
     np.testing.assert_array_equal(loaded.fixed_handles(), session.fixed_handles())
@@ -787,7 +789,7 @@ def test_loading_keeps_the_placement_without_a_deformation(
     loaded = EditSession.load(session.save(tmp_path / "n.json"))
     assert loaded.kind == "none"
     assert loaded.placement == PLACEMENT
-    assert (loaded.resolution, loaded.stiffness) == ((6, 6, 6), 0.8)
+    assert (loaded.resolution, loaded.options.stiffness) == ((6, 6, 6), 0.8)
 
 
 def test_save_creates_missing_folders_and_a_failed_save_keeps_the_old_file(
@@ -854,13 +856,13 @@ def test_refused_settings_name_the_allowed_values_and_keep_the_model(
     """A bad setting raises EditorError naming what is allowed; the model stays."""
     session.set_deformation("massspring", resolution=4)
     model, warps = session.model, list(session.scene.warps)
-    state = (session.kind, session.backend, session.resolution, session.stiffness)
+    state = (session.kind, session.backend, session.resolution, session.options.stiffness)
     kind = settings.pop("kind", "chainmail")
     with pytest.raises(EditorError, match=message):
         session.set_deformation(kind, **settings)
     assert session.model is model
     assert session.scene.warps == warps
-    assert (session.kind, session.backend, session.resolution, session.stiffness) == state
+    assert (session.kind, session.backend, session.resolution, session.options.stiffness) == state
 
 
 class OldContext:
@@ -888,7 +890,7 @@ def test_a_refused_gpu_model_keeps_the_stiffness(volume: Volume) -> None:
     session.set_deformation("massspring", resolution=4, stiffness=0.5)
     with pytest.raises(EditorError):
         session.set_deformation("chainmail", backend="gpu", stiffness=0.9)
-    assert session.stiffness == 0.5
+    assert session.options.stiffness == 0.5
 
 
 def test_a_non_numeric_stiffness_is_an_editor_error(session: EditSession) -> None:

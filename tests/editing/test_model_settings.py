@@ -143,7 +143,7 @@ def test_editor_chainmail_is_the_builders_at_rest(volume: Volume) -> None:
     session = EditSession(Scene(volume))
     session.set_deformation("chainmail", resolution=5, variant="gibson", stiffness=0.7)
     settings = msets.ChainMailSettings(
-        shape=(5, 5, 5), stiffness=0.7, variant="gibson", relax_steps=session.relax_steps
+        shape=(5, 5, 5), stiffness=0.7, variant="gibson", relax_steps=session.options.relax_steps
     )
     built = ChainMailFamily.build(settings, volume)
     assert built.model.to_dict() == session.model.to_dict()

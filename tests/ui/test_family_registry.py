@@ -54,12 +54,13 @@ def test_animation_targets_name_registered_families_once() -> None:
 
 
 def test_shared_editing_code_never_names_a_family() -> None:
-    """The session and the state module import no family adapter by name."""
-    for name in ("session.py", "state.py", "common.py", "keyframes.py"):
+    """The session, the state and common modules and the keyframes import no family
+    adapter by name and never test the family's type."""
+    for name in ("session.py", "state.py", "common.py", "keyframes.py", "model_settings.py"):
         text = (ROOT / "app" / "editing" / name).read_text(encoding="utf-8")
-        assert "WiresFamily" not in text.replace("session.adapter(WiresFamily)", "")
-        assert "LatticeFamily" not in text
-        assert "isinstance(self.family" not in text
+        imports = [line for line in text.splitlines() if line.startswith(("from ", "import "))]
+        assert not [line for line in imports if "families." in line], name
+        assert "isinstance(self.family" not in text, name
 
 
 def test_family_adapters_never_import_the_session() -> None:

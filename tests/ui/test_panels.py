@@ -220,7 +220,7 @@ def test_refresh_reads_the_session_without_edits(qtbot: Any, window: FakeWindow)
     scene.jitter = False
     scene.clip_box = ((1.0, 2.0, 3.0), (9.0, 10.0, 11.0))
     window.session.set_deformation("chainmail", resolution=5)
-    window.session.integrator = "explicit"
+    window.session.options.integrator = "explicit"
     window.session.set_option("relax_steps", 7)
     window.refresh_panels()
     assert volume_panel.mode_combo.currentText() == "average"
@@ -277,7 +277,7 @@ def test_model_combo_builds_a_mass_spring_model(qtbot: Any, window: FakeWindow) 
     assert s.kind == "massspring"
     assert s.model is not None
     assert s.model.grid.shape == (4, 4, 4)
-    assert s.integrator == "explicit"
+    assert s.options.integrator == "explicit"
     assert window.edits == [("New mass-spring model", None)]
     assert window.errors == []
 
@@ -292,7 +292,7 @@ def test_apply_rebuilds_with_the_settings(qtbot: Any, window: FakeWindow) -> Non
     s = window.session
     assert s.model is not first
     assert s.model.grid.shape == (3, 3, 3)
-    assert s.stiffness == pytest.approx(0.25)
+    assert s.options.stiffness == pytest.approx(0.25)
     assert window.edits[-1] == ("New ChainMail model", None)
 
 
@@ -355,7 +355,7 @@ def test_simulation_buttons_and_options(qtbot: Any, window: FakeWindow) -> None:
     click(qtbot, panel.reset_button)
     assert np.allclose(s.model.positions(), s.model.grid.rest_positions)
     panel.steps_spin.setValue(25)
-    assert s.steps_per_frame == 25
+    assert s.options.steps_per_frame == 25
     assert window.edits[-1] == ("Steps per frame", "steps per frame")
     assert panel.simulation_form.isRowVisible(panel.steps_spin)
     assert not panel.simulation_form.isRowVisible(panel.relax_spin)
@@ -366,7 +366,7 @@ def test_relax_steps_for_chainmail(qtbot: Any, window: FakeWindow) -> None:
     panel = make_panel(qtbot, window, DeformationPanel)
     assert panel.relax_spin.maximum() == 16
     panel.relax_spin.setValue(4)
-    assert window.session.relax_steps == 4
+    assert window.session.options.relax_steps == 4
     assert window.session.model.relax_steps == 4
     assert window.edits == [("Relaxation steps", "relax steps")]
     assert panel.simulation_form.isRowVisible(panel.relax_spin)
@@ -446,7 +446,7 @@ def test_wire_parameters(qtbot: Any, window: FakeWindow) -> None:
     panel.wire_kind_combo.setCurrentText("bezier")
     assert s.adapter(WiresFamily).wires[0].kind == "bezier"
     panel.field_scale_combo.setCurrentIndex(panel.field_scale_combo.findData(4))
-    assert s.wire_settings["field_scale"] == 4
+    assert s.options.wire_settings["field_scale"] == 4
     assert not s.family.field_stale
     assert window.errors == []
 

@@ -267,7 +267,10 @@ class WiresPanel(FamilyPanel):
         self.lay_button.setChecked(self._laying())
         self.finish_button.setEnabled(len(s.adapter(WiresFamily).pending_wire) > 0)
         self.field_scale_combo.setCurrentIndex(
-            max(0, self.field_scale_combo.findData(int(s.wire_settings.get("field_scale", 2))))
+            max(
+                0,
+                self.field_scale_combo.findData(int(s.options.wire_settings.get("field_scale", 2))),
+            )
         )
         lo, hi = s.volume.value_range
         span = max(hi - lo, 1e-6)

@@ -285,7 +285,10 @@ class MassSpringFamily(ElementFamily):
     def settings(self) -> MassSpringSettings:
         s = self.session
         return MassSpringSettings(
-            shape=s.resolution, backend=s.backend, stiffness=s.stiffness, integrator=s.integrator
+            shape=s.resolution,
+            backend=s.backend,
+            stiffness=s.options.stiffness,
+            integrator=s.options.integrator,
         )
 
     @classmethod
@@ -320,7 +323,7 @@ class MassSpringFamily(ElementFamily):
         return Built(ms, warp, report)
 
     def _steps(self) -> int:
-        return self.session.steps_per_frame
+        return self.session.options.steps_per_frame
 
     def _run(self, n: int) -> None:
         assert isinstance(self.model, MassSpring)
@@ -356,9 +359,9 @@ class ChainMailFamily(ElementFamily):
         return ChainMailSettings(
             shape=s.resolution,
             backend=s.backend,
-            stiffness=s.stiffness,
-            variant=s.variant,
-            relax_steps=s.relax_steps if s.backend == "cpu" else 0,
+            stiffness=s.options.stiffness,
+            variant=s.options.variant,
+            relax_steps=s.options.relax_steps if s.backend == "cpu" else 0,
         )
 
     @classmethod
@@ -408,7 +411,7 @@ class ChainMailFamily(ElementFamily):
         return restored
 
     def _steps(self) -> int:
-        return self.session.relax_steps
+        return self.session.options.relax_steps
 
     def _may_run_now(self) -> bool:
         # a GPU model's relaxation reads it back: not during a drag

@@ -29,7 +29,7 @@ from voxwarp.render.overlay import OverlayLayer, polyline_segments
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
 
-#: how the field may be built (``EditSession.wire_settings``)
+#: how the field may be built (``FamilyOptions.wire_settings``)
 WIRE_SETTINGS = ("field_scale", "layout", "masks")
 #: wire generations: unique over every adapter, so that a build of one adapter's wires
 #: is never taken for another's (undo makes a new adapter)
@@ -155,7 +155,7 @@ class WiresFamily(Family):
         family.built = family.generation
         spec = warp.to_dict()
         settings = {k: spec[k] for k in WIRE_SETTINGS if k in spec}
-        session.wire_settings = settings or session.wire_settings
+        session.options.wire_settings = settings or session.options.wire_settings
         return family
 
     # ---------------------------------------------------------------- the field
@@ -174,7 +174,7 @@ class WiresFamily(Family):
         """A job rebuilding the field of the current wires (run it on any thread)."""
         s = self.session
         wires = [Wire.from_dict(w.to_dict()) for w in self._wires]
-        return WireBuild(self.generation, s.volume, wires, dict(s.wire_settings))
+        return WireBuild(self.generation, s.volume, wires, dict(s.options.wire_settings))
 
     def _install(self, warp: WireFieldWarp, generation: int) -> None:
         if self.field is not None and self.field is not warp:
@@ -312,7 +312,7 @@ class WiresFamily(Family):
             )
         if "masks" in settings and not isinstance(settings["masks"], bool):
             raise EditorError(f"masks must be true or false; got {settings['masks']!r}")
-        self.session.wire_settings.update(settings)
+        self.session.options.wire_settings.update(settings)
         self._edited()
 
     def set_wire_key(
@@ -420,7 +420,7 @@ class WiresFamily(Family):
             return
         same = (
             snap.state.get("wires") == [w.to_dict() for w in previous.wires]
-            and snap.wire_settings == self.session.wire_settings
+            and snap.options.wire_settings == self.session.options.wire_settings
         )
         if same and not previous.field_stale:
             self._kept = previous.field
