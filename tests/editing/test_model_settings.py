@@ -191,3 +191,30 @@ def test_every_family_has_a_builder(volume: Volume) -> None:
     assert FAMILIES["none"].build(None, volume) == (None, None, msets.BuildReport())
     for name in ("massspring", "chainmail", "wires", "lattice"):
         assert FAMILIES[name].build.__func__ is not FAMILIES["none"].build.__func__  # type: ignore[attr-defined]
+
+
+def test_family_options_keep_the_editor_entry_and_check_settings() -> None:
+    """The options save under the editor entry's keys, in its order, and read back;
+    model settings are checked with the session's messages."""
+    options = msets.FamilyOptions(integrator="explicit", stiffness=0.3, relax_steps=4)
+    entry = options.to_entry()
+    assert list(entry) == [
+        "integrator",
+        "variant",
+        "steps_per_frame",
+        "relax_steps",
+        "stiffness",
+        "wire_settings",
+    ]
+    again = msets.FamilyOptions()
+    again.read_entry(entry)
+    assert again == options
+    assert options.copy() == options
+    assert options.copy().wire_settings is not options.wire_settings
+    with pytest.raises(msets.EditorError, match=r"stiffness must be in \(0, 1\]"):
+        options.with_model_settings({"stiffness": 2})
+    with pytest.raises(msets.EditorError, match="unknown deformation settings: bogus"):
+        options.with_model_settings({"bogus": 1})
+    with options.one_step():
+        assert (options.steps_per_frame, options.relax_steps) == (1, 1)
+    assert (options.steps_per_frame, options.relax_steps) == (10, 4)
