@@ -20,6 +20,7 @@ from PySide6.QtCore import QPoint, Qt
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 
+from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.ui.app import application
 from voxwarp.ui.main_window import MainWindow, load_session_input
 
@@ -114,18 +115,20 @@ def main(out: Path) -> int:
     mouse_drag(pixel_of(2), QPoint(110, 0))
     ok = w.wait_for_wire_build(60)
     print(f"wire: field rebuilt {ok}, {w.session.timings.get('field', float('nan')):.0f} ms")
-    if not ok or w.session.wire_field_stale:
+    if not ok or w.session.family.field_stale:
         problems.append("wire field not rebuilt")
     shot("wire_bend")
 
     # lattice: drag a top-middle node sideways
     choose_model("lattice", 4)
-    nodes = w.session.lattice_nodes
+    nodes = w.session.adapter(LatticeFamily).lattice_nodes
     j = int(np.ravel_multi_index((1, 1, nodes.shape[2] - 1), nodes.shape[:3]))
     rest = nodes.reshape(-1, 3)[j].copy()
     mouse_drag(pixel_of(j), QPoint(120, 20))
     pump(0.5)
-    moved = float(np.linalg.norm(w.session.lattice_nodes.reshape(-1, 3)[j] - rest))
+    moved = float(
+        np.linalg.norm(w.session.adapter(LatticeFamily).lattice_nodes.reshape(-1, 3)[j] - rest)
+    )
     print(f"lattice: node {j} moved {moved:.1f} mm")
     if moved < 5:
         problems.append("lattice drag had no effect")
@@ -134,7 +137,9 @@ def main(out: Path) -> int:
     # undo the lattice drag
     w.undo_action.trigger()
     pump(0.5)
-    back = float(np.linalg.norm(w.session.lattice_nodes.reshape(-1, 3)[j] - rest))
+    back = float(
+        np.linalg.norm(w.session.adapter(LatticeFamily).lattice_nodes.reshape(-1, 3)[j] - rest)
+    )
     print(f"undo: node {j} is {back:.3g} mm from rest")
     if back != 0:
         problems.append("undo did not restore the lattice")

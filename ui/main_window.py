@@ -46,6 +46,7 @@ from PySide6.QtWidgets import (
 from voxwarp.core.camera import VIEWS, Camera
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
 from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
 from voxwarp.errors import VoxwarpError
@@ -177,7 +178,7 @@ class MainWindow(QMainWindow):
 
     def __init__(self, session: EditSession, path: str | Path | None = None) -> None:
         super().__init__()
-        session.sync_wires = False  # wire fields build off the GUI thread here
+        session.sync_builds = False  # wire fields build off the GUI thread here
         self.session = session
         self.path: Path | None = (
             Path(path) if path is not None and str(path).endswith(".json") else None
@@ -459,7 +460,7 @@ class MainWindow(QMainWindow):
     def _changed(self) -> None:
         """After an edit, undo or redo: a stale wire field is rebuilt, panels and the
         view follow."""
-        if self.session.wire_field_stale:
+        if self.session.family.field_stale:
             self.request_wire_build()
         self.refresh_panels()
         self.viewport.update()
@@ -509,9 +510,9 @@ class MainWindow(QMainWindow):
         starts the next build when this one is done)."""
         if self._wire_task and self._wire_task.running:
             return
-        if not self.session.wire_field_stale:  # (never for the other families)
+        if not self.session.family.field_stale:  # (never for the other families)
             return
-        job = self.session.wire_build()
+        job = self.session.family.build_job()
         task = Task(lambda progress, cancelled: job.run(progress), self)
         self._wire_task, self._wire_job = task, job
         self.progress.setValue(0)
@@ -526,16 +527,16 @@ class MainWindow(QMainWindow):
     def _wire_built(self, job: WireBuild) -> None:
         if job is not self._wire_job:
             return
-        self.viewport.with_context(lambda: self.session.install_wire_build(job))
+        self.viewport.with_context(lambda: self.session.family.install(job))
         self.refresh_panels()
         self.viewport.update()
 
     def _wire_task_done(self) -> None:
         self.progress.hide()
         self._wire_task = None
-        if self.session.wire_field_stale and not self.session.dragging:
+        if self.session.family.field_stale and not self.session.dragging:
             QTimer.singleShot(0, self.request_wire_build)
-        elif self.session.wire_field_stale:
+        elif self.session.family.field_stale:
             QTimer.singleShot(30, self.request_wire_build)
 
     def _cancel_wire_build(self) -> None:
@@ -550,7 +551,7 @@ class MainWindow(QMainWindow):
             QApplication.processEvents()
             if (
                 not (self._wire_task and self._wire_task.running)
-                and not self.session.wire_field_stale
+                and not self.session.family.field_stale
             ):
                 return True
             time.sleep(0.01)
@@ -571,7 +572,7 @@ class MainWindow(QMainWindow):
         self.viewport.laying_wire = False
         kind = self.deformation_panel.wire_kind()
         radius = self.deformation_panel.wire_radius()
-        self.edit("New wire", lambda: self.session.finish_wire(kind, radius))
+        self.edit("New wire", lambda: self.session.adapter(WiresFamily).finish_wire(kind, radius))
 
     # ------------------------------------------------------------------ simulation
     def set_running(self, running: bool) -> None:
@@ -601,7 +602,7 @@ class MainWindow(QMainWindow):
     def clear_selection(self) -> None:
         """Clear the selection (and stop laying a wire)."""
         self.viewport.laying_wire = False
-        self.session.pending_wire = []
+        self.session.family.discard_pending()
         self.session.select([], "replace")
         self.viewport.update()
 
@@ -749,7 +750,7 @@ class MainWindow(QMainWindow):
         """Show another session (a file was opened); clears the undo history."""
         self._cancel_wire_build()
         session.running = self.session.running  # run/pause is the window's, not the file's
-        session.sync_wires = False
+        session.sync_builds = False
         self.session = session
         self.viewport.set_session(session, keep_camera=session.scene.camera is not None)
         self.mpr.set_session(session)

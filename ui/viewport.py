@@ -36,7 +36,8 @@ from PySide6.QtWidgets import QRubberBand, QWidget
 
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
-from voxwarp.editing.session import DisplayOptions, EditSession
+from voxwarp.editing.families.wires import WiresFamily
+from voxwarp.editing.session import DisplayOptions, EditorError, EditSession
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, scene_at
 from voxwarp.render.orientation_marker import draw_orientation_marker
@@ -450,7 +451,11 @@ class Viewport(QOpenGLWidget):
         size = self.size_px()
         if button == Qt.MouseButton.LeftButton:
             if self.laying_wire:
-                self.session.add_wire_point(self.camera, size, xy)
+                try:
+                    self.session.adapter(WiresFamily).add_wire_point(self.camera, size, xy)
+                except EditorError:  # the wire family is no longer the session's
+                    self.laying_wire = False
+                    return
                 self._press["mode"] = "laid"
                 self.wirePointLaid.emit()
                 self.update()

@@ -20,6 +20,7 @@ class ElementTargets(TargetFamily):
     """Held elements of the scene's one element model; several tracks may hold elements."""
 
     names = ("elements.drag",)
+    families = ("massspring", "chainmail")
     repeatable = True
     takes_elements = True
 

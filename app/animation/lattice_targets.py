@@ -17,6 +17,7 @@ class LatticeTargets(TargetFamily):
     """The nodes of the scene's one lattice warp (or ``"rest"``)."""
 
     names = ("lattice.nodes",)
+    families = ("lattice",)
 
     def check_value(self, target: str, value: Any, what: str) -> None:
         if not (isinstance(value, str) and value == "rest"):

@@ -59,6 +59,9 @@ class TargetFamily:
     #: the regular expression :meth:`matches` uses when :attr:`names` hold placeholders
     #: (``wires[i]...``; the animation JSON Schema takes it too)
     pattern: ClassVar[str | None] = None
+    #: the deformation families (:data:`voxwarp.editing.families.FAMILIES` keys) these
+    #: targets key (none for the meshes, which follow the scene's warps)
+    families: ClassVar[tuple[str, ...]] = ()
     #: whether several tracks may key one target
     repeatable: ClassVar[bool] = False
     #: whether its tracks take an ``"elements"`` entry

@@ -29,6 +29,7 @@ class WireTargets(TargetFamily):
 
     names = ("wires[i].modified", "wires[i].twist", "wires[i].scale")
     pattern = _TARGET.pattern
+    families = ("wires",)
 
     def matches(self, target: str) -> bool:
         return _TARGET.match(target) is not None

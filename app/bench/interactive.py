@@ -37,6 +37,8 @@ import numpy as np
 
 from voxwarp.bench.command import add_bench_parser, emit_report
 from voxwarp.core.checks import image_size, positive_int
+from voxwarp.editing.families.lattice import LatticeFamily
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import DEFAULT_SAMPLE, load_sample, suggested_transfer_function
 from voxwarp.render.adaptive_quality import (
@@ -124,19 +126,20 @@ def edit_family(session: EditSession, family: str) -> str:
         return f"middle element of 8³ dragged {np.linalg.norm(offset):.0f} mm"
     if family == "wires":
         session.set_deformation("wires")
-        wire = session.wires[0]
-        pts = wire.modified.control_points.copy()
+        wires = session.adapter(WiresFamily)
+        pts = wires.wires[0].modified.control_points.copy()
         pts[2, 0] += 0.25 * size[0]
-        session.set_wire_points(0, pts)
-        session.rebuild_wire_field()
+        wires.set_wire_points(0, pts)
+        wires.rebuild_if_stale()
         return f"control point 3 of 4 moved {0.25 * size[0]:.0f} mm"
     if family == "lattice":
         session.set_deformation("lattice", resolution=4)
-        nodes = session.lattice_nodes
+        lattice = session.adapter(LatticeFamily)
+        nodes = lattice.lattice_nodes
         assert nodes is not None
         nodes = nodes.copy()
         nodes[1, 1, 2, 0] += 0.2 * size[0]
-        session.set_lattice_nodes(nodes)
+        lattice.set_lattice_nodes(nodes)
         return f"node (1, 1, 2) of 3³ cells moved {0.2 * size[0]:.0f} mm"
     session.set_deformation("none")
     return "-"

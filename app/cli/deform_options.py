@@ -14,16 +14,15 @@ from collections.abc import Sequence
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.options import add_field_convention_arg
 from voxwarp.core import limits
+from voxwarp.editing.model_settings import FIXED_STEPS, SETTLE_MAX_STEPS, SETTLE_SPEED
 
 # ---------------------------------------------------------------------- mass-spring options
-#: Steps ``render --massspring`` runs without ``--settle`` (and no ``--steps``). With the
-#: CLI's defaults (semi-implicit, shear springs, dt ~ 24 ms) an 8³ grid is settled after
-#: about 600 steps and a 16³ grid within ~5 % of the dragged distance after 1000.
-MASSSPRING_STEPS = 1000
-#: Most steps ``--settle`` runs when ``--steps`` is not given.
-MASSSPRING_SETTLE_MAX_STEPS = 20000
-#: ``--settle`` stops once every element is slower than this (mm/s).
-MASSSPRING_SETTLE_TOL = 1e-3
+#: Steps ``render --massspring`` runs without ``--settle`` (and no ``--steps``), the most
+#: steps ``--settle`` runs when ``--steps`` is not given, and the speed (mm/s) below which
+#: every element counts as settled: the model builder's (voxwarp.editing.model_settings).
+MASSSPRING_STEPS = FIXED_STEPS
+MASSSPRING_SETTLE_MAX_STEPS = SETTLE_MAX_STEPS
+MASSSPRING_SETTLE_TOL = SETTLE_SPEED
 
 
 class Drag(tuple):

@@ -17,9 +17,7 @@ from typing import Any, NamedTuple
 
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.deform_options import (
-    MASSSPRING_SETTLE_MAX_STEPS,
     MASSSPRING_SETTLE_TOL,
-    MASSSPRING_STEPS,
 )
 
 # the moved bodies below keep the names they had in voxwarp.cli.main
@@ -27,7 +25,7 @@ from voxwarp.cli.deform_options import Cut as _Cut
 from voxwarp.cli.deform_options import Drag as _Drag
 from voxwarp.cli.deform_options import grid_text as _grid_text
 from voxwarp.errors import InputError as CliOptionError
-from voxwarp.inputs import load_lattice_file, load_wire_file
+from voxwarp.inputs import load_wire_file
 
 #: the options of ``render``'s deformation models, in the order of ``--help``: (flag,
 #: attribute, the model that takes it: "both", "massspring" or "chainmail")
@@ -179,7 +177,8 @@ def _check_wire_options(args: argparse.Namespace) -> None:
 def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
     """The wire warp of --wires on ``volume``, built, and a one-line summary."""
     from voxwarp.deform.warp import WarpError
-    from voxwarp.deform.wires.field import WireFieldWarp
+    from voxwarp.editing.families.wires import WiresFamily
+    from voxwarp.editing.model_settings import WireSettings
 
     entry = load_wire_file(args.wires)
     if args.field_scale is not None:
@@ -189,8 +188,7 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
     if args.masks is not None:
         entry["masks"] = args.masks
     try:
-        warp = WireFieldWarp.from_dict(entry)
-        warp.bind_volume(volume)
+        warp = WiresFamily.build(WireSettings(entry), volume).warp
     except WarpError as exc:
         raise CliOptionError(f"--wires {args.wires}: {exc}") from exc
     st = warp.deformer.stats
@@ -205,6 +203,42 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
     return warp, summary
 
 
+def _element_settings(args: argparse.Namespace) -> Any:
+    """The model builder's settings of ``render --massspring`` / ``--chainmail``
+    (:mod:`voxwarp.editing.model_settings`; None without either)."""
+    from voxwarp.editing import model_settings as ms
+
+    model = _deform_model(args)
+    if model is None:
+        return None
+    common: dict[str, Any] = {
+        "backend": args.backend or "cpu",
+        "fixed": tuple(ranges for _, ranges in args.fix or []),
+        "stiffness_from_volume": args.stiffness_from_volume,
+        "drags": tuple(ms.Drag(d.index, d.offset) for d in args.drag or []),
+        "inverse": args.inverse or "baked",
+    }
+    if model == "massspring":
+        return ms.MassSpringSettings(
+            shape=tuple(args.massspring),
+            integrator=args.integrator or "semi-implicit",
+            shear=True if args.shear is None else args.shear,
+            bend=bool(args.bend),
+            run=ms.SettleRule(settle=bool(args.settle), steps=args.steps),
+            **common,
+        )
+    relax = args.relax or 0
+    return ms.ChainMailSettings(
+        shape=tuple(args.chainmail),
+        variant=args.variant or "enhanced",
+        cuts=tuple(ms.Cut(c.point, c.normal, c.radius) for c in args.cut or []),
+        relax=relax,
+        relax_steps=relax,  # saved with the model: a resumed one relaxes alike
+        warm_up=True,  # the reported move time is the move's alone
+        **common,
+    )
+
+
 def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     """The element grid of ``render --massspring`` / ``--chainmail`` over ``volume``
     (None without either): fixed elements and materials set, drags checked against
@@ -213,13 +247,14 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     model = _deform_model(args)
     if model is None:
         return None
-    import numpy as np
+    from voxwarp.editing.families.elements import ElementFamily
+    from voxwarp.editing.model_settings import SettingError
 
-    from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
+    if args.drag_at:  # to the nearest elements at rest, then checked as --drag elements are
+        from voxwarp.deform.elements.grid import ElementGrid
 
-    grid = ElementGrid(volume, shape=args.massspring if model == "massspring" else args.chainmail)
-    if args.drag_at:  # to the nearest elements, then checked as --drag elements are
-        picks = ropt.pick_elements(grid, args.drag_at)
+        shape = args.massspring if model == "massspring" else args.chainmail
+        picks = ropt.pick_elements(ElementGrid(volume, shape=shape), args.drag_at)
         for pick in picks:
             print(pick.summary(), file=sys.stderr)
         args.drag = [
@@ -228,19 +263,10 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
         ]
         args.drag_at = None
         check_deform_options(args)
-    for _, ranges in args.fix or []:
-        mask = np.zeros(grid.shape, dtype=bool)
-        mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
-        grid.fix(mask)
-    if args.stiffness_from_volume:
-        # the voxel centres span origin .. origin + spacing * (shape - 1)
-        org = np.asarray(volume.origin, dtype=np.float64)
-        n = np.maximum(np.asarray(volume.shape) - 1, 1)
-        centres = (org, org + np.asarray(volume.spacing, dtype=np.float64) * n)
-        try:
-            grid.materials_from_volume(volume.data, centres, args.stiffness_from_volume)
-        except ElementGridError as exc:
-            raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
+    try:
+        grid = ElementFamily.grid(_element_settings(args), volume)
+    except SettingError as exc:
+        raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
     if model == "massspring":
         rigid = grid.pinned()
         for d in args.drag or []:
@@ -288,129 +314,77 @@ def _cut_crosses(grid: Any, cut: _Cut) -> bool:
 
 
 def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
-    """Build, drag and run the mass-spring model of ``render --massspring`` on ``grid``.
+    """Build, drag and run the mass-spring model of ``render --massspring`` on ``grid``
+    (the model builder: ``MassSpringFamily.build_on``).
 
     Returns the :class:`~voxwarp.deform.elements.massspring.MassSpring` and a one-line summary.
     """
-    from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
     from voxwarp.deform.warp import WarpError
+    from voxwarp.editing.families.elements import MassSpringFamily
+    from voxwarp.editing.model_settings import SettingError
 
-    backend = args.backend or "cpu"
+    settings = _element_settings(args)
     try:
-        ms = MassSpring(
-            grid,
-            backend=backend,
-            ctx=ctx if backend == "gpu" else None,
-            integrator=args.integrator or "semi-implicit",
-            shear=True if args.shear is None else args.shear,
-            bend=bool(args.bend),
+        ms, _, report = MassSpringFamily.build_on(settings, grid, ctx)
+    except (SettingError, WarpError) as exc:  # e.g. displacements beyond the texture's range
+        raise CliOptionError(f"--massspring: {exc}") from exc
+    how = f"{report.steps} steps"
+    if report.hit_limit:
+        warnings.warn(
+            f"--settle stopped at the limit of {settings.run.limit} steps; the grid may still"
+            " be moving: raise --steps",
+            RuntimeWarning,
+            stacklevel=1,
         )
-    except MassSpringError as exc:
-        raise CliOptionError(f"--massspring: {exc}") from exc
-    try:
-        for d in args.drag or []:
-            ms.move(d.index, d.offset)
-        if args.settle:
-            limit = MASSSPRING_SETTLE_MAX_STEPS if args.steps is None else args.steps
-            steps = ms.settle(max_steps=limit, tol=MASSSPRING_SETTLE_TOL)
-            how = f"{steps} steps"
-            if steps >= limit and limit > 0:
-                warnings.warn(
-                    f"--settle stopped at the limit of {limit} steps; the grid may still"
-                    " be moving: raise --steps",
-                    RuntimeWarning,
-                    stacklevel=1,
-                )
-            else:
-                how += f" (settled: every element slower than {MASSSPRING_SETTLE_TOL:g} mm/s)"
-        else:
-            steps = MASSSPRING_STEPS if args.steps is None else args.steps
-            ms.step(steps)
-            how = f"{steps} steps"
-        ms.warp(inverse=args.inverse or "baked")
-    except WarpError as exc:  # e.g. displacements beyond the texture's range
-        ms.close()
-        raise CliOptionError(f"--massspring: {exc}") from exc
-    except BaseException:
-        ms.close()
-        raise
+    elif report.settling:
+        how += f" (settled: every element slower than {MASSSPRING_SETTLE_TOL:g} mm/s)"
     summary = (
-        f"massspring: {_grid_text(grid.shape)} {backend} {ms.integrator}, dt {ms.dt:.3g} s,"
-        f" {len(args.drag or [])} dragged, {how}"
+        f"massspring: {_grid_text(grid.shape)} {settings.backend} {ms.integrator},"
+        f" dt {ms.dt:.3g} s, {len(settings.drags)} dragged, {how}"
     )
     return ms, summary
 
 
 def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
-    """Build, cut, drag and relax the ChainMail model of ``render --chainmail``.
+    """Build, cut, drag and relax the ChainMail model of ``render --chainmail`` (the
+    model builder: ``ChainMailFamily.build_on``).
 
     Cuts come first (through the rest state), then all ``--drag`` elements move at once
-    (one :meth:`~voxwarp.deform.elements.chainmail.ChainMail.move`), then ``--relax`` steps (also
-    saved
-    as the model's ``relax_steps``). Returns the
-    :class:`~voxwarp.deform.elements.chainmail.ChainMail`
-    and a one-line summary.
+    (one :meth:`~voxwarp.deform.elements.chainmail.ChainMail.move`), then ``--relax`` steps
+    (also saved as the model's ``relax_steps``). Returns the
+    :class:`~voxwarp.deform.elements.chainmail.ChainMail` and a one-line summary.
     """
-    import time
+    from voxwarp.editing.families.elements import ChainMailFamily
+    from voxwarp.editing.model_settings import SettingError
 
-    import numpy as np
-
-    from voxwarp.deform.elements.chainmail import ChainMail, ChainMailError
-
-    backend = args.backend or "cpu"
-    relax = args.relax or 0
+    settings = _element_settings(args)
     drags = args.drag or []
     try:
-        cm = ChainMail(
-            grid,
-            variant=args.variant or "enhanced",
-            backend=backend,
-            ctx=ctx if backend == "gpu" else None,
-        )
-    except ChainMailError as exc:
+        cm, _, report = ChainMailFamily.build_on(settings, grid, ctx)
+    except SettingError as exc:
         raise CliOptionError(f"--chainmail: {exc}") from exc
-    try:
-        cut = sum(cm.cut(c.point, c.normal, c.radius) for c in args.cut or [])
-        if backend == "cpu":  # load the numba kernels outside the timed move: no element
-            cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
-        touched, solve_ms = 0, 0.0
-        if drags:
-            stats = cm.move([d.index for d in drags], [d.offset for d in drags])
-            touched, solve_ms = stats.touched, stats.seconds * 1000
-            if stats.limited:
-                what = (
-                    f"{drags[0].flag} {drags[0].text}"
-                    if len(drags) == 1
-                    else "the dragged elements"
-                )
-                warnings.warn(
-                    f"{what} went only {stats.fraction:.0%} of the way: the links between"
-                    " the dragged and the fixed elements (the 8 corners always are fixed)"
-                    " ran out of slack; fix fewer elements or drag less",
-                    RuntimeWarning,
-                    stacklevel=1,
-                )
-        t = time.perf_counter()
-        cm.relax(relax)
-        relax_ms = (time.perf_counter() - t) * 1000
-        cm.relax_steps = relax  # saved with the model: a resumed one relaxes alike
-        cm.warp(inverse=args.inverse or "baked")
-        displaced = int(np.count_nonzero(np.any(cm.displacements() != 0.0, axis=-1)))
-    except BaseException:
-        cm.close()
-        raise
+    if report.limited_fraction is not None:
+        what = f"{drags[0].flag} {drags[0].text}" if len(drags) == 1 else "the dragged elements"
+        warnings.warn(
+            f"{what} went only {report.limited_fraction:.0%} of the way: the links between"
+            " the dragged and the fixed elements (the 8 corners always are fixed)"
+            " ran out of slack; fix fewer elements or drag less",
+            RuntimeWarning,
+            stacklevel=1,
+        )
+    backend, relax = settings.backend, settings.relax
     moved = (
-        f"{touched} elements touched in {solve_ms:.1f} ms"
+        f"{report.touched} elements touched in {report.solve_ms:.1f} ms"
         if backend == "cpu"
-        else f"solved in {solve_ms:.1f} ms"
+        else f"solved in {report.solve_ms:.1f} ms"
     )
     summary = f"chainmail: {_grid_text(grid.shape)} {backend} {cm.variant}, {len(drags)} dragged"
     summary += f", {moved}"
     if relax:
-        summary += f", relax {relax} step{'s' * (relax != 1)} in {relax_ms:.1f} ms"
+        summary += f", relax {relax} step{'s' * (relax != 1)} in {report.relax_ms:.1f} ms"
     if args.cut:
-        summary += f", {cut} links cut"
-    summary += f"; {displaced} elements displaced"
+        summary += f", {report.cut} links cut"
+    summary += f"; {report.displaced} elements displaced"
     return cm, summary
 
 
@@ -450,7 +424,10 @@ def prepare_deformation(args: argparse.Namespace, scene: Any) -> tuple[Any, Pend
         file_warp, summary = _wire_warp(args, scene.volume)
         print(summary, file=sys.stderr)
     if args.lattice is not None:
-        file_warp = load_lattice_file(args.lattice, scene.volume)
+        from voxwarp.editing.families.lattice import LatticeFamily
+        from voxwarp.editing.model_settings import LatticeSettings
+
+        file_warp = LatticeFamily.build(LatticeSettings(file=args.lattice), scene.volume).warp
     return scene, PendingDeformation(grid, file_warp)
 
 

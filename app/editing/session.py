@@ -12,11 +12,17 @@ its adapter (:mod:`voxwarp.editing.families`; the session never switches on the 
   elements.
 * ``"wires"``: :class:`~voxwarp.deform.wires.field.Wire` objects and their attribute field; the
   handles are the control points of the *modified* wires (the base wires stay where
-  they were laid). Editing one needs a rebuild of the field (~0.2 s): the session
-  hands out a :class:`WireBuild` job that runs off the GUI thread and installs its
-  result only if nothing changed meanwhile.
+  they were laid). Editing one needs a rebuild of the field (~0.2 s): the adapter
+  hands out a :class:`WireBuild` job (``session.family.build_job()``) that runs off the
+  GUI thread and installs its result (``session.family.install(job)``) only if nothing
+  changed meanwhile.
 * ``"lattice"``: a :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` over the volume's box
   (:class:`~voxwarp.deform.lattice.warp.LatticeWarp`); the handles are its nodes.
+
+A family's own editing API lives on its adapter, reached through the typed accessor
+:meth:`EditSession.adapter`: ``session.adapter(WiresFamily).add_wire_point(...)``,
+``session.adapter(LatticeFamily).set_lattice_nodes(nodes)``. Models are built from
+settings by the adapters' one builder (:mod:`voxwarp.editing.model_settings`).
 
 Handles are picked in screen space (the nearest projected handle within a radius of
 pixels), added to or removed from a selection (one of them the *reference*), and
@@ -37,9 +43,8 @@ import contextlib
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 
@@ -49,7 +54,7 @@ from voxwarp.deform.elements.grid import ElementGrid
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.lattice.warp import LatticeWarp
-from voxwarp.deform.warp import AffineWarp, Warp, WarpError, rotation_matrix
+from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.editing.common import (
     BACKENDS as BACKENDS,
 )
@@ -68,9 +73,9 @@ from voxwarp.editing.common import (
     INTEGRATORS as INTEGRATORS,
 )
 from voxwarp.editing.families import FAMILIES, Family, WireBuild
-from voxwarp.editing.families.lattice import LatticeFamily
-from voxwarp.editing.families.wires import WiresFamily
-from voxwarp.render.overlay import OverlayLayer, box_edges, polyline_segments
+from voxwarp.editing.model_settings import FamilyOptions
+from voxwarp.editing.state import DragState, Placement, Snapshot
+from voxwarp.render.overlay import OverlayLayer, box_edges
 from voxwarp.scene import Scene, read_scene_dict, write_scene_json
 
 Deformation = Literal["none", "massspring", "chainmail", "wires", "lattice"]
@@ -80,7 +85,6 @@ SelectMode = Literal["replace", "add", "remove", "toggle"]
 #: pick radius in pixels around a handle
 PICK_RADIUS_PX = 12.0
 #: the session attributes that choose the deformation model
-MODEL_SETTINGS = ("kind", "backend", "resolution", "integrator", "variant", "stiffness")
 #: key of the editor's entry in scene JSON
 EDITOR_KEY = "editor"
 __all__ = [
@@ -97,105 +101,7 @@ __all__ = [
     "WireBuild",
 ]
 
-
-# ---------------------------------------------------------------------------- placement
-@dataclass
-class Placement:
-    """Where the deformation grid sits relative to the volume.
-
-    ``translate`` (mm), ``rotate`` (degrees about x, then y, then z, through the volume's
-    box centre) and ``scale`` (per axis, about that centre) map the grid frame (the
-    volume's box) to world space.
-    """
-
-    translate: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rotate: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
-
-    def __post_init__(self) -> None:
-        for name in ("translate", "rotate", "scale"):
-            v = np.asarray(getattr(self, name), dtype=np.float64).reshape(-1)
-            if v.size == 1:
-                v = np.repeat(v, 3)
-            if v.size != 3 or not np.all(np.isfinite(v)):
-                raise EditorError(f"placement {name} must be 3 finite numbers; got {v.tolist()}")
-            setattr(self, name, (float(v[0]), float(v[1]), float(v[2])))
-        if min(self.scale) <= 0:
-            raise EditorError(f"placement scale must be positive; got {self.scale}")
-
-    @property
-    def is_identity(self) -> bool:
-        """True when the grid sits exactly on the volume's box."""
-        return (
-            self.translate == (0.0, 0.0, 0.0)
-            and self.rotate == (0.0, 0.0, 0.0)
-            and self.scale == (1.0, 1.0, 1.0)
-        )
-
-    def matrix(self, center: Sequence[float]) -> np.ndarray:
-        """4x4 grid frame -> world, about ``center`` (the volume's box centre)."""
-        c = np.asarray(center, dtype=np.float64)
-        r = np.eye(3)
-        for axis, deg in zip(np.eye(3), self.rotate, strict=True):
-            if deg:
-                r = rotation_matrix(axis, deg) @ r
-        m = np.eye(4)
-        m[:3, :3] = r @ np.diag(self.scale)
-        m[:3, 3] = c - m[:3, :3] @ c + np.asarray(self.translate)
-        return m
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
-        return {
-            "translate": list(self.translate),
-            "rotate": list(self.rotate),
-            "scale": list(self.scale),
-        }
-
-    @classmethod
-    def from_dict(cls, d: Any) -> Placement:
-        """Inverse of :meth:`to_dict`; raises :class:`EditorError`."""
-        if not isinstance(d, dict):
-            raise EditorError(f"editor 'placement' must be an object; got {d!r:.60}")
-        return cls(
-            d.get("translate", (0, 0, 0)), d.get("rotate", (0, 0, 0)), d.get("scale", (1, 1, 1))
-        )
-
-
-# ---------------------------------------------------------------------------- snapshots
-@dataclass
-class Snapshot:
-    """An in-memory copy of a session's whole editable state (for undo/redo)."""
-
-    kind: str
-    backend: str
-    resolution: tuple[int, int, int]
-    placement: Placement
-    #: the family's own state (:meth:`Family.snapshot`: model, wires or lattice nodes)
-    state: dict[str, Any] = field(default_factory=dict)
-    wire_settings: dict[str, Any] = field(default_factory=dict)
-    selection: tuple[int, ...] = ()
-    reference: int | None = None
-    settings: dict[str, Any] = field(default_factory=dict)
-    #: the scene's look: mode, transfer function, sample distance, window, clip box, ...
-    look: dict[str, Any] = field(default_factory=dict)
-    #: the keyframes (``Animation.to_dict()``) or None
-    animation: dict[str, Any] | None = None
-    #: the imported warps (:attr:`EditSession.imported_warps`; warps are not edited in
-    #: place, so holding them is a copy)
-    imported: tuple[Warp, ...] = ()
-
-    def same_as(self, other: Snapshot) -> bool:
-        """True when both hold the same state (exact comparison of every array)."""
-        return all(_same(getattr(self, f), getattr(other, f)) for f in self.__dataclass_fields__)
-
-
-def _same(a: Any, b: Any) -> bool:
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return a is not None and b is not None and np.array_equal(a, b)
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    return bool(a == b)
+F = TypeVar("F", bound=Family)
 
 
 # ---------------------------------------------------------------------------- session
@@ -227,22 +133,13 @@ class EditSession:
         self.backend: str = "cpu"
         self.resolution: tuple[int, int, int] = (8, 8, 8)
         self.placement = Placement()
-        #: mass-spring integrator and ChainMail variant of the next model
-        self.integrator: str = "semi-implicit"
-        self.variant: str = "enhanced"
-        #: mass-spring steps and ChainMail relaxation steps per frame while running
-        self.steps_per_frame: int = 10
-        self.relax_steps: int = 1
-        #: element stiffness of new mass-spring/ChainMail models (0..1)
-        self.stiffness: float = 0.5
+        #: the families' settings, kept across family switches, saved and undone (the
+        #: adapters read them: element integrator/variant/stiffness/steps, wire settings)
+        self.options = FamilyOptions()
         self.running: bool = True
-        self.wire_settings: dict[str, Any] = {"field_scale": 2}
-        #: changes with every edit of the wires (a field is of the generation it was built
-        #: from; see :attr:`wire_field_stale`)
-        self.wire_generation = 0
-        #: rebuild wire fields at once on model changes and undo (scripts, tests); the
-        #: GUI sets False and builds them off its thread (:meth:`wire_build`)
-        self.sync_wires = True
+        #: build a family's field at once on model changes and undo (scripts, tests); the
+        #: GUI sets False and builds it off its thread (``family.build_job()``)
+        self.sync_builds = True
         #: GPU models: least seconds between element read-backs for the overlay while
         #: the simulation runs (never during a drag)
         self.gpu_readback_interval = 0.5
@@ -251,11 +148,9 @@ class EditSession:
         self.settled = False
         self.selection: list[int] = []
         self.reference: int | None = None
-        #: control points of the wire being laid (:meth:`add_wire_point`)
-        self.pending_wire: list[np.ndarray] = []
         #: last timings in ms: "step" (model), "field" (wire build)
         self.timings: dict[str, float] = {}
-        self._drag: dict[str, Any] | None = None
+        self._drag: DragState | None = None
         self._handle_cache: np.ndarray | None = None
         self._released_warps: list[Warp] = []
         #: keyframes (:mod:`voxwarp.editing.keyframes`; saved in scene JSON for ``voxwarp
@@ -281,15 +176,13 @@ class EditSession:
         """The element model (mass-spring or ChainMail), else None."""
         return self.family.model
 
-    @property
-    def wires(self) -> list[Any]:
-        """The wires of the wire family (empty for the others)."""
-        return self.family.wires
-
-    @property
-    def lattice_nodes(self) -> np.ndarray | None:
-        """The lattice's nodes (None for the other families)."""
-        return self.family.lattice_nodes
+    def adapter(self, cls: type[F]) -> F:
+        """The active family's adapter as ``cls`` (e.g. ``session.adapter(WiresFamily)``
+        for the wire editing API); an :class:`EditorError` when another family is active."""
+        family = self.family
+        if not isinstance(family, cls):
+            raise EditorError(f"choose the {cls.kind} deformation first")
+        return family
 
     @property
     def volume(self) -> Any:
@@ -314,13 +207,17 @@ class EditSession:
         return self._drag is not None
 
     @property
-    def drag_state(self) -> dict[str, Any] | None:
+    def drag_state(self) -> DragState | None:
         """The drag in progress (for the family adapters), or None."""
         return self._drag
 
     def _touch(self) -> None:
         self._handle_cache = None
         self.settled = False
+
+    def edited(self) -> None:
+        """An adapter edited its state: forget cached handles, run the model again."""
+        self._touch()
 
     def handles_moved(self, throttle: bool = False) -> None:
         """The handles moved (a running model): forget their cached positions; with
@@ -343,19 +240,19 @@ class EditSession:
         per axis (at most 8).
         """
         kind = choice(kind, DEFORMATIONS, "deformation")
-        wanted = self._checked_settings(kind, settings)
-        if wanted["backend"] == "gpu" and FAMILIES[kind].uses_backend and self.ctx is None:
+        backend, res, options = self._checked_settings(settings)
+        if backend == "gpu" and FAMILIES[kind].uses_backend and self.ctx is None:
             raise EditorError("the GPU backend needs the viewport's OpenGL context; use cpu")
-        settings_now = {name: getattr(self, name) for name in MODEL_SETTINGS[1:]}
+        now = (self.backend, self.resolution, self.options)
         # build the new family before closing the old: a refused setting leaves the
         # session as it was (the wire family builds its field after the switch)
         family = FAMILIES[kind](self)
-        self._set_settings(wanted)
+        self.backend, self.resolution, self.options = backend, res, options
         if family.uses_backend:
             try:
                 family.start()
             except EditorError:
-                self._set_settings(settings_now)
+                self.backend, self.resolution, self.options = now
                 raise
         self._close_family()
         self.timings.clear()
@@ -365,34 +262,18 @@ class EditSession:
             family.start()
         self.sync_warps()
 
-    def _checked_settings(self, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
+    def _checked_settings(
+        self, settings: dict[str, Any]
+    ) -> tuple[str, tuple[int, int, int], FamilyOptions]:
+        """The backend, resolution and family options ``settings`` ask for, checked."""
         settings = dict(settings)
         backend = choice(settings.pop("backend", self.backend), BACKENDS, "backend")
         res = resolution(settings.pop("resolution", self.resolution))
-        integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
-        variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
-        stiffness_value = settings.pop("stiffness", self.stiffness)
-        try:
-            stiffness = float(stiffness_value)
-        except (TypeError, ValueError) as exc:
-            raise EditorError(
-                f"stiffness must be a number in (0, 1]; got {stiffness_value!r}"
-            ) from exc
-        if settings:
-            raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
-        if not 0.0 < stiffness <= 1.0:
-            raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
-        values = (backend, res, integrator, variant, stiffness)
-        return dict(zip(MODEL_SETTINGS[1:], values, strict=True))
-
-    def _set_settings(self, values: dict[str, Any]) -> None:
-        for name, value in values.items():
-            setattr(self, name, value)
+        return backend, res, self.options.with_model_settings(settings)
 
     def _close_family(self) -> None:
         self.family.close()
         self.family = Family(self)
-        self.pending_wire = []
         self._drag = None
 
     def release_warp(self, warp: Warp) -> None:
@@ -478,14 +359,8 @@ class EditSession:
         ``relax_steps`` (ChainMail relaxation steps per frame), ``running``."""
         if name == "running":
             self.running = bool(value)
-        elif name in ("steps_per_frame", "relax_steps"):
-            v = int(value)
-            if not 0 <= v <= 10000:
-                raise EditorError(f"{name} must be 0..10000; got {value!r}")
-            setattr(self, name, v)
-            self.family.option_changed(name, v)
         else:
-            raise EditorError(f"unknown option {name!r}")
+            self.family.option_changed(name, self.options.set_run_option(name, value))
 
     # ------------------------------------------------------------------ handles
     def _grid_to_world(self, p: np.ndarray) -> np.ndarray:
@@ -601,14 +476,14 @@ class EditSession:
             return False
         pts = self.handles()
         ref = pts[self.reference]
-        self._drag = {
-            "camera": camera,
-            "size": size,
-            "anchor": camera.point_on_view_plane(pixel, size, ref),
-            "start_world": pts[np.asarray(self.selection)].copy(),
-            "positions": self.family.handles().copy(),
-            "selection": list(self.selection),
-        }
+        self._drag = DragState(
+            camera=camera,
+            size=size,
+            anchor=camera.point_on_view_plane(pixel, size, ref),
+            start_world=pts[np.asarray(self.selection)].copy(),
+            positions=self.family.handles().copy(),
+            selection=list(self.selection),
+        )
         self.family.begin_drag(self._drag)
         return True
 
@@ -619,13 +494,12 @@ class EditSession:
         if self._drag is None:
             return None
         d = self._drag
-        cam: Camera = d["camera"]
-        ref_start = d["start_world"][d["selection"].index(self.reference)]
-        hit = cam.point_on_view_plane(pixel, d["size"], ref_start)
-        delta_world = hit - d["anchor"]
+        ref_start = d.start_world[d.selection.index(self.reference)]
+        hit = d.camera.point_on_view_plane(pixel, d.size, ref_start)
+        delta_world = hit - d.anchor
         lin = self.placement_matrix[:3, :3]
         delta = np.linalg.solve(lin, delta_world) if not self.placement.is_identity else delta_world
-        self.family.drag(d, np.asarray(d["selection"]), delta)
+        self.family.drag(d, np.asarray(d.selection), delta)
         self.sync_warps()
         return delta_world
 
@@ -646,151 +520,16 @@ class EditSession:
         """One step of the model even when paused."""
         running, self.running = self.running, True
         self.settled = False
-        steps, relax = self.steps_per_frame, self.relax_steps
-        self.steps_per_frame = self.relax_steps = 1
         try:
-            self.advance()
+            with self.options.one_step():
+                self.advance()
         finally:
-            self.running, self.steps_per_frame, self.relax_steps = running, steps, relax
+            self.running = running
 
     def reset_model(self) -> None:
         """Back to rest: elements released, wires straightened, lattice undeformed."""
         self.family.reset()
         self.sync_warps()
-
-    # ------------------------------------------------------------------ lattice
-    def set_lattice_nodes(self, nodes: np.ndarray) -> None:
-        """Move every node of the lattice (shape of :attr:`lattice_nodes`); the scene's
-        warps follow."""
-        if not isinstance(self.family, LatticeFamily):
-            raise EditorError("no lattice to move: set_deformation('lattice') first")
-        self.family.set_nodes(nodes)
-        self.sync_warps()
-
-    # ------------------------------------------------------------------ wires
-    def _wire_family(self) -> WiresFamily:
-        if not isinstance(self.family, WiresFamily):
-            raise EditorError("choose the wires deformation first")
-        return self.family
-
-    def wire_build(self) -> WireBuild:
-        """A job rebuilding the field of the current wires (run it on any thread)."""
-        return self._wire_family().build_job()
-
-    @property
-    def wire_field_stale(self) -> bool:
-        """Whether the drawn field lags the wires (a rebuild is due)."""
-        return self.family.field_stale
-
-    def rebuild_wire_field(self) -> None:
-        """Rebuild a stale wire field now, on this thread (scripts, the notebook viewer;
-        the GUI builds off its thread with :meth:`wire_build`)."""
-        if self.wire_field_stale:
-            self._wire_family().rebuild_if_stale()
-
-    def install_wire_build(self, job: WireBuild) -> bool:
-        """Put a finished :class:`WireBuild` in the scene (GUI thread). Returns False
-        when it was cancelled (dropped) or when the wires changed while it ran (then it
-        is drawn meanwhile, and the field stays stale for the next build)."""
-        if not isinstance(self.family, WiresFamily):
-            return False
-        return self.family.install(job)
-
-    def set_wire_points(self, wire: int, points: np.ndarray) -> None:
-        """Move the modified control points of wire ``wire``; its attribute field is then
-        stale (rebuild it with :meth:`wire_build` and :meth:`install_wire_build`)."""
-        self._wire(wire)
-        self._wire_family().set_points(wire, points)
-        self._touch()
-
-    def set_wire_parameters(
-        self,
-        wire: int,
-        *,
-        kind: str | None = None,
-        radius: float | None = None,
-        beta: tuple[float, float] | Literal["keep"] | None = "keep",
-        ends: str | None = None,
-    ) -> None:
-        """Change a wire's curve kind, influence radius (mm), β (value range or None) or
-        ends (``"smooth"``/``"rigid"``, see :class:`voxwarp.deform.wires.field.Wire`); the field
-        is then stale (rebuild it with :meth:`wire_build`)."""
-        self._wire(wire)
-        self._wire_family().set_parameters(wire, kind, radius, beta, ends)
-        self._touch()
-
-    def set_wire_settings(self, **settings: Any) -> None:
-        """Change how the wire field is built: ``field_scale`` (1, 2, 4, 8 or 16),
-        ``layout`` (``"float"``/``"packed"``/``"paper"``), ``masks`` (bool); the field is
-        then stale."""
-        allowed = {"field_scale", "layout", "masks"}
-        unknown = set(settings) - allowed
-        if unknown:
-            raise EditorError(
-                f"unknown wire settings {sorted(unknown)}; allowed: {sorted(allowed)}"
-            )
-        if "field_scale" in settings and settings["field_scale"] not in (1, 2, 4, 8, 16):
-            raise EditorError(
-                f"field_scale must be 1, 2, 4, 8 or 16; got {settings['field_scale']!r}"
-            )
-        if "layout" in settings and settings["layout"] not in ("float", "packed", "paper"):
-            raise EditorError(
-                f"layout must be 'float', 'packed' or 'paper'; got {settings['layout']!r}"
-            )
-        if "masks" in settings and not isinstance(settings["masks"], bool):
-            raise EditorError(f"masks must be true or false; got {settings['masks']!r}")
-        self.wire_settings.update(settings)
-        self.wire_generation += 1
-        self._touch()
-
-    def set_wire_key(
-        self, handle: int, *, twist: float | None = None, scale: float | None = None
-    ) -> None:
-        """Set the twist (radians) or scale at the control point of ``handle``: a key
-        at that point's fraction of the wire's length (replacing a key there)."""
-        if handle is None:
-            raise EditorError("select a control point of a wire first (click it)")
-        self._wire_family().set_key(int(handle), twist, scale)
-        self._touch()
-
-    def _wire(self, wire: int) -> Any:
-        if not isinstance(self.family, WiresFamily) or not 0 <= wire < len(self.wires):
-            raise EditorError(f"no wire {wire}: there are {len(self.wires)} wires")
-        return self.wires[wire]
-
-    def add_wire_point(self, camera: Camera, size: tuple[int, int], pixel: Sequence[float]) -> None:
-        """Lay a control point of a new wire where the cursor meets the plane parallel
-        to the image through the volume's centre (the slice plane of the view)."""
-        lo, hi = self.box
-        p = camera.point_on_view_plane(pixel, size, 0.5 * (lo + hi))
-        m = np.linalg.inv(self.placement_matrix)
-        self.pending_wire.append(p @ m[:3, :3].T + m[:3, 3])
-
-    def finish_wire(self, kind: str = "catmull-rom", radius: float | None = None) -> int:
-        """Make the laid points a wire (base = modified; then bend it by dragging).
-        Returns its index. Needs 2+ points (Bézier: 3k + 1, extra points are dropped)."""
-        kind = choice(kind, WIRE_KINDS, "wire kind")
-        pts = np.asarray(self.pending_wire, dtype=np.float64).reshape(-1, 3)
-        if kind == "bezier":
-            pts = pts[: 3 * ((len(pts) - 1) // 3) + 1]
-        if len(pts) < (4 if kind == "bezier" else 2):
-            raise EditorError(
-                f"a {kind} wire needs at least {4 if kind == 'bezier' else 2} control points;"
-                f" {len(self.pending_wire)} laid: click more points first"
-            )
-        if not isinstance(self.family, WiresFamily):
-            raise EditorError("choose the wires deformation before laying a wire")
-        index = self.family.add(pts, kind, radius)
-        self.pending_wire = []
-        self._touch()
-        return index
-
-    def remove_wire(self, wire: int) -> None:
-        """Delete a wire (the last one cannot go: switch the deformation off instead)."""
-        self._wire(wire)
-        self._wire_family().remove(wire)
-        self.selection, self.reference = [], None
-        self._touch()
 
     # ------------------------------------------------------------------ overlay
     def overlay_layers(self, display: DisplayOptions | None = None) -> list[OverlayLayer]:
@@ -806,11 +545,6 @@ class EditSession:
             layers.append(OverlayLayer("lines", box_edges(c0, c1), COLORS["box"], name="clip"))
         pts = self.handles()
         layers += self.family.overlay(pts, disp, self._grid_to_world)
-        if self.pending_wire:
-            p = self._grid_to_world(np.asarray(self.pending_wire))
-            layers.append(OverlayLayer("points", p, COLORS["pending"], 8.0, "new wire"))
-            if len(p) > 1:
-                layers.append(OverlayLayer("lines", polyline_segments(p), COLORS["pending"]))
         if disp.selection and self.selection and len(pts):
             layers += self._selection_layers(pts)
         return layers
@@ -835,14 +569,7 @@ class EditSession:
             state=self.family.snapshot(),
             selection=tuple(self.selection),
             reference=self.reference,
-            settings={
-                "integrator": self.integrator,
-                "variant": self.variant,
-                "steps_per_frame": self.steps_per_frame,
-                "relax_steps": self.relax_steps,
-                "stiffness": self.stiffness,
-            },
-            wire_settings=dict(self.wire_settings),
+            options=self.options.copy(),
             look=scene_look(self.scene),
             animation=self.animation.to_dict() if self.animation is not None else None,
             imported=tuple(self.imported_warps),
@@ -854,13 +581,9 @@ class EditSession:
         family = FAMILIES[snap.kind](self)
         family.adopt(self.family, snap)
         self._close_family()
-        s = snap.settings
         self.backend, self.resolution = snap.backend, snap.resolution
-        self.integrator, self.variant = s["integrator"], s["variant"]
-        self.steps_per_frame, self.relax_steps = s["steps_per_frame"], s["relax_steps"]
-        self.stiffness = s["stiffness"]
+        self.options = snap.options.copy()
         self.placement = Placement(**snap.placement.to_dict())
-        self.wire_settings = dict(snap.wire_settings)
         self.family = family
         family.restore(snap.state)
         self.selection, self.reference = list(snap.selection), snap.reference
@@ -892,12 +615,7 @@ class EditSession:
             "resolution": list(self.resolution),
             "placement": self.placement.to_dict(),
             "model_warp": model_index,
-            "integrator": self.integrator,
-            "variant": self.variant,
-            "steps_per_frame": self.steps_per_frame,
-            "relax_steps": self.relax_steps,
-            "stiffness": self.stiffness,
-            "wire_settings": dict(self.wire_settings),
+            **self.options.to_entry(),
         }
         if self.animation is not None:
             d["animation"] = self.animation.to_dict()
@@ -923,16 +641,7 @@ class EditSession:
             self.placement = Placement.from_dict(entry["placement"])
         if entry.get("resolution") is not None:
             self.resolution = resolution(entry["resolution"])
-        for key in ("integrator", "variant"):
-            if key in entry:
-                setattr(self, key, str(entry[key]))
-        for key in ("steps_per_frame", "relax_steps"):
-            if key in entry:
-                setattr(self, key, int(entry[key]))
-        if "stiffness" in entry:
-            self.stiffness = float(entry["stiffness"])
-        if isinstance(entry.get("wire_settings"), dict):
-            self.wire_settings = dict(entry["wire_settings"])
+        self.options.read_entry(entry)
 
     def _recover_from_scene(self, entry: dict[str, Any]) -> None:
         """Take over the deformation saved in the scene's warps (see :meth:`to_dict`),

@@ -23,6 +23,9 @@ DEFORMATIONS: tuple[str, ...] = ("mass-spring push", "none", "scene file")
 PUSH_GRID = 7
 #: How far the centre block is pushed, as a fraction of the volume's extent that way.
 PUSH_FRACTION = 0.2
+#: Most mass-spring steps the push takes to settle (settled: the model builder's rule,
+#: :func:`voxwarp.editing.model_settings.is_settled`).
+PUSH_MAX_STEPS = 2000
 #: The pixel size of the rendered view (square), the widget's default.
 DEFAULT_SIZE = 256
 
@@ -34,22 +37,26 @@ def push_warps(
     ``direction`` by ``fraction`` of the volume's extent that way, the rest settled by
     the springs (the eight corners fixed). Moving a block, not one element, keeps the
     material ahead of it from folding (one element pushed past its neighbour would)."""
-    from voxwarp.deform import ElementGrid, MassSpring
+    from voxwarp.editing.families.elements import MassSpringFamily
+    from voxwarp.editing.model_settings import Drag, MassSpringSettings, SettleRule
 
     unit = np.asarray(direction, dtype=np.float64).reshape(3)
     length = float(np.linalg.norm(unit))
     if not (np.isfinite(length) and length > 0):
         raise SceneError(f"the push direction must be a non-zero vector; got {direction!r}")
     unit = unit / length
-    grid = ElementGrid(volume, shape=(PUSH_GRID,) * 3)
-    model = MassSpring(grid, integrator="semi-implicit", shear=True)
     extent = float(np.abs(unit) @ np.asarray(volume.size_mm))
-    block = np.zeros(grid.shape, dtype=bool)
+    block = np.zeros((PUSH_GRID,) * 3, dtype=bool)
     middle = slice(PUSH_GRID // 2 - 1, PUSH_GRID // 2 + 2)
     block[middle, middle, middle] = True
-    model.move(block, tuple(fraction * extent * unit))
-    model.settle()
-    return [model.warp()]
+    settings = MassSpringSettings(
+        shape=(PUSH_GRID,) * 3,
+        integrator="semi-implicit",
+        shear=True,
+        drags=(Drag(block, tuple(fraction * extent * unit)),),
+        run=SettleRule(settle=True, steps=PUSH_MAX_STEPS),
+    )
+    return [MassSpringFamily.build(settings, volume).warp]
 
 
 def scene_file_warps(path: str | os.PathLike, volume: Volume) -> list[Any]:

@@ -200,7 +200,7 @@ class Interaction:
             return
         if p["mode"] in ("drag", "select"):
             self.session.end_drag()
-            self.session.rebuild_wire_field()
+            self.session.family.rebuild_if_stale()
             self._push("Drag" if p["moved"] else "Select", p["before"])
         elif p["mode"] == "orbit" and not p["moved"]:
             self.session.select([], "replace")  # a click on nothing clears the selection

@@ -81,7 +81,7 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
             "Viewer takes a Scene, an EditSession, a Volume, a 3D array, a scene JSON path,"
             f" a volume path or 'sample:NAME'; got {type(source).__name__}"
         )
-    session.sync_wires = False  # wire fields are rebuilt when a drag ends
+    session.sync_builds = False  # wire fields are rebuilt when a drag ends
     start_deformation(session, deformation, settings)
     return session
 

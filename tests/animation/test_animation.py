@@ -34,6 +34,8 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.elements.massspring import MassSpring
 from voxwarp.deform.warp import rotation_matrix
+from voxwarp.editing.families.lattice import LatticeFamily
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import load_sample
 from voxwarp.scene import Scene
@@ -458,7 +460,7 @@ def test_tracks_that_do_not_fit_the_scene_are_refused(
 def test_an_editor_lattice_file_with_an_animation_evaluates(volume: Volume, tmp_path: Path) -> None:
     session = EditSession(Scene(volume))
     session.set_deformation("lattice", resolution=3)
-    rest = session.lattice_nodes.copy()
+    rest = session.adapter(LatticeFamily).lattice_nodes.copy()
     bent = rest.copy()
     bent[-1, :, :, 2] += 8.0
     anim = Animation(5, 10.0, [Track("lattice.nodes", [(0, "rest"), (4, bent.tolist())])])
@@ -478,7 +480,7 @@ def test_an_editor_lattice_file_with_an_animation_evaluates(volume: Volume, tmp_
 def test_wire_tracks_change_only_their_wire_field(volume: Volume, tmp_path: Path) -> None:
     session = EditSession(Scene(volume))
     session.set_deformation("wires")
-    base = np.asarray(session.wires[0].base.control_points)
+    base = np.asarray(session.adapter(WiresFamily).wires[0].base.control_points)
     moved = base.copy()
     moved[-1, 2] += 6.0
     anim = Animation(

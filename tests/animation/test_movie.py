@@ -25,6 +25,7 @@ from tests.cli.test_cli import _keep_warning_state, no_rendering  # noqa: F401
 from voxwarp.animation.movie import animate, encode_movie, frames_dir_for
 from voxwarp.animation.tracks import Animation, Track, load_animated_scene, save_animated_scene
 from voxwarp.cli.main import main
+from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.session import EditSession
 from voxwarp.errors import OutputError
 from voxwarp.io.images import read_image, write_image
@@ -46,7 +47,7 @@ def _animated(path: Path, opaque_end: bool = False) -> Path:
     volume = load_sample("fish", shape=(48, 24, 20))
     session = EditSession(Scene(volume, view="-y"))
     session.set_deformation("lattice", resolution=3)
-    bent = session.lattice_nodes.copy()
+    bent = session.adapter(LatticeFamily).lattice_nodes.copy()
     bent[-1, :, :, 2] += 9.0
     tracks = [
         Track("lattice.nodes", [(0, "rest"), (2, bent.tolist())], "smooth"),

@@ -28,6 +28,7 @@ from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.warp import AffineWarp, chain_apply
 from voxwarp.deform.wires.field import WireFieldWarp
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import (
     PICK_RADIUS_PX,
     DisplayOptions,
@@ -93,10 +94,10 @@ def layer_names(session: EditSession, **display: bool) -> list[str]:
 
 def build_wires(session: EditSession) -> WireFieldWarp:
     """Rebuild the wire field and install it (as the GUI's worker does)."""
-    job = session.wire_build()
+    job = session.family.build_job()
     warp = job.run()
     assert warp is not None
-    assert session.install_wire_build(job)
+    assert session.family.install(job)
     return warp
 
 
@@ -358,8 +359,8 @@ def test_dragging_a_wire_point_moves_only_that_point_and_stales_the_field(
 ) -> None:
     """Only the dragged control point of the modified wire moves; base stays; field stale."""
     session, cam = wire_session(session)
-    assert not session.wire_field_stale
-    base = session.wires[0].base.control_points.copy()
+    assert not session.family.field_stale
+    base = session.adapter(WiresFamily).wires[0].base.control_points.copy()
     drawn = session.scene.warps[0]
     session.select([1])
     d = drag(session, cam, (0.0, -25.0))
@@ -367,9 +368,11 @@ def test_dragging_a_wire_point_moves_only_that_point_and_stales_the_field(
     assert moved[1] > 1.0
     np.testing.assert_array_equal(np.delete(d["after"], 1, 0), np.delete(d["before"], 1, 0))
     np.testing.assert_allclose(cam.project(d["after"][1], SIZE)[0], d["cursor"], atol=1e-6)
-    np.testing.assert_array_equal(session.wires[0].modified.control_points, d["after"])
-    np.testing.assert_array_equal(session.wires[0].base.control_points, base)
-    assert session.wire_field_stale
+    np.testing.assert_array_equal(
+        session.adapter(WiresFamily).wires[0].modified.control_points, d["after"]
+    )
+    np.testing.assert_array_equal(session.adapter(WiresFamily).wires[0].base.control_points, base)
+    assert session.family.field_stale
     assert session.scene.warps == [drawn]  # the old field is drawn until a rebuild
 
 
@@ -380,17 +383,18 @@ def test_rebuild_wire_field_builds_a_stale_field_here_and_only_then(
     by one of the current wires; a fresh one is left alone."""
     session, cam = wire_session(session)
     fresh = session.scene.warps[0]
-    session.rebuild_wire_field()
+    session.family.rebuild_if_stale()
     assert session.scene.warps == [fresh]  # nothing was stale
     session.select([2])
     drag(session, cam, (10.0, 20.0))
-    assert session.wire_field_stale
-    session.rebuild_wire_field()
-    assert not session.wire_field_stale
+    assert session.family.field_stale
+    session.family.rebuild_if_stale()
+    assert not session.family.field_stale
     (warp,) = session.scene.warps
     assert warp is not fresh
     np.testing.assert_array_equal(
-        warp.wires[0].modified.control_points, session.wires[0].modified.control_points
+        warp.wires[0].modified.control_points,
+        session.adapter(WiresFamily).wires[0].modified.control_points,
     )
 
 
@@ -400,18 +404,19 @@ def test_wire_build_clears_the_stale_field_and_changes_the_warp(session: EditSes
     old = session.scene.warps[0]
     session.select([2])
     drag(session, cam, (10.0, 20.0))
-    job = session.wire_build()
+    job = session.family.build_job()
     fractions: list[float] = []
     warp = job.run(lambda f, _msg: fractions.append(f))
     assert isinstance(warp, WireFieldWarp)
     assert fractions[-1] == 1.0
-    assert session.install_wire_build(job) is True
-    assert not session.wire_field_stale
+    assert session.family.install(job) is True
+    assert not session.family.field_stale
     assert session.scene.warps == [warp]
     assert warp is not old
     assert old in session.take_released_warps()
     np.testing.assert_array_equal(
-        warp.wires[0].modified.control_points, session.wires[0].modified.control_points
+        warp.wires[0].modified.control_points,
+        session.adapter(WiresFamily).wires[0].modified.control_points,
     )
     # the new field maps differently from the old one somewhere near the wire
     lo, hi = session.box
@@ -426,14 +431,14 @@ def test_a_build_started_before_a_later_edit_reports_false(session: EditSession)
     session, cam = wire_session(session)
     session.select([1])
     drag(session, cam, (0.0, -15.0))
-    job = session.wire_build()
-    session.set_wire_key(2, twist=0.5)  # an edit after the job was made
+    job = session.family.build_job()
+    session.adapter(WiresFamily).set_wire_key(2, twist=0.5)  # an edit after the job was made
     assert job.run() is not None
-    assert session.install_wire_build(job) is False
-    assert session.wire_field_stale
+    assert session.family.install(job) is False
+    assert session.family.field_stale
     assert session.scene.warps == [job.warp]
     build_wires(session)
-    assert not session.wire_field_stale
+    assert not session.family.field_stale
 
 
 def test_a_cancelled_build_returns_none_and_is_not_installed(session: EditSession) -> None:
@@ -443,17 +448,17 @@ def test_a_cancelled_build_returns_none_and_is_not_installed(session: EditSessio
     session.select([1])
     drag(session, cam, (0.0, -15.0))
     drawn = session.scene.warps[0]
-    job = session.wire_build()
+    job = session.family.build_job()
     job.cancel()
     assert job.cancelled
     assert job.run() is None
-    assert session.install_wire_build(job) is False
-    assert session.wire_field_stale
+    assert session.family.install(job) is False
+    assert session.family.field_stale
     assert session.scene.warps == [drawn]
     # cancelled while it runs (here: from its progress report), the result is dropped too
-    late = session.wire_build()
+    late = session.family.build_job()
     assert late.run(lambda f, _msg: late.cancel() if f >= 0.2 else None) is None
-    assert session.install_wire_build(late) is False
+    assert session.family.install(late) is False
     assert session.scene.warps == [drawn]
 
 
@@ -461,15 +466,15 @@ def test_set_wire_key_keys_the_twist_at_the_points_length_fraction(session: Edit
     """The default wire is straight through points at 0.1, 0.37, 0.63, 0.9 of the box:
     point 1 sits at (0.37 - 0.1) / 0.8 of its length; a second key there replaces it."""
     session, _ = wire_session(session)
-    session.set_wire_key(1, twist=0.7)
-    twist = session.wires[0].twist
+    session.adapter(WiresFamily).set_wire_key(1, twist=0.7)
+    twist = session.adapter(WiresFamily).wires[0].twist
     assert twist.shape == (2, 2)
     np.testing.assert_allclose(twist[0], (0.0, 0.0))
     assert twist[1, 0] == pytest.approx(0.27 / 0.8, abs=1e-3)
     assert twist[1, 1] == 0.7
-    assert session.wire_field_stale
-    session.set_wire_key(1, twist=-0.2, scale=1.5)
-    wire = session.wires[0]
+    assert session.family.field_stale
+    session.adapter(WiresFamily).set_wire_key(1, twist=-0.2, scale=1.5)
+    wire = session.adapter(WiresFamily).wires[0]
     assert wire.twist.shape == (2, 2)
     assert wire.twist[1, 1] == -0.2
     assert wire.scale[-1, 0] == pytest.approx(0.27 / 0.8, abs=1e-3)
@@ -481,7 +486,7 @@ def test_bad_wire_handle_is_named_in_the_error(session: EditSession) -> None:
     """A handle that is no control point is named in the error."""
     session, _ = wire_session(session)
     with pytest.raises(EditorError, match=r"handle 99 is not a wire control point"):
-        session.set_wire_key(99, twist=1.0)
+        session.adapter(WiresFamily).set_wire_key(99, twist=1.0)
 
 
 def test_laid_points_become_a_wire_in_the_view_plane(session: EditSession) -> None:
@@ -490,16 +495,16 @@ def test_laid_points_become_a_wire_in_the_view_plane(session: EditSession) -> No
     session, cam = wire_session(session)
     pixels = np.array([[80.0, 90.0], [160.0, 140.0], [240.0, 100.0]])
     for px in pixels:
-        session.add_wire_point(cam, SIZE, px)
-    assert session.finish_wire() == 1
-    pts = session.wires[1].base.control_points
+        session.adapter(WiresFamily).add_wire_point(cam, SIZE, px)
+    assert session.adapter(WiresFamily).finish_wire() == 1
+    pts = session.adapter(WiresFamily).wires[1].base.control_points
     np.testing.assert_allclose(cam.project(pts, SIZE), pixels, atol=1e-6)
     centre = 0.5 * (session.box[0] + session.box[1])
     np.testing.assert_allclose((pts - centre) @ cam.rotation[:, 2], 0.0, atol=1e-9)
     assert len(session.handles()) == 4 + 3
     np.testing.assert_array_equal(session.handles()[4:], pts)
-    assert session.pending_wire == []
-    assert session.wire_field_stale
+    assert session.adapter(WiresFamily).pending_wire == []
+    assert session.family.field_stale
 
 
 @pytest.mark.parametrize(("kind", "laid", "need"), [("catmull-rom", 1, 2), ("bezier", 3, 4)])
@@ -509,24 +514,24 @@ def test_finish_wire_with_too_few_points_names_the_count(
     """Too few laid points: EditorError naming the need and the count; nothing is added."""
     session, cam = wire_session(session)
     for i in range(laid):
-        session.add_wire_point(cam, SIZE, (100.0 + 30 * i, 120.0))
+        session.adapter(WiresFamily).add_wire_point(cam, SIZE, (100.0 + 30 * i, 120.0))
     with pytest.raises(EditorError, match=rf"at least {need} control points; {laid} laid"):
-        session.finish_wire(kind)
-    assert len(session.wires) == 1
-    assert len(session.pending_wire) == laid
+        session.adapter(WiresFamily).finish_wire(kind)
+    assert len(session.adapter(WiresFamily).wires) == 1
+    assert len(session.adapter(WiresFamily).pending_wire) == laid
 
 
 def test_set_wire_settings_rejects_bad_values(session: EditSession) -> None:
     """field_scale outside 1, 2, 4, 8, 16 and unknown settings raise; settings stay."""
     session, _ = wire_session(session)
     with pytest.raises(EditorError, match=r"field_scale must be 1, 2, 4, 8 or 16; got 3"):
-        session.set_wire_settings(field_scale=3)
+        session.adapter(WiresFamily).set_wire_settings(field_scale=3)
     with pytest.raises(EditorError, match=r"unknown wire settings \['resolution'\]"):
-        session.set_wire_settings(resolution=3)
-    assert session.wire_settings == {"field_scale": 2}
-    assert not session.wire_field_stale
-    session.set_wire_settings(field_scale=4, layout="packed")
-    assert session.wire_field_stale
+        session.adapter(WiresFamily).set_wire_settings(resolution=3)
+    assert session.options.wire_settings == {"field_scale": 2}
+    assert not session.family.field_stale
+    session.adapter(WiresFamily).set_wire_settings(field_scale=4, layout="packed")
+    assert session.family.field_stale
     warp = build_wires(session)
     assert (warp.deformer.field_scale, warp.deformer.layout) == (4, "packed")
 
@@ -535,7 +540,7 @@ def test_set_wire_settings_rejects_a_bad_layout(session: EditSession) -> None:
     """layout must be 'float' or 'packed' (the docstring's values), checked at once."""
     session, _ = wire_session(session)
     with pytest.raises(EditorError, match="layout"):
-        session.set_wire_settings(layout="bogus")
+        session.adapter(WiresFamily).set_wire_settings(layout="bogus")
 
 
 # ---------------------------------------------------------------------- lattice
@@ -649,7 +654,7 @@ def test_restore_returns_to_the_snapshot_exactly(session: EditSession, kind: str
     session.set_option("steps_per_frame", 3)
     session.advance()
     if kind == "wires":
-        session.set_wire_key(2, twist=0.3)
+        session.adapter(WiresFamily).set_wire_key(2, twist=0.3)
     scene_edit(session)
     assert not session.snapshot().same_as(snap)
     session.restore(snap)
@@ -658,10 +663,10 @@ def test_restore_returns_to_the_snapshot_exactly(session: EditSession, kind: str
     assert len(session.scene.warps) == warps
     assert (session.selection, session.kind) == (list(snap.selection), kind)
     if kind == "wires":
-        assert not session.wire_field_stale
+        assert not session.family.field_stale
         np.testing.assert_array_equal(
             session.scene.warps[1].wires[0].modified.control_points,
-            session.wires[0].modified.control_points,
+            session.adapter(WiresFamily).wires[0].modified.control_points,
         )
 
 
@@ -713,10 +718,10 @@ def test_restore_rebuilds_the_wire_field_with_the_restored_settings(
     """Undoing a change of field_scale draws a field of the restored field_scale."""
     session.set_deformation("wires")
     snap = session.snapshot()
-    session.set_wire_settings(field_scale=4)
+    session.adapter(WiresFamily).set_wire_settings(field_scale=4)
     build_wires(session)
     session.restore(snap)
-    assert session.wire_settings["field_scale"] == 2
+    assert session.options.wire_settings["field_scale"] == 2
     assert session.scene.warps[0].deformer.field_scale == 2
 
 
@@ -729,7 +734,7 @@ def test_save_and_load_round_trip(
     """save then load: kind, placement, wire settings and handles come back; the file is
     scene JSON that Scene.load reads (so `voxwarp render` renders it)."""
     if kind == "wires":
-        session.wire_settings = {"field_scale": 4}  # set before the first build
+        session.options.wire_settings = {"field_scale": 4}  # set before the first build
     deform_family(session, kind)
     if placed:
         session.set_placement(PLACEMENT)
@@ -744,12 +749,14 @@ def test_save_and_load_round_trip(
     loaded = EditSession.load(path)
     assert loaded.kind == kind
     assert loaded.placement == session.placement
-    assert loaded.wire_settings["field_scale"] == session.wire_settings["field_scale"]
+    assert (
+        loaded.options.wire_settings["field_scale"] == session.options.wire_settings["field_scale"]
+    )
     assert loaded.handles().shape == session.handles().shape
     np.testing.assert_allclose(loaded.handles(), session.handles(), atol=1e-6)
     np.testing.assert_array_equal(loaded.fixed_handles(), session.fixed_handles())
     assert [type(w) for w in loaded.scene.warps] == [type(w) for w in session.scene.warps]
-    assert not loaded.wire_field_stale
+    assert not loaded.family.field_stale
 
 
 def test_saving_with_a_stale_wire_field_keeps_the_edit(
@@ -759,7 +766,7 @@ def test_saving_with_a_stale_wire_field_keeps_the_edit(
     session, cam = wire_session(session)
     session.select([1])
     drag(session, cam, (0.0, -25.0))
-    assert session.wire_field_stale
+    assert session.family.field_stale
     loaded = EditSession.load(session.save(tmp_path / "w.json"))
     np.testing.assert_allclose(loaded.handles(), session.handles(), atol=1e-6)
 
@@ -782,7 +789,7 @@ def test_loading_keeps_the_placement_without_a_deformation(
     loaded = EditSession.load(session.save(tmp_path / "n.json"))
     assert loaded.kind == "none"
     assert loaded.placement == PLACEMENT
-    assert (loaded.resolution, loaded.stiffness) == ((6, 6, 6), 0.8)
+    assert (loaded.resolution, loaded.options.stiffness) == ((6, 6, 6), 0.8)
 
 
 def test_save_creates_missing_folders_and_a_failed_save_keeps_the_old_file(
@@ -849,13 +856,13 @@ def test_refused_settings_name_the_allowed_values_and_keep_the_model(
     """A bad setting raises EditorError naming what is allowed; the model stays."""
     session.set_deformation("massspring", resolution=4)
     model, warps = session.model, list(session.scene.warps)
-    state = (session.kind, session.backend, session.resolution, session.stiffness)
+    state = (session.kind, session.backend, session.resolution, session.options.stiffness)
     kind = settings.pop("kind", "chainmail")
     with pytest.raises(EditorError, match=message):
         session.set_deformation(kind, **settings)
     assert session.model is model
     assert session.scene.warps == warps
-    assert (session.kind, session.backend, session.resolution, session.stiffness) == state
+    assert (session.kind, session.backend, session.resolution, session.options.stiffness) == state
 
 
 class OldContext:
@@ -883,7 +890,7 @@ def test_a_refused_gpu_model_keeps_the_stiffness(volume: Volume) -> None:
     session.set_deformation("massspring", resolution=4, stiffness=0.5)
     with pytest.raises(EditorError):
         session.set_deformation("chainmail", backend="gpu", stiffness=0.9)
-    assert session.stiffness == 0.5
+    assert session.options.stiffness == 0.5
 
 
 def test_a_non_numeric_stiffness_is_an_editor_error(session: EditSession) -> None:

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from voxwarp.animation.tracks import AnimationError, load_animated_scene
+from voxwarp.editing.families.lattice import LatticeFamily
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.keyframes import delete_keys, key_frames, set_key
 from voxwarp.editing.session import EditSession
 from voxwarp.io.samples import load_sample
@@ -22,11 +24,11 @@ def session() -> EditSession:
 
 def test_lattice_keys_interpolate_the_nodes(session: EditSession, tmp_path: Path) -> None:
     session.set_deformation("lattice", resolution=3)
-    rest = session.lattice_nodes.copy()
+    rest = session.adapter(LatticeFamily).lattice_nodes.copy()
     anim = set_key(None, session, 0, frames=11, interpolation="linear")
     moved = rest.copy()
     moved[1, 1, 2] += (6.0, -3.0, 2.0)
-    session.set_lattice_nodes(moved)
+    session.adapter(LatticeFamily).set_lattice_nodes(moved)
     anim = set_key(anim, session, 10)
     assert key_frames(anim) == [0, 10]
     session.animation = anim
@@ -43,10 +45,10 @@ def test_wire_keys_and_the_camera(session: EditSession, tmp_path: Path) -> None:
     session.set_deformation("wires")
     cam0 = session.scene.resolved_camera()
     anim = set_key(None, session, 0, cam0, frames=9, interpolation="linear")
-    w = session.wires[0]
+    w = session.adapter(WiresFamily).wires[0]
     pts = w.modified.control_points.copy()
     pts[2, 1] += 8.0
-    session.set_wire_points(0, pts)
+    session.adapter(WiresFamily).set_wire_points(0, pts)
     cam1 = session.scene.copy(camera=None, view=(-60, 20)).resolved_camera()
     anim = set_key(anim, session, 8, cam1)
     assert {t.target for t in anim.tracks} == {"camera", "wires[0].modified"}

@@ -13,6 +13,7 @@ import pytest
 from voxwarp.core.volume import Volume
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import AffineWarp, rotation_matrix
+from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.session import EditorError, EditSession, Placement
 from voxwarp.io.fields import load_transform, save_displacement_field
 from voxwarp.render import field_views
@@ -93,9 +94,9 @@ def test_scene_json_keeps_the_field_by_path_and_resumes(tmp_path: Path) -> None:
     field_path = save_displacement_field(smooth_field(), tmp_path / "u.nii.gz")
     s = make_session()
     s.set_deformation("lattice", resolution=3)
-    nodes = s.lattice_nodes.copy()
+    nodes = s.adapter(LatticeFamily).lattice_nodes.copy()
     nodes[1, 1, 1] += (1.0, 0.5, 0.0)
-    s.set_lattice_nodes(nodes)
+    s.adapter(LatticeFamily).set_lattice_nodes(nodes)
     s.add_warps_front(load_transform(field_path))
     scene_path = s.save(tmp_path / "scene.json")
     raw = json.loads(scene_path.read_text())
@@ -106,7 +107,7 @@ def test_scene_json_keeps_the_field_by_path_and_resumes(tmp_path: Path) -> None:
     assert again.kind == "lattice"
     assert len(again.imported_warps) == 1
     assert isinstance(again.scene.warps[0], DisplacementFieldWarp)
-    assert np.allclose(again.lattice_nodes, nodes)
+    assert np.allclose(again.adapter(LatticeFamily).lattice_nodes, nodes)
     p = np.array([[3.0, 4.0, 5.0]])
     assert np.allclose(again.scene.warps[0].apply(p), [[3.3, 4.0, 5.25]], atol=1e-4)
 

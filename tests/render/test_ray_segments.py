@@ -16,6 +16,8 @@ from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import IdentityWarp, chain_apply
+from voxwarp.editing.families.lattice import LatticeFamily
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import EditSession
 from voxwarp.errors import RenderError
 from voxwarp.render.skipping.segments import RaySegments, segment_lengths
@@ -111,17 +113,17 @@ def test_auto_segments_keep_each_family_close_to_per_sample(offscreen: Any, fami
         size = vol.bounds[1][0] - vol.bounds[0][0]
         if family == "lattice":
             session.set_deformation("lattice", resolution=4)
-            nodes = session.lattice_nodes.copy()
+            nodes = session.adapter(LatticeFamily).lattice_nodes.copy()
             nodes[1, 1, 2, 0] += 0.2 * size
-            session.set_lattice_nodes(nodes)
+            session.adapter(LatticeFamily).set_lattice_nodes(nodes)
         elif family == "wires":
             session.set_deformation("wires")
-            pts = session.wires[0].modified.control_points.copy()
+            pts = session.adapter(WiresFamily).wires[0].modified.control_points.copy()
             pts[2, 0] += 0.2 * size
-            session.set_wire_points(0, pts)
-            job = session.wire_build()
+            session.adapter(WiresFamily).set_wire_points(0, pts)
+            job = session.family.build_job()
             job.run()
-            session.install_wire_build(job)
+            session.family.install(job)
         else:
             session.set_deformation("massspring", resolution=6)
             model = session.model

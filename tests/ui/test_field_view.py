@@ -197,10 +197,10 @@ def test_display_panel_embeds_and_refreshes_the_view(qtbot: Any, window: FakeWin
 
 def test_a_wire_field_being_built_shows_no_field_yet(qtbot: Any) -> None:
     window = FakeWindow(cylinder_session())
-    window.session.sync_wires = False  # as the GUI: fields are built off its thread
+    window.session.sync_builds = False  # as the GUI: fields are built off its thread
     window.session.set_deformation("wires")
     view = make_view(qtbot, window)
-    assert window.session.wire_field_stale
+    assert window.session.family.field_stale
     assert view.title_label.text() == "no wires field yet"
     assert not view.view_combo.isEnabled()
     window.request_wire_build()

@@ -20,6 +20,8 @@ import pytest
 from PySide6.QtCore import QPoint, Qt
 
 from tests.ui.windows import press_shortcut, shown_window
+from voxwarp.editing.families.lattice import LatticeFamily
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.io.images import read_image
 from voxwarp.io.samples import load_sample, suggested_transfer_function
@@ -162,16 +164,18 @@ def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any
     drag(qtbot, w.viewport, start, start + QPoint(0, -70))
     assert w.wait_for_wire_build(60)
     assert w.session.model_warp() is not field_before, "the field was not rebuilt"
-    assert not w.session.wire_field_stale
+    assert not w.session.family.field_stale
     moved = (
-        w.session.wires[0].modified.control_points[k] - w.session.wires[0].base.control_points[k]
+        w.session.adapter(WiresFamily).wires[0].modified.control_points[k]
+        - w.session.adapter(WiresFamily).wires[0].base.control_points[k]
     )
     assert np.linalg.norm(moved) > 5.0
     img1 = frame(w)
     assert np.mean(np.abs(img1 - img0).max(axis=-1) > 8) > 0.002
     w.undo_action.trigger()
     np.testing.assert_array_equal(
-        w.session.wires[0].modified.control_points, w.session.wires[0].base.control_points
+        w.session.adapter(WiresFamily).wires[0].modified.control_points,
+        w.session.adapter(WiresFamily).wires[0].base.control_points,
     )
     assert w.wait_for_wire_build(60)  # the undone field is rebuilt off the GUI thread too
     np.testing.assert_array_equal(frame(w), img0)
@@ -182,11 +186,11 @@ def test_lattice_node_drag_bends_the_volume(window: Any, qtbot: Any) -> None:
     w = window
     w.edit("Lattice", lambda: w.session.set_deformation("lattice", resolution=4))
     img0 = frame(w)
-    rest = w.session.lattice_nodes.copy()
+    rest = w.session.adapter(LatticeFamily).lattice_nodes.copy()
     i = int(np.ravel_multi_index((1, 1, 2), rest.shape[:3]))
     start = handle_pixel(w, i)
     drag(qtbot, w.viewport, start, start + QPoint(40, 30))
-    moved = w.session.lattice_nodes - rest
+    moved = w.session.adapter(LatticeFamily).lattice_nodes - rest
     assert np.linalg.norm(moved.reshape(-1, 3)[i]) > 5.0
     others = np.delete(moved.reshape(-1, 3), i, axis=0)
     assert np.all(others == 0)  # one node selected: only it moves
@@ -370,11 +374,11 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     clicks = [QPoint(300, 300), QPoint(350, 320), QPoint(400, 330)]
     for p in clicks:
         qtbot.mouseClick(vp, Qt.MouseButton.LeftButton, pos=p)
-    assert len(w.session.pending_wire) == 3
+    assert len(w.session.adapter(WiresFamily).pending_wire) == 3
     press_shortcut(qtbot, w, Qt.Key.Key_Return)
     assert not vp.laying_wire
-    assert len(w.session.wires) == 2
-    new = w.session.wires[1].base.control_points
+    assert len(w.session.adapter(WiresFamily).wires) == 2
+    new = w.session.adapter(WiresFamily).wires[1].base.control_points
     # each point lies under its click, on the plane through the centre parallel to the image
     xy = vp.camera.project(new, vp.size_px())
     np.testing.assert_allclose(xy, [[p.x(), p.y()] for p in clicks], atol=1e-6)
@@ -383,7 +387,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     assert w.wait_for_wire_build(60)
     assert len(w.session.model_warp().wires) == 2
     w.undo_action.trigger()
-    assert len(w.session.wires) == 1
+    assert len(w.session.adapter(WiresFamily).wires) == 1
 
 
 def test_drop_a_file_opens_it_and_it_becomes_recent(window: Any, tmp_path: Path) -> None:
@@ -449,7 +453,7 @@ def test_keyframes_and_render_movie(window: Any, qtbot: Any, tmp_path: Path) -> 
     w.frames_spin.setValue(5)
     w.frame_spin.setValue(0)
     w.set_key()
-    rest = w.session.lattice_nodes.copy()
+    rest = w.session.adapter(LatticeFamily).lattice_nodes.copy()
     i = int(np.ravel_multi_index((1, 1, 2), rest.shape[:3]))
     start = handle_pixel(w, i)
     drag(qtbot, w.viewport, start, start + QPoint(40, 0))

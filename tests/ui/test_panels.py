@@ -20,6 +20,7 @@ from PySide6.QtWidgets import QTreeWidgetItem, QWidget
 
 from voxwarp.core.mesh import MeshInstance, box_mesh
 from voxwarp.core.volume import Volume
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import (
     DEFORMATIONS,
     DisplayOptions,
@@ -99,10 +100,10 @@ class FakeWindow:
 
     def request_wire_build(self) -> None:
         self.wire_builds += 1
-        if self.session.wire_field_stale:
-            job = self.session.wire_build()
+        if self.session.family.field_stale:
+            job = self.session.family.build_job()
             job.run()
-            assert self.session.install_wire_build(job)
+            assert self.session.family.install(job)
 
     def set_running(self, running: bool) -> None:
         self.running.append(running)
@@ -219,7 +220,7 @@ def test_refresh_reads_the_session_without_edits(qtbot: Any, window: FakeWindow)
     scene.jitter = False
     scene.clip_box = ((1.0, 2.0, 3.0), (9.0, 10.0, 11.0))
     window.session.set_deformation("chainmail", resolution=5)
-    window.session.integrator = "explicit"
+    window.session.options.integrator = "explicit"
     window.session.set_option("relax_steps", 7)
     window.refresh_panels()
     assert volume_panel.mode_combo.currentText() == "average"
@@ -276,7 +277,7 @@ def test_model_combo_builds_a_mass_spring_model(qtbot: Any, window: FakeWindow) 
     assert s.kind == "massspring"
     assert s.model is not None
     assert s.model.grid.shape == (4, 4, 4)
-    assert s.integrator == "explicit"
+    assert s.options.integrator == "explicit"
     assert window.edits == [("New mass-spring model", None)]
     assert window.errors == []
 
@@ -291,7 +292,7 @@ def test_apply_rebuilds_with_the_settings(qtbot: Any, window: FakeWindow) -> Non
     s = window.session
     assert s.model is not first
     assert s.model.grid.shape == (3, 3, 3)
-    assert s.stiffness == pytest.approx(0.25)
+    assert s.options.stiffness == pytest.approx(0.25)
     assert window.edits[-1] == ("New ChainMail model", None)
 
 
@@ -354,7 +355,7 @@ def test_simulation_buttons_and_options(qtbot: Any, window: FakeWindow) -> None:
     click(qtbot, panel.reset_button)
     assert np.allclose(s.model.positions(), s.model.grid.rest_positions)
     panel.steps_spin.setValue(25)
-    assert s.steps_per_frame == 25
+    assert s.options.steps_per_frame == 25
     assert window.edits[-1] == ("Steps per frame", "steps per frame")
     assert panel.simulation_form.isRowVisible(panel.steps_spin)
     assert not panel.simulation_form.isRowVisible(panel.relax_spin)
@@ -365,7 +366,7 @@ def test_relax_steps_for_chainmail(qtbot: Any, window: FakeWindow) -> None:
     panel = make_panel(qtbot, window, DeformationPanel)
     assert panel.relax_spin.maximum() == 16
     panel.relax_spin.setValue(4)
-    assert window.session.relax_steps == 4
+    assert window.session.options.relax_steps == 4
     assert window.session.model.relax_steps == 4
     assert window.edits == [("Relaxation steps", "relax steps")]
     assert panel.simulation_form.isRowVisible(panel.relax_spin)
@@ -407,7 +408,7 @@ def test_set_twist_at_point(qtbot: Any, window: FakeWindow) -> None:
     panel.scale_spin.setValue(1.5)
     builds = window.wire_builds
     click(qtbot, panel.set_key_button)
-    wire = window.session.wires[0]
+    wire = window.session.adapter(WiresFamily).wires[0]
     keys = np.asarray(wire.twist)
     new = keys[keys[:, 0] > 0]  # besides the default key (0, 0)
     assert new.shape == (1, 2)
@@ -415,7 +416,7 @@ def test_set_twist_at_point(qtbot: Any, window: FakeWindow) -> None:
     assert new[0, 1] == pytest.approx(math.pi / 2)
     assert wire.scale_at(new[0, 0]) == pytest.approx(1.5)
     assert window.wire_builds == builds + 1
-    assert not window.session.wire_field_stale
+    assert not window.session.family.field_stale
     # the spins show the keys at the point after a refresh
     panel.twist_spin.setValue(0.0)
     window.refresh_panels()
@@ -427,26 +428,26 @@ def test_wire_parameters(qtbot: Any, window: FakeWindow) -> None:
     window.session.set_deformation("wires")
     panel = make_panel(qtbot, window, DeformationPanel)
     s = window.session
-    assert panel.radius_spin.value() == pytest.approx(s.wires[0].radius)
+    assert panel.radius_spin.value() == pytest.approx(s.adapter(WiresFamily).wires[0].radius)
     panel.radius_spin.setValue(3.0)
-    assert s.wires[0].radius == pytest.approx(3.0)
+    assert s.adapter(WiresFamily).wires[0].radius == pytest.approx(3.0)
     assert window.edits[-1] == ("Wire radius", "wire radius 0")
-    assert not s.wire_field_stale
+    assert not s.family.field_stale
     panel.beta_lo_spin.setValue(20.0)  # classification off: no edit
     n = len(window.edits)
-    assert s.wires[0].beta is None
+    assert s.adapter(WiresFamily).wires[0].beta is None
     panel.beta_check.setChecked(True)
     assert len(window.edits) == n + 1
-    assert s.wires[0].beta == pytest.approx((20.0, 100.0))
+    assert s.adapter(WiresFamily).wires[0].beta == pytest.approx((20.0, 100.0))
     panel.beta_hi_spin.setValue(60.0)
-    assert s.wires[0].beta == pytest.approx((20.0, 60.0))
+    assert s.adapter(WiresFamily).wires[0].beta == pytest.approx((20.0, 60.0))
     panel.beta_check.setChecked(False)
-    assert s.wires[0].beta is None
+    assert s.adapter(WiresFamily).wires[0].beta is None
     panel.wire_kind_combo.setCurrentText("bezier")
-    assert s.wires[0].kind == "bezier"
+    assert s.adapter(WiresFamily).wires[0].kind == "bezier"
     panel.field_scale_combo.setCurrentIndex(panel.field_scale_combo.findData(4))
-    assert s.wire_settings["field_scale"] == 4
-    assert not s.wire_field_stale
+    assert s.options.wire_settings["field_scale"] == 4
+    assert not s.family.field_stale
     assert window.errors == []
 
 
@@ -463,24 +464,26 @@ def test_lay_and_finish_a_wire(qtbot: Any, window: FakeWindow) -> None:
     panel.wire_kind_combo.setCurrentText("bezier")
     assert len(window.edits) == n
     assert (panel.wire_kind(), panel.wire_radius()) == ("bezier", 2.5)
-    assert s.wires[0].kind == "catmull-rom"
+    assert s.adapter(WiresFamily).wires[0].kind == "catmull-rom"
     panel.wire_kind_combo.setCurrentText("catmull-rom")
-    s.pending_wire = [np.array([2.0, 2.0, 2.0]), np.array([12.0, 8.0, 10.0])]
+    s.adapter(WiresFamily).pending_wire = [np.array([2.0, 2.0, 2.0]), np.array([12.0, 8.0, 10.0])]
     window.refresh_panels()
     assert "2 points laid" in panel.wire_label.text()
     click(qtbot, panel.finish_button)
-    assert len(s.wires) == 2
-    assert s.wires[1].radius == pytest.approx(2.5)
-    assert s.pending_wire == []
+    assert len(s.adapter(WiresFamily).wires) == 2
+    assert s.adapter(WiresFamily).wires[1].radius == pytest.approx(2.5)
+    assert s.adapter(WiresFamily).pending_wire == []
     assert window.viewport.laying_wire is False
     assert not panel.lay_button.isChecked()
-    assert not s.wire_field_stale
-    s.select([len(s.wires[0].modified.control_points)])  # first point of wire 2
+    assert not s.family.field_stale
+    s.select(
+        [len(s.adapter(WiresFamily).wires[0].modified.control_points)]
+    )  # first point of wire 2
     window.refresh_panels()
     assert wire_of_handle(s, s.reference) == (1, 0)
     assert "Wire 2 of 2" in panel.wire_label.text()
     click(qtbot, panel.remove_wire_button)
-    assert len(s.wires) == 1
+    assert len(s.adapter(WiresFamily).wires) == 1
     assert not panel.remove_wire_button.isEnabled()
 
 

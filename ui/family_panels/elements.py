@@ -108,8 +108,8 @@ class ElementsPanel(FamilyPanel):
         with self._refreshing():
             self.run_button.setChecked(bool(s.running))
             self.run_button.setText("Pause" if s.running else "Run")
-            self.steps_spin.setValue(s.steps_per_frame)
-            self.relax_spin.setValue(s.relax_steps)
+            self.steps_spin.setValue(s.options.steps_per_frame)
+            self.relax_spin.setValue(s.options.relax_steps)
             for button in (self.fix_button, self.free_button, self.step_button):
                 button.setEnabled(s.model is not None)
 

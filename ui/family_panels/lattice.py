@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.session import EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel
 
@@ -21,5 +22,5 @@ class LatticePanel(FamilyPanel):
     @classmethod
     def summary(cls, s: EditSession) -> str:
         """The family and its cells per axis."""
-        nodes = s.lattice_nodes
+        nodes = s.adapter(LatticeFamily).lattice_nodes
         return cls.sized(s, None if nodes is None else [n - 1 for n in nodes.shape[:3]], "cells")

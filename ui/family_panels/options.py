@@ -62,9 +62,9 @@ class ModelOptions:
         """Show the session's settings (call inside the panel's refresh guard)."""
         self.backend_combo.setCurrentText(s.backend)
         self.resolution_spin.setValue(int(max(s.resolution)))
-        self.integrator_combo.setCurrentText(s.integrator)
-        self.variant_combo.setCurrentText(s.variant)
-        self.stiffness_spin.setValue(s.stiffness)
+        self.integrator_combo.setCurrentText(s.options.integrator)
+        self.variant_combo.setCurrentText(s.options.variant)
+        self.stiffness_spin.setValue(s.options.stiffness)
 
     def show_only(self, names: tuple[str, ...]) -> None:
         """Show the rows of the options ``names``, hide the others."""

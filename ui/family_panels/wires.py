@@ -22,6 +22,7 @@ from PySide6.QtWidgets import (
 )
 
 from voxwarp.deform.wires.field import ENDS
+from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import WIRE_KINDS, EditorError, EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel
 from voxwarp.ui.panel_base import combo, double_spin, value_decimals
@@ -52,7 +53,7 @@ def wire_of_handle(session: EditSession, handle: int | None) -> tuple[int, int] 
     if handle is None or handle < 0:
         return None
     index = int(handle)
-    for w, wire in enumerate(session.wires):
+    for w, wire in enumerate(session.adapter(WiresFamily).wires):
         n = len(wire.modified.control_points)
         if index < n:
             return w, index
@@ -196,7 +197,7 @@ class WiresPanel(FamilyPanel):
     @classmethod
     def summary(cls, s: EditSession) -> str:
         """The family and its number of wires."""
-        n = len(s.wires)
+        n = len(s.adapter(WiresFamily).wires)
         return f"{super().summary(s)}, {n} wire{'s' if n != 1 else ''}"
 
     def timing_parts(self, timings: dict[str, float]) -> list[str]:
@@ -210,18 +211,18 @@ class WiresPanel(FamilyPanel):
 
     # ---------------------------------------------------------------- new wires
     def wire_kind(self) -> str:
-        """Curve kind chosen in the wire group (for :meth:`EditSession.finish_wire`)."""
+        """Curve kind chosen in the wire group (for :meth:`WiresFamily.finish_wire`)."""
         return self.wire_kind_combo.currentText()
 
     def wire_radius(self) -> float:
-        """Radius (mm) chosen in the wire group (for :meth:`EditSession.finish_wire`)."""
+        """Radius (mm) chosen in the wire group (for :meth:`WiresFamily.finish_wire`)."""
         return float(self.radius_spin.value())
 
     # ---------------------------------------------------------------- refresh
     def _current_wire(self, s: EditSession) -> tuple[int, int | None] | None:
         """(wire, control point or None) the wire widgets edit: that of the reference or
         the last selected handle, else wire 0; None without wires."""
-        if not s.wires:
+        if not s.adapter(WiresFamily).wires:
             return None
         for handle in (s.reference, s.selection[-1] if s.selection else None):
             hit = wire_of_handle(s, handle)
@@ -234,9 +235,14 @@ class WiresPanel(FamilyPanel):
         hit = wire_of_handle(s, s.reference)
         if hit is None:
             return None
-        key = (id(s), s.reference, s.wire_generation, len(s.wires))
+        key = (
+            id(s),
+            s.reference,
+            s.adapter(WiresFamily).generation,
+            len(s.adapter(WiresFamily).wires),
+        )
         if key != self._fraction_cache:
-            curve = s.wires[hit[0]].modified
+            curve = s.adapter(WiresFamily).wires[hit[0]].modified
             t, _ = curve.closest_point(curve.control_points[hit[1]])
             t = float(np.asarray(t).reshape(-1)[0])
             total = curve.arc_length()
@@ -259,9 +265,12 @@ class WiresPanel(FamilyPanel):
     def _refresh_common(self, s: EditSession, current: tuple[int, int | None] | None) -> None:
         """Buttons, field resolution and the ranges of the spins."""
         self.lay_button.setChecked(self._laying())
-        self.finish_button.setEnabled(len(s.pending_wire) > 0)
+        self.finish_button.setEnabled(len(s.adapter(WiresFamily).pending_wire) > 0)
         self.field_scale_combo.setCurrentIndex(
-            max(0, self.field_scale_combo.findData(int(s.wire_settings.get("field_scale", 2))))
+            max(
+                0,
+                self.field_scale_combo.findData(int(s.options.wire_settings.get("field_scale", 2))),
+            )
         )
         lo, hi = s.volume.value_range
         span = max(hi - lo, 1e-6)
@@ -273,7 +282,9 @@ class WiresPanel(FamilyPanel):
         extent = float(np.max(s.box[1] - s.box[0]))
         self.radius_spin.setSingleStep(max(extent / 100.0, 0.01))
         self.radius_spin.setMaximum(max(10.0 * extent, 1.0))
-        self.remove_wire_button.setEnabled(current is not None and len(s.wires) > 1)
+        self.remove_wire_button.setEnabled(
+            current is not None and len(s.adapter(WiresFamily).wires) > 1
+        )
         self.set_key_button.setEnabled(current is not None and current[1] is not None)
 
     def _laying(self) -> bool:
@@ -281,10 +292,10 @@ class WiresPanel(FamilyPanel):
 
     def _refresh_wire(self, s: EditSession, w: int, point: int | None) -> None:
         """The label, curve, radius, classification and keys of wire ``w``."""
-        wire = s.wires[w]
-        laying, pending = self._laying(), len(s.pending_wire)
+        wire = s.adapter(WiresFamily).wires[w]
+        laying, pending = self._laying(), len(s.adapter(WiresFamily).pending_wire)
         where = f", point {point + 1}" if point is not None else " (click a point to pick)"
-        text = f"Wire {w + 1} of {len(s.wires)}{where}"
+        text = f"Wire {w + 1} of {len(s.adapter(WiresFamily).wires)}{where}"
         if laying or pending:
             text += (
                 f"<br>New wire: {pending} point{'s' if pending != 1 else ''} laid;"
@@ -337,11 +348,12 @@ class WiresPanel(FamilyPanel):
             self._updating
             or self.lay_button.isChecked()
             or w is None
-            or self.session.wires[w].kind == kind
+            or self.session.adapter(WiresFamily).wires[w].kind == kind
         ):
             return
         self._wire_edit(
-            f"Wire curve {kind}", lambda: self.session.set_wire_parameters(w, kind=kind)
+            f"Wire curve {kind}",
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, kind=kind),
         )
 
     def _radius_changed(self, radius: float) -> None:
@@ -350,15 +362,18 @@ class WiresPanel(FamilyPanel):
             return
         self._wire_edit(
             "Wire radius",
-            lambda: self.session.set_wire_parameters(w, radius=float(radius)),
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, radius=float(radius)),
             merge=f"wire radius {w}",
         )
 
     def _ends_changed(self, ends: str) -> None:
         w = self._wire_index()
-        if self._updating or w is None or self.session.wires[w].ends == ends:
+        if self._updating or w is None or self.session.adapter(WiresFamily).wires[w].ends == ends:
             return
-        self._wire_edit(f"Wire ends {ends}", lambda: self.session.set_wire_parameters(w, ends=ends))
+        self._wire_edit(
+            f"Wire ends {ends}",
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, ends=ends),
+        )
 
     def _beta_toggled(self, on: bool) -> None:
         if self._updating:
@@ -380,7 +395,7 @@ class WiresPanel(FamilyPanel):
         beta = (float(self.beta_lo_spin.value()), float(self.beta_hi_spin.value())) if on else None
         self._wire_edit(
             "Wire object classification",
-            lambda: self.session.set_wire_parameters(w, beta=beta),
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, beta=beta),
             merge=f"wire beta {w}" if on else None,
         )
 
@@ -392,7 +407,7 @@ class WiresPanel(FamilyPanel):
             s = self.session
             if wire_of_handle(s, s.reference) is None:
                 raise EditorError("select a control point of a wire first (click it)")
-            s.set_wire_key(s.reference, twist=twist, scale=scale)
+            s.adapter(WiresFamily).set_wire_key(s.reference, twist=twist, scale=scale)
 
         self._wire_edit("Wire twist and scale", fn)
 
@@ -402,7 +417,7 @@ class WiresPanel(FamilyPanel):
         scale = int(self.field_scale_combo.currentData())
 
         def fn() -> None:
-            self.session.set_wire_settings(field_scale=scale)
+            self.session.adapter(WiresFamily).set_wire_settings(field_scale=scale)
 
         self._wire_edit(f"Wire field 1/{scale}", fn)
 
@@ -414,7 +429,9 @@ class WiresPanel(FamilyPanel):
 
     def _finish_wire(self) -> None:
         kind, radius = self.wire_kind(), self.wire_radius()
-        result = self._wire_edit("New wire", lambda: self.session.finish_wire(kind, radius))
+        result = self._wire_edit(
+            "New wire", lambda: self.session.adapter(WiresFamily).finish_wire(kind, radius)
+        )
         if result is not None:
             self._window.viewport.laying_wire = False
             self._refresh_host()
@@ -423,4 +440,6 @@ class WiresPanel(FamilyPanel):
         w = self._wire_index()
         if w is None:
             return
-        self._wire_edit(f"Remove wire {w + 1}", lambda: self.session.remove_wire(w))
+        self._wire_edit(
+            f"Remove wire {w + 1}", lambda: self.session.adapter(WiresFamily).remove_wire(w)
+        )

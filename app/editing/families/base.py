@@ -5,7 +5,11 @@ answers the session's questions about it: its warp, its handles and how they dra
 the overlay draws, what undo keeps, how it resumes from a scene's warp and what it keys
 for animation. :class:`~voxwarp.editing.session.EditSession` only talks to this
 interface, so adding a family is its warp, its shader, one adapter file registered in
-:mod:`voxwarp.editing.families` and one panel in ``ui/``.
+:mod:`voxwarp.editing.families` and one panel in ``ui/`` (docs/reference/layout.md,
+"Adding a deformation family"). A family's own editing API (the wires', the lattice's)
+lives on its adapter: ``session.adapter(WiresFamily).add_wire_point(...)``. Adapters
+know their session through :class:`~voxwarp.editing.state.SessionHost` and never import
+the session module.
 """
 
 from __future__ import annotations
@@ -17,11 +21,12 @@ import numpy as np
 
 from voxwarp.deform.warp import Warp
 from voxwarp.editing.common import DisplayOptions, EditorError
+from voxwarp.editing.model_settings import BuildReport, Built
+from voxwarp.editing.state import DragState, SessionHost, Snapshot
 from voxwarp.render.overlay import OverlayLayer
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
-    from voxwarp.editing.session import EditSession, Snapshot
 
 #: maps (N, 3) grid-frame points to world mm (the session's placement)
 ToWorld = Callable[[np.ndarray], np.ndarray]
@@ -48,8 +53,17 @@ class Family:
     #: the element model (mass-spring or ChainMail families), else None
     model: Any = None
 
-    def __init__(self, session: EditSession) -> None:
+    def __init__(self, session: SessionHost) -> None:
         self.session = session
+
+    # ---------------------------------------------------------------- the builder
+    @classmethod
+    def build(cls, settings: Any, volume: Any, ctx: Any = None) -> Built:
+        """The model and warp of ``settings`` (the family's settings dataclass in
+        :mod:`voxwarp.editing.model_settings`) on ``volume``: the one builder that the
+        editor, the CLI, the napari widget and the notebook viewer use (``ctx``: the GL
+        context of a GPU backend, current). Nothing for the family ``"none"``."""
+        return Built(None, None, BuildReport())
 
     # ---------------------------------------------------------------- life cycle
     def start(self) -> None:
@@ -65,25 +79,31 @@ class Family:
             self.session.release_warp(warp)
 
     @classmethod
-    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+    def resume(cls, session: SessionHost, warp: Warp) -> Family | None:
         """An adapter taking over ``warp`` from a saved scene, or None if not ours."""
         return None
 
     # ---------------------------------------------------------------- state views
     @property
-    def wires(self) -> list[Any]:
-        """The wires of a wire field (empty for other families)."""
-        return []
-
-    @property
-    def lattice_nodes(self) -> np.ndarray | None:
-        """The lattice's nodes (None for other families)."""
-        return None
-
-    @property
     def field_stale(self) -> bool:
         """Whether a field built off the GUI thread lags the edits."""
         return False
+
+    def build_job(self) -> Any:
+        """A job (``run(progress)``, ``cancel()``) rebuilding a stale field on any thread,
+        for :meth:`install`; None for families with nothing to build off the GUI thread."""
+        return None
+
+    def install(self, job: Any) -> bool:
+        """Put a finished :meth:`build_job` in the scene (GUI thread); whether it is of
+        the current state (False: dropped, or drawn until the next build)."""
+        return False
+
+    def rebuild_if_stale(self) -> None:
+        """Rebuild a stale field on this thread and draw it (saving, scripts, notebook)."""
+
+    def discard_pending(self) -> None:
+        """Drop what is being laid and not finished (the wire family's new points)."""
 
     # ---------------------------------------------------------------- the warp
     def warp(self) -> Warp | None:
@@ -106,11 +126,11 @@ class Family:
         """Fix or free handles."""
         raise EditorError("only the elements of mass-spring and ChainMail can be fixed")
 
-    def begin_drag(self, drag: dict[str, Any]) -> None:
-        """Remember what the drag starting with ``drag`` needs (``drag["positions"]``
-        are the handles in the grid frame, ``drag["selection"]`` the dragged ones)."""
+    def begin_drag(self, drag: DragState) -> None:
+        """Remember what the drag starting with ``drag`` needs (``drag.positions`` are
+        the handles in the grid frame, ``drag.selection`` the dragged ones)."""
 
-    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
+    def drag(self, drag: DragState, selection: np.ndarray, delta: np.ndarray) -> None:
         """Move the selected handles by ``delta`` (grid frame) from their start."""
 
     # ---------------------------------------------------------------- running

@@ -10,21 +10,30 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from voxwarp.deform.elements.chainmail import ChainMail
-from voxwarp.deform.elements.grid import ElementGrid
-from voxwarp.deform.elements.massspring import MassSpring
+from voxwarp.deform.elements.chainmail_model import ChainMailError
+from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
+from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.editing.common import COLORS, DisplayOptions, EditorError
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.editing.model_settings import (
+    SETTLE_SPEED,
+    BuildReport,
+    Built,
+    ChainMailSettings,
+    ElementSettings,
+    MassSpringSettings,
+    SettingError,
+    chainmail_at_rest,
+    is_settled,
+)
+from voxwarp.editing.state import DragState, SessionHost
 from voxwarp.render.overlay import OverlayLayer, grid_edges
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
-    from voxwarp.editing.session import EditSession
-
-#: mass-spring elements slower than this (mm/s) count as at rest
-SETTLED_SPEED = 1e-3
 
 
 class ElementFamily(Family):
@@ -36,7 +45,7 @@ class ElementFamily(Family):
     can_fix = True
     model_class: ClassVar[type[MassSpring] | type[ChainMail]]
 
-    def __init__(self, session: EditSession) -> None:
+    def __init__(self, session: SessionHost) -> None:
         super().__init__(session)
         self.model: MassSpring | ChainMail | None = None
         self._advances = 0
@@ -55,11 +64,45 @@ class ElementFamily(Family):
 
     def _new_model(self) -> MassSpring | ChainMail:
         s = self.session
-        grid = ElementGrid(s.box, shape=s.resolution)
-        grid.set_material(stiffness=s.stiffness)
-        return self._build(grid)
+        return self.build(self.settings(), s.volume, self._ctx()).model
 
-    def _build(self, grid: ElementGrid) -> MassSpring | ChainMail:
+    def settings(self) -> ElementSettings:
+        """The settings of a new model at rest from the session's."""
+        raise NotImplementedError
+
+    # ---------------------------------------------------------------- the builder
+    @classmethod
+    def grid(cls, settings: ElementSettings, volume: Any) -> ElementGrid:
+        """The element grid of ``settings`` over ``volume``'s box: its stiffness, fixed
+        elements and materials set (no GL work); a :class:`SettingError` names a bad
+        setting."""
+        grid = ElementGrid(volume, shape=settings.shape)
+        if settings.stiffness is not None:
+            grid.set_material(stiffness=settings.stiffness)
+        for ranges in settings.fixed:
+            mask = np.zeros(grid.shape, dtype=bool)
+            mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
+            grid.fix(mask)
+        if settings.stiffness_from_volume:
+            # the voxel centres span origin .. origin + spacing * (shape - 1)
+            org = np.asarray(volume.origin, dtype=np.float64)
+            n = np.maximum(np.asarray(volume.shape) - 1, 1)
+            centres = (org, org + np.asarray(volume.spacing, dtype=np.float64) * n)
+            try:
+                grid.materials_from_volume(volume.data, centres, settings.stiffness_from_volume)
+            except ElementGridError as exc:
+                raise SettingError("stiffness_from_volume", str(exc)) from exc
+        return grid
+
+    @classmethod
+    def build(cls, settings: ElementSettings, volume: Any, ctx: Any = None) -> Built:
+        """The model of ``settings`` over ``volume``, dragged and run as they say, and
+        its warp (``ctx``: the GL context of the GPU backend, current)."""
+        return cls.build_on(settings, cls.grid(settings, volume), ctx)
+
+    @classmethod
+    def build_on(cls, settings: Any, grid: ElementGrid, ctx: Any = None) -> Built:
+        """:meth:`build` on a grid from :meth:`grid` (the CLI checks it in between)."""
         raise NotImplementedError
 
     def _from_dict(self, model: dict[str, Any]) -> MassSpring | ChainMail:
@@ -71,7 +114,7 @@ class ElementFamily(Family):
         self.model = None
 
     @classmethod
-    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+    def resume(cls, session: SessionHost, warp: Warp) -> Family | None:
         state = getattr(warp, "model_state", None)
         if not isinstance(warp, OffsetFieldWarp) or state is None:
             return None
@@ -93,7 +136,7 @@ class ElementFamily(Family):
         drag = self.session.drag_state
         if self.model.backend == "gpu" and drag is not None:
             # never read the GPU back while dragging: targets of the held elements
-            return drag["positions"].copy()
+            return drag.positions.copy()
         with self.session.gl_scope():
             return self.model.positions().reshape(-1, 3)
 
@@ -114,23 +157,23 @@ class ElementFamily(Family):
         else:
             self.model.free(ijk)
 
-    def begin_drag(self, drag: dict[str, Any]) -> None:
+    def begin_drag(self, drag: DragState) -> None:
         if self.model is None:
             return
         rest = self.model.grid.rest_positions.reshape(-1, 3)
-        sel = np.asarray(drag["selection"])
-        drag["start_offsets"] = drag["positions"][sel] - rest[sel]
+        sel = np.asarray(drag.selection)
+        drag.start_offsets = drag.positions[sel] - rest[sel]
 
-    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
-        if self.model is None:
+    def drag(self, drag: DragState, selection: np.ndarray, delta: np.ndarray) -> None:
+        if self.model is None or drag.start_offsets is None:
             return
         grid = self.model.grid
         ijk = np.array(np.unravel_index(selection, grid.shape)).T
-        offsets = drag["start_offsets"] + delta
+        offsets = drag.start_offsets + delta
         self.model.move(ijk, offsets)
         rest = grid.rest_positions.reshape(-1, 3)
         movable = ~grid.fixed.reshape(-1)[selection]
-        drag["positions"][selection[movable]] = rest[selection[movable]] + offsets[movable]
+        drag.positions[selection[movable]] = rest[selection[movable]] + offsets[movable]
 
     # ---------------------------------------------------------------- running
     def _steps(self) -> int:
@@ -239,12 +282,48 @@ class MassSpringFamily(ElementFamily):
     kind = "massspring"
     model_class = MassSpring
 
-    def _build(self, grid: ElementGrid) -> MassSpring:
+    def settings(self) -> MassSpringSettings:
         s = self.session
-        return MassSpring(grid, backend=s.backend, ctx=self._ctx(), integrator=s.integrator)
+        return MassSpringSettings(
+            shape=s.resolution,
+            backend=s.backend,
+            stiffness=s.options.stiffness,
+            integrator=s.options.integrator,
+        )
+
+    @classmethod
+    def build_on(cls, settings: MassSpringSettings, grid: ElementGrid, ctx: Any = None) -> Built:
+        """Drags, then ``settings.run``: fixed steps or until :func:`is_settled`."""
+        try:
+            ms = MassSpring(
+                grid,
+                backend=settings.backend,
+                ctx=ctx if settings.backend == "gpu" else None,
+                integrator=settings.integrator,
+                shear=settings.shear,
+                bend=settings.bend,
+            )
+        except MassSpringError as exc:
+            raise SettingError("model", str(exc)) from exc
+        report = BuildReport(settling=settings.run.settle)
+        try:
+            for d in settings.drags:
+                ms.move(d.selection, d.offset)
+            limit = settings.run.limit
+            if settings.run.settle:
+                report.steps = ms.settle(max_steps=limit, tol=SETTLE_SPEED)
+                report.hit_limit = report.steps >= limit and limit > 0
+            elif limit:
+                ms.step(limit)
+                report.steps = limit
+            warp = ms.warp(inverse=settings.inverse)
+        except BaseException:
+            ms.close()
+            raise
+        return Built(ms, warp, report)
 
     def _steps(self) -> int:
-        return self.session.steps_per_frame
+        return self.session.options.steps_per_frame
 
     def _run(self, n: int) -> None:
         assert isinstance(self.model, MassSpring)
@@ -252,8 +331,7 @@ class MassSpringFamily(ElementFamily):
 
     def _at_rest(self, before: np.ndarray | None) -> bool | None:
         assert isinstance(self.model, MassSpring)
-        speed = np.sqrt(np.max(np.sum(self.model.velocities() ** 2, axis=-1)))
-        return bool(speed < SETTLED_SPEED)
+        return is_settled(self.model)
 
     def snapshot(self) -> dict[str, Any]:
         state = super().snapshot()
@@ -274,23 +352,66 @@ class ChainMailFamily(ElementFamily):
     kind = "chainmail"
     model_class = ChainMail
 
-    def _build(self, grid: ElementGrid) -> ChainMail:
+    def settings(self) -> ChainMailSettings:
         s = self.session
-        cm = ChainMail(grid, variant=s.variant, backend=s.backend, ctx=self._ctx())
         # relaxation runs on the CPU (a GPU model is read back for it): a GPU model relaxes
         # in advance() between drags, never inside a move
-        cm.relax_steps = s.relax_steps if s.backend == "cpu" else 0
-        return cm
+        return ChainMailSettings(
+            shape=s.resolution,
+            backend=s.backend,
+            stiffness=s.options.stiffness,
+            variant=s.options.variant,
+            relax_steps=s.options.relax_steps if s.backend == "cpu" else 0,
+        )
+
+    @classmethod
+    def build_on(cls, settings: ChainMailSettings, grid: ElementGrid, ctx: Any = None) -> Built:
+        """Cuts first (through the rest state), then every drag at once (one move),
+        then ``settings.relax`` relaxation steps."""
+        try:
+            cm = ChainMail(
+                grid,
+                variant=settings.variant,
+                backend=settings.backend,
+                ctx=ctx if settings.backend == "gpu" else None,
+            )
+        except ChainMailError as exc:
+            raise SettingError("model", str(exc)) from exc
+        report = BuildReport()
+        try:
+            report.cut = sum(cm.cut(c.point, c.normal, c.radius) for c in settings.cuts)
+            if settings.warm_up and settings.backend == "cpu":  # no element: loads kernels
+                cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
+            if settings.drags:
+                stats = cm.move(
+                    [d.selection for d in settings.drags], [d.offset for d in settings.drags]
+                )
+                report.touched, report.solve_ms = stats.touched, stats.seconds * 1000
+                if stats.limited:
+                    report.limited_fraction = stats.fraction
+            t = time.perf_counter()
+            cm.relax(settings.relax)
+            report.relax_ms = (time.perf_counter() - t) * 1000
+            # saved with the model: a resumed one relaxes alike
+            steps = settings.relax_steps
+            cm.relax_steps = settings.relax if steps is None else steps
+            warp = cm.warp(inverse=settings.inverse)
+            if settings.drags or settings.cuts or settings.relax:
+                report.displaced = int(np.count_nonzero(np.any(cm.displacements() != 0.0, -1)))
+        except BaseException:
+            cm.close()
+            raise
+        return Built(cm, warp, report)
 
     def _from_dict(self, model: dict[str, Any]) -> ChainMail:
         restored = super()._from_dict(model)
         assert isinstance(restored, ChainMail)
         if self.session.backend == "gpu":
-            restored.relax_steps = 0  # see _build
+            restored.relax_steps = 0  # see settings()
         return restored
 
     def _steps(self) -> int:
-        return self.session.relax_steps
+        return self.session.options.relax_steps
 
     def _may_run_now(self) -> bool:
         # a GPU model's relaxation reads it back: not during a drag
@@ -307,7 +428,7 @@ class ChainMailFamily(ElementFamily):
     def _at_rest(self, before: np.ndarray | None) -> bool | None:
         if before is None or self.model is None:
             return None
-        return bool(np.max(np.abs(self.model.positions() - before)) < 1e-4)
+        return chainmail_at_rest(before, self.model.positions())
 
     def option_changed(self, name: str, value: Any) -> None:
         if name == "relax_steps" and isinstance(self.model, ChainMail):

@@ -13,11 +13,12 @@ from voxwarp.deform.warp import Warp
 from voxwarp.editing.common import COLORS, DisplayOptions
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.editing.model_settings import BuildReport, Built, LatticeSettings
+from voxwarp.editing.state import DragState, SessionHost
 from voxwarp.render.overlay import OverlayLayer, grid_edges
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
-    from voxwarp.editing.session import EditSession
 
 #: most cells per axis of a new lattice
 MAX_CELLS = 8
@@ -30,14 +31,21 @@ class LatticeFamily(Family):
     has_grid = True
     handle_name = "lattice nodes"
 
-    def __init__(self, session: EditSession) -> None:
+    def __init__(self, session: SessionHost) -> None:
         super().__init__(session)
         self.nodes: np.ndarray | None = None
         self._warp: LatticeWarp | None = None
 
     @property
     def lattice_nodes(self) -> np.ndarray | None:
+        """The lattice's nodes (nx, ny, nz, 3), grid frame; None before :meth:`start`."""
         return self.nodes
+
+    def set_lattice_nodes(self, nodes: np.ndarray) -> None:
+        """Move every node of the lattice (shape of :attr:`lattice_nodes`); the scene's
+        warps follow."""
+        self.set_nodes(nodes)
+        self.session.sync_warps()
 
     def start(self) -> None:
         """An undeformed lattice of ``resolution - 1`` cells per axis (at most 8)."""
@@ -53,13 +61,24 @@ class LatticeFamily(Family):
         self.nodes = None
 
     @classmethod
-    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+    def resume(cls, session: SessionHost, warp: Warp) -> Family | None:
         if not isinstance(warp, LatticeWarp):
             return None
         family = cls(session)
         family.nodes = np.asarray(warp.grid.nodes, dtype=np.float64).copy()
         family._warp = warp
         return family
+
+    @classmethod
+    def build(cls, settings: LatticeSettings, volume: Any, ctx: Any = None) -> Built:
+        """The lattice warp of ``settings`` (its nodes over its box, default the
+        volume's; or its lattice file) for ``volume`` (no model: ``model`` is None)."""
+        if settings.file is not None:
+            from voxwarp.inputs import load_lattice_file
+
+            return Built(None, load_lattice_file(settings.file, volume), BuildReport())
+        box = volume.bounds if settings.box is None else settings.box
+        return Built(None, LatticeWarp(TrilinearGrid(settings.nodes), box), BuildReport())
 
     def set_nodes(self, nodes: np.ndarray) -> None:
         """Move every node (the warp follows at the next :meth:`warp`)."""
@@ -72,14 +91,15 @@ class LatticeFamily(Family):
         if self.nodes is None:
             return None
         if self._warp is None:
-            self._warp = LatticeWarp(TrilinearGrid(self.nodes), self.session.box)
+            settings = LatticeSettings(self.nodes, self.session.box)
+            self._warp = self.build(settings, self.session.volume).warp
         return self._warp
 
     def handles(self) -> np.ndarray:
         return self.nodes.reshape(-1, 3) if self.nodes is not None else np.zeros((0, 3))
 
-    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
-        nodes = drag["positions"].copy()
+    def drag(self, drag: DragState, selection: np.ndarray, delta: np.ndarray) -> None:
+        nodes = drag.positions.copy()
         nodes[selection] += delta
         self.set_nodes(nodes)
 

@@ -6,28 +6,34 @@ the GUI thread, and its result is installed only if nothing changed meanwhile.""
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from voxwarp.core.camera import Camera
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.deform.wires.field import DEFAULT_ENDS, ENDS, Wire, WireDeformer, WireFieldWarp
 from voxwarp.editing.common import COLORS, WIRE_KINDS, DisplayOptions, EditorError, choice
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
+from voxwarp.editing.model_settings import BuildReport, Built, WireSettings
+from voxwarp.editing.state import DragState, SessionHost, Snapshot
 from voxwarp.render.overlay import OverlayLayer, polyline_segments
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
-    from voxwarp.editing.session import EditSession, Snapshot
 
-#: how the field may be built (``EditSession.wire_settings``)
+#: how the field may be built (``FamilyOptions.wire_settings``)
 WIRE_SETTINGS = ("field_scale", "layout", "masks")
+#: wire generations: unique over every adapter, so that a build of one adapter's wires
+#: is never taken for another's (undo makes a new adapter)
+_GENERATIONS = itertools.count(1)
 
 
 @dataclass
@@ -35,7 +41,7 @@ class WireBuild:
     """A rebuild of the wire field, to run off the GUI thread.
 
     :meth:`run` builds a new attribute field from a copy of the wires (nothing shared
-    with the field being drawn); :meth:`EditSession.install_wire_build` puts it in the
+    with the field being drawn); :meth:`WiresFamily.install` puts it in the
     scene on the GUI thread, unless the wires changed again meanwhile. :meth:`cancel`
     makes :meth:`run` stop at its next check and return ``None``.
     """
@@ -64,13 +70,12 @@ class WireBuild:
             progress(0.05, "laying the wires")
         if self.cancelled:
             return None
-        deformer = WireDeformer(self.volume, self.wires, **self.settings)
         if progress:
             progress(0.2, "propagating the attribute field")
-        deformer.build()
+        built = WiresFamily.build(WireSettings.of(self.wires, **self.settings), self.volume)
         if self.cancelled:
             return None
-        self.warp = deformer.warp()
+        self.warp = built.warp
         self.seconds = time.perf_counter() - t0
         if progress:
             progress(1.0, "done")
@@ -84,9 +89,14 @@ class WiresFamily(Family):
     has_grid = True
     handle_name = "wire points"
 
-    def __init__(self, session: EditSession) -> None:
+    def __init__(self, session: SessionHost) -> None:
         super().__init__(session)
         self._wires: list[Wire] = []
+        #: changes with every edit of the wires or their settings (a field is of the
+        #: generation it was built from; see :attr:`field_stale`)
+        self.generation = 0
+        #: control points of the wire being laid (:meth:`add_wire_point`), grid frame
+        self.pending_wire: list[np.ndarray] = []
         #: the field drawn, and the wire generation it was built from
         self.field: WireFieldWarp | None = None
         self.built = -1
@@ -101,6 +111,18 @@ class WiresFamily(Family):
     @wires.setter
     def wires(self, value: list[Wire]) -> None:
         self._wires = list(value)
+
+    # ---------------------------------------------------------------- the builder
+    @classmethod
+    def build(cls, settings: WireSettings, volume: Any, ctx: Any = None) -> Built:
+        """The wire field of ``settings`` on ``volume``, built (no model: ``model`` is
+        None); a :class:`~voxwarp.deform.warp.WarpError` names a bad entry."""
+        WireFieldWarp.from_dict(settings.entry)  # checks every key and wire first
+        spec = {k: v for k, v in settings.entry.items() if k != "type"}
+        wires = [Wire.from_dict(w) for w in spec.pop("wires")]
+        deformer = WireDeformer(volume, wires, **spec)
+        deformer.build()
+        return Built(None, deformer.warp(), BuildReport())
 
     # ---------------------------------------------------------------- life cycle
     def start(self) -> None:
@@ -124,26 +146,26 @@ class WiresFamily(Family):
         self._wires = []
 
     @classmethod
-    def resume(cls, session: EditSession, warp: Warp) -> Family | None:
+    def resume(cls, session: SessionHost, warp: Warp) -> Family | None:
         if not isinstance(warp, WireFieldWarp):
             return None
         family = cls(session)
         family._wires = list(warp.wires)
         family.field = warp
-        family.built = session.wire_generation
+        family.built = family.generation
         spec = warp.to_dict()
         settings = {k: spec[k] for k in WIRE_SETTINGS if k in spec}
-        session.wire_settings = settings or session.wire_settings
+        session.options.wire_settings = settings or session.options.wire_settings
         return family
 
     # ---------------------------------------------------------------- the field
     def changed(self) -> None:
         """The wires or their settings changed: the field is stale from now on."""
-        self.session.wire_generation += 1
+        self.generation = next(_GENERATIONS)
 
     @property
     def field_stale(self) -> bool:
-        return self.field is None or self.built != self.session.wire_generation
+        return self.field is None or self.built != self.generation
 
     def warp(self) -> Warp | None:
         return self.field
@@ -152,7 +174,7 @@ class WiresFamily(Family):
         """A job rebuilding the field of the current wires (run it on any thread)."""
         s = self.session
         wires = [Wire.from_dict(w.to_dict()) for w in self._wires]
-        return WireBuild(s.wire_generation, s.volume, wires, dict(s.wire_settings))
+        return WireBuild(self.generation, s.volume, wires, dict(s.options.wire_settings))
 
     def _install(self, warp: WireFieldWarp, generation: int) -> None:
         if self.field is not None and self.field is not warp:
@@ -170,18 +192,20 @@ class WiresFamily(Family):
 
     def refresh_field(self) -> None:
         """After a change of the wires: rebuild the field now (the session's
-        ``sync_wires``) or leave it stale for an off-thread :meth:`build_job` (the GUI)."""
-        if self.session.sync_wires:
+        ``sync_builds``) or leave it stale for an off-thread :meth:`build_job` (the GUI)."""
+        if self.session.sync_builds:
             self.build_now()
 
-    def install(self, job: WireBuild) -> bool:
-        """Put a finished build in the scene; whether it is of the current wires."""
-        if job.warp is None or job.cancelled:
+    def install(self, job: Any) -> bool:
+        """Put a finished :class:`WireBuild` in the scene (GUI thread). Returns False
+        when it was cancelled (dropped) or when the wires changed while it ran (then it
+        is drawn meanwhile, and the field stays stale for the next build)."""
+        if not isinstance(job, WireBuild) or job.warp is None or job.cancelled:
             return False
         self._install(job.warp, job.generation)
         self.session.timings["field"] = job.seconds * 1000
         self.session.sync_warps()
-        return job.generation == self.session.wire_generation
+        return job.generation == self.generation
 
     def before_save(self) -> None:
         self.rebuild_if_stale()
@@ -208,8 +232,8 @@ class WiresFamily(Family):
             index -= n
         raise EditorError(f"handle {handle} is not a wire control point")
 
-    def drag(self, drag: dict[str, Any], selection: np.ndarray, delta: np.ndarray) -> None:
-        start = drag["positions"]
+    def drag(self, drag: DragState, selection: np.ndarray, delta: np.ndarray) -> None:
+        start = drag.positions
         for h in selection:
             w, k = self.point(int(h))
             pts = self._wires[w].modified.control_points.copy()
@@ -229,22 +253,29 @@ class WiresFamily(Family):
             raise EditorError(f"no wire {index}: there are {len(self._wires)} wires")
         return self._wires[index]
 
-    def set_points(self, index: int, points: np.ndarray) -> None:
-        """Move the modified control points of wire ``index``."""
-        self._wires[index] = with_modified(self.wire(index), points)
+    def _edited(self) -> None:
         self.changed()
+        self.session.edited()
 
-    def set_parameters(
+    def set_wire_points(self, wire: int, points: np.ndarray) -> None:
+        """Move the modified control points of wire ``wire``; its attribute field is then
+        stale (rebuild it with :meth:`build_job` and :meth:`install`)."""
+        self._wires[wire] = with_modified(self.wire(wire), points)
+        self._edited()
+
+    def set_wire_parameters(
         self,
-        index: int,
-        kind: str | None,
-        radius: float | None,
-        beta: tuple[float, float] | Literal["keep"] | None,
+        wire: int,
+        *,
+        kind: str | None = None,
+        radius: float | None = None,
+        beta: tuple[float, float] | Literal["keep"] | None = "keep",
         ends: str | None = None,
     ) -> None:
-        """Change a wire's curve kind, influence radius (mm), β or ends (see the
-        session)."""
-        w = self.wire(index)
+        """Change a wire's curve kind, influence radius (mm), β (value range or None) or
+        ends (``"smooth"``/``"rigid"``, see :class:`voxwarp.deform.wires.field.Wire`); the
+        field is then stale (rebuild it with :meth:`build_job`)."""
+        w = self.wire(wire)
         d = w.to_dict()
         if ends is not None:
             d["ends"] = choice(ends, ENDS, "wire ends")
@@ -258,11 +289,39 @@ class WiresFamily(Family):
             d["radius"] = radius
         if beta != "keep":
             d["beta"] = None if beta is None else [float(beta[0]), float(beta[1])]
-        self._wires[index] = wire_from(d)
-        self.changed()
+        self._wires[wire] = wire_from(d)
+        self._edited()
 
-    def set_key(self, handle: int, twist: float | None, scale: float | None) -> None:
-        """Set the twist or scale key at the control point of ``handle``."""
+    def set_wire_settings(self, **settings: Any) -> None:
+        """Change how the wire field is built: ``field_scale`` (1, 2, 4, 8 or 16),
+        ``layout`` (``"float"``/``"packed"``/``"paper"``), ``masks`` (bool); the field is
+        then stale."""
+        allowed = set(WIRE_SETTINGS)
+        unknown = set(settings) - allowed
+        if unknown:
+            raise EditorError(
+                f"unknown wire settings {sorted(unknown)}; allowed: {sorted(allowed)}"
+            )
+        if "field_scale" in settings and settings["field_scale"] not in (1, 2, 4, 8, 16):
+            raise EditorError(
+                f"field_scale must be 1, 2, 4, 8 or 16; got {settings['field_scale']!r}"
+            )
+        if "layout" in settings and settings["layout"] not in ("float", "packed", "paper"):
+            raise EditorError(
+                f"layout must be 'float', 'packed' or 'paper'; got {settings['layout']!r}"
+            )
+        if "masks" in settings and not isinstance(settings["masks"], bool):
+            raise EditorError(f"masks must be true or false; got {settings['masks']!r}")
+        self.session.options.wire_settings.update(settings)
+        self._edited()
+
+    def set_wire_key(
+        self, handle: int | None, *, twist: float | None = None, scale: float | None = None
+    ) -> None:
+        """Set the twist (radians) or scale at the control point of ``handle``: a key
+        at that point's fraction of the wire's length (replacing a key there)."""
+        if handle is None:
+            raise EditorError("select a control point of a wire first (click it)")
         w, k = self.point(int(handle))
         wire = self._wires[w]
         t = _length_fraction(wire.modified, k)
@@ -274,17 +333,38 @@ class WiresFamily(Family):
             keys.append((t, float(value)))
             d[name] = sorted(keys)
         self._wires[w] = wire_from(d)
-        self.changed()
+        self._edited()
 
-    def add(self, points: np.ndarray, kind: str, radius: float | None) -> int:
-        """A new wire through ``points`` (base = modified); returns its index."""
+    def add_wire_point(self, camera: Camera, size: tuple[int, int], pixel: Sequence[float]) -> None:
+        """Lay a control point of a new wire where the cursor meets the plane parallel
+        to the image through the volume's centre (the slice plane of the view)."""
+        lo, hi = self.session.box
+        p = camera.point_on_view_plane(pixel, size, 0.5 * (lo + hi))
+        m = np.linalg.inv(self.session.placement_matrix)
+        self.pending_wire.append(p @ m[:3, :3].T + m[:3, 3])
+
+    def discard_pending(self) -> None:
+        self.pending_wire = []
+
+    def finish_wire(self, kind: str = "catmull-rom", radius: float | None = None) -> int:
+        """Make the laid points a wire (base = modified; then bend it by dragging).
+        Returns its index. Needs 2+ points (Bézier: 3k + 1, extra points are dropped)."""
+        kind = choice(kind, WIRE_KINDS, "wire kind")
+        pts = np.asarray(self.pending_wire, dtype=np.float64).reshape(-1, 3)
+        if kind == "bezier":
+            pts = pts[: 3 * ((len(pts) - 1) // 3) + 1]
+        if len(pts) < (4 if kind == "bezier" else 2):
+            raise EditorError(
+                f"a {kind} wire needs at least {4 if kind == 'bezier' else 2} control points;"
+                f" {len(self.pending_wire)} laid: click more points first"
+            )
         if radius is None:
             extent = float(np.max(np.ptp(self.session.box, 0)))
             radius = self._wires[-1].radius if self._wires else 0.1 * extent
         wire = wire_from(
             {
-                "base": points.tolist(),
-                "modified": points.tolist(),
+                "base": pts.tolist(),
+                "modified": pts.tolist(),
                 "kind": kind,
                 "radius": radius,
                 "ends": self._wires[-1].ends if self._wires else DEFAULT_ENDS,
@@ -292,16 +372,19 @@ class WiresFamily(Family):
             }
         )
         self._wires.append(wire)
-        self.changed()
+        self.pending_wire = []
+        self._edited()
         return len(self._wires) - 1
 
-    def remove(self, index: int) -> None:
-        """Delete a wire (the last one cannot go)."""
-        self.wire(index)
+    def remove_wire(self, wire: int) -> None:
+        """Delete a wire (the last one cannot go: switch the deformation off instead)."""
+        self.wire(wire)
         if len(self._wires) == 1:
             raise EditorError("a wire field needs a wire: choose deformation 'none' instead")
-        del self._wires[index]
+        del self._wires[wire]
         self.changed()
+        self.session.select([], "replace")
+        self.session.edited()
 
     # ---------------------------------------------------------------- drawing
     def overlay(
@@ -318,6 +401,11 @@ class WiresFamily(Family):
                 layers.append(OverlayLayer("lines", seg, COLORS["wire_modified"], name="wire"))
         if display.wires_modified and len(handles):
             layers.append(OverlayLayer("points", handles, COLORS["wire_modified"], 8.0, "points"))
+        if self.pending_wire:
+            p = to_world(np.asarray(self.pending_wire))
+            layers.append(OverlayLayer("points", p, COLORS["pending"], 8.0, "new wire"))
+            if len(p) > 1:
+                layers.append(OverlayLayer("lines", polyline_segments(p), COLORS["pending"]))
         return layers
 
     # ---------------------------------------------------------------- undo and animation
@@ -332,7 +420,7 @@ class WiresFamily(Family):
             return
         same = (
             snap.state.get("wires") == [w.to_dict() for w in previous.wires]
-            and snap.wire_settings == self.session.wire_settings
+            and snap.options.wire_settings == self.session.options.wire_settings
         )
         if same and not previous.field_stale:
             self._kept = previous.field
@@ -344,7 +432,7 @@ class WiresFamily(Family):
         self._wires = [Wire.from_dict(w) for w in state.get("wires", [])]
         self.changed()
         if self._kept is not None:
-            self.field, self.built = self._kept, self.session.wire_generation
+            self.field, self.built = self._kept, self.generation
         else:
             self.field = self._drawn  # drawn until the rebuilt field replaces it
             self.refresh_field()
