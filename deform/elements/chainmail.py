@@ -131,7 +131,15 @@ import numpy as np
 
 from voxwarp.deform.elements.chainmail_model import ChainMailError, ChainMailModel, check_limits
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
-from voxwarp.deform.elements.model import ElementWarpMixin
+from voxwarp.deform.elements.model import (
+    HELD_FORM,
+    ElementWarpMixin,
+    check_entry,
+    closed_on_error,
+    held_entries,
+    held_index,
+    held_items,
+)
 
 __all__ = [
     "BACKENDS",
@@ -1081,11 +1089,10 @@ class ChainMail(ElementWarpMixin):
             The backend is not part of the model.
         """
         m = self._model
-        held = [
-            {"index": [int(v) for v in np.unravel_index(e, self.grid.shape)],
-             "offset": self._offsets[e].tolist()}
-            for e in np.flatnonzero(self._held)
-        ]  # fmt: skip
+        flat = np.flatnonzero(self._held)
+        held = held_entries(
+            np.stack(np.unravel_index(flat, self.grid.shape), -1), self._offsets[flat]
+        )
         d: dict[str, Any] = {
             "grid": self.grid.to_dict(),
             "variant": self._variant,
@@ -1129,11 +1136,7 @@ class ChainMail(ElementWarpMixin):
         ChainMailError
             On a missing or malformed key; the message names the key and the fix.
         """
-        if not isinstance(d, Mapping):
-            raise ChainMailError(f"a chainmail entry must be an object; got {d!r:.80}")
-        kind = d.get("type", MODEL_TYPE)
-        if kind != MODEL_TYPE:
-            raise ChainMailError(f"a chainmail entry has 'type' {kind!r}; expected {MODEL_TYPE!r}")
+        check_entry(d, MODEL_TYPE, ChainMailError)
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
         for key in ("variant", "relax_steps"):
@@ -1150,7 +1153,7 @@ class ChainMail(ElementWarpMixin):
         if positions is None:
             positions = d.get("positions")
         cm = cls(grid, backend=backend, ctx=ctx, **kwargs)
-        try:
+        with closed_on_error(cm):
             if limits:
                 cm.set_limits(**{k: v for k, v in limits.items()})
             cm._cut_links(cuts)
@@ -1163,9 +1166,6 @@ class ChainMail(ElementWarpMixin):
             else:
                 for e, off in held:
                     cm.move(np.unravel_index(e, grid.shape), off)
-        except BaseException:
-            cm.close()
-            raise
         return cm
 
     def _cut_links(self, cuts: Any) -> None:
@@ -1244,22 +1244,11 @@ def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
 
 def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[int, np.ndarray]]:
     """Validate a ``"held"`` list; returns (flat index, offset) pairs."""
-    form = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
-    if not isinstance(held, list | tuple):
-        raise ChainMailError(f"chainmail 'held' must be a list; {form}; got {held!r:.80}")
     out = []
-    for n, entry in enumerate(held):
-        where = f"chainmail 'held'[{n}]"
+    for where, entry in held_items(held, MODEL_TYPE, ChainMailError):
         if not isinstance(entry, Mapping) or not {"index", "offset"} <= set(entry):
-            raise ChainMailError(f"{where}: {form}; got {entry!r:.80}")
-        raw = entry["index"]
-        ok = (
-            isinstance(raw, list | tuple)
-            and len(raw) == 3
-            and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
-        )
-        if not ok:
-            raise ChainMailError(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+            raise ChainMailError(f"{where}: {HELD_FORM}; got {entry!r:.80}")
+        raw = held_index(entry["index"], where, ChainMailError)
         try:
             idx = tuple(int(v) for v in grid.indices(raw)[0])
         except ElementGridError as exc:

@@ -51,7 +51,15 @@ from typing import Any
 import numpy as np
 
 from voxwarp.deform.elements.grid import ElementGrid, Selection, grid_from_entry
-from voxwarp.deform.elements.model import ElementWarpMixin
+from voxwarp.deform.elements.model import (
+    HELD_FORM,
+    ElementWarpMixin,
+    check_entry,
+    closed_on_error,
+    held_entries,
+    held_index,
+    held_items,
+)
 from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 from voxwarp.errors import VoxwarpError
 
@@ -638,10 +646,8 @@ class MassSpring(ElementWarpMixin):
         for name in ("stiffness", "damping", "mass"):  # the materials the solver runs
             a = np.asarray(getattr(m, name), dtype=np.float32)
             grid[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
-        held = [
-            {"index": [int(v) for v in idx], "offset": self._offsets[tuple(idx)].tolist()}
-            for idx in np.argwhere(self._held)
-        ]
+        where = np.argwhere(self._held)
+        held = held_entries(where, self._offsets[tuple(where.T)])
         d: dict[str, Any] = {
             "grid": grid,
             "integrator": self.integrator,
@@ -690,13 +696,7 @@ class MassSpring(ElementWarpMixin):
         MassSpringError
             On a missing or malformed key; the message names the key and the fix.
         """
-        if not isinstance(d, Mapping):
-            raise MassSpringError(f"a massspring entry must be an object; got {d!r:.80}")
-        kind = d.get("type", MODEL_TYPE)
-        if kind != MODEL_TYPE:
-            raise MassSpringError(
-                f"a massspring entry has 'type' {kind!r}; expected {MODEL_TYPE!r}"
-            )
+        check_entry(d, MODEL_TYPE, MassSpringError)
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
         for key in ("integrator", "dt", "spring_constant", "spring_damping", "max_step"):
@@ -713,14 +713,11 @@ class MassSpring(ElementWarpMixin):
         if positions is None:
             positions = d.get("positions")
         ms = cls(grid, backend=backend, ctx=ctx, **kwargs)
-        try:
+        with closed_on_error(ms):
             if positions is not None:
                 ms.set_state(positions)
             for idx, off in held:
                 ms.move(idx, off)
-        except BaseException:
-            ms.close()
-            raise
         return ms
 
     def set_state(self, positions: Any, velocities: Any = None) -> None:
@@ -787,26 +784,15 @@ def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
 
 def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[tuple[int, int, int], np.ndarray]]:
     """Validate a ``"held"`` list: ``[{"index": [i, j, k], "offset": [dx, dy, dz]}, ...]``."""
-    form = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
-    if not isinstance(held, list | tuple):
-        raise MassSpringError(f"massspring 'held' must be a list; {form}; got {held!r:.80}")
     pinned = grid.pinned()
     out = []
-    for n, entry in enumerate(held):
-        where = f"massspring 'held'[{n}]"
+    for where, entry in held_items(held, MODEL_TYPE, MassSpringError):
         if not isinstance(entry, Mapping):
-            raise MassSpringError(f"{where} must be an object; {form}; got {entry!r:.80}")
+            raise MassSpringError(f"{where} must be an object; {HELD_FORM}; got {entry!r:.80}")
         missing = [k for k in ("index", "offset") if k not in entry]
         if missing:
-            raise MassSpringError(f"{where} needs the keys {missing}; {form}")
-        raw = entry["index"]
-        ok = (
-            isinstance(raw, list | tuple)
-            and len(raw) == 3
-            and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
-        )
-        if not ok:
-            raise MassSpringError(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+            raise MassSpringError(f"{where} needs the keys {missing}; {HELD_FORM}")
+        raw = held_index(entry["index"], where, MassSpringError)
         idx = tuple(int(v) for v in raw)
         if any(v < 0 or v >= s for v, s in zip(idx, grid.shape, strict=True)):
             raise MassSpringError(

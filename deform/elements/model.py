@@ -4,11 +4,15 @@ fixed, held at offsets and read back, with an offset-field warp for the raycaste
 :class:`ElementModel` names the interface (a ``typing.Protocol``; the edit session and
 the animation code use only these methods). :class:`ElementWarpMixin` is the one
 implementation both models share of the warp, its scene-JSON snapshot, resuming from a
-saved warp and releasing GPU resources.
+saved warp and releasing GPU resources. The functions at the end are the parts of their
+save/load (``to_dict``/``from_dict``) they share: the entry's type check, the ``"held"``
+list, and closing a model whose set-up from an entry fails.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -141,3 +145,58 @@ class ElementWarpMixin:
             self._warp.release()
         if self._solver is not None:
             self._solver.release()
+
+
+# ---------------------------------------------------------------------- save / load
+#: how a held element is written in a model's ``"held"`` list
+HELD_FORM = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
+
+
+def check_entry(d: Any, model_type: str, error: type[Exception]) -> None:
+    """Raise ``error`` unless ``d`` is a mapping whose ``"type"`` (if any) is
+    ``model_type`` (the start of a model's ``from_dict``)."""
+    if not isinstance(d, Mapping):
+        raise error(f"a {model_type} entry must be an object; got {d!r:.80}")
+    kind = d.get("type", model_type)
+    if kind != model_type:
+        raise error(f"a {model_type} entry has 'type' {kind!r}; expected {model_type!r}")
+
+
+def held_entries(indices: np.ndarray, offsets: np.ndarray) -> list[dict[str, Any]]:
+    """A model's ``"held"`` list: ``{"index": [i, j, k], "offset": [dx, dy, dz]}`` per
+    held element (``indices`` (k, 3) grid indices, ``offsets`` (k, 3) mm from rest)."""
+    return [
+        {"index": [int(v) for v in idx], "offset": off.tolist()}
+        for idx, off in zip(indices, offsets, strict=True)
+    ]
+
+
+def held_items(held: Any, model_type: str, error: type[Exception]) -> list[tuple[str, Any]]:
+    """A ``"held"`` list's entries, each with its place in messages (``error`` unless
+    it is a list)."""
+    if not isinstance(held, list | tuple):
+        raise error(f"{model_type} 'held' must be a list; {HELD_FORM}; got {held!r:.80}")
+    return [(f"{model_type} 'held'[{n}]", entry) for n, entry in enumerate(held)]
+
+
+def held_index(raw: Any, where: str, error: type[Exception]) -> Any:
+    """``raw`` checked to be 3 integers ``[i, j, k]`` (``error`` naming ``where``)."""
+    ok = (
+        isinstance(raw, list | tuple)
+        and len(raw) == 3
+        and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
+    )
+    if not ok:
+        raise error(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+    return raw
+
+
+@contextmanager
+def closed_on_error(model: Any) -> Iterator[None]:
+    """Close ``model`` (free its GPU resources) when the block raises, then re-raise:
+    a model half set up from a saved entry is not handed out."""
+    try:
+        yield
+    except BaseException:
+        model.close()
+        raise
