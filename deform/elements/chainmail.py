@@ -134,8 +134,6 @@ from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selectio
 from voxwarp.deform.elements.model import (
     HELD_FORM,
     ElementWarpMixin,
-    check_entry,
-    closed_on_error,
     held_entries,
     held_index,
     held_items,
@@ -243,7 +241,7 @@ def limits_from_stiffness(
 
 
 def _kernels() -> Any:
-    from voxwarp.deform.elements import chainmail_cpu
+    from voxwarp.deform.elements import chainmail_cpu  # numba: loaded when first used
 
     return chainmail_cpu
 
@@ -1047,6 +1045,7 @@ class ChainMail(ElementWarpMixin):
     # ------------------------------------------------------------------ GPU backend
     def _make_gpu_solver(self) -> Any:
         try:
+            # the GPU backend (moderngl) loads only when asked for
             from voxwarp.deform.elements.chainmail_gpu import GpuChainMailSolver
         except ImportError as exc:
             raise ChainMailError(
@@ -1136,7 +1135,10 @@ class ChainMail(ElementWarpMixin):
         ChainMailError
             On a missing or malformed key; the message names the key and the fix.
         """
-        check_entry(d, MODEL_TYPE, ChainMailError)
+        return cls._from_entry(d, backend, ctx, positions)
+
+    @classmethod
+    def _entry_parts(cls, d: Mapping[str, Any]) -> tuple[ElementGrid, dict[str, Any], Any]:
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
         for key in ("variant", "relax_steps"):
@@ -1148,25 +1150,26 @@ class ChainMail(ElementWarpMixin):
                 "chainmail 'limits' must be an object with keys among 'min_dist',"
                 f" 'max_dist', 'max_shear'; got {limits!r:.80}"
             )
-        cuts = d.get("cuts", [])
-        held = _parse_held(d.get("held", []), grid)
-        if positions is None:
-            positions = d.get("positions")
-        cm = cls(grid, backend=backend, ctx=ctx, **kwargs)
-        with closed_on_error(cm):
-            if limits:
-                cm.set_limits(**{k: v for k, v in limits.items()})
-            cm._cut_links(cuts)
-            if positions is not None:
-                for e, off in held:
-                    cm._held[e] = True
-                    cm._offsets[e] = off
-                cm._pinned = cm._model.fixed.reshape(-1) | cm._held
-                cm.set_state(positions)
-            else:
-                for e, off in held:
-                    cm.move(np.unravel_index(e, grid.shape), off)
-        return cm
+        return grid, kwargs, (limits, d.get("cuts", []))
+
+    @classmethod
+    def _entry_held(cls, held: Any, grid: ElementGrid) -> list[tuple[Any, np.ndarray]]:
+        return _parse_held(held, grid)  # type: ignore[return-value]
+
+    def _resume(self, extra: Any, held: list[tuple[Any, np.ndarray]], positions: Any) -> None:
+        limits, cuts = extra
+        if limits:
+            self.set_limits(**{k: v for k, v in limits.items()})
+        self._cut_links(cuts)
+        if positions is not None:
+            for e, off in held:
+                self._held[e] = True
+                self._offsets[e] = off
+            self._pinned = self._model.fixed.reshape(-1) | self._held
+            self.set_state(positions)
+        else:
+            for e, off in held:
+                self.move(np.unravel_index(e, self.grid.shape), off)
 
     def _cut_links(self, cuts: Any) -> None:
         form = "chainmail 'cuts' must be a list of removed links [i, j, k, axis]"

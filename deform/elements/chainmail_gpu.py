@@ -666,8 +666,7 @@ class GpuChainMailSolver(GpuGridSolver):
             ``(nx, ny, nz, 3)`` float64, world mm.
         """
         self._check_alive()
-        w, h = self.atlas_size
-        raw = np.frombuffer(self._pos[self._cur].read(), np.float32).reshape(h, w, 4)
+        raw = self._read_atlas(self._pos[self._cur])
         return self._from_atlas(raw)[..., :3].astype(np.float64) + self._origin
 
 

@@ -126,6 +126,11 @@ class GpuGridSolver:
         tex.repeat_x = tex.repeat_y = False
         return tex
 
+    def _read_atlas(self, tex: Any) -> np.ndarray:
+        """An atlas texture read back, (height, width, 4) float32."""
+        w, h = self.atlas_size
+        return np.frombuffer(tex.read(), np.float32).reshape(h, w, 4)
+
     def _make_programs(self, vertex: str, fragment: str, pin_fragment: str, compute: str) -> None:
         """The owned pass program (``_prog``), pin program (``_pin_prog``) and
         displacement compute shader (``_comp``) from their sources."""

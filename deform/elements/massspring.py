@@ -54,8 +54,6 @@ from voxwarp.deform.elements.grid import ElementGrid, Selection, grid_from_entry
 from voxwarp.deform.elements.model import (
     HELD_FORM,
     ElementWarpMixin,
-    check_entry,
-    closed_on_error,
     held_entries,
     held_index,
     held_items,
@@ -392,6 +390,7 @@ class MassSpring(ElementWarpMixin):
         self._offsets = np.zeros((*grid.shape, 3), dtype=np.float64)
         self._warp: Any = None
         if backend == "gpu":
+            # the GPU backend (moderngl) loads only when asked for
             from voxwarp.deform.elements.massspring_gpu import GpuSpringSolver
 
             self._solver: Any = GpuSpringSolver(self._model, ctx)
@@ -696,7 +695,10 @@ class MassSpring(ElementWarpMixin):
         MassSpringError
             On a missing or malformed key; the message names the key and the fix.
         """
-        check_entry(d, MODEL_TYPE, MassSpringError)
+        return cls._from_entry(d, backend, ctx, positions)
+
+    @classmethod
+    def _entry_parts(cls, d: Mapping[str, Any]) -> tuple[ElementGrid, dict[str, Any], Any]:
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
         for key in ("integrator", "dt", "spring_constant", "spring_damping", "max_step"):
@@ -709,16 +711,17 @@ class MassSpring(ElementWarpMixin):
                         f"massspring '{key}' must be true or false; got {d[key]!r:.40}"
                     )
                 kwargs[key] = d[key]
-        held = _parse_held(d.get("held", []), grid)
-        if positions is None:
-            positions = d.get("positions")
-        ms = cls(grid, backend=backend, ctx=ctx, **kwargs)
-        with closed_on_error(ms):
-            if positions is not None:
-                ms.set_state(positions)
-            for idx, off in held:
-                ms.move(idx, off)
-        return ms
+        return grid, kwargs, None
+
+    @classmethod
+    def _entry_held(cls, held: Any, grid: ElementGrid) -> list[tuple[Any, np.ndarray]]:
+        return _parse_held(held, grid)  # type: ignore[return-value]
+
+    def _resume(self, extra: Any, held: list[tuple[Any, np.ndarray]], positions: Any) -> None:
+        if positions is not None:
+            self.set_state(positions)
+        for idx, off in held:
+            self.move(idx, off)
 
     def set_state(self, positions: Any, velocities: Any = None) -> None:
         """Replace the element positions (and velocities; default 0).

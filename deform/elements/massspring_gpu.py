@@ -441,8 +441,7 @@ class GpuSpringSolver(GpuGridSolver):
         self.ctx.memory_barrier()
 
     def _read(self, textures: list[list[Any]]) -> np.ndarray:
-        w, h = self.atlas_size
-        raws = [np.frombuffer(t.read(), np.float32).reshape(h, w, 4) for t in textures[self._cur]]
+        raws = [self._read_atlas(t) for t in textures[self._cur]]
         return self._from_atlas(raws)
 
     def positions(self) -> np.ndarray:

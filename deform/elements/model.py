@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from voxwarp.deform.elements.offset_field import element_model_warp, saved_model, texture_field
+
 if TYPE_CHECKING:
     from typing import Self
 
@@ -97,8 +99,6 @@ class ElementWarpMixin:
         ``to_dict()`` also writes this model and the field rendered, so a saved scene
         renders the same image and resumes (:meth:`from_warp`).
         """
-        from voxwarp.deform.elements.offset_field import element_model_warp
-
         self._warp = element_model_warp(
             self._warp,
             self.grid,
@@ -122,8 +122,6 @@ class ElementWarpMixin:
 
     def _rendered_field(self) -> np.ndarray:
         """(nx, ny, nz, 3) float64 field the GPU warp renders (a read-back)."""
-        from voxwarp.deform.elements.offset_field import texture_field
-
         field = texture_field(self._solver.displacement_texture(), self.grid.shape)
         return self.displacements().astype(np.float64) if field is None else field
 
@@ -134,10 +132,38 @@ class ElementWarpMixin:
         its :meth:`warp` is a new warp, to put in the scene in place of ``warp``.
         Raises the model's error when the warp carries no such model or the model and
         the field do not fit together."""
-        from voxwarp.deform.elements.offset_field import saved_model
-
         state, positions = saved_model(warp, cls.model_type, cls.label, cls.__name__, cls.error)
         return cls.from_dict(state, backend=backend, ctx=ctx, positions=positions)  # type: ignore[attr-defined]
+
+    @classmethod
+    def _from_entry(cls, d: Any, backend: str, ctx: Any, positions: Any) -> Self:
+        """The models' ``from_dict``: check the entry's type, read its grid and options
+        (:meth:`_entry_parts`) and its ``"held"`` list (:meth:`_entry_held`), make the
+        model and resume it (:meth:`_resume`; closed again if that fails).
+        ``positions`` (else the entry's) are the element positions to resume from."""
+        check_entry(d, cls.model_type, cls.error)
+        grid, kwargs, extra = cls._entry_parts(d)
+        held = cls._entry_held(d.get("held", []), grid)
+        if positions is None:
+            positions = d.get("positions")
+        model = cls(grid, backend=backend, ctx=ctx, **kwargs)  # type: ignore[call-arg]
+        with closed_on_error(model):
+            model._resume(extra, held, positions)
+        return model
+
+    @classmethod
+    def _entry_parts(cls, d: Mapping[str, Any]) -> tuple[ElementGrid, dict[str, Any], Any]:
+        """An entry's grid, constructor keywords and what :meth:`_resume` needs besides."""
+        raise NotImplementedError  # pragma: no cover - the models define it
+
+    @classmethod
+    def _entry_held(cls, held: Any, grid: ElementGrid) -> list[tuple[Any, np.ndarray]]:
+        """An entry's ``"held"`` list checked: (element, offset) pairs."""
+        raise NotImplementedError  # pragma: no cover - the models define it
+
+    def _resume(self, extra: Any, held: list[tuple[Any, np.ndarray]], positions: Any) -> None:
+        """Set a new model up as its entry says (held elements, positions, extras)."""
+        raise NotImplementedError  # pragma: no cover - the models define it
 
     def close(self) -> None:
         """Free the solver's and the warp's GPU resources; idempotent."""

@@ -43,15 +43,19 @@ def _region_centres(
     return lo + (ii + region_lo + 0.5) * h
 
 
+def side_tables(tab: WireTables, side: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """The wire points, frames and arc length of ``side`` (``"modified"`` or ``"base"``)."""
+    if side == "modified":
+        return tab.modified_points, tab.modified_frames, tab.length_modified
+    return tab.base_points, tab.base_frames, tab.length_base
+
+
 def _wire_local(
     tab: WireTables, side: str, u: np.ndarray, p: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Coordinates (x, y, z) of points p in the frame of ``side``'s wire at their
     closest point (u refined from the given u), and that u."""
-    if side == "modified":
-        points, frames, length = tab.modified_points, tab.modified_frames, tab.length_modified
-    else:
-        points, frames, length = tab.base_points, tab.base_frames, tab.length_base
+    points, frames, length = side_tables(tab, side)
     u = _refine_u(points, frames[:, :, 2], length, u, p)
     i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
     d = p - points[i]

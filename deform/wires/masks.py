@@ -18,7 +18,7 @@ from voxwarp.deform.wires.constants import (
     MASK_THREADS,
     MAX_MASK_PIXELS,
 )
-from voxwarp.deform.wires.geometry import _refine_u
+from voxwarp.deform.wires.geometry import _refine_u, side_tables
 from voxwarp.deform.wires.tables import WireTables, _lerp_table
 from voxwarp.deform.wires.wire import Wire
 
@@ -186,10 +186,7 @@ class PlaneMasks:
         mask, k, half = mask_geom
         n_planes = mask.shape[0]
         px = self.mask_resolution
-        if side == "modified":
-            points, frames, length = tab.modified_points, tab.modified_frames, tab.length_modified
-        else:
-            points, frames, length = tab.base_points, tab.base_frames, tab.length_base
+        points, frames, length = side_tables(tab, side)
         u = _refine_u(points, frames[:, :, 2], length, u, p)
         # the nearest table entry: its spacing (length / 255) is far below a mask pixel
         i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
