@@ -132,8 +132,11 @@ import numpy as np
 from voxwarp.deform.elements.chainmail_model import ChainMailError, ChainMailModel, check_limits
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
 from voxwarp.deform.elements.model import (
+    BACKENDS,
     HELD_FORM,
     ElementWarpMixin,
+    check_backend,
+    check_gpu_context,
     held_entries,
     held_index,
     held_items,
@@ -152,7 +155,6 @@ __all__ = [
 #: propagation variants of :class:`ChainMail`
 VARIANTS: tuple[str, ...] = ("gibson", "enhanced")
 #: solver backends of :class:`ChainMail`
-BACKENDS: tuple[str, ...] = ("cpu", "gpu")
 #: ``"type"`` of a ChainMail model in scene JSON (an offset-field warp's ``"model"``)
 MODEL_TYPE = "chainmail"
 #: default largest relative stretch/compression of a stiffness-0 element's links
@@ -294,12 +296,8 @@ class ChainMail(ElementWarpMixin):
                 "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
                 f" got {type(grid).__name__}"
             )
-        if backend not in BACKENDS:
-            raise ChainMailError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
-        if backend == "gpu" and ctx is None:
-            raise ChainMailError(
-                'backend="gpu" needs a moderngl context: pass ctx=..., or use backend="cpu"'
-            )
+        check_backend(backend, ChainMailError)
+        check_gpu_context(backend, ctx, ChainMailError)
         self.grid = grid
         self.backend = backend
         self._ctx = ctx

@@ -51,9 +51,12 @@ from typing import Any
 import numpy as np
 
 from voxwarp.deform.elements.grid import ElementGrid, Selection, grid_from_entry
+from voxwarp.deform.elements.model import BACKENDS as BACKENDS
 from voxwarp.deform.elements.model import (
     HELD_FORM,
     ElementWarpMixin,
+    check_backend,
+    check_gpu_context,
     held_entries,
     held_index,
     held_items,
@@ -62,7 +65,6 @@ from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 from voxwarp.errors import VoxwarpError
 
 #: solver backends of :class:`MassSpring`
-BACKENDS: tuple[str, ...] = ("cpu", "gpu")
 #: ``"type"`` of a mass-spring model in scene JSON (an offset-field warp's ``"model"``)
 MODEL_TYPE = "massspring"
 
@@ -342,16 +344,12 @@ class MassSpring(ElementWarpMixin):
                 "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
                 f" got {type(grid).__name__}"
             )
-        if backend not in BACKENDS:
-            raise MassSpringError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
+        check_backend(backend, MassSpringError)
         if integrator not in INTEGRATORS:
             raise MassSpringError(
                 f"unknown integrator {integrator!r}; valid integrators: {INTEGRATORS}"
             )
-        if backend == "gpu" and ctx is None:
-            raise MassSpringError(
-                'backend="gpu" needs a moderngl context: pass ctx=..., or use backend="cpu"'
-            )
+        check_gpu_context(backend, ctx, MassSpringError)
         spring_constant = _number(spring_constant, "spring_constant", positive=True)
         spring_damping = _number(spring_damping, "spring_damping", positive=False)
         if max_step is None:

@@ -173,6 +173,23 @@ class ElementWarpMixin:
             self._solver.release()
 
 
+# ---------------------------------------------------------------------- arguments
+#: where a model runs
+BACKENDS: tuple[str, ...] = ("cpu", "gpu")
+
+
+def check_backend(backend: str, error: type[Exception]) -> None:
+    """Raise ``error`` unless ``backend`` is one of :data:`BACKENDS`."""
+    if backend not in BACKENDS:
+        raise error(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
+
+
+def check_gpu_context(backend: str, ctx: Any, error: type[Exception]) -> None:
+    """Raise ``error`` when the GPU backend is asked for without a moderngl context."""
+    if backend == "gpu" and ctx is None:
+        raise error('backend="gpu" needs a moderngl context: pass ctx=..., or use backend="cpu"')
+
+
 # ---------------------------------------------------------------------- save / load
 #: how a held element is written in a model's ``"held"`` list
 HELD_FORM = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
