@@ -135,8 +135,8 @@ from voxwarp.deform.elements.model import (
     BACKENDS,
     HELD_FORM,
     ElementWarpMixin,
-    check_backend,
     check_gpu_context,
+    check_grid_and_backend,
     held_entries,
     held_index,
     held_items,
@@ -291,12 +291,7 @@ class ChainMail(ElementWarpMixin):
         shear: float = DEFAULT_SHEAR,
         relax_steps: int = 0,
     ) -> None:
-        if not isinstance(grid, ElementGrid):
-            raise ChainMailError(
-                "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
-                f" got {type(grid).__name__}"
-            )
-        check_backend(backend, ChainMailError)
+        check_grid_and_backend(grid, ElementGrid, backend, ChainMailError)
         check_gpu_context(backend, ctx, ChainMailError)
         self.grid = grid
         self.backend = backend

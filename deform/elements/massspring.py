@@ -55,8 +55,8 @@ from voxwarp.deform.elements.model import BACKENDS as BACKENDS
 from voxwarp.deform.elements.model import (
     HELD_FORM,
     ElementWarpMixin,
-    check_backend,
     check_gpu_context,
+    check_grid_and_backend,
     held_entries,
     held_index,
     held_items,
@@ -339,12 +339,7 @@ class MassSpring(ElementWarpMixin):
         bend: bool = False,
         max_step: float | None = None,
     ) -> None:
-        if not isinstance(grid, ElementGrid):
-            raise MassSpringError(
-                "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
-                f" got {type(grid).__name__}"
-            )
-        check_backend(backend, MassSpringError)
+        check_grid_and_backend(grid, ElementGrid, backend, MassSpringError)
         if integrator not in INTEGRATORS:
             raise MassSpringError(
                 f"unknown integrator {integrator!r}; valid integrators: {INTEGRATORS}"

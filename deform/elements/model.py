@@ -178,8 +178,16 @@ class ElementWarpMixin:
 BACKENDS: tuple[str, ...] = ("cpu", "gpu")
 
 
-def check_backend(backend: str, error: type[Exception]) -> None:
-    """Raise ``error`` unless ``backend`` is one of :data:`BACKENDS`."""
+def check_grid_and_backend(
+    grid: Any, grid_type: type, backend: str, error: type[Exception]
+) -> None:
+    """Raise ``error`` unless ``grid`` is a ``grid_type`` (the models pass
+    :class:`~voxwarp.deform.elements.grid.ElementGrid`) and ``backend`` one of
+    :data:`BACKENDS`."""
+    if not isinstance(grid, grid_type):
+        raise error(
+            f"grid must be a voxwarp.deform.elements.grid.ElementGrid; got {type(grid).__name__}"
+        )
     if backend not in BACKENDS:
         raise error(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
 
