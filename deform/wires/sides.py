@@ -26,7 +26,14 @@ from voxwarp.deform.wires.constants import (
     REFINE_STEPS,
     TOUCH_BLOCK_PIXELS,
 )
-from voxwarp.deform.wires.geometry import _CORNERS, _box_slices, _fade, _region_centres, _wire_local
+from voxwarp.deform.wires.geometry import (
+    _CORNERS,
+    _box_slices,
+    _fade,
+    _region_centres,
+    _wire_local,
+    side_tables,
+)
 from voxwarp.deform.wires.masks import PlaneMasks
 from voxwarp.deform.wires.propagation import nearest_seed
 from voxwarp.deform.wires.tables import WireTables, _lerp_table
@@ -75,6 +82,34 @@ class SidePasses(PlaneMasks):
     propagate: str
     propagation_input: tuple[np.ndarray, tuple[float, ...]] | None
 
+    def _device_geometries(
+        self,
+        tables: list[WireTables],
+        grown: list[tuple[np.ndarray, int, float]],
+        h: np.ndarray,
+        side: str,
+    ) -> list[WireGeometry]:
+        """What the OpenCL pass needs of each wire on ``side``: its table points and
+        frames, length, reach, grown masks, twist and scale keys."""
+        reach = self._reach(h, side)
+        geoms = []
+        for wi, (w, tab) in enumerate(zip(self.wires, tables, strict=True)):
+            points, frames, length = side_tables(tab, side)
+            geoms.append(
+                WireGeometry(
+                    points=points,
+                    tangents=frames[:, :, 2],
+                    frames=frames,
+                    length=length,
+                    reach=float(reach[wi]),
+                    mask=grown[wi][0],
+                    half=grown[wi][2],
+                    twist=w.twist,
+                    scale=w.scale,
+                )
+            )
+        return geoms
+
     def classify_on_device(self) -> bool:  # pragma: no cover - WireDeformer's
         raise NotImplementedError
 
@@ -105,7 +140,6 @@ class SidePasses(PlaneMasks):
         """:meth:`_side` in one OpenCL pass; None where OpenCL (with double precision)
         is unavailable, not asked for, or fails (the numpy path then runs)."""
         seeds, tables, grown, lo, h, shape, side, timings = job.parts()
-
         if self.backend not in ("auto", "opencl") or not self.classify_on_device():
             return None
         t0 = time.perf_counter()
@@ -114,23 +148,7 @@ class SidePasses(PlaneMasks):
             return None
         order = np.argsort(flat, kind="stable")
         modified = side == "modified"
-        reach = self._reach(h, side)
-        geoms = []
-        for wi, (w, tab) in enumerate(zip(self.wires, tables, strict=True)):
-            frames = tab.modified_frames if modified else tab.base_frames
-            geoms.append(
-                WireGeometry(
-                    points=tab.modified_points if modified else tab.base_points,
-                    tangents=frames[:, :, 2],
-                    frames=frames,
-                    length=tab.length_modified if modified else tab.length_base,
-                    reach=float(reach[wi]),
-                    mask=grown[wi][0],
-                    half=grown[wi][2],
-                    twist=w.twist,
-                    scale=w.scale,
-                )
-            )
+        geoms = self._device_geometries(tables, grown, h, side)
         inp = ClassifyInput(
             seed_idx=flat[order],
             seed_wire=s_wire[order],
