@@ -34,6 +34,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 	$(PY) scripts/lint_imports.py
+	$(PY) scripts/import_cycles.py
 
 ## the documentation site into site/ (warnings are errors); `mkdocs serve` to browse it
 docs: $(STAMP)

@@ -6,6 +6,10 @@ NRRD, NIfTI, DICOM folder, TIFF), a scene JSON written by ``Scene.save``, or
 and :func:`load_lattice_file` read the deformation files of ``--wires`` and
 ``--lattice``. Bad files raise :class:`~voxwarp.errors.InputError` naming the file and
 the fix.
+
+The command line imports this module to build its parser; to keep ``voxwarp --help``
+light, the readers, the scene and the deformation models load inside the functions that
+use them (the lattice warp brings scipy).
 """
 
 from __future__ import annotations

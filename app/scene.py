@@ -21,9 +21,11 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed warps
 from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
+from voxwarp.core.field_grid import chain_field, field_grid
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.core.mesh_warp import mesh_instances_bounds
@@ -48,6 +50,8 @@ from voxwarp.deform.warp import (
     warp_from_dict,
 )
 from voxwarp.errors import FieldError, MeshError, SceneError, VolumeError
+from voxwarp.io.samples import load_sample
+from voxwarp.io.volumes import load_volume
 
 if TYPE_CHECKING:
     from voxwarp.deform.fields.displacement import DisplacementFieldWarp
@@ -637,8 +641,6 @@ class Scene:
         Raises :class:`SceneError` for a bad ``spacing`` or ``box`` or a grid over the
         memory budget.
         """
-        from voxwarp.core.field_grid import chain_field, field_grid
-
         affine, shape = field_grid(self.volume, spacing, box)
         lo, hi = self.volume.bounds
         return chain_field(self.warps, affine, shape, vacated=lo - (hi - lo))
@@ -890,7 +892,6 @@ def _resolved_warp(d: Any, base_dir: str | os.PathLike | None) -> Any:
     keys = warp_class(d).file_keys
     if not any(k in d for k in keys):
         return d
-    import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed warps
 
     out = dict(d)
     for key in keys:
@@ -939,8 +940,6 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
                 space=str(d.get("space", "")),
             )
         if "sample" in d:
-            from voxwarp.io.samples import load_sample
-
             name = str(d["sample"])
             kwargs: dict[str, Any] = {}
             if name in GENERATED_SAMPLES and d.get("shape") is not None:
@@ -950,8 +949,6 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
             vol = _with_stated_shape(load_sample(name), d.get("shape"), f"sample:{name}")
             return _with_stated_geometry(vol, spacing, origin)
         if "path" in d:
-            from voxwarp.io.volumes import load_volume
-
             p = scene_file(d["path"], base_dir, "volume", SceneError)
             vol = _with_stated_shape(load_volume(p), d.get("shape"), str(p))
             return _with_stated_geometry(vol, spacing, origin)

@@ -10,7 +10,7 @@ sits in its ``$defs``):
 ``animation.schema.json``   the ``"animation"`` entry (:meth:`voxwarp.animation.tracks.
                             Animation.from_dict`)
 ``wires.schema.json``       a wire file, ``--wires`` (:func:`voxwarp.inputs.read_wire_file`,
-                            :meth:`voxwarp.deform.wires.field.Wire.from_dict`)
+                            :meth:`voxwarp.deform.wires.wire.Wire.from_dict`)
 ``lattice.schema.json``     a lattice file, ``--lattice`` (:func:`voxwarp.inputs.
                             load_lattice_file`, :meth:`voxwarp.deform.lattice.warp.
                             LatticeWarp.from_dict`)
@@ -52,16 +52,16 @@ from voxwarp.animation.tracks import (
 from voxwarp.core.camera import CAMERA_ARRAYS, PROJECTIONS, VIEW_NAMES, Camera
 from voxwarp.core.modes import MODES
 from voxwarp.deform.lattice.warp import INVERSE_MODES, LATTICE_KEYS, LATTICE_REQUIRED
-from voxwarp.deform.wires.curves import KINDS
-from voxwarp.deform.wires.field import (
+from voxwarp.deform.wires.constants import (
     ENDS,
     FIELD_SCALES,
     LAYOUTS,
     MAX_WIRES,
     PROPAGATE_MODES,
-    SPEC_KEYS,
     WIRE_KEYS,
 )
+from voxwarp.deform.wires.curves import KINDS
+from voxwarp.deform.wires.warp import SPEC_KEYS
 from voxwarp.inputs import FILE_NOTES, WIRE_FILE_KEYS
 from voxwarp.scene import FRAMES, SCENE_FORMAT, SCENE_KEYS, SCENE_TYPES, SCENE_VERSION
 

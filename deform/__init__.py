@@ -37,9 +37,9 @@ _PUBLIC: dict[str, str] = {
     "known_warps": "voxwarp.deform.warp",
     "register_warp": "voxwarp.deform.warp",
     "warp_from_dict": "voxwarp.deform.warp",
-    "Wire": "voxwarp.deform.wires.field",
-    "WireDeformer": "voxwarp.deform.wires.field",
-    "WireFieldWarp": "voxwarp.deform.wires.field",
+    "Wire": "voxwarp.deform.wires.wire",
+    "WireDeformer": "voxwarp.deform.wires.build",
+    "WireFieldWarp": "voxwarp.deform.wires.warp",
 }
 
 __all__ = sorted(_PUBLIC)
@@ -70,4 +70,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ loads t
         register_warp,
         warp_from_dict,
     )
-    from voxwarp.deform.wires.field import Wire, WireDeformer, WireFieldWarp
+    from voxwarp.deform.wires.build import WireDeformer
+    from voxwarp.deform.wires.warp import WireFieldWarp
+    from voxwarp.deform.wires.wire import Wire

@@ -65,7 +65,7 @@ _REGISTRY: dict[str, type[Warp]] = {}
 #: names one, so that reading a warp entry never depends on what was imported before
 _BUILT_IN: dict[str, str] = {
     "offset_field": "voxwarp.deform.elements.offset_field",
-    "wires": "voxwarp.deform.wires.field",
+    "wires": "voxwarp.deform.wires.warp",
     "lattice": "voxwarp.deform.lattice.warp",
     "displacement_field": "voxwarp.deform.fields.displacement",
 }

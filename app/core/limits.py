@@ -11,7 +11,7 @@ The limits of the lower layers live with their code (those layers cannot import 
 one): the sample phantoms' ``MAX_SAMPLE_VOXELS`` and ``MAX_SAMPLE_AXIS`` in
 :mod:`voxwarp.sample_volumes.generators`, the wires' ``MAX_WIRE_POINTS``,
 ``MAX_FIELD_VOXELS``, ``MAX_MASK_PIXELS`` and ``MAX_REACH_DIAGONALS`` in
-:mod:`voxwarp.deform.wires.field`, and the element grid's ``MAX_ELEMENTS_PER_AXIS`` in
+:mod:`voxwarp.deform.wires.constants`, and the element grid's ``MAX_ELEMENTS_PER_AXIS`` in
 :mod:`voxwarp.deform.elements.grid`.
 
 Loading a volume is bounded by a **memory budget**: by default

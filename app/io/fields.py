@@ -53,6 +53,13 @@ from voxwarp.deform.fields.displacement import DisplacementFieldWarp, set_field_
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.errors import FieldError, VolumeError
 from voxwarp.io.loaded import native_stderr
+from voxwarp.io.volumes import (
+    _check_nrrd_budget,
+    _check_nrrd_data_files,
+    _nifti_affine,
+    _nrrd_space,
+    data_file_outside,
+)
 
 #: Suffixes of displacement field images.
 IMAGE_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd", ".npz")
@@ -161,8 +168,6 @@ def _convention(convention: str | None, default: str | None, where: str) -> tupl
 def _read_nifti(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str, str]:
     import nibabel as nib
 
-    from voxwarp.io.volumes import _nifti_affine
-
     try:
         img = nib.load(str(path))
         shape = tuple(int(s) for s in img.shape)
@@ -204,8 +209,6 @@ def _read_nifti(path: Path, convention: str | None) -> tuple[np.ndarray, Any, st
 # ---------------------------------------------------------------------------- NRRD
 def _read_nrrd(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str, str]:
     import nrrd
-
-    from voxwarp.io.volumes import _check_nrrd_budget, _check_nrrd_data_files, _nrrd_space
 
     try:
         _check_nrrd_data_files(path)
@@ -295,8 +298,6 @@ def _sitk(what: str) -> Any:
 
 def _metaimage_data_file(path: Path) -> None:
     """Refuse a ``.mhd`` whose ``ElementDataFile`` lies outside its folder."""
-    from voxwarp.io.volumes import data_file_outside
-
     with open(path, "rb") as fh:
         head = fh.read(1 << 16).decode("ascii", "ignore")
     for line in head.splitlines():

@@ -16,6 +16,7 @@ import numpy as np
 
 from voxwarp.core import extras
 from voxwarp.core.volume import Volume
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field
 from voxwarp.deform.warp import Warp, chain_apply
 from voxwarp.io.fields import field_image, itk_affine
 
@@ -62,8 +63,6 @@ def from_sitk(image: Any, name: str = "volume", **fields: Any) -> Volume:
 def displacement_transform(warps: Sequence[Warp], reference: Volume) -> Any:
     """An ITK ``DisplacementFieldTransform`` of a warp chain, sampled on ``reference``'s
     grid (the pull-back field ``chain(p) - p``)."""
-    from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field
-
     sitk = sitk_module("voxwarp.io.itk.displacement_transform")
     u = sample_chain_field(lambda p: chain_apply(warps, p), reference.affine, reference.shape)
     field = DisplacementFieldWarp(u, reference.affine)

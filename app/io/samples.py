@@ -8,12 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from voxwarp import sample_volumes
+from voxwarp.core.volume import Volume
 from voxwarp.errors import VolumeError
-
-if TYPE_CHECKING:
-    from voxwarp.core.volume import Volume
 
 #: The sample `make run` and `voxwarp demo` render by default.
 DEFAULT_SAMPLE = "stent"
@@ -48,15 +47,11 @@ def suggested_transfer_function(name: str) -> Any:
 
 def sample_names() -> list[str]:
     """Names accepted by :func:`load_sample`."""
-    from voxwarp import sample_volumes
-
     return list(sample_volumes.names())
 
 
 def bundled_dir() -> Path:
     """The folder of the bundled sample files (scenes, wire and lattice files, volumes)."""
-    from voxwarp import sample_volumes
-
     return Path(sample_volumes.__file__).resolve().parent
 
 
@@ -70,9 +65,6 @@ def load_sample(
 
     ``kwargs`` go to the generator (``shape``, ``seed``) for synthetic phantoms.
     """
-    from voxwarp import sample_volumes
-    from voxwarp.core.volume import Volume
-
     if name not in sample_volumes.names():
         raise VolumeError(
             f"unknown sample {name!r}; bundled samples: {', '.join(sample_volumes.names())}"

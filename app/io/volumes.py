@@ -68,6 +68,8 @@ from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
 from voxwarp.core.volume import short_repr as _short
 from voxwarp.errors import VolumeError
+from voxwarp.io import samples as _samples
+from voxwarp.io.dicom import list_dicom_series, read_dicom_dir, read_dicom_file
 from voxwarp.io.loaded import Loaded as _Loaded
 from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
 from voxwarp.io.loaded import native as _native
@@ -316,9 +318,7 @@ def load_volume(
     sample_spacing: str | None = None  # a bundled sample knows whether its spacing is real
 
     if isinstance(source, str) and source.startswith("sample:") and not os.path.exists(source):
-        from voxwarp.io.samples import load_sample
-
-        sample = load_sample(source.split(":", 1)[1])
+        sample = _samples.load_sample(source.split(":", 1)[1])  # looked up when called
         loaded = _Loaded(sample.data, sample.spacing, sample.origin, sample.units)
         if sample.space:
             loaded.affine, loaded.space = sample.affine, sample.space
@@ -490,8 +490,6 @@ def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
             )
         return _read_raw(path, sidecar)
     if lower.endswith((".dcm", ".dicom")):
-        from voxwarp.io.dicom import read_dicom_file
-
         return read_dicom_file(path)
     raise VolumeError(
         f"unsupported file type {path.suffix or '(no extension)'} for {path}; voxwarp reads"
@@ -1043,8 +1041,6 @@ def _list_files(directory: Path) -> list[Path]:
 
 def dicom_series(path: str | os.PathLike[str]) -> list[Any]:
     """The DICOM series in a folder (``SeriesInfo``, largest first); empty otherwise."""
-    from voxwarp.io.dicom import list_dicom_series
-
     folder = Path(os.path.abspath(os.path.expanduser(os.fspath(path))))
     if not folder.is_dir():
         return []
@@ -1053,8 +1049,6 @@ def dicom_series(path: str | os.PathLike[str]) -> list[Any]:
 
 
 def _read_directory(directory: Path, series: str | int | None = None) -> _Loaded:
-    from voxwarp.io.dicom import read_dicom_dir
-
     entries = _list_files(directory)
     tiffs = [p for p in entries if p.name.lower().endswith(_TIFF_EXTENSIONS)]
     others = [p for p in entries if not p.name.lower().endswith(_TIFF_EXTENSIONS)]

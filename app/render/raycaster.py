@@ -45,6 +45,7 @@ from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.modes import xray_reference_length
 from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
+from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
@@ -495,7 +496,6 @@ class Renderer:
             },
         )
         frag = shaders.with_defines(frag, defines)
-        from voxwarp.deform import gl_programs
 
         try:  # compiled once per context, shared by its renderers (gl_programs)
             hold = gl_programs.program(
@@ -819,8 +819,6 @@ class Renderer:
         _, tex, fbo = self._lod_target
         self.draw(scene, fbo, (0, 0, *size), camera)
         if self._upscale is None:
-            from voxwarp.deform import gl_programs
-
             hold = gl_programs.program(
                 self.ctx,
                 vertex_shader=shaders.source("upscale.vert.glsl"),

@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from voxwarp import shaders
+from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import compose_glsl
 from voxwarp.errors import RenderError
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
@@ -88,7 +89,6 @@ class SliceRenderer:
             ["#define NEAREST"] if nearest else []
         )
         frag = shaders.with_defines(frag, defines)
-        from voxwarp.deform import gl_programs
 
         try:
             hold = gl_programs.program(

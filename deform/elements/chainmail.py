@@ -131,7 +131,16 @@ import numpy as np
 
 from voxwarp.deform.elements.chainmail_model import ChainMailError, ChainMailModel, check_limits
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
-from voxwarp.deform.elements.model import ElementWarpMixin
+from voxwarp.deform.elements.model import (
+    BACKENDS,
+    HELD_FORM,
+    ElementWarpMixin,
+    check_gpu_context,
+    check_grid_and_backend,
+    held_entries,
+    held_index,
+    held_items,
+)
 
 __all__ = [
     "BACKENDS",
@@ -146,7 +155,6 @@ __all__ = [
 #: propagation variants of :class:`ChainMail`
 VARIANTS: tuple[str, ...] = ("gibson", "enhanced")
 #: solver backends of :class:`ChainMail`
-BACKENDS: tuple[str, ...] = ("cpu", "gpu")
 #: ``"type"`` of a ChainMail model in scene JSON (an offset-field warp's ``"model"``)
 MODEL_TYPE = "chainmail"
 #: default largest relative stretch/compression of a stiffness-0 element's links
@@ -235,7 +243,7 @@ def limits_from_stiffness(
 
 
 def _kernels() -> Any:
-    from voxwarp.deform.elements import chainmail_cpu
+    from voxwarp.deform.elements import chainmail_cpu  # numba: loaded when first used
 
     return chainmail_cpu
 
@@ -283,17 +291,8 @@ class ChainMail(ElementWarpMixin):
         shear: float = DEFAULT_SHEAR,
         relax_steps: int = 0,
     ) -> None:
-        if not isinstance(grid, ElementGrid):
-            raise ChainMailError(
-                "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
-                f" got {type(grid).__name__}"
-            )
-        if backend not in BACKENDS:
-            raise ChainMailError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
-        if backend == "gpu" and ctx is None:
-            raise ChainMailError(
-                'backend="gpu" needs a moderngl context: pass ctx=..., or use backend="cpu"'
-            )
+        check_grid_and_backend(grid, ElementGrid, backend, ChainMailError)
+        check_gpu_context(backend, ctx, ChainMailError)
         self.grid = grid
         self.backend = backend
         self._ctx = ctx
@@ -1039,6 +1038,7 @@ class ChainMail(ElementWarpMixin):
     # ------------------------------------------------------------------ GPU backend
     def _make_gpu_solver(self) -> Any:
         try:
+            # the GPU backend (moderngl) loads only when asked for
             from voxwarp.deform.elements.chainmail_gpu import GpuChainMailSolver
         except ImportError as exc:
             raise ChainMailError(
@@ -1081,11 +1081,10 @@ class ChainMail(ElementWarpMixin):
             The backend is not part of the model.
         """
         m = self._model
-        held = [
-            {"index": [int(v) for v in np.unravel_index(e, self.grid.shape)],
-             "offset": self._offsets[e].tolist()}
-            for e in np.flatnonzero(self._held)
-        ]  # fmt: skip
+        flat = np.flatnonzero(self._held)
+        held = held_entries(
+            np.stack(np.unravel_index(flat, self.grid.shape), -1), self._offsets[flat]
+        )
         d: dict[str, Any] = {
             "grid": self.grid.to_dict(),
             "variant": self._variant,
@@ -1129,11 +1128,10 @@ class ChainMail(ElementWarpMixin):
         ChainMailError
             On a missing or malformed key; the message names the key and the fix.
         """
-        if not isinstance(d, Mapping):
-            raise ChainMailError(f"a chainmail entry must be an object; got {d!r:.80}")
-        kind = d.get("type", MODEL_TYPE)
-        if kind != MODEL_TYPE:
-            raise ChainMailError(f"a chainmail entry has 'type' {kind!r}; expected {MODEL_TYPE!r}")
+        return cls._from_entry(d, backend, ctx, positions)
+
+    @classmethod
+    def _entry_parts(cls, d: Mapping[str, Any]) -> tuple[ElementGrid, dict[str, Any], Any]:
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
         for key in ("variant", "relax_steps"):
@@ -1145,28 +1143,26 @@ class ChainMail(ElementWarpMixin):
                 "chainmail 'limits' must be an object with keys among 'min_dist',"
                 f" 'max_dist', 'max_shear'; got {limits!r:.80}"
             )
-        cuts = d.get("cuts", [])
-        held = _parse_held(d.get("held", []), grid)
-        if positions is None:
-            positions = d.get("positions")
-        cm = cls(grid, backend=backend, ctx=ctx, **kwargs)
-        try:
-            if limits:
-                cm.set_limits(**{k: v for k, v in limits.items()})
-            cm._cut_links(cuts)
-            if positions is not None:
-                for e, off in held:
-                    cm._held[e] = True
-                    cm._offsets[e] = off
-                cm._pinned = cm._model.fixed.reshape(-1) | cm._held
-                cm.set_state(positions)
-            else:
-                for e, off in held:
-                    cm.move(np.unravel_index(e, grid.shape), off)
-        except BaseException:
-            cm.close()
-            raise
-        return cm
+        return grid, kwargs, (limits, d.get("cuts", []))
+
+    @classmethod
+    def _entry_held(cls, held: Any, grid: ElementGrid) -> list[tuple[Any, np.ndarray]]:
+        return _parse_held(held, grid)  # type: ignore[return-value]
+
+    def _resume(self, extra: Any, held: list[tuple[Any, np.ndarray]], positions: Any) -> None:
+        limits, cuts = extra
+        if limits:
+            self.set_limits(**{k: v for k, v in limits.items()})
+        self._cut_links(cuts)
+        if positions is not None:
+            for e, off in held:
+                self._held[e] = True
+                self._offsets[e] = off
+            self._pinned = self._model.fixed.reshape(-1) | self._held
+            self.set_state(positions)
+        else:
+            for e, off in held:
+                self.move(np.unravel_index(e, self.grid.shape), off)
 
     def _cut_links(self, cuts: Any) -> None:
         form = "chainmail 'cuts' must be a list of removed links [i, j, k, axis]"
@@ -1244,22 +1240,11 @@ def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
 
 def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[int, np.ndarray]]:
     """Validate a ``"held"`` list; returns (flat index, offset) pairs."""
-    form = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
-    if not isinstance(held, list | tuple):
-        raise ChainMailError(f"chainmail 'held' must be a list; {form}; got {held!r:.80}")
     out = []
-    for n, entry in enumerate(held):
-        where = f"chainmail 'held'[{n}]"
+    for where, entry in held_items(held, MODEL_TYPE, ChainMailError):
         if not isinstance(entry, Mapping) or not {"index", "offset"} <= set(entry):
-            raise ChainMailError(f"{where}: {form}; got {entry!r:.80}")
-        raw = entry["index"]
-        ok = (
-            isinstance(raw, list | tuple)
-            and len(raw) == 3
-            and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
-        )
-        if not ok:
-            raise ChainMailError(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+            raise ChainMailError(f"{where}: {HELD_FORM}; got {entry!r:.80}")
+        raw = held_index(entry["index"], where, ChainMailError)
         try:
             idx = tuple(int(v) for v in grid.indices(raw)[0])
         except ElementGridError as exc:

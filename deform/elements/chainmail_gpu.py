@@ -142,17 +142,13 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform import gl_programs
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
-from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
-from voxwarp.deform.elements.massspring_gpu import atlas_layout
+from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
 CHECK_TOL_MM = 1e-4
 #: Limit of an absent link (cut, or past a face): its interval is (-BIG, BIG).
 _BIG = 1e30
-#: llvmpipe's raster tile (pixels): each is shaded by one thread
-_RASTER_TILE = 64
 #: Work-group size of the displacement compute shader.
 _GROUP = (8, 8, 1)
 #: GL_RGBA16F, the image format of the displacement texture.
@@ -217,17 +213,15 @@ class GpuChainMailSolver(GpuGridSolver):
     """
 
     def __init__(self, model: ChainMailModel, ctx: Any, *, local: bool = True) -> None:
-        require_compute_context(
+        self._setup(
+            model,
             ctx,
             "GpuChainMailSolver",
             "use the CPU ChainMail of voxwarp.deform.elements.chainmail without a GL context",
             "compute shaders, SSBOs",
         )
-        self.model = model
-        self.ctx = ctx
         #: restrict passes to the box that can still change (see the module doc)
         self.local = bool(local)
-        self._init_objects()
         shape = model.shape
         if len(shape) != 3 or min(shape) < 1:
             raise GpuSolverError(
@@ -243,13 +237,8 @@ class GpuChainMailSolver(GpuGridSolver):
             raise GpuSolverError(
                 f"a grid of {nx}x{ny}x{nz} elements exceeds the context's textures"
             )
-        tx, ty = atlas_layout(shape, max_2d)
-        if tx * nx <= _RASTER_TILE and ty * ny <= _RASTER_TILE and nz * nx <= max_2d:
-            tx, ty = nz, 1  # one row: at least two raster tiles, so two threads
-        #: tiles (z-slices) per row and per column of the atlas
-        self.tiles: tuple[int, int] = (tx, ty)
-        #: atlas size in texels (width, height)
-        self.atlas_size: tuple[int, int] = (tx * nx, ty * ny)
+        #: tiles (z-slices) per row and per column of the atlas, its size in texels (w, h)
+        self._set_atlas(shape, max_2d)
         #: world origin of the stored coordinates (the rest box's centre, float64)
         rest = np.asarray(model.rest, np.float64)
         flat = rest.reshape(-1, 3)
@@ -282,61 +271,30 @@ class GpuChainMailSolver(GpuGridSolver):
             f"#define BX {nx}\n#define BY {ny}\n#define BZ {nz}\n#define TX {self.tiles[0]}\n"
             f"#define CM_ATLAS_W {w}.0\n#define CM_ATLAS_H {h}.0\n"
         )
-        vert = shaders.source("chainmail_box.vert.glsl", {"chainmail_config.glsl": config})
-        self._prog = self._keep(
-            gl_programs.program(
-                ctx,
-                vertex_shader=vert,
-                fragment_shader=shaders.source(
-                    "chainmail_pass.frag.glsl", {"chainmail_config.glsl": config}
-                ),
-            )
-        ).program
-        self._pin_prog = self._keep(
-            gl_programs.program(
-                ctx,
-                vertex_shader=vert,
-                fragment_shader=shaders.source(
-                    "chainmail_pass.frag.glsl",
-                    {"chainmail_config.glsl": config + "#define CM_PIN_PASS\n"},
-                ),
-            )
-        ).program
-        self._comp = self._keep(
-            gl_programs.compute_shader(
-                ctx,
-                shaders.source(
-                    "chainmail_displacement.comp.glsl", {"chainmail_config.glsl": config}
-                ),
-            )
-        ).program
+        cfg = {"chainmail_config.glsl": config}
+        self._make_programs(
+            shaders.source("chainmail_box.vert.glsl", cfg),
+            shaders.source("chainmail_pass.frag.glsl", cfg),
+            shaders.source(
+                "chainmail_pass.frag.glsl",
+                {"chainmail_config.glsl": config + "#define CM_PIN_PASS\n"},
+            ),
+            shaders.source("chainmail_displacement.comp.glsl", cfg),
+        )
         self._vao = self._keep(ctx.vertex_array(self._prog, []))
         self._pin_vao = self._keep(ctx.vertex_array(self._pin_prog, []))
-        self._pos = [self._texture() for _ in range(2)]
+        self._pos = [self._atlas_texture() for _ in range(2)]
         self._fbo = [self._keep(ctx.framebuffer(color_attachments=[t])) for t in self._pos]
         self._cur = 0
         self._scope = self._keep(ctx.scope(self._fbo[0], enable_only=moderngl.NOTHING))
-        self._links = [self._texture(a) for a in self._to_atlas(_link_data(model))]
-        self._target = self._texture()
+        self._links = [self._atlas_texture(a) for a in self._to_atlas(_link_data(model))]
+        self._target = self._atlas_texture()
         rest4 = np.zeros((*self.shape, 4), np.float32)
         rest4[..., :3] = np.asarray(model.rest, np.float64) - self._origin
-        self._rest = self._texture(self._to_atlas(rest4)[0])
+        self._rest = self._atlas_texture(self._to_atlas(rest4)[0])
         self._changes = self._keep(ctx.buffer(_RESET))
-        # z-slices as layers of a 2D array, as GpuSpringSolver's (the offset-field warp
-        # samples it with two bilinear fetches)
-        self._disp = self._keep(ctx.texture_array(self.shape, 4, dtype="f2"))
-        self._disp.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._disp.repeat_x = self._disp.repeat_y = False
+        self._make_displacement()
         self.set_positions(np.asarray(model.rest, np.float64))
-
-    def _texture(self, data: np.ndarray | None = None) -> Any:
-        w, h = self.atlas_size
-        if data is None:
-            data = np.zeros((h, w, 4), np.float32)
-        tex = self._keep(self.ctx.texture((w, h), 4, data.tobytes(), dtype="f4"))
-        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        tex.repeat_x = tex.repeat_y = False
-        return tex
 
     def _to_atlas(self, grid: np.ndarray) -> list[np.ndarray]:
         """(nx, ny, nz, 4c) -> c (height, width, 4) float32 atlases (z-slice tiles)."""
@@ -670,7 +628,7 @@ class GpuChainMailSolver(GpuGridSolver):
         :meth:`restore`."""
         self._check_alive()
         if getattr(self, "_snap", None) is None:
-            self._snap = self._texture()
+            self._snap = self._atlas_texture()
             self._snap_fbo = self._keep(self.ctx.framebuffer([self._snap]))
         self.ctx.copy_framebuffer(self._snap_fbo, self._fbo[self._cur])
         self._snap_state = (
@@ -708,24 +666,8 @@ class GpuChainMailSolver(GpuGridSolver):
             ``(nx, ny, nz, 3)`` float64, world mm.
         """
         self._check_alive()
-        w, h = self.atlas_size
-        raw = np.frombuffer(self._pos[self._cur].read(), np.float32).reshape(h, w, 4)
+        raw = self._read_atlas(self._pos[self._cur])
         return self._from_atlas(raw)[..., :3].astype(np.float64) + self._origin
-
-    def displacement_texture(self) -> moderngl.TextureArray:
-        """The offset field as a 2D array texture (z-slices as layers), kept up to date
-        on the GPU.
-
-        Returns
-        -------
-        moderngl.TextureArray
-            Size ``(nx, ny, nz)``, RGBA16F; texel ``(i, j)`` of layer ``k`` holds the
-            element's displacement ``x - rest`` (world mm) in xyz and 0 in a. Linear
-            filtering, clamped to edge. Owned by the solver (freed by :meth:`release`);
-            the same object for the solver's lifetime.
-        """
-        self._check_alive()
-        return self._disp
 
 
 def _link_data(model: ChainMailModel) -> np.ndarray:

@@ -51,12 +51,20 @@ from typing import Any
 import numpy as np
 
 from voxwarp.deform.elements.grid import ElementGrid, Selection, grid_from_entry
-from voxwarp.deform.elements.model import ElementWarpMixin
+from voxwarp.deform.elements.model import BACKENDS as BACKENDS
+from voxwarp.deform.elements.model import (
+    HELD_FORM,
+    ElementWarpMixin,
+    check_gpu_context,
+    check_grid_and_backend,
+    held_entries,
+    held_index,
+    held_items,
+)
 from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 from voxwarp.errors import VoxwarpError
 
 #: solver backends of :class:`MassSpring`
-BACKENDS: tuple[str, ...] = ("cpu", "gpu")
 #: ``"type"`` of a mass-spring model in scene JSON (an offset-field warp's ``"model"``)
 MODEL_TYPE = "massspring"
 
@@ -331,21 +339,12 @@ class MassSpring(ElementWarpMixin):
         bend: bool = False,
         max_step: float | None = None,
     ) -> None:
-        if not isinstance(grid, ElementGrid):
-            raise MassSpringError(
-                "grid must be a voxwarp.deform.elements.grid.ElementGrid;"
-                f" got {type(grid).__name__}"
-            )
-        if backend not in BACKENDS:
-            raise MassSpringError(f"unknown backend {backend!r}; valid backends: {BACKENDS}")
+        check_grid_and_backend(grid, ElementGrid, backend, MassSpringError)
         if integrator not in INTEGRATORS:
             raise MassSpringError(
                 f"unknown integrator {integrator!r}; valid integrators: {INTEGRATORS}"
             )
-        if backend == "gpu" and ctx is None:
-            raise MassSpringError(
-                'backend="gpu" needs a moderngl context: pass ctx=..., or use backend="cpu"'
-            )
+        check_gpu_context(backend, ctx, MassSpringError)
         spring_constant = _number(spring_constant, "spring_constant", positive=True)
         spring_damping = _number(spring_damping, "spring_damping", positive=False)
         if max_step is None:
@@ -384,6 +383,7 @@ class MassSpring(ElementWarpMixin):
         self._offsets = np.zeros((*grid.shape, 3), dtype=np.float64)
         self._warp: Any = None
         if backend == "gpu":
+            # the GPU backend (moderngl) loads only when asked for
             from voxwarp.deform.elements.massspring_gpu import GpuSpringSolver
 
             self._solver: Any = GpuSpringSolver(self._model, ctx)
@@ -638,10 +638,8 @@ class MassSpring(ElementWarpMixin):
         for name in ("stiffness", "damping", "mass"):  # the materials the solver runs
             a = np.asarray(getattr(m, name), dtype=np.float32)
             grid[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
-        held = [
-            {"index": [int(v) for v in idx], "offset": self._offsets[tuple(idx)].tolist()}
-            for idx in np.argwhere(self._held)
-        ]
+        where = np.argwhere(self._held)
+        held = held_entries(where, self._offsets[tuple(where.T)])
         d: dict[str, Any] = {
             "grid": grid,
             "integrator": self.integrator,
@@ -690,13 +688,10 @@ class MassSpring(ElementWarpMixin):
         MassSpringError
             On a missing or malformed key; the message names the key and the fix.
         """
-        if not isinstance(d, Mapping):
-            raise MassSpringError(f"a massspring entry must be an object; got {d!r:.80}")
-        kind = d.get("type", MODEL_TYPE)
-        if kind != MODEL_TYPE:
-            raise MassSpringError(
-                f"a massspring entry has 'type' {kind!r}; expected {MODEL_TYPE!r}"
-            )
+        return cls._from_entry(d, backend, ctx, positions)
+
+    @classmethod
+    def _entry_parts(cls, d: Mapping[str, Any]) -> tuple[ElementGrid, dict[str, Any], Any]:
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
         for key in ("integrator", "dt", "spring_constant", "spring_damping", "max_step"):
@@ -709,19 +704,17 @@ class MassSpring(ElementWarpMixin):
                         f"massspring '{key}' must be true or false; got {d[key]!r:.40}"
                     )
                 kwargs[key] = d[key]
-        held = _parse_held(d.get("held", []), grid)
-        if positions is None:
-            positions = d.get("positions")
-        ms = cls(grid, backend=backend, ctx=ctx, **kwargs)
-        try:
-            if positions is not None:
-                ms.set_state(positions)
-            for idx, off in held:
-                ms.move(idx, off)
-        except BaseException:
-            ms.close()
-            raise
-        return ms
+        return grid, kwargs, None
+
+    @classmethod
+    def _entry_held(cls, held: Any, grid: ElementGrid) -> list[tuple[Any, np.ndarray]]:
+        return _parse_held(held, grid)  # type: ignore[return-value]
+
+    def _resume(self, extra: Any, held: list[tuple[Any, np.ndarray]], positions: Any) -> None:
+        if positions is not None:
+            self.set_state(positions)
+        for idx, off in held:
+            self.move(idx, off)
 
     def set_state(self, positions: Any, velocities: Any = None) -> None:
         """Replace the element positions (and velocities; default 0).
@@ -787,26 +780,15 @@ def _grid_from(d: Mapping[str, Any]) -> ElementGrid:
 
 def _parse_held(held: Any, grid: ElementGrid) -> list[tuple[tuple[int, int, int], np.ndarray]]:
     """Validate a ``"held"`` list: ``[{"index": [i, j, k], "offset": [dx, dy, dz]}, ...]``."""
-    form = 'each held element is {"index": [i, j, k], "offset": [dx, dy, dz]} (mm)'
-    if not isinstance(held, list | tuple):
-        raise MassSpringError(f"massspring 'held' must be a list; {form}; got {held!r:.80}")
     pinned = grid.pinned()
     out = []
-    for n, entry in enumerate(held):
-        where = f"massspring 'held'[{n}]"
+    for where, entry in held_items(held, MODEL_TYPE, MassSpringError):
         if not isinstance(entry, Mapping):
-            raise MassSpringError(f"{where} must be an object; {form}; got {entry!r:.80}")
+            raise MassSpringError(f"{where} must be an object; {HELD_FORM}; got {entry!r:.80}")
         missing = [k for k in ("index", "offset") if k not in entry]
         if missing:
-            raise MassSpringError(f"{where} needs the keys {missing}; {form}")
-        raw = entry["index"]
-        ok = (
-            isinstance(raw, list | tuple)
-            and len(raw) == 3
-            and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
-        )
-        if not ok:
-            raise MassSpringError(f"{where} 'index' must be 3 integers [i, j, k]; got {raw!r:.80}")
+            raise MassSpringError(f"{where} needs the keys {missing}; {HELD_FORM}")
+        raw = held_index(entry["index"], where, MassSpringError)
         idx = tuple(int(v) for v in raw)
         if any(v < 0 or v >= s for v, s in zip(idx, grid.shape, strict=True)):
             raise MassSpringError(

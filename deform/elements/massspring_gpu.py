@@ -28,10 +28,11 @@ block grid is tiled by z-slices: ``tiles_x`` tiles per row, slice ``K`` being th
 
 of every texture (``u`` = column/x, ``v`` = row/y). The atlas is
 ``(tiles_x * bx) x (tiles_y * by)`` texels with ``tiles_y = ceil(bz / tiles_x)``;
-:func:`atlas_layout` makes it as square as possible within ``GL_MAX_TEXTURE_SIZE``
-(128³ elements in 2 x 2 x 1 blocks: 11 x 12 tiles, 704 x 768 texels), except that an
-atlas fitting in one 64 x 64 llvmpipe raster tile is laid out as one row instead, so
-that both rasterizer threads get work. The step draw covers only the used tiles.
+:func:`~voxwarp.deform.elements.gpu_grid.atlas_layout` makes it as square as possible
+within ``GL_MAX_TEXTURE_SIZE`` (128³ elements in 2 x 2 x 1 blocks: 11 x 12 tiles, 704 x
+768 texels), except that an atlas fitting in one 64 x 64 llvmpipe raster tile is laid
+out as one row instead, so that both rasterizer threads get work. The step draw covers
+only the used tiles.
 Textures (RGBA32F, ``NEAREST``), per element of a block:
 
 * position ``(x, y, z, stiffness)`` and velocity ``(vx, vy, vz, 1 / mass)``, two of
@@ -98,8 +99,7 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform import gl_programs
-from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError, require_compute_context
+from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError
 from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
 
 #: Most springs per element the shaders accept (structural + shear + bend).
@@ -108,51 +108,10 @@ MAX_SPRINGS = 24
 MAX_BLOCK = 4
 #: Elements per fragment along x, y, z by default (see module doc).
 DEFAULT_BLOCK = (2, 2, 1)
-#: llvmpipe's raster tile (pixels): each is shaded by one thread
-_RASTER_TILE = 64
 #: Work-group size of the displacement compute shader.
 _GROUP = (8, 8, 1)
 #: GL_RGBA16F, the image format of the displacement texture.
 _GL_RGBA16F = 0x881A
-
-
-def atlas_layout(shape: tuple[int, int, int], max_size: int) -> tuple[int, int]:
-    """Tiles per row and per column of the z-slice atlas of a grid (see module doc).
-
-    Parameters
-    ----------
-    shape
-        Cells per axis ``(nx, ny, nz)`` (the solver passes its block grid).
-    max_size
-        Largest texture side allowed (``GL_MAX_TEXTURE_SIZE``).
-
-    Returns
-    -------
-    tuple of int
-        ``(tiles_x, tiles_y)`` with ``tiles_x * tiles_y >= nz``, minimising the longer
-        atlas side, then the atlas area.
-
-    Raises
-    ------
-    ValueError
-        If no arrangement fits within ``max_size``.
-    """
-    nx, ny, nz = (int(n) for n in shape)
-    best: tuple[tuple[int, int], tuple[int, int]] | None = None
-    for tx in range(1, nz + 1):
-        ty = -(-nz // tx)
-        w, h = tx * nx, ty * ny
-        if w > max_size or h > max_size:
-            continue
-        key = (max(w, h), w * h)
-        if best is None or key < best[0]:
-            best = (key, (tx, ty))
-    if best is None:
-        raise GpuSolverError(
-            f"a grid of {nx}x{ny}x{nz} elements does not fit in a 2D atlas of at most"
-            f" {max_size}x{max_size} texels"
-        )
-    return best[1]
 
 
 def block_shape(shape: tuple[int, int, int], block: tuple[int, int, int]) -> tuple[int, int, int]:
@@ -185,15 +144,13 @@ class GpuSpringSolver(GpuGridSolver):
     def __init__(
         self, model: SpringModel, ctx: Any, *, block: tuple[int, int, int] = DEFAULT_BLOCK
     ) -> None:
-        require_compute_context(
+        self._setup(
+            model,
             ctx,
             "GpuSpringSolver",
             "use voxwarp.deform.elements.massspring.CpuSpringSolver without a GL context",
             "compute shaders",
         )
-        self.model = model
-        self.ctx = ctx
-        self._init_objects()
         shape = _check_model(model)
         self.shape: tuple[int, int, int] = shape
         nx, ny, nz = shape
@@ -216,14 +173,8 @@ class GpuSpringSolver(GpuGridSolver):
             raise GpuSolverError(
                 f"a grid of {nx}x{ny}x{nz} elements exceeds GL_MAX_3D_TEXTURE_SIZE {max_3d}"
             )
-        bx, by, nz_blocks = self.blocks
-        tx, ty = atlas_layout(self.blocks, max_2d)
-        if tx * bx <= _RASTER_TILE and ty * by <= _RASTER_TILE and nz_blocks * bx <= max_2d:
-            tx, ty = nz_blocks, 1  # one row: at least two raster tiles, so two threads
-        #: tiles per row and per column of the block atlas
-        self.tiles: tuple[int, int] = (tx, ty)
-        #: atlas size in texels (width, height)
-        self.atlas_size: tuple[int, int] = (tx * bx, ty * by)
+        #: tiles per row and per column of the block atlas, its size in texels (w, h)
+        self._set_atlas(self.blocks, max_2d)
         self._n_springs = len(model.offsets)
         self._pinned = np.zeros(shape, bool)
         self._pin_pending = False
@@ -234,44 +185,29 @@ class GpuSpringSolver(GpuGridSolver):
     def _create(self, model: SpringModel) -> None:
         ctx = self.ctx
         config = _config_glsl(self.shape, self.block, self.tiles[0], model)
-        vert = shaders.source("massspring_step.vert.glsl")
-        self._prog = self._keep(
-            gl_programs.program(
-                ctx,
-                vertex_shader=vert,
-                fragment_shader=shaders.source(
-                    "massspring_step.frag.glsl",
-                    {"massspring_config.glsl": config, "massspring_pass.glsl": _step_glsl(self)},
-                ),
-            )
-        ).program
-        self._pin_prog = self._keep(
-            gl_programs.program(
-                ctx,
-                vertex_shader=vert,
-                fragment_shader=shaders.source(
-                    "massspring_step.frag.glsl",
-                    {
-                        "massspring_config.glsl": config + "#define MS_PIN_PASS\n",
-                        "massspring_pass.glsl": _pin_glsl(self),
-                    },
-                ),
-            )
-        ).program
-        self._comp = self._keep(
-            gl_programs.compute_shader(
-                ctx,
-                shaders.source(
-                    "massspring_displacement.comp.glsl",
-                    {"massspring_config.glsl": config, "massspring_pass.glsl": _disp_glsl(self)},
-                ),
-            )
-        ).program
+        frag = "massspring_step.frag.glsl"
+        self._make_programs(
+            shaders.source("massspring_step.vert.glsl"),
+            shaders.source(
+                frag, {"massspring_config.glsl": config, "massspring_pass.glsl": _step_glsl(self)}
+            ),
+            shaders.source(
+                frag,
+                {
+                    "massspring_config.glsl": config + "#define MS_PIN_PASS\n",
+                    "massspring_pass.glsl": _pin_glsl(self),
+                },
+            ),
+            shaders.source(
+                "massspring_displacement.comp.glsl",
+                {"massspring_config.glsl": config, "massspring_pass.glsl": _disp_glsl(self)},
+            ),
+        )
         e = self._n_block
         #: per ping-pong side: position textures (one per element of a block)
-        self._pos = [[self._state_texture() for _ in range(e)] for _ in range(2)]
+        self._pos = [[self._atlas_texture() for _ in range(e)] for _ in range(2)]
         #: per ping-pong side: velocity textures
-        self._vel = [[self._state_texture() for _ in range(e)] for _ in range(2)]
+        self._vel = [[self._atlas_texture() for _ in range(e)] for _ in range(2)]
         self._fbo = [
             self._keep(ctx.framebuffer(color_attachments=self._state_list(i))) for i in range(2)
         ]
@@ -285,19 +221,15 @@ class GpuSpringSolver(GpuGridSolver):
         inv_mass = 1.0 / np.asarray(model.mass, np.float64)
         self._inv_mass = inv_mass
         damping = np.zeros((*self.shape, 4), np.float32)
-        self._damping = self._state_texture(self._to_atlas(damping)[0])  # filled below
+        self._damping = self._atlas_texture(self._to_atlas(damping)[0])  # filled below
         self._damping.write(self._packed(np.asarray(model.damping, np.float32)).tobytes())
         rest4 = np.zeros((*self.shape, 4), np.float32)
         rest4[..., :3] = model.rest
-        self._rest = [self._state_texture(a) for a in self._to_atlas(rest4)]
+        self._rest = [self._atlas_texture(a) for a in self._to_atlas(rest4)]
         rest4[..., 3] = inv_mass  # target = rest, nothing pinned
-        self._target = [self._state_texture(a) for a in self._to_atlas(rest4)]
+        self._target = [self._atlas_texture(a) for a in self._to_atlas(rest4)]
 
-        # z-slices as layers of a 2D array: the offset-field warp samples it with two
-        # bilinear fetches, cheaper than one 3D trilinear fetch on llvmpipe
-        self._disp = self._keep(ctx.texture_array(self.shape, 4, dtype="f2"))
-        self._disp.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._disp.repeat_x = self._disp.repeat_y = False
+        self._make_displacement()
 
         self._vbo = self._keep(ctx.buffer(self._tile_triangles().tobytes()))
         self._vao = self._keep(ctx.vertex_array(self._prog, [(self._vbo, "2f", "in_ndc")]))
@@ -309,17 +241,6 @@ class GpuSpringSolver(GpuGridSolver):
     def _state_list(self, side: int) -> list[Any]:
         """The state textures of one side in image-unit/attachment order (p0 v0 p1 v1 ...)."""
         return [t for pv in zip(self._pos[side], self._vel[side], strict=True) for t in pv]
-
-    def _state_texture(self, data: np.ndarray | None = None) -> Any:
-        w, h = self.atlas_size
-        tex = self._keep(
-            self.ctx.texture((w, h), 4, None if data is None else data.tobytes(), dtype="f4")
-        )
-        if data is None:
-            tex.write(np.zeros((h, w, 4), np.float32).tobytes())
-        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        tex.repeat_x = tex.repeat_y = False
-        return tex
 
     def _tile_triangles(self) -> np.ndarray:
         """NDC triangles covering the used tiles of the atlas (at most two rectangles)."""
@@ -520,8 +441,7 @@ class GpuSpringSolver(GpuGridSolver):
         self.ctx.memory_barrier()
 
     def _read(self, textures: list[list[Any]]) -> np.ndarray:
-        w, h = self.atlas_size
-        raws = [np.frombuffer(t.read(), np.float32).reshape(h, w, 4) for t in textures[self._cur]]
+        raws = [self._read_atlas(t) for t in textures[self._cur]]
         return self._from_atlas(raws)
 
     def positions(self) -> np.ndarray:
@@ -557,21 +477,6 @@ class GpuSpringSolver(GpuGridSolver):
         self._check_alive()
         v = self._read(self._vel)[..., :3]
         return float(np.sqrt(np.max(np.einsum("...i,...i->...", v, v))))
-
-    def displacement_texture(self) -> moderngl.TextureArray:
-        """The offset field as a 2D array texture (z-slices as layers), kept up to date
-        on the GPU.
-
-        Returns
-        -------
-        moderngl.TextureArray
-            Size ``(nx, ny, nz)``, RGBA16F; texel ``(i, j)`` of layer ``k`` holds the element's
-            displacement ``x - rest`` (world mm) in xyz and its stiffness in a. Linear
-            filtering, clamped to edge. Owned by the solver (freed by :meth:`release`);
-            the same object for the solver's lifetime.
-        """
-        self._check_alive()
-        return self._disp
 
 
 def _block_elements(block: tuple[int, int, int]) -> list[tuple[int, int, int]]:

@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp import shaders
+from voxwarp.deform import gl_programs
 from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, register_warp
 
@@ -728,9 +730,6 @@ class OffsetFieldWarp(Warp):
             entry[2].release()
             entry = None
         if entry is None:
-            from voxwarp import shaders
-            from voxwarp.deform import gl_programs
-
             # one compiled bake shader per context, shared by every warp (gl_programs)
             hold = gl_programs.compute_shader(ctx, shaders.source("offset_field_bake.comp.glsl"))
             tex = ctx.texture_array(self.bake_shape, 4, dtype="f2")
@@ -949,7 +948,7 @@ def saved_model(
     (state, positions)
         The model dict and ``rest + displacements`` (the saved field) of its grid.
     """
-    from voxwarp.deform.elements.grid import grid_from_entry
+    from voxwarp.deform.elements.grid import grid_from_entry  # grid imports scipy
 
     state = getattr(warp, "model_state", None)
     if not isinstance(state, Mapping) or state.get("type") != kind:

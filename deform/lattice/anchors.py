@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.warp import WarpError
 
 
@@ -293,8 +294,6 @@ class AnchorStrip:
         """The attached object's :class:`voxwarp.deform.lattice.trilinear.TrilinearGrid` for the
         base
         mesh's current vertices (call every frame the base moves)."""
-        from voxwarp.deform.lattice.trilinear import TrilinearGrid
-
         return TrilinearGrid(self.nodes(vertices, faces))
 
 

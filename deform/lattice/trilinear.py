@@ -1094,7 +1094,7 @@ class TrilinearGrid:
             a, tr, _ = self._fit()
             out = t @ a.T + tr
         else:
-            from voxwarp.deform.lattice.kernel import eval_grid
+            from voxwarp.deform.lattice.kernel import eval_grid  # numba: on first use
 
             out = np.empty_like(t)
             eval_grid(self._contiguous_nodes(), np.ascontiguousarray(t), out)

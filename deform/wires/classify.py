@@ -2,7 +2,7 @@
 
 About this technique (the wire paper's sections 5.1 and 7.1, on the device)
 ----------------------------------------------------------------------------
-:meth:`voxwarp.deform.wires.field.WireDeformer.build` gives every voxel of a wire's region the
+:meth:`voxwarp.deform.wires.build.WireDeformer.build` gives every voxel of a wire's region the
 wire id and arc-length fraction u of its nearest seed (the exact distance transform of
 :mod:`voxwarp.deform.wires.propagation`), then, for the voxels within their wire's reach of
 that seed, refines u to the closest point of the wire (Newton steps along the table's

@@ -27,6 +27,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.deform.warp import chain_displacement_range
+from voxwarp.render.skipping import numpy_maps as skip_numpy
+
 if TYPE_CHECKING:
     from voxwarp.core.transfer_function import TransferFunction
     from voxwarp.scene import Scene
@@ -76,10 +79,8 @@ def block_min_max(data: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.
     :func:`voxwarp.render.skipping.kernels.block_range`).
     """
     if not _compiled(np.asarray(data).size):
-        from voxwarp.render.skipping import numpy_maps as skip_numpy
-
         return skip_numpy.block_min_max(data, block)
-    from voxwarp.render.skipping import kernels as skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels  # numba: on first use
 
     t = _texture_order(data)
     nb = tuple(-(-n // block) for n in t.shape)
@@ -99,15 +100,13 @@ def cell_min_max(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Two full-size arrays: the renderer uses :func:`cell_visibility`, which keeps none.
     """
     if not _compiled(np.asarray(data).size):
-        from voxwarp.render.skipping import numpy_maps as skip_numpy
-
         return skip_numpy.cell_min_max(data)
     return _cell_range_slab(_texture_order(data), 0, np.asarray(data).shape[2] + 1)
 
 
 def _cell_range_slab(t: np.ndarray, z0: int, z1: int) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) of the cells ``z0 .. z1`` (z) of texture-order data, (x, y, z)-indexed."""
-    from voxwarp.render.skipping import kernels as skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels  # numba: on first use
 
     shape = (z1 - z0, t.shape[1] + 1, t.shape[2] + 1)
     lo = np.empty(shape, dtype=t.dtype)
@@ -138,7 +137,7 @@ def cell_visibility(
     """
     if not _compiled(np.prod(cell_grid_shape(np.shape(data)))):
         return static_block_visibility(scene, *cell_min_max(data))
-    from voxwarp.render.skipping import kernels as skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels  # numba: on first use
 
     t = _texture_order(data)
     out = np.empty((t.shape[0] + 1, t.shape[1] + 1, t.shape[2] + 1), dtype=bool)
@@ -213,10 +212,8 @@ def block_skip_distances(visible: np.ndarray) -> np.ndarray:
     if visible.all():
         return np.zeros(visible.shape, dtype=np.uint8)
     if not _compiled(visible.size * BLOCK**3):  # the blocks of a volume that large
-        from voxwarp.render.skipping import numpy_maps as skip_numpy
-
         return skip_numpy.block_skip_distances(visible)
-    from voxwarp.render.skipping import kernels as skip_kernels
+    from voxwarp.render.skipping import kernels as skip_kernels  # numba: on first use
 
     v = _texture_order(visible)
     d = np.empty(v.shape, dtype=np.int32)
@@ -265,10 +262,8 @@ def octant_skip_distances(
         raise ValueError(f"signs must be three of +1/-1; got {signs}")
     cap = int(min(max(cell_cap, 1), 255))
     if not _compiled(visible.size):
-        from voxwarp.render.skipping import numpy_maps as skip_numpy
-
         return skip_numpy.octant_skip_distances(visible, signs, cap, block)
-    from voxwarp.render.skipping import kernels as kern
+    from voxwarp.render.skipping import kernels as kern  # numba: on first use
 
     v = _texture_order(visible)
     out = np.empty(v.shape, dtype=np.uint8)
@@ -454,8 +449,6 @@ def warped_cell_visibility(
         lies in cell ``floor(u + 1/2) - offset``); ``None`` when a warp of the chain
         gives no interval (e.g. a GPU-owned field).
     """
-    from voxwarp.deform.warp import chain_displacement_range
-
     visible = np.asarray(visible, dtype=bool)
     sp = np.asarray(spacing, dtype=float)
     org = np.asarray(origin, dtype=float)

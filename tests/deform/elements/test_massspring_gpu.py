@@ -20,6 +20,7 @@ from voxwarp.deform.elements.spring_model import SpringModel
 
 massspring_gpu = pytest.importorskip("voxwarp.deform.elements.massspring_gpu")
 GpuSpringSolver = massspring_gpu.GpuSpringSolver
+gpu_grid = pytest.importorskip("voxwarp.deform.elements.gpu_grid")
 
 SHAPE = (5, 4, 6)
 SPACING = np.array([2.0, 1.5, 1.0])
@@ -265,7 +266,7 @@ def test_bad_input(gl_ctx: Any) -> None:
 
 
 def test_atlas_layout() -> None:
-    atlas_layout = massspring_gpu.atlas_layout
+    atlas_layout = gpu_grid.atlas_layout
     assert atlas_layout((128, 128, 128), 16384) == (11, 12)
     assert atlas_layout((64, 64, 64), 16384) == (8, 8)
     assert atlas_layout((5, 4, 6), 16384) == (2, 3)

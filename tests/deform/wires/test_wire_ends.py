@@ -1,4 +1,4 @@
-"""Wire ends (deform/wires/field.py ``Wire.ends``): the smooth falloff and the rigid warning.
+"""Wire ends (deform/wires/wire.py ``Wire.ends``): the smooth falloff and the rigid warning.
 
 Oracles: with ``ends="smooth"`` the warp has no jump across the end plane or the radius
 (neighbouring samples on a line across them move apart by at most the sample spacing
@@ -19,7 +19,8 @@ import pytest
 from tests.deform.wires.test_wires import AXIS_Y, AXIS_Z, build, cylinder, resample, wire
 from tests.warp_gpu import gpu_warp
 from voxwarp.deform.warp import WarpError, warp_from_dict
-from voxwarp.deform.wires.field import FAR, Wire
+from voxwarp.deform.wires.constants import FAR
+from voxwarp.deform.wires.wire import Wire
 
 SHIFT = 4.0  # the modified wire's end moves this far along +y (mm)
 FALLOFF = 10.0  # mm

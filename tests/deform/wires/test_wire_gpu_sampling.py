@@ -1,5 +1,5 @@
 """The wire warp's GLSL (shaders/warp_wire.glsl) at single points against its CPU
-reference (voxwarp.deform.wires.field.WireFieldWarp.apply), for both field layouts.
+reference (voxwarp.deform.wires.warp.WireFieldWarp.apply), for both field layouts.
 
 Rendered images compare the two only through a few pixels at a marker's edge, so a
 GPU sampler that takes the nearest voxel's t instead of interpolating it (packed layout)
@@ -24,7 +24,7 @@ import pytest
 
 from tests.deform.wires.test_wires import AXIS_Y, AXIS_Z, axis_points, build, cylinder, wire
 from tests.warp_gpu import gpu_warp
-from voxwarp.deform.wires.field import FAR
+from voxwarp.deform.wires.constants import FAR
 
 #: max |GPU - CPU| of warp(p), mm (see the module docstring)
 TOL_MM = 2e-3

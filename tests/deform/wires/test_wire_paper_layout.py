@@ -1,4 +1,4 @@
-"""The wire field's ``layout="paper"`` (deform/wires/field.py; wire paper section 7.2) and the
+"""The wire field's ``layout="paper"`` (deform/wires/layouts.py; wire paper section 7.2) and the
 plane-mask memory of section 7.1.
 
 Oracles: the 16-bit code of a voxel decoded by hand against the curve's own segment
@@ -34,14 +34,10 @@ from tests.deform.wires.test_wires import (
     wire,
 )
 from voxwarp.deform.warp import WarpError, warp_from_dict
-from voxwarp.deform.wires.field import (
-    FAR,
-    LUT_SIZE,
-    PAPER_VACATED,
-    Wire,
-    WireDeformer,
-    WireFieldWarp,
-)
+from voxwarp.deform.wires.build import WireDeformer
+from voxwarp.deform.wires.constants import FAR, LUT_SIZE, PAPER_VACATED
+from voxwarp.deform.wires.warp import WireFieldWarp
+from voxwarp.deform.wires.wire import Wire
 
 
 def _twisted(layout: str) -> WireFieldWarp:

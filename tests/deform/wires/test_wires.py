@@ -1,4 +1,4 @@
-"""Wire field (deform/wires/field.py): the mapping, the attribute field, the GPU warp.
+"""Wire field (deform/wires/): the mapping, the attribute field, the GPU warp.
 
 Oracles: the identity wire maps every point to itself; a translated wire translates the
 object (CPU exactly, GPU as an image shift); a twist of θ turns a cross-section's
@@ -21,15 +21,11 @@ from scipy import ndimage
 from tests.render.test_render import aligned_camera, grey_scene, projected
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import WarpError, warp_from_dict
-from voxwarp.deform.wires.field import (
-    FAR,
-    LUT_SIZE,
-    MAX_WIRES,
-    Wire,
-    WireDeformer,
-    WireFieldWarp,
-)
+from voxwarp.deform.wires.build import WireDeformer
+from voxwarp.deform.wires.constants import FAR, LUT_SIZE, MAX_WIRES
 from voxwarp.deform.wires.propagation import opencl_available
+from voxwarp.deform.wires.warp import WireFieldWarp
+from voxwarp.deform.wires.wire import Wire
 from voxwarp.scene import Scene
 
 N = (64, 40, 40)  # voxels, 1 mm

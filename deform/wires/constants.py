@@ -1,0 +1,77 @@
+"""The wire field's limits and tuning constants (one place for the numbers
+that :mod:`voxwarp.deform.wires` and :mod:`voxwarp.core.limits` quote)."""
+
+from __future__ import annotations
+
+import os
+
+#: most wires in one attribute field (7-bit wire id of the packed layout)
+MAX_WIRES = 128
+#: entries of each wire's lookup tables ("integer t" 0..255 of the packed layout)
+LUT_SIZE = 256
+#: allowed field scales (per-axis reduction; 1:1, 1:8, 1:64, 1:512, 1:4096 in voxels)
+FIELD_SCALES = (1, 2, 4, 8, 16)
+#: attribute field layouts
+LAYOUTS = ("float", "packed", "paper")
+#: packed code of a vacated voxel (flag 0, wire 127, t 255)
+PACKED_VACATED = 0x7FFF
+#: the paper layout's limits: 4-bit wire id, 4-bit segment index, 7-bit t per segment
+PAPER_MAX_WIRES = 16
+PAPER_MAX_SEGMENTS = 16
+PAPER_T_MAX = 127
+#: paper code of a vacated voxel (flag 0, wire 15, segment 15, t 127)
+PAPER_VACATED = 0x7FFF
+#: propagation domains of :class:`WireDeformer` (``propagate``)
+PROPAGATE_MODES = ("region", "flagged")
+#: a vacated sample is sent this far away (it then lies outside every volume)
+FAR = 1.0e20
+#: most control points of a wire's base or modified curve (its tables cost time per point)
+MAX_WIRE_POINTS = 1024
+#: most a wire's reach (radius times its largest scale) may be, in volume diagonals:
+#: a larger region of influence covers nothing more
+MAX_REACH_DIAGONALS = 1.0
+#: most voxels of an attribute field (the volume box grown by the wires' reach)
+MAX_FIELD_VOXELS = 1 << 27
+#: most mask pixels (planes x K x K) of one wire; each costs ~100 bytes while built
+MAX_MASK_PIXELS = 1 << 25
+#: what float32 arithmetic can add to a mapped point (mm): displacement bounds grow by it
+#: (the filtered lookups of t and of the tables need none, see _box_mapping_range)
+FLOAT32_MARGIN = 1e-4
+#: what a wire does beyond its ends and near its radius (see :class:`Wire`)
+ENDS = ("smooth", "rigid")
+#: the default of :attr:`Wire.ends`
+DEFAULT_ENDS = "smooth"
+#: :attr:`Wire.ends` of a wire saved without it (files from before the option: the
+#: paper's rigid sweep, as they were made)
+SAVED_ENDS = "rigid"
+#: keys of a wire object (:meth:`Wire.from_dict`); ``base`` and ``radius`` are required
+WIRE_KEYS: tuple[str, ...] = (
+    "kind",
+    "base",
+    "modified",
+    "twist",
+    "scale",
+    "radius",
+    "beta",
+    "initial_normal",
+    "name",
+    "ends",
+    "falloff",
+)
+#: with ``ends="smooth"``, the width of the fade beyond the radius, as a share of it
+RADIAL_FADE = 0.25
+
+#: mask pixels per block of planes while the masks are sampled (keeps temporaries small)
+MASK_BLOCK_PIXELS = 1 << 16
+#: voxels per chunk of the numpy classification (keeps temporaries small)
+FLAG_CHUNK = 1 << 16
+#: mask pixels per block while the flagged propagation rasterises the planes
+TOUCH_BLOCK_PIXELS = 1 << 18
+#: threads sampling the mask blocks (and classifying chunks on the numpy path)
+MASK_THREADS = max(1, min(4, os.cpu_count() or 1))
+#: Newton steps that refine the propagated u to the closest point of the wire
+REFINE_STEPS = 2
+
+#: t ranges spanning more table entries than this mix wires (interpolation across a
+#: wire boundary): their bound is taken over the whole table
+MAX_T_STEPS = 64
