@@ -24,6 +24,7 @@ from voxwarp.animation.tracks import Animation, Track, save_animated_scene
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import warp_from_dict
+from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.session import EditSession
 from voxwarp.errors import VoxwarpError
 from voxwarp.inputs import load_lattice_file, load_wire_file
@@ -118,7 +119,7 @@ def test_what_voxwarp_writes_validates(tmp_path: Path) -> None:
     volume = load_sample("fish", shape=(24, 12, 10))
     session = EditSession(Scene(volume, view="-y"))
     session.set_deformation("lattice", resolution=2)
-    bent = session.lattice_nodes.copy()
+    bent = session.adapter(LatticeFamily).lattice_nodes.copy()
     bent[-1, :, :, 2] += 4.0
     tracks = [
         Track("lattice.nodes", [(0, "rest"), (3, bent.tolist())], "smooth"),
