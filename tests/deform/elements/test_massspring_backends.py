@@ -236,8 +236,8 @@ def test_zero_displacement_renders_like_no_warp(offscreen: Any, gl_ctx: Any, bac
 
 # ---------------------------------------------------------------------- bench smoke
 def test_bench_massspring_smoke(gl_ctx: Any) -> None:
-    from voxwarp.bench.massspring import BACKENDS, bench_massspring
-    from voxwarp.bench.taichi import taichi_available
+    from benchmarks.massspring import BACKENDS, bench_massspring
+    from benchmarks.taichi import taichi_available
 
     logged: list[str] = []
     report = bench_massspring(
