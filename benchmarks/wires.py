@@ -78,18 +78,14 @@ from voxwarp.teaching.wire_measure import (  # noqa: F401 (this module's names t
     FRAMED_VIEW,
     PADDED_EDGE,
     RENDER_SCALE,
-    STAGES,
     STATS_SUBSAMPLE,
     TUBES_WIRES,
-    BuildRow,
-    SampleStats,
     camera_rays,
     content_box,
     framed_camera,
     load_wires,
     padded_fish,
-    ray_sample_stats,
-    time_builds,
+    ray_samples,
 )
 
 #: image size of the paper's timings (W, H)
@@ -122,7 +118,79 @@ DEFAULT_PHANTOMS: tuple[tuple[str, Path, dict[str, Any]], ...] = (("tubes", TUBE
 OPENCL_WARMUP = 2
 
 
+STAGES: tuple[str, ...] = ("tables", "masks", "seeds", "propagate", "flags", "store")
+
+
 # ---------------------------------------------------------------------- rows
+@dataclass
+class BuildRow:
+    """Field builds at one scale and layout (medians of the timed builds)."""
+
+    scale: int
+    layout: str
+    field_shape: tuple[int, int, int]
+    repeats: int
+    median_s: float
+    min_s: float
+    #: median seconds of each stage (keys of :data:`STAGES`)
+    stages: dict[str, float]
+    swept: int
+    vacated: int
+    ignored: int
+    voxels: int
+    region_voxels: int
+    seeds: int
+    planes: int
+    backend: str
+
+    @property
+    def percent_ignored(self) -> float:
+        """Field voxels that render as the identity, in %."""
+        return 100.0 * self.ignored / max(self.voxels, 1)
+
+
+@dataclass
+class SampleStats:
+    """The paper's Table 1: ray samples of the deformed render and how they classify."""
+
+    size: tuple[int, int]
+    camera: str
+    subsample: int
+    rays: int
+    rays_hitting: int
+    step_mm: float
+    samples: int
+    identity: int
+    vacated: int
+    swept: int
+    outside_field: int
+    #: the paper's way (Table 1): samples inside the wires' regions of influence, and
+    #: those of them that need no mapping (0, 0 when no region was given)
+    region_samples: int = 0
+    region_identity: int = 0
+
+    @property
+    def percent_ignored_in_region(self) -> float | None:
+        """Ignored samples in % of the samples inside the regions of influence (the
+        paper's Table 1 statistic), or None without a region."""
+        if not self.region_samples:
+            return None
+        return 100.0 * self.region_identity / self.region_samples
+
+    @property
+    def ignored(self) -> int:
+        """Samples that need no mapping: identity (not swept, not vacated)."""
+        return self.identity
+
+    @property
+    def percent_ignored(self) -> float:
+        """Ignored samples, in % of all samples."""
+        return 100.0 * self.ignored / max(self.samples, 1)
+
+    @property
+    def percent_not_swept(self) -> float:
+        """Samples that are not swept (identity or vacated), in %."""
+        return 100.0 * (self.samples - self.swept) / max(self.samples, 1)
 
 
 @dataclass
@@ -534,6 +602,41 @@ def check_scales(scales: Sequence[int]) -> tuple[int, ...]:
 
 
 # ---------------------------------------------------------------------- 1. builds
+def time_builds(
+    volume: Volume, wires: Sequence[Any], scale: int, layout: str, repeats: int
+) -> tuple[BuildRow, Any]:
+    """Build the field ``1 + repeats`` times (the first untimed); the row and deformer."""
+    from voxwarp.deform.wires.field import WireDeformer
+
+    wd = WireDeformer(volume, wires, field_scale=scale, layout=layout)
+    wd.build()  # untimed: OpenCL kernels / buffers of this grid size
+    totals: list[float] = []
+    stages: dict[str, list[float]] = {s: [] for s in STAGES}
+    st = None
+    for _ in range(max(1, int(repeats))):
+        st = wd.build()
+        totals.append(st.timings["total"])
+        for s in STAGES:
+            stages[s].append(st.timings.get(s, 0.0))
+    assert st is not None
+    row = BuildRow(
+        scale=scale,
+        layout=layout,
+        field_shape=tuple(int(n) for n in st.field_shape),  # type: ignore[arg-type]
+        repeats=len(totals),
+        median_s=statistics.median(totals),
+        min_s=min(totals),
+        stages={s: statistics.median(v) for s, v in stages.items()},
+        swept=st.swept,
+        vacated=st.vacated,
+        ignored=st.ignored,
+        voxels=st.voxels,
+        region_voxels=st.region_voxels,
+        seeds=st.seeds,
+        planes=st.planes,
+        backend=st.backend,
+    )
+    return row, wd
 
 
 # ---------------------------------------------------------------------- 2. propagation
@@ -607,6 +710,49 @@ def bench_full_grid(edge: int, sampling: Sequence[float], repeats: int) -> Propa
 
 
 # ---------------------------------------------------------------------- 4. ray samples
+
+
+def ray_sample_stats(
+    scene: Any,
+    camera: Any,
+    size: tuple[int, int],
+    warp: Any,
+    subsample: int = STATS_SUBSAMPLE,
+    chunk: int = 1_000_000,
+    label: str = "",
+    region: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> SampleStats:
+    """Classify the ray samples of ``scene`` (deformed by ``warp``) on the CPU; with
+    ``region`` (points (N, 3) -> bool (N,), e.g. :func:`influence_region`) also count
+    the samples inside it (the paper's Table 1 counts only those)."""
+    rs = ray_samples(scene, camera, size, subsample, chunk)
+    fld = warp.field
+    counts = np.zeros(3, dtype=np.int64)
+    outside = in_region = region_identity = 0
+    for p in rs.chunks:
+        state, _, _ = warp._lookup(p)
+        counts += np.bincount(state, minlength=3)[:3]
+        if region is not None:
+            inside = np.asarray(region(p), dtype=bool)
+            in_region += int(np.count_nonzero(inside))
+            region_identity += int(np.count_nonzero(inside & (state == 0)))
+        g = (p - fld.lo) / fld.spacing
+        outside += int(np.count_nonzero(~np.all((g >= 0) & (g < np.asarray(fld.shape)), axis=1)))
+    return SampleStats(
+        size=(int(size[0]), int(size[1])),
+        camera=label,
+        subsample=int(subsample),
+        rays=rs.rays,
+        rays_hitting=rs.rays_hitting,
+        step_mm=rs.step_mm,
+        samples=int(counts.sum()),
+        identity=int(counts[0]),
+        vacated=int(counts[1]),
+        swept=int(counts[2]),
+        outside_field=outside,
+        region_samples=in_region,
+        region_identity=region_identity,
+    )
 
 
 def influence_region(

@@ -1413,11 +1413,11 @@ def _demo_wires(
         FISH_WIRES,
         FRAMED_VIEW,
         RENDER_SCALE,
+        classify_samples,
         framed_camera,
         load_wires,
         padded_fish,
-        ray_sample_stats,
-        time_builds,
+        time_field_builds,
     )
 
     vol = padded_fish() if s.wire_padded else _fish(s)
@@ -1439,11 +1439,11 @@ def _demo_wires(
         renders.append(("undeformed", _rgb(r, base, size)))
         first: np.ndarray | None = None
         for scale in DEFAULT_SCALES:
-            row, wd = time_builds(vol, wires, scale, "float", s.wire_repeats)
+            row, wd = time_field_builds(vol, wires, scale, s.wire_repeats)
             warp = wd.warp()
             scene = base.copy(warps=[warp])
             stats_scene = stats_base.copy(warps=[warp])
-            stats = ray_sample_stats(stats_scene, stats_cam, size, warp, s.wire_subsample)
+            stats = classify_samples(stats_scene, stats_cam, size, warp, s.wire_subsample)
             img = _rgb(r, scene, size)
             renders.append((f"1:{scale**3}", img))
             if first is None:
@@ -1453,28 +1453,19 @@ def _demo_wires(
                 {
                     "scale": scale,
                     "ratio": f"1:{scale**3}",
-                    "field_shape": row.field_shape,
-                    "build_s": row.median_s,
-                    "build_min_s": row.min_s,
-                    "builds": row.repeats,
-                    "swept": row.swept,
-                    "vacated": row.vacated,
-                    "ignored": row.ignored,
-                    "voxels": row.voxels,
-                    "percent_ignored_voxels": row.percent_ignored,
-                    "samples": stats.samples,
-                    "samples_ignored": stats.identity,
-                    "samples_vacated": stats.vacated,
-                    "samples_swept": stats.swept,
-                    "percent_ignored_samples": 100.0 * stats.identity / max(stats.samples, 1),
+                    **row,
+                    "samples": stats["samples"],
+                    "samples_ignored": stats["identity"],
+                    "samples_vacated": stats["vacated"],
+                    "samples_swept": stats["swept"],
+                    "percent_ignored_samples": 100.0 * stats["identity"] / max(stats["samples"], 1),
                     "pixels_differing_from_1to1": 100.0 * float(differ.mean()),
-                    "backend": row.backend,
                 }
             )
             log(
-                f"wires 1:{scale**3}: built in {row.median_s:.3f} s, {row.percent_ignored:.2f} %"
-                f" of field voxels and {rows[-1]['percent_ignored_samples']:.2f} % of ray"
-                " samples ignored"
+                f"wires 1:{scale**3}: built in {row['build_s']:.3f} s,"
+                f" {row['percent_ignored_voxels']:.2f} % of field voxels and"
+                f" {rows[-1]['percent_ignored_samples']:.2f} % of ray samples ignored"
             )
             if scale == RENDER_SCALE:
                 warm = 2 if not s.quick else 1

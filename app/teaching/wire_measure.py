@@ -1,17 +1,18 @@
 """What the wires demo measures, shared with the lab's ``python -m benchmarks wires``.
 
-The padded fish and its wire file, the timed field builds at one field scale
-(:func:`time_builds`), the classification of a deformed render's ray samples on the CPU
-(:func:`ray_sample_stats`: identity, vacated or swept, the wire paper's Table 1) and a
-camera that frames the object with the space its wires move it into
-(:func:`framed_camera`). The lab's wire benchmarks import these; the installed package
-never imports the lab.
+The padded fish and its wire file, a camera that frames the object with the space its
+wires move it into (:func:`framed_camera`), the samples a raycast takes
+(:func:`ray_samples`, which the lab's ray statistics use too), and the demo's small
+measurements: field builds at one scale (:func:`time_field_builds`) and how the field
+classifies the ray samples (:func:`classify_samples`: identity, vacated or swept, the
+wire paper's Table 1). The lab (``benchmarks/wires.py``) imports these; the installed
+package never imports the lab.
 """
 
 from __future__ import annotations
 
 import statistics
-from collections.abc import Callable, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,78 +40,6 @@ AIR_HU = -1000
 _SAMPLES_DIR = bundled_dir()
 FISH_WIRES = _SAMPLES_DIR / "fish_spine_wires.json"
 TUBES_WIRES = _SAMPLES_DIR / "tubes_twist_wires.json"
-STAGES: tuple[str, ...] = ("tables", "masks", "seeds", "propagate", "flags", "store")
-
-
-@dataclass
-class BuildRow:
-    """Field builds at one scale and layout (medians of the timed builds)."""
-
-    scale: int
-    layout: str
-    field_shape: tuple[int, int, int]
-    repeats: int
-    median_s: float
-    min_s: float
-    #: median seconds of each stage (keys of :data:`STAGES`)
-    stages: dict[str, float]
-    swept: int
-    vacated: int
-    ignored: int
-    voxels: int
-    region_voxels: int
-    seeds: int
-    planes: int
-    backend: str
-
-    @property
-    def percent_ignored(self) -> float:
-        """Field voxels that render as the identity, in %."""
-        return 100.0 * self.ignored / max(self.voxels, 1)
-
-
-@dataclass
-class SampleStats:
-    """The paper's Table 1: ray samples of the deformed render and how they classify."""
-
-    size: tuple[int, int]
-    camera: str
-    subsample: int
-    rays: int
-    rays_hitting: int
-    step_mm: float
-    samples: int
-    identity: int
-    vacated: int
-    swept: int
-    outside_field: int
-    #: the paper's way (Table 1): samples inside the wires' regions of influence, and
-    #: those of them that need no mapping (0, 0 when no region was given)
-    region_samples: int = 0
-    region_identity: int = 0
-
-    @property
-    def percent_ignored_in_region(self) -> float | None:
-        """Ignored samples in % of the samples inside the regions of influence (the
-        paper's Table 1 statistic), or None without a region."""
-        if not self.region_samples:
-            return None
-        return 100.0 * self.region_identity / self.region_samples
-
-    @property
-    def ignored(self) -> int:
-        """Samples that need no mapping: identity (not swept, not vacated)."""
-        return self.identity
-
-    @property
-    def percent_ignored(self) -> float:
-        """Ignored samples, in % of all samples."""
-        return 100.0 * self.ignored / max(self.samples, 1)
-
-    @property
-    def percent_not_swept(self) -> float:
-        """Samples that are not swept (identity or vacated), in %."""
-        return 100.0 * (self.samples - self.swept) / max(self.samples, 1)
 
 
 def padded_fish(shape: Sequence[int] = FISH_SHAPE, edge: int = PADDED_EDGE) -> Volume:
@@ -147,43 +76,6 @@ def load_wires(path: Path) -> tuple[list[Any], dict[str, Any]]:
     return [Wire.from_dict(w) for w in spec["wires"]], spec
 
 
-def time_builds(
-    volume: Volume, wires: Sequence[Any], scale: int, layout: str, repeats: int
-) -> tuple[BuildRow, Any]:
-    """Build the field ``1 + repeats`` times (the first untimed); the row and deformer."""
-    from voxwarp.deform.wires.field import WireDeformer
-
-    wd = WireDeformer(volume, wires, field_scale=scale, layout=layout)
-    wd.build()  # untimed: OpenCL kernels / buffers of this grid size
-    totals: list[float] = []
-    stages: dict[str, list[float]] = {s: [] for s in STAGES}
-    st = None
-    for _ in range(max(1, int(repeats))):
-        st = wd.build()
-        totals.append(st.timings["total"])
-        for s in STAGES:
-            stages[s].append(st.timings.get(s, 0.0))
-    assert st is not None
-    row = BuildRow(
-        scale=scale,
-        layout=layout,
-        field_shape=tuple(int(n) for n in st.field_shape),  # type: ignore[arg-type]
-        repeats=len(totals),
-        median_s=statistics.median(totals),
-        min_s=min(totals),
-        stages={s: statistics.median(v) for s, v in stages.items()},
-        swept=st.swept,
-        vacated=st.vacated,
-        ignored=st.ignored,
-        voxels=st.voxels,
-        region_voxels=st.region_voxels,
-        seeds=st.seeds,
-        planes=st.planes,
-        backend=st.backend,
-    )
-    return row, wd
-
-
 def camera_rays(
     camera: Any, size: tuple[int, int], subsample: int = STATS_SUBSAMPLE
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -202,77 +94,6 @@ def camera_rays(
     far = b[:, :3] / b[:, 3:]
     t_far = np.linalg.norm(far - ro, axis=1)
     return ro, (far - ro) / t_far[:, None], t_far
-
-
-def ray_sample_stats(
-    scene: Any,
-    camera: Any,
-    size: tuple[int, int],
-    warp: Any,
-    subsample: int = STATS_SUBSAMPLE,
-    chunk: int = 1_000_000,
-    label: str = "",
-    region: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> SampleStats:
-    """Classify the ray samples of ``scene`` (deformed by ``warp``) on the CPU; with
-    ``region`` (points (N, 3) -> bool (N,), e.g. :func:`influence_region`) also count
-    the samples inside it (the paper's Table 1 counts only those)."""
-    ro, rd, t_far = camera_rays(camera, size, subsample)
-    lo, hi = (np.asarray(v, dtype=np.float64) for v in scene.ray_bounds())
-    step = float(scene.sample_distance_mm)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / rd
-        ta, tb = (lo - ro) * inv, (hi - ro) * inv
-    t_in = np.nanmax(np.minimum(ta, tb), axis=1)
-    t_out = np.nanmin(np.maximum(ta, tb), axis=1)
-    t_lattice = np.maximum(t_in, 0.0)
-    t1 = np.minimum(t_out, t_far)
-    j = 0.5  # no jitter
-    diag = float(np.linalg.norm(hi - lo))
-    max_steps = int(min(diag / step + 4, 1_000_000))
-    n = np.where(t1 > t_lattice, np.ceil((t1 - t_lattice) / step - j), 0)
-    n = np.clip(n, 0, max_steps).astype(np.int64)
-    fld = warp.field
-    counts = np.zeros(3, dtype=np.int64)
-    outside = in_region = region_identity = 0
-    # rays in chunks of about `chunk` samples
-    cum = np.cumsum(n)
-    start = 0
-    while start < len(n):
-        end = int(np.searchsorted(cum, cum[start] - n[start] + chunk, side="right"))
-        sel = np.arange(start, max(end, start + 1))
-        start = int(sel[-1]) + 1
-        ns = n[sel]
-        total = int(ns.sum())
-        if total == 0:
-            continue
-        ray = np.repeat(sel, ns)
-        k = np.arange(total) - np.repeat(np.cumsum(ns) - ns, ns)
-        t = t_lattice[ray] + (k + j) * step
-        p = ro[ray] + t[:, None] * rd[ray]
-        state, _, _ = warp._lookup(p)
-        counts += np.bincount(state, minlength=3)[:3]
-        if region is not None:
-            inside = np.asarray(region(p), dtype=bool)
-            in_region += int(np.count_nonzero(inside))
-            region_identity += int(np.count_nonzero(inside & (state == 0)))
-        g = (p - fld.lo) / fld.spacing
-        outside += int(np.count_nonzero(~np.all((g >= 0) & (g < np.asarray(fld.shape)), axis=1)))
-    return SampleStats(
-        size=(int(size[0]), int(size[1])),
-        camera=label,
-        subsample=int(subsample),
-        rays=len(n),
-        rays_hitting=int(np.count_nonzero(n)),
-        step_mm=step,
-        samples=int(counts.sum()),
-        identity=int(counts[0]),
-        vacated=int(counts[1]),
-        swept=int(counts[2]),
-        outside_field=outside,
-        region_samples=in_region,
-        region_identity=region_identity,
-    )
 
 
 def content_box(volume: Volume) -> tuple[np.ndarray, np.ndarray]:
@@ -314,3 +135,107 @@ def framed_camera(
         r = w.radius * float(w.scale[:, 1].max())
         lo, hi = np.minimum(lo, pts.min(0) - r), np.maximum(hi, pts.max(0) + r)
     return Camera.framing(lo, hi, view, size, fill=fill, fov=fov)
+
+
+@dataclass
+class RaySamples:
+    """The samples of a raycast, as :func:`ray_samples` lays them out: ``chunks`` yields
+    their points (N, 3) in mm, about ``chunk`` at a time, ray by ray."""
+
+    rays: int
+    rays_hitting: int
+    step_mm: float
+    chunks: Iterator[np.ndarray]
+
+
+def ray_samples(
+    scene: Any,
+    camera: Any,
+    size: tuple[int, int],
+    subsample: int = STATS_SUBSAMPLE,
+    chunk: int = 1_000_000,
+) -> RaySamples:
+    """The sample points of the rays through every ``subsample``-th pixel of ``scene``
+    seen by ``camera`` (no jitter), where the raycaster marches them: from the ray box's
+    entry (or the near plane) to its exit (or the far plane), one sample distance apart."""
+    ro, rd, t_far = camera_rays(camera, size, subsample)
+    lo, hi = (np.asarray(v, dtype=np.float64) for v in scene.ray_bounds())
+    step = float(scene.sample_distance_mm)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / rd
+        ta, tb = (lo - ro) * inv, (hi - ro) * inv
+    t_in = np.nanmax(np.minimum(ta, tb), axis=1)
+    t_out = np.nanmin(np.maximum(ta, tb), axis=1)
+    t_lattice = np.maximum(t_in, 0.0)
+    t1 = np.minimum(t_out, t_far)
+    j = 0.5  # no jitter
+    diag = float(np.linalg.norm(hi - lo))
+    max_steps = int(min(diag / step + 4, 1_000_000))
+    n = np.where(t1 > t_lattice, np.ceil((t1 - t_lattice) / step - j), 0)
+    n = np.clip(n, 0, max_steps).astype(np.int64)
+
+    def chunks() -> Iterator[np.ndarray]:
+        cum = np.cumsum(n)
+        start = 0
+        while start < len(n):
+            end = int(np.searchsorted(cum, cum[start] - n[start] + chunk, side="right"))
+            sel = np.arange(start, max(end, start + 1))
+            start = int(sel[-1]) + 1
+            ns = n[sel]
+            total = int(ns.sum())
+            if total == 0:
+                continue
+            ray = np.repeat(sel, ns)
+            k = np.arange(total) - np.repeat(np.cumsum(ns) - ns, ns)
+            t = t_lattice[ray] + (k + j) * step
+            yield ro[ray] + t[:, None] * rd[ray]
+
+    return RaySamples(len(n), int(np.count_nonzero(n)), step, chunks())
+
+
+def classify_samples(
+    scene: Any, camera: Any, size: tuple[int, int], warp: Any, subsample: int = STATS_SUBSAMPLE
+) -> dict[str, int]:
+    """How the wire field ``warp`` classifies the ray samples of ``scene`` (the wire
+    paper's Table 1 over the whole ray box): ``samples``, ``identity`` (no mapping
+    needed: ignored), ``vacated`` and ``swept``."""
+    counts = np.zeros(3, dtype=np.int64)
+    for p in ray_samples(scene, camera, size, subsample).chunks:
+        state, _, _ = warp._lookup(p)
+        counts += np.bincount(state, minlength=3)[:3]
+    identity, vacated, swept = (int(c) for c in counts)
+    return {
+        "samples": identity + vacated + swept,
+        "identity": identity,
+        "vacated": vacated,
+        "swept": swept,
+    }
+
+
+def time_field_builds(
+    volume: Volume, wires: Sequence[Any], scale: int, repeats: int
+) -> tuple[dict[str, Any], Any]:
+    """Build the wires' attribute field (float layout) at ``scale`` ``1 + repeats`` times,
+    the first untimed (OpenCL kernels and buffers of this grid size): the timed builds'
+    median and min seconds, the field's counts, and the deformer."""
+    from voxwarp.deform.wires.field import WireDeformer
+
+    wd = WireDeformer(volume, wires, field_scale=scale, layout="float")
+    wd.build()
+    totals = []
+    for _ in range(max(1, int(repeats))):
+        st = wd.build()
+        totals.append(st.timings["total"])
+    row = {
+        "field_shape": tuple(int(n) for n in st.field_shape),
+        "build_s": statistics.median(totals),
+        "build_min_s": min(totals),
+        "builds": len(totals),
+        "swept": st.swept,
+        "vacated": st.vacated,
+        "ignored": st.ignored,
+        "voxels": st.voxels,
+        "percent_ignored_voxels": 100.0 * st.ignored / max(st.voxels, 1),
+        "backend": st.backend,
+    }
+    return row, wd

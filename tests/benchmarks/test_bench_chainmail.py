@@ -42,8 +42,8 @@ def test_cpu_rows_on_tiny_grids() -> None:
             assert report.skipped(n, "gpu") == "skipped (not asked for)"
     assert report.find(8, "enhanced", "local").touched == 63  # type: ignore[union-attr]
     assert report.find(4, "enhanced", "large").touched == 4**3  # type: ignore[union-attr]
-    text = report.markdown("voxwarp bench chainmail --sizes 4,8")
-    assert "Command: `voxwarp bench chainmail --sizes 4,8`" in text
+    text = report.markdown("python -m benchmarks chainmail --sizes 4,8")
+    assert "Command: `python -m benchmarks chainmail --sizes 4,8`" in text
     assert "| 8³ | local |" in text
     assert "| 4³ | large |" in text
     assert "* GPU (4³, 8³): skipped (not asked for)" in text

@@ -56,8 +56,8 @@ def test_bench_fields_quick_report_has_every_row() -> None:
     assert steps == ["sample the chain on the 32x32x32 grid", "write .nii.gz", "write .nrrd"]
     assert all(e.seconds > 0 for e in report.export_rows)
     assert all(e.mib > 0 for e in report.export_rows[1:])
-    text = report.markdown("voxwarp bench fields --quick")
-    assert "`voxwarp bench fields --quick`" in text
+    text = report.markdown("python -m benchmarks fields --quick")
+    assert "`python -m benchmarks fields --quick`" in text
     assert "| field 8³ | mip |" in text
     assert "| write .nrrd |" in text
 

@@ -33,9 +33,8 @@ from benchmarks.lattice import (
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="voxwarp")
-    sub = p.add_subparsers(dest="command", required=True)
-    bsub = sub.add_parser("bench").add_subparsers(dest="bench", required=True)
+    p = argparse.ArgumentParser(prog="python -m benchmarks")
+    bsub = p.add_subparsers(dest="bench", required=True)
     add_bench_lattice_parser(bsub)
     return p
 
@@ -106,8 +105,8 @@ def test_tiny_run(gl_ctx: Any) -> None:
     assert report.compose_ratio == pytest.approx(tri.compose_ms / lin.compose_ms)
     assert report.compose_ratio > 1  # lattices compose node by node, matrices multiply
 
-    text = report.markdown("voxwarp bench lattice --triangles 2000")
-    assert text.startswith("Command: `voxwarp bench lattice --triangles 2000`")
+    text = report.markdown("python -m benchmarks lattice --triangles 2000")
+    assert text.startswith("Command: `python -m benchmarks lattice --triangles 2000`")
     for heading in ("## Summary", "## 1. Vertex throughput", "## 2. Composition"):
         assert heading in text
     assert "| 3³ | vertex | tangent | exact |" in text
@@ -173,7 +172,7 @@ def test_report_ratios_without_gl() -> None:
     assert "2³ cells: normal 60%, tangent 75%" in summary[1]
     assert "vertex stage only" in summary[2]
     assert "= 33% per animated frame (12.0 vs 4.0 ms" in summary[3]
-    text = report.markdown("voxwarp bench lattice")
+    text = report.markdown("python -m benchmarks lattice")
     row = (
         "| 2³ | frame | tangent | exact | 80.0 (79.0) | 60.0 (59.0) | 12.5 | 16.7 | 0.75 | — | — |"
     )
@@ -287,7 +286,7 @@ def test_cli_writes_the_markdown(
     printed = capsys.readouterr()
     text = out.read_text()
     assert text in printed.out
-    assert text.startswith(f"Command: `voxwarp {' '.join(argv)} --markdown {out}`")
+    assert text.startswith(f"Command: `python -m benchmarks {' '.join(argv)} --markdown {out}`")
     assert "Image 32x24" in text
     assert "| 2³ | frame | normal | exact |" in text
     assert "| 4³ |" not in text

@@ -43,15 +43,17 @@ def test_accuracy_only_section() -> None:
     report = li.bench_inverse(None, trials=1, points=100, frames=0, log=lambda s: None)
     assert report.render == []
     assert "Render cost" not in "\n".join(report.markdown_lines())
-    text = report.standalone_markdown("voxwarp bench lattice --inverse-only", "gl", (0.5, 1), 2)
-    assert text.startswith("Command: `voxwarp bench lattice --inverse-only`")
+    text = report.standalone_markdown(
+        "python -m benchmarks lattice --inverse-only", "gl", (0.5, 1), 2
+    )
+    assert text.startswith("Command: `python -m benchmarks lattice --inverse-only`")
     assert "## 3. Lattice over a volume" in text
     assert "## 1." not in text
 
 
 def test_command_line_options() -> None:
-    p = argparse.ArgumentParser(prog="voxwarp")
-    bsub = p.add_subparsers(dest="command").add_parser("bench").add_subparsers(dest="bench")
+    p = argparse.ArgumentParser(prog="python -m benchmarks")
+    bsub = p.add_subparsers(dest="bench")
     add_bench_lattice_parser(bsub)
     args = p.parse_args(["lattice", "--inverse-only", "--inverse-frames", "3"])
     assert args.inverse_only

@@ -64,7 +64,7 @@ def test_bench_scale_tiny(gl_ctx: Any) -> None:
     assert growth["first_frame"] == pytest.approx(big.first_ms / small.first_ms)
     assert growth["steady_frame"] == pytest.approx(big.steady_ms / small.steady_ms)
     assert data["rows"][0]["growth"]["first_frame"] == pytest.approx(1.0)
-    text = report.markdown("voxwarp bench scale --sizes 32,48")
+    text = report.markdown("python -m benchmarks scale --sizes 32,48")
     assert "| 48³ uint8 |" in text
     assert "3.4x" in text
 

@@ -14,6 +14,6 @@ def test_bench_segments_reports_ratios_and_differences() -> None:
     assert row.max_diff["1"] == 0  # the per-sample frame against itself
     assert row.mean_diff["8"] >= row.mean_diff["1"]
     assert 0.0 <= row.long_cells <= 1.0
-    text = report.markdown("voxwarp bench segments")
+    text = report.markdown("python -m benchmarks segments")
     assert "| field |" in text
     assert "K = auto" in text

@@ -36,7 +36,7 @@ def test_stent_render_loads_none_of_the_modules_it_does_not_use() -> None:
 
 def test_report_gives_ratios_to_the_reference() -> None:
     rows = [StartupRow("ref", 0.05, [], 0.04), StartupRow("help", 0.15, ["scipy"])]
-    text = markdown(rows, "voxwarp bench startup")
+    text = markdown(rows, "python -m benchmarks startup")
     assert "| ref | 50 | 1.00x | none | 40 |" in text
     assert "| help | 150 | 3.00x | scipy | — |" in text
 

@@ -33,6 +33,6 @@ def test_smooth_ends_leave_fewer_seams_than_the_rigid_cut(gl_ctx: Any) -> None:
     # the rigid sweep cuts the skull where the wire ends; coarse fields make the cut
     # blocky, while the smooth falloff has no cut to coarsen
     assert smooth.seams[2][0] < rigid.seams[2][0]
-    text = markdown(rows, "voxwarp bench wire-ends")
+    text = markdown(rows, "python -m benchmarks wire-ends")
     assert "| colin27 | smooth |" in text
     assert "smooth / rigid build" in text

@@ -66,9 +66,8 @@ def test_cli_storage_writes_the_report(
 
     monkeypatch.setattr(ws, "bench_storage", fake)
     monkeypatch.setattr(sys, "argv", ["pytest"])
-    p = argparse.ArgumentParser(prog="voxwarp")
-    sub = p.add_subparsers(dest="command", required=True)
-    bw.add_bench_wires_parser(sub.add_parser("bench").add_subparsers(dest="bench"))
+    p = argparse.ArgumentParser(prog="python -m benchmarks")
+    bw.add_bench_wires_parser(p.add_subparsers(dest="bench"))
     out = tmp_path / "storage.md"
     argv = ["wires", "--storage", "--repeats", "2", "--frames", "3", "--no-render"]
     args = p.parse_args([*argv, "--markdown", str(out)])

@@ -12,7 +12,7 @@ import pytest
 
 from benchmarks.wire_tables import TablesRow, axis_wire, identity_wires, markdown, measure
 from benchmarks.wires import influence_region, ray_sample_stats
-from tests.bench.test_bench_wires import _Box, _HalfSwept
+from tests.benchmarks.test_bench_wires import _Box, _HalfSwept
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
 from voxwarp.deform.wires.field import Wire, WireDeformer
@@ -118,6 +118,6 @@ def test_measure_the_tubes(gl_ctx: Any) -> None:
     assert row.total_ratio > row.render_ratio
     assert math.isfinite(row.changed_pixels)
     assert row.changed_pixels < 5.0
-    text = markdown([row], "voxwarp bench wire-tables")
+    text = markdown([row], "python -m benchmarks wire-tables")
     assert "| paper (Tables 2-3): Tubes | 2590 | 0.96 | 4810 | 1.86x | 2.23x | — |" in text
     assert "| paper (Table 1): CT Carp | — | — | 26,011,195 | 59.7 |" in text

@@ -43,9 +43,8 @@ def small_fish() -> Any:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="voxwarp")
-    sub = p.add_subparsers(dest="command", required=True)
-    bsub = sub.add_parser("bench").add_subparsers(dest="bench", required=True)
+    p = argparse.ArgumentParser(prog="python -m benchmarks")
+    bsub = p.add_subparsers(dest="bench", required=True)
     add_bench_wires_parser(bsub)
     return p
 
@@ -151,8 +150,8 @@ def test_small_run_with_render(small_fish: Any, gl_ctx: Any, tmp_path: Path) -> 
     assert small.frame_ms > 0
     assert small.total_s == pytest.approx(small.build_s + small.first_ms / 1000)
 
-    text = report.markdown("voxwarp bench wires --scales 2,4")
-    assert text.startswith("Command: `voxwarp bench wires --scales 2,4`")
+    text = report.markdown("python -m benchmarks wires --scales 2,4")
+    assert text.startswith("Command: `python -m benchmarks wires --scales 2,4`")
     lines = report.target_lines()
     # builds at 1:8 and 1:1, the two propagation grids, one per camera x layout
     assert len(lines) == 2 + 2 + len(CAMERAS) * len(LAYOUTS)
@@ -187,7 +186,7 @@ def test_no_render_still_reports_everything_else(small_fish: Any) -> None:
     assert report.render_skipped == "--no-render"
     assert report.builds[0].repeats == 2
     assert len(report.propagation) == 1
-    text = report.markdown("voxwarp bench wires --scales 8 --no-render")
+    text = report.markdown("python -m benchmarks wires --scales 8 --no-render")
     assert "Target: deformed dvr <= 1.5x the undeformed dvr: not measured -> NOT MEASURED" in text
     assert "Not run: --no-render." in text
     assert [(p.layout, p.first_ms) for p in report.phantoms] == [(la, None) for la in LAYOUTS]
@@ -236,7 +235,7 @@ def test_cli_writes_the_markdown(
     printed = capsys.readouterr()
     text = out.read_text()
     assert text in printed.out
-    assert text.startswith(f"Command: `voxwarp {' '.join(argv)} --markdown {out}`")
+    assert text.startswith(f"Command: `python -m benchmarks {' '.join(argv)} --markdown {out}`")
     assert "| 4 | 1:64 |" in text
     assert "build 1:64" in printed.err  # progress goes to stderr
     assert "| 32x16 | framed |" not in text  # default size 512x256

@@ -38,16 +38,16 @@ def test_head_builds_compare_both_paths() -> None:
         assert a.swept > 0
     for r in rows:
         assert sum(r.stages.values()) <= r.median_s + 1e-6
-    text = bw.head_markdown(rows, "voxwarp bench wires --head --scales 8,4")
-    assert text.startswith("Command: `voxwarp bench wires --head --scales 8,4`")
+    text = bw.head_markdown(rows, "python -m benchmarks wires --head --scales 8,4")
+    assert text.startswith("Command: `python -m benchmarks wires --head --scales 8,4`")
     assert text.count("| 1:512 |") == 2
     assert text.count("| 1:64 |") == 2
     assert "Target: head field build" not in text  # targets exist for 1:8 and 1:1 only
 
 
 def test_head_flag_is_parsed() -> None:
-    p = argparse.ArgumentParser(prog="voxwarp")
-    bsub = p.add_subparsers().add_parser("bench").add_subparsers()
+    p = argparse.ArgumentParser(prog="python -m benchmarks")
+    bsub = p.add_subparsers()
     bw.add_bench_wires_parser(bsub)
     args = p.parse_args(["wires", "--head", "--repeats", "2"])
     assert args.head

@@ -276,10 +276,10 @@ def test_bench_massspring_smoke(gl_ctx: Any) -> None:
 
 
 def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
-    from voxwarp.cli.main import main
+    from benchmarks.__main__ import main
 
     out = tmp_path / "bench.md"
-    argv = ["bench", "massspring", "--sizes", "3", "--steps", "2", "--repeats", "1"]
+    argv = ["massspring", "--sizes", "3", "--steps", "2", "--repeats", "1"]
     assert main([*argv, "--no-taichi", "--no-render", "--markdown", str(out)]) == 0
     text = out.read_text(encoding="utf-8")
     assert "| 3³ |" in text
@@ -292,7 +292,7 @@ def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str])
     assert text in capsys.readouterr().out
     for bad in (["--sizes", "1"], ["--sizes", "16,x"], ["--steps", "0"]):
         with pytest.raises(SystemExit):
-            main(["bench", "massspring", *bad])
+            main(["massspring", *bad])
 
 
 def test_element_dragged_onto_its_neighbour_agrees_on_cpu_and_gpu(gl_ctx: Any) -> None:
