@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 #: the checkout's root: the folder that holds ``benchmarks/``
 ROOT = Path(__file__).resolve().parent.parent
@@ -23,3 +24,20 @@ def child_env() -> dict[str, str]:
     any working directory)."""
     path = os.environ.get("PYTHONPATH", "")
     return {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(ROOT), path) if p)}
+
+
+def gpu_context(ctx: Any, use_gpu: bool) -> tuple[Any, bool, str]:
+    """The GL context a benchmark's GPU rows run on: ``(ctx, own, skip)``. ``ctx`` as
+    given, else a new headless one when ``use_gpu`` (``own``: the caller releases it);
+    ``skip`` is why GPU rows are skipped ("" when they run)."""
+    if not use_gpu:
+        return ctx, False, "skipped (not asked for)"
+    if ctx is not None:
+        return ctx, False, ""
+    from voxwarp.errors import RenderError
+    from voxwarp.render.context import create_context
+
+    try:
+        return create_context(), True, ""
+    except RenderError as exc:
+        return None, False, f"skipped: {exc}"

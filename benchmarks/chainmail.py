@@ -46,8 +46,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import gpu_context
 from voxwarp.bench.command import emit_report
-from voxwarp.bench.render import gpu_context
 from voxwarp.core.checks import int_list, positive_int
 from voxwarp.core.timing import cpu_count, load_average
 from voxwarp.deform.elements.chainmail_gpu import GpuChainMailSolver

@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.bench.render import gpu_context
+from benchmarks import gpu_context
 from voxwarp.core.checks import int_list, positive_int
 from voxwarp.core.timing import cpu_count, load_average
 

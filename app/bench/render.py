@@ -102,23 +102,6 @@ class BenchReport:
         return "\n".join(lines) + "\n"
 
 
-def gpu_context(ctx: Any, use_gpu: bool) -> tuple[Any, bool, str]:
-    """The GL context a benchmark's GPU rows run on: ``(ctx, own, skip)``. ``ctx`` as
-    given, else a new headless one when ``use_gpu`` (``own``: the caller releases it);
-    ``skip`` is why GPU rows are skipped ("" when they run)."""
-    if not use_gpu:
-        return ctx, False, "skipped (not asked for)"
-    if ctx is not None:
-        return ctx, False, ""
-    from voxwarp.errors import RenderError
-    from voxwarp.render.context import create_context
-
-    try:
-        return create_context(), True, ""
-    except RenderError as exc:
-        return None, False, f"skipped: {exc}"
-
-
 def benchmark_volume(volume: Volume | None = None) -> Volume:
     """The benchmark volume: ``volume``, or the real CT ``stent`` upsampled to 256³."""
     if volume is not None:

@@ -41,3 +41,17 @@ def test_animate_bench_names_the_lab(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["animate", "scene.json", "--bench"]) == 2
     (line,) = capsys.readouterr().err.splitlines()
     assert "'python -m benchmarks movie SCENE'" in line
+
+
+def test_installed_bench_render_times_voxwarp_alone() -> None:
+    """``voxwarp bench render --input FILE``: voxwarp's rows, no VTK (the lab's ``python
+    -m benchmarks render`` adds it). In a subprocess: it makes its own GL context."""
+    from tests.run_cli import run_cli
+
+    argv = ["bench", "render", "--input", "sample:colin27", "--tf", "mri", "--size", "48x48"]
+    proc = run_cli(*argv, "--frames", "1", "--warmup", "1", timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "Volume: colin27 91x109x91" in proc.stdout
+    assert "| voxwarp | dvr |" in proc.stdout
+    assert "| voxwarp, no skipping | dvr |" in proc.stdout
+    assert "VTK" not in proc.stdout + proc.stderr
