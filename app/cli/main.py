@@ -1056,7 +1056,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         cases = standard_cases()
         if args.tf:  # applies to the sparse case only: the dense ones define their TF
             cases[0].transfer_function = _tf_arg(args.tf, cases[0].volume)
-    log = lambda s: print(s, file=sys.stderr)  # noqa: E731
+
+    def log(message: str) -> None:
+        print(message, file=sys.stderr)
+
     reports = bench_render_cases(
         cases,
         size=args.size,
@@ -1076,7 +1079,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.deformed:
         from voxwarp.bench.render import bench_warp_render
 
-        warp_report = bench_warp_render(frames=args.frames, warmup=args.warmup, log=log)
+        warp_report = bench_warp_render(
+            cases[0].volume if path else None,  # None: the standard run's 256³ CT
+            size=args.size,
+            frames=args.frames,
+            warmup=args.warmup,
+            transfer_function=cases[0].transfer_function if path else None,
+            log=log,
+        )
         warp_text = warp_report.markdown(command)
         print(warp_text)
         cost = warp_report.ratio("offset warp, baked")

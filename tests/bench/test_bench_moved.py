@@ -44,14 +44,17 @@ def test_animate_bench_names_the_lab(capsys: pytest.CaptureFixture[str]) -> None
 
 
 def test_installed_bench_render_times_voxwarp_alone() -> None:
-    """``voxwarp bench render --input FILE``: voxwarp's rows, no VTK (the lab's ``python
-    -m benchmarks render`` adds it). In a subprocess: it makes its own GL context."""
+    """``voxwarp bench render --input FILE --deformed``: voxwarp's rows, then dvr through a
+    settled mass-spring offset field on the same volume; no VTK (the lab's ``python -m
+    benchmarks render`` adds it). In a subprocess: it makes its own GL context."""
     from tests.run_cli import run_cli
 
     argv = ["bench", "render", "--input", "sample:colin27", "--tf", "mri", "--size", "48x48"]
-    proc = run_cli(*argv, "--frames", "1", "--warmup", "1", timeout=300)
+    proc = run_cli(*argv, "--frames", "1", "--warmup", "1", "--deformed", timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "Volume: colin27 91x109x91" in proc.stdout
     assert "| voxwarp | dvr |" in proc.stdout
     assert "| voxwarp, no skipping | dvr |" in proc.stdout
     assert "VTK" not in proc.stdout + proc.stderr
+    assert "| offset warp, baked |" in proc.stdout
+    assert "deformed dvr (offset warp, baked inverse) costs" in proc.stdout
