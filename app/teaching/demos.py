@@ -1682,9 +1682,9 @@ def _demo_lattice(
         gl = _gl_renderer(r)
         plain = _fish_scene(vol, cam)
         bent = _fish_scene(vol, cam, [warp])
-        renders.append(("(c) fish, undeformed", _rgb(r, plain, size)))
-        renders.append(("(d) fish bent by a 12x4x2-cell lattice", _rgb(r, bent, size)))
-        renders.append(("(e) tubes wrapped round a torus (paper Fig. 1)", _rgb(r, torus, size)))
+        renders.append(("(a) fish, undeformed", _rgb(r, plain, size)))
+        renders.append(("(b) fish bent by a 12x4x2-cell lattice", _rgb(r, bent, size)))
+        renders.append(("(c) tubes wrapped round a torus (paper Fig. 1)", _rgb(r, torus, size)))
         normal_scenes = _normal_scenes(size)
         normal_renders = [(title, _rgb(r, sc, size)) for title, sc in normal_scenes]
     # the frame rates against 4x4 matrices and the normals' angles are full studies of the
@@ -1711,21 +1711,21 @@ def _demo_lattice(
             " the unit cube by interpolating its 8 corner nodes. Moving nodes bends what the"
             " lattice holds, smoothly and continuously across cells.",
             _snap(plain),
-            "c",
+            "a",
         ),
         TourStep(
             "Bending a volume",
             "The same lattice bends a volume at render time: each ray sample is mapped back"
             " through the lattice (a few Newton steps per sample) to read the original voxels.",
             _snap(bent),
-            "d",
+            "b",
         ),
         TourStep(
             "Composition in a scene graph",
             "Lattices compose like matrices: a mesh under nested nodes gets one composed"
             " lattice, so a flat slab of tubes becomes a torus (the paper's Figure 1).",
             bundled_dir() / "lattice_torus_tubes.json",
-            "e",
+            "c",
         ),
         TourStep(
             "Attachments follow an animated mesh",
@@ -1746,13 +1746,13 @@ def _demo_lattice(
         ),
         TourStep(
             "Normals across cells",
-            "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel f transforms"
+            "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel d transforms"
             " the normal itself (J n): the shading flows smoothly over cell borders but is"
-            " not exactly perpendicular to the surface. Panel g transforms two tangents and"
+            " not exactly perpendicular to the surface. Panel e transforms two tangents and"
             " crosses them: exactly perpendicular, but the shading jumps at every border of"
             " these 30-degree cells. The tangent way is voxwarp's default.",
             _snap(normal_scenes[1][1]),
-            "g",
+            "e",
         ),
     ]
     return [path], numbers, tour
@@ -1776,8 +1776,8 @@ def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
 
     out = []
     for method, title in (
-        ("normal", "(f) direct normals J n (Fig. 5 left): smooth"),
-        ("tangent", "(g) tangent-space normals (Fig. 5 right): seams"),
+        ("normal", "(d) direct normals J n (Fig. 5 left): smooth"),
+        ("tangent", "(e) tangent-space normals (Fig. 5 right): seams"),
     ):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # the mesh scene's empty volume's TF
