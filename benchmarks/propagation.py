@@ -1,7 +1,7 @@
 """Nearest-seed propagation (the wire field's distance transform): OpenCL vs scipy.
 
 :func:`benchmark_nearest_seed` times :func:`voxwarp.deform.wires.propagation.nearest_seed` with
-both backends on a synthetic helix of seeds (:func:`helix_seeds`); ``voxwarp bench
+both backends on a synthetic helix of seeds (:func:`helix_seeds`); ``python -m benchmarks
 wires`` reports it.
 """
 
