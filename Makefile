@@ -48,9 +48,12 @@ $(BENCH_STAMP): $(STAMP)
 	$(PY) -m pip install -q -e '.[all,dev,bench]'
 	@touch $(BENCH_STAMP)
 
-## raycaster benchmark against VTK (writes docs/bench-render.md)
+## the lab (benchmarks/, in the checkout, not installed): every benchmark, the hardware and one
+## table (out/bench-all.md, .json); BENCH_ARGS=--quick for a few minutes; one: python -m benchmarks NAME
+BENCH_ARGS ?=
 bench: $(BENCH_STAMP)
-	$(VENV)/bin/voxwarp bench render --markdown docs/bench-render.md
+	@mkdir -p out
+	$(PY) -m benchmarks all $(BENCH_ARGS) --json out/bench-all.json --markdown out/bench-all.md
 
 clean:
 	rm -rf out site .pytest_cache tests/_failures

@@ -219,16 +219,16 @@ GALLERY: tuple[Entry, ...] = (
         "demo_wires",
         "Teaching: wire field resolution and cost",
         "The wire demo's figure sheet: the attribute field from 1:1 to 1:4096 (the wire"
-        " paper's Figure 12) and its Tables 1-3 measured the paper's way.",
+        " paper's Figure 12), the ray samples it ignores and the cost of rendering through it.",
         (f"voxwarp demo wires --out {WORK}",),
         _out("wires.png"),
         width=720,
     ),
     Entry(
         "demo_lattice",
-        "Teaching: trilinear lattices vs 4x4 matrices",
-        "The lattice demo's figure sheet: what a lattice can do that a matrix cannot, and"
-        " the GRAPP 2010 paper's timing table beside ours.",
+        "Teaching: trilinear lattices",
+        "The lattice demo's figure sheet: what a lattice can do that a matrix cannot (a bent"
+        " volume, tubes wrapped round a torus) and the two ways of carrying normals.",
         (f"voxwarp demo lattice --out {WORK}",),
         _out("lattice.png"),
         width=720,

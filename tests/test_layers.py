@@ -18,14 +18,20 @@ QT = ("PySide6", "PyQt5", "PyQt6", "PySide2", "shiboken6")
 #: app/'s role subpackages, top to bottom (``voxwarp.<name>``)
 APP = ("cli", "teaching", "bench", "editing", "animation", "render", "inputs", "scene", "io")
 APP_ALL = (*APP, "core")
+#: the lab (benchmarks/ in the checkout): never installed, so nothing installed imports it
+LAB = "benchmarks"
 FORBIDDEN = {
-    "shaders": (*QT, "voxwarp.ui", "voxwarp.deform", *(f"voxwarp.{m}" for m in APP_ALL)),
-    "deform": (*QT, "voxwarp.ui", *(f"voxwarp.{m}" for m in APP_ALL)),
-    "app": (*QT, "voxwarp.ui"),
+    "shaders": (*QT, "voxwarp.ui", "voxwarp.deform", *(f"voxwarp.{m}" for m in APP_ALL), LAB),
+    "deform": (*QT, "voxwarp.ui", *(f"voxwarp.{m}" for m in APP_ALL), LAB),
+    "app": (*QT, "voxwarp.ui", LAB),
+    "ui": (LAB,),
     "sample_volumes": (
         *QT,
         *(f"voxwarp.{m}" for m in (*APP_ALL, "ui", "deform", "shaders", "errors")),
+        LAB,
     ),
+    # teaching is installed without the benchmarks: it imports neither
+    "app/teaching": ("voxwarp.bench", LAB),
 }
 #: entry points that stand outside the layers: ``python -m voxwarp`` runs the console
 #: script (``voxwarp.cli.main:main``), whose ``gui`` command (app/cli/gui.py) is the one
@@ -65,7 +71,9 @@ def test_package_respects_layers(package: str) -> None:
     assert not bad, "layer violations:\n" + "\n".join(bad)
 
 
-@pytest.mark.parametrize("folder", ["app", "deform", "ui", "shaders", "sample_volumes", "tests"])
+@pytest.mark.parametrize(
+    "folder", ["app", "deform", "ui", "shaders", "sample_volumes", "benchmarks", "tests"]
+)
 @pytest.mark.slow
 def test_no_generic_top_level_imports(folder: str) -> None:
     """Every import of the project's own code goes through ``voxwarp``."""

@@ -1,24 +1,23 @@
-"""``voxwarp bench render``: raycaster speed against references measured in the same run.
+"""``voxwarp bench render``: raycaster speed on this machine, against itself without skipping.
 
 Renders one 256³ volume (by default the bundled real CT ``stent``, upsampled x2 in x
 and y to 256³) at 512x512 in ``dvr`` and ``mip``, and reports the median of ``frames``
 frames after warm-up, each bound by ``ctx.finish()``. References in the same process:
 
 * voxwarp with empty-space skipping off (what skipping buys);
-* VTK's ``vtkFixedPointVolumeRayCastMapper`` (CPU) and ``vtkGPUVolumeRayCastMapper``
-  (on whatever OpenGL the machine has), when ``vtk`` is installed (extra ``[bench]``),
-  with the same array, transfer function, sample distance, image size and camera.
+* voxwarp computing shaded samples' gradients on the fly;
+* in a checkout, ``python -m benchmarks render`` adds VTK's fixed-point (CPU) and GPU
+  raycasters on the same array, transfer function, sample distance, image size and camera
+  (``benchmarks/render.py``).
 
 Ratios are ``reference time / voxwarp time`` (above 1: voxwarp is faster).
 """
 
 from __future__ import annotations
 
-import math
 import platform
 import statistics
-import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,9 +26,11 @@ import numpy as np
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
 from voxwarp.render.offscreen import OffscreenRenderer
-from voxwarp.render.raycaster import LIGHT
 from voxwarp.scene import Scene
 
+#: a reference renderer timed on the same scenes: (report, volume, scenes by mode, camera,
+#: image size, frames, warm-up frames, log) -> None, appending its rows to the report
+Reference = Callable[..., None]
 #: the reference row of shaded scenes without the gradient texture
 GRADIENTS_ON_THE_FLY = "voxwarp, gradients on the fly"
 
@@ -99,44 +100,6 @@ class BenchReport:
             rs = f"{ratio:.2f}x" if ratio else "—"
             lines.append(f"| {r.renderer} | {r.mode} | {med} | {mn} | {rs} | {r.note} |")
         return "\n".join(lines) + "\n"
-
-
-def cpu_count() -> int:
-    """CPU cores this process may run on (for the benchmark reports)."""
-    import os
-
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
-def gpu_context(ctx: Any, use_gpu: bool) -> tuple[Any, bool, str]:
-    """The GL context a benchmark's GPU rows run on: ``(ctx, own, skip)``. ``ctx`` as
-    given, else a new headless one when ``use_gpu`` (``own``: the caller releases it);
-    ``skip`` is why GPU rows are skipped ("" when they run)."""
-    if not use_gpu:
-        return ctx, False, "skipped (not asked for)"
-    if ctx is not None:
-        return ctx, False, ""
-    from voxwarp.errors import RenderError
-    from voxwarp.render.context import create_context
-
-    try:
-        return create_context(), True, ""
-    except RenderError as exc:
-        return None, False, f"skipped: {exc}"
-
-
-def load_average() -> float:
-    """The 1-minute load average (-1 where the platform has none): benchmark reports
-    record it before and after a run, since these machines are shared."""
-    import os
-
-    try:
-        return float(os.getloadavg()[0])
-    except (AttributeError, OSError):  # not available on this platform
-        return -1.0
 
 
 def benchmark_volume(volume: Volume | None = None) -> Volume:
@@ -253,15 +216,16 @@ def bench_render(
     modes: tuple[str, ...] = ("dvr", "mip"),
     step: float = 1.0,
     transfer_function: Any = None,
-    use_vtk: bool = True,
-    vtk_mappers: tuple[str, ...] = ("fixed_point", "gpu"),
+    references: Sequence[Reference] = (),
     view: Any = None,
     label: str = "",
     no_skipping: bool = True,
     log: Any = print,
 ) -> BenchReport:
     """Time voxwarp and the references on one volume (see the module docstring); also
-    measure the share of the image the dvr image covers (``report.covered``)."""
+    measure the share of the image the dvr image covers (``report.covered``).
+    ``references`` time other renderers on the same scenes and append their rows (the
+    lab's VTK comparison: ``python -m benchmarks render``)."""
     vol = benchmark_volume(volume)
     if transfer_function is None:
         from voxwarp.io.samples import suggested_transfer_function
@@ -301,8 +265,8 @@ def bench_render(
             log(f"voxwarp without skipping {m}: {statistics.median(t):.1f} ms")
         r.renderer.empty_space_skipping = True
         _bench_gradients_on_the_fly(r, report, scenes, frames, warmup, log)
-    if use_vtk:
-        _bench_vtk(report, vol, scenes, cam, size, frames, warmup, log, vtk_mappers)
+    for reference in references:
+        reference(report, vol, scenes, cam, size, frames, warmup, log)
     return report
 
 
@@ -329,65 +293,6 @@ def _bench_gradients_on_the_fly(
         log(f"voxwarp with gradients on the fly {m}: {statistics.median(t):.1f} ms")
 
 
-def _bench_vtk(
-    report: BenchReport,
-    vol: Volume,
-    scenes: dict[str, Scene],
-    cam: Camera,
-    size: tuple[int, int],
-    frames: int,
-    warmup: int,
-    log: Any,
-    mappers: tuple[str, ...] = ("fixed_point", "gpu"),
-) -> None:
-    from voxwarp.bench import vtk as bench_vtk
-
-    names = {"fixed_point": "VTK fixed-point (CPU)", "gpu": "VTK GPU raycaster"}
-    names = {k: v for k, v in names.items() if k in mappers}
-    if not bench_vtk.vtk_available():
-        for name in names.values():
-            report.rows.append(
-                BenchRow(name, "-", 0, 0, "skipped: VTK not installed (pip install '.[bench]')")
-            )
-        log("VTK not installed: VTK rows skipped (pip install '.[bench]')")
-        return
-    near, far = cam.near_far()
-    spec = bench_vtk.CameraSpec(
-        position=tuple(cam.eye),
-        focal_point=tuple(cam.center),
-        view_up=tuple(cam.rotation[:, 1]),
-        view_angle_deg=cam.fov,
-        parallel=False,
-        parallel_scale=cam.ortho_height / 2,
-        near=near,
-        far=far,
-    )
-    for mapper, name in names.items():
-        for m, scene in scenes.items():
-            try:
-                res = bench_vtk.render_vtk(
-                    vol.data,
-                    vol.spacing,
-                    vol.origin,
-                    list(scene.transfer_function.points),
-                    mapper=mapper,  # type: ignore[arg-type]
-                    mode=m,  # type: ignore[arg-type]
-                    sample_distance_mm=scene.sample_distance_mm,
-                    opacity_unit_distance_mm=scene.opacity_reference_mm,
-                    size=size,
-                    camera=spec,
-                    frames=frames,
-                    warmup=warmup,
-                    shading=LIGHT if scene.use_shading() else None,
-                )
-            except (RuntimeError, ValueError) as exc:
-                report.rows.append(BenchRow(name, m, 0, 0, f"skipped: {exc}"))
-                log(f"{name} {m}: skipped ({exc})")
-                continue
-            report.rows.append(BenchRow(name, m, res.median_ms, res.min_ms))
-            log(f"{name} {m}: {res.median_ms:.1f} ms")
-
-
 def bench_render_cases(cases: list[RenderCase], **kwargs: Any) -> list[BenchReport]:
     """:func:`bench_render` of each case (``kwargs`` as there), one report per case."""
     return [
@@ -400,31 +305,6 @@ def bench_render_cases(cases: list[RenderCase], **kwargs: Any) -> list[BenchRepo
         )
         for c in cases
     ]
-
-
-def case_summary(report: BenchReport) -> dict[str, Any]:
-    """The key numbers of one case: voxwarp dvr ms, covered share, ms per covered
-    megapixel and the speed-ups over the references measured (JSON-ready)."""
-    ours = report.find("voxwarp", "dvr")
-    pixels = report.size[0] * report.size[1] * max(report.covered, 0.0)
-    out: dict[str, Any] = {
-        "case": report.label or report.volume,
-        "volume": report.volume,
-        "voxwarp_dvr_ms": None if ours is None else round(ours.median_ms, 2),
-        "covered": round(report.covered, 4),
-        "ms_per_covered_mpixel": (
-            None if ours is None or pixels <= 0 else round(ours.median_ms / (pixels / 1e6), 2)
-        ),
-    }
-    for ref in (
-        "voxwarp, no skipping",
-        GRADIENTS_ON_THE_FLY,
-        "VTK fixed-point (CPU)",
-        "VTK GPU raycaster",
-    ):
-        ratio = report.ratio(ref, "dvr")
-        out[f"speedup_vs_{ref}"] = None if ratio is None else round(ratio, 3)
-    return out
 
 
 # ---------------------------------------------------------------------- deformed DVR
@@ -578,15 +458,3 @@ def bench_warp_render(
         r.renderer.empty_space_skipping = True
     ms.close()
     return report
-
-
-def best_times(repeats: int, *steps: Callable[[], Any]) -> list[float]:
-    """The shortest wall time (s) of each of ``steps`` over ``repeats`` rounds (each
-    round runs every step once, in order)."""
-    best = [math.inf] * len(steps)
-    for _ in range(max(1, int(repeats))):
-        for i, step in enumerate(steps):
-            start = time.perf_counter()
-            step()
-            best[i] = min(best[i], time.perf_counter() - start)
-    return best

@@ -1,6 +1,7 @@
-"""``voxwarp bench``: the benchmarks' parsers and commands (``bench render``,
-``massspring``, ``startup``, ``chainmail``; the heavier ones define their own options in
-:mod:`voxwarp.bench` and are added only when a ``bench`` command runs)."""
+"""``voxwarp bench``: this machine's frame rates (``bench render``, and ``slices`` and
+``interactive``, whose options their modules in :mod:`voxwarp.bench` define and which are
+added only when a ``bench`` command runs). The peer comparisons and studies are the lab's
+(``python -m benchmarks NAME`` from a checkout); their old names here say so in one line."""
 
 from __future__ import annotations
 
@@ -15,9 +16,22 @@ from voxwarp.cli.options import TF_HELP
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.checks import image_size as _size
-from voxwarp.core.checks import int_list
-from voxwarp.core.checks import positive_int as _positive_int
 from voxwarp.inputs import load_input
+
+#: ``voxwarp bench`` commands that moved to the lab in the checkout (``benchmarks/``)
+MOVED_BENCHMARKS = (
+    "massspring",
+    "startup",
+    "chainmail",
+    "wires",
+    "wire-tables",
+    "wire-ends",
+    "lattice",
+    "fields",
+    "scale",
+    "segments",
+    "all",
+)
 
 
 def add_parser(sub: Any, *, bench: bool = True) -> None:
@@ -25,7 +39,7 @@ def add_parser(sub: Any, *, bench: bool = True) -> None:
     leaves out the heavy ones (:func:`_add_heavy_bench_parsers`)."""
     pb = sub.add_parser("bench", help="benchmarks")
     bsub = pb.add_subparsers(dest="bench", required=True)
-    pbr = bsub.add_parser("render", help="raycaster timings vs VTK and no-skipping")
+    pbr = bsub.add_parser("render", help="raycaster timings vs no-skipping")
     pbr.add_argument(
         "input",
         nargs="?",
@@ -41,68 +55,25 @@ def add_parser(sub: Any, *, bench: bool = True) -> None:
     pbr.add_argument(
         "--tf", help=TF_HELP + " (default: suits the bench volume; standard run: sparse)"
     )
-    pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
+    pbr.add_argument(
+        "--no-vtk", action="store_true", help="no effect: VTK is in 'python -m benchmarks render'"
+    )
+    pbr.add_argument(
+        "--deformed", action="store_true", help="also time dvr through a mass-spring offset warp"
+    )
     pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbr.set_defaults(func=cmd_bench)
-    pbm = bsub.add_parser("massspring", help="mass-spring steps/s: numpy, GPU and taichi")
-    pbm.add_argument(
-        "--sizes",
-        type=_sizes,
-        default=(16, 32, 64, 128),
-        metavar="N,N,...",
-        help="grids of N³ elements (default 16,32,64,128)",
-    )
-    pbm.add_argument(
-        "--steps",
-        type=_positive_int,
-        default=50,
-        metavar="N",
-        help="steps per timed block (fewer where a block would take over 2 s)",
-    )
-    pbm.add_argument("--repeats", type=_positive_int, default=5, help="timed blocks per solver")
-    pbm.add_argument("--no-taichi", action="store_true", help="skip the taichi reference")
-    pbm.add_argument("--no-numpy", action="store_true", help="skip the numpy solver")
-    pbm.add_argument(
-        "--render",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="also time deformed vs undeformed dvr through the offset warp (default on)",
-    )
-    pbm.add_argument(
-        "--frames", type=_positive_int, default=10, help="timed frames per render (default 10)"
-    )
-    pbm.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
-    pbm.set_defaults(func=cmd_bench_massspring)
-    pbs = bsub.add_parser(
-        "startup",
-        help="start-up time of voxwarp --help, import voxwarp and a whole render of the"
-        " stent sample vs python",
-    )
-    pbs.add_argument("--repeats", type=_positive_int, default=5, help="runs per case")
-    pbs.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
-    pbs.set_defaults(func=cmd_bench_startup)
-    pbc = bsub.add_parser(
-        "chainmail", help="3D ChainMail: time to settle a local and a large drag vs grid size"
-    )
-    pbc.add_argument(
-        "--sizes",
-        type=_sizes,
-        default=(16, 32, 64, 128),
-        metavar="N,N,...",
-        help="grids of N³ elements (default 16,32,64,128)",
-    )
-    pbc.add_argument(
-        "--repeats", type=_positive_int, default=5, help="timed moves per solver (default 5)"
-    )
-    pbc.add_argument("--no-gpu", action="store_true", help="skip the GPU backend")
-    pbc.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
-    pbc.set_defaults(func=cmd_bench_chainmail)
+    for name in MOVED_BENCHMARKS:  # no option of theirs is parsed here ("\0": none is one)
+        help_ = f"moved: python -m benchmarks {name} (from a checkout)"
+        pmv = bsub.add_parser(name, help=help_, add_help=False, prefix_chars="\0")
+        pmv.add_argument("rest", nargs="*")
+        pmv.set_defaults(func=cmd_bench_moved)
     if bench:
         _add_heavy_bench_parsers(bsub)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """``voxwarp bench render``: timings against references (see voxwarp.bench.render);
+    """``voxwarp bench render``: this machine's frame rates (see voxwarp.bench.render);
     without an input the standard run: a sparse and two dense cases."""
     from voxwarp.bench.render import RenderCase, bench_render_cases, standard_cases
     from voxwarp.core.files import atomic_write_text
@@ -116,15 +87,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
         cases = standard_cases()
         if args.tf:  # applies to the sparse case only: the dense ones define their TF
             cases[0].transfer_function = _tf_arg(args.tf, cases[0].volume)
+
+    def log(message: str) -> None:
+        print(message, file=sys.stderr)
+
     reports = bench_render_cases(
         cases,
         size=args.size,
         frames=args.frames,
         warmup=args.warmup,
-        use_vtk=not args.no_vtk,
         step=args.step,
         view=args.view,
-        log=lambda s: print(s, file=sys.stderr),
+        log=log,
     )
     command = (
         "voxwarp " + " ".join(sys.argv[1:])
@@ -133,55 +107,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     )
     text = "\n".join(report.markdown(command) for report in reports)
     print(text)
-    for report in reports:
-        for mode in ("dvr", "mip"):
-            ratio = report.ratio("VTK fixed-point (CPU)", mode)
-            if ratio is not None:
-                print(
-                    f"{report.label or report.volume} {mode}: voxwarp is {ratio:.2f}x the"
-                    " speed of VTK's fixed-point raycaster"
-                )
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
-
-
-#: ``--sizes`` of ``bench massspring`` / ``bench chainmail``: element grids per axis
-_sizes = int_list(2, 128, "size", "16,32,64")
-
-
-def cmd_bench_massspring(args: argparse.Namespace) -> int:
-    """``voxwarp bench massspring``: solver steps/s (see voxwarp.bench.massspring)."""
-    from voxwarp.bench.massspring import bench_massspring
-    from voxwarp.core.files import atomic_write_text
-
-    report = bench_massspring(
-        args.sizes,
-        steps=args.steps,
-        repeats=args.repeats,
-        use_taichi=not args.no_taichi,
-        use_numpy=not args.no_numpy,
-        log=lambda s: print(s, file=sys.stderr),
-    )
-    command = (
-        "voxwarp " + " ".join(sys.argv[1:])
-        if sys.argv[0].endswith("voxwarp")
-        else "voxwarp bench massspring"
-    )
-    text = report.markdown(command)
-    print(text)
-    for n in report.sizes:
-        ratio = report.ratio(n, "gpu", "taichi")
-        if ratio is not None:
-            print(f"{n}³: the GPU solver runs {ratio:.2f}x the steps/s of taichi on the CPU")
-        ratio = report.ratio(n, "gpu", "taichi-min")
-        if ratio is not None:
-            print(f"{n}³: the GPU solver runs {ratio:.2f}x the minimal taichi kernel's steps/s")
-    if args.render:
+    if args.deformed:
         from voxwarp.bench.render import bench_warp_render
 
         warp_report = bench_warp_render(
-            frames=args.frames, warmup=2, log=lambda s: print(s, file=sys.stderr)
+            cases[0].volume if path else None,  # None: the standard run's 256³ CT
+            size=args.size,
+            frames=args.frames,
+            warmup=args.warmup,
+            transfer_function=cases[0].transfer_function if path else None,
+            log=log,
         )
         warp_text = warp_report.markdown(command)
         print(warp_text)
@@ -194,65 +129,24 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_bench_startup(args: argparse.Namespace) -> int:
-    """``voxwarp bench startup``: start-up time of the command line (voxwarp.bench.startup)."""
-    from voxwarp.bench.startup import bench_startup, markdown
-    from voxwarp.core.files import atomic_write_text
-
-    text = markdown(bench_startup(args.repeats), f"voxwarp bench startup --repeats {args.repeats}")
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
-
-
-def cmd_bench_chainmail(args: argparse.Namespace) -> int:
-    """``voxwarp bench chainmail``: time to settle one drag (see voxwarp.bench.chainmail)."""
-    from voxwarp.bench.chainmail import bench_chainmail
-    from voxwarp.core.files import atomic_write_text
-
-    report = bench_chainmail(
-        args.sizes,
-        repeats=args.repeats,
-        use_gpu=not args.no_gpu,
-        log=lambda s: print(s, file=sys.stderr),
+def cmd_bench_moved(args: argparse.Namespace) -> int:
+    """A ``voxwarp bench`` command that moved to the lab: one line saying where, exit 2."""
+    print(
+        f"voxwarp: error: 'voxwarp bench {args.bench}' moved out of the installed package:"
+        f" run 'python -m benchmarks {args.bench}' from a checkout of voxwarp",
+        file=sys.stderr,
     )
-    command = (
-        "voxwarp " + " ".join(sys.argv[1:])
-        if sys.argv[0].endswith("voxwarp")
-        else "voxwarp bench chainmail"
-    )
-    text = report.markdown(command)
-    print(text)
-    if args.markdown:
-        atomic_write_text(Path(args.markdown), text)
-    return 0
+    return 2
 
 
 def _add_heavy_bench_parsers(bsub: Any) -> None:
-    """``bench wires|lattice|interactive|fields|scale|all``: their modules define their options
-    (and load numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
-    from voxwarp.bench.all import add_bench_all_parser
-    from voxwarp.bench.fields import add_bench_fields_parser
+    """``bench interactive|slices``: their modules define their options (and load numpy,
+    numba, ...), so the parser adds them only when a ``bench`` command runs."""
     from voxwarp.bench.interactive import add_bench_interactive_parser
-    from voxwarp.bench.lattice import add_bench_lattice_parser
-    from voxwarp.bench.scale import add_bench_scale_parser
-    from voxwarp.bench.segments import add_bench_segments_parser
     from voxwarp.bench.slices import add_bench_slices_parser
-    from voxwarp.bench.wire_ends import add_bench_wire_ends_parser
-    from voxwarp.bench.wire_tables import add_bench_wire_tables_parser
-    from voxwarp.bench.wires import add_bench_wires_parser
 
-    add_bench_wires_parser(bsub)
-    add_bench_wire_tables_parser(bsub)
-    add_bench_wire_ends_parser(bsub)
-    add_bench_lattice_parser(bsub)
     add_bench_interactive_parser(bsub)
-    add_bench_fields_parser(bsub)
-    add_bench_scale_parser(bsub)
-    add_bench_segments_parser(bsub)
     add_bench_slices_parser(bsub)
-    add_bench_all_parser(bsub)
 
 
 def wants_bench(argv: Sequence[str] | None) -> bool:

@@ -4,7 +4,7 @@ ITK's physical space is LPS mm; voxwarp's world is RAS mm (a volume without pati
 orientation is taken as RAS here too). :func:`to_sitk` and :func:`from_sitk` convert
 volumes with their full geometry (spacing, origin, direction); :func:`resample` is the
 "resample the whole volume" alternative voxwarp avoids (3D Slicer's way), used as an
-oracle by tests and as the reference of ``voxwarp bench fields``.
+oracle by tests and as the reference of ``python -m benchmarks fields``.
 """
 
 from __future__ import annotations

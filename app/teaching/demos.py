@@ -13,15 +13,18 @@ and puts their numbers beside the papers'.
   priority queue), then the element grid after 0, 1 and 4 relaxation steps, the
   smoothness energy per step, and the fish rendered after 0, 1 and 4 steps.
 * ``compare`` (Knoche 2008, Figures 12-13): mass-spring and ChainMail on the same grid
-  and the same drag, side by side, and the CPU and GPU solvers' timings (the existing
-  benchmarks at small sizes; GPU = the moderngl backends on the EGL context, labelled
-  with its GL renderer).
+  and the same drag, side by side, and the CPU and GPU solvers' timings at small sizes
+  (:mod:`voxwarp.teaching.measure`; GPU = the moderngl backends on the EGL context,
+  labelled with its GL renderer).
 * ``wires`` (Journal of WSCG 2006, Figure 12 and Table 1): the fish bent by the bundled
   spine wires with the attribute field at 1:1 ... 1:4096, build times, the share of
-  field voxels and of ray samples that need no mapping ("ignored").
-* ``lattice`` (GRAPP 2010, its table): frame rate of trilinear lattices against 4x4
-  matrices (vertex throughput, composition of many objects), and renders of a bent
-  volume and of the lattice-wrapped torus of the paper's Figure 1.
+  field voxels and of ray samples that need no mapping ("ignored")
+  (:mod:`voxwarp.teaching.wire_measure`); the paper's Tables 1-3 measured its way are
+  ``python -m benchmarks wire-tables`` in a checkout.
+* ``lattice`` (GRAPP 2010, Figures 1 and 5): renders of a bent volume, of the
+  lattice-wrapped torus of the paper's Figure 1 and of both normal methods; the frame
+  rates against 4x4 matrices (the paper's table) are a full study of the lab, ``python -m
+  benchmarks lattice`` in a checkout.
 * ``registration`` (no paper; :mod:`voxwarp.teaching.registration_demo`): colin27 deformed
   by known Gaussian bumps, registered back with SimpleITK demons, the moving image
   rendered through the recovered field beside the fixed one (``registration`` extra).
@@ -36,7 +39,6 @@ for a student and a scene JSON to show.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import math
 import os
@@ -149,11 +151,6 @@ class _Settings:
     wire_subsample: int
     wire_repeats: int
     wire_frames: int
-    lattice_triangles: int
-    lattice_objects: int
-    lattice_frames: int
-    lattice_size: tuple[int, int]
-    lattice_cells: tuple[int, ...]
 
 
 FULL = _Settings(
@@ -174,11 +171,6 @@ FULL = _Settings(
     wire_subsample=4,
     wire_repeats=2,
     wire_frames=5,
-    lattice_triangles=1_500_000,
-    lattice_objects=2000,
-    lattice_frames=5,
-    lattice_size=(512, 512),
-    lattice_cells=(1, 4, 16),
 )
 QUICK = _Settings(
     quick=True,
@@ -198,11 +190,6 @@ QUICK = _Settings(
     wire_subsample=8,
     wire_repeats=1,
     wire_frames=1,
-    lattice_triangles=8000,
-    lattice_objects=40,
-    lattice_frames=1,
-    lattice_size=(96, 96),
-    lattice_cells=(1, 4),
 )
 
 
@@ -1190,11 +1177,10 @@ def _plot_relax_curve(ax: Any, slice_curve: Sequence[float], fish_curve: Sequenc
 def _demo_compare(
     s: _Settings, out: Path, log: Callable[[str], None]
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
-    from voxwarp.bench.chainmail import bench_chainmail
-    from voxwarp.bench.massspring import bench_massspring
     from voxwarp.deform.elements.chainmail import ChainMail
     from voxwarp.deform.elements.grid import ElementGrid
     from voxwarp.deform.elements.massspring import MassSpring
+    from voxwarp.teaching.measure import chainmail_times, massspring_rates
 
     # the same grid and drag in both models
     t = time.perf_counter()
@@ -1237,44 +1223,13 @@ def _demo_compare(
         scene = _fish_scene(vol, cam, [fcm.warp()])
         tour_scenes["chainmail+4"] = _snap(scene)
         renders.append(("(f) fish, ChainMail + 4 relaxation steps", _rgb(r, scene, s.render_size)))
-        # CPU vs GPU: the benchmarks at small sizes, on this context
+        # CPU vs GPU at small sizes, on this context (voxwarp.teaching.measure)
         log("compare: timing the mass-spring solvers")
-        msr = bench_massspring(
-            s.ms_sizes,
-            steps=s.ms_steps,
-            repeats=s.ms_repeats,
-            use_taichi=False,
-            ctx=r.ctx,
-            log=log,
+        ms_rows, ms_model = massspring_rates(
+            s.ms_sizes, steps=s.ms_steps, repeats=s.ms_repeats, ctx=r.ctx, log=log
         )
         log("compare: timing the ChainMail solvers")
-        cmr = bench_chainmail(s.cm_sizes, repeats=s.cm_repeats, ctx=r.ctx, log=log)
-
-    ms_rows = [
-        {
-            "size": row.size,
-            "backend": row.backend,
-            "steps_per_s": row.median_sps,
-            "min": row.min_sps,
-            "max": row.max_sps,
-            "note": row.note,
-        }
-        for row in msr.rows
-        if row.backend != "taichi"
-    ]
-    cm_rows = [
-        {
-            "size": row.size,
-            "solver": row.solver,
-            "drag": row.drag,
-            "ms": row.median_ms if row.repeats else None,
-            "min": row.min_ms if row.repeats else None,
-            "max": row.max_ms if row.repeats else None,
-            "touched": row.touched,
-            "note": row.note,
-        }
-        for row in cmr.rows
-    ]
+        cm_rows = chainmail_times(s.cm_sizes, repeats=s.cm_repeats, ctx=r.ctx, log=log)
     diff = np.linalg.norm(states["massspring"] - states["chainmail+4"], axis=-1)
     numbers: dict[str, Any] = {
         "grid": SLICE_SHAPE,
@@ -1298,10 +1253,10 @@ def _demo_compare(
         "gl_renderer": gl,
         "timings": {
             "massspring": ms_rows,
-            "massspring_dt_s": msr.dt,
-            "massspring_integrator": msr.integrator,
+            "massspring_dt_s": ms_model["dt"],
+            "massspring_integrator": ms_model["integrator"],
             "chainmail": cm_rows,
-            "gl_renderer": cmr.gl_renderer,
+            "gl_renderer": gl,
         },
     }
     fig = _figure(16.0, 10.5, DEMO_TITLES["compare"])
@@ -1449,28 +1404,28 @@ def _plot_cm_timings(ax: Any, n: dict[str, Any]) -> None:
 def _demo_wires(
     s: _Settings, out: Path, log: Callable[[str], None]
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
-    from voxwarp.bench.wires import (
-        DEFAULT_SCALES,
-        FISH_WIRES,
-        FRAMED_VIEW,
-        RENDER_SCALE,
-        framed_camera,
-        load_wires,
-        padded_fish,
-        ray_sample_stats,
-        time_builds,
-    )
     from voxwarp.deform.wires.field import WireFieldWarp
     from voxwarp.deform.wires.propagation import opencl_device_name
     from voxwarp.io.samples import load_sample
     from voxwarp.scene import Scene
+    from voxwarp.teaching.wire_measure import (
+        DEFAULT_SCALES,
+        FISH_WIRES,
+        FRAMED_VIEW,
+        RENDER_SCALE,
+        classify_samples,
+        framed_camera,
+        load_wires,
+        padded_fish,
+        time_field_builds,
+    )
 
     vol = padded_fish() if s.wire_padded else _fish(s)
     wires, spec = load_wires(FISH_WIRES)
     size = s.wire_size
     # the pictures from above (+z: the sideways bend in the image plane, the tail fin
     # turned edge-on by the twist); the ray statistics and the render cost from the view
-    # of ``voxwarp bench wires`` (FRAMED_VIEW), so that they compare with its report
+    # of ``python -m benchmarks wires`` (FRAMED_VIEW), so that they compare with its report
     cam = framed_camera(vol, wires, size, view=FISH_VIEW)
     stats_cam = framed_camera(vol, wires, size)
     tf = FISH_TF
@@ -1484,11 +1439,11 @@ def _demo_wires(
         renders.append(("undeformed", _rgb(r, base, size)))
         first: np.ndarray | None = None
         for scale in DEFAULT_SCALES:
-            row, wd = time_builds(vol, wires, scale, "float", s.wire_repeats)
+            row, wd = time_field_builds(vol, wires, scale, s.wire_repeats)
             warp = wd.warp()
             scene = base.copy(warps=[warp])
             stats_scene = stats_base.copy(warps=[warp])
-            stats = ray_sample_stats(stats_scene, stats_cam, size, warp, s.wire_subsample)
+            stats = classify_samples(stats_scene, stats_cam, size, warp, s.wire_subsample)
             img = _rgb(r, scene, size)
             renders.append((f"1:{scale**3}", img))
             if first is None:
@@ -1498,28 +1453,19 @@ def _demo_wires(
                 {
                     "scale": scale,
                     "ratio": f"1:{scale**3}",
-                    "field_shape": row.field_shape,
-                    "build_s": row.median_s,
-                    "build_min_s": row.min_s,
-                    "builds": row.repeats,
-                    "swept": row.swept,
-                    "vacated": row.vacated,
-                    "ignored": row.ignored,
-                    "voxels": row.voxels,
-                    "percent_ignored_voxels": row.percent_ignored,
-                    "samples": stats.samples,
-                    "samples_ignored": stats.identity,
-                    "samples_vacated": stats.vacated,
-                    "samples_swept": stats.swept,
-                    "percent_ignored_samples": 100.0 * stats.identity / max(stats.samples, 1),
+                    **row,
+                    "samples": stats["samples"],
+                    "samples_ignored": stats["identity"],
+                    "samples_vacated": stats["vacated"],
+                    "samples_swept": stats["swept"],
+                    "percent_ignored_samples": 100.0 * stats["identity"] / max(stats["samples"], 1),
                     "pixels_differing_from_1to1": 100.0 * float(differ.mean()),
-                    "backend": row.backend,
                 }
             )
             log(
-                f"wires 1:{scale**3}: built in {row.median_s:.3f} s, {row.percent_ignored:.2f} %"
-                f" of field voxels and {rows[-1]['percent_ignored_samples']:.2f} % of ray"
-                " samples ignored"
+                f"wires 1:{scale**3}: built in {row['build_s']:.3f} s,"
+                f" {row['percent_ignored_voxels']:.2f} % of field voxels and"
+                f" {rows[-1]['percent_ignored_samples']:.2f} % of ray samples ignored"
             )
             if scale == RENDER_SCALE:
                 warm = 2 if not s.quick else 1
@@ -1533,7 +1479,6 @@ def _demo_wires(
                 }
                 render_cost["ratio"] = render_cost["deformed_ms"] / render_cost["undeformed_ms"]
     numbers: dict[str, Any] = {
-        "tables": _wire_tables(s, log),
         "storage": _wire_storage(vol, wires),
         "volume": vol.name,
         "volume_shape": vol.shape,
@@ -1617,8 +1562,8 @@ def _demo_wires(
 def _wire_storage(vol: Any, wires: Sequence[Any]) -> list[dict[str, Any]]:
     """Bytes per field voxel of each layout and the plane masks' memory (section 7.2 and
     7.1) for the fish's field at the render scale."""
-    from voxwarp.bench.wires import RENDER_SCALE
     from voxwarp.deform.wires.field import LAYOUTS, WireDeformer
+    from voxwarp.teaching.wire_measure import RENDER_SCALE
 
     rows = []
     for layout in LAYOUTS:
@@ -1634,18 +1579,6 @@ def _wire_storage(vol: Any, wires: Sequence[Any]) -> list[dict[str, Any]]:
             }
         )
     return rows
-
-
-def _wire_tables(s: _Settings, log: Callable[[str], None]) -> dict[str, Any]:
-    """The wire paper's Tables 1-3 measured its way (``voxwarp bench wire-tables``);
-    the quick run measures the tubes alone at its small image size."""
-    from voxwarp.bench.wire_tables import DATASETS, bench_wire_tables
-
-    names = ("tubes",) if s.quick else DATASETS
-    rows = bench_wire_tables(
-        names, size=s.wire_size, frames=s.wire_frames, repeats=s.wire_repeats, log=log
-    )
-    return {"size": s.wire_size, "rows": [r.as_dict() for r in rows]}
 
 
 def _plot_ignored(ax: Any, n: dict[str, Any]) -> None:
@@ -1727,10 +1660,9 @@ def _table_wires(ax: Any, n: dict[str, Any]) -> None:
 def _demo_lattice(
     s: _Settings, out: Path, log: Callable[[str], None]
 ) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
-    from voxwarp.bench.lattice import PAPER_RATIO, bench_lattice
-    from voxwarp.bench.lattice_normals import normals_study
     from voxwarp.deform.lattice.warp import LatticeWarp
     from voxwarp.teaching.lattice_scenes import torus_tubes
+    from voxwarp.teaching.papers import lattice_ratio_range
 
     vol = _fish(s)
     spec = json.loads((bundled_dir() / "fish_lattice_bend.json").read_text(encoding="utf-8"))
@@ -1750,66 +1682,24 @@ def _demo_lattice(
         gl = _gl_renderer(r)
         plain = _fish_scene(vol, cam)
         bent = _fish_scene(vol, cam, [warp])
-        renders.append(("(c) fish, undeformed", _rgb(r, plain, size)))
-        renders.append(("(d) fish bent by a 12x4x2-cell lattice", _rgb(r, bent, size)))
-        renders.append(("(e) tubes wrapped round a torus (paper Fig. 1)", _rgb(r, torus, size)))
+        renders.append(("(a) fish, undeformed", _rgb(r, plain, size)))
+        renders.append(("(b) fish bent by a 12x4x2-cell lattice", _rgb(r, bent, size)))
+        renders.append(("(c) tubes wrapped round a torus (paper Fig. 1)", _rgb(r, torus, size)))
         normal_scenes = _normal_scenes(size)
         normal_renders = [(title, _rgb(r, sc, size)) for title, sc in normal_scenes]
-        log("lattice: timing trilinear vs linear")
-        rep = bench_lattice(
-            triangles=s.lattice_triangles,
-            objects=s.lattice_objects,
-            frames=s.lattice_frames,
-            size=s.lattice_size,
-            cells=s.lattice_cells,
-            crosscheck=False,
-            ctx=r.ctx,
-            log=log,
-        )
-    tri, lin = rep.variant("trilinear"), rep.variant("linear")
-    assert tri is not None
-    assert lin is not None
+    # the frame rates against 4x4 matrices and the normals' angles are full studies of the
+    # lab (a torus of 1.5 M triangles, thousands of composed objects): not run here
     numbers: dict[str, Any] = {
-        "paper_fps_ratio": PAPER_RATIO,
-        "triangles": rep.triangles,
-        "objects": rep.objects,
-        "frames": rep.frames,
-        "size": rep.size,
-        "cells": rep.cells,
-        "throughput": [
-            {
-                "cells": t.cells,
-                "stage": t.stage,
-                "normal_method": t.normal_method,
-                "position": t.position,
-                "lattice_ms": t.lattice_ms,
-                "linear_ms": t.linear_ms,
-                "fps_ratio": t.fps_ratio,
-            }
-            for t in rep.throughput
-        ],
-        "composition": {
-            "animated_fps_ratio": rep.composition_fps_ratio,
-            "static_fps_ratio": rep.static_fps_ratio,
-            "compose_ratio": rep.compose_ratio,
-            "trilinear_frame_ms": tri.frame_ms,
-            "linear_frame_ms": lin.frame_ms,
-            "trilinear_compose_ms": tri.compose_ms,
-            "linear_compose_ms": lin.compose_ms,
-            "groups": tri.groups,
-        },
-        "normals": [dataclasses.asdict(r) for r in normals_study()],
+        "paper_fps_ratio": lattice_ratio_range(),
+        "lab_command": LATTICE_LAB_COMMAND,
         "gl_renderer": gl,
     }
-    fig = _figure(16.0, 14.0, DEMO_TITLES["lattice"])
-    grid = fig.add_gridspec(3, 1, height_ratios=[1.0, 1.0, 1.1])
-    top = grid[0].subgridspec(1, 2, width_ratios=[1.5, 1.0])
-    _plot_throughput(fig.add_subplot(top[0, 0]), numbers)
-    _plot_composition(fig.add_subplot(top[0, 1]), numbers)
-    middle = grid[1].subgridspec(1, 3)
+    fig = _figure(16.0, 10.0, DEMO_TITLES["lattice"])
+    grid = fig.add_gridspec(2, 1)
+    middle = grid[0].subgridspec(1, 3)
     for i, (title, img) in enumerate(renders):
         _show_image(fig.add_subplot(middle[0, i]), img, title)
-    bottom = grid[2].subgridspec(1, 2)
+    bottom = grid[1].subgridspec(1, 2)
     for i, (title, img) in enumerate(normal_renders):
         _show_image(fig.add_subplot(bottom[0, i]), img, title)
     path = _save_figure(fig, out / "lattice.png")
@@ -1821,21 +1711,21 @@ def _demo_lattice(
             " the unit cube by interpolating its 8 corner nodes. Moving nodes bends what the"
             " lattice holds, smoothly and continuously across cells.",
             _snap(plain),
-            "c",
+            "a",
         ),
         TourStep(
             "Bending a volume",
             "The same lattice bends a volume at render time: each ray sample is mapped back"
             " through the lattice (a few Newton steps per sample) to read the original voxels.",
             _snap(bent),
-            "d",
+            "b",
         ),
         TourStep(
             "Composition in a scene graph",
             "Lattices compose like matrices: a mesh under nested nodes gets one composed"
             " lattice, so a flat slab of tubes becomes a torus (the paper's Figure 1).",
             bundled_dir() / "lattice_torus_tubes.json",
-            "e",
+            "c",
         ),
         TourStep(
             "Attachments follow an animated mesh",
@@ -1847,24 +1737,30 @@ def _demo_lattice(
         ),
         TourStep(
             "What it costs",
-            "Panel a: frames per second with lattices relative to plain 4x4 matrices (the"
-            " paper's table: 76.4-80.6 %); panel b: animating many objects, where every composed"
-            " lattice is recomputed on the CPU each frame.",
+            "Frames per second with lattices relative to plain 4x4 matrices (the paper's"
+            " table: 76.4-80.6 %), and animating many objects, where every composed lattice is"
+            f" recomputed on the CPU each frame: measured by `{LATTICE_LAB_COMMAND}` in a"
+            " checkout of voxwarp (docs/benchmarks.md).",
             None,
-            "a",
+            None,
         ),
         TourStep(
             "Normals across cells",
-            "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel f transforms"
+            "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel d transforms"
             " the normal itself (J n): the shading flows smoothly over cell borders but is"
-            " not exactly perpendicular to the surface. Panel g transforms two tangents and"
+            " not exactly perpendicular to the surface. Panel e transforms two tangents and"
             " crosses them: exactly perpendicular, but the shading jumps at every border of"
             " these 30-degree cells. The tangent way is voxwarp's default.",
             _snap(normal_scenes[1][1]),
-            "g",
+            "e",
         ),
     ]
     return [path], numbers, tour
+
+
+#: the lab's command that measures the lattice's costs (frame rates against 4x4 matrices,
+#: composition, normals' angles): a checkout's ``benchmarks/``, not installed
+LATTICE_LAB_COMMAND = "python -m benchmarks lattice"
 
 
 #: The lattice demo's normal panels: cells of the coarse torus lattice (30 degrees per cell
@@ -1880,8 +1776,8 @@ def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
 
     out = []
     for method, title in (
-        ("normal", "(f) direct normals J n (Fig. 5 left): smooth"),
-        ("tangent", "(g) tangent-space normals (Fig. 5 right): seams"),
+        ("normal", "(d) direct normals J n (Fig. 5 left): smooth"),
+        ("tangent", "(e) tangent-space normals (Fig. 5 right): seams"),
     ):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # the mesh scene's empty volume's TF
@@ -1895,88 +1791,3 @@ def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
         scene.camera = _framing_camera(*quarter, NORMALS_VIEW, size)
         out.append((title, scene))
     return out
-
-
-def _plot_throughput(ax: Any, n: dict[str, Any]) -> None:
-    lo, hi = n["paper_fps_ratio"]
-    groups = [f"{c}³ cells" for c in n["cells"]]
-    series: dict[str, list[float | None]] = {}
-    for stage, method, position, label in (
-        ("frame", "normal", "exact", "frame, direct normals (J n)"),
-        ("frame", "tangent", "exact", "frame, normals by tangents"),
-        ("frame", "normal", "hardware", "frame, hardware position"),
-        ("vertex", "normal", "exact", "vertex stage only"),
-    ):
-        vals: list[float | None] = []
-        for c in n["cells"]:
-            rows = [
-                t
-                for t in n["throughput"]
-                if (t["cells"], t["stage"], t["normal_method"], t["position"])
-                == (c, stage, method, position)
-            ]
-            vals.append(100.0 * rows[0]["fps_ratio"] if rows else None)
-        series[label] = vals
-    x = np.arange(len(groups))
-    width = 0.8 / len(series)
-    colors = ("tab:blue", "tab:cyan", "tab:purple", "tab:gray")
-    for i, ((label, vals), color) in enumerate(zip(series.items(), colors, strict=True)):
-        v = np.array([np.nan if a is None else a for a in vals], dtype=np.float64)
-        pos = x - 0.4 + width * (i + 0.5)
-        ax.bar(pos, v, width, label=label, color=color)
-        for p, val in zip(pos, v, strict=True):
-            if np.isfinite(val):
-                ax.text(
-                    p, val + 1, f"{val:.0f}", ha="center", va="bottom", fontsize=7, in_layout=False
-                )
-    paper = f"paper: {100 * lo:.1f}-{100 * hi:.1f} %"
-    ax.axhspan(100 * lo, 100 * hi, color="tab:orange", alpha=0.25, label=paper)
-    ax.axhline(100, color="0.4", lw=1, ls=":")
-    ax.set_xticks(x, groups)
-    top = max([135.0] + [1.3 * a for vals in series.values() for a in vals if a is not None])
-    ax.set_ylim(0, top)
-    ax.set_yticks(range(0, int(top * 0.75) + 1, 20))
-    ax.set_ylabel("lattice FPS / 4x4 FPS (%)")
-    ax.set_title(
-        f"(a) vertex throughput: a torus of {n['triangles']:,} triangles,"
-        f" {n['size'][0]}x{n['size'][1]} (GL: {n['gl_renderer']})",
-        fontsize=10,
-    )
-    ax.legend(fontsize=8, loc="upper center", ncol=3)
-    ax.grid(True, axis="y", alpha=0.3)
-
-
-def _plot_composition(ax: Any, n: dict[str, Any]) -> None:
-    c = n["composition"]
-    lo, hi = n["paper_fps_ratio"]
-    labels = ["animated frame\n(compose + draw)", "static redraw"]
-    vals = [100.0 * (c["animated_fps_ratio"] or 0.0), 100.0 * (c["static_fps_ratio"] or 0.0)]
-    bars = ax.bar(labels, vals, color=("tab:red", "tab:blue"), width=0.5)
-    for b, v in zip(bars, vals, strict=True):
-        ax.text(
-            b.get_x() + b.get_width() / 2,
-            v + 1,
-            f"{v:.0f} %",
-            ha="center",
-            fontsize=9,
-            in_layout=False,
-        )
-    paper = f"paper: {100 * lo:.1f}-{100 * hi:.1f} %"
-    ax.axhspan(100 * lo, 100 * hi, color="tab:orange", alpha=0.25, label=paper)
-    ax.axhline(100, color="0.4", lw=1, ls=":")
-    top = max(135.0, 1.3 * max(vals))
-    ax.set_ylim(0, top)
-    ax.set_yticks(range(0, int(top * 0.75) + 1, 20))
-    ax.set_ylabel("trilinear FPS / linear FPS (%)")
-    ax.set_title(f"(b) composition: {n['objects']} objects in {c['groups']} groups", fontsize=10)
-    ax.legend(fontsize=8, loc="upper left")
-    ax.grid(True, axis="y", alpha=0.3)
-    _note(
-        ax,
-        f"compose_scene: {c['trilinear_compose_ms']:.1f} ms with lattices vs"
-        f" {c['linear_compose_ms']:.1f} ms with 4x4s ({c['compose_ratio']:.1f}x); frame"
-        f" {c['trilinear_frame_ms']:.1f} vs {c['linear_frame_ms']:.1f} ms. An animated frame"
-        " recomposes every object's lattice on the CPU; a static redraw reuses them.",
-        "upper right",
-        44,
-    )

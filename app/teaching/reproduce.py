@@ -6,8 +6,8 @@ writes their figure sheets into a folder beside the report (``docs/reproduction/
 GL renderer, OpenCL device), the date, the command, and per table or figure the papers'
 numbers beside ours.
 
-The papers' numbers come from :mod:`voxwarp.bench.papers` (each with its table or
-figure); a cell says :data:`voxwarp.bench.papers.PAPER_HAS_NONE` where the paper prints
+The papers' numbers come from :mod:`voxwarp.teaching.papers` (each with its table or
+figure); a cell says :data:`voxwarp.teaching.papers.PAPER_HAS_NONE` where the paper prints
 no number for that row (the thesis prints none at all). Absolute times of 2006-2010
 hardware do not compare with ours, so the report puts ratios beside ratios. Timings
 exclude compilation and warm-up (each demo runs every timed case at least once before
@@ -28,7 +28,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from voxwarp.bench.papers import (
+from voxwarp.core.files import atomic_write_text
+from voxwarp.core.timing import cpu_count, cpu_model, load_average
+from voxwarp.teaching.demos import DEMO_TITLES, DEMOS, DemoResult, run_demo
+from voxwarp.teaching.papers import (
     LATTICE_FPS,
     LATTICE_SHADER_COMPLEXITY,
     PAPER_HAS_NONE,
@@ -42,13 +45,14 @@ from voxwarp.bench.papers import (
     fmt_ratio,
     wire_render_ratio_range,
 )
-from voxwarp.core.files import atomic_write_text
-from voxwarp.teaching.demos import DEMO_TITLES, DEMOS, DemoResult, run_demo
 
 #: the report ``voxwarp reproduce`` writes by default (figures go to its stem's folder)
 DEFAULT_REPORT = Path("docs/reproduction.md")
 #: what the thesis columns say: the thesis reports images, no measured numbers
 THESIS_HAS_NONE = "none in the thesis"
+#: the lab's commands behind the numbers the installed demos leave to it
+WIRE_TABLES_COMMAND = "python -m benchmarks wire-tables"
+LATTICE_COMMAND = "python -m benchmarks lattice"
 #: what a timing cell says in a ``--quick`` run
 QUICK_SKIP = "not measured in --quick"
 
@@ -87,8 +91,6 @@ def reproduce(
         command = "voxwarp reproduce" + (" --quick" if quick else "")
         if out != DEFAULT_REPORT:
             command += f" --out {out}"
-    from voxwarp.bench.render import load_average
-
     started = datetime.datetime.now(datetime.UTC)
     t0 = time.perf_counter()
     load = [load_average()]
@@ -121,16 +123,6 @@ def _run_keeping_figures(
 
 
 # ---------------------------------------------------------------------- hardware
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo (else :func:`platform.processor`)."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown"
 
 
 def memory_gib() -> float | None:
@@ -160,8 +152,6 @@ def hardware(results: dict[str, DemoResult], load: Sequence[float] = ()) -> list
     list of (str, str)
         (what, value) rows.
     """
-    from voxwarp.bench.render import cpu_count
-
     gl = next((r.numbers.get("gl_renderer") for r in results.values()), None) or "?"
     cl = ""
     if "wires" in results:
@@ -271,13 +261,14 @@ def report_markdown(
         ]
     lines += [
         "Every paper number below is quoted with its table or figure"
-        " (`voxwarp/bench/papers.py` holds them; a test checks them against the papers'"
+        " (`voxwarp/teaching/papers.py` holds them; a test checks them against the papers'"
         f' text). "{PAPER_HAS_NONE}" / "{THESIS_HAS_NONE}" mark rows the source does not'
         " measure: the 2008 thesis shows images only. Absolute times of the papers' 2006-2010"
         " machines do not compare with ours, so ratios stand beside ratios. Timings exclude"
         " program compilation, kernel builds and first-use allocations: every timed case"
-        " runs at least once untimed first. The full benchmarks are `voxwarp bench"
-        " massspring | chainmail | wires | wire-tables | lattice` (`docs/bench-*.md`).",
+        " runs at least once untimed first. The full benchmarks are the lab's, in a checkout:"
+        " `python -m benchmarks massspring | chainmail | wires | wire-tables | lattice`"
+        " (`docs/bench-*.md`).",
         "",
         "## Hardware",
         "",
@@ -464,7 +455,7 @@ def _compare_section(n: dict[str, Any], quick: bool = False) -> list[str]:
         rows.append([f"{size}³", THESIS_HAS_NONE, _rate(cpu), _rate(gpu), ratio])
     lines += [
         f"Mass-spring steps per second ({tm['massspring_integrator']} Euler, the benchmark"
-        f" model of `voxwarp bench massspring`); GPU = {n['gl_renderer']}:",
+        f" model of `python -m benchmarks massspring`); GPU = {n['gl_renderer']}:",
         "",
         *_table(["grid", "thesis", "CPU (numpy)", "GPU", "GPU / CPU"], rows),
     ]
@@ -496,7 +487,7 @@ def _compare_section(n: dict[str, Any], quick: bool = False) -> list[str]:
                 ]
             )
     lines += [
-        "ChainMail ms per move (`voxwarp bench chainmail`'s drags: local = 1 spacing,"
+        "ChainMail ms per move (`python -m benchmarks chainmail`'s drags: local = 1 spacing,"
         f" large = 20 spacings); GPU = {tm['gl_renderer']}:",
         "",
         *_table(
@@ -511,9 +502,7 @@ def _wires_section(n: dict[str, Any], quick: bool = False) -> list[str]:
     lines = _wires_fig12(n, quick)
     if n.get("storage"):
         lines += _wires_storage(n["storage"])
-    if n.get("tables"):
-        lines += _wires_table1(n["tables"])
-        lines += _wires_tables23(n["tables"], quick)
+    lines += _wires_tables()
     rc = n["render_cost"]
     if rc:
         lo, hi = wire_render_ratio_range()
@@ -608,82 +597,30 @@ def _wires_storage(rows: Sequence[dict[str, Any]]) -> list[str]:
     ]
 
 
-def _wires_table1(t: dict[str, Any]) -> list[str]:
-    """Table 1: the share of ray samples that need no mapping, two ways."""
-    rows = [
-        [f"paper: {p.dataset}", "—", "—", f"{p.samples:,}", f"{p.percent:.1f}"] for p in WIRE_TABLE1
-    ]
-    for r in t["rows"]:
-        inside = r["percent_ignored_in_region"]
-        rows.append(
-            [
-                r["dataset"],
-                f"{r['samples']:,}",
-                f"{r['percent_ignored']:.1f}",
-                f"{r['region_samples']:,}",
-                "—" if inside is None else f"{inside:.1f}",
-            ]
-        )
-    return [
-        "Table 1 counts only the samples inside the paper's attribute field. voxwarp's field"
-        " covers the whole volume, so its share over every sample of the ray box (first"
-        " pair of columns) is not comparable; the second pair counts the samples inside"
-        " the wires' regions of influence only (within the radius of a modified or base"
-        f" wire), the paper's way. Rays through every 4th pixel of {t['size'][0]}x"
-        f"{t['size'][1]}, each dataset bent by its own wires (`voxwarp bench wire-tables`).",
-        "",
-        *_table(
-            [
-                "dataset (Table 1)",
-                "samples, ray box",
-                "% ignored, ray box",
-                "samples in the regions",
-                "% ignored in the regions",
-            ],
-            rows,
-        ),
-    ]
-
-
-def _wires_tables23(t: dict[str, Any], quick: bool) -> list[str]:
-    """Tables 2-3: standard render vs the identity deformation, as ratios."""
-    rows = [
+def _wires_tables() -> list[str]:
+    """Tables 1-3, the paper's rows: voxwarp's, measured the paper's way on its datasets,
+    come from the lab (``python -m benchmarks wire-tables`` in a checkout)."""
+    t1 = [[p.dataset, f"{p.samples:,}", f"{p.percent:.1f}"] for p in WIRE_TABLE1]
+    t23 = [
         [
-            f"paper: {p.dataset}",
+            p.dataset,
             f"{p.standard_s:.2f} s",
             f"{p.preprocessing_s:.2f} s",
             f"{p.render_s:.2f} s",
             fmt_ratio(p.render_ratio),
             fmt_ratio(p.total_ratio),
-            "—",
         ]
         for p in WIRE_TIMINGS
     ]
-    for r in t["rows"]:
-        timed = [
-            f"{r['standard_ms']:.1f} ms",
-            f"{r['build_s']:.3f} s",
-            f"{r['identity_ms']:.1f} ms",
-            fmt_ratio(r["render_ratio"]),
-            fmt_ratio(r["total_ratio"]),
-        ]
-        rows.append(
-            [r["dataset"], *([QUICK_SKIP] * 5 if quick else timed), f"{r['changed_pixels']:.2f}"]
-        )
     w, h = WIRE_TIMING_IMAGE
     return [
-        f"Tables 2-3: the same render without deformation and through an identity deformation"
-        f" (every modified wire equal to its base wire), at {t['size'][0]}x{t['size'][1]}"
-        f" (the paper: {w}x{h}, {WIRE_TIMING_MACHINE}). Render ratio = identity render /"
-        " standard render (the paper's Table 3 render / Table 2); total ratio ="
-        " (preprocessing + render) / standard render (Table 3 total / Table 2). Frames of"
-        " the two renders interleaved, medians, after two untimed frames of each; the"
-        " field build once untimed, then the median of the timed builds. The last column"
-        " compares the two images (pixels differing by more than 2/255): the identity maps"
-        " every point to itself (to 4e-6 mm on the GPU), but the wires' regions grow the"
-        " box the rays march through, so the samples fall at another phase along each ray,"
-        " which shows on thin, bright structures.",
+        "Table 1 (ray samples inside the attribute field that need no mapping) and Tables"
+        " 2-3 (the render without deformation and through an identity deformation, at"
+        f" {w}x{h} on a {WIRE_TIMING_MACHINE}), the paper's numbers. voxwarp's, counted and"
+        " timed the paper's way on its datasets, are a full study of the lab:"
+        f" `{WIRE_TABLES_COMMAND}` in a checkout (docs/benchmarks.md).",
         "",
+        *_table(["dataset (Table 1)", "samples in the field", "% ignored"], t1),
         *_table(
             [
                 "dataset (Tables 2-3)",
@@ -692,9 +629,8 @@ def _wires_tables23(t: dict[str, Any], quick: bool) -> list[str]:
                 "identity render",
                 "render ratio",
                 "total ratio",
-                "% pixels changed",
             ],
-            rows,
+            t23,
         ),
     ]
 
@@ -704,94 +640,29 @@ def _lattice_section(n: dict[str, Any], quick: bool = False) -> list[str]:
     gpu_paper = f"{spheres.ratio:.1%} ({spheres.scene}, {spheres.triangles} triangles)"
     cpu_paper = " / ".join(f"{h.ratio:.1%} ({h.objects} objects)" for h in helices)
     vertex_paper = f"none (its shader: ~{LATTICE_SHADER_COMPLEXITY:g}x the work, section 6)"
-    rows = []
-    normals = {"normal": "direct normals (J n)", "tangent": "tangent-space normals"}
-    for t in n["throughput"]:
-        what = "frame" if t["stage"] == "frame" else "vertex stage only"
-        timed = [f"{t['fps_ratio']:.0%}", f"{t['lattice_ms']:.1f} / {t['linear_ms']:.1f}"]
-        rows.append(
-            [
-                f"{t['cells']}³ cells, {what}, {normals.get(t['normal_method'], '?')},"
-                f" {t['position']} position",
-                gpu_paper if t["stage"] == "frame" else vertex_paper,
-                *([QUICK_SKIP, QUICK_SKIP] if quick else timed),
-            ]
-        )
-    c = n["composition"]
-    animated = [
-        f"{(c['animated_fps_ratio'] or 0):.0%}",
-        f"{c['trilinear_frame_ms']:.1f} / {c['linear_frame_ms']:.1f}",
+    here = f"`{LATTICE_COMMAND}`"
+    rows = [
+        ["vertex throughput, frame (lattice FPS / 4x4 FPS)", gpu_paper, here],
+        ["vertex throughput, vertex stage only", vertex_paper, here],
+        ["composition of many objects, animated frame", cpu_paper, here],
+        ["composition, static redraw", PAPER_HAS_NONE, here],
+        [
+            "normals (section 4.2): angle to the exact normals, direct (J n) and tangent space",
+            "Figure 5: images, no numbers",
+            here + " (section 5); the demo's figure shows both",
+        ],
     ]
-    rows.append(
-        [
-            f"composition, {n['objects']} objects, animated frame",
-            cpu_paper,
-            *([QUICK_SKIP, QUICK_SKIP] if quick else animated),
-        ]
-    )
-    rows.append(
-        [
-            f"composition, {n['objects']} objects, static redraw",
-            PAPER_HAS_NONE,
-            QUICK_SKIP if quick else f"{(c['static_fps_ratio'] or 0):.0%}",
-            "—",
-        ]
-    )
     return [
-        f"Vertex throughput: a torus of {n['triangles']:,} triangles at"
-        f" {n['size'][0]}x{n['size'][1]}, lattice and 4x4 frames alternated, medians of"
-        f" {n['frames']} after one untimed frame of each; GL: {n['gl_renderer']}. The paper's"
-        " table (section 6, GeForce 8800) gives trilinear / linear frame rates of"
+        "The paper's table (section 6, GeForce 8800) gives trilinear / linear frame rates of"
         f" {spheres.ratio:.1%} for {spheres.triangles} triangles on the GPU and {cpu_paper}"
         " when many objects are composed on the CPU (its text rounds them to 75, 80 and"
-        " 77 %).",
+        " 77 %). voxwarp's, a torus of 1.5 M triangles and thousands of composed objects"
+        f" against 4x4 matrices on GL {n['gl_renderer']}, are a full study of the lab:"
+        f" `{LATTICE_COMMAND}` in a checkout (docs/benchmarks.md).",
         "",
-        *_table(["configuration", "paper", "lattice FPS / 4x4 FPS", "ms (lattice / 4x4)"], rows),
-        *_lattice_normals(n.get("normals", [])),
+        *_table(["configuration", "paper", "measured by"], rows, "lll"),
         "Figure 8 (attachments following an animated base mesh): `voxwarp animate"
         " sample_volumes/lattice_accessories_anim.json -o body.mp4` (the paper's figure has"
         " no numbers).",
         "",
-    ]
-
-
-def _lattice_normals(rows: Sequence[dict[str, Any]]) -> list[str]:
-    """Figure 5: both normal methods against the exact normals of the smooth shape."""
-    if not rows:
-        return []
-    by: dict[tuple[str, str], dict[str, dict[str, Any]]] = {}
-    for r in rows:
-        cells = "x".join(map(str, r["cells"]))
-        by.setdefault((r["scene"], cells), {})[r["method"]] = r
-
-    def cell(r: dict[str, Any] | None) -> str:
-        if r is None:
-            return "—"
-        return f"{r['mean_deg']:.2f}° / {r['max_deg']:.2f}° / {r['seam_deg']:.2f}°"
-
-    table = [
-        [
-            f"{scene}, {cells} cells",
-            "Figure 5: images, no numbers",
-            cell(m.get("normal")),
-            cell(m.get("tangent")),
-        ]
-        for (scene, cells), m in by.items()
-    ]
-    return [
-        "Normals (section 4.2, Figure 5): angle to the exact normals of the smooth shape the"
-        " lattice samples, mean / max over the vertices, and the largest jump across an"
-        " inner cell face (seam); `voxwarp bench lattice` section 5. The default is the"
-        " tangent-space method: it converges as the cells get finer, while the direct one"
-        " stays off wherever the lattice stretches unevenly.",
-        "",
-        *_table(
-            [
-                "scene",
-                "paper",
-                "direct (J n): mean / max / seam",
-                "tangent space: mean / max / seam",
-            ],
-            table,
-        ),
     ]

@@ -125,7 +125,7 @@ shader places the quads from the box uniforms). Ping-pong stays consistent altho
 a pass writes only its box: every element changed by a pass lies in the next pass's
 box, which copies it into the other buffer, so outside the box both buffers always
 agree. ``local=False`` draws every pass over the whole grid (the thesis' scheme,
-same passes and result) for comparison; :func:`voxwarp.bench.chainmail.gpu_enforce_table`
+same passes and result) for comparison; :func:`benchmarks.chainmail.gpu_enforce_table`
 times both.
 
 The solver draws on the context it is given and does not make it current. GL state it

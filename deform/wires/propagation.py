@@ -52,7 +52,7 @@ or to work around a broken driver.
 
 Measurements (OpenCL against scipy, kernel build and buffer allocation): docs/benchmarks.md,
 section 'voxwarp.deform.wires.propagation: OpenCL vs scipy'; the timing helper is
-:func:`voxwarp.bench.propagation.benchmark_nearest_seed`.
+:func:`benchmarks.propagation.benchmark_nearest_seed`.
 """
 
 from __future__ import annotations

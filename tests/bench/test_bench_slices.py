@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from voxwarp.bench import all as bench_all
+from benchmarks import all as bench_all
 from voxwarp.bench.slices import bench_slices
 from voxwarp.cli.main import main
 

@@ -226,7 +226,7 @@ def test_bent_lattice_stays_on_the_trilinear_program(gl_ctx: Any) -> None:
 
 
 def test_bench_fast_path_rows(gl_ctx: Any) -> None:
-    from voxwarp.bench.lattice import LatticeBenchReport, bench_fast_path, torus_for
+    from benchmarks.lattice import LatticeBenchReport, bench_fast_path, torus_for
 
     mesh = torus_for(2000)
     report = LatticeBenchReport(
@@ -262,7 +262,7 @@ def test_is_linear_tolerance_survives_the_quick_rejection() -> None:
 
 
 def test_bench_normals_study() -> None:
-    from voxwarp.bench.lattice_normals import markdown_lines, normals_study
+    from benchmarks.lattice_normals import markdown_lines, normals_study
 
     rows = {(r.scene, r.cells[0], r.method): r for r in normals_study()}
     assert len(rows) == 8

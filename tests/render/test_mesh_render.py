@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from voxwarp.bench.lattice import bench_mesh_throughput, bend_grid
+from benchmarks.lattice import bench_mesh_throughput, bend_grid
 from voxwarp.core.camera import Camera, view_rotation
 from voxwarp.core.mesh import MeshInstance, box_mesh, tile_mesh, torus_mesh, uv_sphere
 from voxwarp.core.volume import Volume

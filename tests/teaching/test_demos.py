@@ -194,18 +194,16 @@ def test_wires_coarser_fields_ignore_fewer_samples(demos: dict[str, DemoResult])
 
 
 # ---------------------------------------------------------------------- lattice
-def test_lattice_measures_every_configuration(demos: dict[str, DemoResult]) -> None:
+def test_lattice_quotes_the_paper_and_names_the_lab_study(
+    demos: dict[str, DemoResult],
+) -> None:
+    """The frame rates against 4x4 matrices are a full study of the lab (``python -m
+    benchmarks lattice``, tested in tests/benchmarks/test_bench_lattice.py): the installed
+    demo quotes the paper's range and names the command that measures it."""
     n = demos["lattice"].numbers
     assert tuple(n["paper_fps_ratio"]) == pytest.approx((14.9 / 19.5, 13.3 / 16.5))
-    configs = {(t["cells"], t["stage"], t["normal_method"], t["position"]) for t in n["throughput"]}
-    assert {c for c, *_ in configs} == {1, 4}
-    assert len(configs) == 2 * 5
-    for t in n["throughput"]:
-        assert t["fps_ratio"] == pytest.approx(t["linear_ms"] / t["lattice_ms"])
-        assert 0 < t["fps_ratio"] < 10
-    c = n["composition"]
-    assert c["trilinear_compose_ms"] > c["linear_compose_ms"]  # lattices compose slower
-    assert 0 < c["animated_fps_ratio"] < 10
+    assert n["lab_command"] == "python -m benchmarks lattice"
+    assert "throughput" not in n
 
 
 # ---------------------------------------------------------------------- tours

@@ -1,4 +1,4 @@
-"""The papers' numbers in voxwarp.bench.papers: consistent with themselves and, where the
+"""The papers' numbers in voxwarp.teaching.papers: consistent with themselves and, where the
 papers' text is on this machine, printed there."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from voxwarp.bench import papers
+from voxwarp.teaching import papers
 
 PAPERS = Path(__file__).resolve().parents[3] / "shared" / "papers"
 

@@ -237,8 +237,8 @@ def test_zero_displacement_renders_like_no_warp(offscreen: Any, gl_ctx: Any, bac
 
 # ---------------------------------------------------------------------- bench smoke
 def test_bench_massspring_smoke(gl_ctx: Any) -> None:
-    from voxwarp.bench.massspring import BACKENDS, bench_massspring
-    from voxwarp.bench.taichi import taichi_available
+    from benchmarks.massspring import BACKENDS, bench_massspring
+    from benchmarks.taichi import taichi_available
 
     logged: list[str] = []
     report = bench_massspring(
@@ -277,10 +277,10 @@ def test_bench_massspring_smoke(gl_ctx: Any) -> None:
 
 
 def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
-    from voxwarp.cli.main import main
+    from benchmarks.__main__ import main
 
     out = tmp_path / "bench.md"
-    argv = ["bench", "massspring", "--sizes", "3", "--steps", "2", "--repeats", "1"]
+    argv = ["massspring", "--sizes", "3", "--steps", "2", "--repeats", "1"]
     assert main([*argv, "--no-taichi", "--no-render", "--markdown", str(out)]) == 0
     text = out.read_text(encoding="utf-8")
     assert "| 3³ |" in text
@@ -293,7 +293,7 @@ def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str])
     assert text in capsys.readouterr().out
     for bad in (["--sizes", "1"], ["--sizes", "16,x"], ["--steps", "0"]):
         with pytest.raises(SystemExit):
-            main(["bench", "massspring", *bad])
+            main(["massspring", *bad])
 
 
 def test_element_dragged_onto_its_neighbour_agrees_on_cpu_and_gpu(gl_ctx: Any) -> None:

@@ -476,7 +476,7 @@ def test_bad_grid_arguments() -> None:
 
 def test_vectorised_maps_equal_point_by_point_maps() -> None:
     """The vectorised forward maps and inverse give, for a batch, what they give for
-    each point alone (their speed is measured by ``voxwarp.bench.lattice.bench_cpu_grid``,
+    each point alone (their speed is measured by ``benchmarks.lattice.bench_cpu_grid``,
     see docs/benchmarks.md, not asserted here)."""
     rng = np.random.default_rng(23)
     g = mild_grid(rng, cells=8)

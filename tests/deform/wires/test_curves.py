@@ -732,7 +732,7 @@ def test_repr_names_kind_and_sizes():
 def test_vectorised_methods_equal_point_by_point_calls() -> None:
     """``evaluate``, ``derivative`` and ``closest_point`` of a batch give what they give
     for each parameter or point alone (their speed is measured by
-    ``voxwarp.bench.wires.bench_curve_speed``, see docs/benchmarks.md, not asserted here)."""
+    ``benchmarks.wires.bench_curve_speed``, see docs/benchmarks.md, not asserted here)."""
     c = random_curve("catmull-rom", 9, seed=24)
     rng = np.random.default_rng(25)
     t = np.concatenate([[0.0, 1.0, 0.5, 1 / 8, 7 / 8], rng.uniform(0, 1, 200)])

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from voxwarp.bench.propagation import benchmark_nearest_seed, helix_seeds
+from benchmarks.propagation import benchmark_nearest_seed, helix_seeds
 from voxwarp.deform.warp import WarpError
 from voxwarp.deform.wires import propagation as prop
 from voxwarp.deform.wires.propagation import (
