@@ -8,7 +8,8 @@ import warnings
 
 import pytest
 
-from voxwarp.cli.main import MOVED_BENCHMARKS, build_parser, main
+from voxwarp.cli.bench import MOVED_BENCHMARKS
+from voxwarp.cli.main import build_parser, main
 
 
 @pytest.fixture(autouse=True)
