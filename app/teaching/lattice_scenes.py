@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.animation.tracks import Animation, Track
 from voxwarp.core.mesh import (
     PALETTE,
     Mesh,
@@ -244,8 +245,6 @@ def accessories_anim(keys: tuple[tuple[int, float], ...] = ACCESSORY_KEYS) -> di
     """Figure 8 animated: the body bends one way, then the other, and back; the bands and
     the plate follow it through their anchors (scene JSON with an ``"animation"`` entry,
     a ``meshes[body].nodes`` track with ``"attachments"``, smooth interpolation)."""
-    from voxwarp.animation.tracks import Animation, Track
-
     scene = accessories(keys[0][1]).copy(zoom=0.8)  # room for every pose in the held view
     values = [(f, "rest" if a == 0.0 else accessory_pose(a).nodes.tolist()) for f, a in keys]
     attachments = [{"mesh": n, **s.to_dict()} for n, s, _, _ in accessory_attachments()]

@@ -22,15 +22,22 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.teaching.demos import (
+from voxwarp.core.camera import Camera
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+from voxwarp.io.fields import field_image, itk_affine, load_transform, save_displacement_field
+from voxwarp.io.itk import displacement_transform, resample, sitk_module, to_sitk
+from voxwarp.io.samples import load_sample
+from voxwarp.io.volumes import load_volume, save_volume
+from voxwarp.scene import Scene
+from voxwarp.teaching.sheets import (
     TourStep,
-    _figure,
-    _gl_renderer,
-    _note,
-    _offscreen,
-    _rgb,
-    _save_figure,
-    _show_image,
+    add_note,
+    gl_renderer,
+    new_figure,
+    offscreen_renderer,
+    render_rgb,
+    save_figure,
+    show_image,
 )
 
 #: the known deformation: this many Gaussian bumps, centres seeded inside the middle of
@@ -60,10 +67,6 @@ def demo_registration(
     """Run the registration demo into ``out`` (sheet ``registration.png``, the moving
     image ``registration_moving.nii.gz`` and the recovered field
     ``registration_field.nii.gz`` / ``.h5``); returns (figures, numbers, tour steps)."""
-    from voxwarp.io.fields import load_transform, save_displacement_field
-    from voxwarp.io.samples import load_sample
-    from voxwarp.io.volumes import load_volume, save_volume
-
     fixed = load_sample("colin27")
     if quick:
         fixed = fixed.downsample(2)
@@ -112,8 +115,6 @@ def demo_registration(
 def known_field(fixed: Any) -> Any:
     """The known pull-back field ``w`` on ``fixed``'s grid: :data:`BUMPS` seeded Gaussian
     bumps in the head (a :class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp`)."""
-    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
-
     rng = np.random.default_rng(SEED)
     xyz = _grid_points(fixed)
     head = xyz[fixed.data > 40]
@@ -138,9 +139,6 @@ def _grid_points(vol: Any) -> np.ndarray:
 def deform_volume(fixed: Any, known: Any) -> Any:
     """The moving image: ``fixed`` resampled (SimpleITK, linear) through the inverse of
     ``known``, so that registering fixed and moving should recover ``known``."""
-    from voxwarp.io.fields import field_image
-    from voxwarp.io.itk import resample, sitk_module
-
     sitk = sitk_module("voxwarp demo registration")
     inverse = sitk.InvertDisplacementField(
         field_image(known),
@@ -158,10 +156,6 @@ def register(fixed: Any, moving: Any, levels: tuple[int, ...], iterations: int) 
     """Demons registration (SimpleITK fast symmetric forces) of ``moving`` to ``fixed``,
     coarse to fine (``levels``: shrink factors); the pull-back field on ``fixed``'s grid
     as a :class:`~voxwarp.deform.fields.displacement.DisplacementFieldWarp`."""
-    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
-    from voxwarp.io.fields import itk_affine
-    from voxwarp.io.itk import sitk_module, to_sitk
-
     sitk = sitk_module("voxwarp demo registration")
     f_img = sitk.Cast(to_sitk(fixed), sitk.sitkFloat32)
     m_img = sitk.Cast(to_sitk(moving), sitk.sitkFloat32)
@@ -192,9 +186,6 @@ def _level(sitk: Any, img: Any, shrink: int) -> Any:
 def _renders(fixed: Any, moving: Any, warps: list[Any], size: tuple[int, int]) -> dict[str, Any]:
     """Fixed, moving and moving-through-the-field renders of the axial slab through the
     strongest bump (mean along the ray, orthographic, from above), grey (H, W) float."""
-    from voxwarp.core.camera import Camera
-    from voxwarp.scene import Scene
-
     lo, hi = (np.asarray(b, dtype=np.float64) for b in fixed.bounds)
     z = _slab_centre(warps[0], fixed)
     clip = ((lo[0], lo[1], z - SLAB_MM / 2), (hi[0], hi[1], z + SLAB_MM / 2))
@@ -212,12 +203,12 @@ def _renders(fixed: Any, moving: Any, warps: list[Any], size: tuple[int, int]) -
             step=0.5,
         )
 
-    with _offscreen(size) as r:
+    with offscreen_renderer(size) as r:
         out = {
-            "fixed": _rgb(r, scene(fixed, []), size)[..., 0].astype(np.float64),
-            "moving": _rgb(r, scene(moving, []), size)[..., 0].astype(np.float64),
-            "through": _rgb(r, scene(moving, warps), size)[..., 0].astype(np.float64),
-            "gl_renderer": _gl_renderer(r),
+            "fixed": render_rgb(r, scene(fixed, []), size)[..., 0].astype(np.float64),
+            "moving": render_rgb(r, scene(moving, []), size)[..., 0].astype(np.float64),
+            "through": render_rgb(r, scene(moving, warps), size)[..., 0].astype(np.float64),
+            "gl_renderer": gl_renderer(r),
         }
     out.update(camera=camera, clip=clip, z_mm=z)
     return out
@@ -236,8 +227,6 @@ def _numbers(
 ) -> dict[str, Any]:
     """Before/after differences (renders and volumes) and the recovered field against
     the known one."""
-    from voxwarp.io.itk import displacement_transform, resample
-
     f, m, t = renders["fixed"], renders["moving"], renders["through"]
     head = (f > 0) | (m > 0)
     vf = fixed.data.astype(np.float64)
@@ -290,12 +279,12 @@ def _sheet(
     fixed: Any,
 ) -> Path:
     f, m, t = renders["fixed"], renders["moving"], renders["through"]
-    fig = _figure(13.5, 8.6, "A demons registration rendered through its field, no resampling")
+    fig = new_figure(13.5, 8.6, "A demons registration rendered through its field, no resampling")
     axs = fig.subplots(2, 4)
-    _show_image(axs[0, 0], _grey(f), "(a) fixed: colin27")
-    _show_image(axs[0, 1], _grey(m), "(b) moving, as stored")
-    _show_image(axs[0, 2], _grey(t), "(c) moving rendered through the field")
-    _show_image(axs[0, 3], _grey(_checker(f, t)), "(d) checkerboard: (a) | (c)")
+    show_image(axs[0, 0], _grey(f), "(a) fixed: colin27")
+    show_image(axs[0, 1], _grey(m), "(b) moving, as stored")
+    show_image(axs[0, 2], _grey(t), "(c) moving rendered through the field")
+    show_image(axs[0, 3], _grey(_checker(f, t)), "(d) checkerboard: (a) | (c)")
     vmax = max(float(np.abs(f - m).max()), 1.0)
     for ax, d, title in (
         (axs[1, 0], np.abs(f - m), f"(e) |a - b|, mean {n['render_mad_before']:.1f}"),
@@ -316,25 +305,23 @@ def _sheet(
         ax.set_title(title, fontsize=10)
         ax.set_axis_off()
         fig.colorbar(im, ax=ax, shrink=0.7)
-    _note(
+    add_note(
         axs[1, 3],
         f"mean |u| {n['recovered_mean_mm']:.1f} vs {n['known_mean_mm']:.1f} mm, error"
         f" {n['field_error_mm']:.1f} mm, r = {n['field_correlation']:.2f}",
         "lower left",
         34,
     )
-    _note(
+    add_note(
         axs[0, 2],
         f"demons {n['registration_seconds']:.1f} s; axial slab {SLAB_MM:g} mm at z = {z:.0f} mm",
         "lower left",
         40,
     )
-    return _save_figure(fig, path)
+    return save_figure(fig, path)
 
 
 def _tour(moving: Any, warps: list[Any], camera: Any, clip: Any) -> list[TourStep]:
-    from voxwarp.scene import Scene
-
     def scene(ws: list[Any]) -> dict[str, Any]:
         s = Scene(moving, mode="average", camera=camera, warps=ws, window=WINDOW, clip_box=clip)
         return s.to_dict()

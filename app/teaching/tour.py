@@ -1,5 +1,5 @@
 """Guided tours of the teaching demos: read a ``NAME_tour.json`` written by
-:func:`voxwarp.teaching.demos.write_tour` (the GUI steps through it; see ``ui/tour_panel.py``).
+:func:`voxwarp.teaching.sheets.write_tour` (the GUI steps through it; see ``ui/tour_panel.py``).
 
 The file is JSON::
 

@@ -19,8 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
-from voxwarp.io.samples import bundled_dir
+from voxwarp.inputs import read_wire_file
+from voxwarp.io.samples import bundled_dir, load_sample
 
 #: field scales of the paper's Figure 12 (per-axis reduction: 1:1 ... 1:4096 voxels)
 DEFAULT_SCALES: tuple[int, ...] = (1, 2, 4, 8, 16)
@@ -49,8 +51,6 @@ def padded_fish(shape: Sequence[int] = FISH_SHAPE, edge: int = PADDED_EDGE) -> V
     origin moves by the padding before, so every fish voxel keeps its mm position and the
     bundled wire files apply.
     """
-    from voxwarp.io.samples import load_sample
-
     fish = load_sample("fish", shape=tuple(int(n) for n in shape))
     pads = []
     for n in fish.shape:
@@ -70,7 +70,6 @@ def padded_fish(shape: Sequence[int] = FISH_SHAPE, edge: int = PADDED_EDGE) -> V
 def load_wires(path: Path) -> tuple[list[Any], dict[str, Any]]:
     """The wires of a wire file and its whole JSON object."""
     from voxwarp.deform.wires.field import Wire
-    from voxwarp.inputs import read_wire_file
 
     spec = read_wire_file(path)
     return [Wire.from_dict(w) for w in spec["wires"]], spec
@@ -127,8 +126,6 @@ def framed_camera(
     """A perspective camera from ``view`` whose image the object fills: the box of
     :func:`content_box` grown by each modified wire's region of influence (where the
     wires move the object to), zoomed to ``fill`` of the image's width or height."""
-    from voxwarp.core.camera import Camera
-
     lo, hi = content_box(volume)
     for w in wires:
         pts = w.modified.evaluate(np.linspace(0.0, 1.0, 257))

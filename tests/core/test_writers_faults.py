@@ -76,11 +76,11 @@ def _mesh() -> Mesh:
 def _figure(path: Path) -> None:
     from matplotlib.figure import Figure
 
-    from voxwarp.teaching.demos import _save_figure
+    from voxwarp.teaching.sheets import save_figure
 
     fig = Figure(figsize=(2, 2), dpi=50)
     fig.add_subplot().imshow(np.random.default_rng(3).random((20, 20)))
-    _save_figure(fig, path)
+    save_figure(fig, path)
 
 
 IMAGE = np.random.default_rng(0).integers(0, 255, (64, 64, 3), dtype=np.uint8)

@@ -20,14 +20,9 @@ import pytest
 
 from voxwarp.cli.main import main
 from voxwarp.io.images import read_image
-from voxwarp.teaching.demos import (
-    DEMOS,
-    TOUR_FORMAT,
-    DemoError,
-    DemoResult,
-    gibson_sponsor,
-    run_demo,
-)
+from voxwarp.teaching.chainmail_demo import gibson_sponsor
+from voxwarp.teaching.demos import DEMOS, DemoError, DemoResult, run_demo
+from voxwarp.teaching.tour import TOUR_FORMAT
 
 
 @pytest.fixture(autouse=True)

@@ -1,0 +1,173 @@
+"""``voxwarp demo lattice`` (GRAPP 2010, Figures 1 and 5).
+
+Renders of a bent volume, of the lattice-wrapped torus of the paper's Figure 1 and of both
+normal methods; the frame rates against 4x4 matrices (the paper's table) are a full study
+of the lab, ``python -m benchmarks lattice`` in a checkout. Run by
+:func:`voxwarp.teaching.demos.run_demo`; the helpers it shares with the other demos are in
+:mod:`voxwarp.teaching.sheets`.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from voxwarp.io.samples import bundled_dir
+from voxwarp.teaching import DEMO_TITLES
+from voxwarp.teaching.lattice_scenes import torus_tubes
+from voxwarp.teaching.papers import lattice_ratio_range
+from voxwarp.teaching.sheets import (
+    FISH_VIEW,
+    DemoSettings,
+    TourStep,
+    fish_scene,
+    fish_volume,
+    framing_camera,
+    gl_renderer,
+    new_figure,
+    offscreen_renderer,
+    render_rgb,
+    save_figure,
+    show_image,
+    snap,
+)
+
+
+# ====================================================================== lattice
+def demo_lattice(
+    s: DemoSettings, out: Path, log: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+    from voxwarp.deform.lattice.warp import LatticeWarp
+
+    vol = fish_volume(s)
+    spec = json.loads((bundled_dir() / "fish_lattice_bend.json").read_text(encoding="utf-8"))
+    entry = {k: v for k, v in spec.items() if k not in ("description", "sample", "type")}
+    entry.setdefault("box", [list(map(float, b)) for b in vol.bounds])
+    warp = LatticeWarp.from_dict(entry)
+    lo, hi = (np.asarray(b, dtype=np.float64).copy() for b in vol.bounds)
+    nodes = np.asarray(warp.grid.nodes).reshape(-1, 3)
+    lo, hi = np.minimum(lo, nodes.min(0)), np.maximum(hi, nodes.max(0))
+    size = s.render_size
+    cam = framing_camera(lo, hi, FISH_VIEW, size)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the mesh scene's empty volume's TF
+        torus = torus_tubes()
+    renders: list[tuple[str, np.ndarray]] = []
+    with offscreen_renderer(size) as r:
+        gl = gl_renderer(r)
+        plain = fish_scene(vol, cam)
+        bent = fish_scene(vol, cam, [warp])
+        renders.append(("(a) fish, undeformed", render_rgb(r, plain, size)))
+        renders.append(("(b) fish bent by a 12x4x2-cell lattice", render_rgb(r, bent, size)))
+        renders.append(
+            ("(c) tubes wrapped round a torus (paper Fig. 1)", render_rgb(r, torus, size))
+        )
+        normal_scenes = _normal_scenes(size)
+        normal_renders = [(title, render_rgb(r, sc, size)) for title, sc in normal_scenes]
+    # the frame rates against 4x4 matrices and the normals' angles are full studies of the
+    # lab (a torus of 1.5 M triangles, thousands of composed objects): not run here
+    numbers: dict[str, Any] = {
+        "paper_fps_ratio": lattice_ratio_range(),
+        "lab_command": LATTICE_LAB_COMMAND,
+        "gl_renderer": gl,
+    }
+    fig = new_figure(16.0, 10.0, DEMO_TITLES["lattice"])
+    grid = fig.add_gridspec(2, 1)
+    middle = grid[0].subgridspec(1, 3)
+    for i, (title, img) in enumerate(renders):
+        show_image(fig.add_subplot(middle[0, i]), img, title)
+    bottom = grid[1].subgridspec(1, 2)
+    for i, (title, img) in enumerate(normal_renders):
+        show_image(fig.add_subplot(bottom[0, i]), img, title)
+    path = save_figure(fig, out / "lattice.png")
+
+    tour = [
+        TourStep(
+            "A lattice of trilinear cells",
+            "A trilinear lattice replaces a 4x4 matrix by a grid of cells; each cell maps"
+            " the unit cube by interpolating its 8 corner nodes. Moving nodes bends what the"
+            " lattice holds, smoothly and continuously across cells.",
+            snap(plain),
+            "a",
+        ),
+        TourStep(
+            "Bending a volume",
+            "The same lattice bends a volume at render time: each ray sample is mapped back"
+            " through the lattice (a few Newton steps per sample) to read the original voxels.",
+            snap(bent),
+            "b",
+        ),
+        TourStep(
+            "Composition in a scene graph",
+            "Lattices compose like matrices: a mesh under nested nodes gets one composed"
+            " lattice, so a flat slab of tubes becomes a torus (the paper's Figure 1).",
+            bundled_dir() / "lattice_torus_tubes.json",
+            "c",
+        ),
+        TourStep(
+            "Attachments follow an animated mesh",
+            "Anchors sit on a base mesh's triangles; every frame they are evaluated on the"
+            " moved mesh and rebuild the lattices of the bands and the plate attached to it,"
+            " so they follow the swaying body (the paper's Figure 8); Render Movie renders it.",
+            bundled_dir() / "lattice_accessories_anim.json",
+            None,
+        ),
+        TourStep(
+            "What it costs",
+            "Frames per second with lattices relative to plain 4x4 matrices (the paper's"
+            " table: 76.4-80.6 %), and animating many objects, where every composed lattice is"
+            f" recomputed on the CPU each frame: measured by `{LATTICE_LAB_COMMAND}` in a"
+            " checkout of voxwarp (docs/benchmarks.md).",
+            None,
+            None,
+        ),
+        TourStep(
+            "Normals across cells",
+            "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel d transforms"
+            " the normal itself (J n): the shading flows smoothly over cell borders but is"
+            " not exactly perpendicular to the surface. Panel e transforms two tangents and"
+            " crosses them: exactly perpendicular, but the shading jumps at every border of"
+            " these 30-degree cells. The tangent way is voxwarp's default.",
+            snap(normal_scenes[1][1]),
+            "e",
+        ),
+    ]
+    return [path], numbers, tour
+
+
+#: the lab's command that measures the lattice's costs (frame rates against 4x4 matrices,
+#: composition, normals' angles): a checkout's ``benchmarks/``, not installed
+LATTICE_LAB_COMMAND = "python -m benchmarks lattice"
+
+
+#: The lattice demo's normal panels: cells of the coarse torus lattice (30 degrees per cell
+#: around the major circle) and the view of the close-up.
+NORMALS_CELLS = (12, 2, 1)
+NORMALS_VIEW = (60.0, 30.0)
+
+
+def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
+    """The torus of tubes on a coarse lattice, close up, with each normal method
+    (GRAPP 2010, Figure 5): (title, scene) for the direct and the tangent-space normals."""
+    out = []
+    for method, title in (
+        ("normal", "(d) direct normals J n (Fig. 5 left): smooth"),
+        ("tangent", "(e) tangent-space normals (Fig. 5 right): seams"),
+    ):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # the mesh scene's empty volume's TF
+            scene = torus_tubes()
+        for inst in scene.meshes:
+            inst.transform = inst.transform.resample(NORMALS_CELLS)
+            inst.normal_method = method
+        w = np.concatenate([inst.world_vertices() for inst in scene.meshes])
+        lo, hi = w.min(axis=0), w.max(axis=0)
+        quarter = np.r_[0.1 * hi[:2], lo[2]], hi  # the quadrant facing the camera
+        scene.camera = framing_camera(*quarter, NORMALS_VIEW, size)
+        out.append((title, scene))
+    return out
