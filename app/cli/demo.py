@@ -65,7 +65,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME``: a teaching demo's figure sheet (:mod:`voxwarp.teaching.demos`);
     ``voxwarp demo [INPUT]``: render INPUT (default the bundled sample) in every mode
     into a folder."""
-    from voxwarp.teaching.demos import DEMOS
+    from voxwarp.teaching import DEMOS
 
     if args.input in DEMOS:
         return _teaching_demo(args)

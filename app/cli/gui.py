@@ -64,7 +64,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
 def cmd_demo_gui(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME --gui``: the teaching demo (figure sheet and tour, by
     :func:`voxwarp.cli.demo.cmd_demo`), then its guided step-through in the desktop window."""
-    from voxwarp.teaching.demos import DEMOS
+    from voxwarp.teaching import DEMOS
 
     code = demo.cmd_demo(args)
     if code != 0 or not getattr(args, "gui", False) or args.input not in DEMOS:
