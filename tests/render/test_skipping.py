@@ -258,7 +258,8 @@ def test_visible_ranges_integer_path_equals_float_path(dtype: Any) -> None:
 
 # ---------------------------------------------------------------------- warped rays
 def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
-    from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from benchmarks.offset_inverse import gaussian_drag_field
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     lo, hi = vol.bounds
     field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (amount, -0.5 * amount, 1.0), 1.0)
