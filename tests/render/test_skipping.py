@@ -22,8 +22,9 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.skipping.maps import (
+    OCTANT_EPS,
+    Octant,
     block_skip_distances,
-    octant_of,
     octant_regions,
     octant_skip_distances,
     ray_direction_coefficients,
@@ -31,6 +32,14 @@ from voxwarp.render.skipping.maps import (
 from voxwarp.scene import Scene
 
 OCTANTS = list(itertools.product((1, -1), repeat=3))
+
+
+def octant_of(direction: np.ndarray) -> Octant:
+    """The octant of a direction as the raycaster classifies it (see ``OCTANT_EPS``): the
+    CPU oracle of the shader's rule."""
+    d = np.asarray(direction, dtype=np.float64)[:3]
+    limit = -OCTANT_EPS * float(np.max(np.abs(d)))
+    return tuple(-1 if c < limit else 1 for c in d)  # type: ignore[return-value]
 
 
 def brute_force_octant(
