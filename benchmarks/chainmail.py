@@ -47,8 +47,9 @@ from typing import Any
 import numpy as np
 
 from benchmarks import gpu_context
+from benchmarks.shared import int_list
 from voxwarp.bench.command import emit_report
-from voxwarp.core.checks import int_list, positive_int
+from voxwarp.core.checks import positive_int
 from voxwarp.core.timing import cpu_count, load_average
 from voxwarp.deform.elements.chainmail_gpu import GpuChainMailSolver
 from voxwarp.deform.elements.chainmail_model import ChainMailModel

@@ -43,9 +43,10 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.shared import int_list
 from voxwarp.bench.command import add_bench_parser
 from voxwarp.bench.render import bench_camera, benchmark_volume
-from voxwarp.core.checks import image_size, int_list, positive_int
+from voxwarp.core.checks import image_size, positive_int
 from voxwarp.core.timing import load_average
 from voxwarp.core.volume import Volume
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field

@@ -73,10 +73,11 @@ from benchmarks.lattice_inverse import DEFAULT_FRAMES as INVERSE_FRAMES
 from benchmarks.lattice_inverse import bench_inverse
 from benchmarks.lattice_normals import markdown_lines as normals_markdown
 from benchmarks.lattice_normals import normals_study
+from benchmarks.shared import best_times
 from voxwarp.bench.command import emit_report
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import DEFAULT_NORMAL_METHOD, MeshInstance
-from voxwarp.core.timing import best_times, cpu_count, load_average
+from voxwarp.core.timing import cpu_count, load_average
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.render.mesh_pass import POSITIONS, MeshRenderer
 from voxwarp.teaching.papers import lattice_ratio_range

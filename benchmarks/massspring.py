@@ -45,7 +45,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks import gpu_context
-from voxwarp.core.checks import int_list, positive_int
+from benchmarks.shared import int_list
+from voxwarp.core.checks import positive_int
 from voxwarp.core.timing import cpu_count, load_average
 
 #: the benchmark's grid sizes (elements per axis)

@@ -20,8 +20,33 @@ from voxwarp.deform.wires.propagation import (
     nearest_seed,
     opencl_available,
     opencl_device_name,
-    seed_distance,
 )
+
+
+def seed_distance(nearest: np.ndarray, sampling: float | Sequence[float] = 1.0) -> np.ndarray:
+    """Distance (mm) from every voxel to the seed :func:`nearest_seed` chose for it.
+
+    Parameters
+    ----------
+    nearest : np.ndarray
+        int32 (nx, ny, nz) output of :func:`nearest_seed` (must contain a seed; -1
+        entries give NaN).
+    sampling : float or sequence of 3 floats
+        Voxel spacing (mm).
+
+    Returns
+    -------
+    np.ndarray
+        float64 (nx, ny, nz).
+    """
+    spacing = check_sampling(sampling)
+    shape = nearest.shape
+    seed = np.unravel_index(np.maximum(nearest, 0).ravel(), shape)
+    own = np.indices(shape).reshape(3, -1)
+    d2 = sum(((own[a] - seed[a]) * spacing[a]) ** 2 for a in range(3))
+    d = np.sqrt(d2).reshape(shape)
+    d[nearest < 0] = np.nan
+    return d
 
 
 def helix_seeds(shape: Sequence[int], turns: float = 3.0) -> np.ndarray:

@@ -65,10 +65,11 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.shared import best_times
 from voxwarp.bench.command import emit_report
 from voxwarp.bench.render import bench_camera
 from voxwarp.core.checks import image_size, positive_int
-from voxwarp.core.timing import best_times, cpu_count, load_average
+from voxwarp.core.timing import cpu_count, load_average
 from voxwarp.core.volume import Volume
 from voxwarp.teaching.wire_measure import (  # noqa: F401 (this module's names too)
     AIR_HU,
@@ -646,7 +647,8 @@ def bench_propagation(
     """OpenCL :func:`~voxwarp.deform.wires.propagation.nearest_seed` vs scipy's EDT on ``seeds``."""
     from scipy import ndimage
 
-    from voxwarp.deform.wires.propagation import nearest_seed, opencl_available, seed_distance
+    from benchmarks.propagation import seed_distance
+    from voxwarp.deform.wires.propagation import nearest_seed, opencl_available
 
     h = tuple(float(v) for v in sampling)
     call = "distance_transform_edt(~seeds, sampling, return_indices=True)"

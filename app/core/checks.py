@@ -1,6 +1,6 @@
 """Checks of values shared across voxwarp: argparse types of the ``voxwarp`` commands
-(the modules of ``voxwarp.cli`` and the benchmark modules that add their own sub-commands) and
-:func:`finite_vector` for vectors given in Python or scene JSON."""
+(the modules of ``voxwarp.cli``; the lab's benchmark modules use them for their own
+sub-commands too) and :func:`finite_vector` for vectors given in Python or scene JSON."""
 
 from __future__ import annotations
 
@@ -31,24 +31,6 @@ def positive_int(text: str) -> int:
     if n < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer; got {text!r}")
     return n
-
-
-def int_list(lo: int, hi: int, what: str, example: str) -> Any:
-    """argparse type of comma-separated integers in ``lo..hi``, e.g. ``int_list(2, 128,
-    "size", "16,32,64")``; the error names ``what`` and the ``example``."""
-
-    def parse(text: str) -> tuple[int, ...]:
-        try:
-            values = tuple(int(v) for v in text.split(","))
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(
-                f"{what}s must be comma-separated integers like {example}; got {text!r}"
-            ) from exc
-        if not values or not all(lo <= n <= hi for n in values):
-            raise argparse.ArgumentTypeError(f"each {what} must be {lo}..{hi}; got {text!r}")
-        return values
-
-    return parse
 
 
 def finite_vector(x: Any, n: int, what: str, error: type[Exception]) -> np.ndarray:

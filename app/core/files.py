@@ -309,9 +309,3 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically, synced to disk, creating folders."""
     with atomic_open(path, "w", suffix="") as fh:
         fh.write(text)
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically, synced to disk, creating folders."""
-    with atomic_open(path, "wb", suffix="") as fh:
-        fh.write(data)

@@ -1,5 +1,5 @@
-"""What every measurement shares: the cores this process may use, the load average, the
-CPU's model, and the best wall time of a few steps.
+"""What every measurement shares: the cores this process may use, the load average and the
+CPU's model.
 
 The installed ``voxwarp bench``, the teaching demos (``voxwarp demo``, ``voxwarp
 reproduce``) and the lab in the checkout (``python -m benchmarks``) all report these
@@ -8,12 +8,8 @@ beside their numbers, since timings on shared machines are noisy.
 
 from __future__ import annotations
 
-import math
 import os
 import platform
-import time
-from collections.abc import Callable
-from typing import Any
 
 
 def cpu_count() -> int:
@@ -43,15 +39,3 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine() or "unknown"
-
-
-def best_times(repeats: int, *steps: Callable[[], Any]) -> list[float]:
-    """The shortest wall time (s) of each of ``steps`` over ``repeats`` rounds (each
-    round runs every step once, in order)."""
-    best = [math.inf] * len(steps)
-    for _ in range(max(1, int(repeats))):
-        for i, step in enumerate(steps):
-            start = time.perf_counter()
-            step()
-            best[i] = min(best[i], time.perf_counter() - start)
-    return best

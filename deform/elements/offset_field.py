@@ -41,7 +41,7 @@ INVERSE_MODES: tuple[str, ...] = ("approx", "exact", "baked")
 #: Allowed range of fixed-point iterations.
 MAX_ITERATIONS = 64
 #: Default number of fixed-point iterations of ``inverse="exact"``: the fewest whose
-#: worst residual in :func:`inverse_error_table` stays below 1 % of the node spacing
+#: worst residual in the lab's ``inverse_error_table`` stays below 1 % of the node spacing
 #: (docs/benchmarks.md, section 'voxwarp.deform.elements.offset_field: inverse accuracy and cost').
 DEFAULT_ITERATIONS = 6
 #: Default fixed-point corrections of ``inverse="baked"`` after the baked seed, when the
@@ -884,36 +884,6 @@ class OffsetFieldWarp(Warp):
         )
 
 
-# ---------------------------------------------------------------------- error study
-def gaussian_drag_field(
-    shape: Sequence[int],
-    node: Sequence[int],
-    displacement: Sequence[float],
-    sigma: float,
-) -> np.ndarray:
-    """A dragged node with smoothly relaxed neighbours: ``d * exp(-|i - node|² / 2σ²)``.
-
-    Parameters
-    ----------
-    shape
-        Node counts ``(nx, ny, nz)``.
-    node
-        Index of the dragged node.
-    displacement
-        Its displacement (mm), applied in full at ``node``.
-    sigma
-        Width of the Gaussian fall-off, in nodes.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(nx, ny, nz, 3)`` displacements in mm.
-    """
-    idx = np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), axis=-1)
-    d2 = np.sum((idx - np.asarray(node)) ** 2, axis=-1)
-    return np.exp(-d2 / (2.0 * sigma**2))[..., None] * np.asarray(displacement, float)
-
-
 def texture_field(tex: Any, shape: Sequence[int]) -> np.ndarray | None:
     """The ``(nx, ny, nz, 3)`` float64 field an RGBA16F 2D array texture of ``shape``
     (layers = z) holds -- what the warp renders, read back -- or ``None`` when ``tex``
@@ -1035,81 +1005,3 @@ def element_model_warp(
             raise error(f"iterations must be an integer 1..{MAX_ITERATIONS}; got {iterations!r}")
         warp.iterations = int(iterations)
     return warp
-
-
-def inverse_error_table(
-    n: int = 16,
-    drag: float = 1.5,
-    sigma: float = 2.0,
-    iterations: Sequence[int] = (1, 2, 4, 5, 6, 8, 16),
-    baked_iterations: Sequence[int] = (0, 1, 2, 3),
-    points: int = 20000,
-    seed: int = 0,
-) -> list[dict[str, Any]]:
-    """Residual of the inverse for a large drag: the study behind the default iterations.
-
-    An ``n³`` grid with node spacing 1 mm; the interior node ``(n//2,)*3`` moves by
-    ``drag`` spacings along +x and every node by the Gaussian (``sigma`` nodes) of
-    :func:`gaussian_drag_field`. Deformed points ``p`` are drawn uniformly (``seed``) in
-    the box of half-width ``3 sigma + drag`` spacings around the dragged node's rest
-    position (clipped to the grid), and the residual ``|forward(apply(p)) - p|`` is
-    measured for ``"approx"`` and for ``"exact"`` and ``"baked"`` with each iteration
-    count. docs/benchmarks.md shows the table for the defaults.
-
-    Parameters
-    ----------
-    n, drag, sigma
-        Grid size, drag distance (node spacings) and fall-off width (nodes).
-    iterations
-        Iteration counts of ``"exact"`` to measure.
-    baked_iterations
-        Correction counts of ``"baked"`` to measure (0: the baked seed alone).
-    points, seed
-        Number of sample points and the RNG seed.
-
-    Returns
-    -------
-    list of dict
-        Rows ``{"inverse", "iterations", "max", "mean", "max_grad"}``: residuals in
-        units of the node spacing, and the largest ``|du/dX|`` entry of the field.
-    """
-    shape = (n, n, n)
-    centre = (n // 2,) * 3
-    u = gaussian_drag_field(shape, centre, (drag, 0.0, 0.0), sigma)
-    lo, hi = np.zeros(3), np.full(3, n - 1.0)
-    half = 3.0 * sigma + drag
-    rng = np.random.default_rng(seed)
-    c = np.asarray(centre, float)
-    p = rng.uniform(np.maximum(c - half, lo), np.minimum(c + half, hi), (points, 3))
-    base = OffsetFieldWarp(lo, hi, u)
-    _, grad = base._interpolate(p, gradient=True)
-    max_grad = float(np.max(np.abs(grad)))
-    rows: list[dict[str, Any]] = []
-    variants = [("approx", 1)] + [("exact", int(k)) for k in iterations]
-    variants += [("baked", int(k)) for k in baked_iterations]
-    for mode, k in variants:
-        w = OffsetFieldWarp(lo, hi, u, inverse=mode, iterations=max(k, 1))
-        if mode == "baked" and k == 0:
-            q = p - w._interpolate(p, field=w.baked_inverse())
-        else:
-            q = w.apply(p)
-        err = np.linalg.norm(w.forward(q) - p, axis=1)
-        rows.append(
-            {
-                "inverse": mode,
-                "iterations": k,
-                "max": float(err.max()),
-                "mean": float(err.mean()),
-                "max_grad": max_grad,
-            }
-        )
-    return rows
-
-
-def format_error_table(rows: Sequence[Mapping[str, Any]]) -> str:
-    """Markdown table of :func:`inverse_error_table` rows (residuals / node spacing)."""
-    lines = ["| inverse | max / h | mean / h |", "|---|---|---|"]
-    for r in rows:
-        name = "approx" if r["inverse"] == "approx" else f"{r['inverse']} k={r['iterations']}"
-        lines.append(f"| {name} | {r['max']:.3g} | {r['mean']:.3g} |")
-    return "\n".join(lines)

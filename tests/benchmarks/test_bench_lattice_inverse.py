@@ -15,7 +15,8 @@ import pytest
 
 from benchmarks import lattice_inverse as li
 from benchmarks.lattice import add_bench_lattice_parser, command_line
-from voxwarp.deform.lattice.warp import DEFAULT_TOLERANCE, STUDY_VARIANTS
+from benchmarks.lattice_inverse import STUDY_VARIANTS
+from voxwarp.deform.lattice.warp import DEFAULT_TOLERANCE
 
 
 @pytest.mark.slow

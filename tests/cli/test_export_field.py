@@ -28,12 +28,13 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.lattice_inverse import bent_grid
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.elements.grid import ElementGrid
 from voxwarp.deform.elements.massspring import MassSpring
-from voxwarp.deform.lattice.warp import LatticeWarp, bent_grid
+from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.warp import AffineWarp, Warp
 from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.io.fields import save_displacement_field

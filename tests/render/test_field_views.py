@@ -13,10 +13,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.lattice_inverse import bent_grid
+from benchmarks.offset_inverse import gaussian_drag_field
 from voxwarp.core.volume import Volume
-from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
-from voxwarp.deform.lattice.warp import LatticeWarp, bent_grid
+from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.warp import AffineWarp
 from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.errors import VoxwarpError

@@ -29,9 +29,10 @@ import moderngl
 import numpy as np
 import pytest
 
+from benchmarks.lattice_inverse import bent_grid
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
-from voxwarp.deform.lattice.warp import LatticeWarp, bent_grid
+from voxwarp.deform.lattice.warp import LatticeWarp
 from voxwarp.deform.wires.field import Wire, WireDeformer
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene

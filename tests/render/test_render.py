@@ -576,7 +576,8 @@ def test_cell_block_and_no_skipping_give_the_same_image(gl_ctx: Any, mode: str) 
 
 # ---------------------------------------------------------------------- interactive use
 def _warped_scene() -> Scene:
-    from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from benchmarks.offset_inverse import gaussian_drag_field
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     vol = phantom()
     lo, hi = vol.bounds

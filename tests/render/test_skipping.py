@@ -22,8 +22,9 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.skipping.maps import (
+    OCTANT_EPS,
+    Octant,
     block_skip_distances,
-    octant_of,
     octant_regions,
     octant_skip_distances,
     ray_direction_coefficients,
@@ -31,6 +32,14 @@ from voxwarp.render.skipping.maps import (
 from voxwarp.scene import Scene
 
 OCTANTS = list(itertools.product((1, -1), repeat=3))
+
+
+def octant_of(direction: np.ndarray) -> Octant:
+    """The octant of a direction as the raycaster classifies it (see ``OCTANT_EPS``): the
+    CPU oracle of the shader's rule."""
+    d = np.asarray(direction, dtype=np.float64)[:3]
+    limit = -OCTANT_EPS * float(np.max(np.abs(d)))
+    return tuple(-1 if c < limit else 1 for c in d)  # type: ignore[return-value]
 
 
 def brute_force_octant(
@@ -258,7 +267,8 @@ def test_visible_ranges_integer_path_equals_float_path(dtype: Any) -> None:
 
 # ---------------------------------------------------------------------- warped rays
 def _drag_warp(vol: Volume, amount: float = 4.0) -> Any:
-    from voxwarp.deform.elements.offset_field import OffsetFieldWarp, gaussian_drag_field
+    from benchmarks.offset_inverse import gaussian_drag_field
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
     lo, hi = vol.bounds
     field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (amount, -0.5 * amount, 1.0), 1.0)

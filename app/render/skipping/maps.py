@@ -317,13 +317,6 @@ def ray_direction_coefficients(inv_view_proj: np.ndarray, to_texel: np.ndarray) 
     return np.stack([d10 - d00, d01 - d00, d00], axis=1)
 
 
-def octant_of(direction: np.ndarray) -> Octant:
-    """The octant of a direction as the raycaster classifies it (see ``OCTANT_EPS``)."""
-    d = np.asarray(direction, dtype=np.float64)[:3]
-    limit = -OCTANT_EPS * float(np.max(np.abs(d)))
-    return tuple(-1 if c < limit else 1 for c in d)  # type: ignore[return-value]
-
-
 def _clip_polygon(poly: list[tuple[float, float]], a: float, b: float, c: float) -> list:
     """Sutherland-Hodgman: the part of convex ``poly`` where a*x + b*y + c >= 0."""
     out: list[tuple[float, float]] = []

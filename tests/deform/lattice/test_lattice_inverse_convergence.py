@@ -8,8 +8,9 @@ point that stopped by the rule is within ``tolerance`` of the true one (the boun
 tests assert, not tuned to measurements: those lie far below it, see docs/benchmarks.md),
 and its residual ``|grid(u') - p|`` within ``tolerance`` times the lattice's largest
 stretch ``|J diag(1 / size)|``. Oracles: the true points (``p = grid(u)`` for known u),
-the CPU reference (float64) against the GLSL (float32), and a Bernstein certificate that
-the random lattices do not fold (checked against dense samples of ``det J``).
+the CPU reference (float64) against the GLSL (float32); the random lattices are the lab's
+(benchmarks.lattice_inverse), proven not to fold by a Bernstein certificate
+(tests/benchmarks/test_lattice_inverse_study.py).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.lattice_inverse import study_cases
 from tests.warp_gpu import gpu_warp
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.lattice.warp import (
@@ -27,11 +29,7 @@ from voxwarp.deform.lattice.warp import (
     DEFAULT_TOLERANCE,
     FAR,
     LatticeWarp,
-    _cell_dets,
-    certified_nonfolding,
     lattice_eval,
-    random_lattice,
-    study_cases,
 )
 from voxwarp.deform.warp import WarpError, warp_from_dict
 
@@ -48,22 +46,6 @@ def stretch(grid: TrilinearGrid, box: tuple, u: np.ndarray) -> float:
     _, j = lattice_eval(np.asarray(grid.nodes, dtype=np.float64), u)
     assert j is not None
     return float(np.max(np.linalg.norm(j / (box[1] - box[0])[None, None, :], ord=2, axis=(1, 2))))
-
-
-# ---------------------------------------------------------------------- the test lattices
-def test_random_lattices_are_proven_nonfolding() -> None:
-    rng = np.random.default_rng(0)
-    t = np.linspace(0.0, 1.0, 9)
-    f = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
-    for k in range(24):
-        grid = random_lattice(rng, 1 + k % 4, BOX, 0.6, "one" if k % 2 else "all")
-        assert certified_nonfolding(grid)
-        assert len(grid.folded_cells()) == 0
-        assert _cell_dets(np.asarray(grid.nodes), f).min() > 0.0
-    # the certificate refuses a folded lattice (a node pushed past its neighbour)
-    nodes = np.array(TrilinearGrid.from_box(*BOX, cells=2).nodes)
-    nodes[1, 1, 1, 0] += 0.8 * (BOX[1][0] - BOX[0][0])
-    assert not certified_nonfolding(TrilinearGrid(nodes))
 
 
 # ---------------------------------------------------------------------- CPU reference

@@ -20,20 +20,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from benchmarks.lattice_inverse import bent_grid
 from tests.render.test_render import aligned_camera, grey_scene
 from tests.warp_gpu import gpu_warp
 from voxwarp.core.volume import Volume
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
-from voxwarp.deform.lattice.warp import (
-    DEFAULT_ITERATIONS,
-    DEFAULT_TOLERANCE,
-    FAR,
-    LatticeWarp,
-    bent_grid,
-    format_error_table,
-    inverse_error_table,
-    lattice_eval,
-)
+from voxwarp.deform.lattice.warp import FAR, LatticeWarp, lattice_eval
 from voxwarp.deform.warp import AffineWarp, WarpError, chain_apply, warp_from_dict
 
 BOX = (np.array([-10.0, 0.0, 5.0]), np.array([54.0, 48.0, 61.0]))
@@ -137,25 +129,6 @@ def test_the_inverse_undoes_the_lattice(inverse: str, k: int, tol: float, lost: 
     np.testing.assert_array_less(
         np.linalg.norm(q[shown] - (BOX[0] + u[shown] * SIZE), axis=1), 2 * tol
     )
-
-
-def test_error_table_of_the_bent_lattice() -> None:
-    rows = inverse_error_table(points=4000)
-    by = {(r["inverse"], r["iterations"]): r for r in rows}
-    assert bent().adaptive
-    assert bent().iterations is None
-    assert (bent().tolerance, bent().max_iterations) == (DEFAULT_TOLERANCE, 8)
-    assert bent(inverse="baked").iterations == 0
-    assert bent(iterations=DEFAULT_ITERATIONS).steps == 2  # the former default
-    # the default iterates to a residual far below its tolerance (quadratic convergence)
-    assert by["newton", None]["max"] < 1e-3 * DEFAULT_TOLERANCE
-    assert by["newton", 1]["max"] > 0.01
-    # each step helps; the seed alone is the least accurate
-    assert by["baked", 0]["max"] > by["newton", 1]["max"] > by["newton", 2]["max"]
-    assert by["newton", 3]["max"] < 1e-8
-    assert by["baked", 0]["median"] < 0.05  # good almost everywhere, poor at the kinks
-    assert "| newton k=2 |" in format_error_table(rows)
-    assert "| newton tol=0.001 mm |" in format_error_table(rows)
 
 
 def test_outside_rule_far_unless_the_surface_is_the_box() -> None:

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from benchmarks.propagation import benchmark_nearest_seed, helix_seeds
+from benchmarks.propagation import benchmark_nearest_seed, helix_seeds, seed_distance
 from voxwarp.deform.warp import WarpError
 from voxwarp.deform.wires import propagation as prop
 from voxwarp.deform.wires.propagation import (
@@ -19,7 +19,6 @@ from voxwarp.deform.wires.propagation import (
     last_backend,
     nearest_seed,
     opencl_available,
-    seed_distance,
 )
 
 requires_opencl = pytest.mark.skipif(
