@@ -63,7 +63,7 @@ from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, Volume
 from voxwarp.ui.tasks import Task, run_with_progress
 from voxwarp.ui.tf_editor import TransferFunctionEditor
 from voxwarp.ui.tour_panel import TourPanel
-from voxwarp.ui.viewport import Viewport
+from voxwarp.ui.viewport import Viewport, qimage_to_array
 
 #: frames per second of the simulation timer
 SIM_FPS = 30
@@ -818,8 +818,6 @@ class MainWindow(QMainWindow):
             return None
         try:
             if whole_window:
-                from voxwarp.ui.viewport import qimage_to_array
-
                 img = qimage_to_array(self.grab().toImage())
             else:
                 img = self.viewport.screenshot()
