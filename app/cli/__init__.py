@@ -8,5 +8,6 @@ Every command's module loads whenever the parser is built (``voxwarp --help`` to
 what a command needs to run (the scene, the renderer, the models, the readers, the teaching
 demos) is imported inside its functions: ``voxwarp --help`` loads the parser, numpy and a
 few small modules only (``tests/test_package.py`` checks that no heavy module loads).
-Small modules that the parser loads anyway are imported at the top.
+What the parser loads anyway, and a few small modules (``core.files``, ``core.progress``,
+``teaching.tour``: some ms together), are imported at the top.
 """
