@@ -12,6 +12,7 @@ from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
 from voxwarp.errors import VoxwarpError
+from voxwarp.io.samples import DEFAULT_SAMPLE
 
 #: after the first frame, the time given to the docks to paint before a screenshot (ms)
 SCREENSHOT_SETTLE_MS = 300
@@ -76,7 +77,7 @@ def open_window(
     opened (a :class:`~voxwarp.errors.VoxwarpError`) still opens the window, on the
     bundled sample, and shows the one-line error in a dialog (and on stderr), as File >
     Open does; without, the error is raised."""
-    from voxwarp.io.samples import DEFAULT_SAMPLE
+    # the window loads moderngl and scipy: Qt set-up (configure_qt) stays light without it
     from voxwarp.ui.main_window import MainWindow, load_session_input
 
     error: str | None = None

@@ -46,16 +46,24 @@ from PySide6.QtWidgets import (
 from voxwarp.core.camera import VIEWS, Camera
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
+from voxwarp.deform.warp import WarpError
 from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
 from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
 from voxwarp.errors import VoxwarpError
+from voxwarp.inputs import load_input
+from voxwarp.io.fields import load_transform
 from voxwarp.io.images import write_image
+from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
+from voxwarp.teaching.tour import read_tour
 from voxwarp.ui.field_view import SEP
+from voxwarp.ui.mpr import SliceLayout, install_slice_controls
+from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
 from voxwarp.ui.tasks import Task, run_with_progress
 from voxwarp.ui.tf_editor import TransferFunctionEditor
-from voxwarp.ui.viewport import Viewport
+from voxwarp.ui.tour_panel import TourPanel
+from voxwarp.ui.viewport import Viewport, qimage_to_array
 
 #: frames per second of the simulation timer
 SIM_FPS = 30
@@ -186,8 +194,6 @@ class MainWindow(QMainWindow):
         self.source: str | None = str(path) if path is not None else None
         self.undo_stack = QUndoStack(self)
         self.viewport = Viewport(session, self)
-        from voxwarp.ui.mpr import SliceLayout
-
         #: the central area: the viewport and the linked slice views
         self.mpr = SliceLayout(self)
         self.setCentralWidget(self.mpr)
@@ -228,8 +234,6 @@ class MainWindow(QMainWindow):
 
     # ------------------------------------------------------------------ docks
     def _make_docks(self) -> None:
-        from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
-
         self.volume_panel = VolumePanel(self)
         self.tf_editor = TransferFunctionEditor(
             self.session.scene.transfer_function, self.session.volume
@@ -374,8 +378,6 @@ class MainWindow(QMainWindow):
         )
         self.marker_action.setChecked(self.viewport.show_marker)
         v.addSeparator()
-        from voxwarp.ui.mpr import install_slice_controls
-
         install_slice_controls(self, v)
         v.addSeparator()
         for dock in self.docks.values():
@@ -694,9 +696,6 @@ class MainWindow(QMainWindow):
     def add_field(self, path: str | Path) -> bool:
         """Read a field or transform file (:func:`voxwarp.io.fields.load_transform`) and put
         its warps first in the scene's chain (undoable); errors become the one-line dialog."""
-        from voxwarp.deform.warp import WarpError
-        from voxwarp.io.fields import load_transform
-
         try:
             warps = load_transform(path)
         except (VoxwarpError, WarpError, OSError) as exc:
@@ -819,8 +818,6 @@ class MainWindow(QMainWindow):
             return None
         try:
             if whole_window:
-                from voxwarp.ui.viewport import qimage_to_array
-
                 img = qimage_to_array(self.grab().toImage())
             else:
                 img = self.viewport.screenshot()
@@ -960,9 +957,6 @@ class MainWindow(QMainWindow):
 
     def start_tour(self, path: str | Path) -> None:
         """Step through a teaching demo's tour (``voxwarp demo NAME --gui``) in a dock."""
-        from voxwarp.teaching.tour import read_tour
-        from voxwarp.ui.tour_panel import TourPanel
-
         try:
             tour = read_tour(path)
         except VoxwarpError as exc:
@@ -1040,9 +1034,6 @@ def load_session_input(spec: str, series: int | str | None = None) -> EditSessio
     """A session for INPUT: a scene JSON (resuming its deformation), a volume file or
     ``sample:NAME`` (shown with the sample's suggested transfer function); ``series``
     picks one series of a DICOM folder (``voxwarp gui --series``)."""
-    from voxwarp.inputs import load_input
-    from voxwarp.io.samples import suggested_transfer_function
-
     path = Path(spec)
     if path.suffix.lower() == ".json" and path.is_file():
         if series is not None:

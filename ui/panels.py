@@ -60,6 +60,7 @@ from voxwarp.editing.session import DEFORMATIONS, DisplayOptions, EditSession, P
 from voxwarp.scene import MODES
 from voxwarp.ui.family_panels import FAMILY_PANELS, FamilyPanel, ModelOptions, family_label
 from voxwarp.ui.family_panels.wires import FIELD_SCALES, wire_of_handle
+from voxwarp.ui.field_view import FieldSliceView
 from voxwarp.ui.panel_base import (
     AxisSpinBox,
     Panel,
@@ -629,8 +630,6 @@ class DisplayPanel(Panel):
             check.toggled.connect(lambda on, name=f.name: self._toggled(name, on))
             layout.addWidget(check)
             self.checks[f.name] = check
-        from voxwarp.ui.field_view import FieldSliceView
-
         #: the deformation's internal fields on a slice (folded until asked for)
         self.field_view = FieldSliceView(window)
         layout.addSpacing(4)

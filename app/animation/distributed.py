@@ -36,6 +36,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any
 
+from voxwarp.animation.frames import render_frame_to_file
 from voxwarp.animation.tracks import AnimationError
 from voxwarp.errors import VoxwarpError
 
@@ -195,8 +196,6 @@ def render_task(header: Mapping[str, Any], scene: Mapping[str, Any], path: str) 
         ``{"path", "size", "sha256"}`` of the file written
         (:func:`voxwarp.animation.frames.render_frame_to_file`).
     """
-    from voxwarp.animation.frames import render_frame_to_file
-
     return render_frame_to_file(header, scene, path)
 
 

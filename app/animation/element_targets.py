@@ -9,6 +9,7 @@ import numpy as np
 
 from voxwarp.animation.target_family import Binding, Keys, TargetFamily, TrackLike
 from voxwarp.animation.values import AnimationError, array, key_weights
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 
 if TYPE_CHECKING:
     from voxwarp.scene import Scene
@@ -51,6 +52,7 @@ class ElementTargets(TargetFamily):
         return elements
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
+        # the element models load scipy: only a scene with drag tracks needs them
         from voxwarp.deform.elements.chainmail import ChainMail
         from voxwarp.deform.elements.massspring import MassSpring
 
@@ -65,8 +67,6 @@ class ElementTargets(TargetFamily):
 
 def _model_warp(base: Scene) -> int:
     """Index of the scene's one offset-field warp saved with its element model."""
-    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
-
     hits = [
         n
         for n, w in enumerate(base.warps)
@@ -106,7 +106,7 @@ class ElementBinding(Binding):
         self.drags.append((np.asarray(track.elements), offsets))
 
     def step(self, d: dict[str, Any], index: int, steps: int, relax: int) -> None:
-        from voxwarp.deform.elements.massspring import MassSpring
+        from voxwarp.deform.elements.massspring import MassSpring  # scipy, as in bind
 
         drags, self.drags = self.drags, []
         try:

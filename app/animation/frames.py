@@ -19,7 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.errors import SceneError
+from voxwarp.core.files import output_error
+from voxwarp.deform.warp import WarpError, warp_from_dict
+from voxwarp.errors import SceneError, VoxwarpError
+from voxwarp.io import images  # images.write_image: tests stand in for it
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.scene import Scene
 
 _STUB_VOLUME = {"embedded": {"dtype": "uint8", "shape": [1, 1, 1], "order": "F", "data": "AA=="}}
 
@@ -40,10 +45,6 @@ class _ProcessRenderer:
         self.warps: dict[str, Any] = {}
 
     def render(self, header: Mapping[str, Any], scene: Mapping[str, Any]) -> np.ndarray:
-        from voxwarp.deform.warp import WarpError, warp_from_dict
-        from voxwarp.render.offscreen import OffscreenRenderer
-        from voxwarp.scene import Scene
-
         w, h = (int(v) for v in header["size"])
         dtype = str(header.get("dtype", "u1"))
         if self.key != (w, h, dtype):
@@ -161,15 +162,11 @@ def render_frame_to_file(
         When the frame cannot be written or does not read back as written (the file is
         removed).
     """
-    from voxwarp.core.files import output_error
-    from voxwarp.errors import VoxwarpError
-    from voxwarp.io.images import read_image, write_image
-
     image = render_frame(header, scene)
-    write_image(path, image)
+    images.write_image(path, image)
     record = file_record(path)
     try:
-        back = read_image(path) if record is not None else None
+        back = images.read_image(path) if record is not None else None
     except VoxwarpError:
         back = None
     if back is None or back.dtype != image.dtype or not np.array_equal(back, image):

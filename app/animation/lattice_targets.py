@@ -24,6 +24,7 @@ class LatticeTargets(TargetFamily):
             array(value, f"{what} (lattice nodes)", (None, None, None, 3))
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
+        # the lattice warp loads scipy: only a scene with lattice tracks needs it
         from voxwarp.deform.lattice.warp import LatticeWarp
 
         k = find_warp(base, LatticeWarp, "lattice", target)
@@ -59,6 +60,6 @@ class LatticeBinding(Binding):
         d["warps"][self.warp] = entry
 
     def check(self, d: dict[str, Any]) -> None:
-        from voxwarp.deform.lattice.warp import LatticeWarp
+        from voxwarp.deform.lattice.warp import LatticeWarp  # scipy, as in bind
 
         LatticeWarp.from_dict(d["warps"][self.warp])

@@ -31,11 +31,12 @@ import numpy as np
 
 from voxwarp.animation.target_family import Binding, Keys, TargetFamily, TrackLike
 from voxwarp.animation.values import AnimationError, array, interpolate
+from voxwarp.core.mesh import MeshInstance
+from voxwarp.deform.lattice.anchors import AnchorStrip
+from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.warp import WarpError
 
 if TYPE_CHECKING:
-    from voxwarp.core.mesh import MeshInstance
-    from voxwarp.deform.lattice.anchors import AnchorStrip
     from voxwarp.scene import Scene
 
 _TARGET = re.compile(r"^meshes\[([^\]]+)\]\.nodes$")
@@ -50,8 +51,6 @@ def mesh_name(target: str) -> str:
 
 def _attachment(a: Any, where: str) -> dict[str, Any]:
     """One checked attachment entry (its anchor array parsed, then kept as JSON)."""
-    from voxwarp.deform.lattice.anchors import AnchorStrip
-
     if not isinstance(a, Mapping) or not isinstance(a.get("mesh"), str):
         raise AnimationError(f"{where}: an attachment needs 'mesh' (the attached mesh's name)")
     strip = {k: v for k, v in a.items() if k != "mesh"}
@@ -121,8 +120,6 @@ class MeshBinding(Binding):
 
     def _bind_track(self, track: TrackLike, what: str) -> None:
         """Claim the track's base mesh and attachments; check the anchors fit the base."""
-        from voxwarp.deform.lattice.anchors import AnchorStrip
-
         target = track.target
         base = self.meshes[self._claim(mesh_name(target), target, what)]
         if not base.is_lattice:
@@ -143,8 +140,6 @@ class MeshBinding(Binding):
         self.attached[target] = strips
 
     def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
-        from voxwarp.deform.lattice.trilinear import TrilinearGrid
-
         if track.target not in self.attached:
             self._bind_track(track, what)
         inst = self.meshes[self._index(mesh_name(track.target), what)]
@@ -161,8 +156,6 @@ class MeshBinding(Binding):
         return a
 
     def apply(self, d: dict[str, Any], track: TrackLike, keys: Keys, f: float) -> None:
-        from voxwarp.deform.lattice.trilinear import TrilinearGrid
-
         if d.get("meshes") is self.template.get("meshes"):  # first mesh track of this frame
             d["meshes"] = list(self.template["meshes"])
         i = self._index(mesh_name(track.target), track.target)
@@ -183,8 +176,6 @@ class MeshBinding(Binding):
 
 def _with_grid(inst: MeshInstance, grid: Any) -> MeshInstance:
     """A copy of ``inst`` placed by ``grid`` (its box kept)."""
-    from voxwarp.core.mesh import MeshInstance
-
     return MeshInstance(inst.mesh, grid, box=inst.box, name=inst.name)
 
 

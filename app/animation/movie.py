@@ -81,11 +81,20 @@ from typing import Any
 import numpy as np
 
 from voxwarp.animation import FRAME_FORMATS
+from voxwarp.animation.distributed import dask_client, probe_scheduler, render_on_dask
 from voxwarp.animation.frames import canonical_json, file_record, render_frame_to_file
 from voxwarp.animation.tracks import MAX_FRAMES, FrameStream, stream_animated_scene
 from voxwarp.core.extras import require
+from voxwarp.core.files import (
+    atomic_output,
+    atomic_write_text,
+    is_temp_name,
+    output_error,
+    remove_stale_temps,
+)
 from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import VoxwarpError
+from voxwarp.io import images  # images.read_image: tests stand in for it
 
 #: movie containers accepted for ``-o``
 MOVIE_SUFFIXES: tuple[str, ...] = (".mp4", ".mov", ".mkv")
@@ -260,8 +269,6 @@ class FrameFolder:
     """
 
     def __init__(self, folder: str | os.PathLike, count: int, ext: str) -> None:
-        from voxwarp.core.files import output_error
-
         self.folder = Path(folder)
         self.count = int(count)
         self.ext = ext
@@ -301,8 +308,6 @@ class FrameFolder:
     def _remove_temps(self) -> None:
         """Remove temporary frame and manifest files of killed runs (this folder is
         written by one run at a time)."""
-        from voxwarp.core.files import is_temp_name
-
         for p in self.folder.iterdir():
             n = p.name
             ours = n.startswith(".frame_") or n.startswith(f".{MANIFEST_NAME}.")
@@ -335,8 +340,6 @@ class FrameFolder:
 
     def write_manifest(self) -> None:
         """Write the manifest (atomically; :class:`~voxwarp.errors.OutputError` on failure)."""
-        from voxwarp.core.files import atomic_write_text
-
         frames: list[Any] = [None] * self.count
         for i, e in self.entries.items():
             frames[i] = list(e)
@@ -481,15 +484,12 @@ def encode_movie(
     VoxwarpError
         When a frame cannot be read or has another size than the first.
     """
-    from voxwarp.core.files import atomic_output, output_error
-    from voxwarp.io.images import read_image
-
     out = Path(output)
     if out.suffix.lower() not in MOVIE_SUFFIXES:
         raise VoxwarpError(f"movie output {out} must end in {', '.join(MOVIE_SUFFIXES)}")
     if not frame_paths:
         raise VoxwarpError("no frames to encode")
-    first = _rgb8(read_image(frame_paths[0]))
+    first = _rgb8(images.read_image(frame_paths[0]))
     height, width = first.shape[:2]
     with atomic_output(out, out.suffix) as tmp, tempfile.TemporaryFile() as log:
         try:
@@ -500,7 +500,7 @@ def encode_movie(
         try:
             try:
                 for n, p in enumerate(frame_paths):
-                    rgb = first if n == 0 else _rgb8(read_image(p))
+                    rgb = first if n == 0 else _rgb8(images.read_image(p))
                     if rgb.shape != first.shape:
                         raise VoxwarpError(
                             f"frame {p} is {rgb.shape[1]}x{rgb.shape[0]}; the first frame is"
@@ -595,8 +595,6 @@ class _Timed:
 def remove_stale_movie_temps(output: str | os.PathLike) -> list[Path]:
     """Remove temporary movies of ``output`` that killed runs left beside it (only
     temporaries of that name whose writing process is gone)."""
-    from voxwarp.core.files import remove_stale_temps
-
     out = Path(output)
     return remove_stale_temps(out.parent, for_name=out.name)
 
@@ -683,8 +681,6 @@ def animate(
     if workers is not None or scheduler is not None:
         require("distributed", "voxwarp animate --workers/--scheduler")
     if scheduler is not None:  # a wrong address fails before any file is touched
-        from voxwarp.animation.distributed import probe_scheduler
-
         probe_scheduler(scheduler)
     ext = FRAME_FORMATS[image_format]
     folder = frames_dir_for(out)
@@ -799,8 +795,6 @@ def _render_jobs(
         for job in jobs:
             done(job, render_frame_to_file(header, job.scene, job.path))
         return
-    from voxwarp.animation.distributed import dask_client, render_on_dask
-
     if client is not None:
         render_on_dask(client, header, jobs, done)
         return
@@ -810,8 +804,6 @@ def _render_jobs(
 
 def _unlink(p: Path) -> bool:
     """Delete ``p``; False if it was already gone, OutputError if it cannot be deleted."""
-    from voxwarp.core.files import output_error
-
     try:
         p.unlink()
     except FileNotFoundError:

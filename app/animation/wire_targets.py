@@ -44,6 +44,7 @@ class WireTargets(TargetFamily):
             number(value, what)
 
     def bind(self, base: Scene, template: dict[str, Any], target: str) -> Binding:
+        # the wire field loads scipy: only a scene with wire tracks needs it
         from voxwarp.deform.wires.field import WireFieldWarp
 
         return WireBinding(template, find_warp(base, WireFieldWarp, "wires", target))
@@ -57,7 +58,7 @@ class WireBinding(Binding):
         self.warp = warp
 
     def resolve(self, track: TrackLike, value: Any, what: str, first: Any) -> Any:
-        from voxwarp.deform.wires.field import Wire
+        from voxwarp.deform.wires.field import Wire  # scipy, as in bind
 
         wires = self.template["warps"][self.warp]["wires"]
         i, part = _parts(track.target)
@@ -89,7 +90,7 @@ class WireBinding(Binding):
         d["warps"][k]["wires"][i][part] = value.tolist()
 
     def check(self, d: dict[str, Any]) -> None:
-        from voxwarp.deform.wires.field import Wire
+        from voxwarp.deform.wires.field import Wire  # scipy, as in bind
 
         for w in d["warps"][self.warp]["wires"]:
             Wire.from_dict(w)

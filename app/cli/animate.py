@@ -21,6 +21,7 @@ def _fps(text: str) -> float:
 
 
 def _frames(text: str) -> int:
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.animation.tracks import MAX_FRAMES
 
     n = positive_int(text)
@@ -84,6 +85,7 @@ def add_parser(sub: Any) -> None:
 
 def cmd_animate(args: argparse.Namespace) -> int:
     """``voxwarp animate SCENE -o movie.mp4``."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.animation.movie import animate
 
     if args.bench:  # the lab's, not installed: one line naming it

@@ -16,6 +16,7 @@ from voxwarp.cli.options import TF_HELP
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.checks import image_size as _size
+from voxwarp.core.files import atomic_write_text
 from voxwarp.inputs import load_input
 
 #: ``voxwarp bench`` commands that moved to the lab in the checkout (``benchmarks/``)
@@ -75,8 +76,8 @@ def add_parser(sub: Any, *, bench: bool = True) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     """``voxwarp bench render``: this machine's frame rates (see voxwarp.bench.render);
     without an input the standard run: a sparse and two dense cases."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.bench.render import RenderCase, bench_render_cases, standard_cases
-    from voxwarp.core.files import atomic_write_text
 
     path = args.input_file or args.input
     if path:
@@ -108,6 +109,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     text = "\n".join(report.markdown(command) for report in reports)
     print(text)
     if args.deformed:
+        # loaded when used: voxwarp --help stays light (see voxwarp.cli)
         from voxwarp.bench.render import bench_warp_render
 
         warp_report = bench_warp_render(

@@ -47,6 +47,7 @@ class Drag(tuple):
 
 
 def _grid_shape(text: str) -> tuple[int, int, int]:
+    # loads scipy: only when used
     from voxwarp.deform.elements.grid import MAX_ELEMENTS_PER_AXIS as hi
     from voxwarp.deform.elements.grid import MIN_ELEMENTS_PER_AXIS as lo
 
@@ -204,6 +205,7 @@ def grid_text(shape: Sequence[int]) -> str:
 
 
 def _field_scale(text: str) -> int:
+    # loads scipy: only when used
     from voxwarp.deform.wires.field import FIELD_SCALES
 
     try:

@@ -24,6 +24,8 @@ from voxwarp.cli.deform_options import (
 from voxwarp.cli.deform_options import Cut as _Cut
 from voxwarp.cli.deform_options import Drag as _Drag
 from voxwarp.cli.deform_options import grid_text as _grid_text
+from voxwarp.editing import model_settings as ms
+from voxwarp.editing.model_settings import LatticeSettings, SettingError, WireSettings
 from voxwarp.errors import InputError as CliOptionError
 from voxwarp.inputs import load_wire_file
 
@@ -176,9 +178,9 @@ def _check_wire_options(args: argparse.Namespace) -> None:
 
 def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
     """The wire warp of --wires on ``volume``, built, and a one-line summary."""
+    # loads scipy: only when used
     from voxwarp.deform.warp import WarpError
     from voxwarp.editing.families.wires import WiresFamily
-    from voxwarp.editing.model_settings import WireSettings
 
     entry = load_wire_file(args.wires)
     if args.field_scale is not None:
@@ -206,8 +208,6 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
 def _element_settings(args: argparse.Namespace) -> Any:
     """The model builder's settings of ``render --massspring`` / ``--chainmail``
     (:mod:`voxwarp.editing.model_settings`; None without either)."""
-    from voxwarp.editing import model_settings as ms
-
     model = _deform_model(args)
     if model is None:
         return None
@@ -247,10 +247,11 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     model = _deform_model(args)
     if model is None:
         return None
+    # loads scipy: only when used
     from voxwarp.editing.families.elements import ElementFamily
-    from voxwarp.editing.model_settings import SettingError
 
     if args.drag_at:  # to the nearest elements at rest, then checked as --drag elements are
+        # loads scipy: only when used
         from voxwarp.deform.elements.grid import ElementGrid
 
         shape = args.massspring if model == "massspring" else args.chainmail
@@ -319,9 +320,9 @@ def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any,
 
     Returns the :class:`~voxwarp.deform.elements.massspring.MassSpring` and a one-line summary.
     """
+    # loads scipy: only when used
     from voxwarp.deform.warp import WarpError
     from voxwarp.editing.families.elements import MassSpringFamily
-    from voxwarp.editing.model_settings import SettingError
 
     settings = _element_settings(args)
     try:
@@ -354,8 +355,8 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
     (also saved as the model's ``relax_steps``). Returns the
     :class:`~voxwarp.deform.elements.chainmail.ChainMail` and a one-line summary.
     """
+    # loads scipy: only when used
     from voxwarp.editing.families.elements import ChainMailFamily
-    from voxwarp.editing.model_settings import SettingError
 
     settings = _element_settings(args)
     drags = args.drag or []
@@ -392,6 +393,7 @@ def _field_warps(args: argparse.Namespace) -> list[Any]:
     """The warps of every ``--displacement`` file, in order (fails before any GL work)."""
     if not args.displacement:
         return []
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.fields import load_transform
 
     warps: list[Any] = []
@@ -424,8 +426,8 @@ def prepare_deformation(args: argparse.Namespace, scene: Any) -> tuple[Any, Pend
         file_warp, summary = _wire_warp(args, scene.volume)
         print(summary, file=sys.stderr)
     if args.lattice is not None:
+        # loads scipy: only when used
         from voxwarp.editing.families.lattice import LatticeFamily
-        from voxwarp.editing.model_settings import LatticeSettings
 
         file_warp = LatticeFamily.build(LatticeSettings(file=args.lattice), scene.volume).warp
     return scene, PendingDeformation(grid, file_warp)

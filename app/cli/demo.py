@@ -16,12 +16,12 @@ from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.modes import MODES
 from voxwarp.inputs import load_input
+from voxwarp.io.samples import DEFAULT_SAMPLE, suggested_transfer_function
+from voxwarp.teaching import DEMO_TITLES, DEMOS
 
 
 def add_parser(sub: Any) -> None:
     """Add ``demo`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
-    from voxwarp.teaching import DEMO_TITLES, DEMOS
-
     pd = sub.add_parser(
         "demo",
         help=f"teaching demo NAME ({', '.join(DEMOS)}): a figure sheet; or render a volume"
@@ -65,8 +65,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME``: a teaching demo's figure sheet (:mod:`voxwarp.teaching.demos`);
     ``voxwarp demo [INPUT]``: render INPUT (default the bundled sample) in every mode
     into a folder."""
-    from voxwarp.teaching import DEMOS
-
     if args.input in DEMOS:
         return _teaching_demo(args)
     if args.quick or args.gui:
@@ -88,6 +86,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def _teaching_demo(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME``: write the figure sheet (and with --gui the tour)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.teaching.demos import run_demo
 
     res = run_demo(
@@ -111,8 +110,8 @@ def _teaching_demo(args: argparse.Namespace) -> int:
 
 def _demo_volume(args: argparse.Namespace) -> int:
     """``voxwarp demo [INPUT]``: render INPUT in every mode into a folder."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.images import write_image
-    from voxwarp.io.samples import DEFAULT_SAMPLE, suggested_transfer_function
     from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.scene import Scene
 
@@ -151,6 +150,7 @@ def _demo_bend(vol: Any) -> Any:
     """A settled mass-spring bend of ``vol``: an 8³ grid, the bottom quarter (lowest z)
     fixed, the centre elements of the top two layers dragged sideways by 30% of the box
     width."""
+    # loads scipy: only when used
     from voxwarp.deform import ElementGrid, MassSpring
 
     grid = ElementGrid(vol, shape=(8, 8, 8))
@@ -167,6 +167,7 @@ def _demo_wire(vol: Any, view: Any) -> Any:
     """A wire bend of ``vol`` laid where it is safe (:mod:`voxwarp.teaching.auto_wire`:
     along the largest object's principal axis, ends outside it, bent across ``view``),
     built; None, with one line on stderr saying why, when no object stands out."""
+    # loads scipy: only when used
     from voxwarp.deform.wires.field import WireDeformer
     from voxwarp.teaching.auto_wire import auto_wire
 

@@ -57,6 +57,7 @@ def add_parser(sub: Any) -> None:
 def cmd_export_field(args: argparse.Namespace) -> int:
     """``voxwarp export-field SCENE.json -o field.nii.gz``: the scene's warp chain as a
     displacement field in the ITK convention (:meth:`voxwarp.scene.Scene.displacement_field`)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.fields import WRITE_SUFFIXES, field_suffix, save_displacement_field
 
     out = Path(args.output)

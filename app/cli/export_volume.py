@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from voxwarp.cli.options import add_memory_budget_arg, load_scene_json
+from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import InputError
 
 if TYPE_CHECKING:
@@ -122,6 +123,7 @@ def export_grid(
     """``(affine, (nx, ny, nz))`` of the output grid (see the module docstring)."""
     import numpy as np
 
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.deform.warp import box_corners
 
     vol = scene.volume
@@ -188,6 +190,7 @@ def resampled_slices(
     ``on_slice()`` is called after each."""
     import numpy as np
 
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.render.slice_image import COVERED
 
     nx, ny, nz = shape
@@ -209,7 +212,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     """``voxwarp export-volume SCENE.json -o deformed.nii.gz``."""
     import numpy as np
 
-    from voxwarp.core.progress import ProgressBar
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
     from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.render.slices import MAX_SLICE_SIDE

@@ -25,6 +25,8 @@ from voxwarp.cli.render_options import add_series_arg
 from voxwarp.core.checks import image_size
 from voxwarp.core.extras import require
 from voxwarp.io.samples import DEFAULT_SAMPLE
+from voxwarp.teaching import DEMOS
+from voxwarp.teaching.tour import read_tour
 
 
 def has_display() -> bool:
@@ -54,6 +56,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
         )
         return demo.cmd_demo(_demo_args(args.fallback_out))
     require("gui", "voxwarp gui")
+    # Qt: only when a window opens (see the module docstring)
     from voxwarp.ui.app import run_gui
 
     return run_gui(
@@ -64,8 +67,6 @@ def cmd_gui(args: argparse.Namespace) -> int:
 def cmd_demo_gui(args: argparse.Namespace) -> int:
     """``voxwarp demo NAME --gui``: the teaching demo (figure sheet and tour, by
     :func:`voxwarp.cli.demo.cmd_demo`), then its guided step-through in the desktop window."""
-    from voxwarp.teaching import DEMOS
-
     code = demo.cmd_demo(args)
     if code != 0 or not getattr(args, "gui", False) or args.input not in DEMOS:
         return code
@@ -77,9 +78,8 @@ def cmd_demo_gui(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 0
-    from voxwarp.teaching.tour import read_tour
-
     require("gui", "voxwarp demo --gui")
+    # Qt: only when a window opens (see the module docstring)
     from voxwarp.ui.app import run_gui
 
     tour = read_tour(tour_path)

@@ -30,6 +30,7 @@ def add_parser(sub: Any) -> None:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """``voxwarp info INPUT``: dims, dtype, spacing, value range, histogram."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.fields import field_info, field_summary, is_field_file, load_transform
     from voxwarp.io.volumes import dicom_series, volume_info, volume_summary
     from voxwarp.scene import Scene

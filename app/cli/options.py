@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any, NoReturn
 
+import voxwarp
 from voxwarp.cli import render_options as ropt
 from voxwarp.core import limits
 from voxwarp.errors import InputError as CliOptionError
@@ -43,6 +44,7 @@ __all__ = [
 
 def view_arg(text: str) -> Any:
     """``--view``: a view name (``+z``, ``anterior``, ...) or ``AZIMUTH,ELEVATION`` degrees."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.core.camera import VIEW_NAMES
 
     if text in VIEW_NAMES:
@@ -91,6 +93,7 @@ def tf_arg(tf: str | None, volume: Any = None) -> Any:
     """``--tf`` (the one resolver): None, a preset or matplotlib colour-map name (kept as
     a name, the scene resolves it for its mode), or a file, ``FILE:NAME`` too (voxwarp,
     ParaView or Slicer; read now against ``volume``)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.core.transfer_function import TransferFunction, file_spec
 
     if tf is None or file_spec(tf) is None:
@@ -157,6 +160,7 @@ def add_field_convention_arg(p: Any) -> None:
 def load_scene_json(path: str, command: str) -> Any:
     """The :class:`~voxwarp.scene.Scene` of the scene JSON ``path`` that ``command``
     (``export-field``, ``export-volume``) reads; one line for anything else."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.scene import Scene
 
     scene_path = Path(path)
@@ -203,9 +207,7 @@ class VersionAction(argparse.Action):
         super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
 
     def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> NoReturn:
-        from voxwarp import __version__
-
-        print(f"voxwarp {__version__}")
+        print(f"voxwarp {voxwarp.__version__}")  # read from the metadata only now
         parser.exit()
 
 

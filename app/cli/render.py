@@ -64,6 +64,7 @@ def add_parser(sub: Any) -> None:
 
 
 def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.scene import Scene
 
     tf = _tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
@@ -124,6 +125,7 @@ def _check_distinct_outputs(args: argparse.Namespace) -> None:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """``voxwarp render INPUT -o out.png``: render one image headless."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.images import check_image_format, write_image
     from voxwarp.render.offscreen import OffscreenRenderer
 
@@ -150,6 +152,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     print(scene.display_note(), file=sys.stderr)
     ropt.spacing_notice(scene.volume, args)
     if args.marker:  # the orientation triad (R/L, A/P, S/I letters when oriented)
+        # loaded when used: voxwarp --help stays light (see voxwarp.cli)
         from voxwarp.render.orientation_marker import draw_scene_marker
 
         draw_scene_marker(img, scene)

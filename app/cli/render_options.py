@@ -17,7 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from voxwarp.errors import InputError
+from voxwarp.core.files import atomic_write_text
+from voxwarp.errors import InputError, SceneError
 
 #: ``--slab`` axis letters: world axis and sign (L, P, I count along -x, -y, -z)
 SLAB_AXES: dict[str, tuple[int, int]] = {
@@ -142,8 +143,8 @@ def series_arg(text: str) -> int | str:
 def camera_arg(text: str) -> Any:
     """``--camera FILE``: the camera of a scene JSON (its ``"camera"``) or of a camera JSON
     (``Camera.to_dict``, as ``--save-camera`` writes it); a bad file is one argparse line."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.core.camera import Camera
-    from voxwarp.errors import SceneError
 
     path = Path(text)
     try:
@@ -338,8 +339,6 @@ def save_camera(scene: Any, args: argparse.Namespace) -> None:
     path = getattr(args, "save_camera", None)
     if path is None:
         return
-    from voxwarp.core.files import atomic_write_text
-
     text = json.dumps(scene.resolved_camera().to_dict(), indent=2)
     atomic_write_text(Path(path), text + "\n")  # OutputError: one line, path and cause
     print(f"camera: {path}")

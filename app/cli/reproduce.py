@@ -34,6 +34,7 @@ def add_parser(sub: Any) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """``voxwarp reproduce``: every demo's measurements and the report beside the
     papers' numbers (see :mod:`voxwarp.teaching.reproduce`)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.teaching.reproduce import DEFAULT_REPORT, reproduce
 
     command = "voxwarp reproduce" + (" --quick" if args.quick else "")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from voxwarp.io.samples import sample_names
+
 
 def add_parser(sub: Any) -> None:
     """Add ``samples`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
@@ -14,8 +16,6 @@ def add_parser(sub: Any) -> None:
 
 def cmd_samples(args: argparse.Namespace) -> int:
     """``voxwarp samples``: list bundled samples."""
-    from voxwarp.io.samples import sample_names
-
     for name in sample_names():
         print(f"sample:{name}")
     return 0

@@ -20,11 +20,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from voxwarp.cli import render_options as ropt
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
 from voxwarp.cli.options import TF_HELP, add_volume_args, tf_arg, window_arg
 from voxwarp.core.checks import image_size
+from voxwarp.core.orientation import axis_letters
 from voxwarp.errors import InputError
+from voxwarp.inputs import load_input
 
 if TYPE_CHECKING:
     import numpy as np
@@ -38,6 +41,7 @@ def plane_arg(text: str) -> str:
     spec = text.strip().lower()
     if spec in _NAMES:
         return spec
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.core.slice_plane import split_point_normal
 
     parts = split_point_normal(spec)
@@ -159,6 +163,7 @@ def add_parser(sub: Any) -> None:
 
 
 def _base_scene(obj: Any, args: argparse.Namespace) -> Any:
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.scene import Scene
 
     tf = tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
@@ -170,6 +175,7 @@ def _base_scene(obj: Any, args: argparse.Namespace) -> Any:
 def resolve_plane_name(spec: str | None, space: str) -> str:
     """The plane to draw: ``spec`` (default axial, or z without an orientation); an
     anatomical name on a volume without one becomes its world axis, with a note."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.core.slice_plane import plane_for_space
 
     if spec is None:
@@ -190,6 +196,7 @@ def slice_plane(scene: Any, args: argparse.Namespace) -> tuple[Any, tuple[int, i
     for a plane that misses the deformed volume."""
     import numpy as np
 
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.core.slice_plane import fit_pixels, parse_plane
 
     lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.deformed_bounds())
@@ -204,6 +211,7 @@ def slice_plane(scene: Any, args: argparse.Namespace) -> tuple[Any, tuple[int, i
 
 
 def _check_hits(plane: Any, lo: np.ndarray, hi: np.ndarray, spec: str) -> None:
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.deform.warp import box_corners
 
     axis = plane.scroll_axis
@@ -232,8 +240,6 @@ def position_text(plane: Any, space: str) -> str:
     named plane of an oriented volume, ``z 12.5 mm`` or ``12.5 mm along (n)`` otherwise."""
     import numpy as np
 
-    from voxwarp.core.orientation import axis_letters
-
     pos = plane.position
     axis = plane.scroll_axis
     k = int(np.argmax(np.abs(axis)))
@@ -248,8 +254,7 @@ def cmd_slice(args: argparse.Namespace) -> int:
     """``voxwarp slice INPUT -o slice.png``: one plane of the deformed volume."""
     import numpy as np
 
-    from voxwarp.cli import render_options as ropt
-    from voxwarp.inputs import load_input
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.io.images import check_image_format, write_image
     from voxwarp.render.offscreen import OffscreenRenderer
 

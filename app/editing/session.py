@@ -48,6 +48,7 @@ from typing import Any, Literal, TypeVar
 
 import numpy as np
 
+from voxwarp.animation.tracks import Animation, AnimationError
 from voxwarp.core.camera import Camera
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.elements.grid import ElementGrid
@@ -746,8 +747,6 @@ def _animation_from(d: Any) -> Any:
     """An :class:`~voxwarp.animation.tracks.Animation` from its dict (None stays None)."""
     if d is None:
         return None
-    from voxwarp.animation.tracks import Animation, AnimationError
-
     try:
         return Animation.from_dict(d)
     except AnimationError as exc:

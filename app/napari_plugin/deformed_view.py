@@ -14,7 +14,10 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.volume import Volume
+from voxwarp.editing.model_settings import Drag, MassSpringSettings, SettleRule
 from voxwarp.errors import SceneError
+from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.scene import Scene
 
 #: What "Render deformed view" can apply: nothing, a mass-spring push through the
 #: volume's centre, or the warps of a scene JSON the user picks.
@@ -37,8 +40,8 @@ def push_warps(
     ``direction`` by ``fraction`` of the volume's extent that way, the rest settled by
     the springs (the eight corners fixed). Moving a block, not one element, keeps the
     material ahead of it from folding (one element pushed past its neighbour would)."""
+    # the mass-spring family loads scipy: only a push needs it
     from voxwarp.editing.families.elements import MassSpringFamily
-    from voxwarp.editing.model_settings import Drag, MassSpringSettings, SettleRule
 
     unit = np.asarray(direction, dtype=np.float64).reshape(3)
     length = float(np.linalg.norm(unit))
@@ -63,8 +66,6 @@ def scene_file_warps(path: str | os.PathLike, volume: Volume) -> list[Any]:
     """The warp chain of the scene JSON at ``path``, bound to ``volume`` (warps live in
     world mm: they act where they were made, so they fit a volume in the same world
     space). The scene's own volume is loaded too (its warps are read against it)."""
-    from voxwarp.scene import Scene
-
     warps = list(Scene.load(path).warps)
     if not warps:
         raise SceneError(f"{path} has no warps; pick a scene saved with a deformation")
@@ -106,8 +107,6 @@ def deformed_scene(
 ) -> Any:
     """A :class:`~voxwarp.scene.Scene` of ``volume`` with ``options`` and deformation
     ``kind``; the push goes up the screen of the scene's camera, so it shows."""
-    from voxwarp.scene import Scene
-
     scene = Scene(volume, **options)
     up = scene.resolved_camera().rotation[:, 1]
     return scene.copy(warps=deformation_warps(kind, volume, scene_path, up))
@@ -115,8 +114,6 @@ def deformed_scene(
 
 def render_rgb(scene: Any, size: int = DEFAULT_SIZE) -> np.ndarray:
     """``scene`` rendered headless to a ``(size, size, 3)`` uint8 image (row 0 = top)."""
-    from voxwarp.render.offscreen import OffscreenRenderer
-
     with OffscreenRenderer(int(size), int(size)) as renderer:
         image = renderer.render(scene)
     return np.ascontiguousarray(np.asarray(image)[..., :3])

@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp.core.volume import Volume
+from voxwarp.io.volumes import save_volume
+from voxwarp.scene import Scene
 
 #: Prefix of the temporary folders handed to voxwarp.
 FOLDER_PREFIX = "voxwarp-napari-"
@@ -29,9 +31,6 @@ def write_handoff(
     temporary folder); returns the scene path. ``scene_options`` are
     :class:`~voxwarp.scene.Scene` arguments (e.g.
     :func:`voxwarp.napari_plugin.convert.layer_scene_options`)."""
-    from voxwarp.io.volumes import save_volume
-    from voxwarp.scene import Scene
-
     out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix=FOLDER_PREFIX))
     out.mkdir(parents=True, exist_ok=True)
     stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in volume.name) or "volume"

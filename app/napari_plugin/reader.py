@@ -19,7 +19,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from voxwarp.errors import VoxwarpError
+from voxwarp.io.volumes import load_volume
+from voxwarp.napari_plugin import deformed_view
 from voxwarp.napari_plugin.convert import LayerData, volume_to_layer_data
+from voxwarp.scene import SCENE_FORMAT, SCENE_KEYS, Scene
 
 ReaderFunction = Callable[[Any], list[LayerData]]
 #: Extensions read as volumes (napari's builtins do not read these).
@@ -55,8 +59,6 @@ def is_scene_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` holds a voxwarp scene: ``"format": "voxwarp-scene"`` (what
     :meth:`~voxwarp.scene.Scene.save` writes first), or a small JSON object of scene
     keys only with a ``volume`` entry (scene JSON written by hand)."""
-    from voxwarp.scene import SCENE_FORMAT, SCENE_KEYS
-
     try:
         with open(path, "rb") as fh:
             head = fh.read(_HEAD_BYTES)
@@ -87,8 +89,6 @@ def is_dicom_folder(path: Path) -> bool:
 
 def read_volume(path: str | list[str]) -> list[LayerData]:
     """One Image layer of the volume at ``path`` (NRRD, NIfTI or a DICOM folder)."""
-    from voxwarp.io.volumes import load_volume
-
     path = path[0] if isinstance(path, list) else path
     volume = load_volume(path)
     return [volume_to_layer_data(volume, metadata={"path": str(path)})]
@@ -98,8 +98,6 @@ def read_scene(path: str | list[str]) -> list[LayerData]:
     """The scene's volume as an Image layer (its window as contrast limits, the scene's
     transfer function and mode in ``metadata``), and for a scene with warps the
     deformed view as an RGB layer."""
-    from voxwarp.scene import Scene
-
     path = path[0] if isinstance(path, list) else path
     scene = Scene.load(path)
     level, width = scene.window
@@ -124,12 +122,9 @@ def _deformed_view(scene: Any) -> Any:
     fails (no OpenGL here): the volume layer still opens."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from voxwarp.errors import VoxwarpError
-    from voxwarp.napari_plugin.deformed_view import render_rgb
-
     try:
         with ThreadPoolExecutor(1, thread_name_prefix="voxwarp-render") as pool:
-            return pool.submit(render_rgb, scene).result()
+            return pool.submit(deformed_view.render_rgb, scene).result()
     except (VoxwarpError, RuntimeError, OSError) as exc:
         warnings.warn(f"voxwarp: the deformed view was not rendered: {exc}", stacklevel=2)
         return None

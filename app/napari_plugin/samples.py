@@ -9,13 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from voxwarp.io.samples import load_sample
 from voxwarp.napari_plugin.convert import LayerData, volume_to_layer_data
 
 
 def sample_layers(name: str) -> list[LayerData]:
     """The bundled sample ``name`` (see :func:`voxwarp.io.samples.sample_names`)."""
-    from voxwarp.io.samples import load_sample
-
     return [volume_to_layer_data(load_sample(name), metadata={"sample": name})]
 
 

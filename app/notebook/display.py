@@ -26,6 +26,7 @@ import numpy as np
 from voxwarp.errors import VoxwarpError
 from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.render.inline_image import RenderedImage, png_bytes, rendered
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
 
 #: side (pixels) of a scene's inline preview
@@ -43,8 +44,6 @@ def _gl() -> GLThread | SameThread:
 def preview_renderer() -> Any:
     """The renderer shared by scene previews (made on first use, on the previews' thread;
     raises :class:`~voxwarp.errors.RenderError` without OpenGL)."""
-    from voxwarp.render.offscreen import OffscreenRenderer
-
     if "renderer" not in _shared:
         _shared["renderer"] = _gl().run(OffscreenRenderer, PREVIEW_PX, PREVIEW_PX)
     return _shared["renderer"]

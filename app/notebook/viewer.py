@@ -33,11 +33,14 @@ from voxwarp.core.volume import Volume
 from voxwarp.editing.common import DisplayOptions
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.errors import MissingExtraError, VoxwarpError
+from voxwarp.inputs import load_input
+from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.io.volumes import load_volume
 from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.notebook.interaction import SETTLE_S, Interaction
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
 from voxwarp.render.inline_image import RenderedImage, png_bytes
+from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.overlay import OverlayRenderer
 from voxwarp.scene import Scene
 
@@ -95,9 +98,6 @@ def start_deformation(session: EditSession, deformation: str | None, settings: d
 
 
 def _session_from_input(spec: str) -> EditSession:
-    from voxwarp.inputs import load_input
-    from voxwarp.io.samples import suggested_transfer_function
-
     if spec.lower().endswith(".json") and Path(spec).is_file():
         return EditSession.load(spec)
     obj = load_input(spec)
@@ -145,8 +145,6 @@ class Viewer(RemoteFrameBuffer):
         ctx: Any = None,
         **settings: Any,
     ) -> None:
-        from voxwarp.render.offscreen import OffscreenRenderer
-
         w, h = (max(1, int(v)) for v in size)
         super().__init__(css_width=f"{w}px", css_height=f"{h}px")
         # an own context lives on a thread of its own (Jupyter calls from several)

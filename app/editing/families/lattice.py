@@ -15,6 +15,7 @@ from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
 from voxwarp.editing.model_settings import BuildReport, Built, LatticeSettings
 from voxwarp.editing.state import DragState, SessionHost
+from voxwarp.inputs import load_lattice_file
 from voxwarp.render.overlay import OverlayLayer, grid_edges
 
 if TYPE_CHECKING:
@@ -74,8 +75,6 @@ class LatticeFamily(Family):
         """The lattice warp of ``settings`` (its nodes over its box, default the
         volume's; or its lattice file) for ``volume`` (no model: ``model`` is None)."""
         if settings.file is not None:
-            from voxwarp.inputs import load_lattice_file
-
             return Built(None, load_lattice_file(settings.file, volume), BuildReport())
         box = volume.bounds if settings.box is None else settings.box
         return Built(None, LatticeWarp(TrilinearGrid(settings.nodes), box), BuildReport())
