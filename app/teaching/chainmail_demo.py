@@ -15,33 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.teaching import DEMO_TITLES
-from voxwarp.teaching.sheets import (
-    FISH_DRAG_MM,
-    FISH_DRAGGED,
-    FISH_GRID,
-    SLICE_BOX,
-    SLICE_DRAG_MM,
-    SLICE_DRAGGED,
-    SLICE_SHAPE,
-    DemoSettings,
-    TourStep,
-    fish_camera,
-    fish_grid,
-    fish_scene,
-    fish_volume,
-    gl_renderer,
-    new_figure,
-    offscreen_renderer,
-    plot_slice_state,
-    render_rgb,
-    save_figure,
-    show_image,
-    slice_frame,
-    slice_grid,
-    slice_xy,
-    snap,
-)
+from voxwarp.teaching import DEMO_TITLES, sheets
 
 #: the relaxation steps of the thesis' Figure 13
 RELAX_STEPS: tuple[int, ...] = (0, 1, 4)
@@ -89,8 +63,8 @@ def _chainmail_slice() -> dict[str, Any]:
 
     res: dict[str, Any] = {}
     for variant in ("gibson", "enhanced"):
-        cm = ChainMail(slice_grid(), variant=variant)
-        stats = cm.move(SLICE_DRAGGED, SLICE_DRAG_MM)
+        cm = ChainMail(sheets.slice_grid(), variant=variant)
+        stats = cm.move(sheets.SLICE_DRAGGED, sheets.SLICE_DRAG_MM)
         res[variant] = {
             "order": _move_order(cm),
             "touched": stats.touched,
@@ -105,7 +79,7 @@ def _chainmail_slice() -> dict[str, Any]:
     sponsors = []
     holds = True
     for e in order[1:]:
-        sp = gibson_sponsor(e, SLICE_DRAGGED)
+        sp = gibson_sponsor(e, sheets.SLICE_DRAGGED)
         ok = sp in rank and rank[sp] < rank[tuple(int(v) for v in e)]
         holds &= ok
         sponsors.append((tuple(int(v) for v in e), sp if ok else None))
@@ -139,8 +113,8 @@ def _relaxed_states(
 
 
 def demo_chainmail(
-    s: DemoSettings, out: Path, log: Callable[[str], None]
-) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+    s: sheets.DemoSettings, out: Path, log: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
     from voxwarp.deform.elements.chainmail import ChainMail
 
     sl = _chainmail_slice()
@@ -153,16 +127,16 @@ def demo_chainmail(
     violation = cm.violation()
     log(f"chainmail: slice drag touched {sl['gibson']['touched']} elements")
 
-    vol = fish_volume(s)
-    cam = fish_camera(vol, s.render_size)
-    fish_cm = ChainMail(fish_grid(vol), variant="enhanced")
-    fish_stats = fish_cm.move(list(FISH_DRAGGED), FISH_DRAG_MM)
+    vol = sheets.fish_volume(s)
+    cam = sheets.fish_camera(vol, s.render_size)
+    fish_cm = ChainMail(sheets.fish_grid(vol), variant="enhanced")
+    fish_stats = fish_cm.move(list(sheets.FISH_DRAGGED), sheets.FISH_DRAG_MM)
     renders: list[tuple[str, np.ndarray]] = []
     fish_curve = [fish_cm.smoothness_energy()]
     tour_scenes: dict[int, Any] = {}
     done = 0
-    with offscreen_renderer(s.render_size) as r:
-        gl = gl_renderer(r)
+    with sheets.offscreen_renderer(s.render_size) as r:
+        gl = sheets.gl_renderer(r)
         for k in RELAX_STEPS:
             if k > done:
                 for _ in range(k - done):
@@ -170,13 +144,13 @@ def demo_chainmail(
                     fish_curve.append(fish_cm.smoothness_energy())
                 done = k
             fish_cm.relax_steps = k  # saved with the model: a resumed one relaxes alike
-            scene = fish_scene(vol, cam, [fish_cm.warp()])
-            tour_scenes[k] = snap(scene)
+            scene = sheets.fish_scene(vol, cam, [fish_cm.warp()])
+            tour_scenes[k] = sheets.snap(scene)
             renders.append(
                 (
                     f"({'ghi'[len(renders)]}) fish, tail dragged 12 mm, {k} relaxation"
                     f" step{'s' * (k != 1)}",
-                    render_rgb(r, scene, s.render_size),
+                    sheets.render_rgb(r, scene, s.render_size),
                 )
             )
     for _ in range(done, s.relax_curve):
@@ -184,10 +158,10 @@ def demo_chainmail(
         fish_curve.append(fish_cm.smoothness_energy())
 
     numbers: dict[str, Any] = {
-        "grid": SLICE_SHAPE,
-        "box_mm": SLICE_BOX,
-        "dragged": SLICE_DRAGGED,
-        "drag_mm": SLICE_DRAG_MM,
+        "grid": sheets.SLICE_SHAPE,
+        "box_mm": sheets.SLICE_BOX,
+        "dragged": sheets.SLICE_DRAGGED,
+        "drag_mm": sheets.SLICE_DRAG_MM,
         "fixed": "i = 0 layer",
         "touched": {v: sl[v]["touched"] for v in ("gibson", "enhanced")},
         "checks": {v: sl[v]["checks"] for v in ("gibson", "enhanced")},
@@ -200,9 +174,9 @@ def demo_chainmail(
         "relax_curve": {"steps": list(range(len(slice_curve))), "slice": slice_curve},
         "violation_after_relax_mm": violation,
         "fish": {
-            "grid": FISH_GRID,
-            "dragged": FISH_DRAGGED,
-            "drag_mm": FISH_DRAG_MM,
+            "grid": sheets.FISH_GRID,
+            "dragged": sheets.FISH_DRAGGED,
+            "drag_mm": sheets.FISH_DRAG_MM,
             "touched": fish_stats.touched,
             "fraction": fish_stats.fraction,
             "smoothness_energy": {k: fish_curve[k] for k in RELAX_STEPS},
@@ -210,13 +184,13 @@ def demo_chainmail(
         },
         "gl_renderer": gl,
     }
-    fig = new_figure(15.0, 13.0, DEMO_TITLES["chainmail"])
+    fig = sheets.new_figure(15.0, 13.0, DEMO_TITLES["chainmail"])
     grid = fig.add_gridspec(3, 3, height_ratios=[1.15, 1.0, 0.75])
     _plot_order(fig.add_subplot(grid[0, 0]), sl["gibson"], sponsors=True)
     _plot_order(fig.add_subplot(grid[0, 1]), sl["enhanced"], sponsors=False)
     _plot_relax_curve(fig.add_subplot(grid[0, 2]), slice_curve, fish_curve)
     for i, k in enumerate(RELAX_STEPS):
-        plot_slice_state(
+        sheets.plot_slice_state(
             fig.add_subplot(grid[1, i]),
             states[k],
             f"({'def'[i]}) {k} relaxation step{'s' * (k != 1)} after the drag:"
@@ -224,19 +198,19 @@ def demo_chainmail(
             colorbar=i == len(RELAX_STEPS) - 1,
         )
     for i, (title, img) in enumerate(renders):
-        show_image(fig.add_subplot(grid[2, i]), img, title)
-    path = save_figure(fig, out / "chainmail.png")
+        sheets.show_image(fig.add_subplot(grid[2, i]), img, title)
+    path = sheets.save_figure(fig, out / "chainmail.png")
 
     tour = [
-        TourStep(
+        sheets.TourStep(
             "Links with slack",
             "3D ChainMail links every element to its 6 neighbours like the rings of a chain"
             " mail: a link may stretch, compress or shear by up to a quarter of the element"
             " spacing (stiffness 0.5) before it pulls its neighbour along.",
-            snap(fish_scene(vol, cam)),
+            sheets.snap(sheets.fish_scene(vol, cam)),
             None,
         ),
-        TourStep(
+        sheets.TourStep(
             "Gibson's sponsors",
             "The dragged element sponsors its neighbours. Six candidate lists (+x, -x, +y,"
             " -y, +z, -z) are processed in turn: an element from an x list queues its x, y"
@@ -247,7 +221,7 @@ def demo_chainmail(
             None,
             "a",
         ),
-        TourStep(
+        sheets.TourStep(
             "The enhanced variant",
             "Schill et al.'s priority queue moves first the element that is asked to move"
             " farthest, against all its links at once (Dijkstra's order). For one drag it"
@@ -255,14 +229,14 @@ def demo_chainmail(
             None,
             "b",
         ),
-        TourStep(
+        sheets.TourStep(
             "Right after the drag",
             "Without relaxation the deformation is piecewise linear: straight, sheared blocks"
             " with sharp kinks at both ends of the taut chain of links.",
             tour_scenes[0],
             "d",
         ),
-        TourStep(
+        sheets.TourStep(
             "One relaxation step",
             "Relaxation moves every free element towards the mean displacement of its"
             " neighbours, but only as far as its links allow: the kinks round off and the"
@@ -270,7 +244,7 @@ def demo_chainmail(
             tour_scenes[1],
             "e",
         ),
-        TourStep(
+        sheets.TourStep(
             "Four relaxation steps",
             "After four steps the bend is smooth; every link still satisfies its limits"
             " (panel c plots the energy per step).",
@@ -284,9 +258,9 @@ def demo_chainmail(
 def _plot_order(ax: Any, data: dict[str, Any], sponsors: bool) -> None:
     from voxwarp.deform.elements.grid import ElementGrid
 
-    rest = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE).rest_positions
-    xy = slice_xy(rest)
-    k = SLICE_DRAGGED[2]
+    rest = ElementGrid(sheets.SLICE_BOX, shape=sheets.SLICE_SHAPE).rest_positions
+    xy = sheets.slice_xy(rest)
+    k = sheets.SLICE_DRAGGED[2]
     order = data["order"]
     on_slice = [(i, e) for i, e in enumerate(order) if int(e[2]) == k]
     ax.scatter(xy[..., 0].ravel(), xy[..., 1].ravel(), s=12, c="0.8", zorder=1, label="at rest")
@@ -314,16 +288,16 @@ def _plot_order(ax: Any, data: dict[str, Any], sponsors: bool) -> None:
                 },
                 zorder=4,
             )
-    seed = rest[SLICE_DRAGGED][:2]
+    seed = rest[sheets.SLICE_DRAGGED][:2]
     ax.scatter([seed[0]], [seed[1]], marker="*", s=300, c="tab:red", zorder=6, label="dragged")
     ax.annotate(
         "",
-        xy=seed + np.asarray(SLICE_DRAG_MM[:2]),
+        xy=seed + np.asarray(sheets.SLICE_DRAG_MM[:2]),
         xytext=seed,
         arrowprops={"arrowstyle": "-|>", "color": "tab:red", "lw": 2.5},
         zorder=6,
     )
-    slice_frame(ax)
+    sheets.slice_frame(ax)
     if sponsors:
         title = (
             f"(a) Gibson's sponsor lists: move order, arrows sponsor → element\n"

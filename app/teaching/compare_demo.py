@@ -16,83 +16,62 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.teaching import DEMO_TITLES
+from voxwarp.teaching import DEMO_TITLES, sheets
 from voxwarp.teaching.measure import chainmail_times, massspring_rates
-from voxwarp.teaching.sheets import (
-    FISH_DRAG_MM,
-    FISH_DRAGGED,
-    SLICE_BOX,
-    SLICE_DRAG_MM,
-    SLICE_DRAGGED,
-    SLICE_SHAPE,
-    DemoSettings,
-    TourStep,
-    fish_camera,
-    fish_grid,
-    fish_scene,
-    fish_volume,
-    gl_renderer,
-    new_figure,
-    offscreen_renderer,
-    plot_slice_state,
-    render_rgb,
-    save_figure,
-    show_image,
-    slice_grid,
-    snap,
-)
 
 
 # ====================================================================== compare
 def demo_compare(
-    s: DemoSettings, out: Path, log: Callable[[str], None]
-) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+    s: sheets.DemoSettings, out: Path, log: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
     from voxwarp.deform.elements.chainmail import ChainMail
     from voxwarp.deform.elements.grid import ElementGrid
     from voxwarp.deform.elements.massspring import MassSpring
 
     # the same grid and drag in both models
     t = time.perf_counter()
-    ms = MassSpring(slice_grid(), integrator="semi-implicit", shear=True)
-    ms.move(SLICE_DRAGGED, SLICE_DRAG_MM)
+    ms = MassSpring(sheets.slice_grid(), integrator="semi-implicit", shear=True)
+    ms.move(sheets.SLICE_DRAGGED, sheets.SLICE_DRAG_MM)
     ms_steps = ms.settle(max_steps=20000, tol=1e-3)
     ms_s = time.perf_counter() - t
-    cm = ChainMail(slice_grid(), variant="enhanced")
-    cm.move(SLICE_DRAGGED, SLICE_DRAG_MM)  # loads the numba kernels: not timed
+    cm = ChainMail(sheets.slice_grid(), variant="enhanced")
+    cm.move(sheets.SLICE_DRAGGED, sheets.SLICE_DRAG_MM)  # loads the numba kernels: not timed
     cm.reset()
-    stats = cm.move(SLICE_DRAGGED, SLICE_DRAG_MM)
+    stats = cm.move(sheets.SLICE_DRAGGED, sheets.SLICE_DRAG_MM)
     cm0 = cm.positions()
     cm.relax(4)
     cm4 = cm.positions()
-    rest = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE).rest_positions
+    rest = ElementGrid(sheets.SLICE_BOX, shape=sheets.SLICE_SHAPE).rest_positions
     states = {"massspring": ms.positions(), "chainmail": cm0, "chainmail+4": cm4}
     u = {k: np.linalg.norm(v - rest, axis=-1) for k, v in states.items()}
     moved = {k: int(np.count_nonzero(v > 0.01)) for k, v in u.items()}
     log(f"compare: mass-spring settled in {ms_steps} steps, ChainMail touched {stats.touched}")
 
-    vol = fish_volume(s)
-    cam = fish_camera(vol, s.render_size)
+    vol = sheets.fish_volume(s)
+    cam = sheets.fish_camera(vol, s.render_size)
     renders: list[tuple[str, np.ndarray]] = []
     tour_scenes: dict[str, Any] = {}
-    with offscreen_renderer(s.render_size) as r:
-        gl = gl_renderer(r)
-        fms = MassSpring(fish_grid(vol), integrator="semi-implicit", shear=True)
-        fms.move(list(FISH_DRAGGED), FISH_DRAG_MM)
+    with sheets.offscreen_renderer(s.render_size) as r:
+        gl = sheets.gl_renderer(r)
+        fms = MassSpring(sheets.fish_grid(vol), integrator="semi-implicit", shear=True)
+        fms.move(list(sheets.FISH_DRAGGED), sheets.FISH_DRAG_MM)
         fms.settle(max_steps=20000, tol=1e-3)
-        scene = fish_scene(vol, cam, [fms.warp()])
-        tour_scenes["massspring"] = snap(scene)
-        renders.append(("(d) fish, mass-spring (settled)", render_rgb(r, scene, s.render_size)))
-        fcm = ChainMail(fish_grid(vol), variant="enhanced")
-        fcm.move(list(FISH_DRAGGED), FISH_DRAG_MM)
-        scene = fish_scene(vol, cam, [fcm.warp()])
-        tour_scenes["chainmail"] = snap(scene)
-        renders.append(("(e) fish, ChainMail", render_rgb(r, scene, s.render_size)))
+        scene = sheets.fish_scene(vol, cam, [fms.warp()])
+        tour_scenes["massspring"] = sheets.snap(scene)
+        renders.append(
+            ("(d) fish, mass-spring (settled)", sheets.render_rgb(r, scene, s.render_size))
+        )
+        fcm = ChainMail(sheets.fish_grid(vol), variant="enhanced")
+        fcm.move(list(sheets.FISH_DRAGGED), sheets.FISH_DRAG_MM)
+        scene = sheets.fish_scene(vol, cam, [fcm.warp()])
+        tour_scenes["chainmail"] = sheets.snap(scene)
+        renders.append(("(e) fish, ChainMail", sheets.render_rgb(r, scene, s.render_size)))
         fcm.relax(4)
         fcm.relax_steps = 4
-        scene = fish_scene(vol, cam, [fcm.warp()])
-        tour_scenes["chainmail+4"] = snap(scene)
+        scene = sheets.fish_scene(vol, cam, [fcm.warp()])
+        tour_scenes["chainmail+4"] = sheets.snap(scene)
         renders.append(
-            ("(f) fish, ChainMail + 4 relaxation steps", render_rgb(r, scene, s.render_size))
+            ("(f) fish, ChainMail + 4 relaxation steps", sheets.render_rgb(r, scene, s.render_size))
         )
         # CPU vs GPU at small sizes, on this context (voxwarp.teaching.measure)
         log("compare: timing the mass-spring solvers")
@@ -103,9 +82,9 @@ def demo_compare(
         cm_rows = chainmail_times(s.cm_sizes, repeats=s.cm_repeats, ctx=r.ctx, log=log)
     diff = np.linalg.norm(states["massspring"] - states["chainmail+4"], axis=-1)
     numbers: dict[str, Any] = {
-        "grid": SLICE_SHAPE,
-        "dragged": SLICE_DRAGGED,
-        "drag_mm": SLICE_DRAG_MM,
+        "grid": sheets.SLICE_SHAPE,
+        "dragged": sheets.SLICE_DRAGGED,
+        "drag_mm": sheets.SLICE_DRAG_MM,
         "massspring": {
             "integrator": "semi-implicit",
             "settle_steps": ms_steps,
@@ -130,35 +109,35 @@ def demo_compare(
             "gl_renderer": gl,
         },
     }
-    fig = new_figure(16.0, 10.5, DEMO_TITLES["compare"])
+    fig = sheets.new_figure(16.0, 10.5, DEMO_TITLES["compare"])
     grid = fig.add_gridspec(3, 1, height_ratios=[1.2, 0.8, 1.0])
     top = grid[0].subgridspec(1, 3)
-    plot_slice_state(
+    sheets.plot_slice_state(
         fig.add_subplot(top[0, 0]),
         states["massspring"],
         f"(a) mass-spring, settled ({ms_steps} steps)\n{moved['massspring']} elements moved",
     )
-    plot_slice_state(
+    sheets.plot_slice_state(
         fig.add_subplot(top[0, 1]),
         states["chainmail"],
         f"(b) ChainMail, one move ({stats.seconds * 1000:.2f} ms)\n"
         f"{moved['chainmail']} elements moved",
     )
-    plot_slice_state(
+    sheets.plot_slice_state(
         fig.add_subplot(top[0, 2]),
         states["chainmail+4"],
         f"(c) ChainMail + 4 relaxation steps\n{moved['chainmail+4']} elements moved",
     )
     mid = grid[1].subgridspec(1, 3)
     for i, (title, img) in enumerate(renders):
-        show_image(fig.add_subplot(mid[0, i]), img, title)
+        sheets.show_image(fig.add_subplot(mid[0, i]), img, title)
     bottom = grid[2].subgridspec(1, 2)
     _plot_ms_timings(fig.add_subplot(bottom[0, 0]), numbers)
     _plot_cm_timings(fig.add_subplot(bottom[0, 1]), numbers)
-    path = save_figure(fig, out / "compare.png")
+    path = sheets.save_figure(fig, out / "compare.png")
 
     tour = [
-        TourStep(
+        sheets.TourStep(
             "Mass-spring: forces over time",
             "The mass-spring model pulls the grid along through spring forces, step by step"
             f" ({ms_steps} semi-implicit steps until it settles). Every element moves a"
@@ -166,7 +145,7 @@ def demo_compare(
             tour_scenes["massspring"],
             "a",
         ),
-        TourStep(
+        sheets.TourStep(
             "ChainMail: geometry at once",
             "ChainMail settles the same drag in one move, in milliseconds, by moving every"
             " other element as little as its links allow: only the elements on taut chains"
@@ -174,14 +153,14 @@ def demo_compare(
             tour_scenes["chainmail"],
             "b",
         ),
-        TourStep(
+        sheets.TourStep(
             "ChainMail with relaxation",
             "Four relaxation steps spread the deformation and round the kinks, coming closer"
             " to the mass-spring shape while every link stays within its limits.",
             tour_scenes["chainmail+4"],
             "c",
         ),
-        TourStep(
+        sheets.TourStep(
             "CPU and GPU",
             "Both models also run in fragment shaders on the renderer's OpenGL context"
             f" ({gl}). Panel g: mass-spring steps per second; panel h: milliseconds per"

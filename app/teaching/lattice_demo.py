@@ -18,33 +18,18 @@ from typing import Any
 import numpy as np
 
 from voxwarp.io.samples import bundled_dir
-from voxwarp.teaching import DEMO_TITLES
+from voxwarp.teaching import DEMO_TITLES, sheets
 from voxwarp.teaching.lattice_scenes import torus_tubes
 from voxwarp.teaching.papers import lattice_ratio_range
-from voxwarp.teaching.sheets import (
-    FISH_VIEW,
-    DemoSettings,
-    TourStep,
-    fish_scene,
-    fish_volume,
-    framing_camera,
-    gl_renderer,
-    new_figure,
-    offscreen_renderer,
-    render_rgb,
-    save_figure,
-    show_image,
-    snap,
-)
 
 
 # ====================================================================== lattice
 def demo_lattice(
-    s: DemoSettings, out: Path, log: Callable[[str], None]
-) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+    s: sheets.DemoSettings, out: Path, log: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
     from voxwarp.deform.lattice.warp import LatticeWarp
 
-    vol = fish_volume(s)
+    vol = sheets.fish_volume(s)
     spec = json.loads((bundled_dir() / "fish_lattice_bend.json").read_text(encoding="utf-8"))
     entry = {k: v for k, v in spec.items() if k not in ("description", "sample", "type")}
     entry.setdefault("box", [list(map(float, b)) for b in vol.bounds])
@@ -53,22 +38,22 @@ def demo_lattice(
     nodes = np.asarray(warp.grid.nodes).reshape(-1, 3)
     lo, hi = np.minimum(lo, nodes.min(0)), np.maximum(hi, nodes.max(0))
     size = s.render_size
-    cam = framing_camera(lo, hi, FISH_VIEW, size)
+    cam = sheets.framing_camera(lo, hi, sheets.FISH_VIEW, size)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the mesh scene's empty volume's TF
         torus = torus_tubes()
     renders: list[tuple[str, np.ndarray]] = []
-    with offscreen_renderer(size) as r:
-        gl = gl_renderer(r)
-        plain = fish_scene(vol, cam)
-        bent = fish_scene(vol, cam, [warp])
-        renders.append(("(a) fish, undeformed", render_rgb(r, plain, size)))
-        renders.append(("(b) fish bent by a 12x4x2-cell lattice", render_rgb(r, bent, size)))
+    with sheets.offscreen_renderer(size) as r:
+        gl = sheets.gl_renderer(r)
+        plain = sheets.fish_scene(vol, cam)
+        bent = sheets.fish_scene(vol, cam, [warp])
+        renders.append(("(a) fish, undeformed", sheets.render_rgb(r, plain, size)))
+        renders.append(("(b) fish bent by a 12x4x2-cell lattice", sheets.render_rgb(r, bent, size)))
         renders.append(
-            ("(c) tubes wrapped round a torus (paper Fig. 1)", render_rgb(r, torus, size))
+            ("(c) tubes wrapped round a torus (paper Fig. 1)", sheets.render_rgb(r, torus, size))
         )
         normal_scenes = _normal_scenes(size)
-        normal_renders = [(title, render_rgb(r, sc, size)) for title, sc in normal_scenes]
+        normal_renders = [(title, sheets.render_rgb(r, sc, size)) for title, sc in normal_scenes]
     # the frame rates against 4x4 matrices and the normals' angles are full studies of the
     # lab (a torus of 1.5 M triangles, thousands of composed objects): not run here
     numbers: dict[str, Any] = {
@@ -76,40 +61,40 @@ def demo_lattice(
         "lab_command": LATTICE_LAB_COMMAND,
         "gl_renderer": gl,
     }
-    fig = new_figure(16.0, 10.0, DEMO_TITLES["lattice"])
+    fig = sheets.new_figure(16.0, 10.0, DEMO_TITLES["lattice"])
     grid = fig.add_gridspec(2, 1)
     middle = grid[0].subgridspec(1, 3)
     for i, (title, img) in enumerate(renders):
-        show_image(fig.add_subplot(middle[0, i]), img, title)
+        sheets.show_image(fig.add_subplot(middle[0, i]), img, title)
     bottom = grid[1].subgridspec(1, 2)
     for i, (title, img) in enumerate(normal_renders):
-        show_image(fig.add_subplot(bottom[0, i]), img, title)
-    path = save_figure(fig, out / "lattice.png")
+        sheets.show_image(fig.add_subplot(bottom[0, i]), img, title)
+    path = sheets.save_figure(fig, out / "lattice.png")
 
     tour = [
-        TourStep(
+        sheets.TourStep(
             "A lattice of trilinear cells",
             "A trilinear lattice replaces a 4x4 matrix by a grid of cells; each cell maps"
             " the unit cube by interpolating its 8 corner nodes. Moving nodes bends what the"
             " lattice holds, smoothly and continuously across cells.",
-            snap(plain),
+            sheets.snap(plain),
             "a",
         ),
-        TourStep(
+        sheets.TourStep(
             "Bending a volume",
             "The same lattice bends a volume at render time: each ray sample is mapped back"
             " through the lattice (a few Newton steps per sample) to read the original voxels.",
-            snap(bent),
+            sheets.snap(bent),
             "b",
         ),
-        TourStep(
+        sheets.TourStep(
             "Composition in a scene graph",
             "Lattices compose like matrices: a mesh under nested nodes gets one composed"
             " lattice, so a flat slab of tubes becomes a torus (the paper's Figure 1).",
             bundled_dir() / "lattice_torus_tubes.json",
             "c",
         ),
-        TourStep(
+        sheets.TourStep(
             "Attachments follow an animated mesh",
             "Anchors sit on a base mesh's triangles; every frame they are evaluated on the"
             " moved mesh and rebuild the lattices of the bands and the plate attached to it,"
@@ -117,7 +102,7 @@ def demo_lattice(
             bundled_dir() / "lattice_accessories_anim.json",
             None,
         ),
-        TourStep(
+        sheets.TourStep(
             "What it costs",
             "Frames per second with lattices relative to plain 4x4 matrices (the paper's"
             " table: 76.4-80.6 %), and animating many objects, where every composed lattice is"
@@ -126,14 +111,14 @@ def demo_lattice(
             None,
             None,
         ),
-        TourStep(
+        sheets.TourStep(
             "Normals across cells",
             "GRAPP 2010 (section 4.2, Figure 5) carries normals two ways. Panel d transforms"
             " the normal itself (J n): the shading flows smoothly over cell borders but is"
             " not exactly perpendicular to the surface. Panel e transforms two tangents and"
             " crosses them: exactly perpendicular, but the shading jumps at every border of"
             " these 30-degree cells. The tangent way is voxwarp's default.",
-            snap(normal_scenes[1][1]),
+            sheets.snap(normal_scenes[1][1]),
             "e",
         ),
     ]
@@ -168,6 +153,6 @@ def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
         w = np.concatenate([inst.world_vertices() for inst in scene.meshes])
         lo, hi = w.min(axis=0), w.max(axis=0)
         quarter = np.r_[0.1 * hi[:2], lo[2]], hi  # the quadrant facing the camera
-        scene.camera = framing_camera(*quarter, NORMALS_VIEW, size)
+        scene.camera = sheets.framing_camera(*quarter, NORMALS_VIEW, size)
         out.append((title, scene))
     return out

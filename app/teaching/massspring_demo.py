@@ -16,27 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.teaching import DEMO_TITLES
-from voxwarp.teaching.sheets import (
-    FISH_DRAG_MM,
-    FISH_DRAGGED,
-    FISH_GRID,
-    HEAD_LAYERS,
-    DemoSettings,
-    TourStep,
-    add_note,
-    fish_camera,
-    fish_grid,
-    fish_scene,
-    fish_volume,
-    gl_renderer,
-    new_figure,
-    offscreen_renderer,
-    render_rgb,
-    save_figure,
-    show_image,
-    snap,
-)
+from voxwarp.teaching import DEMO_TITLES, sheets
 
 # ---------------------------------------------------------------------- mass-spring
 #: the demo's time step, in units of the semi-implicit integrator's stable step: beyond
@@ -76,16 +56,18 @@ def _energy_run(ms: Any, steps: int, e0: float) -> list[float]:
 
 
 def _dragged_fish_model(vol: Any, integrator: str, dt: float, clamp: bool) -> Any:
-    ms = _mass_spring(fish_grid(vol), integrator, dt, clamp)
-    ms.move(list(FISH_DRAGGED), FISH_DRAG_MM)
+    ms = _mass_spring(sheets.fish_grid(vol), integrator, dt, clamp)
+    ms.move(list(sheets.FISH_DRAGGED), sheets.FISH_DRAG_MM)
     return ms
 
 
 def demo_massspring(
-    s: DemoSettings, out: Path, log: Callable[[str], None]
-) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
-    vol = fish_volume(s)
-    probe = {i: _mass_spring(fish_grid(vol), i, 1.0, True) for i in ("explicit", "semi-implicit")}
+    s: sheets.DemoSettings, out: Path, log: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
+    vol = sheets.fish_volume(s)
+    probe = {
+        i: _mass_spring(sheets.fish_grid(vol), i, 1.0, True) for i in ("explicit", "semi-implicit")
+    }
     stable = {i: m.stable_time_step() for i, m in probe.items()}
     dt = DT_FACTOR * stable["semi-implicit"]
     steps = max(2, math.ceil(s.sim_seconds / dt))
@@ -117,48 +99,50 @@ def demo_massspring(
     # renders: the semi-implicit model at its own (default) step over time, as the GUI
     # runs it (its scenes resume there), then the explicit ones at the demo's dt and at
     # their own stable step
-    cam = fish_camera(vol, s.render_size)
+    cam = sheets.fish_camera(vol, s.render_size)
     shots: list[tuple[str, np.ndarray]] = []
     tour_states: dict[str, Any] = {}
     semi_dt = stable["semi-implicit"]
     mid_steps = max(1, round(0.3 / semi_dt))
-    with offscreen_renderer(s.render_size) as r:
-        gl = gl_renderer(r)
-        shots.append(("(c) at rest", render_rgb(r, fish_scene(vol, cam), s.render_size)))
+    with sheets.offscreen_renderer(s.render_size) as r:
+        gl = sheets.gl_renderer(r)
+        shots.append(
+            ("(c) at rest", sheets.render_rgb(r, sheets.fish_scene(vol, cam), s.render_size))
+        )
         semi = _dragged_fish_model(vol, "semi-implicit", semi_dt, True)
-        tour_states["dragged"] = snap(fish_scene(vol, cam, [semi.warp()]))
+        tour_states["dragged"] = sheets.snap(sheets.fish_scene(vol, cam, [semi.warp()]))
         shots.append(
             (
                 "(d) t = 0: tail elements dragged",
-                render_rgb(r, fish_scene(vol, cam, [semi.warp()]), s.render_size),
+                sheets.render_rgb(r, sheets.fish_scene(vol, cam, [semi.warp()]), s.render_size),
             )
         )
         semi.step(mid_steps)
         t_mid = mid_steps * semi_dt
-        tour_states["moving"] = snap(fish_scene(vol, cam, [semi.warp()]))
+        tour_states["moving"] = sheets.snap(sheets.fish_scene(vol, cam, [semi.warp()]))
         shots.append(
             (
                 f"(e) semi-implicit (dt {semi_dt * 1000:.1f} ms), t = {t_mid:.2f} s",
-                render_rgb(r, fish_scene(vol, cam, [semi.warp()]), s.render_size),
+                sheets.render_rgb(r, sheets.fish_scene(vol, cam, [semi.warp()]), s.render_size),
             )
         )
         settle_steps = mid_steps + semi.settle(max_steps=20000, tol=1e-3)
-        tour_states["settled"] = snap(fish_scene(vol, cam, [semi.warp()]))
+        tour_states["settled"] = sheets.snap(sheets.fish_scene(vol, cam, [semi.warp()]))
         max_disp = float(np.linalg.norm(semi.displacements(), axis=-1).max())
         shots.append(
             (
                 f"(f) semi-implicit, settled ({settle_steps} steps)",
-                render_rgb(r, fish_scene(vol, cam, [semi.warp()]), s.render_size),
+                sheets.render_rgb(r, sheets.fish_scene(vol, cam, [semi.warp()]), s.render_size),
             )
         )
         expl = _dragged_fish_model(vol, "explicit", dt, True)
         with np.errstate(all="ignore"):
             expl.step(steps)
-        tour_states["explicit"] = snap(fish_scene(vol, cam, [expl.warp()]))
+        tour_states["explicit"] = sheets.snap(sheets.fish_scene(vol, cam, [expl.warp()]))
         shots.append(
             (
                 f"(g) explicit + clamp, same dt, t = {steps * dt:.1f} s",
-                render_rgb(r, fish_scene(vol, cam, [expl.warp()]), s.render_size),
+                sheets.render_rgb(r, sheets.fish_scene(vol, cam, [expl.warp()]), s.render_size),
             )
         )
         slow = _dragged_fish_model(vol, "explicit", stable["explicit"], True)
@@ -167,15 +151,15 @@ def demo_massspring(
             (
                 f"(h) explicit at its stable dt, {steps} steps"
                 f" (t = {steps * stable['explicit']:.2f} s)",
-                render_rgb(r, fish_scene(vol, cam, [slow.warp()]), s.render_size),
+                sheets.render_rgb(r, sheets.fish_scene(vol, cam, [slow.warp()]), s.render_size),
             )
         )
 
     numbers: dict[str, Any] = {
-        "grid": FISH_GRID,
-        "fixed": f"i < {HEAD_LAYERS} (the head)",
-        "dragged": FISH_DRAGGED,
-        "drag_mm": FISH_DRAG_MM,
+        "grid": sheets.FISH_GRID,
+        "fixed": f"i < {sheets.HEAD_LAYERS} (the head)",
+        "dragged": sheets.FISH_DRAGGED,
+        "drag_mm": sheets.FISH_DRAG_MM,
         "volume": f"fish {'x'.join(map(str, vol.shape))}",
         "dt_s": dt,
         "stable_dt_s": stable,
@@ -192,34 +176,34 @@ def demo_massspring(
         "max_displacement_mm": max_disp,
         "gl_renderer": gl,
     }
-    fig = new_figure(15.0, 9.2, DEMO_TITLES["massspring"])
+    fig = sheets.new_figure(15.0, 9.2, DEMO_TITLES["massspring"])
     grid = fig.add_gridspec(2, 6, height_ratios=[1.15, 1.0])
     _plot_energy(fig.add_subplot(grid[0, 0:3]), numbers)
     _plot_sweep(fig.add_subplot(grid[0, 3:6]), numbers)
     sub = grid[1, :].subgridspec(2, 3)
     for i, (title, img) in enumerate(shots):
-        show_image(fig.add_subplot(sub[i // 3, i % 3]), img, title)
-    path = save_figure(fig, out / "massspring.png")
+        sheets.show_image(fig.add_subplot(sub[i // 3, i % 3]), img, title)
+    path = sheets.save_figure(fig, out / "massspring.png")
 
     tour = [
-        TourStep(
+        sheets.TourStep(
             "A grid of masses and springs",
             "The fish is covered by an 8x8x8 grid of point masses joined by springs (along"
             " the axes and the face diagonals). The head's three layers are fixed. Moving"
             " an element stretches its springs; their forces pull the neighbours along, and"
             " the elements' displacements bend the volume at render time: the voxels are"
             " never resampled.",
-            snap(fish_scene(vol, cam)),
+            sheets.snap(sheets.fish_scene(vol, cam)),
             "c",
         ),
-        TourStep(
+        sheets.TourStep(
             "Drag the tail",
             "Two tail elements are held 12 mm to the side. At t = 0 nothing else has moved"
             " yet: only the cells around the held elements are stretched.",
             tour_states["dragged"],
             "d",
         ),
-        TourStep(
+        sheets.TourStep(
             "Semi-implicit Euler",
             "Each step first updates the velocity from the spring forces, v' = v + dt a,"
             " then the position with the new velocity, x' = x + dt v'. At its default time"
@@ -228,14 +212,14 @@ def demo_massspring(
             tour_states["moving"],
             "e",
         ),
-        TourStep(
+        sheets.TourStep(
             "Settled",
             "Once every element is slower than 0.001 mm/s the grid is at rest: the tail"
             " bends in a smooth curve from the fixed head to the held elements.",
             tour_states["settled"],
             "f",
         ),
-        TourStep(
+        sheets.TourStep(
             "Explicit Euler at the same step",
             "Explicit Euler moves with the old velocity, x' = x + dt v. Beyond its stability"
             f" limit (here dt is {dt / stable['explicit']:.0f}x its guaranteed-stable step)"
@@ -246,7 +230,7 @@ def demo_massspring(
             tour_states["explicit"],
             "g",
         ),
-        TourStep(
+        sheets.TourStep(
             "Where each integrator becomes unstable",
             "Panel b runs both integrators at a range of time steps: explicit Euler blows up"
             " at a step several times smaller than semi-implicit Euler, which is why the"
@@ -299,7 +283,7 @@ def _plot_energy(ax: Any, n: dict[str, Any]) -> None:
     )
     ax.legend(loc="upper left", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    add_note(
+    sheets.add_note(
         ax,
         "Same model, drag and dt: explicit Euler (x' = x + dt v) gains energy every step and"
         " blows up; the thesis' displacement clamp keeps it bounded, but it never settles."
@@ -331,7 +315,7 @@ def _plot_sweep(ax: Any, n: dict[str, Any]) -> None:
     ax.set_title(f"(b) stability: largest energy over {sw['steps']} steps, no clamp", fontsize=10)
     ax.legend(loc="center left", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    add_note(
+    sheets.add_note(
         ax,
         "Dashed: each integrator's guaranteed-stable step (MassSpring.stable_time_step);"
         " solid: the dt of (a). Above 1: the run gained energy (capped at"

@@ -29,16 +29,7 @@ from voxwarp.io.itk import displacement_transform, resample, sitk_module, to_sit
 from voxwarp.io.samples import load_sample
 from voxwarp.io.volumes import load_volume, save_volume
 from voxwarp.scene import Scene
-from voxwarp.teaching.sheets import (
-    TourStep,
-    add_note,
-    gl_renderer,
-    new_figure,
-    offscreen_renderer,
-    render_rgb,
-    save_figure,
-    show_image,
-)
+from voxwarp.teaching import sheets
 
 #: the known deformation: this many Gaussian bumps, centres seeded inside the middle of
 #: the head's box, amplitude (mm) and width (sigma, mm)
@@ -63,7 +54,7 @@ FIELD_MIN_MM = 1.0
 
 def demo_registration(
     quick: bool, out: Path, say: Callable[[str], None]
-) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
     """Run the registration demo into ``out`` (sheet ``registration.png``, the moving
     image ``registration_moving.nii.gz`` and the recovered field
     ``registration_field.nii.gz`` / ``.h5``); returns (figures, numbers, tour steps)."""
@@ -203,12 +194,12 @@ def _renders(fixed: Any, moving: Any, warps: list[Any], size: tuple[int, int]) -
             step=0.5,
         )
 
-    with offscreen_renderer(size) as r:
+    with sheets.offscreen_renderer(size) as r:
         out = {
-            "fixed": render_rgb(r, scene(fixed, []), size)[..., 0].astype(np.float64),
-            "moving": render_rgb(r, scene(moving, []), size)[..., 0].astype(np.float64),
-            "through": render_rgb(r, scene(moving, warps), size)[..., 0].astype(np.float64),
-            "gl_renderer": gl_renderer(r),
+            "fixed": sheets.render_rgb(r, scene(fixed, []), size)[..., 0].astype(np.float64),
+            "moving": sheets.render_rgb(r, scene(moving, []), size)[..., 0].astype(np.float64),
+            "through": sheets.render_rgb(r, scene(moving, warps), size)[..., 0].astype(np.float64),
+            "gl_renderer": sheets.gl_renderer(r),
         }
     out.update(camera=camera, clip=clip, z_mm=z)
     return out
@@ -279,12 +270,14 @@ def _sheet(
     fixed: Any,
 ) -> Path:
     f, m, t = renders["fixed"], renders["moving"], renders["through"]
-    fig = new_figure(13.5, 8.6, "A demons registration rendered through its field, no resampling")
+    fig = sheets.new_figure(
+        13.5, 8.6, "A demons registration rendered through its field, no resampling"
+    )
     axs = fig.subplots(2, 4)
-    show_image(axs[0, 0], _grey(f), "(a) fixed: colin27")
-    show_image(axs[0, 1], _grey(m), "(b) moving, as stored")
-    show_image(axs[0, 2], _grey(t), "(c) moving rendered through the field")
-    show_image(axs[0, 3], _grey(_checker(f, t)), "(d) checkerboard: (a) | (c)")
+    sheets.show_image(axs[0, 0], _grey(f), "(a) fixed: colin27")
+    sheets.show_image(axs[0, 1], _grey(m), "(b) moving, as stored")
+    sheets.show_image(axs[0, 2], _grey(t), "(c) moving rendered through the field")
+    sheets.show_image(axs[0, 3], _grey(_checker(f, t)), "(d) checkerboard: (a) | (c)")
     vmax = max(float(np.abs(f - m).max()), 1.0)
     for ax, d, title in (
         (axs[1, 0], np.abs(f - m), f"(e) |a - b|, mean {n['render_mad_before']:.1f}"),
@@ -305,36 +298,36 @@ def _sheet(
         ax.set_title(title, fontsize=10)
         ax.set_axis_off()
         fig.colorbar(im, ax=ax, shrink=0.7)
-    add_note(
+    sheets.add_note(
         axs[1, 3],
         f"mean |u| {n['recovered_mean_mm']:.1f} vs {n['known_mean_mm']:.1f} mm, error"
         f" {n['field_error_mm']:.1f} mm, r = {n['field_correlation']:.2f}",
         "lower left",
         34,
     )
-    add_note(
+    sheets.add_note(
         axs[0, 2],
         f"demons {n['registration_seconds']:.1f} s; axial slab {SLAB_MM:g} mm at z = {z:.0f} mm",
         "lower left",
         40,
     )
-    return save_figure(fig, path)
+    return sheets.save_figure(fig, path)
 
 
-def _tour(moving: Any, warps: list[Any], camera: Any, clip: Any) -> list[TourStep]:
+def _tour(moving: Any, warps: list[Any], camera: Any, clip: Any) -> list[sheets.TourStep]:
     def scene(ws: list[Any]) -> dict[str, Any]:
         s = Scene(moving, mode="average", camera=camera, warps=ws, window=WINDOW, clip_box=clip)
         return s.to_dict()
 
     return [
-        TourStep(
+        sheets.TourStep(
             "The moving image",
             "The bundled MRI after a known smooth deformation: a few Gaussian bumps push"
             " the anatomy by several millimetres. Compare it with the fixed image in (a).",
             scene([]),
             "b",
         ),
-        TourStep(
+        sheets.TourStep(
             "Through the registration's field",
             "SimpleITK's demons found a pull-back field u (ITK convention, LPS): the fixed"
             " point p samples the moving image at p + u(p). voxwarp renders the stored"
@@ -342,7 +335,7 @@ def _tour(moving: Any, warps: list[Any], camera: Any, clip: Any) -> list[TourSte
             scene(warps),
             "c",
         ),
-        TourStep(
+        sheets.TourStep(
             "How good is it",
             "The checkerboard (d) and the differences (e, f) show the alignment before and"
             " after; (g) and (h) compare the recovered displacement with the known one.",

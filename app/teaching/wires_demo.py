@@ -19,22 +19,7 @@ import numpy as np
 from voxwarp.deform.wires.propagation import opencl_device_name
 from voxwarp.io.samples import load_sample
 from voxwarp.scene import Scene
-from voxwarp.teaching import DEMO_TITLES
-from voxwarp.teaching.sheets import (
-    FISH_TF,
-    FISH_VIEW,
-    DemoSettings,
-    TourStep,
-    add_note,
-    fish_volume,
-    gl_renderer,
-    new_figure,
-    offscreen_renderer,
-    render_rgb,
-    save_figure,
-    show_image,
-    snap,
-)
+from voxwarp.teaching import DEMO_TITLES, sheets
 from voxwarp.teaching.wire_measure import (
     DEFAULT_SCALES,
     FISH_WIRES,
@@ -50,27 +35,27 @@ from voxwarp.teaching.wire_measure import (
 
 # ====================================================================== wires
 def demo_wires(
-    s: DemoSettings, out: Path, log: Callable[[str], None]
-) -> tuple[list[Path], dict[str, Any], list[TourStep]]:
+    s: sheets.DemoSettings, out: Path, log: Callable[[str], None]
+) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
     from voxwarp.deform.wires.field import WireFieldWarp
 
-    vol = padded_fish() if s.wire_padded else fish_volume(s)
+    vol = padded_fish() if s.wire_padded else sheets.fish_volume(s)
     wires, spec = load_wires(FISH_WIRES)
     size = s.wire_size
     # the pictures from above (+z: the sideways bend in the image plane, the tail fin
     # turned edge-on by the twist); the ray statistics and the render cost from the view
     # of ``python -m benchmarks wires`` (FRAMED_VIEW), so that they compare with its report
-    cam = framed_camera(vol, wires, size, view=FISH_VIEW)
+    cam = framed_camera(vol, wires, size, view=sheets.FISH_VIEW)
     stats_cam = framed_camera(vol, wires, size)
-    tf = FISH_TF
+    tf = sheets.FISH_TF
     rows: list[dict[str, Any]] = []
     renders: list[tuple[str, np.ndarray]] = []
     render_cost: dict[str, Any] = {}
-    with offscreen_renderer(size) as r:
-        gl = gl_renderer(r)
+    with sheets.offscreen_renderer(size) as r:
+        gl = sheets.gl_renderer(r)
         base = Scene(vol, transfer_function=tf, camera=cam, jitter=False)
         stats_base = base.copy(camera=stats_cam)
-        renders.append(("undeformed", render_rgb(r, base, size)))
+        renders.append(("undeformed", sheets.render_rgb(r, base, size)))
         first: np.ndarray | None = None
         for scale in DEFAULT_SCALES:
             row, wd = time_field_builds(vol, wires, scale, s.wire_repeats)
@@ -78,7 +63,7 @@ def demo_wires(
             scene = base.copy(warps=[warp])
             stats_scene = stats_base.copy(warps=[warp])
             stats = classify_samples(stats_scene, stats_cam, size, warp, s.wire_subsample)
-            img = render_rgb(r, scene, size)
+            img = sheets.render_rgb(r, scene, size)
             renders.append((f"1:{scale**3}", img))
             if first is None:
                 first = img
@@ -120,14 +105,14 @@ def demo_wires(
         "image": size,
         "transfer_function": tf,
         "ray_subsample": s.wire_subsample,
-        "view": FISH_VIEW,
+        "view": sheets.FISH_VIEW,
         "stats_view": FRAMED_VIEW,
         "rows": rows,
         "render_cost": render_cost,
         "opencl_device": opencl_device_name(),
         "gl_renderer": gl,
     }
-    fig = new_figure(16.0, 11.0, DEMO_TITLES["wires"])
+    fig = sheets.new_figure(16.0, 11.0, DEMO_TITLES["wires"])
     grid = fig.add_gridspec(3, 1, height_ratios=[1.0, 1.0, 1.15])
     for row_i in range(2):
         sub = grid[row_i].subgridspec(1, 3)
@@ -143,31 +128,31 @@ def demo_wires(
                 if idx > 1:
                     diff = rw["pixels_differing_from_1to1"]
                     label += f"\n{diff:.2f} % of the pixels differ from the 1:1 image"
-            show_image(fig.add_subplot(sub[0, j]), img, label)
+            sheets.show_image(fig.add_subplot(sub[0, j]), img, label)
     bottom = grid[2].subgridspec(1, 2, width_ratios=[1.0, 1.35])
     _plot_ignored(fig.add_subplot(bottom[0, 0]), numbers)
     _table_wires(fig.add_subplot(bottom[0, 1]), numbers)
-    path = save_figure(fig, out / "wires.png")
+    path = sheets.save_figure(fig, out / "wires.png")
 
     # the tour's scenes: the bundled fish (its default shape), the wire file at each scale
     fish = load_sample("fish")
     tcam = framed_camera(fish, wires, size)
     entry = {"type": "wires", **{k: v for k, v in spec.items() if k in ("wires", "masks")}}
     tour = [
-        TourStep(
+        sheets.TourStep(
             "Wires",
             "A wire is a curve laid through an object (the base wire, along the fish's spine)"
             " and a modified copy the user bends, twists and scales. Each cross-section of the"
             " object normal to the base wire is shown on the plane normal to the modified wire"
             " at the same fraction of its length.",
-            snap(Scene(fish, transfer_function=tf, camera=tcam, jitter=False)),
+            sheets.snap(Scene(fish, transfer_function=tf, camera=tcam, jitter=False)),
             "a",
         ),
     ]
     for i, scale in enumerate(DEFAULT_SCALES):
         warp = WireFieldWarp.from_dict({**entry, "field_scale": scale})
         tour.append(
-            TourStep(
+            sheets.TourStep(
                 f"Attribute field 1:{scale**3}",
                 "Every ray sample looks up a field that says whether it is swept, by which"
                 " wire and at which fraction t, or can be ignored (no mapping needed)."
@@ -175,12 +160,14 @@ def demo_wires(
                 f" ({rows[i]['percent_ignored_voxels']:.1f} % of its voxels ignored,"
                 f" built in {rows[i]['build_s']:.3f} s on this machine). Coarser fields"
                 " build faster but blur the edges of the swept object.",
-                snap(Scene(fish, transfer_function=tf, camera=tcam, jitter=False, warps=[warp])),
+                sheets.snap(
+                    Scene(fish, transfer_function=tf, camera=tcam, jitter=False, warps=[warp])
+                ),
                 "abcdef"[i + 1],
             )
         )
     tour.append(
-        TourStep(
+        sheets.TourStep(
             "Samples ignored",
             "Most samples of a ray never touch the bent object: they read the field once and"
             " go on unmapped (panel g, the wire paper's Table 1). The share shrinks as the"
@@ -280,7 +267,7 @@ def _table_wires(ax: Any, n: dict[str, Any]) -> None:
             f" {rc['undeformed_ms']:.1f} ms undeformed = {rc['ratio']:.2f}x"
             f" ({n['image'][0]}x{n['image'][1]}, {n['gl_renderer']})."
         )
-    add_note(ax, text, "lower left", 110)
+    sheets.add_note(ax, text, "lower left", 110)
     ax.set_title(
         f"(h) field builds (median of {n['rows'][0]['builds']}) and ray samples\n{n['volume']};"
         f" rays through every {n['ray_subsample']}th pixel of {n['image'][0]}x{n['image'][1]},"
