@@ -470,12 +470,7 @@ def cmd_bench_massspring(args: argparse.Namespace) -> int:
         warp_report = bench_warp_render(
             frames=args.frames, warmup=2, log=lambda s: print(s, file=sys.stderr)
         )
-        warp_text = warp_report.markdown(command)
-        print(warp_text)
-        cost = warp_report.ratio("offset warp, baked")
-        if cost is not None:
-            print(f"deformed dvr (offset warp, baked inverse) costs {cost:.2f}x undeformed")
-        text += "\n" + warp_text
+        text += "\n" + warp_report.print_summary(command)
     if args.markdown:
         atomic_write_text(Path(args.markdown), text)
     return 0

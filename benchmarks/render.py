@@ -19,6 +19,8 @@ from typing import Any
 from benchmarks import vtk as bench_vtk
 from voxwarp.bench import render as installed
 from voxwarp.bench.render import BenchReport, BenchRow, RenderCase
+from voxwarp.cli.options import tf_arg as _tf_arg
+from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.camera import Camera
 from voxwarp.core.checks import image_size
 from voxwarp.core.volume import Volume
@@ -134,28 +136,6 @@ def case_summary(report: BenchReport) -> dict[str, Any]:
         ratio = report.ratio(ref, "dvr")
         out[f"speedup_vs_{ref}"] = None if ratio is None else round(ratio, 3)
     return out
-
-
-def _view(text: str) -> Any:
-    from voxwarp.core.camera import VIEW_NAMES
-
-    if text in VIEW_NAMES:
-        return text
-    try:
-        az, el = (float(v) for v in text.split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(
-            f"view must be one of {','.join(VIEW_NAMES)} or AZIMUTH,ELEVATION degrees; got {text!r}"
-        ) from exc
-    return (az, el)
-
-
-def _tf_arg(tf: str | None, volume: Any = None) -> Any:
-    from voxwarp.core.transfer_function import TransferFunction, file_spec
-
-    if tf is None or file_spec(tf) is None:
-        return tf
-    return TransferFunction.load(tf, volume)
 
 
 def add_bench_render_parser(bsub: Any) -> None:

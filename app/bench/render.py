@@ -350,6 +350,16 @@ class WarpRenderReport:
             lines.append(f"| {r.renderer} | {r.median_ms:.1f} | {r.min_ms:.1f} | {rs} | {r.note} |")
         return "\n".join(lines) + "\n"
 
+    def print_summary(self, command: str) -> str:
+        """Print :meth:`markdown` and the cost of deforming in one line; returns the
+        markdown (for a ``--markdown`` file)."""
+        text = self.markdown(command)
+        print(text)
+        cost = self.ratio("offset warp, baked")
+        if cost is not None:
+            print(f"deformed dvr (offset warp, baked inverse) costs {cost:.2f}x undeformed")
+        return text
+
 
 def bench_warp_render(
     volume: Volume | None = None,
