@@ -47,7 +47,6 @@ from voxwarp.core.camera import VIEWS, Camera
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import WarpError
-from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
 from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
 from voxwarp.errors import VoxwarpError
@@ -124,7 +123,6 @@ SHORTCUTS: list[tuple[str, str]] = [
     ("Slice view: right drag / middle drag", "window (horizontal) and level (vertical) / pan"),
     ("R", "reset the camera"),
     ("P", "perspective / orthographic"),
-    ("W", "lay a new wire (click points; Enter finishes, Esc cancels)"),
     ("Ctrl+Z / Ctrl+Shift+Z", "undo / redo"),
     ("Ctrl+O / Ctrl+S / Ctrl+Shift+S", "open / save scene / save scene as"),
     ("Ctrl+E", "export a screenshot (PNG or EXR)"),
@@ -215,7 +213,7 @@ class MainWindow(QMainWindow):
         self.viewport.frameDrawn.connect(self._frame_drawn)
         self.viewport.failed.connect(self.show_error)
         self.viewport.contextMenuAt.connect(self._context_menu)
-        self.viewport.wirePointLaid.connect(self.refresh_panels)
+        self.viewport.pointPlaced.connect(self.refresh_panels)
         for view in self.mpr.views:
             view.editStarted.connect(self._begin_mouse_edit)
             view.editFinished.connect(self._end_mouse_edit)
@@ -389,9 +387,11 @@ class MainWindow(QMainWindow):
         )
         self._action(d, "&Single Step", self.single_step, "S")
         self._action(d, "Reset &Model", lambda: self.edit("Reset model", self.session.reset_model))
-        d.addSeparator()
-        self._action(d, "Lay a New &Wire", self.start_wire, "W")
-        self._action(d, "&Finish Wire", self.finish_wire, "Return")
+        family_actions = self.deformation_panel.window_actions()
+        if family_actions:
+            d.addSeparator()
+        for fa in family_actions:  # e.g. the wire family's Lay a New Wire (W)
+            self._action(d, fa.text, fa.slot, fa.shortcut)
 
         a = mb.addMenu("&Animation")
         self._action(a, "Set &Key at This Frame", self.set_key, "K")
@@ -559,23 +559,6 @@ class MainWindow(QMainWindow):
             time.sleep(0.01)
         return False
 
-    def start_wire(self) -> None:
-        """Lay a new wire: the next clicks lay its control points."""
-        if self.session.kind != "wires":
-            self.edit("Wire field", lambda: self.session.set_deformation("wires"))
-        self.viewport.laying_wire = True
-        self.statusBar().showMessage("Click control points of the new wire; Enter finishes", 5000)
-        self.refresh_panels()
-
-    def finish_wire(self) -> None:
-        """Make the laid points a wire."""
-        if not self.viewport.laying_wire:
-            return
-        self.viewport.laying_wire = False
-        kind = self.deformation_panel.wire_kind()
-        radius = self.deformation_panel.wire_radius()
-        self.edit("New wire", lambda: self.session.adapter(WiresFamily).finish_wire(kind, radius))
-
     # ------------------------------------------------------------------ simulation
     def set_running(self, running: bool) -> None:
         """Run or pause the simulation."""
@@ -602,10 +585,10 @@ class MainWindow(QMainWindow):
         self.viewport.update()
 
     def clear_selection(self) -> None:
-        """Clear the selection (and stop laying a wire)."""
-        self.viewport.laying_wire = False
-        self.session.family.discard_pending()
+        """Clear the selection (and cancel placing a new object, such as a wire)."""
+        self.session.family.cancel_placing()
         self.session.select([], "replace")
+        self.refresh_panels()  # (the wire panel's New wire button and label)
         self.viewport.update()
 
     def fix_selected(self, fixed: bool) -> None:
@@ -999,7 +982,10 @@ class MainWindow(QMainWindow):
         dlg.setWindowTitle("voxwarp — keyboard and mouse")
         lay = QVBoxLayout(dlg)
         text = QTextBrowser()
-        rows = "".join(f"<tr><td><b>{k}</b></td><td>{v}</td></tr>" for k, v in SHORTCUTS)
+        family_rows = [a.help for a in self.deformation_panel.window_actions() if a.help]
+        rows = "".join(
+            f"<tr><td><b>{k}</b></td><td>{v}</td></tr>" for k, v in [*SHORTCUTS, *family_rows]
+        )
         text.setHtml(f"<table cellspacing=6>{rows}</table>")
         lay.addWidget(text)
         dlg.resize(620, 520)

@@ -13,6 +13,8 @@ to the window only through this contract (see ``ui/main_window.py``)::
     window.request_wire_build() -> None    # rebuild the wire field off the GUI thread
     window.set_running(running) -> None
     window.open_file_dialog() -> None
+    window.refresh_panels() -> None        # after an edit outside window.edit
+    window.statusBar()                     # messages of the family panels' actions
 
 Edits
 -----
@@ -58,7 +60,13 @@ from voxwarp import shaders
 from voxwarp.core.camera import PROJECTIONS
 from voxwarp.editing.session import DEFORMATIONS, DisplayOptions, EditSession, Placement
 from voxwarp.scene import MODES
-from voxwarp.ui.family_panels import FAMILY_PANELS, FamilyPanel, ModelOptions, family_label
+from voxwarp.ui.family_panels import (
+    FAMILY_PANELS,
+    FamilyPanel,
+    ModelOptions,
+    PanelAction,
+    family_label,
+)
 from voxwarp.ui.family_panels.wires import FIELD_SCALES, wire_of_handle
 from voxwarp.ui.field_view import FieldSliceView
 from voxwarp.ui.panel_base import (
@@ -400,8 +408,7 @@ class DeformationPanel(Panel):
     Parameters
     ----------
     window
-        The main window (see the module docstring for what the panel uses of it; the
-        wire toggle also sets ``window.viewport.laying_wire``).
+        The main window (see the module docstring for what the panel uses of it).
     parent
         Optional parent widget.
     """
@@ -472,6 +479,11 @@ class DeformationPanel(Panel):
         for name in panel.exposed:
             assert not hasattr(self, name), f"two family panels expose {name}"
             setattr(self, name, getattr(panel, name))
+
+    def window_actions(self) -> list[PanelAction]:
+        """The family panels' actions for the window's Deformation menu, in the order of
+        :data:`FAMILY_PANELS` (see :meth:`FamilyPanel.window_actions`)."""
+        return [a for p in dict.fromkeys(self._family_panels.values()) for a in p.window_actions()]
 
     def _build_placement_group(self) -> QGroupBox:
         self.placement_group = QGroupBox("Placement of the grid")

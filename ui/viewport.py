@@ -14,7 +14,8 @@ Mouse (see also the help dialog of the main window):
 * left button on a handle: pick it (Shift adds, Ctrl toggles) and drag the selection
   in the plane parallel to the image through the reference handle;
 * left button elsewhere: orbit; Shift + left elsewhere: rubber-band selection;
-  while laying a wire (:attr:`Viewport.laying_wire`): each click lays a control point;
+  while the family places a new object (its adapter's ``placing``: a new wire), each
+  click places a point (``place_point``);
 * middle button, or right button dragged: pan; right click: context menu;
 * wheel: zoom.
 """
@@ -36,8 +37,7 @@ from PySide6.QtWidgets import QRubberBand, QWidget
 
 from voxwarp import shaders
 from voxwarp.core.camera import Camera
-from voxwarp.editing.families.wires import WiresFamily
-from voxwarp.editing.session import DisplayOptions, EditorError, EditSession
+from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, scene_at
 from voxwarp.render.orientation_marker import draw_orientation_marker
@@ -91,6 +91,8 @@ class Viewport(QOpenGLWidget):
         A drawing or editing error, with the message for the user.
     contextMenuAt(QPoint, object)
         Right click (global position, picked handle or None).
+    pointPlaced()
+        A click placed a point of the family's new object (a wire's control point).
     """
 
     editStarted = Signal(str)
@@ -99,15 +101,13 @@ class Viewport(QOpenGLWidget):
     frameDrawn = Signal(float)
     failed = Signal(str)
     contextMenuAt = Signal(QPoint, object)
-    wirePointLaid = Signal()
+    pointPlaced = Signal()
 
     def __init__(self, session: EditSession, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.session = session
         self.display = DisplayOptions()
         self.camera: Camera = session.scene.resolved_camera()
-        #: a click lays a control point of a new wire instead of picking
-        self.laying_wire = False
         #: draw the orientation marker (View -> Orientation Marker)
         self.show_marker = True
         self._marker: tuple[Any, np.ndarray] | None = None
@@ -450,14 +450,11 @@ class Viewport(QOpenGLWidget):
         xy = self._xy(pos)
         size = self.size_px()
         if button == Qt.MouseButton.LeftButton:
-            if self.laying_wire:
-                try:
-                    self.session.adapter(WiresFamily).add_wire_point(self.camera, size, xy)
-                except EditorError:  # the wire family is no longer the session's
-                    self.laying_wire = False
-                    return
-                self._press["mode"] = "laid"
-                self.wirePointLaid.emit()
+            family = self.session.family
+            if family.placing:  # a click places a point of a new object, no picking
+                family.place_point(self.camera, size, xy)
+                self._press["mode"] = "placed"
+                self.pointPlaced.emit()
                 self.update()
                 return
             hit = self.session.pick(self.camera, size, xy)

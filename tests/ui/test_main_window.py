@@ -368,7 +368,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     vp = w.viewport
     vp.setFocus()
     press_shortcut(qtbot, w, Qt.Key.Key_W)
-    assert vp.laying_wire
+    assert w.session.family.placing
     assert w.session.kind == "wires"
     assert w.wait_for_wire_build(60)
     clicks = [QPoint(300, 300), QPoint(350, 320), QPoint(400, 330)]
@@ -376,7 +376,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
         qtbot.mouseClick(vp, Qt.MouseButton.LeftButton, pos=p)
     assert len(w.session.adapter(WiresFamily).pending_wire) == 3
     press_shortcut(qtbot, w, Qt.Key.Key_Return)
-    assert not vp.laying_wire
+    assert not w.session.family.placing
     assert len(w.session.adapter(WiresFamily).wires) == 2
     new = w.session.adapter(WiresFamily).wires[1].base.control_points
     # each point lies under its click, on the plane through the centre parallel to the image
@@ -388,6 +388,39 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     assert len(w.session.model_warp().wires) == 2
     w.undo_action.trigger()
     assert len(w.session.adapter(WiresFamily).wires) == 1
+
+
+@pytest.mark.slow
+def test_wire_actions_come_from_the_wire_panel_and_esc_cancels(window: Any, qtbot: Any) -> None:
+    """The wire panel gives the Deformation menu its Lay a New Wire (W) and Finish Wire
+    (Return); a click while laying places a point through the adapter, undo keeps
+    laying, Esc stops laying and drops the points."""
+    w = window
+    texts = [a.text().replace("&", "") for a in w.menuBar().actions()]
+    menu = w.menuBar().actions()[texts.index("Deformation")].menu()
+    keys = {a.text().replace("&", ""): a.shortcut().toString() for a in menu.actions()}
+    assert keys["Lay a New Wire"] == "W"
+    assert keys["Finish Wire"] == "Return"
+    press_shortcut(qtbot, w, Qt.Key.Key_W)
+    assert w.session.kind == "wires"
+    assert w.session.family.placing
+    assert w.wait_for_wire_build(60)
+    assert w.undo_stack.undoText() == "Wire field"
+    w.deformation_panel.radius_spin.setValue(3.0)  # while laying: no edit of wire 1
+    assert w.undo_stack.undoText() == "Wire field"
+    ends = w.deformation_panel.wire_ends_combo
+    ends.setCurrentIndex(1 - ends.currentIndex())  # an edit while laying, then its undo
+    assert w.undo_stack.undoText().startswith("Wire ends")
+    w.undo_action.trigger()
+    assert w.session.family.placing
+    assert w.wait_for_wire_build(60)
+    qtbot.mouseClick(w.viewport, Qt.MouseButton.LeftButton, pos=QPoint(300, 300))
+    assert len(w.session.adapter(WiresFamily).pending_wire) == 1
+    assert "1 point laid" in w.deformation_panel.wire_label.text()
+    press_shortcut(qtbot, w, Qt.Key.Key_Escape)
+    assert not w.session.family.placing
+    assert w.session.adapter(WiresFamily).pending_wire == []
+    assert not w.deformation_panel.lay_button.isChecked()
 
 
 def test_drop_a_file_opens_it_and_it_becomes_recent(window: Any, tmp_path: Path) -> None:

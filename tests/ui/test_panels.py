@@ -54,7 +54,6 @@ class FakeViewport:
 
     def __init__(self) -> None:
         self.display = DisplayOptions()
-        self.laying_wire = False
         self.updates = 0
 
     def update(self) -> None:
@@ -457,7 +456,7 @@ def test_lay_and_finish_a_wire(qtbot: Any, window: FakeWindow) -> None:
     s = window.session
     assert not panel.finish_button.isEnabled()
     click(qtbot, panel.lay_button)
-    assert window.viewport.laying_wire is True
+    assert s.family.placing is True
     # while laying, curve and radius are the new wire's, not edits of wire 1
     n = len(window.edits)
     panel.radius_spin.setValue(2.5)
@@ -473,7 +472,7 @@ def test_lay_and_finish_a_wire(qtbot: Any, window: FakeWindow) -> None:
     assert len(s.adapter(WiresFamily).wires) == 2
     assert s.adapter(WiresFamily).wires[1].radius == pytest.approx(2.5)
     assert s.adapter(WiresFamily).pending_wire == []
-    assert window.viewport.laying_wire is False
+    assert s.family.placing is False
     assert not panel.lay_button.isChecked()
     assert not s.family.field_stale
     s.select(

@@ -3,19 +3,20 @@
 scene tree look the current family up here and never switch on it.
 
 A new family: a :class:`~voxwarp.ui.family_panels.base.FamilyPanel` subclass in a file
-here (its labels, Model-group options, group boxes, refresh) and its entry below.
+here (its labels, Model-group options, group boxes, refresh, window actions) and its
+entry below.
 Usage: ``FAMILY_PANELS[session.kind]``; :func:`family_label` names a family.
 """
 
 from __future__ import annotations
 
-from voxwarp.ui.family_panels.base import FamilyPanel
+from voxwarp.ui.family_panels.base import FamilyPanel, PanelAction
 from voxwarp.ui.family_panels.elements import ElementsPanel
 from voxwarp.ui.family_panels.lattice import LatticePanel
 from voxwarp.ui.family_panels.options import ModelOptions
 from voxwarp.ui.family_panels.wires import WiresPanel
 
-__all__ = ["FAMILY_PANELS", "FamilyPanel", "ModelOptions", "family_label"]
+__all__ = ["FAMILY_PANELS", "FamilyPanel", "ModelOptions", "PanelAction", "family_label"]
 
 #: family name -> panel class (one class may serve several families: see its ``labels``)
 FAMILY_PANELS: dict[str, type[FamilyPanel]] = {

@@ -3,22 +3,37 @@
 A family panel holds the widgets only its family uses (the element model's simulation,
 the wires, ...) and tells :class:`~voxwarp.ui.panels.DeformationPanel` what to show of
 the common parts: which rows of the Model group (:mod:`voxwarp.ui.family_panels.options`)
-and whether Apply, Reset and the placement are offered. One panel may serve several
-families (mass-spring and ChainMail share :class:`ElementsPanel`); its :attr:`labels`
-name them. Register a new panel in :data:`voxwarp.ui.family_panels.FAMILY_PANELS`.
+and whether Apply, Reset and the placement are offered. It may also give the window
+actions of its own (:meth:`FamilyPanel.window_actions`: menu entries with shortcuts, such
+as the wire family's "Lay a New Wire"). One panel may serve several families (mass-spring
+and ChainMail share :class:`ElementsPanel`); its :attr:`labels` name them. Register a new
+panel in :data:`voxwarp.ui.family_panels.FAMILY_PANELS`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 from PySide6.QtWidgets import QGroupBox, QVBoxLayout, QWidget
 
 from voxwarp.editing.session import EditSession
 from voxwarp.ui.panel_base import Panel
 
-__all__ = ["FamilyPanel"]
+__all__ = ["FamilyPanel", "PanelAction"]
+
+
+class PanelAction(NamedTuple):
+    """An action a family panel adds to the window's Deformation menu."""
+
+    #: menu text (``&`` marks the mnemonic)
+    text: str
+    #: what it does (called without arguments)
+    slot: Callable[[], Any]
+    #: its shortcut (a ``QKeySequence`` string such as ``"W"``), or None
+    shortcut: str | None = None
+    #: its row of the keyboard help: (keys, what they do), or None
+    help: tuple[str, str] | None = None
 
 
 class FamilyPanel(Panel):
@@ -78,6 +93,12 @@ class FamilyPanel(Panel):
         if shape is None:
             return text
         return f"{text}, {'×'.join(str(n) for n in shape)} {what}"
+
+    def window_actions(self) -> list[PanelAction]:
+        """The panel's actions for the window's Deformation menu (none here). The window
+        asks every panel once, when it builds its menus, so the actions and their
+        shortcuts are there whatever family is current."""
+        return []
 
     def show_family(self, kind: str) -> None:
         """Show the rows of family ``kind`` (for panels serving several families)."""

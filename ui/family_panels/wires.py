@@ -1,7 +1,11 @@
 """The panel of the wires family: the selected wire's curve, radius, object
-classification, twist and scale keys, the field resolution, laying and removing wires.
+classification, twist and scale keys, the field resolution, laying and removing wires,
+and the window's "Lay a New Wire" (W) and "Finish Wire" (Return) actions.
 
-The wire edits rebuild the wire field off the GUI thread (``window.request_wire_build``).
+A new wire is laid through the adapter's generic placing (``Family.start_placing``; the
+viewport hands clicks to ``place_point``) and finished with this panel's curve and
+radius. The wire edits rebuild the wire field off the GUI thread
+(``window.request_wire_build``).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from PySide6.QtWidgets import (
 from voxwarp.deform.wires.field import ENDS
 from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import WIRE_KINDS, EditorError, EditSession
-from voxwarp.ui.family_panels.base import FamilyPanel
+from voxwarp.ui.family_panels.base import FamilyPanel, PanelAction
 from voxwarp.ui.panel_base import combo, double_spin, value_decimals
 
 __all__ = ["FIELD_SCALES", "WiresPanel", "wire_of_handle"]
@@ -210,6 +214,37 @@ class WiresPanel(FamilyPanel):
         self._window.request_wire_build()
 
     # ---------------------------------------------------------------- new wires
+    def window_actions(self) -> list[PanelAction]:
+        """Lay a New Wire (W) and Finish Wire (Return) in the Deformation menu."""
+        return [
+            PanelAction(
+                "Lay a New &Wire",
+                self.start_wire,
+                "W",
+                ("W", "lay a new wire (click points; Enter finishes, Esc cancels)"),
+            ),
+            PanelAction("&Finish Wire", self.finish_wire, "Return"),
+        ]
+
+    def start_wire(self) -> None:
+        """Lay a new wire (switching to the wire family first): the next clicks in the
+        viewport lay its control points."""
+        if self.session.kind != "wires":
+            self._edit("Wire field", lambda: self.session.set_deformation("wires"))
+        self.session.family.start_placing()
+        self._window.statusBar().showMessage(
+            "Click control points of the new wire; Enter finishes", 5000
+        )
+        self._window.refresh_panels()
+
+    def finish_wire(self) -> None:
+        """Make the laid points a wire with the curve and radius of the wire group (one
+        undo step, "New wire"); nothing unless a wire is being laid."""
+        if not self._laying():
+            return
+        kind, radius = self.wire_kind(), self.wire_radius()
+        self._edit("New wire", lambda: self.session.family.finish_placing(kind=kind, radius=radius))
+
     def wire_kind(self) -> str:
         """Curve kind chosen in the wire group (for :meth:`WiresFamily.finish_wire`)."""
         return self.wire_kind_combo.currentText()
@@ -288,7 +323,8 @@ class WiresPanel(FamilyPanel):
         self.set_key_button.setEnabled(current is not None and current[1] is not None)
 
     def _laying(self) -> bool:
-        return bool(getattr(self._window.viewport, "laying_wire", False))
+        """Whether a new wire is being laid (the adapter's generic placing)."""
+        return self.session.kind == "wires" and self.session.family.placing
 
     def _refresh_wire(self, s: EditSession, w: int, point: int | None) -> None:
         """The label, curve, radius, classification and keys of wire ``w``."""
@@ -424,7 +460,10 @@ class WiresPanel(FamilyPanel):
     def _lay_toggled(self, on: bool) -> None:
         if self._updating:
             return
-        self._window.viewport.laying_wire = bool(on)
+        if on:
+            self.session.adapter(WiresFamily).start_placing()
+        else:  # paused: the laid points stay (Finish wire makes them a wire)
+            self.session.adapter(WiresFamily).placing = False
         self._refresh_host()
 
     def _finish_wire(self) -> None:
@@ -433,7 +472,7 @@ class WiresPanel(FamilyPanel):
             "New wire", lambda: self.session.adapter(WiresFamily).finish_wire(kind, radius)
         )
         if result is not None:
-            self._window.viewport.laying_wire = False
+            self.session.adapter(WiresFamily).placing = False
             self._refresh_host()
 
     def _remove_wire(self) -> None:

@@ -7,14 +7,16 @@ for animation. :class:`~voxwarp.editing.session.EditSession` only talks to this
 interface, so adding a family is its warp, its shader, one adapter file registered in
 :mod:`voxwarp.editing.families` and one panel in ``ui/`` (docs/reference/layout.md,
 "Adding a deformation family"). A family's own editing API (the wires', the lattice's)
-lives on its adapter: ``session.adapter(WiresFamily).add_wire_point(...)``. Adapters
+lives on its adapter: ``session.adapter(WiresFamily).set_wire_parameters(...)``; what
+the GUI's shared code needs of it is generic (e.g. placing a new object by clicking
+points: :meth:`Family.start_placing`, :meth:`Family.place_point`). Adapters
 know their session through :class:`~voxwarp.editing.state.SessionHost` and never import
 the session module.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -27,6 +29,7 @@ from voxwarp.render.overlay import OverlayLayer
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
+    from voxwarp.core.camera import Camera
 
 #: maps (N, 3) grid-frame points to world mm (the session's placement)
 ToWorld = Callable[[np.ndarray], np.ndarray]
@@ -55,6 +58,11 @@ class Family:
 
     def __init__(self, session: SessionHost) -> None:
         self.session = session
+        #: whether clicks in the viewport place points of a new object
+        #: (:meth:`place_point`; the wire family's new wire); set by
+        #: :meth:`start_placing`, cleared by :meth:`finish_placing` and
+        #: :meth:`cancel_placing` (setting it False pauses, keeping the points)
+        self.placing = False
 
     # ---------------------------------------------------------------- the builder
     @classmethod
@@ -102,9 +110,6 @@ class Family:
     def rebuild_if_stale(self) -> None:
         """Rebuild a stale field on this thread and draw it (saving, scripts, notebook)."""
 
-    def discard_pending(self) -> None:
-        """Drop what is being laid and not finished (the wire family's new points)."""
-
     # ---------------------------------------------------------------- the warp
     def warp(self) -> Warp | None:
         """The family's warp in the grid frame (None: nothing deforms)."""
@@ -132,6 +137,30 @@ class Family:
 
     def drag(self, drag: DragState, selection: np.ndarray, delta: np.ndarray) -> None:
         """Move the selected handles by ``delta`` (grid frame) from their start."""
+
+    # ---------------------------------------------------------------- placing
+    # A family may build a new object from points clicked in the viewport (the wire
+    # family lays a new wire): the window starts placing, the viewport hands each click
+    # to :meth:`place_point` while :attr:`placing`, the family's panel finishes it with
+    # its options (:meth:`finish_placing`), Esc cancels. The defaults place nothing.
+    def start_placing(self) -> None:
+        """Let the next clicks place points of a new object (nothing here: the family
+        places nothing, :attr:`placing` stays False)."""
+
+    def place_point(self, camera: Camera, size: tuple[int, int], pixel: Sequence[float]) -> None:
+        """Place a point of the new object under ``pixel`` (``size``: the view's pixels)
+        seen by ``camera``."""
+
+    def finish_placing(self, **options: Any) -> Any:
+        """Stop placing and make the placed points the new object (``options``: the
+        family's, from its panel, e.g. a wire's ``kind`` and ``radius``). Returns what
+        was made (None here); an :class:`EditorError` when the points make none."""
+        self.placing = False
+        return None
+
+    def cancel_placing(self) -> None:
+        """Stop placing and drop the points placed."""
+        self.placing = False
 
     # ---------------------------------------------------------------- running
     def advance(self) -> bool:

@@ -343,7 +343,24 @@ class WiresFamily(Family):
         m = np.linalg.inv(self.session.placement_matrix)
         self.pending_wire.append(p @ m[:3, :3].T + m[:3, 3])
 
-    def discard_pending(self) -> None:
+    # ---------------------------------------------------------------- placing (new wires)
+    def start_placing(self) -> None:
+        """The next clicks lay control points of a new wire (:meth:`add_wire_point`)."""
+        self.placing = True
+
+    def place_point(self, camera: Camera, size: tuple[int, int], pixel: Sequence[float]) -> None:
+        """:meth:`add_wire_point`."""
+        self.add_wire_point(camera, size, pixel)
+
+    def finish_placing(self, **options: Any) -> int:
+        """Stop laying and make the laid points a wire (:meth:`finish_wire`; ``options``:
+        its ``kind`` and ``radius``)."""
+        self.placing = False
+        return self.finish_wire(**options)
+
+    def cancel_placing(self) -> None:
+        """Stop laying and drop the laid points."""
+        self.placing = False
         self.pending_wire = []
 
     def finish_wire(self, kind: str = "catmull-rom", radius: float | None = None) -> int:
@@ -415,9 +432,10 @@ class WiresFamily(Family):
     def adopt(self, previous: Family, snap: Snapshot) -> None:
         """Keep the field drawn by ``previous`` (a wire family): as it is when ``snap``
         has the same wires and settings and the field is up to date, else drawn until
-        the rebuilt one replaces it."""
+        the rebuilt one replaces it; keep laying a new wire if ``previous`` was."""
         if not isinstance(previous, WiresFamily):
             return
+        self.placing = previous.placing  # undo keeps laying a new wire (not its points)
         same = (
             snap.state.get("wires") == [w.to_dict() for w in previous.wires]
             and snap.options.wire_settings == self.session.options.wire_settings
