@@ -67,7 +67,6 @@ from voxwarp.ui.family_panels import (
     PanelAction,
     family_label,
 )
-from voxwarp.ui.family_panels.wires import FIELD_SCALES, wire_of_handle
 from voxwarp.ui.field_view import FieldSliceView
 from voxwarp.ui.panel_base import (
     AxisSpinBox,
@@ -82,14 +81,12 @@ from voxwarp.ui.panel_base import (
 
 __all__ = [
     "DISPLAY_LABELS",
-    "FIELD_SCALES",
     "SHADING_CHOICES",
     "DeformationPanel",
     "DisplayPanel",
     "ScenePanel",
     "VolumePanel",
     "window_acts",
-    "wire_of_handle",
 ]
 
 #: Entries of the shading combo box and the ``Scene.shading`` value of each.

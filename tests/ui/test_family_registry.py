@@ -71,12 +71,12 @@ def test_family_adapters_never_import_the_session() -> None:
 
 
 def test_shared_gui_code_never_names_a_family() -> None:
-    """The main window and the viewport import no family adapter (``families.`` of
+    """The main window, the viewport and the panels import no family adapter (``families.`` of
     ``voxwarp.editing``) and no family panel module, and name no adapter class: a family's
     actions and clicks go through the generic hooks (the panel's ``window_actions``, the
     adapter's ``placing`` and ``place_point``)."""
     adapters = [cls.__name__ for cls in FAMILIES.values() if cls is not Family]
-    for name in ("main_window.py", "viewport.py"):
+    for name in ("main_window.py", "viewport.py", "panels.py"):
         text = (ROOT / "ui" / name).read_text(encoding="utf-8")
         imports = [line for line in text.splitlines() if line.startswith(("from ", "import "))]
         assert not [line for line in imports if "families" in line], name

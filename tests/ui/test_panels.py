@@ -30,12 +30,12 @@ from voxwarp.editing.session import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.scene import MODES, Scene
+from voxwarp.ui.family_panels.wires import wire_of_handle
 from voxwarp.ui.panels import (
     DeformationPanel,
     DisplayPanel,
     ScenePanel,
     VolumePanel,
-    wire_of_handle,
 )
 
 TF = [(0.0, 0.0, 0.0, 0.0, 0.0), (100.0, 1.0, 1.0, 1.0, 1.0)]
