@@ -180,7 +180,7 @@ GALLERY: tuple[Entry, ...] = (
         "The window's 2x2 layout on the stent CT bent by the wire `voxwarp demo` lays along"
         " it: axial, sagittal and coronal slices through the same warp as the 3D view.",
         (
-            f"voxwarp demo sample:stent --size 320x400 --out {WORK}/demo",
+            f"voxwarp demo sample:stent --size 320x400 -o {WORK}/demo",
             f"voxwarp gui {WORK}/demo/stent_wires_scene.json --size 1100x750"
             f" --screenshot {WORK}/window_2x2.png",
         ),
@@ -193,7 +193,7 @@ GALLERY: tuple[Entry, ...] = (
         "Viewing a registration without resampling",
         "Colin27 deformed by known bumps, registered back with SimpleITK demons, and the"
         " moving image rendered through the recovered displacement field.",
-        (f"voxwarp demo registration --out {WORK}",),
+        (f"voxwarp demo registration -o {WORK}",),
         _out("registration.png"),
         width=720,
     ),
@@ -202,7 +202,7 @@ GALLERY: tuple[Entry, ...] = (
         "Teaching: explicit vs semi-implicit Euler",
         "The mass-spring demo's figure sheet: energy and stability of both integrators, and"
         " renders of the fish bent by the same drag.",
-        (f"voxwarp demo massspring --out {WORK}",),
+        (f"voxwarp demo massspring -o {WORK}",),
         _out("massspring.png"),
         width=720,
     ),
@@ -211,7 +211,7 @@ GALLERY: tuple[Entry, ...] = (
         "Teaching: how ChainMail propagates a drag",
         "The ChainMail demo's figure sheet: the order in which one drag moves the elements"
         " and the effect of 0, 1 and 4 relaxation steps.",
-        (f"voxwarp demo chainmail --out {WORK}",),
+        (f"voxwarp demo chainmail -o {WORK}",),
         _out("chainmail.png"),
         width=720,
     ),
@@ -220,7 +220,7 @@ GALLERY: tuple[Entry, ...] = (
         "Teaching: wire field resolution and cost",
         "The wire demo's figure sheet: the attribute field from 1:1 to 1:4096 (the wire"
         " paper's Figure 12), the ray samples it ignores and the cost of rendering through it.",
-        (f"voxwarp demo wires --out {WORK}",),
+        (f"voxwarp demo wires -o {WORK}",),
         _out("wires.png"),
         width=720,
     ),
@@ -229,7 +229,7 @@ GALLERY: tuple[Entry, ...] = (
         "Teaching: trilinear lattices",
         "The lattice demo's figure sheet: what a lattice can do that a matrix cannot (a bent"
         " volume, tubes wrapped round a torus) and the two ways of carrying normals.",
-        (f"voxwarp demo lattice --out {WORK}",),
+        (f"voxwarp demo lattice -o {WORK}",),
         _out("lattice.png"),
         width=720,
     ),

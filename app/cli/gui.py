@@ -35,10 +35,10 @@ def has_display() -> bool:
 
 
 def _demo_args(out: str) -> argparse.Namespace:
-    """The options of ``voxwarp demo --out OUT`` (the headless fallback of ``gui``)."""
+    """The options of ``voxwarp demo -o OUT`` (the headless fallback of ``gui``)."""
     parser = argparse.ArgumentParser(prog="voxwarp")
     demo.add_parser(parser.add_subparsers())
-    return parser.parse_args(["demo", "--out", out])
+    return parser.parse_args(["demo", "-o", out])
 
 
 def cmd_gui(args: argparse.Namespace) -> int:
@@ -51,7 +51,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
             )
         print(
             "voxwarp: no display ($DISPLAY is not set), so no window: rendering the sample"
-            " headless into out/ instead (voxwarp demo --out out)",
+            " headless into out/ instead (voxwarp demo -o out)",
             file=sys.stderr,
         )
         return demo.cmd_demo(_demo_args(args.fallback_out))
