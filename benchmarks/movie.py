@@ -122,9 +122,8 @@ def format_bench(row: Mapping[str, Any]) -> str:
 
 def add_bench_movie_parser(bsub: Any) -> None:
     """The ``movie`` sub-command (the options ``voxwarp animate --bench`` took)."""
-    from voxwarp.animation import FRAME_FORMATS
-    from voxwarp.cli.animate import _frames
-    from voxwarp.core.checks import image_size, positive_int
+    from voxwarp.cli.animate import add_frame_args
+    from voxwarp.core.checks import positive_int
 
     p = bsub.add_parser(
         "movie",
@@ -132,15 +131,7 @@ def add_bench_movie_parser(bsub: Any) -> None:
         " identical, print a table (no movie)",
     )
     p.add_argument("scene", help="scene JSON with an 'animation' entry")
-    p.add_argument("--frames", type=_frames, help="frames to render (default: the animation's)")
-    p.add_argument("--size", type=image_size, default=(512, 512), help="WxH pixels")
-    p.add_argument(
-        "--format",
-        dest="image_format",
-        choices=tuple(FRAME_FORMATS),
-        default="png",
-        help="frame files: 8-bit PNG or float EXR (default png)",
-    )
+    add_frame_args(p)
     p.add_argument(
         "--workers", type=positive_int, default=2, metavar="N", help="local workers (default 2)"
     )

@@ -19,10 +19,9 @@ from typing import Any
 from benchmarks import vtk as bench_vtk
 from voxwarp.bench import render as installed
 from voxwarp.bench.render import BenchReport, BenchRow, RenderCase
+from voxwarp.cli.bench import add_render_bench_args
 from voxwarp.cli.options import tf_arg as _tf_arg
-from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.camera import Camera
-from voxwarp.core.checks import image_size
 from voxwarp.core.volume import Volume
 from voxwarp.render.raycaster import LIGHT
 from voxwarp.scene import Scene
@@ -141,19 +140,7 @@ def case_summary(report: BenchReport) -> dict[str, Any]:
 def add_bench_render_parser(bsub: Any) -> None:
     """The ``render`` sub-command (the options of the former ``voxwarp bench render``)."""
     pbr = bsub.add_parser("render", help="raycaster timings vs VTK and no-skipping")
-    pbr.add_argument(
-        "input",
-        nargs="?",
-        help="volume (default: the standard run: the real CT upsampled to 256³, a dense CT-like"
-        " phantom and the bundled MRI)",
-    )
-    pbr.add_argument("--input", dest="input_file", metavar="FILE", help="same as INPUT")
-    pbr.add_argument("--view", type=_view, help="a named view or AZIMUTH,ELEVATION degrees")
-    pbr.add_argument("--size", type=image_size, default=(512, 512))
-    pbr.add_argument("--frames", type=int, default=10)
-    pbr.add_argument("--warmup", type=int, default=2)
-    pbr.add_argument("--step", type=float, default=1.0)
-    pbr.add_argument("--tf", help="transfer function (default: suits the bench volume)")
+    add_render_bench_args(pbr)
     pbr.add_argument("--no-vtk", action="store_true", help="skip the VTK references")
     pbr.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbr.set_defaults(func=cmd_bench_render)

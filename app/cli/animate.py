@@ -30,6 +30,20 @@ def _frames(text: str) -> int:
     return n
 
 
+def add_frame_args(p: argparse.ArgumentParser) -> None:
+    """The frame options of every command that renders an animation's frames (``animate``
+    and the lab's ``python -m benchmarks movie``): how many, their size and file format."""
+    p.add_argument("--frames", type=_frames, help="frames to render (default: the animation's)")
+    p.add_argument("--size", type=image_size, default=(512, 512), help="WxH pixels")
+    p.add_argument(
+        "--format",
+        dest="image_format",
+        choices=tuple(FRAME_FORMATS),
+        default="png",
+        help="frame files: 8-bit PNG or float EXR (default png)",
+    )
+
+
 def add_parser(sub: Any) -> None:
     """Add ``animate`` to the ``voxwarp`` sub-commands (``sub``: their sub-parsers object)."""
     p = sub.add_parser(
@@ -46,16 +60,8 @@ def add_parser(sub: Any) -> None:
         default="movie.mp4",
         help="movie file (.mp4, .mov, .mkv); frames go to <stem>_frames/",
     )
-    p.add_argument("--frames", type=_frames, help="frames to render (default: the animation's)")
+    add_frame_args(p)
     p.add_argument("--fps", type=_fps, help="frames per second (default: the animation's)")
-    p.add_argument("--size", type=image_size, default=(512, 512), help="WxH pixels")
-    p.add_argument(
-        "--format",
-        dest="image_format",
-        choices=tuple(FRAME_FORMATS),
-        default="png",
-        help="frame files: 8-bit PNG or float EXR (default png)",
-    )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",

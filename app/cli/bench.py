@@ -41,21 +41,7 @@ def add_parser(sub: Any, *, bench: bool = True) -> None:
     pb = sub.add_parser("bench", help="benchmarks")
     bsub = pb.add_subparsers(dest="bench", required=True)
     pbr = bsub.add_parser("render", help="raycaster timings vs no-skipping")
-    pbr.add_argument(
-        "input",
-        nargs="?",
-        help="volume (default: the standard run: the real CT upsampled to 256³, a dense CT-like"
-        " phantom and the bundled MRI)",
-    )
-    pbr.add_argument("--input", dest="input_file", metavar="FILE", help="same as INPUT")
-    pbr.add_argument("--view", type=_view, help=ropt.VIEW_HELP)
-    pbr.add_argument("--size", type=_size, default=(512, 512))
-    pbr.add_argument("--frames", type=int, default=10)
-    pbr.add_argument("--warmup", type=int, default=2)
-    pbr.add_argument("--step", type=float, default=1.0)
-    pbr.add_argument(
-        "--tf", help=TF_HELP + " (default: suits the bench volume; standard run: sparse)"
-    )
+    add_render_bench_args(pbr)
     pbr.add_argument(
         "--no-vtk", action="store_true", help="no effect: VTK is in 'python -m benchmarks render'"
     )
@@ -71,6 +57,27 @@ def add_parser(sub: Any, *, bench: bool = True) -> None:
         pmv.set_defaults(func=cmd_bench_moved)
     if bench:
         _add_heavy_bench_parsers(bsub)
+
+
+def add_render_bench_args(p: argparse.ArgumentParser) -> None:
+    """The options every render benchmark takes (``voxwarp bench render`` and the lab's
+    ``python -m benchmarks render``): the volume, view, image size, frames, sample
+    distance and transfer function."""
+    p.add_argument(
+        "input",
+        nargs="?",
+        help="volume (default: the standard run: the real CT upsampled to 256³, a dense CT-like"
+        " phantom and the bundled MRI)",
+    )
+    p.add_argument("--input", dest="input_file", metavar="FILE", help="same as INPUT")
+    p.add_argument("--view", type=_view, help=ropt.VIEW_HELP)
+    p.add_argument("--size", type=_size, default=(512, 512))
+    p.add_argument("--frames", type=int, default=10)
+    p.add_argument("--warmup", type=int, default=2)
+    p.add_argument("--step", type=float, default=1.0)
+    p.add_argument(
+        "--tf", help=TF_HELP + " (default: suits the bench volume; standard run: sparse)"
+    )
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
