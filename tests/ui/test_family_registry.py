@@ -24,7 +24,7 @@ def _section() -> str:
 
 def test_the_listed_files_exist() -> None:
     rows = [r for r in _section().splitlines() if r.startswith("| ") and "`" in r]
-    assert len(rows) == 6  # warp, shader, settings, adapter, panel, animation targets
+    assert len(rows) == 7  # warp, shader, settings, adapter, panel, animation targets, CLI
     for row in rows:
         for path in re.findall(r"`([\w/]+\.(?:py|glsl))`", row):
             assert (ROOT / path).is_file(), f"layout.md names {path}, which does not exist"
