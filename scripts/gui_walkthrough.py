@@ -74,7 +74,7 @@ def main(out: Path) -> int:
         panel.model_combo.setCurrentIndex(panel.model_combo.findData(kind))
         if w.session.kind != kind:
             panel.apply_button.click()
-        w.wait_for_wire_build(60)
+        w.wait_for_field_build(60)
 
     def front_middle(shape: tuple[int, ...]) -> int:
         pts = w.session.handles()
@@ -113,7 +113,7 @@ def main(out: Path) -> int:
     # wire: bend the default wire by its third control point
     choose_model("wires", 6)
     mouse_drag(pixel_of(2), QPoint(110, 0))
-    ok = w.wait_for_wire_build(60)
+    ok = w.wait_for_field_build(60)
     print(f"wire: field rebuilt {ok}, {w.session.timings.get('field', float('nan')):.0f} ms")
     if not ok or w.session.family.field_stale:
         problems.append("wire field not rebuilt")

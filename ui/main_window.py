@@ -48,7 +48,8 @@ from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import WarpError
 from voxwarp.editing.keyframes import DEFAULT_FRAMES, delete_keys, key_frames, set_key
-from voxwarp.editing.session import EditorError, EditSession, Snapshot, WireBuild, warm_up_kernels
+from voxwarp.editing.session import EditorError, EditSession, Snapshot, warm_up_kernels
+from voxwarp.editing.state import BuildJob
 from voxwarp.errors import VoxwarpError
 from voxwarp.inputs import load_input
 from voxwarp.io.fields import load_transform
@@ -198,8 +199,8 @@ class MainWindow(QMainWindow):
         self.setAcceptDrops(True)
         self.resize(1280, 820)
         self._pending_before: Snapshot | None = None
-        self._wire_task: Task | None = None
-        self._wire_job: WireBuild | None = None
+        self._build_task: Task | None = None
+        self._build_job: BuildJob | None = None
         self._open_task: Task | None = None
         self._fps_times: list[float] = []
         self._panels: list[Any] = []
@@ -463,13 +464,13 @@ class MainWindow(QMainWindow):
         """After an edit, undo or redo: a stale wire field is rebuilt, panels and the
         view follow."""
         if self.session.family.field_stale:
-            self.request_wire_build()
+            self.request_field_build()
         self.refresh_panels()
         self.viewport.update()
 
     def restore(self, snap: Snapshot) -> None:
         """Put the session in a snapshot's state (undo/redo)."""
-        self._cancel_wire_build()
+        self._cancel_field_build()
         try:
             self.viewport.with_context(lambda: self.session.restore(snap))
         except VoxwarpError as exc:
@@ -497,7 +498,7 @@ class MainWindow(QMainWindow):
         self._changed()
 
     def _dragged(self) -> None:
-        self.request_wire_build()  # only when the drag left a wire field stale
+        self.request_field_build()  # only when the drag left a wire field stale
 
     def _tf_edited(self, tf: Any) -> None:
         self.edit(
@@ -506,53 +507,55 @@ class MainWindow(QMainWindow):
             merge="transfer function",
         )
 
-    # ------------------------------------------------------------------ wires
-    def request_wire_build(self) -> None:
-        """Rebuild the wire field off the GUI thread (one at a time; a newer edit
-        starts the next build when this one is done)."""
-        if self._wire_task and self._wire_task.running:
+    # ------------------------------------------------------------------ field builds
+    def request_field_build(self) -> None:
+        """Rebuild the active family's stale field (the wire field) off the GUI thread (one
+        at a time; a newer edit starts the next build when this one is done)."""
+        if self._build_task and self._build_task.running:
             return
         if not self.session.family.field_stale:  # (never for the other families)
             return
         job = self.session.family.build_job()
+        if job is None:
+            return
         task = Task(lambda progress, cancelled: job.run(progress), self)
-        self._wire_task, self._wire_job = task, job
+        self._build_task, self._build_job = task, job
         self.progress.setValue(0)
-        self.progress.setFormat("wire field %p%")
+        self.progress.setFormat(f"{job.label} %p%")
         self.progress.show()
         task.progressed.connect(lambda f, _t: self.progress.setValue(int(1000 * f)))
-        task.succeeded.connect(lambda _w: self._wire_built(job))
+        task.succeeded.connect(lambda _w: self._field_built(job))
         task.failed.connect(self.show_error)
-        task.finished.connect(self._wire_task_done)
+        task.finished.connect(self._build_task_done)
         task.start()
 
-    def _wire_built(self, job: WireBuild) -> None:
-        if job is not self._wire_job:
+    def _field_built(self, job: BuildJob) -> None:
+        if job is not self._build_job:
             return
         self.viewport.with_context(lambda: self.session.family.install(job))
         self.refresh_panels()
         self.viewport.update()
 
-    def _wire_task_done(self) -> None:
+    def _build_task_done(self) -> None:
         self.progress.hide()
-        self._wire_task = None
+        self._build_task = None
         if self.session.family.field_stale and not self.session.dragging:
-            QTimer.singleShot(0, self.request_wire_build)
+            QTimer.singleShot(0, self.request_field_build)
         elif self.session.family.field_stale:
-            QTimer.singleShot(30, self.request_wire_build)
+            QTimer.singleShot(30, self.request_field_build)
 
-    def _cancel_wire_build(self) -> None:
-        if self._wire_job is not None:
-            self._wire_job.cancel()
-        self._wire_job = None
+    def _cancel_field_build(self) -> None:
+        if self._build_job is not None:
+            self._build_job.cancel()
+        self._build_job = None
 
-    def wait_for_wire_build(self, timeout: float = 60.0) -> bool:
-        """Process events until no wire build is running or due (tests, scripts)."""
+    def wait_for_field_build(self, timeout: float = 60.0) -> bool:
+        """Process events until no field build is running or due (tests, scripts)."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             QApplication.processEvents()
             if (
-                not (self._wire_task and self._wire_task.running)
+                not (self._build_task and self._build_task.running)
                 and not self.session.family.field_stale
             ):
                 return True
@@ -730,7 +733,7 @@ class MainWindow(QMainWindow):
 
     def set_session(self, session: EditSession, source: str | None = None) -> None:
         """Show another session (a file was opened); clears the undo history."""
-        self._cancel_wire_build()
+        self._cancel_field_build()
         session.running = self.session.running  # run/pause is the window's, not the file's
         session.sync_builds = False
         self.session = session
@@ -1010,7 +1013,7 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event: Any) -> None:
         """Stop the timer and release GL resources."""
         self.sim_timer.stop()
-        self._cancel_wire_build()
+        self._cancel_field_build()
         self.viewport.release_gl()
         super().closeEvent(event)
 

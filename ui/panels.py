@@ -10,7 +10,7 @@ to the window only through this contract (see ``ui/main_window.py``)::
     window.viewport.update() -> None       # redraw
     window.edit(text, fn, merge=None)      # fn() as one undoable edit
     window.scene_changed() -> None         # the scene's look changed
-    window.request_wire_build() -> None    # rebuild the wire field off the GUI thread
+    window.request_field_build() -> None    # rebuild the wire field off the GUI thread
     window.set_running(running) -> None
     window.open_file_dialog() -> None
     window.refresh_panels() -> None        # after an edit outside window.edit

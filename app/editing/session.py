@@ -13,9 +13,9 @@ its adapter (:mod:`voxwarp.editing.families`; the session never switches on the 
 * ``"wires"``: :class:`~voxwarp.deform.wires.field.Wire` objects and their attribute field; the
   handles are the control points of the *modified* wires (the base wires stay where
   they were laid). Editing one needs a rebuild of the field (~0.2 s): the adapter
-  hands out a :class:`WireBuild` job (``session.family.build_job()``) that runs off the
-  GUI thread and installs its result (``session.family.install(job)``) only if nothing
-  changed meanwhile.
+  hands out a :class:`~voxwarp.editing.state.BuildJob`
+  (``session.family.build_job()``) that runs off the GUI thread and installs its result
+  (``session.family.install(job)``) only if nothing changed meanwhile.
 * ``"lattice"``: a :class:`~voxwarp.deform.lattice.trilinear.TrilinearGrid` over the volume's box
   (:class:`~voxwarp.deform.lattice.warp.LatticeWarp`); the handles are its nodes.
 
@@ -73,7 +73,7 @@ from voxwarp.editing.common import (
 from voxwarp.editing.common import (
     INTEGRATORS as INTEGRATORS,
 )
-from voxwarp.editing.families import FAMILIES, Family, WireBuild
+from voxwarp.editing.families import FAMILIES, Family
 from voxwarp.editing.model_settings import FamilyOptions
 from voxwarp.editing.state import DragState, Placement, Snapshot
 from voxwarp.render.overlay import OverlayLayer, box_edges
@@ -99,7 +99,6 @@ __all__ = [
     "EditorError",
     "Placement",
     "Snapshot",
-    "WireBuild",
 ]
 
 F = TypeVar("F", bound=Family)

@@ -182,3 +182,18 @@ class SessionHost(Protocol):
     def sync_warps(self) -> None: ...
 
     def set_deformation(self, kind: str, **settings: Any) -> None: ...
+
+
+class BuildJob(Protocol):
+    """A field rebuild a family hands out
+    (:meth:`~voxwarp.editing.families.base.Family.build_job`) to run off the GUI thread:
+    ``run`` builds from a copy of the family's state (``progress(fraction, what)``
+    reports) and returns the result for
+    :meth:`~voxwarp.editing.families.base.Family.install`, or None once cancelled."""
+
+    #: what is being built, for a progress bar ("wire field")
+    label: str
+
+    def run(self, progress: Callable[[float, str], None] | None = None) -> Any: ...
+
+    def cancel(self) -> None: ...

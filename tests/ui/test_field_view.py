@@ -203,7 +203,7 @@ def test_a_wire_field_being_built_shows_no_field_yet(qtbot: Any) -> None:
     assert window.session.family.field_stale
     assert view.title_label.text() == "no wires field yet"
     assert not view.view_combo.isEnabled()
-    window.request_wire_build()
+    window.request_field_build()
     view.refresh()
     assert combo_items(view) == list(voxwarp.render.field_views.VIEWS["wires"])
     assert view.slice is not None

@@ -155,14 +155,14 @@ def test_undo_restores_the_state_exactly_and_redo_reapplies(window: Any, qtbot: 
 def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any) -> None:
     w = window
     w.edit("Wire field", lambda: w.session.set_deformation("wires"))
-    assert w.wait_for_wire_build(60)
+    assert w.wait_for_field_build(60)
     field_before = w.session.model_warp()
     assert field_before is not None
     img0 = frame(w)
     k = 2  # an inner control point of the default straight wire
     start = handle_pixel(w, k)
     drag(qtbot, w.viewport, start, start + QPoint(0, -70))
-    assert w.wait_for_wire_build(60)
+    assert w.wait_for_field_build(60)
     assert w.session.model_warp() is not field_before, "the field was not rebuilt"
     assert not w.session.family.field_stale
     moved = (
@@ -177,7 +177,7 @@ def test_wire_drag_rebuilds_the_field_off_the_gui_thread(window: Any, qtbot: Any
         w.session.adapter(WiresFamily).wires[0].modified.control_points,
         w.session.adapter(WiresFamily).wires[0].base.control_points,
     )
-    assert w.wait_for_wire_build(60)  # the undone field is rebuilt off the GUI thread too
+    assert w.wait_for_field_build(60)  # the undone field is rebuilt off the GUI thread too
     np.testing.assert_array_equal(frame(w), img0)
 
 
@@ -370,7 +370,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     press_shortcut(qtbot, w, Qt.Key.Key_W)
     assert w.session.family.placing
     assert w.session.kind == "wires"
-    assert w.wait_for_wire_build(60)
+    assert w.wait_for_field_build(60)
     clicks = [QPoint(300, 300), QPoint(350, 320), QPoint(400, 330)]
     for p in clicks:
         qtbot.mouseClick(vp, Qt.MouseButton.LeftButton, pos=p)
@@ -384,7 +384,7 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
     np.testing.assert_allclose(xy, [[p.x(), p.y()] for p in clicks], atol=1e-6)
     centre = 0.5 * np.add(*w.session.volume.bounds)
     np.testing.assert_allclose((new - centre) @ vp.camera.rotation[:, 2], 0.0, atol=1e-9)
-    assert w.wait_for_wire_build(60)
+    assert w.wait_for_field_build(60)
     assert len(w.session.model_warp().wires) == 2
     w.undo_action.trigger()
     assert len(w.session.adapter(WiresFamily).wires) == 1
@@ -404,7 +404,7 @@ def test_wire_actions_come_from_the_wire_panel_and_esc_cancels(window: Any, qtbo
     press_shortcut(qtbot, w, Qt.Key.Key_W)
     assert w.session.kind == "wires"
     assert w.session.family.placing
-    assert w.wait_for_wire_build(60)
+    assert w.wait_for_field_build(60)
     assert w.undo_stack.undoText() == "Wire field"
     w.deformation_panel.radius_spin.setValue(3.0)  # while laying: no edit of wire 1
     assert w.undo_stack.undoText() == "Wire field"
@@ -413,7 +413,7 @@ def test_wire_actions_come_from_the_wire_panel_and_esc_cancels(window: Any, qtbo
     assert w.undo_stack.undoText().startswith("Wire ends")
     w.undo_action.trigger()
     assert w.session.family.placing
-    assert w.wait_for_wire_build(60)
+    assert w.wait_for_field_build(60)
     qtbot.mouseClick(w.viewport, Qt.MouseButton.LeftButton, pos=QPoint(300, 300))
     assert len(w.session.adapter(WiresFamily).pending_wire) == 1
     assert "1 point laid" in w.deformation_panel.wire_label.text()

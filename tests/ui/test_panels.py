@@ -97,7 +97,7 @@ class FakeWindow:
     def scene_changed(self) -> None:
         self.scene_changes += 1
 
-    def request_wire_build(self) -> None:
+    def request_field_build(self) -> None:
         self.wire_builds += 1
         if self.session.family.field_stale:
             job = self.session.family.build_job()

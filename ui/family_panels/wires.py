@@ -5,7 +5,7 @@ and the window's "Lay a New Wire" (W) and "Finish Wire" (Return) actions.
 A new wire is laid through the adapter's generic placing (``Family.start_placing``; the
 viewport hands clicks to ``place_point``) and finished with this panel's curve and
 radius. The wire edits rebuild the wire field off the GUI thread
-(``window.request_wire_build``).
+(``window.request_field_build``).
 """
 
 from __future__ import annotations
@@ -211,7 +211,7 @@ class WiresPanel(FamilyPanel):
 
     def model_edited(self) -> None:
         """New or reset wires: rebuild their field."""
-        self._window.request_wire_build()
+        self._window.request_field_build()
 
     # ---------------------------------------------------------------- new wires
     def window_actions(self) -> list[PanelAction]:
@@ -371,7 +371,7 @@ class WiresPanel(FamilyPanel):
     def _wire_edit(self, text: str, fn: Callable[[], Any], merge: str | None = None) -> Any:
         """An edit of the wires, then a rebuild of their field off the GUI thread."""
         result = self._edit(text, fn, merge)
-        self._window.request_wire_build()
+        self._window.request_field_build()
         return result
 
     def _wire_index(self) -> int | None:

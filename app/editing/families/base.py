@@ -24,7 +24,7 @@ import numpy as np
 from voxwarp.deform.warp import Warp
 from voxwarp.editing.common import DisplayOptions, EditorError
 from voxwarp.editing.model_settings import BuildReport, Built
-from voxwarp.editing.state import DragState, SessionHost, Snapshot
+from voxwarp.editing.state import BuildJob, DragState, SessionHost, Snapshot
 from voxwarp.render.overlay import OverlayLayer
 
 if TYPE_CHECKING:
@@ -97,12 +97,12 @@ class Family:
         """Whether a field built off the GUI thread lags the edits."""
         return False
 
-    def build_job(self) -> Any:
-        """A job (``run(progress)``, ``cancel()``) rebuilding a stale field on any thread,
-        for :meth:`install`; None for families with nothing to build off the GUI thread."""
+    def build_job(self) -> BuildJob | None:
+        """A job rebuilding a stale field on any thread, for :meth:`install`; None for
+        families with nothing to build off the GUI thread."""
         return None
 
-    def install(self, job: Any) -> bool:
+    def install(self, job: BuildJob) -> bool:
         """Put a finished :meth:`build_job` in the scene (GUI thread); whether it is of
         the current state (False: dropped, or drawn until the next build)."""
         return False

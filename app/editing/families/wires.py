@@ -12,7 +12,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 
@@ -53,6 +53,8 @@ class WireBuild:
     warp: WireFieldWarp | None = None
     seconds: float = 0.0
     _cancel: threading.Event = field(default_factory=threading.Event)
+    #: what is being built, for a progress bar (:class:`~voxwarp.editing.state.BuildJob`)
+    label: ClassVar[str] = "wire field"
 
     def cancel(self) -> None:
         """Ask :meth:`run` to stop; its result is then dropped."""
