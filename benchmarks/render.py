@@ -19,8 +19,7 @@ from typing import Any
 from benchmarks import vtk as bench_vtk
 from voxwarp.bench import render as installed
 from voxwarp.bench.render import BenchReport, BenchRow, RenderCase
-from voxwarp.cli.bench import add_render_bench_args
-from voxwarp.cli.options import tf_arg as _tf_arg
+from voxwarp.cli.bench import add_render_bench_args, render_bench_cases
 from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
 from voxwarp.render.raycaster import LIGHT
@@ -150,17 +149,8 @@ def cmd_bench_render(args: argparse.Namespace) -> int:
     """``python -m benchmarks render``: without an input the standard run (a sparse and
     two dense cases)."""
     from voxwarp.core.files import atomic_write_text
-    from voxwarp.inputs import load_input
 
-    path = args.input_file or args.input
-    if path:
-        obj = load_input(path)
-        vol = getattr(obj, "volume", obj)
-        cases = [RenderCase("", vol, _tf_arg(args.tf, vol), ("dvr", "mip"))]
-    else:
-        cases = installed.standard_cases()
-        if args.tf:  # applies to the sparse case only: the dense ones define their TF
-            cases[0].transfer_function = _tf_arg(args.tf, cases[0].volume)
+    cases = render_bench_cases(args)
     reports = bench_render_cases(
         cases,
         size=args.size,

@@ -80,21 +80,32 @@ def add_render_bench_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-def cmd_bench(args: argparse.Namespace) -> int:
-    """``voxwarp bench render``: this machine's frame rates (see voxwarp.bench.render);
-    without an input the standard run: a sparse and two dense cases."""
+def render_bench_cases(args: argparse.Namespace) -> list[Any]:
+    """The cases a render benchmark times (:func:`add_render_bench_args`' options): the
+    input volume alone, or without one the standard run (a sparse and two dense cases;
+    ``--tf`` applies to the sparse one, the dense ones define their own)."""
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
-    from voxwarp.bench.render import RenderCase, bench_render_cases, standard_cases
+    from voxwarp.bench.render import RenderCase, standard_cases
 
     path = args.input_file or args.input
     if path:
         obj = load_input(path)
         vol = getattr(obj, "volume", obj)
-        cases = [RenderCase("", vol, _tf_arg(args.tf, vol), ("dvr", "mip"))]
-    else:
-        cases = standard_cases()
-        if args.tf:  # applies to the sparse case only: the dense ones define their TF
-            cases[0].transfer_function = _tf_arg(args.tf, cases[0].volume)
+        return [RenderCase("", vol, _tf_arg(args.tf, vol), ("dvr", "mip"))]
+    cases = standard_cases()
+    if args.tf:
+        cases[0].transfer_function = _tf_arg(args.tf, cases[0].volume)
+    return cases
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``voxwarp bench render``: this machine's frame rates (see voxwarp.bench.render);
+    without an input the standard run: a sparse and two dense cases."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.bench.render import bench_render_cases
+
+    path = args.input_file or args.input
+    cases = render_bench_cases(args)
 
     def log(message: str) -> None:
         print(message, file=sys.stderr)
