@@ -58,6 +58,8 @@ from voxwarp.deform.wires.constants import (
     LAYOUTS,
     MAX_WIRES,
     PROPAGATE_MODES,
+    SIDES,
+    VACATED,
     WIRE_KEYS,
 )
 from voxwarp.deform.wires.curves import KINDS
@@ -131,6 +133,9 @@ def wire_schema() -> dict[str, Any]:
         "initial_normal": _one_of(_numbers(3), {"type": "null"}),
         "ends": {"enum": list(ENDS)},
         "falloff": _one_of(positive, {"type": "null"}),
+        "sides": {"enum": list(SIDES)},
+        "side_falloff": _one_of(positive, {"type": "null"}),
+        "vacated": {"enum": list(VACATED)},
     }
     return _object(WIRE_KEYS, props, required=("base", "radius"))
 

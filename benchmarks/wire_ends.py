@@ -70,7 +70,7 @@ def head_wire(vol: Volume, ends: str) -> Any:
     s = (zs - zs[0]) / (zs[-1] - zs[0])
     base = [[c[0], c[1], z] for z in zs]
     mod = [[c[0] + 40.0 * si**2, c[1], z] for si, z in zip(s, zs, strict=True)]
-    return Wire(base, mod, radius=80.0, beta=(20, 255), ends=ends)
+    return Wire(base, mod, radius=80.0, beta=(20, 255), ends=ends, sides="rigid")
 
 
 def graft_wire(vol: Volume, ends: str) -> Any:
@@ -81,7 +81,7 @@ def graft_wire(vol: Volume, ends: str) -> Any:
     s = (zs - zs[0]) / (zs[-1] - zs[0])
     base = [[62.0, 64.0, z] for z in zs]
     mod = [[62.0 + 25.0 * si**2, 64.0, z] for si, z in zip(s, zs, strict=True)]
-    return Wire(base, mod, radius=30.0, beta=(8, 40), ends=ends, falloff=20.0)
+    return Wire(base, mod, radius=30.0, beta=(8, 40), ends=ends, falloff=20.0, sides="rigid")
 
 
 def body_wire(vol: Volume, ends: str) -> Any:
@@ -91,7 +91,12 @@ def body_wire(vol: Volume, ends: str) -> Any:
     lo, hi = vol.value_range
     w = axis_wire(vol, lo + 0.25 * (hi - lo), bend=0.2)
     return Wire(
-        w.base.control_points, w.modified.control_points, radius=w.radius, beta=w.beta, ends=ends
+        w.base.control_points,
+        w.modified.control_points,
+        radius=w.radius,
+        beta=w.beta,
+        ends=ends,
+        sides="rigid",
     )
 
 

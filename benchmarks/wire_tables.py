@@ -156,6 +156,7 @@ def axis_wire(volume: Volume, threshold: float, bend: float = 0.15) -> Any:
         beta=(threshold, hi),
         name="principal axis",
         ends="rigid",  # the paper's sweep
+        sides="rigid",
     )
 
 

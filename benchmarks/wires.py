@@ -1268,6 +1268,7 @@ HEAD_WIRE: dict[str, Any] = {
     "radius": 40.0,
     "beta": [40, 255],
     "twist": [[0, 0], [1, 0.5]],
+    "sides": "rigid",  # the paper's sweep (its build times are the targets)
 }
 #: field scales of the head case (1:8, 1:1) and its targets (s)
 HEAD_SCALES: tuple[int, ...] = (2, 1)

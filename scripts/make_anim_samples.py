@@ -71,7 +71,7 @@ def swim(vol: Volume) -> dict:
         return _r(pts)
 
     keys = [(k, wave(k)) for k in [*range(0, frames - 1, 2), frames - 1]]
-    wire = Wire(base, base.copy(), radius=16.0, beta=(-900.0, 4000.0), name="spine")
+    wire = Wire(base, base.copy(), radius=16.0, beta=(-900.0, 4000.0), name="spine", sides="rigid")
     deformer = WireDeformer(vol, [wire], field_scale=2)
     deformer.build()
     scene = Scene(

@@ -259,6 +259,7 @@ wire = Wire(
     twist=[(0.0, 0.0), (0.6, 0.0), (1.0, np.pi / 2)],  # (t, radians)
     radius=14.0,  # mm around the wire that it moves
     beta=(-200, 3000),  # the fish's value range (HU): what the sweep carries
+    sides="rigid",  # the paper's sweep of the masked fish (its old place is vacated)
 )
 deformer = WireDeformer(vol, [wire], field_scale=2)
 stats = deformer.build()

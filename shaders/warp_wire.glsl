@@ -20,9 +20,36 @@ uniform vec3 WARP_shape;
 uniform float WARP_rows;      // rows of WARP_lut (3 per wire)
 uniform sampler2D WARP_lut;
 #if WARP_SMOOTH
-// smooth wire ends (deform/wires/field.py Wire.ends): per-voxel weight of the displacement,
-// fading to 0 beyond the wire ends and its radius (linear filter)
+// smooth wire sides and ends (deform/wires/wire.py Wire.sides, Wire.ends): per-voxel
+// weight of the displacement, fading to 0 beyond the wire's radius and ends
 uniform sampler3D WARP_weight;
+
+#define WARP_W(OFF) texelFetch(WARP_weight, min(i0 + OFF, top), 0).r
+// The weight at field coordinates g, trilinear from its 8 texels (clamped to the edge,
+// as deform/wires/layouts.py _sample_t_float), and its exact gradient in mm.
+float WARP_weight_at(vec3 g, out vec3 grad) {
+    vec3 raw = g - 0.5;
+    vec3 gc = clamp(raw, vec3(0.0), WARP_shape - 1.0);
+    ivec3 top = ivec3(WARP_shape) - 1;
+    ivec3 i0 = min(ivec3(floor(gc)), max(top - 1, ivec3(0)));
+    vec3 f = gc - vec3(i0);
+    vec3 e = 1.0 - f;
+    float c000 = WARP_W(ivec3(0, 0, 0)), c100 = WARP_W(ivec3(1, 0, 0));
+    float c010 = WARP_W(ivec3(0, 1, 0)), c110 = WARP_W(ivec3(1, 1, 0));
+    float c001 = WARP_W(ivec3(0, 0, 1)), c101 = WARP_W(ivec3(1, 0, 1));
+    float c011 = WARP_W(ivec3(0, 1, 1)), c111 = WARP_W(ivec3(1, 1, 1));
+    grad.x = e.y * e.z * (c100 - c000) + f.y * e.z * (c110 - c010)
+           + e.y * f.z * (c101 - c001) + f.y * f.z * (c111 - c011);
+    grad.y = e.x * e.z * (c010 - c000) + f.x * e.z * (c110 - c100)
+           + e.x * f.z * (c011 - c001) + f.x * f.z * (c111 - c101);
+    grad.z = e.x * e.y * (c001 - c000) + f.x * e.y * (c101 - c100)
+           + e.x * f.y * (c011 - c010) + f.x * f.y * (c111 - c110);
+    vec3 inside = vec3(greaterThan(raw, vec3(0.0))) * vec3(lessThan(raw, WARP_shape - 1.0));
+    grad *= inside * WARP_shape / WARP_size;  // per field voxel -> per mm
+    float a = mix(mix(c000, c100, f.x), mix(c010, c110, f.x), f.y);
+    float b = mix(mix(c001, c101, f.x), mix(c011, c111, f.x), f.y);
+    return mix(a, b, f.z);
+}
 #endif
 #if WARP_LAYOUT_PAPER
 uniform usampler3D WARP_code;
@@ -109,9 +136,13 @@ int WARP_lookup(vec3 p, out vec3 q, out mat3 A) {
     A = transpose(mat3(r0.xyz, r1.xyz, r2.xyz));  // GLSL matrices are built by columns
     q = A * p + vec3(r0.w, r1.w, r2.w);
 #if WARP_SMOOTH
-    float wt = textureLod(WARP_weight, g / WARP_shape, 0.0).r;
-    q = p + wt * (q - p);
-    A = mat3(1.0) + wt * (A - mat3(1.0));  // the weight's own gradient is left out
+    // p + w (q - p); its Jacobian I + w (A - I) + (q - p) (x) grad w (t's gradient left
+    // out, as the paper's section 6.1)
+    vec3 gw;
+    float wt = WARP_weight_at(g, gw);
+    vec3 d = q - p;
+    q = p + wt * d;
+    A = mat3(1.0) + wt * (A - mat3(1.0)) + outerProduct(d, gw);
 #endif
     return 2;
 }

@@ -162,7 +162,7 @@ def wire_warps(vol: Volume) -> list[Warp]:
     base = [[c[0], y, c[2]] for y in ys]
     bent = [[c[0] + s, y, c[2]] for y, s in zip(ys, (0.0, dx, dx, 0.0), strict=True)]
     radius = 0.3 * float(np.max(hi - lo))
-    wd = WireDeformer(vol, [Wire(base, bent, radius=radius, ends="smooth")])
+    wd = WireDeformer(vol, [Wire(base, bent, radius=radius, ends="smooth", sides="rigid")])
     wd.build()
     return [wd.warp()]
 

@@ -220,6 +220,17 @@ def _field_scale(text: str) -> int:
     return v
 
 
+def _positive_mm(text: str) -> float:
+    """A finite length in mm > 0 (``--side-falloff``)."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"give a length in mm > 0; got {text!r}")
+    return v
+
+
 def add_field_args(p: argparse.ArgumentParser) -> None:
     """``--displacement FILE`` (repeatable) and ``--field-convention``."""
     g = p.add_argument_group(
@@ -282,6 +293,29 @@ def add_wire_args(p: argparse.ArgumentParser) -> None:
         default=None,
         help="plane masks: sweep only the connected cross-section the wire runs through"
         " (default on; --no-masks sweeps every object voxel within the radius)",
+    )
+    g.add_argument(
+        "--sides",
+        choices=("smooth", "rigid"),
+        help="for every wire: smooth moves everything within radius + side falloff, the"
+        " surroundings stretching continuously (no masks, nothing left empty); rigid is"
+        " the wire paper's sweep of the masked object, whose old place is vacated;"
+        " default: each wire's 'sides', else smooth",
+    )
+    g.add_argument(
+        "--side-falloff",
+        type=_positive_mm,
+        metavar="MM",
+        help="for every wire with smooth sides: width (mm) of the fade beyond the radius;"
+        " default: each wire's 'side_falloff', else the radius or twice the wire's largest"
+        " move if longer (narrower than 1.5 x the move folds: a warning says so)",
+    )
+    g.add_argument(
+        "--vacated",
+        choices=("empty", "rest"),
+        help="for every wire with rigid sides: what the swept object's old place shows:"
+        " empty (the paper) or rest (the unmoved content); default: each wire's"
+        " 'vacated', else empty",
     )
 
 

@@ -160,6 +160,25 @@ def _check_lattice_options(args: argparse.Namespace) -> None:
         )
 
 
+#: the per-wire options of --wires that every wire of the file takes: (option, key)
+_WIRE_SIDE_OPTIONS = (
+    ("--sides", "sides"),
+    ("--side-falloff", "side_falloff"),
+    ("--vacated", "vacated"),
+)
+
+
+def _apply_side_options(args: argparse.Namespace, entry: dict[str, Any]) -> None:
+    """--sides, --side-falloff and --vacated into every wire of a wire file's entry."""
+    for _, key in _WIRE_SIDE_OPTIONS:
+        value = getattr(args, key, None)
+        if value is None:
+            continue
+        for wire in entry.get("wires") or []:
+            if isinstance(wire, dict):
+                wire[key] = value
+
+
 def _check_wire_options(args: argparse.Namespace) -> None:
     """--wires cannot be combined with a model; its options need it."""
     if args.wires is None:
@@ -168,6 +187,9 @@ def _check_wire_options(args: argparse.Namespace) -> None:
                 raise CliOptionError(f"{opt} needs --wires FILE (a wire file, see --help)")
         if args.masks is not None:
             raise CliOptionError("--masks/--no-masks needs --wires FILE (a wire file)")
+        for opt, attr in _WIRE_SIDE_OPTIONS:
+            if getattr(args, attr, None) is not None:
+                raise CliOptionError(f"{opt} needs --wires FILE (a wire file, see --help)")
         return
     if _deform_model(args) is not None:
         raise CliOptionError(
@@ -189,6 +211,7 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
         entry["layout"] = args.layout
     if args.masks is not None:
         entry["masks"] = args.masks
+    _apply_side_options(args, entry)
     try:
         warp = WiresFamily.build(WireSettings(entry), volume).warp
     except WarpError as exc:
@@ -200,9 +223,20 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
         f" (1:{st.field_scale**3}, {st.layout}), {st.planes - st.planes_dropped} planes"
         f" ({st.mask_bytes_total} bytes of masks), {st.swept} voxels swept,"
         f" {st.percent_ignored:.1f}% ignored,"
-        f" built in {st.timings['total']:.2f} s ({st.backend})"
+        f" built in {st.timings['total']:.2f} s ({st.backend}); sides: {_sides_text(warp.wires)}"
     )
     return warp, summary
+
+
+def _sides_text(wires: list[Any]) -> str:
+    """The wires' sides in a few words (e.g. ``smooth, falloff 35 mm``)."""
+    parts = []
+    for w in wires:
+        if w.smooth_sides:
+            parts.append(f"smooth, falloff {w.side_falloff:.3g} mm")
+        else:
+            parts.append(f"rigid, vacated {w.vacated}")
+    return "; ".join(dict.fromkeys(parts))
 
 
 def _element_settings(args: argparse.Namespace) -> Any:

@@ -148,6 +148,7 @@ def _wire_along(pts: np.ndarray, volume: Any, level: float, top: float, view: An
         radius=radius,
         beta=(level, max(top, level)),
         ends="smooth",
+        sides="rigid",  # the teaching demo shows the paper's sweep of the object
         name="auto",
     )
 

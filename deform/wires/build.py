@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -214,7 +215,7 @@ class WireDeformer(SidePasses):
         lo, hi = vlo.copy(), vhi.copy()
         for w in self.wires:
             clo, chi = _curve_box(w.modified)
-            grow = max(w.influence * float(w.scale[:, 1].max()), w.end_reach())
+            grow = max(w.reach_at(float(w.scale[:, 1].max())), w.end_reach())
             lo = np.minimum(lo, clo - grow)
             hi = np.maximum(hi, chi + grow)
         grow_lo = np.ceil((vlo - lo) / h - 1e-9)
@@ -254,6 +255,10 @@ class WireDeformer(SidePasses):
         masks, dropped, planes_total, mask_bytes = self._all_masks(tables)
         timings["masks"] = time.perf_counter() - t0
         self._warn_ends_inside(tables, masks)
+        for w in self.wires:
+            fold = w.side_fold_warning()
+            if fold is not None:
+                warnings.warn(fold, stacklevel=2)
 
         # 3. seeds: the 8 voxels of every field cell a wire enters; the modified wires
         # for the swept voxels, the base wires for the place the object leaves

@@ -57,9 +57,26 @@ WIRE_KEYS: tuple[str, ...] = (
     "name",
     "ends",
     "falloff",
+    "sides",
+    "side_falloff",
+    "vacated",
 )
 #: with ``ends="smooth"``, the width of the fade beyond the radius, as a share of it
 RADIAL_FADE = 0.25
+#: what a wire does around its radius (see :class:`Wire`): the tissue around the swept
+#: cylinder stretches (``"smooth"``) or the paper's rigid sweep with masks
+SIDES = ("smooth", "rigid")
+#: the default of :attr:`Wire.sides`, also for a wire saved without it
+DEFAULT_SIDES = "smooth"
+#: what the vacated place of a rigid sweep shows: nothing (the paper) or the rest content
+VACATED = ("empty", "rest")
+#: the default of :attr:`Wire.vacated`
+DEFAULT_VACATED = "empty"
+#: a smooth side fade of width F folds where F < FOLD_RATIO x the displacement it fades
+#: (smoothstep's steepest slope is 1.5 / F: det(I + d (x) grad w) = 1 - 1.5 |d| / F)
+FOLD_RATIO = 1.5
+#: the default side falloff is this many times the wire's largest move (or the radius)
+SIDE_FALLOFF_MOVES = 2.0
 
 #: mask pixels per block of planes while the masks are sampled (keeps temporaries small)
 MASK_BLOCK_PIXELS = 1 << 16

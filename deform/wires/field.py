@@ -7,6 +7,7 @@ from __future__ import annotations
 from voxwarp.deform.wires.build import WireDeformer
 from voxwarp.deform.wires.constants import (
     DEFAULT_ENDS,
+    DEFAULT_SIDES,
     ENDS,
     FAR,
     FIELD_SCALES,
@@ -23,6 +24,8 @@ from voxwarp.deform.wires.constants import (
     PAPER_VACATED,
     PROPAGATE_MODES,
     RADIAL_FADE,
+    SIDES,
+    VACATED,
 )
 from voxwarp.deform.wires.layouts import WireField, WireFieldStats
 from voxwarp.deform.wires.tables import WireTables, map_points
@@ -31,6 +34,7 @@ from voxwarp.deform.wires.wire import Wire
 
 __all__ = [
     "DEFAULT_ENDS",
+    "DEFAULT_SIDES",
     "ENDS",
     "FAR",
     "FIELD_SCALES",
@@ -47,6 +51,8 @@ __all__ = [
     "PAPER_VACATED",
     "PROPAGATE_MODES",
     "RADIAL_FADE",
+    "SIDES",
+    "VACATED",
     "Wire",
     "WireDeformer",
     "WireField",

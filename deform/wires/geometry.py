@@ -75,11 +75,16 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
 
 def _fade(wire: Wire, tab: WireTables, u: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Displacement weight of deformed points p of a smooth wire: 1 within its (scaled)
-    radius and between its end planes, fading smoothly to 0 over :data:`RADIAL_FADE`
-    times the radius beyond the radius and over ``falloff`` mm beyond each end plane."""
+    radius and between its end planes, fading smoothly (smoothstep) to 0 beyond the
+    radius over ``side_falloff`` mm (``sides="smooth"``) or :data:`RADIAL_FADE` times
+    the radius (smooth ends only), and over ``falloff`` mm beyond each end plane
+    (``ends="smooth"``; rigid ends keep 1 there)."""
     x, y, z, u = _wire_local(tab, "modified", u, p)
     rm = wire.radius * wire.scale_at(u)
-    radial = 1.0 - _smoothstep((np.hypot(x, y) - rm) / (RADIAL_FADE * rm))
+    width = wire.side_falloff if wire.smooth_sides else RADIAL_FADE * rm
+    radial = 1.0 - _smoothstep((np.hypot(x, y) - rm) / width)
+    if not wire.smooth:
+        return radial.astype(np.float32)
     beyond = np.where(u >= 1.0, np.maximum(z, 0.0), 0.0) + np.where(
         u <= 0.0, np.maximum(-z, 0.0), 0.0
     )

@@ -207,6 +207,27 @@ def _sample_t_float(t_field: np.ndarray, g: np.ndarray) -> np.ndarray:
     return out
 
 
+def _trilinear_gradient(t_field: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """d/dg of :func:`_sample_t_float` at continuous voxel coordinates g (N, 3): the
+    exact gradient of the trilinear interpolant (0 along an axis where g is clamped);
+    divide by the voxel size for mm."""
+    shape = np.asarray(t_field.shape)
+    raw = g - 0.5
+    gc = np.clip(raw, 0.0, shape - 1.0)
+    i0 = np.minimum(np.floor(gc).astype(np.int64), np.maximum(shape - 2, 0))
+    f = gc - i0
+    out = np.zeros((len(g), 3))
+    for c in _CORNERS:
+        idx = np.minimum(i0 + c, shape - 1)
+        v = t_field[idx[:, 0], idx[:, 1], idx[:, 2]]
+        lin = np.where(c == 1, f, 1.0 - f)
+        for a in range(3):
+            others = np.prod(np.delete(lin, a, axis=1), axis=1)
+            out[:, a] += (1.0 if c[a] == 1 else -1.0) * others * v
+    inside = (raw > 0.0) & (raw < shape - 1.0)
+    return np.where(inside, out, 0.0)
+
+
 def _sample_t_packed(code: np.ndarray, g: np.ndarray, wire: np.ndarray) -> np.ndarray:
     """t at g from the 8 packed neighbours of the same wire (vacated ones excluded),
     renormalised; the nearest voxel's integer t where none qualifies (as the shader)."""

@@ -43,7 +43,7 @@ class PlaneMasks:
         px = self.mask_resolution
         n_planes = max(2, math.ceil(tab.length_modified / px) + 1)
         smax = float(wire.scale[:, 1].max())
-        half = math.ceil(wire.influence * smax / px)
+        half = math.ceil(wire.reach_at(smax) / px)
         k = 2 * half + 1
         if n_planes * k * k > MAX_MASK_PIXELS:
             raise WarpError(
@@ -54,12 +54,14 @@ class PlaneMasks:
             )
         ax = (np.arange(k) - half) * px
         x, y = np.meshgrid(ax, ax, indexing="ij")
-        disc = x**2 + y**2 <= (wire.influence * smax) ** 2
+        disc = x**2 + y**2 <= wire.reach_at(smax) ** 2
         # the radius is the region of influence on the base side: a scaled cross-section
         # covers s * radius on the modified side
         tt = np.linspace(0.0, LUT_SIZE - 1.0, n_planes)
         s_at = wire.scale_at(tt / (LUT_SIZE - 1))
-        in_disc = (x[None] ** 2 + y[None] ** 2) <= (wire.influence * s_at[:, None, None]) ** 2
+        in_disc = (x[None] ** 2 + y[None] ** 2) <= wire.reach_at(s_at[:, None, None]) ** 2
+        if wire.smooth_sides:  # no masks: everything within the reach moves
+            return in_disc & disc[None], k, 0
         obj = self._object_pixels(wire, tab, tt, x[disc], y[disc], in_disc[:, disc])
         obj_full = np.zeros((n_planes, k, k), dtype=bool)
         obj_full[:, disc] = obj

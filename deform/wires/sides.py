@@ -205,7 +205,7 @@ class SidePasses(PlaneMasks):
             pts = tab.modified_points if side == "modified" else tab.base_points
             smax = float(w.scale[:, 1].max()) if side == "modified" else 1.0
             ends = w.end_reach(side)
-            r = max(w.influence * smax, ends) + 2 * self.mask_resolution
+            r = max(w.reach_at(smax), ends) + 2 * self.mask_resolution
             a = np.floor((pts.min(0) - r - lo) / h - 0.5).astype(int) - 1
             b = np.ceil((pts.max(0) + r - lo) / h - 0.5).astype(int) + 1
             c_lo, c_hi = np.minimum(c_lo, a), np.maximum(c_hi, b)
@@ -234,7 +234,7 @@ class SidePasses(PlaneMasks):
         return np.array(
             [
                 math.hypot(
-                    w.influence * (float(w.scale[:, 1].max()) if modified else 1.0),
+                    w.reach_at(float(w.scale[:, 1].max()) if modified else 1.0),
                     w.end_reach(side),
                 )
                 + 2 * self.mask_resolution
@@ -258,6 +258,8 @@ class SidePasses(PlaneMasks):
     ) -> _SideResult:
         """One side's result with the bits of ``ends="smooth"`` wires as they need them.
 
+        A wire that vacates nothing (:attr:`Wire.vacates` false: smooth sides, or
+        ``vacated="rest"``) keeps no bit on the base side.
         A flag beyond an end reaches as far as its own wire's :meth:`Wire.end_reach`
         (the OpenCL pass takes the largest of all wires): the falloff on the modified
         side, half of it on the base side. A smooth wire's place is vacated out to the
@@ -266,6 +268,10 @@ class SidePasses(PlaneMasks):
         continuously, so what lies past their middle mostly stays and is shown.
         """
         region_lo, rshape, r_wire, r_u, bits, count = out
+        if side == "base":  # smooth sides and vacated="rest" leave nothing empty
+            for wi, w in enumerate(self.wires):
+                if not w.vacates:
+                    bits &= r_wire != wi
         if not any(w.smooth for w in self.wires):
             return out
         flat = np.flatnonzero(bits)
@@ -297,17 +303,17 @@ class SidePasses(PlaneMasks):
         swept: np.ndarray,
     ) -> np.ndarray | None:
         """The field's displacement weights (see :attr:`WireField.weight`): 1 where a
-        rigid wire is nearest, the smooth fade of the nearest smooth wire elsewhere;
-        None when every wire is rigid. Only the swept voxels and their neighbours (the
+        rigid wire is nearest, the fade of the nearest smooth (ends or sides) wire
+        elsewhere; None when every wire is rigid. Only the swept voxels and their neighbours (the
         corners a swept sample interpolates) are computed; the rest hold 1, unused."""
-        if not any(w.smooth for w in self.wires):
+        if not any(w.fades for w in self.wires):
             return None
         weight = np.ones(shape, dtype=np.float32, order="F")
         inner = np.ones(rshape, dtype=np.float32)
         flat_wire = r_wire.ravel()
         need = np.flatnonzero(ndimage.maximum_filter(swept, size=3, mode="constant"))
         for wi, w in enumerate(self.wires):
-            if not w.smooth:
+            if not w.fades:
                 continue
             for start in range(0, len(need), FLAG_CHUNK):
                 chunk = need[start : start + FLAG_CHUNK]

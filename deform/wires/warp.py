@@ -31,6 +31,7 @@ from voxwarp.deform.wires.layouts import (
     _sample_t_float,
     _sample_t_packed,
     _sample_t_paper,
+    _trilinear_gradient,
 )
 from voxwarp.deform.wires.tables import _lerp_table, map_points
 from voxwarp.deform.wires.wire import Wire
@@ -249,17 +250,39 @@ class WireFieldWarp(Warp):
         return out
 
     def jacobian(self, points: np.ndarray, eps: float = 1e-3) -> np.ndarray:
-        """A(t) where swept (section 6.1), the identity elsewhere."""
+        """d apply / d p: A(t) where swept (section 6.1), the identity elsewhere.
+
+        Where the displacement is weighted (smooth sides or ends) it is
+        ``I + w (A - I) + (A p + b - p) (x) grad w``, with grad w the exact gradient of
+        the trilinear weight (so shading and normals are right in the fade). The terms
+        through t's own gradient (``w (dA/dt p + db/dt) (x) grad t``) are left out, as
+        the paper does (section 6.1): they vanish on straight parts of the wire and
+        grow with its curvature times the distance from it."""
         p = np.atleast_2d(np.asarray(points, dtype=np.float64))
         state, wire, t = self._lookup(p)
         out = np.broadcast_to(np.eye(3), (len(p), 3, 3)).copy()
+        moved = np.zeros((len(p), 3))
         for wi in np.unique(wire[state == 2]):
             sel = (state == 2) & (wire == wi)
-            out[sel] = self.field.tables[int(wi)].lookup(t[sel])[0]
+            a, b = self.field.tables[int(wi)].lookup(t[sel])
+            out[sel] = a
+            moved[sel] = np.einsum("nij,nj->ni", a, p[sel]) + b - p[sel]
         weight = self._weight(p, state)
-        if weight is not None:  # I + w (A - I): the weight's own gradient is left out
-            out[state == 2] = np.eye(3) + weight[:, None, None] * (out[state == 2] - np.eye(3))
+        if weight is not None:
+            sw = state == 2
+            fld = self.field
+            assert fld.weight is not None
+            grad = _trilinear_gradient(fld.weight, (p[sw] - fld.lo) / fld.spacing) / fld.spacing
+            out[sw] = np.eye(3) + weight[:, None, None] * (out[sw] - np.eye(3))
+            out[sw] += moved[sw][:, :, None] * grad[:, None, :]
         return out
+
+    def vacated(self, points: np.ndarray) -> np.ndarray:
+        """Which deformed-space points show nothing because a rigid sweep vacated them
+        (``sides="rigid"``, ``vacated="empty"``; :meth:`apply` sends them to
+        :data:`FAR`): bool per point. Always False for smooth sides or
+        ``vacated="rest"``."""
+        return self._lookup(points)[0] == 1
 
     def swept(self, points: np.ndarray) -> np.ndarray:
         """Which deformed-space points are swept by a wire (bool per point)."""

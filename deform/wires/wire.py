@@ -12,11 +12,17 @@ import numpy as np
 from voxwarp.deform.warp import WarpError
 from voxwarp.deform.wires.constants import (
     DEFAULT_ENDS,
+    DEFAULT_SIDES,
+    DEFAULT_VACATED,
     ENDS,
+    FOLD_RATIO,
     LUT_SIZE,
     MAX_WIRE_POINTS,
     RADIAL_FADE,
     SAVED_ENDS,
+    SIDE_FALLOFF_MOVES,
+    SIDES,
+    VACATED,
     WIRE_KEYS,
 )
 from voxwarp.deform.wires.curves import Curve
@@ -109,8 +115,9 @@ class Wire:
         ``[(t, s), ...]`` (s > 0): scale of the cross-section, keyed the same way.
     radius
         Region of influence (mm): how far from the wire the object is swept (Maya's
-        dropoffDistance); the sweep is rigid inside it; beyond it nothing moves
-        (``ends="rigid"``) or the sweep fades out (``ends="smooth"``).
+        dropoffDistance); the sweep is rigid inside it; beyond it the sweep fades out
+        over ``side_falloff`` mm (``sides="smooth"``), or, with ``sides="rigid"``,
+        nothing moves (``ends="rigid"``) or a short fade (``ends="smooth"``).
     beta
         Object classification: a value range ``(lo, hi)`` of the volume, a callable
         ``values -> bool array``, or ``None`` (everything inside the radius).
@@ -131,6 +138,20 @@ class Wire:
         radius, or twice the largest move of an end's cross-section if that is longer
         (:meth:`end_moves`: a fade shorter than twice the move folds and shows a strip
         twice).
+    sides
+        What happens around the swept cylinder: ``"smooth"`` (the default) moves
+        everything within ``radius + side_falloff`` mm of the modified wire, with no
+        masks: the displacement is the sweep's inside the radius and fades (a
+        smoothstep, C1) to 0 over ``side_falloff`` mm beyond it, so the surrounding
+        tissue stretches, nothing is cut at the radius and no place is vacated;
+        ``"rigid"`` is the paper's sweep of the masked object (its original place is
+        vacated, section 5), kept for the reproductions.
+    side_falloff
+        Width (mm) of the fade beyond the radius with ``sides="smooth"``; default
+        :attr:`side_falloff` (the radius, or twice the wire's largest move if longer).
+    vacated
+        With ``sides="rigid"``: what the swept object's original place shows:
+        ``"empty"`` (the paper: nothing) or ``"rest"`` (its unmoved content).
     """
 
     def __init__(
@@ -146,6 +167,9 @@ class Wire:
         name: str = "",
         ends: str = DEFAULT_ENDS,
         falloff: float | None = None,
+        sides: str = DEFAULT_SIDES,
+        side_falloff: float | None = None,
+        vacated: str = DEFAULT_VACATED,
     ) -> None:
         for what, points in (("base", base), ("modified", modified)):
             count = len(points.control_points) if isinstance(points, Curve) else _count(points)
@@ -179,6 +203,16 @@ class Wire:
         self.ends = ends
         self._end_moves: tuple[Any, tuple[float, float]] | None = None
         self.falloff_mm = None if falloff is None else _positive_mm(falloff, "falloff")
+        if sides not in SIDES:
+            raise WarpError(f"wire sides must be one of {SIDES}; got {sides!r:.40}")
+        self.sides = sides
+        self.side_falloff_mm = (
+            None if side_falloff is None else _positive_mm(side_falloff, "side_falloff")
+        )
+        if vacated not in VACATED:
+            raise WarpError(f"wire vacated must be one of {VACATED}; got {vacated!r:.40}")
+        self.vacated = vacated
+        self._largest_move: tuple[Any, float] | None = None
 
     @property
     def falloff(self) -> float:
@@ -188,18 +222,77 @@ class Wire:
             return self.falloff_mm
         return max(self.radius, 2.0 * max(self.end_moves()))
 
-    def end_moves(self) -> tuple[float, float]:
-        """How far (mm) the sweep moves each end's cross-section at most: the end point
-        and 16 points on the circle of the (scaled) radius around it, in the modified
-        wire's end plane, mapped back through the wire's tables. Cached per shape of
-        the wire."""
-        key = (
+    @property
+    def side_falloff(self) -> float:
+        """Width (mm) of the fade beyond the radius with ``sides="smooth"``: as given,
+        else the larger of the radius and :data:`SIDE_FALLOFF_MOVES` (2) times
+        :meth:`largest_move`.
+
+        Why: across the fade the warp is ``p + w(r) d`` with d the sweep's displacement
+        (|d| <= the largest move m) and w a smoothstep of width F, whose steepest slope
+        is 1.5 / F; its Jacobian ``I + d (x) grad w`` has determinant down to
+        ``1 - 1.5 m / F``, which folds (shows content twice) once F < 1.5 m
+        (:data:`FOLD_RATIO`). 2 m keeps a margin (det >= 0.25); the radius keeps a
+        small move's stretch gentle (a fade as wide as the swept cylinder)."""
+        if self.side_falloff_mm is not None:
+            return self.side_falloff_mm
+        return max(self.radius, SIDE_FALLOFF_MOVES * self.largest_move())
+
+    def side_fold_warning(self) -> str | None:
+        """A one-line warning when a given ``side_falloff`` is short enough to fold
+        (below :data:`FOLD_RATIO` times :meth:`largest_move`), else None."""
+        if not self.smooth_sides or self.side_falloff_mm is None:
+            return None
+        move = self.largest_move()
+        if self.side_falloff_mm >= FOLD_RATIO * move:
+            return None
+        label = repr(self.name) if self.name else "wire"
+        return (
+            f"{label}: side_falloff {self.side_falloff_mm:g} mm is below {FOLD_RATIO:g} x its"
+            f" largest move ({move:.3g} mm): the fade folds (shows tissue twice); give at"
+            f" least {FOLD_RATIO * move:.3g} mm or leave it out (default"
+            f" {max(self.radius, SIDE_FALLOFF_MOVES * move):.3g} mm)"
+        )
+
+    def largest_move(self) -> float:
+        """How far (mm) the sweep moves any point within the (scaled) radius at most:
+        the wire point and 16 points on the circle of the radius around it, in the
+        modified wire's planes at every 8th table entry and the ends, mapped back
+        through the tables. Cached per shape of the wire."""
+        key = self._shape_key()
+        if self._largest_move is None or self._largest_move[0] != key:
+            tab = self.tables()
+            angle = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
+            idx = np.unique(np.r_[np.arange(0, tab.size, 8), tab.size - 1])
+            u = idx / (tab.size - 1)
+            r = self.radius * self.scale_at(u)
+            f = tab.modified_frames[idx]  # (n, 3, 3): columns N, B, T
+            ring = np.cos(angle)[None, :, None] * f[:, None, :, 0]
+            ring = ring + np.sin(angle)[None, :, None] * f[:, None, :, 1]
+            m = tab.modified_points[idx]
+            p = np.concatenate([m[:, None, :], m[:, None, :] + r[:, None, None] * ring], 1)
+            t = np.repeat(idx.astype(np.float64), p.shape[1])
+            q = map_points(tab, t, p.reshape(-1, 3))
+            move = float(np.linalg.norm(q - p.reshape(-1, 3), axis=1).max())
+            self._largest_move = (key, move)
+        return self._largest_move[1]
+
+    def _shape_key(self) -> tuple[Any, ...]:
+        """What the moves depend on (curves, twist, scale, radius)."""
+        return (
             self.base.control_points.tobytes(),
             self.modified.control_points.tobytes(),
             self.twist.tobytes(),
             self.scale.tobytes(),
             self.radius,
         )
+
+    def end_moves(self) -> tuple[float, float]:
+        """How far (mm) the sweep moves each end's cross-section at most: the end point
+        and 16 points on the circle of the (scaled) radius around it, in the modified
+        wire's end plane, mapped back through the wire's tables. Cached per shape of
+        the wire."""
+        key = self._shape_key()
         if self._end_moves is None or self._end_moves[0] != key:
             tab = self.tables()
             angle = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
@@ -217,13 +310,39 @@ class Wire:
     @property
     def influence(self) -> float:
         """How far (mm, before scaling) from the wire anything moves: the radius, and
-        the radial fade beyond it with ``ends="smooth"``."""
-        return self.radius * (1.0 + RADIAL_FADE) if self.smooth else self.radius
+        the radial fade beyond it (``side_falloff`` with ``sides="smooth"``, else
+        :data:`RADIAL_FADE` x the radius with ``ends="smooth"``)."""
+        return self.reach_at(1.0)
+
+    def reach_at(self, scale: Any) -> Any:
+        """How far (mm) from the modified wire anything moves where the cross-section
+        scale is ``scale``: ``radius x scale + side_falloff`` (smooth sides), else the
+        scaled :attr:`influence` of the rigid sweep."""
+        if self.smooth_sides:
+            return self.radius * scale + self.side_falloff
+        return self.radius * scale * ((1.0 + RADIAL_FADE) if self.smooth else 1.0)
 
     @property
     def smooth(self) -> bool:
-        """Whether the sweep fades out beyond the ends and near the radius."""
+        """Whether the sweep fades out beyond the ends (``ends="smooth"``)."""
         return self.ends == "smooth"
+
+    @property
+    def smooth_sides(self) -> bool:
+        """Whether everything around the radius moves with a fade (``sides="smooth"``:
+        no masks, nothing vacated)."""
+        return self.sides == "smooth"
+
+    @property
+    def fades(self) -> bool:
+        """Whether the wire's displacement is weighted (smooth ends or sides)."""
+        return self.smooth or self.smooth_sides
+
+    @property
+    def vacates(self) -> bool:
+        """Whether the swept object's original place shows nothing (the paper's rigid
+        sweep with ``vacated="empty"``)."""
+        return self.sides == "rigid" and self.vacated == "empty"
 
     def end_reach(self, side: str = "modified") -> float:
         """How far (mm) beyond its end planes the wire moves anything (``side``
@@ -281,9 +400,14 @@ class Wire:
             "radius": self.radius,
             "beta": None if self.beta is None else list(self.beta),
             "ends": self.ends,
+            "sides": self.sides,
         }
         if self.falloff_mm is not None:
             d["falloff"] = self.falloff_mm
+        if self.side_falloff_mm is not None:
+            d["side_falloff"] = self.side_falloff_mm
+        if self.vacated != DEFAULT_VACATED:
+            d["vacated"] = self.vacated
         if self.initial_normal is not None:
             d["initial_normal"] = self.initial_normal.tolist()
         if self.name:
@@ -316,10 +440,14 @@ class Wire:
             name=d.get("name", ""),
             ends=d.get("ends", SAVED_ENDS),
             falloff=d.get("falloff"),
+            sides=d.get("sides", DEFAULT_SIDES),
+            side_falloff=d.get("side_falloff"),
+            vacated=d.get("vacated", DEFAULT_VACATED),
         )
 
     def __repr__(self) -> str:
         return (
             f"Wire(kind={self.kind!r}, points={len(self.base.control_points)},"
-            f" radius={self.radius:g}, beta={self.beta!r}, ends={self.ends!r})"
+            f" radius={self.radius:g}, beta={self.beta!r}, ends={self.ends!r},"
+            f" sides={self.sides!r})"
         )

@@ -91,7 +91,9 @@ def _wires(vol: Volume) -> list[Warp]:
     ys = np.linspace(lo[1] + 10, hi[1] - 10, 4)
     base = [[c[0], y, c[2]] for y in ys]
     bent = [[c[0] + dx, y, c[2]] for y, dx in zip(ys, (0.0, 30.0, 30.0, 0.0), strict=True)]
-    wire = Wire(base, bent, radius=45.0, beta=(60.0, 2000.0), ends="rigid")  # the paper's sweep
+    wire = Wire(
+        base, bent, radius=45.0, beta=(60.0, 2000.0), ends="rigid", sides="rigid"
+    )  # the paper's sweep
     wd = WireDeformer(vol, [wire])
     wd.build()
     return [wd.warp()]

@@ -25,7 +25,7 @@ from PySide6.QtWidgets import (
     QPushButton,
 )
 
-from voxwarp.deform.wires.field import ENDS
+from voxwarp.deform.wires.field import ENDS, SIDES, VACATED
 from voxwarp.editing.families.wires import WiresFamily
 from voxwarp.editing.session import WIRE_KINDS, EditorError, EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel, PanelAction
@@ -77,6 +77,9 @@ class WiresPanel(FamilyPanel):
         "wire_kind_combo",
         "radius_spin",
         "wire_ends_combo",
+        "wire_sides_combo",
+        "side_falloff_spin",
+        "wire_vacated_combo",
         "beta_check",
         "beta_lo_spin",
         "beta_hi_spin",
@@ -108,6 +111,36 @@ class WiresPanel(FamilyPanel):
         self._build_new_wire_rows(form)
         self.add_group(self.wire_group)
 
+    def _build_side_rows(self, form: QFormLayout) -> None:
+        """Sides, side falloff and vacated place of the selected wire."""
+        self.wire_sides_combo = combo(
+            SIDES,
+            "Around the selected wire's radius: smooth moves everything within radius +"
+            " falloff (the surroundings stretch, nothing is left empty); rigid is the"
+            " paper's sweep of the masked object (its old place is vacated)",
+        )
+        self.wire_sides_combo.currentTextChanged.connect(self._sides_changed)
+        form.addRow("Sides", self.wire_sides_combo)
+        self.side_falloff_spin = double_spin(
+            0.0,
+            1e5,
+            1.0,
+            2,
+            " mm",
+            "Width of the smooth sides' fade beyond the radius; 0: the default (the radius,"
+            " or twice the wire's largest move if longer: narrower fades fold)",
+        )
+        self.side_falloff_spin.setSpecialValueText("default")
+        self.side_falloff_spin.valueChanged.connect(self._side_falloff_changed)
+        form.addRow("Side falloff", self.side_falloff_spin)
+        self.wire_vacated_combo = combo(
+            VACATED,
+            "With rigid sides: what the swept object's old place shows: empty (the"
+            " paper) or rest (its unmoved content)",
+        )
+        self.wire_vacated_combo.currentTextChanged.connect(self._vacated_changed)
+        form.addRow("Vacated", self.wire_vacated_combo)
+
     def _build_curve_rows(self, form: QFormLayout) -> None:
         """Curve kind, radius and object classification of the selected wire."""
         self.wire_kind_combo = combo(
@@ -132,6 +165,7 @@ class WiresPanel(FamilyPanel):
         )
         self.wire_ends_combo.currentTextChanged.connect(self._ends_changed)
         form.addRow("Ends", self.wire_ends_combo)
+        self._build_side_rows(form)
         self.beta_check = QCheckBox("Object classification")
         self.beta_check.setToolTip(
             "β: only voxels with values in [low, high] follow the selected wire;"
@@ -343,6 +377,11 @@ class WiresPanel(FamilyPanel):
             self.radius_spin.setMaximum(max(self.radius_spin.maximum(), wire.radius))
             self.radius_spin.setValue(wire.radius)
         self.wire_ends_combo.setCurrentText(wire.ends)
+        self.wire_sides_combo.setCurrentText(wire.sides)
+        self.side_falloff_spin.setValue(wire.side_falloff_mm or 0.0)
+        self.side_falloff_spin.setEnabled(wire.smooth_sides)
+        self.wire_vacated_combo.setCurrentText(wire.vacated)
+        self.wire_vacated_combo.setEnabled(not wire.smooth_sides)
         self._refresh_beta(s, wire)
         fraction = self._reference_fraction(s) if point is not None else None
         if fraction is not None:
@@ -409,6 +448,36 @@ class WiresPanel(FamilyPanel):
         self._wire_edit(
             f"Wire ends {ends}",
             lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, ends=ends),
+        )
+
+    def _sides_changed(self, sides: str) -> None:
+        w = self._wire_index()
+        if self._updating or w is None or self.session.adapter(WiresFamily).wires[w].sides == sides:
+            return
+        self._wire_edit(
+            f"Wire sides {sides}",
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, sides=sides),
+        )
+
+    def _side_falloff_changed(self, mm: float) -> None:
+        w = self._wire_index()
+        if self._updating or w is None:
+            return
+        value = float(mm) if mm > 0 else None
+        self._wire_edit(
+            "Wire side falloff",
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, side_falloff=value),
+            merge=f"wire side falloff {w}",
+        )
+
+    def _vacated_changed(self, vacated: str) -> None:
+        w = self._wire_index()
+        wires = self.session.adapter(WiresFamily).wires
+        if self._updating or w is None or wires[w].vacated == vacated:
+            return
+        self._wire_edit(
+            f"Wire vacated {vacated}",
+            lambda: self.session.adapter(WiresFamily).set_wire_parameters(w, vacated=vacated),
         )
 
     def _beta_toggled(self, on: bool) -> None:

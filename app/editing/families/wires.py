@@ -18,7 +18,16 @@ import numpy as np
 
 from voxwarp.core.camera import Camera
 from voxwarp.deform.warp import Warp, WarpError
-from voxwarp.deform.wires.field import DEFAULT_ENDS, ENDS, Wire, WireDeformer, WireFieldWarp
+from voxwarp.deform.wires.field import (
+    DEFAULT_ENDS,
+    DEFAULT_SIDES,
+    ENDS,
+    SIDES,
+    VACATED,
+    Wire,
+    WireDeformer,
+    WireFieldWarp,
+)
 from voxwarp.editing.common import COLORS, WIRE_KINDS, DisplayOptions, EditorError, choice
 from voxwarp.editing.families.base import Family, ToWorld
 from voxwarp.editing.keyframes import json_values, put_key, track
@@ -273,14 +282,27 @@ class WiresFamily(Family):
         radius: float | None = None,
         beta: tuple[float, float] | Literal["keep"] | None = "keep",
         ends: str | None = None,
+        sides: str | None = None,
+        side_falloff: float | Literal["keep"] | None = "keep",
+        vacated: str | None = None,
     ) -> None:
-        """Change a wire's curve kind, influence radius (mm), β (value range or None) or
-        ends (``"smooth"``/``"rigid"``, see :class:`voxwarp.deform.wires.field.Wire`); the
+        """Change a wire's curve kind, influence radius (mm), β (value range or None),
+        ends (``"smooth"``/``"rigid"``), sides (``"smooth"``/``"rigid"``), side falloff
+        (mm, or None for the default) or what a rigid sweep's vacated place shows
+        (``"empty"``/``"rest"``), see :class:`voxwarp.deform.wires.field.Wire`; the
         field is then stale (rebuild it with :meth:`build_job`)."""
         w = self.wire(wire)
         d = w.to_dict()
         if ends is not None:
             d["ends"] = choice(ends, ENDS, "wire ends")
+        if sides is not None:
+            d["sides"] = choice(sides, SIDES, "wire sides")
+        if side_falloff != "keep":
+            d.pop("side_falloff", None)
+            if side_falloff is not None:
+                d["side_falloff"] = float(side_falloff)
+        if vacated is not None:
+            d["vacated"] = choice(vacated, VACATED, "wire vacated")
         if kind is not None:
             kind = choice(kind, WIRE_KINDS, "wire kind")
             if kind != w.kind:
@@ -387,6 +409,7 @@ class WiresFamily(Family):
                 "kind": kind,
                 "radius": radius,
                 "ends": self._wires[-1].ends if self._wires else DEFAULT_ENDS,
+                "sides": self._wires[-1].sides if self._wires else DEFAULT_SIDES,
                 "name": f"wire {len(self._wires) + 1}",
             }
         )

@@ -205,7 +205,9 @@ def test_displacement_range_holds_the_faded_displacements() -> None:
 def _straight(shift: float, twist: float = 0.0, radius: float = 5.0) -> Wire:
     base = [[x, 0.0, 0.0] for x in (0.0, 10.0, 20.0, 30.0)]
     mod = [[x, shift, 0.0] for x in (0.0, 10.0, 20.0, 30.0)]
-    return Wire(base, mod, twist=[(0.0, 0.0), (1.0, twist)], radius=radius, ends="smooth")
+    return Wire(
+        base, mod, twist=[(0.0, 0.0), (1.0, twist)], radius=radius, ends="smooth", sides="rigid"
+    )
 
 
 def test_end_moves_are_the_sweeps_largest_move_of_each_end() -> None:

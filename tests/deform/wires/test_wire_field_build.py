@@ -59,6 +59,7 @@ def wires() -> list[Wire]:
         twist=[(0, 0), (1, 1.2)],
         scale=[(0, 1.0), (1, 1.3)],
         ends="rigid",
+        sides="rigid",
     )
     b = Wire(
         pts(28, 26),
@@ -67,6 +68,7 @@ def wires() -> list[Wire]:
         beta=(50, 2000),
         twist=0.4,
         ends="rigid",
+        sides="rigid",
     )
     return [a, b]
 

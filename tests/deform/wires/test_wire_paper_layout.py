@@ -134,7 +134,9 @@ def test_mask_memory_is_kept_planes_times_pixels_over_8() -> None:
     # 1 mm pixels and planes -> 41 planes of (2 * 9 + 1)^2 pixels, one bit each
     vol = cylinder()
     straight = [[x, AXIS_Y, AXIS_Z] for x in (10.0, 30.0, 50.0)]
-    rigid = Wire(straight, radius=9.0, beta=(50.0, 2000.0), ends="rigid")  # no radial fade
+    rigid = Wire(
+        straight, radius=9.0, beta=(50.0, 2000.0), ends="rigid", sides="rigid"
+    )  # no radial fade
     wd = WireDeformer(vol, [rigid], mask_resolution=1.0)
     stats = wd.build()
     assert stats.planes == 41

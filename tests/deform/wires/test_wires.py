@@ -59,6 +59,7 @@ def axis_points(dx: float = 0.0, dy: float = 0.0, dz: float = 0.0) -> list[list[
 
 def wire(**kw: Any) -> Wire:
     kw.setdefault("ends", "rigid")  # the paper's sweep (test_wire_ends.py: the smooth one)
+    kw.setdefault("sides", "rigid")  # (test_wire_sides.py: the smooth sides)
     kw.setdefault("radius", 9.0)
     kw.setdefault("beta", (50.0, 2000.0))
     base = kw.pop("base", axis_points())
