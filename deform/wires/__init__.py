@@ -92,6 +92,31 @@ leave the original box). It is built in deformed space:
    (:mod:`voxwarp.deform.wires.classify`: the nearest-seed indices never leave the device,
    and the refinement and mask tests give the numpy path's bits); else in numpy.
 
+Wire sides (not in the paper). The paper sweeps only the masked object and vacates its
+original place: the field's voxels are flagged from the plane masks (section 5) and the
+renderer ignores every unflagged voxel (section 6), so that place shows nothing. On real
+anatomy, where tissue surrounds the swept cylinder, that reads as a hole (a crescent
+where the cylinder was) and a tear (where its rim meets unmoved tissue). So
+``sides="smooth"`` (the default, also for wire files without the key) moves everything
+within ``radius + side_falloff`` of the modified wire, with no masks (β is not used):
+``warp(p) = p + w(p) (A p + b - p)``, w = 1 inside the (scaled) radius, falling with a
+smoothstep (C1) to 0 over ``side_falloff`` mm beyond it (times the end fade below);
+nothing is vacated, nothing tears at the radius. The field's "swept" voxels are then the
+whole tube of that reach (steps 1-2 give full discs; step 5 marks nothing vacated). The
+default ``side_falloff`` is the radius or twice the wire's largest move
+(:meth:`Wire.largest_move`), whichever is longer: across the fade the warp is
+``p + w d`` with ``|d| <= m`` and the smoothstep's steepest slope is 1.5 / F, so det J
+falls to ``1 - 1.5 m / F`` and a fade narrower than 1.5 m folds (the build warns in one
+line, :meth:`Wire.side_fold_warning`). Keep the reach below the bend's radius of
+curvature (where the wire's normal planes cross, no sweep is one-to-one).
+``sides="rigid"`` is the paper's sweep (masks, vacated place), kept for the reproductions
+(the bundled files, benchmarks and teaching code say so explicitly); with it
+``vacated="rest"`` marks nothing vacated, so the place shows its unmoved content
+(``"empty"``: the paper). :meth:`WireFieldWarp.vacated` tells which deformed-space points
+show nothing. The Jacobian is ``I + w (A - I) + (A p + b - p) (x) grad w`` with the exact
+gradient of the trilinear weight (CPU and GLSL alike), so shading is right in the fade;
+the terms through t's gradient are left out, as section 6.1 does.
+
 Wire ends (not in the paper). The rigid sweep (``ends="rigid"``) moves nothing past the
 end planes and the radius: a wire that ends inside an object, or an object wider than
 the radius, is cut there, and the build warns when a moving end lies inside its object.
@@ -100,9 +125,10 @@ the radius, is cut there, and the build warns when a moving end lies inside its 
 planes, falling smoothly (a smoothstep) to 0 over ``falloff`` mm beyond each end along
 its tangent (the mapping there is the end plane's, extended) and over
 :data:`RADIAL_FADE` times the radius beyond the radius. Planes beyond the ends use the
-end plane's mask. w is stored per field voxel (float32, trilinearly filtered); the
-Jacobian is taken as ``I + w (A - I)`` (the gradient of w is left out, as that of u).
-The object's place is vacated only out to the middle of the fades: past it the content
+end plane's mask (with smooth sides, the fade is ``side_falloff`` instead of
+:data:`RADIAL_FADE`). w is stored per field voxel (float32; the shader interpolates its
+8 texels itself, as the CPU does, and takes the gradient from them). With rigid sides,
+the object's place is vacated only out to the middle of the fades: past it the content
 has mostly stayed and shows in place, so a fade leaves no hole; a move larger than the
 fade still folds (a doubled strip), so give a falloff of at least twice the end's move.
 

@@ -107,8 +107,9 @@ class WireField:
     #: (wires, PAPER_MAX_SEGMENTS + 1) float32; entries past a wire's last segment
     #: repeat its end
     segments: np.ndarray | None = None
-    #: with any ``ends="smooth"`` wire: float32 weight in [0, 1] per voxel (trilinearly
-    #: filtered) by which a swept sample's displacement is scaled; None: all rigid
+    #: with any smooth (``sides`` or ``ends``) wire: float32 weight in [0, 1] per voxel
+    #: (trilinearly interpolated) by which a swept sample's displacement is scaled;
+    #: None: all rigid
     weight: np.ndarray | None = None
 
     @property

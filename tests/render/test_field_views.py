@@ -61,7 +61,8 @@ def wire_warp(volume: Volume, bent: bool, layout: str = "float") -> Any:
     modified = BASE.copy()
     if bent:
         modified[1:, 1] += (3.0, 4.0, 2.0)
-    wire = Wire(BASE, modified, radius=6.0, beta=(50.0, 200.0), name="axis")
+    # the paper's rigid sweep: its vacated place is what the field views show
+    wire = Wire(BASE, modified, radius=6.0, beta=(50.0, 200.0), name="axis", sides="rigid")
     deformer = WireDeformer(volume, [wire], field_scale=1, layout=layout)
     deformer.build()
     return deformer.warp()
