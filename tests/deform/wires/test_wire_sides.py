@@ -14,6 +14,7 @@ the CPU at points in the fade.
 
 from __future__ import annotations
 
+import json
 import warnings
 from typing import Any
 
@@ -212,3 +213,15 @@ def test_gpu_warp_and_jacobian_equal_the_cpu_in_the_fade(gl_ctx: Any, layout: st
     # test_wire_gpu_sampling.py): a few 1e-3 mm
     np.testing.assert_allclose(q_gpu, warp.apply(p), atol=5e-3)
     np.testing.assert_allclose(j_gpu, warp.jacobian(p), atol=5e-3)
+
+
+def test_scene_json_keeps_the_sides() -> None:
+    warp = built(spine(sides="rigid", vacated="rest"))
+    d = json.loads(json.dumps(warp.to_dict()))
+    assert d["wires"][0]["sides"] == "rigid"
+    assert d["wires"][0]["vacated"] == "rest"
+    loaded = WireFieldWarp.from_dict(d)
+    loaded.bind_volume(filled())
+    assert (loaded.wires[0].sides, loaded.wires[0].vacated) == ("rigid", "rest")
+    p = coronal(step=4.0)
+    np.testing.assert_allclose(loaded.apply(p), warp.apply(p))
