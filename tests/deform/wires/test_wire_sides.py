@@ -225,3 +225,13 @@ def test_scene_json_keeps_the_sides() -> None:
     assert (loaded.wires[0].sides, loaded.wires[0].vacated) == ("rigid", "rest")
     p = coronal(step=4.0)
     np.testing.assert_allclose(loaded.apply(p), warp.apply(p))
+
+
+def test_forward_carries_points_through_the_fade() -> None:
+    # meshes: forward (original -> deformed) inverts apply in the fade too (Newton steps
+    # with the Jacobian that includes the weight's gradient)
+    warp = built(spine())
+    x = np.random.default_rng(1).uniform(40.0, 150.0, (2000, 3))
+    p = warp.forward(x)
+    np.testing.assert_allclose(warp.apply(p), x, atol=warp.forward_tolerance * 1.01)
+    assert np.linalg.norm(p - x, axis=1).max() > 0.5 * BEND  # it does move them
