@@ -339,7 +339,7 @@ class WireDeformer(SidePasses):
         flags: the mask bit under each voxel's projection on its plane. The swept side's
         result, and the vacated place (the base side's first voxel, shape and bits, less
         the swept voxels): the swept object's original place, the same masks seen from
-        the base wires.
+        the base wires (not propagated at all when no wire vacates anything).
 
         A field voxel counts when its footprint touches a mask, not only its centre: the
         masks grow by half a field voxel (else the object's edges would be cut at coarse
@@ -357,6 +357,8 @@ class WireDeformer(SidePasses):
         timings["propagate"] = 0.0
         swept_side = self._side(_SideJob(seeds_m, tables, grown, lo, h, shape, "modified", timings))
         region_lo, rshape, _, _, swept, _ = swept_side
+        if not any(w.vacates for w in self.wires):  # smooth sides or vacated="rest"
+            return swept_side, (region_lo, rshape, np.zeros(rshape, dtype=bool))
         b_lo, b_shape, _, _, gone, _ = self._side(
             _SideJob(seeds_b, tables, grown, lo, h, shape, "base", timings)
         )

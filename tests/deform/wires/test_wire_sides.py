@@ -200,7 +200,7 @@ def test_default_falloff_does_not_fold_and_a_narrow_one_warns() -> None:
     assert np.linalg.det(fd_jacobian(folded, in_fade(folded))).min() < 0.0
 
 
-@pytest.mark.parametrize("layout", ["float", "packed"])
+@pytest.mark.parametrize("layout", ["float", "packed", "paper"])
 def test_gpu_warp_and_jacobian_equal_the_cpu_in_the_fade(gl_ctx: Any, layout: str) -> None:
     warp = built(spine(), layout=layout)
     try:
