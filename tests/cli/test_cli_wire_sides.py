@@ -56,6 +56,7 @@ def black_inside(grey: np.ndarray, doc: dict[str, Any]) -> int:
     return int(np.sum((grey == 0) & inside))
 
 
+@pytest.mark.slow  # three subprocess slices
 def test_default_sides_leave_no_black_pixel_and_rigid_does(
     gl_ctx: Any, bent: tuple[Path, Path]
 ) -> None:

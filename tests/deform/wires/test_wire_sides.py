@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -235,3 +236,26 @@ def test_forward_carries_points_through_the_fade() -> None:
     p = warp.forward(x)
     np.testing.assert_allclose(warp.apply(p), x, atol=warp.forward_tolerance * 1.01)
     assert np.linalg.norm(p - x, axis=1).max() > 0.5 * BEND  # it does move them
+
+
+def _wire_entries(obj: Any) -> list[dict[str, Any]]:
+    """Every wire object in a JSON document (wire files, scenes, animations)."""
+    if isinstance(obj, dict):
+        found = list(obj["wires"]) if isinstance(obj.get("wires"), list) else []
+        return found + [
+            w for v in obj.values() if v is not obj.get("wires") for w in _wire_entries(v)
+        ]
+    if isinstance(obj, list):
+        return [w for v in obj for w in _wire_entries(v)]
+    return []
+
+
+def test_bundled_wire_files_keep_the_papers_rigid_sweep() -> None:
+    # the reproductions, demos and golden images use them: they must not change
+    root = Path(__file__).resolve().parents[3] / "sample_volumes"
+    files = [p for p in root.glob("*.json") if "wires" in p.read_text(encoding="utf-8")]
+    assert len(files) >= 3
+    for path in files:
+        wires = _wire_entries(json.loads(path.read_text(encoding="utf-8")))
+        assert wires, path.name
+        assert {w.get("sides") for w in wires} == {"rigid"}, path.name
