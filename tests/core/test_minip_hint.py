@@ -56,8 +56,10 @@ def test_the_advice_cuts_the_box_to_a_slab_across_the_view() -> None:
     vol = chest()
     scene = Scene(vol, mode="minip", view="anterior")
     advice = minip_advice(vol, scene.window, (0, 1, 0), scene.ray_bounds())
-    assert advice is not None and advice.axis == 1
-    assert advice.thickness > THICK_MM and advice.share >= 0.9
+    assert advice is not None
+    assert advice.axis == 1
+    assert advice.thickness > THICK_MM
+    assert advice.share >= 0.9
     lo, hi = advice.slab_box(scene.ray_bounds())
     assert (lo[1], hi[1]) == (-10.0, 10.0)
     assert (lo[0], hi[0]) == tuple(map(float, (vol.bounds[0][0], vol.bounds[1][0])))

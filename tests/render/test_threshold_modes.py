@@ -62,8 +62,8 @@ def check_coverage(offscreen: Any, scene: Scene) -> tuple[float, float, float]:
 def test_real_scans_show_the_object_on_background(offscreen: Any, sample: str, mode: str) -> None:
     scene = threshold_scene(load_input(f"sample:{sample}"), mode)
     drawn, background, box_background = check_coverage(offscreen, scene)
-    # measured: drawn 1.0, background 1.0, box 18 % (colin27), 38 % (stent flm), 82 % (stent iso) background;
-    # the old stent FLM (threshold 0) drew the whole box
+    # measured: drawn 1.0, background 1.0; background in the box 18 % (colin27), 38 %
+    # (stent flm), 82 % (stent iso); the old stent FLM (threshold 0) drew the whole box
     assert drawn >= 0.97, f"{sample} {mode}: only {drawn:.1%} of the object's rays drawn"
     assert background >= 0.995, f"{sample} {mode}: {1 - background:.1%} of background rays drawn"
     # not a flat box: the air and noise around the object in the box stay background
