@@ -27,7 +27,7 @@ from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rota
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.field_grid import chain_field, field_grid
 from voxwarp.core.files import atomic_write_text
-from voxwarp.core.levels import Level, default_level
+from voxwarp.core.levels import LEVEL_ATTRIBUTES, Level, default_level
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.core.mesh_warp import mesh_instances_bounds
 from voxwarp.core.minip_hint import minip_slab_hint
@@ -419,7 +419,7 @@ class Scene:
             self.window,
             self.use_shading(),
             window_given=self._window is not None,
-            level=self.resolved_level().text(self.mode) if self.mode in ("iso", "flm") else None,
+            level=self.resolved_level().text(self.mode) if self.mode in LEVEL_ATTRIBUTES else None,
             hint=self._minip_hint() if self.mode == "minip" else None,
         )
 
@@ -441,7 +441,9 @@ class Scene:
         and why: the given ``iso_value`` / ``flm_threshold``, else the histogram's
         (:func:`voxwarp.core.levels.default_level`)."""
         mode = self.mode if mode is None else mode
-        name = "iso_value" if mode == "iso" else "flm_threshold"
+        if mode not in LEVEL_ATTRIBUTES:
+            raise SceneError(f"mode {mode!r} has no level; the threshold modes are iso and flm")
+        name = LEVEL_ATTRIBUTES[mode]
         given = getattr(self, name)
         if given is not None:
             return Level(_finite(given, name), "given")

@@ -37,6 +37,8 @@ from voxwarp.core.modality_detection import detect_modality, volume_cache
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 
+#: The threshold modes and the scene attribute that holds their level.
+LEVEL_ATTRIBUTES: dict[str, str] = {"iso": "iso_value", "flm": "flm_threshold"}
 #: Percentiles of the values inside the field of view the split's histogram spans.
 SPLIT_PERCENTILES: tuple[float, float] = (0.5, 99.5)
 #: Bins of the split's histogram.
