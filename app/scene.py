@@ -27,8 +27,10 @@ from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rota
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.field_grid import chain_field, field_grid
 from voxwarp.core.files import atomic_write_text
+from voxwarp.core.levels import LEVEL_ATTRIBUTES, Level, default_level
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.core.mesh_warp import mesh_instances_bounds
+from voxwarp.core.minip_hint import minip_slab_hint
 from voxwarp.core.modality import (
     default_shading,
     describe,
@@ -138,10 +140,13 @@ class Scene:
         ``dvr`` on where the transfer function is a preset that shows surfaces
         (:data:`voxwarp.core.modality.SURFACE_PRESETS`), off otherwise.
     iso_value
-        Isovalue for ``iso``; default where the transfer function's opacity first
-        reaches a quarter of its maximum.
+        Isovalue for ``iso`` (data units); default from the histogram: the split of
+        object and background (MR and other data: the object's outer surface), on a CT
+        where the transfer function's opacity first reaches a quarter of its maximum,
+        never below that split (:mod:`voxwarp.core.levels`).
     flm_threshold
-        Threshold for ``flm``; default the lowest value the transfer function shows.
+        Threshold for ``flm`` (data units); default as ``iso_value``, with the lowest
+        value the transfer function shows on a CT (:mod:`voxwarp.core.levels`).
     background
         RGBA background in [0, 1].
     camera
@@ -414,26 +419,35 @@ class Scene:
             self.window,
             self.use_shading(),
             window_given=self._window is not None,
+            level=self.resolved_level().text(self.mode) if self.mode in LEVEL_ATTRIBUTES else None,
+            hint=self._minip_hint() if self.mode == "minip" else None,
         )
 
+    def _minip_hint(self) -> str | None:
+        """The slab a nearly all dark ``minip`` needs (:mod:`voxwarp.core.minip_hint`)."""
+        back = self.resolved_camera().rotation[:, 2]
+        return minip_slab_hint(self.volume, self.window, back, self.ray_bounds())
+
     def resolved_iso_value(self) -> float:
-        """The isovalue used by ``iso``."""
-        if self.iso_value is not None:
-            return _finite(self.iso_value, "iso_value")
-        tf = self.transfer_function
-        pts = np.asarray(tf.points)
-        amax = pts[:, 4].max()
-        if amax <= 0:
-            return float(self.window[0])
-        v = np.linspace(*tf.value_range, 4096)
-        a = tf(v)[:, 3]
-        return float(v[np.argmax(a >= 0.25 * amax)])
+        """The isovalue used by ``iso`` (given, or :func:`~voxwarp.core.levels.default_level`)."""
+        return self.resolved_level("iso").value
 
     def resolved_flm_threshold(self) -> float:
-        """The first-local-maximum threshold used by ``flm``."""
-        if self.flm_threshold is not None:
-            return _finite(self.flm_threshold, "flm_threshold")
-        return self.transfer_function.first_visible_value()
+        """The first-local-maximum threshold used by ``flm`` (given, or the default)."""
+        return self.resolved_level("flm").value
+
+    def resolved_level(self, mode: str | None = None) -> Level:
+        """The level of threshold ``mode`` (default this scene's; ``"iso"`` or ``"flm"``)
+        and why: the given ``iso_value`` / ``flm_threshold``, else the histogram's
+        (:func:`voxwarp.core.levels.default_level`)."""
+        mode = self.mode if mode is None else mode
+        if mode not in LEVEL_ATTRIBUTES:
+            raise SceneError(f"mode {mode!r} has no level; the threshold modes are iso and flm")
+        name = LEVEL_ATTRIBUTES[mode]
+        given = getattr(self, name)
+        if given is not None:
+            return Level(_finite(given, name), "given")
+        return default_level(self.volume, self.transfer_function, mode)
 
     def deformed_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Box in deformed space holding the warped volume (before clipping)."""

@@ -58,6 +58,7 @@ from PySide6.QtWidgets import (
 
 from voxwarp import shaders
 from voxwarp.core.camera import PROJECTIONS
+from voxwarp.core.levels import LEVEL_ATTRIBUTES
 from voxwarp.editing.session import DEFORMATIONS, DisplayOptions, EditSession, Placement
 from voxwarp.scene import MODES
 from voxwarp.ui.family_panels import (
@@ -222,6 +223,7 @@ class VolumePanel(Panel):
         window_row.addWidget(self.width_spin)
         self.window_label = QLabel("Window")
         form.addRow(self.window_label, window_row)
+        form.addRow(*self._build_threshold_row())
         self.shading_combo = QComboBox()
         for label, value in SHADING_CHOICES:
             self.shading_combo.addItem(label, value)
@@ -272,6 +274,23 @@ class VolumePanel(Panel):
         layout.addStretch(1)
         self.refresh()
 
+    def _build_threshold_row(self) -> tuple[QLabel, QHBoxLayout]:
+        """The level of the threshold modes (iso value, FLM threshold) and its Auto box."""
+        self.threshold_spin = double_spin(-1e9, 1e9, 1.0, 3)
+        self.threshold_spin.valueChanged.connect(self._threshold_changed)
+        self.threshold_auto = QCheckBox("Auto")
+        self.threshold_auto.setToolTip(
+            "From the histogram: the split of object and background (on a CT the transfer"
+            " function's level above it); off: the value typed here"
+        )
+        self.threshold_auto.toggled.connect(self._threshold_auto_toggled)
+        row = QHBoxLayout()
+        row.setSpacing(6)
+        row.addWidget(self.threshold_spin, 1)
+        row.addWidget(self.threshold_auto)
+        self.threshold_label = QLabel("Level")
+        return self.threshold_label, row
+
     # ------------------------------------------------------------------ refresh
     def refresh(self) -> None:
         """Show the current session's volume and scene look (makes no edit)."""
@@ -301,6 +320,7 @@ class VolumePanel(Panel):
             self.level_spin.setValue(level)
             self.width_spin.setValue(width)
             self._show_window_controls(scene.mode)
+            self._show_threshold(scene, decimals, step)
             set_combo_data(self.shading_combo, scene.shading)
             self.jitter_check.setChecked(scene.jitter)
             lo, hi = (np.asarray(b, dtype=np.float64) for b in vol.bounds)
@@ -350,6 +370,39 @@ class VolumePanel(Panel):
             else f"The window acts in {where} only; {mode} maps values through the"
             " transfer function"
         )
+
+    def _show_threshold(self, scene: Any, decimals: int, step: float) -> None:
+        """The threshold row: the mode's level (given or chosen) where the mode has one,
+        disabled elsewhere."""
+        attr = LEVEL_ATTRIBUTES.get(scene.mode)
+        self.threshold_label.setText("Iso value" if scene.mode == "iso" else "Threshold")
+        for w in (self.threshold_label, self.threshold_spin, self.threshold_auto):
+            w.setEnabled(attr is not None)
+        if attr is None:
+            self.threshold_label.setText("Level")
+            self.threshold_label.setToolTip("The iso value of iso and the threshold of flm")
+            return
+        level = scene.resolved_level()
+        self.threshold_spin.setDecimals(decimals)
+        self.threshold_spin.setSingleStep(step)
+        self.threshold_spin.setValue(level.value)
+        self.threshold_auto.setChecked(getattr(scene, attr) is None)
+        self.threshold_spin.setEnabled(getattr(scene, attr) is not None)
+        self.threshold_label.setToolTip(level.text(scene.mode))
+
+    def _threshold_changed(self, value: float) -> None:
+        attr = LEVEL_ATTRIBUTES.get(self.session.scene.mode)
+        if attr is None or self.threshold_auto.isChecked():
+            return
+        self._edit_look(self.threshold_label.text(), attr, float(value), merge=attr)
+
+    def _threshold_auto_toggled(self, on: bool) -> None:
+        attr = LEVEL_ATTRIBUTES.get(self.session.scene.mode)
+        if attr is None:
+            return
+        self.threshold_spin.setEnabled(not on)
+        value = None if on else float(self.threshold_spin.value())
+        self._edit_look(f"{self.threshold_label.text()} {'auto' if on else 'set'}", attr, value)
 
     def _window_changed(self, _value: float) -> None:
         window = (float(self.level_spin.value()), float(self.width_spin.value()))

@@ -14,6 +14,7 @@ from voxwarp.cli.options import TF_HELP, CliOptionError, add_memory_budget_arg
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.checks import image_size as _size
+from voxwarp.core.minip_hint import SLAB_MM, minip_advice
 from voxwarp.core.modes import MODES
 from voxwarp.inputs import load_input
 from voxwarp.io.samples import DEFAULT_SAMPLE, suggested_transfer_function
@@ -127,6 +128,8 @@ def _demo_volume(args: argparse.Namespace) -> int:
     with OffscreenRenderer(*args.size) as r:
         for mode in MODES:
             scene = Scene(vol, mode=mode, transfer_function=tf, view=args.view, zoom=1.3)
+            if mode == "minip":
+                scene = _minip_slab(scene)
             img = r.render(scene)
             paths.append(write_image(out / f"{vol.name}_{mode}.png", img))
         scene.save(out / f"{vol.name}_scene.json")
@@ -144,6 +147,23 @@ def _demo_volume(args: argparse.Namespace) -> int:
     for p in paths:
         print(p)
     return 0
+
+
+def _minip_slab(scene: Any) -> Any:
+    """``scene`` cut to a slab across the view when its minIP would be nearly all dark
+    (:func:`voxwarp.core.minip_hint.minip_advice`: the air on the way is every ray's
+    minimum), with one line on stderr saying so."""
+    back = scene.resolved_camera().rotation[:, 2]
+    box = scene.ray_bounds()
+    advice = minip_advice(scene.volume, scene.window, back, box)
+    if advice is None:
+        return scene
+    print(
+        f"voxwarp: demo: minip through a {SLAB_MM:g} mm slab across the view (through the"
+        f" whole {advice.thickness:.0f} mm it is {advice.share:.0%} dark)",
+        file=sys.stderr,
+    )
+    return scene.copy(clip_box=advice.slab_box(box))
 
 
 def _demo_bend(vol: Any) -> Any:

@@ -41,7 +41,23 @@ def add_parser(sub: Any) -> None:
         metavar="LEVEL,WIDTH",
         help="grey window in data units, e.g. 40,400 (also LEVEL WIDTH: two numbers)",
     )
-    pr.add_argument("--iso", dest="iso_value", type=float, help="isovalue for --mode iso")
+    pr.add_argument(
+        "--iso",
+        dest="iso_value",
+        type=float,
+        metavar="VALUE",
+        help="isovalue for --mode iso, data units (default from the histogram: the split of"
+        " object and background, on a CT the transfer function's surface above it; printed)",
+    )
+    pr.add_argument(
+        "--flm-threshold",
+        dest="flm_threshold",
+        type=float,
+        metavar="VALUE",
+        help="threshold for --mode flm, data units: the first local maximum above it is"
+        " shown (default as --iso, on a CT the lowest value the transfer function shows;"
+        " printed)",
+    )
     pr.add_argument("--zoom", type=float)
     pr.add_argument("--seed", type=int, help="jitter seed")
     pr.add_argument("--jitter", action=argparse.BooleanOptionalAction, default=None)
@@ -72,7 +88,8 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
         changes: dict[str, Any] = {}
         if tf is not None:
             changes["transfer_function"] = tf  # resolved by the scene, knowing the mode
-        for key in ("mode", "projection", "view", "step", "window", "seed", "iso_value", "zoom"):
+        keys = ("mode", "projection", "view", "step", "window", "seed", "zoom")
+        for key in (*keys, "iso_value", "flm_threshold"):
             val = getattr(args, key)
             if val is not None:
                 changes[key] = val
@@ -94,6 +111,7 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
         "seed": args.seed if args.seed is not None else 0,
         "shading": args.shading,
         "iso_value": args.iso_value,
+        "flm_threshold": args.flm_threshold,
         "zoom": args.zoom if args.zoom is not None else 1.0,
     }
     return Scene(obj, **kw)

@@ -161,7 +161,7 @@ def _count_text(n: int) -> str:
 
 
 # ---------------------------------------------------------------------------- defaults
-def _inside_values(volume: Volume) -> np.ndarray:
+def inside_values(volume: Volume) -> np.ndarray:
     """A subsample of the voxel values inside the field of view (padding excluded)."""
     cache = volume_cache(volume)
     if "inside" not in cache:
@@ -181,7 +181,7 @@ def _thin(values: np.ndarray) -> np.ndarray:
 def robust_range(volume: Volume, lo: float, hi: float) -> tuple[float, float]:
     """Percentiles ``lo`` and ``hi`` of the values inside the field of view; widened to
     the value range (and then to one unit) when they coincide."""
-    p_lo, p_hi = (float(x) for x in np.percentile(_inside_values(volume), [lo, hi]))
+    p_lo, p_hi = (float(x) for x in np.percentile(inside_values(volume), [lo, hi]))
     if p_hi <= p_lo:
         p_lo, p_hi = volume.value_range
     if p_hi <= p_lo:
@@ -272,13 +272,18 @@ def describe(
     shading: bool,
     *,
     window_given: bool = False,
+    level: str | None = None,
+    hint: str | None = None,
 ) -> str:
     """One line: the modality and its evidence, what ``mode`` draws with, the padding
-    (``window_given``: the window is the user's, not from the percentiles)."""
+    (``window_given``: the window is the user's, not from the percentiles; ``level``:
+    the iso value or FLM threshold and why; ``hint``: advice appended at the end)."""
     modality = detect_modality(volume)
     unit = " HU" if modality.hu else ""
     if mode in TF_MODES:
         what = f"tf {tf.name}, {'shaded' if shading else 'unshaded'} {mode.upper()}"
+        if level is not None:
+            what += f", {level}"
     else:
         pct = WINDOW_PERCENTILES.get(mode, (1.0, 99.5))
         what = f"{mode.upper()} window {window[0]:.4g}/{window[1]:.4g}{unit}"
@@ -297,7 +302,7 @@ def describe(
                 f"; padding {_padding_text(volume, mask)} kept"
                 f" ({_count_text(int(np.count_nonzero(mask)))} voxels)"
             )
-    return text
+    return text if hint is None else f"{text}; {hint}"
 
 
 def uses_transfer_function(mode: str) -> bool:
