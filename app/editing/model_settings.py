@@ -117,6 +117,18 @@ class ElementSettings:
     drags: tuple[Drag, ...] = ()
     #: the warp's inverse mode (None: the model's default, ``"baked"``)
     inverse: str | None = None
+    # -- the grid margin (mm): the grid's box reaches this far beyond the volume's on
+    # -- every side (None: ElementGrid's default_margin of the drags, 0 without drags)
+    margin: float | None = None
+
+    def grid_margin(self) -> float:
+        """The margin the grid gets: ``margin``, or the largest drag offset component."""
+        # loads scipy: only when used
+        from voxwarp.deform.elements.grid import default_margin
+
+        if self.margin is not None:
+            return float(self.margin)
+        return default_margin([v for d in self.drags for v in np.reshape(d.offset, (-1, 3))])
 
 
 @dataclass(frozen=True)

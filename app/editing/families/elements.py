@@ -73,10 +73,13 @@ class ElementFamily(Family):
     # ---------------------------------------------------------------- the builder
     @classmethod
     def grid(cls, settings: ElementSettings, volume: Any) -> ElementGrid:
-        """The element grid of ``settings`` over ``volume``'s box: its stiffness, fixed
-        elements and materials set (no GL work); a :class:`SettingError` names a bad
-        setting."""
-        grid = ElementGrid(volume, shape=settings.shape)
+        """The element grid of ``settings`` over ``volume``'s box padded by the settings'
+        margin (:meth:`ElementSettings.grid_margin`): its stiffness, fixed elements and
+        materials set (no GL work); a :class:`SettingError` names a bad setting."""
+        try:
+            grid = ElementGrid(volume, shape=settings.shape, margin=settings.grid_margin())
+        except ElementGridError as exc:
+            raise SettingError("margin", str(exc)) from exc
         if settings.stiffness is not None:
             grid.set_material(stiffness=settings.stiffness)
         for ranges in settings.fixed:
