@@ -295,20 +295,25 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
                 f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
                 " point inside that box (world mm, as --drag offsets)"
             )
+    _say_margin(args)
     return grid
 
 
 def _resolve_margin(args: argparse.Namespace) -> None:
     """Set ``args.grid_margin`` (mm): as given, else the largest offset component of the
-    drags (``default_margin``); a margin above 0 is said in one stderr line."""
+    drags (``default_margin``)."""
     from voxwarp.deform.elements.grid import default_margin
 
-    given = args.grid_margin is not None
-    if not given:
+    args.grid_margin_given = args.grid_margin is not None
+    if not args.grid_margin_given:
         offsets = [d.offset for d in args.drag or []] + [d.offset for d in args.drag_at or []]
         args.grid_margin = default_margin(offsets)
+
+
+def _say_margin(args: argparse.Namespace) -> None:
+    """The one stderr line of a grid margin above 0 (after every check passed)."""
     if args.grid_margin > 0.0:
-        why = "--grid-margin" if given else "default: the largest drag offset"
+        why = "--grid-margin" if args.grid_margin_given else "default: the largest drag offset"
         print(
             f"grid margin: the element grid reaches {args.grid_margin:g} mm beyond the"
             f" volume's box on every side ({why}; --grid-margin 0 keeps the box)",

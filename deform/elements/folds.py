@@ -70,5 +70,5 @@ def fold_summary(u: np.ndarray, lo: Any, spacing: Any) -> str | None:
         f"the offset field folds (det J <= 0) in {int(bad.sum())} of {bad.size} cells, worst"
         f" det {float(dets[worst]):.3g} around {np.round(centre, 1).tolist()} mm: the"
         " material turns inside out there, so the volume's inverse is ambiguous and meshes"
-        " self-intersect; drag less, use more elements or stiffer ones, or --relax"
+        " self-intersect; drag less or use more (or stiffer) elements"
     )
