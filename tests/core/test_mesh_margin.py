@@ -24,6 +24,7 @@ from voxwarp.core import mesh_warp
 from voxwarp.core.camera import Camera
 from voxwarp.core.mesh import MeshInstance, uv_sphere
 from voxwarp.core.volume import Volume
+from voxwarp.deform.elements.grid import default_margin
 from voxwarp.deform.warp import chain_apply
 from voxwarp.editing import model_settings as ms
 from voxwarp.editing.families.elements import ChainMailFamily
@@ -47,12 +48,12 @@ def fish() -> Volume:
 
 def fin_warp(volume: Volume, margin: float | None, inverse: str = "baked") -> Any:
     """The ChainMail warp of the fin drag: the element nearest FIN held 15 mm up."""
-    probe = ChainMailFamily.grid(ms.ChainMailSettings(shape=SHAPE, margin=margin), volume)
+    pad = default_margin([DRAG]) if margin is None else margin
+    probe = ChainMailFamily.grid(ms.ChainMailSettings(shape=SHAPE, margin=pad), volume)
     d = np.linalg.norm(probe.rest_positions - FIN, axis=-1)
     index = tuple(int(v) for v in np.unravel_index(np.argmin(d), d.shape))
     drag = ms.Drag(index, DRAG)
-    margin = ms.ChainMailSettings(drags=(drag,), margin=margin).grid_margin()
-    settings = ms.ChainMailSettings(shape=SHAPE, drags=(drag,), margin=margin, inverse=inverse)
+    settings = ms.ChainMailSettings(shape=SHAPE, drags=(drag,), margin=pad, inverse=inverse)
     return ChainMailFamily.build(settings, volume).warp
 
 

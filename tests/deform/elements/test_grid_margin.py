@@ -5,6 +5,7 @@ and the folds of an offset field (det J <= 0)."""
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -76,13 +77,17 @@ def test_default_margin_is_the_largest_drag_component() -> None:
     assert default_margin(np.full((2, 2, 3), -4.0)) == 4.0
 
 
-def test_settings_margin_and_its_default() -> None:
+def test_settings_margin_pads_the_builders_grid() -> None:
     from voxwarp.editing import model_settings as ms
+    from voxwarp.editing.families.elements import ChainMailFamily
 
-    drag = ms.Drag((1, 1, 1), (0.0, -12.0, 3.0))
-    assert ms.ChainMailSettings(drags=(drag,)).grid_margin() == 12.0
-    assert ms.MassSpringSettings(drags=(drag,), margin=0.0).grid_margin() == 0.0
-    assert ms.MassSpringSettings().grid_margin() == 0.0
+    vol = SimpleNamespace(bounds=BOX)
+    grid = ChainMailFamily.grid(ms.ChainMailSettings(shape=(3, 3, 3), margin=5.0), vol)
+    np.testing.assert_array_equal(grid.lo, np.asarray(BOX[0]) - 5.0)
+    assert ChainMailFamily.grid(ms.ChainMailSettings(shape=(3, 3, 3)), vol).margin == 0.0
+    with pytest.raises(ms.SettingError, match="margin") as info:
+        ChainMailFamily.grid(ms.ChainMailSettings(shape=(3, 3, 3), margin=-1.0), vol)
+    assert info.value.setting == "margin"
 
 
 # ---------------------------------------------------------------------- folds
