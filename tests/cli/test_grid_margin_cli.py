@@ -76,3 +76,19 @@ def test_without_margin_the_push_is_cut_at_the_face(block: Path, tmp_path: Path)
     assert cam.radius == pytest.approx(0.5 * np.linalg.norm([40.0, 40.0, 40.0]))
     world = vol.index_to_world(np.argwhere(np.asarray(vol.data) > 100).astype(float))
     assert world[:, 1].max() <= TOP + 0.5
+
+
+@pytest.mark.gl
+def test_slice_extent_holds_the_pushed_content(block: Path, tmp_path: Path) -> None:
+    """``voxwarp slice``'s plane is sized to the deformed box: it reaches the pushed top."""
+    common = ["slice", str(block), "--plane", "z", "--pixel", "1", "--json"]
+    drag = ["--chainmail", "11", "--drag-at", f"20,{TOP},20:0,{PUSH},0"]
+    tops = {}
+    for margin in ("0", None):
+        extra = [] if margin is None else ["--grid-margin", margin]
+        r = run_cli(*common, *drag, *extra, "-o", str(tmp_path / "s.png"))
+        assert r.returncode == 0, r.stderr
+        doc = json.loads(r.stdout)
+        tops[margin] = doc["center"][1] + 0.5 * doc["size"][1] * doc["pixel_mm"]
+    assert tops["0"] == pytest.approx(TOP + 0.5, abs=1.0)  # the volume box (whole pixels)
+    assert tops[None] >= TOP + PUSH

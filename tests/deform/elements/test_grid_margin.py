@@ -122,3 +122,25 @@ def test_a_folded_field_is_found_and_said_in_one_line() -> None:
     assert warp.fold_summary() == line
     smooth = OffsetFieldWarp(np.zeros(3), np.full(3, 40.0), _fold_field(4.0)[0])
     assert smooth.fold_summary() is None
+
+
+@pytest.mark.parametrize("kind", ["massspring", "chainmail"])
+def test_a_saved_model_keeps_its_margin(kind: str) -> None:
+    """Scene JSON of a padded model: the grid entry has "margin", the warp spans the padded
+    box, and the resumed model has the same grid; without the key it is the plain box."""
+    from voxwarp.deform.elements.chainmail import ChainMail
+    from voxwarp.deform.elements.massspring import MassSpring
+    from voxwarp.deform.warp import warp_from_dict
+
+    cls = MassSpring if kind == "massspring" else ChainMail
+    model = cls(ElementGrid(BOX, shape=4, margin=8.0))
+    model.move((1, 2, 2), (0.0, 3.0, 0.0))
+    d = json.loads(json.dumps(model.warp().to_dict()))
+    assert d["model"]["grid"]["margin"] == 8.0
+    warp = warp_from_dict(d)
+    np.testing.assert_array_equal(warp.lo, np.asarray(BOX[0]) - 8.0)
+    resumed = cls.from_warp(warp)
+    np.testing.assert_array_equal(resumed.grid.rest_positions, model.grid.rest_positions)
+    assert resumed.grid.margin == 8.0
+    model.close()
+    resumed.close()
