@@ -37,6 +37,10 @@ FIN = np.array([26.0, 35.0, 6.5])
 DRAG = (0.0, 15.0, 0.0)
 SHAPE = (16, 16, 16)
 SIZE = 128
+#: how far (mm) the volume's inverse may send a carried vertex from where it sat: the
+#: Newton tolerance for approx/exact; baked: the bake's own accuracy (X + u(X) is the
+#: converged inverse's answer; measured 0.028 mm here)
+TOL = {"approx": 1e-3, "exact": 1e-3, "baked": 0.05}
 #: measured on llvmpipe: IoU >= 0.99 padded (edge pixels differ)
 MIN_IOU = 0.95
 
@@ -74,7 +78,7 @@ def test_vertices_land_where_the_volume_shows_their_voxel(fish: Volume, inverse:
     p, said = carry(inst, [warp])
     assert said == []
     residual = np.linalg.norm(chain_apply([warp], p) - x, axis=1)
-    assert residual.max() < 1e-3, residual.max()
+    assert residual.max() < TOL[inverse], residual.max()
     assert p[:, 1].max() > fish.bounds[1][1]  # carried out of the volume's box
 
 
@@ -92,7 +96,7 @@ def test_vertices_cut_at_the_box_are_counted_in_one_line(fish: Volume) -> None:
     counted = int(said[0].split(": ")[1].split(" of ")[0])
     assert counted == int(out.sum())
     residual = np.linalg.norm(chain_apply([warp], p) - x, axis=1)
-    assert np.all(residual[~out] < 1e-3)  # the others follow
+    assert np.all(residual[~out] < TOL["baked"])  # the others follow
 
 
 def test_a_folded_field_is_reported_for_the_mesh(fish: Volume) -> None:
