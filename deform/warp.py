@@ -148,19 +148,7 @@ class Warp(ABC):
         naming how many points failed and the largest residual.
         """
         x = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        p = 2.0 * x - self.apply(x)
-        for _ in range(self.forward_steps):
-            r = self.apply(p) - x
-            bad = np.linalg.norm(r, axis=1) > self.forward_tolerance
-            if not np.any(bad):
-                return p
-            j = self.jacobian(p[bad])
-            ok = np.abs(np.linalg.det(j)) > 1e-12
-            step = np.zeros((int(bad.sum()), 3))
-            step[ok] = np.linalg.solve(j[ok], r[bad][ok][..., None])[..., 0]
-            step[~ok] = r[bad][~ok]
-            p[bad] -= step
-        return check_forward(self, p, x)
+        return solve_forward(self, x, 2.0 * x - self.apply(x))
 
     @property
     def is_affine(self) -> bool:
@@ -469,6 +457,25 @@ def box_corners(lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     idx = np.array([[i, j, k] for k in (0, 1) for j in (0, 1) for i in (0, 1)], dtype=float)
     return lo + idx * (hi - lo)
+
+
+def solve_forward(warp: Warp, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The points ``p`` with ``warp.apply(p) = x`` by Newton steps with
+    :meth:`Warp.jacobian` from the seed ``p`` ((N, 3), updated in place), at most
+    :attr:`Warp.forward_steps`, then :func:`check_forward` (a :class:`ForwardMapError`
+    for points left above :attr:`Warp.forward_tolerance`)."""
+    for _ in range(warp.forward_steps):
+        r = warp.apply(p) - x
+        bad = ~(np.linalg.norm(r, axis=1) <= warp.forward_tolerance)
+        if not np.any(bad):
+            return p
+        j = warp.jacobian(p[bad])
+        ok = np.abs(np.linalg.det(j)) > 1e-12
+        step = np.zeros((int(bad.sum()), 3))
+        step[ok] = np.linalg.solve(j[ok], r[bad][ok][..., None])[..., 0]
+        step[~ok] = r[bad][~ok]
+        p[bad] -= step
+    return check_forward(warp, p, x)
 
 
 def check_forward(warp: Warp, p: np.ndarray, x: np.ndarray) -> np.ndarray:

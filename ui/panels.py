@@ -500,6 +500,7 @@ class DeformationPanel(Panel):
         self.integrator_combo = self.options.integrator_combo
         self.variant_combo = self.options.variant_combo
         self.stiffness_spin = self.options.stiffness_spin
+        self.margin_spin = self.options.margin_spin
         row = QHBoxLayout()
         self.apply_button = QPushButton("Apply")
         self.apply_button.setToolTip("Build a new model at rest with these settings")

@@ -361,6 +361,22 @@ class WarpRenderReport:
         return text
 
 
+def _margin_config(vol: Volume, grid: int, margin: float, drag: float, base: Scene) -> tuple:
+    """The benchmark row of the baked warp on a grid padded by ``margin`` mm: the same
+    element count and centre drag (mm) as the unpadded row, settled alike."""
+    from voxwarp.deform import ElementGrid, MassSpring
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+
+    padded = ElementGrid(vol, shape=(grid, grid, grid), margin=margin)
+    ms = MassSpring(padded, integrator="semi-implicit", shear=True)
+    ms.move((grid // 2, grid // 2, grid // 2), (drag, 0.0, 0.0))
+    ms.settle(max_steps=20000, tol=1e-3)
+    warp = OffsetFieldWarp(padded.lo, padded.hi, ms.displacements(), inverse="baked")
+    ms.close()
+    name = f"offset warp, baked, margin {margin:g} mm"
+    return (name, base.copy(warps=[warp]), True, "the grid padded: same elements, coarser")
+
+
 def bench_warp_render(
     volume: Volume | None = None,
     *,
@@ -371,6 +387,7 @@ def bench_warp_render(
     drag_spacings: float = 1.5,
     transfer_function: Any = None,
     only: tuple[str, ...] | None = None,
+    margin: float | None = None,
     log: Any = print,
 ) -> WarpRenderReport:
     """Cost of rendering through the mass-spring offset-field warp (dvr).
@@ -384,7 +401,10 @@ def bench_warp_render(
     ``baked`` inverse (the default) and the ``exact`` inverse, each with deformed-space
     empty-space skipping; and the ``exact`` warp with per-block checks only (what
     skipping through deformed space buys). ``only`` keeps just the rows of those names
-    (e.g. ``("undeformed", "offset warp, baked")`` for a quick run).
+    (e.g. ``("undeformed", "offset warp, baked")`` for a quick run). ``margin`` (mm)
+    adds the row ``offset warp, baked, margin M mm``: the same model and drag on a grid
+    padded by ``margin`` (the same element count, a coarser spacing, a larger deformed box
+    to march).
     """
     from voxwarp.deform import ElementGrid, MassSpring
     from voxwarp.deform.elements.offset_field import OffsetFieldWarp
@@ -443,6 +463,8 @@ def bench_warp_render(
             "no skipping through deformed space",
         ),
     ]
+    if margin is not None:
+        configs.append(_margin_config(vol, grid, margin, drag, base))
     if only is not None:
         configs = [c for c in configs if c[0] in only]
     with OffscreenRenderer(*size) as r:

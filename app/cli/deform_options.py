@@ -199,6 +199,16 @@ def _steps(text: str) -> int:
     return n
 
 
+def _grid_margin(text: str) -> float:
+    try:
+        mm = float(text)
+    except ValueError:
+        mm = -1.0
+    if not (math.isfinite(mm) and mm >= 0.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a margin in mm >= 0, e.g. 20")
+    return mm
+
+
 def grid_text(shape: Sequence[int]) -> str:
     """An element grid's shape as ``8x8x8``."""
     return "x".join(str(n) for n in shape)
@@ -397,6 +407,17 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
         " through VALUE:STIFFNESS points (data units : 0..1; constant beyond the ends),"
         " e.g. 100:0.2,400:0.95 makes CT bone stiff; stiffness 1 is rigid (default:"
         " 0.5 everywhere); ChainMail's link slack is 1 - stiffness",
+    )
+    # -- the grid margin (one block: other options go before or after it)
+    g.add_argument(
+        "--grid-margin",
+        type=_grid_margin,
+        metavar="MM",
+        help="pad the element grid's box beyond the volume's box by MM on every side, so"
+        " that content pushed across a face is carried out of the box and rendered there"
+        " (the element count stays; their spacing grows). Default: the largest --drag /"
+        " --drag-at offset component (no element moves farther than a dragged one), 0"
+        " without drags; --grid-margin 0 keeps the volume's box",
     )
 
     m = p.add_argument_group("mass-spring options (with --massspring)")

@@ -38,6 +38,7 @@ _DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
     ("--backend", "backend", "both"),
     ("--inverse", "inverse", "both"),
     ("--stiffness-from-volume", "stiffness_from_volume", "both"),
+    ("--grid-margin", "grid_margin", "both"),
     ("--settle", "settle", "massspring"),
     ("--steps", "steps", "massspring"),
     ("--integrator", "integrator", "massspring"),
@@ -251,6 +252,7 @@ def _element_settings(args: argparse.Namespace) -> Any:
         "stiffness_from_volume": args.stiffness_from_volume,
         "drags": tuple(ms.Drag(d.index, d.offset) for d in args.drag or []),
         "inverse": args.inverse or "baked",
+        "margin": args.grid_margin,
     }
     if model == "massspring":
         return ms.MassSpringSettings(
@@ -284,12 +286,17 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     # loads scipy: only when used
     from voxwarp.editing.families.elements import ElementFamily
 
+    _resolve_margin(args)
     if args.drag_at:  # to the nearest elements at rest, then checked as --drag elements are
         # loads scipy: only when used
-        from voxwarp.deform.elements.grid import ElementGrid
+        from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
 
         shape = args.massspring if model == "massspring" else args.chainmail
-        picks = ropt.pick_elements(ElementGrid(volume, shape=shape), args.drag_at)
+        try:
+            pick_grid = ElementGrid(volume, shape=shape, margin=args.grid_margin)
+        except ElementGridError as exc:
+            raise CliOptionError(f"--grid-margin: {exc}") from exc
+        picks = ropt.pick_elements(pick_grid, args.drag_at)
         for pick in picks:
             print(pick.summary(), file=sys.stderr)
         args.drag = [
@@ -301,7 +308,8 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     try:
         grid = ElementFamily.grid(_element_settings(args), volume)
     except SettingError as exc:
-        raise CliOptionError(f"--stiffness-from-volume: {exc}") from exc
+        flag = "--grid-margin" if exc.setting == "margin" else "--stiffness-from-volume"
+        raise CliOptionError(f"{flag}: {exc}") from exc
     if model == "massspring":
         rigid = grid.pinned()
         for d in args.drag or []:
@@ -321,7 +329,30 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
                 f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
                 " point inside that box (world mm, as --drag offsets)"
             )
+    _say_margin(args)
     return grid
+
+
+def _resolve_margin(args: argparse.Namespace) -> None:
+    """Set ``args.grid_margin`` (mm): as given, else the largest offset component of the
+    drags (``default_margin``)."""
+    from voxwarp.deform.elements.grid import default_margin
+
+    args.grid_margin_given = args.grid_margin is not None
+    if not args.grid_margin_given:
+        offsets = [d.offset for d in args.drag or []] + [d.offset for d in args.drag_at or []]
+        args.grid_margin = default_margin(offsets)
+
+
+def _say_margin(args: argparse.Namespace) -> None:
+    """The one stderr line of a grid margin above 0 (after every check passed)."""
+    if args.grid_margin > 0.0:
+        why = "--grid-margin" if args.grid_margin_given else "default: the largest drag offset"
+        print(
+            f"grid margin: the element grid reaches {args.grid_margin:g} mm beyond the"
+            f" volume's box on every side ({why}; --grid-margin 0 keeps the box)",
+            file=sys.stderr,
+        )
 
 
 def _cut_crosses(grid: Any, cut: _Cut) -> bool:
@@ -480,6 +511,9 @@ def deformed_scene(
             run = _run_massspring if args.massspring is not None else _run_chainmail
             model, summary = run(args, pending.grid, ctx)
             print(summary, file=sys.stderr)
+            folds = model.warp().fold_summary()
+            if folds is not None:  # one line: meshes and the inverse are wrong there
+                print(f"warning: {folds}", file=sys.stderr)
             # last in the chain: it deforms the volume itself, before the
             # scene's own warps move the result
             scene = scene.copy(warps=[*scene.warps, model.warp()])

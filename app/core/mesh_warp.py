@@ -70,10 +70,11 @@ def warped_geometry(
     """World positions (N, 3) and unit normals (N, 3) of an instance's vertices moved
     by the chain's forward map, and the cache key they are stored under.
 
-    Where the chain has no forward map at some vertices (a fold, or a tear such as
-    the edge of a displacement field's grid, which the moving anatomy often reaches)
-    those vertices keep the best estimate and one :class:`MeshWarpWarning` line says
-    how many; the rest of the mesh is exact.
+    Each vertex goes to the point the volume's inverse (``chain_apply``) maps to it.
+    Where the chain has no such point (outside every support, e.g. content pushed out of
+    an unpadded element grid; a tear such as the edge of a displacement field's grid) or
+    folds (``det J <= 0``) those vertices keep the best estimate and one
+    :class:`MeshWarpWarning` line names the mesh and counts them; the rest is exact.
     """
     key = geometry_key(instance, warps)
     hit = _CACHE.get(key)
@@ -82,14 +83,8 @@ def warped_geometry(
         return hit[1], hit[2], key
     world, normals = _placed(instance)
     p, failed, message = chain_forward_lenient(warps, world)
-    if np.any(failed):
-        warnings.warn(
-            f"mesh {instance.name!r}: {int(failed.sum())} of {len(failed)} vertices have no"
-            f" forward map and keep their nearest estimate ({message})",
-            MeshWarpWarning,
-            stacklevel=3,
-        )
     j = chain_jacobian(warps, p)
+    _warn_uncarried(instance.name, failed, np.linalg.det(j) <= 0.0, message)
     n = np.einsum("nji,nj->ni", j, normals)  # J^T n
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     p.setflags(write=False)
@@ -98,6 +93,27 @@ def warped_geometry(
     while len(_CACHE) > CACHE_SIZE:
         _CACHE.popitem(last=False)
     return p, n, key
+
+
+def _warn_uncarried(name: str, failed: np.ndarray, folded: np.ndarray, message: str) -> None:
+    """One :class:`MeshWarpWarning` line naming the mesh and counting the vertices the
+    chain cannot carry: no forward map (outside every support, a tear) or a fold
+    (``det J <= 0`` at the vertex's deformed point)."""
+    bad = failed | folded
+    if not np.any(bad):
+        return
+    why = []
+    if np.any(failed):
+        why.append(f"{int(failed.sum())} without a point the volume's inverse maps to them")
+    if np.any(folded & ~failed):
+        why.append(f"{int((folded & ~failed).sum())} in a fold (det J <= 0)")
+    detail = f" ({message})" if message else " (the warp chain folds there)"
+    warnings.warn(
+        f"mesh {name!r}: {int(bad.sum())} of {len(bad)} vertices have no forward map and"
+        f" keep their nearest estimate: {', '.join(why)}{detail}",
+        MeshWarpWarning,
+        stacklevel=4,
+    )
 
 
 def _placed(instance: MeshInstance) -> tuple[np.ndarray, np.ndarray]:

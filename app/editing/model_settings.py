@@ -117,6 +117,10 @@ class ElementSettings:
     drags: tuple[Drag, ...] = ()
     #: the warp's inverse mode (None: the model's default, ``"baked"``)
     inverse: str | None = None
+    # -- the grid margin (mm): the grid's box reaches this far beyond the volume's on
+    # -- every side (0: the volume's box; the CLI's default is the largest drag,
+    # -- ElementGrid's default_margin)
+    margin: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -185,6 +189,9 @@ class FamilyOptions:
     steps_per_frame: int = 10
     relax_steps: int = 1
     wire_settings: dict[str, Any] = field(default_factory=lambda: {"field_scale": 2})
+    # -- the grid margin (mm) of new mass-spring/ChainMail models: their grid's box
+    # -- reaches this far beyond the volume's (0: the volume's box)
+    margin: float = 0.0
 
     def copy(self) -> FamilyOptions:
         """An independent copy."""
@@ -192,8 +199,8 @@ class FamilyOptions:
 
     def with_model_settings(self, settings: dict[str, Any]) -> FamilyOptions:
         """A copy with the model settings of ``EditSession.set_deformation``
-        (``integrator``, ``variant``, ``stiffness``; nothing else may be left in
-        ``settings``), checked; an :class:`EditorError` names a bad one."""
+        (``integrator``, ``variant``, ``stiffness``, ``margin``; nothing else may be left
+        in ``settings``), checked; an :class:`EditorError` names a bad one."""
         settings = dict(settings)
         integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
         variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
@@ -204,11 +211,14 @@ class FamilyOptions:
             raise EditorError(
                 f"stiffness must be a number in (0, 1]; got {stiffness_value!r}"
             ) from exc
+        margin = _margin(settings.pop("margin", self.margin))
         if settings:
             raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
         if not 0.0 < stiffness <= 1.0:
             raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
-        return replace(self.copy(), integrator=integrator, variant=variant, stiffness=stiffness)
+        return replace(
+            self.copy(), integrator=integrator, variant=variant, stiffness=stiffness, margin=margin
+        )
 
     def set_run_option(self, name: str, value: Any) -> int:
         """Set ``steps_per_frame`` or ``relax_steps`` (0..10000); returns the value."""
@@ -239,6 +249,7 @@ class FamilyOptions:
             "relax_steps": self.relax_steps,
             "stiffness": self.stiffness,
             "wire_settings": dict(self.wire_settings),
+            **({"margin": self.margin} if self.margin else {}),  # absent: 0, as before
         }
 
     def read_entry(self, entry: dict[str, Any]) -> None:
@@ -253,6 +264,19 @@ class FamilyOptions:
             self.stiffness = float(entry["stiffness"])
         if isinstance(entry.get("wire_settings"), dict):
             self.wire_settings = dict(entry["wire_settings"])
+        if "margin" in entry:  # absent in scenes saved before the margin: 0
+            self.margin = _margin(entry["margin"])
+
+
+def _margin(value: Any) -> float:
+    """A grid margin in mm, checked (a finite number >= 0)."""
+    try:
+        margin = float(value)
+    except (TypeError, ValueError) as exc:
+        raise EditorError(f"margin must be a number of mm >= 0; got {value!r:.40}") from exc
+    if not (np.isfinite(margin) and margin >= 0.0):
+        raise EditorError(f"margin must be a number of mm >= 0; got {margin}")
+    return margin
 
 
 # ---------------------------------------------------------------------------- results

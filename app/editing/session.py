@@ -232,7 +232,8 @@ class EditSession:
     # ------------------------------------------------------------------ models
     def set_deformation(self, kind: str, **settings: Any) -> None:
         """Switch the deformation family (and settings: ``backend``, ``resolution``,
-        ``integrator``, ``variant``, ``stiffness``); builds a fresh model at rest.
+        ``integrator``, ``variant``, ``stiffness``, ``margin``: mm the element grid's box
+        reaches beyond the volume's); builds a fresh model at rest.
 
         ``"wires"`` starts with one straight wire along the volume's longest axis
         through its centre (bend it by dragging its control points, or lay new ones);

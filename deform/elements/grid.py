@@ -4,8 +4,15 @@ About this technique (Knoche 2008, 3.5, 3.6)
 --------------------------------------------
 An ``n_x x n_y x n_z`` grid of *elements* (point masses) is spread evenly over the
 volume's box, faces included: element ``(i, j, k)`` (indices along x, y, z) rests at
-``lo + (i, j, k) * spacing`` with ``spacing = (hi - lo) / (shape - 1)``. Each element
-carries a material (``stiffness`` in [0, 1], ``damping`` >= 0, ``mass`` > 0) and may be
+``lo + (i, j, k) * spacing`` with ``spacing = (hi - lo) / (shape - 1)``.
+
+A *margin* (mm) pads the grid's box beyond the volume's on every side (``lo`` and ``hi``
+are then the padded corners; ``volume_lo``/``volume_hi`` keep the volume's): content
+pushed across a face of the volume's box stays inside the grid, so it is carried out
+of the box and rendered there instead of being cut off. The element count per axis
+stays what was asked; the spacing grows with the box (docs/concepts/margin.md).
+
+Each element carries a material (``stiffness`` in [0, 1], ``damping`` >= 0, ``mass`` > 0) and may be
 *fixed* (it never moves). The 8 corner elements are fixed by default so that the grid
 cannot drift away as a whole. Stiffness 1 means rigid: such an element does not move
 by itself either (:meth:`ElementGrid.pinned`).
@@ -31,6 +38,8 @@ from voxwarp.errors import VoxwarpError
 MAX_ELEMENTS_PER_AXIS = 128
 #: fewest elements along one axis (one on each face)
 MIN_ELEMENTS_PER_AXIS = 2
+#: largest grid margin, as a multiple of the volume box's largest side
+MAX_MARGIN_FACTOR = 4.0
 #: default material of every element
 DEFAULT_STIFFNESS = 0.5
 DEFAULT_DAMPING = 1.0
@@ -55,13 +64,21 @@ class ElementGrid:
     shape
         Elements per axis ``(n_x, n_y, n_z)``, each an int in
         [2, :data:`MAX_ELEMENTS_PER_AXIS`]; one int means the same on all axes.
+    margin
+        mm the grid's box reaches beyond the volume's box on every side (>= 0, at most
+        :data:`MAX_MARGIN_FACTOR` times the box's largest side); 0 (the default) is the
+        volume's box itself.
 
     Attributes
     ----------
     shape : tuple[int, int, int]
         Elements per axis.
     lo, hi : numpy.ndarray
-        (3,) corners of the box in mm.
+        (3,) corners of the grid's box in mm (the volume's box padded by ``margin``).
+    margin : float
+        The padding in mm.
+    volume_lo, volume_hi : numpy.ndarray
+        (3,) corners of the box given (the volume's), without the margin.
     spacing : numpy.ndarray
         (3,) rest distance between neighbouring elements per axis.
     rest_positions : numpy.ndarray
@@ -80,8 +97,17 @@ class ElementGrid:
     8
     """
 
-    def __init__(self, volume_or_bounds: Any, shape: int | Sequence[int] = (16, 16, 16)) -> None:
-        lo, hi = _parse_bounds(volume_or_bounds)
+    def __init__(
+        self,
+        volume_or_bounds: Any,
+        shape: int | Sequence[int] = (16, 16, 16),
+        margin: float = 0.0,
+    ) -> None:
+        vlo, vhi = _parse_bounds(volume_or_bounds)
+        self.margin: float = check_margin(margin, vhi - vlo)
+        self.volume_lo: np.ndarray = vlo
+        self.volume_hi: np.ndarray = vhi
+        lo, hi = padded_box(vlo, vhi, self.margin)
         self.shape: tuple[int, int, int] = _parse_shape(shape)
         self.lo: np.ndarray = lo
         self.hi: np.ndarray = hi
@@ -382,19 +408,22 @@ class ElementGrid:
         Returns
         -------
         dict
-            ``lo``, ``hi``, ``shape``, ``fixed`` (list of fixed ``[i, j, k]``), and
-            ``stiffness``, ``damping``, ``mass``: a number when uniform, else a nested
-            list of the grid shape.
+            ``lo``, ``hi`` (the volume's box, without the margin), ``shape``, ``fixed``
+            (list of fixed ``[i, j, k]``), and ``stiffness``, ``damping``, ``mass``: a
+            number when uniform, else a nested list of the grid shape; ``margin`` (mm)
+            when it is not 0.
         """
         d: dict[str, Any] = {
-            "lo": self.lo.tolist(),
-            "hi": self.hi.tolist(),
+            "lo": self.volume_lo.tolist(),
+            "hi": self.volume_hi.tolist(),
             "shape": list(self.shape),
             "fixed": np.argwhere(self.fixed).tolist(),
         }
         for name in ("stiffness", "damping", "mass"):
             a = getattr(self, name)
             d[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
+        if self.margin > 0.0:
+            d["margin"] = self.margin
         return d
 
     @classmethod
@@ -404,8 +433,9 @@ class ElementGrid:
         Parameters
         ----------
         d
-            Mapping with ``lo``, ``hi`` and ``shape``; optionally ``fixed`` (list of
-            indices; default the corners) and ``stiffness``, ``damping``, ``mass``.
+            Mapping with ``lo``, ``hi`` and ``shape``; optionally ``margin`` (mm,
+            default 0: files saved before the margin existed load unchanged), ``fixed``
+            (list of indices; default the corners) and ``stiffness``, ``damping``, ``mass``.
 
         Returns
         -------
@@ -421,7 +451,7 @@ class ElementGrid:
         missing = [k for k in ("lo", "hi", "shape") if k not in d]
         if missing:
             raise ElementGridError(f"an element grid entry needs the keys {missing}")
-        grid = cls((d["lo"], d["hi"]), shape=d["shape"])
+        grid = cls((d["lo"], d["hi"]), shape=d["shape"], margin=d.get("margin", 0.0))
         if "fixed" in d:
             grid.fixed[:] = False
             grid.fix(np.asarray(d["fixed"], dtype=np.int64).reshape(-1, 3))
@@ -433,7 +463,7 @@ class ElementGrid:
     def __repr__(self) -> str:
         return (
             f"ElementGrid(shape={self.shape}, lo={self.lo.tolist()}, hi={self.hi.tolist()}, "
-            f"fixed={int(self.fixed.sum())})"
+            f"margin={self.margin:g}, fixed={int(self.fixed.sum())})"
         )
 
 
@@ -449,6 +479,43 @@ def grid_from_entry(d: Mapping[str, Any], model: str, error: type[Exception]) ->
         return ElementGrid.from_dict(d["grid"])
     except ElementGridError as exc:
         raise error(f"{model} 'grid': {exc}") from exc
+
+
+def check_margin(margin: Any, size: np.ndarray) -> float:
+    """``margin`` as a float in mm, checked: finite, >= 0 and at most
+    :data:`MAX_MARGIN_FACTOR` times the largest side of a box of ``size`` (3,) mm."""
+    most = MAX_MARGIN_FACTOR * float(np.max(size))
+    fix = f"give a margin in mm in [0, {most:g}] ({MAX_MARGIN_FACTOR:g} x the box's largest side)"
+    if isinstance(margin, bool | np.bool_):
+        raise ElementGridError(f"grid margin must be a number of mm; got {margin!r}; {fix}")
+    try:
+        m = float(margin)
+    except (TypeError, ValueError) as exc:
+        raise ElementGridError(
+            f"grid margin must be a number of mm; got {margin!r:.40}; {fix}"
+        ) from exc
+    if not np.isfinite(m) or m < 0.0 or m > most:
+        raise ElementGridError(f"grid margin {m:g} mm is out of range; {fix}")
+    return m
+
+
+def default_margin(offsets: Any) -> float:
+    """The default grid margin (mm) for drags of the given offsets ((m, 3) mm): the
+    largest offset component, 0 without drags.
+
+    No element moves farther than the farthest dragged one: a ChainMail follower moves
+    only as far as restores its link to a moved neighbour (Gibson 1997), and a settled
+    mass-spring grid is a weighted average of its held neighbours (the maximum
+    principle of the discrete spring Laplacian). So content at a face of the volume's
+    box stays inside a grid padded by this much.
+    """
+    a = np.abs(np.asarray(offsets, dtype=np.float64).reshape(-1, 3))
+    return float(a.max()) if a.size else 0.0
+
+
+def padded_box(lo: np.ndarray, hi: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The box ``[lo, hi]`` grown by ``margin`` mm on every side (copies)."""
+    return np.asarray(lo, np.float64) - margin, np.asarray(hi, np.float64) + margin
 
 
 def _apply_mapping(mapping: Any, values: np.ndarray) -> np.ndarray:

@@ -32,8 +32,15 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.deform import gl_programs
+from voxwarp.deform.elements.folds import fold_summary
 from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
-from voxwarp.deform.warp import Warp, WarpError, register_warp
+from voxwarp.deform.warp import (
+    ForwardMapError,
+    Warp,
+    WarpError,
+    register_warp,
+    solve_forward,
+)
 
 #: Inverse modes: one step (thesis), the fixed-point iteration from ``q_0 = p``, or the
 #: fixed-point iteration seeded by a baked inverse field.
@@ -570,14 +577,47 @@ class OffsetFieldWarp(Warp):
         x = np.atleast_2d(np.asarray(points, dtype=np.float64))
         return self._interpolate(x)
 
-    def forward(self, points: np.ndarray) -> np.ndarray:
-        """Original -> deformed: ``X + u(X)`` for (N, 3) points in mm (meshes, picking).
-
-        Exact (no iteration). A GPU-owned field is read back through its
-        ``field_reader`` once per revision; without one this raises :class:`WarpError`.
-        """
+    def field_forward(self, points: np.ndarray) -> np.ndarray:
+        """The field's own map ``X + u(X)`` for (N, 3) points in mm: exact, no iteration;
+        the seed of :meth:`forward` (which follows the inverse the volume is drawn with)."""
         x = np.atleast_2d(np.asarray(points, dtype=np.float64))
         return x + self._interpolate(x)
+
+    def forward(self, points: np.ndarray) -> np.ndarray:
+        """Original -> deformed as the volume is drawn: the point ``p`` whose
+        :meth:`apply` (the inverse of the current mode, as the raycaster samples it) is
+        ``X``, for (N, 3) points in mm (meshes, picking).
+
+        ``"approx"`` and ``"exact"``: the field's own map ``X + u(X)`` refined by Newton
+        steps on :meth:`apply` (:func:`~voxwarp.deform.warp.solve_forward`), so a mesh
+        vertex lands where the volume shows its voxel. ``"baked"`` (converged: the bake
+        is the inverse to float precision) takes ``X + u(X)`` itself, which needs no CPU
+        bake (seconds per field change while dragging) and is within the bake's accuracy
+        (hundredths of a mm) of it, and checks it in closed form. Where no such point
+        exists it raises :class:`~voxwarp.deform.warp.ForwardMapError` (with the
+        estimates): ``X + u(X)`` leaves the grid box (content cut at the box: pad the
+        grid, ``ElementGrid(margin=...)``) or the field folds at ``X``. A GPU-owned field
+        is read back through its ``field_reader`` once per revision; without one this
+        raises :class:`WarpError`.
+        """
+        x = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        if self.inverse != "baked":
+            return solve_forward(self, x, self.field_forward(x))
+        u, grad = self._interpolate(x, gradient=True)
+        p = x + u
+        cut = np.any((p < self.lo) | (p > self.hi), axis=1) & np.any(u != 0.0, axis=1)
+        folded = np.linalg.det(np.eye(3) + grad) <= 0.0
+        bad = cut | folded
+        if np.any(bad):
+            raise ForwardMapError(
+                f"the {self.kind} warp has no forward map at {int(bad.sum())} of {len(x)}"
+                f" points ({int(cut.sum())} carried outside the field's grid box, where the"
+                f" volume is cut: pad the grid, e.g. --grid-margin; {int(folded.sum())} in a"
+                " fold, det J <= 0)",
+                p,
+                bad,
+            )
+        return p
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original: ``q`` with ``q + u(q) = p``, as the GLSL computes it.
@@ -648,6 +688,13 @@ class OffsetFieldWarp(Warp):
         if np.any(ok):
             out[ok] = np.linalg.inv(a[ok])
         return out
+
+    def fold_summary(self) -> str | None:
+        """One line saying where the field folds (``det(I + grad u) <= 0`` at a cell
+        corner, :mod:`voxwarp.deform.elements.folds`), or None when it does not (or a
+        GPU-owned field has no reader)."""
+        u = self._range_field()
+        return None if u is None else fold_summary(u, self.lo, self.spacing)
 
     def deformed_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Box in deformed space holding every point the warp maps into ``[lo, hi]``.

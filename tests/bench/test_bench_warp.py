@@ -51,3 +51,28 @@ def test_bench_warp_render_reports_every_row() -> None:
     assert text.startswith("Command: `voxwarp bench massspring --sizes 3`")
     assert text.count("\n| ") == len(report.rows) + 1
     assert len(lines) == len(report.rows)
+
+
+def test_bench_warp_render_margin_row() -> None:
+    """``margin``: one more row, the baked warp on the padded grid, timed in the same run."""
+    from voxwarp.bench.render import bench_warp_render
+
+    tf = TransferFunction([(0, 0, 0, 0, 0), (40, 1, 0.5, 0.2, 0.0), (255, 1, 1, 1, 0.8)])
+    only = ("undeformed", "offset warp, baked", "offset warp, baked, margin 6 mm")
+    report = bench_warp_render(
+        _volume(), size=(48, 48), frames=1, warmup=1, grid=5, transfer_function=tf,
+        only=only, margin=6.0, log=str,
+    )  # fmt: skip
+    assert [r.renderer for r in report.rows] == list(only)
+    ratio = report.ratio("offset warp, baked, margin 6 mm")
+    assert ratio is not None
+    assert ratio > 0
+
+
+def test_bench_grid_margin_needs_deformed(capsys: pytest.CaptureFixture) -> None:
+    from voxwarp.cli.main import main
+
+    assert main(["bench", "render", "--grid-margin", "10", "--frames", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--grid-margin times the deformed render: add --deformed" in err
+    assert err.count("\n") == 1

@@ -226,6 +226,8 @@ def test_cut_keeps_the_far_side_at_rest(
             "7",
             "--drag",
             "2,3,3:0,4,0",
+            "--grid-margin",  # the layers at 7.5 and 10.2 mm are those of the volume's box
+            "0",
             *extra,
         )
         (w,) = json.loads(scene.read_text())["warps"]

@@ -347,7 +347,8 @@ def test_drag_at_equals_the_drag_of_its_element(
     """A world point near element (2, 1, 1) of a 4³ grid over the cube volume (box
     -0.5..31.5 mm, elements every 32/3 mm) drags that element: the same image as
     ``--drag 2,1,1`` and a line saying which element and how far."""
-    common = [str(files["cube"]), *MIP, *ORTHO_TOP, "--massspring", "4", "--steps", "60"]
+    common = [str(files["cube"]), *MIP, *ORTHO_TOP, "--massspring", "4", "--grid-margin", "0"]
+    common += ["--steps", "60"]
     by_index, _ = render(tmp_path, "i.png", *common, "--drag", "2,1,1:0,6,0")
     by_point, err = render(tmp_path, "p.png", *common, "--drag-at", "21,10,10:0,6,0")
     np.testing.assert_array_equal(by_point, by_index)

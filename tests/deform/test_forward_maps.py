@@ -103,8 +103,8 @@ def test_gpu_owned_field_forward_reads_the_field_back() -> None:
         revision_source=lambda: 7,
     )
     x = points_in(w.lo, w.hi, 300)
-    np.testing.assert_array_equal(gpu.forward(x), w.forward(x))
-    gpu.forward(x)
+    np.testing.assert_array_equal(gpu.field_forward(x), w.field_forward(x))
+    gpu.field_forward(x)
     assert len(reads) == 1  # read back once per revision
     blind = OffsetFieldWarp(w.lo, w.hi, shape=w.shape, texture_source=lambda ctx: None)
     with pytest.raises(WarpError, match="field_reader") as info:

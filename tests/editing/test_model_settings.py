@@ -66,6 +66,7 @@ def test_cli_and_builder_give_the_same_mass_spring(volume: Volume) -> None:
         fixed=(((0, 4), (0, 4), (0, 0)),),
         drags=(msets.Drag((2, 2, 2), (3.0, 0.0, 1.0)),),
         run=msets.SettleRule(steps=60),
+        margin=3.0,  # the CLI's default grid margin: the largest drag offset component
     )
     built = MassSpringFamily.build(settings, volume)
     np.testing.assert_array_equal(built.model.positions(), cli_model.positions())
@@ -88,7 +89,10 @@ def test_editor_and_builder_give_the_same_mass_spring(volume: Volume) -> None:
     )
     built = MassSpringFamily.build(settings, volume)
     np.testing.assert_array_equal(built.model.positions(), session.model.positions())
-    args = _render_args("--massspring", "5", "--no-shear", "--drag", "2,2,2:3,0,1", "--steps", "40")
+    args = _render_args(
+        "--massspring", "5", "--no-shear", "--drag", "2,2,2:3,0,1", "--steps", "40",
+        "--grid-margin", "0",  # the editor's margin
+    )  # fmt: skip
     cli_model, _ = _run_massspring(args, _deform_grid(args, volume), None)
     np.testing.assert_array_equal(cli_model.positions(), session.model.positions())
 
@@ -127,6 +131,7 @@ def test_cli_and_builder_give_the_same_chainmail(volume: Volume) -> None:
         shape=(6, 6, 6),
         cuts=(msets.Cut((48.0, 24.0, 20.0), (1.0, 0.0, 0.0)),),
         drags=(msets.Drag((3, 3, 3), (0.0, 4.0, 0.0)),),
+        margin=4.0,  # the CLI's default grid margin: the largest drag offset component
         relax=3,
     )
     built = ChainMailFamily.build(settings, volume)

@@ -15,7 +15,7 @@ from voxwarp.ui.panel_base import int_spin
 __all__ = ["ElementsPanel"]
 
 #: options of the Model group, shared by both element families
-_SHARED = ("backend", "resolution", "stiffness")
+_SHARED = ("backend", "resolution", "stiffness", "margin")
 
 
 class ElementsPanel(FamilyPanel):

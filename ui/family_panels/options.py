@@ -1,5 +1,5 @@
 """The settings of new models in the Model group: backend, resolution, integrator,
-variant and stiffness.
+variant, stiffness and the element grid's margin.
 
 They are the session's settings (shared by the families: the resolution is that of the
 elements and of the lattice), so there is one widget each; a family panel names the rows
@@ -37,6 +37,16 @@ class ModelOptions:
         self.stiffness_spin = double_spin(
             0.01, 1.0, 0.05, 2, tooltip="Element stiffness of new models (0..1]"
         )
+        self.margin_spin = double_spin(
+            0.0,
+            1000.0,
+            5.0,
+            1,
+            suffix=" mm",
+            tooltip="Grid margin (mm): the element grid reaches this far beyond the volume's"
+            " box, so content dragged across a face is carried out and drawn there (0: the"
+            " volume's box). A margin as large as the largest drag keeps everything",
+        )
         #: option name -> its widget, in the order of the rows
         self.widgets: dict[str, QWidget] = {
             "backend": self.backend_combo,
@@ -44,6 +54,7 @@ class ModelOptions:
             "integrator": self.integrator_combo,
             "variant": self.variant_combo,
             "stiffness": self.stiffness_spin,
+            "margin": self.margin_spin,
         }
         for name, widget in self.widgets.items():
             form.addRow(name.capitalize(), widget)
@@ -56,6 +67,7 @@ class ModelOptions:
             "integrator": self.integrator_combo.currentText(),
             "variant": self.variant_combo.currentText(),
             "stiffness": float(self.stiffness_spin.value()),
+            "margin": float(self.margin_spin.value()),
         }
 
     def refresh(self, s: EditSession) -> None:
@@ -65,6 +77,7 @@ class ModelOptions:
         self.integrator_combo.setCurrentText(s.options.integrator)
         self.variant_combo.setCurrentText(s.options.variant)
         self.stiffness_spin.setValue(s.options.stiffness)
+        self.margin_spin.setValue(s.options.margin)
 
     def show_only(self, names: tuple[str, ...]) -> None:
         """Show the rows of the options ``names``, hide the others."""

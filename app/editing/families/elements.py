@@ -73,10 +73,13 @@ class ElementFamily(Family):
     # ---------------------------------------------------------------- the builder
     @classmethod
     def grid(cls, settings: ElementSettings, volume: Any) -> ElementGrid:
-        """The element grid of ``settings`` over ``volume``'s box: its stiffness, fixed
-        elements and materials set (no GL work); a :class:`SettingError` names a bad
-        setting."""
-        grid = ElementGrid(volume, shape=settings.shape)
+        """The element grid of ``settings`` over ``volume``'s box padded by the settings'
+        ``margin``: its stiffness, fixed elements and materials set (no GL work); a
+        :class:`SettingError` names a bad setting."""
+        try:
+            grid = ElementGrid(volume, shape=settings.shape, margin=settings.margin)
+        except ElementGridError as exc:
+            raise SettingError("margin", str(exc)) from exc
         if settings.stiffness is not None:
             grid.set_material(stiffness=settings.stiffness)
         for ranges in settings.fixed:
@@ -289,6 +292,7 @@ class MassSpringFamily(ElementFamily):
             backend=s.backend,
             stiffness=s.options.stiffness,
             integrator=s.options.integrator,
+            margin=s.options.margin,
         )
 
     @classmethod
@@ -362,6 +366,7 @@ class ChainMailFamily(ElementFamily):
             stiffness=s.options.stiffness,
             variant=s.options.variant,
             relax_steps=s.options.relax_steps if s.backend == "cpu" else 0,
+            margin=s.options.margin,
         )
 
     @classmethod

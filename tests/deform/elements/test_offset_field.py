@@ -27,7 +27,7 @@ from voxwarp.deform.elements.offset_field import (
     DEFAULT_ITERATIONS,
     OffsetFieldWarp,
 )
-from voxwarp.deform.warp import WarpError, compose_glsl, warp_from_dict
+from voxwarp.deform.warp import ForwardMapError, WarpError, compose_glsl, warp_from_dict
 from voxwarp.scene import Scene
 
 SAVE_IMAGES = os.environ.get("VOXWARP_SAVE_IMAGES")  # folder for the comparison PNGs
@@ -98,7 +98,12 @@ def test_nodes_move_by_their_displacement_and_outside_is_identity() -> None:
     u = wavy_field(LO, HI, SHAPE, 6.0)
     w = OffsetFieldWarp(LO, HI, u)
     x = node_positions(LO, HI, SHAPE).reshape(-1, 3)
-    np.testing.assert_allclose(w.forward(x), x + u.reshape(-1, 3), atol=1e-12)
+    np.testing.assert_allclose(w.field_forward(x), x + u.reshape(-1, 3), atol=1e-12)
+    # forward follows the inverse the volume is drawn with (6 fixed-point steps), which
+    # is within a fraction of a mm of the field's own map here
+    p = w.forward(x)
+    np.testing.assert_allclose(w.apply(p), x, atol=2 * w.forward_tolerance)
+    np.testing.assert_allclose(p, x + u.reshape(-1, 3), atol=0.05)
     # trilinear between nodes: the midpoint of an edge gets the mean of its two nodes
     mid = 0.5 * (x[0] + x[1])  # nodes (0, 0, 0) and (0, 0, 1)
     np.testing.assert_allclose(w.offset(mid)[0], 0.5 * (u[0, 0, 0] + u[0, 0, 1]), atol=1e-12)
@@ -132,7 +137,7 @@ def test_approx_error_is_larger_than_exact_error() -> None:
     errors = {}
     for mode in ("approx", "exact"):
         w = wavy_warp(inverse=mode)
-        errors[mode] = np.linalg.norm(w.forward(w.apply(p)) - p, axis=1)
+        errors[mode] = np.linalg.norm(w.field_forward(w.apply(p)) - p, axis=1)
     # measured (mm, node spacing 4 mm): approx max 1.58 (0.40 spacings), mean 0.22;
     # exact (k = 6) max 0.0081, mean 1.8e-4
     assert errors["approx"].max() > 0.25 * H[0]
@@ -196,10 +201,14 @@ def test_content_cannot_leave_the_grid_box() -> None:
     u = np.zeros((*SHAPE, 3))
     u[..., 0] = 3.0
     w = OffsetFieldWarp(LO, HI, u)
-    x = np.array([[HI[0] - 1.0, 20.0, 30.0]])
-    p = w.forward(x)
-    assert p[0, 0] > HI[0]  # forward: outside the grid box...
-    np.testing.assert_array_equal(w.apply(p), p)  # ...but there the original is shown
+    x = np.array([[HI[0] - 1.0, 20.0, 30.0], [HI[0] - 5.0, 20.0, 30.0]])
+    p = w.field_forward(x)
+    assert p[0, 0] > HI[0]  # the field sends it outside the grid box...
+    np.testing.assert_array_equal(w.apply(p[:1]), p[:1])  # ...but there the original is shown
+    # so the forward map of the drawn volume has no point for it (meshes are told)
+    with pytest.raises(ForwardMapError, match="no forward map at 1 of 2 points") as info:
+        w.forward(x)
+    assert info.value.failed.tolist() == [True, False]
     inside = np.array([[HI[0] - 5.0, 20.0, 30.0]])
     np.testing.assert_allclose(w.apply(inside), inside - [3.0, 0, 0], atol=1e-12)
     # and the deformed bounds of the grid box itself do not grow
