@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core import limits
-from voxwarp.core.volume import Volume
 from voxwarp.core.field_check import (
     TOLERANCE_MM,
     FieldCheck,
@@ -34,6 +33,7 @@ from voxwarp.core.field_check import (
     fill_outside,
     sample_carried,
 )
+from voxwarp.core.volume import Volume
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import Warp
 from voxwarp.errors import SceneError
@@ -147,6 +147,10 @@ class FieldExport:
         ``(nx, ny, nz)`` bool: nodes the chain does not carry (filled from neighbours).
     check : FieldCheck
         Its measured interpolation error and torn nodes.
+    needed_spacing : numpy.ndarray
+        Spacing per grid axis (mm) that meets the tolerance: the field's own when it
+        does; else a finer spacing tried that met it (``needed_met``), or the last
+        estimate (``needed_met`` False).
     refined : bool
         True when the spacing was made finer than the starting grid to meet the
         tolerance.
@@ -158,21 +162,17 @@ class FieldExport:
     field: DisplacementFieldWarp
     outside: np.ndarray
     check: FieldCheck
+    needed_spacing: np.ndarray
     refined: bool = False
     capped: bool = False
-
-    @property
-    def needed_spacing(self) -> np.ndarray:
-        """Spacing per grid axis (mm) that would meet the tolerance (the field's own
-        when it is met)."""
-        return np.asarray(self.field.spacing) * self.check.scale
+    needed_met: bool = True
 
     def report(self) -> str:
         """One line: the measured error, outside and torn node counts."""
         c = self.check
         return (
-            f"field check: trilinear within {c.max_error:.3g} mm of the chain at {c.checked}"
-            f" cell centres in the deformed volume (tolerance {c.tolerance:g} mm);"
+            f"field check: trilinear within {c.max_error:.3g} mm of the chain in {c.checked}"
+            f" cells of the deformed volume (tolerance {c.tolerance:g} mm);"
             f" {int(self.outside.sum())} outside node(s) not carried by the chain hold their"
             f" nearest carried vector; {int(c.torn.sum())} node(s) border a tear (left out)"
         )
@@ -196,27 +196,44 @@ def export_chain(
 ) -> FieldExport:
     """Sample ``warps`` as a field on ``field_grid(volume, spacing, box)`` and measure it.
 
-    With ``spacing=None`` the spacing is refined (up to :data:`MAX_REFINE` times, within
-    :data:`MAX_AUTO_NODES` nodes and the memory budget) until ITK's trilinear
-    interpolation is within ``tolerance`` mm of the chain away from tears; a given
-    ``spacing`` is kept as it is (see :attr:`FieldExport.needed_spacing`).
+    Where ITK's trilinear interpolation misses the chain by more than ``tolerance`` mm
+    away from tears, finer spacings are tried (up to :data:`MAX_REFINE` times, within
+    :data:`MAX_AUTO_NODES` nodes and the memory budget). With ``spacing=None`` the
+    finest one tried is returned (``refined``); a given ``spacing`` is kept, and the
+    spacing that met the tolerance (or the last estimate) is its
+    :attr:`FieldExport.needed_spacing`.
     """
     chain = list(warps)
-    affine, shape = field_grid(volume, spacing, box)
     to_index = np.linalg.inv(np.asarray(volume.affine, float))
-    out = _measured(chain, affine, shape, to_index, volume.shape, tolerance)
-    for _ in range(MAX_REFINE if spacing is None else 0):
-        if out.check.met:
+
+    def measured(grid: Any) -> FieldExport:
+        affine, shape = field_grid(volume, grid, box)
+        return _measured(chain, affine, shape, to_index, volume.shape, tolerance)
+
+    first = trial = measured(spacing)
+    capped = False
+    for _ in range(MAX_REFINE):
+        if trial.check.met:
             break
-        finer = out.needed_spacing
         try:
-            affine, shape = field_grid(volume, finer, box)
-        except SceneError:
-            return replace(out, capped=True)
-        if int(np.prod(shape)) > MAX_AUTO_NODES:
-            return replace(out, capped=True)
-        out = replace(_measured(chain, affine, shape, to_index, volume.shape, tolerance), refined=True)
-    return out
+            finer = measured(_capped(volume, trial.needed_spacing, box))
+        except SceneError:  # over the memory budget or the node cap
+            capped = True
+            break
+        trial = replace(finer, refined=True)
+    if spacing is None:
+        return replace(trial, capped=capped, needed_met=False)
+    return replace(
+        first, capped=capped, needed_spacing=trial.needed_spacing, needed_met=trial.check.met
+    )
+
+
+def _capped(volume: Volume, spacing: np.ndarray, box: Any) -> np.ndarray:
+    """``spacing``, or :class:`SceneError` when its grid has over :data:`MAX_AUTO_NODES`."""
+    _, shape = field_grid(volume, spacing, box)
+    if int(np.prod(shape)) > MAX_AUTO_NODES:
+        raise SceneError(f"over {MAX_AUTO_NODES} nodes")
+    return spacing
 
 
 def _measured(
@@ -229,4 +246,4 @@ def _measured(
 ) -> FieldExport:
     field, outside = chain_field(chain, affine, shape)
     check = check_field(chain, field, to_index, volume_shape, tolerance=tolerance)
-    return FieldExport(field, outside, check)
+    return FieldExport(field, outside, check, np.asarray(field.spacing) * check.scale)
