@@ -157,23 +157,17 @@ def _discontinuous(u: np.ndarray, fine: np.ndarray, coarse: np.ndarray, tol: flo
     """A cell's map jumps when its :data:`PROBE` times finer grid misses it by more than
     half the cell's own error (trilinear error falls as ``h^2`` where the map is smooth,
     as ``h`` at a kink such as an element face: by :data:`PROBE` at least; a jump keeps
-    it), or when neighbouring probe nodes differ by more than ``tol`` and over half as
-    much as the cell's neighbouring corners (a continuous map's differences fall as
-    ``h``). ``u``: (M, P+1, P+1, P+1, 3) probe values; ``fine``, ``coarse``: (M,) errors."""
-    steps = np.zeros(len(u))
-    edges = np.zeros(len(u))
-    corners = u[:, ::PROBE, ::PROBE, ::PROBE]
+    it), or when along a line of probe nodes one step changes the map by more than
+    ``tol`` and by more than all the line's other steps together (a continuous map
+    spreads its change over the steps). ``u``: (M, P+1, P+1, P+1, 3) probe values;
+    ``fine``, ``coarse``: (M,) errors."""
+    jump = np.zeros(len(u), dtype=bool)
     for ax in range(1, 4):
-        steps = np.maximum(steps, _largest_step(u, ax))
-        edges = np.maximum(edges, _largest_step(corners, ax))
-    jump = (steps > tol) & (2.0 * steps > edges)
+        d = np.nan_to_num(np.linalg.norm(np.diff(u, axis=ax), axis=-1), nan=np.inf)
+        top, total = d.max(axis=ax), d.sum(axis=ax)
+        line = (top > tol) & (2.0 * top > total)
+        jump |= line.reshape(len(u), -1).any(axis=1)
     return ~(2.0 * fine <= coarse) | jump
-
-
-def _largest_step(u: np.ndarray, axis: int) -> np.ndarray:
-    """Largest ``|u[k+1] - u[k]|`` along ``axis`` per cell (M,)."""
-    d = np.linalg.norm(np.diff(u, axis=axis), axis=-1).reshape(len(u), -1)
-    return np.nan_to_num(d.max(axis=1), nan=np.inf)
 
 
 def _subcell_trilinear(u: np.ndarray) -> np.ndarray:

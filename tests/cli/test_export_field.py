@@ -144,9 +144,9 @@ def _vacated_pixels(
     warps: list[Warp], field: Any, cam: Camera, clip: tuple[np.ndarray, np.ndarray]
 ) -> np.ndarray:
     """Pixels whose rays cross space in the ``clip`` box that the chain does not carry
-    (a rigid wire's vacated space; dilated by 2 pixels): voxwarp draws nothing there, while the export holds
-    the nearest carried vectors (so that ITK's interpolation beside it stays right) and
-    ITK's resampling shows the neighbours' tissue."""
+    (a rigid wire's vacated space; dilated by 2 pixels): voxwarp draws nothing there,
+    while the export holds the nearest carried vectors (so that ITK's interpolation
+    beside it stays right) and ITK's resampling shows the neighbours' tissue."""
     from scipy import ndimage
 
     idx = np.indices(field.shape).reshape(3, -1).T.astype(float)
