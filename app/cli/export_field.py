@@ -118,10 +118,10 @@ def _unmet(export: FieldExport, given: bool) -> str:
     c = export.check
     now = " x ".join(f"{s:.4g}" for s in export.field.spacing)
     need = " ".join(f"{np.floor(s * 1000) / 1000:g}" for s in export.needed_spacing)
-    which = f"--spacing {now}" if given else f"the finest spacing within the node cap, {now} mm,"
+    which = f"--spacing {now}" if given else f"spacing {now} mm (the finest within the node cap)"
     fix = f"--spacing {need} meets it" if export.needed_met else f"try --spacing {need}"
     return (
         f"{which} leaves ITK's trilinear interpolation up to {c.max_error:.3g} mm from the"
         f" chain between nodes (tolerance {c.tolerance:g} mm); {fix}"
-        + ("" if given else " (raise --memory-budget)")
+        + ("" if given else " (within --memory-budget)")
     )
