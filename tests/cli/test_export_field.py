@@ -284,6 +284,7 @@ def test_cli_export_field_writes_a_field_itk_reads(
         (["{scene}", "-o", "{tmp}/f.nrrd", "--box", "1", "2", "3", "0", "0", "0"], "x0 < x1"),
         (["{scene}", "-o", "{tmp}/f.nrrd", "--spacing", "1", "2"], "one positive number or"),
         (["{scene}", "-o", "{tmp}/f.nrrd", "--spacing", "1e-4"], "over the memory budget"),
+        (["{scene}", "-o", "{tmp}/f.nrrd", "--tolerance", "0"], "--tolerance 0: give a positive"),
     ],
 )
 def test_cli_export_field_bad_input_is_one_line(

@@ -150,3 +150,25 @@ def test_check_counts_only_points_carried_into_the_volume(volume: Volume) -> Non
     check = check_field([shift], field, np.linalg.inv(volume.affine), volume.shape)
     assert check.checked == 0
     assert check.max_error == 0.0
+
+
+def test_the_default_spacing_stops_at_the_node_cap(
+    volume: Volume, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``u_x = 3 (x - 20)^2`` misses by ``3 / 4`` mm on the 1 mm voxel grid; a finer grid
+    would be over :data:`MAX_AUTO_NODES` (patched to 50^3), so the default keeps the
+    voxel grid, says ``capped`` and reports the error it measured (not met)."""
+    from voxwarp.core import field_grid
+
+    monkeypatch.setattr(field_grid, "MAX_AUTO_NODES", 50**3)
+    export = export_chain(volume, [_quadratic(3.0)])
+    assert export.capped
+    assert not export.refined
+    assert export.field.shape == volume.shape
+    assert export.check.max_error == pytest.approx(0.75, rel=0.02)
+    assert not export.check.met
+    monkeypatch.setattr(field_grid, "MAX_AUTO_NODES", 1 << 25)
+    finer = export_chain(volume, [_quadratic(3.0)])
+    assert finer.refined
+    assert finer.check.met
+    assert finer.field.spacing[0] < 0.82  # 3 h^2 / 4 <= 0.5
