@@ -118,8 +118,11 @@ def _cells(shape: Sequence[int], rng: np.random.Generator) -> np.ndarray:
     """Lower-corner indices (M, 3) of the cells to check: all, or a random subset."""
     cells = np.asarray(shape) - 1
     count = int(np.prod(cells))
-    flat = np.arange(count) if count <= MAX_CHECK_CELLS else rng.choice(count, MAX_CHECK_CELLS)
-    return np.stack(np.unravel_index(np.sort(flat), tuple(cells)), axis=1)
+    if count <= MAX_CHECK_CELLS:
+        flat = np.arange(count)
+    else:  # sorted, without repeats (a few fewer than asked)
+        flat = np.unique(rng.integers(0, count, MAX_CHECK_CELLS))
+    return np.stack(np.unravel_index(flat, tuple(cells)), axis=1)
 
 
 def _inside(volume_index: np.ndarray, volume_shape: Sequence[int]) -> np.ndarray:
