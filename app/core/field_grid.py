@@ -43,7 +43,7 @@ NODE_BYTES = 12
 #: Most nodes a field refined by :func:`export_chain` may have (12 bytes each).
 MAX_AUTO_NODES = 1 << 25
 #: Most refinements :func:`export_chain` makes.
-MAX_REFINE = 2
+MAX_REFINE = 3
 
 
 def _spacing(spacing: Any) -> np.ndarray:
