@@ -25,7 +25,8 @@ import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed war
 from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
-from voxwarp.core.field_grid import chain_field, field_grid
+from voxwarp.core.field_check import TOLERANCE_MM
+from voxwarp.core.field_grid import FieldExport, chain_field, export_chain, field_grid
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.levels import LEVEL_ATTRIBUTES, Level, default_level
 from voxwarp.core.mesh import MeshInstance
@@ -640,7 +641,10 @@ class Scene:
         picture takes the original volume's value at ``p + u(p)``, so
         ``Resample(volume, DisplacementFieldTransform(field))`` reproduces the volume
         voxwarp draws deformed. Between nodes the field is trilinear, so the export is
-        exact only where the chain is smooth at the node spacing.
+        exact only where the chain is smooth at the node spacing (:meth:`export_field`
+        measures that and refines the spacing). Nodes the chain does not carry (a rigid
+        wire's vacated space) hold their nearest carried node's vector, so they cannot
+        bleed into their neighbours' interpolation.
 
         Parameters
         ----------
@@ -656,8 +660,21 @@ class Scene:
         memory budget.
         """
         affine, shape = field_grid(self.volume, spacing, box)
-        lo, hi = self.volume.bounds
-        return chain_field(self.warps, affine, shape, vacated=lo - (hi - lo))
+        return chain_field(self.warps, affine, shape)[0]
+
+    def export_field(
+        self, spacing: Any = None, box: Any = None, tolerance: float = TOLERANCE_MM
+    ) -> FieldExport:
+        """:meth:`displacement_field` with its interpolation measured (``voxwarp export-field``).
+
+        At cell centres inside the deformed volume, ITK's trilinear value is compared
+        with the chain; with ``spacing=None`` the spacing is made finer until that is
+        within ``tolerance`` mm where the chain is smooth (up to a node cap). The result
+        holds the field, its outside nodes (not carried by the chain), the nodes that
+        border a tear (a discontinuity no spacing interpolates) and the measured error:
+        see :func:`voxwarp.core.field_grid.export_chain`.
+        """
+        return export_chain(self.volume, self.warps, spacing, box, tolerance)
 
     def __repr__(self) -> str:
         return (

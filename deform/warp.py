@@ -60,6 +60,11 @@ class ForwardMapError(WarpError):
         self.failed = failed
 
 
+#: A chain that moves a point farther than this (mm) does not carry it (see
+#: :func:`chain_apply_carried`): beyond a half float, as ``node_grid``'s limit; vacated
+#: points go farther.
+FAR_MM = 6.0e4
+
 _REGISTRY: dict[str, type[Warp]] = {}
 #: the warp kinds voxwarp ships and the modules that register them: loaded when a scene
 #: names one, so that reading a warp entry never depends on what was imported before
@@ -200,6 +205,16 @@ class Warp(ABC):
             :func:`voxwarp.render.skipping.maps.warped_cell_visibility`). Signed intervals matter: a
             smooth field moves a region mostly one way, so the content a sample can
             reach is a shifted window, not a ball.
+        """
+        return None
+
+    def carried(self, points: np.ndarray) -> np.ndarray | None:
+        """Which of the (N, 3) deformed points the warp maps to content: an (N,) bool
+        mask, or ``None`` when it carries every point (the default).
+
+        A point it does not carry shows nothing (a rigid wire's vacated space);
+        :func:`chain_apply_carried` gathers the masks of a chain, and exporters mark
+        those points instead of writing the value :meth:`apply` gives there.
         """
         return None
 
@@ -551,6 +566,25 @@ def chain_apply(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:
     for w in warps:
         q = w.apply(q)
     return q
+
+
+def chain_apply_carried(warps: Sequence[Warp], points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`chain_apply` and an (N,) bool mask of the points the chain carries.
+
+    A point is not carried when some warp's :meth:`Warp.carried` says so at the point
+    that warp receives, or when the chain sends it to NaN or farther than :data:`FAR_MM`
+    (where a vacated point is sent).
+    """
+    p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    q, ok = p, np.ones(len(p), dtype=bool)
+    for w in warps:
+        mask = w.carried(q)
+        if mask is not None:
+            ok &= np.asarray(mask, dtype=bool)
+        q = w.apply(q)
+    with np.errstate(invalid="ignore"):
+        ok &= np.all(np.abs(q - p) < FAR_MM, axis=1)
+    return q, ok
 
 
 def chain_deformed_bounds(

@@ -9,8 +9,10 @@ Three grids, all given as a 4x4 index -> world (RAS mm) affine and a node count 
 * a world box ``(lo, hi)`` (axis-aligned in world), sampled the same way, at
   ``spacing`` or by default the volume's smallest voxel size.
 
-A point the chain leaves empty (a wire's vacated space, sent "infinitely far") points
-one box size outside the volume in the field, where resampling tools find nothing.
+A node the chain does not carry (a wire's vacated space, sent "infinitely far") is
+*outside*: it holds its nearest carried node's vector, so that ITK's trilinear
+interpolation next to it stays close to the chain (:mod:`voxwarp.core.field_check`);
+:func:`export_chain` measures that interpolation and refines the default spacing.
 The field's vectors are float32 (12 bytes a node), checked against the memory budget
 (:func:`voxwarp.core.limits.current_memory_budget`) before anything is allocated.
 """
@@ -18,22 +20,30 @@ The field's vectors are float32 (12 bytes a node), checked against the memory bu
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from voxwarp.core import limits
-from voxwarp.core.volume import Volume
-from voxwarp.deform.fields.displacement import (
-    MAX_DISPLACEMENT_MM,
-    DisplacementFieldWarp,
-    sample_chain_field,
+from voxwarp.core.field_check import (
+    TOLERANCE_MM,
+    FieldCheck,
+    check_field,
+    fill_outside,
+    sample_carried,
 )
-from voxwarp.deform.warp import Warp, chain_apply
+from voxwarp.core.volume import Volume
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+from voxwarp.deform.warp import Warp
 from voxwarp.errors import SceneError
 
 #: Bytes of one node of an exported field (3 float32 components).
 NODE_BYTES = 12
+#: Most nodes a field refined by :func:`export_chain` may have (12 bytes each).
+MAX_AUTO_NODES = 1 << 25
+#: Most refinements :func:`export_chain` makes.
+MAX_REFINE = 3
 
 
 def _spacing(spacing: Any) -> np.ndarray:
@@ -111,26 +121,129 @@ def _check_budget(shape: Sequence[int]) -> None:
 
 
 def chain_field(
-    warps: Sequence[Warp],
-    affine: np.ndarray,
-    shape: Sequence[int],
-    vacated: Sequence[float] | None = None,
-) -> DisplacementFieldWarp:
-    """The pull-back field ``chain(p) - p`` of ``warps`` on the grid ``(affine, shape)``.
+    warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
+) -> tuple[DisplacementFieldWarp, np.ndarray]:
+    """The pull-back field ``chain(p) - p`` of ``warps`` on the grid ``(affine, shape)``
+    and the ``(nx, ny, nz)`` bool mask of its *outside* nodes.
 
-    A node the chain sends farther than :data:`MAX_DISPLACEMENT_MM` or to NaN (the space
-    a wire's object left: nothing to draw there) points at ``vacated`` instead, a point
-    outside the volume, so resampling tools draw nothing there either.
+    A node the chain does not carry (a wire's vacated space, NaN, a point sent farther
+    than :data:`~voxwarp.deform.warp.FAR_MM`) is outside; it holds its nearest carried
+    node's vector (:func:`~voxwarp.core.field_check.fill_outside`), so ITK's trilinear
+    interpolation next to it keeps the carried side's value.
+    """
+    u, outside = sample_carried(list(warps), affine, shape)
+    return DisplacementFieldWarp(fill_outside(u, outside), affine), outside
+
+
+@dataclass(frozen=True)
+class FieldExport:
+    """An exported field with what was measured of it (:func:`export_chain`).
+
+    Attributes
+    ----------
+    field : DisplacementFieldWarp
+        The field (RAS; :func:`voxwarp.io.fields.save_displacement_field` writes it).
+    outside : numpy.ndarray
+        ``(nx, ny, nz)`` bool: nodes the chain does not carry (filled from neighbours).
+    check : FieldCheck
+        Its measured interpolation error and torn nodes.
+    needed_spacing : numpy.ndarray
+        Spacing per grid axis (mm) that meets the tolerance: the field's own when it
+        does; else a finer spacing tried that met it (``needed_met``), or the last
+        estimate (``needed_met`` False).
+    refined : bool
+        True when the spacing was made finer than the starting grid to meet the
+        tolerance.
+    capped : bool
+        True when a finer spacing was needed but over :data:`MAX_AUTO_NODES` or the
+        memory budget.
+    """
+
+    field: DisplacementFieldWarp
+    outside: np.ndarray
+    check: FieldCheck
+    needed_spacing: np.ndarray
+    refined: bool = False
+    capped: bool = False
+    needed_met: bool = True
+
+    def report(self) -> str:
+        """One line: the measured error, outside and torn node counts."""
+        c = self.check
+        return (
+            f"field check: trilinear within {c.max_error:.3g} mm of the chain in {c.checked}"
+            f" cells of the deformed volume (tolerance {c.tolerance:g} mm);"
+            f" {int(self.outside.sum())} outside node(s) not carried by the chain hold their"
+            f" nearest carried vector; {int(c.torn.sum())} node(s) border a tear (left out)"
+        )
+
+    def metadata(self) -> dict[str, str]:
+        """What the written file records of the check (short key -> text)."""
+        return {
+            "max_error_mm": f"{self.check.max_error:.3g}",
+            "tolerance_mm": f"{self.check.tolerance:g}",
+            "outside_nodes": str(int(self.outside.sum())),
+            "torn_nodes": str(int(self.check.torn.sum())),
+        }
+
+
+def export_chain(
+    volume: Volume,
+    warps: Sequence[Warp],
+    spacing: Any = None,
+    box: Any = None,
+    tolerance: float = TOLERANCE_MM,
+) -> FieldExport:
+    """Sample ``warps`` as a field on ``field_grid(volume, spacing, box)`` and measure it.
+
+    Where ITK's trilinear interpolation misses the chain by more than ``tolerance`` mm
+    away from tears, finer spacings are tried (up to :data:`MAX_REFINE` times, within
+    :data:`MAX_AUTO_NODES` nodes and the memory budget). With ``spacing=None`` the
+    finest one tried is returned (``refined``); a given ``spacing`` is kept, and the
+    spacing that met the tolerance (or the last estimate) is its
+    :attr:`FieldExport.needed_spacing`.
     """
     chain = list(warps)
-    out = None if vacated is None else np.asarray(vacated, dtype=np.float64).reshape(1, 3)
+    to_index = np.linalg.inv(np.asarray(volume.affine, float))
 
-    def apply(p: np.ndarray) -> np.ndarray:
-        q = chain_apply(chain, p)
-        if out is not None:
-            far = ~np.all(np.abs(q - p) < MAX_DISPLACEMENT_MM, axis=1)
-            q[far] = out
-        return q
+    def measured(grid: Any) -> FieldExport:
+        affine, shape = field_grid(volume, grid, box)
+        return _measured(chain, affine, shape, to_index, volume.shape, tolerance)
 
-    u = sample_chain_field(apply, affine, shape)
-    return DisplacementFieldWarp(u, affine)
+    first = trial = measured(spacing)
+    capped = False
+    for _ in range(MAX_REFINE):
+        if trial.check.met:
+            break
+        try:
+            finer = measured(_capped(volume, trial.needed_spacing, box))
+        except SceneError:  # over the memory budget or the node cap
+            capped = True
+            break
+        trial = replace(finer, refined=True)
+    if spacing is None:
+        return replace(trial, capped=capped, needed_met=False)
+    return replace(
+        first, capped=capped, needed_spacing=trial.needed_spacing, needed_met=trial.check.met
+    )
+
+
+def _capped(volume: Volume, spacing: np.ndarray, box: Any) -> np.ndarray:
+    """``spacing``, or :class:`SceneError` when its grid has over :data:`MAX_AUTO_NODES`."""
+    _, shape = field_grid(volume, spacing, box)
+    if int(np.prod(shape)) > MAX_AUTO_NODES:
+        raise SceneError(f"over {MAX_AUTO_NODES} nodes")
+    return spacing
+
+
+def _measured(
+    chain: list[Warp],
+    affine: np.ndarray,
+    shape: Sequence[int],
+    to_index: np.ndarray,
+    volume_shape: Sequence[int],
+    tolerance: float,
+) -> FieldExport:
+    field, outside = chain_field(chain, affine, shape)
+    check = check_field(chain, field, to_index, volume_shape, tolerance=tolerance)
+    return FieldExport(field, outside, check, np.asarray(field.spacing) * check.scale)

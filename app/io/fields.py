@@ -39,7 +39,7 @@ Writing (:func:`save_displacement_field`) always uses the ITK convention, so tha
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -487,12 +487,20 @@ def _field_of_transform(path: Path, part: int | None) -> DisplacementFieldWarp:
 WRITE_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".mha", ".h5", ".npz")
 
 
-def save_displacement_field(field: DisplacementFieldWarp, path: str | os.PathLike[str]) -> Path:
+def save_displacement_field(
+    field: DisplacementFieldWarp,
+    path: str | os.PathLike[str],
+    metadata: Mapping[str, str] | None = None,
+) -> Path:
     """Write ``field`` in the ITK convention (LPS vectors, pull-back), atomically.
 
     The format follows the suffix (:data:`WRITE_SUFFIXES`): NIfTI (5-D, intent vector,
     as SimpleITK writes), NRRD (space left-posterior-superior), MetaImage and ITK
     ``.h5`` transform (``registration`` extra), or ``.npz`` (voxwarp's arrays, RAS).
+    ``metadata`` (e.g. :meth:`voxwarp.core.field_grid.FieldExport.metadata`) is
+    recorded with keys prefixed ``voxwarp_``: NRRD fields, MetaImage tags, ``.npz``
+    entries, and ``key=value`` pairs in a NIfTI's ``descrip`` (80 characters); an
+    ``.h5`` transform has no place for it.
     Returns the path. Raises :class:`FieldError` or :class:`~voxwarp.errors.OutputError`.
     """
     final = Path(path)
@@ -512,8 +520,9 @@ def save_displacement_field(field: DisplacementFieldWarp, path: str | os.PathLik
         ".h5": _write_sitk,
         ".npz": _write_npz,
     }[suffix]
+    notes = {f"voxwarp_{k}": str(v) for k, v in (metadata or {}).items()}
     with atomic_output(final, suffix) as tmp:
-        writer(field, tmp)
+        writer(field, tmp, notes)
     return final
 
 
@@ -522,11 +531,14 @@ def _lps(field: DisplacementFieldWarp) -> tuple[np.ndarray, np.ndarray]:
     return field.displacements * _FLIP.astype(np.float32), _LPS @ field.affine
 
 
-def _write_nifti(field: DisplacementFieldWarp, tmp: Path) -> None:
+def _write_nifti(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, str]) -> None:
     import nibabel as nib
 
     u_lps, _ = _lps(field)
     img = nib.Nifti1Image(u_lps[:, :, :, None, :].astype(np.float32), field.affine)
+    if notes:
+        pairs = " ".join(f"{k.removeprefix('voxwarp_')}={v}" for k, v in notes.items())
+        img.header["descrip"] = f"voxwarp {pairs}"[:79].encode("ascii", "replace")
     img.header.set_intent("vector")
     img.header.set_sform(field.affine, code=1)
     img.header.set_qform(field.affine, code=1)
@@ -534,7 +546,7 @@ def _write_nifti(field: DisplacementFieldWarp, tmp: Path) -> None:
     nib.save(img, str(tmp))
 
 
-def _write_nrrd(field: DisplacementFieldWarp, tmp: Path) -> None:
+def _write_nrrd(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, str]) -> None:
     import nrrd
 
     u_lps, a = _lps(field)
@@ -544,6 +556,7 @@ def _write_nrrd(field: DisplacementFieldWarp, tmp: Path) -> None:
         "space directions": np.vstack([np.full(3, np.nan), a[:3, :3].T]),
         "space origin": a[:3, 3],
         "encoding": "gzip",
+        **notes,
     }
     nrrd.write(str(tmp), np.moveaxis(u_lps, -1, 0), header, index_order="F")
 
@@ -560,9 +573,11 @@ def field_image(field: DisplacementFieldWarp) -> Any:
     return img
 
 
-def _write_sitk(field: DisplacementFieldWarp, tmp: Path) -> None:
+def _write_sitk(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, str]) -> None:
     sitk = _sitk(f"writing {tmp.name}")
     img = field_image(field)
+    for key, value in notes.items():
+        img.SetMetaData(key, value)
     try:
         if field_suffix(tmp) == ".h5":
             sitk.WriteTransform(sitk.DisplacementFieldTransform(img), str(tmp))
@@ -572,7 +587,8 @@ def _write_sitk(field: DisplacementFieldWarp, tmp: Path) -> None:
         raise OSError(_first_line(exc)) from exc
 
 
-def _write_npz(field: DisplacementFieldWarp, tmp: Path) -> None:
+def _write_npz(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, str]) -> None:
+    extra = {k: np.str_(v) for k, v in notes.items()}
     with open(tmp, "wb") as fh:
         np.savez_compressed(
             fh,
@@ -580,6 +596,7 @@ def _write_npz(field: DisplacementFieldWarp, tmp: Path) -> None:
             affine=field.affine,
             space=np.str_("RAS"),
             units=np.str_("mm"),
+            **extra,
         )
 
 

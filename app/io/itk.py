@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core import extras
+from voxwarp.core.field_grid import chain_field
 from voxwarp.core.volume import Volume
-from voxwarp.deform.fields.displacement import DisplacementFieldWarp, sample_chain_field
-from voxwarp.deform.warp import Warp, chain_apply
+from voxwarp.deform.warp import Warp
 from voxwarp.io.fields import field_image, itk_affine
 
 _FLIP3 = np.diag([-1.0, -1.0, 1.0])
@@ -62,10 +62,10 @@ def from_sitk(image: Any, name: str = "volume", **fields: Any) -> Volume:
 
 def displacement_transform(warps: Sequence[Warp], reference: Volume) -> Any:
     """An ITK ``DisplacementFieldTransform`` of a warp chain, sampled on ``reference``'s
-    grid (the pull-back field ``chain(p) - p``)."""
+    grid (the pull-back field ``chain(p) - p``; nodes the chain does not carry hold
+    their nearest carried vector, as :func:`voxwarp.core.field_grid.chain_field`)."""
     sitk = sitk_module("voxwarp.io.itk.displacement_transform")
-    u = sample_chain_field(lambda p: chain_apply(warps, p), reference.affine, reference.shape)
-    field = DisplacementFieldWarp(u, reference.affine)
+    field, _ = chain_field(warps, reference.affine, reference.shape)
     return sitk.DisplacementFieldTransform(field_image(field))
 
 

@@ -193,6 +193,10 @@ class WireFieldWarp(Warp):
             out[state == 2] = p[state == 2] + weight[:, None] * (out[state == 2] - p[state == 2])
         return out
 
+    def carried(self, points: np.ndarray) -> np.ndarray:
+        """False at vacated points (state 1: the swept object left them), True elsewhere."""
+        return self._lookup(points)[0] != 1
+
     def _weight(self, p: np.ndarray, state: np.ndarray) -> np.ndarray | None:
         """Displacement weight of the swept points among p (trilinear, as the GPU's
         filtered texture), or None when every wire is rigid."""
