@@ -194,8 +194,8 @@ class WireFieldWarp(Warp):
         return out
 
     def carried(self, points: np.ndarray) -> np.ndarray:
-        """False at vacated points (state 1: the swept object left them), True elsewhere."""
-        return self._lookup(points)[0] != 1
+        """False at vacated points (:meth:`vacated`), True elsewhere."""
+        return ~self.vacated(points)
 
     def _weight(self, p: np.ndarray, state: np.ndarray) -> np.ndarray | None:
         """Displacement weight of the swept points among p (trilinear, as the GPU's
