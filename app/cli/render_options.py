@@ -376,8 +376,9 @@ class Pick(NamedTuple):
 
 
 def pick_elements(grid: Any, drags: list[DragAt]) -> list[Pick]:
-    """The element of ``grid`` nearest each ``--drag-at`` point (at rest);
-    :class:`InputError` for a point more than one element spacing outside the grid box."""
+    """The element of ``grid`` nearest each ``--drag-at`` point (at rest) that is not
+    fixed (the anchor's shell can be held by no drag); :class:`InputError` for a point more
+    than one element spacing outside the grid box."""
     import numpy as np
 
     rest = np.asarray(grid.rest_positions, dtype=np.float64)
@@ -396,6 +397,7 @@ def pick_elements(grid: Any, drags: list[DragAt]) -> list[Pick]:
                 " that box (world mm)"
             )
         dist = np.linalg.norm(flat - p, axis=1)
+        dist[np.asarray(grid.fixed).reshape(-1)] = np.inf
         k = int(np.argmin(dist))
         index = tuple(int(v) for v in np.unravel_index(k, rest.shape[:3]))
         picks.append(Pick(d, index, tuple(map(float, flat[k])), float(dist[k])))  # type: ignore[arg-type]

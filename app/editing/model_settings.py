@@ -110,13 +110,19 @@ class ElementSettings:
     backend: str = "cpu"
     #: one stiffness (0..1] for every element (None: the grid's default)
     stiffness: float | None = None
-    #: (value, stiffness) points mapping the volume's values to element stiffness
-    stiffness_from_volume: Sequence[tuple[float, float]] | None = None
+    #: (value, stiffness) points mapping the volume's values to element stiffness, or a
+    #: tissue preset: "ct", "mr" or "auto" (from the volume's modality)
+    stiffness_from_volume: Sequence[tuple[float, float]] | str | None = None
     #: index ranges ``((i0, i1), (j0, j1), (k0, k1))`` (inclusive) of fixed elements
     fixed: tuple[tuple[tuple[int, int], ...], ...] = ()
     drags: tuple[Drag, ...] = ()
     #: the warp's inverse mode (None: the model's default, ``"baked"``)
     inverse: str | None = None
+    #: boundary conditions (:mod:`voxwarp.deform.elements.anchors`): the grid's fixed
+    #: elements ("shell", "corners": the thesis's, "none") and the region of influence
+    #: (mm, "auto", None: off; "default": "auto" with the shell, else off)
+    anchor: str = "shell"
+    fix_outside: float | str | None = "default"
 
 
 @dataclass(frozen=True)
@@ -181,6 +187,9 @@ class FamilyOptions:
     variant: str = "enhanced"
     #: element stiffness of new mass-spring/ChainMail models (0..1]
     stiffness: float = 0.5
+    #: boundary conditions of new element models (see :class:`ElementSettings`)
+    anchor: str = "shell"
+    fix_outside: float | str | None = "default"
     #: mass-spring steps and ChainMail relaxation steps per frame while running
     steps_per_frame: int = 10
     relax_steps: int = 1

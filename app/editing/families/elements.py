@@ -9,10 +9,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from voxwarp.core.modality_detection import detect_modality
+from voxwarp.deform.elements.anchors import AnchorError
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.elements.chainmail_model import ChainMailError
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
 from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
+from voxwarp.deform.elements.materials import MaterialPresetError
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.editing.common import COLORS, DisplayOptions, EditorError
@@ -76,14 +79,25 @@ class ElementFamily(Family):
         """The element grid of ``settings`` over ``volume``'s box: its stiffness, fixed
         elements and materials set (no GL work); a :class:`SettingError` names a bad
         setting."""
-        grid = ElementGrid(volume, shape=settings.shape)
+        try:
+            grid = ElementGrid(
+                volume, settings.shape, anchor=settings.anchor, fix_outside=settings.fix_outside
+            )
+        except AnchorError as exc:
+            raise SettingError("anchor", str(exc)) from exc
         if settings.stiffness is not None:
             grid.set_material(stiffness=settings.stiffness)
         for ranges in settings.fixed:
             mask = np.zeros(grid.shape, dtype=bool)
             mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
             grid.fix(mask)
-        if settings.stiffness_from_volume:
+        if isinstance(settings.stiffness_from_volume, str):
+            preset = material_preset(settings.stiffness_from_volume, volume)
+            try:
+                grid.materials_from_preset(volume, preset)
+            except (ElementGridError, MaterialPresetError) as exc:
+                raise SettingError("stiffness_from_volume", str(exc)) from exc
+        elif settings.stiffness_from_volume:
             # the voxel centres span origin .. origin + spacing * (shape - 1)
             org = np.asarray(volume.origin, dtype=np.float64)
             n = np.maximum(np.asarray(volume.shape) - 1, 1)
@@ -288,6 +302,8 @@ class MassSpringFamily(ElementFamily):
             shape=s.resolution,
             backend=s.backend,
             stiffness=s.options.stiffness,
+            anchor=s.options.anchor,
+            fix_outside=s.options.fix_outside,
             integrator=s.options.integrator,
         )
 
@@ -360,6 +376,8 @@ class ChainMailFamily(ElementFamily):
             shape=s.resolution,
             backend=s.backend,
             stiffness=s.options.stiffness,
+            anchor=s.options.anchor,
+            fix_outside=s.options.fix_outside,
             variant=s.options.variant,
             relax_steps=s.options.relax_steps if s.backend == "cpu" else 0,
         )
@@ -438,3 +456,12 @@ class ChainMailFamily(ElementFamily):
         super().restore(state)
         if isinstance(self.model, ChainMail):
             self.model.set_state(state["positions"])
+
+
+def material_preset(name: str, volume: Any) -> str:
+    """The tissue preset ``name`` (``"ct"``, ``"mr"`` or ``"auto"``) for ``volume``:
+    ``"auto"`` is ``"ct"`` for a CT in Hounsfield units, else ``"mr"`` (relative to the
+    volume's histogram, which also suits other data without absolute units)."""
+    if name != "auto":
+        return name
+    return "ct" if detect_modality(volume).kind == "CT" else "mr"
