@@ -80,7 +80,6 @@ def check_deform_options(args: argparse.Namespace) -> None:
     """Option checks that need no volume: deformation options without their model, both
     models at once, options of the other model, drags and fixes outside the grid, drags
     of a fixed element or of one element twice."""
-    import numpy as np
 
     if args.massspring is not None and args.chainmail is not None:
         raise CliOptionError(
@@ -306,8 +305,6 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
 
 def _cut_crosses(grid: Any, cut: _Cut) -> bool:
     """Whether ``cut`` removes a link of ``grid`` at rest (the test of ChainMail.cut)."""
-    import numpy as np
-
     p0 = np.asarray(cut.point, dtype=np.float64)
     normal = np.asarray(cut.normal, dtype=np.float64)
     x = grid.rest_positions

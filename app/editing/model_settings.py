@@ -22,6 +22,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from voxwarp.deform.elements.anchors import ANCHOR_MODES, AUTO
+from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
 from voxwarp.editing.common import CHAINMAIL_VARIANTS, INTEGRATORS, EditorError, choice
 
 #: a mass-spring model whose elements are all slower than this (mm/s) is settled
@@ -201,9 +203,11 @@ class FamilyOptions:
 
     def with_model_settings(self, settings: dict[str, Any]) -> FamilyOptions:
         """A copy with the model settings of ``EditSession.set_deformation``
-        (``integrator``, ``variant``, ``stiffness``; nothing else may be left in
-        ``settings``), checked; an :class:`EditorError` names a bad one."""
+        (``integrator``, ``variant``, ``stiffness``, ``anchor``, ``fix_outside``;
+        nothing else may be left in ``settings``), checked; an :class:`EditorError`
+        names a bad one."""
         settings = dict(settings)
+        bounds = _boundary_settings(settings, self.anchor, self.fix_outside)
         integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
         variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
         stiffness_value = settings.pop("stiffness", self.stiffness)
@@ -217,7 +221,9 @@ class FamilyOptions:
             raise EditorError(f"unknown deformation settings: {', '.join(sorted(settings))}")
         if not 0.0 < stiffness <= 1.0:
             raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
-        return replace(self.copy(), integrator=integrator, variant=variant, stiffness=stiffness)
+        return replace(
+            self.copy(), integrator=integrator, variant=variant, stiffness=stiffness, **bounds
+        )
 
     def set_run_option(self, name: str, value: Any) -> int:
         """Set ``steps_per_frame`` or ``relax_steps`` (0..10000); returns the value."""
@@ -247,6 +253,8 @@ class FamilyOptions:
             "steps_per_frame": self.steps_per_frame,
             "relax_steps": self.relax_steps,
             "stiffness": self.stiffness,
+            "anchor": self.anchor,
+            "fix_outside": self.fix_outside,
             "wire_settings": dict(self.wire_settings),
         }
 
@@ -260,8 +268,31 @@ class FamilyOptions:
                 setattr(self, key, int(entry[key]))
         if "stiffness" in entry:
             self.stiffness = float(entry["stiffness"])
+        if "anchor" in entry:
+            self.anchor = str(entry["anchor"])
+        if "fix_outside" in entry:
+            self.fix_outside = entry["fix_outside"]
         if isinstance(entry.get("wire_settings"), dict):
             self.wire_settings = dict(entry["wire_settings"])
+
+
+def _boundary_settings(
+    settings: dict[str, Any], anchor: str, fix_outside: float | str | None
+) -> dict[str, Any]:
+    """``anchor`` and ``fix_outside`` popped from ``settings`` (default: the current),
+    checked; an :class:`EditorError` names a bad one."""
+    anchor = choice(settings.pop("anchor", anchor), ANCHOR_MODES, "anchor")
+    fix_outside = settings.pop("fix_outside", fix_outside)
+    if fix_outside not in (DEFAULT_REGION, AUTO, None):
+        try:
+            fix_outside = float(fix_outside)
+        except (TypeError, ValueError) as exc:
+            raise EditorError(
+                f"fix_outside must be a radius in mm, 'auto' or None; got {fix_outside!r}"
+            ) from exc
+        if not fix_outside >= 0:
+            raise EditorError(f"fix_outside must be >= 0 mm (0: off); got {fix_outside}")
+    return {"anchor": anchor, "fix_outside": fix_outside}
 
 
 # ---------------------------------------------------------------------------- results

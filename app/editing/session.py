@@ -232,7 +232,9 @@ class EditSession:
     # ------------------------------------------------------------------ models
     def set_deformation(self, kind: str, **settings: Any) -> None:
         """Switch the deformation family (and settings: ``backend``, ``resolution``,
-        ``integrator``, ``variant``, ``stiffness``); builds a fresh model at rest.
+        ``integrator``, ``variant``, ``stiffness``, and the element grid's boundary
+        conditions ``anchor`` and ``fix_outside``, see
+        :class:`~voxwarp.deform.elements.grid.ElementGrid`); builds a fresh model at rest.
 
         ``"wires"`` starts with one straight wire along the volume's longest axis
         through its centre (bend it by dragging its control points, or lay new ones);

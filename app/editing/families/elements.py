@@ -246,13 +246,27 @@ class ElementFamily(Family):
             edges = grid_edges(handles.reshape(*self.model.grid.shape, 3))
             layers.append(OverlayLayer("lines", edges, COLORS["link"], name="links"))
         fixed = self.fixed_handles(len(handles))
+        anchored = self.model.grid.anchored.reshape(-1) & ~fixed
         if display.elements:
+            free = ~(fixed | anchored)
             layers.append(
-                OverlayLayer("points", handles[~fixed], COLORS["element"], 5.0, name="elements")
+                OverlayLayer("points", handles[free], COLORS["element"], 5.0, name="elements")
             )
         if display.fixed and np.any(fixed):
             layers.append(OverlayLayer("points", handles[fixed], COLORS["fixed"], 7.0, "fixed"))
+        if display.fixed and np.any(anchored):
+            layers.append(
+                OverlayLayer("points", handles[anchored], COLORS["anchored"], 6.0, "anchored")
+            )
         return layers
+
+    def boundary_text(self) -> str:
+        """The boundary conditions of the model in one line (the panel shows it)."""
+        if self.model is None:
+            return ""
+        grid = self.model.grid
+        count = int(grid.anchored.sum())
+        return grid.describe_anchors() + (f"; {count} anchored now" if count else "")
 
     # ---------------------------------------------------------------- undo and animation
     def snapshot(self) -> dict[str, Any]:

@@ -38,10 +38,12 @@ def test_anchor_masks_count(shape: tuple[int, int, int]) -> None:
 
 def test_new_grid_fixes_the_shell_and_modes_are_checked() -> None:
     g = ElementGrid(BOX, shape=9)
-    assert g.anchor == "shell" and g.fix_outside == "auto"
+    assert g.anchor == "shell"
+    assert g.fix_outside == "auto"
     np.testing.assert_array_equal(g.fixed, anchors.anchor_mask(g.shape, "shell"))
     corners = ElementGrid(BOX, shape=9, anchor="corners")
-    assert int(corners.fixed.sum()) == 8 and corners.fix_outside is None
+    assert int(corners.fixed.sum()) == 8
+    assert corners.fix_outside is None
     assert ElementGrid(BOX, shape=9, anchor="none").fixed.sum() == 0
     with pytest.raises(anchors.AnchorError, match="shell, corners, none"):
         ElementGrid(BOX, shape=9, anchor="walls")
@@ -113,7 +115,7 @@ def test_bundled_model_files_load_with_the_thesis_set_up() -> None:
     for name in ("fish_massspring_jiggle_anim.json", "fish_chainmail_poke_anim.json"):
         model = json.loads((SAMPLES / name).read_text())["warps"][0]["model"]
         grid = ElementGrid.from_dict(model["grid"])
-        assert grid.anchor == "corners" and grid.fix_outside is None, name
+        assert (grid.anchor, grid.fix_outside) == ("corners", None), name
 
 
 @pytest.mark.parametrize("cls", [MassSpring, ChainMail])
@@ -131,7 +133,8 @@ def test_drag_leaves_everything_beyond_the_region_at_rest(cls: Any) -> None:
         # a new drag elsewhere recomputes the anchors around both held elements
         before = g.anchored.copy()
         model.move((1, 1, 1), (0.0, 2.0, 0.0))
-        assert not g.anchored[1, 1, 1] and before[1, 1, 1]
+        assert not g.anchored[1, 1, 1]
+        assert before[1, 1, 1]
         assert not np.array_equal(before, g.anchored)
         model.reset()
         if cls is ChainMail:
@@ -187,7 +190,8 @@ def test_chainmail_gpu_pins_anchored_elements_like_the_cpu(gl_ctx: Any) -> None:
     ]
     try:
         stats = [cm.move((4, 4, 4), (0.0, 0.0, 12.0)) for cm in models]
-        assert stats[0].limited and stats[1].limited  # the anchored ring stops the push
+        assert stats[0].limited
+        assert stats[1].limited
         assert stats[1].fraction == pytest.approx(stats[0].fraction, abs=2.0**-12)
         cpu, gpu = models
         np.testing.assert_array_equal(cpu.grid.anchored, gpu.grid.anchored)
@@ -215,7 +219,8 @@ def test_ct_preset_orders_bone_soft_air() -> None:
     s = g.materials_from_preset(vol, "ct")[:, 0, 0]
     air, fat, soft, bone = s[5], s[15], s[25], s[35]
     assert bone > soft >= fat > air
-    assert air == pytest.approx(materials.FREE) and bone < 1.0
+    assert air == pytest.approx(materials.FREE)
+    assert bone < 1.0
 
 
 def test_mr_preset_frees_the_background_from_the_histogram() -> None:

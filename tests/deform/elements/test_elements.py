@@ -242,7 +242,9 @@ def test_materials_from_a_volume_object_take_its_voxel_centres() -> None:
     s = grid.materials_from_volume(vol, mapping=points)
     lo = np.asarray(vol.origin)
     hi = lo + np.asarray(vol.spacing) * (np.asarray(vol.shape) - 1)
-    expected = ElementGrid(vol, shape=(6, 3, 3), anchor="corners").materials_from_volume(data, (lo, hi), points)
+    expected = ElementGrid(vol, shape=(6, 3, 3), anchor="corners").materials_from_volume(
+        data, (lo, hi), points
+    )
     np.testing.assert_array_equal(s, expected)
     assert s[0, 0, 0] == pytest.approx(0.2)
     assert s[-1, 0, 0] == pytest.approx(0.95)

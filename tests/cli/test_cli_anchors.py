@@ -1,0 +1,50 @@
+"""Boundary conditions on the command line (``--anchor``, ``--fix-outside``): a default
+drag on a head stays local, ``--anchor corners`` is the thesis's set-up that moves the
+whole head, and the conditions in use are named in one stderr line.
+
+Oracle (``tests/cli/locality.py``): a 15 mm posterior push at the face front; the mean
+|deformed - rest| grey of sagittal slices over the head's posterior (far) third against
+its anterior (near) third. On the bundled MRI (``sample:colin27``) and a phantom
+(``sample:head``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.cli.locality import thirds_change
+
+MODELS = {"massspring": ["--massspring", "16", "--settle"], "chainmail": ["--chainmail", "16"]}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sample", ["sample:colin27", "sample:head"])
+@pytest.mark.parametrize("model", sorted(MODELS))
+def test_default_drag_stays_local(sample: str, model: str, tmp_path: Path) -> None:
+    near, far, err = thirds_change(sample, tmp_path, *MODELS[model])
+    assert near > 0.0, "the push changed nothing near it"
+    assert far < near / 5, f"far third {far:.3f} vs near third {near:.3f}"
+    lines = [line for line in err.splitlines() if "boundary:" in line]
+    assert len(lines) == 1
+    assert "grid shell fixed" in lines[0]
+    assert "anchored" in lines[0]
+    assert "(--anchor, --fix-outside)" in lines[0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sample", ["sample:colin27", "sample:head"])
+def test_corners_move_the_whole_head_as_before(sample: str, tmp_path: Path) -> None:
+    near, far, err = thirds_change(sample, tmp_path, *MODELS["massspring"], "--anchor", "corners")
+    assert far >= near / 5, f"far third {far:.3f} vs near third {near:.3f}"
+    assert "boundary: 8 grid corners fixed; no region of influence" in err
+
+
+@pytest.mark.slow
+def test_fix_outside_sets_the_radius_and_off_removes_it(tmp_path: Path) -> None:
+    base = ["--massspring", "16", "--steps", "10"]
+    _, _, err = thirds_change("sample:head", tmp_path, *base, "--fix-outside", "40")
+    assert "elements beyond 40 mm of a drag anchored;" in err
+    _, _, err = thirds_change("sample:head", tmp_path, *base, "--fix-outside", "off")
+    assert "grid shell fixed; no region of influence" in err
