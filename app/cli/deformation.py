@@ -258,7 +258,7 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     if model is None:
         return None
     # loads scipy: only when used
-    from voxwarp.editing.families.elements import ElementFamily
+    from voxwarp.editing.families.elements import ElementFamily, material_preset
 
     if args.drag_at:  # to the nearest elements at rest, then checked as --drag elements are
         # loads scipy: only when used
@@ -281,6 +281,14 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     except SettingError as exc:
         option = "--anchor" if exc.setting == "anchor" else "--stiffness-from-volume"
         raise CliOptionError(f"{option}: {exc}") from exc
+    if isinstance(args.stiffness_from_volume, str):
+        preset = material_preset(args.stiffness_from_volume, volume)
+        s = grid.stiffness
+        print(
+            f"voxwarp: materials: --stiffness-from-volume {args.stiffness_from_volume}:"
+            f" the {preset} preset, element stiffness {s.min():.2f}..{s.max():.2f}",
+            file=sys.stderr,
+        )
     if model == "massspring":
         rigid = grid.pinned()
         for d in args.drag or []:

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from tests.cli.locality import thirds_change
+from tests.cli.test_cli import run_cli
 
 MODELS = {"massspring": ["--massspring", "16", "--settle"], "chainmail": ["--chainmail", "16"]}
 
@@ -48,3 +49,15 @@ def test_fix_outside_sets_the_radius_and_off_removes_it(tmp_path: Path) -> None:
     assert "elements beyond 40 mm of a drag anchored;" in err
     _, _, err = thirds_change("sample:head", tmp_path, *base, "--fix-outside", "off")
     assert "grid shell fixed; no region of influence" in err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", ["ct", "mr"])
+def test_stiffness_preset_is_named_in_one_line(preset: str, tmp_path: Path) -> None:
+    out = tmp_path / "s.png"
+    args = ["--massspring", "6", "--drag", "3,3,3:0,5,0", "--steps", "1"]
+    proc = run_cli("slice", "sample:head", "-o", str(out), *args, "--stiffness-from-volume", preset)
+    assert proc.returncode == 0, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if "materials:" in line]
+    assert len(lines) == 1
+    assert f"the {preset} preset" in lines[0]
