@@ -791,14 +791,17 @@ class ChainMail(ElementWarpMixin):
 
     def _update_anchors(self, held: np.ndarray, offsets: np.ndarray) -> None:
         """Anchor the elements at rest beyond the region of influence of ``held``
-        (:meth:`ElementGrid.anchor_around`); the GPU solver is rebuilt when they change."""
-        if self.backend == "gpu":
-            x = self._solver.positions().reshape(-1, 3)
-        else:
-            x = self._x
-        at_rest = np.all(x == self._rest, axis=1)
+        (:meth:`ElementGrid.anchor_around`); the GPU solver is rebuilt when they change.
+        A region that only shrinks (a drag growing) needs no GPU read-back."""
         before = self.grid.anchored.copy()
-        self.grid.anchor_around(held, offsets, at_rest & ~self._held)
+        grown = self.grid.anchor_around(held, offsets) & ~before
+        if grown.any():
+            if self.backend == "gpu":
+                x = self._solver.positions().reshape(-1, 3)
+            else:
+                x = self._x
+            at_rest = np.all(x == self._rest, axis=1)
+            self.grid.anchor_around(held, offsets, at_rest & ~self._held)
         if np.array_equal(before, self.grid.anchored):
             return
         self._model.fixed = self.grid.constrained()
