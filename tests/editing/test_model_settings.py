@@ -154,7 +154,9 @@ def test_napari_push_is_the_builders_and_as_before(volume: Volume) -> None:
     block[2:5, 2:5, 2:5] = True
     offset = (0.0, 0.0, 0.2 * float(volume.size_mm[2]))
     direct = MassSpring(
-        ElementGrid(volume, shape=PUSH_GRID), integrator="semi-implicit", shear=True
+        ElementGrid(volume, shape=PUSH_GRID, anchor="corners"),
+        integrator="semi-implicit",
+        shear=True,
     )
     direct.move(block, offset)
     direct.settle()
