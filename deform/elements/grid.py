@@ -40,6 +40,8 @@ DEFAULT_STIFFNESS = 0.5
 DEFAULT_DAMPING = 1.0
 DEFAULT_MASS = 1.0
 
+#: (anchor, fix_outside) of a saved grid without those keys: the thesis's set-up
+LEGACY_ANCHORS = ("corners", None)
 #: a selection of elements: bool mask of the grid shape, one (i, j, k), or (m, 3) indices
 Selection = Any
 
@@ -455,18 +457,19 @@ class ElementGrid:
         -------
         dict
             ``lo``, ``hi``, ``shape``, ``fixed`` (list of fixed ``[i, j, k]``),
-            ``anchor``, ``fix_outside`` (mm, ``"auto"`` or None), and ``stiffness``,
-            ``damping``, ``mass``: a number when uniform, else a nested list of the
-            grid shape.
+            ``anchor`` and ``fix_outside`` (mm, ``"auto"`` or None; both left out when
+            they are the thesis's ``"corners"`` and None, so such a grid saves as it
+            did before they existed), and ``stiffness``, ``damping``, ``mass``: a
+            number when uniform, else a nested list of the grid shape.
         """
         d: dict[str, Any] = {
             "lo": self.lo.tolist(),
             "hi": self.hi.tolist(),
             "shape": list(self.shape),
             "fixed": np.argwhere(self.fixed).tolist(),
-            "anchor": self.anchor,
-            "fix_outside": self.fix_outside,
         }
+        if (self.anchor, self.fix_outside) != LEGACY_ANCHORS:
+            d["anchor"], d["fix_outside"] = self.anchor, self.fix_outside
         for name in ("stiffness", "damping", "mass"):
             a = getattr(self, name)
             d[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
@@ -502,8 +505,8 @@ class ElementGrid:
             grid = cls(
                 (d["lo"], d["hi"]),
                 shape=d["shape"],
-                anchor=d.get("anchor", "corners"),
-                fix_outside=d.get("fix_outside"),
+                anchor=d.get("anchor", LEGACY_ANCHORS[0]),
+                fix_outside=d.get("fix_outside", LEGACY_ANCHORS[1]),
             )
         except anchors.AnchorError as exc:
             raise ElementGridError(str(exc)) from exc

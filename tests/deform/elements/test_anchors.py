@@ -107,6 +107,10 @@ def test_saved_grids_keep_anchors_and_old_files_load_as_corners() -> None:
     old = {k: v for k, v in d.items() if k not in ("anchor", "fix_outside", "fixed")}
     legacy = ElementGrid.from_dict(old)
     assert (legacy.anchor, legacy.fix_outside, int(legacy.fixed.sum())) == ("corners", None, 8)
+    # the thesis's set-up saves as before: no new keys, the same bytes
+    assert "anchor" not in legacy.to_dict()
+    assert "fix_outside" not in legacy.to_dict()
+    assert ElementGrid.from_dict({**d, "fix_outside": None}).to_dict()["fix_outside"] is None
     with pytest.raises(ElementGridError, match="unknown anchor"):
         ElementGrid.from_dict({**d, "anchor": "box"})
 
