@@ -384,12 +384,13 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
     except SettingError as exc:
         raise CliOptionError(f"--chainmail: {exc}") from exc
     if report.limited_fraction is not None:
+        shell = " (the grid's shell is fixed: --anchor shell)" if grid.anchor == "shell" else ""
         what = f"{drags[0].flag} {drags[0].text}" if len(drags) == 1 else "the dragged elements"
         warnings.warn(
             f"{what} went only {report.limited_fraction:.0%} of the way: the links between"
-            " the dragged and the fixed or anchored elements ran out of slack (a drag"
-            " within a spacing of the box's faces pulls on the fixed shell); drag less,"
-            " farther from the faces, or fix fewer elements (--anchor, --fix-outside)",
+            f" the dragged and the fixed or anchored elements ran out of slack{shell};"
+            " drag less, lower the stiffness, or fix fewer elements (--anchor corners,"
+            " --fix-outside off)",
             RuntimeWarning,
             stacklevel=1,
         )

@@ -32,6 +32,9 @@ def test_default_drag_stays_local(sample: str, model: str, tmp_path: Path) -> No
     assert "grid shell fixed" in lines[0]
     assert "anchored" in lines[0]
     assert "(--anchor, --fix-outside)" in lines[0]
+    limited = [line for line in err.splitlines() if "went only" in line]
+    # a ChainMail push next to the fixed shell is held back by its links: it says why
+    assert all("the grid's shell is fixed: --anchor shell" in line for line in limited)
 
 
 @pytest.mark.slow
