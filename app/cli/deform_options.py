@@ -323,11 +323,11 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
         "settled at once, moving every other element as little as the links allow). With "
         "--save-scene the JSON keeps the field and the model (grid, materials, held elements;"
         " ChainMail also its limits and cuts), so rendering it again gives the same image. "
-        "Examples (bend the fish's tail sideways, head held): voxwarp render sample:fish "
-        "--view +z --massspring 8 --fix 0..2,0..7,0..7 --drag 6,4,3:0,10,0 --drag "
-        "6,3,3:0,10,0 --settle -o bent.png; voxwarp render sample:fish --view +z --chainmail "
-        "8 --fix 0..2,0..7,0..7 --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o "
-        "poked.png",
+        "Examples (bend the fish's tail sideways, head held, the thesis's corners fixed): "
+        "voxwarp render sample:fish --view +z --massspring 8 --anchor corners --fix "
+        "0..2,0..7,0..7 --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png; voxwarp"
+        " render sample:fish --view +z --chainmail 8 --anchor corners --fix 0..2,0..7,0..7 "
+        "--drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
     )
     g.add_argument(
         "--massspring",
