@@ -126,7 +126,7 @@ class ElementGrid:
         self.anchor: str = anchors.check_anchor(anchor)
         self.fix_outside: float | str | None = anchors.check_fix_outside(fix_outside, anchor)
         self.anchored: np.ndarray = np.zeros(self.shape, dtype=bool)
-        #: elements the user freed from the region (never anchored until reset)
+        #: elements the user freed from the region: never anchored again
         self.unanchored: np.ndarray = np.zeros(self.shape, dtype=bool)
         self.fixed[anchors.anchor_mask(self.shape, self.anchor)] = True
 
