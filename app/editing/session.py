@@ -383,6 +383,10 @@ class EditSession:
         """(N,) bool: handles that do not move (fixed elements)."""
         return self.family.fixed_handles(len(self.handles()))
 
+    def anchored_handles(self) -> np.ndarray:
+        """(N,) bool: handles anchored at rest by the region of influence of a drag."""
+        return self.family.anchored_handles(len(self.handles()))
+
     # ------------------------------------------------------------------ picking
     def pick(
         self,

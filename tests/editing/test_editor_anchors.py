@@ -40,6 +40,7 @@ def test_anchored_elements_have_their_own_layer_and_free_like_fixed(
     np.testing.assert_array_equal(layers["anchored"].positions, handles[grid.anchored.reshape(-1)])
     assert len(layers["elements"].positions) == grid.count - grid.constrained().sum()
     assert "anchored now" in s.family.boundary_text()
+    np.testing.assert_array_equal(s.anchored_handles(), grid.anchored.reshape(-1))
     picked = int(np.flatnonzero(grid.anchored.reshape(-1))[0])
     s.set_fixed([picked], False)  # picking frees an anchored element
     assert not grid.anchored.reshape(-1)[picked]

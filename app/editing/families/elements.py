@@ -159,6 +159,12 @@ class ElementFamily(Family):
             return super().fixed_handles(count)
         return self.model.grid.fixed.reshape(-1).copy()
 
+    def anchored_handles(self, count: int) -> np.ndarray:
+        if self.model is None:
+            return super().anchored_handles(count)
+        grid = self.model.grid
+        return (grid.anchored & ~grid.fixed).reshape(-1)
+
     def set_fixed(self, indices: list[int], fixed: bool) -> None:
         if self.model is None:
             super().set_fixed(indices, fixed)
@@ -246,7 +252,7 @@ class ElementFamily(Family):
             edges = grid_edges(handles.reshape(*self.model.grid.shape, 3))
             layers.append(OverlayLayer("lines", edges, COLORS["link"], name="links"))
         fixed = self.fixed_handles(len(handles))
-        anchored = self.model.grid.anchored.reshape(-1) & ~fixed
+        anchored = self.anchored_handles(len(handles))
         if display.elements:
             free = ~(fixed | anchored)
             layers.append(
