@@ -234,7 +234,7 @@ def drag_offset(n: int, drag: str) -> np.ndarray:
 def _grid(n: int) -> Any:
     from voxwarp.deform.elements.grid import ElementGrid
 
-    grid = ElementGrid(BOX, shape=n)
+    grid = ElementGrid(BOX, shape=n, anchor="corners")
     grid.free(grid.corner_mask())
     return grid
 

@@ -233,7 +233,7 @@ class _Runner:
 def _grid(n: int) -> Any:
     from voxwarp.deform.elements.grid import ElementGrid
 
-    return ElementGrid(BOX, shape=n)
+    return ElementGrid(BOX, shape=n, anchor="corners")
 
 
 def _centre(n: int) -> tuple[int, int, int]:

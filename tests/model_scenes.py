@@ -27,7 +27,7 @@ def padded_colin(pad: int = PAD) -> Volume:
 def massspring_push(vol: Volume, shape: int, steps: int) -> list[Warp]:
     """A ``shape``³ grid fixed at its bottom layer, its inner top elements pushed 28 mm
     along +x and settled (at most ``steps`` steps)."""
-    ms = MassSpring(ElementGrid(vol, shape=shape))
+    ms = MassSpring(ElementGrid(vol, shape=shape, anchor="corners"))
     ms.fix([(i, j, 0) for i in range(shape) for j in range(shape)])
     top = [(i, j, 4) for i in range(1, shape - 1) for j in range(1, shape - 1)]
     ms.move(top, np.tile([28.0, 0.0, 0.0], (len(top), 1)))

@@ -234,7 +234,7 @@ class SliceView(QWidget):
 
     def _paint_handles(self, p: QPainter, plane: SlicePlane) -> None:
         """The handles near the plane as dots (selected yellow, reference white, fixed
-        red)."""
+        red, anchored by a drag's region violet)."""
         session = self.mpr.window.session
         pts = session.handles()
         if not self.mpr.window.viewport.display.elements or len(pts) == 0:
@@ -244,6 +244,7 @@ class SliceView(QWidget):
             return
         xy = self.to_widget(pts[near], plane)
         fixed = session.fixed_handles()
+        anchored = session.anchored_handles()
         selected = set(session.selection)
         p.setPen(QPen(QColor(15, 15, 15), 1.0))
         for i, (x, y) in zip(near, xy, strict=True):
@@ -253,6 +254,8 @@ class SliceView(QWidget):
                 colour, size = COLORS["selected"], HANDLE_PX + 2
             elif len(fixed) > i and fixed[i]:
                 colour, size = COLORS["fixed"], HANDLE_PX
+            elif len(anchored) > i and anchored[i]:
+                colour, size = COLORS["anchored"], HANDLE_PX
             else:
                 colour, size = COLORS["element"], HANDLE_PX
             p.setBrush(qcolor(colour))

@@ -415,7 +415,7 @@ def bench_warp_render(
 
         transfer_function = suggested_transfer_function("stent" if volume is None else vol.name)
     cam = bench_camera(vol)
-    elements = ElementGrid(vol, shape=(grid, grid, grid))
+    elements = ElementGrid(vol, shape=(grid, grid, grid), anchor="corners")
     ms = MassSpring(elements, integrator="semi-implicit", shear=True)
     drag = float(drag_spacings * elements.spacing[0])
     centre = (grid // 2, grid // 2, grid // 2)

@@ -145,7 +145,7 @@ def massspring_warps(vol: Volume) -> list[Warp]:
     """A settled push of a 6³ mass-spring: bottom fixed, the top's middle moved +x by a
     fifth of the box (its warp: the offset field)."""
     lo, hi = vol.bounds
-    ms = MassSpring(ElementGrid(vol, shape=6))
+    ms = MassSpring(ElementGrid(vol, shape=6, anchor="corners"))
     ms.fix([(i, j, 0) for i in range(6) for j in range(6)])
     top = [(i, j, 4) for i in range(1, 5) for j in range(1, 5)]
     ms.move(top, np.tile([0.2 * (hi[0] - lo[0]), 0.0, 0.0], (len(top), 1)))

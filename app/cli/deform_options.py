@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.options import add_field_convention_arg
 from voxwarp.core import limits
+from voxwarp.deform.elements.anchors import ANCHOR_MODES
+from voxwarp.deform.elements.materials import PRESETS
 from voxwarp.editing.model_settings import FIXED_STEPS, SETTLE_MAX_STEPS, SETTLE_SPEED
 
 # ---------------------------------------------------------------------- mass-spring options
@@ -23,6 +25,8 @@ from voxwarp.editing.model_settings import FIXED_STEPS, SETTLE_MAX_STEPS, SETTLE
 MASSSPRING_STEPS = FIXED_STEPS
 MASSSPRING_SETTLE_MAX_STEPS = SETTLE_MAX_STEPS
 MASSSPRING_SETTLE_TOL = SETTLE_SPEED
+#: the names --stiffness-from-volume takes besides VALUE:STIFFNESS points
+STIFFNESS_PRESETS = (*PRESETS, "auto")
 
 
 class Drag(tuple):
@@ -184,6 +188,28 @@ def _stiffness_points(text: str) -> list[tuple[float, float]]:
     return pts  # type: ignore[return-value]
 
 
+def _stiffness_arg(text: str) -> list[tuple[float, float]] | str:
+    """``--stiffness-from-volume``: a tissue preset name or VALUE:STIFFNESS points."""
+    if text in STIFFNESS_PRESETS:
+        return text
+    return _stiffness_points(text)
+
+
+def _fix_outside(text: str) -> float:
+    """``--fix-outside MM``: a radius in mm; 0 or ``off`` (read as 0) turns the region off."""
+    if text.strip().lower() == "off":
+        return 0.0
+    try:
+        r = float(text)
+    except ValueError:
+        r = -1.0
+    if not math.isfinite(r) or r < 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a radius in mm >= 0 (0 or off: no region), e.g. 60"
+        )
+    return r
+
+
 def _steps(text: str) -> int:
     try:
         n = int(text)
@@ -333,19 +359,19 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
     """``--massspring``/``--chainmail`` and their options (drags, fixes, cuts, ...)."""
     g = p.add_argument_group(
         "deformation (--massspring or --chainmail)",
-        "Deform the volume before rendering: an element grid spans the volume's box (its"
-        " 8 corners fixed), --drag holds elements at offsets from rest, the model moves"
-        " the others along, and the resulting offset field warps the volume at render"
-        " time. --massspring runs a mass-spring simulation (springs pull the rest along"
-        " over time steps); --chainmail runs 3D ChainMail (links with slack: each drag is"
-        " settled at once, moving every other element as little as the links allow). With"
-        " --save-scene the JSON keeps the field and the model (grid, materials, held"
-        " elements; ChainMail also its limits and cuts), so rendering it again gives the"
-        " same image. Examples (bend the fish's tail sideways, head held):"
-        " voxwarp render sample:fish --view +z --massspring 8 --fix 0..2,0..7,0..7"
-        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png;"
-        " voxwarp render sample:fish --view +z --chainmail 8 --fix 0..2,0..7,0..7"
-        " --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
+        "Deform the volume before rendering: an element grid spans the volume's box (its "
+        "outer shell fixed, see --anchor), --drag holds elements at offsets from rest, the "
+        "model moves the others along, and the resulting offset field warps the volume at "
+        "render time. --massspring runs a mass-spring simulation (springs pull the rest along"
+        " over time steps); --chainmail runs 3D ChainMail (links with slack: each drag is "
+        "settled at once, moving every other element as little as the links allow). With "
+        "--save-scene the JSON keeps the field and the model (grid, materials, held elements;"
+        " ChainMail also its limits and cuts), so rendering it again gives the same image. "
+        "Examples (bend the fish's tail sideways, head held, the thesis's corners fixed): "
+        "voxwarp render sample:fish --view +z --massspring 8 --anchor corners --fix "
+        "0..2,0..7,0..7 --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png; voxwarp"
+        " render sample:fish --view +z --chainmail 8 --anchor corners --fix 0..2,0..7,0..7 "
+        "--drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
     )
     g.add_argument(
         "--massspring",
@@ -367,14 +393,16 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
         action="append",
         metavar="I,J,K:DX,DY,DZ",
         help="hold element (i, j, k) at its rest position + (dx, dy, dz) mm (world x, y, z"
-        " axes); repeatable; indices run 0..N-1 along x, y, z; corners stay fixed",
+        " axes); repeatable; indices run 0..N-1 along x, y, z; fixed elements (the"
+        " --anchor set and --fix) cannot be dragged",
     )
     g.add_argument(
         "--drag-at",
         type=ropt.drag_at_arg,
         action="append",
         metavar="X,Y,Z:DX,DY,DZ",
-        help="as --drag, on the element nearest the world point (x, y, z) mm (at rest; it"
+        help="as --drag, on the element nearest the world point (x, y, z) mm that is not"
+        " fixed (at rest; it"
         " says which and how far); the point may lie at most one element spacing outside"
         " the grid; repeatable",
     )
@@ -383,7 +411,7 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
         type=_fix,
         action="append",
         metavar="I,J,K",
-        help="also fix these elements at rest (the 8 corners always are); each index may"
+        help="also fix these elements at rest (besides the --anchor set); each index may"
         " be a range A..B, e.g. --fix 0..2,0..7,0..7 holds the x = low end; repeatable",
     )
     g.add_argument(
@@ -401,12 +429,30 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--stiffness-from-volume",
-        type=_stiffness_points,
-        metavar="V:S,...",
-        help="element stiffness from the volume value at each element, piecewise linear"
-        " through VALUE:STIFFNESS points (data units : 0..1; constant beyond the ends),"
-        " e.g. 100:0.2,400:0.95 makes CT bone stiff; stiffness 1 is rigid (default:"
-        " 0.5 everywhere); ChainMail's link slack is 1 - stiffness",
+        type=_stiffness_arg,
+        metavar="ct|mr|auto|V:S,...",
+        help="element stiffness from the volume value at each element: a tissue preset"
+        " (ct: Hounsfield units, air free, fat and soft tissue soft, bone stiff; mr: from"
+        " the volume's own histogram, background free, tissue soft; auto: ct for a CT in"
+        " HU, else mr) or piecewise linear through VALUE:STIFFNESS points (data units :"
+        " 0..1; constant beyond the ends), e.g. 100:0.2,400:0.95; stiffness 1 is rigid"
+        " (default: 0.5 everywhere); ChainMail's link slack is 1 - stiffness",
+    )
+    g.add_argument(
+        "--anchor",
+        choices=ANCHOR_MODES,
+        help="the grid elements fixed at rest: shell (default: every element on the"
+        " grid's outer faces, so a drag cannot move the whole volume), corners (the 8"
+        " corners, the thesis's set-up: a drag moves everything) or none",
+    )
+    g.add_argument(
+        "--fix-outside",
+        type=_fix_outside,
+        metavar="MM",
+        help="region of influence: elements farther than MM from every dragged element"
+        " are anchored at rest (0 or off: none); default with --anchor shell: the larger"
+        " of 30 mm, 4 element spacings and 3 x the largest drag, so a push fades over a"
+        " few centimetres; default with corners or none: off",
     )
     # -- the grid margin (one block: other options go before or after it)
     g.add_argument(

@@ -15,6 +15,8 @@ import warnings
 from collections.abc import Iterator
 from typing import Any, NamedTuple
 
+import numpy as np
+
 from voxwarp.cli import render_options as ropt
 from voxwarp.cli.deform_options import (
     MASSSPRING_SETTLE_TOL,
@@ -24,6 +26,8 @@ from voxwarp.cli.deform_options import (
 from voxwarp.cli.deform_options import Cut as _Cut
 from voxwarp.cli.deform_options import Drag as _Drag
 from voxwarp.cli.deform_options import grid_text as _grid_text
+from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
+from voxwarp.deform.elements.anchors import DEFAULT_ANCHOR, anchor_mask
 from voxwarp.editing import model_settings as ms
 from voxwarp.editing.model_settings import LatticeSettings, SettingError, WireSettings
 from voxwarp.errors import InputError as CliOptionError
@@ -39,6 +43,8 @@ _DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
     ("--inverse", "inverse", "both"),
     ("--stiffness-from-volume", "stiffness_from_volume", "both"),
     ("--grid-margin", "grid_margin", "both"),
+    ("--anchor", "anchor", "both"),
+    ("--fix-outside", "fix_outside", "both"),
     ("--settle", "settle", "massspring"),
     ("--steps", "steps", "massspring"),
     ("--integrator", "integrator", "massspring"),
@@ -75,7 +81,6 @@ def check_deform_options(args: argparse.Namespace) -> None:
     """Option checks that need no volume: deformation options without their model, both
     models at once, options of the other model, drags and fixes outside the grid, drags
     of a fixed element or of one element twice."""
-    import numpy as np
 
     if args.massspring is not None and args.chainmail is not None:
         raise CliOptionError(
@@ -122,8 +127,8 @@ def check_deform_options(args: argparse.Namespace) -> None:
         ranges_text = f"indices run 0..{shape[0] - 1}"
     else:
         ranges_text = "indices run " + ", ".join(f"0..{n - 1}" for n in shape) + " (i, j, k)"
-    fixed = np.zeros(shape, dtype=bool)
-    fixed[:: shape[0] - 1, :: shape[1] - 1, :: shape[2] - 1] = True
+    anchor = args.anchor or DEFAULT_ANCHOR
+    fixed = anchor_mask(tuple(shape), anchor)
     for text, ranges in args.fix or []:
         if any(hi >= n for (_, hi), n in zip(ranges, shape, strict=True)):
             raise CliOptionError(f"--fix {text}: reaches outside the {grid} grid; {ranges_text}")
@@ -135,12 +140,15 @@ def check_deform_options(args: argparse.Namespace) -> None:
                 f"{d.flag} {d.text}: element {d.index} is outside the {grid} grid; {ranges_text}"
             )
         if fixed[d.index]:
-            corner = all(v in (0, n - 1) for v, n in zip(d.index, shape, strict=True))
+            by_anchor = anchor_mask(tuple(shape), anchor)[d.index]
             what = (
-                f"a corner of the {grid} grid (corners stay fixed)" if corner else "fixed by --fix"
+                f"on the {grid} grid's {anchor} (--anchor {anchor} fixes it)"
+                if by_anchor
+                else "fixed by --fix"
             )
             raise CliOptionError(
-                f"{d.flag} {d.text}: element {d.index} is {what}; drag an element that is not fixed"
+                f"{d.flag} {d.text}: element {d.index} is {what}; drag an element that is not"
+                " fixed" + (", or choose another --anchor" if by_anchor else "")
             )
         if d.index in seen:
             raise CliOptionError(
@@ -250,6 +258,8 @@ def _element_settings(args: argparse.Namespace) -> Any:
         "backend": args.backend or "cpu",
         "fixed": tuple(ranges for _, ranges in args.fix or []),
         "stiffness_from_volume": args.stiffness_from_volume,
+        "anchor": args.anchor or DEFAULT_ANCHOR,
+        "fix_outside": DEFAULT_REGION if args.fix_outside is None else args.fix_outside,
         "drags": tuple(ms.Drag(d.index, d.offset) for d in args.drag or []),
         "inverse": args.inverse or "baked",
         "margin": args.grid_margin,
@@ -284,7 +294,7 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     if model is None:
         return None
     # loads scipy: only when used
-    from voxwarp.editing.families.elements import ElementFamily
+    from voxwarp.editing.families.elements import ElementFamily, material_preset
 
     _resolve_margin(args)
     if args.drag_at:  # to the nearest elements at rest, then checked as --drag elements are
@@ -293,7 +303,9 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
 
         shape = args.massspring if model == "massspring" else args.chainmail
         try:
-            pick_grid = ElementGrid(volume, shape=shape, margin=args.grid_margin)
+            pick_grid = ElementGrid(
+                volume, shape=shape, margin=args.grid_margin, anchor=args.anchor or DEFAULT_ANCHOR
+            )
         except ElementGridError as exc:
             raise CliOptionError(f"--grid-margin: {exc}") from exc
         picks = ropt.pick_elements(pick_grid, args.drag_at)
@@ -308,8 +320,17 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     try:
         grid = ElementFamily.grid(_element_settings(args), volume)
     except SettingError as exc:
-        flag = "--grid-margin" if exc.setting == "margin" else "--stiffness-from-volume"
+        flags = {"margin": "--grid-margin", "anchor": "--anchor"}
+        flag = flags.get(exc.setting, "--stiffness-from-volume")
         raise CliOptionError(f"{flag}: {exc}") from exc
+    if isinstance(args.stiffness_from_volume, str):
+        preset = material_preset(args.stiffness_from_volume, volume)
+        s = grid.stiffness
+        print(
+            f"voxwarp: materials: --stiffness-from-volume {args.stiffness_from_volume}:"
+            f" the {preset} preset, element stiffness {s.min():.2f}..{s.max():.2f}",
+            file=sys.stderr,
+        )
     if model == "massspring":
         rigid = grid.pinned()
         for d in args.drag or []:
@@ -357,8 +378,6 @@ def _say_margin(args: argparse.Namespace) -> None:
 
 def _cut_crosses(grid: Any, cut: _Cut) -> bool:
     """Whether ``cut`` removes a link of ``grid`` at rest (the test of ChainMail.cut)."""
-    import numpy as np
-
     p0 = np.asarray(cut.point, dtype=np.float64)
     normal = np.asarray(cut.normal, dtype=np.float64)
     x = grid.rest_positions
@@ -430,11 +449,13 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
     except SettingError as exc:
         raise CliOptionError(f"--chainmail: {exc}") from exc
     if report.limited_fraction is not None:
+        shell = " (the grid's shell is fixed: --anchor shell)" if grid.anchor == "shell" else ""
         what = f"{drags[0].flag} {drags[0].text}" if len(drags) == 1 else "the dragged elements"
         warnings.warn(
             f"{what} went only {report.limited_fraction:.0%} of the way: the links between"
-            " the dragged and the fixed elements (the 8 corners always are fixed)"
-            " ran out of slack; fix fewer elements or drag less",
+            f" the dragged and the fixed or anchored elements ran out of slack{shell};"
+            " drag less, lower the stiffness, or fix fewer elements (--anchor corners,"
+            " --fix-outside off)",
             RuntimeWarning,
             stacklevel=1,
         )
@@ -465,6 +486,15 @@ def _field_warps(args: argparse.Namespace) -> list[Any]:
     for path in args.displacement or []:
         warps += load_transform(path, convention=args.field_convention)
     return warps
+
+
+def boundary_line(model: Any) -> str:
+    """The one stderr line naming the boundary conditions of a built element model."""
+    held = model.to_dict().get("held", [])
+    drag = max((float(np.linalg.norm(h["offset"])) for h in held), default=None)
+    grid = model.grid
+    count = f"; {int(grid.anchored.sum())} anchored" if grid.anchored.any() else ""
+    return f"voxwarp: boundary: {grid.describe_anchors(drag)}{count} (--anchor, --fix-outside)"
 
 
 class PendingDeformation(NamedTuple):
@@ -514,6 +544,7 @@ def deformed_scene(
             folds = model.warp().fold_summary()
             if folds is not None:  # one line: meshes and the inverse are wrong there
                 print(f"warning: {folds}", file=sys.stderr)
+            print(boundary_line(model), file=sys.stderr)
             # last in the chain: it deforms the volume itself, before the
             # scene's own warps move the result
             scene = scene.copy(warps=[*scene.warps, model.warp()])

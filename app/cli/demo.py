@@ -173,7 +173,7 @@ def _demo_bend(vol: Any) -> Any:
     # loads scipy: only when used
     from voxwarp.deform import ElementGrid, MassSpring
 
-    grid = ElementGrid(vol, shape=(8, 8, 8))
+    grid = ElementGrid(vol, shape=(8, 8, 8), anchor="corners")
     ms = MassSpring(grid, integrator="semi-implicit", shear=True)
     z = grid.rest_positions[..., 2]
     ms.fix(z < grid.lo[2] + 0.25 * (grid.hi[2] - grid.lo[2]))

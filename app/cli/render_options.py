@@ -376,7 +376,8 @@ class Pick(NamedTuple):
 
 
 def pick_elements(grid: Any, drags: list[DragAt]) -> list[Pick]:
-    """The element of ``grid`` nearest each ``--drag-at`` point (at rest);
+    """The element of ``grid`` nearest each ``--drag-at`` point (at rest) that is not
+    fixed (no drag can hold the anchor's shell; when every element is fixed, the nearest);
     :class:`InputError` for a point more than one element spacing outside the grid box."""
     import numpy as np
 
@@ -396,6 +397,9 @@ def pick_elements(grid: Any, drags: list[DragAt]) -> list[Pick]:
                 " that box (world mm)"
             )
         dist = np.linalg.norm(flat - p, axis=1)
+        fixed = np.asarray(grid.fixed).reshape(-1)
+        if not fixed.all():  # all fixed: the nearest, which the drag checks refuse
+            dist[fixed] = np.inf
         k = int(np.argmin(dist))
         index = tuple(int(v) for v in np.unravel_index(k, rest.shape[:3]))
         picks.append(Pick(d, index, tuple(map(float, flat[k])), float(dist[k])))  # type: ignore[arg-type]

@@ -62,6 +62,8 @@ class DisplayOptions:
 COLORS = {
     "element": (0.30, 0.80, 1.00, 0.9),
     "fixed": (1.00, 0.30, 0.25, 0.95),
+    #: elements anchored at rest by the region of influence of a drag
+    "anchored": (0.60, 0.45, 1.00, 0.9),
     "selected": (1.00, 0.85, 0.10, 1.0),
     "reference": (1.00, 1.00, 1.00, 1.0),
     "link": (0.30, 0.80, 1.00, 0.35),

@@ -22,6 +22,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from voxwarp.deform.elements.anchors import ANCHOR_MODES, AUTO
+from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
 from voxwarp.editing.common import CHAINMAIL_VARIANTS, INTEGRATORS, EditorError, choice
 
 #: a mass-spring model whose elements are all slower than this (mm/s) is settled
@@ -110,8 +112,9 @@ class ElementSettings:
     backend: str = "cpu"
     #: one stiffness (0..1] for every element (None: the grid's default)
     stiffness: float | None = None
-    #: (value, stiffness) points mapping the volume's values to element stiffness
-    stiffness_from_volume: Sequence[tuple[float, float]] | None = None
+    #: (value, stiffness) points mapping the volume's values to element stiffness, or a
+    #: tissue preset: "ct", "mr" or "auto" (from the volume's modality)
+    stiffness_from_volume: Sequence[tuple[float, float]] | str | None = None
     #: index ranges ``((i0, i1), (j0, j1), (k0, k1))`` (inclusive) of fixed elements
     fixed: tuple[tuple[tuple[int, int], ...], ...] = ()
     drags: tuple[Drag, ...] = ()
@@ -121,6 +124,11 @@ class ElementSettings:
     # -- every side (0: the volume's box; the CLI's default is the largest drag,
     # -- ElementGrid's default_margin)
     margin: float = 0.0
+    #: boundary conditions (:mod:`voxwarp.deform.elements.anchors`): the grid's fixed
+    #: elements ("shell", "corners": the thesis's, "none") and the region of influence
+    #: (mm, "auto", None: off; "default": "auto" with the shell, else off)
+    anchor: str = "shell"
+    fix_outside: float | str | None = "default"
 
 
 @dataclass(frozen=True)
@@ -185,6 +193,9 @@ class FamilyOptions:
     variant: str = "enhanced"
     #: element stiffness of new mass-spring/ChainMail models (0..1]
     stiffness: float = 0.5
+    #: boundary conditions of new element models (see :class:`ElementSettings`)
+    anchor: str = "shell"
+    fix_outside: float | str | None = "default"
     #: mass-spring steps and ChainMail relaxation steps per frame while running
     steps_per_frame: int = 10
     relax_steps: int = 1
@@ -199,9 +210,11 @@ class FamilyOptions:
 
     def with_model_settings(self, settings: dict[str, Any]) -> FamilyOptions:
         """A copy with the model settings of ``EditSession.set_deformation``
-        (``integrator``, ``variant``, ``stiffness``, ``margin``; nothing else may be left
-        in ``settings``), checked; an :class:`EditorError` names a bad one."""
+        (``integrator``, ``variant``, ``stiffness``, ``margin``, ``anchor``,
+        ``fix_outside``; nothing else may be left in ``settings``), checked; an
+        :class:`EditorError` names a bad one."""
         settings = dict(settings)
+        bounds = _boundary_settings(settings, self.anchor, self.fix_outside)
         integrator = choice(settings.pop("integrator", self.integrator), INTEGRATORS, "integrator")
         variant = choice(settings.pop("variant", self.variant), CHAINMAIL_VARIANTS, "variant")
         stiffness_value = settings.pop("stiffness", self.stiffness)
@@ -217,7 +230,12 @@ class FamilyOptions:
         if not 0.0 < stiffness <= 1.0:
             raise EditorError(f"stiffness must be in (0, 1]; got {stiffness}")
         return replace(
-            self.copy(), integrator=integrator, variant=variant, stiffness=stiffness, margin=margin
+            self.copy(),
+            integrator=integrator,
+            variant=variant,
+            stiffness=stiffness,
+            margin=margin,
+            **bounds,
         )
 
     def set_run_option(self, name: str, value: Any) -> int:
@@ -248,6 +266,8 @@ class FamilyOptions:
             "steps_per_frame": self.steps_per_frame,
             "relax_steps": self.relax_steps,
             "stiffness": self.stiffness,
+            "anchor": self.anchor,
+            "fix_outside": self.fix_outside,
             "wire_settings": dict(self.wire_settings),
             **({"margin": self.margin} if self.margin else {}),  # absent: 0, as before
         }
@@ -262,6 +282,10 @@ class FamilyOptions:
                 setattr(self, key, int(entry[key]))
         if "stiffness" in entry:
             self.stiffness = float(entry["stiffness"])
+        if "anchor" in entry:
+            self.anchor = str(entry["anchor"])
+        if "fix_outside" in entry:
+            self.fix_outside = entry["fix_outside"]
         if isinstance(entry.get("wire_settings"), dict):
             self.wire_settings = dict(entry["wire_settings"])
         if "margin" in entry:  # absent in scenes saved before the margin: 0
@@ -277,6 +301,25 @@ def _margin(value: Any) -> float:
     if not (np.isfinite(margin) and margin >= 0.0):
         raise EditorError(f"margin must be a number of mm >= 0; got {margin}")
     return margin
+
+
+def _boundary_settings(
+    settings: dict[str, Any], anchor: str, fix_outside: float | str | None
+) -> dict[str, Any]:
+    """``anchor`` and ``fix_outside`` popped from ``settings`` (default: the current),
+    checked; an :class:`EditorError` names a bad one."""
+    anchor = choice(settings.pop("anchor", anchor), ANCHOR_MODES, "anchor")
+    fix_outside = settings.pop("fix_outside", fix_outside)
+    if fix_outside not in (DEFAULT_REGION, AUTO, None):
+        try:
+            fix_outside = float(fix_outside)
+        except (TypeError, ValueError) as exc:
+            raise EditorError(
+                f"fix_outside must be a radius in mm, 'auto' or None; got {fix_outside!r}"
+            ) from exc
+        if not fix_outside >= 0:
+            raise EditorError(f"fix_outside must be >= 0 mm (0: off); got {fix_outside}")
+    return {"anchor": anchor, "fix_outside": fix_outside}
 
 
 # ---------------------------------------------------------------------------- results

@@ -233,7 +233,9 @@ class EditSession:
     def set_deformation(self, kind: str, **settings: Any) -> None:
         """Switch the deformation family (and settings: ``backend``, ``resolution``,
         ``integrator``, ``variant``, ``stiffness``, ``margin``: mm the element grid's box
-        reaches beyond the volume's); builds a fresh model at rest.
+        reaches beyond the volume's, and the element grid's boundary conditions
+        ``anchor`` and ``fix_outside``, see
+        :class:`~voxwarp.deform.elements.grid.ElementGrid`); builds a fresh model at rest.
 
         ``"wires"`` starts with one straight wire along the volume's longest axis
         through its centre (bend it by dragging its control points, or lay new ones);
@@ -381,6 +383,10 @@ class EditSession:
     def fixed_handles(self) -> np.ndarray:
         """(N,) bool: handles that do not move (fixed elements)."""
         return self.family.fixed_handles(len(self.handles()))
+
+    def anchored_handles(self) -> np.ndarray:
+        """(N,) bool: handles anchored at rest by the region of influence of a drag."""
+        return self.family.anchored_handles(len(self.handles()))
 
     # ------------------------------------------------------------------ picking
     def pick(

@@ -54,6 +54,7 @@ def push_warps(
     block[middle, middle, middle] = True
     settings = MassSpringSettings(
         shape=(PUSH_GRID,) * 3,
+        anchor="corners",  # the demo's set-up, as documented: the block moves freely
         integrator="semi-implicit",
         shear=True,
         drags=(Drag(block, tuple(fraction * extent * unit)),),

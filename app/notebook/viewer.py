@@ -132,7 +132,8 @@ class Viewer(RemoteFrameBuffer):
         headless EGL context of the viewer's own.
     settings
         Deformation settings: ``resolution``, ``stiffness``, ``integrator``,
-        ``variant``, ``backend``.
+        ``variant``, ``backend``, and the element grid's boundary conditions ``anchor``
+        (``"shell"``, ``"corners"``, ``"none"``) and ``fix_outside`` (mm, ``"auto"``).
     """
 
     def __init__(

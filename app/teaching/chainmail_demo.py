@@ -258,7 +258,7 @@ def demo_chainmail(
 def _plot_order(ax: Any, data: dict[str, Any], sponsors: bool) -> None:
     from voxwarp.deform.elements.grid import ElementGrid
 
-    rest = ElementGrid(sheets.SLICE_BOX, shape=sheets.SLICE_SHAPE).rest_positions
+    rest = ElementGrid(sheets.SLICE_BOX, shape=sheets.SLICE_SHAPE, anchor="corners").rest_positions
     xy = sheets.slice_xy(rest)
     k = sheets.SLICE_DRAGGED[2]
     order = data["order"]

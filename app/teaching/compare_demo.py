@@ -41,7 +41,7 @@ def demo_compare(
     cm0 = cm.positions()
     cm.relax(4)
     cm4 = cm.positions()
-    rest = ElementGrid(sheets.SLICE_BOX, shape=sheets.SLICE_SHAPE).rest_positions
+    rest = ElementGrid(sheets.SLICE_BOX, shape=sheets.SLICE_SHAPE, anchor="corners").rest_positions
     states = {"massspring": ms.positions(), "chainmail": cm0, "chainmail+4": cm4}
     u = {k: np.linalg.norm(v - rest, axis=-1) for k, v in states.items()}
     moved = {k: int(np.count_nonzero(v > 0.01)) for k, v in u.items()}

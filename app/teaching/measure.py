@@ -45,7 +45,7 @@ def massspring_rates(
     for n in sizes:
         for backend, name in (("cpu", "numpy"), ("gpu", "gpu")):
             gl = ctx if backend == "gpu" else None
-            ms = MassSpring(ElementGrid(BOX, shape=n), backend=backend, ctx=gl)
+            ms = MassSpring(ElementGrid(BOX, shape=n, anchor="corners"), backend=backend, ctx=gl)
             finish = ctx.finish if backend == "gpu" else (lambda: None)
             try:
                 ms.move((n // 2, n // 2, n // 2), SPRING_DRAG_MM)
@@ -81,7 +81,7 @@ def chainmail_times(
     for n in sizes:
         centre = (n // 2, n // 2, n // 2)
         for solver in ("gibson", "enhanced", "gpu"):
-            grid = ElementGrid(BOX, shape=n)
+            grid = ElementGrid(BOX, shape=n, anchor="corners")
             grid.free(grid.corner_mask())
             gpu = solver == "gpu"
             cm = ChainMail(grid, backend="gpu", ctx=ctx) if gpu else ChainMail(grid, variant=solver)

@@ -294,7 +294,7 @@ def fish_grid(vol: Any) -> Any:
     """The fish's element grid: the head layers fixed, the other corners free."""
     from voxwarp.deform.elements.grid import ElementGrid
 
-    grid = ElementGrid(vol, shape=FISH_GRID)
+    grid = ElementGrid(vol, shape=FISH_GRID, anchor="corners")
     grid.free(grid.corner_mask())
     head = np.zeros(FISH_GRID, dtype=bool)
     head[:HEAD_LAYERS] = True
@@ -306,7 +306,7 @@ def slice_grid() -> Any:
     """The teaching grid (:data:`SLICE_SHAPE`): the x = 0 layer fixed, no other corner."""
     from voxwarp.deform.elements.grid import ElementGrid
 
-    grid = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE)
+    grid = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE, anchor="corners")
     grid.free(grid.corner_mask())
     left = np.zeros(SLICE_SHAPE, dtype=bool)
     left[0] = True
@@ -394,7 +394,7 @@ def plot_slice_state(ax: Any, positions: np.ndarray, title: str, colorbar: bool 
     their displacement (with a colour bar when ``colorbar``)."""
     from voxwarp.deform.elements.grid import ElementGrid
 
-    rest = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE).rest_positions
+    rest = ElementGrid(SLICE_BOX, shape=SLICE_SHAPE, anchor="corners").rest_positions
     xy = slice_xy(positions)
     u = np.linalg.norm(slice_xy(positions - rest), axis=-1)
     for i in range(xy.shape[0]):

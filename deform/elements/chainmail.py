@@ -306,7 +306,7 @@ class ChainMail(ElementWarpMixin):
             max_dist=mx,
             max_shear=sh,
             links=np.ones((*grid.shape, 3), dtype=bool),
-            fixed=grid.fixed.copy(),
+            fixed=grid.constrained(),
         )
         self._check_rest()
         n = grid.count
@@ -517,7 +517,7 @@ class ChainMail(ElementWarpMixin):
                     " move held or fixed elements; release() the held ones first"
                 )
         self.grid.fix(mask)
-        self._model.fixed = self.grid.fixed.copy()
+        self._model.fixed = self.grid.constrained()
         fixed = self._model.fixed.reshape(-1)
         self._held &= ~fixed
         self._offsets[fixed] = 0.0
@@ -527,9 +527,10 @@ class ChainMail(ElementWarpMixin):
         self._update_warp()
 
     def free(self, sel: Selection) -> None:
-        """Unfix elements (see :meth:`ElementGrid.free`); they stay where they are."""
+        """Unfix elements (see :meth:`ElementGrid.free`; anchored ones too); they stay
+        where they are."""
         self.grid.free(sel)
-        self._model.fixed = self.grid.fixed.copy()
+        self._model.fixed = self.grid.constrained()
         self._pinned = self._model.fixed.reshape(-1) | self._held
         if self.backend == "gpu":
             self._rebuild_gpu()
@@ -543,6 +544,7 @@ class ChainMail(ElementWarpMixin):
             Elements to release (see :meth:`ElementGrid.mask`); ``None`` releases all.
         """
         mask = self.grid.mask(sel).reshape(-1)
+        self._update_anchors(self._held & ~mask, self._offsets)
         self._held &= ~mask
         self._offsets[mask] = 0.0
         self._pinned = self._model.fixed.reshape(-1) | self._held
@@ -551,6 +553,7 @@ class ChainMail(ElementWarpMixin):
         """Put every element back at rest and release all held elements."""
         self._held[:] = False
         self._offsets[:] = 0.0
+        self._update_anchors(self._held, self._offsets)
         self._pinned = self._model.fixed.reshape(-1).copy()
         self._box = None
         if self.backend == "gpu":
@@ -591,6 +594,9 @@ class ChainMail(ElementWarpMixin):
         """
         t0 = time.perf_counter()
         flat, off = self._selection(sel, offsets)
+        held, offs = self._held.copy(), self._offsets.copy()
+        held[flat], offs[flat] = True, off
+        self._update_anchors(held, offs)
         self._held[flat] = True
         self._offsets[flat] = off
         self._pinned[flat] = True
@@ -780,8 +786,28 @@ class ChainMail(ElementWarpMixin):
             _, first_rev = np.unique(flat[::-1], return_index=True)
             keep = np.sort(flat.size - 1 - first_rev)
             flat, off = flat[keep], off[keep]
-        free = ~self._model.fixed.reshape(-1)[flat]
+        free = ~self.grid.fixed.reshape(-1)[flat]
         return flat[free], np.array(off[free], dtype=np.float64).reshape(-1, 3)
+
+    def _update_anchors(self, held: np.ndarray, offsets: np.ndarray) -> None:
+        """Anchor the elements at rest beyond the region of influence of ``held``
+        (:meth:`ElementGrid.anchor_around`); the GPU solver is rebuilt when they change.
+        A region that only shrinks (a drag growing) needs no GPU read-back."""
+        before = self.grid.anchored.copy()
+        grown = self.grid.anchor_around(held, offsets) & ~before
+        if grown.any():
+            if self.backend == "gpu":
+                x = self._solver.positions().reshape(-1, 3)
+            else:
+                x = self._x
+            at_rest = np.all(x == self._rest, axis=1)
+            self.grid.anchor_around(held, offsets, at_rest & ~self._held)
+        if np.array_equal(before, self.grid.anchored):
+            return
+        self._model.fixed = self.grid.constrained()
+        self._pinned = self._model.fixed.reshape(-1) | self._held
+        if self.backend == "gpu":
+            self._rebuild_gpu()
 
     def _targets(self) -> np.ndarray:
         """(N, 3) rest positions with the held elements at ``rest + offset``."""
@@ -1160,6 +1186,7 @@ class ChainMail(ElementWarpMixin):
                 self._offsets[e] = off
             self._pinned = self._model.fixed.reshape(-1) | self._held
             self.set_state(positions)
+            self._update_anchors(self._held, self._offsets)
         else:
             for e, off in held:
                 self.move(np.unravel_index(e, self.grid.shape), off)

@@ -13,9 +13,11 @@ of the box and rendered there instead of being cut off. The element count per ax
 stays what was asked; the spacing grows with the box (docs/concepts/margin.md).
 
 Each element carries a material (``stiffness`` in [0, 1], ``damping`` >= 0, ``mass`` > 0) and may be
-*fixed* (it never moves). The 8 corner elements are fixed by default so that the grid
-cannot drift away as a whole. Stiffness 1 means rigid: such an element does not move
-by itself either (:meth:`ElementGrid.pinned`).
+*fixed* (it never moves). Which elements are fixed by default is the grid's *anchor*
+mode (:mod:`voxwarp.deform.elements.anchors`): the outer shell (default), the thesis's
+8 corners, or none. While elements are dragged, those beyond the region of influence
+(``fix_outside``) are *anchored* at rest (:attr:`ElementGrid.anchored`). Stiffness 1
+means rigid: such an element does not move by itself either (:meth:`ElementGrid.pinned`).
 
 Materials can vary over the grid; :meth:`ElementGrid.materials_from_volume` derives the
 stiffness from the volume's values, e.g. bone stiffer than soft tissue.
@@ -32,6 +34,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from voxwarp.deform.elements import anchors
+from voxwarp.deform.elements.materials import preset_stiffness
 from voxwarp.errors import VoxwarpError
 
 #: most elements along one axis
@@ -45,6 +49,8 @@ DEFAULT_STIFFNESS = 0.5
 DEFAULT_DAMPING = 1.0
 DEFAULT_MASS = 1.0
 
+#: (anchor, fix_outside) of a saved grid without those keys: the thesis's set-up
+LEGACY_ANCHORS = ("corners", None)
 #: a selection of elements: bool mask of the grid shape, one (i, j, k), or (m, 3) indices
 Selection = Any
 
@@ -68,6 +74,15 @@ class ElementGrid:
         mm the grid's box reaches beyond the volume's box on every side (>= 0, at most
         :data:`MAX_MARGIN_FACTOR` times the box's largest side); 0 (the default) is the
         volume's box itself.
+    anchor
+        The fixed elements of the new grid: ``"shell"`` (default: the outer faces),
+        ``"corners"`` (the thesis's 8) or ``"none"``.
+    fix_outside
+        Region of influence: while elements are held, those farther than this many mm
+        from every held element are anchored at rest. ``"auto"``
+        (:func:`~voxwarp.deform.elements.anchors.influence_radius`), a radius in mm,
+        or 0 / ``"off"`` / None (no region). Default: ``"auto"`` with the shell
+        anchor, no region with the others (``"corners"`` is the thesis's set-up).
 
     Attributes
     ----------
@@ -84,13 +99,17 @@ class ElementGrid:
     rest_positions : numpy.ndarray
         (n_x, n_y, n_z, 3) float64 rest position of each element.
     fixed : numpy.ndarray
-        (n_x, n_y, n_z) bool; True for elements that never move. Corners by default.
+        (n_x, n_y, n_z) bool; True for elements that never move (the user's, and the
+        anchor mode's at first).
+    anchored : numpy.ndarray
+        (n_x, n_y, n_z) bool; elements held at rest by the region of influence of the
+        current drag (:meth:`anchor_around`); recomputed by every drag.
     stiffness, damping, mass : numpy.ndarray
         (n_x, n_y, n_z) float32 materials; defaults 0.5, 1.0 and 1.0.
 
     Examples
     --------
-    >>> grid = ElementGrid(((0, 0, 0), (100, 50, 50)), shape=(11, 6, 6))
+    >>> grid = ElementGrid(((0, 0, 0), (100, 50, 50)), shape=(11, 6, 6), anchor="corners")
     >>> grid.spacing.tolist()
     [10.0, 10.0, 10.0]
     >>> int(grid.fixed.sum())
@@ -102,6 +121,8 @@ class ElementGrid:
         volume_or_bounds: Any,
         shape: int | Sequence[int] = (16, 16, 16),
         margin: float = 0.0,
+        anchor: str = anchors.DEFAULT_ANCHOR,
+        fix_outside: float | str | None = anchors.DEFAULT,
     ) -> None:
         vlo, vhi = _parse_bounds(volume_or_bounds)
         self.margin: float = check_margin(margin, vhi - vlo)
@@ -124,7 +145,12 @@ class ElementGrid:
         self.stiffness: np.ndarray = np.full(self.shape, DEFAULT_STIFFNESS, dtype=np.float32)
         self.damping: np.ndarray = np.full(self.shape, DEFAULT_DAMPING, dtype=np.float32)
         self.mass: np.ndarray = np.full(self.shape, DEFAULT_MASS, dtype=np.float32)
-        self.fixed[self.corner_mask()] = True
+        self.anchor: str = anchors.check_anchor(anchor)
+        self.fix_outside: float | str | None = anchors.check_fix_outside(fix_outside, anchor)
+        self.anchored: np.ndarray = np.zeros(self.shape, dtype=bool)
+        #: elements the user freed from the region: never anchored again
+        self.unanchored: np.ndarray = np.zeros(self.shape, dtype=bool)
+        self.fixed[anchors.anchor_mask(self.shape, self.anchor)] = True
 
     # ------------------------------------------------------------------ selections
     @property
@@ -237,24 +263,60 @@ class ElementGrid:
         self.fixed |= self.mask(sel)
 
     def free(self, sel: Selection) -> None:
-        """Unfix elements (they move again, unless their stiffness is 1).
+        """Unfix elements (they move again, unless their stiffness is 1); anchored ones
+        leave the region's anchors too, and later drags do not anchor them again.
 
         Parameters
         ----------
         sel
             Bool mask of the grid shape, one index ``(i, j, k)`` or (m, 3) indices.
         """
-        self.fixed &= ~self.mask(sel)
+        m = self.mask(sel)
+        self.unanchored |= m & self.anchored
+        self.anchored &= ~m
+        self.fixed &= ~m
 
     def pinned(self) -> np.ndarray:
-        """Elements that do not move by themselves: fixed, or rigid (stiffness >= 1).
+        """Elements that do not move by themselves: fixed, anchored, or rigid
+        (stiffness >= 1).
 
         Returns
         -------
         numpy.ndarray
             (n_x, n_y, n_z) bool mask (a new array).
         """
-        return self.fixed | (self.stiffness >= 1.0)
+        return self.constrained() | (self.stiffness >= 1.0)
+
+    def constrained(self) -> np.ndarray:
+        """Elements held at rest by a boundary condition: fixed or anchored (a new mask)."""
+        return self.fixed | self.anchored
+
+    def anchor_around(
+        self, held: np.ndarray, offsets: Any, candidates: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Recompute :attr:`anchored` for a drag: the elements farther than the region
+        radius (``fix_outside``; ``"auto"`` from the spacing and the largest of the
+        held ``offsets``, mm) from every ``held`` element, never fixed, held or
+        :attr:`unanchored` ones, and (if given) only ``candidates`` (e.g. elements at
+        rest). Returns the new mask (also stored); nothing held anchors nothing.
+        """
+        held = np.asarray(held, dtype=bool).reshape(self.shape)
+        off = np.asarray(offsets, dtype=np.float64).reshape((*self.shape, 3))[held]
+        radius = anchors.region_radius(self.fix_outside, self.spacing, off)
+        if radius is None:
+            new = np.zeros(self.shape, dtype=bool)
+        else:
+            new = anchors.outside_mask(self.spacing, held, radius)
+            new &= ~(self.fixed | held | self.unanchored)
+            if candidates is not None:
+                new &= np.asarray(candidates, dtype=bool).reshape(self.shape)
+        self.anchored = new
+        return new.copy()
+
+    def describe_anchors(self, drag_mm: float | None = None) -> str:
+        """The boundary conditions in one phrase (for the CLI's and the GUI's line);
+        ``drag_mm``: the largest drag, to name the automatic radius it gives."""
+        return anchors.describe(self.anchor, self.fix_outside, self.spacing, drag_mm)
 
     # ------------------------------------------------------------------ materials
     def set_material(
@@ -401,6 +463,14 @@ class ElementGrid:
         self.set_material(stiffness=stiff)
         return self.stiffness.copy()
 
+    def materials_from_preset(self, volume: Any, preset: str) -> np.ndarray:
+        """Set every element's stiffness from ``volume`` by a tissue preset: ``"ct"``
+        (Hounsfield units) or ``"mr"`` (the volume's own histogram); see
+        :func:`voxwarp.deform.elements.materials.preset_stiffness`. ``volume`` has
+        ``data``, ``spacing`` and ``origin``. Returns the new stiffness."""
+        values = np.asarray(volume.data)
+        return self.materials_from_volume(volume, mapping=preset_stiffness(values, preset))
+
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable description (plain lists and numbers).
@@ -409,9 +479,11 @@ class ElementGrid:
         -------
         dict
             ``lo``, ``hi`` (the volume's box, without the margin), ``shape``, ``fixed``
-            (list of fixed ``[i, j, k]``), and ``stiffness``, ``damping``, ``mass``: a
-            number when uniform, else a nested list of the grid shape; ``margin`` (mm)
-            when it is not 0.
+            (list of fixed ``[i, j, k]``), ``margin`` (mm, when it is not 0),
+            ``anchor`` and ``fix_outside`` (mm, ``"auto"`` or None; both left out when
+            they are the thesis's ``"corners"`` and None, so such a grid saves as it
+            did before they existed), and ``stiffness``, ``damping``, ``mass``: a
+            number when uniform, else a nested list of the grid shape.
         """
         d: dict[str, Any] = {
             "lo": self.volume_lo.tolist(),
@@ -419,6 +491,8 @@ class ElementGrid:
             "shape": list(self.shape),
             "fixed": np.argwhere(self.fixed).tolist(),
         }
+        if (self.anchor, self.fix_outside) != LEGACY_ANCHORS:
+            d["anchor"], d["fix_outside"] = self.anchor, self.fix_outside
         for name in ("stiffness", "damping", "mass"):
             a = getattr(self, name)
             d[name] = float(a.flat[0]) if np.all(a == a.flat[0]) else a.tolist()
@@ -434,8 +508,10 @@ class ElementGrid:
         ----------
         d
             Mapping with ``lo``, ``hi`` and ``shape``; optionally ``margin`` (mm,
-            default 0: files saved before the margin existed load unchanged), ``fixed``
-            (list of indices; default the corners) and ``stiffness``, ``damping``, ``mass``.
+            default 0: files saved before the margin existed load unchanged), ``fixed`` (list of
+            indices; default the anchor's), ``anchor`` (default ``"corners"``, as every
+            grid saved before anchors existed), ``fix_outside`` (default None: no
+            region) and ``stiffness``, ``damping``, ``mass``.
 
         Returns
         -------
@@ -451,7 +527,16 @@ class ElementGrid:
         missing = [k for k in ("lo", "hi", "shape") if k not in d]
         if missing:
             raise ElementGridError(f"an element grid entry needs the keys {missing}")
-        grid = cls((d["lo"], d["hi"]), shape=d["shape"], margin=d.get("margin", 0.0))
+        try:
+            grid = cls(
+                (d["lo"], d["hi"]),
+                shape=d["shape"],
+                margin=d.get("margin", 0.0),
+                anchor=d.get("anchor", LEGACY_ANCHORS[0]),
+                fix_outside=d.get("fix_outside", LEGACY_ANCHORS[1]),
+            )
+        except anchors.AnchorError as exc:
+            raise ElementGridError(str(exc)) from exc
         if "fixed" in d:
             grid.fixed[:] = False
             grid.fix(np.asarray(d["fixed"], dtype=np.int64).reshape(-1, 3))
@@ -463,7 +548,7 @@ class ElementGrid:
     def __repr__(self) -> str:
         return (
             f"ElementGrid(shape={self.shape}, lo={self.lo.tolist()}, hi={self.hi.tolist()}, "
-            f"margin={self.margin:g}, fixed={int(self.fixed.sum())})"
+            f"margin={self.margin:g}, fixed={int(self.fixed.sum())}, anchor={self.anchor!r})"
         )
 
 

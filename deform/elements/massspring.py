@@ -495,7 +495,7 @@ class MassSpring(ElementWarpMixin):
         if not np.all(np.isfinite(off)):
             raise MassSpringError("offsets must be finite numbers (mm)")
         sel_arr = np.asarray(sel)
-        movable = ~self._rest_pinned()
+        movable = ~(self.grid.fixed | (np.asarray(self._model.stiffness) >= 1.0))
         if sel_arr.dtype == bool:
             mask = self.grid.mask(sel_arr) & movable
             if off.shape != (3,):
@@ -517,6 +517,7 @@ class MassSpring(ElementWarpMixin):
             idx, off = idx[keep], off[keep]
             self._offsets[idx[:, 0], idx[:, 1], idx[:, 2]] = off
             self._held[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        self.grid.anchor_around(self._held, self._offsets)
         self._sync_constraints()
         self._update_warp()
 
@@ -531,11 +532,14 @@ class MassSpring(ElementWarpMixin):
         mask = self.grid.mask(sel)
         self._held &= ~mask
         self._offsets[mask] = 0.0
+        self.grid.anchor_around(self._held, self._offsets)
         self._sync_constraints()
 
     def _rest_pinned(self) -> np.ndarray:
-        """Elements pinned at rest: fixed, or rigid (stiffness 1 in the model)."""
-        return self.grid.fixed | (np.asarray(self._model.stiffness) >= 1.0)
+        """Elements pinned at rest: fixed, anchored by the region of influence
+        (:meth:`ElementGrid.anchor_around`, recomputed by every drag), or rigid
+        (stiffness 1 in the model)."""
+        return self.grid.constrained() | (np.asarray(self._model.stiffness) >= 1.0)
 
     def _pinned_and_targets(self) -> tuple[np.ndarray, np.ndarray]:
         rest_pinned = self._rest_pinned()

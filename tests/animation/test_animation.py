@@ -512,7 +512,7 @@ def test_element_drags_step_the_model_frame_by_frame(
     volume: Volume, tmp_path: Path, kind: str
 ) -> None:
     session = EditSession(Scene(volume))
-    session.set_deformation(kind, resolution=5)
+    session.set_deformation(kind, resolution=5, anchor="corners")
     session.set_option("steps_per_frame", 7)
     session.set_option("relax_steps", 2)
     path = tmp_path / "m.json"

@@ -30,7 +30,7 @@ from tests.cli.test_cli_massspring import VIEW, ball_file, centroid_x, grey  # n
 from voxwarp.cli.main import main
 from voxwarp.io.images import read_image
 
-DRAG = ["--chainmail", "7", "--drag", "3,3,3:3,0,0"]
+DRAG = ["--chainmail", "7", "--anchor", "corners", "--drag", "3,3,3:3,0,0"]
 
 
 # ---------------------------------------------------------------------- errors
@@ -43,6 +43,8 @@ DRAG = ["--chainmail", "7", "--drag", "3,3,3:3,0,0"]
         (["--chainmail", "8", "--relax", "-1"], "relaxation steps >= 0"),
         (["--chainmail", "8", "--relax", "two"], "relaxation steps >= 0"),
         (["--chainmail", "8", "--variant", "schill"], "invalid choice"),
+        (["--chainmail", "8", "--anchor", "box"], "invalid choice: 'box'"),
+        (["--chainmail", "8", "--fix-outside", "-2"], "expected a radius in mm >= 0"),
         (["--chainmail", "8", "--cut", "1,2,3"], "expected PX,PY,PZ:NX,NY,NZ[:RADIUS]"),
         (["--chainmail", "8", "--cut", "1,2:1,0,0"], "expected PX,PY,PZ:NX,NY,NZ"),
         (["--chainmail", "8", "--cut", "1,2,3:0,0,0"], "the normal must not be 0,0,0"),
@@ -90,7 +92,11 @@ def test_bad_syntax_is_an_argparse_error(
             ["--chainmail", "8", "--drag", "8,3,3:1,0,0"],
             "--drag 8,3,3:1,0,0: element (8, 3, 3) is outside the 8x8x8 grid; indices run 0..7",
         ),
-        (["--chainmail", "8", "--drag", "7,7,0:1,0,0"], "(7, 7, 0) is a corner"),
+        (
+            ["--chainmail", "8", "--anchor", "corners", "--drag", "7,7,0:1,0,0"],
+            "(7, 7, 0) is on the 8x8x8 grid's corners (--anchor corners fixes it)",
+        ),
+        (["--chainmail", "8", "--drag", "7,3,3:1,0,0"], "(7, 3, 3) is on the 8x8x8 grid's shell"),
         (["--chainmail", "8", "--fix", "0..8,0,0"], "--fix 0..8,0,0: reaches outside"),
         (
             ["--chainmail", "8", "--fix", "2,2,2", "--drag", "2,2,2:1,0,0"],
@@ -224,6 +230,8 @@ def test_cut_keeps_the_far_side_at_rest(
             *VIEW,
             "--chainmail",
             "7",
+            "--anchor",
+            "corners",
             "--drag",
             "2,3,3:0,4,0",
             "--grid-margin",  # the layers at 7.5 and 10.2 mm are those of the volume's box

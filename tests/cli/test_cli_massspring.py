@@ -35,6 +35,8 @@ from voxwarp.io.volumes import save_volume
 N = 16
 VIEW = ["--mode", "mip", "--projection", "orthographic", "--view", "+z", "--size", "128x128"]
 VIEW += ["--no-jitter", "--tf", "grayscale"]
+#: the thesis's boundary condition: these tests drag a small ball across its whole grid
+CORNERS = ["--anchor", "corners"]
 
 
 def ball() -> np.ndarray:
@@ -75,6 +77,7 @@ def centroid_x(img: np.ndarray) -> float:
         (["--massspring", "8", "--backend", "cuda"], "invalid choice"),
         (["--massspring", "8", "--stiffness-from-volume", "100:1.5"], "stiffnesses must be"),
         (["--massspring", "8", "--stiffness-from-volume", "100"], "VALUE:STIFFNESS"),
+        (["--massspring", "8", "--stiffness-from-volume", "bone"], "VALUE:STIFFNESS"),
     ],
 )
 def test_bad_syntax_is_an_argparse_error(
@@ -104,7 +107,11 @@ def test_bad_syntax_is_an_argparse_error(
         (["--drag", "1,1,1:0,0,5"], "--drag needs --massspring: add --massspring N"),
         (["--settle"], "--settle needs --massspring"),
         (["--backend", "gpu"], "--backend needs --massspring"),
-        (["--massspring", "6", "--drag", "5,0,5:1,0,0"], "(5, 0, 5) is a corner"),
+        (
+            ["--massspring", "6", "--anchor", "corners", "--drag", "5,0,5:1,0,0"],
+            "(5, 0, 5) is on the 6x6x6 grid's corners",
+        ),
+        (["--massspring", "6", "--drag", "5,2,2:1,0,0"], "(5, 2, 2) is on the 6x6x6 grid's shell"),
         (
             ["--massspring", "6", "--drag", "2,2,2:1,0,0", "--drag", "2,2,2:0,1,0"],
             "already dragged by --drag 2,2,2:1,0,0",
@@ -145,7 +152,15 @@ def test_drag_along_x_moves_the_centroid_right(
     rest, moved = tmp_path / "rest.png", tmp_path / "moved.png"
     render(str(ball_file), "-o", str(rest), *VIEW)
     proc = render(
-        str(ball_file), "-o", str(moved), *VIEW, "--massspring", "7", "--drag", "3,3,3:3,0,0"
+        str(ball_file),
+        "-o",
+        str(moved),
+        *VIEW,
+        "--massspring",
+        "7",
+        *CORNERS,
+        "--drag",
+        "3,3,3:3,0,0",
     )
     assert "massspring: 7x7x7 cpu semi-implicit" in proc.stderr
     assert "1000 steps" in proc.stderr  # the default without --settle
@@ -174,7 +189,8 @@ def test_saved_scene_renders_the_identical_image(
     gl_ctx: Any, ball_file: Path, tmp_path: Path
 ) -> None:
     first, second, scene = tmp_path / "a.png", tmp_path / "b.png", tmp_path / "s" / "scene.json"
-    drag = ["--massspring", "6", "--drag", "2,3,3:2,1,-1", "--fix", "5,0..5,0..5", "--settle"]
+    drag = ["--massspring", "6", *CORNERS, "--drag", "2,3,3:2,1,-1", "--fix", "5,0..5,0..5"]
+    drag += ["--settle"]
     proc = render(str(ball_file), "-o", str(first), "--save-scene", str(scene), *VIEW, *drag)
     assert "settled" in proc.stderr
     d = json.loads(scene.read_text())

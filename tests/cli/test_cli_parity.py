@@ -317,8 +317,16 @@ def test_scene_frame_is_saved_and_old_scenes_load() -> None:
 
 
 # ---------------------------------------------------------------------- drag-at
+def test_pick_elements_skip_fixed_elements() -> None:
+    grid = ElementGrid(((0.0, 0.0, 0.0), (30.0, 30.0, 30.0)), shape=4)  # shell fixed
+    (pick,) = ropt.pick_elements(grid, [ropt.drag_at_arg("1,2,29:0,1,0")])
+    assert pick.index == (1, 1, 2)  # the nearest inner element, not the corner
+    (pick,) = ropt.pick_elements(grid, [ropt.drag_at_arg("21,18,9:0,1,0")])
+    assert pick.index == (2, 2, 1)
+
+
 def test_pick_elements_nearest_and_outside() -> None:
-    grid = ElementGrid(((0.0, 0.0, 0.0), (30.0, 20.0, 10.0)), shape=(4, 3, 2))
+    grid = ElementGrid(((0.0, 0.0, 0.0), (30.0, 20.0, 10.0)), shape=(4, 3, 2), anchor="none")
     # elements at x 0, 10, 20, 30; y 0, 10, 20; z 0, 10
     drags = [ropt.drag_at_arg("11,8,3:0,1,0"), ropt.drag_at_arg("-9,25,14:1,0,0")]
     near, edge = ropt.pick_elements(grid, drags)
@@ -366,8 +374,12 @@ def test_drag_at_equals_the_drag_of_its_element(
             "--drag-at 80,10,10:0,6,0: the point lies more than one element spacing",
         ),
         (
-            ["--chainmail", "4", "--drag-at", "0,0,0:0,6,0"],
-            "--drag-at 0,0,0:0,6,0: element (0, 0, 0) is a corner of the 4x4x4 grid",
+            ["--chainmail", "4", "--anchor", "corners", "--drag", "0,0,0:0,6,0"],
+            "--drag 0,0,0:0,6,0: element (0, 0, 0) is on the 4x4x4 grid's corners",
+        ),
+        (  # a 2-element axis is all shell: nothing can be dragged
+            ["--chainmail", "4,4,2", "--drag-at", "0,0,0:0,6,0"],
+            "element (0, 0, 0) is on the 4x4x2 grid's shell (--anchor shell fixes it)",
         ),
         (
             ["--massspring", "4", "--drag", "2,1,1:1,0,0", "--drag-at", "21,10,10:0,6,0"],

@@ -75,7 +75,7 @@ def _inner_box(vol: Volume) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _massspring(vol: Volume) -> list[Warp]:
-    ms = MassSpring(ElementGrid(vol, shape=6))
+    ms = MassSpring(ElementGrid(vol, shape=6, anchor="corners"))
     ms.fix([(i, j, 0) for i in range(6) for j in range(6)])
     top = [(i, j, 4) for i in range(1, 5) for j in range(1, 5)]
     ms.move(top, np.tile([28.0, 0.0, 0.0], (len(top), 1)))
@@ -84,7 +84,7 @@ def _massspring(vol: Volume) -> list[Warp]:
 
 
 def _chainmail(vol: Volume) -> list[Warp]:
-    cm = ChainMail(ElementGrid(vol, shape=8), relax_steps=20)
+    cm = ChainMail(ElementGrid(vol, shape=8, anchor="corners"), relax_steps=20)
     cm.move((4, 4, 6), (30.0, 15.0, 0.0))
     return [cm.warp()]
 
@@ -251,7 +251,7 @@ def massspring_scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Vo
     render(
         str(src),
         *("-o", str(folder / "r.png"), "--size", "48x48", "--massspring", "4"),
-        *("--drag", "2,2,3:4,0,0", "--save-scene", str(scene)),
+        *("--anchor", "corners", "--drag", "2,2,3:4,0,0", "--save-scene", str(scene)),
     )
     return scene, vol
 

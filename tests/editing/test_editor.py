@@ -110,7 +110,7 @@ def deform_family(session: EditSession, kind: str) -> None:
         session.set_deformation("lattice", resolution=4)
         session.select([flat((4, 4, 4), 1, 2, 1)])
     else:
-        session.set_deformation(kind, resolution=5)
+        session.set_deformation(kind, resolution=5, anchor="corners")
         session.select([flat((5, 5, 5), 2, 2, 2), flat((5, 5, 5), 2, 3, 2)])
     cam = camera_for(session.handles(), (30.0, 20.0), "perspective")
     drag(session, cam, (12.0, -7.0))
@@ -284,7 +284,7 @@ def test_drag_moves_the_reference_in_the_view_plane_under_the_cursor(
     session: EditSession, kind: str, view: Any, projection: str
 ) -> None:
     """The reference's target offset is parallel to the image and it lands under the cursor."""
-    session.set_deformation(kind, resolution=5)
+    session.set_deformation(kind, resolution=5, anchor="corners")
     ref = flat((5, 5, 5), 2, 2, 2)
     session.select([ref])
     cam = camera_for(session.handles(), view, projection)
@@ -304,7 +304,7 @@ def test_drag_moves_the_reference_in_the_view_plane_under_the_cursor(
 @pytest.mark.parametrize("kind", ELEMENT_KINDS)
 def test_drag_keeps_the_shape_of_the_selection(session: EditSession, kind: str) -> None:
     """Every selected element moves by the reference's offset: pairwise differences stay."""
-    session.set_deformation(kind, resolution=5)
+    session.set_deformation(kind, resolution=5, anchor="corners")
     sel = [flat((5, 5, 5), *ijk) for ijk in [(1, 2, 2), (2, 2, 2), (2, 3, 1), (3, 1, 3)]]
     session.select(sel)
     session.set_reference(sel[1])
@@ -323,7 +323,7 @@ def test_drag_leaves_fixed_elements_in_the_selection_where_they_are(
     session: EditSession, kind: str
 ) -> None:
     """A fixed element (a corner, or one fixed by set_fixed) in the selection does not move."""
-    session.set_deformation(kind, resolution=5)
+    session.set_deformation(kind, resolution=5, anchor="corners")
     corner, fixed, free = (flat((5, 5, 5), *ijk) for ijk in [(0, 0, 0), (1, 3, 3), (2, 2, 2)])
     session.set_fixed([fixed], True)
     assert session.fixed_handles()[[corner, fixed, free]].tolist() == [True, True, False]
@@ -925,7 +925,7 @@ def test_overlay_layers_per_family_and_their_toggles(
     session: EditSession, kind: str, expected: list[str], toggles: dict[str, list[str]]
 ) -> None:
     """Each family draws its layers; each DisplayOptions field removes exactly its layers."""
-    session.set_deformation(kind, resolution=4)
+    session.set_deformation(kind, resolution=4, anchor="corners")
     assert layer_names(session) == expected
     for option, gone in {**toggles, "grid_box": ["grid box"]}.items():
         assert layer_names(session, **{option: False}) == [n for n in expected if n not in gone]

@@ -159,7 +159,9 @@ def test_napari_push_is_the_builders_and_as_before(volume: Volume) -> None:
     block[2:5, 2:5, 2:5] = True
     offset = (0.0, 0.0, 0.2 * float(volume.size_mm[2]))
     direct = MassSpring(
-        ElementGrid(volume, shape=PUSH_GRID), integrator="semi-implicit", shear=True
+        ElementGrid(volume, shape=PUSH_GRID, anchor="corners"),
+        integrator="semi-implicit",
+        shear=True,
     )
     direct.move(block, offset)
     direct.settle()
@@ -206,6 +208,8 @@ def test_family_options_keep_the_editor_entry_and_check_settings() -> None:
         "steps_per_frame",
         "relax_steps",
         "stiffness",
+        "anchor",
+        "fix_outside",
         "wire_settings",
     ]
     again = msets.FamilyOptions()
@@ -217,6 +221,13 @@ def test_family_options_keep_the_editor_entry_and_check_settings() -> None:
         options.with_model_settings({"stiffness": 2})
     with pytest.raises(msets.EditorError, match="unknown deformation settings: bogus"):
         options.with_model_settings({"bogus": 1})
+    with pytest.raises(msets.EditorError, match="anchor must be one of shell, corners, none"):
+        options.with_model_settings({"anchor": "box"})
+    with pytest.raises(msets.EditorError, match="fix_outside must be >= 0"):
+        options.with_model_settings({"fix_outside": -1})
+    bounds = options.with_model_settings({"anchor": "corners", "fix_outside": 40})
+    assert (bounds.anchor, bounds.fix_outside) == ("corners", 40.0)
+    assert (options.anchor, options.fix_outside) == ("shell", "default")
     with options.one_step():
         assert (options.steps_per_frame, options.relax_steps) == (1, 1)
     assert (options.steps_per_frame, options.relax_steps) == (10, 4)

@@ -88,7 +88,7 @@ from voxwarp import Scene, load_sample
 from voxwarp.notebook import Viewer
 
 scene = Scene(load_sample("fish", shape=(64, 32, 28)), view="+z")
-v = Viewer(scene, "massspring", resolution=5, size=(200, 150))
+v = Viewer(scene, "massspring", resolution=5, size=(200, 150), anchor="corners")
 v._has_visible_views = True  # what the browser reports once the view is on screen
 
 

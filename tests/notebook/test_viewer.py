@@ -37,7 +37,7 @@ def _scene() -> Any:
 def viewer(gl_ctx: Any) -> Iterator[Any]:
     from voxwarp.notebook import Viewer
 
-    v = Viewer(_scene(), "massspring", size=SIZE, ctx=gl_ctx, resolution=6)
+    v = Viewer(_scene(), "massspring", size=SIZE, ctx=gl_ctx, resolution=6, anchor="corners")
     v.handle_event({"type": "resize", "width": SIZE[0], "height": SIZE[1], "ratio": 1.0})
     yield v
     v.release()
@@ -92,7 +92,8 @@ def test_wheel_zooms_in(viewer: Any) -> None:
 
 
 def _movable_handle(v: Any) -> int:
-    """A free element near the middle of the grid (front layer, so pick finds it)."""
+    """A free element near the middle of the grid (front layer, so pick finds it; the
+    viewers here fix the corners only, the thesis's set-up)."""
     grid = v.session.model.grid
     i, j = grid.shape[0] // 2, grid.shape[1] // 2
     k = grid.shape[2] - 1  # +z view: the top layer is nearest the eye
@@ -195,7 +196,15 @@ def test_keys_and_resize(viewer: Any) -> None:
 def test_chainmail_from_sample_input(gl_ctx: Any) -> None:
     from voxwarp.notebook import Viewer
 
-    v = Viewer("sample:fish", "chainmail", size=(96, 72), ctx=gl_ctx, resolution=4, stiffness=0.8)
+    v = Viewer(
+        "sample:fish",
+        "chainmail",
+        size=(96, 72),
+        ctx=gl_ctx,
+        resolution=4,
+        stiffness=0.8,
+        anchor="corners",
+    )
     try:
         assert v.session.kind == "chainmail"
         grid = v.session.model.grid
@@ -215,7 +224,9 @@ def test_chainmail_from_sample_input(gl_ctx: Any) -> None:
 def test_gpu_backend_drag_and_undo(gl_ctx: Any) -> None:
     from voxwarp.notebook import Viewer
 
-    v = Viewer(_scene(), "massspring", size=SIZE, ctx=gl_ctx, resolution=5, backend="gpu")
+    v = Viewer(
+        _scene(), "massspring", size=SIZE, ctx=gl_ctx, resolution=5, backend="gpu", anchor="corners"
+    )
     try:
         assert v.session.model.backend == "gpu"
         grid = v.session.model.grid

@@ -200,7 +200,10 @@ def test_lattice_node_drag_bends_the_volume(window: Any, qtbot: Any) -> None:
 
 def test_rubber_band_selects_and_fix_key_fixes(window: Any, qtbot: Any) -> None:
     w = window
-    w.edit("New ChainMail", lambda: w.session.set_deformation("chainmail", resolution=4))
+    w.edit(
+        "New ChainMail",
+        lambda: w.session.set_deformation("chainmail", resolution=4, anchor="corners"),
+    )
     size = w.viewport.size_px()
     xy = w.viewport.camera.project(w.session.handles(), size)
     lo, hi = xy.min(axis=0) - 20, xy.max(axis=0) + 20  # beyond the pick radius

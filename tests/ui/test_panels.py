@@ -308,7 +308,7 @@ def test_gpu_backend_without_context_is_an_error_and_the_combo_follows(
 
 
 def test_fix_and_free_selected(qtbot: Any, window: FakeWindow) -> None:
-    window.session.set_deformation("massspring", resolution=3)
+    window.session.set_deformation("massspring", resolution=3, anchor="corners")
     panel = make_panel(qtbot, window, DeformationPanel)
     corners = window.session.model.grid.fixed.reshape(-1).copy()  # fixed by default
     assert not corners[5]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from PySide6.QtWidgets import QFormLayout, QGroupBox, QHBoxLayout, QPushButton, QSpinBox
+from PySide6.QtWidgets import QFormLayout, QGroupBox, QHBoxLayout, QLabel, QPushButton, QSpinBox
 
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel
@@ -15,7 +15,7 @@ from voxwarp.ui.panel_base import int_spin
 __all__ = ["ElementsPanel"]
 
 #: options of the Model group, shared by both element families
-_SHARED = ("backend", "resolution", "stiffness", "margin")
+_SHARED = ("backend", "resolution", "stiffness", "margin", "anchor", "fix_outside")
 
 
 class ElementsPanel(FamilyPanel):
@@ -41,6 +41,7 @@ class ElementsPanel(FamilyPanel):
         "relax_spin",
         "fix_button",
         "free_button",
+        "boundary_label",
     )
 
     def _build(self) -> None:
@@ -58,6 +59,13 @@ class ElementsPanel(FamilyPanel):
         )
         form.addRow("Relax steps", self.relax_spin)
         form.addRow(self._fix_row())
+        self.boundary_label = QLabel()
+        self.boundary_label.setWordWrap(True)
+        self.boundary_label.setToolTip(
+            "Boundary conditions: fixed elements (red) and elements anchored by the region"
+            " of influence of the drag (violet); Free selected frees either kind"
+        )
+        form.addRow("Boundary", self.boundary_label)
         self.add_group(self.simulation_group)
 
     def _run_row(self) -> QHBoxLayout:
@@ -112,6 +120,8 @@ class ElementsPanel(FamilyPanel):
             self.relax_spin.setValue(s.options.relax_steps)
             for button in (self.fix_button, self.free_button, self.step_button):
                 button.setEnabled(s.model is not None)
+            text = getattr(s.family, "boundary_text", None)
+            self.boundary_label.setText(text() if callable(text) else "")
 
     def timing_parts(self, timings: dict[str, float]) -> list[str]:
         """The last model step."""

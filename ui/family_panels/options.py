@@ -1,5 +1,6 @@
 """The settings of new models in the Model group: backend, resolution, integrator,
-variant, stiffness and the element grid's margin.
+variant, stiffness and the element grid's margin and boundary conditions (anchor,
+region).
 
 They are the session's settings (shared by the families: the resolution is that of the
 elements and of the lattice), so there is one widget each; a family panel names the rows
@@ -14,6 +15,7 @@ from typing import Any
 
 from PySide6.QtWidgets import QFormLayout, QWidget
 
+from voxwarp.deform.elements.anchors import ANCHOR_MODES, AUTO, DEFAULT
 from voxwarp.editing.session import BACKENDS, CHAINMAIL_VARIANTS, INTEGRATORS, EditSession
 from voxwarp.ui.panel_base import combo, double_spin, int_spin
 
@@ -47,6 +49,22 @@ class ModelOptions:
             " box, so content dragged across a face is carried out and drawn there (0: the"
             " volume's box). A margin as large as the largest drag keeps everything",
         )
+        self.anchor_combo = combo(
+            ANCHOR_MODES,
+            "Elements fixed at rest: shell (the grid's outer faces, so a drag stays local),"
+            " corners (the thesis's 8: a drag moves everything) or none",
+        )
+        self.region_spin = double_spin(
+            -1.0,
+            1000.0,
+            5.0,
+            0,
+            " mm",
+            "Region of influence: elements farther than this from every dragged element"
+            " are anchored at rest (drawn in their own colour); auto: the larger of 30 mm,"
+            " 4 element spacings and 3 x the drag; 0: off",
+        )
+        self.region_spin.setSpecialValueText(AUTO)
         #: option name -> its widget, in the order of the rows
         self.widgets: dict[str, QWidget] = {
             "backend": self.backend_combo,
@@ -55,9 +73,11 @@ class ModelOptions:
             "variant": self.variant_combo,
             "stiffness": self.stiffness_spin,
             "margin": self.margin_spin,
+            "anchor": self.anchor_combo,
+            "fix_outside": self.region_spin,
         }
         for name, widget in self.widgets.items():
-            form.addRow(name.capitalize(), widget)
+            form.addRow(_ROW_LABELS.get(name, name.capitalize()), widget)
 
     def settings(self) -> dict[str, Any]:
         """The chosen settings (keywords of :meth:`EditSession.set_deformation`)."""
@@ -68,6 +88,8 @@ class ModelOptions:
             "variant": self.variant_combo.currentText(),
             "stiffness": float(self.stiffness_spin.value()),
             "margin": float(self.margin_spin.value()),
+            "anchor": self.anchor_combo.currentText(),
+            "fix_outside": AUTO if self.region_spin.value() < 0 else self.region_spin.value(),
         }
 
     def refresh(self, s: EditSession) -> None:
@@ -78,8 +100,23 @@ class ModelOptions:
         self.variant_combo.setCurrentText(s.options.variant)
         self.stiffness_spin.setValue(s.options.stiffness)
         self.margin_spin.setValue(s.options.margin)
+        self.anchor_combo.setCurrentText(s.options.anchor)
+        self.region_spin.setValue(_region_value(s.options.anchor, s.options.fix_outside))
 
     def show_only(self, names: tuple[str, ...]) -> None:
         """Show the rows of the options ``names``, hide the others."""
         for name, widget in self.widgets.items():
             self._form.setRowVisible(widget, name in names)
+
+
+#: row labels that are not the option's name capitalised
+_ROW_LABELS = {"anchor": "Anchor", "fix_outside": "Fix outside"}
+
+
+def _region_value(anchor: str, fix_outside: float | str | None) -> float:
+    """The region spin box's value of a setting: -1 shows ``auto``, 0 off."""
+    if fix_outside == DEFAULT:
+        fix_outside = AUTO if anchor == "shell" else None
+    if fix_outside == AUTO:
+        return -1.0
+    return 0.0 if fix_outside is None else float(fix_outside)

@@ -127,6 +127,11 @@ class Family:
         """(count,) bool: handles that do not move."""
         return np.zeros(count, dtype=bool)
 
+    def anchored_handles(self, count: int) -> np.ndarray:
+        """(count,) bool: handles held at rest by the current drag's region of influence
+        (not fixed ones)."""
+        return np.zeros(count, dtype=bool)
+
     def set_fixed(self, indices: list[int], fixed: bool) -> None:
         """Fix or free handles."""
         raise EditorError("only the elements of mass-spring and ChainMail can be fixed")

@@ -9,10 +9,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from voxwarp.core.modality_detection import detect_modality
+from voxwarp.deform.elements.anchors import AnchorError
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.elements.chainmail_model import ChainMailError
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
 from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
+from voxwarp.deform.elements.materials import MaterialPresetError
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.editing.common import COLORS, DisplayOptions, EditorError
@@ -74,10 +77,19 @@ class ElementFamily(Family):
     @classmethod
     def grid(cls, settings: ElementSettings, volume: Any) -> ElementGrid:
         """The element grid of ``settings`` over ``volume``'s box padded by the settings'
-        ``margin``: its stiffness, fixed elements and materials set (no GL work); a
-        :class:`SettingError` names a bad setting."""
+        ``margin``, with its boundary conditions (``anchor``, ``fix_outside``), stiffness,
+        fixed elements and materials set (no GL work); a :class:`SettingError` names a
+        bad setting."""
         try:
-            grid = ElementGrid(volume, shape=settings.shape, margin=settings.margin)
+            grid = ElementGrid(
+                volume,
+                settings.shape,
+                margin=settings.margin,
+                anchor=settings.anchor,
+                fix_outside=settings.fix_outside,
+            )
+        except AnchorError as exc:
+            raise SettingError("anchor", str(exc)) from exc
         except ElementGridError as exc:
             raise SettingError("margin", str(exc)) from exc
         if settings.stiffness is not None:
@@ -86,7 +98,13 @@ class ElementFamily(Family):
             mask = np.zeros(grid.shape, dtype=bool)
             mask[tuple(slice(lo, hi + 1) for lo, hi in ranges)] = True
             grid.fix(mask)
-        if settings.stiffness_from_volume:
+        if isinstance(settings.stiffness_from_volume, str):
+            preset = material_preset(settings.stiffness_from_volume, volume)
+            try:
+                grid.materials_from_preset(volume, preset)
+            except (ElementGridError, MaterialPresetError) as exc:
+                raise SettingError("stiffness_from_volume", str(exc)) from exc
+        elif settings.stiffness_from_volume:
             # the voxel centres span origin .. origin + spacing * (shape - 1)
             org = np.asarray(volume.origin, dtype=np.float64)
             n = np.maximum(np.asarray(volume.shape) - 1, 1)
@@ -147,6 +165,12 @@ class ElementFamily(Family):
         if self.model is None:
             return super().fixed_handles(count)
         return self.model.grid.fixed.reshape(-1).copy()
+
+    def anchored_handles(self, count: int) -> np.ndarray:
+        if self.model is None:
+            return super().anchored_handles(count)
+        grid = self.model.grid
+        return (grid.anchored & ~grid.fixed).reshape(-1)
 
     def set_fixed(self, indices: list[int], fixed: bool) -> None:
         if self.model is None:
@@ -235,13 +259,27 @@ class ElementFamily(Family):
             edges = grid_edges(handles.reshape(*self.model.grid.shape, 3))
             layers.append(OverlayLayer("lines", edges, COLORS["link"], name="links"))
         fixed = self.fixed_handles(len(handles))
+        anchored = self.anchored_handles(len(handles))
         if display.elements:
+            free = ~(fixed | anchored)
             layers.append(
-                OverlayLayer("points", handles[~fixed], COLORS["element"], 5.0, name="elements")
+                OverlayLayer("points", handles[free], COLORS["element"], 5.0, name="elements")
             )
         if display.fixed and np.any(fixed):
             layers.append(OverlayLayer("points", handles[fixed], COLORS["fixed"], 7.0, "fixed"))
+        if display.fixed and np.any(anchored):
+            layers.append(
+                OverlayLayer("points", handles[anchored], COLORS["anchored"], 6.0, "anchored")
+            )
         return layers
+
+    def boundary_text(self) -> str:
+        """The boundary conditions of the model in one line (the panel shows it)."""
+        if self.model is None:
+            return ""
+        grid = self.model.grid
+        count = int(grid.anchored.sum())
+        return grid.describe_anchors() + (f"; {count} anchored now" if count else "")
 
     # ---------------------------------------------------------------- undo and animation
     def snapshot(self) -> dict[str, Any]:
@@ -291,6 +329,8 @@ class MassSpringFamily(ElementFamily):
             shape=s.resolution,
             backend=s.backend,
             stiffness=s.options.stiffness,
+            anchor=s.options.anchor,
+            fix_outside=s.options.fix_outside,
             integrator=s.options.integrator,
             margin=s.options.margin,
         )
@@ -364,6 +404,8 @@ class ChainMailFamily(ElementFamily):
             shape=s.resolution,
             backend=s.backend,
             stiffness=s.options.stiffness,
+            anchor=s.options.anchor,
+            fix_outside=s.options.fix_outside,
             variant=s.options.variant,
             relax_steps=s.options.relax_steps if s.backend == "cpu" else 0,
             margin=s.options.margin,
@@ -443,3 +485,12 @@ class ChainMailFamily(ElementFamily):
         super().restore(state)
         if isinstance(self.model, ChainMail):
             self.model.set_state(state["positions"])
+
+
+def material_preset(name: str, volume: Any) -> str:
+    """The tissue preset ``name`` (``"ct"``, ``"mr"`` or ``"auto"``) for ``volume``:
+    ``"auto"`` is ``"ct"`` for a CT in Hounsfield units, else ``"mr"`` (relative to the
+    volume's histogram, which also suits other data without absolute units)."""
+    if name != "auto":
+        return name
+    return "ct" if detect_modality(volume).kind == "CT" else "mr"

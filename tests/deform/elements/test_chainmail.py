@@ -36,7 +36,7 @@ TOL = 1e-6
 
 def _grid(shape: tuple[int, int, int], spacing: float = 10.0) -> ElementGrid:
     hi = tuple(spacing * (n - 1) for n in shape)
-    return ElementGrid(((0.0, 0.0, 0.0), hi), shape=shape)
+    return ElementGrid(((0.0, 0.0, 0.0), hi), shape=shape, anchor="corners")
 
 
 def _heterogeneous(cm: ChainMail, seed: int) -> None:
@@ -491,7 +491,7 @@ def test_zero_move_renders_like_no_warp(offscreen: Any, gl_ctx: Any) -> None:
     from tests.render.test_render import aligned_camera, grey_scene, phantom
 
     vol = phantom()
-    grid = ElementGrid(vol, shape=(6, 5, 5))
+    grid = ElementGrid(vol, shape=(6, 5, 5), anchor="corners")
     cm = ChainMail(grid)
     try:
         stats = cm.move((3, 2, 2), (0.0, 0.0, 0.0))

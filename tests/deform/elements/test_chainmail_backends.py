@@ -23,7 +23,7 @@ TOL = 5e-4
 
 def _grid(shape: tuple[int, int, int], spacing: float = 10.0) -> ElementGrid:
     hi = tuple(spacing * (n - 1) for n in shape)
-    return ElementGrid(((0.0, 0.0, 0.0), hi), shape=shape)
+    return ElementGrid(((0.0, 0.0, 0.0), hi), shape=shape, anchor="corners")
 
 
 def test_gpu_feasible_drags_match_the_cpu(gl_ctx: Any) -> None:

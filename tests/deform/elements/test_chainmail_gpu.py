@@ -463,7 +463,7 @@ def test_valid_positions_skip_the_full_check(gl_ctx: Any) -> None:
     from voxwarp.deform.elements.chainmail_model import ChainMailModel
     from voxwarp.deform.elements.grid import ElementGrid
 
-    grid = ElementGrid(((0, 0, 0), (230, 230, 230)), shape=(24, 24, 24))
+    grid = ElementGrid(((0, 0, 0), (230, 230, 230)), shape=(24, 24, 24), anchor="corners")
     s = grid.spacing
     model = ChainMailModel(
         grid.rest_positions, s, 0.9 * s, 1.1 * s, 0.1 * s, np.ones((24, 24, 24, 3), bool), g

@@ -14,7 +14,7 @@ BOX = ((0.0, 0.0, 0.0), (30.0, 20.0, 10.0))
 
 @pytest.mark.parametrize("cls", [MassSpring, ChainMail])
 def test_models_are_element_models_and_resume_from_their_warp(cls: type) -> None:
-    model = cls(ElementGrid(BOX, shape=(4, 4, 3)))
+    model = cls(ElementGrid(BOX, shape=(4, 4, 3), anchor="corners"))
     assert isinstance(model, ElementModel)
     model.move((2, 2, 1), (3.0, 0.0, 0.0))
     if isinstance(model, MassSpring):
@@ -32,6 +32,6 @@ def test_models_are_element_models_and_resume_from_their_warp(cls: type) -> None
 )
 def test_from_warp_names_the_model_it_needs(cls: type, error: type) -> None:
     other = ChainMail if cls is MassSpring else MassSpring
-    warp = other(ElementGrid(BOX, shape=3)).warp()
+    warp = other(ElementGrid(BOX, shape=3, anchor="corners")).warp()
     with pytest.raises(error, match=f"only warps saved from a {cls.__name__} can be resumed"):
         cls.from_warp(warp)

@@ -18,7 +18,7 @@ BOX = ((-10.0, 0.0, 5.0), (30.0, 20.0, 35.0))
 
 
 def test_rest_positions_span_the_box_faces_included() -> None:
-    g = ElementGrid(BOX, shape=(5, 3, 4))
+    g = ElementGrid(BOX, shape=(5, 3, 4), anchor="corners")
     assert g.shape == (5, 3, 4)
     np.testing.assert_allclose(g.spacing, [10.0, 10.0, 10.0])
     assert g.rest_positions.shape == (5, 3, 4, 3)
@@ -33,13 +33,13 @@ def test_rest_positions_span_the_box_faces_included() -> None:
 
 def test_volume_like_object_and_int_shape() -> None:
     vol = SimpleNamespace(bounds=(np.zeros(3), np.array([6.0, 9.0, 12.0])))
-    g = ElementGrid(vol, shape=4)
+    g = ElementGrid(vol, shape=4, anchor="corners")
     assert g.shape == (4, 4, 4)
     np.testing.assert_allclose(g.spacing, [2.0, 3.0, 4.0])
 
 
 def test_default_materials_and_corners_fixed() -> None:
-    g = ElementGrid(BOX, shape=(3, 4, 5))
+    g = ElementGrid(BOX, shape=(3, 4, 5), anchor="corners")
     assert g.fixed.dtype == bool
     assert int(g.fixed.sum()) == 8
     for i in (0, 2):
@@ -67,7 +67,7 @@ def test_default_materials_and_corners_fixed() -> None:
 )
 def test_bad_shape(shape: object, match: str) -> None:
     with pytest.raises(ElementGridError, match=match):
-        ElementGrid(BOX, shape=shape)  # type: ignore[arg-type]
+        ElementGrid(BOX, shape=shape, anchor="corners")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(
@@ -81,11 +81,11 @@ def test_bad_shape(shape: object, match: str) -> None:
 )
 def test_bad_bounds(bounds: object, match: str) -> None:
     with pytest.raises(ElementGridError, match=match):
-        ElementGrid(bounds, shape=3)
+        ElementGrid(bounds, shape=3, anchor="corners")
 
 
 def test_fix_and_free_by_mask_index_and_list() -> None:
-    g = ElementGrid(BOX, shape=(4, 4, 4))
+    g = ElementGrid(BOX, shape=(4, 4, 4), anchor="corners")
     g.free(g.corner_mask())
     assert not g.fixed.any()
     g.fix((1, 2, 3))
@@ -108,7 +108,7 @@ def test_fix_and_free_by_mask_index_and_list() -> None:
 
 
 def test_pinned_includes_rigid_elements() -> None:
-    g = ElementGrid(BOX, shape=(3, 3, 3))
+    g = ElementGrid(BOX, shape=(3, 3, 3), anchor="corners")
     g.set_material((1, 1, 1), stiffness=1.0)
     p = g.pinned()
     assert p[1, 1, 1]
@@ -121,14 +121,14 @@ def test_pinned_includes_rigid_elements() -> None:
     [(4, 0, 0), [[0, 0, 0], [1, 4, 2]], (-1, 0, 0)],
 )
 def test_index_out_of_range_names_index_and_shape(sel: object) -> None:
-    g = ElementGrid(BOX, shape=(4, 4, 4))
+    g = ElementGrid(BOX, shape=(4, 4, 4), anchor="corners")
     with pytest.raises(ElementGridError, match=r"outside the grid of shape \(4, 4, 4\)"):
         g.fix(sel)
     assert int(g.fixed.sum()) == 8  # nothing changed
 
 
 def test_bad_selection_shapes() -> None:
-    g = ElementGrid(BOX, shape=(4, 4, 4))
+    g = ElementGrid(BOX, shape=(4, 4, 4), anchor="corners")
     with pytest.raises(ElementGridError, match="grid shape"):
         g.fix(np.ones((4, 4), dtype=bool))
     with pytest.raises(ElementGridError, match=r"\(m, 3\)"):
@@ -138,7 +138,7 @@ def test_bad_selection_shapes() -> None:
 
 
 def test_set_material_values_and_validation() -> None:
-    g = ElementGrid(BOX, shape=(3, 3, 3))
+    g = ElementGrid(BOX, shape=(3, 3, 3), anchor="corners")
     g.set_material([[0, 1, 2]], stiffness=0.9, damping=2.5, mass=3.0)
     assert g.stiffness[0, 1, 2] == pytest.approx(0.9)
     assert g.damping[0, 1, 2] == 2.5
@@ -171,7 +171,7 @@ def test_materials_from_volume_step_function() -> None:
     lo, hi = np.zeros(3), np.array([100.0, 40.0, 40.0])
     xs = np.linspace(lo[0], hi[0], 101)
     data = np.where(xs >= 50.0, 1000.0, 40.0)[:, None, None] * np.ones((1, 5, 7))
-    g = ElementGrid((lo, hi), shape=(9, 3, 3))  # element x: 0, 12.5, ..., 100
+    g = ElementGrid((lo, hi), shape=(9, 3, 3), anchor="corners")  # element x: 0, 12.5, ..., 100
     s = g.materials_from_volume(data, (lo, hi), [(40.0, 0.1), (1000.0, 0.9)])
     x = g.rest_positions[..., 0]
     assert np.all(np.isclose(s[x > 50.5], 0.9))
@@ -188,13 +188,13 @@ def test_materials_from_volume_trilinear_between_voxels() -> None:
     lo, hi = np.zeros(3), np.array([10.0, 10.0, 10.0])
     n = 6
     ramp = np.linspace(0.0, 1.0, n)[None, None, :] * np.ones((n, n, 1))
-    g = ElementGrid((lo, hi), shape=(4, 4, 7))
+    g = ElementGrid((lo, hi), shape=(4, 4, 7), anchor="corners")
     s = g.materials_from_volume(ramp, (lo, hi), lambda v: v)
     np.testing.assert_allclose(s, g.rest_positions[..., 2] / 10.0, atol=1e-6)
 
 
 def test_materials_from_volume_errors() -> None:
-    g = ElementGrid(BOX, shape=3)
+    g = ElementGrid(BOX, shape=3, anchor="corners")
     with pytest.raises(ElementGridError, match="3-D"):
         g.materials_from_volume(np.zeros((4, 4)), BOX, [(0, 0), (1, 1)])
     with pytest.raises(ElementGridError, match=r"\[0, 1\]"):
@@ -206,7 +206,7 @@ def test_materials_from_volume_errors() -> None:
 
 
 def test_to_dict_from_dict_round_trip_through_json() -> None:
-    g = ElementGrid(BOX, shape=(4, 3, 5))
+    g = ElementGrid(BOX, shape=(4, 3, 5), anchor="corners")
     g.free((0, 0, 0))
     g.fix([[1, 1, 1], [2, 0, 4]])
     rng = np.random.default_rng(1)
@@ -237,12 +237,14 @@ def test_materials_from_a_volume_object_take_its_voxel_centres() -> None:
     data = np.zeros((20, 10, 10), np.float32)
     data[10:] = 1000.0  # the upper half in x is "bone"
     vol = Volume(data, spacing=(2.0, 1.0, 1.0), origin=(5.0, 0.0, 0.0))
-    grid = ElementGrid(vol, shape=(6, 3, 3))
+    grid = ElementGrid(vol, shape=(6, 3, 3), anchor="corners")
     points = [(100.0, 0.2), (400.0, 0.95)]
     s = grid.materials_from_volume(vol, mapping=points)
     lo = np.asarray(vol.origin)
     hi = lo + np.asarray(vol.spacing) * (np.asarray(vol.shape) - 1)
-    expected = ElementGrid(vol, shape=(6, 3, 3)).materials_from_volume(data, (lo, hi), points)
+    expected = ElementGrid(vol, shape=(6, 3, 3), anchor="corners").materials_from_volume(
+        data, (lo, hi), points
+    )
     np.testing.assert_array_equal(s, expected)
     assert s[0, 0, 0] == pytest.approx(0.2)
     assert s[-1, 0, 0] == pytest.approx(0.95)

@@ -27,7 +27,7 @@ CUBE = ((0.0, 0.0, 0.0), (50.0, 50.0, 50.0))
 # --------------------------------------------------------------------- single step
 def _two_cube_model(integrator: str, shear: bool, max_step: float = 0.0) -> SpringModel:
     """A 2x2x2 grid with spacing 10 mm and varied materials."""
-    g = ElementGrid(((0, 0, 0), (10, 10, 10)), shape=2)
+    g = ElementGrid(((0, 0, 0), (10, 10, 10)), shape=2, anchor="corners")
     stiff = np.array([0.2, 0.4, 0.6, 0.8, 0.3, 0.5, 0.7, 0.9]).reshape(2, 2, 2)
     g.set_material(stiffness=stiff, damping=0.7, mass=1.5)
     g.set_material((1, 0, 0), damping=0.4, mass=2.0)
@@ -118,7 +118,7 @@ def test_displacement_clamp_scales_step_and_velocity(integrator: str) -> None:
 
 @pytest.mark.parametrize(("shear", "bend"), [(False, False), (True, True)])
 def test_rigid_motions_exert_no_force(shear: bool, bend: bool) -> None:
-    g = ElementGrid(((0, 0, 0), (40, 30, 20)), shape=(5, 4, 3))
+    g = ElementGrid(((0, 0, 0), (40, 30, 20)), shape=(5, 4, 3), anchor="corners")
     m = SpringModel(
         rest=g.rest_positions,
         spacing=g.spacing,
@@ -147,7 +147,7 @@ def test_rigid_motions_exert_no_force(shear: bool, bend: bool) -> None:
 # --------------------------------------------------------------------- constraints
 def test_fixed_never_move_and_held_stay_exactly_where_held() -> None:
     rng = np.random.default_rng(7)
-    g = ElementGrid(CUBE, shape=5)
+    g = ElementGrid(CUBE, shape=5, anchor="corners")
     g.fix([[2, 2, 2], [0, 3, 1]])
     ms = MassSpring(g)
     rest = g.rest_positions
@@ -179,7 +179,7 @@ def test_fixed_never_move_and_held_stay_exactly_where_held() -> None:
 
 
 def test_move_by_mask_list_and_release() -> None:
-    g = ElementGrid(CUBE, shape=4)
+    g = ElementGrid(CUBE, shape=4, anchor="corners")
     ms = MassSpring(g, integrator="semi-implicit")
     face = np.zeros(g.shape, dtype=bool)
     face[:, :, 3] = True
@@ -221,7 +221,7 @@ BAR_PULL = 5.5
 @functools.cache
 def _settled_bar(integrator: str) -> tuple[np.ndarray, int]:
     """Bar 110 x 10 x 10 mm, face i=0 fixed, face i=11 pulled +5.5 mm along x."""
-    g = ElementGrid(((0, 0, 0), (110, 10, 10)), shape=BAR_SHAPE)
+    g = ElementGrid(((0, 0, 0), (110, 10, 10)), shape=BAR_SHAPE, anchor="corners")
     first = np.zeros(g.shape, dtype=bool)
     first[0] = True
     last = np.zeros(g.shape, dtype=bool)
@@ -252,7 +252,7 @@ def test_explicit_and_semi_implicit_reach_the_same_equilibrium() -> None:
 
 # --------------------------------------------------------------------- energy
 def test_energy_of_hand_built_state() -> None:
-    g = ElementGrid(((0, 0, 0), (10, 10, 10)), shape=2)
+    g = ElementGrid(((0, 0, 0), (10, 10, 10)), shape=2, anchor="corners")
     g.fix(np.ones(g.shape, dtype=bool))
     g.free((1, 0, 0))
     g.set_material(stiffness=0.25)  # exact in float32
@@ -284,7 +284,7 @@ def test_random_drags_stay_bounded() -> None:
     U_max; an unstable one grows without bound (or turns into NaN).
     """
     rng = np.random.default_rng(2024)
-    g = ElementGrid(CUBE, shape=6)
+    g = ElementGrid(CUBE, shape=6, anchor="corners")
     h = float(g.spacing.min())
     ms = MassSpring(g)  # explicit, clamp on (max_step = h / 2)
     assert ms.max_step == pytest.approx(0.5 * h)
@@ -323,7 +323,7 @@ def test_stable_time_step_is_stable_and_the_limit_is_real(integrator: str, limit
     rng = np.random.default_rng(5)
     energies = {}
     for name in ("stable", "unstable"):
-        g = ElementGrid(CUBE, shape=6)
+        g = ElementGrid(CUBE, shape=6, anchor="corners")
         ms = MassSpring(g, integrator=integrator, max_step=0)
         assert ms.dt < limit
         if name == "unstable":
@@ -341,7 +341,7 @@ def test_stable_time_step_is_stable_and_the_limit_is_real(integrator: str, limit
 
 # --------------------------------------------------------------------- settle / warp
 def test_settle_stops_when_still_or_at_max_steps() -> None:
-    g = ElementGrid(CUBE, shape=4)
+    g = ElementGrid(CUBE, shape=4, anchor="corners")
     ms = MassSpring(g, integrator="semi-implicit")
     ms.move((1, 1, 1), (0, 5.0, 0))
     assert ms.settle(max_steps=30, tol=1e-6) == 30
@@ -355,7 +355,7 @@ def test_settle_stops_when_still_or_at_max_steps() -> None:
 
 def test_warp_follows_the_displacements() -> None:
     pytest.importorskip("voxwarp.deform.elements.offset_field")
-    g = ElementGrid(CUBE, shape=4)
+    g = ElementGrid(CUBE, shape=4, anchor="corners")
     ms = MassSpring(g)
     w = ms.warp()
     assert ms.warp() is w
@@ -410,7 +410,7 @@ def test_gpu_backend_reads_back_only_when_asked(monkeypatch: pytest.MonkeyPatch)
     gpu = pytest.importorskip("voxwarp.deform.elements.massspring_gpu")
     pytest.importorskip("voxwarp.deform.elements.offset_field")
     monkeypatch.setattr(gpu, "GpuSpringSolver", _RecordingSolver)
-    g = ElementGrid(CUBE, shape=4)
+    g = ElementGrid(CUBE, shape=4, anchor="corners")
     ms = MassSpring(g, backend="gpu", ctx="ctx")
     solver = _RecordingSolver.instances[-1]
     assert solver.ctx == "ctx"
@@ -435,7 +435,7 @@ def test_gpu_backend_reads_back_only_when_asked(monkeypatch: pytest.MonkeyPatch)
 
 # --------------------------------------------------------------------- bad parameters
 def test_bad_parameters() -> None:
-    g = ElementGrid(CUBE, shape=3)
+    g = ElementGrid(CUBE, shape=3, anchor="corners")
     with pytest.raises(ElementGridError, match=r"\[0, 1\]"):
         g.set_material(stiffness=1.2)
     with pytest.raises(MassSpringError, match=r"unknown integrator 'rk4'.*explicit.*semi-implicit"):
@@ -455,7 +455,7 @@ def test_bad_parameters() -> None:
 
 
 def test_unstable_dt_warns_and_is_clamped() -> None:
-    g = ElementGrid(CUBE, shape=3)
+    g = ElementGrid(CUBE, shape=3, anchor="corners")
     stable = MassSpring(g).stable_time_step()
     with pytest.warns(RuntimeWarning, match=rf"dt=1 s exceeds the stable time step {stable:g}"):
         ms = MassSpring(g, dt=1.0)

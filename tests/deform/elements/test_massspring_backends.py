@@ -34,7 +34,7 @@ BOX = ((0.0, 0.0, 0.0), (70.0, 60.0, 50.0))
 def _grid(shape: tuple[int, int, int], seed: int = 5) -> ElementGrid:
     """Element grid over BOX with varied materials and one fixed interior element."""
     rng = np.random.default_rng(seed)
-    g = ElementGrid(BOX, shape=shape)
+    g = ElementGrid(BOX, shape=shape, anchor="corners")
     g.set_material(
         stiffness=rng.uniform(0.2, 0.9, g.shape),
         damping=rng.uniform(0.5, 2.0, g.shape),
@@ -83,7 +83,7 @@ def test_cpu_and_gpu_agree(gl_ctx: Any, shear: bool, bend: bool, integrator: str
 # ---------------------------------------------------------------------- constraints
 def test_gpu_fixed_never_move_and_held_stay_exactly_where_held(gl_ctx: Any) -> None:
     rng = np.random.default_rng(7)
-    g = ElementGrid(((0.0, 0.0, 0.0), (50.0, 50.0, 50.0)), shape=5)
+    g = ElementGrid(((0.0, 0.0, 0.0), (50.0, 50.0, 50.0)), shape=5, anchor="corners")
     g.fix([[2, 2, 2], [0, 3, 1]])
     ms = MassSpring(g, backend="gpu", ctx=gl_ctx, shear=True)
     try:
@@ -137,7 +137,7 @@ def test_gpu_random_drags_stay_bounded(gl_ctx: Any) -> None:
     every element must stay within 2R of its rest position (measured max 1.27 R).
     """
     rng = np.random.default_rng(2024)
-    g = ElementGrid(((0.0, 0.0, 0.0), (50.0, 50.0, 50.0)), shape=6)
+    g = ElementGrid(((0.0, 0.0, 0.0), (50.0, 50.0, 50.0)), shape=6, anchor="corners")
     h = float(g.spacing.min())
     ms = MassSpring(g, backend="gpu", ctx=gl_ctx)  # explicit, clamp on (max_step = h / 2)
     try:
@@ -185,7 +185,7 @@ def test_zero_displacement_renders_like_no_warp(offscreen: Any, gl_ctx: Any, bac
     from voxwarp.scene import Scene
 
     vol = phantom()
-    grid = ElementGrid(vol, shape=(6, 5, 5))
+    grid = ElementGrid(vol, shape=(6, 5, 5), anchor="corners")
     ms = MassSpring(grid, backend=backend, ctx=gl_ctx if backend == "gpu" else None)
     try:
         # the state is float64 on the CPU, float32 on the GPU: rest there is f32(rest)
@@ -298,7 +298,7 @@ def test_bench_massspring_cli(tmp_path: Any, capsys: pytest.CaptureFixture[str])
 
 def test_element_dragged_onto_its_neighbour_agrees_on_cpu_and_gpu(gl_ctx: Any) -> None:
     """A zero-length spring has no direction on every backend (no float32 noise force)."""
-    grid = ElementGrid(((0, 0, 0), (40, 40, 40)), shape=(5, 5, 5))
+    grid = ElementGrid(((0, 0, 0), (40, 40, 40)), shape=(5, 5, 5), anchor="corners")
     results = []
     for backend in ("cpu", "gpu"):
         ms = MassSpring(grid, backend=backend, ctx=gl_ctx if backend == "gpu" else None)
@@ -320,7 +320,7 @@ def test_gpu_field_skips_through_deformed_space_once_it_holds_still(gl_ctx: Any)
     from voxwarp.scene import Scene
 
     vol = phantom()
-    grid = ElementGrid(vol, shape=(6, 5, 5))
+    grid = ElementGrid(vol, shape=(6, 5, 5), anchor="corners")
     ms = MassSpring(grid, backend="gpu", ctx=gl_ctx, integrator="semi-implicit")
     try:
         ms.move((3, 2, 2), (6.0, 0.0, 0.0))

@@ -29,7 +29,7 @@ BOX = ((0.0, -10.0, 5.0), (60.0, 30.0, 45.0))
 
 def rich_model() -> MassSpring:
     """A 6x5x4 model with every setting away from its default and two held elements."""
-    g = ElementGrid(BOX, shape=(6, 5, 4))
+    g = ElementGrid(BOX, shape=(6, 5, 4), anchor="corners")
     rng = np.random.default_rng(3)
     g.set_material(stiffness=rng.uniform(0.1, 0.9, g.shape), damping=1.5, mass=2.0)
     g.set_material((2, 2, 2), mass=3.0)
@@ -104,15 +104,15 @@ def test_positions_resume_the_simulation_exactly() -> None:
 
 
 def test_only_the_grid_is_required() -> None:
-    g = ElementGrid(BOX, shape=4)
+    g = ElementGrid(BOX, shape=4, anchor="corners")
     ms = MassSpring.from_dict({"type": "massspring", "grid": g.to_dict()})
-    default = MassSpring(ElementGrid(BOX, shape=4))
+    default = MassSpring(ElementGrid(BOX, shape=4, anchor="corners"))
     assert ms.to_dict() == default.to_dict()
     assert not ms.held.any()
 
 
 def test_materials_are_those_the_solver_runs() -> None:
-    ms = MassSpring(ElementGrid(BOX, shape=3))
+    ms = MassSpring(ElementGrid(BOX, shape=3, anchor="corners"))
     ms.grid.set_material(stiffness=0.9)  # after construction: not simulated
     assert ms.to_dict()["grid"]["stiffness"] == 0.5
 
@@ -146,13 +146,13 @@ BAD = [
 @pytest.mark.parametrize(("entry", "pattern"), BAD)
 def test_bad_entries_raise_clear_errors(entry: Any, pattern: str) -> None:
     if isinstance(entry, dict) and "grid" not in entry and entry:
-        entry = {"grid": ElementGrid(BOX, shape=4).to_dict(), **entry}
+        entry = {"grid": ElementGrid(BOX, shape=4, anchor="corners").to_dict(), **entry}
     with pytest.raises(MassSpringError, match=pattern):
         MassSpring.from_dict(entry)
 
 
 def test_rigid_elements_cannot_be_held() -> None:
-    g = ElementGrid(BOX, shape=4)
+    g = ElementGrid(BOX, shape=4, anchor="corners")
     g.set_material((1, 1, 1), stiffness=1.0)
     d = {"grid": g.to_dict(), "held": [{"index": [1, 1, 1], "offset": [1, 0, 0]}]}
     with pytest.raises(MassSpringError, match="rigid"):
@@ -230,7 +230,7 @@ def test_resuming_checks_the_field_against_the_grid() -> None:
 
 
 def test_bad_warp_settings() -> None:
-    ms = MassSpring(ElementGrid(BOX, shape=3))
+    ms = MassSpring(ElementGrid(BOX, shape=3, anchor="corners"))
     with pytest.raises(MassSpringError, match="inverse must be one of"):
         ms.warp(inverse="newton")
     with pytest.raises(MassSpringError, match="iterations"):
@@ -247,7 +247,7 @@ def test_saved_gpu_warp_renders_like_the_live_one(
     from voxwarp.scene import Scene
 
     vol = phantom()
-    grid = ElementGrid(vol, shape=6)
+    grid = ElementGrid(vol, shape=6, anchor="corners")
     ms = MassSpring(grid, backend="gpu", ctx=gl_ctx, integrator="semi-implicit", shear=True)
     try:
         ms.move((3, 3, 3), (4.0, 2.0, 0.0))
