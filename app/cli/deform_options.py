@@ -359,19 +359,23 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
     """``--massspring``/``--chainmail`` and their options (drags, fixes, cuts, ...)."""
     g = p.add_argument_group(
         "deformation (--massspring or --chainmail)",
-        "Deform the volume before rendering: an element grid spans the volume's box (its "
-        "outer shell fixed, see --anchor), --drag holds elements at offsets from rest, the "
-        "model moves the others along, and the resulting offset field warps the volume at "
-        "render time. --massspring runs a mass-spring simulation (springs pull the rest along"
-        " over time steps); --chainmail runs 3D ChainMail (links with slack: each drag is "
-        "settled at once, moving every other element as little as the links allow). With "
-        "--save-scene the JSON keeps the field and the model (grid, materials, held elements;"
-        " ChainMail also its limits and cuts), so rendering it again gives the same image. "
-        "Examples (bend the fish's tail sideways, head held, the thesis's corners fixed): "
-        "voxwarp render sample:fish --view +z --massspring 8 --anchor corners --fix "
-        "0..2,0..7,0..7 --drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --settle -o bent.png; voxwarp"
-        " render sample:fish --view +z --chainmail 8 --anchor corners --fix 0..2,0..7,0..7 "
-        "--drag 6,4,3:0,10,0 --drag 6,3,3:0,10,0 --relax 4 -o poked.png",
+        (
+            "Deform the volume before rendering: an element grid spans the volume's box"
+            " (its outer shell fixed for mass-spring, its corners for ChainMail, see"
+            " --anchor), --drag holds elements at offsets from rest, the model moves the"
+            " others along, and the resulting offset field warps the volume at render time."
+            " --massspring runs a mass-spring simulation (springs pull the rest along over"
+            " time steps); --chainmail runs 3D ChainMail (links with slack: each drag is"
+            " settled at once, moving every other element as little as the links allow)."
+            " With --save-scene the JSON keeps the field and the model (grid, materials,"
+            " held elements; ChainMail also its limits and cuts), so rendering it again"
+            " gives the same image. Examples (bend the fish's tail sideways, head held, the"
+            " thesis's corners fixed): voxwarp render sample:fish --view +z --massspring 8"
+            " --anchor corners --fix 0..2,0..7,0..7 --drag 6,4,3:0,10,0 --drag"
+            " 6,3,3:0,10,0 --settle -o bent.png; voxwarp render sample:fish --view +z"
+            " --chainmail 8 --anchor corners --fix 0..2,0..7,0..7 --drag 6,4,3:0,10,0"
+            " --drag 6,3,3:0,10,0 --relax 4 -o poked.png"
+        ),
     )
     g.add_argument(
         "--massspring",
@@ -441,9 +445,11 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--anchor",
         choices=ANCHOR_MODES,
-        help="the grid elements fixed at rest: shell (default: every element on the"
-        " grid's outer faces, so a drag cannot move the whole volume), corners (the 8"
-        " corners, the thesis's set-up: a drag moves everything) or none",
+        help="the grid elements fixed at rest: shell (mass-spring's default: every element"
+        " on the grid's outer faces, so springs cannot carry a drag to the whole volume),"
+        " corners (ChainMail's default and the thesis's set-up: ChainMail moves an element"
+        " only once a link to it runs out of slack, so its drags stay local; a mass-spring"
+        " drag then moves everything) or none",
     )
     g.add_argument(
         "--fix-outside",

@@ -27,7 +27,7 @@ from voxwarp.cli.deform_options import Cut as _Cut
 from voxwarp.cli.deform_options import Drag as _Drag
 from voxwarp.cli.deform_options import grid_text as _grid_text
 from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
-from voxwarp.deform.elements.anchors import DEFAULT_ANCHOR, anchor_mask
+from voxwarp.deform.elements.anchors import MODEL_DEFAULT, anchor_mask, resolve_anchor
 from voxwarp.editing import model_settings as ms
 from voxwarp.editing.model_settings import LatticeSettings, SettingError, WireSettings
 from voxwarp.errors import InputError as CliOptionError
@@ -127,7 +127,7 @@ def check_deform_options(args: argparse.Namespace) -> None:
         ranges_text = f"indices run 0..{shape[0] - 1}"
     else:
         ranges_text = "indices run " + ", ".join(f"0..{n - 1}" for n in shape) + " (i, j, k)"
-    anchor = args.anchor or DEFAULT_ANCHOR
+    anchor = resolve_anchor(args.anchor or MODEL_DEFAULT, model)
     fixed = anchor_mask(tuple(shape), anchor)
     for text, ranges in args.fix or []:
         if any(hi >= n for (_, hi), n in zip(ranges, shape, strict=True)):
@@ -258,7 +258,7 @@ def _element_settings(args: argparse.Namespace) -> Any:
         "backend": args.backend or "cpu",
         "fixed": tuple(ranges for _, ranges in args.fix or []),
         "stiffness_from_volume": args.stiffness_from_volume,
-        "anchor": args.anchor or DEFAULT_ANCHOR,
+        "anchor": args.anchor or MODEL_DEFAULT,
         "fix_outside": DEFAULT_REGION if args.fix_outside is None else args.fix_outside,
         "drags": tuple(ms.Drag(d.index, d.offset) for d in args.drag or []),
         "inverse": args.inverse or "baked",
@@ -304,7 +304,10 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
         shape = args.massspring if model == "massspring" else args.chainmail
         try:
             pick_grid = ElementGrid(
-                volume, shape=shape, margin=args.grid_margin, anchor=args.anchor or DEFAULT_ANCHOR
+                volume,
+                shape=shape,
+                margin=args.grid_margin,
+                anchor=resolve_anchor(args.anchor or MODEL_DEFAULT, model),
             )
         except ElementGridError as exc:
             raise CliOptionError(f"--grid-margin: {exc}") from exc
@@ -488,13 +491,17 @@ def _field_warps(args: argparse.Namespace) -> list[Any]:
     return warps
 
 
-def boundary_line(model: Any) -> str:
-    """The one stderr line naming the boundary conditions of a built element model."""
+def boundary_line(model: Any, chainmail: bool = False) -> str:
+    """The one stderr line naming the boundary conditions of a built element model
+    (``chainmail``: say that its links keep a drag local without a fixed shell)."""
     held = model.to_dict().get("held", [])
     drag = max((float(np.linalg.norm(h["offset"])) for h in held), default=None)
     grid = model.grid
     count = f"; {int(grid.anchored.sum())} anchored" if grid.anchored.any() else ""
-    return f"voxwarp: boundary: {grid.describe_anchors(drag)}{count} (--anchor, --fix-outside)"
+    local = "; ChainMail's link slack keeps a drag local" if chainmail else ""
+    return (
+        f"voxwarp: boundary: {grid.describe_anchors(drag)}{count}{local} (--anchor, --fix-outside)"
+    )
 
 
 class PendingDeformation(NamedTuple):
@@ -544,7 +551,7 @@ def deformed_scene(
             folds = model.warp().fold_summary()
             if folds is not None:  # one line: meshes and the inverse are wrong there
                 print(f"warning: {folds}", file=sys.stderr)
-            print(boundary_line(model), file=sys.stderr)
+            print(boundary_line(model, args.chainmail is not None), file=sys.stderr)
             # last in the chain: it deforms the volume itself, before the
             # scene's own warps move the result
             scene = scene.copy(warps=[*scene.warps, model.warp()])

@@ -18,11 +18,11 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from voxwarp.deform.elements.anchors import ANCHOR_MODES, AUTO
+from voxwarp.deform.elements.anchors import ANCHOR_CHOICES, AUTO, MODEL_DEFAULT, resolve_anchor
 from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
 from voxwarp.editing.common import CHAINMAIL_VARIANTS, INTEGRATORS, EditorError, choice
 
@@ -125,10 +125,17 @@ class ElementSettings:
     # -- ElementGrid's default_margin)
     margin: float = 0.0
     #: boundary conditions (:mod:`voxwarp.deform.elements.anchors`): the grid's fixed
-    #: elements ("shell", "corners": the thesis's, "none") and the region of influence
-    #: (mm, "auto", None: off; "default": "auto" with the shell, else off)
-    anchor: str = "shell"
+    #: elements ("shell", "corners": the thesis's, "none", "default": the model's own,
+    #: :data:`~voxwarp.deform.elements.anchors.MODEL_ANCHORS`) and the region of
+    #: influence (mm, "auto", None: off; "default": "auto" with the shell, else off)
+    anchor: str = MODEL_DEFAULT
     fix_outside: float | str | None = "default"
+    #: the model these settings build (its default anchor)
+    model: ClassVar[str] = "massspring"
+
+    def grid_anchor(self) -> str:
+        """The anchor mode of the grid: :attr:`anchor`, or the model's default."""
+        return resolve_anchor(self.anchor, self.model)
 
 
 @dataclass(frozen=True)
@@ -145,6 +152,8 @@ class MassSpringSettings(ElementSettings):
 @dataclass(frozen=True)
 class ChainMailSettings(ElementSettings):
     """A 3D ChainMail model (Knoche 2008, chapter 4; Gibson 1997)."""
+
+    model: ClassVar[str] = "chainmail"
 
     variant: str = "enhanced"
     cuts: tuple[Cut, ...] = ()
@@ -194,7 +203,7 @@ class FamilyOptions:
     #: element stiffness of new mass-spring/ChainMail models (0..1]
     stiffness: float = 0.5
     #: boundary conditions of new element models (see :class:`ElementSettings`)
-    anchor: str = "shell"
+    anchor: str = MODEL_DEFAULT
     fix_outside: float | str | None = "default"
     #: mass-spring steps and ChainMail relaxation steps per frame while running
     steps_per_frame: int = 10
@@ -308,7 +317,7 @@ def _boundary_settings(
 ) -> dict[str, Any]:
     """``anchor`` and ``fix_outside`` popped from ``settings`` (default: the current),
     checked; an :class:`EditorError` names a bad one."""
-    anchor = choice(settings.pop("anchor", anchor), ANCHOR_MODES, "anchor")
+    anchor = choice(settings.pop("anchor", anchor), ANCHOR_CHOICES, "anchor")
     fix_outside = settings.pop("fix_outside", fix_outside)
     if fix_outside not in (DEFAULT_REGION, AUTO, None):
         try:

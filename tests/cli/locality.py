@@ -50,8 +50,13 @@ def thirds_change(sample: str, tmp: Path, *model: str) -> tuple[float, float, st
     rest = _grey(tmp / "rest.png")
     front, y0, y1 = face_point(rest, rest_info)
     point = ",".join(f"{v:g}" for v in front)
-    info = _slice(sample, tmp / "def.png", *model, "--drag-at", f"{point}:0,-{PUSH_MM:g},0")
+    drag = ("--drag-at", f"{point}:0,-{PUSH_MM:g},0")
+    info = _slice(sample, tmp / "def.png", *model, *drag)
     deformed = _grey(tmp / "def.png")
+    # the rest state on the same plane and extent (a grid margin grows the deformed box)
+    same = _slice(sample, tmp / "rest_same.png", *model, *drag, "--show", "rest")
+    assert same["pixel_to_world"] == info["pixel_to_world"]
+    rest = _grey(tmp / "rest_same.png")
     assert deformed.shape == rest.shape
     m = np.asarray(info["pixel_to_world"])
     rows, cols = np.indices(rest.shape)

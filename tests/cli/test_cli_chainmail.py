@@ -96,7 +96,10 @@ def test_bad_syntax_is_an_argparse_error(
             ["--chainmail", "8", "--anchor", "corners", "--drag", "7,7,0:1,0,0"],
             "(7, 7, 0) is on the 8x8x8 grid's corners (--anchor corners fixes it)",
         ),
-        (["--chainmail", "8", "--drag", "7,3,3:1,0,0"], "(7, 3, 3) is on the 8x8x8 grid's shell"),
+        (
+            ["--chainmail", "8", "--anchor", "shell", "--drag", "7,3,3:1,0,0"],
+            "(7, 3, 3) is on the 8x8x8 grid's shell",
+        ),
         (["--chainmail", "8", "--fix", "0..8,0,0"], "--fix 0..8,0,0: reaches outside"),
         (
             ["--chainmail", "8", "--fix", "2,2,2", "--drag", "2,2,2:1,0,0"],

@@ -28,7 +28,7 @@ def test_anchored_elements_have_their_own_layer_and_free_like_fixed(
     volume: Volume, kind: str
 ) -> None:
     s = EditSession(Scene(volume))
-    s.set_deformation(kind, resolution=9, fix_outside=15)
+    s.set_deformation(kind, resolution=9, anchor="shell", fix_outside=15)
     grid = s.model.grid
     np.testing.assert_array_equal(grid.fixed, anchor_mask(grid.shape, "shell"))
     assert "shell fixed" in s.family.boundary_text()

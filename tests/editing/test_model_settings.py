@@ -221,13 +221,15 @@ def test_family_options_keep_the_editor_entry_and_check_settings() -> None:
         options.with_model_settings({"stiffness": 2})
     with pytest.raises(msets.EditorError, match="unknown deformation settings: bogus"):
         options.with_model_settings({"bogus": 1})
-    with pytest.raises(msets.EditorError, match="anchor must be one of shell, corners, none"):
+    with pytest.raises(
+        msets.EditorError, match="anchor must be one of default, shell, corners, none"
+    ):
         options.with_model_settings({"anchor": "box"})
     with pytest.raises(msets.EditorError, match="fix_outside must be >= 0"):
         options.with_model_settings({"fix_outside": -1})
     bounds = options.with_model_settings({"anchor": "corners", "fix_outside": 40})
     assert (bounds.anchor, bounds.fix_outside) == ("corners", 40.0)
-    assert (options.anchor, options.fix_outside) == ("shell", "default")
+    assert (options.anchor, options.fix_outside) == ("default", "default")
     with options.one_step():
         assert (options.steps_per_frame, options.relax_steps) == (1, 1)
     assert (options.steps_per_frame, options.relax_steps) == (10, 4)

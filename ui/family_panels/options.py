@@ -15,7 +15,7 @@ from typing import Any
 
 from PySide6.QtWidgets import QFormLayout, QWidget
 
-from voxwarp.deform.elements.anchors import ANCHOR_MODES, AUTO, DEFAULT
+from voxwarp.deform.elements.anchors import ANCHOR_CHOICES, AUTO, DEFAULT, MODEL_DEFAULT
 from voxwarp.editing.session import BACKENDS, CHAINMAIL_VARIANTS, INTEGRATORS, EditSession
 from voxwarp.ui.panel_base import combo, double_spin, int_spin
 
@@ -50,9 +50,11 @@ class ModelOptions:
             " volume's box). A margin as large as the largest drag keeps everything",
         )
         self.anchor_combo = combo(
-            ANCHOR_MODES,
-            "Elements fixed at rest: shell (the grid's outer faces, so a drag stays local),"
-            " corners (the thesis's 8: a drag moves everything) or none",
+            ANCHOR_CHOICES,
+            "Elements fixed at rest: default (the model's: shell for mass-spring, corners for"
+            " ChainMail, whose drags stay local by themselves), shell (the grid's outer faces,"
+            " so a springy drag stays local), corners (the thesis's 8: a mass-spring drag"
+            " moves everything) or none",
         )
         self.region_spin = double_spin(
             -1.0,
@@ -116,7 +118,7 @@ _ROW_LABELS = {"anchor": "Anchor", "fix_outside": "Fix outside"}
 def _region_value(anchor: str, fix_outside: float | str | None) -> float:
     """The region spin box's value of a setting: -1 shows ``auto``, 0 off."""
     if fix_outside == DEFAULT:
-        fix_outside = AUTO if anchor == "shell" else None
+        fix_outside = AUTO if anchor in ("shell", MODEL_DEFAULT) else None
     if fix_outside == AUTO:
         return -1.0
     return 0.0 if fix_outside is None else float(fix_outside)

@@ -85,7 +85,7 @@ class ElementFamily(Family):
                 volume,
                 settings.shape,
                 margin=settings.margin,
-                anchor=settings.anchor,
+                anchor=settings.grid_anchor(),
                 fix_outside=settings.fix_outside,
             )
         except AnchorError as exc:

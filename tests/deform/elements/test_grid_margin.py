@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from voxwarp.deform.elements.anchors import anchor_mask
 from voxwarp.deform.elements.folds import corner_dets, fold_summary, folded_cells
 from voxwarp.deform.elements.grid import (
     MAX_MARGIN_FACTOR,
@@ -34,7 +35,8 @@ def test_margin_pads_the_box_and_keeps_the_element_count() -> None:
     np.testing.assert_allclose(padded.spacing, [60 / 4, 40 / 2, 50 / 3])
     np.testing.assert_array_equal(padded.rest_positions[0, 0, 0], padded.lo)
     np.testing.assert_array_equal(padded.rest_positions[-1, -1, -1], padded.hi)
-    assert padded.fixed.sum() == 8
+    # the anchor's elements are those of the padded grid (its shell: the margin's faces)
+    np.testing.assert_array_equal(padded.fixed, anchor_mask(padded.shape, padded.anchor))
     assert padded.fixed[-1, -1, -1]
 
 
