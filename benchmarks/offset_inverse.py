@@ -64,7 +64,7 @@ def inverse_error_table(
     ``drag`` spacings along +x and every node by the Gaussian (``sigma`` nodes) of
     :func:`gaussian_drag_field`. Deformed points ``p`` are drawn uniformly (``seed``) in
     the box of half-width ``3 sigma + drag`` spacings around the dragged node's rest
-    position (clipped to the grid), and the residual ``|forward(apply(p)) - p|`` is
+    position (clipped to the grid), and the residual ``|field_forward(apply(p)) - p|`` is
     measured for ``"approx"`` and for ``"exact"`` and ``"baked"`` with each iteration
     count. docs/benchmarks.md shows the table for the defaults.
 
@@ -105,7 +105,7 @@ def inverse_error_table(
             q = p - w._interpolate(p, field=w.baked_inverse())
         else:
             q = w.apply(p)
-        err = np.linalg.norm(w.forward(q) - p, axis=1)
+        err = np.linalg.norm(w.field_forward(q) - p, axis=1)
         rows.append(
             {
                 "inverse": mode,

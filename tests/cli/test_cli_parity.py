@@ -378,7 +378,7 @@ def test_drag_at_equals_the_drag_of_its_element(
             "--drag 0,0,0:0,6,0: element (0, 0, 0) is on the 4x4x4 grid's corners",
         ),
         (  # a 2-element axis is all shell: nothing can be dragged
-            ["--chainmail", "4,4,2", "--drag-at", "0,0,0:0,6,0"],
+            ["--chainmail", "4,4,2", "--anchor", "shell", "--drag-at", "0,0,0:0,6,0"],
             "element (0, 0, 0) is on the 4x4x2 grid's shell (--anchor shell fixes it)",
         ),
         (
