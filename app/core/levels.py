@@ -36,6 +36,7 @@ from voxwarp.core.modality import inside_values
 from voxwarp.core.modality_detection import detect_modality, volume_cache
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
+from voxwarp.deform.histogram import otsu
 
 #: The threshold modes and the scene attribute that holds their level.
 LEVEL_ATTRIBUTES: dict[str, str] = {"iso": "iso_value", "flm": "flm_threshold"}
@@ -71,15 +72,7 @@ def otsu_split(values: np.ndarray, bins: int = SPLIT_BINS) -> float:
     lo, hi = float(v.min()), float(v.max())
     if not hi > lo:
         return lo
-    hist, edges = np.histogram(v, bins=bins, range=(lo, hi))
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    w0 = np.cumsum(hist).astype(np.float64)
-    w1 = w0[-1] - w0
-    m0 = np.cumsum(hist * centres)
-    mu0 = m0 / np.maximum(w0, 1)
-    mu1 = (m0[-1] - m0) / np.maximum(w1, 1)
-    between = w0 * w1 * (mu0 - mu1) ** 2
-    edge = float(edges[int(np.argmax(between[:-1])) + 1])
+    edge = otsu(v, bins).edge
     below, above = v[v < edge], v[v >= edge]
     if below.size == 0 or above.size == 0:
         return edge

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from voxwarp.deform.histogram import otsu
 from voxwarp.deform.wires.field import Wire
 
 #: most voxels the object search looks at (the volume is thinned by a whole stride)
@@ -63,17 +64,8 @@ class AutoWire:
 
 
 def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
-    """The Otsu threshold of ``values`` (the split maximising the between-class
-    variance of a ``bins``-bin histogram)."""
-    hist, edges = np.histogram(values, bins=bins)
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    w0 = np.cumsum(hist).astype(np.float64)
-    w1 = w0[-1] - w0
-    m0 = np.cumsum(hist * centres)
-    mu0 = m0 / np.maximum(w0, 1)
-    mu1 = (m0[-1] - m0) / np.maximum(w1, 1)
-    between = w0 * w1 * (mu0 - mu1) ** 2
-    return float(edges[int(np.argmax(between[:-1])) + 1])
+    """The Otsu threshold of ``values`` (:func:`~voxwarp.deform.histogram.otsu`'s edge)."""
+    return otsu(values, bins).edge
 
 
 def auto_wire(volume: Any, view: Any = None) -> AutoWire:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from voxwarp.deform.histogram import otsu
 from voxwarp.errors import VoxwarpError
 
 #: the presets :func:`preset_stiffness` knows
@@ -67,16 +68,7 @@ def _mr_points(values: np.ndarray) -> list[tuple[float, float]]:
 
 
 def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
-    """Otsu's threshold: the value that best splits ``values`` into two classes
-    (largest between-class variance of a ``bins``-bin histogram), placed midway
-    between the two classes' means (any cut in an empty gap splits alike)."""
-    hist, edges = np.histogram(values, bins=bins)
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    w0 = np.cumsum(hist).astype(np.float64)
-    w1 = w0[-1] - w0
-    m0 = np.cumsum(hist * centres)
-    mu0 = m0 / np.maximum(w0, 1)
-    mu1 = (m0[-1] - m0) / np.maximum(w1, 1)
-    between = w0 * w1 * (mu0 - mu1) ** 2
-    k = int(np.argmax(between))
-    return float(0.5 * (mu0[k] + mu1[k]))
+    """Otsu's threshold (:func:`~voxwarp.deform.histogram.otsu`), placed midway between
+    the two classes' means (any cut in an empty gap splits alike)."""
+    split = otsu(values, bins)
+    return 0.5 * (split.mean_below + split.mean_above)
