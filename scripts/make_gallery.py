@@ -105,8 +105,8 @@ GALLERY: tuple[Entry, ...] = (
         "3D ChainMail: one drag, settled at once",
         "One element dragged 30 mm; ChainMail moves every other element only as far as the"
         " links' slack requires, then four relaxation steps round the kinks. Only the 8"
-        " corners are fixed (--anchor corners): the default fixed shell would hold a 30 mm"
-        " drag on this coarse grid back to 46 %.",
+        " corners are fixed (--anchor corners, ChainMail's default): a fixed shell would"
+        " hold a 30 mm drag on this coarse grid back to 46 %.",
         (
             "voxwarp render sample:stent --tf hot --size 320x480 --chainmail 8 --anchor corners"
             " --drag-at 75,64,128:30,0,0 --relax 4 -o " + _out("stent_cm.png"),
@@ -175,6 +175,96 @@ GALLERY: tuple[Entry, ...] = (
         ),
         _out("colin27_slice.png"),
         width=260,
+    ),
+    Entry(
+        "nose_push_corners",
+        "Boundary conditions: the thesis's corners",
+        "A 15 mm push on the face of the Colin27 MRI (mass-spring, 16^3 elements, settled)"
+        " with only the 8 grid corners fixed, shown as rest (blue) against deformed (red):"
+        " the springs carry the push through the whole head, and the occiput moves as much"
+        " as the face.",
+        (
+            "voxwarp slice sample:colin27 --plane sagittal --at 0 --pixel 1 --massspring 16"
+            " --anchor corners --drag-at 0,89.5,-1.5:0,-15,0 --settle --show difference -o "
+            + _out("nose_corners.png"),
+        ),
+        _out("nose_corners.png"),
+        width=260,
+    ),
+    Entry(
+        "nose_push_default",
+        "Boundary conditions: the default",
+        "The same push with the defaults: the grid's outer shell is fixed, elements beyond"
+        " the region of influence (here 66 mm) are anchored and the grid reaches 15 mm past"
+        " the volume: only the face moves.",
+        (
+            "voxwarp slice sample:colin27 --plane sagittal --at 0 --pixel 1 --massspring 16"
+            " --drag-at 0,89.5,-1.5:0,-15,0 --settle --show difference -o "
+            + _out("nose_default.png"),
+        ),
+        _out("nose_default.png"),
+        width=260,
+    ),
+    Entry(
+        "push_margin0",
+        "A push through the box, without a margin",
+        "ChainMail pulls the vertex of the head 15 mm up on a grid that ends at the"
+        " volume's box (--grid-margin 0): the warp is the identity outside the box, so the"
+        " skull is flattened against its top.",
+        (
+            "voxwarp slice sample:colin27 --plane coronal --at -20 --pixel 1 --chainmail 16"
+            " --drag-at 0,-20,100:0,0,15 --grid-margin 0 -o " + _out("push_margin0.png"),
+        ),
+        _out("push_margin0.png"),
+        width=260,
+    ),
+    Entry(
+        "push_margin",
+        "A push through the box, with the default margin",
+        "The same drag with the default margin (the largest drag, 15 mm): the grid reaches"
+        " beyond the box, the skull is carried out of it and the slice grows to show it.",
+        (
+            "voxwarp slice sample:colin27 --plane coronal --at -20 --pixel 1 --chainmail 16"
+            " --drag-at 0,-20,100:0,0,15 -o " + _out("push_margin.png"),
+        ),
+        _out("push_margin.png"),
+        width=260,
+    ),
+    Entry(
+        "wire_rigid_sides",
+        "Wire sides: the paper's rigid sweep",
+        "A wire bends the midline of Colin27 15 mm (radius 35 mm) with the paper's sweep"
+        " (--sides rigid): the masked cross-sections move and their old place is vacated,"
+        " which on anatomy reads as a black hole and a straight tear.",
+        (
+            "voxwarp slice sample:colin27 --plane coronal --at -20 --pixel 1 --wires"
+            " sample_volumes/colin27_midline_wires.json --sides rigid -o " + _out("wire_rigid.png"),
+        ),
+        _out("wire_rigid.png"),
+        width=260,
+    ),
+    Entry(
+        "wire_smooth_sides",
+        "Wire sides: smooth, the default",
+        "The same wire with smooth sides: everything within the radius moves and the"
+        " surrounding tissue stretches over the side falloff (here 39.6 mm), so nothing is"
+        " left empty and nothing tears.",
+        (
+            "voxwarp slice sample:colin27 --plane coronal --at -20 --pixel 1 --wires"
+            " sample_volumes/colin27_midline_wires.json -o " + _out("wire_smooth.png"),
+        ),
+        _out("wire_smooth.png"),
+        width=260,
+    ),
+    Entry(
+        "stent_flm",
+        "First local maximum with a threshold from the histogram",
+        "FLM on the stent CT: the threshold comes from the histogram's object/background"
+        " split (printed on stderr), so the background's noise no longer counts as a"
+        " maximum and draws a flat grey box.",
+        ("voxwarp render sample:stent --mode flm --size 320x480 -o " + _out("stent_flm.png"),),
+        _out("stent_flm.png"),
+        width=320,
     ),
     Entry(
         "window_2x2",
