@@ -4,7 +4,7 @@ sweep of the closest point is discontinuous while the side weight w is still > 0
 tears the map. :func:`fade_seams` finds those voxels of the field and fades w to 0 at them
 with a smoothstep of the distance to them, so the map goes continuously to the identity.
 
-Use: ``n = fade_seams(weight, known, wire, u, h, tables, wires)`` on the region's weight
+Use: ``n = fade_seams(weight, known, wire, u, (origin, h), tables, wires)`` on the region's weight
 (changed in place) before the field is stored."""
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import ndimage
 
-from voxwarp.deform.wires.constants import SEAM_STEP_VOXELS
+from voxwarp.deform.wires.constants import LUT_SIZE, SEAM_STEP_VOXELS, SIDE_FALLOFF_MOVES
 from voxwarp.deform.wires.geometry import _smoothstep
-from voxwarp.deform.wires.tables import WireTables
+from voxwarp.deform.wires.tables import WireTables, map_points
 from voxwarp.deform.wires.wire import Wire
 
 
@@ -52,28 +52,71 @@ def seam_voxels(
     return seam
 
 
+def _moves(
+    weight: np.ndarray,
+    u: np.ndarray,
+    tab: WireTables,
+    sel: np.ndarray,
+    origin: np.ndarray,
+    h: np.ndarray,
+) -> np.ndarray:
+    """|w (A p + b - p)| (mm) at the region voxels of flat indices ``sel`` (their centres
+    ``origin + index * h``): the displacement a seam fade has to take away."""
+    p = origin + np.stack(np.unravel_index(sel, weight.shape), -1) * h
+    q = map_points(tab, u.ravel()[sel] * (LUT_SIZE - 1), p)
+    return weight.ravel()[sel] * np.linalg.norm(q - p, axis=1)
+
+
+def seam_width(
+    dist: np.ndarray, zone: np.ndarray, moves: np.ndarray, falloff: float, floor: float
+) -> float:
+    """The seam fade's width (mm) for one wire: the smallest W >= ``floor`` with
+    W >= :data:`SIDE_FALLOFF_MOVES` x the largest weighted move within W of a seam (the
+    side fade's rule that keeps det J > 0, applied to what the seam fade takes away), at
+    most ``falloff``. ``dist`` and ``moves`` are given at the wire's voxels ``zone``
+    (flat indices), ``moves`` from :func:`_moves`."""
+    d = dist.ravel()[zone]
+    width = floor
+    for _ in range(64):
+        near = d < width
+        need = SIDE_FALLOFF_MOVES * float(moves[near].max()) if near.any() else 0.0
+        if need <= width or width >= falloff:
+            return min(width, falloff)
+        width = need
+    return falloff
+
+
 def fade_seams(
     weight: np.ndarray,
     known: np.ndarray,
     wire: np.ndarray,
     u: np.ndarray,
-    h: np.ndarray,
+    grid: tuple[np.ndarray, np.ndarray],
     tables: Sequence[WireTables],
     wires: Sequence[Wire],
 ) -> int:
     """Multiply the weights of smooth-sides wires' voxels by a smoothstep of their
-    distance (mm) to the nearest seam voxel over the wire's ``side_falloff`` (the width
-    that does not fold, as for the side fade); returns how many voxels with weight > 0
-    changed. No seam (or no smooth-sides wire): ``weight`` is left untouched."""
+    distance (mm) to the nearest seam voxel (0 at the seam, so the map meets the identity
+    there continuously) over a width that does not fold (:func:`seam_width`: at most the
+    wire's ``side_falloff``); returns how many voxels with weight > 0 changed. No seam (or
+    no smooth-sides wire): ``weight`` is left untouched. ``grid`` is the region voxel
+    (0, 0, 0)'s centre and the voxel size (mm)."""
     smooth = np.array([w.smooth_sides for w in wires], dtype=bool)
     if not smooth.any():
         return 0
+    origin, h = (np.asarray(x, dtype=np.float64) for x in grid)
     lengths = np.array([t.length_modified for t in tables], dtype=np.float64)
-    seam = seam_voxels(weight, known, wire, u, np.asarray(h, dtype=np.float64), lengths, smooth)
+    seam = seam_voxels(weight, known, wire, u, h, lengths, smooth)
     if not seam.any():
         return 0
     dist = ndimage.distance_transform_edt(~seam, sampling=tuple(float(x) for x in h))
-    width = np.array([w.side_falloff if w.smooth_sides else np.inf for w in wires])
+    width = np.full(len(wires), np.inf)
+    for wi, w in enumerate(wires):
+        zone = np.flatnonzero(known & (wire == wi) & (weight > 0))
+        if w.smooth_sides and len(zone):
+            near = zone[dist.ravel()[zone] < w.side_falloff]
+            moves = _moves(weight, u, tables[wi], near, origin, h)
+            width[wi] = seam_width(dist, near, moves, w.side_falloff, 2.0 * float(h.max()))
     gid = np.where(wire >= 0, wire, 0)
     factor = _smoothstep(dist / width[gid])
     faded = known & (wire >= 0) & smooth[gid] & (factor < 1.0) & (weight > 0)

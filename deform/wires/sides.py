@@ -327,7 +327,8 @@ class SidePasses(PlaneMasks):
                     continue
                 p = _region_centres(lo, h, region_lo, rshape, sel)
                 inner.reshape(-1)[sel] = _fade(w, tables[wi], r_u.ravel()[sel], p)
-        faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, h, tables, self.wires)
+        grid = (lo + (region_lo + 0.5) * h, h)
+        faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
         weight[_box_slices(region_lo, rshape)] = inner
         return weight, faded
 

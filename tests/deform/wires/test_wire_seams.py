@@ -163,3 +163,18 @@ def test_colin27_midline_coronal_plane_has_no_tear() -> None:
     qx = np.linalg.norm(np.diff(q, axis=0), axis=-1) / H
     qz = np.linalg.norm(np.diff(q, axis=1), axis=-1) / H
     assert max(qx.max(), qz.max()) <= bound(wires), (qx.max(), qz.max())
+
+
+def test_the_seam_fade_does_not_fold() -> None:
+    for wires in ([kinked()], pair()):
+        warp, _ = build(wires)
+        off, _ = build(wires, seams=False)
+        p = np.random.default_rng(7).uniform(20.0, SIZE * SPACING - 20.0, (6000, 3))
+        fld, old = warp.field, off.field
+        w = _sample_t_float(fld.weight, (p - fld.lo) / fld.spacing)
+        w0 = _sample_t_float(old.weight, (p - old.lo) / old.spacing)
+        p = p[warp.swept(p) & (w < 0.95 * w0)]  # where the seam fade acts
+        assert len(p) > 100
+        eps = 1e-3
+        cols = [(warp.apply(p + eps * e) - warp.apply(p - eps * e)) / (2 * eps) for e in np.eye(3)]
+        assert np.linalg.det(np.stack(cols, -1)).min() > 0.0
