@@ -234,6 +234,8 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
         f" {st.percent_ignored:.1f}% ignored,"
         f" built in {st.timings['total']:.2f} s ({st.backend}); sides: {_sides_text(warp.wires)}"
     )
+    if st.seam_faded:
+        summary += f"; {st.seam_faded} voxels faded at seams (closest point jumps)"
     return warp, summary
 
 

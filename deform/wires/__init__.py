@@ -4,7 +4,8 @@ curves ("wires"), without resampling.
 Modules, by role: ``wire`` (the :class:`~voxwarp.deform.wires.wire.Wire`, its keys and JSON
 form), ``tables`` (its lookup tables of the mapping), ``constants`` (limits and tuning),
 ``build`` (:class:`~voxwarp.deform.wires.build.WireDeformer`, the attribute field build) with
-its stages ``masks`` (plane masks) and ``sides`` (seeds, propagation, flags), ``layouts`` (the
+its stages ``masks`` (plane masks), ``sides`` (seeds, propagation, flags) and ``seams``
+(the weight's fade where the closest point jumps), ``layouts`` (the
 built field and its storage layouts), ``warp``
 (:class:`~voxwarp.deform.wires.warp.WireFieldWarp`: CPU reference, GLSL side, JSON) with
 ``bounds`` (displacement bounds for empty-space skipping), ``geometry`` (small helpers);
@@ -107,8 +108,17 @@ default ``side_falloff`` is the radius or twice the wire's largest move
 (:meth:`Wire.largest_move`), whichever is longer: across the fade the warp is
 ``p + w d`` with ``|d| <= m`` and the smoothstep's steepest slope is 1.5 / F, so det J
 falls to ``1 - 1.5 m / F`` and a fade narrower than 1.5 m folds (the build warns in one
-line, :meth:`Wire.side_fold_warning`). Keep the reach below the bend's radius of
-curvature (where the wire's normal planes cross, no sweep is one-to-one).
+line, :meth:`Wire.side_fold_warning`). Seams: where the closest point on the wires
+jumps (past a bend's radius of curvature, where the wire's normal planes cross; where two
+wires' regions meet), the sweep jumps while w > 0, which would tear the map; the build
+(:mod:`voxwarp.deform.wires.seams`) marks 6-neighbour voxel pairs whose wire differs or
+whose closest point moves more than :data:`SEAM_STEP_VOXELS` field voxels along the wire,
+and multiplies w by a smoothstep of the distance to them, over the smallest width that is
+twice the weighted move within it (at most ``side_falloff``), so the map meets the
+identity there continuously; wires without seams keep their weights bit for bit
+(:attr:`WireFieldStats.seam_faded` counts the faded voxels). Content near a seam moves
+less than the wire asks: keep the reach below the bend's radius of curvature where the
+whole move matters.
 ``sides="rigid"`` is the paper's sweep (masks, vacated place), kept for the reproductions
 (the bundled files, benchmarks and teaching code say so explicitly); with it
 ``vacated="rest"`` marks nothing vacated, so the place shows its unmoved content

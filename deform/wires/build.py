@@ -279,7 +279,9 @@ class WireDeformer(SidePasses):
         fld = store_field(
             self.layout, self.wires, tables, (lo, h, shape), swept_side, (b_lo, b_shape, vacated)
         )
-        fld.weight = self._weights(tables, lo, h, shape, region_lo, rshape, r_wire, r_u, swept)
+        fld.weight, seam_faded = self._weights(
+            tables, lo, h, shape, region_lo, rshape, r_wire, r_u, swept
+        )
         timings["store"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_all
 
@@ -301,6 +303,7 @@ class WireDeformer(SidePasses):
             timings=timings,
             mask_bytes=tuple(mask_bytes),
             propagate=self.propagate,
+            seam_faded=seam_faded,
         )
         if self._warp is not None:
             self._warp._set_field(fld)

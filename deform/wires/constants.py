@@ -92,3 +92,8 @@ REFINE_STEPS = 2
 #: t ranges spanning more table entries than this mix wires (interpolation across a
 #: wire boundary): their bound is taken over the whole table
 MAX_T_STEPS = 64
+#: a 6-neighbour pair of a smooth-sides wire's field is a seam when its closest point
+#: moves along the wire by more than this many field voxels between them (near the wire
+#: it moves about one voxel per voxel, R / (R - r) at distance r on the concave side of a
+#: bend of radius R, so 3 flags r > 2R/3 and every jump at the medial axis)
+SEAM_STEP_VOXELS = 3.0

@@ -47,6 +47,9 @@ class WireFieldStats:
     mask_bytes: tuple[int, ...] = ()
     #: the propagation domain (``WireDeformer(propagate=...)``)
     propagate: str = "region"
+    #: field voxels of smooth-sides wires whose weight was faded towards a seam (where
+    #: the closest point on the wires jumps; :mod:`voxwarp.deform.wires.seams`)
+    seam_faded: int = 0
 
     @property
     def voxels(self) -> int:
@@ -83,6 +86,7 @@ class WireFieldStats:
             "mask_bytes": list(self.mask_bytes),
             "mask_bytes_total": self.mask_bytes_total,
             "propagate": self.propagate,
+            "seam_faded": self.seam_faded,
         }
 
 

@@ -36,6 +36,7 @@ from voxwarp.deform.wires.geometry import (
 )
 from voxwarp.deform.wires.masks import PlaneMasks
 from voxwarp.deform.wires.propagation import nearest_seed
+from voxwarp.deform.wires.seams import fade_seams
 from voxwarp.deform.wires.tables import WireTables, _lerp_table
 
 #: what one side's propagation gives: the region's first voxel and shape, wire id and
@@ -301,17 +302,21 @@ class SidePasses(PlaneMasks):
         r_wire: np.ndarray,
         r_u: np.ndarray,
         swept: np.ndarray,
-    ) -> np.ndarray | None:
+    ) -> tuple[np.ndarray | None, int]:
         """The field's displacement weights (see :attr:`WireField.weight`): 1 where a
         rigid wire is nearest, the fade of the nearest smooth (ends or sides) wire
-        elsewhere; None when every wire is rigid. Only the swept voxels and their neighbours (the
-        corners a swept sample interpolates) are computed; the rest hold 1, unused."""
+        elsewhere, faded to 0 at the seams of smooth-sides wires
+        (:func:`~voxwarp.deform.wires.seams.fade_seams`); None when every wire is rigid.
+        Only the swept voxels and their neighbours (the corners a swept sample
+        interpolates) are computed; the rest hold 1, unused. Also returns how many
+        voxels the seams faded."""
         if not any(w.fades for w in self.wires):
-            return None
+            return None, 0
         weight = np.ones(shape, dtype=np.float32, order="F")
         inner = np.ones(rshape, dtype=np.float32)
         flat_wire = r_wire.ravel()
-        need = np.flatnonzero(ndimage.maximum_filter(swept, size=3, mode="constant"))
+        known = ndimage.maximum_filter(swept, size=3, mode="constant")
+        need = np.flatnonzero(known)
         for wi, w in enumerate(self.wires):
             if not w.fades:
                 continue
@@ -322,8 +327,10 @@ class SidePasses(PlaneMasks):
                     continue
                 p = _region_centres(lo, h, region_lo, rshape, sel)
                 inner.reshape(-1)[sel] = _fade(w, tables[wi], r_u.ravel()[sel], p)
+        grid = (lo + (region_lo + 0.5) * h, h)
+        faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
         weight[_box_slices(region_lo, rshape)] = inner
-        return weight
+        return weight, faded
 
     def _propagate(
         self,

@@ -76,6 +76,18 @@ def test_a_narrow_side_falloff_warns_in_one_line(gl_ctx: Any, bent: tuple[Path, 
     vol, wires = bent
     args = ["--wires", str(wires), "--plane", "y", "--side-falloff", "5"]
     _, _, err = slice_cli(vol, "sides_narrow", *args)
+    assert "faded at seams" not in err  # a gentle bend has no seam
     lines = [ln for ln in err.splitlines() if "side_falloff 5 mm" in ln]
     assert len(lines) == 1, err
     assert "folds" in lines[0]
+
+
+def test_the_wires_line_counts_the_voxels_faded_at_seams(gl_ctx: Any) -> None:
+    # the bundled MRI's midline wire reaches 75 mm, past its bend's ~45 mm radius of
+    # curvature: the closest point jumps, the weight is faded there and the line says so
+    wires = Path(__file__).resolve().parents[2] / "sample_volumes" / "colin27_midline_wires.json"
+    args = ["--wires", str(wires), "--plane", "coronal", "--at", "-20", "--pixel", "2"]
+    _, _, err = slice_cli(Path("sample:colin27"), "sides_seams", *args)
+    line = next(ln for ln in err.splitlines() if ln.startswith("wires:"))
+    faded = int(line.split("; ")[-1].split(" voxels faded at seams")[0])
+    assert faded > 0, line
