@@ -235,7 +235,12 @@ def _wire_warp(args: argparse.Namespace, volume: Any) -> tuple[Any, str]:
         f" built in {st.timings['total']:.2f} s ({st.backend}); sides: {_sides_text(warp.wires)}"
     )
     if st.seam_faded:
-        summary += f"; {st.seam_faded} voxels faded at seams (closest point jumps)"
+        short = warp.wire_shortfall()
+        summary += (
+            f"; {st.seam_faded} voxels faded at seams (closest point jumps), so the wire's"
+            f" content lands up to {short:.1f} mm short of the bend (a gentler bend, or a"
+            " smaller radius and --side-falloff, keeps the closest point from jumping)"
+        )
     return warp, summary
 
 

@@ -288,6 +288,20 @@ class WireFieldWarp(Warp):
         ``vacated="rest"``."""
         return self._lookup(points)[0] == 1
 
+    def wire_shortfall(self) -> float:
+        """How far (mm) the content on the modified wires lands from the base wires'
+        points it should show: the largest ``|apply(M(u)) - C(u)|`` over each wire's table
+        points. About a field voxel when the sweep is whole; more where the seam fade
+        (:mod:`voxwarp.deform.wires.seams`) took some of the move away."""
+        worst = 0.0
+        for tab in self.field.tables:
+            got = self.apply(tab.modified_points)
+            ok = np.all(np.isfinite(got), axis=1) & (np.abs(got) < FAR / 2).all(axis=1)
+            if ok.any():
+                err = np.linalg.norm(got[ok] - tab.base_points[ok], axis=1)
+                worst = max(worst, float(err.max()))
+        return worst
+
     def swept(self, points: np.ndarray) -> np.ndarray:
         """Which deformed-space points are swept by a wire (bool per point)."""
         return self._lookup(points)[0] == 2

@@ -115,6 +115,22 @@ def test_a_gentle_bend_has_no_seam_and_the_same_weights() -> None:
     np.testing.assert_array_equal(warp.field.weight, off.field.weight)
 
 
+def test_the_shortfall_says_what_the_seam_fade_takes_from_the_wire() -> None:
+    # a whole sweep lands the modified wire's content on the base wire to about a field
+    # voxel (the table's linear t); the sharp bend's fade takes some of the move away
+    gentle, _ = build([spine()])
+    assert gentle.wire_shortfall() < 2.0 * float(gentle.field.spacing.max())
+    torn, _ = build([kinked()], seams=False)
+    faded, _ = build([kinked()])
+    move = kinked().largest_move()
+    assert torn.wire_shortfall() < faded.wire_shortfall() <= move
+    # the oracle: the faded weight on the modified wire times its move is what is left
+    tab = faded.field.tables[0]
+    left = np.linalg.norm(faded.apply(tab.modified_points) - tab.modified_points, axis=1)
+    whole = np.linalg.norm(tab.base_points - tab.modified_points, axis=1)
+    assert faded.wire_shortfall() == pytest.approx(float(np.max(whole - left)), abs=0.5)
+
+
 def test_rigid_sides_are_unchanged() -> None:
     off, _ = build([kinked(sides="rigid")], seams=False)
     warp, faded = build([kinked(sides="rigid")])

@@ -254,6 +254,9 @@ def test_bundled_wire_files_keep_the_papers_rigid_sweep() -> None:
     # the reproductions, demos and golden images use them: they must not change
     root = Path(__file__).resolve().parents[3] / "sample_volumes"
     files = [p for p in root.glob("*.json") if "wires" in p.read_text(encoding="utf-8")]
+    # the Colin27 midline wire shows the default smooth sides (the docs' pictures, which
+    # give --sides rigid for the paper's sweep); it is in no reproduction
+    files = [p for p in files if p.name != "colin27_midline_wires.json"]
     assert len(files) >= 3
     for path in files:
         wires = _wire_entries(json.loads(path.read_text(encoding="utf-8")))
