@@ -648,7 +648,8 @@ class EditSession:
             self.placement = Placement.from_dict(entry["placement"])
         if entry.get("resolution") is not None:
             self.resolution = resolution(entry["resolution"])
-        self.options.read_entry(entry)
+        if entry:  # a scene without an editor entry keeps the defaults ("auto" margin)
+            self.options.read_entry(entry)
 
     def _recover_from_scene(self, entry: dict[str, Any]) -> None:
         """Take over the deformation saved in the scene's warps (see :meth:`to_dict`),
