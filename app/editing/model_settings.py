@@ -314,7 +314,9 @@ def _margin(value: Any) -> float | str:
     try:
         margin = float(value)
     except (TypeError, ValueError) as exc:
-        raise EditorError(f"margin must be 'auto' or a number of mm >= 0; got {value!r:.40}") from exc
+        raise EditorError(
+            f"margin must be 'auto' or a number of mm >= 0; got {value!r:.40}"
+        ) from exc
     if not (np.isfinite(margin) and margin >= 0.0):
         raise EditorError(f"margin must be 'auto' or a number of mm >= 0; got {margin}")
     return margin

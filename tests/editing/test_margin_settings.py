@@ -120,7 +120,7 @@ def test_an_old_editor_entry_loads_as_margin_0(volume: Volume, tmp_path: Path) -
     path.write_text(json.dumps(d))
     loaded = EditSession.load(path)
     assert loaded.options.margin == 0.0
-    lo, hi = box(volume)
+    lo, _ = box(volume)
     np.testing.assert_allclose(loaded.model.grid.lo, lo)  # renders as before
     loaded.set_deformation("massspring", resolution=4)  # a new model: as before, too
     np.testing.assert_allclose(loaded.model.grid.lo, lo)
