@@ -61,7 +61,8 @@ def test_frame_is_the_scene_with_handles(viewer: Any) -> None:
     plain = _volume_only(viewer)
     # the handles are drawn where they project: the pixel under a handle differs
     x, y = viewer.handle_pixels()[_movable_handle(viewer)]  # in view (grid margin "auto")
-    assert 0 <= x < SIZE[0] and 0 <= y < SIZE[1]
+    assert 0 <= x < SIZE[0]
+    assert 0 <= y < SIZE[1]
     assert np.any(full[int(y), int(x), :3] != plain[int(y), int(x), :3])
 
 
