@@ -24,6 +24,7 @@ import numpy as np
 
 from voxwarp.deform.elements.anchors import ANCHOR_CHOICES, AUTO, MODEL_DEFAULT, resolve_anchor
 from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
+from voxwarp.deform.elements.margin import AUTO_MARGIN
 from voxwarp.editing.common import CHAINMAIL_VARIANTS, INTEGRATORS, EditorError, choice
 
 #: a mass-spring model whose elements are all slower than this (mm/s) is settled
@@ -121,9 +122,10 @@ class ElementSettings:
     #: the warp's inverse mode (None: the model's default, ``"baked"``)
     inverse: str | None = None
     # -- the grid margin (mm): the grid's box reaches this far beyond the volume's on
-    # -- every side (0: the volume's box; the CLI's default is the largest drag,
-    # -- ElementGrid's default_margin)
-    margin: float = 0.0
+    # -- every side (0: the volume's box; "auto": 10 % of its largest side, resolved
+    # -- when the grid is built, margin.auto_margin; the CLI's default is the largest
+    # -- drag, grid.default_margin)
+    margin: float | str = 0.0
     #: boundary conditions (:mod:`voxwarp.deform.elements.anchors`): the grid's fixed
     #: elements ("shell", "corners": the thesis's, "none", "default": the model's own,
     #: :data:`~voxwarp.deform.elements.anchors.MODEL_ANCHORS`) and the region of
@@ -209,9 +211,11 @@ class FamilyOptions:
     steps_per_frame: int = 10
     relax_steps: int = 1
     wire_settings: dict[str, Any] = field(default_factory=lambda: {"field_scale": 2})
-    # -- the grid margin (mm) of new mass-spring/ChainMail models: their grid's box
-    # -- reaches this far beyond the volume's (0: the volume's box)
-    margin: float = 0.0
+    # -- the grid margin of new mass-spring/ChainMail models: mm their grid's box reaches
+    # -- beyond the volume's (0: the volume's box), or "auto" (the default: 10 % of the
+    # -- volume box's largest side, resolved when a model is built, margin.auto_margin),
+    # -- as no drag is known then; an editor entry without the key means 0
+    margin: float | str = AUTO_MARGIN
 
     def copy(self) -> FamilyOptions:
         """An independent copy."""
@@ -278,11 +282,13 @@ class FamilyOptions:
             "anchor": self.anchor,
             "fix_outside": self.fix_outside,
             "wire_settings": dict(self.wire_settings),
-            **({"margin": self.margin} if self.margin else {}),  # absent: 0, as before
+            "margin": self.margin,
         }
 
     def read_entry(self, entry: dict[str, Any]) -> None:
-        """Take the options an editor entry holds (missing ones stay)."""
+        """Take the options an editor entry holds (missing ones stay, but a missing
+        ``margin`` is 0: the entry was saved before the margin, and its scene's new
+        models are built as they were then)."""
         for key in ("integrator", "variant"):
             if key in entry:
                 setattr(self, key, str(entry[key]))
@@ -297,18 +303,22 @@ class FamilyOptions:
             self.fix_outside = entry["fix_outside"]
         if isinstance(entry.get("wire_settings"), dict):
             self.wire_settings = dict(entry["wire_settings"])
-        if "margin" in entry:  # absent in scenes saved before the margin: 0
-            self.margin = _margin(entry["margin"])
+        self.margin = _margin(entry.get("margin", 0.0))
 
 
-def _margin(value: Any) -> float:
-    """A grid margin in mm, checked (a finite number >= 0)."""
+def _margin(value: Any) -> float | str:
+    """A grid margin setting, checked: :data:`AUTO_MARGIN` or a finite number of mm
+    >= 0."""
+    if isinstance(value, str) and value == AUTO_MARGIN:
+        return AUTO_MARGIN
     try:
         margin = float(value)
     except (TypeError, ValueError) as exc:
-        raise EditorError(f"margin must be a number of mm >= 0; got {value!r:.40}") from exc
+        raise EditorError(
+            f"margin must be 'auto' or a number of mm >= 0; got {value!r:.40}"
+        ) from exc
     if not (np.isfinite(margin) and margin >= 0.0):
-        raise EditorError(f"margin must be a number of mm >= 0; got {margin}")
+        raise EditorError(f"margin must be 'auto' or a number of mm >= 0; got {margin}")
     return margin
 
 

@@ -233,7 +233,9 @@ class EditSession:
     def set_deformation(self, kind: str, **settings: Any) -> None:
         """Switch the deformation family (and settings: ``backend``, ``resolution``,
         ``integrator``, ``variant``, ``stiffness``, ``margin``: mm the element grid's box
-        reaches beyond the volume's, and the element grid's boundary conditions
+        reaches beyond the volume's, or ``"auto"`` (the default: 10 % of the volume box's
+        largest side, resolved when the model is built; 0: the volume's box), and the
+        element grid's boundary conditions
         ``anchor`` and ``fix_outside``, see
         :class:`~voxwarp.deform.elements.grid.ElementGrid`); builds a fresh model at rest.
 
@@ -648,7 +650,8 @@ class EditSession:
             self.placement = Placement.from_dict(entry["placement"])
         if entry.get("resolution") is not None:
             self.resolution = resolution(entry["resolution"])
-        self.options.read_entry(entry)
+        if entry:  # a scene without an editor entry keeps the defaults ("auto" margin)
+            self.options.read_entry(entry)
 
     def _recover_from_scene(self, entry: dict[str, Any]) -> None:
         """Take over the deformation saved in the scene's warps (see :meth:`to_dict`),

@@ -35,6 +35,7 @@ import numpy as np
 from scipy import ndimage
 
 from voxwarp.deform.elements import anchors
+from voxwarp.deform.elements.margin import AUTO_MARGIN, auto_margin
 from voxwarp.deform.elements.materials import preset_stiffness
 from voxwarp.errors import VoxwarpError
 
@@ -73,7 +74,8 @@ class ElementGrid:
     margin
         mm the grid's box reaches beyond the volume's box on every side (>= 0, at most
         :data:`MAX_MARGIN_FACTOR` times the box's largest side); 0 (the default) is the
-        volume's box itself.
+        volume's box itself; ``"auto"`` (:data:`AUTO_MARGIN`) is :func:`auto_margin`,
+        10 % of the box's largest side (the desktop window's default).
     anchor
         The fixed elements of the new grid: ``"shell"`` (default: the outer faces),
         ``"corners"`` (the thesis's 8) or ``"none"``.
@@ -91,7 +93,7 @@ class ElementGrid:
     lo, hi : numpy.ndarray
         (3,) corners of the grid's box in mm (the volume's box padded by ``margin``).
     margin : float
-        The padding in mm.
+        The padding in mm (``"auto"`` resolved).
     volume_lo, volume_hi : numpy.ndarray
         (3,) corners of the box given (the volume's), without the margin.
     spacing : numpy.ndarray
@@ -120,12 +122,12 @@ class ElementGrid:
         self,
         volume_or_bounds: Any,
         shape: int | Sequence[int] = (16, 16, 16),
-        margin: float = 0.0,
+        margin: float | str = 0.0,
         anchor: str = anchors.DEFAULT_ANCHOR,
         fix_outside: float | str | None = anchors.DEFAULT,
     ) -> None:
         vlo, vhi = _parse_bounds(volume_or_bounds)
-        self.margin: float = check_margin(margin, vhi - vlo)
+        self.margin: float = resolve_margin(margin, vhi - vlo)
         self.volume_lo: np.ndarray = vlo
         self.volume_hi: np.ndarray = vhi
         lo, hi = padded_box(vlo, vhi, self.margin)
@@ -596,6 +598,14 @@ def default_margin(offsets: Any) -> float:
     """
     a = np.abs(np.asarray(offsets, dtype=np.float64).reshape(-1, 3))
     return float(a.max()) if a.size else 0.0
+
+
+def resolve_margin(margin: Any, size: Any) -> float:
+    """A margin setting as mm for a box of ``size`` (3,) mm: :data:`AUTO_MARGIN` gives
+    :func:`auto_margin`, a number is checked by :func:`check_margin`."""
+    if isinstance(margin, str) and margin == AUTO_MARGIN:
+        return auto_margin(size)
+    return check_margin(margin, np.asarray(size, dtype=np.float64))
 
 
 def padded_box(lo: np.ndarray, hi: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:

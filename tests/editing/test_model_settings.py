@@ -75,8 +75,9 @@ def test_cli_and_builder_give_the_same_mass_spring(volume: Volume) -> None:
 
 
 def test_editor_and_builder_give_the_same_mass_spring(volume: Volume) -> None:
-    """The editor's model is the builder's at rest, with the session's settings; the
-    CLI with the same settings (no shear springs) gives the same positions."""
+    """The editor's model is the builder's at rest, with the session's settings (its
+    default margin "auto"); the CLI with the same settings (no shear springs, the
+    resolved margin) gives the same positions."""
     session = EditSession(Scene(volume))
     session.set_deformation("massspring", resolution=5, stiffness=0.5)
     session.model.move((2, 2, 2), (3.0, 0.0, 1.0))
@@ -86,12 +87,15 @@ def test_editor_and_builder_give_the_same_mass_spring(volume: Volume) -> None:
         stiffness=0.5,
         drags=(msets.Drag((2, 2, 2), (3.0, 0.0, 1.0)),),
         run=msets.SettleRule(steps=40),
+        margin="auto",
     )
     built = MassSpringFamily.build(settings, volume)
     np.testing.assert_array_equal(built.model.positions(), session.model.positions())
+    margin = session.model.grid.margin
+    assert margin > 0.0
     args = _render_args(
         "--massspring", "5", "--no-shear", "--drag", "2,2,2:3,0,1", "--steps", "40",
-        "--grid-margin", "0",  # the editor's margin
+        "--grid-margin", repr(margin),  # the editor's margin, resolved
     )  # fmt: skip
     cli_model, _ = _run_massspring(args, _deform_grid(args, volume), None)
     np.testing.assert_array_equal(cli_model.positions(), session.model.positions())
@@ -145,7 +149,11 @@ def test_editor_chainmail_is_the_builders_at_rest(volume: Volume) -> None:
     session = EditSession(Scene(volume))
     session.set_deformation("chainmail", resolution=5, variant="gibson", stiffness=0.7)
     settings = msets.ChainMailSettings(
-        shape=(5, 5, 5), stiffness=0.7, variant="gibson", relax_steps=session.options.relax_steps
+        shape=(5, 5, 5),
+        stiffness=0.7,
+        variant="gibson",
+        relax_steps=session.options.relax_steps,
+        margin="auto",  # the editor's default
     )
     built = ChainMailFamily.build(settings, volume)
     assert built.model.to_dict() == session.model.to_dict()
@@ -211,7 +219,9 @@ def test_family_options_keep_the_editor_entry_and_check_settings() -> None:
         "anchor",
         "fix_outside",
         "wire_settings",
+        "margin",
     ]
+    assert entry["margin"] == "auto"
     again = msets.FamilyOptions()
     again.read_entry(entry)
     assert again == options

@@ -198,7 +198,8 @@ def test_a_slice_shows_the_nearest_layer_of_a_grid_also_when_deformed() -> None:
 
 def test_pick_near_plane_ignores_handles_off_the_plane() -> None:
     session = EditSession(Scene(volume("")))
-    session.set_deformation("massspring", resolution=4)
+    # margin 0: the handles lie on the volume's box, where the crosshair can go
+    session.set_deformation("massspring", resolution=4, margin=0.0)
     pts = session.handles()
     state = SliceViews(session.volume, (0.0, 1.0))
     state.set_crosshair(pts[0])

@@ -60,7 +60,9 @@ def test_frame_is_the_scene_with_handles(viewer: Any) -> None:
     assert full.shape == (SIZE[1], SIZE[0], 4)
     plain = _volume_only(viewer)
     # the handles are drawn where they project: the pixel under a handle differs
-    x, y = viewer.handle_pixels()[0]
+    x, y = viewer.handle_pixels()[_movable_handle(viewer)]  # in view (grid margin "auto")
+    assert 0 <= x < SIZE[0]
+    assert 0 <= y < SIZE[1]
     assert np.any(full[int(y), int(x), :3] != plain[int(y), int(x), :3])
 
 
@@ -297,7 +299,8 @@ def test_own_context_serves_calls_from_any_thread(gl_ctx: Any) -> None:
 
     from voxwarp.notebook import Viewer
 
-    v = Viewer(_scene(), "massspring", size=(96, 64), resolution=4)  # its own context
+    # its own context; margin 0: no grid corner lies under the pressed pixel (2, 2)
+    v = Viewer(_scene(), "massspring", size=(96, 64), resolution=4, margin=0.0)
     try:
         out: dict[str, Any] = {}
 

@@ -295,6 +295,40 @@ def test_apply_rebuilds_with_the_settings(qtbot: Any, window: FakeWindow) -> Non
     assert window.edits[-1] == ("New ChainMail model", None)
 
 
+def test_the_margin_row_defaults_to_auto_and_builds_with_what_is_typed(
+    qtbot: Any, window: FakeWindow
+) -> None:
+    """The Margin row shows "auto" (10 % of the volume box's largest side, resolved
+    when the model is built; the tooltip and the boundary line say the mm); a typed
+    number and 0 (the volume's box) are used."""
+    panel = make_panel(qtbot, window, DeformationPanel)
+    assert panel.margin_spin.text() == "auto"
+    panel.model_combo.setCurrentIndex(panel.model_combo.findData("chainmail"))
+    s = window.session
+    lo, hi = (np.asarray(b) for b in s.volume.bounds)
+    auto = 0.1 * float(np.max(hi - lo))  # the ramp's box: 16 x 16 x 24 mm
+    assert auto == pytest.approx(2.4)
+    np.testing.assert_allclose(s.model.grid.lo, lo - auto)
+    assert s.options.margin == "auto"
+    assert panel.margin_spin.text() == "auto"
+    assert "In use: 2.4 mm" in panel.margin_spin.toolTip()
+    assert "grid margin 2.4 mm beyond the volume's box" in panel.boundary_label.text()
+    panel.margin_spin.setValue(12.0)
+    click(qtbot, panel.apply_button)
+    np.testing.assert_allclose(s.model.grid.lo, lo - 12.0)
+    assert s.options.margin == 12.0
+    assert "In use: 12.0 mm" in panel.margin_spin.toolTip()
+    panel.margin_spin.setValue(0.0)
+    click(qtbot, panel.apply_button)
+    np.testing.assert_allclose(s.model.grid.lo, lo)
+    np.testing.assert_allclose(s.model.grid.hi, hi)
+    assert "grid margin 0 mm (the volume's box)" in panel.boundary_label.text()
+    panel.margin_spin.setValue(-1.0)  # back to auto
+    click(qtbot, panel.apply_button)
+    assert s.options.margin == "auto"
+    np.testing.assert_allclose(s.model.grid.hi, hi + auto)
+
+
 def test_gpu_backend_without_context_is_an_error_and_the_combo_follows(
     qtbot: Any, window: FakeWindow
 ) -> None:

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from PySide6.QtWidgets import QFormLayout, QWidget
 
 from voxwarp.deform.elements.anchors import ANCHOR_CHOICES, AUTO, DEFAULT, MODEL_DEFAULT
+from voxwarp.deform.elements.margin import AUTO_MARGIN, AUTO_MARGIN_FRACTION, auto_margin
 from voxwarp.editing.session import BACKENDS, CHAINMAIL_VARIANTS, INTEGRATORS, EditSession
 from voxwarp.ui.panel_base import combo, double_spin, int_spin
 
@@ -39,16 +41,9 @@ class ModelOptions:
         self.stiffness_spin = double_spin(
             0.01, 1.0, 0.05, 2, tooltip="Element stiffness of new models (0..1]"
         )
-        self.margin_spin = double_spin(
-            0.0,
-            1000.0,
-            5.0,
-            1,
-            suffix=" mm",
-            tooltip="Grid margin (mm): the element grid reaches this far beyond the volume's"
-            " box, so content dragged across a face is carried out and drawn there (0: the"
-            " volume's box). A margin as large as the largest drag keeps everything",
-        )
+        self.margin_spin = double_spin(-1.0, 1000.0, 5.0, 1, suffix=" mm")
+        self.margin_spin.setSpecialValueText(AUTO_MARGIN)  # -1
+        self.margin_spin.setToolTip(_margin_tooltip(None))
         self.anchor_combo = combo(
             ANCHOR_CHOICES,
             "Elements fixed at rest: default (the model's: shell for mass-spring, corners for"
@@ -89,7 +84,7 @@ class ModelOptions:
             "integrator": self.integrator_combo.currentText(),
             "variant": self.variant_combo.currentText(),
             "stiffness": float(self.stiffness_spin.value()),
-            "margin": float(self.margin_spin.value()),
+            "margin": _margin_setting(self.margin_spin.value()),
             "anchor": self.anchor_combo.currentText(),
             "fix_outside": AUTO if self.region_spin.value() < 0 else self.region_spin.value(),
         }
@@ -101,7 +96,9 @@ class ModelOptions:
         self.integrator_combo.setCurrentText(s.options.integrator)
         self.variant_combo.setCurrentText(s.options.variant)
         self.stiffness_spin.setValue(s.options.stiffness)
-        self.margin_spin.setValue(s.options.margin)
+        margin = s.options.margin
+        self.margin_spin.setValue(-1.0 if margin == AUTO_MARGIN else float(margin))
+        self.margin_spin.setToolTip(_margin_tooltip(_margin_in_use(s)))
         self.anchor_combo.setCurrentText(s.options.anchor)
         self.region_spin.setValue(_region_value(s.options.anchor, s.options.fix_outside))
 
@@ -113,6 +110,34 @@ class ModelOptions:
 
 #: row labels that are not the option's name capitalised
 _ROW_LABELS = {"anchor": "Anchor", "fix_outside": "Fix outside"}
+
+
+def _margin_setting(value: float) -> float | str:
+    """The margin setting of the spin box's value: -1 (shown ``auto``) is ``"auto"``."""
+    return AUTO_MARGIN if value < 0 else float(value)
+
+
+def _margin_in_use(s: EditSession) -> float:
+    """The margin (mm) of the running element model's grid, else the one the session's
+    setting gives a new model over its volume's box."""
+    grid = getattr(getattr(s.family, "model", None), "grid", None)
+    if grid is not None:
+        return float(grid.margin)
+    if s.options.margin != AUTO_MARGIN:
+        return float(s.options.margin)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in s.volume.bounds)
+    return auto_margin(hi - lo)
+
+
+def _margin_tooltip(in_use: float | None) -> str:
+    """The Margin row's tooltip, naming the margin in mm in use (when known)."""
+    now = "" if in_use is None else f"In use: {in_use:.1f} mm. "
+    return (
+        f"{now}Grid margin (mm): the element grid reaches this far beyond the volume's box,"
+        " so content dragged across a face is carried out and drawn there. auto (the"
+        f" default): {AUTO_MARGIN_FRACTION:.0%} of the volume box's largest side; 0: the"
+        " volume's box. A margin as large as the largest drag keeps everything"
+    )
 
 
 def _region_value(anchor: str, fix_outside: float | str | None) -> float:

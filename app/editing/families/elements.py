@@ -274,12 +274,14 @@ class ElementFamily(Family):
         return layers
 
     def boundary_text(self) -> str:
-        """The boundary conditions of the model in one line (the panel shows it)."""
+        """The boundary conditions of the model and its grid margin in one line (the
+        panel shows it)."""
         if self.model is None:
             return ""
         grid = self.model.grid
         count = int(grid.anchored.sum())
-        return grid.describe_anchors() + (f"; {count} anchored now" if count else "")
+        anchored = f"; {count} anchored now" if count else ""
+        return f"{grid.describe_anchors()}{anchored}; {margin_phrase(grid.margin)}"
 
     # ---------------------------------------------------------------- undo and animation
     def snapshot(self) -> dict[str, Any]:
@@ -315,6 +317,13 @@ class ElementFamily(Family):
 def _per_element(value: Any, count: int) -> list[list[float]]:
     """A drag key value (one offset or one per element) as ``count`` offsets."""
     return np.broadcast_to(np.asarray(value, dtype=np.float64), (count, 3)).tolist()
+
+
+def margin_phrase(margin: float) -> str:
+    """The grid margin in mm in use, in a few words (the boundary line ends with it)."""
+    if margin <= 0.0:
+        return "grid margin 0 mm (the volume's box)"
+    return f"grid margin {margin:.1f} mm beyond the volume's box"
 
 
 class MassSpringFamily(ElementFamily):
