@@ -1,6 +1,7 @@
 """Write the documentation gallery and the README's top images from voxwarp commands.
 
-Each entry of :data:`GALLERY` is one or more ``voxwarp`` command lines (run in the
+Each entry of :data:`GALLERY` (and of :data:`FIGURES`, the concept pages' figures,
+written to ``docs/figures/``) is one or more ``voxwarp`` command lines (run in the
 repository root with this Python's ``voxwarp``, as a user would type them) and the image
 the last one writes under ``out/gallery/``. The image is downsized to a small palette PNG
 in ``docs/gallery/NAME.png``; ``docs/gallery.md`` shows each with its caption and the
@@ -30,6 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 WORK = "out/gallery"  # where the commands write (git-ignored)
 GALLERY_DIR = ROOT / "docs" / "gallery"
+FIGURE_DIR = ROOT / "docs" / "figures"
 README_DIR = ROOT / "docs" / "images"
 PAGE = ROOT / "docs" / "gallery.md"
 MAX_BYTES = 60_000  # per gallery PNG
@@ -177,6 +179,80 @@ GALLERY: tuple[Entry, ...] = (
         width=260,
     ),
     Entry(
+        "stent_flm",
+        "First local maximum with a threshold from the histogram",
+        "FLM on the stent CT: the threshold comes from the histogram's object/background"
+        " split (printed on stderr), so the background's noise no longer counts as a"
+        " maximum and draws a flat grey box.",
+        ("voxwarp render sample:stent --mode flm --size 320x480 -o " + _out("stent_flm.png"),),
+        _out("stent_flm.png"),
+        width=320,
+    ),
+    Entry(
+        "window_2x2",
+        "The desktop window: three slices and 3D",
+        "The window's 2x2 layout on the stent CT bent by the wire `voxwarp demo` lays along"
+        " it: axial, sagittal and coronal slices through the same warp as the 3D view.",
+        (
+            f"voxwarp demo sample:stent --size 320x400 -o {WORK}/demo",
+            f"voxwarp gui {WORK}/demo/stent_wires_scene.json --size 1100x750"
+            f" --screenshot {WORK}/window_2x2.png",
+        ),
+        _out("window_2x2.png"),
+        width=720,
+        octree=True,
+    ),
+    Entry(
+        "registration",
+        "Viewing a registration without resampling",
+        "Colin27 deformed by known bumps, registered back with SimpleITK demons, and the"
+        " moving image rendered through the recovered displacement field.",
+        (f"voxwarp demo registration -o {WORK}",),
+        _out("registration.png"),
+        width=720,
+    ),
+    Entry(
+        "demo_massspring",
+        "Teaching: explicit vs semi-implicit Euler",
+        "The mass-spring demo's figure sheet: energy and stability of both integrators, and"
+        " renders of the fish bent by the same drag.",
+        (f"voxwarp demo massspring -o {WORK}",),
+        _out("massspring.png"),
+        width=720,
+    ),
+    Entry(
+        "demo_chainmail",
+        "Teaching: how ChainMail propagates a drag",
+        "The ChainMail demo's figure sheet: the order in which one drag moves the elements"
+        " and the effect of 0, 1 and 4 relaxation steps.",
+        (f"voxwarp demo chainmail -o {WORK}",),
+        _out("chainmail.png"),
+        width=720,
+    ),
+    Entry(
+        "demo_wires",
+        "Teaching: wire field resolution and cost",
+        "The wire demo's figure sheet: the attribute field from 1:1 to 1:4096 (the wire"
+        " paper's Figure 12), the ray samples it ignores and the cost of rendering through it.",
+        (f"voxwarp demo wires -o {WORK}",),
+        _out("wires.png"),
+        width=720,
+    ),
+    Entry(
+        "demo_lattice",
+        "Teaching: trilinear lattices",
+        "The lattice demo's figure sheet: what a lattice can do that a matrix cannot (a bent"
+        " volume, tubes wrapped round a torus) and the two ways of carrying normals.",
+        (f"voxwarp demo lattice -o {WORK}",),
+        _out("lattice.png"),
+        width=720,
+    ),
+)
+
+#: the concept pages' figures (docs/figures/NAME.png; each page's caption gives the
+#: command): before/after pairs of the tissue-like defaults, not on the gallery page
+FIGURES: tuple[Entry, ...] = (
+    Entry(
         "nose_push_corners",
         "Boundary conditions: the thesis's corners",
         "A 15 mm push on the face of the Colin27 MRI (mass-spring, 16^3 elements, settled)"
@@ -255,75 +331,6 @@ GALLERY: tuple[Entry, ...] = (
         ),
         _out("wire_smooth.png"),
         width=260,
-    ),
-    Entry(
-        "stent_flm",
-        "First local maximum with a threshold from the histogram",
-        "FLM on the stent CT: the threshold comes from the histogram's object/background"
-        " split (printed on stderr), so the background's noise no longer counts as a"
-        " maximum and draws a flat grey box.",
-        ("voxwarp render sample:stent --mode flm --size 320x480 -o " + _out("stent_flm.png"),),
-        _out("stent_flm.png"),
-        width=320,
-    ),
-    Entry(
-        "window_2x2",
-        "The desktop window: three slices and 3D",
-        "The window's 2x2 layout on the stent CT bent by the wire `voxwarp demo` lays along"
-        " it: axial, sagittal and coronal slices through the same warp as the 3D view.",
-        (
-            f"voxwarp demo sample:stent --size 320x400 -o {WORK}/demo",
-            f"voxwarp gui {WORK}/demo/stent_wires_scene.json --size 1100x750"
-            f" --screenshot {WORK}/window_2x2.png",
-        ),
-        _out("window_2x2.png"),
-        width=720,
-        octree=True,
-    ),
-    Entry(
-        "registration",
-        "Viewing a registration without resampling",
-        "Colin27 deformed by known bumps, registered back with SimpleITK demons, and the"
-        " moving image rendered through the recovered displacement field.",
-        (f"voxwarp demo registration -o {WORK}",),
-        _out("registration.png"),
-        width=720,
-    ),
-    Entry(
-        "demo_massspring",
-        "Teaching: explicit vs semi-implicit Euler",
-        "The mass-spring demo's figure sheet: energy and stability of both integrators, and"
-        " renders of the fish bent by the same drag.",
-        (f"voxwarp demo massspring -o {WORK}",),
-        _out("massspring.png"),
-        width=720,
-    ),
-    Entry(
-        "demo_chainmail",
-        "Teaching: how ChainMail propagates a drag",
-        "The ChainMail demo's figure sheet: the order in which one drag moves the elements"
-        " and the effect of 0, 1 and 4 relaxation steps.",
-        (f"voxwarp demo chainmail -o {WORK}",),
-        _out("chainmail.png"),
-        width=720,
-    ),
-    Entry(
-        "demo_wires",
-        "Teaching: wire field resolution and cost",
-        "The wire demo's figure sheet: the attribute field from 1:1 to 1:4096 (the wire"
-        " paper's Figure 12), the ray samples it ignores and the cost of rendering through it.",
-        (f"voxwarp demo wires -o {WORK}",),
-        _out("wires.png"),
-        width=720,
-    ),
-    Entry(
-        "demo_lattice",
-        "Teaching: trilinear lattices",
-        "The lattice demo's figure sheet: what a lattice can do that a matrix cannot (a bent"
-        " volume, tubes wrapped round a torus) and the two ways of carrying normals.",
-        (f"voxwarp demo lattice -o {WORK}",),
-        _out("lattice.png"),
-        width=720,
     ),
 )
 
@@ -413,12 +420,14 @@ def main(argv: list[str] | None = None) -> int:
         "--reuse", action="store_true", help="keep images already in out/gallery (only resize)"
     )
     args = p.parse_args(argv)
-    chosen = [e for e in GALLERY if not args.names or e.name in args.names]
+    chosen = [e for e in (*GALLERY, *FIGURES) if not args.names or e.name in args.names]
     (ROOT / WORK).mkdir(parents=True, exist_ok=True)
     GALLERY_DIR.mkdir(parents=True, exist_ok=True)
+    FIGURE_DIR.mkdir(parents=True, exist_ok=True)
     for e in chosen:
         seconds = 0.0 if args.reuse and (ROOT / e.image).is_file() else run(e)
-        size = small_png(ROOT / e.image, GALLERY_DIR / f"{e.name}.png", e.width, octree=e.octree)
+        dest = (FIGURE_DIR if e in FIGURES else GALLERY_DIR) / f"{e.name}.png"
+        size = small_png(ROOT / e.image, dest, e.width, octree=e.octree)
         print(f"{e.name}: {seconds:.1f} s, {size / 1000:.0f} kB", flush=True)
         if e.readme:
             with Image.open(ROOT / e.image) as img:

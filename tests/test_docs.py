@@ -52,20 +52,25 @@ def test_gallery_page_is_the_one_the_script_writes() -> None:
     assert (DOCS / "gallery.md").read_text(encoding="utf-8") == GALLERY.page()
 
 
+#: the gallery's entries and the concept pages' figures: the same checks for both
+ALL_ENTRIES = GALLERY.GALLERY + GALLERY.FIGURES
+
+
 def test_gallery_names_are_unique_and_commands_start_with_voxwarp() -> None:
-    names = [e.name for e in GALLERY.GALLERY]
+    names = [e.name for e in ALL_ENTRIES]
     assert len(names) == len(set(names))
-    assert 10 <= len(names) <= 16
-    for e in GALLERY.GALLERY:
+    assert 10 <= len(GALLERY.GALLERY) <= 16
+    for e in ALL_ENTRIES:
         assert e.commands, e.name
         assert all(shlex.split(c)[0] == "voxwarp" for c in e.commands), e.name
         folder = e.image.rsplit("/", 1)[0]
         assert folder in e.commands[-1], f"{e.name}: the last command must write {e.image}"
 
 
-@pytest.mark.parametrize("entry", GALLERY.GALLERY, ids=lambda e: e.name)
+@pytest.mark.parametrize("entry", ALL_ENTRIES, ids=lambda e: e.name)
 def test_gallery_image_is_a_small_png(entry) -> None:
-    path = DOCS / "gallery" / f"{entry.name}.png"
+    folder = "figures" if entry in GALLERY.FIGURES else "gallery"
+    path = DOCS / folder / f"{entry.name}.png"
     data = path.read_bytes()
     assert data.startswith(PNG_MAGIC), path
     assert len(data) <= GALLERY.MAX_BYTES * 1.05, f"{path}: {len(data)} bytes"
@@ -78,9 +83,11 @@ def test_gallery_image_is_a_small_png(entry) -> None:
 def test_gallery_folder_holds_only_listed_images() -> None:
     listed = {f"{e.name}.png" for e in GALLERY.GALLERY}
     assert {p.name for p in (DOCS / "gallery").iterdir()} == listed
+    figures = {f"{e.name}.png" for e in GALLERY.FIGURES}
+    assert {p.name for p in (DOCS / "figures").iterdir()} == figures
 
 
-@pytest.mark.parametrize("entry", GALLERY.GALLERY, ids=lambda e: e.name)
+@pytest.mark.parametrize("entry", ALL_ENTRIES, ids=lambda e: e.name)
 def test_gallery_commands_parse(entry) -> None:
     """Each command is a real subcommand with valid options (parsed, not run), and every
     repository file it reads exists."""
@@ -131,7 +138,7 @@ def test_readme_shows_top_images_before_the_quick_start() -> None:
 def test_gallery_page_shows_each_command_word_for_word() -> None:
     """The page breaks long commands into backslash-continued lines; a shell reading
     them gets the same words as the command the script runs."""
-    for e in GALLERY.GALLERY:
+    for e in ALL_ENTRIES:
         for command in e.commands:
             shown = GALLERY.shell_lines(command)
             assert max(len(line) for line in shown.splitlines()) <= 78, shown
