@@ -75,6 +75,12 @@ def _vector(v: np.ndarray) -> str:
     return "(" + ",".join(repr(float(x)) for x in v) + ")"
 
 
+#: NRRD key of a volume written without a patient orientation: its ``space`` is voxwarp's
+#: world (RAS mm), so ITK and Slicer place it as the NIfTI, and voxwarp reads it back as
+#: a volume without orientation
+NOT_ORIENTED_KEY = "voxwarp_oriented"
+
+
 def nrrd_header(
     affine: np.ndarray, shape: tuple[int, int, int], dtype: np.dtype, oriented: bool
 ) -> str:
@@ -85,7 +91,9 @@ def nrrd_header(
         "# http://teem.sourceforge.net/nrrd/format.html",
         f"type: {NRRD_TYPES[np.dtype(dtype).name]}",
         "dimension: 3",
-        "space: right-anterior-superior" if oriented else "space dimension: 3",
+        # always a space: without it ITK and Slicer read the axes as LPS, 180 degrees from
+        # the same volume's NIfTI; a volume without patient orientation says so below
+        "space: right-anterior-superior",
         f"sizes: {shape[0]} {shape[1]} {shape[2]}",
         "space directions: " + " ".join(_vector(affine[:3, i]) for i in range(3)),
         "kinds: domain domain domain",
@@ -94,6 +102,8 @@ def nrrd_header(
         f"space origin: {_vector(affine[:3, 3])}",
         'space units: "mm" "mm" "mm"',
     ]
+    if not oriented:
+        lines.append(f"{NOT_ORIENTED_KEY}:=false")
     return "\n".join(lines) + "\n\n"
 
 

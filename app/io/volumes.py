@@ -20,7 +20,11 @@ Supported inputs (chosen by extension, or by the content of a folder):
                           ``"RAS"`` or ``"LPS"``. The sidecar path itself may be
                           passed too.
 ``.nrrd`` / ``.nhdr``     NRRD via pynrrd: ``space directions`` and ``space origin`` in
-                          any ``space`` (RAS, LAS, LPS become patient RAS).
+                          any ``space`` (RAS, LAS, LPS become patient RAS). voxwarp
+                          writes every NRRD with ``space: right-anterior-superior``
+                          (so ITK and Slicer place it as the same volume's NIfTI);
+                          ``voxwarp_oriented:=false`` marks one without a patient
+                          orientation, which reads back as such.
 ``.nii`` / ``.nii.gz``    NIfTI via nibabel: the sform, else the qform (nibabel's
                           precedence); neither code set means no orientation.
 folder of DICOM files     One series (``series=``; the largest by default), sorted
@@ -74,6 +78,7 @@ from voxwarp.io.loaded import Loaded as _Loaded
 from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
 from voxwarp.io.loaded import native as _native
 from voxwarp.io.loaded import warn as _warn
+from voxwarp.io.volume_stream import NOT_ORIENTED_KEY
 
 __all__ = [
     "LOAD_EXTENSIONS",
@@ -934,7 +939,7 @@ def _nrrd_space(header: dict[str, Any], where: str) -> str | None:
     """The patient space of the header (RAS, LPS, LAS), or ``None`` for scanner-xyz,
     3D-right-handed, 3D-left-handed or no ``space`` (geometry without orientation)."""
     space = header.get("space")
-    if not isinstance(space, str):
+    if not isinstance(space, str) or header.get(NOT_ORIENTED_KEY) == "false":
         return None
     return _NRRD_SPACES.get(space.strip().lower().removesuffix("-time"))
 
@@ -1011,10 +1016,12 @@ def _nifti_affine(hdr: Any, where: str) -> np.ndarray | None:
     invertible is passed over with a warning."""
     if not hasattr(hdr, "get_sform"):
         return None
-    for name, (affine, code) in (
-        ("sform", hdr.get_sform(coded=True)),
-        ("qform", hdr.get_qform(coded=True)),
-    ):
+    for name in ("sform", "qform"):
+        try:
+            affine, code = getattr(hdr, f"get_{name}")(coded=True)
+        except ValueError as exc:  # e.g. a qform quaternion that is no rotation
+            _warn(f"{where}: the {name} cannot be read ({exc}); ignored. Fix the header.")
+            continue
         if not code or affine is None:
             continue
         a = np.asarray(affine, dtype=np.float64)
@@ -1366,16 +1373,18 @@ def _save_raw(volume: Volume, final: Path) -> None:
 def _write_nrrd(volume: Volume, tmp: Path) -> None:
     import nrrd
 
+    # always a space (ITK and Slicer read a NRRD without one as LPS, 180 degrees from the
+    # NIfTI); a volume without patient orientation is marked so it reads back as one
     header: dict[str, Any] = {
-        "space dimension": 3,
+        "space": "right-anterior-superior",
         "space directions": volume.affine[:3, :3].T,
         "space origin": np.asarray(volume.origin, dtype=np.float64),
         "space units": ["mm", "mm", "mm"],
         "kinds": ["domain", "domain", "domain"],
         "encoding": "gzip",
     }
-    if volume.space:
-        header["space"] = "right-anterior-superior"
+    if not volume.space:
+        header[NOT_ORIENTED_KEY] = "false"
     if volume.units:
         header["voxwarp_units"] = volume.units
     nrrd.write(str(tmp), np.asarray(volume.data), header, index_order="F")

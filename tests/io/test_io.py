@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import warnings
@@ -805,3 +806,71 @@ def test_bad_stated_geometry_is_one_clear_error(tmp_path: Path, make: str, messa
         path = tmp_path / "vol.raw"
     with pytest.raises(VolumeError, match=message):
         load_volume(path)
+
+
+@pytest.mark.parametrize("writer", ["save_volume", "stream"])
+def test_unoriented_nrrd_and_nifti_coincide_in_simpleitk(tmp_path: Path, writer: str) -> None:
+    """A volume without patient orientation (npy, raw, TIFF, the samples) written as NRRD
+    and as NIfTI: SimpleITK places every voxel of both at the same physical point (a NRRD
+    without ``space`` is read as LPS, 180 degrees from the NIfTI), and voxwarp reads the
+    NRRD back without a patient orientation and with the same geometry."""
+    sitk = pytest.importorskip("SimpleITK")
+    from voxwarp.io.volume_stream import write_volume_slices
+
+    vol = Volume(asym(), spacing=(1.5, 2.0, 2.5), origin=(10.0, -20.0, 30.0))
+    assert not vol.space
+    for suffix in (".nrrd", ".nii.gz"):
+        path = tmp_path / f"v{suffix}"
+        if writer == "save_volume":
+            save_volume(vol, path)
+        else:
+            slices = [np.asarray(vol.data)[:, :, k].T for k in range(vol.shape[2])]
+            write_volume_slices(path, vol.affine, vol.shape, vol.dtype, slices, oriented=False)
+    images = [sitk.ReadImage(str(tmp_path / f"v{s}")) for s in (".nrrd", ".nii.gz")]
+    corners = [(0, 0, 0), (vol.shape[0] - 1, 1, 2), (1, vol.shape[1] - 1, vol.shape[2] - 1)]
+    for index in corners:
+        a, b = (np.asarray(im.TransformIndexToPhysicalPoint(index)) for im in images)
+        np.testing.assert_allclose(a, b, atol=1e-9)
+        # ITK is LPS: x and y of voxwarp's world (RAS) change sign
+        world = vol.affine @ np.array([*index, 1.0])
+        np.testing.assert_allclose(a, world[:3] * [-1, -1, 1], atol=1e-9)
+    np.testing.assert_array_equal(
+        sitk.GetArrayFromImage(images[0]), sitk.GetArrayFromImage(images[1])
+    )
+    back = load_volume(tmp_path / "v.nrrd")
+    assert not back.space
+    np.testing.assert_allclose(back.affine, vol.affine, atol=1e-12)
+    np.testing.assert_array_equal(back.data, vol.data)
+
+
+def test_a_qform_quaternion_that_is_no_rotation_is_ignored_with_a_warning(
+    tmp_path: Path,
+) -> None:
+    """nibabel raises ValueError for a qform whose quaternion has b^2 + c^2 + d^2 > 1; when
+    the coded sform is unusable too, the reader falls back to that qform: the volume
+    loads without an orientation and says why in warnings, and a field with no other
+    transform is refused in one line (found by tests/fuzz/test_fuzz_fields.py)."""
+    from voxwarp.io.fields import FieldError, load_displacement_field
+
+    def broken(data: np.ndarray, path: Path) -> Path:
+        img = nib.Nifti1Image(data, np.eye(4))
+        img.set_qform(np.eye(4), code=1)
+        # a coded sform that is no transform, so the reader falls back to the qform
+        img.set_sform(np.diag([1.0, 1.0, 0.0, 1.0]), code=1)
+        nib.save(img, str(path))
+        raw = bytearray(path.read_bytes())
+        raw[256:264] = np.array([0.9, 0.9], "<f4").tobytes()  # quatern_b, quatern_c
+        path.write_bytes(bytes(raw))
+        with pytest.raises(ValueError, match="w2 should be positive"):
+            nib.Nifti1Header.from_fileobj(io.BytesIO(bytes(raw))).get_qform(coded=True)
+        return path
+
+    path = broken(asym(), tmp_path / "v.nii")
+    with pytest.warns(UserWarning, match="the qform cannot be read"):
+        vol = load_volume(path)
+    assert not vol.space
+    field = broken(np.zeros((4, 4, 4, 3), np.float32), tmp_path / "u.nii")
+    with pytest.warns(UserWarning, match="the qform cannot be read"):
+        with pytest.raises(FieldError, match="has no sform or qform") as err:
+            load_displacement_field(field, convention="itk")
+    assert "\n" not in str(err.value)
