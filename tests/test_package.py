@@ -183,3 +183,15 @@ def test_core_only_install_renders_headless(tmp_path: Path) -> None:
         "voxwarp: error: voxwarp gui needs the gui extra (missing: PySide6):"
         " pip install 'voxwarp[gui]'"
     )
+
+
+def test_loading_an_array_imports_neither_simpleitk_nor_nibabel(tmp_path: Path) -> None:
+    """load_volume tells SimpleITK/nibabel images apart by their class's module name."""
+    out = _python(
+        "import sys, numpy as np\n"
+        "from voxwarp import load_volume\n"
+        "load_volume(np.zeros((2, 3, 4), np.float32))\n"
+        "print(sorted(m for m in ('SimpleITK', 'nibabel') if m in sys.modules))",
+        tmp_path,
+    )
+    assert out.strip().splitlines()[-1] == "[]"

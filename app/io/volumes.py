@@ -36,6 +36,10 @@ folder of DICOM files     One series (``series=``; the largest by default), sort
                           slices in natural file-name order; ImageJ calibration is used.
 ========================  ===========================================================
 
+In-memory images load as their files would: a 3-D scalar SimpleITK image (LPS
+origin/spacing/direction, converted to RAS) and a nibabel image (its RAS affine and
+scaled ``dataobj``); see :mod:`voxwarp.io.image_objects`.
+
 :func:`save_volume` writes ``.npz``, ``.raw`` (+ ``.raw.json``), ``.nrrd``,
 ``.nii``/``.nii.gz`` and ``.tif`` atomically. :func:`volume_summary` and
 :func:`volume_info` describe a volume as text and as a JSON-ready dict.
@@ -74,6 +78,7 @@ from voxwarp.core.volume import short_repr as _short
 from voxwarp.errors import VolumeError
 from voxwarp.io import samples as _samples
 from voxwarp.io.dicom import list_dicom_series, read_dicom_dir, read_dicom_file
+from voxwarp.io.image_objects import NIBABEL_SOURCE, SITK_SOURCE, image_kind, sitk_loaded
 from voxwarp.io.loaded import Loaded as _Loaded
 from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
 from voxwarp.io.loaded import native as _native
@@ -242,7 +247,7 @@ def _check_downsample(factor: Any) -> int | tuple[int, int, int]:
 
 # ---------------------------------------------------------------------------- loading
 def load_volume(
-    source: str | os.PathLike[str] | np.ndarray,
+    source: str | os.PathLike[str] | np.ndarray | Any,
     spacing: float | Sequence[float] | None = None,
     *,
     origin: float | Sequence[float] | None = None,
@@ -255,14 +260,22 @@ def load_volume(
     allow_data_dirs: Sequence[str | os.PathLike[str]] | None = None,
     memory_budget: int | float | str | None = None,
 ) -> Volume:
-    """Load a volume from a file, a folder of slices, or a NumPy array.
+    """Load a volume from a file, a folder of slices, a NumPy array, or an in-memory
+    SimpleITK or nibabel image.
 
     Parameters
     ----------
     source
         Path to a volume file or to a folder of DICOM or TIFF slices (see the module
         docstring for the formats), ``"sample:NAME"`` for a bundled sample volume
-        (see :func:`voxwarp.io.samples.sample_names`), or an in-memory array.
+        (see :func:`voxwarp.io.samples.sample_names`), an in-memory array, a 3-D scalar
+        ``SimpleITK.Image`` (geometry from its origin, spacing and direction, which are
+        LPS, converted to RAS as for an LPS NRRD; voxels from ``GetArrayFromImage``,
+        reordered from ``(z, y, x)``), or a nibabel image (``Nifti1Image``,
+        ``Nifti2Image``, ``MGHImage``: geometry from its RAS ``affine``, voxels from
+        ``dataobj`` with its scaling), read as the same image's file would be. Neither
+        library is imported unless an image of it is passed; a vector or 4-D image is
+        a :class:`~voxwarp.errors.VolumeError`.
     spacing
         Voxel size ``(sx, sy, sz)`` in mm (or one number for all axes). Overrides what
         the file states; default: the file's spacing, or 1 mm.
@@ -273,8 +286,8 @@ def load_volume(
         How an array (or a ``.npy``/``.npz`` file) is indexed: ``"xyz"``
         (``array[i, j, k]``, voxwarp's order) or ``"zyx"`` (napari/tifffile order,
         transposed on load). ``spacing`` and ``origin`` are always given as
-        ``(x, y, z)``. Other formats define their own axis order, so ``"zyx"`` is an
-        error for them.
+        ``(x, y, z)``. Other formats (and SimpleITK/nibabel images) define their own
+        axis order, so ``"zyx"`` is an error for them.
     nan_policy
         ``"raise"`` rejects NaN/Inf voxels; ``"mask"`` replaces them by the minimum
         finite value with a warning (see :func:`voxwarp.core.volume.check_finite`).
@@ -284,6 +297,13 @@ def load_volume(
     affine
         For arrays: the 4x4 index -> world matrix (mm) in ``space``; gives the array a
         patient orientation (e.g. ``nibabel_image.affine``). Excludes spacing/origin.
+        It maps the index ``(i, j, k)`` of the array **as passed**, in ``axis_order``:
+        with ``"zyx"`` its first column is the step along the array's first axis (z),
+        as for ``np.asarray(nibabel_image.dataobj).T``. ITK's geometry indexes
+        ``(x, y, z)`` while ``GetArrayFromImage`` is ``(z, y, x)``: pass the SimpleITK
+        image itself instead (or reverse the affine's first three columns). A
+        ``spacing=`` given with ``affine=`` that matches its voxel sizes only in the
+        other order is reported as such (one line).
     space
         ``"RAS"`` (nibabel, Slicer) or ``"LPS"`` (DICOM, ITK): the patient space of
         ``affine``.
@@ -305,7 +325,10 @@ def load_volume(
     Volume
         With ``name`` set to the file stem (or folder name), ``source`` to the
         absolute path (``None`` for arrays) and ``units`` to the value unit when
-        known (``"HU"`` for CT DICOM).
+        known (``"HU"`` for CT DICOM). A SimpleITK image is named ``"SimpleITK image"``
+        (``name`` and ``source``); a nibabel image has ``source`` ``"nibabel image"``
+        and its file's stem as ``name`` when it was loaded from one (its voxels may
+        have changed in memory, so a scene embeds them rather than naming the file).
 
     Raises
     ------
@@ -319,7 +342,7 @@ def load_volume(
     factor = _check_downsample(downsample)
     spacing_override = None if spacing is None else _triple(spacing, "spacing", positive=True)
     origin_override = None if origin is None else _triple(origin, "origin")
-    array_affine = _array_affine(affine, space, spacing_override, origin_override)
+    array_affine = _array_affine(affine, space, spacing_override, origin_override, axis_order)
     sample_spacing: str | None = None  # a bundled sample knows whether its spacing is real
 
     if isinstance(source, str) and source.startswith("sample:") and not os.path.exists(source):
@@ -338,6 +361,8 @@ def load_volume(
             loaded = _load_path(path, series)
         name, src = _stem(path), str(path)
         what = path.name
+    elif image_kind(source):
+        loaded, name, src, what = _image_object(source)
     elif isinstance(source, np.ndarray) or hasattr(source, "__array__"):
         try:
             array = np.asarray(source)
@@ -348,7 +373,10 @@ def load_volume(
             loaded.affine, loaded.space = array_affine, "RAS"
         name, src, what = "volume", None, "array"
     else:
-        raise VolumeError(f"source must be a path or a NumPy array; got {type(source).__name__}.")
+        raise VolumeError(
+            "source must be a path or a NumPy array (or a SimpleITK or nibabel image);"
+            f" got {type(source).__name__}."
+        )
 
     data = loaded.data
     if axis_order == "zyx":
@@ -435,10 +463,29 @@ def _finish(
     )
 
 
-def _array_affine(affine: Any, space: Any, spacing: Any, origin: Any) -> np.ndarray | None:
-    """The RAS affine an array was given (``affine=`` in ``space``), or ``None``."""
+def _image_object(source: Any) -> tuple[_Loaded, str, str, str]:
+    """A SimpleITK or nibabel image as (loaded, name, source, what); no file is written."""
+    if image_kind(source) == "sitk":
+        return sitk_loaded(source), SITK_SOURCE, SITK_SOURCE, "the SimpleITK image"
+    filename = source.get_filename() if hasattr(source, "get_filename") else None
+    name = _stem(Path(filename)) if filename else NIBABEL_SOURCE
+    loaded = _nibabel_loaded(source, "the image", "the nibabel image", "nibabel")
+    return loaded, name, NIBABEL_SOURCE, "the nibabel image"
+
+
+def _array_affine(
+    affine: Any, space: Any, spacing: Any, origin: Any, axis_order: str = "xyz"
+) -> np.ndarray | None:
+    """The RAS affine an array was given (``affine=`` in ``space``), or ``None``.
+
+    The affine maps the index ``(i, j, k)`` of the array as passed (in ``axis_order``)
+    to world mm; a ``spacing=`` equal to its voxel sizes in the other order is reported
+    as a transposed array/affine pair."""
     if affine is None:
         return None
+    a = checked_affine(affine, "affine=") if spacing is not None else None
+    if a is not None:
+        _check_transposed(a, spacing, axis_order)
     if spacing is not None or origin is not None:
         raise VolumeError(
             "pass either affine= or spacing=/origin= for an array, not both (the affine"
@@ -446,6 +493,24 @@ def _array_affine(affine: Any, space: Any, spacing: Any, origin: Any) -> np.ndar
         )
     a = checked_affine(affine, "affine=")
     return _to_ras(a, space, "space=")
+
+
+def _check_transposed(affine: np.ndarray, spacing: Sequence[float], axis_order: str) -> None:
+    """A one-line error when ``spacing`` (x, y, z) matches the voxel sizes of ``affine``
+    only with its columns reversed: the affine indexes the other axis order."""
+    sizes = np.linalg.norm(affine[:3, :3], axis=0)  # per axis of the array as passed
+    if axis_order == "zyx":
+        sizes = sizes[::-1]  # the array's (z, y, x) axes become (x, y, z)
+    given = np.asarray(spacing, dtype=np.float64)
+    if np.allclose(sizes, given, rtol=1e-4) or not np.allclose(sizes[::-1], given, rtol=1e-4):
+        return
+    other = "xyz" if axis_order == "zyx" else "zyx"
+    raise VolumeError(
+        f"affine= and axis_order={axis_order!r} disagree: the affine's voxel sizes match"
+        f" spacing={tuple(float(v) for v in given)} only in {other!r} order; the affine must"
+        " map the index of the array as passed (in axis_order) to world. Reverse its first"
+        " three columns (affine[:, [2, 1, 0, 3]]), or pass the SimpleITK/nibabel image itself."
+    )
 
 
 def _to_ras(affine: np.ndarray, space: Any, where: str) -> np.ndarray:
@@ -950,26 +1015,33 @@ def _read_nifti(path: Path) -> _Loaded:
 
     try:
         img = nib.load(str(path))
-        shape = tuple(int(s) for s in img.shape)
     except Exception as exc:
         raise VolumeError(
             f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
             " The file may be corrupt or not a NIfTI/Analyze image."
         ) from exc
+    return _nibabel_loaded(img, str(path), path.name, "NIfTI")
+
+
+def _nibabel_loaded(img: Any, what: str, short: str, kind: str) -> _Loaded:
+    """The voxels (index order as stored) and geometry of a nibabel image: for NIfTI the
+    sform, else the qform (an in-memory ``img.affine`` that differs from both wins); for
+    other formats with an affine (MGH) that affine, in RAS; Analyze has none."""
+    shape = tuple(int(s) for s in img.shape)
     while len(shape) > 3 and shape[-1] == 1:
         shape = shape[:-1]
     if len(shape) > 3:
         raise VolumeError(
-            f"{path} is a 4D NIfTI with shape {tuple(img.shape)} (a time series or several"
+            f"{what} is a 4D {kind} image with shape {tuple(img.shape)} (a time series or several"
             " channels); voxwarp renders one 3D volume. Extract one, e.g. with nibabel:"
-            " nib.save(img.slicer[..., 0], 'volume0.nii.gz'); a displacement field goes"
-            " to render --displacement FILE instead."
+            " img.slicer[..., 0] (saved with nib.save(..., 'volume0.nii.gz')); a"
+            " displacement field goes to render --displacement FILE instead."
         )
     if len(shape) < 3:
         raise VolumeError(
-            f"{path} is a {len(shape)}D image with shape {shape}; voxwarp needs a 3D volume."
+            f"{what} is a {len(shape)}D image with shape {shape}; voxwarp needs a 3D volume."
         )
-    _limits.check_load_bytes(shape, _nifti_itemsize(img), path.name)
+    _limits.check_load_bytes(shape, _nifti_itemsize(img), short)
     try:
         proxy = img.dataobj
         if hasattr(proxy, "get_unscaled"):
@@ -980,11 +1052,11 @@ def _read_nifti(path: Path) -> _Loaded:
             raw, slope, inter = np.asanyarray(proxy), 1.0, 0.0
         hdr = img.header
         zooms = tuple(float(z) for z in hdr.get_zooms()[:3])
-        affine = _nifti_affine(hdr, path.name)
+        affine = _nibabel_affine(img, short)
         space_unit = hdr.get_xyzt_units()[0] if hasattr(hdr, "get_xyzt_units") else "mm"
     except Exception as exc:
         raise VolumeError(
-            f"cannot read the voxel data of the NIfTI file {path} ({type(exc).__name__}: {exc});"
+            f"cannot read the voxel data of {what} ({kind} image; {type(exc).__name__}: {exc});"
             " the file may be truncated or corrupt."
         ) from exc
     data = np.asarray(raw).reshape(shape, order="F") if raw.ndim != 3 else np.asarray(raw)
@@ -993,12 +1065,27 @@ def _read_nifti(path: Path) -> _Loaded:
     if slope != 1.0 or inter != 0.0:
         data = rescale(data, slope, inter)
 
-    scale = _unit_scale(space_unit, path.name)
+    scale = _unit_scale(space_unit, short)
     if affine is not None:
         affine[:3, :] *= scale
         return _Loaded(data, affine=affine, space="RAS")
-    spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=path.name)
+    spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=short)
     return _Loaded(data, tuple(s * scale for s in spacing))  # type: ignore[arg-type]
+
+
+def _nibabel_affine(img: Any, where: str) -> np.ndarray | None:
+    """The RAS index -> world affine of a nibabel image, or ``None`` (no orientation)."""
+    hdr = img.header
+    if hasattr(hdr, "get_sform"):  # NIfTI: the codes say whether there is one
+        stated = getattr(img, "affine", None)
+        if stated is not None and not np.allclose(stated, hdr.get_best_affine()):
+            return checked_affine(stated, where, f"the affine of {where}")  # set in memory
+        return _nifti_affine(hdr, where)
+    from nibabel.analyze import AnalyzeHeader
+
+    if isinstance(hdr, AnalyzeHeader) or getattr(img, "affine", None) is None:
+        return None  # Analyze states no patient orientation
+    return checked_affine(img.affine, where, f"the affine of {where}")
 
 
 def _nifti_itemsize(img: Any) -> int:

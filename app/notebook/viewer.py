@@ -34,6 +34,7 @@ from voxwarp.editing.common import DisplayOptions
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.errors import MissingExtraError, VoxwarpError
 from voxwarp.inputs import load_input
+from voxwarp.io.image_objects import image_kind
 from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.io.volumes import load_volume
 from voxwarp.notebook.gl_thread import GLThread, SameThread
@@ -64,7 +65,8 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
     """An edit session for ``source``: a :class:`~voxwarp.scene.Scene` (a copy of it is
     edited; its warps resume as the session's deformation), an
     :class:`~voxwarp.editing.session.EditSession`, a :class:`~voxwarp.core.volume.Volume`,
-    a 3D array (as :func:`~voxwarp.io.volumes.load_volume` takes it), or INPUT as
+    a 3D array or a SimpleITK/nibabel image (as :func:`~voxwarp.io.volumes.load_volume`
+    takes them), or INPUT as
     ``voxwarp gui`` takes it (a scene JSON, resuming its deformation; a volume file;
     ``sample:NAME``). ``deformation`` (``"massspring"``, ``"chainmail"``,
     ``"wires"``, ``"lattice"``) starts that family with ``settings`` (``resolution``,
@@ -75,13 +77,14 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
         session = EditSession(source.copy())  # the caller's scene keeps its warps
     elif isinstance(source, Volume):
         session = EditSession(Scene(source))
-    elif isinstance(source, np.ndarray):  # as load_volume takes it: (x, y, z), 1 mm voxels
+    elif isinstance(source, np.ndarray) or image_kind(source):  # as load_volume takes them
         session = EditSession(Scene(load_volume(source)))
     elif isinstance(source, str | Path):
         session = _session_from_input(str(source))
     else:
         raise EditorError(
-            "Viewer takes a Scene, an EditSession, a Volume, a 3D array, a scene JSON path,"
+            "Viewer takes a Scene, an EditSession, a Volume, a 3D array, a SimpleITK or"
+            " nibabel image, a scene JSON path,"
             f" a volume path or 'sample:NAME'; got {type(source).__name__}"
         )
     session.sync_builds = False  # wire fields are rebuilt when a drag ends

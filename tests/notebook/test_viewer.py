@@ -267,6 +267,18 @@ def test_a_3d_array_is_a_volume_of_1_mm_voxels() -> None:
     assert tuple(session.scene.volume.spacing) == (1.0, 1.0, 1.0)
 
 
+def test_a_nibabel_image_keeps_its_geometry() -> None:
+    nib = pytest.importorskip("nibabel")
+    from voxwarp.notebook import session_for
+
+    affine = np.diag([-2.0, 1.5, 1.0, 1.0])  # LAS: stored flipped to RAS
+    img = nib.Nifti1Image(np.arange(120, dtype=np.float32).reshape(6, 5, 4), affine)
+    volume = session_for(img).scene.volume
+    assert volume.source == "nibabel image"
+    assert tuple(volume.spacing) == (2.0, 1.5, 1.0)
+    assert volume.file_axes == "LAS"
+
+
 def test_scene_is_copied_and_a_saved_session_resumes(gl_ctx: Any, tmp_path: Any) -> None:
     from voxwarp.notebook import Viewer
 
