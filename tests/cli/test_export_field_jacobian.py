@@ -123,6 +123,7 @@ def test_jacobian_matches_simpleitk_on_the_exported_field(
     assert hi == pytest.approx(np.nanmax(ours), rel=1e-3)
 
 
+@pytest.mark.filterwarnings("ignore:--spacing 2:UserWarning")  # a fold: expected
 def test_folded_field_counts_folded_voxels(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """A fold is counted in the line (count and volume) and in the written image."""
     scene = _scene(tmp_path, _folded)
