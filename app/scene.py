@@ -28,6 +28,7 @@ from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.field_check import TOLERANCE_MM
 from voxwarp.core.field_grid import FieldExport, chain_field, export_chain, field_grid
 from voxwarp.core.files import atomic_write_text
+from voxwarp.core.jacobian import JacobianMap, chain_determinant
 from voxwarp.core.levels import LEVEL_ATTRIBUTES, Level, default_level
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.core.mesh_warp import mesh_instances_bounds
@@ -675,6 +676,27 @@ class Scene:
         see :func:`voxwarp.core.field_grid.export_chain`.
         """
         return export_chain(self.volume, self.warps, spacing, box, tolerance)
+
+    def jacobian_determinant(
+        self, spacing: Any = None, box: Any = None, tolerance: float = TOLERANCE_MM
+    ) -> JacobianMap:
+        """``det J`` of the warp chain on the grid :meth:`export_field` writes
+        (``voxwarp export-field --jacobian``).
+
+        Evaluated from the warps' analytic Jacobians (chain rule) at every node: the
+        determinant of the pull-back map ``x -> chain(x)``, i.e. ``det(I + grad u)`` of
+        the exported field ``u`` as ITK's ``DisplacementFieldJacobianDeterminantFilter``
+        defines it (the same in RAS and LPS). ``spacing``, ``box`` and ``tolerance`` pick
+        the grid as in :meth:`export_field` (``spacing=None``: its refined default, which
+        runs the field check). Nodes the chain does not carry are NaN. See
+        :mod:`voxwarp.core.jacobian`.
+        """
+        if spacing is None:
+            f = self.export_field(box=box, tolerance=tolerance).field
+            affine, shape = f.affine, f.shape
+        else:
+            affine, shape = field_grid(self.volume, spacing, box)
+        return JacobianMap(chain_determinant(self.warps, affine, shape), np.asarray(affine))
 
     def __repr__(self) -> str:
         return (

@@ -37,8 +37,18 @@ def cmd_info(args: argparse.Namespace) -> int:
 
     if is_field_file(args.input):  # a registration result, not a volume
         warps = load_transform(args.input, convention=args.field_convention)
-        text = json.dumps([field_info(w) for w in warps], indent=2)
-        print(text if args.json else field_summary(warps))
+        stats = [_field_jacobian(w) for w in warps]
+        if args.json:
+            infos = [field_info(w) for w in warps]
+            for info, st in zip(infos, stats, strict=True):
+                if st is not None:
+                    info["jacobian_determinant"] = dataclasses.asdict(st)
+            print(json.dumps(infos, indent=2))
+            return 0
+        print(field_summary(warps))
+        for i, st in enumerate(stats):
+            if st is not None:
+                print(f"[{i}] {st.line()} (central differences on the nodes)")
         return 0
     # info shows the file's values: padding kept
     obj = load_input(args.input, keep_padding=True, **ropt.load_options(args))
@@ -58,3 +68,15 @@ def cmd_info(args: argparse.Namespace) -> int:
             mark = "*" if chosen in (str(s.index), s.uid) else " "
             print(f" {mark} {s.line()}")
     return 0
+
+
+def _field_jacobian(warp: Any) -> Any:
+    """:class:`~voxwarp.core.jacobian.JacobianStats` of a displacement field's nodes
+    (central differences, as ITK's filter), or None for another warp."""
+    from voxwarp.core.jacobian import JacobianStats, field_determinant
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+
+    if not isinstance(warp, DisplacementFieldWarp) or min(warp.shape) < 2:
+        return None
+    det = field_determinant(warp.displacements, warp.affine)
+    return JacobianStats.of(det, warp.affine)
