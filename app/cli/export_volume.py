@@ -172,6 +172,34 @@ def export_grid(
     return affine, (int(shape[0]), int(shape[1]), int(shape[2]))
 
 
+def drawable_grid(
+    scene: Any, spacing: tuple[float, float, float] | None, grid: str, max_side: int
+) -> tuple[np.ndarray, tuple[int, int, int], str]:
+    """``(affine, shape, grid used)``: :func:`export_grid`, whose k-slices are drawn one
+    per draw, so each must fit ``max_side`` voxels a side. An ``input`` grid whose file
+    order puts a long axis in its slices falls back to ``volume`` (the same voxels in
+    closest-RAS order) with a warning; a volume without a file orientation gets
+    ``volume`` silently. Otherwise an :class:`InputError` asks for a coarser spacing."""
+    affine, shape = export_grid(scene, spacing, grid)
+    if grid == "input" and not scene.volume.file_axes:
+        grid = "volume"
+    if grid == "input" and max(shape[:2]) > max_side:
+        affine, shape = export_grid(scene, spacing, "volume")
+        if max(shape[:2]) <= max_side:
+            warnings.warn(
+                f"the input file's grid has slices over {max_side} voxels a side; writing"
+                " --grid volume (the same voxels in closest-RAS order) instead",
+                stacklevel=2,
+            )
+            grid = "volume"
+    if max(shape[:2]) > max_side:
+        raise InputError(
+            f"the output grid {'x'.join(map(str, shape))} has slices over {max_side}"
+            " voxels a side; give a coarser --spacing"
+        )
+    return affine, shape, grid
+
+
 def in_file_order(
     volume: Any, affine: np.ndarray, shape: tuple[int, int, int]
 ) -> tuple[np.ndarray, tuple[int, int, int]]:
@@ -248,13 +276,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     scene = load_scene_json(args.scene, "export-volume")
     if not scene.warps:
         warnings.warn(f"{args.scene} has no warps: the export is the volume itself", stacklevel=1)
-    affine, shape = export_grid(scene, args.spacing, args.grid)
-    grid = "volume" if args.grid == "input" and not scene.volume.file_axes else args.grid
-    if max(shape[:2]) > MAX_SLICE_SIDE:
-        raise InputError(
-            f"the output grid {'x'.join(map(str, shape))} has slices over {MAX_SLICE_SIDE}"
-            " voxels a side; give a coarser --spacing"
-        )
+    affine, shape, grid = drawable_grid(scene, args.spacing, args.grid, MAX_SLICE_SIDE)
     vol = scene.volume
     dtype = vol.dtype if args.dtype == "same" else np.dtype(np.float32)
     outside = vol.value_range[0] if args.outside is None else args.outside

@@ -12,6 +12,7 @@ different length, so a wrong permutation cannot pass).
 from __future__ import annotations
 
 import itertools
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -19,14 +20,16 @@ import numpy as np
 import pytest
 
 from tests.run_cli import run_cli
-from voxwarp.cli.export_volume import export_grid, resampled_slices
+from voxwarp.cli.export_volume import drawable_grid, export_grid, resampled_slices
 from voxwarp.core.orientation import (
     axis_code,
     data_in_file_order,
     grid_in_file_order,
     to_closest_ras,
 )
+from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
+from voxwarp.errors import InputError
 from voxwarp.io.fields import save_displacement_field
 from voxwarp.io.volume_stream import write_volume_slices
 from voxwarp.io.volumes import load_volume
@@ -180,3 +183,54 @@ def test_cli_defaults_to_the_input_grid(gl_ctx: Any, input_file: Path, tmp_path:
         assert proc.returncode == 0, proc.stderr
         np.testing.assert_allclose(nib.load(str(out)).affine, original.affine, atol=1e-5)
         assert command == "export-field" or "(input grid)" in proc.stderr
+
+
+def test_input_grid_with_too_long_slices_falls_back_to_volume() -> None:
+    """A file whose first axis runs along z (stored last): its own slices are 30 voxels
+    wide, the stored grid's 5, so under a 10-voxel cap the export falls back with a
+    warning; under a 3-voxel cap neither fits: one line asking for a coarser spacing."""
+    vol = Volume(np.zeros((4, 5, 30), np.uint8), space="RAS", file_axes="SRA")
+    scene = Scene(vol)
+    assert export_grid(scene, None, "input")[1] == (30, 4, 5)
+    with pytest.warns(UserWarning, match="--grid volume"):
+        affine, shape, grid = drawable_grid(scene, None, "input", 10)
+    assert (shape, grid) == ((4, 5, 30), "volume")
+    np.testing.assert_allclose(affine, vol.affine)
+    with pytest.raises(InputError, match="coarser --spacing"):
+        drawable_grid(scene, None, "input", 3)
+    plain = Scene(Volume(np.zeros((4, 5, 30), np.uint8)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert drawable_grid(plain, None, "input", 64)[1:] == ((4, 5, 30), "volume")
+    assert drawable_grid(scene, None, "input", 64)[1:] == ((30, 4, 5), "input")
+
+
+def test_nrrd_in_lps_space_round_trips_on_its_own_grid(renderer: Any, tmp_path: Path) -> None:
+    """An LPS-space NRRD (as a CT scanner writes it), exported to NRRD on --grid input:
+    SimpleITK reads the same array, origin and direction as from the input."""
+    import nrrd
+
+    rng = np.random.default_rng(11)
+    data = rng.integers(-1000, 1500, (10, 8, 6)).astype(np.int16)
+    header = {
+        "space": "left-posterior-superior",
+        "space directions": np.diag([0.7, 0.9, 2.0]),
+        "space origin": np.array([-40.0, 55.0, 110.0]),
+        "kinds": ["domain"] * 3,
+    }
+    src = tmp_path / "ct_lps.nrrd"
+    nrrd.write(str(src), data, header)
+    vol = load_volume(src)
+    assert vol.file_axes == "LPS"
+    out = tmp_path / "out.nrrd"
+    affine, shape = export_grid(Scene(vol), None, "input")
+    slices = resampled_slices(
+        renderer, Scene(vol), affine, shape, dtype=vol.dtype, outside=0.0, interpolation="linear"
+    )
+    write_volume_slices(out, affine, shape, vol.dtype, slices, oriented=True)
+    want, got = sitk.ReadImage(str(src)), sitk.ReadImage(str(out))
+    np.testing.assert_array_equal(sitk.GetArrayFromImage(got), sitk.GetArrayFromImage(want))
+    np.testing.assert_allclose(got.GetOrigin(), want.GetOrigin(), atol=1e-9)
+    np.testing.assert_allclose(got.GetDirection(), want.GetDirection(), atol=1e-9)
+    np.testing.assert_allclose(got.GetSpacing(), want.GetSpacing(), atol=1e-9)
+    np.testing.assert_array_equal(nrrd.read(str(out))[0], data)
