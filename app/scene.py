@@ -664,7 +664,11 @@ class Scene:
         return chain_field(self.warps, affine, shape)[0]
 
     def export_field(
-        self, spacing: Any = None, box: Any = None, tolerance: float = TOLERANCE_MM
+        self,
+        spacing: Any = None,
+        box: Any = None,
+        tolerance: float = TOLERANCE_MM,
+        grid: str = "volume",
     ) -> FieldExport:
         """:meth:`displacement_field` with its interpolation measured (``voxwarp export-field``).
 
@@ -673,9 +677,11 @@ class Scene:
         within ``tolerance`` mm where the chain is smooth (up to a node cap). The result
         holds the field, its outside nodes (not carried by the chain), the nodes that
         border a tear (a discontinuity no spacing interpolates) and the measured error:
-        see :func:`voxwarp.core.field_grid.export_chain`.
+        see :func:`voxwarp.core.field_grid.export_chain`. ``grid="input"`` indexes the
+        nodes in the input file's axis order (its affine), ``"volume"`` in voxwarp's
+        closest-RAS order (:func:`voxwarp.core.field_grid.field_grid`).
         """
-        return export_chain(self.volume, self.warps, spacing, box, tolerance)
+        return export_chain(self.volume, self.warps, spacing, box, tolerance, grid)
 
     def jacobian_determinant(
         self, spacing: Any = None, box: Any = None, tolerance: float = TOLERANCE_MM

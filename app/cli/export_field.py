@@ -69,6 +69,15 @@ def add_parser(sub: Any) -> None:
         help="sample this world box (RAS mm, axis-aligned) instead of the volume's",
     )
     p.add_argument(
+        "--grid",
+        choices=("input", "volume"),
+        default="input",
+        help="input (default: nodes indexed as the input file's voxels, its axes, direction"
+        " and origin, so the field's affine equals the file's; a volume without a file"
+        " orientation gets 'volume') or volume (voxwarp's closest-RAS reordering); the same"
+        " nodes either way. Not used with --box",
+    )
+    p.add_argument(
         "--convention",
         choices=("itk",),
         default="itk",
@@ -106,7 +115,9 @@ def cmd_export_field(args: argparse.Namespace) -> int:
         warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
-    export = scene.export_field(spacing=args.spacing, box=box, tolerance=args.tolerance)
+    export = scene.export_field(
+        spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
+    )
     field = export.field
     save_displacement_field(field, out, export.metadata())
     grid = "x".join(str(n) for n in field.shape)

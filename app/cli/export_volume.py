@@ -9,9 +9,16 @@ memory holds one slice, never the output volume.
 Output grids (:func:`export_grid`), all along the volume's own index axes (its
 direction kept):
 
-* ``volume`` (default): the volume's own grid, the same shape and affine, so the output
-  compares voxel by voxel with the input; ``--spacing`` resamples the volume's box at
-  another voxel size (centred in it, as ``export-field`` does).
+* ``input`` (the CLI's default): the input file's own grid, its array axes, direction
+  and origin, so ``nib.load(out).get_fdata()`` lines up voxel by voxel with the input
+  file's and the affines are equal. voxwarp stores a file in the closest RAS axis order
+  (a permutation and flip, :attr:`Volume.file_axes`); this is the ``volume`` grid
+  indexed back in the file's order (the same voxel centres, nothing resampled; each
+  k-slice of the file's order is drawn directly, so it still streams). A volume
+  without a file orientation (arrays, samples) gets the ``volume`` grid.
+* ``volume``: the volume's grid as voxwarp stores it (closest RAS order), the same
+  shape and affine as ``Volume.affine``; ``--spacing`` resamples the volume's box at
+  another voxel size (centred in it, as ``export-field`` does); with ``input`` too.
 * ``deformed``: the grid grows, in whole voxels of the lattice through the volume's
   voxel centres, until it holds the deformed box.
 
@@ -39,7 +46,7 @@ from voxwarp.errors import InputError
 if TYPE_CHECKING:
     import numpy as np
 
-GRIDS = ("volume", "deformed")
+GRIDS = ("input", "volume", "deformed")
 
 
 def spacing_arg(text: str) -> tuple[float, float, float]:
@@ -74,8 +81,9 @@ def add_parser(sub: Any) -> None:
         description="Resamples the deformed volume of SCENE.json (voxwarp render ..."
         " --save-scene) one slice at a time on the GPU, through the same warp chain the"
         " renderer draws, and streams it to a NIfTI or NRRD file with the output grid's"
-        " affine (RAS; memory holds one slice). Default grid: the volume's own (same shape"
-        " and affine), so the result compares voxel by voxel with the input.",
+        " affine (RAS; memory holds one slice). Default grid: the input file's own (its array"
+        " axes, direction and origin), so the result compares voxel by voxel with the input"
+        " file.",
     )
     p.add_argument("scene", metavar="SCENE.json")
     p.add_argument("-o", "--output", required=True, metavar="VOLUME", help=".nii.gz, .nii or .nrrd")
@@ -88,9 +96,11 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--grid",
         choices=GRIDS,
-        default="volume",
-        help="volume (default: the volume's box) or deformed (grown along the volume's"
-        " axes to hold the deformed box)",
+        default="input",
+        help="input (default: the input file's own grid, axes, direction and origin, so"
+        " the output lines up voxel by voxel with the file; a volume without a file"
+        " orientation gets 'volume'), volume (voxwarp's closest-RAS reordering of it) or"
+        " deformed (grown along the volume's axes to hold the deformed box)",
     )
     p.add_argument(
         "--dtype",
@@ -129,6 +139,9 @@ def export_grid(
     vol = scene.volume
     if grid not in GRIDS:
         raise InputError(f"--grid must be one of {', '.join(GRIDS)}; got {grid!r}")
+    if grid == "input":
+        affine, shape = export_grid(scene, spacing, "volume")
+        return in_file_order(vol, affine, shape)
     if grid == "volume" and spacing is None:
         return np.asarray(vol.affine, dtype=np.float64), vol.shape
     if grid == "volume":  # the box at another voxel size, centred in it (as export-field);
@@ -157,6 +170,47 @@ def export_grid(
     affine[:3, :3] = d * s
     affine[:3, 3] = origin + d @ (first * s)
     return affine, (int(shape[0]), int(shape[1]), int(shape[2]))
+
+
+def drawable_grid(
+    scene: Any, spacing: tuple[float, float, float] | None, grid: str, max_side: int
+) -> tuple[np.ndarray, tuple[int, int, int], str]:
+    """``(affine, shape, grid used)``: :func:`export_grid`, whose k-slices are drawn one
+    per draw, so each must fit ``max_side`` voxels a side. An ``input`` grid whose file
+    order puts a long axis in its slices falls back to ``volume`` (the same voxels in
+    closest-RAS order) with a warning; a volume without a file orientation gets
+    ``volume`` silently. Otherwise an :class:`InputError` asks for a coarser spacing."""
+    affine, shape = export_grid(scene, spacing, grid)
+    if grid == "input" and not scene.volume.file_axes:
+        grid = "volume"
+    if grid == "input" and max(shape[:2]) > max_side:
+        affine, shape = export_grid(scene, spacing, "volume")
+        if max(shape[:2]) <= max_side:
+            warnings.warn(
+                f"the input file's grid has slices over {max_side} voxels a side; writing"
+                " --grid volume (the same voxels in closest-RAS order) instead",
+                stacklevel=2,
+            )
+            grid = "volume"
+    if max(shape[:2]) > max_side:
+        raise InputError(
+            f"the output grid {'x'.join(map(str, shape))} has slices over {max_side}"
+            " voxels a side; give a coarser --spacing"
+        )
+    return affine, shape, grid
+
+
+def in_file_order(
+    volume: Any, affine: np.ndarray, shape: tuple[int, int, int]
+) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """The grid ``(affine, shape)`` along ``volume``'s stored axes, indexed in its
+    file's axis order (:attr:`Volume.file_axes`); unchanged without one."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.orientation import grid_in_file_order
+
+    if not volume.file_axes:
+        return affine, shape
+    return grid_in_file_order(affine, shape, volume.file_axes)
 
 
 def slice_matrix(affine: np.ndarray, k: int) -> np.ndarray:
@@ -222,12 +276,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     scene = load_scene_json(args.scene, "export-volume")
     if not scene.warps:
         warnings.warn(f"{args.scene} has no warps: the export is the volume itself", stacklevel=1)
-    affine, shape = export_grid(scene, args.spacing, args.grid)
-    if max(shape[:2]) > MAX_SLICE_SIDE:
-        raise InputError(
-            f"the output grid {'x'.join(map(str, shape))} has slices over {MAX_SLICE_SIDE}"
-            " voxels a side; give a coarser --spacing"
-        )
+    affine, shape, grid = drawable_grid(scene, args.spacing, args.grid, MAX_SLICE_SIDE)
     vol = scene.volume
     dtype = vol.dtype if args.dtype == "same" else np.dtype(np.float32)
     outside = vol.value_range[0] if args.outside is None else args.outside
@@ -254,7 +303,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - t0
     spacing = np.linalg.norm(affine[:3, :3], axis=0)
     print(
-        f"export-volume: {'x'.join(map(str, shape))} voxels ({args.grid} grid), spacing"
+        f"export-volume: {'x'.join(map(str, shape))} voxels ({grid} grid), spacing"
         f" {' x '.join(f'{v:.4g}' for v in spacing)} mm, {np.dtype(dtype).name},"
         f" {len(scene.warps)} warp(s), {args.interpolation}, outside {outside:g},"
         f" {seconds:.1f} s",

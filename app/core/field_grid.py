@@ -1,6 +1,8 @@
 """The grid a warp chain is exported on as a displacement field (``Scene.displacement_field``).
 
-Three grids, all given as a 4x4 index -> world (RAS mm) affine and a node count per axis:
+Three grids, all given as a 4x4 index -> world (RAS mm) affine and a node count per axis
+(with ``grid="input"`` the first two are indexed in the input file's axis order,
+:func:`voxwarp.core.orientation.grid_in_file_order`: the same nodes):
 
 * the volume's own grid (its affine, direction included): one node per voxel centre;
 * the volume's box at another node ``spacing`` (one number or three, mm), keeping the
@@ -33,6 +35,7 @@ from voxwarp.core.field_check import (
     fill_outside,
     sample_carried,
 )
+from voxwarp.core.orientation import grid_in_file_order
 from voxwarp.core.volume import Volume
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import Warp
@@ -88,9 +91,12 @@ def _centred(
 
 
 def field_grid(
-    volume: Volume, spacing: Any = None, box: Any = None
+    volume: Volume, spacing: Any = None, box: Any = None, grid: str = "volume"
 ) -> tuple[np.ndarray, tuple[int, int, int]]:
     """``(affine, shape)`` of the grid to sample a field on (see the module doc).
+
+    ``grid="input"`` indexes a grid along the volume's axes in its file's axis order
+    (:attr:`Volume.file_axes`; unchanged without one, or with a ``box``).
 
     Raises :class:`~voxwarp.errors.SceneError` for a bad ``spacing`` or ``box``, or a
     grid over the memory budget.
@@ -106,6 +112,8 @@ def field_grid(
         affine, shape = _centred(extent, s, centre, np.asarray(volume.direction, float))
     else:
         affine, shape = np.asarray(volume.affine, float), tuple(volume.shape)
+    if grid == "input" and box is None and volume.file_axes:
+        affine, shape = grid_in_file_order(affine, shape, volume.file_axes)
     _check_budget(shape)
     return affine, shape  # type: ignore[return-value]
 
@@ -193,8 +201,10 @@ def export_chain(
     spacing: Any = None,
     box: Any = None,
     tolerance: float = TOLERANCE_MM,
+    grid: str = "volume",
 ) -> FieldExport:
-    """Sample ``warps`` as a field on ``field_grid(volume, spacing, box)`` and measure it.
+    """Sample ``warps`` as a field on ``field_grid(volume, spacing, box, grid)`` and
+    measure it.
 
     Where ITK's trilinear interpolation misses the chain by more than ``tolerance`` mm
     away from tears, finer spacings are tried (up to :data:`MAX_REFINE` times, within
@@ -206,8 +216,8 @@ def export_chain(
     chain = list(warps)
     to_index = np.linalg.inv(np.asarray(volume.affine, float))
 
-    def measured(grid: Any) -> FieldExport:
-        affine, shape = field_grid(volume, grid, box)
+    def measured(step: Any) -> FieldExport:
+        affine, shape = field_grid(volume, step, box, grid)
         return _measured(chain, affine, shape, to_index, volume.shape, tolerance)
 
     first = trial = measured(spacing)

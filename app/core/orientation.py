@@ -164,3 +164,44 @@ def obliquity_degrees(direction: np.ndarray) -> float:
     d = np.asarray(direction, dtype=np.float64)
     cos = np.clip(np.abs(d).max(axis=0), 0.0, 1.0)
     return float(np.degrees(np.arccos(cos)).max())
+
+
+def file_axes_order(file_axes: str) -> list[tuple[int, float]]:
+    """For each file index axis, the stored (closest-RAS) axis it became and its sign,
+    from the file's axis code (e.g. ``"LIA"`` -> ``[(0, -1), (2, -1), (1, 1)]``)."""
+    order = []
+    for letter in file_axes.upper():
+        for w, pair in enumerate(_LETTERS):
+            if letter in pair:
+                order.append((w, 1.0 if letter == pair[0] else -1.0))
+    if len(order) != 3 or len({w for w, _ in order}) != 3:
+        raise VolumeError(f"not an axis code like 'LPS' or 'RAS': {file_axes!r}")
+    return order
+
+
+def grid_in_file_order(
+    affine: np.ndarray, shape: tuple[int, int, int], file_axes: str
+) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """A stored (closest-RAS) grid ``(affine, shape)`` re-indexed in the file's axis order.
+
+    The inverse of :func:`to_closest_ras` for a file of axis code ``file_axes``: the same
+    voxel centres, indexed as the file indexes them (its axis order, flips and origin).
+    """
+    a = np.asarray(affine, dtype=np.float64)
+    out = np.eye(4)
+    out[:3, 3] = a[:3, 3]
+    new_shape = [0, 0, 0]
+    for i, (w, sign) in enumerate(file_axes_order(file_axes)):
+        new_shape[i] = int(shape[w])
+        out[:3, i] = sign * a[:3, w]
+        if sign < 0:
+            out[:3, 3] += a[:3, w] * (shape[w] - 1)
+    return out, (new_shape[0], new_shape[1], new_shape[2])
+
+
+def data_in_file_order(data: np.ndarray, file_axes: str) -> np.ndarray:
+    """Stored (closest-RAS) voxels ``data`` in the file's axis order (a view; lossless)."""
+    order = file_axes_order(file_axes)
+    out = np.transpose(data, [w for w, _ in order])
+    flips = tuple(i for i, (_, sign) in enumerate(order) if sign < 0)
+    return np.flip(out, axis=flips) if flips else out

@@ -250,7 +250,7 @@ def test_cli_exports_and_summarises(gl_ctx: Any, scene_json: Path, tmp_path: Pat
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == str(out)
     summary = proc.stderr.strip().splitlines()[-1]
-    assert summary.startswith("export-volume: 32x36x32 voxels (volume grid), spacing 8 x 8 x 8 mm,")
+    assert summary.startswith("export-volume: 32x36x32 voxels (input grid), spacing 8 x 8 x 8 mm,")
     assert "float32, 1 warp(s)" in summary
     img = nib.load(str(out))
     assert img.shape == (32, 36, 32)
