@@ -684,7 +684,11 @@ class Scene:
         return export_chain(self.volume, self.warps, spacing, box, tolerance, grid)
 
     def jacobian_determinant(
-        self, spacing: Any = None, box: Any = None, tolerance: float = TOLERANCE_MM
+        self,
+        spacing: Any = None,
+        box: Any = None,
+        tolerance: float = TOLERANCE_MM,
+        grid: str = "volume",
     ) -> JacobianMap:
         """``det J`` of the warp chain on the grid :meth:`export_field` writes
         (``voxwarp export-field --jacobian``).
@@ -692,16 +696,16 @@ class Scene:
         Evaluated from the warps' analytic Jacobians (chain rule) at every node: the
         determinant of the pull-back map ``x -> chain(x)``, i.e. ``det(I + grad u)`` of
         the exported field ``u`` as ITK's ``DisplacementFieldJacobianDeterminantFilter``
-        defines it (the same in RAS and LPS). ``spacing``, ``box`` and ``tolerance`` pick
-        the grid as in :meth:`export_field` (``spacing=None``: its refined default, which
-        runs the field check). Nodes the chain does not carry are NaN. See
+        defines it (the same in RAS and LPS). ``spacing``, ``box``, ``tolerance`` and
+        ``grid`` pick the grid as in :meth:`export_field` (``spacing=None``: its refined
+        default, which runs the field check). Nodes the chain does not carry are NaN. See
         :mod:`voxwarp.core.jacobian`.
         """
         if spacing is None:
-            f = self.export_field(box=box, tolerance=tolerance).field
+            f = self.export_field(box=box, tolerance=tolerance, grid=grid).field
             affine, shape = f.affine, f.shape
         else:
-            affine, shape = field_grid(self.volume, spacing, box)
+            affine, shape = field_grid(self.volume, spacing, box, grid)
         return JacobianMap(chain_determinant(self.warps, affine, shape), np.asarray(affine))
 
     def __repr__(self) -> str:

@@ -143,7 +143,9 @@ def _export_jacobian(args: argparse.Namespace, out: Path) -> int:
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    jac = scene.jacobian_determinant(spacing=args.spacing, box=box, tolerance=args.tolerance)
+    jac = scene.jacobian_determinant(
+        spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
+    )
     det = jac.det
     slices = (det[:, :, k].T for k in range(det.shape[2]))
     oriented = scene.volume.space == "RAS"

@@ -185,6 +185,23 @@ def test_cli_defaults_to_the_input_grid(gl_ctx: Any, input_file: Path, tmp_path:
         assert command == "export-field" or "(input grid)" in proc.stderr
 
 
+def test_jacobian_lies_on_the_field_export_grid(
+    gl_ctx: Any, input_file: Path, tmp_path: Path
+) -> None:
+    """``export-field --jacobian`` writes det J on the grid the field export writes (the
+    input file's, by default): same shape and affine, so the two files line up."""
+    scene_json = _deformed(load_volume(input_file)).save(tmp_path / "scene.json")
+    outs = {}
+    for name, extra in (("field", []), ("detj", ["--jacobian"])):
+        outs[name] = tmp_path / f"{name}.nii.gz"
+        proc = run_cli("export-field", str(scene_json), "-o", str(outs[name]), *extra)
+        assert proc.returncode == 0, proc.stderr
+    field, detj = (nib.load(str(p)) for p in outs.values())
+    np.testing.assert_allclose(detj.affine, field.affine, atol=1e-5)
+    np.testing.assert_allclose(detj.affine, nib.load(str(input_file)).affine, atol=1e-5)
+    assert detj.shape == field.shape[:3]
+
+
 def test_input_grid_with_too_long_slices_falls_back_to_volume() -> None:
     """A file whose first axis runs along z (stored last): its own slices are 30 voxels
     wide, the stored grid's 5, so under a 10-voxel cap the export falls back with a
