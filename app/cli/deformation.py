@@ -27,7 +27,7 @@ from voxwarp.cli.deform_options import Cut as _Cut
 from voxwarp.cli.deform_options import Drag as _Drag
 from voxwarp.cli.deform_options import grid_text as _grid_text
 from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
-from voxwarp.deform.elements.anchors import MODEL_DEFAULT, anchor_mask, resolve_anchor
+from voxwarp.deform.elements.anchors import MODEL_DEFAULT, anchor_mask
 from voxwarp.editing import model_settings as ms
 from voxwarp.editing.model_settings import LatticeSettings, SettingError, WireSettings
 from voxwarp.errors import InputError as CliOptionError
@@ -127,7 +127,7 @@ def check_deform_options(args: argparse.Namespace) -> None:
         ranges_text = f"indices run 0..{shape[0] - 1}"
     else:
         ranges_text = "indices run " + ", ".join(f"0..{n - 1}" for n in shape) + " (i, j, k)"
-    anchor = resolve_anchor(args.anchor or MODEL_DEFAULT, model)
+    anchor = _grid_anchor(args, model)
     fixed = anchor_mask(tuple(shape), anchor)
     for text, ranges in args.fix or []:
         if any(hi >= n for (_, hi), n in zip(ranges, shape, strict=True)):
@@ -255,6 +255,13 @@ def _sides_text(wires: list[Any]) -> str:
     return "; ".join(dict.fromkeys(parts))
 
 
+def _grid_anchor(args: argparse.Namespace, model: str) -> str:
+    """The anchor mode the grid of ``--massspring``/``--chainmail`` gets: ``--anchor``, or
+    the model's own (its settings class's ``default_anchor``)."""
+    settings = ms.MassSpringSettings if model == "massspring" else ms.ChainMailSettings
+    return args.anchor or settings.default_anchor
+
+
 def _element_settings(args: argparse.Namespace) -> Any:
     """The model builder's settings of ``render --massspring`` / ``--chainmail``
     (:mod:`voxwarp.editing.model_settings`; None without either)."""
@@ -314,7 +321,7 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
                 volume,
                 shape=shape,
                 margin=args.grid_margin,
-                anchor=resolve_anchor(args.anchor or MODEL_DEFAULT, model),
+                anchor=_grid_anchor(args, model),
             )
         except ElementGridError as exc:
             raise CliOptionError(f"--grid-margin: {exc}") from exc

@@ -22,7 +22,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from voxwarp.deform.elements.anchors import ANCHOR_CHOICES, AUTO, MODEL_DEFAULT, resolve_anchor
+from voxwarp.deform.elements.anchors import ANCHOR_CHOICES, AUTO, MODEL_DEFAULT
 from voxwarp.deform.elements.anchors import DEFAULT as DEFAULT_REGION
 from voxwarp.deform.elements.margin import AUTO_MARGIN
 from voxwarp.editing.common import CHAINMAIL_VARIANTS, INTEGRATORS, EditorError, choice
@@ -128,16 +128,17 @@ class ElementSettings:
     margin: float | str = 0.0
     #: boundary conditions (:mod:`voxwarp.deform.elements.anchors`): the grid's fixed
     #: elements ("shell", "corners": the thesis's, "none", "default": the model's own,
-    #: :data:`~voxwarp.deform.elements.anchors.MODEL_ANCHORS`) and the region of
-    #: influence (mm, "auto", None: off; "default": "auto" with the shell, else off)
+    #: :attr:`default_anchor`) and the region of influence (mm, "auto", None: off;
+    #: "default": "auto" with the shell, else off)
     anchor: str = MODEL_DEFAULT
     fix_outside: float | str | None = "default"
-    #: the model these settings build (its default anchor)
-    model: ClassVar[str] = "massspring"
+    #: the model's own anchor mode: springs spread a drag over the whole grid, so
+    #: mass-spring fixes the shell (ChainMail overrides it)
+    default_anchor: ClassVar[str] = "shell"
 
     def grid_anchor(self) -> str:
         """The anchor mode of the grid: :attr:`anchor`, or the model's default."""
-        return resolve_anchor(self.anchor, self.model)
+        return self.default_anchor if self.anchor == MODEL_DEFAULT else self.anchor
 
 
 @dataclass(frozen=True)
@@ -155,7 +156,10 @@ class MassSpringSettings(ElementSettings):
 class ChainMailSettings(ElementSettings):
     """A 3D ChainMail model (Knoche 2008, chapter 4; Gibson 1997)."""
 
-    model: ClassVar[str] = "chainmail"
+    #: ChainMail moves an element only once a link to it runs out of slack, so a drag is
+    #: local with the thesis's corners; a fixed shell next to a drag would stop it (the
+    #: links to the shell run out of slack within one spacing)
+    default_anchor: ClassVar[str] = "corners"
 
     variant: str = "enhanced"
     cuts: tuple[Cut, ...] = ()

@@ -27,15 +27,11 @@ from voxwarp.errors import VoxwarpError
 ANCHOR_MODES = ("shell", "corners", "none")
 #: the anchor mode of a new grid (a saved grid without ``"anchor"`` is ``"corners"``)
 DEFAULT_ANCHOR = "shell"
-#: a setting's anchor ``"default"``: the model's own (:func:`resolve_anchor`)
+#: a setting's anchor ``"default"``: the model's own (the settings class's
+#: ``default_anchor``, :mod:`voxwarp.editing.model_settings`)
 MODEL_DEFAULT = "default"
 #: what a setting may say: a mode, or the model's own default
 ANCHOR_CHOICES = (MODEL_DEFAULT, *ANCHOR_MODES)
-#: each model's own default: springs spread a drag over the whole grid, so mass-spring
-#: fixes the shell; ChainMail moves an element only once a link to it runs out of slack,
-#: so a drag is local with the thesis's corners, and a fixed shell next to a drag would
-#: stop it (the links to the shell run out of slack within one spacing)
-MODEL_ANCHORS = {"massspring": "shell", "chainmail": "corners"}
 #: ``fix_outside``: the radius follows the grid and the drag
 AUTO = "auto"
 #: ``fix_outside`` of a new grid: ``"auto"`` with the shell anchor, off with the others
@@ -51,12 +47,6 @@ DRAGS_PER_RADIUS = 3.0
 
 class AnchorError(VoxwarpError, ValueError):
     """A bad anchor mode or region radius (the message names the fix)."""
-
-
-def resolve_anchor(anchor: str, model: str) -> str:
-    """The anchor mode of a setting: ``anchor`` itself, or for :data:`MODEL_DEFAULT` the
-    default of ``model`` (``"massspring"`` or ``"chainmail"``, :data:`MODEL_ANCHORS`)."""
-    return MODEL_ANCHORS[model] if anchor == MODEL_DEFAULT else anchor
 
 
 def check_anchor(mode: Any) -> str:
