@@ -42,12 +42,15 @@ def load_input(
     axis_order: str = "xyz",
     series: int | str | None = None,
     keep_padding: bool = False,
+    frame_index: int | None = None,
+    channel: int | None = None,
 ) -> Any:
     """Load INPUT: returns a Volume, or a Scene for scene JSON.
 
     ``axis_order`` (``"xyz"`` or ``"zyx"``) says how a .npy/.npz array is indexed;
     ``series`` picks one series of a DICOM folder (its UID or index); both are passed to
-    :func:`voxwarp.io.volumes.load_volume` and refused for samples and scene JSON.
+    :func:`voxwarp.io.volumes.load_volume` and refused for samples and scene JSON, as
+    are ``frame_index`` and ``channel`` (one time point or channel of a 4-D/5-D file).
     The padding outside a CT's field of view is masked
     (:func:`voxwarp.core.modality.mask_padding`) unless ``keep_padding``.
     """
@@ -64,6 +67,9 @@ def load_input(
             raise InputError(f"--axis-order applies to .npy/.npz arrays; {spec} is {named}")
         if series is not None:
             raise InputError(f"--series applies to DICOM folders; {spec} is {named}")
+        for option, value in (("--frame-index", frame_index), ("--channel", channel)):
+            if value is not None:
+                raise InputError(f"{option} applies to 4-D/multi-channel files; {spec} is {named}")
     if spec.startswith("sample:"):
         vol = load_sample(spec.split(":", 1)[1], spacing=spacing)
         vol = vol.downsample(downsample) if downsample != 1 else vol
@@ -73,7 +79,8 @@ def load_input(
         return scene if keep_padding else _scene_without_padding(scene)
     from voxwarp.io.volumes import load_volume  # the file readers: only for files
 
-    extra: dict[str, Any] = {} if series is None else {"series": series}
+    given = {"series": series, "frame_index": frame_index, "channel": channel}
+    extra: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
     vol = load_volume(
         path,
         spacing=spacing,

@@ -888,6 +888,7 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
     if src is not None and os.path.exists(src):
         d["path"] = path_entry(src, base_dir)
         d["shape"] = list(volume.shape)  # a downsampled file is loaded downsampled again
+        d.update(volume.frame_choice)  # the time point / channel of a 4-D file
         return d
     if volume.nbytes > EMBED_LIMIT_BYTES:
         raise SceneError(
@@ -1013,7 +1014,8 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
             return _with_stated_geometry(vol, spacing, origin)
         if "path" in d:
             p = scene_file(d["path"], base_dir, "volume", SceneError)
-            vol = _with_stated_shape(load_volume(p), d.get("shape"), str(p))
+            pick = {k: d[k] for k in ("frame_index", "channel") if d.get(k) is not None}
+            vol = _with_stated_shape(load_volume(p, **pick), d.get("shape"), str(p))
             return _with_stated_geometry(vol, spacing, origin)
     except SceneError:
         raise  # names the scene volume already

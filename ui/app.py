@@ -72,6 +72,7 @@ def open_window(
     size: tuple[int, int] = (1280, 820),
     series: int | str | None = None,
     fallback: bool = True,
+    **pick: int,
 ) -> Any:
     """Show the main window on ``input_spec``. With ``fallback``, an INPUT that cannot be
     opened (a :class:`~voxwarp.errors.VoxwarpError`) still opens the window, on the
@@ -82,7 +83,7 @@ def open_window(
 
     error: str | None = None
     try:
-        session = load_session_input(input_spec, series=series)
+        session = load_session_input(input_spec, series=series, **pick)
     except VoxwarpError as exc:
         if not fallback:
             raise
@@ -104,6 +105,7 @@ def run_gui(
     size: tuple[int, int] = (1280, 820),
     tour: str | None = None,
     series: int | str | None = None,
+    **pick: int,
 ) -> int:
     """Open the window on ``input_spec``; with ``tour``, step through a teaching demo's
     tour (its first scene replaces ``input_spec``); with ``screenshot``, save a PNG of
@@ -112,7 +114,7 @@ def run_gui(
     ``screenshot`` returns 2 without a window. Returns the exit code."""
     app = application()
     try:  # with --screenshot (a script) a bad INPUT ends it: no window to wait on
-        window = open_window(input_spec, size=size, series=series, fallback=not screenshot)
+        window = open_window(input_spec, size=size, series=series, fallback=not screenshot, **pick)
     except VoxwarpError as exc:
         print(f"voxwarp: error: {exc}", file=sys.stderr)
         return 2

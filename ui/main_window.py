@@ -53,11 +53,13 @@ from voxwarp.editing.state import BuildJob
 from voxwarp.errors import VoxwarpError
 from voxwarp.inputs import load_input
 from voxwarp.io.fields import load_transform
+from voxwarp.io.frames import FrameChoiceError
 from voxwarp.io.images import write_image
 from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
 from voxwarp.ui.field_view import SEP
+from voxwarp.ui.frame_dialog import ask_frame
 from voxwarp.ui.mpr import SliceLayout, install_slice_controls
 from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
 from voxwarp.ui.tasks import Task, run_with_progress
@@ -702,17 +704,29 @@ class MainWindow(QMainWindow):
         n = self.edit("Remove displacement fields", self.session.remove_imported_warps)
         self.statusBar().showMessage(f"Removed {n} imported warp(s)", 4000)
 
-    def open_path(self, path: str | Path, wait: bool = False, refit: bool = False) -> Task:
+    def open_path(
+        self, path: str | Path, wait: bool = False, refit: bool = False, **pick: int
+    ) -> Task:
         """Open a volume or a scene JSON off the GUI thread (progress, cancel); with
         ``refit`` the camera is fitted to this viewport instead of the file's camera
-        (tour scenes were framed for their figure's image shape)."""
+        (tour scenes were framed for their figure's image shape). ``pick``
+        (``frame_index=``, ``channel=``) chooses in a 4-D file; without, the window asks
+        (:mod:`voxwarp.ui.frame_dialog`)."""
         spec = str(path)
 
         def job(progress: Callable[[float, str], None], cancelled: Callable[[], bool]) -> Any:
             progress(0.1, "reading")
-            return load_session_input(spec)
+            try:
+                return load_session_input(spec, **pick)
+            except FrameChoiceError as exc:
+                return exc  # asked on the GUI thread, in done
 
         def done(result: Any) -> None:
+            if isinstance(result, FrameChoiceError):
+                choice = ask_frame(self, Path(spec).name, result)
+                if choice is not None:
+                    self.open_path(spec, wait=wait, refit=refit, **choice)
+                return
             self.viewport.with_context(self.session.close)
             if refit:
                 result.scene.camera = None
@@ -1019,16 +1033,18 @@ class MainWindow(QMainWindow):
 
 
 # ---------------------------------------------------------------------------- helpers
-def load_session_input(spec: str, series: int | str | None = None) -> EditSession:
+def load_session_input(spec: str, series: int | str | None = None, **pick: int) -> EditSession:
     """A session for INPUT: a scene JSON (resuming its deformation), a volume file or
     ``sample:NAME`` (shown with the sample's suggested transfer function); ``series``
-    picks one series of a DICOM folder (``voxwarp gui --series``)."""
+    picks one series of a DICOM folder (``voxwarp gui --series``), ``pick``
+    (``frame_index=``, ``channel=``) one volume of a 4-D file."""
     path = Path(spec)
     if path.suffix.lower() == ".json" and path.is_file():
         if series is not None:
             raise EditorError(f"--series applies to DICOM folders; {spec} is a scene JSON")
         return EditSession.load(path)
-    obj = load_input(spec, **({} if series is None else {"series": series}))
+    given = {"series": series, **pick}
+    obj = load_input(spec, **{k: v for k, v in given.items() if v is not None})
     if isinstance(obj, Scene):
         return EditSession(obj)
     if not isinstance(obj, Volume):

@@ -59,8 +59,14 @@ def cmd_gui(args: argparse.Namespace) -> int:
     # Qt: only when a window opens (see the module docstring)
     from voxwarp.ui.app import run_gui
 
+    pick = {k: getattr(args, k) for k in ("frame_index", "channel") if getattr(args, k) is not None}
     return run_gui(
-        args.input, screenshot=args.screenshot, size=args.size, tour=args.tour, series=args.series
+        args.input,
+        screenshot=args.screenshot,
+        size=args.size,
+        tour=args.tour,
+        series=args.series,
+        **pick,
     )
 
 

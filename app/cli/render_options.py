@@ -183,7 +183,8 @@ def camera_arg(text: str) -> Any:
 
 
 def add_input_args(p: argparse.ArgumentParser) -> None:
-    """``--axis-order`` and ``--series``: how INPUT is read (``render``, ``info``, ``gui``)."""
+    """``--axis-order``, ``--series``, ``--frame-index`` and ``--channel``: how INPUT is
+    read (``render``, ``slice``, ``info``)."""
     p.add_argument(
         "--axis-order",
         choices=("xyz", "zyx"),
@@ -194,7 +195,23 @@ def add_input_args(p: argparse.ArgumentParser) -> None:
 
 
 def add_series_arg(p: argparse.ArgumentParser) -> None:
-    """``--series UID|INDEX`` for DICOM folders holding several series."""
+    """``--series UID|INDEX`` for DICOM folders holding several series, and
+    ``--frame-index N`` / ``--channel N`` for 4-D and multi-channel files."""
+    p.add_argument(
+        "--frame-index",
+        type=index_arg,
+        metavar="N",
+        help="the time point (0-based) to read from a 4-D file (a NIfTI time series, a"
+        " NRRD time axis, a TIFF hyperstack's T); required when it holds several",
+    )
+    p.add_argument(
+        "--channel",
+        type=index_arg,
+        metavar="N",
+        help="the channel or vector component (0-based) to read from a multi-channel file"
+        " (5-D NIfTI, NRRD list/vector axis, TIFF C/S, MetaImage with several components);"
+        " required when it holds several",
+    )
     p.add_argument(
         "--series",
         type=series_arg,
@@ -208,14 +225,26 @@ def add_series_arg(p: argparse.ArgumentParser) -> None:
 def load_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keywords of :func:`voxwarp.inputs.load_input` that the input options give:
     ``--spacing``, ``--downsample`` and ``--nan`` where the command has them, and
-    ``--axis-order`` and ``--series`` when given."""
+    ``--axis-order``, ``--series``, ``--frame-index`` and ``--channel`` when given."""
     names = {"spacing": "spacing", "downsample": "downsample", "nan": "nan_policy"}
     out: dict[str, Any] = {kw: getattr(args, a) for a, kw in names.items() if hasattr(args, a)}
     if getattr(args, "axis_order", None) is not None:
         out["axis_order"] = args.axis_order
-    if getattr(args, "series", None) is not None:
-        out["series"] = args.series
+    for name in ("series", "frame_index", "channel"):
+        if getattr(args, name, None) is not None:
+            out[name] = getattr(args, name)
     return out
+
+
+def index_arg(text: str) -> int:
+    """A 0-based index: a whole number >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number (0, 1, 2, ...)") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is negative; indices count from 0")
+    return value
 
 
 def add_render_options(p: argparse.ArgumentParser) -> None:

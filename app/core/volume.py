@@ -165,6 +165,10 @@ class Volume:
     padding_value
         Value the file marks as outside the scanned field of view (DICOM
         PixelPaddingValue, in stored units after rescaling), or ``None``.
+    frame_choice
+        ``{"frame_index": t}`` and/or ``{"channel": c}``: the volume that was read from a
+        4-D or multi-channel file (a scene saves it beside the file's path); empty
+        otherwise.
     """
 
     data: np.ndarray
@@ -179,6 +183,7 @@ class Volume:
     spacing_source: str = "file"
     modality: str = ""
     padding_value: float | None = None
+    frame_choice: dict[str, int] = field(default_factory=dict)
     _range: tuple[float, float] | None = field(default=None, repr=False)
     _window: tuple[float, float] | None = field(default=None, repr=False)
 
@@ -365,6 +370,7 @@ _GEOMETRY_FIELDS = (
     "spacing_source",
     "modality",
     "padding_value",
+    "frame_choice",
 )
 
 

@@ -48,7 +48,10 @@ class Loaded:
 
     ``affine`` is the 4x4 index -> world matrix in mm when the file states one (world
     RAS+ when ``space == "RAS"``); otherwise ``spacing``/``origin`` (axis-aligned) when
-    known. ``array_like`` marks .npy/.npz data (``axis_order`` applies).
+    known. ``array_like`` marks .npy/.npz data (``axis_order`` applies). ``extra``
+    describes axes after the three spatial ones (:class:`voxwarp.io.frames.ExtraAxis`,
+    one per axis, time or channels) that :func:`voxwarp.io.volumes.load_volume` picks
+    from; ``picked`` marks a reader that chose the frame/channel itself.
     """
 
     data: np.ndarray
@@ -60,6 +63,9 @@ class Loaded:
     space: str = ""
     modality: str = ""
     padding_value: float | None = None
+    extra: tuple[Any, ...] = ()
+    picked: bool = False
+    vector_field: str = ""
 
 
 def warn(message: str) -> None:

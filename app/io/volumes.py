@@ -34,9 +34,15 @@ folder of DICOM files     One series (``series=``; the largest by default), sort
 ``.dcm``                  A single multi-frame DICOM file.
 ``.tif`` / ``.tiff``      A multi-page TIFF z-stack, or a folder of single-page TIFF
                           slices in natural file-name order; ImageJ calibration is used.
+``.mha`` / ``.mhd``       MetaImage via SimpleITK (``registration`` extra), LPS.
 ========================  ===========================================================
 
-In-memory images load as their files would: a 3-D scalar SimpleITK image (LPS
+4-D and 5-D images (NIfTI time series and vector images, NRRD ``list``/``vector``/``time``
+axes, TIFF hyperstacks with T/C/S axes, 4-D ``.npy``/``.npz`` arrays, MetaImage and
+SimpleITK images with several components or a 4th dimension) load one time point or
+channel: ``frame_index=`` / ``channel=`` (:mod:`voxwarp.io.frames`).
+
+In-memory images load as their files would: a SimpleITK or ITK (``itk``) image (LPS
 origin/spacing/direction, converted to RAS) and a nibabel image (its RAS affine and
 scaled ``dataobj``); see :mod:`voxwarp.io.image_objects`.
 
@@ -76,13 +82,23 @@ from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
 from voxwarp.core.volume import short_repr as _short
 from voxwarp.errors import VolumeError
+from voxwarp.io import frames as _frames
 from voxwarp.io import samples as _samples
 from voxwarp.io.dicom import list_dicom_series, read_dicom_dir, read_dicom_file
-from voxwarp.io.image_objects import NIBABEL_SOURCE, SITK_SOURCE, image_kind, sitk_loaded
+from voxwarp.io.image_objects import (
+    ITK_SOURCE,
+    NIBABEL_SOURCE,
+    SITK_SOURCE,
+    image_kind,
+    itk_loaded,
+    sitk_loaded,
+)
 from voxwarp.io.loaded import Loaded as _Loaded
 from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
 from voxwarp.io.loaded import native as _native
 from voxwarp.io.loaded import warn as _warn
+from voxwarp.io.metaimage import METAIMAGE_SUFFIXES, read_metaimage
+from voxwarp.io.nifti_frames import nifti_extra_axes
 from voxwarp.io.volume_stream import NOT_ORIENTED_KEY
 
 __all__ = [
@@ -110,6 +126,8 @@ LOAD_EXTENSIONS: tuple[str, ...] = (
     ".nii",
     ".nii.gz",
     ".hdr",
+    ".mha",
+    ".mhd",
     ".dcm",
     ".tif",
     ".tiff",
@@ -129,7 +147,8 @@ _RAW_EXTENSIONS = (".raw", ".bin", ".img")
 _TIFF_EXTENSIONS = (".tif", ".tiff")
 _SUPPORTED_TEXT = (
     ".npy, .npz, .raw/.bin/.img with a .json sidecar, .nrrd/.nhdr, .nii/.nii.gz,"
-    " .tif/.tiff (multi-page), .dcm (multi-frame), or a folder of DICOM or TIFF slices"
+    " .mha/.mhd, .tif/.tiff (multi-page), .dcm (multi-frame), or a folder of DICOM or TIFF"
+    " slices"
 )
 
 #: dtype names accepted in a raw sidecar, mapped to NumPy type codes.
@@ -259,6 +278,8 @@ def load_volume(
     series: str | int | None = None,
     allow_data_dirs: Sequence[str | os.PathLike[str]] | None = None,
     memory_budget: int | float | str | None = None,
+    frame_index: int | None = None,
+    channel: int | None = None,
 ) -> Volume:
     """Load a volume from a file, a folder of slices, a NumPy array, or an in-memory
     SimpleITK or nibabel image.
@@ -319,6 +340,16 @@ def load_volume(
         ``"2G"``; ``"unlimited"`` for no limit). Default: half the physical memory
         (:data:`voxwarp.core.limits.DEFAULT_MEMORY_FRACTION`). Each reader checks the
         size its header states before reading the voxels.
+    frame_index, channel
+        For a 4-D or 5-D image (a time series, a vector or multi-channel image): the
+        0-based time point and channel to load (see :mod:`voxwarp.io.frames`). A file
+        that holds several volumes without them raises
+        :class:`~voxwarp.io.frames.FrameChoiceError` naming the range; NumPy arrays
+        and ``.npy``/``.npz`` files with a 4th axis (last in ``"xyz"`` order, first
+        in ``"zyx"``) take either. A NIfTI with a vector/displacement intent (or 5-D
+        with 3 float components), a 3-component float NRRD vector axis or a SimpleITK
+        float 3-vector image is a displacement field: refused (it goes to
+        ``--displacement``) unless ``channel`` picks one component.
 
     Returns
     -------
@@ -344,6 +375,7 @@ def load_volume(
     origin_override = None if origin is None else _triple(origin, "origin")
     array_affine = _array_affine(affine, space, spacing_override, origin_override, axis_order)
     sample_spacing: str | None = None  # a bundled sample knows whether its spacing is real
+    pick = _frames.Pick(frame_index, channel)
 
     if isinstance(source, str) and source.startswith("sample:") and not os.path.exists(source):
         sample = _samples.load_sample(source.split(":", 1)[1])  # looked up when called
@@ -358,11 +390,11 @@ def load_volume(
         except (TypeError, ValueError) as exc:
             raise VolumeError(f"invalid path {_short(source)}: {exc}") from exc
         with allowed_data_dirs(allow_data_dirs), _limits.memory_budget(memory_budget):
-            loaded = _load_path(path, series)
+            loaded = _load_path(path, series, pick)
         name, src = _stem(path), str(path)
         what = path.name
     elif image_kind(source):
-        loaded, name, src, what = _image_object(source)
+        loaded, name, src, what = _image_object(source, pick)
     elif isinstance(source, np.ndarray) or hasattr(source, "__array__"):
         try:
             array = np.asarray(source)
@@ -378,7 +410,7 @@ def load_volume(
             f" got {type(source).__name__}."
         )
 
-    data = loaded.data
+    data = _pick(loaded, pick, axis_order, what)
     if axis_order == "zyx":
         if not loaded.array_like:
             raise VolumeError(
@@ -404,6 +436,7 @@ def load_volume(
     volume = _finish(loaded, spacing_override, origin_override, name, src, nan_policy, what)
     if sample_spacing is not None and spacing_override is None:
         volume.spacing_source = sample_spacing
+    volume.frame_choice = pick.keywords()
     if factor != 1:
         reduced = volume.downsample(factor)
         _warn(
@@ -463,14 +496,38 @@ def _finish(
     )
 
 
-def _image_object(source: Any) -> tuple[_Loaded, str, str, str]:
-    """A SimpleITK or nibabel image as (loaded, name, source, what); no file is written."""
-    if image_kind(source) == "sitk":
+def _image_object(source: Any, pick: _frames.Pick) -> tuple[_Loaded, str, str, str]:
+    """A SimpleITK, ITK or nibabel image as (loaded, name, source, what); no file is
+    written."""
+    kind = image_kind(source)
+    if kind == "sitk":
         return sitk_loaded(source), SITK_SOURCE, SITK_SOURCE, "the SimpleITK image"
+    if kind == "itk":
+        return itk_loaded(source), ITK_SOURCE, ITK_SOURCE, "the ITK image"
     filename = source.get_filename() if hasattr(source, "get_filename") else None
     name = _stem(Path(filename)) if filename else NIBABEL_SOURCE
-    loaded = _nibabel_loaded(source, "the image", "the nibabel image", "nibabel")
+    loaded = _nibabel_loaded(source, "the nibabel image", "nibabel", pick)
     return loaded, name, NIBABEL_SOURCE, "the nibabel image"
+
+
+def _pick(loaded: _Loaded, pick: _frames.Pick, axis_order: str, what: str) -> np.ndarray:
+    """The loaded voxels reduced to the chosen frame/channel (see :mod:`voxwarp.io.frames`);
+    an array's axes beyond 3 (first in ``"zyx"`` order) are taken as unnamed."""
+    data = loaded.data
+    if loaded.picked:
+        return data
+    if loaded.array_like and data.ndim > 3:
+        n = data.ndim - 3
+        if axis_order == "zyx":  # (t, z, y, x): the extra axes lead
+            data = np.moveaxis(data, list(range(n)), list(range(3, 3 + n)))
+        loaded.extra = loaded.extra or tuple(
+            _frames.ExtraAxis(_frames.ANY, int(s)) for s in data.shape[3:]
+        )
+    if data.ndim != 3 + len(loaded.extra):
+        return data  # not a volume: _finish says so
+    shape = tuple(int(s) for s in data.shape)
+    indices = _frames.choose(loaded.extra, pick, what, shape, vector_field=loaded.vector_field)
+    return _frames.take(data, indices)
 
 
 def _array_affine(
@@ -520,7 +577,9 @@ def _to_ras(affine: np.ndarray, space: Any, where: str) -> np.ndarray:
     return affine_to_ras(affine, space)
 
 
-def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
+def _load_path(
+    path: Path, series: str | int | None = None, pick: _frames.Pick | None = None
+) -> _Loaded:
     """Dispatch on the path: folder content or file extension."""
     if not path.exists():
         raise VolumeError(f"no such file or directory: {path}")
@@ -540,9 +599,11 @@ def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
     if lower.endswith((".npy", ".npz")):
         return _read_numpy(path)
     if lower.endswith((".nii", ".nii.gz", ".hdr")):
-        return _read_nifti(path)
+        return _read_nifti(path, pick)
     if lower.endswith((".nrrd", ".nhdr")):
         return _read_nrrd(path)
+    if lower.endswith(METAIMAGE_SUFFIXES):
+        return read_metaimage(path)
     if lower.endswith(_TIFF_EXTENSIONS):
         return _read_tiff_file(path)
     if lower.endswith(".json"):
@@ -550,7 +611,7 @@ def _load_path(path: Path, series: str | int | None = None) -> _Loaded:
     if lower.endswith(_RAW_EXTENSIONS):
         sidecar = _sidecar_for_raw(path)
         if sidecar is None and lower.endswith(".img") and path.with_suffix(".hdr").exists():
-            return _read_nifti(path)  # Analyze / NIfTI pair
+            return _read_nifti(path, pick)  # Analyze / NIfTI pair
         if sidecar is None:
             raise VolumeError(
                 f"no JSON sidecar for raw file {path}: put {path.name}.json or"
@@ -843,17 +904,17 @@ def _read_nrrd(path: Path) -> _Loaded:
     if dirs is not None and (dirs.ndim != 2 or dirs.shape[0] != data.ndim):
         dirs = None
 
-    spatial = list(range(data.ndim))
-    if dirs is not None:
-        spatial = [a for a in range(data.ndim) if np.all(np.isfinite(dirs[a]))]
+    spatial = _nrrd_spatial_axes(header, dirs, data.ndim)
+    extra: tuple[_frames.ExtraAxis, ...] = ()
+    field = ""
     if data.ndim != 3:
-        extra = [a for a in range(data.ndim) if a not in spatial]
-        if len(spatial) != 3 or any(data.shape[a] != 1 for a in extra):
+        if len(spatial) != 3:
             raise VolumeError(
-                f"{path} is a {data.ndim}D NRRD with sizes {list(data.shape)}; voxwarp reads"
-                " scalar 3D volumes. Extract one 3D scalar component first."
+                f"{path} is a {data.ndim}D NRRD with sizes {list(data.shape)} whose header"
+                " does not say which 3 axes are spatial; give the others a 'kinds' entry"
+                " (list, vector, time) or a 'none' space direction."
             )
-        data = np.squeeze(data, axis=tuple(extra))
+        data, extra, field = _nrrd_extra(data, header, spatial)
 
     scale = 1.0
     units_field = header.get("space units")
@@ -871,9 +932,15 @@ def _read_nrrd(path: Path) -> _Loaded:
             affine[:3, 3] = origin
         affine = checked_affine(affine, where, f"the geometry (space directions) of {where}")
         space = _nrrd_space(header, where)
-        if space is not None:
-            return _Loaded(data, units=units, affine=_to_ras(affine, space, where), space="RAS")
-        return _Loaded(data, units=units, affine=affine)
+        ras = _to_ras(affine, space, where) if space is not None else affine
+        return _Loaded(
+            data,
+            units=units,
+            affine=ras,
+            space="" if space is None else "RAS",
+            extra=extra,
+            vector_field=field,
+        )
     spacing = None
     if spacings is not None:
         finite = spacings[np.isfinite(spacings)]
@@ -885,7 +952,52 @@ def _read_nrrd(path: Path) -> _Loaded:
                 " each of the 3 axes; spacing treated as not stated (1 mm assumed). Fix the"
                 " header or pass --spacing SX SY SZ."
             )
-    return _Loaded(data, spacing, None if origin is None else tuple(origin), units)
+    origin_t = None if origin is None else tuple(origin)
+    return _Loaded(data, spacing, origin_t, units, extra=extra, vector_field=field)
+
+
+#: NRRD ``kinds`` of a component axis that holds displacement-like vectors.
+_NRRD_VECTOR_KINDS = ("vector", "covariant-vector", "3-vector", "normal")
+#: NRRD ``kinds`` of spatial axes.
+_NRRD_SPATIAL_KINDS = ("domain", "space")
+
+
+def _nrrd_kinds(header: dict[str, Any], ndim: int) -> list[str]:
+    kinds = header.get("kinds")
+    if not isinstance(kinds, list) or len(kinds) != ndim:
+        return [""] * ndim
+    return [str(k).strip().lower() for k in kinds]
+
+
+def _nrrd_spatial_axes(header: dict[str, Any], dirs: np.ndarray | None, ndim: int) -> list[int]:
+    """The spatial axes of an NRRD: those with a space direction, else those of a
+    spatial ``kinds`` entry, else all."""
+    if dirs is not None:
+        return [a for a in range(ndim) if np.all(np.isfinite(dirs[a]))]
+    kinds = _nrrd_kinds(header, ndim)
+    if ndim > 3 and any(kinds):
+        return [a for a in range(ndim) if kinds[a] in _NRRD_SPATIAL_KINDS]
+    return list(range(ndim))
+
+
+def _nrrd_extra(
+    data: np.ndarray, header: dict[str, Any], spatial: list[int]
+) -> tuple[np.ndarray, tuple[_frames.ExtraAxis, ...], str]:
+    """``data`` with its non-spatial axes moved last, one :class:`ExtraAxis` each (a
+    ``time`` kind is a frame axis, any other a channel axis), and why it is a
+    displacement field (one 3-component float ``vector`` axis), else ``""``."""
+    kinds = _nrrd_kinds(header, data.ndim)
+    others = [a for a in range(data.ndim) if a not in spatial]
+    moved = np.moveaxis(data, others, list(range(3, data.ndim)))
+    extra = tuple(
+        _frames.ExtraAxis(_frames.FRAME if kinds[a] == "time" else _frames.CHANNEL, data.shape[a])
+        for a in others
+    )
+    field = ""
+    if len(others) == 1 and data.shape[others[0]] == 3 and data.dtype.kind == "f":
+        if kinds[others[0]] in _NRRD_VECTOR_KINDS:
+            field = f"NRRD '{kinds[others[0]]}' axis of 3 float components"
+    return moved, extra, field
 
 
 #: Folders the caller allows detached NRRD data files in, besides the header's own folder
@@ -1010,7 +1122,7 @@ def _nrrd_space(header: dict[str, Any], where: str) -> str | None:
 
 
 # ---------------------------------------------------------------------------- NIfTI
-def _read_nifti(path: Path) -> _Loaded:
+def _read_nifti(path: Path, pick: _frames.Pick | None = None) -> _Loaded:
     import nibabel as nib
 
     try:
@@ -1020,43 +1132,46 @@ def _read_nifti(path: Path) -> _Loaded:
             f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
             " The file may be corrupt or not a NIfTI/Analyze image."
         ) from exc
-    return _nibabel_loaded(img, str(path), path.name, "NIfTI")
+    return _nibabel_loaded(img, path.name, "NIfTI", pick)
 
 
-def _nibabel_loaded(img: Any, what: str, short: str, kind: str) -> _Loaded:
+def _nibabel_loaded(img: Any, short: str, kind: str, pick: _frames.Pick | None) -> _Loaded:
     """The voxels (index order as stored) and geometry of a nibabel image: for NIfTI the
     sform, else the qform (an in-memory ``img.affine`` that differs from both wins); for
-    other formats with an affine (MGH) that affine, in RAS; Analyze has none."""
-    shape = tuple(int(s) for s in img.shape)
-    while len(shape) > 3 and shape[-1] == 1:
+    other formats with an affine (MGH) that affine, in RAS; Analyze has none. Of a 4-D/5-D
+    image only the frame/channel ``pick`` names is read (:mod:`voxwarp.io.nifti_frames`)."""
+    full = tuple(int(s) for s in img.shape)
+    shape = full
+    while len(shape) > 5 and shape[-1] == 1:
         shape = shape[:-1]
-    if len(shape) > 3:
-        raise VolumeError(
-            f"{what} is a 4D {kind} image with shape {tuple(img.shape)} (a time series or several"
-            " channels); voxwarp renders one 3D volume. Extract one, e.g. with nibabel:"
-            " img.slicer[..., 0] (saved with nib.save(..., 'volume0.nii.gz')); a"
-            " displacement field goes to render --displacement FILE instead."
-        )
     if len(shape) < 3:
         raise VolumeError(
-            f"{what} is a {len(shape)}D image with shape {shape}; voxwarp needs a 3D volume."
+            f"{short} is a {len(shape)}D image with shape {shape}; voxwarp needs a 3D volume."
         )
+    axes, field = nifti_extra_axes(img, shape)
+    indices = _frames.choose(axes, pick or _frames.Pick(), short, shape, vector_field=field)
+    slicer = (slice(None),) * 3 + indices + (0,) * (len(full) - len(shape))
+    shape = shape[:3]
     _limits.check_load_bytes(shape, _nifti_itemsize(img), short)
     try:
         proxy = img.dataobj
-        if hasattr(proxy, "get_unscaled"):
-            raw = np.asarray(proxy.get_unscaled())
+        if hasattr(proxy, "_get_unscaled"):  # reads only the chosen frame
+            raw = np.asarray(proxy._get_unscaled(slicer))
+            slope = float(getattr(proxy, "slope", 1.0))
+            inter = float(getattr(proxy, "inter", 0.0))
+        elif hasattr(proxy, "get_unscaled"):
+            raw = np.asarray(proxy.get_unscaled())[slicer]
             slope = float(getattr(proxy, "slope", 1.0))
             inter = float(getattr(proxy, "inter", 0.0))
         else:
-            raw, slope, inter = np.asanyarray(proxy), 1.0, 0.0
+            raw, slope, inter = np.asanyarray(proxy)[slicer], 1.0, 0.0
         hdr = img.header
         zooms = tuple(float(z) for z in hdr.get_zooms()[:3])
         affine = _nibabel_affine(img, short)
         space_unit = hdr.get_xyzt_units()[0] if hasattr(hdr, "get_xyzt_units") else "mm"
     except Exception as exc:
         raise VolumeError(
-            f"cannot read the voxel data of {what} ({kind} image; {type(exc).__name__}: {exc});"
+            f"cannot read the voxel data of {short} ({kind} image; {type(exc).__name__}: {exc});"
             " the file may be truncated or corrupt."
         ) from exc
     data = np.asarray(raw).reshape(shape, order="F") if raw.ndim != 3 else np.asarray(raw)
@@ -1068,9 +1183,9 @@ def _nibabel_loaded(img: Any, what: str, short: str, kind: str) -> _Loaded:
     scale = _unit_scale(space_unit, short)
     if affine is not None:
         affine[:3, :] *= scale
-        return _Loaded(data, affine=affine, space="RAS")
+        return _Loaded(data, affine=affine, space="RAS", picked=True)
     spacing = _triple(zooms, "voxel size (pixdim)", positive=True, where=short)
-    return _Loaded(data, tuple(s * scale for s in spacing))  # type: ignore[arg-type]
+    return _Loaded(data, tuple(s * scale for s in spacing), picked=True)  # type: ignore[arg-type]
 
 
 def _nibabel_affine(img: Any, where: str) -> np.ndarray | None:
@@ -1208,6 +1323,34 @@ def _tiff_to_zyx(data: np.ndarray, axes: str, path: Path) -> np.ndarray:
     )
 
 
+def _tiff_hyperstack(
+    data: np.ndarray, axes: str, path: Path
+) -> tuple[np.ndarray, tuple[_frames.ExtraAxis, ...]]:
+    """A tifffile series with time (``T``) or channel (``C``, ``S``) axes as ``(z, y,
+    x, ...)`` plus one :class:`ExtraAxis` per such axis; other series as
+    :func:`_tiff_to_zyx` reads them, with no extra axis."""
+    keep = [i for i, a in enumerate(axes) if a in "YX" or data.shape[i] != 1]
+    kept = "".join(axes[i] for i in keep)
+    others = [n for n, a in enumerate(kept) if a in "TCS"]
+    if not others:
+        return _tiff_to_zyx(data, axes, path), ()
+    data = np.squeeze(data, axis=tuple(i for i in range(data.ndim) if i not in keep))
+    space = [n for n in range(len(kept)) if n not in others]
+    if "".join(kept[n] for n in space)[-2:] != "YX" or len(space) > 3:
+        raise VolumeError(
+            f"{path} holds images with axes {kept!r} and shape {data.shape}; voxwarp reads"
+            " z-stacks with time (T) and channel (C, S) axes. Save a ZYX stack per channel."
+        )
+    data = data.transpose(space + others)
+    if len(space) == 2:
+        data = data[None]
+    extra = tuple(
+        _frames.ExtraAxis(_frames.FRAME if kept[n] == "T" else _frames.CHANNEL, data.shape[3 + m])
+        for m, n in enumerate(others)
+    )
+    return data, extra
+
+
 def _tiff_stack(tif: Any, path: Path) -> np.ndarray:
     """Every image of an open TIFF file as one ``(z, y, x)`` stack, whatever its layout.
 
@@ -1226,6 +1369,11 @@ def _tiff_stack(tif: Any, path: Path) -> np.ndarray:
     if len(series) == 1 and (tif.is_imagej or len(first.pages) >= len(pages)):
         _limits.check_load_bytes(first.shape, first.dtype.itemsize, path.name)
         return _tiff_to_zyx(np.asarray(first.asarray()), first.axes, path)
+    return _tiff_pages(pages, path)
+
+
+def _tiff_pages(pages: list[Any], path: Path) -> np.ndarray:
+    """Every page of a TIFF file in file order as one ``(z, y, x)`` stack."""
     try:  # the pages' size as their tags state it (a page that has none reads as 0)
         voxels, itemsize = sum(math.prod(p.shape) for p in pages), pages[0].dtype.itemsize
     except (AttributeError, TypeError, ValueError):
@@ -1260,9 +1408,15 @@ def _tiff_stack(tif: Any, path: Path) -> np.ndarray:
 def _read_tiff_file(path: Path) -> _Loaded:
     import tifffile
 
+    extra: tuple[_frames.ExtraAxis, ...] = ()
     try:
         with tifffile.TiffFile(path) as tif:
-            data = _tiff_stack(tif, path)
+            first = tif.series[0] if len(tif.series) == 1 else None
+            if first is not None and any(a in "TCS" for a in first.axes):
+                _limits.check_load_bytes(first.shape, first.dtype.itemsize, path.name)
+                data, extra = _tiff_hyperstack(np.asarray(first.asarray()), first.axes, path)
+            else:
+                data = _tiff_stack(tif, path)
             spacing, origin, units = _tiff_geometry(tif, path.name)
     except VolumeError:
         raise
@@ -1271,7 +1425,8 @@ def _read_tiff_file(path: Path) -> _Loaded:
             f"cannot read the TIFF file {path} ({type(exc).__name__}: {exc})."
             " The file may be corrupt or not a TIFF image."
         ) from exc
-    return _Loaded(data.transpose(2, 1, 0), spacing, origin, units)
+    order = [2, 1, 0, *range(3, data.ndim)]
+    return _Loaded(data.transpose(order), spacing, origin, units, extra=extra)
 
 
 def _read_tiff_dir(directory: Path, files: list[Path]) -> _Loaded:
