@@ -145,11 +145,18 @@ def test_a_transposed_affine_and_axis_order_is_one_line() -> None:
         load_volume(sitk.GetArrayFromImage(img).T, affine=lps, spacing=img.GetSpacing())
 
 
-def test_four_d_and_vector_images_are_one_line_errors() -> None:
+def test_four_d_and_vector_images_without_a_choice_are_one_line_errors() -> None:
+    """A 4-D or vector image needs frame_index=/channel= (voxwarp.io.frames); a float
+    3-vector image is taken for a displacement field."""
     four = sitk.Image([4, 4, 4, 3], sitk.sitkFloat32)
     vector = sitk.Image([4, 4, 4], sitk.sitkVectorFloat32, 3)
     nib4 = nib.Nifti1Image(np.zeros((4, 4, 4, 3), np.float32), np.eye(4))
-    for image, match in ((four, "4-D"), (vector, "3 component"), (nib4, "4D nibabel")):
+    cases = (
+        (four, r"3 time points; pick one with --frame-index 0\.\.2"),
+        (vector, "displacement field"),
+        (nib4, r"3 time points; pick one with --frame-index 0\.\.2"),
+    )
+    for image, match in cases:
         with pytest.raises(VolumeError, match=match) as info:
             load_volume(image)
         assert "\n" not in str(info.value)

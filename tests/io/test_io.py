@@ -314,10 +314,13 @@ def test_tiff_folder_rejects_mismatched_slices(tmp_path: Path) -> None:
         load_volume(tmp_path)
 
 
-def test_tiff_rgb_rejected(tmp_path: Path) -> None:
-    tifffile.imwrite(tmp_path / "rgb.tif", np.zeros((4, 6, 5, 3), np.uint8), photometric="rgb")
-    with pytest.raises(VolumeError, match="grayscale"):
+def test_tiff_rgb_needs_a_channel(tmp_path: Path) -> None:
+    rgb = np.arange(4 * 6 * 5 * 3, dtype=np.uint8).reshape(4, 6, 5, 3)  # z, y, x, sample
+    tifffile.imwrite(tmp_path / "rgb.tif", rgb, photometric="rgb")
+    with pytest.raises(VolumeError, match=r"3 channels; pick one with --channel 0\.\.2"):
         load_volume(tmp_path / "rgb.tif")
+    green = load_volume(tmp_path / "rgb.tif", channel=1)
+    np.testing.assert_array_equal(green.data, rgb[..., 1].transpose(2, 1, 0))
 
 
 def test_numpy_arrays_xyz_and_zyx(tmp_path: Path) -> None:
@@ -636,9 +639,9 @@ def test_empty_directory_and_text_files(tmp_path: Path) -> None:
         load_volume(tmp_path)
 
 
-def test_nifti_4d_rejected(tmp_path: Path) -> None:
+def test_nifti_4d_needs_a_frame(tmp_path: Path) -> None:
     nib.save(nib.Nifti1Image(np.zeros((4, 4, 4, 3), np.int16), np.eye(4)), str(tmp_path / "t.nii"))
-    with pytest.raises(VolumeError, match="4D NIfTI"):
+    with pytest.raises(VolumeError, match=r"t.nii holds 3 time points; pick one with --frame"):
         load_volume(tmp_path / "t.nii")
 
 
