@@ -724,8 +724,8 @@ class MainWindow(QMainWindow):
         def done(result: Any) -> None:
             if isinstance(result, FrameChoiceError):
                 choice = ask_frame(self, Path(spec).name, result)
-                if choice is not None:
-                    self.open_path(spec, wait=wait, refit=refit, **choice)
+                if choice is not None:  # after this task has finished emitting
+                    QTimer.singleShot(0, lambda: self.open_path(spec, refit=refit, **choice))
                 return
             self.viewport.with_context(self.session.close)
             if refit:

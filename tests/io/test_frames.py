@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.run_cli import run_cli
 from voxwarp.errors import VolumeError
 from voxwarp.io.frames import FRAME, FrameChoiceError
 from voxwarp.io.volumes import load_volume
-from tests.run_cli import run_cli
 
 nib = pytest.importorskip("nibabel")
 
@@ -85,7 +85,8 @@ def test_vector_intent_nifti_is_a_displacement_field(tmp_path: Path) -> None:
         load_volume(tmp_path / "warp.nii.gz")
     text = str(info.value)
     assert "is a displacement field (NIfTI intent vector)" in text
-    assert "--displacement warp.nii.gz" in text and "\n" not in text
+    assert "--displacement warp.nii.gz" in text
+    assert "\n" not in text
     np.testing.assert_array_equal(
         load_volume(tmp_path / "warp.nii.gz", channel=2).data, u[:, :, :, 0, 2]
     )
@@ -109,7 +110,8 @@ def test_nrrd_with_a_vector_or_list_axis(tmp_path: Path) -> None:
     for c in (0, 1):
         vol = load_volume(tmp_path / "two.nrrd", channel=c)
         np.testing.assert_array_equal(vol.data, data[c])
-        assert vol.spacing == (1.0, 2.0, 3.0) and vol.origin == (1.0, 2.0, 3.0)
+        assert vol.spacing == (1.0, 2.0, 3.0)
+        assert vol.origin == (1.0, 2.0, 3.0)
     # the same channels on the last axis, kinds 'list'
     last = np.moveaxis(data, 0, -1)
     header["kinds"] = ["domain", "domain", "domain", "list"]
@@ -210,7 +212,7 @@ def test_a_3d_file_refuses_the_options(tmp_path: Path) -> None:
 def test_scene_keeps_the_frame(tmp_path: Path) -> None:
     from voxwarp.scene import Scene
 
-    path, data = _bold(tmp_path)
+    path, _data = _bold(tmp_path)
     Scene(load_volume(path, frame_index=3)).save(tmp_path / "s.json")
     again = Scene.load(tmp_path / "s.json").volume
     np.testing.assert_array_equal(again.data, load_volume(path, frame_index=3).data)
@@ -220,16 +222,22 @@ def test_scene_keeps_the_frame(tmp_path: Path) -> None:
 def test_itk_python_image_loads_like_simpleitk() -> None:
     itk = pytest.importorskip("itk")
     sitk = pytest.importorskip("SimpleITK")
-    arr = np.random.default_rng(7).normal(size=(4, 5, 6)).astype(np.float32)
-    image = itk.image_from_array(arr)
-    image.SetSpacing((0.5, 1.0, 2.0))
-    image.SetOrigin((3.0, -2.0, 1.0))
-    ref = sitk.GetImageFromArray(arr)
-    ref.SetSpacing((0.5, 1.0, 2.0))
-    ref.SetOrigin((3.0, -2.0, 1.0))
-    got, want = load_volume(image), load_volume(ref)
-    np.testing.assert_array_equal(got.data, want.data)
-    np.testing.assert_allclose(got.affine, want.affine)
+    rng = np.random.default_rng(7)
+    arr = rng.normal(size=(4, 5, 6, 2)).astype(np.float32)  # z, y, x, component
+    direction = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    image = itk.image_from_array(np.ascontiguousarray(arr), is_vector=True)
+    ref = sitk.GetImageFromArray(arr, isVector=True)
+    for img in (image, ref):
+        img.SetSpacing((0.5, 1.0, 2.0))
+        img.SetOrigin((3.0, -2.0, 1.0))
+    image.SetDirection(itk.matrix_from_array(direction))
+    ref.SetDirection(direction.ravel().tolist())
+    with pytest.raises(FrameChoiceError, match="the ITK image holds 2 channels"):
+        load_volume(image)
+    for c in (0, 1):
+        got, want = load_volume(image, channel=c), load_volume(ref, channel=c)
+        np.testing.assert_array_equal(got.data, want.data)
+        np.testing.assert_allclose(got.affine, want.affine)
 
 
 def test_cli_error_lines_without_traceback(tmp_path: Path) -> None:
@@ -242,7 +250,8 @@ def test_cli_error_lines_without_traceback(tmp_path: Path) -> None:
     for extra, line in cases:
         proc = run_cli("info", str(path), *extra)
         assert proc.returncode != 0
-        assert line in proc.stderr and "Traceback" not in proc.stderr
+        assert line in proc.stderr
+        assert "Traceback" not in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
     proc = run_cli("info", str(path), "--frame-index", "4")
     assert proc.returncode == 0, proc.stderr
