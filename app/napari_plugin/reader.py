@@ -6,7 +6,8 @@ folder without DICOM files and anything else give ``None``, so napari asks the n
 reader. Volumes become Image layers through
 :func:`voxwarp.napari_plugin.convert.volume_to_layer_data` (zyx data, spacing as
 ``scale``, the patient-space affine of oblique scans). A scene with warps adds its
-deformed view, rendered headless, as an RGB layer.
+deformed view, rendered headless, as an RGB layer. A 4-D or multi-channel file gives a
+layer per channel, its time points on the leading axis (napari's time slider).
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp.errors import VoxwarpError
+from voxwarp.io.frames import FrameChoiceError
 from voxwarp.io.volumes import load_volume
 from voxwarp.napari_plugin import deformed_view
 from voxwarp.napari_plugin.convert import LayerData, volume_to_layer_data
+from voxwarp.napari_plugin.frames import frame_layers
 from voxwarp.scene import SCENE_FORMAT, SCENE_KEYS, Scene
 
 ReaderFunction = Callable[[Any], list[LayerData]]
@@ -88,9 +91,14 @@ def is_dicom_folder(path: Path) -> bool:
 
 
 def read_volume(path: str | list[str]) -> list[LayerData]:
-    """One Image layer of the volume at ``path`` (NRRD, NIfTI or a DICOM folder)."""
+    """One Image layer of the volume at ``path`` (NRRD, NIfTI or a DICOM folder); of a
+    4-D/multi-channel file, a layer per channel with its time points stacked
+    (:func:`voxwarp.napari_plugin.frames.frame_layers`)."""
     path = path[0] if isinstance(path, list) else path
-    volume = load_volume(path)
+    try:
+        volume = load_volume(path)
+    except FrameChoiceError as exc:  # a time series, or channels: every one, as napari does
+        return frame_layers(path, exc)
     return [volume_to_layer_data(volume, metadata={"path": str(path)})]
 
 

@@ -181,3 +181,25 @@ def test_scene_opens_without_its_render_where_rendering_fails(
         layers = read_scene(str(path))
     assert len(layers) == 1
     assert layers[0][0].shape == (24, 24, 24)
+
+
+def test_4d_nifti_is_one_layer_with_a_time_axis(tmp_path: Path) -> None:
+    nib = pytest.importorskip("nibabel")
+    data = np.arange(3 * 4 * 5 * 6, dtype=np.int16).reshape(3, 4, 5, 6)  # x, y, z, t
+    nib.save(nib.Nifti1Image(data, np.diag([2.0, 3.0, 4.0, 1.0])), str(tmp_path / "t.nii.gz"))
+    reader = get_reader(str(tmp_path / "t.nii.gz"))
+    (layer,) = reader(str(tmp_path / "t.nii.gz"))
+    np.testing.assert_array_equal(layer[0], data.transpose(3, 2, 1, 0))  # t, z, y, x
+    assert tuple(layer[1]["scale"]) == (1.0, 4.0, 3.0, 2.0)
+    assert _layer(layer).ndim == 4
+
+
+def test_multichannel_nrrd_is_a_layer_per_channel(tmp_path: Path) -> None:
+    nrrd = pytest.importorskip("nrrd")
+    data = np.random.default_rng(0).normal(size=(2, 4, 5, 6)).astype(np.float32)
+    header = {"kinds": ["list", "domain", "domain", "domain"], "spacings": [np.nan, 1, 1, 1]}
+    nrrd.write(str(tmp_path / "c.nrrd"), data, header, index_order="F")
+    layers = read_volume(str(tmp_path / "c.nrrd"))
+    assert [lay[1]["name"] for lay in layers] == ["c [channel 0]", "c [channel 1]"]
+    for c, layer in enumerate(layers):
+        np.testing.assert_array_equal(layer[0], data[c].T)
