@@ -289,14 +289,15 @@ def load_volume(
     source
         Path to a volume file or to a folder of DICOM or TIFF slices (see the module
         docstring for the formats), ``"sample:NAME"`` for a bundled sample volume
-        (see :func:`voxwarp.io.samples.sample_names`), an in-memory array, a 3-D scalar
-        ``SimpleITK.Image`` (geometry from its origin, spacing and direction, which are
-        LPS, converted to RAS as for an LPS NRRD; voxels from ``GetArrayFromImage``,
-        reordered from ``(z, y, x)``), or a nibabel image (``Nifti1Image``,
-        ``Nifti2Image``, ``MGHImage``: geometry from its RAS ``affine``, voxels from
-        ``dataobj`` with its scaling), read as the same image's file would be. Neither
-        library is imported unless an image of it is passed; a vector or 4-D image is
-        a :class:`~voxwarp.errors.VolumeError`.
+        (see :func:`voxwarp.io.samples.sample_names`), an in-memory array, a
+        ``SimpleITK.Image`` or an ITK Python image (``itk.Image``, ``itk.VectorImage``;
+        geometry from its origin, spacing and direction, which are LPS, converted to
+        RAS as for an LPS NRRD; voxels from ``GetArrayFromImage``, reordered from
+        ``(z, y, x)``), or a nibabel image (``Nifti1Image``, ``Nifti2Image``,
+        ``MGHImage``: geometry from its RAS ``affine``, voxels from ``dataobj`` with its
+        scaling), read as the same image's file would be. No library is imported
+        unless an image of it is passed; a vector or 4-D image needs ``channel=`` /
+        ``frame_index=``.
     spacing
         Voxel size ``(sx, sy, sz)`` in mm (or one number for all axes). Overrides what
         the file states; default: the file's spacing, or 1 mm.
