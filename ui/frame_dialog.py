@@ -30,6 +30,7 @@ class FrameDialog(QDialog):
     def __init__(self, parent: QWidget | None, name: str, error: FrameChoiceError) -> None:
         super().__init__(parent)
         self.setWindowTitle(f"Open {name}")
+        self.setMinimumWidth(380)
         layout = QVBoxLayout(self)
         shape = " × ".join(str(s) for s in error.shape)
         info = QLabel(f"{name} holds {frame_text(error.axes)} (shape {shape}).\nOpen which one?")

@@ -85,6 +85,7 @@ from voxwarp.errors import VolumeError
 from voxwarp.io import frames as _frames
 from voxwarp.io import samples as _samples
 from voxwarp.io.dicom import list_dicom_series, read_dicom_dir, read_dicom_file
+from voxwarp.io.frame_axes import nifti_extra_axes, nrrd_extra, nrrd_spatial_axes, tiff_extra
 from voxwarp.io.image_objects import (
     ITK_SOURCE,
     NIBABEL_SOURCE,
@@ -98,7 +99,6 @@ from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
 from voxwarp.io.loaded import native as _native
 from voxwarp.io.loaded import warn as _warn
 from voxwarp.io.metaimage import METAIMAGE_SUFFIXES, read_metaimage
-from voxwarp.io.nifti_frames import nifti_extra_axes
 from voxwarp.io.volume_stream import NOT_ORIENTED_KEY
 
 __all__ = [
@@ -905,7 +905,7 @@ def _read_nrrd(path: Path) -> _Loaded:
     if dirs is not None and (dirs.ndim != 2 or dirs.shape[0] != data.ndim):
         dirs = None
 
-    spatial = _nrrd_spatial_axes(header, dirs, data.ndim)
+    spatial = nrrd_spatial_axes(header, dirs, data.ndim)
     extra: tuple[_frames.ExtraAxis, ...] = ()
     field = ""
     if data.ndim != 3:
@@ -915,7 +915,7 @@ def _read_nrrd(path: Path) -> _Loaded:
                 " does not say which 3 axes are spatial; give the others a 'kinds' entry"
                 " (list, vector, time) or a 'none' space direction."
             )
-        data, extra, field = _nrrd_extra(data, header, spatial)
+        data, extra, field = nrrd_extra(data, header, spatial)
 
     scale = 1.0
     units_field = header.get("space units")
@@ -955,50 +955,6 @@ def _read_nrrd(path: Path) -> _Loaded:
             )
     origin_t = None if origin is None else tuple(origin)
     return _Loaded(data, spacing, origin_t, units, extra=extra, vector_field=field)
-
-
-#: NRRD ``kinds`` of a component axis that holds displacement-like vectors.
-_NRRD_VECTOR_KINDS = ("vector", "covariant-vector", "3-vector", "normal")
-#: NRRD ``kinds`` of spatial axes.
-_NRRD_SPATIAL_KINDS = ("domain", "space")
-
-
-def _nrrd_kinds(header: dict[str, Any], ndim: int) -> list[str]:
-    kinds = header.get("kinds")
-    if not isinstance(kinds, list) or len(kinds) != ndim:
-        return [""] * ndim
-    return [str(k).strip().lower() for k in kinds]
-
-
-def _nrrd_spatial_axes(header: dict[str, Any], dirs: np.ndarray | None, ndim: int) -> list[int]:
-    """The spatial axes of an NRRD: those with a space direction, else those of a
-    spatial ``kinds`` entry, else all."""
-    if dirs is not None:
-        return [a for a in range(ndim) if np.all(np.isfinite(dirs[a]))]
-    kinds = _nrrd_kinds(header, ndim)
-    if ndim > 3 and any(kinds):
-        return [a for a in range(ndim) if kinds[a] in _NRRD_SPATIAL_KINDS]
-    return list(range(ndim))
-
-
-def _nrrd_extra(
-    data: np.ndarray, header: dict[str, Any], spatial: list[int]
-) -> tuple[np.ndarray, tuple[_frames.ExtraAxis, ...], str]:
-    """``data`` with its non-spatial axes moved last, one :class:`ExtraAxis` each (a
-    ``time`` kind is a frame axis, any other a channel axis), and why it is a
-    displacement field (one 3-component float ``vector`` axis), else ``""``."""
-    kinds = _nrrd_kinds(header, data.ndim)
-    others = [a for a in range(data.ndim) if a not in spatial]
-    moved = np.moveaxis(data, others, list(range(3, data.ndim)))
-    extra = tuple(
-        _frames.ExtraAxis(_frames.FRAME if kinds[a] == "time" else _frames.CHANNEL, data.shape[a])
-        for a in others
-    )
-    field = ""
-    if len(others) == 1 and data.shape[others[0]] == 3 and data.dtype.kind == "f":
-        if kinds[others[0]] in _NRRD_VECTOR_KINDS:
-            field = f"NRRD '{kinds[others[0]]}' axis of 3 float components"
-    return moved, extra, field
 
 
 #: Folders the caller allows detached NRRD data files in, besides the header's own folder
@@ -1140,7 +1096,7 @@ def _nibabel_loaded(img: Any, short: str, kind: str, pick: _frames.Pick | None) 
     """The voxels (index order as stored) and geometry of a nibabel image: for NIfTI the
     sform, else the qform (an in-memory ``img.affine`` that differs from both wins); for
     other formats with an affine (MGH) that affine, in RAS; Analyze has none. Of a 4-D/5-D
-    image only the frame/channel ``pick`` names is read (:mod:`voxwarp.io.nifti_frames`)."""
+    image only the frame/channel ``pick`` names is read (:mod:`voxwarp.io.frame_axes`)."""
     full = tuple(int(s) for s in img.shape)
     shape = full
     while len(shape) > 5 and shape[-1] == 1:
@@ -1324,34 +1280,6 @@ def _tiff_to_zyx(data: np.ndarray, axes: str, path: Path) -> np.ndarray:
     )
 
 
-def _tiff_hyperstack(
-    data: np.ndarray, axes: str, path: Path
-) -> tuple[np.ndarray, tuple[_frames.ExtraAxis, ...]]:
-    """A tifffile series with time (``T``) or channel (``C``, ``S``) axes as ``(z, y,
-    x, ...)`` plus one :class:`ExtraAxis` per such axis; other series as
-    :func:`_tiff_to_zyx` reads them, with no extra axis."""
-    keep = [i for i, a in enumerate(axes) if a in "YX" or data.shape[i] != 1]
-    kept = "".join(axes[i] for i in keep)
-    others = [n for n, a in enumerate(kept) if a in "TCS"]
-    if not others:
-        return _tiff_to_zyx(data, axes, path), ()
-    data = np.squeeze(data, axis=tuple(i for i in range(data.ndim) if i not in keep))
-    space = [n for n in range(len(kept)) if n not in others]
-    if "".join(kept[n] for n in space)[-2:] != "YX" or len(space) > 3:
-        raise VolumeError(
-            f"{path} holds images with axes {kept!r} and shape {data.shape}; voxwarp reads"
-            " z-stacks with time (T) and channel (C, S) axes. Save a ZYX stack per channel."
-        )
-    data = data.transpose(space + others)
-    if len(space) == 2:
-        data = data[None]
-    extra = tuple(
-        _frames.ExtraAxis(_frames.FRAME if kept[n] == "T" else _frames.CHANNEL, data.shape[3 + m])
-        for m, n in enumerate(others)
-    )
-    return data, extra
-
-
 def _tiff_stack(tif: Any, path: Path) -> np.ndarray:
     """Every image of an open TIFF file as one ``(z, y, x)`` stack, whatever its layout.
 
@@ -1415,7 +1343,8 @@ def _read_tiff_file(path: Path) -> _Loaded:
             first = tif.series[0] if len(tif.series) == 1 else None
             if first is not None and any(a in "TCS" for a in first.axes):
                 _limits.check_load_bytes(first.shape, first.dtype.itemsize, path.name)
-                data, extra = _tiff_hyperstack(np.asarray(first.asarray()), first.axes, path)
+                data, extra = tiff_extra(np.asarray(first.asarray()), first.axes, path.name)
+                data = _tiff_to_zyx(data, first.axes, path) if not extra else data
             else:
                 data = _tiff_stack(tif, path)
             spacing, origin, units = _tiff_geometry(tif, path.name)
