@@ -144,6 +144,8 @@ SAVE_FORMATS: dict[str, str] = {
 }
 
 _RAW_EXTENSIONS = (".raw", ".bin", ".img")
+#: ITK transform files (voxwarp.io.fields reads them as warps, not volumes).
+_TRANSFORM_EXTENSIONS = (".h5", ".hdf5", ".tfm", ".mat")
 _TIFF_EXTENSIONS = (".tif", ".tiff")
 _SUPPORTED_TEXT = (
     ".npy, .npz, .raw/.bin/.img with a .json sidecar, .nrrd/.nhdr, .nii/.nii.gz,"
@@ -623,6 +625,12 @@ def _load_path(
         return _read_raw(path, sidecar)
     if lower.endswith((".dcm", ".dicom")):
         return read_dicom_file(path)
+    if lower.endswith(_TRANSFORM_EXTENSIONS):
+        raise VolumeError(
+            f"{path.name} is an ITK transform file, not a volume: load it with --displacement"
+            f" {path.name} on the moving volume (voxwarp render MOVING --displacement"
+            f" {path.name})"
+        )
     raise VolumeError(
         f"unsupported file type {path.suffix or '(no extension)'} for {path}; voxwarp reads"
         f" {_SUPPORTED_TEXT}. Convert the file, or pass the folder for DICOM slices."

@@ -70,7 +70,8 @@ def session_for(source: Any, deformation: str | None = None, **settings: Any) ->
     ``voxwarp gui`` takes it (a scene JSON, resuming its deformation; a volume file;
     ``sample:NAME``). ``deformation`` (``"massspring"``, ``"chainmail"``,
     ``"wires"``, ``"lattice"``) starts that family with ``settings`` (``resolution``,
-    ``stiffness``, ``integrator``, ``variant``, ``backend``)."""
+    ``stiffness``, ``integrator``, ``variant``, ``backend``). One time point or channel
+    of a 4-D file: pass ``load_volume(path, frame_index=..., channel=...)``."""
     if isinstance(source, EditSession):
         session = source
     elif isinstance(source, Scene):

@@ -94,6 +94,12 @@ def test_vector_intent_nifti_is_a_displacement_field(tmp_path: Path) -> None:
     np.testing.assert_allclose(field.displacements, u[:, :, :, 0] * [-1.0, -1.0, 1.0])
 
 
+def test_transform_file_points_to_displacement(tmp_path: Path) -> None:
+    (tmp_path / "Composite.h5").write_bytes(b"\x89HDF\r\n\x1a\n")
+    with pytest.raises(VolumeError, match=r"ITK transform file.*--displacement Composite.h5"):
+        load_volume(tmp_path / "Composite.h5")
+
+
 def test_nrrd_with_a_vector_or_list_axis(tmp_path: Path) -> None:
     nrrd = pytest.importorskip("nrrd")
     data = np.random.default_rng(3).normal(size=(2, 5, 6, 7)).astype(np.float32)
