@@ -12,6 +12,7 @@ from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
 from voxwarp.errors import VoxwarpError
+from voxwarp.io.frames import FrameChoiceError
 from voxwarp.io.samples import DEFAULT_SAMPLE
 
 #: after the first frame, the time given to the docks to paint before a screenshot (ms)
@@ -83,7 +84,7 @@ def open_window(
 
     error: str | None = None
     try:
-        session = load_session_input(input_spec, series=series, **pick)
+        session = _session_asking(input_spec, series, pick, ask=fallback)
     except VoxwarpError as exc:
         if not fallback:
             raise
@@ -97,6 +98,22 @@ def open_window(
     if error is not None:
         QTimer.singleShot(0, lambda: window.show_error(error))  # over the shown window
     return window
+
+
+def _session_asking(spec: str, series: Any, pick: dict[str, int], ask: bool) -> Any:
+    """The session for INPUT; a 4-D file opened without a choice asks which volume
+    (:func:`voxwarp.ui.frame_dialog.ask_frame`) when ``ask``, else the one-line error."""
+    from voxwarp.ui.main_window import load_session_input
+
+    try:
+        return load_session_input(spec, series=series, **pick)
+    except FrameChoiceError as exc:
+        from voxwarp.ui.frame_dialog import ask_frame
+
+        choice = ask_frame(None, Path(spec).name, exc) if ask else None
+        if choice is None:
+            raise
+        return load_session_input(spec, series=series, **choice)
 
 
 def run_gui(

@@ -97,3 +97,18 @@ def test_cancel_keeps_the_open_volume(
     monkeypatch.setattr(main_window, "ask_frame", lambda *a: None)
     window.open_path(path, wait=True)
     assert window.session.volume is before
+
+
+def test_gui_input_of_a_4d_file_asks_before_the_window_opens(
+    qtbot: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import voxwarp.ui.frame_dialog as frame_dialog
+    from voxwarp.ui.app import open_window
+
+    path, data = _series(tmp_path)
+    monkeypatch.setattr(frame_dialog, "ask_frame", lambda parent, name, error: {"frame_index": 1})
+    opened = open_window(str(path), size=(640, 480))
+    qtbot.addWidget(opened)
+    assert opened.session.volume.frame_choice == {"frame_index": 1}
+    np.testing.assert_array_equal(opened.session.volume.data, data[..., 1])
+    opened.close()
