@@ -31,6 +31,7 @@ from voxwarp.core.orientation import (
     to_closest_ras,
 )
 from voxwarp.errors import VolumeError
+from voxwarp.io.frames import ExtraAxis
 
 _IO_DIR = str(Path(__file__).resolve().parent)
 
@@ -51,7 +52,8 @@ class Loaded:
     known. ``array_like`` marks .npy/.npz data (``axis_order`` applies). ``extra``
     describes axes after the three spatial ones (:class:`voxwarp.io.frames.ExtraAxis`,
     one per axis, time or channels) that :func:`voxwarp.io.volumes.load_volume` picks
-    from; ``picked`` marks a reader that chose the frame/channel itself.
+    from; ``picked`` marks a reader that chose the frame/channel itself;
+    ``vector_field`` says why the header marks a displacement field (``""``: it does not).
     """
 
     data: np.ndarray
@@ -63,7 +65,7 @@ class Loaded:
     space: str = ""
     modality: str = ""
     padding_value: float | None = None
-    extra: tuple[Any, ...] = ()
+    extra: tuple[ExtraAxis, ...] = ()
     picked: bool = False
     vector_field: str = ""
 
