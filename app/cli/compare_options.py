@@ -88,13 +88,12 @@ def with_comparison(
         if show is not None and strict:
             raise InputError(f"--show {show} compares with a fixed image; give --fixed FILE")
         return scene
-    old = scene.comparison
-    changes = {
-        "fixed": fixed,
-        "compare": show or (old.show if old else "checkerboard"),
-        "blend": args.blend if args.blend is not None else (old.blend if old else 0.5),
-        "checker_mm": args.checker_mm if args.checker_mm is not None else (
-            old.checker_mm if old else None
-        ),
-    }
-    return scene.copy(**changes)
+    old = scene.comparison.settings_dict() if scene.comparison is not None else {}
+    given = {"show": show, "blend": args.blend, "checker_mm": args.checker_mm}
+    settings = {**old, **{k: v for k, v in given.items() if v is not None}}
+    return scene.copy(
+        fixed=fixed,
+        compare=settings.get("show", "checkerboard"),
+        blend=settings.get("blend", 0.5),
+        checker_mm=settings.get("checker_mm"),
+    )

@@ -20,6 +20,7 @@ Oracles:
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -139,7 +140,8 @@ def test_3d_checkerboard_matches_the_two_renders(r3d: Any) -> None:
     odd = checker_fixed(pts, CELL)
     px = 24.0 / SIZE[0] * 2  # two pixels of margin, in mm (generous)
     inner = np.all(np.abs(pts[..., :2] / CELL - np.rint(pts[..., :2] / CELL)) * CELL > px, -1)
-    assert odd[inner].any() and (~odd[inner]).any()
+    assert odd[inner].any()
+    assert (~odd[inner]).any()
     want = np.where(odd[..., None], fixed, moving)
     assert _diff(checker[inner], want[inner]) <= 1
 
@@ -157,6 +159,26 @@ def test_comparison_settings_are_checked() -> None:
     c = Comparison(vol, "difference")
     m, f = np.array([5.0, 1.0]), np.array([2.0, 4.0])
     assert np.allclose(c.combine(m, f, np.zeros((2, 3))), [3.0, 3.0])
+
+
+def test_scene_json_keeps_the_fixed_image(tmp_path: Any) -> None:
+    from voxwarp.io.volumes import save_volume
+
+    vol = _volume()
+    fixed_path = save_volume(_volume(seed=2), tmp_path / "fixed.nrrd")
+    scene = Scene(vol, fixed=str(fixed_path), compare="difference", checker_mm=5.0)
+    path = scene.save(tmp_path / "scene.json")
+    d = json.loads(path.read_text())
+    assert d["fixed"]["path"] == "fixed.nrrd"  # relative to the scene, as the volume's
+    back = Scene.load(path)
+    assert back.comparison is not None
+    assert back.comparison.show == "difference"
+    assert back.comparison.checker_mm == 5.0
+    assert np.array_equal(back.fixed.data, _volume(seed=2).data)
+    assert "fixed" not in Scene(vol).to_dict()  # no comparison: scene JSON as before
+    d["compare"]["swipe"] = 1
+    with pytest.raises(SceneError, match="drop swipe"):
+        Scene.from_dict(d, base_dir=tmp_path)
 
 
 # ------------------------------------------------------------------------------ slices
@@ -193,7 +215,8 @@ def test_slice_blend_checker_and_difference(offscreen: Any) -> None:
     assert _diff(colorize(img, window=win, show="blend", blend=1.0), fixed) == 0
     checker = colorize(img, window=win, show="checkerboard", checker_mm=CELL)
     odd = checker_fixed(img.pixel_points(), CELL)
-    assert odd.any() and (~odd).any()
+    assert odd.any()
+    assert (~odd).any()
     assert np.array_equal(checker, np.where(odd[..., None], fixed, moving))
     same = _slice(offscreen, _scene(moving_vol, fixed=moving_vol), window=win, show="difference")
     rgb = same.rgba[..., :3].astype(int)
