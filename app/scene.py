@@ -25,7 +25,7 @@ import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed war
 from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
-from voxwarp.core.comparison import Comparison, as_fixed_volume
+from voxwarp.core.comparison import Comparison
 from voxwarp.core.field_check import TOLERANCE_MM
 from voxwarp.core.field_grid import FieldExport, chain_field, export_chain, field_grid
 from voxwarp.core.files import atomic_write_text
@@ -1086,3 +1086,14 @@ def _comparison_from_dict(d: Mapping[str, Any], base_dir: Any) -> dict[str, Any]
     except SceneError as exc:
         raise SceneError(f"scene 'fixed': {exc}") from exc
     return {"fixed": fixed, **_compare_args(settings)}
+
+
+def as_fixed_volume(fixed: Any) -> Volume:
+    """A fixed image given as a Volume, a path or ``"sample:NAME"`` -> the Volume."""
+    if isinstance(fixed, Volume):
+        return fixed
+    if isinstance(fixed, str | os.PathLike):
+        return load_volume(fixed)
+    raise SceneError(
+        f"fixed must be a Volume, a volume file path or 'sample:NAME'; got {type(fixed).__name__}"
+    )

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from typing import Any
 
 import numpy as np
@@ -51,20 +50,6 @@ def default_checker_mm(volume: Volume) -> float:
         return 1.0
     digits = 1 - math.floor(math.log10(side))
     return float(round(side, digits))
-
-
-def as_fixed_volume(fixed: Any) -> Volume:
-    """A fixed image given as a Volume, a path or ``"sample:NAME"`` -> the Volume."""
-    if isinstance(fixed, Volume):
-        return fixed
-    if isinstance(fixed, str | os.PathLike):
-        # loaded when used: the core stays light
-        from voxwarp.io.volumes import load_volume
-
-        return load_volume(fixed)
-    raise SceneError(
-        f"fixed must be a Volume, a volume file path or 'sample:NAME'; got {type(fixed).__name__}"
-    )
 
 
 @dataclasses.dataclass(frozen=True)

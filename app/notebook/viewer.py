@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.core.comparison import Comparison, as_fixed_volume
+from voxwarp.core.comparison import Comparison
 from voxwarp.core.volume import Volume
 from voxwarp.editing.common import DisplayOptions
 from voxwarp.editing.session import EditorError, EditSession
@@ -44,7 +44,7 @@ from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scen
 from voxwarp.render.inline_image import RenderedImage, png_bytes
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.overlay import OverlayRenderer
-from voxwarp.scene import Scene
+from voxwarp.scene import Scene, as_fixed_volume
 
 try:
     from jupyter_rfb import RemoteFrameBuffer
