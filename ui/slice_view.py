@@ -331,7 +331,8 @@ class SliceView(QWidget):
             ih = self.image.size[1]
             xy = self.to_widget(point[None])[0] * (ih / h)  # image pixels (a scaled image)
             values = self.image.value_at(xy[0], xy[1])
-        return readout(point, space, *values)
+        fixed = self.image is not None and self.image.fixed is not None
+        return readout(point, space, *values, "fixed" if fixed else "rest")
 
     # ------------------------------------------------------------------ mouse
     def mousePressEvent(self, event: QMouseEvent) -> None:

@@ -108,12 +108,13 @@ class SliceImage:
         return (self.pixel_to_world @ np.array([col, row, 0.0, 1.0]))[:3]
 
     def value_at(self, col: float, row: float) -> tuple[float, float]:
-        """(deformed, rest) values of the pixel holding ``(col, row)``; NaN outside."""
+        """(deformed, rest) values of the pixel holding ``(col, row)`` (the fixed
+        image's value instead of rest when there is one: :attr:`reference`); NaN outside."""
         w, h = self.size
         c, r = int(np.floor(col)), int(np.floor(row))
         if not (0 <= c < w and 0 <= r < h):
             return float("nan"), float("nan")
-        return float(self.values[r, c]), float(self.rest[r, c])
+        return float(self.values[r, c]), float(self.reference[r, c])
 
 
 def _grey(values: np.ndarray, window: tuple[float, float]) -> np.ndarray:

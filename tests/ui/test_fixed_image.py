@@ -77,6 +77,7 @@ def test_open_fixed_image_slices_blend_and_3d(
         assert inside.mean() > 0.2
         err = np.abs(img.fixed - img.values)[inside]
         assert err.max() < 3 * 200 / 512  # same world points: the filter's tolerance
+        assert "   fixed " in view.readout_text()
 
     # the blend slider's ends: the moving and the fixed colours (a fixed image that
     # differs: the inverted ramp)
@@ -107,6 +108,7 @@ def test_open_fixed_image_slices_blend_and_3d(
     next(a for a in w.actions() if a.text() == "Close Fixed Image").trigger()
     assert w.fixed_image.volume is None
     assert all(v.image.fixed is None for v in w.mpr.views if v.image is not None)
+    assert "   rest " in w.mpr.views[0].readout_text()
 
 
 def test_bad_fixed_file_is_one_line(
