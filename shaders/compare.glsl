@@ -7,8 +7,9 @@
 //                 floor(p / size)) or fixed (odd);
 //   difference:   |moving - fixed|;
 //   blend:        (1 - u_blend) * moving + u_blend * fixed.
-// Shading uses the same combination of the two gradients (the fixed one by central
-// differences of u_fixed_step mm in world space).
+// Shading uses the same combination of the two gradients (the fixed one from its
+// gradient texture with FIXED_GRADIENT_TEXTURE, else by central differences of
+// u_fixed_step mm in world space).
 #ifdef COMPARE
 uniform sampler3D u_fixed;
 uniform mat4 u_fixed_world_to_tex;   // world mm -> fixed texture coordinates in [0, 1]
@@ -21,10 +22,16 @@ uniform float u_checker_mm;
 vec2 g_cmp_w = vec2(1.0, 0.0);       // weights (moving, fixed) of the last sample
 float g_cmp_sign = 1.0;              // sign folded into the difference's abs
 
+// The fixed value at p, clamped to the edge texels (as the moving volume's gradient).
+float fixed_clamped(vec3 p) {
+    vec3 c = (u_fixed_world_to_tex * vec4(p, 1.0)).xyz;
+    return textureLod(u_fixed, c, 0.0).r * u_fixed_value_map.x + u_fixed_value_map.y;
+}
+
 float fixed_value(vec3 p) {
     vec3 c = (u_fixed_world_to_tex * vec4(p, 1.0)).xyz;
     if (any(lessThan(c, vec3(0.0))) || any(greaterThan(c, vec3(1.0)))) return u_fixed_outside;
-    return textureLod(u_fixed, c, 0.0).r * u_fixed_value_map.x + u_fixed_value_map.y;
+    return fixed_clamped(p);
 }
 
 float scene_value(vec3 u, float t) {
@@ -45,14 +52,25 @@ float scene_value(vec3 u, float t) {
     return g_cmp_sign * v;
 }
 
+#ifdef FIXED_GRADIENT_TEXTURE
+// precomputed: half the central differences per voxel (app/render/gradients.py)
+uniform sampler3D u_fixed_gradient;
+uniform mat3 u_fixed_direction;
+uniform vec3 u_fixed_spacing;
+vec3 gradient_fixed(vec3 p) {
+    vec3 c = (u_fixed_world_to_tex * vec4(p, 1.0)).xyz;
+    return u_fixed_direction * (textureLod(u_fixed_gradient, c, 0.0).xyz / u_fixed_spacing);
+}
+#else
 vec3 gradient_fixed(vec3 p) {
     float h = u_fixed_step;
     vec3 g;
-    g.x = fixed_value(p + vec3(h, 0, 0)) - fixed_value(p - vec3(h, 0, 0));
-    g.y = fixed_value(p + vec3(0, h, 0)) - fixed_value(p - vec3(0, h, 0));
-    g.z = fixed_value(p + vec3(0, 0, h)) - fixed_value(p - vec3(0, 0, h));
+    g.x = fixed_clamped(p + vec3(h, 0, 0)) - fixed_clamped(p - vec3(h, 0, 0));
+    g.y = fixed_clamped(p + vec3(0, h, 0)) - fixed_clamped(p - vec3(0, h, 0));
+    g.z = fixed_clamped(p + vec3(0, 0, h)) - fixed_clamped(p - vec3(0, 0, h));
     return g / (2.0 * h);
 }
+#endif
 
 // The compared gradient from the moving one (deformed world units) at ray parameter t.
 vec3 compare_gradient(vec3 g_moving, float t) {

@@ -16,6 +16,8 @@ import numpy as np
 
 from voxwarp.core.comparison import COMPARE_SHOWS, Comparison
 from voxwarp.core.volume import Volume
+from voxwarp.render import gradients
+from voxwarp.render.gradients import MAX_VOXELS
 from voxwarp.render.volume_texture import upload_volume_texture
 
 _FORMATS = {
@@ -32,6 +34,7 @@ class FixedTexture:
     def __init__(self, ctx: Any) -> None:
         self.ctx = ctx
         self._entry: tuple[weakref.ref, Any, tuple[float, float]] | None = None
+        self._gradient: Any = None
 
     def get(self, volume: Volume) -> tuple[Any, tuple[float, float]]:
         """``(texture, value_map)`` of ``volume`` (uploaded on first use)."""
@@ -48,11 +51,31 @@ class FixedTexture:
         self._entry = (weakref.ref(volume), tex, (fmt[1], fmt[2]))
         return tex, self._entry[2]
 
+    def gradient(self, volume: Volume) -> Any:
+        """``volume``'s RGBA16F gradient texture (:mod:`voxwarp.render.gradients`),
+        made on the GPU on first use."""
+        texture, value_map = self.get(volume)
+        if self._gradient is None:
+            self._gradient = gradients.gradient_texture(
+                self.ctx, texture, volume.shape, value_map[0], False
+            )
+        return self._gradient
+
     def release(self) -> None:
-        """Free the texture (idempotent)."""
+        """Free the textures (idempotent)."""
+        if self._gradient is not None:
+            self._gradient.release()
+            self._gradient = None
         if self._entry is not None:
             self._entry[1].release()
             self._entry = None
+
+
+def uses_gradient_texture(scene: Any) -> bool:
+    """Whether a comparison scene shades the fixed image from a gradient texture (shaded,
+    and the fixed volume small enough: :data:`voxwarp.render.gradients.MAX_VOXELS`)."""
+    cmp = scene.comparison
+    return bool(cmp is not None and scene.use_shading() and cmp.fixed.data.size <= MAX_VOXELS)
 
 
 def fixed_world_to_tex(volume: Volume) -> np.ndarray:
@@ -79,6 +102,8 @@ def compare_uniforms(moving: Volume, comparison: Comparison, unit: int, value_ma
         "u_fixed_value_map": tuple(float(v) for v in value_map),
         "u_fixed_outside": float(fixed.value_range[0]),
         "u_fixed_step": float(min(fixed.spacing)),
+        "u_fixed_direction": fixed.direction,
+        "u_fixed_spacing": tuple(float(s) for s in fixed.spacing),
         "u_compare": COMPARE_SHOWS.index(comparison.show),
         "u_blend": float(comparison.blend),
         "u_checker_mm": comparison.cell_mm,

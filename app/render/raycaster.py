@@ -49,7 +49,7 @@ from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
-from voxwarp.render.fixed_texture import FixedTexture, compare_uniforms
+from voxwarp.render.fixed_texture import FixedTexture, compare_uniforms, uses_gradient_texture
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
@@ -469,6 +469,7 @@ class Renderer:
             piecewise,
             gradient_texture,
             scene.comparison is not None,
+            uses_gradient_texture(scene),
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -494,6 +495,8 @@ class Renderer:
             defines.append("#define GRADIENT_TEXTURE")
         if scene.comparison is not None:
             defines.append("#define COMPARE")
+        if uses_gradient_texture(scene):
+            defines.append("#define FIXED_GRADIENT_TEXTURE")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -717,6 +720,7 @@ class Renderer:
             set_uniform(prog, "u_segment_map", unit)
             unit += 1
         if scene.comparison is not None:
+            self.check_volume(scene.comparison.fixed)  # too large: one line with advice
             texture, value_map = self._fixed.get(scene.comparison.fixed)
             texture.use(unit)
             for name, value in compare_uniforms(
@@ -724,6 +728,10 @@ class Renderer:
             ).items():
                 set_uniform(prog, name, value)
             unit += 1
+            if uses_gradient_texture(scene):
+                self._fixed.gradient(scene.comparison.fixed).use(unit)
+                set_uniform(prog, "u_fixed_gradient", unit)
+                unit += 1
         return unit
 
     def _bind_mesh_target(

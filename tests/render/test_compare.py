@@ -104,6 +104,26 @@ def test_identity_difference_is_background_and_checker_is_moving(r3d: Any) -> No
         assert _diff(blend, moving) <= 1
 
 
+@pytest.mark.parametrize("gradient_texture", [True, False])
+def test_shaded_checkerboard_of_the_same_image_is_the_moving_render(
+    r3d: Any, gradient_texture: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Shading in fixed cells uses the fixed image's gradient (its gradient texture, or
+    central differences in world mm for a volume over the texture limit): the same
+    image gives the same shaded picture, to the gradients' rounding."""
+    from voxwarp.render import fixed_texture
+
+    if not gradient_texture:  # both images by central differences
+        monkeypatch.setattr(fixed_texture, "MAX_VOXELS", 0)
+        monkeypatch.setattr(r3d.renderer, "gradient_texture", False)
+    vol = _volume()
+    moving = r3d.render(_scene(vol, shading=True, view=(30.0, 20.0)))
+    checker = r3d.render(_scene(vol, fixed=vol, checker_mm=CELL, shading=True, view=(30.0, 20.0)))
+    assert _diff(checker, moving) <= 4
+    other = r3d.render(_scene(vol, fixed=_volume(seed=2), checker_mm=CELL, shading=True))
+    assert _diff(other, moving) > 20
+
+
 def test_fixed_on_another_grid_lines_up(r3d: Any) -> None:
     vol = _volume()
     other = _flipped_permuted(vol)
