@@ -138,6 +138,36 @@ def test_fixed_on_another_grid_lines_up(r3d: Any) -> None:
     assert shifted[..., :3].max() > 40
 
 
+def _constant_field(d: np.ndarray) -> Any:
+    """A pull-back field ``u = d`` on a grid well around the test volumes."""
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+
+    n = 13
+    affine = np.diag([5.0, 5.0, 5.0, 1.0])
+    affine[:3, 3] = -30.0
+    return DisplacementFieldWarp(np.broadcast_to(d, (n, n, n, 3)).copy(), affine)
+
+
+@pytest.mark.parametrize("kind", ["affine", "field"])
+def test_moving_seen_through_the_chain_matches_the_fixed(r3d: Any, kind: str) -> None:
+    """The moving image is the fixed one moved by d; the chain's pull-back p -> p + d
+    (a translation: straight rays; a constant field: warped rays) brings it back onto
+    the fixed image, so the difference is (nearly) background; the wrong sign is not."""
+    d = np.array([3.0, -2.0, 1.0])
+    fixed = _volume()
+    moving = fixed.with_geometry(origin=tuple(np.asarray(fixed.origin) + d))
+
+    def chain(sign: float) -> list:
+        if kind == "affine":
+            return [AffineWarp.translation(-sign * d)]
+        return [_constant_field(sign * d)]
+
+    right = r3d.render(_scene(moving, warps=chain(1.0), fixed=fixed, compare="difference"))
+    wrong = r3d.render(_scene(moving, warps=chain(-1.0), fixed=fixed, compare="difference"))
+    assert right[..., :3].max() <= 3
+    assert wrong[..., :3].max() > 40
+
+
 def _pixel_points(scene: Scene, size: tuple[int, int]) -> np.ndarray:
     """(H, W, 3) world points on each pixel centre's ray (orthographic: any depth)."""
     w, h = size
