@@ -172,7 +172,11 @@ class Scene:
         A registration's fixed image (a Volume, a volume path or ``"sample:NAME"``, on
         any grid): renders and slices then compare the volume seen through the warps
         (the moving image) with it at the same world points, as ``compare`` says
-        (:mod:`voxwarp.core.comparison`); None (default): no comparison.
+        (:mod:`voxwarp.core.comparison`); None (default): no comparison. Kept as the
+        settable attribute ``comparison`` (a :class:`~voxwarp.core.comparison.Comparison`
+        or None); ``fixed`` reads its volume. Scene JSON stores it in ``"fixed"`` (as
+        the volume: a path relative to the scene file, a sample or embedded) and
+        ``"compare"``.
     compare
         ``"checkerboard"`` (default: cubes of ``checker_mm`` alternate moving and
         fixed), ``"difference"`` (3D: ``|moving - fixed|`` through the transfer
