@@ -1,12 +1,13 @@
 """The GUI's fixed image: a registration's fixed volume beside the moving one.
 
 File › Open Fixed Image… loads a second volume (any grid; :mod:`voxwarp.core.comparison`).
-The slice views then sample it on each plane (:func:`slice_fixed_values`) and the Show
+The slice views then sample it on each plane (:meth:`FixedImage.fixed_values`) and the Show
 choices ``rest`` (the fixed image), ``checkerboard`` (world cells of the checker size),
 ``difference`` and ``blend`` compare with it; the Compare toolbar's slider sets the
 blend (0 = moving, 1 = fixed) and its 3D choice turns the raycaster's comparison on
-(``scene.comparison``: checkerboard, difference or blend) or off. File › Close Fixed
-Image drops it. :func:`install_fixed_image` wires this into the main window.
+(``scene.comparison``: checkerboard, difference or blend) or off; the toolbar sits at
+the bottom of the window while a fixed image is open. File › Close Fixed Image drops
+it. :func:`install_fixed_image` wires this into the main window.
 """
 
 from __future__ import annotations
@@ -136,7 +137,10 @@ def install_fixed_image(window: Any, file_menu: Any) -> FixedImage:
         window.addAction(action)
     bar = QToolBar("Compare")
     bar.setObjectName("Compare")
-    window.addToolBar(bar)
+    # at the bottom, shown while a fixed image is open: the top rows keep their room
+    window.addToolBar(Qt.ToolBarArea.BottomToolBarArea, bar)
+    bar.setVisible(False)
+    window.compare_bar = bar
     controls: dict[str, Any] = {}
     box = QComboBox()
     box.addItems([OFF, *COMPARE_SHOWS])
@@ -174,6 +178,7 @@ def _sync(window: Any) -> None:
     if not controls:
         return
     fixed = window.fixed_image
+    window.compare_bar.setVisible(fixed.volume is not None)
     values = {
         "show_3d": fixed.show_3d,
         "blend": round(fixed.blend * 100),

@@ -66,9 +66,11 @@ def test_open_fixed_image_slices_blend_and_3d(
     window: Any, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     w = window
+    assert not w.compare_bar.isVisible()  # no fixed image: no Compare toolbar
     path = save_volume(_flipped(w.session.volume), tmp_path / "fixed_lps.nrrd")
     _open(w, monkeypatch, path)
     assert not w.errors
+    assert w.compare_bar.isVisible()
     assert w.fixed_image.volume is not None
     for view in w.mpr.views:
         img = view.image
@@ -107,6 +109,7 @@ def test_open_fixed_image_slices_blend_and_3d(
 
     next(a for a in w.actions() if a.text() == "Close Fixed Image").trigger()
     assert w.fixed_image.volume is None
+    assert not w.compare_bar.isVisible()
     assert all(v.image.fixed is None for v in w.mpr.views if v.image is not None)
     assert "   rest " in w.mpr.views[0].readout_text()
 
