@@ -25,6 +25,7 @@ import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed war
 from voxwarp.core import limits
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
+from voxwarp.core.comparison import Comparison
 from voxwarp.core.field_check import TOLERANCE_MM
 from voxwarp.core.field_grid import FieldExport, chain_field, export_chain, field_grid
 from voxwarp.core.files import atomic_write_text
@@ -167,6 +168,23 @@ class Scene:
         The fitted camera then frames the volume and the meshes. A mesh-only picture
         still needs a volume: use a tiny empty one (e.g. ``Volume(np.zeros((2, 2, 2),
         np.uint8))`` with a transfer function that shows nothing).
+    fixed
+        A registration's fixed image (a Volume, a volume path or ``"sample:NAME"``, on
+        any grid): renders and slices then compare the volume seen through the warps
+        (the moving image) with it at the same world points, as ``compare`` says
+        (:mod:`voxwarp.core.comparison`); None (default): no comparison. Kept as the
+        settable attribute ``comparison`` (a :class:`~voxwarp.core.comparison.Comparison`
+        or None); ``fixed`` reads its volume. Scene JSON stores it in ``"fixed"`` (as
+        the volume: a path relative to the scene file, a sample or embedded) and
+        ``"compare"``.
+    compare
+        ``"checkerboard"`` (default: cubes of ``checker_mm`` alternate moving and
+        fixed), ``"difference"`` (3D: ``|moving - fixed|`` through the transfer
+        function) or ``"blend"``.
+    blend
+        The fixed image's weight for ``compare="blend"`` (0 = moving, 1 = fixed).
+    checker_mm
+        Checker cell size in mm; None: about 1/8 of the fixed image's longest side.
     """
 
     def __init__(
@@ -192,6 +210,10 @@ class Scene:
         fov: float = 30.0,
         meshes: Sequence[MeshInstance] | None = None,
         frame: Frame = "undeformed",
+        fixed: Any = None,
+        compare: str = "checkerboard",
+        blend: float = 0.5,
+        checker_mm: float | None = None,
     ) -> None:
         if not isinstance(volume, Volume):
             raise SceneError(
@@ -219,6 +241,14 @@ class Scene:
         self.fov = fov
         self.meshes = meshes
         self.frame = frame
+        self.comparison: Comparison | None = None
+        if fixed is not None:
+            self.comparison = Comparison(as_fixed_volume(fixed), compare, blend, checker_mm)
+
+    @property
+    def fixed(self) -> Volume | None:
+        """The fixed image of the comparison (None without one); see ``Scene(fixed=)``."""
+        return None if self.comparison is None else self.comparison.fixed
 
     # ------------------------------------------------------------------ validated attributes
     @property
@@ -504,6 +534,7 @@ class Scene:
             "fov": self.fov,
             "meshes": list(self._meshes),
             "frame": self.frame,
+            **_comparison_kwargs(self.comparison),
         }
 
     # ------------------------------------------------------------------ serialisation
@@ -532,6 +563,9 @@ class Scene:
             "fov": self.fov,
             "frame": self.frame,
         }
+        if self.comparison is not None:  # absent without a fixed image
+            d["fixed"] = _volume_to_dict(self.comparison.fixed, base_dir)
+            d["compare"] = self.comparison.settings_dict()
         if self._meshes:  # absent without meshes: scene JSON stays as before
             try:
                 d["meshes"] = [m.to_dict(base_dir) for m in self._meshes]
@@ -608,6 +642,7 @@ class Scene:
             "fov": d.get("fov", 30.0),
             "meshes": meshes,
             "frame": d.get("frame", "undeformed"),  # scenes written before it: undeformed
+            **_comparison_from_dict(d, base_dir),
         }
         for key in ("jitter",):
             if not isinstance(kwargs[key], bool):
@@ -793,6 +828,8 @@ SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
     "fov": (("number",), _NUMBER),
     "frame": (("str",), f"one of the strings {', '.join(FRAMES)}"),
     "meshes": (("list", "null"), "a list of mesh instance objects"),
+    "fixed": (("object", "null"), "an object with 'path', 'sample' or 'embedded', or null"),
+    "compare": (("object", "null"), "an object with 'show', 'blend', 'checker_mm', or null"),
 }
 #: Every key a scene JSON object may hold.
 SCENE_KEYS: tuple[str, ...] = (*SCENE_TYPES, *SCENE_EXTRA_KEYS)
@@ -1022,3 +1059,47 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
     except (VolumeError, TypeError, ValueError, OverflowError) as exc:
         raise SceneError(f"scene volume: {exc}") from exc
     raise SceneError("scene 'volume' needs one of 'path', 'sample' or 'embedded'")
+
+
+def _comparison_kwargs(comparison: Comparison | None) -> dict[str, Any]:
+    """``Scene`` arguments that rebuild ``comparison`` (none without one)."""
+    if comparison is None:
+        return {}
+    return {"fixed": comparison.fixed, **_compare_args(comparison.settings_dict())}
+
+
+def _compare_args(settings: Mapping[str, Any]) -> dict[str, Any]:
+    return {
+        "compare": settings.get("show", "checkerboard"),
+        "blend": settings.get("blend", 0.5),
+        "checker_mm": settings.get("checker_mm"),
+    }
+
+
+def _comparison_from_dict(d: Mapping[str, Any], base_dir: Any) -> dict[str, Any]:
+    """Scene JSON's ``fixed`` (a volume entry, resolved as the scene's volume is) and
+    ``compare`` settings -> ``Scene`` arguments."""
+    if d.get("fixed") is None:
+        return {}
+    settings = d.get("compare") or {}
+    unknown = sorted(set(settings) - {"show", "blend", "checker_mm"})
+    if unknown:
+        raise SceneError(
+            f"scene 'compare' holds only show, blend and checker_mm; drop {', '.join(unknown)}"
+        )
+    try:
+        fixed = _volume_from_dict(d["fixed"], base_dir)
+    except SceneError as exc:
+        raise SceneError(f"scene 'fixed': {exc}") from exc
+    return {"fixed": fixed, **_compare_args(settings)}
+
+
+def as_fixed_volume(fixed: Any) -> Volume:
+    """A fixed image given as a Volume, a path or ``"sample:NAME"`` -> the Volume."""
+    if isinstance(fixed, Volume):
+        return fixed
+    if isinstance(fixed, str | os.PathLike):
+        return load_volume(fixed)
+    raise SceneError(
+        f"fixed must be a Volume, a volume file path or 'sample:NAME'; got {type(fixed).__name__}"
+    )

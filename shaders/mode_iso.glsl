@@ -24,7 +24,7 @@ bool mode_sample(inout State s, float v, vec3 u, float t) {
         float tb = t;
         for (int i = 0; i < 6; ++i) {
             float tm = 0.5 * (ta + tb);
-            if (sample_value(texel_at(tm)) >= u_iso) tb = tm; else ta = tm;
+            if (scene_value(texel_at(tm), tm) >= u_iso) tb = tm; else ta = tm;
         }
         th = tb;
     }

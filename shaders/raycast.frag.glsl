@@ -27,6 +27,8 @@
 // can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
 // The renderer clears the viewport to u_background first; rays that miss the volume
 // (or, with CELL_SKIP, meet nothing visible) discard instead of writing it.
+// COMPARE: a fixed image is sampled at each sample's deformed world point and combined
+// with the moving value (compare.glsl); the renderer then draws without skipping.
 // MESH_DEPTH (mixed scenes, app/render/mesh_pass.py): the meshes were drawn first into
 // u_mesh_color (premultiplied, over the background) and u_mesh_depth, at the viewport's
 // size. Each ray stops at the mesh surface (the depth value unprojected to a point on
@@ -153,9 +155,12 @@ vec3 g_du;
 vec3 skip_at(float t) { return g_u0 + t * g_du; }
 #endif
 
-// Gradient of the deformed field at the sample (texel u, ray parameter t).
+#include "compare.glsl"
+
+// Gradient of the deformed field at the sample (texel u, ray parameter t); with
+// COMPARE, combined with the fixed image's as the sample's value is (compare.glsl).
 vec3 gradient_deformed(vec3 u, float t) {
-    return transpose(jacobian_at(t)) * gradient_original(u);
+    return compare_gradient(transpose(jacobian_at(t)) * gradient_original(u), t);
 }
 
 bool block_in_grid(ivec3 b) {
@@ -349,7 +354,7 @@ void main() {
                 ++k;
                 continue;
             }
-            if (mode_sample(s, sample_value(u), u, t)) {
+            if (mode_sample(s, scene_value(u, t), u, t)) {
                 finished = true;
                 break;
             }
@@ -379,7 +384,7 @@ void main() {
             continue;
         }
 #endif
-        if (mode_sample(s, sample_value(u), u, t)) break;
+        if (mode_sample(s, scene_value(u, t), u, t)) break;
         ++k;
     }
 #endif
@@ -407,7 +412,7 @@ void main() {
                 continue;
             }
         }
-        if (mode_sample(s, sample_value(u), u, t)) break;
+        if (mode_sample(s, scene_value(u, t), u, t)) break;
         ++k;
     }
 #else
@@ -429,7 +434,7 @@ void main() {
             if (mode_skip(s, t)) break;
             continue;
         }
-        if (mode_sample(s, sample_value(u), u, t)) break;
+        if (mode_sample(s, scene_value(u, t), u, t)) break;
     }
 #endif
     vec4 c = mode_finish(s);

@@ -59,6 +59,7 @@ from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
 from voxwarp.ui.field_view import SEP
+from voxwarp.ui.fixed_image import install_fixed_image
 from voxwarp.ui.frame_dialog import ask_frame
 from voxwarp.ui.mpr import SliceLayout, install_slice_controls
 from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
@@ -340,6 +341,7 @@ class MainWindow(QMainWindow):
         self.remove_fields_action = self._action(
             f, "Remove Displacement Fields", self.remove_fields
         )
+        install_fixed_image(self, f)
         f.addSeparator()
         self._action(f, "&Quit", self.close, QKeySequence.StandardKey.Quit)
 
@@ -753,6 +755,7 @@ class MainWindow(QMainWindow):
         self.session = session
         self.viewport.set_session(session, keep_camera=session.scene.camera is not None)
         self.mpr.set_session(session)
+        self.fixed_image.apply()  # the comparison carries over to the new scene
         if session.scene.camera is not None:
             self.viewport.camera = session.scene.camera
         self.undo_stack.clear()

@@ -45,6 +45,7 @@ from voxwarp.editing.slice_views import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.ui.fixed_image import slice_extras
 
 __all__ = ["SliceView"]
 
@@ -164,6 +165,11 @@ class SliceView(QWidget):
                 )
             )
             self.image = SliceImage.from_data(data, p2w, plane)
+            fixed = slice_extras(self.mpr.window)
+            if fixed is not None:  # the fixed image on the same pixels (ui/fixed_image.py)
+                self.image.fixed = vp.with_context(
+                    lambda: fixed.fixed_values(vp.renderer, p2w, size, state)
+                )
             self._error = ""
             self.recolor()
         except VoxwarpError as exc:
@@ -184,6 +190,7 @@ class SliceView(QWidget):
                 window=state.window,
                 tf=self.mpr.window.session.scene.transfer_function,
                 show=state.show,
+                **(fixed.colour_options() if (fixed := slice_extras(self.mpr.window)) else {}),
             )
         except VoxwarpError as exc:
             self._show_error(str(exc))
@@ -324,7 +331,8 @@ class SliceView(QWidget):
             ih = self.image.size[1]
             xy = self.to_widget(point[None])[0] * (ih / h)  # image pixels (a scaled image)
             values = self.image.value_at(xy[0], xy[1])
-        return readout(point, space, *values)
+        fixed = self.image is not None and self.image.fixed is not None
+        return readout(point, space, *values, "fixed" if fixed else "rest")
 
     # ------------------------------------------------------------------ mouse
     def mousePressEvent(self, event: QMouseEvent) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp.cli import render_options as ropt
+from voxwarp.cli.compare_options import add_compare_args, with_comparison
 from voxwarp.cli.deform_options import add_deform_args as _add_deform_args
 from voxwarp.cli.deform_options import add_field_args as _add_field_args
 from voxwarp.cli.deform_options import add_wire_args as _add_wire_args
@@ -76,6 +77,7 @@ def add_parser(sub: Any) -> None:
     _add_deform_args(pr)
     _add_wire_args(pr)
     _add_field_args(pr)
+    add_compare_args(pr, show=True)
     pr.set_defaults(func=cmd_render)
 
 
@@ -152,7 +154,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     _check_distinct_outputs(args)
     check_image_format(args.output)  # a bad -o fails before any work or other output
     obj = load_input(args.input, keep_padding=args.keep_padding, **ropt.load_options(args))
-    scene, pending = prepare_deformation(args, _scene_from_args(obj, args))
+    base = with_comparison(_scene_from_args(obj, args), args, args.show)
+    scene, pending = prepare_deformation(args, base)
     out = Path(args.output)
     dtype = "f4" if out.suffix.lower() in (".exr", ".hdr") else "u1"
     with OffscreenRenderer(*args.size, dtype=dtype) as r:

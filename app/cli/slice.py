@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from voxwarp.cli import render_options as ropt
+from voxwarp.cli.compare_options import add_compare_args, with_comparison
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
 from voxwarp.cli.options import TF_HELP, add_volume_args, tf_arg, window_arg
@@ -136,11 +137,13 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--tf", help=TF_HELP + " (--look tf)")
     p.add_argument(
         "--show",
-        choices=("deformed", "rest", "checkerboard", "difference"),
+        choices=("deformed", "rest", "checkerboard", "difference", "blend"),
         default="deformed",
-        help="the deformed volume (default), the rest state, a checkerboard of both, or"
-        " deformed minus rest",
+        help="the deformed volume (default), the rest state, a checkerboard of both,"
+        " deformed minus rest, or a blend (--blend); with --fixed, 'rest' is the fixed"
+        " image and the comparisons are against it",
     )
+    add_compare_args(p, show=False)
     size = p.add_mutually_exclusive_group()
     size.add_argument(
         "--pixel",
@@ -160,6 +163,11 @@ def add_parser(sub: Any) -> None:
     add_wire_args(p)
     add_field_args(p)
     p.set_defaults(func=cmd_slice)
+
+
+def _compare_look(show: str) -> str | None:
+    """The scene's 3D comparison look for a slice's ``--show`` (saved scenes keep it)."""
+    return show if show in ("checkerboard", "difference", "blend") else None
 
 
 def _base_scene(obj: Any, args: argparse.Namespace) -> Any:
@@ -263,7 +271,9 @@ def cmd_slice(args: argparse.Namespace) -> int:
     if args.look == "tf" and args.window is not None:
         raise InputError("--window sets the grey of --look window; drop it with --look tf")
     obj = load_input(args.input, **ropt.load_options(args))
-    scene, pending = prepare_deformation(args, _base_scene(obj, args))
+    look = _compare_look(args.show)
+    base = with_comparison(_base_scene(obj, args), args, look, strict=False)
+    scene, pending = prepare_deformation(args, base)
     with OffscreenRenderer(16, 16) as r, r.current():
         with deformed_scene(args, scene, pending, r.ctx) as scene:
             plane, size = slice_plane(scene, args)
@@ -277,6 +287,8 @@ def cmd_slice(args: argparse.Namespace) -> int:
                 look=args.look,
                 window=args.window,
                 show=args.show,
+                checker_mm=args.checker_mm,
+                blend=args.blend,
             )
     rgba = image.rgba
     assert rgba is not None

@@ -276,17 +276,20 @@ def layer_spacing(points: np.ndarray, normal: np.ndarray) -> float:
     return float(np.median(gap)) if len(gap) else 0.0
 
 
-def readout(point: Sequence[float], space: str, deformed: float, rest: float) -> str:
+def readout(
+    point: Sequence[float], space: str, deformed: float, rest: float, rest_label: str = "rest"
+) -> str:
     """The position line of a slice view: patient mm as Slicer writes it for RAS
     volumes (the letter of the side, then the distance: ``L 12.2  A 3.0  S 0.0``), signed
     ``x``, ``y``, ``z`` otherwise, then the deformed and rest values (5 significant
-    digits: the texture's float interpolation is not exact to more)."""
+    digits: the texture's float interpolation is not exact to more); ``rest_label``
+    names the second value (``"fixed"`` with a fixed image)."""
     p = np.asarray(point, dtype=np.float64).reshape(3)
     if space == "RAS":
         parts = [f"{axis_letters(a, v)} {abs(v):.1f}" for a, v in enumerate(p)]
     else:
         parts = [f"{a} {v:+.1f}" for a, v in zip(("x", "y", "z"), p, strict=True)]
-    return f"{'  '.join(parts)} mm   deformed {_value(deformed)}   rest {_value(rest)}"
+    return f"{'  '.join(parts)} mm   deformed {_value(deformed)}   {rest_label} {_value(rest)}"
 
 
 def _value(v: float) -> str:

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core.comparison import Comparison
 from voxwarp.core.volume import Volume
 from voxwarp.editing.common import DisplayOptions
 from voxwarp.editing.session import EditorError, EditSession
@@ -43,7 +44,7 @@ from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scen
 from voxwarp.render.inline_image import RenderedImage, png_bytes
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.overlay import OverlayRenderer
-from voxwarp.scene import Scene
+from voxwarp.scene import Scene, as_fixed_volume
 
 try:
     from jupyter_rfb import RemoteFrameBuffer
@@ -134,6 +135,10 @@ class Viewer(RemoteFrameBuffer):
     ctx
         A moderngl context to render with (its owner makes it current); default: a
         headless EGL context of the viewer's own.
+    fixed
+        A registration's fixed image (a Volume, a path or ``"sample:NAME"``): the view
+        compares the moving image seen through the warps with it (checkerboard; see
+        :meth:`set_fixed` and :mod:`voxwarp.core.comparison`). None: a scene's own.
     settings
         Deformation settings: ``resolution``, ``stiffness``, ``integrator``,
         ``variant``, ``backend``, and the element grid's boundary conditions ``anchor``
@@ -148,6 +153,7 @@ class Viewer(RemoteFrameBuffer):
         size: tuple[int, int] = DEFAULT_SIZE,
         running: bool = True,
         ctx: Any = None,
+        fixed: Any = None,
         **settings: Any,
     ) -> None:
         w, h = (max(1, int(v)) for v in size)
@@ -173,6 +179,8 @@ class Viewer(RemoteFrameBuffer):
             self._gl.shutdown()
             raise
         self.session.running = bool(running)
+        if fixed is not None:
+            self.session.scene.comparison = Comparison(as_fixed_volume(fixed))
         self.pixel_ratio = 1.0
         self.interaction = Interaction(self.session, (w, h))
         self.display_options = DisplayOptions()
@@ -235,6 +243,22 @@ class Viewer(RemoteFrameBuffer):
     def reset_camera(self) -> None:
         """Refit the camera to the scene."""
         self._redrawn(self._on_gl(self.interaction.reset_camera))
+
+    def set_fixed(
+        self,
+        fixed: Any,
+        compare: str = "checkerboard",
+        blend: float = 0.5,
+        checker_mm: float | None = None,
+    ) -> None:
+        """Compare with a fixed image (a Volume, a path or ``"sample:NAME"``) as
+        ``compare`` says (``"checkerboard"``, ``"difference"``, ``"blend"``); None
+        stops comparing. See ``Scene(fixed=...)``."""
+        cmp = None
+        if fixed is not None:
+            cmp = Comparison(as_fixed_volume(fixed), compare, blend, checker_mm)
+        self.session.scene.comparison = cmp
+        self.request_draw()
 
     def handle_pixels(self) -> np.ndarray:
         """(N, 2) CSS pixel positions of the handles (to pick or drag them by script)."""

@@ -133,6 +133,8 @@ class OffscreenRenderer:
         look: str = "window",
         window: tuple[float, float] | None = None,
         show: str = "deformed",
+        checker_mm: float | None = None,
+        blend: float | None = None,
     ) -> SliceImage:
         """One slice of ``scene`` through its warp chain (multi-planar reformatting).
 
@@ -142,8 +144,12 @@ class OffscreenRenderer:
         this renderer's. Returns a :class:`~voxwarp.render.slice_image.SliceImage`: its
         ``rgba`` (coloured by ``look`` ``"window"`` with ``window = (level, width)``,
         default the scene's, or ``"tf"``; ``show`` one of ``"deformed"``, ``"rest"``,
-        ``"checkerboard"``, ``"difference"``), the deformed and rest ``values`` and
-        ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to world mm.
+        ``"checkerboard"``, ``"difference"``, ``"blend"``), the deformed and rest
+        ``values`` and ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to
+        world mm. A scene with a fixed image (``Scene(fixed=...)``) samples it at the
+        same world points (``image.fixed``) and compares with it instead of the rest
+        state; ``checker_mm`` (world cells instead of 32-pixel tiles) and ``blend``
+        default to the scene's comparison settings.
         """
         w, h = self.size if size is None else (int(size[0]), int(size[1]))
         if isinstance(plane, str):  # axial etc. of a volume without orientation: z etc.
@@ -162,8 +168,31 @@ class OffscreenRenderer:
                 interpolation=interpolation,
             )
         image = SliceImage.from_data(data, matrix, plane)
+        cmp = scene.comparison
+        if cmp is not None:
+            fixed_scene = Scene(cmp.fixed, transfer_function=scene.transfer_function)
+            with self.current():
+                fixed = self.renderer.slice_values(
+                    fixed_scene,
+                    matrix,
+                    (w, h),
+                    slab_mm=slab_mm,
+                    slab_mode=slab_mode,
+                    interpolation=interpolation,
+                )
+            image.fixed = SliceImage.from_data(fixed, matrix).values
+            checker_mm = cmp.cell_mm if checker_mm is None else checker_mm
+            blend = cmp.blend if blend is None else blend
         win = scene.window if window is None else window
-        colorize(image, look=look, window=win, tf=scene.transfer_function, show=show)
+        colorize(
+            image,
+            look=look,
+            window=win,
+            tf=scene.transfer_function,
+            show=show,
+            checker_mm=checker_mm,
+            blend=0.5 if blend is None else blend,
+        )
         image.rgba = rendered(image.rgba)  # shows inline in Jupyter
         return image
 

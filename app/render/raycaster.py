@@ -49,6 +49,7 @@ from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
+from voxwarp.render.fixed_texture import FixedTexture, compare_uniforms, uses_gradient_texture
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
@@ -253,6 +254,8 @@ class Renderer:
         #: (size, colour texture, framebuffer) of draw_scaled, and its upscaling program
         self._lod_target: tuple[tuple[int, int], Any, Any] | None = None
         self._upscale: tuple[Any, Any] | None = None
+        #: the fixed image of a comparison scene (Scene(fixed=...)), uploaded on use
+        self._fixed = FixedTexture(ctx)
         self._released = False
 
     # ------------------------------------------------------------------ resources
@@ -465,6 +468,8 @@ class Renderer:
             meshes,
             piecewise,
             gradient_texture,
+            scene.comparison is not None,
+            uses_gradient_texture(scene),
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -488,6 +493,10 @@ class Renderer:
             defines.append("#define SEGMENT_MAP")
         if gradient_texture:
             defines.append("#define GRADIENT_TEXTURE")
+        if scene.comparison is not None:
+            defines.append("#define COMPARE")
+        if uses_gradient_texture(scene):
+            defines.append("#define FIXED_GRADIENT_TEXTURE")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -547,6 +556,8 @@ class Renderer:
         fold = fold_affine(scene.warps)
         linear = fold is not None
         skip_kind = self._skip_maps.kind(scene, linear, gpu.skip)
+        if scene.comparison is not None:  # the skip maps know the moving volume only
+            skip_kind = "none"
         self.last_skip_kind = skip_kind
         segment = 1
         if skip_kind == "cells" and not linear:
@@ -708,6 +719,19 @@ class Renderer:
             frame.gpu.skip.segment_texture.use(unit)
             set_uniform(prog, "u_segment_map", unit)
             unit += 1
+        if scene.comparison is not None:
+            self.check_volume(scene.comparison.fixed)  # too large: one line with advice
+            texture, value_map = self._fixed.get(scene.comparison.fixed)
+            texture.use(unit)
+            for name, value in compare_uniforms(
+                scene.volume, scene.comparison, unit, value_map
+            ).items():
+                set_uniform(prog, name, value)
+            unit += 1
+            if uses_gradient_texture(scene):
+                self._fixed.gradient(scene.comparison.fixed).use(unit)
+                set_uniform(prog, "u_fixed_gradient", unit)
+                unit += 1
         return unit
 
     def _bind_mesh_target(
@@ -868,6 +892,7 @@ class Renderer:
         if self._slice_renderer is not None:
             self._slice_renderer.release()
             self._slice_renderer = None
+        self._fixed.release()
         self._release_mesh_target()
         self._released = True
 

@@ -17,9 +17,17 @@ Shown state (``show``)
 ----------------------
 ``"deformed"`` (default), ``"rest"`` (the undeformed volume on the same plane),
 ``"checkerboard"`` (tiles of ``checker_px`` pixels alternating rest and deformed, the
-registration check) and ``"difference"`` (deformed minus rest over a dim rest image:
+registration check), ``"difference"`` (deformed minus rest over a dim rest image:
 red where the deformation raised the value, blue where it lowered it, full strength at
-one window width).
+one window width) and ``"blend"`` (``(1 - blend) * deformed + blend * rest``, colours
+mixed).
+
+With a fixed image (``image.fixed``, a registration's fixed volume sampled at the same
+world points; :mod:`voxwarp.core.comparison`) the comparisons use it instead of the
+rest state: ``"rest"`` shows the fixed image, ``"checkerboard"``, ``"difference"`` and
+``"blend"`` compare the deformed (moving) image with it. ``checker_mm`` switches the
+checkerboard from pixel tiles to the world cells the 3D view uses
+(:func:`voxwarp.core.comparison.checker_fixed`: odd cells show the reference).
 """
 
 from __future__ import annotations
@@ -29,14 +37,15 @@ from typing import Any, Literal
 
 import numpy as np
 
+from voxwarp.core.comparison import checker_fixed
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.errors import RenderError
 
 Look = Literal["window", "tf"]
 LOOKS: tuple[str, ...] = ("window", "tf")
-Show = Literal["deformed", "rest", "checkerboard", "difference"]
-SHOWS: tuple[str, ...] = ("deformed", "rest", "checkerboard", "difference")
+Show = Literal["deformed", "rest", "checkerboard", "difference", "blend"]
+SHOWS: tuple[str, ...] = ("deformed", "rest", "checkerboard", "difference", "blend")
 #: a pixel shows the volume when at least this fraction of its slab samples lie inside
 COVERED = 1e-6
 
@@ -56,6 +65,9 @@ class SliceImage:
         (its whole slab) lies outside the volume.
     rgba
         (H, W, 4) uint8 colours (:func:`colorize`), or None before colouring.
+    fixed
+        (H, W) float32 values of a fixed image at the pixels' world points (NaN
+        outside it), or None without one: then the comparisons use ``rest``.
     """
 
     plane: SlicePlane | None
@@ -63,6 +75,19 @@ class SliceImage:
     values: np.ndarray
     rest: np.ndarray
     rgba: np.ndarray | None = None
+    fixed: np.ndarray | None = None
+
+    @property
+    def reference(self) -> np.ndarray:
+        """What the comparisons compare ``values`` with: ``fixed``, else ``rest``."""
+        return self.rest if self.fixed is None else self.fixed
+
+    def pixel_points(self) -> np.ndarray:
+        """(H, W, 3) world points (mm) of the pixel centres."""
+        h, w = self.values.shape
+        cols, rows = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        m = self.pixel_to_world
+        return cols[..., None] * m[:3, 0] + rows[..., None] * m[:3, 1] + m[:3, 3]
 
     @classmethod
     def from_data(
@@ -83,12 +108,13 @@ class SliceImage:
         return (self.pixel_to_world @ np.array([col, row, 0.0, 1.0]))[:3]
 
     def value_at(self, col: float, row: float) -> tuple[float, float]:
-        """(deformed, rest) values of the pixel holding ``(col, row)``; NaN outside."""
+        """(deformed, rest) values of the pixel holding ``(col, row)`` (the fixed
+        image's value instead of rest when there is one: :attr:`reference`); NaN outside."""
         w, h = self.size
         c, r = int(np.floor(col)), int(np.floor(row))
         if not (0 <= c < w and 0 <= r < h):
             return float("nan"), float("nan")
-        return float(self.values[r, c]), float(self.rest[r, c])
+        return float(self.values[r, c]), float(self.reference[r, c])
 
 
 def _grey(values: np.ndarray, window: tuple[float, float]) -> np.ndarray:
@@ -132,23 +158,29 @@ def colorize(
     tf: TransferFunction | None = None,
     show: str = "deformed",
     checker_px: int = 32,
+    checker_mm: float | None = None,
+    blend: float = 0.5,
 ) -> np.ndarray:
     """The slice's (H, W, 4) uint8 RGBA (opaque; see the module docstring for
-    ``look`` and ``show``); also kept as ``image.rgba``."""
+    ``look``, ``show``, ``checker_mm`` and ``blend``); also kept as ``image.rgba``."""
     options: dict[str, Any] = {"look": look, "window": window, "tf": tf}
     if show == "deformed":
         colours = colour_values(image.values, **options)
     elif show == "rest":
-        colours = colour_values(image.rest, **options)
+        colours = colour_values(image.reference, **options)
     elif show == "checkerboard":
-        h, w = image.values.shape
-        k = max(int(checker_px), 1)
-        tiles = ((np.arange(h)[:, None] // k) + (np.arange(w)[None, :] // k)) % 2 == 1
-        rest = colour_values(image.rest, **options)
+        tiles = _checker_tiles(image, checker_px, checker_mm)
+        rest = colour_values(image.reference, **options)
         deformed = colour_values(image.values, **options)
         colours = np.where(tiles if rest.ndim == 2 else tiles[..., None], rest, deformed)
     elif show == "difference":
         colours = _difference(image, window)
+    elif show == "blend":
+        b = float(blend)
+        if not 0.0 <= b <= 1.0:
+            raise RenderError(f"blend must be in [0, 1] (0 = moving, 1 = fixed); got {blend}")
+        rest = colour_values(image.reference, **options)
+        colours = (1.0 - b) * colour_values(image.values, **options) + b * rest
     else:
         raise RenderError(f"show must be one of {', '.join(SHOWS)}; got {show!r}")
     out = np.empty((*colours.shape[:2], 4), np.uint8)
@@ -159,13 +191,25 @@ def colorize(
     return out
 
 
+def _checker_tiles(image: SliceImage, checker_px: int, checker_mm: float | None) -> np.ndarray:
+    """(H, W) bool: where the checkerboard shows the reference (rest or fixed)."""
+    if checker_mm is not None:
+        if not (np.isfinite(checker_mm) and checker_mm > 0):
+            raise RenderError(f"checker size must be a positive number of mm; got {checker_mm}")
+        return checker_fixed(image.pixel_points(), float(checker_mm))
+    h, w = image.values.shape
+    k = max(int(checker_px), 1)
+    return ((np.arange(h)[:, None] // k) + (np.arange(w)[None, :] // k)) % 2 == 1
+
+
 def _difference(image: SliceImage, window: tuple[float, float]) -> np.ndarray:
-    """Deformed - rest over a dim grey rest image: red up, blue down, full at one width."""
+    """Deformed - reference (rest or fixed) over a dim grey reference image: red up,
+    blue down, full at one width."""
     width = float(window[1])
-    rest = np.where(np.isfinite(image.rest), image.rest, np.nan)
-    under = np.repeat(0.35 * colour_values(rest, "window", window)[..., None], 3, axis=2)
+    ref = image.reference
+    under = np.repeat(0.35 * colour_values(ref, "window", window)[..., None], 3, axis=2)
     a = np.where(np.isfinite(image.values), image.values, window[0] - width / 2)
-    b = np.where(np.isfinite(image.rest), image.rest, window[0] - width / 2)
+    b = np.where(np.isfinite(ref), ref, window[0] - width / 2)
     t = np.clip((a - b) / width, -1.0, 1.0)
     rgb = under.copy()
     rgb[..., 0] = np.maximum(under[..., 0], np.maximum(t, 0.0))

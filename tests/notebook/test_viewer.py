@@ -336,3 +336,27 @@ def test_own_context_serves_calls_from_any_thread(gl_ctx: Any) -> None:
         assert _changed_pixels(after, np.asarray(before, np.int16)) > 50  # the orbit took
     finally:
         v.close()
+
+
+def test_fixed_image_compares_in_the_view(gl_ctx: Any) -> None:
+    """Viewer(fixed=): the frame is the comparison; the image against itself as
+    difference is the bare background (a transfer function transparent up to 100),
+    set_fixed(None) brings the moving image back."""
+    from voxwarp.core.transfer_function import TransferFunction
+    from voxwarp.notebook import Viewer
+
+    tf = TransferFunction([(0, 0, 0, 0, 0), (100, 1, 1, 1, 0), (400, 1, 1, 1, 1)])
+    scene = _scene().copy(transfer_function=tf)
+    v = Viewer(scene, size=SIZE, ctx=gl_ctx, fixed=scene.volume)
+    try:
+        assert v.session.scene.comparison is not None
+        assert v.session.scene.comparison.show == "checkerboard"
+        v.set_fixed(scene.volume, "difference")
+        diff = np.asarray(v.snapshot(1.0))[..., :3].astype(int)
+        v.set_fixed(None)
+        assert v.session.scene.comparison is None
+        moving = np.asarray(v.snapshot(1.0))[..., :3].astype(int)
+        assert moving.max() > 60  # the fish shows
+        assert diff.max() <= 2
+    finally:
+        v.release()
