@@ -80,9 +80,9 @@ def add_overlay_args(p: argparse.ArgumentParser, three_d: bool = False) -> None:
         p.add_argument(
             "--grid-plane",
             choices=GRID_PLANES,
-            default="all",
-            help="3D grid: the lines of one plane through the volume's centre, or all:"
-            " the 3D lattice (default); glyphs lie on that plane (axial for all)",
+            help="3D grid: the lines of one plane through the volume's centre (default"
+            " the named plane that faces the camera most), or all: the 3D lattice;"
+            " glyphs lie on that plane (axial for all)",
         )
 
 

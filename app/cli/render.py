@@ -120,17 +120,26 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
 
 
 def _with_overlays(scene: Any, args: argparse.Namespace) -> Any:
-    """``scene`` with the meshes of ``--overlay grid``/``glyphs`` added (notes on stderr)."""
+    """``scene`` with the meshes of ``--overlay grid``/``glyphs`` added, seen by the
+    camera of the scene without them (notes on stderr)."""
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
-    from voxwarp.render.warp_overlays import WARP_OVERLAYS, overlay_meshes
+    from voxwarp.render.warp_overlays import (
+        WARP_OVERLAYS,
+        camera_pixel_mm,
+        facing_plane,
+        overlay_meshes,
+    )
 
     wanted = [o for o in args.overlays if o in WARP_OVERLAYS]
     if not wanted:
         return scene
     spacing = grid_spacing(args, scene.volume)
-    extra = overlay_meshes(scene, wanted, spacing, args.grid_plane)
-    print(f"render: {', '.join(wanted)} every {spacing:g} mm ({args.grid_plane})", file=sys.stderr)
-    return scene.copy(meshes=[*scene.meshes, *extra])
+    camera = scene.resolved_camera()
+    plane = args.grid_plane or facing_plane(camera)
+    pixel = camera_pixel_mm(camera, tuple(args.size))
+    extra = overlay_meshes(scene, wanted, spacing, plane, pixel_mm=pixel)
+    print(f"render: {', '.join(wanted)} every {spacing:g} mm ({plane})", file=sys.stderr)
+    return scene.copy(meshes=[*scene.meshes, *extra], camera=camera)
 
 
 def _check_distinct_outputs(args: argparse.Namespace) -> None:

@@ -197,13 +197,16 @@ def overlay_meshes(
     overlays: Sequence[str],
     spacing_mm: float,
     plane: str = "all",
+    *,
+    pixel_mm: float = 0.0,
 ) -> list[MeshInstance]:
     """Mesh instances of ``overlays`` (``"grid"``, ``"glyphs"``) for ``scene``'s mesh
     pass: the grid's tubes (rest space, moved by the chain when drawn) over the
     volume's box, and glyph arrows on ``plane`` (the box centre's axial plane for
-    ``"all"``)."""
+    ``"all"``). ``pixel_mm``: the picture's pixel size at the volume (see
+    :func:`camera_pixel_mm`); tubes are at least 1.5 pixels wide."""
     lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.volume.bounds)
-    radius = float(np.max(hi - lo)) * TUBE_RADIUS
+    radius = max(float(np.max(hi - lo)) * TUBE_RADIUS, 0.75 * float(pixel_mm))
     out = []
     if "grid" in overlays:
         lines = lattice_lines(lo, hi, spacing_mm, plane)
@@ -216,6 +219,22 @@ def overlay_meshes(
         if mesh is not None:
             out.append(MeshInstance(mesh, color=(*GLYPH_RGB, 1.0), name="displacement glyphs"))
     return out
+
+
+def camera_pixel_mm(camera: Any, size: tuple[int, int]) -> float:
+    """Size in mm of one pixel of a ``size`` picture at the camera's centre."""
+    c = np.asarray(camera.center, dtype=np.float64)
+    right = np.asarray(camera.rotation, dtype=np.float64)[:, 0]
+    a, b = camera.project(np.stack([c, c + right]), size)
+    return 1.0 / max(float(np.hypot(*(b - a))), 1e-12)
+
+
+def facing_plane(camera: Any) -> str:
+    """The named plane (axial, coronal, sagittal) whose normal is closest to the
+    camera's viewing direction."""
+    view = np.asarray(camera.rotation, dtype=np.float64)[:, 2]
+    axis = int(np.argmax(np.abs(view)))
+    return {k: name for name, k in PLANE_AXIS.items()}[axis]
 
 
 def tube_mesh(lines: Sequence[np.ndarray], radius: float, name: str = "tubes") -> Mesh:
@@ -316,8 +335,10 @@ __all__ = [
     "GRID_RGB",
     "WARP_OVERLAYS",
     "arrow_vertices",
+    "camera_pixel_mm",
     "draw_glyphs",
     "draw_slice_overlays",
+    "facing_plane",
     "glyph_mesh",
     "glyph_note",
     "overlay_meshes",
