@@ -31,7 +31,7 @@ from voxwarp.core.warp_grid import (
     pull_back,
     slice_glyphs,
 )
-from voxwarp.deform.warp import Warp
+from voxwarp.deform.warp import Warp, chain_forward_lenient
 from voxwarp.errors import InputError
 
 #: Overlays these functions draw (the CLI's ``--overlay`` accepts them).
@@ -287,13 +287,7 @@ def glyph_mesh(
     deformed-space plane ``plane`` through the box centre (longest 0.9 spacing),
     stored pulled back through the chain (the mesh pass's forward map returns them
     to where they are built). None when nothing moves there."""
-    k = PLANE_AXIS[plane]
-    a, b = (ax for ax in range(3) if ax != k)
-    ta = np.arange(lo[a] + spacing_mm / 2, hi[a], spacing_mm)
-    tb = np.arange(lo[b] + spacing_mm / 2, hi[b], spacing_mm)
-    ga, gb = np.meshgrid(ta, tb, indexing="ij")
-    x = np.empty((ga.size, 3))
-    x[:, a], x[:, b], x[:, k] = ga.ravel(), gb.ravel(), (lo[k] + hi[k]) / 2
+    x = plane_points(lo, hi, spacing_mm, plane)
     u = pull_back(warps, x) - x
     size = np.linalg.norm(u, axis=1)
     keep = np.isfinite(size) & (size > 1e-6)
@@ -310,6 +304,50 @@ def glyph_mesh(
     rest = pull_back(warps, deformed)
     rest = np.where(np.isfinite(rest), rest, deformed)
     return Mesh(rest, np.concatenate(faces), name="displacement glyphs")
+
+
+def grid_segments(scene: Any, spacing_mm: float, plane: str = "all") -> np.ndarray:
+    """Line segments (2k, 3) of the rest-space grid moved by the chain's forward map
+    (for 1-pixel line overlays such as the GUI's; points without a forward map keep
+    their best estimate)."""
+    lo, hi = scene.volume.bounds
+    segments = []
+    for p in lattice_lines(lo, hi, spacing_mm, plane):
+        q = chain_forward_lenient(scene.warps, p)[0] if scene.warps else p
+        segments.append(np.repeat(q, 2, axis=0)[1:-1])
+    return np.concatenate(segments) if segments else np.zeros((0, 3))
+
+
+def glyph_segments(scene: Any, spacing_mm: float, plane: str) -> np.ndarray:
+    """Line segments (2k, 3) of arrows of ``u = chain(x) - x`` on the deformed-space
+    ``plane`` through the box centre (shaft and two barbs each; longest 0.9 spacing)."""
+    lo, hi = (np.asarray(b, float) for b in scene.deformed_bounds())
+    x = plane_points(lo, hi, spacing_mm, plane)
+    u = pull_back(scene.warps, x) - x
+    size = np.linalg.norm(u, axis=1)
+    keep = np.isfinite(size) & (size > 1e-6)
+    if not np.any(keep):
+        return np.zeros((0, 3))
+    x, vec = x[keep], u[keep] * (0.9 * spacing_mm / float(size[keep].max()))
+    tip = x + vec
+    normal = np.eye(3)[PLANE_AXIS[plane]]
+    side = np.cross(vec, normal) * 0.15
+    back = vec * 0.3
+    parts = [x, tip, tip, tip - back + side, tip, tip - back - side]
+    return np.stack(parts, axis=1).reshape(-1, 3)
+
+
+def plane_points(lo: np.ndarray, hi: np.ndarray, spacing_mm: float, plane: str) -> np.ndarray:
+    """(n, 3) points every ``spacing_mm`` (cell centres) on the named plane through the
+    centre of the box ``lo..hi``."""
+    k = PLANE_AXIS[plane]
+    a, b = (ax for ax in range(3) if ax != k)
+    ta = np.arange(lo[a] + spacing_mm / 2, hi[a], spacing_mm)
+    tb = np.arange(lo[b] + spacing_mm / 2, hi[b], spacing_mm)
+    ga, gb = np.meshgrid(ta, tb, indexing="ij")
+    x = np.empty((ga.size, 3))
+    x[:, a], x[:, b], x[:, k] = ga.ravel(), gb.ravel(), (lo[k] + hi[k]) / 2
+    return x
 
 
 def arrow_vertices(
@@ -341,6 +379,9 @@ __all__ = [
     "facing_plane",
     "glyph_mesh",
     "glyph_note",
+    "glyph_segments",
+    "grid_segments",
     "overlay_meshes",
+    "plane_points",
     "tube_mesh",
 ]

@@ -1,0 +1,193 @@
+"""View › Warped Grid / Displacement Glyphs: the chain's grid and glyphs in the GUI.
+
+:class:`WarpOverlays` (``window.warp_overlays``) holds the two switches and the grid
+spacing (0: automatic, as the CLI's default) and draws:
+
+* on the slice views, over each slice's colours (:meth:`WarpOverlays.slice_rgba`,
+  called by :meth:`voxwarp.ui.slice_view.SliceView.recolor`), the rest-space grid and
+  the displacement arrows of :func:`voxwarp.render.warp_overlays.draw_slice_overlays`;
+  each slice's pull-back points are computed once per drawn slice (a window/level
+  drag does not recompute them);
+* in the 3D view, 1-pixel lines on top of the volume (an ``extra_overlays`` entry of
+  the viewport): the grid plane facing the camera moved by the chain's forward map,
+  and arrows of ``u`` on that plane (:func:`~voxwarp.render.warp_overlays.grid_segments`,
+  :func:`~voxwarp.render.warp_overlays.glyph_segments`), cached per warp revision.
+
+:func:`install_warp_overlays` adds the menu entries and the spacing box.
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+import numpy as np
+from PySide6.QtGui import QAction
+from PySide6.QtWidgets import QDoubleSpinBox, QHBoxLayout, QLabel, QMenu, QWidget, QWidgetAction
+
+from voxwarp.core.warp_grid import (
+    MIN_CELL_PX,
+    grid_coverage,
+    nice_spacing,
+    pixel_points,
+    pull_back,
+    slice_glyphs,
+)
+from voxwarp.errors import VoxwarpError
+from voxwarp.render.overlay import OverlayLayer
+from voxwarp.render.warp_overlays import (
+    GLYPH_RGB,
+    GRID_ALPHA,
+    GRID_RGB,
+    draw_glyphs,
+    facing_plane,
+    glyph_segments,
+    grid_segments,
+)
+
+
+class WarpOverlays:
+    """The grid/glyph switches of one window and their drawing (see the module)."""
+
+    def __init__(self, window: Any) -> None:
+        self.window = window
+        self.grid = False
+        self.glyphs = False
+        #: grid spacing in mm; 0 picks it from the volume's box
+        self.spacing_mm = 0.0
+        #: pull-back points per drawn slice image: id -> (weak reference, points)
+        self._rest: dict[int, tuple[weakref.ref, np.ndarray]] = {}
+        self._lines: tuple[Any, list[OverlayLayer]] | None = None
+
+    @property
+    def active(self) -> bool:
+        """True when the grid or the glyphs are shown."""
+        return self.grid or self.glyphs
+
+    def spacing(self, pixel_mm: float = 0.0) -> float:
+        """The grid spacing in mm (the automatic one when ``spacing_mm`` is 0)."""
+        if self.spacing_mm > 0:
+            return float(self.spacing_mm)
+        volume = self.window.session.scene.volume
+        return nice_spacing(*volume.bounds, at_least_mm=MIN_CELL_PX * pixel_mm)
+
+    def set(self, grid: bool | None = None, glyphs: bool | None = None) -> None:
+        """Switch the grid and/or glyphs and redraw."""
+        if grid is not None:
+            self.grid = bool(grid)
+        if glyphs is not None:
+            self.glyphs = bool(glyphs)
+        self.changed()
+
+    def set_spacing(self, mm: float) -> None:
+        """Grid spacing in mm (0: automatic) and redraw."""
+        self.spacing_mm = max(float(mm), 0.0)
+        self.changed()
+
+    def changed(self) -> None:
+        """Recolour the slices and redraw the 3D view."""
+        self._lines = None
+        self.window.mpr.recolor_all()
+        self.window.viewport.update()
+
+    # ---------------------------------------------------------------- slices
+    def slice_rgba(self, image: Any, rgba: np.ndarray) -> np.ndarray:
+        """``rgba`` of a slice ``image`` with the switched-on overlays drawn over it."""
+        if not self.active:
+            return rgba
+        m = np.asarray(image.pixel_to_world, dtype=np.float64)
+        warps = self.window.session.scene.warps
+        spacing = self.spacing(float(np.linalg.norm(m[:3, 0])))
+        out = np.asarray(rgba, dtype=np.float64).copy()
+        try:
+            if self.grid:
+                rest = self._rest_points(image, warps)
+                cover = grid_coverage(rest, (m[:3, 0], m[:3, 1]), spacing) * GRID_ALPHA
+                a = cover[..., None]
+                out[..., :3] = out[..., :3] * (1 - a) + np.asarray(GRID_RGB) * 255 * a
+            if self.glyphs:
+                draw_glyphs(out, slice_glyphs(warps, m, image.size, spacing))
+        except VoxwarpError:
+            return rgba
+        return np.ascontiguousarray((out + 0.5).clip(0, 255).astype(np.uint8))
+
+    def _rest_points(self, image: Any, warps: list) -> np.ndarray:
+        """The pull-back points of a slice's pixels, computed once per slice image."""
+        hit = self._rest.get(id(image))
+        if hit is not None and hit[0]() is image:
+            return hit[1]
+        self._rest = {k: v for k, v in self._rest.items() if v[0]() is not None}
+        m = np.asarray(image.pixel_to_world, dtype=np.float64)
+        rest = pull_back(warps, pixel_points(m, image.size))
+        self._rest[id(image)] = (weakref.ref(image), rest)
+        return rest
+
+    # ---------------------------------------------------------------- 3D
+    def layers_3d(self, display: Any = None) -> list[OverlayLayer]:
+        """The 3D view's line layers (cached per warp revision, spacing and plane)."""
+        if not self.active:
+            return []
+        scene = self.window.session.scene
+        plane = facing_plane(self.window.viewport.camera)
+        key = (
+            tuple((id(w), w.revision) for w in scene.warps),
+            self.grid,
+            self.glyphs,
+            self.spacing(),
+            plane,
+            id(scene.volume),
+        )
+        if self._lines is not None and self._lines[0] == key:
+            return self._lines[1]
+        layers = []
+        try:
+            if self.grid:
+                seg = grid_segments(scene, self.spacing(), plane)
+                layers.append(OverlayLayer("lines", seg, (*GRID_RGB, 1.0), name="warped grid"))
+            if self.glyphs:
+                seg = glyph_segments(scene, self.spacing(), plane)
+                layers.append(OverlayLayer("lines", seg, (*GLYPH_RGB, 1.0), name="glyphs"))
+        except VoxwarpError:
+            layers = []
+        self._lines = (key, layers)
+        return layers
+
+
+def install_warp_overlays(window: Any, menu: QMenu) -> WarpOverlays:
+    """Add "Warped Grid" (G), "Displacement Glyphs" and a grid spacing box to ``menu``;
+    the state is ``window.warp_overlays``, its actions ``window.warp_overlay_actions``."""
+    overlays = WarpOverlays(window)
+    window.warp_overlays = overlays
+    window.viewport.extra_overlays.append(overlays.layers_3d)
+    grid = QAction("Warped &Grid", window)
+    grid.setCheckable(True)
+    grid.setShortcut("G")
+    grid.setToolTip("the rest-space grid carried by the warp chain, in 3D and on the slices")
+    grid.toggled.connect(lambda on: overlays.set(grid=on))
+    glyphs = QAction("Displacement Gl&yphs", window)
+    glyphs.setCheckable(True)
+    glyphs.setToolTip("arrows of u = chain(x) - x (the exported field's vectors)")
+    glyphs.toggled.connect(lambda on: overlays.set(glyphs=on))
+    for action in (grid, glyphs):
+        menu.addAction(action)
+        window.addAction(action)
+    box = QDoubleSpinBox()
+    box.setRange(0.0, 1000.0)
+    box.setDecimals(1)
+    box.setSuffix(" mm")
+    box.setSpecialValueText("auto")
+    box.setToolTip("grid spacing (auto: about 1/16 of the volume)")
+    box.valueChanged.connect(overlays.set_spacing)
+    holder = QWidget()
+    row = QHBoxLayout(holder)
+    row.setContentsMargins(24, 2, 8, 2)
+    row.addWidget(QLabel("Grid spacing"))
+    row.addWidget(box)
+    spacing = QWidgetAction(window)
+    spacing.setDefaultWidget(holder)
+    menu.addAction(spacing)
+    window.warp_overlay_actions = {"grid": grid, "glyphs": glyphs, "spacing": box}
+    return overlays
+
+
+__all__ = ["WarpOverlays", "install_warp_overlays"]
