@@ -35,15 +35,7 @@ from voxwarp.core.warp_grid import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.overlay import OverlayLayer
-from voxwarp.render.warp_overlays import (
-    GLYPH_RGB,
-    GRID_ALPHA,
-    GRID_RGB,
-    draw_glyphs,
-    facing_plane,
-    glyph_segments,
-    grid_segments,
-)
+from voxwarp.render.warp_overlays import GRID_ALPHA, GRID_RGB, WarpLines, draw_glyphs
 
 
 class WarpOverlays:
@@ -57,7 +49,7 @@ class WarpOverlays:
         self.spacing_mm = 0.0
         #: pull-back points per drawn slice image: id -> (weak reference, points)
         self._rest: dict[int, tuple[weakref.ref, np.ndarray]] = {}
-        self._lines: tuple[Any, list[OverlayLayer]] | None = None
+        self._lines = WarpLines()
 
     @property
     def active(self) -> bool:
@@ -86,7 +78,6 @@ class WarpOverlays:
 
     def changed(self) -> None:
         """Recolour the slices and redraw the 3D view."""
-        self._lines = None
         self.window.mpr.recolor_all()
         self.window.viewport.update()
 
@@ -124,33 +115,13 @@ class WarpOverlays:
 
     # ---------------------------------------------------------------- 3D
     def layers_3d(self, display: Any = None) -> list[OverlayLayer]:
-        """The 3D view's line layers (cached per warp revision, spacing and plane)."""
-        if not self.active:
-            return []
-        scene = self.window.session.scene
-        plane = facing_plane(self.window.viewport.camera)
-        key = (
-            tuple((id(w), w.revision) for w in scene.warps),
-            self.grid,
-            self.glyphs,
-            self.spacing(),
-            plane,
-            id(scene.volume),
-        )
-        if self._lines is not None and self._lines[0] == key:
-            return self._lines[1]
-        layers = []
+        """The 3D view's line layers (:class:`~voxwarp.render.warp_overlays.WarpLines`)."""
+        lines = self._lines
+        lines.grid, lines.glyphs, lines.spacing_mm = self.grid, self.glyphs, self.spacing_mm
         try:
-            if self.grid:
-                seg = grid_segments(scene, self.spacing(), plane)
-                layers.append(OverlayLayer("lines", seg, (*GRID_RGB, 1.0), name="warped grid"))
-            if self.glyphs:
-                seg = glyph_segments(scene, self.spacing(), plane)
-                layers.append(OverlayLayer("lines", seg, (*GLYPH_RGB, 1.0), name="glyphs"))
+            return lines.layers(self.window.session.scene, self.window.viewport.camera)
         except VoxwarpError:
-            layers = []
-        self._lines = (key, layers)
-        return layers
+            return []
 
 
 def install_warp_overlays(window: Any, menu: QMenu) -> WarpOverlays:

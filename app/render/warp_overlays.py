@@ -27,12 +27,14 @@ from voxwarp.core.warp_grid import (
     SliceGlyphs,
     grid_coverage,
     lattice_lines,
+    nice_spacing,
     pixel_points,
     pull_back,
     slice_glyphs,
 )
 from voxwarp.deform.warp import Warp, chain_forward_lenient
 from voxwarp.errors import InputError
+from voxwarp.render.overlay import OverlayLayer
 
 #: Overlays these functions draw (the CLI's ``--overlay`` accepts them).
 WARP_OVERLAYS: tuple[str, ...] = ("grid", "glyphs")
@@ -350,6 +352,46 @@ def plane_points(lo: np.ndarray, hi: np.ndarray, spacing_mm: float, plane: str) 
     return x
 
 
+class WarpLines:
+    """The grid and glyphs as 1-pixel line layers over a 3D view (GUI, notebook).
+
+    Switches ``grid``, ``glyphs`` and ``spacing_mm`` (0: :func:`nice_spacing` of the
+    volume); :meth:`layers` gives the :class:`~voxwarp.render.overlay.OverlayLayer`
+    list for a scene and camera: the plane facing the camera, cached per warp
+    revision, spacing and plane.
+    """
+
+    def __init__(self, grid: bool = False, glyphs: bool = False, spacing_mm: float = 0.0):
+        self.grid, self.glyphs, self.spacing_mm = bool(grid), bool(glyphs), float(spacing_mm)
+        self._cache: tuple[Any, list[OverlayLayer]] | None = None
+
+    def spacing(self, volume: Any) -> float:
+        """The grid spacing in mm for ``volume`` (``spacing_mm``, or automatic)."""
+        if self.spacing_mm > 0:
+            return self.spacing_mm
+        return nice_spacing(*volume.bounds)
+
+    def layers(self, scene: Any, camera: Any) -> list[OverlayLayer]:
+        """Line layers of the switched-on overlays (empty when both are off)."""
+        if not (self.grid or self.glyphs):
+            return []
+        plane = facing_plane(camera)
+        spacing = self.spacing(scene.volume)
+        warps = tuple((id(w), w.revision) for w in scene.warps)
+        key = (warps, self.grid, self.glyphs, spacing, plane, id(scene.volume))
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        layers = []
+        if self.grid:
+            seg = grid_segments(scene, spacing, plane)
+            layers.append(OverlayLayer("lines", seg, (*GRID_RGB, 1.0), name="warped grid"))
+        if self.glyphs:
+            seg = glyph_segments(scene, spacing, plane)
+            layers.append(OverlayLayer("lines", seg, (*GLYPH_RGB, 1.0), name="glyphs"))
+        self._cache = (key, layers)
+        return layers
+
+
 def arrow_vertices(
     tail: np.ndarray, vec: np.ndarray, radius: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -372,6 +414,7 @@ __all__ = [
     "GLYPH_RGB",
     "GRID_RGB",
     "WARP_OVERLAYS",
+    "WarpLines",
     "arrow_vertices",
     "camera_pixel_mm",
     "draw_glyphs",
