@@ -56,6 +56,7 @@ def test_slice_grid_lines_at_multiples(gl_ctx: Any, volume_file: Path, tmp_path:
     assert np.all(img[far, 0] == grey[far])  # grey (untouched) away from them
 
 
+@pytest.mark.slow  # two renders in child processes (~7 s)
 def test_render_grid_and_glyphs(gl_ctx: Any, volume_file: Path, tmp_path: Path) -> None:
     plain, grid = tmp_path / "plain.png", tmp_path / "grid.png"
     common = ["--size", "64x64", "--seed", "1"]
