@@ -87,7 +87,8 @@ class WarpOverlays:
         if not self.active:
             return rgba
         m = np.asarray(image.pixel_to_world, dtype=np.float64)
-        warps = self.window.session.scene.warps
+        rest_shown = self.window.mpr.state.show == "rest"  # the rest state: a straight grid
+        warps = [] if rest_shown else self.window.session.scene.warps
         spacing = self.spacing(float(np.linalg.norm(m[:3, 0])))
         out = np.asarray(rgba, dtype=np.float64).copy()
         try:
@@ -104,6 +105,8 @@ class WarpOverlays:
 
     def _rest_points(self, image: Any, warps: list) -> np.ndarray:
         """The pull-back points of a slice's pixels, computed once per slice image."""
+        if not warps:
+            return pixel_points(np.asarray(image.pixel_to_world, float), image.size)
         hit = self._rest.get(id(image))
         if hit is not None and hit[0]() is image:
             return hit[1]

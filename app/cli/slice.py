@@ -313,8 +313,9 @@ def _draw_overlays(rgba: np.ndarray, scene: Any, matrix: np.ndarray, args: Any) 
         return rgba
     pixel_mm = float(np.linalg.norm(np.asarray(matrix)[:3, 0]))
     spacing = grid_spacing(args, scene.volume, pixel_mm)
+    warps = [] if args.show == "rest" else scene.warps  # the rest state: a straight grid
     rgba, notes = draw_slice_overlays(
-        rgba, scene.warps, matrix, wanted, spacing, glyph_spacing_mm=args.glyph_spacing
+        rgba, warps, matrix, wanted, spacing, glyph_spacing_mm=args.glyph_spacing
     )
     for note in notes:
         print(f"slice: {note}", file=sys.stderr)

@@ -4,6 +4,7 @@ Slices (:func:`draw_slice_overlays`, numpy, no GL): over a slice's RGBA, the res
 grid lines carried by the chain (:func:`voxwarp.core.warp_grid.grid_coverage` of the
 pull-back point of each pixel centre, the point the slice shader samples) and arrows of
 the in-plane displacement ``u = chain(x) - x`` with a legend arrow and its length in mm
+(top right)
 (:func:`voxwarp.core.warp_grid.slice_glyphs`).
 
 3D (:func:`overlay_meshes`): mesh instances for a scene's mesh pass, drawn depth-tested
@@ -156,15 +157,16 @@ def _segment(
 
 
 def _legend(out: np.ndarray, glyphs: SliceGlyphs, width: float, rgb: Any) -> None:
-    """The legend: an arrow of ``legend_mm`` and its length as text, bottom left."""
-    h = out.shape[0]
+    """The legend, top right: an arrow of ``legend_mm`` and its length as text."""
+    h, w = out.shape[:2]
     length = glyphs.legend_mm * glyphs.px_per_mm
     scale = 2 if h >= 384 else 1
-    y = h - 8 - 7 * scale
-    tail = np.array([8.0, y + 3.5 * scale])
-    _arrow(out, tail, tail + np.array([length, 0.0]), width, rgb)
     text = f"{glyphs.legend_mm:g} mm"
-    _text(out, text, int(tail[0] + length + 6), int(y), scale, rgb)
+    x0 = w - 8 - 6 * scale * len(text) - 6 - length
+    y = 8
+    tail = np.array([x0, y + 3.5 * scale])
+    _arrow(out, tail, tail + np.array([length, 0.0]), width, rgb)
+    _text(out, text, int(x0 + length + 6), y, scale, rgb)
 
 
 def _text(out: np.ndarray, text: str, x: int, y: int, scale: int, rgb: Any) -> None:

@@ -4,7 +4,8 @@ Scene: a volume moved by a known translation ``t`` (forward map ``p + t``, pull-
 ``x - t``). Oracles: with the grid on, the axial slice view's yellow pixels are the ones
 whose pull-back point ``x - t`` lies within half a pixel of a multiple of the spacing
 (none elsewhere); the 3D view's grid layer holds the rest lattice lines moved by ``t``;
-the glyph layer's arrows all point along ``-t``; switching off restores the slice.
+the glyph layer's arrows all point along ``-t``; with the rest state shown the grid is
+straight (multiples of the spacing in world x, y); switching off restores the slice.
 """
 
 from __future__ import annotations
@@ -82,6 +83,14 @@ def test_grid_and_glyphs_follow_the_warp(window: Any) -> None:
         np.broadcast_to(-SHIFT / np.linalg.norm(SHIFT), shafts.shape),
         atol=1e-9,
     )
-    w.warp_overlay_actions["grid"].setChecked(False)
+    # the rest state shown: the grid is straight, at multiples of N in world x, y
     w.warp_overlay_actions["glyphs"].setChecked(False)
+    w.mpr.set_option("show", "rest")
+    img = _slice(axial)
+    d0 = (np.abs(world[..., :2] / N - np.round(world[..., :2] / N)) * N / px).min(axis=-1)
+    yellow = (img[..., 0] - img[..., 2] > 60) & np.isfinite(axial.image.rest)
+    assert (yellow & (d0 <= 0.5)).sum() > 50
+    assert not np.any(yellow & (d0 > 1.3))
+    w.mpr.set_option("show", "deformed")
+    w.warp_overlay_actions["grid"].setChecked(False)
     np.testing.assert_array_equal(_slice(axial), before)
