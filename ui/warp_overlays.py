@@ -27,15 +27,13 @@ from PySide6.QtWidgets import QDoubleSpinBox, QHBoxLayout, QLabel, QMenu, QWidge
 
 from voxwarp.core.warp_grid import (
     MIN_CELL_PX,
-    grid_coverage,
     nice_spacing,
     pixel_points,
     pull_back,
-    slice_glyphs,
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.overlay import OverlayLayer
-from voxwarp.render.warp_overlays import GRID_ALPHA, GRID_RGB, WarpLines, draw_glyphs
+from voxwarp.render.warp_overlays import WarpLines, composite, slice_overlay_layer
 
 
 class WarpOverlays:
@@ -49,6 +47,8 @@ class WarpOverlays:
         self.spacing_mm = 0.0
         #: pull-back points per drawn slice image: id -> (weak reference, points)
         self._rest: dict[int, tuple[weakref.ref, np.ndarray]] = {}
+        #: overlay layers per drawn slice image: id -> (weak reference, settings, layer)
+        self._layers: dict[int, tuple[weakref.ref, Any, np.ndarray]] = {}
         self._lines = WarpLines()
 
     @property
@@ -83,25 +83,27 @@ class WarpOverlays:
 
     # ---------------------------------------------------------------- slices
     def slice_rgba(self, image: Any, rgba: np.ndarray) -> np.ndarray:
-        """``rgba`` of a slice ``image`` with the switched-on overlays drawn over it."""
+        """``rgba`` of a slice ``image`` with the switched-on overlays drawn over it
+        (the overlay layer is kept per image: a window/level drag only composites)."""
         if not self.active:
             return rgba
         m = np.asarray(image.pixel_to_world, dtype=np.float64)
         rest_shown = self.window.mpr.state.show == "rest"  # the rest state: a straight grid
         warps = [] if rest_shown else self.window.session.scene.warps
         spacing = self.spacing(float(np.linalg.norm(m[:3, 0])))
-        out = np.asarray(rgba, dtype=np.float64).copy()
+        key = (self.grid, self.glyphs, spacing, rest_shown)
+        hit = self._layers.get(id(image))
+        if hit is not None and hit[0]() is image and hit[1] == key:
+            return composite(rgba, hit[2])
+        wanted = [name for name, on in (("grid", self.grid), ("glyphs", self.glyphs)) if on]
         try:
-            if self.grid:
-                rest = self._rest_points(image, warps)
-                cover = grid_coverage(rest, (m[:3, 0], m[:3, 1]), spacing) * GRID_ALPHA
-                a = cover[..., None]
-                out[..., :3] = out[..., :3] * (1 - a) + np.asarray(GRID_RGB) * 255 * a
-            if self.glyphs:
-                draw_glyphs(out, slice_glyphs(warps, m, image.size, spacing))
+            rest = self._rest_points(image, warps) if self.grid else None
+            layer, _ = slice_overlay_layer(warps, m, image.size, wanted, spacing, rest=rest)
         except VoxwarpError:
             return rgba
-        return np.ascontiguousarray((out + 0.5).clip(0, 255).astype(np.uint8))
+        self._layers = {k: v for k, v in self._layers.items() if v[0]() is not None}
+        self._layers[id(image)] = (weakref.ref(image), key, layer)
+        return composite(rgba, layer)
 
     def _rest_points(self, image: Any, warps: list) -> np.ndarray:
         """The pull-back points of a slice's pixels, computed once per slice image."""

@@ -81,20 +81,51 @@ def draw_slice_overlays(
     left to their own modules) drawn over it, and one line per overlay saying what
     was drawn. ``spacing_mm``: grid spacing; glyphs every ``glyph_spacing_mm``
     (default the grid spacing)."""
-    out = np.asarray(rgba, dtype=np.float64).copy()
-    h, w = out.shape[:2]
+    h, w = np.asarray(rgba).shape[:2]
+    layer, notes = slice_overlay_layer(
+        warps, pixel_to_world, (w, h), overlays, spacing_mm, glyph_spacing_mm=glyph_spacing_mm
+    )
+    return composite(rgba, layer), notes
+
+
+def slice_overlay_layer(
+    warps: Sequence[Warp],
+    pixel_to_world: np.ndarray,
+    size: tuple[int, int],
+    overlays: Sequence[str],
+    spacing_mm: float,
+    *,
+    glyph_spacing_mm: float | None = None,
+    rest: np.ndarray | None = None,
+) -> tuple[np.ndarray, list[str]]:
+    """The overlays of a ``size`` (W, H) slice as a premultiplied (H, W, 4) float layer
+    (colour 0..255, alpha 0..1; :func:`composite` puts it over a slice) and the notes
+    of :func:`draw_slice_overlays`. ``rest``: the pixels' pull-back points if known."""
+    w, h = (int(v) for v in size)
     m = np.asarray(pixel_to_world, dtype=np.float64)
+    layer = np.zeros((h, w, 4))
     notes = []
     if "grid" in overlays:
-        rest = pull_back(warps, pixel_points(m, (w, h)))
+        if rest is None:
+            rest = pull_back(warps, pixel_points(m, (w, h)))
         cover = grid_coverage(rest, (m[:3, 0], m[:3, 1]), spacing_mm)
-        _blend(out, cover * GRID_ALPHA, GRID_RGB)
+        _blend(layer, cover * GRID_ALPHA, GRID_RGB)
         notes.append(f"grid: rest-space lines every {spacing_mm:g} mm")
     if "glyphs" in overlays:
         glyphs = slice_glyphs(warps, m, (w, h), glyph_spacing_mm or spacing_mm)
-        draw_glyphs(out, glyphs)
+        draw_glyphs(layer, glyphs)
         notes.append(glyph_note(glyphs))
-    return (out + 0.5).clip(0, 255).astype(np.uint8), notes
+    return layer, notes
+
+
+def composite(rgba: np.ndarray, layer: np.ndarray) -> np.ndarray:
+    """``layer`` (:func:`slice_overlay_layer`) over ``rgba`` (H, W, 4 uint8): a new
+    contiguous uint8 RGBA, alpha kept."""
+    out = np.array(rgba, dtype=np.uint8, copy=True)
+    a = layer[..., 3:]
+    rgb = layer[..., :3] + out[..., :3] * (1.0 - a)
+    out[..., :3] = (rgb + 0.5).clip(0, 255).astype(np.uint8)
+    return out
 
 
 def glyph_note(glyphs: SliceGlyphs) -> str:
@@ -110,7 +141,7 @@ def glyph_note(glyphs: SliceGlyphs) -> str:
 
 def draw_glyphs(out: np.ndarray, glyphs: SliceGlyphs, rgb: Sequence[float] = GLYPH_RGB) -> None:
     """Arrows (a dark halo under them) and the legend arrow drawn into ``out``
-    (H, W, >=3 float in 0..255), in place."""
+    (H, W, 3 float colour in 0..255, or a premultiplied layer with alpha), in place."""
     if glyphs.px_per_mm <= 0:
         return
     width = 1.5 if glyphs.spacing_px >= 16 else 1.0
@@ -189,10 +220,13 @@ def _glyph_mask(ch: str, scale: int) -> np.ndarray:
 
 
 def _blend(region: np.ndarray, alpha: np.ndarray, rgb: Sequence[float]) -> None:
-    """``region`` (h, w, >=3, 0..255) <- ``rgb`` (0..1) over it with coverage ``alpha``."""
+    """``region`` (h, w, 3 or 4; colour 0..255, premultiplied alpha 0..1) <- ``rgb``
+    (0..1) over it with coverage ``alpha``."""
     a = np.asarray(alpha, dtype=np.float64)[..., None]
     col = np.asarray(rgb, dtype=np.float64) * 255.0
     region[..., :3] = region[..., :3] * (1 - a) + col * a
+    if region.shape[-1] == 4:
+        region[..., 3:] = region[..., 3:] * (1 - a) + a
 
 
 # ---------------------------------------------------------------------------- 3D
@@ -419,6 +453,7 @@ __all__ = [
     "WarpLines",
     "arrow_vertices",
     "camera_pixel_mm",
+    "composite",
     "draw_glyphs",
     "draw_slice_overlays",
     "facing_plane",
@@ -428,5 +463,6 @@ __all__ = [
     "grid_segments",
     "overlay_meshes",
     "plane_points",
+    "slice_overlay_layer",
     "tube_mesh",
 ]

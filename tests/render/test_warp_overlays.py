@@ -24,7 +24,7 @@ import pytest
 
 from voxwarp.core.mesh_warp import warped_geometry
 from voxwarp.core.volume import Volume
-from voxwarp.core.warp_grid import lattice_lines, pixel_points, pull_back
+from voxwarp.core.warp_grid import grid_coverage, lattice_lines, pixel_points, pull_back
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import AffineWarp, chain_apply, chain_forward
 from voxwarp.render.warp_overlays import (
@@ -124,17 +124,20 @@ def test_slice_grid_pixels_match_the_coverage(overlays: list[str]) -> None:
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 3] = (-1.0, 0, 0), (0, -1.0, 0), (40.0, 30.0, 0.0)
     warps = [AffineWarp.scaling(1.25, (5.0, 5.0, 0.0))]
-    rgba = np.zeros((60, 80, 4), np.uint8)
+    rgba = np.full((60, 80, 4), 100, np.uint8)  # grey under the lines
     rgba[..., 3] = 255
     out, notes = draw_slice_overlays(rgba, warps, m, overlays, 10.0)
     rest = pull_back(warps, pixel_points(m, (80, 60)))
     on = (np.abs(rest[..., 0] / 10 - np.round(rest[..., 0] / 10)) * 10 / 0.8 < 0.2) | (
         np.abs(rest[..., 1] / 10 - np.round(rest[..., 1] / 10)) * 10 / 0.8 < 0.2
     )
-    yellow = np.asarray(GRID_RGB) * 255 * 0.8
+    yellow = np.asarray(GRID_RGB) * 255 * 0.8 + 100 * 0.2  # "over" at coverage 0.8
     if overlays == ["grid"]:
         np.testing.assert_allclose(out[on, :3], np.broadcast_to(yellow, (on.sum(), 3)), atol=1)
         assert len(notes) == 1
+        far = np.isclose(grid_coverage(rest, (m[:3, 0], m[:3, 1]), 10.0), 0.0)
+        assert np.all(out[far][:, :3] == 100)  # untouched away from the lines
+        assert np.all(out[..., 3] == 255)
     else:
         assert "legend" in notes[1]
         assert out[:20, -60:, 2].max() > 200  # the legend arrow and text (cyan), top right
