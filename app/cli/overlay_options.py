@@ -74,7 +74,8 @@ def add_overlay_args(p: argparse.ArgumentParser, three_d: bool = False) -> None:
         "--glyph-spacing",
         type=positive_mm,
         metavar="MM",
-        help="distance between glyph arrows in mm (default the grid spacing)",
+        help="distance between glyph arrows in mm (default the grid spacing, doubled"
+        " until it is at least 20 pixels on a slice)",
     )
     if three_d:
         p.add_argument(

@@ -58,9 +58,19 @@ def nice_number(value: float) -> float:
 
 def nice_spacing(lo: Sequence[float], hi: Sequence[float], at_least_mm: float = 0.0) -> float:
     """Default grid spacing in mm: :func:`nice_number` of the box's largest side / 16
-    (or of ``at_least_mm`` when larger, e.g. a slice's 12 pixels)."""
+    (rounded up to :func:`nice_ceil` of ``at_least_mm`` when smaller, e.g. a slice's
+    12 pixels)."""
     side = float(np.max(np.asarray(hi, float) - np.asarray(lo, float)))
-    return nice_number(max(side / CELLS_PER_SIDE, at_least_mm, 1e-6))
+    spacing = nice_number(max(side / CELLS_PER_SIDE, 1e-6))
+    return spacing if spacing >= at_least_mm else nice_ceil(at_least_mm)
+
+
+def nice_ceil(value: float) -> float:
+    """The smallest 1, 2 or 5 times a power of ten that is >= ``value`` (> 0)."""
+    v = nice_number(value)
+    k = math.floor(math.log10(v))
+    steps = [m * 10.0**e for e in (k, k + 1) for m in (1, 2, 5)]
+    return min(c for c in steps if c >= value * (1 - 1e-12))
 
 
 def check_spacing(spacing: float) -> float:
@@ -225,6 +235,7 @@ __all__ = [
     "grid_coverage",
     "lattice_lines",
     "line_coverage",
+    "nice_ceil",
     "nice_number",
     "nice_spacing",
     "pixel_points",

@@ -46,6 +46,8 @@ GLYPH_RGB = (0.2, 0.9, 1.0)
 GRID_ALPHA = 0.8
 #: Tube radius of 3D grid lines, as a fraction of the box's largest side.
 TUBE_RADIUS = 1 / 500
+#: Fewest pixels between default glyphs on a slice.
+MIN_GLYPH_PX = 20
 #: Sides of the tubes and arrow shafts.
 TUBE_SIDES = 4
 
@@ -112,10 +114,20 @@ def slice_overlay_layer(
         _blend(layer, cover * GRID_ALPHA, GRID_RGB)
         notes.append(f"grid: rest-space lines every {spacing_mm:g} mm")
     if "glyphs" in overlays:
-        glyphs = slice_glyphs(warps, m, (w, h), glyph_spacing_mm or spacing_mm)
+        glyphs = slice_glyphs(warps, m, (w, h), glyph_spacing_mm or glyph_default(m, spacing_mm))
         draw_glyphs(layer, glyphs)
         notes.append(glyph_note(glyphs))
     return layer, notes
+
+
+def glyph_default(pixel_to_world: np.ndarray, spacing_mm: float) -> float:
+    """Default glyph spacing on a slice: the grid spacing, doubled while that is under
+    :data:`MIN_GLYPH_PX` pixels (glyphs stay on grid nodes)."""
+    px = float(np.linalg.norm(np.asarray(pixel_to_world, dtype=np.float64)[:3, 0]))
+    spacing = float(spacing_mm)
+    while spacing < MIN_GLYPH_PX * px:
+        spacing *= 2
+    return spacing
 
 
 def composite(rgba: np.ndarray, layer: np.ndarray) -> np.ndarray:
@@ -151,9 +163,12 @@ def draw_glyphs(out: np.ndarray, glyphs: SliceGlyphs, rgb: Sequence[float] = GLY
 
 
 def _arrow(out: np.ndarray, tail: np.ndarray, head: np.ndarray, width: float, rgb: Any) -> None:
-    """One arrow: a shaft and two barbs (a quarter of its length, at least 3 px)."""
+    """One arrow: a shaft and two barbs (a quarter of its length, at least 3 px and at
+    most 0.6 of it); none when shorter than a pixel."""
     d = head - tail
     length = float(np.hypot(*d))
+    if length < 1.0:  # under a pixel: no arrow (not a dot on every still glyph)
+        return
     segments = [(tail, head)]
     if length >= 2:
         barb = min(max(3.0, length / 4), 0.6 * length) * d / length

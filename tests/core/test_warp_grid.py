@@ -21,6 +21,7 @@ import pytest
 from voxwarp.core.warp_grid import (
     grid_coverage,
     lattice_lines,
+    nice_ceil,
     nice_number,
     nice_spacing,
     pixel_points,
@@ -153,6 +154,11 @@ def test_spacing_defaults_and_errors() -> None:
     assert nice_number(0.13) == 0.1
     assert nice_number(3.4) == 5.0
     assert nice_spacing((0, 0, 0), (256.0, 200.0, 180.0)) == 20.0
+    assert nice_spacing((0, 0, 0), (160.0, 1, 1)) == 10.0
+    assert nice_spacing((0, 0, 0), (160.0, 1, 1), at_least_mm=12.0) == 20.0  # rounded up
+    assert nice_ceil(2.0) == 2.0
+    assert nice_ceil(2.01) == 5.0
+    assert nice_ceil(0.7) == 1.0
     with pytest.raises(InputError, match="positive"):
         grid_coverage(np.zeros((2, 2, 3)), (np.array([1.0, 0, 0]),), 0.0)
     with pytest.raises(InputError, match="grid-plane"):
