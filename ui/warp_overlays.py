@@ -10,8 +10,8 @@ spacing (0: automatic, as the CLI's default) and draws:
   drag does not recompute them);
 * in the 3D view, 1-pixel lines on top of the volume (an ``extra_overlays`` entry of
   the viewport): the grid plane facing the camera moved by the chain's forward map,
-  and arrows of ``u`` on that plane (:func:`~voxwarp.render.warp_overlays.grid_segments`,
-  :func:`~voxwarp.render.warp_overlays.glyph_segments`), cached per warp revision.
+  and arrows of ``u`` on that plane (:func:`~voxwarp.render.warp_meshes.grid_segments`,
+  :func:`~voxwarp.render.warp_meshes.glyph_segments`), cached per warp revision.
 
 :func:`install_warp_overlays` adds the menu entries and the spacing box.
 """
@@ -33,7 +33,8 @@ from voxwarp.core.warp_grid import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.overlay import OverlayLayer
-from voxwarp.render.warp_overlays import WarpLines, composite, slice_overlay_layer
+from voxwarp.render.warp_meshes import WarpLines
+from voxwarp.render.warp_overlays import composite, slice_overlay_layer
 
 
 class WarpOverlays:
@@ -120,7 +121,7 @@ class WarpOverlays:
 
     # ---------------------------------------------------------------- 3D
     def layers_3d(self, display: Any = None) -> list[OverlayLayer]:
-        """The 3D view's line layers (:class:`~voxwarp.render.warp_overlays.WarpLines`)."""
+        """The 3D view's line layers (:class:`~voxwarp.render.warp_meshes.WarpLines`)."""
         lines = self._lines
         lines.grid, lines.glyphs, lines.spacing_mm = self.grid, self.glyphs, self.spacing_mm
         try:

@@ -3,7 +3,8 @@
 ``--overlay NAME`` (repeatable, or a comma list) draws what the warp chain does over
 the picture; :data:`OVERLAYS` holds every name any command accepts (one tuple, so each
 overlay's module adds its name here). ``grid`` and ``glyphs`` are drawn by
-:mod:`voxwarp.render.warp_overlays`. Importing this loads no numpy.
+:mod:`voxwarp.render.warp_overlays` (slices) and :mod:`voxwarp.render.warp_meshes` (3D).
+Importing this loads no numpy.
 """
 
 from __future__ import annotations

@@ -123,12 +123,8 @@ def _with_overlays(scene: Any, args: argparse.Namespace) -> Any:
     """``scene`` with the meshes of ``--overlay grid``/``glyphs`` added, seen by the
     camera of the scene without them (notes on stderr)."""
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
-    from voxwarp.render.warp_overlays import (
-        WARP_OVERLAYS,
-        camera_pixel_mm,
-        facing_plane,
-        overlay_meshes,
-    )
+    from voxwarp.render.warp_meshes import camera_pixel_mm, facing_plane, overlay_meshes
+    from voxwarp.render.warp_overlays import WARP_OVERLAYS
 
     wanted = [o for o in args.overlays if o in WARP_OVERLAYS]
     if not wanted:

@@ -44,7 +44,7 @@ from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scen
 from voxwarp.render.inline_image import RenderedImage, png_bytes
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.overlay import OverlayRenderer
-from voxwarp.render.warp_overlays import WarpLines
+from voxwarp.render.warp_meshes import WarpLines
 from voxwarp.scene import Scene
 
 try:
@@ -247,7 +247,7 @@ class Viewer(RemoteFrameBuffer):
     ) -> None:
         """Switch the warped grid and the displacement glyphs (lines over the view on
         the plane facing the camera, carried by the scene's warp chain; see
-        :class:`~voxwarp.render.warp_overlays.WarpLines`); ``spacing_mm`` 0: about 1/16
+        :class:`~voxwarp.render.warp_meshes.WarpLines`); ``spacing_mm`` 0: about 1/16
         of the volume. ``None`` leaves a setting as it is."""
         lines = self.warp_lines
         if grid is not None:

@@ -27,14 +27,8 @@ from voxwarp.core.volume import Volume
 from voxwarp.core.warp_grid import grid_coverage, lattice_lines, pixel_points, pull_back
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import AffineWarp, chain_apply, chain_forward
-from voxwarp.render.warp_overlays import (
-    GRID_RGB,
-    TUBE_SIDES,
-    camera_pixel_mm,
-    draw_slice_overlays,
-    facing_plane,
-    overlay_meshes,
-)
+from voxwarp.render.warp_meshes import TUBE_SIDES, camera_pixel_mm, facing_plane, overlay_meshes
+from voxwarp.render.warp_overlays import GRID_RGB, draw_slice_overlays
 from voxwarp.scene import Scene
 
 N = 8.0
