@@ -332,6 +332,24 @@ FIGURES: tuple[Entry, ...] = (
         _out("wire_smooth.png"),
         width=260,
     ),
+    Entry(
+        "registration_grid_glyphs",
+        "A registration's warped grid and displacement glyphs",
+        "The demons registration of the bundled MRI (voxwarp demo registration --quick)"
+        " seen on an axial slice through its field: the moving image's grid (yellow, every"
+        " 10 mm) bent by the chain, and arrows of u = chain(x) - x with the legend in mm.",
+        (
+            "voxwarp demo registration --quick -o " + WORK,
+            "voxwarp slice "
+            + _out("registration_moving.nii.gz")
+            + " --displacement "
+            + _out("registration_field.h5")
+            + " --overlay grid,glyphs --pixel 0.5 -o "
+            + _out("registration_grid.png"),
+        ),
+        _out("registration_grid.png"),
+        width=300,
+    ),
 )
 
 

@@ -67,6 +67,7 @@ from voxwarp.ui.tasks import Task, run_with_progress
 from voxwarp.ui.tf_editor import TransferFunctionEditor
 from voxwarp.ui.tour_panel import TourPanel
 from voxwarp.ui.viewport import Viewport, qimage_to_array
+from voxwarp.ui.warp_overlays import install_warp_overlays
 
 #: frames per second of the simulation timer
 SIM_FPS = 30
@@ -382,6 +383,8 @@ class MainWindow(QMainWindow):
         self.marker_action.setChecked(self.viewport.show_marker)
         v.addSeparator()
         install_slice_controls(self, v)
+        v.addSeparator()
+        install_warp_overlays(self, v)
         v.addSeparator()
         for dock in self.docks.values():
             v.addAction(dock.toggleViewAction())

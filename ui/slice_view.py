@@ -195,6 +195,8 @@ class SliceView(QWidget):
         except VoxwarpError as exc:
             self._show_error(str(exc))
             return
+        if getattr(self.mpr.window, "warp_overlays", None) is not None:  # grid, glyphs
+            rgba = self.mpr.window.warp_overlays.slice_rgba(self.image, rgba)
         h, w = rgba.shape[:2]
         self._qimage = QImage(rgba.data, w, h, 4 * w, QImage.Format.Format_RGBA8888).copy()
         self.update()

@@ -20,6 +20,7 @@ from voxwarp.cli.options import TF_HELP, CliOptionError, window_pair_arg
 from voxwarp.cli.options import add_volume_args as _add_volume_args
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
+from voxwarp.cli.overlay_options import add_overlay_args, grid_spacing
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.modes import MODES
 from voxwarp.inputs import load_input
@@ -78,6 +79,7 @@ def add_parser(sub: Any) -> None:
     _add_wire_args(pr)
     _add_field_args(pr)
     add_compare_args(pr, show=True)
+    add_overlay_args(pr, three_d=True)
     pr.set_defaults(func=cmd_render)
 
 
@@ -117,6 +119,25 @@ def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
         "zoom": args.zoom if args.zoom is not None else 1.0,
     }
     return Scene(obj, **kw)
+
+
+def _with_overlays(scene: Any, args: argparse.Namespace) -> Any:
+    """``scene`` with the meshes of ``--overlay grid``/``glyphs`` added, seen by the
+    camera of the scene without them (notes on stderr)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.render.warp_meshes import camera_pixel_mm, facing_plane, overlay_meshes
+    from voxwarp.render.warp_overlays import WARP_OVERLAYS
+
+    wanted = [o for o in args.overlays if o in WARP_OVERLAYS]
+    if not wanted:
+        return scene
+    spacing = grid_spacing(args, scene.volume)
+    camera = scene.resolved_camera()
+    plane = args.grid_plane or facing_plane(camera)
+    pixel = camera_pixel_mm(camera, tuple(args.size))
+    extra = overlay_meshes(scene, wanted, spacing, plane, pixel_mm=pixel)
+    print(f"render: {', '.join(wanted)} every {spacing:g} mm ({plane})", file=sys.stderr)
+    return scene.copy(meshes=[*scene.meshes, *extra], camera=camera)
 
 
 def _check_distinct_outputs(args: argparse.Namespace) -> None:
@@ -166,7 +187,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         r.renderer.gradient_texture = False
         # the GPU backends run on the renderer's context (made current here)
         with r.current(), deformed_scene(args, scene, pending, r.ctx) as scene:
-            img = r.render(scene)
+            img = r.render(_with_overlays(scene, args))
             if args.save_scene:  # inside: a GPU-owned field is read back to save it
                 scene.save(args.save_scene)
     # what was chosen, once the image exists (a refused render prints only its error)

@@ -16,7 +16,8 @@ GUI uses (:class:`~voxwarp.render.adaptive_quality.AdaptiveQuality`: a fraction 
 resolution, which the browser scales up, and a longer sample distance), and the model
 advances one frame (``steps_per_frame`` steps) before each; once it rests, the full
 frame follows. The same actions are methods for scripts and tests: :meth:`orbit`,
-:meth:`zoom`, :meth:`pan`, :meth:`pick`, :meth:`drag`, :meth:`undo`, :meth:`snapshot`.
+:meth:`zoom`, :meth:`pan`, :meth:`pick`, :meth:`drag`, :meth:`undo`, :meth:`snapshot`;
+:meth:`show_overlays` switches the warped grid and the displacement glyphs.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scen
 from voxwarp.render.inline_image import RenderedImage, png_bytes
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.overlay import OverlayRenderer
+from voxwarp.render.warp_meshes import WarpLines
 from voxwarp.scene import Scene, as_fixed_volume
 
 try:
@@ -189,6 +191,8 @@ class Viewer(RemoteFrameBuffer):
         self.frames_drawn = 0
         self.last_frame_ms = 0.0
         self._refine: Any = None
+        #: the warped grid / glyph switches (:meth:`show_overlays`)
+        self.warp_lines = WarpLines()
 
     # ------------------------------------------------------------------ properties
     @property
@@ -259,6 +263,25 @@ class Viewer(RemoteFrameBuffer):
             cmp = Comparison(as_fixed_volume(fixed), compare, blend, checker_mm)
         self.session.scene.comparison = cmp
         self.request_draw()
+
+    def show_overlays(
+        self,
+        grid: bool | None = None,
+        glyphs: bool | None = None,
+        spacing_mm: float | None = None,
+    ) -> None:
+        """Switch the warped grid and the displacement glyphs (lines over the view on
+        the plane facing the camera, carried by the scene's warp chain; see
+        :class:`~voxwarp.render.warp_meshes.WarpLines`); ``spacing_mm`` 0: about 1/16
+        of the volume. ``None`` leaves a setting as it is."""
+        lines = self.warp_lines
+        if grid is not None:
+            lines.grid = bool(grid)
+        if glyphs is not None:
+            lines.glyphs = bool(glyphs)
+        if spacing_mm is not None:
+            lines.spacing_mm = max(float(spacing_mm), 0.0)
+        self._redrawn(None)
 
     def handle_pixels(self) -> np.ndarray:
         """(N, 2) CSS pixel positions of the handles (to pick or drag them by script)."""
@@ -374,6 +397,7 @@ class Viewer(RemoteFrameBuffer):
             if self._overlay is None:
                 self._overlay = OverlayRenderer(r.ctx)
             layers = self.session.overlay_layers(self.display_options)
+            layers += self.warp_lines.layers(self.session.scene, self.camera)
             self._overlay.draw(layers, r.framebuffer, self.camera, point_scale=scale)
             img = r.read()
         self.last_quality = quality

@@ -1,0 +1,102 @@
+"""``--overlay`` and its options, shared by ``voxwarp slice`` and ``voxwarp render``.
+
+``--overlay NAME`` (repeatable, or a comma list) draws what the warp chain does over
+the picture; :data:`OVERLAYS` holds every name any command accepts (one tuple, so each
+overlay's module adds its name here). ``grid`` and ``glyphs`` are drawn by
+:mod:`voxwarp.render.warp_overlays` (slices) and :mod:`voxwarp.render.warp_meshes` (3D).
+Importing this loads no numpy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+#: Names ``--overlay`` accepts.
+OVERLAYS: tuple[str, ...] = ("grid", "glyphs")
+#: ``--grid-plane`` choices (as voxwarp.core.warp_grid.GRID_PLANES).
+GRID_PLANES: tuple[str, ...] = ("axial", "coronal", "sagittal", "all")
+
+
+def overlay_arg(text: str) -> list[str]:
+    """One ``--overlay`` value: a name of :data:`OVERLAYS` or a comma list of them."""
+    names = [t.strip().lower() for t in text.split(",") if t.strip()]
+    bad = [n for n in names if n not in OVERLAYS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected one or more of {', '.join(OVERLAYS)} (comma separated)"
+        )
+    return names
+
+
+def positive_mm(text: str) -> float:
+    """A finite number of mm > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a number of mm > 0; got {text!r}")
+    return v
+
+
+class _Extend(argparse.Action):
+    """Append the names of each ``--overlay`` value, without repeats."""
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option: Any = None) -> None:
+        have = list(getattr(namespace, self.dest, None) or [])
+        setattr(namespace, self.dest, have + [v for v in values if v not in have])
+
+
+def add_overlay_args(p: argparse.ArgumentParser, three_d: bool = False) -> None:
+    """``--overlay``, ``--grid-spacing`` and ``--glyph-spacing`` (and ``--grid-plane``
+    for the 3D ``render``)."""
+    p.add_argument(
+        "--overlay",
+        dest="overlays",
+        type=overlay_arg,
+        action=_Extend,
+        default=[],
+        metavar="NAME[,NAME]",
+        help="draw over the picture (repeatable or comma separated): grid (the rest-space"
+        " grid carried by the warp chain, lines every --grid-spacing mm), glyphs (arrows"
+        " of the displacement u = chain(x) - x, the vector an exported field holds, with a"
+        " legend in mm)",
+    )
+    p.add_argument(
+        "--grid-spacing",
+        type=positive_mm,
+        metavar="MM",
+        help="grid line spacing in mm (default about 1/16 of the volume's largest side,"
+        " at least 12 pixels on a slice, rounded to 1, 2 or 5 x 10^k mm)",
+    )
+    p.add_argument(
+        "--glyph-spacing",
+        type=positive_mm,
+        metavar="MM",
+        help="distance between glyph arrows in mm (default the grid spacing, doubled"
+        " until it is at least 20 pixels on a slice)",
+    )
+    if three_d:
+        p.add_argument(
+            "--grid-plane",
+            choices=GRID_PLANES,
+            help="3D grid: the lines of one plane through the volume's centre (default"
+            " the named plane that faces the camera most), or all: the 3D lattice;"
+            " glyphs lie on that plane (axial for all)",
+        )
+
+
+def grid_spacing(args: argparse.Namespace, volume: Any, pixel_mm: float = 0.0) -> float:
+    """``--grid-spacing``, or the default from the volume's box (on a slice of
+    ``pixel_mm`` pixels, at least 12 pixels between lines)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.warp_grid import MIN_CELL_PX, nice_spacing
+
+    if args.grid_spacing is not None:
+        return float(args.grid_spacing)
+    return nice_spacing(*volume.bounds, at_least_mm=MIN_CELL_PX * pixel_mm)
+
+
+__all__ = ["GRID_PLANES", "OVERLAYS", "add_overlay_args", "grid_spacing", "overlay_arg"]
