@@ -100,20 +100,3 @@ def test_readout_fits_at_1280(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> No
     finally:
         w.close()
 
-
-def test_screenshot_for_review(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> None:
-    import os
-
-    if not os.environ.get("VOXWARP_SHOT"):
-        pytest.skip("review screenshot only")
-    from voxwarp.io.samples import load_sample
-
-    s = EditSession(Scene(load_sample("fish"), jitter=False))
-    w = shown_window(qtbot, monkeypatch, s, (1280, 800), layout="2x2")
-    qtbot.waitUntil(lambda: all(v.image is not None for v in w.mpr.views), timeout=30000)
-    view = w.mpr.views[0]
-    font = QFont(view.font())
-    font.setPointSizeF(9.0)
-    print("one-line", QFontMetricsF(font).horizontalAdvance(view.readout_text()), view.width())
-    w.grab().save(os.environ["VOXWARP_SHOT"])
-    w.close()
