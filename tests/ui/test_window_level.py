@@ -99,4 +99,3 @@ def test_readout_fits_at_1280(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> No
             assert fm.horizontalAdvance(longest) > view.width() - 12  # one line did not
     finally:
         w.close()
-
