@@ -204,6 +204,13 @@ class SliceLayout(QWidget):
         else:
             self.render_all()
 
+    def one_to_one(self) -> None:
+        """Zoom every slice view so that one screen pixel is one voxel (1:1)."""
+        for view in self.views:
+            native = self.state.native_zoom(view.name, view.size_px())
+            self.state.zoom(view.name, native / self.state.views[view.name].zoom)  # clipped
+        self.planes_changed()
+
     def reset(self) -> None:
         """Crosshair to the centre, views unzoomed and untilted, default window."""
         self.state.reset()
@@ -236,6 +243,9 @@ def install_slice_controls(window: Any, menu: QMenu) -> None:
     reset = QAction("Reset Slice Views (untilted, unzoomed)", window)
     reset.triggered.connect(lambda *_: mpr.reset())
     menu.addAction(reset)
+    native = QAction("Slice Views 1:1 (a pixel per voxel)", window)
+    native.triggered.connect(lambda *_: mpr.one_to_one())
+    menu.addAction(native)
 
     bar = window.addToolBar("Slices")
     bar.setObjectName("Slices")

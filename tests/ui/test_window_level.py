@@ -99,3 +99,25 @@ def test_readout_fits_at_1280(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> No
             assert fm.horizontalAdvance(longest) > view.width() - 12  # one line did not
     finally:
         w.close()
+
+
+def test_one_to_one_views_show_voxels(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """View > Slice Views 1:1: a pixel per voxel, each pixel centre on a voxel centre
+    (nearest and linear sampling then agree: the readout is the voxel's value)."""
+    w = _open(qtbot, monkeypatch, "CT")
+    try:
+        w.mpr.state.set_crosshair(w.session.volume.index_to_world(np.array([9.4, 20.7, 13.2])))
+        w.mpr.one_to_one()
+        vol = w.session.volume
+        for view in w.mpr.views:
+            plane, size = view.plane(), view.size_px()
+            assert plane.pixel_mm(size) == pytest.approx(min(vol.spacing))
+            m = plane.pixel_to_world(size)
+            corners = np.array([[0, 0, 0, 1], [size[0] - 1, size[1] - 1, 0, 1]], float)
+            idx = vol.world_to_index((corners @ m.T)[:, :3])
+            axis = {"axial": 2, "coronal": 1, "sagittal": 0}[view.name]
+            in_plane = np.delete(idx, axis, axis=1)
+            assert np.abs(in_plane - np.round(in_plane)).max() < 1e-6, view.name
+    finally:
+        w.close()
+
