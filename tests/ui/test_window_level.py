@@ -120,4 +120,3 @@ def test_one_to_one_views_show_voxels(qtbot: Any, monkeypatch: pytest.MonkeyPatc
             assert np.abs(in_plane - np.round(in_plane)).max() < 1e-6, view.name
     finally:
         w.close()
-
