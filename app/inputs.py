@@ -2,8 +2,10 @@
 
 :func:`load_input` opens INPUT: a volume file or folder (npy, npz, raw + JSON sidecar,
 NRRD, NIfTI, DICOM folder, TIFF), a scene JSON written by ``Scene.save``, or
-``sample:NAME`` for a bundled sample. :func:`read_wire_file` / :func:`load_wire_file`
-and :func:`load_lattice_file` read the deformation files of ``--wires`` and
+``sample:NAME`` for a bundled sample (a volume, or a bundled scene JSON by its file's
+stem: :func:`voxwarp.io.samples.resolve_sample_path`; ``--wires``/``--lattice`` take
+``sample:NAME`` of a bundled wire or lattice file too). :func:`read_wire_file` /
+:func:`load_wire_file` and :func:`load_lattice_file` read the deformation files of ``--wires`` and
 ``--lattice``. Bad files raise :class:`~voxwarp.errors.InputError` naming the file and
 the fix.
 
@@ -19,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from voxwarp.errors import InputError
+from voxwarp.errors import InputError, VolumeError
 
 
 def is_scene_json(path: Path) -> bool:
@@ -55,9 +57,10 @@ def load_input(
     (:func:`voxwarp.core.modality.mask_padding`) unless ``keep_padding``.
     """
     from voxwarp.core.modality import mask_padding
-    from voxwarp.io.samples import load_sample
+    from voxwarp.io.samples import load_sample, resolve_sample_path
     from voxwarp.scene import Scene
 
+    spec = str(resolve_sample_path(spec))  # sample:NAME of a bundled scene: its file
     path = Path(spec)
     if path.suffix.lower() == ".json" and path.is_file():
         _check_json_input(path)
@@ -144,9 +147,14 @@ FILE_NOTES = {"description", "sample", "type"}
 
 def read_json_option(option: str, path: str | Path) -> Any:
     """The JSON in the file an option names; :class:`InputError` naming the option,
-    the file and what is wrong with it otherwise."""
+    the file and what is wrong with it otherwise; ``sample:NAME`` is a bundled file."""
+    from voxwarp.io.samples import resolve_sample_path
+
     try:
+        path = resolve_sample_path(path)
         return json.loads(Path(path).read_text(encoding="utf-8"))
+    except VolumeError as exc:
+        raise InputError(f"{option} {path}: {exc}") from exc
     except FileNotFoundError as exc:
         raise InputError(f"{option} {path}: no such file") from exc
     except (OSError, UnicodeDecodeError) as exc:

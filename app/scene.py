@@ -338,6 +338,11 @@ class Scene:
         self._window = (level, width)
 
     @property
+    def window_given(self) -> bool:
+        """Whether :attr:`window` was set (argument, setter or scene JSON), not a default."""
+        return self._window is not None
+
+    @property
     def clip_box(self) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
         """Clipping box in deformed world mm, or None."""
         return self._clip_box

@@ -125,7 +125,7 @@ GALLERY: tuple[Entry, ...] = (
         " paper's rigid sweep cuts it (voxwarp warns).",
         (
             "voxwarp render sample:fish --view +z --tf ct-soft --zoom 1.5 --size 480x360"
-            " --wires sample_volumes/fish_spine_wires.json -o " + _out("fish_wires.png"),
+            " --wires sample:fish_spine_wires -o " + _out("fish_wires.png"),
         ),
         _out("fish_wires.png"),
         readme="The fish phantom bent and twisted by a wire",
@@ -137,7 +137,7 @@ GALLERY: tuple[Entry, ...] = (
         " per ray sample, seeded by a baked inverse).",
         (
             "voxwarp render sample:fish --view +z --tf ct-soft --zoom 1.4 --size 480x360"
-            " --lattice sample_volumes/fish_lattice_bend.json -o " + _out("fish_lattice.png"),
+            " --lattice sample:fish_lattice_bend -o " + _out("fish_lattice.png"),
         ),
         _out("fish_lattice.png"),
     ),
@@ -147,7 +147,7 @@ GALLERY: tuple[Entry, ...] = (
         "Tubes wrapped round a torus by one lattice and staying in contact (the GRAPP 2010"
         " paper's Figure 1), deformed in the vertex shader.",
         (
-            "voxwarp render sample_volumes/lattice_torus_tubes.json --size 480x360 --zoom 1.6 -o "
+            "voxwarp render sample:lattice_torus_tubes --size 480x360 --zoom 1.6 -o "
             + _out("lattice_tubes.png"),
         ),
         _out("lattice_tubes.png"),
@@ -314,7 +314,7 @@ FIGURES: tuple[Entry, ...] = (
         " which on anatomy reads as a black hole and a straight tear.",
         (
             "voxwarp slice sample:colin27 --plane coronal --at -20 --pixel 1 --wires"
-            " sample_volumes/colin27_midline_wires.json --sides rigid -o " + _out("wire_rigid.png"),
+            " sample:colin27_midline_wires --sides rigid -o " + _out("wire_rigid.png"),
         ),
         _out("wire_rigid.png"),
         width=260,
@@ -327,7 +327,7 @@ FIGURES: tuple[Entry, ...] = (
         " left empty and nothing tears.",
         (
             "voxwarp slice sample:colin27 --plane coronal --at -20 --pixel 1 --wires"
-            " sample_volumes/colin27_midline_wires.json -o " + _out("wire_smooth.png"),
+            " sample:colin27_midline_wires -o " + _out("wire_smooth.png"),
         ),
         _out("wire_smooth.png"),
         width=260,

@@ -5,7 +5,7 @@ The animated ones (``lattice_accessories_anim.json``) carry an ``"animation"`` e
 
 Run from the repository root: ``.venv/bin/python scripts/make_lattice_demos.py``. The
 scenes are built by :mod:`voxwarp.teaching.lattice_scenes`; render one with
-``voxwarp render sample_volumes/lattice_torus_tubes.json -o tubes.png``.
+``voxwarp render sample:lattice_torus_tubes -o tubes.png``.
 """
 
 from __future__ import annotations

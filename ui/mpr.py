@@ -26,9 +26,11 @@ from PySide6.QtWidgets import QComboBox, QDoubleSpinBox, QGridLayout, QLabel, QM
 
 from voxwarp.editing.slice_views import LAYOUTS, SliceViews
 from voxwarp.errors import VoxwarpError
+from voxwarp.render.slice_grid import slice_window
 from voxwarp.render.slice_image import LOOKS, SHOWS
 from voxwarp.render.slices import INTERPOLATIONS, SLAB_MODES
 from voxwarp.ui.slice_view import SliceView
+from voxwarp.ui.window_level import install_window_level
 
 __all__ = ["LAYOUT_KEYS", "SliceLayout", "install_slice_controls"]
 
@@ -82,7 +84,7 @@ class SliceLayout(QWidget):
 
     def _new_state(self) -> SliceViews:
         scene = self.window.session.scene
-        return SliceViews(scene.volume, scene.window)
+        return SliceViews(scene.volume, slice_window(scene))
 
     # ------------------------------------------------------------------ layout
     def set_layout(self, layout: str) -> None:
@@ -145,6 +147,7 @@ class SliceLayout(QWidget):
         self.state.layout = layout
         for view in self.views:
             view.image = None
+        self._sync_window_level()
         self.planes_changed()
 
     def render_all(self) -> None:
@@ -172,6 +175,13 @@ class SliceLayout(QWidget):
         """Colour every slice again (window, look or shown state changed; no GPU)."""
         for view in self.views:
             view.recolor()
+        self._sync_window_level()
+
+    def _sync_window_level(self) -> None:
+        """The Window/Level bar (:mod:`voxwarp.ui.window_level`) shows the window."""
+        bar = getattr(self.window, "window_level", None)
+        if bar is not None:
+            bar.sync()
 
     def planes_changed(self) -> None:
         """The crosshair or a plane moved: redraw the slices now, the 3D view's
@@ -194,9 +204,17 @@ class SliceLayout(QWidget):
         else:
             self.render_all()
 
+    def one_to_one(self) -> None:
+        """Zoom every slice view so that one screen pixel is one voxel (1:1)."""
+        for view in self.views:
+            native = self.state.native_zoom(view.name, view.size_px())
+            self.state.zoom(view.name, native / self.state.views[view.name].zoom)  # clipped
+        self.planes_changed()
+
     def reset(self) -> None:
         """Crosshair to the centre, views unzoomed and untilted, default window."""
         self.state.reset()
+        self._sync_window_level()
         self.planes_changed()
 
     def _outlines(self, display: Any) -> list[Any]:
@@ -225,6 +243,9 @@ def install_slice_controls(window: Any, menu: QMenu) -> None:
     reset = QAction("Reset Slice Views (untilted, unzoomed)", window)
     reset.triggered.connect(lambda *_: mpr.reset())
     menu.addAction(reset)
+    native = QAction("Slice Views 1:1 (a pixel per voxel)", window)
+    native.triggered.connect(lambda *_: mpr.one_to_one())
+    menu.addAction(native)
 
     bar = window.addToolBar("Slices")
     bar.setObjectName("Slices")
@@ -271,3 +292,4 @@ def install_slice_controls(window: Any, menu: QMenu) -> None:
     window.slice_controls["slab_mm"] = slab
     combo("slab_mode", "", tuple(SLAB_MODES), "how a slab's samples combine")
     combo("interpolation", "", INTERPOLATIONS, "sampling of the volume")
+    install_window_level(window)  # typed window/level and presets: a toolbar of its own

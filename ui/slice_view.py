@@ -35,6 +35,7 @@ from PySide6.QtWidgets import QWidget
 
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.editing.common import COLORS
+from voxwarp.editing.reading import split_readout, window_text
 from voxwarp.editing.slice_views import (
     PLANE_COLORS,
     edge_labels,
@@ -120,7 +121,7 @@ class SliceView(QWidget):
     def plane(self) -> SlicePlane:
         """The plane this view shows at its current size."""
         w, h = self.size_px()
-        return self.mpr.state.plane(self.name, w / h)
+        return self.mpr.state.plane(self.name, w / h, size=(w, h))  # on the voxel grid
 
     def world_at(self, x: float, y: float) -> np.ndarray:
         """The world point (mm) under widget position ``(x, y)``."""
@@ -291,7 +292,7 @@ class SliceView(QWidget):
         p.drawText(QPointF(6, 4 + fm.ascent()), title)
         p.setPen(QColor(230, 230, 120))
         top = 4 + fm.ascent() + fm.height()  # below the title line
-        bottom = h - 14 - 2 * fm.height()  # above the scale bar and the readout
+        bottom = h - 14 - 3 * fm.height()  # above the scale bar and the readout's 2 lines
         for side, text in edge_labels(plane, space).items():
             tw = fm.horizontalAdvance(text)
             x = {"left": 6.0, "right": w - 6.0 - tw}.get(side, (w - tw) / 2)
@@ -299,8 +300,14 @@ class SliceView(QWidget):
             p.drawText(QPointF(x, y), text)
         self._paint_scale_bar(p, plane, fm)
         p.setPen(QColor(220, 220, 220))
-        text = fm.elidedText(self.readout_text(), Qt.TextElideMode.ElideRight, w - 12)
-        p.drawText(QPointF(6, h - 6 - fm.descent()), text)
+        if state.look == "window":  # the window, top right (below, if the title is long)
+            corner = self.window_text()
+            cw = fm.horizontalAdvance(corner)
+            row = 0 if fm.horizontalAdvance(title) + cw + 18 <= w else 1
+            p.drawText(QPointF(w - 6 - cw, 4 + fm.ascent() + row * fm.height()), corner)
+        for i, line in enumerate(reversed(self.readout_lines())):  # values last
+            text = fm.elidedText(line, Qt.TextElideMode.ElideRight, w - 12)
+            p.drawText(QPointF(6, h - 6 - fm.descent() - i * fm.height()), text)
         if self._error:
             p.setPen(QColor(255, 110, 110))
             p.drawText(QRectF(6, 24, w - 12, h - 48), Qt.TextFlag.TextWordWrap, self._error)
@@ -311,13 +318,22 @@ class SliceView(QWidget):
         mm = scale_bar_mm(px_mm, 0.25 * w)
         length = mm / px_mm
         x1 = w - 10
-        y = h - 14 - fm.height()
+        y = h - 14 - 2 * fm.height()  # above the readout's two lines
         p.setPen(QPen(QColor(240, 240, 240), 2.0))
         p.drawLine(QPointF(x1 - length, y), QPointF(x1, y))
         for x in (x1 - length, x1):
             p.drawLine(QPointF(x, y - 4), QPointF(x, y + 4))
         text = f"{mm:g} mm"
         p.drawText(QPointF(x1 - (length + fm.horizontalAdvance(text)) / 2, y - 6), text)
+
+    def window_text(self) -> str:
+        """The corner label of the shared window: ``"W 400 L 40"`` (the toolbar's
+        combo names its preset)."""
+        return window_text(self.mpr.state.window)
+
+    def readout_lines(self) -> tuple[str, str]:
+        """:meth:`readout_text` as a position line and a value line (fits narrow views)."""
+        return split_readout(self.readout_text())
 
     def readout_text(self) -> str:
         """The position line: the point under the cursor (else the crosshair) in patient

@@ -203,8 +203,10 @@ def _slice_rows(
     cases: dict[str, Callable[[], Any]] = {}
     for d, scene in scenes.items():
         cases[f"{d} 3D"] = lambda s=scene: _frame(r, s)
-        cases[f"{d} slices"] = lambda s=scene: [r.render_slice(s, p) for p in planes]
-        cases[f"{d} slab"] = lambda s=scene: r.render_slice(s, planes[0], slab_mm=SLAB_MM)
+        cases[f"{d} slices"] = lambda s=scene: [r.render_slice(s, p, size=r.size) for p in planes]
+        cases[f"{d} slab"] = lambda s=scene: r.render_slice(
+            s, planes[0], size=r.size, slab_mm=SLAB_MM
+        )
         cases[f"{d} values"] = lambda s=scene: _values(r, s, planes)
     ms = _interleaved(cases, rounds)
     return [

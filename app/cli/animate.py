@@ -53,7 +53,11 @@ def add_parser(sub: Any) -> None:
         " app/animation/tracks.py and sample_volumes/*anim*.json) and encode them with"
         " ffmpeg. An interrupted run resumes: finished frames are kept and skipped.",
     )
-    p.add_argument("scene", help="scene JSON with an 'animation' entry")
+    p.add_argument(
+        "scene",
+        help="scene JSON with an 'animation' entry, or sample:NAME of a bundled one"
+        " (voxwarp samples lists them)",
+    )
     p.add_argument(
         "-o",
         "--output",
@@ -101,8 +105,10 @@ def cmd_animate(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    from voxwarp.io.samples import resolve_sample_path
+
     result = animate(
-        args.scene,
+        str(resolve_sample_path(args.scene)),  # sample:NAME: a bundled animation
         args.output,
         frames=args.frames,
         fps=args.fps,

@@ -11,7 +11,6 @@ stays quick).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,6 +25,7 @@ from voxwarp.inputs import load_input
 __all__ = [
     "NEGATIVE_VALUE_OPTIONS",
     "TF_HELP",
+    "WINDOW_HELP",
     "CliOptionError",
     "OneLineErrorParser",
     "VersionAction",
@@ -58,28 +58,44 @@ def view_arg(text: str) -> Any:
     return (az, el)
 
 
-def window_arg(text: str) -> tuple[float, float]:
-    """``--window LEVEL,WIDTH`` (data units; the width > 0)."""
-    form = "LEVEL,WIDTH in data units with WIDTH > 0, e.g. 40,400 for CT soft tissue"
+def window_arg(text: str) -> str | tuple[float, float]:
+    """``--window NAME|LEVEL,WIDTH``: a preset name (lung, mediastinum, bone, brain,
+    percentile; resolved per volume by :func:`voxwarp.core.window_presets.resolve_window`)
+    or two numbers in data units with the width > 0."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.window_presets import parse_window
+
     try:
-        level, width = (float(v) for v in text.split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
-    if not (math.isfinite(level) and math.isfinite(width) and width > 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
-    return level, width
+        return parse_window(text)
+    except CliOptionError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
-def window_pair_arg(text: str) -> list[float]:
-    """``render --window LEVEL,WIDTH`` (also written ``--window LEVEL WIDTH``: see
-    :func:`join_negative_views`): two numbers, as a list; the scene checks their values."""
+def window_pair_arg(text: str) -> str | list[float]:
+    """``render --window NAME|LEVEL,WIDTH`` (also written ``--window LEVEL WIDTH``: see
+    :func:`join_negative_views`): a preset name, or two numbers as a list (the scene
+    checks their values)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.window_presets import PRESET_NAMES
+
+    if text.strip().lower() in PRESET_NAMES:
+        return text.strip().lower()
     try:
         level, width = (float(v) for v in text.split(","))
     except ValueError as exc:
         raise argparse.ArgumentTypeError(
-            f"{text!r}: expected LEVEL,WIDTH (or LEVEL WIDTH) in data units, e.g. 40,400"
+            f"{text!r}: expected {', '.join(PRESET_NAMES)} or LEVEL,WIDTH (or LEVEL WIDTH)"
+            " in data units, e.g. 40,400"
         ) from exc
     return [level, width]
+
+
+#: ``--window`` help, the same for ``slice`` and ``render``
+WINDOW_HELP = (
+    "grey window: a preset (CT in HU: lung -600/1500, mediastinum 40/400, bone 400/1800,"
+    " brain 40/80; any volume: percentile) or LEVEL,WIDTH in data units (default: the"
+    " scene's, else mediastinum for a CT in HU and the percentile window otherwise)"
+)
 
 
 #: ``--tf`` help, the same wherever it is accepted (one resolver: :func:`tf_arg`).
@@ -161,8 +177,10 @@ def load_scene_json(path: str, command: str) -> Any:
     """The :class:`~voxwarp.scene.Scene` of the scene JSON ``path`` that ``command``
     (``export-field``, ``export-volume``) reads; one line for anything else."""
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.io.samples import resolve_sample_path
     from voxwarp.scene import Scene
 
+    path = str(resolve_sample_path(path))  # sample:NAME: a bundled scene JSON
     scene_path = Path(path)
     if scene_path.suffix.lower() != ".json" or not scene_path.is_file():
         what = "is not a .json file" if scene_path.is_file() else "does not exist"

@@ -40,8 +40,10 @@ def add_parser(sub: Any) -> None:
     pr.add_argument(
         "--window",
         type=window_pair_arg,
-        metavar="LEVEL,WIDTH",
-        help="grey window in data units, e.g. 40,400 (also LEVEL WIDTH: two numbers)",
+        metavar="NAME|LEVEL,WIDTH",
+        help="grey window of the mip, minip, average and xray modes: a preset (CT in HU:"
+        " lung, mediastinum, bone, brain; any volume: percentile) or LEVEL,WIDTH in data"
+        " units, e.g. 40,400 (also LEVEL WIDTH: two numbers)",
     )
     pr.add_argument(
         "--iso",
@@ -85,9 +87,13 @@ def add_parser(sub: Any) -> None:
 
 def _scene_from_args(obj: Any, args: argparse.Namespace) -> Any:
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.window_presets import preset_window
     from voxwarp.scene import Scene
 
-    tf = _tf_arg(args.tf, obj.volume if isinstance(obj, Scene) else obj)
+    volume = obj.volume if isinstance(obj, Scene) else obj
+    tf = _tf_arg(args.tf, volume)
+    if isinstance(args.window, str):  # a preset: its window for this volume
+        args.window = list(preset_window(args.window, volume))
     if isinstance(obj, Scene):
         changes: dict[str, Any] = {}
         if tf is not None:

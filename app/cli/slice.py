@@ -24,7 +24,7 @@ from voxwarp.cli import render_options as ropt
 from voxwarp.cli.compare_options import add_compare_args, with_comparison
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
-from voxwarp.cli.options import TF_HELP, add_volume_args, tf_arg, window_arg
+from voxwarp.cli.options import TF_HELP, WINDOW_HELP, add_volume_args, tf_arg, window_arg
 from voxwarp.cli.overlay_options import add_overlay_args, grid_spacing
 from voxwarp.core.checks import image_size
 from voxwarp.core.orientation import axis_letters
@@ -105,7 +105,7 @@ def add_parser(sub: Any) -> None:
         metavar="MM",
         help="position in mm along the plane's axis (named: world z/y/x; oblique: a shift"
         " from the point along the normal, turned so its largest component is positive);"
-        " default the centre of the deformed volume",
+        " default the voxel centre nearest the centre of the deformed volume",
     )
     p.add_argument(
         "--slab",
@@ -132,8 +132,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--window",
         type=window_arg,
-        metavar="LEVEL,WIDTH",
-        help="grey window in data units (default the scene's or the volume's)",
+        metavar="NAME|LEVEL,WIDTH",
+        help=WINDOW_HELP,
     )
     p.add_argument("--tf", help=TF_HELP + " (--look tf)")
     p.add_argument(
@@ -151,7 +151,9 @@ def add_parser(sub: Any) -> None:
         type=_mm("--pixel", positive=True),
         metavar="MM",
         help="pixel size in mm (default the volume's smallest voxel size); the image is"
-        " sized to hold the deformed volume",
+        " sized to hold the deformed volume and its pixel grid runs through voxel"
+        " centres, so a plane along the voxel axes at the default size samples the"
+        " voxels themselves",
     )
     size.add_argument("--size", type=image_size, metavar="WxH", help="image size in pixels")
     p.add_argument(
@@ -207,17 +209,23 @@ def slice_plane(scene: Any, args: argparse.Namespace) -> tuple[Any, tuple[int, i
     import numpy as np
 
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
-    from voxwarp.core.slice_plane import fit_pixels, parse_plane
+    from voxwarp.core.slice_plane import PLANE_AXIS, aligned, fit_pixels, parse_plane, voxel_anchor
+    from voxwarp.render.slice_grid import named_slice_grid
 
     lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.deformed_bounds())
     name = resolve_plane_name(args.plane, scene.volume.space)
+    if name in PLANE_AXIS:  # pixel centres on voxel centres (see named_slice_grid)
+        plane, size = named_slice_grid(scene, name, at=args.at, size=args.size, pixel_mm=args.pixel)
+        _check_hits(plane, lo, hi, name)
+        return plane, size
     aspect = 1.0 if args.size is None else args.size[0] / args.size[1]
     plane = parse_plane(name, (lo, hi), at=args.at, aspect=aspect)
     _check_hits(plane, lo, hi, name)
+    anchor = voxel_anchor(scene.volume, plane.center)
     if args.size is not None:
-        return plane, args.size
+        return aligned(plane, args.size, anchor), args.size
     pixel = args.pixel if args.pixel is not None else float(min(scene.volume.spacing))
-    return fit_pixels(plane, lo, hi, pixel)
+    return fit_pixels(plane, lo, hi, pixel, anchor=anchor)
 
 
 def _check_hits(plane: Any, lo: np.ndarray, hi: np.ndarray, spec: str) -> None:
@@ -265,6 +273,7 @@ def cmd_slice(args: argparse.Namespace) -> int:
     import numpy as np
 
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.window_presets import resolve_window
     from voxwarp.io.images import check_image_format, write_image
     from voxwarp.render.offscreen import OffscreenRenderer
 
@@ -287,7 +296,7 @@ def cmd_slice(args: argparse.Namespace) -> int:
                 slab_mode=args.slab_mode,
                 interpolation=args.interpolation,
                 look=args.look,
-                window=args.window,
+                window=resolve_window(args.window, scene.volume),
                 show=args.show,
                 checker_mm=args.checker_mm,
                 blend=args.blend,

@@ -364,11 +364,21 @@ def parse_plane(
 
 
 def fit_pixels(
-    plane: SlicePlane, lo: Sequence[float], hi: Sequence[float], pixel_mm: float
+    plane: SlicePlane,
+    lo: Sequence[float],
+    hi: Sequence[float],
+    pixel_mm: float,
+    anchor: Sequence[float] | None = None,
 ) -> tuple[SlicePlane, tuple[int, int]]:
     """``plane`` reframed to show the box ``lo``..``hi`` with square pixels of about
     ``pixel_mm`` (coarser if the image would exceed :data:`MAX_SLICE_PIXELS` a side),
-    and the image size ``(W, H)`` that does it."""
+    and the image size ``(W, H)`` that does it.
+
+    With ``anchor`` (a world point, e.g. a voxel centre: :func:`voxel_anchor`) the
+    pixel grid is laid out from it: one pixel centre sits on the anchor's projection and
+    the image grows by whole pixels to hold the box (2.5 % margin a side), so at the
+    native pixel size of a plane along the voxel axes every pixel centre is a voxel
+    centre and a linear slice equals the array's own slice."""
     px = _finite(pixel_mm, "pixel size")
     if px <= 0:
         raise SceneError(f"pixel size must be positive; got {px} mm")
@@ -376,6 +386,52 @@ def fit_pixels(
     w = float(np.ptp(corners @ plane.right)) * 1.05
     h = float(np.ptp(corners @ plane.up)) * 1.05
     px = max(px, max(w, h) / MAX_SLICE_PIXELS)
+    if anchor is not None:
+        return _anchored_grid(plane, corners + plane.center, px, anchor)
     size = (max(1, math.ceil(w / px)), max(1, math.ceil(h / px)))
     framed = plane.framing(np.asarray(lo, float), np.asarray(hi, float), size[0] / size[1])
     return dataclasses.replace(framed, height_mm=size[1] * px), size
+
+
+def _anchored_grid(
+    plane: SlicePlane, corners: np.ndarray, px: float, anchor: Sequence[float]
+) -> tuple[SlicePlane, tuple[int, int]]:
+    """The pixel grid of step ``px`` through ``anchor``'s projection that holds
+    ``corners`` with a 2.5 % margin a side: pixel indices ``i0..i1`` from the anchor."""
+    a = np.asarray(anchor, dtype=np.float64).reshape(3)
+    a = a - float((a - plane.center) @ plane.normal) * plane.normal  # onto the plane
+    rel = corners - a
+    middle = [0.0, 0.0]
+    size = [1, 1]
+    for k, axis in enumerate((plane.right, plane.up)):
+        x = rel @ axis
+        margin = 0.025 * float(np.ptp(x))
+        i0 = math.floor((float(x.min()) - margin) / px + 1e-9)
+        i1 = math.ceil((float(x.max()) + margin) / px - 1e-9)
+        size[k] = max(1, i1 - i0 + 1)
+        middle[k] = (i0 + i0 + size[k] - 1) / 2 * px
+    center = a + middle[0] * plane.right + middle[1] * plane.up
+    framed = dataclasses.replace(plane, center=center, height_mm=size[1] * px)
+    return framed, (size[0], size[1])
+
+
+def voxel_anchor(volume: object, point: Sequence[float]) -> np.ndarray:
+    """The centre of the voxel of ``volume`` (a :class:`~voxwarp.core.volume.Volume`)
+    nearest ``point`` (world mm; indices rounded, not clipped to the volume)."""
+    index = volume.world_to_index(np.asarray(point, dtype=np.float64).reshape(3))  # type: ignore[attr-defined]
+    centre = volume.index_to_world(np.round(index))  # type: ignore[attr-defined]
+    return np.asarray(centre, dtype=np.float64).reshape(3)
+
+
+def aligned(plane: SlicePlane, size: tuple[int, int], anchor: Sequence[float]) -> SlicePlane:
+    """``plane`` shifted in-plane by less than a pixel so that a pixel centre of its
+    ``(W, H)`` image lies on ``anchor``'s projection (a voxel centre: the GUI's views
+    sample the voxel grid, not between voxels, when a pixel is a voxel)."""
+    px = plane.pixel_mm(size)
+    corner = plane.pixel_to_world(size)[:3, 3]
+    rel = np.asarray(anchor, dtype=np.float64).reshape(3) - corner
+    shift = np.zeros(3)
+    for axis in (plane.right, plane.up):
+        d = float(rel @ axis)
+        shift += (d - round(d / px) * px) * axis
+    return dataclasses.replace(plane, center=plane.center + shift)

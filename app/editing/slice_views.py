@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.orientation import axis_letters
-from voxwarp.core.slice_plane import SlicePlane, plane_names
+from voxwarp.core.slice_plane import SlicePlane, aligned, plane_names
 from voxwarp.deform.warp import box_corners, rotation_matrix
 from voxwarp.errors import SceneError
 from voxwarp.render.overlay import OverlayLayer
@@ -132,10 +132,14 @@ class SliceViews:
         self.crosshair = np.clip(p, lo, hi)
 
     # ------------------------------------------------------------------ planes
-    def plane(self, name: str, aspect: float = 1.0) -> SlicePlane:
+    def plane(
+        self, name: str, aspect: float = 1.0, size: tuple[int, int] | None = None
+    ) -> SlicePlane:
         """The plane view ``name`` shows in an image of width/height ``aspect``: the
         named plane through the crosshair framing the volume, tilted about the
-        crosshair, then panned and zoomed."""
+        crosshair, then panned and zoomed. With the image ``size`` (W, H) an untilted
+        plane is shifted by less than a pixel so that a pixel centre lies on a voxel
+        centre: at 1:1 zoom (:meth:`native_zoom`) every pixel shows one voxel."""
         view = self.views[name]
         lo, hi = self.volume.bounds
         base = SlicePlane.named(name, (lo, hi), aspect=aspect).through(self.crosshair)
@@ -149,7 +153,18 @@ class SliceViews:
                 "oblique",
             )
         center = base.center + view.pan[0] * base.right + view.pan[1] * base.up
-        return dataclasses.replace(base, center=center, height_mm=base.height_mm / view.zoom)
+        plane = dataclasses.replace(base, center=center, height_mm=base.height_mm / view.zoom)
+        if size is None or base.name == "oblique":
+            return plane
+        # a fixed voxel (the centre one), not the crosshair's: a click keeps the view still
+        centre = np.asarray(self.volume.shape) // 2
+        return aligned(plane, size, np.asarray(self.volume.index_to_world(centre), float))
+
+    def native_zoom(self, name: str, size: tuple[int, int]) -> float:
+        """The zoom of view ``name`` at which one pixel of its ``(W, H)`` image is the
+        volume's smallest voxel side (1:1)."""
+        unzoomed = self.plane(name, size[0] / size[1]).height_mm * self.views[name].zoom
+        return unzoomed / (int(size[1]) * float(min(self.volume.spacing)))
 
     def step_mm(self, name: str) -> float:
         """One scroll step of view ``name``: the volume's voxel spacing along the

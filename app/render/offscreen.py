@@ -12,11 +12,12 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.camera import Camera
-from voxwarp.core.slice_plane import SlicePlane, plane_for_space
+from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.errors import RenderError
 from voxwarp.render.context import create_context, egl_current, egl_restore
 from voxwarp.render.inline_image import RenderedImage, rendered
 from voxwarp.render.raycaster import Renderer
+from voxwarp.render.slice_grid import named_slice_grid, slice_window
 from voxwarp.render.slice_image import SliceImage, colorize
 from voxwarp.scene import Scene
 
@@ -135,28 +136,34 @@ class OffscreenRenderer:
         show: str = "deformed",
         checker_mm: float | None = None,
         blend: float | None = None,
+        pixel_mm: float | None = None,
     ) -> SliceImage:
         """One slice of ``scene`` through its warp chain (multi-planar reformatting).
 
-        ``plane`` is a :class:`~voxwarp.core.slice_plane.SlicePlane` or a name
-        (``"axial"``, ``"coronal"``, ``"sagittal"``, ``"x"``, ``"y"``, ``"z"``) framed
-        on the scene's deformed box at ``at`` mm along its axis. ``size`` defaults to
-        this renderer's. Returns a :class:`~voxwarp.render.slice_image.SliceImage`: its
+        ``plane`` is a :class:`~voxwarp.core.slice_plane.SlicePlane` (``size``
+        defaults to this renderer's) or a name (``"axial"``, ``"coronal"``,
+        ``"sagittal"``, ``"x"``, ``"y"``, ``"z"``) at ``at`` mm along its axis (default:
+        the voxel centre nearest the deformed box's centre) on the pixel grid of
+        :func:`~voxwarp.render.slice_grid.named_slice_grid`: without ``size``, pixels of
+        ``pixel_mm`` (default the smallest voxel side) whose centres are voxel centres,
+        as many as hold the deformed box, so the default slice of an unwarped volume is
+        the array's own slice. Returns a :class:`~voxwarp.render.slice_image.SliceImage`: its
         ``rgba`` (coloured by ``look`` ``"window"`` with ``window = (level, width)``,
-        default the scene's, or ``"tf"``; ``show`` one of ``"deformed"``, ``"rest"``,
-        ``"checkerboard"``, ``"difference"``, ``"blend"``), the deformed and rest
-        ``values`` and ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to
-        world mm. A scene with a fixed image (``Scene(fixed=...)``) samples it at the
-        same world points (``image.fixed``) and compares with it instead of the rest
-        state; ``checker_mm`` (world cells instead of 32-pixel tiles) and ``blend``
-        default to the scene's comparison settings.
+        default the scene's own, else
+        :func:`~voxwarp.core.window_presets.default_slice_window`: mediastinum for a CT
+        in HU, the percentile window otherwise; or ``"tf"``; ``show`` one of
+        ``"deformed"``, ``"rest"``, ``"checkerboard"``, ``"difference"``, ``"blend"``),
+        the deformed and rest ``values`` and ``pixel_to_world``, the 4x4 map of pixel
+        ``(col, row, 0, 1)`` to world mm. A scene with a fixed image
+        (``Scene(fixed=...)``) samples it at the same world points (``image.fixed``) and
+        compares with it instead of the rest state; ``checker_mm`` (world cells instead of
+        32-pixel tiles) and ``blend`` default to the scene's comparison settings.
         """
-        w, h = self.size if size is None else (int(size[0]), int(size[1]))
-        if isinstance(plane, str):  # axial etc. of a volume without orientation: z etc.
-            name = plane_for_space(plane, scene.volume.space)
-            plane = SlicePlane.named(name, scene.deformed_bounds(), at=at, aspect=w / h)
-        elif at is not None:
-            plane = plane.at(at)
+        if isinstance(plane, str):
+            plane, (w, h) = named_slice_grid(scene, plane, at=at, size=size, pixel_mm=pixel_mm)
+        else:
+            w, h = self.size if size is None else (int(size[0]), int(size[1]))
+            plane = plane if at is None else plane.at(at)
         matrix = plane.pixel_to_world((w, h))
         with self.current():
             data = self.renderer.slice_values(
@@ -183,7 +190,7 @@ class OffscreenRenderer:
             image.fixed = SliceImage.from_data(fixed, matrix).values
             checker_mm = cmp.cell_mm if checker_mm is None else checker_mm
             blend = cmp.blend if blend is None else blend
-        win = scene.window if window is None else window
+        win = slice_window(scene) if window is None else window
         colorize(
             image,
             look=look,

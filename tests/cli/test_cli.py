@@ -265,8 +265,10 @@ def test_samples_lists_names(capsys: pytest.CaptureFixture) -> None:
 
     names = sample_names()
     assert main(["samples"]) == 0
-    lines = capsys.readouterr().out.split()
-    assert lines == [f"sample:{n}" for n in names]
+    lines = capsys.readouterr().out.splitlines()
+    first = [line.split()[0] for line in lines]  # sample:NAME, then its kind
+    assert first[: len(names)] == [f"sample:{n}" for n in names]  # the volumes first
+    assert all(line.split()[1] == "volumes" for line in lines[: len(names)])
     assert names, "no samples listed"
 
 

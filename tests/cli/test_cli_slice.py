@@ -111,7 +111,9 @@ def test_named_planes_are_the_array_slices(gl_ctx: Any, lps_file: Path, plane: s
     size = tuple(doc["size"])
     assert grey.shape == (size[1], size[0])
     want, clear = expected_grey(vol, np.asarray(doc["pixel_to_world"]), size)
-    assert clear.mean() > 0.9
+    # the pixel grid runs through voxel centres, so every 10th 0.7 mm pixel lies on a
+    # face of a 2 mm voxel (7 mm = 3.5 voxels): a tie, left out
+    assert clear.mean() > 0.85
     np.testing.assert_array_equal(grey[clear], want[clear])
     assert np.count_nonzero(grey) > 0.3 * grey.size  # the volume fills the image
     assert err.count("\n") == 1

@@ -245,4 +245,7 @@ def test_closed_stdout_pipe_is_a_quiet_exit(tmp_path: Path, argv: list[str]) -> 
 def test_open_pipe_still_gets_everything(tmp_path: Path) -> None:
     proc = voxwarp("samples", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
-    assert "sample:stent" in proc.stdout.splitlines()
+    assert "sample:stent" in [line.split()[0] for line in proc.stdout.splitlines()]
+    from voxwarp.io.samples import sample_files, sample_names
+
+    assert len(proc.stdout.splitlines()) == len(sample_names()) + len(sample_files())
