@@ -1,5 +1,6 @@
 """``voxwarp render MOVING --displacement FIELD --chainmail N --drag-at P:D --save-scene``
-then ``voxwarp export-field SCENE.json``: a registration corrected from the command line.
+then ``voxwarp export-field SCENE.json`` (or ``export-field`` with the same options): a
+registration corrected from the command line.
 
 Oracles: the saved chain puts the correction before the field (it acts in the displayed
 space) and maps the dragged element's held position to where the field alone maps its
@@ -25,7 +26,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.deform.warp import chain_apply
-from voxwarp.io.fields import save_displacement_field
+from voxwarp.io.fields import load_displacement_field, save_displacement_field
 from voxwarp.io.volumes import save_volume
 from voxwarp.scene import Scene
 
@@ -88,3 +89,12 @@ def test_render_then_export_field_writes_the_corrected_registration(
     np.testing.assert_allclose(itk, ours, atol=1e-3)
     assert np.linalg.norm(ours - field.apply(nodes * LPS), axis=1).min() > 2.0
     cm.close()
+    # export-field takes the same options on a plain scene: the same file
+    plain = Scene(scene.volume).save(tmp_path / "plain.json")
+    direct = tmp_path / "direct.nii.gz"
+    args = ["export-field", str(plain), "--displacement", str(reg), "--chainmail", "6"]
+    assert main([*args, "--drag-at", "2,0,0:0,5,0", "-o", str(direct), "--spacing", "1"]) == 0
+    a = load_displacement_field(out)
+    b = load_displacement_field(direct)
+    np.testing.assert_array_equal(a.displacements, b.displacements)
+    np.testing.assert_array_equal(a.affine, b.affine)
