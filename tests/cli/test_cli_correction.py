@@ -98,3 +98,25 @@ def test_render_then_export_field_writes_the_corrected_registration(
     b = load_displacement_field(direct)
     np.testing.assert_array_equal(a.displacements, b.displacements)
     np.testing.assert_array_equal(a.affine, b.affine)
+
+
+@pytest.mark.gl
+@pytest.mark.filterwarnings("ignore:--spacing 2:UserWarning")  # coarse on purpose: fast
+@pytest.mark.parametrize("model", ["chainmail", "massspring"])
+def test_the_gpu_backends_export_the_same_correction(
+    gl_ctx: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str], model: str
+) -> None:
+    moving, reg, _ = _files(tmp_path)
+    from voxwarp.io.volumes import load_volume
+
+    plain = Scene(load_volume(moving)).save(tmp_path / "plain.json")
+    fields = []
+    for backend in ("cpu", "gpu"):
+        out = tmp_path / f"{backend}.nii.gz"
+        args = ["export-field", str(plain), "--displacement", str(reg), f"--{model}", "6"]
+        args += ["--drag-at", "2,0,0:0,5,0", "--backend", backend, "--spacing", "2"]
+        assert main([*args, "-o", str(out)]) == 0
+        fields.append(load_displacement_field(out).displacements)
+    capsys.readouterr()
+    assert np.abs(fields[0] - fields[1]).max() < 1e-3  # mm: float32 on both sides
+    assert np.abs(fields[0]).max() > 2.0  # the field and the drag are in it
