@@ -32,6 +32,7 @@ def _drag_centre_element(w: Any) -> None:
     w.edit("Drag", move)
 
 
+@pytest.mark.slow  # a window, a ChainMail model and four exports: ~12 s
 def test_export_corrected_field_and_undo(
     window: Any,  # noqa: F811
     monkeypatch: pytest.MonkeyPatch,
