@@ -18,6 +18,7 @@ the whole head, before and after.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,7 @@ def correct_registration(
     """Drag a ChainMail correction at the largest residual of ``warps`` (the recovered
     field) against ``known``, export the composed field to ``out`` and measure it with
     SimpleITK; returns the numbers and arrays for :func:`correction_sheet`."""
+    t0 = time.perf_counter()
     mask = np.asarray(fixed.data) > head
     site = largest_residual(fixed, warps, known, mask)
     model = drag_correction(moving, site, np.zeros(3), shape=CORRECTION_SHAPE)
@@ -59,6 +61,7 @@ def correct_registration(
         "site_mm": rest[0].tolist(),
         "drag_mm": drag.tolist(),
         "file": str(path),
+        "seconds": time.perf_counter() - t0,
         **{f"{k}_before": v for k, v in before.items() if k != "maps"},
         **{f"{k}_after": v for k, v in after.items() if k != "maps"},
         "maps": (before["maps"], after["maps"]),

@@ -128,7 +128,7 @@ def _correction_step(
         f" {', '.join(f'{v:.0f}' for v in c['site_mm'])} mm; residual at the site"
         f" {c['site_field_mm_before']:.2f} -> {c['site_field_mm_after']:.2f} mm, |fixed -"
         f" moving| there {c['site_image_before']:.1f} -> {c['site_image_after']:.1f}"
-        f" (SimpleITK through {Path(c['file']).name})"
+        f" (SimpleITK through {Path(c['file']).name}; {c['seconds']:.1f} s)"
     )
     return sheet
 
