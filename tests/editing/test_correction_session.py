@@ -1,5 +1,8 @@
 """A registration corrected in the editing session (what the GUI drives, Qt-free): an
-imported field, a ChainMail, mass-spring or lattice correction dragged with the camera.
+imported field, a ChainMail, mass-spring, lattice or wire correction dragged with the
+camera (CPU, and the element models' GPU backends). The drag is across the wire (along
+y; the session's first wire lies along the fish's x): a control point moved along its
+own wire re-parametrises the sweep instead of carrying the point under it.
 
 Oracles: the dragged handle lands where the cursor put it and the corrected chain there
 reads the moving volume where the field alone read the handle's old position (the drag
@@ -40,14 +43,25 @@ def swirl(volume: Volume) -> DisplacementFieldWarp:
     return DisplacementFieldWarp(u, affine)
 
 
-@pytest.mark.parametrize("kind", ["chainmail", "massspring", "lattice"])
+@pytest.mark.parametrize(
+    ("kind", "backend"),
+    [
+        ("chainmail", "cpu"),
+        ("massspring", "cpu"),
+        ("lattice", "cpu"),
+        ("wires", "cpu"),
+        pytest.param("chainmail", "gpu", marks=pytest.mark.gl),
+        pytest.param("massspring", "gpu", marks=pytest.mark.gl),
+    ],
+)
 def test_a_drag_on_top_of_a_field_moves_what_is_seen_and_undoes_exactly(
-    volume: Volume, kind: str
+    volume: Volume, kind: str, backend: str, request: pytest.FixtureRequest
 ) -> None:
-    s = EditSession(Scene(volume))
+    ctx = request.getfixturevalue("gl_ctx") if backend == "gpu" else None
+    s = EditSession(Scene(volume), ctx)
     field = swirl(volume)
     s.add_warps_front([field])
-    s.set_deformation(kind, resolution=5)
+    s.set_deformation(kind, resolution=5, backend=backend)
     u0 = field.displacements.copy()
     export0 = s.scene.displacement_field(spacing=4.0).displacements.copy()
     handles = s.handles()
@@ -55,9 +69,10 @@ def test_a_drag_on_top_of_a_field_moves_what_is_seen_and_undoes_exactly(
     s.select([ref])
     s.set_reference(ref)
     before = s.snapshot()
-    moved = drag(s, camera_for(handles, "+z", "orthographic"), (12.0, -5.0))
+    moved = drag(s, camera_for(handles, "+z", "orthographic"), (0.0, -12.0))
     for _ in range(300):  # mass-spring: the springs carry the drag to the neighbours
         s.advance()
+    s.family.before_save()  # wires: the field of the dragged wire, built now
     old, new = moved["before"][ref], moved["after"][ref]
     np.testing.assert_allclose(s.handles()[ref], new)  # the held handle stays put
     assert np.linalg.norm(new - old) > 3.0  # mm
@@ -65,7 +80,7 @@ def test_a_drag_on_top_of_a_field_moves_what_is_seen_and_undoes_exactly(
     seen_before = chain_apply([field], old.reshape(1, 3))
     seen_after = chain_apply(s.scene.warps, new.reshape(1, 3))
     # within the error of the models' inverse maps (a few % of the drag)
-    print(kind, np.linalg.norm(new - old), np.abs(seen_after - seen_before).max())
+    print(kind, backend, np.linalg.norm(new - old), np.abs(seen_after - seen_before).max())
     np.testing.assert_allclose(seen_after, seen_before, atol=0.05 * np.linalg.norm(new - old))
     export1 = s.scene.displacement_field(spacing=4.0).displacements
     assert np.abs(export1 - export0).max() > 1.0
@@ -73,3 +88,4 @@ def test_a_drag_on_top_of_a_field_moves_what_is_seen_and_undoes_exactly(
     np.testing.assert_array_equal(s.scene.displacement_field(spacing=4.0).displacements, export0)
     assert s.imported_warps == [field]
     np.testing.assert_array_equal(field.displacements, u0)
+    s.close()
