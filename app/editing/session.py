@@ -738,9 +738,14 @@ def _split_imported(
 ) -> tuple[list[Warp], list[Warp], dict[str, Any]]:
     """A saved chain split into (imported warps, model warps, the editor entry with its
     ``"model_warp"`` index counted in the model warps). Files with ``"imported_at":
-    "end"`` hold the imported warps last; older files (and scenes without an editor
-    entry) hold them first, and the session then moves them after the model."""
+    "end"`` hold the imported warps last; older files hold them first, and the session
+    then moves them after the model. Without an editor entry (``voxwarp render
+    --save-scene``) the displacement fields at the front are imported, else those at the
+    end (a correction saved by ``render --displacement F --chainmail ...``)."""
     n = _imported_count(warps, entry)
+    if "imported_warps" not in entry and n == 0:
+        n = _imported_count(warps[::-1], entry)
+        return warps[len(warps) - n :], warps[: len(warps) - n], entry
     if entry.get("imported_at") == "end":
         return warps[len(warps) - n :], warps[: len(warps) - n], entry
     return warps[:n], warps[n:], _shift(entry, n)

@@ -166,3 +166,18 @@ def test_field_view_shows_u_at_world_points_of_a_rotated_grid() -> None:
     assert np.abs(fs.image.astype(int) - expect).max() <= 1
     assert "whole field max" in fs.legend
     assert (fs.image == field_views.VIRIDIS[0].astype(np.uint8)).all(axis=-1).any()  # 0 outside
+
+
+def test_a_render_scene_with_a_correction_before_the_field_resumes(tmp_path: Path) -> None:
+    """``render --displacement F --lattice L --save-scene`` writes [correction, field]
+    without an editor entry: the field is imported, the correction editable."""
+    field_path = save_displacement_field(smooth_field(), tmp_path / "u.nii.gz")
+    s = make_session()
+    s.set_deformation("lattice", resolution=3)
+    lattice = s.model_warp()
+    field = load_transform(field_path)[0]
+    Scene(s.volume, warps=[lattice, field]).save(tmp_path / "render.json")
+    again = EditSession.load(tmp_path / "render.json")
+    assert again.kind == "lattice"
+    assert len(again.imported_warps) == 1
+    assert [w.kind for w in again.scene.warps] == [lattice.kind, field.kind]
