@@ -58,6 +58,7 @@ from voxwarp.io.images import write_image
 from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
+from voxwarp.ui.correction_export import install_correction_export
 from voxwarp.ui.field_view import SEP
 from voxwarp.ui.fixed_image import install_fixed_image
 from voxwarp.ui.frame_dialog import ask_frame
@@ -395,6 +396,7 @@ class MainWindow(QMainWindow):
         )
         self._action(d, "&Single Step", self.single_step, "S")
         self._action(d, "Reset &Model", lambda: self.edit("Reset model", self.session.reset_model))
+        install_correction_export(self, d)
         family_actions = self.deformation_panel.window_actions()
         if family_actions:
             d.addSeparator()
@@ -688,7 +690,8 @@ class MainWindow(QMainWindow):
 
     def add_field(self, path: str | Path) -> bool:
         """Read a field or transform file (:func:`voxwarp.io.fields.load_transform`) and put
-        its warps first in the scene's chain (undoable); errors become the one-line dialog."""
+        its warps in the scene's chain after the model's, which corrects it in the displayed
+        space (undoable); errors become the one-line dialog."""
         try:
             warps = load_transform(path)
         except (VoxwarpError, WarpError, OSError) as exc:

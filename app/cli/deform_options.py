@@ -277,7 +277,11 @@ def add_field_args(p: argparse.ArgumentParser) -> None:
         " (.h5, .tfm, ANTs' .mat: displacement fields, B-splines, affines, composites). Repeat the"
         " option to compose: the first file is applied first to the displayed (fixed)"
         " point, the order antsApplyTransforms takes its -t files in (e.g. --displacement"
-        " 1Warp.nii.gz --displacement 0GenericAffine.mat).",
+        " 1Warp.nii.gz --displacement 0GenericAffine.mat). With --massspring, --chainmail,"
+        " --wires or --lattice the model corrects the registration in the displayed space"
+        " (it comes before the fields in the chain): --drag-at P --drag D moves what is seen"
+        " at P by D; save it with --save-scene and write the corrected field with"
+        " export-field.",
     )
     g.add_argument(
         "--displacement",

@@ -12,7 +12,7 @@ import argparse
 import contextlib
 import sys
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -520,22 +520,21 @@ def boundary_line(model: Any, chainmail: bool = False) -> str:
 
 class PendingDeformation(NamedTuple):
     """The deformation options of ``render`` (and ``slice``) prepared before any GL work:
-    the element grid of ``--massspring``/``--chainmail`` and the warp of ``--wires`` or
-    ``--lattice`` (None when not given)."""
+    the element grid of ``--massspring``/``--chainmail``, the warp of ``--wires`` or
+    ``--lattice`` (None when not given) and the ``--displacement`` warps."""
 
     grid: Any
     file_warp: Any
+    fields: tuple[Any, ...] = ()
 
 
 def prepare_deformation(args: argparse.Namespace, scene: Any) -> tuple[Any, PendingDeformation]:
-    """``scene`` with the ``--displacement`` fields in its chain, and the model grid and
-    file warp still to add (:func:`deformed_scene`); every check that needs no GL runs
-    here, so bad options fail before a context is made."""
+    """``scene`` and what :func:`deformed_scene` adds to its chain: the ``--displacement``
+    fields, the model grid and the file warp; every check that needs no GL runs here, so
+    bad options fail before a context is made."""
     fields = _field_warps(args)
     for w in fields:
         w.bind_volume(scene.volume)  # a field that misses the volume warns
-    if fields:  # nearest the displayed (fixed) space; the models act in the volume's
-        scene = scene.copy(warps=[*fields, *scene.warps])
     grid = _deform_grid(args, scene.volume)
     file_warp = None  # --wires or --lattice (they exclude each other)
     if args.wires is not None:  # built before any GL work: bad wires fail fast
@@ -546,17 +545,35 @@ def prepare_deformation(args: argparse.Namespace, scene: Any) -> tuple[Any, Pend
         from voxwarp.editing.families.lattice import LatticeFamily
 
         file_warp = LatticeFamily.build(LatticeSettings(file=args.lattice), scene.volume).warp
-    return scene, PendingDeformation(grid, file_warp)
+    return scene, PendingDeformation(grid, file_warp, tuple(fields))
+
+
+def compose_chain(
+    scene_warps: Sequence[Any], fields: Sequence[Any], correction: Sequence[Any]
+) -> list[Any]:
+    """The chain of ``render``/``slice`` (deformed -> original, first warp nearest the
+    picture).
+
+    With ``--displacement`` fields, the models (``--massspring``/``--chainmail``, then
+    ``--wires``/``--lattice``) correct the registration in the displayed (fixed)
+    space: ``[*correction, *fields, *scene_warps]``, so a ``--drag`` moves what is
+    seen at its point by its offset. Without fields they deform the volume itself,
+    before the scene's own warps move the result: ``[*scene_warps, *correction]``.
+    """
+    if fields:
+        return [*correction, *fields, *scene_warps]
+    return [*scene_warps, *correction]
 
 
 @contextlib.contextmanager
 def deformed_scene(
     args: argparse.Namespace, scene: Any, pending: PendingDeformation, ctx: Any
 ) -> Iterator[Any]:
-    """The finished scene: the model of ``pending`` run on ``ctx`` (current) and its warp
-    last in the chain, then the file warp, then the clip/camera options; the model is
-    closed when the block ends."""
+    """The finished scene: the model of ``pending`` run on ``ctx`` (current), its warp and
+    the file warp put in the chain (:func:`compose_chain`), then the clip/camera options;
+    the model is closed when the block ends."""
     model = None
+    correction: list[Any] = []
     try:
         if pending.grid is not None:
             run = _run_massspring if args.massspring is not None else _run_chainmail
@@ -566,11 +583,10 @@ def deformed_scene(
             if folds is not None:  # one line: meshes and the inverse are wrong there
                 print(f"warning: {folds}", file=sys.stderr)
             print(boundary_line(model, args.chainmail is not None), file=sys.stderr)
-            # last in the chain: it deforms the volume itself, before the
-            # scene's own warps move the result
-            scene = scene.copy(warps=[*scene.warps, model.warp()])
+            correction.append(model.warp())
         if pending.file_warp is not None:
-            scene = scene.copy(warps=[*scene.warps, pending.file_warp])
+            correction.append(pending.file_warp)
+        scene = scene.copy(warps=compose_chain(scene.warps, pending.fields, correction))
         yield ropt.apply_render_options(scene, args)  # every warp is in place
     finally:
         if model is not None:

@@ -4,13 +4,16 @@ displacement field in the ITK convention (for ITK, ANTs, SimpleITK, Slicer)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.options import CliOptionError, add_memory_budget_arg, load_scene_json
 from voxwarp.core.field_check import TOLERANCE_MM
 
@@ -34,7 +37,11 @@ def add_parser(sub: Any) -> None:
         " every support) hold their nearest carried node's vector, so they cannot bleed"
         " into their neighbours' interpolation; nodes bordering a tear (a discontinuity no"
         " spacing interpolates) are counted. Both counts and the measured error are printed"
-        " and recorded in the file's metadata (not in .h5).",
+        " and recorded in the file's metadata (not in .h5). The deformation options of"
+        " render (--displacement, --chainmail, --massspring, --wires, --lattice) add to the"
+        " scene's chain as they do for render: with --displacement the model corrects the"
+        " registration in the displayed space (it comes before the fields), so the file is"
+        " the corrected registration.",
     )
     p.add_argument("scene", metavar="SCENE.json")
     p.add_argument(
@@ -92,6 +99,9 @@ def add_parser(sub: Any) -> None:
         " and the folded (det J <= 0), compressed (< 0.5) and expanded (> 2) voxels",
     )
     add_memory_budget_arg(p)
+    add_deform_args(p)
+    add_wire_args(p)
+    add_field_args(p)
     p.set_defaults(func=cmd_export_field)
 
 
@@ -109,15 +119,15 @@ def cmd_export_field(args: argparse.Namespace) -> int:
             f"-o {out}: cannot write a displacement field as {field_suffix(out) or '(no suffix)'};"
             f" use one of {', '.join(WRITE_SUFFIXES)}"
         )
-    scene = load_scene_json(args.scene, "export-field")
-    box = None if args.box is None else (args.box[:3], args.box[3:])
-    if not scene.warps:
-        warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
-    export = scene.export_field(
-        spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
-    )
+    box = None if args.box is None else (args.box[:3], args.box[3:])
+    with _chain_scene(args) as scene:
+        if not scene.warps:
+            warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
+        export = scene.export_field(
+            spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
+        )
     field = export.field
     save_displacement_field(field, out, export.metadata())
     grid = "x".join(str(n) for n in field.shape)
@@ -139,13 +149,13 @@ def _export_jacobian(args: argparse.Namespace, out: Path) -> int:
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
 
     stream_format(out)  # a bad -o fails before any work
-    scene = load_scene_json(args.scene, "export-field")
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    jac = scene.jacobian_determinant(
-        spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
-    )
+    with _chain_scene(args) as scene:
+        jac = scene.jacobian_determinant(
+            spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
+        )
     det = jac.det
     slices = (det[:, :, k].T for k in range(det.shape[2]))
     oriented = scene.volume.space == "RAS"
@@ -157,6 +167,34 @@ def _export_jacobian(args: argparse.Namespace, out: Path) -> int:
     print(jac.stats.line(), file=sys.stderr)
     print(out)
     return 0
+
+
+def _deformation_given(args: argparse.Namespace) -> bool:
+    """Whether any of render's deformation options was given."""
+    names = ("displacement", "massspring", "chainmail", "wires", "lattice")
+    return any(getattr(args, n, None) is not None for n in names)
+
+
+@contextlib.contextmanager
+def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
+    """The scene of SCENE.json with the deformation options of render added to its chain
+    (:func:`voxwarp.cli.deformation.compose_chain`); the element models run on a small
+    offscreen context (their GPU backend too) that stays current in the block."""
+    scene = load_scene_json(args.scene, "export-field")
+    if not _deformation_given(args):
+        yield scene
+        return
+    from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
+    from voxwarp.render.offscreen import OffscreenRenderer
+
+    check_deform_options(args)
+    scene, pending = prepare_deformation(args, scene)
+    with (
+        OffscreenRenderer(16, 16) as r,
+        r.current(),
+        deformed_scene(args, scene, pending, r.ctx) as s,
+    ):
+        yield s
 
 
 def _unmet(export: FieldExport, given: bool) -> str:

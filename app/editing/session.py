@@ -156,9 +156,9 @@ class EditSession:
         #: keyframes (:mod:`voxwarp.editing.keyframes`; saved in scene JSON for ``voxwarp
         #: animate``)
         self.animation: Any = None
-        #: warps read from files (displacement fields, ITK transforms), first in the
-        #: scene's chain: they map the displayed (fixed) space to the volume's
-        #: (:meth:`add_warps_front`)
+        #: warps read from files (displacement fields, ITK transforms), last in the
+        #: scene's chain: they map the registration's fixed space to the volume's, and
+        #: the family's warp before them corrects what is displayed (:meth:`add_warps_front`)
         self.imported_warps: list[Warp] = []
         #: ``() -> context manager`` making the GL context of GPU models current (the
         #: GUI's viewport sets it; a headless caller's context is current already)
@@ -296,9 +296,11 @@ class EditSession:
         return self.family.warp()
 
     def sync_warps(self) -> None:
-        """Put the imported warps, then the family's warp (placed by :attr:`placement`),
-        in the scene."""
-        self.scene.warps = [*self.imported_warps, *self._model_chain()]
+        """Put the family's warp (placed by :attr:`placement`), then the imported warps,
+        in the scene: the model acts in the displayed space (a correction drawn on top of
+        a registration moves what is seen where it is dragged), the imported warps then
+        carry that space to the volume's."""
+        self.scene.warps = [*self._model_chain(), *self.imported_warps]
         self._touch()
 
     def _model_chain(self) -> list[Warp]:
@@ -312,10 +314,11 @@ class EditSession:
         return [AffineWarp(m), w, AffineWarp(np.linalg.inv(m))]
 
     def add_warps_front(self, warps: Sequence[Warp]) -> int:
-        """Put warps read from a file (:func:`voxwarp.io.fields.load_transform`) at the
-        front of the scene's chain, before earlier imported warps and the model's: a
-        registration field maps the displayed (fixed) space to the volume's. Returns
-        how many imported warps there are now."""
+        """Put warps read from a file (:func:`voxwarp.io.fields.load_transform`) in the
+        scene's chain: before earlier imported warps, after the model's (see
+        :meth:`sync_warps`): a registration field maps the fixed space to the volume's,
+        and the model corrects it in the displayed space. Returns how many imported
+        warps there are now."""
         new = list(warps)
         if not new or not all(isinstance(w, Warp) for w in new):
             raise EditorError(
@@ -616,9 +619,10 @@ class EditSession:
         self.family.before_save()
         d = self.scene.to_dict(base_dir=base_dir)
         n = len(self.imported_warps)
-        model_index = {0: None, 1: n, 3: n + 1}[len(self.scene.warps) - n]
+        model_index = {0: None, 1: 0, 3: 1}[len(self.scene.warps) - n]
         d[EDITOR_KEY] = {
             "imported_warps": n,
+            "imported_at": "end",
             "deformation": self.kind,
             "backend": self.backend,
             "resolution": list(self.resolution),
@@ -659,10 +663,9 @@ class EditSession:
         warps = list(self.scene.warps)
         try:
             self._read_editor_entry(entry)
-            n = _imported_count(warps, entry)
-            self.imported_warps, warps = warps[:n], warps[n:]
+            self.imported_warps, warps, entry = _split_imported(warps, entry)
             if warps:
-                self.family = self._resume(warps, _shift(entry, n))
+                self.family = self._resume(warps, entry)
         except (WarpError, KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, EditorError):
                 raise
@@ -730,8 +733,26 @@ def set_scene_look(scene: Scene, look: dict[str, Any]) -> None:
         scene.transfer_function = look["transfer_function"]
 
 
+def _split_imported(
+    warps: list[Warp], entry: dict[str, Any]
+) -> tuple[list[Warp], list[Warp], dict[str, Any]]:
+    """A saved chain split into (imported warps, model warps, the editor entry with its
+    ``"model_warp"`` index counted in the model warps). Files with ``"imported_at":
+    "end"`` hold the imported warps last; older files hold them first, and the session
+    then moves them after the model. Without an editor entry (``voxwarp render
+    --save-scene``) the displacement fields at the front are imported, else those at the
+    end (a correction saved by ``render --displacement F --chainmail ...``)."""
+    n = _imported_count(warps, entry)
+    if "imported_warps" not in entry and n == 0:
+        n = _imported_count(warps[::-1], entry)
+        return warps[len(warps) - n :], warps[: len(warps) - n], entry
+    if entry.get("imported_at") == "end":
+        return warps[len(warps) - n :], warps[: len(warps) - n], entry
+    return warps[:n], warps[n:], _shift(entry, n)
+
+
 def _imported_count(warps: list[Warp], entry: dict[str, Any]) -> int:
-    """How many leading warps of a saved scene are imported (the editor entry's
+    """How many warps of a saved scene are imported (the editor entry's
     ``"imported_warps"``; without one, the leading displacement fields)."""
     if "imported_warps" in entry:
         n = int(entry["imported_warps"])

@@ -10,7 +10,10 @@ moving; its field is written with :func:`voxwarp.io.fields.save_displacement_fie
 moving image is rendered *through* it (no resampling) beside the fixed image, a
 checkerboard of both and the differences before and after. The numbers: mean absolute
 difference of the renders and of the volumes (in the head), and the recovered field
-against the known one where the deformation is.
+against the known one where the deformation is. Then a correction step
+(:mod:`voxwarp.teaching.registration_correction`) drags a ChainMail element at the
+largest residual, exports the composed field (``registration_corrected.h5``) and
+applies it with SimpleITK (sheet ``registration_correction.png``).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from voxwarp.io.samples import load_sample
 from voxwarp.io.volumes import load_volume, save_volume
 from voxwarp.scene import Scene
 from voxwarp.teaching import sheets
+from voxwarp.teaching.registration_correction import correct_registration, correction_sheet
 
 #: the known deformation: this many Gaussian bumps, centres seeded inside the middle of
 #: the head's box, amplitude (mm) and width (sigma, mm)
@@ -55,9 +59,10 @@ FIELD_MIN_MM = 1.0
 def demo_registration(
     quick: bool, out: Path, say: Callable[[str], None]
 ) -> tuple[list[Path], dict[str, Any], list[sheets.TourStep]]:
-    """Run the registration demo into ``out`` (sheet ``registration.png``, the moving
-    image ``registration_moving.nii.gz`` and the recovered field
-    ``registration_field.nii.gz`` / ``.h5``); returns (figures, numbers, tour steps)."""
+    """Run the registration demo into ``out`` (sheets ``registration.png`` and
+    ``registration_correction.png``, the moving image ``registration_moving.nii.gz``,
+    the recovered field ``registration_field.nii.gz`` / ``.h5`` and the corrected one
+    ``registration_corrected.h5``); returns (figures, numbers, tour steps)."""
     fixed = load_sample("colin27")
     if quick:
         fixed = fixed.downsample(2)
@@ -97,9 +102,35 @@ def demo_registration(
     )
     say(f"registration: the same render from the command line: {cli}")
     sheet = _sheet(out / "registration.png", renders, numbers, known, warps[0], fixed)
+    fixed_sheet = _correction_step(fixed, moving, warps, known, out, numbers, say)
     steps = _tour(moving, warps, renders["camera"], renders["clip"])
     renders.pop("camera"), renders.pop("clip")
-    return [sheet], numbers, steps
+    return [sheet, fixed_sheet], numbers, steps
+
+
+def _correction_step(
+    fixed: Any,
+    moving: Any,
+    warps: list[Any],
+    known: Any,
+    out: Path,
+    numbers: dict[str, Any],
+    say: Callable[[str], None],
+) -> Path:
+    """The correction step (:mod:`voxwarp.teaching.registration_correction`): its
+    numbers go in ``numbers["correction"]``; returns its sheet."""
+    c = correct_registration(fixed, moving, warps, known, HEAD_THRESHOLD, out)
+    sheet = correction_sheet(out / "registration_correction.png", fixed, c)
+    c.pop("maps")
+    numbers["correction"] = c
+    say(
+        f"correction: ChainMail drag {np.linalg.norm(c['drag_mm']):.1f} mm at"
+        f" {', '.join(f'{v:.0f}' for v in c['site_mm'])} mm; residual at the site"
+        f" {c['site_field_mm_before']:.2f} -> {c['site_field_mm_after']:.2f} mm, |fixed -"
+        f" moving| there {c['site_image_before']:.1f} -> {c['site_image_after']:.1f}"
+        f" (SimpleITK through {Path(c['file']).name}; {c['seconds']:.1f} s)"
+    )
+    return sheet
 
 
 # ---------------------------------------------------------------------- the data

@@ -38,7 +38,7 @@ def smooth_field(
     return DisplacementFieldWarp(u, a, path=path)
 
 
-def test_imported_warps_go_first_and_come_out_again() -> None:
+def test_imported_warps_go_after_the_model_and_come_out_again() -> None:
     s = make_session()
     s.set_deformation("lattice", resolution=3)
     s.set_placement(Placement(translate=(1.0, 0.0, 0.0)))
@@ -47,17 +47,18 @@ def test_imported_warps_go_first_and_come_out_again() -> None:
     before = volume.data.copy()
     f1, f2 = smooth_field(), smooth_field()
     assert s.add_warps_front([f1]) == 1
-    assert s.scene.warps[0] is f1
-    assert [w.kind for w in s.scene.warps[1:]] == [w.kind for w in model_chain]
-    assert s.scene.warps[2] is model_chain[1]
+    # the model corrects the displayed space: it comes before the registration field
+    assert s.scene.warps[-1] is f1
+    assert [w.kind for w in s.scene.warps[:3]] == [w.kind for w in model_chain]
+    assert s.scene.warps[1] is model_chain[1]
     assert s.add_warps_front([f2]) == 2  # a newer file goes in front of older ones
-    assert s.scene.warps[:2] == [f2, f1]
-    assert s.scene.warps[3] is model_chain[1]
+    assert s.scene.warps[3:] == [f2, f1]
+    assert s.scene.warps[1] is model_chain[1]
     assert len(s.scene.warps) == 5
     assert s.model_warp() is model_chain[1]
-    # editing the model keeps the imported warps in front
+    # editing the model keeps the imported warps last
     s.set_deformation("lattice", resolution=4)
-    assert s.scene.warps[:2] == [f2, f1]
+    assert s.scene.warps[3:] == [f2, f1]
     assert len(s.scene.warps) == 5
     assert s.remove_imported_warps() == 2
     assert s.imported_warps == []
@@ -100,16 +101,32 @@ def test_scene_json_keeps_the_field_by_path_and_resumes(tmp_path: Path) -> None:
     s.add_warps_front(load_transform(field_path))
     scene_path = s.save(tmp_path / "scene.json")
     raw = json.loads(scene_path.read_text())
-    assert raw["warps"][0] == {"type": "displacement_field", "path": "u.nii.gz"}
+    assert raw["warps"][-1] == {"type": "displacement_field", "path": "u.nii.gz"}
     assert raw["editor"]["imported_warps"] == 1
-    assert raw["editor"]["model_warp"] == 1
+    assert raw["editor"]["imported_at"] == "end"
+    assert raw["editor"]["model_warp"] == 0
     again = EditSession.load(scene_path)
     assert again.kind == "lattice"
     assert len(again.imported_warps) == 1
-    assert isinstance(again.scene.warps[0], DisplacementFieldWarp)
+    assert isinstance(again.scene.warps[-1], DisplacementFieldWarp)
     assert np.allclose(again.adapter(LatticeFamily).lattice_nodes, nodes)
     p = np.array([[3.0, 4.0, 5.0]])
-    assert np.allclose(again.scene.warps[0].apply(p), [[3.3, 4.0, 5.25]], atol=1e-4)
+    assert np.allclose(again.scene.warps[-1].apply(p), [[3.3, 4.0, 5.25]], atol=1e-4)
+
+
+def test_an_older_scene_with_the_field_first_resumes_with_it_last(tmp_path: Path) -> None:
+    field_path = save_displacement_field(smooth_field(), tmp_path / "u.nii.gz")
+    s = make_session()
+    s.set_deformation("lattice", resolution=3)
+    lattice = s.model_warp()
+    field = load_transform(field_path)[0]
+    old = Scene(s.volume, warps=[field, lattice])  # the layout before "imported_at"
+    raw = old.to_dict(base_dir=tmp_path)
+    raw["editor"] = {"imported_warps": 1, "deformation": "lattice", "model_warp": 1}
+    (tmp_path / "old.json").write_text(json.dumps(raw))
+    again = EditSession.load(tmp_path / "old.json")
+    assert again.kind == "lattice"
+    assert [w.kind for w in again.scene.warps] == [lattice.kind, field.kind]
 
 
 def test_a_scene_of_only_a_field_opens_with_it_imported(tmp_path: Path) -> None:
@@ -149,3 +166,18 @@ def test_field_view_shows_u_at_world_points_of_a_rotated_grid() -> None:
     assert np.abs(fs.image.astype(int) - expect).max() <= 1
     assert "whole field max" in fs.legend
     assert (fs.image == field_views.VIRIDIS[0].astype(np.uint8)).all(axis=-1).any()  # 0 outside
+
+
+def test_a_render_scene_with_a_correction_before_the_field_resumes(tmp_path: Path) -> None:
+    """``render --displacement F --lattice L --save-scene`` writes [correction, field]
+    without an editor entry: the field is imported, the correction editable."""
+    field_path = save_displacement_field(smooth_field(), tmp_path / "u.nii.gz")
+    s = make_session()
+    s.set_deformation("lattice", resolution=3)
+    lattice = s.model_warp()
+    field = load_transform(field_path)[0]
+    Scene(s.volume, warps=[lattice, field]).save(tmp_path / "render.json")
+    again = EditSession.load(tmp_path / "render.json")
+    assert again.kind == "lattice"
+    assert len(again.imported_warps) == 1
+    assert [w.kind for w in again.scene.warps] == [lattice.kind, field.kind]
