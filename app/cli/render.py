@@ -19,6 +19,7 @@ from voxwarp.cli.options import TF_HELP, CliOptionError, window_pair_arg
 from voxwarp.cli.options import add_volume_args as _add_volume_args
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
+from voxwarp.cli.overlay_options import add_overlay_args, set_overlays
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.modes import MODES
 from voxwarp.inputs import load_input
@@ -71,6 +72,7 @@ def add_parser(sub: Any) -> None:
     pr.add_argument(
         "--marker", action="store_true", help="draw an orientation marker (bottom left)"
     )
+    add_overlay_args(pr)
     _add_volume_args(pr)
     ropt.add_render_options(pr)
     _add_deform_args(pr)
@@ -161,6 +163,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         # likewise the gradient texture (a pass over every voxel) for shading
         r.renderer.cell_skipping = False
         r.renderer.gradient_texture = False
+        set_overlays(r.renderer, scene, args)
         # the GPU backends run on the renderer's context (made current here)
         with r.current(), deformed_scene(args, scene, pending, r.ctx) as scene:
             img = r.render(scene)

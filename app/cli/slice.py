@@ -24,6 +24,7 @@ from voxwarp.cli import render_options as ropt
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
 from voxwarp.cli.options import TF_HELP, add_volume_args, tf_arg, window_arg
+from voxwarp.cli.overlay_options import add_overlay_args, overlays
 from voxwarp.core.checks import image_size
 from voxwarp.core.orientation import axis_letters
 from voxwarp.errors import InputError
@@ -155,6 +156,7 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="print the plane and its pixel -> world 4x4 matrix as JSON on stdout",
     )
+    add_overlay_args(p)
     add_volume_args(p)
     add_deform_args(p)
     add_wire_args(p)
@@ -277,6 +279,8 @@ def cmd_slice(args: argparse.Namespace) -> int:
                 look=args.look,
                 window=args.window,
                 show=args.show,
+                overlay=overlays(args),
+                overlay_opacity=args.overlay_opacity,
             )
     rgba = image.rgba
     assert rgba is not None

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -16,6 +16,13 @@ from voxwarp.core.slice_plane import SlicePlane, plane_for_space
 from voxwarp.errors import RenderError
 from voxwarp.render.context import create_context, egl_current, egl_restore
 from voxwarp.render.inline_image import RenderedImage, rendered
+from voxwarp.render.jacobian_overlay import (
+    DEFAULT_OPACITY,
+    JacobianOverlay,
+    draw_legend,
+    slice_detj,
+)
+from voxwarp.render.overlay_options import check_overlays
 from voxwarp.render.raycaster import Renderer
 from voxwarp.render.slice_image import SliceImage, colorize
 from voxwarp.scene import Scene
@@ -109,7 +116,10 @@ class OffscreenRenderer:
         :class:`~voxwarp.render.inline_image.RenderedImage`: an array Jupyter shows)."""
         with self.current():
             self.renderer.draw(scene, self._fbo, camera=camera)
-            return self.read()
+            img = self.read()
+        if self.renderer.jacobian_overlay is not None:  # the det J colour bar
+            draw_legend(img, self.renderer.jacobian_overlay)
+        return img
 
     def read(self) -> RenderedImage:
         """What :attr:`framebuffer` holds, as :meth:`render` returns it: after drawing
@@ -133,6 +143,8 @@ class OffscreenRenderer:
         look: str = "window",
         window: tuple[float, float] | None = None,
         show: str = "deformed",
+        overlay: str | Sequence[str] = (),
+        overlay_opacity: float = DEFAULT_OPACITY,
     ) -> SliceImage:
         """One slice of ``scene`` through its warp chain (multi-planar reformatting).
 
@@ -144,7 +156,13 @@ class OffscreenRenderer:
         default the scene's, or ``"tf"``; ``show`` one of ``"deformed"``, ``"rest"``,
         ``"checkerboard"``, ``"difference"``), the deformed and rest ``values`` and
         ``pixel_to_world``, the 4x4 map of pixel ``(col, row, 0, 1)`` to world mm.
+        ``overlay``: names of :data:`~voxwarp.render.overlay_options.OVERLAYS` drawn
+        over it, ``"jacobian"``: ``det J`` of the chain at every pixel centre (kept as
+        ``detj``) as a colour map with a legend, ``overlay_opacity`` (0..1) strong
+        (:mod:`voxwarp.render.jacobian_overlay`).
         """
+        overlays = check_overlays(overlay)
+        jacobian = JacobianOverlay(opacity=overlay_opacity) if "jacobian" in overlays else None
         w, h = self.size if size is None else (int(size[0]), int(size[1]))
         if isinstance(plane, str):  # axial etc. of a volume without orientation: z etc.
             name = plane_for_space(plane, scene.volume.space)
@@ -162,8 +180,11 @@ class OffscreenRenderer:
                 interpolation=interpolation,
             )
         image = SliceImage.from_data(data, matrix, plane)
+        if jacobian is not None:
+            image.detj = slice_detj(scene.warps, matrix, image.values)
         win = scene.window if window is None else window
-        colorize(image, look=look, window=win, tf=scene.transfer_function, show=show)
+        tf = scene.transfer_function
+        colorize(image, look=look, window=win, tf=tf, show=show, jacobian=jacobian)
         image.rgba = rendered(image.rgba)  # shows inline in Jupyter
         return image
 

@@ -50,6 +50,7 @@ from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
+from voxwarp.render.jacobian_overlay import JacobianOverlay, check_detj_mode
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
 from voxwarp.render.skipping.maps import (
@@ -253,6 +254,9 @@ class Renderer:
         #: (size, colour texture, framebuffer) of draw_scaled, and its upscaling program
         self._lod_target: tuple[tuple[int, int], Any, Any] | None = None
         self._upscale: tuple[Any, Any] | None = None
+        #: the det J overlay of the 3D image (:mod:`voxwarp.render.jacobian_overlay`),
+        #: None for none; drawn in the modes of :data:`DETJ_MODES`
+        self.jacobian_overlay: JacobianOverlay | None = None
         self._released = False
 
     # ------------------------------------------------------------------ resources
@@ -465,6 +469,7 @@ class Renderer:
             meshes,
             piecewise,
             gradient_texture,
+            self.jacobian_overlay is not None,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -488,6 +493,8 @@ class Renderer:
             defines.append("#define SEGMENT_MAP")
         if gradient_texture:
             defines.append("#define GRADIENT_TEXTURE")
+        if self.jacobian_overlay is not None:
+            defines.append("#define DETJ_OVERLAY")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -571,6 +578,9 @@ class Renderer:
         """Set the raycast program's uniforms for ``frame``; returns them by name."""
         values = self._frame_uniforms(frame)
         values.update(_mode_uniforms(frame.scene))
+        if self.jacobian_overlay is not None:
+            check_detj_mode(frame.scene.mode)
+            values.update(self.jacobian_overlay.uniforms())
         values.update(self._texel_uniforms(frame))
         for name, value in values.items():
             set_uniform(frame.prog, name, value)

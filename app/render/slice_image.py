@@ -32,6 +32,7 @@ import numpy as np
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.errors import RenderError
+from voxwarp.render.jacobian_overlay import JacobianOverlay, blend_detj, draw_legend
 
 Look = Literal["window", "tf"]
 LOOKS: tuple[str, ...] = ("window", "tf")
@@ -56,6 +57,9 @@ class SliceImage:
         (its whole slab) lies outside the volume.
     rgba
         (H, W, 4) uint8 colours (:func:`colorize`), or None before colouring.
+    detj
+        (H, W) float32 ``det J`` of the warp chain at the pixel centres (NaN where the
+        pixel shows no volume), or None when the ``jacobian`` overlay was not asked for.
     """
 
     plane: SlicePlane | None
@@ -63,6 +67,7 @@ class SliceImage:
     values: np.ndarray
     rest: np.ndarray
     rgba: np.ndarray | None = None
+    detj: np.ndarray | None = None
 
     @classmethod
     def from_data(
@@ -132,9 +137,12 @@ def colorize(
     tf: TransferFunction | None = None,
     show: str = "deformed",
     checker_px: int = 32,
+    jacobian: JacobianOverlay | None = None,
 ) -> np.ndarray:
     """The slice's (H, W, 4) uint8 RGBA (opaque; see the module docstring for
-    ``look`` and ``show``); also kept as ``image.rgba``."""
+    ``look`` and ``show``); also kept as ``image.rgba``. ``jacobian``: draw
+    ``image.detj`` over it with this colour map and its legend
+    (:mod:`voxwarp.render.jacobian_overlay`)."""
     options: dict[str, Any] = {"look": look, "window": window, "tf": tf}
     if show == "deformed":
         colours = colour_values(image.values, **options)
@@ -155,6 +163,9 @@ def colorize(
     u8 = (np.asarray(colours, dtype=np.float32) * 255 + 0.5).astype(np.uint8)
     out[..., :3] = u8[..., None] if u8.ndim == 2 else u8
     out[..., 3] = 255
+    if jacobian is not None and image.detj is not None:
+        blend_detj(out, image.detj, jacobian)
+        draw_legend(out, jacobian)
     image.rgba = out
     return out
 
