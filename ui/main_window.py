@@ -57,6 +57,7 @@ from voxwarp.io.images import write_image
 from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
+from voxwarp.ui.detj_overlay import install_detj_controls
 from voxwarp.ui.field_view import SEP
 from voxwarp.ui.mpr import SliceLayout, install_slice_controls
 from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
@@ -378,6 +379,7 @@ class MainWindow(QMainWindow):
         self.marker_action.setChecked(self.viewport.show_marker)
         v.addSeparator()
         install_slice_controls(self, v)
+        install_detj_controls(self, v)
         v.addSeparator()
         for dock in self.docks.values():
             v.addAction(dock.toggleViewAction())
@@ -748,6 +750,7 @@ class MainWindow(QMainWindow):
             _add_recent(source)
         self.tf_editor.set_volume(session.volume)
         self.refresh_panels()
+        self.detj.schedule()  # the status line's det J of the new scene
         self.sessionChanged.emit()
         self._update_title()
         if source is not None:  # what the volume was taken for and how it is shown

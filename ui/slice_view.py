@@ -45,6 +45,7 @@ from voxwarp.editing.slice_views import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.ui.detj_overlay import readout_suffix
 
 __all__ = ["SliceView"]
 
@@ -164,6 +165,8 @@ class SliceView(QWidget):
                 )
             )
             self.image = SliceImage.from_data(data, p2w, plane)
+            detj = getattr(self.mpr.window, "detj", None)  # the det J overlay, when on
+            self.image.detj = None if detj is None else detj.slice_detj(self.image)
             self._error = ""
             self.recolor()
         except VoxwarpError as exc:
@@ -184,6 +187,8 @@ class SliceView(QWidget):
                 window=state.window,
                 tf=self.mpr.window.session.scene.transfer_function,
                 show=state.show,
+                jacobian=getattr(self.mpr.window, "detj", None) and self.mpr.window.detj.jacobian(),
+                legend="top-right",  # the readout and scale bar are at the bottom
             )
         except VoxwarpError as exc:
             self._show_error(str(exc))
@@ -324,6 +329,7 @@ class SliceView(QWidget):
             ih = self.image.size[1]
             xy = self.to_widget(point[None])[0] * (ih / h)  # image pixels (a scaled image)
             values = self.image.value_at(xy[0], xy[1])
+            return readout(point, space, *values) + readout_suffix(self.mpr.window, self.image, xy)
         return readout(point, space, *values)
 
     # ------------------------------------------------------------------ mouse

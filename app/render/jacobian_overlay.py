@@ -155,15 +155,24 @@ def _legend_box(w: int, h: int) -> tuple[int, int, int]:
     return s, bar_w + 12 * s + 24 * s + text_mask("<=0 fold", s).shape[1], 32 * s
 
 
-def draw_legend(rgba: np.ndarray, overlay: JacobianOverlay) -> np.ndarray:
+#: corners the legend may sit in
+LEGEND_CORNERS: tuple[str, ...] = ("bottom-right", "top-right")
+
+
+def draw_legend(
+    rgba: np.ndarray, overlay: JacobianOverlay, corner: str = "bottom-right"
+) -> np.ndarray:
     """Draw the colour bar (``det J`` from ``2^-r`` to ``2^r``, ticks and labels) and the
-    fold swatch in the bottom-right corner of ``rgba`` (H, W, 3|4), uint8 or float in
-    [0, 1], in place (nothing on an image too small to hold it)."""
+    fold swatch in a corner (:data:`LEGEND_CORNERS`) of ``rgba`` (H, W, 3|4), uint8 or
+    float in [0, 1], in place (nothing on an image too small to hold it)."""
+    if corner not in LEGEND_CORNERS:
+        raise RenderError(f"legend corner must be one of {', '.join(LEGEND_CORNERS)}")
     h, w = rgba.shape[:2]
     s, box_w, box_h = _legend_box(w, h)
     if box_w > w or box_h > h:
         return rgba
-    region = rgba[h - box_h :, w - box_w :]
+    rows = slice(h - box_h, h) if corner == "bottom-right" else slice(0, box_h)
+    region = rgba[rows, w - box_w :]
     if rgba.dtype == np.uint8:
         _draw_legend_u8(region, overlay, s)
         return rgba

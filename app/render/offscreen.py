@@ -18,6 +18,7 @@ from voxwarp.render.context import create_context, egl_current, egl_restore
 from voxwarp.render.inline_image import RenderedImage, rendered
 from voxwarp.render.jacobian_overlay import (
     DEFAULT_OPACITY,
+    DETJ_MODES,
     JacobianOverlay,
     draw_legend,
     slice_detj,
@@ -117,8 +118,9 @@ class OffscreenRenderer:
         with self.current():
             self.renderer.draw(scene, self._fbo, camera=camera)
             img = self.read()
-        if self.renderer.jacobian_overlay is not None:  # the det J colour bar
-            draw_legend(img, self.renderer.jacobian_overlay)
+        overlay = self.renderer.jacobian_overlay
+        if overlay is not None and scene.mode in DETJ_MODES:  # the det J colour bar
+            draw_legend(img, overlay)
         return img
 
     def read(self) -> RenderedImage:

@@ -50,7 +50,7 @@ from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
 from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
-from voxwarp.render.jacobian_overlay import JacobianOverlay, check_detj_mode
+from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
 from voxwarp.render.skipping.maps import (
@@ -255,7 +255,7 @@ class Renderer:
         self._lod_target: tuple[tuple[int, int], Any, Any] | None = None
         self._upscale: tuple[Any, Any] | None = None
         #: the det J overlay of the 3D image (:mod:`voxwarp.render.jacobian_overlay`),
-        #: None for none; drawn in the modes of :data:`DETJ_MODES`
+        #: None for none; drawn in the modes of its ``DETJ_MODES`` (others draw without)
         self.jacobian_overlay: JacobianOverlay | None = None
         self._released = False
 
@@ -469,7 +469,7 @@ class Renderer:
             meshes,
             piecewise,
             gradient_texture,
-            self.jacobian_overlay is not None,
+            self._detj_on(scene),
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -493,7 +493,7 @@ class Renderer:
             defines.append("#define SEGMENT_MAP")
         if gradient_texture:
             defines.append("#define GRADIENT_TEXTURE")
-        if self.jacobian_overlay is not None:
+        if self._detj_on(scene):
             defines.append("#define DETJ_OVERLAY")
         frag = shaders.source(
             "raycast.frag.glsl",
@@ -566,6 +566,10 @@ class Renderer:
         view = (x, y, w, h)
         return _Frame(scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment)
 
+    def _detj_on(self, scene: Scene) -> bool:
+        """Whether this draw tints by det J (an overlay is set and the mode shows it)."""
+        return self.jacobian_overlay is not None and scene.mode in DETJ_MODES
+
     def _use_gradients(self, scene: Scene) -> bool:
         """Whether shading reads a gradient texture (see :attr:`gradient_texture`)."""
         if not scene.use_shading() or self.gradient_texture is False:
@@ -578,8 +582,7 @@ class Renderer:
         """Set the raycast program's uniforms for ``frame``; returns them by name."""
         values = self._frame_uniforms(frame)
         values.update(_mode_uniforms(frame.scene))
-        if self.jacobian_overlay is not None:
-            check_detj_mode(frame.scene.mode)
+        if self.jacobian_overlay is not None and self._detj_on(frame.scene):
             values.update(self.jacobian_overlay.uniforms())
         values.update(self._texel_uniforms(frame))
         for name, value in values.items():

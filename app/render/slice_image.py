@@ -138,11 +138,12 @@ def colorize(
     show: str = "deformed",
     checker_px: int = 32,
     jacobian: JacobianOverlay | None = None,
+    legend: str | None = "bottom-right",
 ) -> np.ndarray:
     """The slice's (H, W, 4) uint8 RGBA (opaque; see the module docstring for
     ``look`` and ``show``); also kept as ``image.rgba``. ``jacobian``: draw
-    ``image.detj`` over it with this colour map and its legend
-    (:mod:`voxwarp.render.jacobian_overlay`)."""
+    ``image.detj`` over it with this colour map and its legend in the corner ``legend``
+    (None: no legend; :mod:`voxwarp.render.jacobian_overlay`)."""
     options: dict[str, Any] = {"look": look, "window": window, "tf": tf}
     if show == "deformed":
         colours = colour_values(image.values, **options)
@@ -165,7 +166,8 @@ def colorize(
     out[..., 3] = 255
     if jacobian is not None and image.detj is not None:
         blend_detj(out, image.detj, jacobian)
-        draw_legend(out, jacobian)
+        if legend is not None:
+            draw_legend(out, jacobian, legend)
     image.rgba = out
     return out
 

@@ -336,3 +336,23 @@ def test_own_context_serves_calls_from_any_thread(gl_ctx: Any) -> None:
         assert _changed_pixels(after, np.asarray(before, np.int16)) > 50  # the orbit took
     finally:
         v.close()
+
+
+def test_jacobian_overlay_switch(viewer: Any) -> None:
+    """``viewer.overlays = "jacobian"``: the model at rest has det J = 1, so the frame is
+    unchanged but for the legend (bottom right); off again, the frame is back."""
+    from voxwarp.errors import RenderError
+
+    plain = _volume_only(viewer)
+    viewer.overlays = "jacobian"
+    assert viewer.overlays == ("jacobian",)
+    tinted = _volume_only(viewer)
+    legend = np.zeros(plain.shape[:2], bool)
+    legend[-32:, -143:] = True
+    np.testing.assert_array_equal(tinted[~legend], plain[~legend])
+    assert np.any(tinted[legend] != plain[legend])
+    viewer.overlays = ()
+    assert viewer.overlays == ()
+    np.testing.assert_array_equal(_volume_only(viewer), plain)
+    with pytest.raises(RenderError, match="choose from jacobian"):
+        viewer.overlays = "bogus"

@@ -36,6 +36,7 @@ from voxwarp.render.jacobian_overlay import (
     EXPANSION_RGB,
     FOLD_RGB,
     JacobianOverlay,
+    check_detj_mode,
     detj_rgba,
     draw_legend,
     pixel_centres,
@@ -242,7 +243,11 @@ def test_3d_overlay_in_dvr_and_iso_is_the_fold_colour_times_opacity(
     np.testing.assert_allclose(tinted[..., :3][covered], want[covered], atol=2e-3)
 
 
-def test_3d_overlay_refuses_other_modes(offscreen: Any) -> None:
-    scene = Scene(_volume(), mode="average")
+def test_3d_overlay_leaves_other_modes_alone(offscreen: Any) -> None:
+    """average has no one sample per pixel to colour: drawn as without the overlay."""
+    scene = Scene(_volume(), mode="average", warps=[AffineWarp.scaling((0.7,) * 3)])
+    plain = _tinted_mip(offscreen, scene, None)
+    tinted = _tinted_mip(offscreen, scene, JacobianOverlay())
+    np.testing.assert_array_equal(tinted, plain)
     with pytest.raises(RenderError, match="jacobian overlay colours"):
-        _tinted_mip(offscreen, scene, JacobianOverlay())
+        check_detj_mode("average")
