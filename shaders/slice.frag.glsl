@@ -12,6 +12,8 @@
 // layout); otherwise trilinear, as the raycaster samples.
 // Output (RGBA32F): r = deformed value, g = fraction of the slab's samples inside the
 // volume (0: nothing here), b = the rest-state (undeformed) value at p, a = its fraction.
+// DETJ (the det J overlay, app/render/jacobian_overlay.py): r = det of the chain's
+// Jacobian at p (the plane's own point, no slab), g = 1 instead.
 
 #include "volume_sample.glsl"
 #include "warps.glsl"
@@ -49,6 +51,10 @@ void main() {
     vec2 pixel = gl_FragCoord.xy - u_viewport.xy - 0.5;     // (col, row from the bottom)
     vec2 cr = vec2(pixel.x, u_viewport.w - 1.0 - pixel.y);   // row 0 at the image top
     vec3 p0 = (u_pixel_to_world * vec4(cr, 0.0, 1.0)).xyz;
+#ifdef DETJ
+    f_value = vec4(determinant(warp_chain_jacobian(p0)), 1.0, 0.0, 0.0);
+    return;
+#endif
     vec3 first = p0 - 0.5 * float(u_slab_samples - 1) * u_slab_step;
     vec2 deformed = vec2(0.0);
     vec2 rest = vec2(0.0);

@@ -23,7 +23,7 @@ from PySide6.QtWidgets import QLabel, QMenu
 
 from voxwarp.core.jacobian import JacobianStats
 from voxwarp.errors import VoxwarpError
-from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay, slice_detj
+from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay
 
 #: nodes along the longest side of the status line's det J grid
 STATUS_NODES = 32
@@ -91,10 +91,10 @@ class DetJOverlay(QObject):
         """det J at a slice image's pixel centres when the overlay is on."""
         if not self.enabled:
             return None
-        warps = self.window.session.scene.warps
-        return self.window.viewport.with_context(
-            lambda: slice_detj(warps, image.pixel_to_world, image.values)
-        )
+        vp, scene = self.window.viewport, self.window.session.scene
+        h, w = image.values.shape
+        det = vp.with_context(lambda: vp.renderer.slice_detj(scene, image.pixel_to_world, (w, h)))
+        return np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
 
     def schedule(self) -> None:
         """Recompute the status line soon (after the last of a burst of changes)."""

@@ -21,7 +21,6 @@ from voxwarp.render.jacobian_overlay import (
     DETJ_MODES,
     JacobianOverlay,
     draw_legend,
-    slice_detj,
 )
 from voxwarp.render.overlay_options import check_overlays
 from voxwarp.render.raycaster import Renderer
@@ -182,8 +181,10 @@ class OffscreenRenderer:
                 interpolation=interpolation,
             )
         image = SliceImage.from_data(data, matrix, plane)
-        if jacobian is not None:
-            image.detj = slice_detj(scene.warps, matrix, image.values)
+        if jacobian is not None:  # det J per pixel on the GPU, where the volume shows
+            with self.current():
+                det = self.renderer.slice_detj(scene, matrix, (w, h))
+            image.detj = np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
         win = scene.window if window is None else window
         tf = scene.transfer_function
         colorize(image, look=look, window=win, tf=tf, show=show, jacobian=jacobian)

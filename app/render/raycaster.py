@@ -803,6 +803,21 @@ class Renderer:
             interpolation=interpolation,
         )
 
+    def slice_detj(
+        self, scene: Scene, pixel_to_world: np.ndarray, size: tuple[int, int]
+    ) -> np.ndarray:
+        """``det J`` of the scene's warp chain at the pixel centres of a slice, on the GPU
+        (the warps' GLSL Jacobians): (H, W) float32, row 0 at the top; pixels as in
+        :meth:`slice_values` (the CPU reference is
+        :func:`voxwarp.render.jacobian_overlay.slice_detj`)."""
+        if self._released:
+            raise RenderError("this Renderer was released")
+        gpu = self._volume_gpu(scene.volume)
+        if self._slice_renderer is None:
+            self._slice_renderer = SliceRenderer(self.ctx)
+        data = self._slice_renderer.values(gpu, scene, pixel_to_world, size, detj=True)
+        return data[..., 0].copy()
+
     def draw_scaled(
         self,
         scene: Scene,

@@ -77,8 +77,8 @@ class SliceRenderer:
         self._target: tuple[tuple[int, int], Any, Any] | None = None
         self._released = False
 
-    def _program(self, scene: Scene, slice_pairs: bool, nearest: bool) -> Any:
-        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest)
+    def _program(self, scene: Scene, slice_pairs: bool, nearest: bool, detj: bool) -> Any:
+        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest, detj)
         hold = self._programs.get(key)
         if hold is not None:
             return hold.program
@@ -88,6 +88,7 @@ class SliceRenderer:
         defines = (["#define SLICE_PAIRS"] if slice_pairs else []) + (
             ["#define NEAREST"] if nearest else []
         )
+        defines += ["#define DETJ"] if detj else []
         frag = shaders.with_defines(frag, defines)
 
         try:
@@ -110,11 +111,13 @@ class SliceRenderer:
         slab_mm: float = 0.0,
         slab_mode: str = "mip",
         interpolation: str = "linear",
+        detj: bool = False,
     ) -> None:
         """Draw the slice whose pixel ``(col, row)`` (row 0 at the top) lies at
         ``pixel_to_world @ (col, row, 0, 1)`` into ``viewport`` of ``framebuffer``;
         the slab runs along ``pixel_to_world``'s third column (unit length expected).
-        ``gpu`` is the renderer's copy of the scene's volume."""
+        ``gpu`` is the renderer's copy of the scene's volume. ``detj``: draw the
+        chain's det J at each pixel's point instead (channel r; g = 1)."""
         if self._released:
             raise RenderError("this SliceRenderer was released")
         check_slice_options(slab_mode, interpolation)
@@ -123,7 +126,7 @@ class SliceRenderer:
             raise RenderError("pixel_to_world must be a finite 4x4 matrix")
         samples, spacing = slab_sampling(slab_mm, scene.sample_distance_mm)
         normal = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-12)
-        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest")
+        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest", detj)
         textures = warp_textures(self.ctx, scene.warps)  # first: may run GPU passes
         vol = scene.volume
         values: dict[str, Any] = {

@@ -4,11 +4,13 @@ Oracles:
 
 * the colour map's own definition: identity clear, ``det J = 2^±r`` at full opacity in
   the compression/expansion colour, folds solid, NaN clear;
-* slices: an affine scaling's det J is ``1 / (sx sy sz)`` at every pixel (closed form);
+* slices (det J from the warps' GLSL Jacobians, on the GPU): an affine scaling's det J
+  is ``1 / (sx sy sz)`` at every pixel (closed form);
   a smooth displacement field's det J at the pixel centres equals the determinant of
   the chain's pull-back map differentiated by central differences of
-  ``chain_apply`` (an independent numeric Jacobian) and equals
-  ``Scene.jacobian_determinant`` where a pixel centre lies on one of its nodes;
+  ``chain_apply`` (an independent numeric Jacobian) and the CPU ``chain_determinant``
+  (what ``Scene.jacobian_determinant`` evaluates) on a grid whose nodes are the pixel
+  centres, within 2e-3 (GPU vs CPU);
 * folds: a displacement field whose x component falls with slope -2 between two node
   planes and is flat elsewhere has ``det J = -1`` exactly between them and 1 outside
   (trilinear interpolation of the nodes): the fold colour covers exactly the pixels
@@ -40,6 +42,7 @@ from voxwarp.render.jacobian_overlay import (
     detj_rgba,
     draw_legend,
     pixel_centres,
+    slice_detj,
 )
 from voxwarp.render.overlay_options import check_overlays
 from voxwarp.scene import Scene
@@ -159,7 +162,12 @@ def test_slice_detj_equals_the_chain_at_pixel_centres(offscreen: Any) -> None:
     grid = np.array(img.pixel_to_world, dtype=np.float64)
     grid[:3, 2] = (0.0, 0.0, 1.0)
     ref = chain_determinant(scene.warps, grid, (img.size[0], img.size[1], 1))[..., 0].T
-    np.testing.assert_allclose(img.detj[inside], ref[inside], rtol=1e-6)
+    # the slice's det J comes from the warps' GLSL Jacobians (the field's texture read
+    # with 8-bit filter weights): GPU and CPU agree to 6e-4 here
+    np.testing.assert_allclose(img.detj[inside], ref[inside], atol=2e-3)
+    # and the CPU reference of the slice overlay is the grid's det J exactly
+    cpu = slice_detj(scene.warps, img.pixel_to_world, img.values)
+    np.testing.assert_allclose(cpu[inside], ref[inside], rtol=1e-6)
 
 
 def test_fold_colour_exactly_where_det_j_is_negative(offscreen: Any) -> None:

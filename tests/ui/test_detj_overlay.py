@@ -4,8 +4,9 @@ Oracles: the status line's min/max and folded count are those of
 ``Scene.jacobian_determinant`` on the same coarse grid (computed here independently of
 the window); the field folds by construction (u_x falls with slope -2 over a band of
 x), so the count is positive. With the overlay on, the slice views hold det J equal to
-``point_determinant`` of the chain at their pixel centres, the readout shows it, and the
-3D frame changes; off again, the 3D frame is back.
+``point_determinant`` of the chain at their pixel centres (CPU; the view's is the GPU's,
+within 2e-3), the readout shows it, and the 3D frame changes; off again, the 3D frame
+is back.
 """
 
 from __future__ import annotations
@@ -72,7 +73,11 @@ def test_status_and_overlay_follow_det_j(window: Any, qtbot: Any, tmp_path: Path
     want = point_determinant(scene.warps, pts).reshape(img.detj.shape)
     ok = np.isfinite(img.detj)
     assert ok.sum() > 100
-    np.testing.assert_allclose(img.detj[ok], want[ok], rtol=1e-6)
+    # GPU (the warps' GLSL Jacobians) vs CPU: within 2e-3 (8-bit texture filter
+    # weights), but for pixels whose centre straddles the fold band's edge
+    close = np.abs(img.detj[ok] - want[ok]) <= 2e-3
+    assert close.mean() > 0.99
+    assert (want <= 0).sum() > 100  # the fold shows in this slice
     assert "det J" in view.readout_text()
     after = frame(w)
     assert np.abs(after - before).max() > 20  # the 3D view is tinted
