@@ -65,25 +65,36 @@ class JacobianOverlay:
 
 def detj_rgba(det: np.ndarray, overlay: JacobianOverlay) -> np.ndarray:
     """``(..., 4)`` float32 colour and opacity of ``det J`` values (NaN: opacity 0)."""
-    d = np.asarray(det, dtype=np.float64)
-    out = np.zeros((*d.shape, 4), dtype=np.float32)
+    shape = np.shape(det)
+    d = np.asarray(det, dtype=np.float32).reshape(-1)
+    out = np.empty((d.size, 4), dtype=np.float32)
     with np.errstate(invalid="ignore", divide="ignore"):
         pos = d > 0
-        level = np.clip(np.log2(np.where(pos, d, 1.0)) / overlay.log2_range, -1.0, 1.0)
-    out[..., :3] = np.where((level < 0)[..., None], EXPANSION_RGB, COMPRESSION_RGB)
-    out[..., 3] = np.where(pos, overlay.opacity * np.abs(level), 0.0)
-    fold = d <= 0
-    out[fold, :3] = FOLD_RGB
-    out[fold, 3] = 1.0
-    return out
+        level = np.log2(np.where(pos, d, np.float32(1)))
+        level *= np.float32(1.0 / overlay.log2_range)
+        np.clip(level, -1.0, 1.0, out=level)
+        expand = level < 0
+        for k in range(3):
+            out[:, k] = np.where(expand, EXPANSION_RGB[k], COMPRESSION_RGB[k])
+        np.abs(level, out=level)
+        level *= np.float32(overlay.opacity)
+        out[:, 3] = np.where(pos, level, np.float32(0))
+        fold = d <= 0
+    out[fold] = (*FOLD_RGB, 1.0)
+    return out.reshape(*shape, 4)
 
 
 def blend_detj(rgba: np.ndarray, det: np.ndarray, overlay: JacobianOverlay) -> np.ndarray:
     """Blend the overlay of ``det`` (H, W) over ``rgba`` (H, W, 4) uint8, in place."""
     c = detj_rgba(det, overlay)
     a = c[..., 3:4]
-    rgb = rgba[..., :3].astype(np.float32) * (1 - a) + c[..., :3] * 255.0 * a
-    rgba[..., :3] = np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+    rgb = rgba[..., :3].astype(np.float32)
+    rgb *= 1 - a
+    c[..., :3] *= a * np.float32(255)
+    rgb += c[..., :3]
+    rgb += np.float32(0.5)
+    np.clip(rgb, 0, 255, out=rgb)
+    rgba[..., :3] = rgb.astype(np.uint8)
     return rgba
 
 
