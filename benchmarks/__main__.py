@@ -3,7 +3,7 @@
 Each sub-command keeps the options and the report of the ``voxwarp bench NAME`` it was;
 ``python -m benchmarks all --json FILE`` runs every one of them (each in a subprocess of
 its own) and makes the whole table, the one command to run on a lent GPU. ``voxwarp
-bench render|slices|interactive`` stay installed (this machine's frame rates); their
+bench render|slices|interactive|detj`` stay installed (this machine's frame rates); their
 sub-commands here run the same code.
 """
 
