@@ -10,6 +10,7 @@ from voxwarp.bench.detj import bench_detj
 from voxwarp.cli.main import main
 
 
+@pytest.mark.slow
 def test_bench_detj_times_each_view_with_and_without() -> None:
     report = bench_detj(volumes=("colin27",), sizes=(32,), rounds=1, deformations=("wires",))
     assert [r.view for r in report.rows] == ["3D dvr", "3D mip", "slice (axial)"]

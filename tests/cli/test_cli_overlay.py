@@ -51,6 +51,7 @@ def _slice(vol: Path, out: Path, *args: str) -> np.ndarray:
     return read_image(out)[..., :3].astype(np.float64)
 
 
+@pytest.mark.slow
 def test_identity_overlay_leaves_the_slice_unchanged(files: tuple[Path, Path]) -> None:
     vol, _ = files
     out = vol.parent
@@ -63,6 +64,7 @@ def test_identity_overlay_leaves_the_slice_unchanged(files: tuple[Path, Path]) -
     assert np.any(over[legend] != plain[legend])  # the legend is drawn
 
 
+@pytest.mark.slow
 def test_linear_field_tints_every_pixel_by_det_i_plus_m(files: tuple[Path, Path]) -> None:
     vol, field = files
     out = vol.parent
@@ -85,6 +87,7 @@ def test_linear_field_tints_every_pixel_by_det_i_plus_m(files: tuple[Path, Path]
     np.testing.assert_allclose(over[:h][shown], expect[:h][shown], atol=1.01)
 
 
+@pytest.mark.slow
 def test_bad_overlay_and_mode_fail_in_one_line(files: tuple[Path, Path]) -> None:
     vol, _ = files
     proc = run_cli("slice", str(vol), "-o", str(vol.parent / "x.png"), "--overlay", "bogus")

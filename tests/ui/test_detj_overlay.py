@@ -50,6 +50,7 @@ def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     w.close()
 
 
+@pytest.mark.slow
 def test_status_and_overlay_follow_det_j(window: Any, qtbot: Any, tmp_path: Path) -> None:
     w = window
     assert w.detj.stats is None  # no warps: no status line
