@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from typing import Any
 
 from voxwarp.render.overlay_options import OVERLAYS
@@ -46,7 +47,8 @@ def add_overlay_args(p: Any) -> None:
         metavar="NAME[,NAME]",
         help="draw over the image (repeat or comma list): jacobian = det J of the warp"
         " chain as a colour map on log2(det J): blue > 1 (shown shrunk), orange < 1"
-        " (shown enlarged), clear at 1, solid green folds (det J <= 0), with a legend",
+        " (shown enlarged), clear at 1, solid green folds (det J <= 0), with a legend"
+        " (render: modes dvr, mip, minip, iso)",
     )
     p.add_argument(
         "--overlay-opacity",
@@ -74,3 +76,16 @@ def set_overlays(renderer: Any, scene: Any, args: argparse.Namespace) -> None:
     if "jacobian" in overlays(args):
         check_detj_mode(scene.mode)
         renderer.jacobian_overlay = JacobianOverlay(opacity=args.overlay_opacity)
+
+
+def legend_note(overlay_names: tuple[str, ...], size: tuple[int, int]) -> None:
+    """One stderr note when the det J legend does not fit an image of ``size`` (W, H)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.render.jacobian_overlay import legend_fits
+
+    if "jacobian" in overlay_names and not legend_fits(*size):
+        print(
+            f"voxwarp: note: the det J legend needs a larger image than {size[0]}x{size[1]}"
+            " pixels; give a smaller --pixel or a --size",
+            file=sys.stderr,
+        )

@@ -24,7 +24,7 @@ from voxwarp.cli import render_options as ropt
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
 from voxwarp.cli.options import TF_HELP, add_volume_args, tf_arg, window_arg
-from voxwarp.cli.overlay_options import add_overlay_args, overlays
+from voxwarp.cli.overlay_options import add_overlay_args, legend_note, overlays
 from voxwarp.core.checks import image_size
 from voxwarp.core.orientation import axis_letters
 from voxwarp.errors import InputError
@@ -294,6 +294,7 @@ def cmd_slice(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     ropt.spacing_notice(scene.volume, args)
+    legend_note(overlays(args), size)
     if args.json:
         print(json.dumps(slice_json(plane, size, image.pixel_to_world, out), indent=2))
     else:

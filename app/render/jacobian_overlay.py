@@ -166,6 +166,12 @@ def _legend_box(w: int, h: int) -> tuple[int, int, int]:
     return s, bar_w + 12 * s + 24 * s + text_mask("<=0 fold", s).shape[1], 32 * s
 
 
+def legend_fits(width: int, height: int) -> bool:
+    """Whether an image of ``width`` x ``height`` pixels holds the legend."""
+    _, box_w, box_h = _legend_box(int(width), int(height))
+    return box_w <= width and box_h <= height
+
+
 #: corners the legend may sit in
 LEGEND_CORNERS: tuple[str, ...] = ("bottom-right", "top-right")
 
@@ -180,7 +186,7 @@ def draw_legend(
         raise RenderError(f"legend corner must be one of {', '.join(LEGEND_CORNERS)}")
     h, w = rgba.shape[:2]
     s, box_w, box_h = _legend_box(w, h)
-    if box_w > w or box_h > h:
+    if not legend_fits(w, h):
         return rgba
     rows = slice(h - box_h, h) if corner == "bottom-right" else slice(0, box_h)
     region = rgba[rows, w - box_w :]
