@@ -87,15 +87,6 @@ class DetJOverlay(QObject):
         """The overlay the slice views colour with (None when off)."""
         return self.overlay if self.enabled else None
 
-    def slice_detj(self, image: Any) -> np.ndarray | None:
-        """det J at a slice image's pixel centres when the overlay is on."""
-        if not self.enabled:
-            return None
-        vp, scene = self.window.viewport, self.window.session.scene
-        h, w = image.values.shape
-        det = vp.with_context(lambda: vp.renderer.slice_detj(scene, image.pixel_to_world, (w, h)))
-        return np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
-
     def schedule(self) -> None:
         """Recompute the status line soon (after the last of a burst of changes)."""
         self.apply_to_renderer()
@@ -123,6 +114,12 @@ class DetJOverlay(QObject):
             text += f" (3D overlay in {', '.join(DETJ_MODES)})"
         self.label.setText(text)
         self.label.show()
+
+
+def masked_detj(data: np.ndarray, image: Any) -> np.ndarray:
+    """The det J channel of ``slice_values(..., detj=True)`` data, NaN where the slice
+    image shows no volume."""
+    return np.where(np.isfinite(image.values), data[..., 4], np.nan).astype(np.float32)
 
 
 def readout_suffix(window: Any, image: Any, xy: tuple[float, float]) -> str:

@@ -45,7 +45,7 @@ from voxwarp.editing.slice_views import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.slice_image import SliceImage, colorize
-from voxwarp.ui.detj_overlay import readout_suffix
+from voxwarp.ui.detj_overlay import masked_detj, readout_suffix
 
 __all__ = ["SliceView"]
 
@@ -153,6 +153,8 @@ class SliceView(QWidget):
         size = (max(1, round(w * r)), max(1, round(h * r)))
         plane = self.plane()
         p2w = plane.pixel_to_world(size)
+        detj = getattr(self.mpr.window, "detj", None)  # the det J overlay
+        want_detj = detj is not None and detj.enabled
         try:
             data = vp.with_context(
                 lambda: vp.renderer.slice_values(
@@ -162,11 +164,11 @@ class SliceView(QWidget):
                     slab_mm=state.slab_mm,
                     slab_mode=state.slab_mode,
                     interpolation=state.interpolation,
+                    detj=want_detj,
                 )
             )
-            self.image = SliceImage.from_data(data, p2w, plane)
-            detj = getattr(self.mpr.window, "detj", None)  # the det J overlay, when on
-            self.image.detj = None if detj is None else detj.slice_detj(self.image)
+            self.image = SliceImage.from_data(data[..., :4], p2w, plane)
+            self.image.detj = masked_detj(data, self.image) if want_detj else None
             self._error = ""
             self.recolor()
         except VoxwarpError as exc:

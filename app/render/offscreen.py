@@ -179,11 +179,11 @@ class OffscreenRenderer:
                 slab_mm=slab_mm,
                 slab_mode=slab_mode,
                 interpolation=interpolation,
+                detj=jacobian is not None,
             )
-        image = SliceImage.from_data(data, matrix, plane)
-        if jacobian is not None:  # det J per pixel on the GPU, where the volume shows
-            with self.current():
-                det = self.renderer.slice_detj(scene, matrix, (w, h))
+        image = SliceImage.from_data(data[..., :4], matrix, plane)
+        if jacobian is not None:  # det J per pixel (same draw), where the volume shows
+            det = data[..., 4]
             image.detj = np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
         win = scene.window if window is None else window
         tf = scene.transfer_function

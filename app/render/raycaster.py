@@ -779,9 +779,11 @@ class Renderer:
         slab_mm: float = 0.0,
         slab_mode: str = "mip",
         interpolation: str = "linear",
+        detj: bool = False,
     ) -> np.ndarray:
         """One slice of ``scene`` through its warp chain, as data: (H, W, 4) float32,
-        row 0 at the top, channels (deformed value, coverage, rest value, coverage).
+        row 0 at the top, channels (deformed value, coverage, rest value, coverage);
+        ``detj=True`` adds a fifth, det J of the chain at each pixel's point.
 
         Pixel ``(col, row)`` samples the world point ``pixel_to_world @ (col, row, 0, 1)``;
         a slab ``slab_mm`` thick runs along the matrix's third column, combined by
@@ -801,6 +803,7 @@ class Renderer:
             slab_mm=slab_mm,
             slab_mode=slab_mode,
             interpolation=interpolation,
+            detj=detj,
         )
 
     def slice_detj(
@@ -816,7 +819,7 @@ class Renderer:
         if self._slice_renderer is None:
             self._slice_renderer = SliceRenderer(self.ctx)
         data = self._slice_renderer.values(gpu, scene, pixel_to_world, size, detj=True)
-        return data[..., 0].copy()
+        return data[..., 4].copy()
 
     def draw_scaled(
         self,
