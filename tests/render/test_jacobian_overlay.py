@@ -259,3 +259,26 @@ def test_3d_overlay_leaves_other_modes_alone(offscreen: Any) -> None:
     np.testing.assert_array_equal(tinted, plain)
     with pytest.raises(RenderError, match="jacobian overlay colours"):
         check_detj_mode("average")
+
+
+@pytest.mark.parametrize("slab_mm", [0.0, 6.0])
+def test_overlay_leaves_the_slice_values_alone(offscreen: Any, slab_mm: float) -> None:
+    """The det J output shares the slice's draw: the values (thin slice: from the same
+    chain evaluation; slab: the slab loop) equal those drawn without it, and
+    ``Renderer.slice_detj`` gives the same det J."""
+    vol = _volume()
+
+    def u(x: np.ndarray) -> np.ndarray:
+        return np.stack([2 * np.sin(x[..., 1] / 5.0), 0 * x[..., 0], np.cos(x[..., 0] / 7.0)], -1)
+
+    scene = Scene(vol, warps=[_field(u, vol)])
+    img = _slice(offscreen, scene, slab_mm=slab_mm)
+    plain = offscreen(16, 16).render_slice(scene, img.plane, size=img.size, slab_mm=slab_mm)
+    np.testing.assert_array_equal(img.values, plain.values)
+    np.testing.assert_array_equal(img.rest, plain.rest)
+    r = offscreen(16, 16)
+    with r.current():
+        det = r.renderer.slice_detj(scene, img.pixel_to_world, img.size)
+    ok = np.isfinite(img.detj)
+    assert ok.sum() > 100
+    np.testing.assert_array_equal(det[ok], img.detj[ok])
