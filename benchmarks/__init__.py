@@ -4,7 +4,7 @@ voxwarp`` leaves it out; nothing in ``voxwarp`` imports it): run it from the rep
 root as ``python -m benchmarks NAME`` (``python -m benchmarks all --json FILE`` makes the
 whole table on a lent GPU; ``make bench`` runs it).
 
-What the installed package keeps is ``voxwarp bench render|slices|interactive``: this
+What the installed package keeps is ``voxwarp bench render|slices|interactive|detj``: this
 machine's frame rates (:mod:`voxwarp.bench`).
 """
 

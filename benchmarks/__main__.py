@@ -3,7 +3,7 @@
 Each sub-command keeps the options and the report of the ``voxwarp bench NAME`` it was;
 ``python -m benchmarks all --json FILE`` runs every one of them (each in a subprocess of
 its own) and makes the whole table, the one command to run on a lent GPU. ``voxwarp
-bench render|slices|interactive`` stay installed (this machine's frame rates); their
+bench render|slices|interactive|detj`` stay installed (this machine's frame rates); their
 sub-commands here run the same code.
 """
 
@@ -29,6 +29,7 @@ COMMANDS: tuple[str, ...] = (
     "scale",
     "segments",
     "slices",
+    "detj",
     "movie",
     "all",
 )
@@ -49,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     from benchmarks.wire_ends import add_bench_wire_ends_parser
     from benchmarks.wire_tables import add_bench_wire_tables_parser
     from benchmarks.wires import add_bench_wires_parser
+    from voxwarp.bench.detj import add_bench_detj_parser
     from voxwarp.bench.interactive import add_bench_interactive_parser
     from voxwarp.bench.slices import add_bench_slices_parser
     from voxwarp.cli.main import OneLineErrorParser
@@ -70,6 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_scale_parser(bsub)
     add_bench_segments_parser(bsub)
     add_bench_slices_parser(bsub)
+    add_bench_detj_parser(bsub)
     add_bench_movie_parser(bsub)
     add_bench_all_parser(bsub)
     return p

@@ -45,6 +45,7 @@ BENCHMARKS: tuple[str, ...] = (
     "fields",
     "segments",
     "slices",
+    "detj",
 )
 #: seconds one benchmark may run before it is stopped (quick, full)
 TIMEOUT_S: tuple[float, float] = (240.0, 3600.0)
@@ -412,6 +413,20 @@ def run_slices(quick: bool) -> dict[str, Any]:
     return {"ratios": ratios, "issue": {}, "markdown": report.markdown(command)}
 
 
+def run_detj(quick: bool) -> dict[str, Any]:
+    """``bench detj`` (with ``quick``: 256², 3 rounds): the det J overlay's cost."""
+    from voxwarp.bench.detj import bench_detj
+
+    sizes, rounds = ((256,), 3) if quick else ((512,), 5)
+    report = bench_detj(sizes=sizes, rounds=rounds, log=_log)
+    ratios: dict[str, Any] = {
+        f"{r.volume} {r.deformation} {r.size}² {r.view} det J / without": round(r.ratio, 3)
+        for r in report.rows
+    }
+    command = f"python -m benchmarks detj --sizes {','.join(map(str, sizes))} --rounds {rounds}"
+    return {"ratios": ratios, "issue": {}, "markdown": report.markdown(command)}
+
+
 #: benchmark name -> runner(quick) -> {"ratios", "issue", "markdown"}
 RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "startup": run_startup,
@@ -427,6 +442,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "fields": run_fields,
     "segments": run_segments,
     "slices": run_slices,
+    "detj": run_detj,
 }
 
 

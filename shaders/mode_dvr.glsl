@@ -8,6 +8,7 @@ bool mode_skip(inout State s, float t_clear) { return false; }
 bool mode_sample(inout State s, float v, vec3 u, float t) {
     vec4 c = transfer(v);
     if (c.a <= 0.0) return false;
+    c.rgb = detj_tint(c.rgb, c.a, t);
 #ifdef SHADING
     c.rgb = shade(c.rgb, c.a, gradient_deformed(u, t), g_rd);
 #endif

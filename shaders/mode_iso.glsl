@@ -28,7 +28,7 @@ bool mode_sample(inout State s, float v, vec3 u, float t) {
         }
         th = tb;
     }
-    vec3 rgb = u_iso_color;
+    vec3 rgb = detj_tint(u_iso_color, 1.0, th);
 #ifdef SHADING
     rgb = shade(rgb, 1.0, gradient_deformed(texel_at(th), th), g_rd);
 #endif

@@ -176,6 +176,13 @@ vec4 block_info(ivec3 b) { return texelFetch(u_block_info, b, 0); }
 uniform sampler3D u_cell_skip;
 uniform vec3 u_octant;
 
+// DETJ_OVERLAY: the modes tint their colour by det J (app/render/jacobian_overlay.py)
+#ifdef DETJ_OVERLAY
+#include "jacobian_overlay.glsl"
+#else
+vec3 detj_tint(vec3 rgb, float a, float t) { return rgb; }
+#endif
+
 #include "mode.glsl"
 
 #ifdef LINEAR_PATH

@@ -12,6 +12,9 @@
 // layout); otherwise trilinear, as the raycaster samples.
 // Output (RGBA32F): r = deformed value, g = fraction of the slab's samples inside the
 // volume (0: nothing here), b = the rest-state (undeformed) value at p, a = its fraction.
+// DETJ (the det J overlay, app/render/jacobian_overlay.py): also f_detj (location 1,
+// R32F) = det of the chain's Jacobian at the plane's own point p0 (no slab); a thin
+// slice then samples the point that same chain evaluation gave.
 
 #include "volume_sample.glsl"
 #include "warps.glsl"
@@ -22,7 +25,10 @@ uniform vec3 u_slab_step;       // world vector between slab samples (mm)
 uniform int u_slab_samples;     // 1: a thin slice
 uniform int u_slab_mode;        // 0 MIP, 1 MinIP, 2 average
 
-out vec4 f_value;
+layout(location = 0) out vec4 f_value;
+#ifdef DETJ
+layout(location = 1) out float f_detj;
+#endif
 
 float fetch(vec3 q, out bool inside) {
     vec3 u = world_to_texel(q);
@@ -49,6 +55,19 @@ void main() {
     vec2 pixel = gl_FragCoord.xy - u_viewport.xy - 0.5;     // (col, row from the bottom)
     vec2 cr = vec2(pixel.x, u_viewport.w - 1.0 - pixel.y);   // row 0 at the image top
     vec3 p0 = (u_pixel_to_world * vec4(cr, 0.0, 1.0)).xyz;
+#ifdef DETJ
+    mat3 J;
+    vec3 q0 = warp_chain_and_jacobian(p0, J);
+    f_detj = determinant(J);
+    if (u_slab_samples == 1) {   // a thin slice: the one sample is q0
+        bool in_d;
+        bool in_r;
+        float vd = fetch(q0, in_d);
+        float vr = fetch(p0, in_r);
+        f_value = vec4(in_d ? vd : 0.0, in_d ? 1.0 : 0.0, in_r ? vr : 0.0, in_r ? 1.0 : 0.0);
+        return;
+    }
+#endif
     vec3 first = p0 - 0.5 * float(u_slab_samples - 1) * u_slab_step;
     vec2 deformed = vec2(0.0);
     vec2 rest = vec2(0.0);

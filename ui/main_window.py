@@ -59,6 +59,7 @@ from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
 from voxwarp.ui.correction_export import install_correction_export
+from voxwarp.ui.detj_overlay import install_detj_controls
 from voxwarp.ui.field_view import SEP
 from voxwarp.ui.fixed_image import install_fixed_image
 from voxwarp.ui.frame_dialog import ask_frame
@@ -384,6 +385,7 @@ class MainWindow(QMainWindow):
         self.marker_action.setChecked(self.viewport.show_marker)
         v.addSeparator()
         install_slice_controls(self, v)
+        install_detj_controls(self, v)
         v.addSeparator()
         install_warp_overlays(self, v)
         v.addSeparator()
@@ -771,6 +773,7 @@ class MainWindow(QMainWindow):
             _add_recent(source)
         self.tf_editor.set_volume(session.volume)
         self.refresh_panels()
+        self.detj.schedule()  # the status line's det J of the new scene
         self.sessionChanged.emit()
         self._update_title()
         if source is not None:  # what the volume was taken for and how it is shown

@@ -46,6 +46,7 @@ from voxwarp.editing.slice_views import (
 )
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.ui.detj_overlay import masked_detj, readout_suffix
 from voxwarp.ui.fixed_image import slice_extras
 
 __all__ = ["SliceView"]
@@ -154,6 +155,8 @@ class SliceView(QWidget):
         size = (max(1, round(w * r)), max(1, round(h * r)))
         plane = self.plane()
         p2w = plane.pixel_to_world(size)
+        detj = getattr(self.mpr.window, "detj", None)  # the det J overlay
+        want_detj = detj is not None and detj.enabled
         try:
             data = vp.with_context(
                 lambda: vp.renderer.slice_values(
@@ -163,14 +166,16 @@ class SliceView(QWidget):
                     slab_mm=state.slab_mm,
                     slab_mode=state.slab_mode,
                     interpolation=state.interpolation,
+                    detj=want_detj,
                 )
             )
-            self.image = SliceImage.from_data(data, p2w, plane)
+            self.image = SliceImage.from_data(data[..., :4], p2w, plane)
             fixed = slice_extras(self.mpr.window)
             if fixed is not None:  # the fixed image on the same pixels (ui/fixed_image.py)
                 self.image.fixed = vp.with_context(
                     lambda: fixed.fixed_values(vp.renderer, p2w, size, state)
                 )
+            self.image.detj = masked_detj(data, self.image) if want_detj else None
             self._error = ""
             self.recolor()
         except VoxwarpError as exc:
@@ -192,6 +197,8 @@ class SliceView(QWidget):
                 tf=self.mpr.window.session.scene.transfer_function,
                 show=state.show,
                 **(fixed.colour_options() if (fixed := slice_extras(self.mpr.window)) else {}),
+                jacobian=getattr(self.mpr.window, "detj", None) and self.mpr.window.detj.jacobian(),
+                legend="top-right",  # the readout and scale bar are at the bottom
             )
         except VoxwarpError as exc:
             self._show_error(str(exc))
@@ -344,13 +351,15 @@ class SliceView(QWidget):
         else:
             point = self.mpr.state.crosshair
         values = (float("nan"), float("nan"))
+        suffix = ""
         if self.image is not None:
             _, h = self.size_px()
             ih = self.image.size[1]
             xy = self.to_widget(point[None])[0] * (ih / h)  # image pixels (a scaled image)
             values = self.image.value_at(xy[0], xy[1])
+            suffix = readout_suffix(self.mpr.window, self.image, xy)
         fixed = self.image is not None and self.image.fixed is not None
-        return readout(point, space, *values, "fixed" if fixed else "rest")
+        return readout(point, space, *values, "fixed" if fixed else "rest") + suffix
 
     # ------------------------------------------------------------------ mouse
     def mousePressEvent(self, event: QMouseEvent) -> None:

@@ -1,9 +1,11 @@
 """``--overlay`` and its options, shared by ``voxwarp slice`` and ``voxwarp render``.
 
 ``--overlay NAME`` (repeatable, or a comma list) draws what the warp chain does over
-the picture; :data:`OVERLAYS` holds every name any command accepts (one tuple, so each
-overlay's module adds its name here). ``grid`` and ``glyphs`` are drawn by
-:mod:`voxwarp.render.warp_overlays` (slices) and :mod:`voxwarp.render.warp_meshes` (3D).
+the picture. The names come from :data:`voxwarp.render.overlay_options.OVERLAYS` (one
+place): ``jacobian`` (det J colour map, :mod:`voxwarp.render.jacobian_overlay`, with
+``--overlay-opacity``), ``grid`` and ``glyphs`` (drawn by
+:mod:`voxwarp.render.warp_overlays` on slices and :mod:`voxwarp.render.warp_meshes` in
+3D, with ``--grid-spacing``, ``--glyph-spacing`` and ``--grid-plane``).
 Importing this loads no numpy.
 """
 
@@ -11,10 +13,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from typing import Any
 
-#: Names ``--overlay`` accepts.
-OVERLAYS: tuple[str, ...] = ("grid", "glyphs")
+from voxwarp.render.overlay_options import OVERLAYS
+
+#: ``--overlay-opacity`` default (the det J colour at full |log2 det J|)
+DEFAULT_OVERLAY_OPACITY = 0.6
 #: ``--grid-plane`` choices (as voxwarp.core.warp_grid.GRID_PLANES).
 GRID_PLANES: tuple[str, ...] = ("axial", "coronal", "sagittal", "all")
 
@@ -41,6 +46,17 @@ def positive_mm(text: str) -> float:
     return v
 
 
+def opacity_arg(text: str) -> float:
+    """``--overlay-opacity``: a number in 0..1."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+        raise argparse.ArgumentTypeError(f"--overlay-opacity must be in 0..1; got {text!r}")
+    return v
+
+
 class _Extend(argparse.Action):
     """Append the names of each ``--overlay`` value, without repeats."""
 
@@ -50,7 +66,8 @@ class _Extend(argparse.Action):
 
 
 def add_overlay_args(p: argparse.ArgumentParser, three_d: bool = False) -> None:
-    """``--overlay``, ``--grid-spacing`` and ``--glyph-spacing`` (and ``--grid-plane``
+    """``--overlay``, ``--overlay-opacity``, ``--grid-spacing`` and ``--glyph-spacing``
+    (and ``--grid-plane``
     for the 3D ``render``)."""
     p.add_argument(
         "--overlay",
@@ -59,10 +76,20 @@ def add_overlay_args(p: argparse.ArgumentParser, three_d: bool = False) -> None:
         action=_Extend,
         default=[],
         metavar="NAME[,NAME]",
-        help="draw over the picture (repeatable or comma separated): grid (the rest-space"
+        help="draw over the picture (repeatable or comma separated): jacobian (det J of"
+        " the warp chain as a colour map on log2(det J): blue > 1 (shown shrunk), orange"
+        " < 1 (shown enlarged), clear at 1, solid green folds (det J <= 0), with a legend;"
+        " render: modes dvr, mip, minip, iso), grid (the rest-space"
         " grid carried by the warp chain, lines every --grid-spacing mm), glyphs (arrows"
         " of the displacement u = chain(x) - x, the vector an exported field holds, with a"
         " legend in mm)",
+    )
+    p.add_argument(
+        "--overlay-opacity",
+        type=opacity_arg,
+        default=DEFAULT_OVERLAY_OPACITY,
+        metavar="0..1",
+        help=f"strength of the det J colours (default {DEFAULT_OVERLAY_OPACITY:g})",
     )
     p.add_argument(
         "--grid-spacing",
@@ -99,4 +126,42 @@ def grid_spacing(args: argparse.Namespace, volume: Any, pixel_mm: float = 0.0) -
     return nice_spacing(*volume.bounds, at_least_mm=MIN_CELL_PX * pixel_mm)
 
 
-__all__ = ["GRID_PLANES", "OVERLAYS", "add_overlay_args", "grid_spacing", "overlay_arg"]
+def overlays(args: argparse.Namespace) -> tuple[str, ...]:
+    """The overlay names of ``--overlay``, in order, no repeats."""
+    return tuple(getattr(args, "overlays", None) or ())
+
+
+def set_overlays(renderer: Any, scene: Any, args: argparse.Namespace) -> None:
+    """Switch on the 3D overlays of ``args`` on a :class:`~voxwarp.render.raycaster.Renderer`
+    for ``scene`` (a one-line error for a mode the overlay does not colour)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.render.jacobian_overlay import JacobianOverlay, check_detj_mode
+
+    if "jacobian" in overlays(args):
+        check_detj_mode(scene.mode)
+        renderer.jacobian_overlay = JacobianOverlay(opacity=args.overlay_opacity)
+
+
+def legend_note(overlay_names: tuple[str, ...], size: tuple[int, int]) -> None:
+    """One stderr note when the det J legend does not fit an image of ``size`` (W, H)."""
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.render.jacobian_overlay import legend_fits
+
+    if "jacobian" in overlay_names and not legend_fits(*size):
+        print(
+            f"voxwarp: note: the det J legend needs a larger image than {size[0]}x{size[1]}"
+            " pixels; give a smaller --pixel or a --size",
+            file=sys.stderr,
+        )
+
+
+__all__ = [
+    "GRID_PLANES",
+    "OVERLAYS",
+    "add_overlay_args",
+    "grid_spacing",
+    "legend_note",
+    "overlay_arg",
+    "overlays",
+    "set_overlays",
+]

@@ -20,7 +20,13 @@ from voxwarp.cli.options import TF_HELP, CliOptionError, window_pair_arg
 from voxwarp.cli.options import add_volume_args as _add_volume_args
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
-from voxwarp.cli.overlay_options import add_overlay_args, grid_spacing
+from voxwarp.cli.overlay_options import (
+    add_overlay_args,
+    grid_spacing,
+    legend_note,
+    overlays,
+    set_overlays,
+)
 from voxwarp.core.checks import image_size as _size
 from voxwarp.core.modes import MODES
 from voxwarp.inputs import load_input
@@ -191,6 +197,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         # likewise the gradient texture (a pass over every voxel) for shading
         r.renderer.cell_skipping = False
         r.renderer.gradient_texture = False
+        set_overlays(r.renderer, scene, args)
         # the GPU backends run on the renderer's context (made current here)
         with r.current(), deformed_scene(args, scene, pending, r.ctx) as scene:
             img = r.render(_with_overlays(scene, args))
@@ -199,6 +206,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     # what was chosen, once the image exists (a refused render prints only its error)
     print(scene.display_note(), file=sys.stderr)
     ropt.spacing_notice(scene.volume, args)
+    legend_note(overlays(args), args.size)
     if args.marker:  # the orientation triad (R/L, A/P, S/I letters when oriented)
         # loaded when used: voxwarp --help stays light (see voxwarp.cli)
         from voxwarp.render.orientation_marker import draw_scene_marker

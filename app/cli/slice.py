@@ -25,7 +25,7 @@ from voxwarp.cli.compare_options import add_compare_args, with_comparison
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
 from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
 from voxwarp.cli.options import TF_HELP, WINDOW_HELP, add_volume_args, tf_arg, window_arg
-from voxwarp.cli.overlay_options import add_overlay_args, grid_spacing
+from voxwarp.cli.overlay_options import add_overlay_args, legend_note, overlays
 from voxwarp.core.checks import image_size
 from voxwarp.core.orientation import axis_letters
 from voxwarp.errors import InputError
@@ -300,9 +300,13 @@ def cmd_slice(args: argparse.Namespace) -> int:
                 show=args.show,
                 checker_mm=args.checker_mm,
                 blend=args.blend,
+                overlay=overlays(args),
+                overlay_opacity=args.overlay_opacity,
+                grid_spacing_mm=args.grid_spacing,
+                glyph_spacing_mm=args.glyph_spacing,
             )
-            assert image.rgba is not None
-            image.rgba = _draw_overlays(image.rgba, scene, image.pixel_to_world, args)
+            for note in image.notes:  # what --overlay grid/glyphs drew
+                print(f"slice: {note}", file=sys.stderr)
     rgba = image.rgba
     assert rgba is not None
     if ext in (".exr", ".hdr"):  # float formats: the same colours in [0, 1]
@@ -315,32 +319,12 @@ def cmd_slice(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     ropt.spacing_notice(scene.volume, args)
+    legend_note(overlays(args), size)
     if args.json:
         print(json.dumps(slice_json(plane, size, image.pixel_to_world, out), indent=2))
     else:
         print(out)
     return 0
-
-
-def _draw_overlays(rgba: np.ndarray, scene: Any, matrix: np.ndarray, args: Any) -> np.ndarray:
-    """``--overlay grid``/``glyphs`` drawn over the slice's colours (notes on stderr)."""
-    import numpy as np
-
-    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
-    from voxwarp.render.warp_overlays import WARP_OVERLAYS, draw_slice_overlays
-
-    wanted = [o for o in args.overlays if o in WARP_OVERLAYS]
-    if not wanted:
-        return rgba
-    pixel_mm = float(np.linalg.norm(np.asarray(matrix)[:3, 0]))
-    spacing = grid_spacing(args, scene.volume, pixel_mm)
-    warps = [] if args.show == "rest" else scene.warps  # the rest state: a straight grid
-    rgba, notes = draw_slice_overlays(
-        rgba, warps, matrix, wanted, spacing, glyph_spacing_mm=args.glyph_spacing
-    )
-    for note in notes:
-        print(f"slice: {note}", file=sys.stderr)
-    return rgba
 
 
 def slice_json(plane: Any, size: tuple[int, int], matrix: np.ndarray, out: Path) -> dict:

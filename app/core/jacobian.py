@@ -8,7 +8,8 @@ same in RAS and LPS (``diag(-1, -1, 1) (I + grad u) diag(-1, -1, 1)`` has the sa
 determinant). ``det J > 1``: the deformed picture shows that neighbourhood shrunk
 (the map pulls from a larger region); ``< 1``: enlarged; ``<= 0``: folded.
 
-* :func:`chain_determinant` evaluates it from the warps' analytic Jacobians
+* :func:`point_determinant` evaluates it at any deformed points (the slice overlay);
+  :func:`chain_determinant` evaluates it from the warps' analytic Jacobians
   (:func:`voxwarp.deform.warp.chain_jacobian`) at the nodes of a grid; nodes the chain
   does not carry are NaN.
 * :func:`field_determinant` computes it from a field's nodes by central differences
@@ -42,6 +43,17 @@ def _nodes(affine: np.ndarray, shape: Sequence[int], k: int) -> np.ndarray:
     return idx @ affine[:3, :3].T + affine[:3, 3]
 
 
+def point_determinant(warps: Sequence[Warp], points: np.ndarray) -> np.ndarray:
+    """``det J`` of ``warps`` at deformed points ``(N, 3)`` (world mm): float64 ``(N,)``,
+    NaN where the chain does not carry the point (the slice overlay's per-pixel value)."""
+    p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    chain = list(warps)
+    _, ok = chain_apply_carried(chain, p)
+    with np.errstate(invalid="ignore", over="ignore"):
+        det = np.linalg.det(chain_jacobian(chain, p))
+    return np.where(ok, det, np.nan)
+
+
 def chain_determinant(
     warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
 ) -> np.ndarray:
@@ -50,13 +62,8 @@ def chain_determinant(
     a = np.asarray(affine, dtype=np.float64)
     nx, ny, nz = (int(v) for v in shape)
     out = np.empty((nx, ny, nz), dtype=np.float32)
-    chain = list(warps)
     for k in range(nz):
-        p = _nodes(a, shape, k)
-        _, ok = chain_apply_carried(chain, p)
-        with np.errstate(invalid="ignore", over="ignore"):
-            det = np.linalg.det(chain_jacobian(chain, p))
-        out[:, :, k] = np.where(ok, det, np.nan).reshape(nx, ny)
+        out[:, :, k] = point_determinant(warps, _nodes(a, shape, k)).reshape(nx, ny)
     return out
 
 

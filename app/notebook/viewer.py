@@ -43,8 +43,15 @@ from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.notebook.interaction import SETTLE_S, Interaction
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
 from voxwarp.render.inline_image import RenderedImage, png_bytes
+from voxwarp.render.jacobian_overlay import (
+    DEFAULT_OPACITY,
+    DETJ_MODES,
+    JacobianOverlay,
+    draw_legend,
+)
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.render.overlay import OverlayRenderer
+from voxwarp.render.overlay_options import OVERLAYS, check_overlays
 from voxwarp.render.warp_meshes import WarpLines
 from voxwarp.scene import Scene, as_fixed_volume
 
@@ -214,6 +221,39 @@ class Viewer(RemoteFrameBuffer):
     def running(self, value: bool) -> None:
         self._on_gl(self.session.set_option, "running", bool(value))
         self.request_draw()
+
+    @property
+    def overlays(self) -> tuple[str, ...]:
+        """Overlays drawn over the view (settable: a name, a comma list or names of
+        :data:`~voxwarp.render.overlay_options.OVERLAYS`): ``"jacobian"`` colours the
+        volume by det J of the warp chain, with a legend (dvr, mip, minip, iso; see
+        :mod:`voxwarp.render.jacobian_overlay`, strength :attr:`overlay_opacity`);
+        ``"grid"`` and ``"glyphs"`` as :meth:`show_overlays`."""
+        lines = self.warp_lines
+        on = {
+            "jacobian": self._renderer.renderer.jacobian_overlay is not None,
+            "grid": lines.grid,
+            "glyphs": lines.glyphs,
+        }
+        return tuple(name for name in OVERLAYS if on[name])
+
+    @overlays.setter
+    def overlays(self, names: Any) -> None:
+        wanted = check_overlays(names)
+        opacity = getattr(self, "_overlay_opacity", DEFAULT_OPACITY)
+        overlay = JacobianOverlay(opacity=opacity) if "jacobian" in wanted else None
+        self._renderer.renderer.jacobian_overlay = overlay
+        self.show_overlays(grid="grid" in wanted, glyphs="glyphs" in wanted)
+
+    @property
+    def overlay_opacity(self) -> float:
+        """Strength (0..1) of the overlay colours (settable)."""
+        return float(getattr(self, "_overlay_opacity", DEFAULT_OPACITY))
+
+    @overlay_opacity.setter
+    def overlay_opacity(self, value: float) -> None:
+        self._overlay_opacity = JacobianOverlay(opacity=float(value)).opacity
+        self.overlays = self.overlays
 
     def _on_gl(self, fn: Any, *args: Any, **kwargs: Any) -> Any:
         """``fn(*args, **kwargs)`` on the viewer's GL thread with its context current
@@ -400,6 +440,9 @@ class Viewer(RemoteFrameBuffer):
             layers += self.warp_lines.layers(self.session.scene, self.camera)
             self._overlay.draw(layers, r.framebuffer, self.camera, point_scale=scale)
             img = r.read()
+        overlay = r.renderer.jacobian_overlay
+        if overlay is not None and self.session.scene.mode in DETJ_MODES:
+            draw_legend(img, overlay)
         self.last_quality = quality
         self.last_frame_ms = (time.perf_counter() - t0) * 1000
         self.frames_drawn += 1

@@ -6,19 +6,28 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
 from voxwarp.core.camera import Camera
 from voxwarp.core.slice_plane import SlicePlane
+from voxwarp.core.warp_grid import MIN_CELL_PX, nice_spacing
 from voxwarp.errors import RenderError
 from voxwarp.render.context import create_context, egl_current, egl_restore
 from voxwarp.render.inline_image import RenderedImage, rendered
+from voxwarp.render.jacobian_overlay import (
+    DEFAULT_OPACITY,
+    DETJ_MODES,
+    JacobianOverlay,
+    draw_legend,
+)
+from voxwarp.render.overlay_options import check_overlays
 from voxwarp.render.raycaster import Renderer
 from voxwarp.render.slice_grid import named_slice_grid, slice_window
 from voxwarp.render.slice_image import SliceImage, colorize
+from voxwarp.render.warp_overlays import WARP_OVERLAYS, draw_slice_overlays
 from voxwarp.scene import Scene
 
 
@@ -110,7 +119,11 @@ class OffscreenRenderer:
         :class:`~voxwarp.render.inline_image.RenderedImage`: an array Jupyter shows)."""
         with self.current():
             self.renderer.draw(scene, self._fbo, camera=camera)
-            return self.read()
+            img = self.read()
+        overlay = self.renderer.jacobian_overlay
+        if overlay is not None and scene.mode in DETJ_MODES:  # the det J colour bar
+            draw_legend(img, overlay)
+        return img
 
     def read(self) -> RenderedImage:
         """What :attr:`framebuffer` holds, as :meth:`render` returns it: after drawing
@@ -137,6 +150,10 @@ class OffscreenRenderer:
         checker_mm: float | None = None,
         blend: float | None = None,
         pixel_mm: float | None = None,
+        overlay: str | Sequence[str] = (),
+        overlay_opacity: float = DEFAULT_OPACITY,
+        grid_spacing_mm: float | None = None,
+        glyph_spacing_mm: float | None = None,
     ) -> SliceImage:
         """One slice of ``scene`` through its warp chain (multi-planar reformatting).
 
@@ -158,7 +175,16 @@ class OffscreenRenderer:
         (``Scene(fixed=...)``) samples it at the same world points (``image.fixed``) and
         compares with it instead of the rest state; ``checker_mm`` (world cells instead of
         32-pixel tiles) and ``blend`` default to the scene's comparison settings.
+        ``overlay``: names of :data:`~voxwarp.render.overlay_options.OVERLAYS`;
+        ``"jacobian"`` draws ``det J`` of the chain at every pixel centre (kept as
+        ``detj``) as a colour map with a legend, ``overlay_opacity`` (0..1) strong
+        (:mod:`voxwarp.render.jacobian_overlay`); ``grid`` and ``glyphs`` are drawn by
+        :func:`voxwarp.render.warp_overlays.draw_slice_overlays` on the result, lines
+        every ``grid_spacing_mm`` (default about 1/16 of the volume, at least 12 pixels)
+        and arrows every ``glyph_spacing_mm`` (what was drawn: ``image.notes``).
         """
+        overlays = check_overlays(overlay)
+        jacobian = JacobianOverlay(opacity=overlay_opacity) if "jacobian" in overlays else None
         if isinstance(plane, str):
             plane, (w, h) = named_slice_grid(scene, plane, at=at, size=size, pixel_mm=pixel_mm)
         else:
@@ -173,8 +199,12 @@ class OffscreenRenderer:
                 slab_mm=slab_mm,
                 slab_mode=slab_mode,
                 interpolation=interpolation,
+                detj=jacobian is not None,
             )
-        image = SliceImage.from_data(data, matrix, plane)
+        image = SliceImage.from_data(data[..., :4], matrix, plane)
+        if jacobian is not None:  # det J per pixel (same draw), where the volume shows
+            det = data[..., 4]
+            image.detj = np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
         cmp = scene.comparison
         if cmp is not None:
             fixed_scene = Scene(cmp.fixed, transfer_function=scene.transfer_function)
@@ -199,7 +229,21 @@ class OffscreenRenderer:
             show=show,
             checker_mm=checker_mm,
             blend=0.5 if blend is None else blend,
+            jacobian=jacobian,
         )
+        if any(name in WARP_OVERLAYS for name in overlays):
+            warps = [] if show == "rest" else scene.warps  # the rest state: a straight grid
+            if grid_spacing_mm is None:
+                pixel = float(np.linalg.norm(matrix[:3, 0]))
+                grid_spacing_mm = nice_spacing(*scene.volume.bounds, MIN_CELL_PX * pixel)
+            image.rgba, image.notes = draw_slice_overlays(
+                image.rgba,
+                warps,
+                matrix,
+                [o for o in overlays if o in WARP_OVERLAYS],
+                grid_spacing_mm,
+                glyph_spacing_mm=glyph_spacing_mm,
+            )
         image.rgba = rendered(image.rgba)  # shows inline in Jupyter
         return image
 

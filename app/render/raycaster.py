@@ -51,6 +51,7 @@ from voxwarp.errors import RenderError, VolumeTooLargeError
 from voxwarp.render import gradients
 from voxwarp.render.fixed_texture import FixedTexture, compare_uniforms, uses_gradient_texture
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
+from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
 from voxwarp.render.skipping.maps import (
@@ -256,6 +257,9 @@ class Renderer:
         self._upscale: tuple[Any, Any] | None = None
         #: the fixed image of a comparison scene (Scene(fixed=...)), uploaded on use
         self._fixed = FixedTexture(ctx)
+        #: the det J overlay of the 3D image (:mod:`voxwarp.render.jacobian_overlay`),
+        #: None for none; drawn in the modes of its ``DETJ_MODES`` (others draw without)
+        self.jacobian_overlay: JacobianOverlay | None = None
         self._released = False
 
     # ------------------------------------------------------------------ resources
@@ -470,6 +474,7 @@ class Renderer:
             gradient_texture,
             scene.comparison is not None,
             uses_gradient_texture(scene),
+            self._detj_on(scene),
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -497,6 +502,8 @@ class Renderer:
             defines.append("#define COMPARE")
         if uses_gradient_texture(scene):
             defines.append("#define FIXED_GRADIENT_TEXTURE")
+        if self._detj_on(scene):
+            defines.append("#define DETJ_OVERLAY")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -570,6 +577,10 @@ class Renderer:
         view = (x, y, w, h)
         return _Frame(scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment)
 
+    def _detj_on(self, scene: Scene) -> bool:
+        """Whether this draw tints by det J (an overlay is set and the mode shows it)."""
+        return self.jacobian_overlay is not None and scene.mode in DETJ_MODES
+
     def _use_gradients(self, scene: Scene) -> bool:
         """Whether shading reads a gradient texture (see :attr:`gradient_texture`)."""
         if not scene.use_shading() or self.gradient_texture is False:
@@ -582,6 +593,8 @@ class Renderer:
         """Set the raycast program's uniforms for ``frame``; returns them by name."""
         values = self._frame_uniforms(frame)
         values.update(_mode_uniforms(frame.scene))
+        if self.jacobian_overlay is not None and self._detj_on(frame.scene):
+            values.update(self.jacobian_overlay.uniforms())
         values.update(self._texel_uniforms(frame))
         for name, value in values.items():
             set_uniform(frame.prog, name, value)
@@ -790,9 +803,11 @@ class Renderer:
         slab_mm: float = 0.0,
         slab_mode: str = "mip",
         interpolation: str = "linear",
+        detj: bool = False,
     ) -> np.ndarray:
         """One slice of ``scene`` through its warp chain, as data: (H, W, 4) float32,
-        row 0 at the top, channels (deformed value, coverage, rest value, coverage).
+        row 0 at the top, channels (deformed value, coverage, rest value, coverage);
+        ``detj=True`` adds a fifth, det J of the chain at each pixel's point.
 
         Pixel ``(col, row)`` samples the world point ``pixel_to_world @ (col, row, 0, 1)``;
         a slab ``slab_mm`` thick runs along the matrix's third column, combined by
@@ -812,7 +827,23 @@ class Renderer:
             slab_mm=slab_mm,
             slab_mode=slab_mode,
             interpolation=interpolation,
+            detj=detj,
         )
+
+    def slice_detj(
+        self, scene: Scene, pixel_to_world: np.ndarray, size: tuple[int, int]
+    ) -> np.ndarray:
+        """``det J`` of the scene's warp chain at the pixel centres of a slice, on the GPU
+        (the warps' GLSL Jacobians): (H, W) float32, row 0 at the top; pixels as in
+        :meth:`slice_values` (the CPU reference is
+        :func:`voxwarp.render.jacobian_overlay.slice_detj`)."""
+        if self._released:
+            raise RenderError("this Renderer was released")
+        gpu = self._volume_gpu(scene.volume)
+        if self._slice_renderer is None:
+            self._slice_renderer = SliceRenderer(self.ctx)
+        data = self._slice_renderer.values(gpu, scene, pixel_to_world, size, detj=True)
+        return data[..., 4].copy()
 
     def draw_scaled(
         self,

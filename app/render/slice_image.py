@@ -41,6 +41,7 @@ from voxwarp.core.comparison import checker_fixed
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.errors import RenderError
+from voxwarp.render.jacobian_overlay import JacobianOverlay, blend_detj, draw_legend
 
 Look = Literal["window", "tf"]
 LOOKS: tuple[str, ...] = ("window", "tf")
@@ -68,6 +69,11 @@ class SliceImage:
     fixed
         (H, W) float32 values of a fixed image at the pixels' world points (NaN
         outside it), or None without one: then the comparisons use ``rest``.
+    detj
+        (H, W) float32 ``det J`` of the warp chain at the pixel centres (NaN where the
+        pixel shows no volume), or None when the ``jacobian`` overlay was not asked for.
+    notes
+        One line per ``grid``/``glyphs`` overlay drawn (spacing, legend scale).
     """
 
     plane: SlicePlane | None
@@ -75,6 +81,8 @@ class SliceImage:
     values: np.ndarray
     rest: np.ndarray
     rgba: np.ndarray | None = None
+    detj: np.ndarray | None = None
+    notes: list[str] = dataclasses.field(default_factory=list)
     fixed: np.ndarray | None = None
 
     @property
@@ -160,9 +168,13 @@ def colorize(
     checker_px: int = 32,
     checker_mm: float | None = None,
     blend: float = 0.5,
+    jacobian: JacobianOverlay | None = None,
+    legend: str | None = "bottom-right",
 ) -> np.ndarray:
     """The slice's (H, W, 4) uint8 RGBA (opaque; see the module docstring for
-    ``look``, ``show``, ``checker_mm`` and ``blend``); also kept as ``image.rgba``."""
+    ``look``, ``show``, ``checker_mm`` and ``blend``); also kept as ``image.rgba``.
+    ``jacobian``: draw ``image.detj`` over it with this colour map and its legend in the
+    corner ``legend`` (None: no legend; :mod:`voxwarp.render.jacobian_overlay`)."""
     options: dict[str, Any] = {"look": look, "window": window, "tf": tf}
     if show == "deformed":
         colours = colour_values(image.values, **options)
@@ -187,6 +199,10 @@ def colorize(
     u8 = (np.asarray(colours, dtype=np.float32) * 255 + 0.5).astype(np.uint8)
     out[..., :3] = u8[..., None] if u8.ndim == 2 else u8
     out[..., 3] = 255
+    if jacobian is not None and image.detj is not None:
+        blend_detj(out, image.detj, jacobian)
+        if legend is not None:
+            draw_legend(out, jacobian, legend)
     image.rgba = out
     return out
 

@@ -74,11 +74,11 @@ class SliceRenderer:
         self.ctx = ctx
         self._programs: dict[tuple, Any] = {}
         self._vaos: dict[int, Any] = {}
-        self._target: tuple[tuple[int, int], Any, Any] | None = None
+        self._target: tuple[tuple[int, int], tuple[Any, Any], Any] | None = None
         self._released = False
 
-    def _program(self, scene: Scene, slice_pairs: bool, nearest: bool) -> Any:
-        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest)
+    def _program(self, scene: Scene, slice_pairs: bool, nearest: bool, detj: bool) -> Any:
+        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest, detj)
         hold = self._programs.get(key)
         if hold is not None:
             return hold.program
@@ -88,6 +88,7 @@ class SliceRenderer:
         defines = (["#define SLICE_PAIRS"] if slice_pairs else []) + (
             ["#define NEAREST"] if nearest else []
         )
+        defines += ["#define DETJ"] if detj else []
         frag = shaders.with_defines(frag, defines)
 
         try:
@@ -110,11 +111,13 @@ class SliceRenderer:
         slab_mm: float = 0.0,
         slab_mode: str = "mip",
         interpolation: str = "linear",
+        detj: bool = False,
     ) -> None:
         """Draw the slice whose pixel ``(col, row)`` (row 0 at the top) lies at
         ``pixel_to_world @ (col, row, 0, 1)`` into ``viewport`` of ``framebuffer``;
         the slab runs along ``pixel_to_world``'s third column (unit length expected).
-        ``gpu`` is the renderer's copy of the scene's volume."""
+        ``gpu`` is the renderer's copy of the scene's volume. ``detj``: draw the
+        chain's det J at each pixel's point instead (channel r; g = 1)."""
         if self._released:
             raise RenderError("this SliceRenderer was released")
         check_slice_options(slab_mode, interpolation)
@@ -123,7 +126,7 @@ class SliceRenderer:
             raise RenderError("pixel_to_world must be a finite 4x4 matrix")
         samples, spacing = slab_sampling(slab_mm, scene.sample_distance_mm)
         normal = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-12)
-        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest")
+        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest", detj)
         textures = warp_textures(self.ctx, scene.warps)  # first: may run GPU passes
         vol = scene.volume
         values: dict[str, Any] = {
@@ -162,25 +165,32 @@ class SliceRenderer:
     ) -> np.ndarray:
         """The slice as data: an (H, W, 4) float32 array, row 0 at the top, channels
         (deformed value, deformed coverage, rest value, rest coverage); see
-        :meth:`draw` for the options."""
+        :meth:`draw` for the options. With ``detj=True`` a fifth channel holds the
+        chain's det J at each pixel's point (the same draw)."""
         w, h = (int(v) for v in size)
         if not (1 <= w <= MAX_SLICE_SIDE and 1 <= h <= MAX_SLICE_SIDE):
             raise RenderError(f"slice size must be 1..{MAX_SLICE_SIDE} pixels a side; got {w}x{h}")
         fbo = self._framebuffer(w, h)
         self.draw(gpu, scene, pixel_to_world, fbo, (0, 0, w, h), **options)
         raw = fbo.read(viewport=(0, 0, w, h), components=4, dtype="f4", alignment=1)
-        return np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)[::-1].copy()
+        data = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)
+        if not options.get("detj"):
+            return data[::-1].copy()
+        raw = fbo.read(viewport=(0, 0, w, h), components=1, attachment=1, dtype="f4", alignment=1)
+        det = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 1)
+        return np.concatenate([data, det], axis=2)[::-1].copy()
 
     def _framebuffer(self, w: int, h: int) -> Any:
-        """The RGBA32F target of :meth:`values`, grown (never shrunk) to hold (w, h)."""
+        """The RGBA32F (+ R32F det J) target of :meth:`values`, grown (never shrunk) to
+        hold (w, h)."""
         if self._target is not None:
             (tw, th), _, fbo = self._target
             if tw >= w and th >= h:
                 return fbo
             w, h = max(w, tw), max(h, th)
         self._release_target()
-        tex = self.ctx.texture((w, h), 4, dtype="f4")
-        self._target = ((w, h), tex, self.ctx.framebuffer(color_attachments=[tex]))
+        tex = (self.ctx.texture((w, h), 4, dtype="f4"), self.ctx.texture((w, h), 1, dtype="f4"))
+        self._target = ((w, h), tex, self.ctx.framebuffer(color_attachments=list(tex)))
         return self._target[2]
 
     def _release_target(self) -> None:
@@ -191,7 +201,8 @@ class SliceRenderer:
             except Exception:
                 pass
             fbo.release()
-            tex.release()
+            for t in tex:
+                t.release()
             self._target = None
 
     def release(self) -> None:

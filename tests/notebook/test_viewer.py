@@ -360,3 +360,28 @@ def test_fixed_image_compares_in_the_view(gl_ctx: Any) -> None:
         assert diff.max() <= 2
     finally:
         v.release()
+
+
+def test_jacobian_overlay_switch(viewer: Any) -> None:
+    """``viewer.overlays = "jacobian"``: the model at rest has det J = 1, so the frame is
+    unchanged but for the legend (bottom right); off again, the frame is back."""
+    from voxwarp.errors import RenderError
+
+    plain = _volume_only(viewer)
+    viewer.overlays = "jacobian"
+    assert viewer.overlays == ("jacobian",)
+    tinted = _volume_only(viewer)
+    legend = np.zeros(plain.shape[:2], bool)
+    legend[-32:, -143:] = True
+    np.testing.assert_array_equal(tinted[~legend], plain[~legend])
+    assert np.any(tinted[legend] != plain[legend])
+    viewer.overlays = ()
+    assert viewer.overlays == ()
+    np.testing.assert_array_equal(_volume_only(viewer), plain)
+    viewer.overlays = "grid,jacobian"  # one switch for every overlay name
+    assert viewer.overlays == ("jacobian", "grid")
+    assert viewer.warp_lines.grid and not viewer.warp_lines.glyphs
+    viewer.overlays = ()
+    assert not viewer.warp_lines.grid
+    with pytest.raises(RenderError, match="choose from jacobian"):
+        viewer.overlays = "bogus"
