@@ -218,6 +218,14 @@ class Warp(ABC):
         """
         return None
 
+    def apply_carried(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`apply` and :meth:`carried` of the same (N, 3) points at once.
+
+        The default calls both; a warp whose two share work (a wire's field lookup)
+        overrides it so that :func:`chain_apply_carried` (field exports) does it once.
+        """
+        return self.apply(points), self.carried(points)
+
     # ---------------------------------------------------------------- GPU side
     def uniforms(self) -> dict[str, Any]:
         """Uniform values by unprefixed name (``WARP_name`` in GLSL -> ``name``)."""
@@ -578,10 +586,9 @@ def chain_apply_carried(warps: Sequence[Warp], points: np.ndarray) -> tuple[np.n
     p = np.atleast_2d(np.asarray(points, dtype=np.float64))
     q, ok = p, np.ones(len(p), dtype=bool)
     for w in warps:
-        mask = w.carried(q)
+        q, mask = w.apply_carried(q)
         if mask is not None:
             ok &= np.asarray(mask, dtype=bool)
-        q = w.apply(q)
     with np.errstate(invalid="ignore"):
         ok &= np.all(np.abs(q - p) < FAR_MM, axis=1)
     return q, ok

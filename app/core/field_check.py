@@ -84,18 +84,24 @@ def sample_carried(
     warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
 ) -> tuple[np.ndarray, np.ndarray]:
     """``chain(p) - p`` at every node (float32 ``(nx, ny, nz, 3)``) and the ``(nx, ny,
-    nz)`` bool mask of the nodes the chain does not carry (their vectors are 0)."""
+    nz)`` bool mask of the nodes the chain does not carry (their vectors are 0).
+
+    The chain maps whole slabs of about :data:`_SLAB` nodes at once, each a run of
+    first-axis planes, so every slab fills a contiguous block of the output."""
     nx, ny, nz = (int(v) for v in shape)
     u = np.zeros((nx, ny, nz, 3), dtype=np.float32)
     outside = np.zeros((nx, ny, nz), dtype=bool)
-    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    for k in range(nz):
-        idx = np.stack([ii.ravel(), jj.ravel(), np.full(ii.size, k)], axis=1).astype(float)
-        p = idx @ affine[:3, :3].T + affine[:3, 3]
+    a = np.asarray(affine, dtype=np.float64)
+    jj, kk = np.meshgrid(np.arange(ny), np.arange(nz), indexing="ij")
+    plane = np.stack([jj.ravel(), kk.ravel()], axis=1).astype(float) @ a[:3, 1:3].T + a[:3, 3]
+    per = max(1, _SLAB // max(ny * nz, 1))
+    for i0 in range(0, nx, per):
+        i = np.arange(i0, min(i0 + per, nx), dtype=float)
+        p = (i[:, None, None] * a[:3, 0] + plane[None]).reshape(-1, 3)
         q, ok = chain_apply_carried(warps, p)
         d = np.where(ok[:, None], q - p, 0.0)
-        u[:, :, k] = d.reshape(nx, ny, 3)
-        outside[:, :, k] = ~ok.reshape(nx, ny)
+        u[i0 : i0 + len(i)] = d.reshape(len(i), ny, nz, 3)
+        outside[i0 : i0 + len(i)] = ~ok.reshape(len(i), ny, nz)
     return u, outside
 
 
