@@ -621,6 +621,10 @@ class OffsetFieldWarp(Warp):
             )
         return p
 
+    def export_resolution(self) -> float:
+        """The smallest element spacing (mm): the field is trilinear between elements."""
+        return float(np.min(self.spacing))
+
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original: ``q`` with ``q + u(q) = p``, as the GLSL computes it.
 

@@ -566,6 +566,10 @@ class LatticeWarp(Warp):
                 break
         return u, steps, converged
 
+    def export_resolution(self) -> float:
+        """The smallest control-point spacing (mm): the map is trilinear per cell."""
+        return float(np.min(self.size / np.asarray(self.cells, float)))
+
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original, as the GLSL computes it (outside: the identity or
         :data:`FAR`, see the module docstring)."""
