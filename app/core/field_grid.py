@@ -125,7 +125,8 @@ def _check_budget(shape: Sequence[int]) -> None:
         dims = "x".join(str(int(n)) for n in shape)
         raise SceneError(
             f"a {dims} displacement field needs {over[0]}, over the memory budget of"
-            f" {over[1]}; use a coarser spacing or a smaller box (or raise --memory-budget)"
+            f" {over[1]}; use a coarser spacing (--spacing) or a smaller box (or raise"
+            " --memory-budget)"
         )
 
 
