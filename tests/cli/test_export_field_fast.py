@@ -10,8 +10,9 @@ Oracles:
   exported field, read back by SimpleITK, lands within the field check's tolerance
   (:data:`~voxwarp.core.field_check.TOLERANCE_MM`) of the chain at 99 % of random
   points the chain carries into the volume (and within 1.25 times it at all: the check
-  samples two points a cell, so its maximum may sit a little under the true one); a wire keeps the voxels, an affine map gets
-  :data:`~voxwarp.core.field_spacing.MIN_NODES` nodes per axis.
+  samples two points a cell, so its maximum may sit a little under the true one); a
+  wire keeps the voxels, an affine map gets :data:`~voxwarp.core.field_spacing.MIN_NODES`
+  nodes per axis.
 * **Estimate.** The printed estimate is at least the written ``.nii``'s size and at
   most :data:`~voxwarp.core.field_spacing.HEADER_BYTES` over it; over a small
   ``--memory-budget`` the export is refused with one line naming ``--spacing``.
@@ -141,7 +142,8 @@ def test_wire_apply_carried_equals_apply_and_carried(volume: Volume) -> None:
 def test_default_spacing_per_family(volume: Volume) -> None:
     voxels = np.asarray(volume.spacing)
     ms = default_spacing(volume, _massspring(volume))
-    assert ms.spacing is not None and np.all(ms.spacing >= voxels)
+    assert ms.spacing is not None
+    assert np.all(ms.spacing >= voxels)
     assert np.any(ms.spacing > voxels)  # coarser than the voxels
     assert default_spacing(volume, _wire(volume)).spacing is None
     assert default_spacing(volume, []).spacing is None
@@ -216,6 +218,8 @@ def test_export_over_a_small_memory_budget_is_refused(
     argv = ["export-field", str(scene), "-o", str(out), "--memory-budget", "20K"]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert err.startswith("voxwarp: error:") and err.count("\n") == 1, err
-    assert "over the memory budget" in err and "--spacing" in err
+    assert err.startswith("voxwarp: error:")
+    assert err.count("\n") == 1, err
+    assert "over the memory budget" in err
+    assert "--spacing" in err
     assert not out.exists()
