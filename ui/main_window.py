@@ -57,6 +57,7 @@ from voxwarp.io.images import write_image
 from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
+from voxwarp.ui.export_dialog import open_export_dialog
 from voxwarp.ui.field_view import SEP
 from voxwarp.ui.mpr import SliceLayout, install_slice_controls
 from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
@@ -333,6 +334,7 @@ class MainWindow(QMainWindow):
         self._action(f, "&Save Scene", self.save, QKeySequence.StandardKey.Save)
         self._action(f, "Save Scene &As…", self.save_as, "Ctrl+Shift+S")
         self._action(f, "&Export Screenshot…", self.export_dialog, "Ctrl+E")
+        self._action(f, "Export Volume, Field or det &J…", lambda: open_export_dialog(self))
         f.addSeparator()
         self._action(f, "Add &Displacement Field…", self.add_field_dialog)
         self.remove_fields_action = self._action(
