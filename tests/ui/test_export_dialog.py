@@ -52,6 +52,11 @@ def test_dialog_estimate_follows_the_choice(qtbot: Any, scene: Scene, tmp_path: 
         dialog.choice()
 
 
+def _recorder(steps: list[float]) -> Any:
+    """A progress callback that records the fractions in ``steps``."""
+    return lambda fraction, _text: steps.append(fraction)
+
+
 def test_dialog_writes_the_three_kinds(qtbot: Any, scene: Scene, tmp_path: Path) -> None:
     dialog = ExportDialog(scene, str(tmp_path))
     qtbot.addWidget(dialog)
@@ -62,7 +67,7 @@ def test_dialog_writes_the_three_kinds(qtbot: Any, scene: Scene, tmp_path: Path)
         got_kind, out, grid, spacing = dialog.choice()
         assert got_kind == kind
         steps: list[float] = []
-        written[kind] = run_export(scene, kind, out, grid, spacing, lambda f, _t: steps.append(f))
+        written[kind] = run_export(scene, kind, out, grid, spacing, _recorder(steps))
         assert written[kind].is_file()
         assert steps[-1] == 1.0
     assert nib.load(written["volume"]).shape == (24, 20, 16)
