@@ -2,17 +2,17 @@
 
 **Default spacing** (:func:`default_spacing`). Each warp states the finest length on
 which its map's derivative changes (:meth:`voxwarp.deform.warp.Warp.export_resolution`):
-an element grid's or a lattice's node spacing; infinite for an affine map; ``None`` for
-maps with detail down to voxels (wires, imported fields). A chain of smooth warps is
-exported at :data:`NODES_PER_ELEMENT` nodes per element of its finest warp: between two
-element nodes the map is trilinear in the element's own frame, so the export's trilinear
-interpolation misses it only near the element faces (its kinks), by at most about the
-node spacing times the change of slope across the face, and a quarter of an element
-keeps that to a sixteenth of the element's own displacement change over one element
-(:mod:`voxwarp.core.field_check` measures it, and refines the spacing where it does
-not hold). The spacing is never finer than the volume's voxels (per axis), and has at
-least :data:`MIN_NODES` nodes per axis over the volume. A chain with a wire or an
-imported field keeps the volume's voxel grid, as before.
+the shortest edge of an element grid's or a lattice's cells, at rest or deformed (the
+inverse the volume is drawn with bends at the deformed cells' faces); infinite for an
+affine map; ``None`` for maps with detail down to voxels (wires, imported fields). A
+chain of smooth warps starts at :data:`NODES_PER_ELEMENT` nodes per shortest edge:
+inside a cell the map is smooth, so the export's trilinear interpolation misses it
+mostly near the cell faces (its kinks), by about the node spacing times the change of
+slope there, which a quarter of a cell keeps small; :mod:`voxwarp.core.field_check`
+then measures it and refines the spacing where it misses the tolerance. The spacing is
+never finer than the volume's voxels (per axis) and keeps at least :data:`MIN_NODES`
+nodes per axis over the volume. A chain with a wire or an imported field starts on the
+volume's voxel grid, as before.
 
 **Size estimate** (:func:`estimate_bytes`): nodes x 3 components x 4 bytes (float32)
 plus the format's header; compressed formats (``.nii.gz``, ``.h5``) are estimated
@@ -75,7 +75,7 @@ def default_spacing(volume: Volume, warps: Sequence[Warp]) -> SpacingChoice:
     if math.isinf(finest):
         why = f"an affine chain: {MIN_NODES} nodes per axis"
     else:
-        why = f"a quarter of the finest element/control-point spacing ({finest:.3g} mm)"
+        why = f"a quarter of the shortest element or lattice cell edge ({finest:.3g} mm)"
     if np.any(s == voxels) and np.any(voxels > wanted):
         why += ", no finer than the voxels"
     return SpacingChoice(s, why)

@@ -622,8 +622,15 @@ class OffsetFieldWarp(Warp):
         return p
 
     def export_resolution(self) -> float:
-        """The smallest element spacing (mm): the field is trilinear between elements."""
-        return float(np.min(self.spacing))
+        """The shortest element edge (mm), at rest or deformed (``X + u(X)`` of the
+        nodes): the field is trilinear between elements, its inverse (which the volume
+        is drawn with) bends at the deformed elements' faces."""
+        n = self.shape
+        axes = [np.linspace(a, b, k) for a, b, k in zip(self.lo, self.hi, n, strict=True)]
+        rest = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+        moved = rest + self._reference_field()[..., :3]
+        edges = [np.linalg.norm(np.diff(moved, axis=a), axis=-1).min() for a in range(3)]
+        return float(min(min(edges), np.min(self.spacing)))
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original: ``q`` with ``q + u(q) = p``, as the GLSL computes it.
