@@ -91,3 +91,27 @@ def test_failed_export_is_one_line_and_writes_nothing(scene: Scene, tmp_path: Pa
     assert not list(tmp_path.iterdir())
     assert parse_spacing(" ") is None
     assert parse_spacing("1, 2, 3") == [1.0, 2.0, 3.0]
+
+
+def test_file_menu_opens_the_dialog_on_the_window_scene(
+    qtbot: Any, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from PySide6.QtWidgets import QDialog
+
+    from tests.ui.test_main_window import _session
+    from tests.ui.windows import shown_window
+
+    w = shown_window(qtbot, monkeypatch, _session(), (1000, 700))
+    seen: list[Any] = []
+
+    def refuse(dialog: ExportDialog) -> int:
+        seen.append((dialog.scene, dialog.estimate.text()))
+        return QDialog.DialogCode.Rejected
+
+    monkeypatch.setattr(ExportDialog, "exec", refuse)
+    act = next(a for a in w.actions() if a.text() == "Export Volume, Field or det &J…")
+    act.trigger()
+    w.close()
+    assert len(seen) == 1
+    assert seen[0][0] is w.session.scene
+    assert "nodes, about" in seen[0][1]
