@@ -28,6 +28,7 @@ tests, picking and bounds computation.
 from __future__ import annotations
 
 import importlib
+import math
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
@@ -218,6 +219,22 @@ class Warp(ABC):
         """
         return None
 
+    def apply_carried(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`apply` and :meth:`carried` of the same (N, 3) points at once.
+
+        The default calls both; a warp whose two share work (a wire's field lookup)
+        overrides it so that :func:`chain_apply_carried` (field exports) does it once.
+        """
+        return self.apply(points), self.carried(points)
+
+    def export_resolution(self) -> float | None:
+        """The finest length (mm) on which the map's derivative changes, for a field
+        export's default node spacing (``voxwarp export-field``): an element or
+        control-point spacing; ``math.inf`` for a map trilinear interpolation holds at
+        any spacing (affine); ``None`` (the default) when the map has detail down to the
+        volume's voxels (wires, imported fields): the export keeps the voxel grid."""
+        return None
+
     # ---------------------------------------------------------------- GPU side
     def uniforms(self) -> dict[str, Any]:
         """Uniform values by unprefixed name (``WARP_name`` in GLSL -> ``name``)."""
@@ -267,6 +284,10 @@ class IdentityWarp(Warp):
 
     kind = "identity"
     glsl_file = "warp_identity.glsl"
+
+    def export_resolution(self) -> float:
+        """Infinite: the identity needs no nodes between the box's."""
+        return math.inf
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Return the points unchanged (as float64 (N, 3))."""
@@ -375,6 +396,10 @@ class AffineWarp(Warp):
         m = np.eye(4)
         m[:3, :3] = r
         return cls(_about(m, center))
+
+    def export_resolution(self) -> float:
+        """Infinite: trilinear interpolation reproduces an affine map at any spacing."""
+        return math.inf
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original: the inverse matrix applied to (N, 3) points."""
@@ -578,10 +603,9 @@ def chain_apply_carried(warps: Sequence[Warp], points: np.ndarray) -> tuple[np.n
     p = np.atleast_2d(np.asarray(points, dtype=np.float64))
     q, ok = p, np.ones(len(p), dtype=bool)
     for w in warps:
-        mask = w.carried(q)
+        q, mask = w.apply_carried(q)
         if mask is not None:
             ok &= np.asarray(mask, dtype=bool)
-        q = w.apply(q)
     with np.errstate(invalid="ignore"):
         ok &= np.all(np.abs(q - p) < FAR_MM, axis=1)
     return q, ok

@@ -60,6 +60,7 @@ from voxwarp.scene import Scene
 from voxwarp.teaching.tour import read_tour
 from voxwarp.ui.correction_export import install_correction_export
 from voxwarp.ui.detj_overlay import install_detj_controls
+from voxwarp.ui.export_dialog import open_export_dialog
 from voxwarp.ui.field_view import SEP
 from voxwarp.ui.fixed_image import install_fixed_image
 from voxwarp.ui.frame_dialog import ask_frame
@@ -339,6 +340,7 @@ class MainWindow(QMainWindow):
         self._action(f, "&Save Scene", self.save, QKeySequence.StandardKey.Save)
         self._action(f, "Save Scene &As…", self.save_as, "Ctrl+Shift+S")
         self._action(f, "&Export Screenshot…", self.export_dialog, "Ctrl+E")
+        self._action(f, "Export Volume, Field or det &J…", lambda: open_export_dialog(self))
         f.addSeparator()
         self._action(f, "Add &Displacement Field…", self.add_field_dialog)
         self.remove_fields_action = self._action(

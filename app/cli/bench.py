@@ -167,15 +167,17 @@ def cmd_bench_moved(args: argparse.Namespace) -> int:
 
 
 def _add_heavy_bench_parsers(bsub: Any) -> None:
-    """``bench interactive|slices|detj``: their modules define their options (and load
-    numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
+    """``bench interactive|slices|detj|exports``: their modules define their options (and
+    load numpy, numba, ...), so the parser adds them only when a ``bench`` command runs."""
     from voxwarp.bench.detj import add_bench_detj_parser
+    from voxwarp.bench.exports import add_bench_exports_parser
     from voxwarp.bench.interactive import add_bench_interactive_parser
     from voxwarp.bench.slices import add_bench_slices_parser
 
     add_bench_interactive_parser(bsub)
     add_bench_slices_parser(bsub)
     add_bench_detj_parser(bsub)
+    add_bench_exports_parser(bsub)
 
 
 def wants_bench(argv: Sequence[str] | None) -> bool:

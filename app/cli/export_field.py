@@ -57,8 +57,12 @@ def add_parser(sub: Any) -> None:
         type=float,
         metavar="S",
         help="node spacing in mm, one number or three, kept as given (a warning names the"
-        " spacing that would meet --tolerance); default: the volume's voxels, refined until"
-        " --tolerance is met",
+        " spacing that would meet --tolerance); default: a quarter of the finest element or"
+        " lattice cell for element grids, lattices and affine maps (16 nodes per axis at"
+        " least, never finer than the voxels), the volume's voxels for wires and imported"
+        " fields; refined until --tolerance is met. The chosen spacing, why, and the"
+        " file's estimated size are printed first; an export over the free disk space"
+        " or --memory-budget is refused",
     )
     p.add_argument(
         "--tolerance",
@@ -123,6 +127,7 @@ def cmd_export_field(args: argparse.Namespace) -> int:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
     with _chain_scene(args) as scene:
+        _plan(args, scene, out, box, components=3)
         if not scene.warps:
             warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
         export = scene.export_field(
@@ -153,6 +158,7 @@ def _export_jacobian(args: argparse.Namespace, out: Path) -> int:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
     with _chain_scene(args) as scene:
+        _plan(args, scene, out, box, components=1)
         jac = scene.jacobian_determinant(
             spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
         )
@@ -195,6 +201,31 @@ def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
         deformed_scene(args, scene, pending, r.ctx) as s,
     ):
         yield s
+
+
+def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components: int) -> None:
+    """Print the starting spacing (and why, when it is the default) and the size
+    estimate; refuse one over the free disk space (the memory budget is checked by
+    the grid itself)."""
+    from voxwarp.core.field_grid import field_grid
+    from voxwarp.core.field_spacing import check_room, default_spacing, estimate_bytes
+    from voxwarp.core.limits import format_bytes
+
+    if args.spacing is None:
+        choice = default_spacing(scene.volume, scene.warps)
+        start, why = choice.spacing, f"default: {choice.reason}"
+    else:
+        start, why = args.spacing, "--spacing"
+    affine, shape = field_grid(scene.volume, start, box, args.grid)
+    size = estimate_bytes(shape, components)
+    step = " x ".join(f"{v:.4g}" for v in np.linalg.norm(affine[:3, :3], axis=0))
+    dims = "x".join(str(n) for n in shape)
+    print(
+        f"spacing {step} mm ({why}): {dims} nodes, about {format_bytes(size)} uncompressed"
+        + (" before any refinement the field check asks for" if args.spacing is None else ""),
+        file=sys.stderr,
+    )
+    check_room(out, size)
 
 
 def _unmet(export: FieldExport, given: bool) -> str:

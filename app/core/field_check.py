@@ -12,7 +12,9 @@ where that holds:
   it stays within the carried nodes' range and cannot bleed into its neighbours'
   interpolation: a carried point next to vacated space keeps its own side's value.
 * **Measured error.** At the centre and at one random point of every cell (a seeded
-  random subset of :data:`MAX_CHECK_CELLS` cells when there are more), the field's
+  random subset of :data:`MAX_CHECK_CELLS` cells when there are more; on a grid of
+  fewer cells, more random points a cell, up to :data:`MAX_DRAWS`, so a coarse default
+  grid is measured at about as many points as a fine one), the field's
   trilinear value is compared with the chain itself, at the points the chain carries
   into the volume (the deformed volume). The largest difference is the export's
   measured interpolation error.
@@ -44,6 +46,8 @@ TOLERANCE_MM = 0.5
 MAX_CHECK_CELLS = 1_000_000
 #: Most off cells probed for a tear (the rest count as smooth but coarse).
 MAX_PROBED_CELLS = 20_000
+#: Most random points measured per cell (on grids of few cells; one on large grids).
+MAX_DRAWS = 16
 #: A probed cell is refined this many times per axis.
 PROBE = 4
 _SLAB = 1 << 18
@@ -84,18 +88,24 @@ def sample_carried(
     warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
 ) -> tuple[np.ndarray, np.ndarray]:
     """``chain(p) - p`` at every node (float32 ``(nx, ny, nz, 3)``) and the ``(nx, ny,
-    nz)`` bool mask of the nodes the chain does not carry (their vectors are 0)."""
+    nz)`` bool mask of the nodes the chain does not carry (their vectors are 0).
+
+    The chain maps whole slabs of about :data:`_SLAB` nodes at once, each a run of
+    first-axis planes, so every slab fills a contiguous block of the output."""
     nx, ny, nz = (int(v) for v in shape)
     u = np.zeros((nx, ny, nz, 3), dtype=np.float32)
     outside = np.zeros((nx, ny, nz), dtype=bool)
-    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    for k in range(nz):
-        idx = np.stack([ii.ravel(), jj.ravel(), np.full(ii.size, k)], axis=1).astype(float)
-        p = idx @ affine[:3, :3].T + affine[:3, 3]
+    a = np.asarray(affine, dtype=np.float64)
+    jj, kk = np.meshgrid(np.arange(ny), np.arange(nz), indexing="ij")
+    plane = np.stack([jj.ravel(), kk.ravel()], axis=1).astype(float) @ a[:3, 1:3].T + a[:3, 3]
+    per = max(1, _SLAB // max(ny * nz, 1))
+    for i0 in range(0, nx, per):
+        i = np.arange(i0, min(i0 + per, nx), dtype=float)
+        p = (i[:, None, None] * a[:3, 0] + plane[None]).reshape(-1, 3)
         q, ok = chain_apply_carried(warps, p)
         d = np.where(ok[:, None], q - p, 0.0)
-        u[:, :, k] = d.reshape(nx, ny, 3)
-        outside[:, :, k] = ~ok.reshape(nx, ny)
+        u[i0 : i0 + len(i)] = d.reshape(len(i), ny, nz, 3)
+        outside[i0 : i0 + len(i)] = ~ok.reshape(len(i), ny, nz)
     return u, outside
 
 
@@ -120,8 +130,10 @@ def _cells(shape: Sequence[int], rng: np.random.Generator) -> np.ndarray:
     count = int(np.prod(cells))
     if count <= MAX_CHECK_CELLS:
         flat = np.arange(count)
-    else:  # sorted, without repeats (a few fewer than asked)
-        flat = np.unique(rng.integers(0, count, MAX_CHECK_CELLS))
+    else:  # sorted, without repeats (a few fewer than asked): np.unique's set, in O(count)
+        hit = np.zeros(count, dtype=bool)
+        hit[rng.integers(0, count, MAX_CHECK_CELLS)] = True
+        flat = np.flatnonzero(hit)
     return np.stack(np.unravel_index(flat, tuple(cells)), axis=1)
 
 
@@ -194,8 +206,9 @@ def check_field(
 ) -> FieldCheck:
     """Measure ``field`` against ``warps`` between nodes (see the module docstring).
 
-    Each checked cell is measured at its centre and at one seeded random point in it
-    (trilinear error peaks at the centre where the map is smooth, elsewhere at a kink).
+    Each checked cell is measured at its centre and at seeded random points in it (one
+    on large grids, more on coarse ones: :func:`_draws_per_cell`; trilinear error
+    peaks at the centre where the map is smooth, elsewhere at a kink).
     ``volume_to_index`` (4x4) and ``volume_shape`` place the original volume: a point
     counts when the chain carries it into that volume.
     """
@@ -236,7 +249,9 @@ def _cell_errors(
     centre and a random point that the chain carries into the volume; NaN at none."""
     a = field.affine
     out = np.full(len(base), np.nan)
-    for offset in (np.full((len(base), 3), 0.5), rng.random((len(base), 3))):
+    draws = _draws_per_cell(field.shape)
+    offsets = [np.full((len(base), 3), 0.5), *(rng.random((len(base), 3)) for _ in range(draws))]
+    for offset in offsets:
         p = (base + offset) @ a[:3, :3].T + a[:3, 3]
         q, ok = chain_apply_carried(warps, p)
         vi = q @ to_index[:3, :3].T + to_index[:3, 3]
@@ -244,6 +259,14 @@ def _cell_errors(
         err = np.linalg.norm(field.apply(p[keep]) - q[keep], axis=1)
         out[keep] = np.fmax(out[keep], err)
     return out
+
+
+def _draws_per_cell(shape: Sequence[int]) -> int:
+    """Random points measured per cell besides its centre: one on a grid of
+    :data:`MAX_CHECK_CELLS` cells or more, more on coarser grids (up to
+    :data:`MAX_DRAWS`), so that a coarse grid is measured at as many points."""
+    cells = int(np.prod(np.asarray(shape) - 1))
+    return int(np.clip(MAX_CHECK_CELLS // max(cells, 1), 1, MAX_DRAWS))
 
 
 def _torn_nodes(shape: Sequence[int], cells: list[np.ndarray]) -> np.ndarray:

@@ -35,6 +35,7 @@ from voxwarp.core.field_check import (
     fill_outside,
     sample_carried,
 )
+from voxwarp.core.field_spacing import default_spacing
 from voxwarp.core.orientation import grid_in_file_order
 from voxwarp.core.volume import Volume
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
@@ -124,7 +125,8 @@ def _check_budget(shape: Sequence[int]) -> None:
         dims = "x".join(str(int(n)) for n in shape)
         raise SceneError(
             f"a {dims} displacement field needs {over[0]}, over the memory budget of"
-            f" {over[1]}; use a coarser spacing or a smaller box (or raise --memory-budget)"
+            f" {over[1]}; use a coarser spacing (--spacing) or a smaller box (or raise"
+            " --memory-budget)"
         )
 
 
@@ -204,7 +206,9 @@ def export_chain(
     grid: str = "volume",
 ) -> FieldExport:
     """Sample ``warps`` as a field on ``field_grid(volume, spacing, box, grid)`` and
-    measure it.
+    measure it; ``spacing=None`` starts from
+    :func:`voxwarp.core.field_spacing.default_spacing` (coarser than the voxels for
+    element grids, lattices and affine maps).
 
     Where ITK's trilinear interpolation misses the chain by more than ``tolerance`` mm
     away from tears, finer spacings are tried (up to :data:`MAX_REFINE` times, within
@@ -220,7 +224,8 @@ def export_chain(
         affine, shape = field_grid(volume, step, box, grid)
         return _measured(chain, affine, shape, to_index, volume.shape, tolerance)
 
-    first = trial = measured(spacing)
+    start = default_spacing(volume, chain).spacing if spacing is None else spacing
+    first = trial = measured(start)
     capped = False
     for _ in range(MAX_REFINE):
         if trial.check.met:

@@ -543,9 +543,11 @@ class OffsetFieldWarp(Warp):
         g = 1.0 - f
         val = np.zeros((len(q), 3))
         grad = np.zeros((len(q), 3, 3)) if gradient else None
+        flat = u.reshape(-1, 3)  # one gather per corner (a view where u is contiguous)
+        base = (i0[:, 0] * n[1] + i0[:, 1]) * n[2] + i0[:, 2]
         for c in range(8):
             o = ((c >> 0) & 1, (c >> 1) & 1, (c >> 2) & 1)
-            corner = u[i0[:, 0] + o[0], i0[:, 1] + o[1], i0[:, 2] + o[2]]
+            corner = np.take(flat, base + ((o[0] * n[1] + o[1]) * n[2] + o[2]), axis=0)
             w = [f[:, a] if o[a] else g[:, a] for a in range(3)]
             val += (w[0] * w[1] * w[2])[:, None] * corner
             if grad is not None:
@@ -618,6 +620,17 @@ class OffsetFieldWarp(Warp):
                 bad,
             )
         return p
+
+    def export_resolution(self) -> float:
+        """The shortest element edge (mm), at rest or deformed (``X + u(X)`` of the
+        nodes): the field is trilinear between elements, its inverse (which the volume
+        is drawn with) bends at the deformed elements' faces."""
+        n = self.shape
+        axes = [np.linspace(a, b, k) for a, b, k in zip(self.lo, self.hi, n, strict=True)]
+        rest = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+        moved = rest + self._reference_field()[..., :3]
+        edges = [np.linalg.norm(np.diff(moved, axis=a), axis=-1).min() for a in range(3)]
+        return float(min(min(edges), np.min(self.spacing)))
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original: ``q`` with ``q + u(q) = p``, as the GLSL computes it.

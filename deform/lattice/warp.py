@@ -566,6 +566,11 @@ class LatticeWarp(Warp):
                 break
         return u, steps, converged
 
+    def export_resolution(self) -> float:
+        """The shortest cell edge (mm) of the deformed lattice: its inverse, which the
+        volume is drawn with, bends at the deformed cells' faces."""
+        return _shortest_edge(np.asarray(self._nodes))
+
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original, as the GLSL computes it (outside: the identity or
         :data:`FAR`, see the module docstring)."""
@@ -1062,3 +1067,9 @@ def warn_if_folded(grid: TrilinearGrid, what: str = "the lattice") -> None:
         FoldedLatticeWarning,
         stacklevel=3,
     )
+
+
+def _shortest_edge(points: np.ndarray) -> float:
+    """The shortest distance (mm) between neighbouring nodes of a (nx, ny, nz, 3) grid."""
+    edges = [np.linalg.norm(np.diff(points, axis=a), axis=-1).min() for a in range(3)]
+    return float(min(edges))

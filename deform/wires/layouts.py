@@ -204,11 +204,17 @@ def _sample_t_float(t_field: np.ndarray, g: np.ndarray) -> np.ndarray:
     gc = np.clip(g - 0.5, 0.0, shape - 1.0)
     i0 = np.minimum(np.floor(gc).astype(np.int64), np.maximum(shape - 2, 0))
     f = gc - i0
+    # per axis, the two neighbours' flat offsets and weights; corners in _CORNERS' order
+    # (the same sums as indexing each corner: one flat gather a corner)
+    step = np.array([shape[1] * shape[2], shape[2], 1])
+    ends = (i0, np.minimum(i0 + 1, shape - 1))
+    offs = [[ends[c][:, a] * step[a] for c in (0, 1)] for a in range(3)]
+    wts = [[1.0 - f[:, a], f[:, a]] for a in range(3)]
+    flat = t_field.reshape(-1)
     out = np.zeros(len(g))
-    for c in _CORNERS:
-        idx = np.minimum(i0 + c, shape - 1)
-        w = np.prod(np.where(c == 1, f, 1.0 - f), axis=1)
-        out += w * t_field[idx[:, 0], idx[:, 1], idx[:, 2]]
+    for a, b, c in _CORNERS:
+        w = wts[0][a] * wts[1][b] * wts[2][c]
+        out += w * flat[offs[0][a] + offs[1][b] + offs[2][c]]
     return out
 
 

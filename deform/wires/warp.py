@@ -182,7 +182,18 @@ class WireFieldWarp(Warp):
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Deformed -> original, as the shader does (vacated points go to :data:`FAR`)."""
         p = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        return self._swept(p, *self._lookup(p))
+
+    def apply_carried(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`apply` and :meth:`carried` from one field lookup."""
+        p = np.atleast_2d(np.asarray(points, dtype=np.float64))
         state, wire, t = self._lookup(p)
+        return self._swept(p, state, wire, t), state != 1
+
+    def _swept(
+        self, p: np.ndarray, state: np.ndarray, wire: np.ndarray, t: np.ndarray
+    ) -> np.ndarray:
+        """:meth:`apply` of points ``p`` whose :meth:`_lookup` is given."""
         out = p.copy()
         out[state == 1] = FAR
         for wi in np.unique(wire[state == 2]):

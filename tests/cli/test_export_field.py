@@ -264,7 +264,9 @@ def test_cli_export_field_writes_a_field_itk_reads(
 
     scene, vol = massspring_scene
     out = tmp_path / "field.nii.gz"
-    assert main(["export-field", str(scene), "-o", str(out)]) == 0
+    # the voxels' spacing: the default is coarser for an element grid (test_export_field_fast)
+    voxels = ["--spacing", "1", "1", "1.5"]
+    assert main(["export-field", str(scene), "-o", str(out), *voxels]) == 0
     captured = capsys.readouterr()
     assert captured.out.strip() == str(out)
     assert "field: 24x20x16 nodes" in captured.err

@@ -380,7 +380,8 @@ def test_jacobian_overlay_switch(viewer: Any) -> None:
     np.testing.assert_array_equal(_volume_only(viewer), plain)
     viewer.overlays = "grid,jacobian"  # one switch for every overlay name
     assert viewer.overlays == ("jacobian", "grid")
-    assert viewer.warp_lines.grid and not viewer.warp_lines.glyphs
+    assert viewer.warp_lines.grid
+    assert not viewer.warp_lines.glyphs
     viewer.overlays = ()
     assert not viewer.warp_lines.grid
     with pytest.raises(RenderError, match="choose from jacobian"):
