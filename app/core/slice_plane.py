@@ -396,8 +396,9 @@ def fit_pixels(
 def _anchored_grid(
     plane: SlicePlane, corners: np.ndarray, px: float, anchor: Sequence[float]
 ) -> tuple[SlicePlane, tuple[int, int]]:
-    """The pixel grid of step ``px`` through ``anchor``'s projection that holds
-    ``corners`` with a 2.5 % margin a side: pixel indices ``i0..i1`` from the anchor."""
+    """The pixel grid of step ``px`` through ``anchor``'s projection whose pixels
+    (edges, not only centres) hold ``corners`` with a 2.5 % margin a side: pixel indices
+    ``i0..i1`` from the anchor."""
     a = np.asarray(anchor, dtype=np.float64).reshape(3)
     a = a - float((a - plane.center) @ plane.normal) * plane.normal  # onto the plane
     rel = corners - a
@@ -406,8 +407,9 @@ def _anchored_grid(
     for k, axis in enumerate((plane.right, plane.up)):
         x = rel @ axis
         margin = 0.025 * float(np.ptp(x))
-        i0 = math.floor((float(x.min()) - margin) / px + 1e-9)
-        i1 = math.ceil((float(x.max()) + margin) / px - 1e-9)
+        # the fewest pixels whose edges hold the box and its margin
+        i0 = math.floor((float(x.min()) - margin) / px + 0.5 + 1e-9)
+        i1 = math.ceil((float(x.max()) + margin) / px - 0.5 - 1e-9)
         size[k] = max(1, i1 - i0 + 1)
         middle[k] = (i0 + i0 + size[k] - 1) / 2 * px
     center = a + middle[0] * plane.right + middle[1] * plane.up
