@@ -185,6 +185,7 @@ class OffscreenRenderer:
         """
         overlays = check_overlays(overlay)
         jacobian = JacobianOverlay(opacity=overlay_opacity) if "jacobian" in overlays else None
+        lines = [name for name in overlays if name in WARP_OVERLAYS]  # grid, glyphs
         if isinstance(plane, str):
             plane, (w, h) = named_slice_grid(scene, plane, at=at, size=size, pixel_mm=pixel_mm)
         else:
@@ -230,8 +231,9 @@ class OffscreenRenderer:
             checker_mm=checker_mm,
             blend=0.5 if blend is None else blend,
             jacobian=jacobian,
+            legend=None if lines else "bottom-right",  # the legend goes over the lines
         )
-        if any(name in WARP_OVERLAYS for name in overlays):
+        if lines:
             warps = [] if show == "rest" else scene.warps  # the rest state: a straight grid
             if grid_spacing_mm is None:
                 pixel = float(np.linalg.norm(matrix[:3, 0]))
@@ -240,10 +242,12 @@ class OffscreenRenderer:
                 image.rgba,
                 warps,
                 matrix,
-                [o for o in overlays if o in WARP_OVERLAYS],
+                lines,
                 grid_spacing_mm,
                 glyph_spacing_mm=glyph_spacing_mm,
             )
+            if jacobian is not None:
+                draw_legend(image.rgba, jacobian)
         image.rgba = rendered(image.rgba)  # shows inline in Jupyter
         return image
 

@@ -282,3 +282,22 @@ def test_overlay_leaves_the_slice_values_alone(offscreen: Any, slab_mm: float) -
     ok = np.isfinite(img.detj)
     assert ok.sum() > 100
     np.testing.assert_array_equal(det[ok], img.detj[ok])
+
+
+def test_legend_stays_on_top_of_the_grid_lines(offscreen: Any) -> None:
+    """``render_slice(overlay="jacobian,grid")``: the grid lines are drawn first and the
+    det J legend over them, so the legend's pixels are those of the det J-only slice."""
+    vol = _volume()
+    scene = Scene(vol, warps=[AffineWarp.scaling((1.2, 0.8, 1.5), center=(0, 0, 0))])
+    only = _slice(offscreen, scene, size=(240, 200))
+    both = offscreen(16, 16).render_slice(
+        scene, only.plane, size=only.size, overlay="jacobian,grid", grid_spacing_mm=2.0
+    )
+    grey, black = np.full_like(only.rgba, 200), np.zeros_like(only.rgba)
+    draw_legend(grey, JacobianOverlay())
+    draw_legend(black, JacobianOverlay())
+    # the legend's opaque pixels (its bar, swatch and text): the same on any background
+    legend = np.all(grey[..., :3] == black[..., :3], axis=2) & np.any(grey[..., :3] != 200, axis=2)
+    assert legend.sum() > 100
+    np.testing.assert_array_equal(both.rgba[legend], only.rgba[legend])
+    assert np.any(both.rgba[~legend] != only.rgba[~legend])  # the grid is drawn
