@@ -27,6 +27,7 @@ import numpy as np
 
 from voxwarp.core.jacobian import point_determinant
 from voxwarp.errors import RenderError
+from voxwarp.render.bitmap_font import text_mask
 
 #: colour (RGB in [0, 1]) of ``det J < 1`` (the picture shows the region enlarged)
 EXPANSION_RGB: tuple[float, float, float] = (1.0, 0.35, 0.1)
@@ -99,46 +100,6 @@ def blend_detj(rgba: np.ndarray, det: np.ndarray, overlay: JacobianOverlay) -> n
 
 
 # ---------------------------------------------------------------- the legend
-# 5x7 glyphs (rows top to bottom) for the legend's text
-_FONT: dict[str, tuple[str, ...]] = {
-    "0": (".###.", "#...#", "#..##", "#.#.#", "##..#", "#...#", ".###."),
-    "1": ("..#..", ".##..", "..#..", "..#..", "..#..", "..#..", ".###."),
-    "2": (".###.", "#...#", "....#", "...#.", "..#..", ".#...", "#####"),
-    "3": ("####.", "....#", "....#", ".###.", "....#", "....#", "####."),
-    "4": ("...#.", "..##.", ".#.#.", "#..#.", "#####", "...#.", "...#."),
-    "5": ("#####", "#....", "####.", "....#", "....#", "#...#", ".###."),
-    "6": (".###.", "#....", "#....", "####.", "#...#", "#...#", ".###."),
-    "7": ("#####", "....#", "...#.", "..#..", ".#...", ".#...", ".#..."),
-    "8": (".###.", "#...#", "#...#", ".###.", "#...#", "#...#", ".###."),
-    "9": (".###.", "#...#", "#...#", ".####", "....#", "....#", ".###."),
-    ".": (".....", ".....", ".....", ".....", ".....", ".##..", ".##.."),
-    "-": (".....", ".....", ".....", "#####", ".....", ".....", "....."),
-    "<": ("...#.", "..#..", ".#...", "#....", ".#...", "..#..", "...#."),
-    "=": (".....", ".....", "#####", ".....", "#####", ".....", "....."),
-    " ": (".....",) * 7,
-    "d": ("....#", "....#", ".####", "#...#", "#...#", "#...#", ".####"),
-    "e": (".....", ".....", ".###.", "#...#", "#####", "#....", ".###."),
-    "t": (".#...", ".#...", "####.", ".#...", ".#...", ".#..#", "..##."),
-    "J": ("..###", "...#.", "...#.", "...#.", "...#.", "#..#.", ".##.."),
-    "f": ("..##.", ".#..#", ".#...", "###..", ".#...", ".#...", ".#..."),
-    "o": (".....", ".....", ".###.", "#...#", "#...#", "#...#", ".###."),
-    "l": (".##..", "..#..", "..#..", "..#..", "..#..", "..#..", ".###."),
-}
-
-
-def text_mask(text: str, scale: int = 1) -> np.ndarray:
-    """Boolean bitmap of ``text`` in the legend's 5x7 font (one pixel between glyphs)."""
-    cols = []
-    for ch in text:
-        rows = _FONT.get(ch)
-        if rows is None:
-            raise RenderError(f"the legend font has no glyph {ch!r}")
-        cols.append(np.array([[c == "#" for c in r] for r in rows], dtype=bool))
-        cols.append(np.zeros((7, 1), dtype=bool))
-    mask = np.concatenate(cols[:-1], axis=1) if cols else np.zeros((7, 0), bool)
-    return np.kron(mask, np.ones((scale, scale), dtype=bool)).astype(bool)
-
-
 def _put(img: np.ndarray, mask: np.ndarray, x: int, y: int, rgb: tuple[int, ...]) -> None:
     h, w = img.shape[:2]
     mh, mw = mask.shape

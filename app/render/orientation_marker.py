@@ -47,6 +47,7 @@ import numpy as np
 
 from voxwarp.core.orientation import axis_letters
 from voxwarp.errors import RenderError
+from voxwarp.render.bitmap_font import text_mask
 
 if TYPE_CHECKING:
     from voxwarp.core.camera import Camera
@@ -76,27 +77,14 @@ MIN_LABEL_LENGTH = 0.25
 HALO_RGB = (15, 15, 15)
 HALO_ALPHA = 0.7
 
-# 5x7 glyphs, rows top to bottom
-_FONT: dict[str, tuple[str, ...]] = {
-    "R": ("####.", "#...#", "#...#", "####.", "#.#..", "#..#.", "#...#"),
-    "L": ("#....", "#....", "#....", "#....", "#....", "#....", "#####"),
-    "A": (".###.", "#...#", "#...#", "#####", "#...#", "#...#", "#...#"),
-    "P": ("####.", "#...#", "#...#", "####.", "#....", "#....", "#...."),
-    "S": (".####", "#....", "#....", ".###.", "....#", "....#", "####."),
-    "I": ("#####", "..#..", "..#..", "..#..", "..#..", "..#..", "#####"),
-    "x": (".....", ".....", "#...#", ".#.#.", "..#..", ".#.#.", "#...#"),
-    "y": (".....", ".....", "#...#", "#...#", ".####", "....#", ".###."),
-    "z": (".....", ".....", "#####", "...#.", "..#..", ".#...", "#####"),
-}
 GLYPH_SHAPE = (7, 5)
 
 
 def glyph_mask(letter: str, scale: int = 1) -> np.ndarray:
     """The (7*scale, 5*scale) boolean bitmap of ``letter`` (one of R L A P S I x y z)."""
-    if letter not in _FONT:
-        raise RenderError(f"the marker font has no glyph {letter!r}; it has {' '.join(_FONT)}")
-    rows = np.array([[c == "#" for c in row] for row in _FONT[letter]])
-    return np.kron(rows, np.ones((scale, scale), dtype=bool)).astype(bool)
+    if len(letter) != 1:
+        raise RenderError(f"a marker label is one letter; got {letter!r}")
+    return text_mask(letter, scale)
 
 
 @dataclass(frozen=True)

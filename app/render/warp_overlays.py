@@ -25,6 +25,7 @@ from voxwarp.core.warp_grid import (
     slice_glyphs,
 )
 from voxwarp.deform.warp import Warp
+from voxwarp.render.bitmap_font import text_mask
 
 #: Overlays these functions draw (the CLI's ``--overlay`` accepts them).
 WARP_OVERLAYS: tuple[str, ...] = ("grid", "glyphs")
@@ -35,23 +36,6 @@ GLYPH_RGB = (0.2, 0.9, 1.0)
 GRID_ALPHA = 0.8
 #: Fewest pixels between default glyphs on a slice.
 MIN_GLYPH_PX = 20
-
-# 5x7 bitmap digits for the glyph legend, rows top to bottom
-_FONT: dict[str, tuple[str, ...]] = {
-    "0": (".###.", "#...#", "#..##", "#.#.#", "##..#", "#...#", ".###."),
-    "1": ("..#..", ".##..", "..#..", "..#..", "..#..", "..#..", ".###."),
-    "2": (".###.", "#...#", "....#", "...#.", "..#..", ".#...", "#####"),
-    "3": ("####.", "....#", "....#", ".###.", "....#", "....#", "####."),
-    "4": ("...#.", "..##.", ".#.#.", "#..#.", "#####", "...#.", "...#."),
-    "5": ("#####", "#....", "####.", "....#", "....#", "#...#", ".###."),
-    "6": (".###.", "#....", "#....", "####.", "#...#", "#...#", ".###."),
-    "7": ("#####", "....#", "...#.", "..#..", ".#...", ".#...", ".#..."),
-    "8": (".###.", "#...#", "#...#", ".###.", "#...#", "#...#", ".###."),
-    "9": (".###.", "#...#", "#...#", ".####", "....#", "....#", ".###."),
-    ".": (".....", ".....", ".....", ".....", ".....", ".##..", ".##.."),
-    "m": (".....", ".....", "##.#.", "#.#.#", "#.#.#", "#.#.#", "#.#.#"),
-    " ": (".....",) * 7,
-}
 
 
 def draw_slice_overlays(
@@ -201,21 +185,14 @@ def _legend(out: np.ndarray, glyphs: SliceGlyphs, width: float, rgb: Any) -> Non
 
 def _text(out: np.ndarray, text: str, x: int, y: int, scale: int, rgb: Any) -> None:
     """``text`` (digits, '.', 'm', ' ') at pixel (x, y) top left, over a dark box."""
-    masks = [_glyph_mask(ch, scale) for ch in text]
-    gh, gw = 7 * scale, 6 * scale * len(masks)
+    mask = text_mask(text, scale)
+    gh, gw = 7 * scale, 6 * scale * len(text)
     h, w = out.shape[:2]
     if x + gw > w or y + gh > h or x < 0 or y < 0:
         return
     box = out[max(0, y - scale) : y + gh + scale, max(0, x - scale) : x + gw]
     _blend(box, np.full(box.shape[:2], 0.6), (0.0, 0.0, 0.0))
-    for i, mask in enumerate(masks):
-        x0 = x + 6 * scale * i
-        _blend(out[y : y + gh, x0 : x0 + 5 * scale], mask.astype(float), rgb)
-
-
-def _glyph_mask(ch: str, scale: int) -> np.ndarray:
-    rows = np.array([[c == "#" for c in row] for row in _FONT.get(ch, _FONT[" "])])
-    return np.kron(rows, np.ones((scale, scale), dtype=bool))
+    _blend(out[y : y + gh, x : x + mask.shape[1]], mask.astype(float), rgb)
 
 
 def _blend(region: np.ndarray, alpha: np.ndarray, rgb: Sequence[float]) -> None:
