@@ -5,9 +5,9 @@ image compared with the moving (deformed) volume, for ``voxwarp render`` and
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Any
 
+from voxwarp.cli.options import fraction_arg, mm_arg
 from voxwarp.errors import InputError
 
 COMPARE_CHOICES = ("checkerboard", "difference", "blend")
@@ -15,26 +15,6 @@ FIXED_HELP = (
     "a registration's fixed image (any volume voxwarp reads, sample:NAME too, on its own"
     " grid): compared at the same world points with INPUT seen through its warps"
 )
-
-
-def _blend(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 <= v <= 1.0:
-        raise argparse.ArgumentTypeError(f"--blend must be a number in 0..1; got {text!r}")
-    return v
-
-
-def _checker(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"--checker-size must be a number of mm > 0; got {text!r}")
-    return v
 
 
 def add_compare_args(p: Any, *, show: bool) -> None:
@@ -51,7 +31,7 @@ def add_compare_args(p: Any, *, show: bool) -> None:
         )
     p.add_argument(
         "--blend",
-        type=_blend,
+        type=fraction_arg("--blend"),
         metavar="0..1",
         help="--show blend: the fixed (or rest) image's weight, 0 = moving, 1 = fixed"
         " (default 0.5)",
@@ -59,7 +39,7 @@ def add_compare_args(p: Any, *, show: bool) -> None:
     p.add_argument(
         "--checker-size",
         dest="checker_mm",
-        type=_checker,
+        type=mm_arg("--checker-size"),
         metavar="MM",
         help="--show checkerboard: cell size in world mm (default with --fixed: about 1/8"
         " of the fixed image's longest side; slices without --fixed: 32-pixel tiles)",

@@ -12,7 +12,7 @@ import math
 from collections.abc import Sequence
 
 from voxwarp.cli import render_options as ropt
-from voxwarp.cli.options import add_field_convention_arg
+from voxwarp.cli.options import add_field_convention_arg, mm_arg
 from voxwarp.core import limits
 from voxwarp.deform.elements.anchors import ANCHOR_MODES
 from voxwarp.deform.elements.materials import PRESETS
@@ -256,17 +256,6 @@ def _field_scale(text: str) -> int:
     return v
 
 
-def _positive_mm(text: str) -> float:
-    """A finite length in mm > 0 (``--side-falloff``)."""
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"give a length in mm > 0; got {text!r}")
-    return v
-
-
 def add_field_args(p: argparse.ArgumentParser) -> None:
     """``--displacement FILE`` (repeatable) and ``--field-convention``."""
     g = p.add_argument_group(
@@ -344,7 +333,7 @@ def add_wire_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--side-falloff",
-        type=_positive_mm,
+        type=mm_arg("--side-falloff"),
         metavar="MM",
         help="for every wire with smooth sides: width (mm) of the fade beyond the radius;"
         " default: each wire's 'side_falloff', else the radius or twice the wire's largest"

@@ -11,8 +11,9 @@ stays quick).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any, NoReturn
 
@@ -21,6 +22,38 @@ from voxwarp.cli import render_options as ropt
 from voxwarp.core import limits
 from voxwarp.errors import InputError as CliOptionError
 from voxwarp.inputs import load_input
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
+
+
+def mm_arg(option: str) -> Callable[[str], float]:
+    """An argparse ``type`` for ``option``: a finite length in mm > 0 (one line otherwise)."""
+
+    def parse(text: str) -> float:
+        v = _number(text)
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{option} must be a number of mm > 0; got {text!r}")
+        return v
+
+    return parse
+
+
+def fraction_arg(option: str) -> Callable[[str], float]:
+    """An argparse ``type`` for ``option``: a number in 0..1 (one line otherwise)."""
+
+    def parse(text: str) -> float:
+        v = _number(text)
+        if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+            raise argparse.ArgumentTypeError(f"{option} must be a number in 0..1; got {text!r}")
+        return v
+
+    return parse
+
 
 __all__ = [
     "NEGATIVE_VALUE_OPTIONS",

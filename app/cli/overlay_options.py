@@ -12,10 +12,10 @@ Importing this loads no numpy.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from typing import Any
 
+from voxwarp.cli.options import fraction_arg, mm_arg
 from voxwarp.render.overlay_options import OVERLAYS
 
 #: ``--overlay-opacity`` default (the det J colour at full |log2 det J|)
@@ -33,28 +33,6 @@ def overlay_arg(text: str) -> list[str]:
             f"{text!r}: expected one or more of {', '.join(OVERLAYS)} (comma separated)"
         )
     return names
-
-
-def positive_mm(text: str) -> float:
-    """A finite number of mm > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a number of mm > 0; got {text!r}")
-    return v
-
-
-def opacity_arg(text: str) -> float:
-    """``--overlay-opacity``: a number in 0..1."""
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and 0.0 <= v <= 1.0):
-        raise argparse.ArgumentTypeError(f"--overlay-opacity must be in 0..1; got {text!r}")
-    return v
 
 
 class _Extend(argparse.Action):
@@ -86,21 +64,21 @@ def add_overlay_args(p: argparse.ArgumentParser, three_d: bool = False) -> None:
     )
     p.add_argument(
         "--overlay-opacity",
-        type=opacity_arg,
+        type=fraction_arg("--overlay-opacity"),
         default=DEFAULT_OVERLAY_OPACITY,
         metavar="0..1",
         help=f"strength of the det J colours (default {DEFAULT_OVERLAY_OPACITY:g})",
     )
     p.add_argument(
         "--grid-spacing",
-        type=positive_mm,
+        type=mm_arg("--grid-spacing"),
         metavar="MM",
         help="grid line spacing in mm (default about 1/16 of the volume's largest side,"
         " at least 12 pixels on a slice, rounded to 1, 2 or 5 x 10^k mm)",
     )
     p.add_argument(
         "--glyph-spacing",
-        type=positive_mm,
+        type=mm_arg("--glyph-spacing"),
         metavar="MM",
         help="distance between glyph arrows in mm (default the grid spacing, doubled"
         " until it is at least 20 pixels on a slice)",
