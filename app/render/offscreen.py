@@ -187,45 +187,20 @@ class OffscreenRenderer:
         jacobian = JacobianOverlay(opacity=overlay_opacity) if "jacobian" in overlays else None
         lines = [name for name in overlays if name in WARP_OVERLAYS]  # grid, glyphs
         if isinstance(plane, str):
-            plane, (w, h) = named_slice_grid(scene, plane, at=at, size=size, pixel_mm=pixel_mm)
+            plane, size = named_slice_grid(scene, plane, at=at, size=size, pixel_mm=pixel_mm)
         else:
-            w, h = self.size if size is None else (int(size[0]), int(size[1]))
+            size = self.size if size is None else (int(size[0]), int(size[1]))
             plane = plane if at is None else plane.at(at)
-        matrix = plane.pixel_to_world((w, h))
-        with self.current():
-            data = self.renderer.slice_values(
-                scene,
-                matrix,
-                (w, h),
-                slab_mm=slab_mm,
-                slab_mode=slab_mode,
-                interpolation=interpolation,
-                detj=jacobian is not None,
-            )
-        image = SliceImage.from_data(data[..., :4], matrix, plane)
-        if jacobian is not None:  # det J per pixel (same draw), where the volume shows
-            det = data[..., 4]
-            image.detj = np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
+        sampling = {"slab_mm": slab_mm, "slab_mode": slab_mode, "interpolation": interpolation}
+        image = self._sample_slice(scene, plane, size, sampling, detj=jacobian is not None)
         cmp = scene.comparison
         if cmp is not None:
-            fixed_scene = Scene(cmp.fixed, transfer_function=scene.transfer_function)
-            with self.current():
-                fixed = self.renderer.slice_values(
-                    fixed_scene,
-                    matrix,
-                    (w, h),
-                    slab_mm=slab_mm,
-                    slab_mode=slab_mode,
-                    interpolation=interpolation,
-                )
-            image.fixed = SliceImage.from_data(fixed, matrix).values
             checker_mm = cmp.cell_mm if checker_mm is None else checker_mm
             blend = cmp.blend if blend is None else blend
-        win = slice_window(scene) if window is None else window
         colorize(
             image,
             look=look,
-            window=win,
+            window=slice_window(scene) if window is None else window,
             tf=scene.transfer_function,
             show=show,
             checker_mm=checker_mm,
@@ -235,20 +210,34 @@ class OffscreenRenderer:
         )
         if lines:
             warps = [] if show == "rest" else scene.warps  # the rest state: a straight grid
-            if grid_spacing_mm is None:
-                pixel = float(np.linalg.norm(matrix[:3, 0]))
-                grid_spacing_mm = nice_spacing(*scene.volume.bounds, MIN_CELL_PX * pixel)
-            image.rgba, image.notes = draw_slice_overlays(
-                image.rgba,
-                warps,
-                matrix,
-                lines,
-                grid_spacing_mm,
-                glyph_spacing_mm=glyph_spacing_mm,
-            )
+            _draw_lines(image, warps, scene.volume, lines, grid_spacing_mm, glyph_spacing_mm)
             if jacobian is not None:
                 draw_legend(image.rgba, jacobian)
         image.rgba = rendered(image.rgba)  # shows inline in Jupyter
+        return image
+
+    def _sample_slice(
+        self,
+        scene: Scene,
+        plane: SlicePlane,
+        size: tuple[int, int],
+        sampling: dict[str, Any],
+        detj: bool,
+    ) -> SliceImage:
+        """The deformed and rest values of ``plane`` (and det J, and the fixed image's
+        values when the scene compares with one) on ``size`` pixels, not yet coloured."""
+        matrix = plane.pixel_to_world(size)
+        with self.current():
+            data = self.renderer.slice_values(scene, matrix, size, detj=detj, **sampling)
+        image = SliceImage.from_data(data[..., :4], matrix, plane)
+        if detj:  # det J per pixel (same draw), where the volume shows
+            det = data[..., 4]
+            image.detj = np.where(np.isfinite(image.values), det, np.nan).astype(np.float32)
+        if scene.comparison is not None:
+            fixed_scene = Scene(scene.comparison.fixed, transfer_function=scene.transfer_function)
+            with self.current():
+                fixed = self.renderer.slice_values(fixed_scene, matrix, size, **sampling)
+            image.fixed = SliceImage.from_data(fixed, matrix).values
         return image
 
     def time_frames(
@@ -292,3 +281,24 @@ class OffscreenRenderer:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
+
+
+def _draw_lines(
+    image: SliceImage,
+    warps: Sequence[Any],
+    volume: Any,
+    lines: Sequence[str],
+    grid_spacing_mm: float | None,
+    glyph_spacing_mm: float | None,
+) -> None:
+    """Draw the ``grid``/``glyphs`` of ``lines`` over ``image.rgba`` (what was drawn in
+    ``image.notes``); the grid spacing defaults to about 1/16 of the volume, at least 12
+    pixels."""
+    matrix = image.pixel_to_world
+    if grid_spacing_mm is None:
+        pixel = float(np.linalg.norm(matrix[:3, 0]))
+        grid_spacing_mm = nice_spacing(*volume.bounds, MIN_CELL_PX * pixel)
+    assert image.rgba is not None
+    image.rgba, image.notes = draw_slice_overlays(
+        image.rgba, warps, matrix, lines, grid_spacing_mm, glyph_spacing_mm=glyph_spacing_mm
+    )
