@@ -205,8 +205,8 @@ def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
 
 def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components: int) -> None:
     """Print the starting spacing (and why, when it is the default) and the size
-    estimate; refuse one over the free disk space (the memory budget is checked by
-    the grid itself)."""
+    estimate; refuse one over the free disk space or the file-size limit (the memory
+    budget is checked by the grid itself)."""
     from voxwarp.core.field_grid import field_grid
     from voxwarp.core.field_spacing import check_room, default_spacing, estimate_bytes
     from voxwarp.core.limits import format_bytes
@@ -217,15 +217,17 @@ def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components:
     else:
         start, why = args.spacing, "--spacing"
     affine, shape = field_grid(scene.volume, start, box, args.grid)
-    size = estimate_bytes(shape, components)
+    # SimpleITK writes .mha and .h5 vectors as float64 (field_image)
+    itemsize = 8 if components == 3 and out.name.lower().endswith((".mha", ".h5")) else 4
+    size = estimate_bytes(shape, components, itemsize)
     step = " x ".join(f"{v:.4g}" for v in np.linalg.norm(affine[:3, :3], axis=0))
     dims = "x".join(str(n) for n in shape)
+    check_room(out, size)  # first: a refusal is the one line printed
     print(
         f"spacing {step} mm ({why}): {dims} nodes, about {format_bytes(size)} uncompressed"
         + (" before any refinement the field check asks for" if args.spacing is None else ""),
         file=sys.stderr,
     )
-    check_room(out, size)
 
 
 def _unmet(export: FieldExport, given: bool) -> str:
