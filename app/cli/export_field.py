@@ -113,6 +113,7 @@ def cmd_export_field(args: argparse.Namespace) -> int:
     """``voxwarp export-field SCENE.json -o field.nii.gz``: the scene's warp chain as a
     displacement field in the ITK convention (:meth:`voxwarp.scene.Scene.displacement_field`)."""
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.files import remove_stale_temps
     from voxwarp.io.fields import WRITE_SUFFIXES, field_suffix, save_displacement_field
 
     out = Path(args.output)
@@ -125,6 +126,7 @@ def cmd_export_field(args: argparse.Namespace) -> int:
         )
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
+    remove_stale_temps(out.parent, for_name=out.name)  # a killed run's, even if this one fails
     box = None if args.box is None else (args.box[:3], args.box[3:])
     with _chain_scene(args) as scene:
         _plan(args, scene, out, box, components=3)

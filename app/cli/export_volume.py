@@ -305,12 +305,14 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     import numpy as np
 
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.files import remove_stale_temps
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
     from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.render.slices import MAX_SLICE_SIDE
 
     out = Path(args.output)
     stream_format(out)  # a bad -o fails before any work
+    remove_stale_temps(out.parent, for_name=out.name)  # a killed run's, even if this one fails
     scene = load_scene_json(args.scene, "export-volume")
     affine, shape, grid = drawable_grid(scene, args.spacing, args.grid, MAX_SLICE_SIDE)
     vol = scene.volume
