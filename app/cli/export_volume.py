@@ -97,7 +97,9 @@ def add_parser(sub: Any) -> None:
         "--spacing",
         type=spacing_arg,
         metavar="MM|SX,SY,SZ",
-        help="output voxel size in mm (default: the volume's own grid)",
+        help="output voxel size in mm, 1e-06 to 1e+06 (default: the volume's own grid);"
+        " a grid over --memory-budget, over 32767 voxels a side for NIfTI, or (.nii) over"
+        " the free disk space or the file-size limit is refused before any work",
     )
     p.add_argument(
         "--grid",
