@@ -98,8 +98,9 @@ def add_parser(sub: Any) -> None:
         type=spacing_arg,
         metavar="MM|SX,SY,SZ",
         help="output voxel size in mm, 1e-06 to 1e+06 (default: the volume's own grid);"
-        " a grid over --memory-budget, over 32767 voxels a side for NIfTI, or (.nii) over"
-        " the free disk space or the file-size limit is refused before any work",
+        " a grid over --memory-budget, over 32767 voxels a side for NIfTI, or whose"
+        " uncompressed size is over the free disk space or the file-size limit is refused"
+        " before any work",
     )
     p.add_argument(
         "--grid",
@@ -215,8 +216,9 @@ NIFTI_MAX_SIDE = 32767
 def check_export_size(out: Path, shape: tuple[int, int, int], dtype: Any) -> None:
     """Refuse, before any work, an output grid the format cannot hold (NIfTI: over
     :data:`NIFTI_MAX_SIDE` a side), whose voxels exceed the memory budget (the bound on
-    an export's work and file, ``--memory-budget``), or whose uncompressed bytes exceed
-    the free disk space or the file-size limit; each with the estimate and the fix."""
+    an export's work and file, ``--memory-budget``), or whose uncompressed bytes (an
+    upper bound of a gzip file's) exceed the free disk space or the file-size limit;
+    each with the estimate and the fix."""
     import numpy as np
 
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
@@ -235,9 +237,8 @@ def check_export_size(out: Path, shape: tuple[int, int, int], dtype: Any) -> Non
             f"the output grid {dims} ({np.dtype(dtype).name}) is {over[0]}, over the memory"
             f" budget of {over[1]}; give a coarser --spacing (or raise --memory-budget)"
         )
-    if out.name.lower().endswith(".nii"):  # compressed files are smaller: their
-        # disk and file-size errors come from the write itself, one line, nothing left
-        check_room(out, int(np.prod(shape, dtype=np.float64)) * itemsize + HEADER_BYTES)
+    # the uncompressed size: exact for .nii, an upper bound for .nii.gz and .nrrd (gzip)
+    check_room(out, int(np.prod(shape, dtype=np.float64)) * itemsize + HEADER_BYTES)
 
 
 def in_file_order(

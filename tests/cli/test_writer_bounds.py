@@ -195,3 +195,20 @@ def test_killed_export_leaves_no_temp_after_the_rerun(scene_file: Path, tmp_path
     )  # fmt: skip
     _one_line_error(rerun, "over the memory budget")
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.timeout(20)
+def test_export_volume_over_the_file_size_limit_is_refused_first(
+    scene_file: Path, tmp_path: Path
+) -> None:
+    """24x20x16 int16 at 0.5 mm: 48x40x32 voxels, 120 KiB + the header allowance, over
+    a 64 KiB ``ulimit -f``: refused before any slice is drawn."""
+    out = tmp_path / "e.nii.gz"
+    cmd = [sys.executable, "-m", "voxwarp.cli.main", "export-volume", str(scene_file)]
+    proc = subprocess.run(
+        [*cmd, "-o", str(out), "--spacing", "0.5"],
+        capture_output=True, text=True, cwd=REPO, timeout=20, check=False,
+        env={**os.environ, "PYTHONPATH": str(REPO)}, preexec_fn=lambda: _limited(64 << 10),
+    )  # fmt: skip
+    _one_line_error(proc, "file-size limit", "--spacing")
+    assert os.listdir(tmp_path) == []
