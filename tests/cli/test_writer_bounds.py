@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -212,3 +213,47 @@ def test_export_volume_over_the_file_size_limit_is_refused_first(
     )  # fmt: skip
     _one_line_error(proc, "file-size limit", "--spacing")
     assert os.listdir(tmp_path) == []
+
+
+# ---------------------------------------------------------------------------- disk faults
+@pytest.fixture
+def small_fs(tmp_path: Path) -> Iterator[Path]:
+    """A 4 MiB tmpfs (skipped where mounting is not permitted; RLIMIT_FSIZE covers it)."""
+    folder = tmp_path / "fs"
+    folder.mkdir()
+    mount = ["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(folder)]
+    if subprocess.run(mount, capture_output=True, check=False).returncode != 0:
+        pytest.skip("mounting a tmpfs is not permitted here")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], capture_output=True, check=False)
+
+
+@pytest.mark.timeout(40)
+@pytest.mark.parametrize("suffix", [".h5", ".mha"])
+def test_export_field_on_full_and_read_only_disks(
+    suffix: str, scene_file: Path, small_fs: Path
+) -> None:
+    """HDF5 printed 23-54 lines on these, MetaImage its own line, before voxwarp's."""
+    out = small_fs / f"f{suffix}"
+    remount = ["mount", "-o", "remount,ro", str(small_fs)]
+    if subprocess.run(remount, capture_output=True, check=False).returncode != 0:
+        pytest.skip("remounting read-only is not permitted here")
+    proc = run_cli("export-field", str(scene_file), "-o", str(out), "--spacing", "1")
+    # the plan and the "no warps" warning come first (the write fails after them): every
+    # line is voxwarp's own, one error, nothing of HDF5's or MetaImage's
+    lines = proc.stderr.splitlines()
+    assert proc.returncode == 2
+    assert lines[-1].startswith("voxwarp: error: cannot write")
+    assert "read-only file system" in lines[-1]
+    assert [line for line in lines if "error" in line.lower()] == lines[-1:]
+    assert all(line.startswith(("voxwarp: ", "spacing ")) for line in lines), lines
+    subprocess.run(["mount", "-o", "remount,rw", str(small_fs)], check=True)
+    with open(small_fs / "filler", "wb") as fh:
+        with contextlib.suppress(OSError):
+            while True:
+                fh.write(b"\0" * 65536)
+    proc = run_cli("export-field", str(scene_file), "-o", str(out), "--spacing", "1")
+    _one_line_error(proc, "free on its disk", "--spacing")
+    assert sorted(os.listdir(small_fs)) == ["filler"]
