@@ -113,6 +113,7 @@ def cmd_export_field(args: argparse.Namespace) -> int:
     """``voxwarp export-field SCENE.json -o field.nii.gz``: the scene's warp chain as a
     displacement field in the ITK convention (:meth:`voxwarp.scene.Scene.displacement_field`)."""
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.files import remove_stale_temps
     from voxwarp.io.fields import WRITE_SUFFIXES, field_suffix, save_displacement_field
 
     out = Path(args.output)
@@ -125,6 +126,7 @@ def cmd_export_field(args: argparse.Namespace) -> int:
         )
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
+    remove_stale_temps(out.parent, for_name=out.name)  # a killed run's, even if this one fails
     box = None if args.box is None else (args.box[:3], args.box[3:])
     with _chain_scene(args) as scene:
         _plan(args, scene, out, box, components=3)
@@ -205,8 +207,8 @@ def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
 
 def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components: int) -> None:
     """Print the starting spacing (and why, when it is the default) and the size
-    estimate; refuse one over the free disk space (the memory budget is checked by
-    the grid itself)."""
+    estimate; refuse one over the free disk space or the file-size limit (the memory
+    budget is checked by the grid itself)."""
     from voxwarp.core.field_grid import field_grid
     from voxwarp.core.field_spacing import check_room, default_spacing, estimate_bytes
     from voxwarp.core.limits import format_bytes
@@ -217,15 +219,17 @@ def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components:
     else:
         start, why = args.spacing, "--spacing"
     affine, shape = field_grid(scene.volume, start, box, args.grid)
-    size = estimate_bytes(shape, components)
+    # SimpleITK writes .mha and .h5 vectors as float64 (field_image)
+    itemsize = 8 if components == 3 and out.name.lower().endswith((".mha", ".h5")) else 4
+    size = estimate_bytes(shape, components, itemsize)
     step = " x ".join(f"{v:.4g}" for v in np.linalg.norm(affine[:3, :3], axis=0))
     dims = "x".join(str(n) for n in shape)
+    check_room(out, size)  # first: a refusal is the one line printed
     print(
         f"spacing {step} mm ({why}): {dims} nodes, about {format_bytes(size)} uncompressed"
         + (" before any refinement the field check asks for" if args.spacing is None else ""),
         file=sys.stderr,
     )
-    check_room(out, size)
 
 
 def _unmet(export: FieldExport, given: bool) -> str:

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from voxwarp.cli.options import add_memory_budget_arg, load_scene_json
+from voxwarp.core import limits
 from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import InputError
 
@@ -50,15 +51,20 @@ GRIDS = ("input", "volume", "deformed")
 
 
 def spacing_arg(text: str) -> tuple[float, float, float]:
-    """``--spacing MM`` or ``SX,SY,SZ`` (mm, > 0)."""
-    form = "one voxel size in mm or three SX,SY,SZ, e.g. 1 or 0.8,0.8,2"
+    """``--spacing MM`` or ``SX,SY,SZ`` (mm, within :data:`limits.MIN_SPACING_MM` ..
+    :data:`limits.MAX_SPACING_MM`)."""
+    form = (
+        "one voxel size in mm or three SX,SY,SZ, e.g. 1 or 0.8,0.8,2, each from"
+        f" {limits.MIN_SPACING_MM:g} to {limits.MAX_SPACING_MM:g}"
+    )
     try:
         vals = [float(v) for v in text.split(",")]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
     if len(vals) == 1:
         vals *= 3
-    if len(vals) != 3 or not all(math.isfinite(v) and v > 0 for v in vals):
+    ok = all(math.isfinite(v) and limits.MIN_SPACING_MM <= v <= limits.MAX_SPACING_MM for v in vals)
+    if len(vals) != 3 or not ok:
         raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
     return vals[0], vals[1], vals[2]
 
@@ -91,7 +97,10 @@ def add_parser(sub: Any) -> None:
         "--spacing",
         type=spacing_arg,
         metavar="MM|SX,SY,SZ",
-        help="output voxel size in mm (default: the volume's own grid)",
+        help="output voxel size in mm, 1e-06 to 1e+06 (default: the volume's own grid);"
+        " a grid over --memory-budget, over 32767 voxels a side for NIfTI, or whose"
+        " uncompressed size is over the free disk space or the file-size limit is refused"
+        " before any work",
     )
     p.add_argument(
         "--grid",
@@ -200,6 +209,38 @@ def drawable_grid(
     return affine, shape, grid
 
 
+#: most voxels a side a NIfTI-1 header holds (its ``dim`` entries are int16)
+NIFTI_MAX_SIDE = 32767
+
+
+def check_export_size(out: Path, shape: tuple[int, int, int], dtype: Any) -> None:
+    """Refuse, before any work, an output grid the format cannot hold (NIfTI: over
+    :data:`NIFTI_MAX_SIDE` a side), whose voxels exceed the memory budget (the bound on
+    an export's work and file, ``--memory-budget``), or whose uncompressed bytes (an
+    upper bound of a gzip file's) exceed the free disk space or the file-size limit;
+    each with the estimate and the fix."""
+    import numpy as np
+
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.field_spacing import HEADER_BYTES, check_room
+
+    dims = "x".join(map(str, shape))
+    if out.name.lower().endswith((".nii", ".nii.gz")) and max(shape) > NIFTI_MAX_SIDE:
+        raise InputError(
+            f"the output grid {dims} has a side over the {NIFTI_MAX_SIDE} voxels a NIfTI"
+            " file holds; give a coarser --spacing or write .nrrd"
+        )
+    itemsize = np.dtype(dtype).itemsize
+    over = limits.over_budget(shape, itemsize)
+    if over is not None:
+        raise InputError(
+            f"the output grid {dims} ({np.dtype(dtype).name}) is {over[0]}, over the memory"
+            f" budget of {over[1]}; give a coarser --spacing (or raise --memory-budget)"
+        )
+    # the uncompressed size: exact for .nii, an upper bound for .nii.gz and .nrrd (gzip)
+    check_room(out, int(np.prod(shape, dtype=np.float64)) * itemsize + HEADER_BYTES)
+
+
 def in_file_order(
     volume: Any, affine: np.ndarray, shape: tuple[int, int, int]
 ) -> tuple[np.ndarray, tuple[int, int, int]]:
@@ -267,18 +308,21 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     import numpy as np
 
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.core.files import remove_stale_temps
     from voxwarp.io.volume_stream import stream_format, write_volume_slices
     from voxwarp.render.offscreen import OffscreenRenderer
     from voxwarp.render.slices import MAX_SLICE_SIDE
 
     out = Path(args.output)
     stream_format(out)  # a bad -o fails before any work
+    remove_stale_temps(out.parent, for_name=out.name)  # a killed run's, even if this one fails
     scene = load_scene_json(args.scene, "export-volume")
-    if not scene.warps:
-        warnings.warn(f"{args.scene} has no warps: the export is the volume itself", stacklevel=1)
     affine, shape, grid = drawable_grid(scene, args.spacing, args.grid, MAX_SLICE_SIDE)
     vol = scene.volume
     dtype = vol.dtype if args.dtype == "same" else np.dtype(np.float32)
+    check_export_size(out, shape, dtype)
+    if not scene.warps:
+        warnings.warn(f"{args.scene} has no warps: the export is the volume itself", stacklevel=1)
     outside = vol.value_range[0] if args.outside is None else args.outside
     t0 = time.perf_counter()
     bar = ProgressBar(shape[2], args.progress, unit="slice")

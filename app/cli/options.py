@@ -178,7 +178,11 @@ def add_memory_budget_arg(p: argparse.ArgumentParser) -> None:
 def add_volume_args(p: argparse.ArgumentParser) -> None:
     """How a volume file is read: spacing, downsampling, memory budget, NaNs, axis order, series."""
     p.add_argument(
-        "--spacing", nargs=3, type=float, metavar=("SX", "SY", "SZ"), help="voxel size in mm"
+        "--spacing",
+        nargs=3,
+        type=limits.spacing_mm,
+        metavar=("SX", "SY", "SZ"),
+        help=f"voxel size in mm ({limits.MIN_SPACING_MM:g} to {limits.MAX_SPACING_MM:g})",
     )
     p.add_argument(
         "--downsample",

@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import sys
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -228,6 +229,40 @@ def slice_plane(scene: Any, args: argparse.Namespace) -> tuple[Any, tuple[int, i
     return fit_pixels(plane, lo, hi, pixel, anchor=anchor)
 
 
+def pixel_note(asked: float | None, used: float) -> None:
+    """Warn (one line) when ``--pixel`` could not be kept: the image would exceed the
+    slice side limit, so :func:`fit_pixels` chose coarser pixels."""
+    from voxwarp.core.slice_plane import MAX_SLICE_PIXELS
+
+    if asked is not None and abs(used - asked) > 1e-6 * asked:
+        warnings.warn(
+            f"--pixel {asked:g} mm would make the image over {MAX_SLICE_PIXELS} pixels a"
+            f" side; using {used:.4g} mm pixels (give --pixel {used:.4g} or more)",
+            stacklevel=2,
+        )
+
+
+def useful_slab(scene: Any, plane: Any, slab_mm: float) -> float:
+    """``slab_mm`` clamped to the deformed box's extent across ``plane`` (twice the
+    farthest box corner from it): samples beyond it see nothing, and the slab's
+    fixed sample count would only spread thinner. Warns (one line) when it clamps."""
+    import numpy as np
+
+    # loaded when used: voxwarp --help stays light (see voxwarp.cli)
+    from voxwarp.deform.warp import box_corners
+
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.deformed_bounds())
+    reach = 2.0 * float(np.max(np.abs((box_corners(lo, hi) - plane.center) @ plane.normal)))
+    if slab_mm <= reach:
+        return slab_mm
+    warnings.warn(
+        f"--slab {slab_mm:g} mm is thicker than the deformed volume across the plane;"
+        f" using {reach:.4g} mm, which holds all of it",
+        stacklevel=2,
+    )
+    return reach
+
+
 def _check_hits(plane: Any, lo: np.ndarray, hi: np.ndarray, spec: str) -> None:
     # loaded when used: voxwarp --help stays light (see voxwarp.cli)
     from voxwarp.deform.warp import box_corners
@@ -288,11 +323,12 @@ def cmd_slice(args: argparse.Namespace) -> int:
     with OffscreenRenderer(16, 16) as r, r.current():
         with deformed_scene(args, scene, pending, r.ctx) as scene:
             plane, size = slice_plane(scene, args)
+            pixel_note(args.pixel, plane.pixel_mm(size))
             image = r.render_slice(
                 scene,
                 plane,
                 size=size,
-                slab_mm=args.slab_mm,
+                slab_mm=useful_slab(scene, plane, args.slab_mm),
                 slab_mode=args.slab_mode,
                 interpolation=args.interpolation,
                 look=args.look,

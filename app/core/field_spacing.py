@@ -92,8 +92,21 @@ def estimate_bytes(shape: Sequence[int], components: int = 3, itemsize: int = 4)
     return field_file_bytes(shape, components, itemsize) + HEADER_BYTES
 
 
+def file_size_limit() -> float:
+    """The process's file-size limit in bytes (``RLIMIT_FSIZE``, ``ulimit -f``); ``inf``
+    when unlimited or unknown (no :mod:`resource` on Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return math.inf
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return math.inf if soft in (resource.RLIM_INFINITY, -1) or soft < 0 else float(soft)
+
+
 def check_room(out: Path, nbytes: int) -> None:
-    """Raise :class:`SceneError` when ``nbytes`` is over the free space at ``out``."""
+    """Raise :class:`SceneError` when ``nbytes`` is over the free space at ``out`` or the
+    process's file-size limit (:func:`file_size_limit`): checked before a native writer
+    (HDF5, MetaImage) runs into either, which some cannot survive."""
     folder = Path(out).resolve().parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
@@ -102,4 +115,11 @@ def check_room(out: Path, nbytes: int) -> None:
         raise SceneError(
             f"{out}: the export needs about {format_bytes(nbytes)}, over the"
             f" {format_bytes(free)} free on its disk; use a coarser --spacing (or free space)"
+        )
+    cap = file_size_limit()
+    if nbytes > cap:
+        raise SceneError(
+            f"{out}: the export needs about {format_bytes(nbytes)}, over this process's"
+            f" file-size limit of {format_bytes(cap)} (ulimit -f); use a coarser --spacing"
+            " or raise the limit"
         )

@@ -214,8 +214,10 @@ def _sync_folder(folder: Path) -> None:
 def atomic_output(
     path: str | os.PathLike, suffix: str | None = None, *, mkdir: bool = True
 ) -> Iterator[Path]:
-    """Yield a temporary path to write; on success it replaces ``path`` atomically and
-    removes the temporaries of ``path`` that killed writers left (:func:`remove_stale_temps`).
+    """Yield a temporary path to write; on success it replaces ``path`` atomically. The
+    temporaries of ``path`` that killed writers left (:func:`remove_stale_temps`) are
+    removed first (every writer cleans up after a kill on its next run, as ``animate``
+    does) and again after the rename.
 
     Parameters
     ----------
@@ -247,6 +249,9 @@ def atomic_output(
             final.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise output_error(final, exc) from exc
+    # first the temporaries of this destination a killed writer left (its pid is gone):
+    # a rerun frees their space before it writes, and even when it fails
+    remove_stale_temps(final.parent, for_name=final.name)
     tmp = temp_name(final, suffix)
     try:
         yield tmp

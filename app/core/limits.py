@@ -45,6 +45,10 @@ MAX_DRAG_MM = 60000.0
 #: Range of a scene's ``zoom`` (1 frames the volume; > 1 magnifies).
 MIN_ZOOM = 1e-3
 MAX_ZOOM = 1e3
+#: Range of a voxel or pixel size given on the command line (mm): below a nanometre or
+#: above a kilometre no scan is meant, and such numbers overflow the grids they size.
+MIN_SPACING_MM = 1e-6
+MAX_SPACING_MM = 1e6
 #: Default memory budget of loading a volume: this fraction of the physical memory.
 DEFAULT_MEMORY_FRACTION = 0.5
 #: The budget when the physical memory cannot be read (bytes).
@@ -116,6 +120,23 @@ def size_arg(text: str) -> float:
         return parse_size(text, "--memory-budget")
     except VolumeError as exc:
         raise argparse.ArgumentTypeError(str(exc).rstrip(".")) from exc
+
+
+def spacing_mm(text: str, what: str = "--spacing") -> float:
+    """argparse type of a voxel size in mm: finite, in
+    :data:`MIN_SPACING_MM`..:data:`MAX_SPACING_MM`."""
+    import argparse
+
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and MIN_SPACING_MM <= v <= MAX_SPACING_MM):
+        raise argparse.ArgumentTypeError(
+            f"{what} {text!r}: a voxel size must be a number of mm from {MIN_SPACING_MM:g}"
+            f" to {MAX_SPACING_MM:g}"
+        )
+    return v
 
 
 #: The budget of the load in progress (set by :func:`memory_budget`; ``None``: unset).

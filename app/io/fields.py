@@ -578,13 +578,20 @@ def _write_sitk(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, str
     img = field_image(field)
     for key, value in notes.items():
         img.SetMetaData(key, value)
-    try:
-        if field_suffix(tmp) == ".h5":
-            sitk.WriteTransform(sitk.DisplacementFieldTransform(img), str(tmp))
+    # HDF5 and MetaImage print their own diagnostics (23-54 lines on a full disk): hold
+    # them back and report one line (atomic_output words it with the path and the fix)
+    with native_stderr() as said:
+        try:
+            if field_suffix(tmp) == ".h5":
+                sitk.WriteTransform(sitk.DisplacementFieldTransform(img), str(tmp))
+            else:
+                sitk.WriteImage(img, str(tmp), True)
+        except RuntimeError as exc:
+            error: RuntimeError | None = exc
         else:
-            sitk.WriteImage(img, str(tmp), True)
-    except RuntimeError as exc:
-        raise OSError(_first_line(exc)) from exc
+            error = None
+    if error is not None:
+        raise OSError(_library_reason(said, error)) from error
 
 
 def _write_npz(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, str]) -> None:

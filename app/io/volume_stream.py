@@ -60,7 +60,13 @@ def _nifti_header(
     import nibabel as nib
 
     hdr = nib.Nifti1Header()
-    hdr.set_data_shape(shape)
+    try:
+        hdr.set_data_shape(shape)
+    except nib.spatialimages.HeaderDataError as exc:  # a side over 32767 (int16 dim)
+        raise VolumeError(
+            f"a NIfTI file cannot hold {'x'.join(map(str, shape))} voxels ({exc}); write"
+            " .nrrd or use a coarser grid"
+        ) from exc
     hdr.set_data_dtype(dtype)
     code = 1 if oriented else 2  # scanner (patient) space, or "aligned", as save_volume
     hdr.set_sform(affine, code=code)
@@ -148,6 +154,7 @@ def write_volume_slices(
     a = np.asarray(affine, dtype=np.float64)
     file_dt = dt.newbyteorder("<")
     suffix = ".nii.gz" if fmt == "nii.gz" else f".{fmt}"
+    header = None if fmt == "nrrd" else _nifti_header(a, shape, dt, oriented)  # before a file
     with atomic_open(path, "wb", suffix=suffix) as fh:
         if fmt == "nrrd":
             fh.write(nrrd_header(a, shape, dt, oriented).encode("ascii"))
@@ -155,8 +162,8 @@ def write_volume_slices(
         if fmt in ("nii.gz", "nrrd"):
             body = gzip.GzipFile(fileobj=fh, mode="wb", compresslevel=GZIP_LEVEL, mtime=0)
         try:
-            if fmt != "nrrd":
-                _nifti_header(a, shape, dt, oriented).write_to(body)
+            if header is not None:
+                header.write_to(body)
             _write_slices(body, slices, shape, file_dt)
         except BaseException:
             if body is not fh:  # the first error is the one to report

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.core.camera import Camera
+from voxwarp.core.limits import MAX_ZOOM, MIN_ZOOM
 from voxwarp.editing.session import EditorError, EditSession, Snapshot
 
 #: pixels the pointer may move before a press becomes a drag (orbit, pan)
@@ -45,6 +46,26 @@ WHEEL_PX_PER_STEP = 100.0
 SETTLE_S = 0.25
 
 
+#: largest view side in CSS pixels
+MAX_VIEW_SIDE = 16384
+
+
+def view_size(size: Any) -> tuple[int, int]:
+    """``size`` as ``(width, height)`` whole CSS pixels, each 1 to :data:`MAX_VIEW_SIDE`;
+    anything else (a string, three numbers, NaN) is a one-line :class:`EditorError`."""
+    try:
+        if isinstance(size, str | bytes):
+            raise TypeError("a string")
+        w, h = (float(v) for v in size)
+        if not all(math.isfinite(v) and v >= 1 for v in (w, h)):
+            raise ValueError("not positive and finite")
+    except (TypeError, ValueError) as exc:
+        raise EditorError(
+            f"size must be (width, height) in CSS pixels, e.g. (480, 360); got {size!r:.60}"
+        ) from exc
+    return min(round(w), MAX_VIEW_SIDE), min(round(h), MAX_VIEW_SIDE)
+
+
 class Interaction:
     """Camera, picking, dragging and undo of one view of an edit session.
 
@@ -58,7 +79,9 @@ class Interaction:
 
     def __init__(self, session: EditSession, size: tuple[int, int]) -> None:
         self.session = session
-        self.size = (max(1, int(size[0])), max(1, int(size[1])))
+        self.size = view_size(size)
+        #: magnification since the camera was fitted (kept in MIN_ZOOM..MAX_ZOOM)
+        self.magnification = 1.0
         self.camera: Camera = self.fitted_camera()
         self.camera_moved = False
         self._press: dict[str, Any] | None = None
@@ -79,13 +102,15 @@ class Interaction:
 
     def resize(self, size: tuple[int, int]) -> None:
         """The view's size changed; the camera is refitted until the user moves it."""
-        self.size = (max(1, int(size[0])), max(1, int(size[1])))
+        self.size = view_size(size)
         if not self.camera_moved:
             self.camera = self.fitted_camera()
+            self.magnification = 1.0
 
     def reset_camera(self) -> None:
         """Refit the camera to the scene."""
         self.camera = self.fitted_camera()
+        self.magnification = 1.0
         self.camera_moved = False
         self.note_input()
 
@@ -100,8 +125,14 @@ class Interaction:
         self._moved_camera()
 
     def zoom(self, factor: float) -> None:
-        """Magnify by ``factor`` (> 1 zooms in)."""
-        self.camera.zoom(float(factor))
+        """Magnify by ``factor`` (> 1 zooms in), within :data:`MIN_ZOOM`..:data:`MAX_ZOOM`
+        of the fitted view (so a burst of wheel events cannot shrink the camera's
+        distance to zero)."""
+        target = min(MAX_ZOOM, max(MIN_ZOOM, self.magnification * float(factor)))
+        if not math.isfinite(target) or target == self.magnification:
+            return
+        self.camera.zoom(target / self.magnification)
+        self.magnification = target
         self._moved_camera()
 
     def _moved_camera(self) -> None:

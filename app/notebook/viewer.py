@@ -40,7 +40,7 @@ from voxwarp.io.image_objects import image_kind
 from voxwarp.io.samples import suggested_transfer_function
 from voxwarp.io.volumes import load_volume
 from voxwarp.notebook.gl_thread import GLThread, SameThread
-from voxwarp.notebook.interaction import SETTLE_S, Interaction
+from voxwarp.notebook.interaction import SETTLE_S, Interaction, view_size
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
 from voxwarp.render.inline_image import RenderedImage, png_bytes
 from voxwarp.render.jacobian_overlay import (
@@ -165,7 +165,7 @@ class Viewer(RemoteFrameBuffer):
         fixed: Any = None,
         **settings: Any,
     ) -> None:
-        w, h = (max(1, int(v)) for v in size)
+        w, h = view_size(size)  # one-line EditorError for a string, three numbers, ...
         super().__init__(css_width=f"{w}px", css_height=f"{h}px")
         # an own context lives on a thread of its own (Jupyter calls from several)
         self._gl: GLThread | SameThread = GLThread() if ctx is None else SameThread()
@@ -464,6 +464,8 @@ class Viewer(RemoteFrameBuffer):
 
     def close(self, *args: Any, **kwargs: Any) -> None:
         """Close the widget and free its GPU resources."""
+        if "_released" not in vars(self):  # __init__ refused its size: no widget was made
+            return
         super().close(*args, **kwargs)
         self.release()
 

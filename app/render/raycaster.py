@@ -47,7 +47,7 @@ from voxwarp.core.transfer_function import TABLE_SIZE, TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import box_corners, compose_glsl, fold_affine
-from voxwarp.errors import RenderError, VolumeTooLargeError
+from voxwarp.errors import RenderError, VolumeTooLargeError, VoxwarpError
 from voxwarp.render import gradients
 from voxwarp.render.fixed_texture import FixedTexture, compare_uniforms, uses_gradient_texture
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
@@ -120,6 +120,30 @@ class _VolumeGPU:
             self.gradient = None
         self.skip.release()
         self.texture = None  # type: ignore[assignment]
+
+
+def upload_error(volume: Volume, exc: BaseException) -> Exception:
+    """The one-line error of a failed volume upload: moderngl's GL errors (and a
+    ``GL_OUT_OF_MEMORY``) are the GPU failing to allocate the texture; host memory
+    running out says so; anything else is reported as what it is, not as the GPU's."""
+    import moderngl
+
+    detail = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, VoxwarpError):
+        return exc
+    if isinstance(exc, moderngl.Error):
+        return VolumeTooLargeError(
+            f"the GPU could not allocate the texture for volume {volume.shape}"
+            f" ({detail}); downsample it (load_volume(..., downsample=2))"
+        )
+    if isinstance(exc, MemoryError):
+        return VolumeTooLargeError(
+            f"not enough memory to prepare volume {volume.shape} for the GPU; downsample"
+            " it (load_volume(..., downsample=2)) or close other programs"
+        )
+    return RenderError(
+        f"uploading volume {volume.shape} to the GPU failed: {type(exc).__name__}: {detail}"
+    )
 
 
 def _tf_key(tf: TransferFunction) -> tuple:
@@ -320,11 +344,8 @@ class Renderer:
         self.ctx.error  # noqa: B018 - clear any stale error flag
         try:
             gpu = _VolumeGPU(self.ctx, volume, self.sampling == "slice_pairs")
-        except Exception as exc:  # moderngl raises plain Error on GL failures
-            raise VolumeTooLargeError(
-                f"the GPU could not allocate the texture for volume {volume.shape}"
-                f" ({exc}); downsample it (load_volume(..., downsample=2))"
-            ) from exc
+        except Exception as exc:  # worded by upload_error, the cause kept
+            raise upload_error(volume, exc) from exc
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             gpu.release()
