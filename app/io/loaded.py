@@ -202,3 +202,19 @@ def native_stderr() -> Iterator[list[str]]:
             os.close(saved)
             held.seek(0)
             lines.extend(held.read().decode("utf-8", "replace").splitlines())
+
+
+@contextmanager
+def quiet_nibabel() -> Iterator[None]:
+    """Keep nibabel's log lines (``pixdim[1,2,3] should be non-zero ...``, printed on
+    its ``nibabel.global`` logger) off stderr during the block: voxwarp reports one
+    line of its own."""
+    import logging
+
+    logger = logging.getLogger("nibabel.global")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)

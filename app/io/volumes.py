@@ -77,6 +77,7 @@ import numpy as np
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
+from voxwarp.core.json_input import parse_json_text
 from voxwarp.core.orientation import PATIENT_SPACES, affine_to_ras
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
@@ -759,7 +760,7 @@ def _raw_for_sidecar(sidecar: Path) -> Path:
 def _read_sidecar(sidecar: Path) -> dict[str, Any]:
     try:
         text = sidecar.read_text(encoding="utf-8")
-        meta = json.loads(text)
+        meta = parse_json_text(text)
     except OSError as exc:
         raise VolumeError(f"cannot read the sidecar {sidecar}: {exc.strerror or exc}.") from exc
     except (ValueError, RecursionError) as exc:
