@@ -48,6 +48,7 @@ import numpy as np
 from voxwarp.core import extras
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_output
+from voxwarp.core.input_files import check_regular
 from voxwarp.core.orientation import PATIENT_SPACES
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp, set_field_reader
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError
@@ -380,6 +381,7 @@ def _metaimage_data_file(path: Path) -> None:
                     f"{path.name} names the data file {name!r} outside its folder; voxwarp"
                     " reads MetaImage data only beside the header: move it there"
                 )
+            check_regular(path.parent / name, f"{path.name}'s data file", FieldError)
             return
 
 

@@ -77,6 +77,7 @@ import numpy as np
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
+from voxwarp.core.input_files import check_regular
 from voxwarp.core.json_input import parse_json_text
 from voxwarp.core.orientation import PATIENT_SPACES, affine_to_ras
 from voxwarp.core.volume import Volume, check_finite
@@ -1059,6 +1060,9 @@ def _check_nrrd_data_files(path: Path) -> None:
                 f" load_volume(..., allow_data_dirs=[{str(target.parent)!r}]) or"
                 f" {NRRD_DATA_DIRS_ENV}={target.parent}"
             )
+        if "%" not in name and not name.startswith("LIST"):
+            home = path.parent.resolve()
+            check_regular(home / os.path.expanduser(name), f"{path.name}'s data file", VolumeError)
     if value.split()[:1] == ["LIST"]:
         raise VolumeError(
             f"the NRRD header {path} spreads its data over several files (data file: LIST),"
