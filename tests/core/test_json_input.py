@@ -172,9 +172,11 @@ def test_cli_tf_fifo_and_deep_tf_are_one_line(tmp_path: Path) -> None:
         ("slice", "sample:tubes", "--look", "tf", "--tf", str(deep), "-o", out),
     ):
         proc = run_cli(*argv, timeout=20)
-        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+        assert proc.returncode == 2, proc.stderr
+        assert "Traceback" not in proc.stderr
         lines = [x for x in proc.stderr.splitlines() if x.strip()]
-        assert len(lines) == 1 and ("FIFO" in lines[0] or "64 deep" in lines[0]), proc.stderr
+        assert len(lines) == 1, proc.stderr
+        assert "FIFO" in lines[0] or "64 deep" in lines[0], proc.stderr
 
 
 def test_scene_nan_iso_refused_bom_accepted(tmp_path: Path) -> None:

@@ -15,7 +15,10 @@ from voxwarp.errors import FieldError, SceneError, VolumeError
 from voxwarp.io.volumes import load_volume
 
 NHDR = "NRRD0004\ntype: float\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: {}\n\n"
-MHD = "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_FLOAT\nElementDataFile = {}\n"
+MHD = (
+    "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_FLOAT\n"
+    "ElementDataFile = {}\n"
+)
 
 
 @pytest.mark.timeout(20)
