@@ -242,7 +242,7 @@ def _read_nrrd(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str
     affine = _nrrd_field_affine(header, vec_axis, path.name)
     frame = header.get("measurement frame")
     if frame is not None:  # vectors in the measurement frame -> the header's space
-        data = data @ np.asarray(frame, dtype=np.float32).T
+        data = data @ _measurement_frame(frame, path.name).T
     fx, fy = PATIENT_SPACES[space]
     flip = np.array([fx, fy, 1.0, 1.0])
     if convention == "voxel":  # vectors along the grid's index axes: no flip
@@ -295,6 +295,20 @@ def _nrrd_field_affine(header: dict[str, Any], vec_axis: int, where: str) -> np.
     affine[:3, :3] = rows.T
     affine[:3, 3] = origin
     return affine
+
+
+def _measurement_frame(frame: Any, where: str) -> np.ndarray:
+    """An NRRD ``measurement frame`` as a finite 3x3 matrix; one line otherwise."""
+    try:
+        m = np.asarray(frame, dtype=np.float32)
+    except (TypeError, ValueError):
+        m = np.zeros(0)
+    if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+        raise FieldError(
+            f"{where}: its 'measurement frame' must be three finite 3-vectors, e.g."
+            " measurement frame: (1,0,0) (0,1,0) (0,0,1)"
+        )
+    return m
 
 
 def _nrrd_vector_axis(shape: Sequence[int], header: dict[str, Any], where: str) -> int:
@@ -351,6 +365,8 @@ def _check_npz_member(archive: Any, member: str, where: str) -> None:
         fmt = np.lib.format
         v1 = fmt.read_magic(fh) == (1, 0)
         shape, _, dtype = (fmt.read_array_header_1_0 if v1 else fmt.read_array_header_2_0)(fh)
+    if dtype.kind not in "iuf":
+        raise FieldError(f"{where}: {member} holds {dtype} values; write real numbers (float32)")
     _limits.check_load_bytes(tuple(shape), max(int(dtype.itemsize), 4), where)
     need = int(np.prod(shape, dtype=np.float64)) * int(dtype.itemsize)
     check_inflation(need, info.compress_size, f"{where} ({member})")

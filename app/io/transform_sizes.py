@@ -51,13 +51,77 @@ def _grid(fixed: list[float], dim: int, where: str) -> list[int]:
     return [int(v) for v in size]
 
 
-def check_grid(name: str, fixed: list[float], n_params: int | None, where: str) -> None:
-    """Refuse a grid transform ``name`` whose FixedParameters imply a grid over the
-    memory budget, or whose Parameters count (``n_params``) does not fit the grid."""
-    base, dims = _DIM.sub("", name.split("_double")[0].split("_float")[0]), _DIM.search(name)
-    if base not in GRID_TRANSFORMS:
+#: Linear ITK transforms voxwarp reads from text files -> (Parameters count, accepted
+#: FixedParameters counts) in 3-D. ITK trusts these counts: a short Parameters line
+#: corrupted its heap (found by tests/fuzz/test_fuzz_readers.py).
+LINEAR_COUNTS: dict[str, tuple[int, tuple[int, ...]]] = {
+    "AffineTransform": (12, (3,)),
+    "MatrixOffsetTransformBase": (12, (3,)),
+    "Euler3DTransform": (6, (3, 4)),
+    "VersorRigid3DTransform": (6, (3,)),
+    "VersorTransform": (3, (3,)),
+    "QuaternionRigidTransform": (7, (3,)),
+    "Similarity3DTransform": (7, (3,)),
+    "ScaleSkewVersor3DTransform": (15, (3,)),
+    "ScaleVersor3DTransform": (9, (3,)),
+    "ComposeScaleSkewVersor3DTransform": (12, (3,)),
+    "ScaleTransform": (3, (3,)),
+    "ScaleLogarithmicTransform": (3, (3,)),
+    "TranslationTransform": (3, (0,)),
+    "IdentityTransform": (0, (0,)),
+}
+
+
+def _base_and_dim(name: str, where: str) -> str:
+    """The transform's class name without ``_double_3_3``; one line unless 3-D."""
+    dims = _DIM.search(name)
+    base = _DIM.sub("", name)
+    for precision in ("_double", "_float"):
+        base = base.removesuffix(precision)
+    if dims and dims.groups() != ("3", "3"):
+        raise FieldError(f"{where} is {dims[1]}-D; voxwarp reads 3-D transforms only")
+    return base
+
+
+def check_linear(base: str, params: list[float], n_fixed: int, where: str) -> None:
+    """Refuse a linear transform whose Parameters/FixedParameters counts differ from
+    :data:`LINEAR_COUNTS`, or whose Parameters are not finite."""
+    n_params, fixed_counts = LINEAR_COUNTS[base]
+    if len(params) != n_params or n_fixed not in fixed_counts:
+        raise FieldError(
+            f"{where}: {len(params)} Parameters and {n_fixed} FixedParameters; a {base} has"
+            f" {n_params} and {' or '.join(map(str, fixed_counts))}: the file is damaged"
+        )
+    if not all(math.isfinite(v) for v in params):
+        raise FieldError(f"{where}: its Parameters hold NaN or infinity; the file is damaged")
+
+
+def check_block(name: str, params: str | None, fixed: str | None, where: str) -> None:
+    """Check one transform of a text file (its name and raw Parameters/FixedParameters
+    values) before ITK builds it; composites hold no numbers of their own."""
+    base = _base_and_dim(name, where)
+    if base == "CompositeTransform":
         return
-    dim = int(dims.group(1)) if dims else 3
+    if params is None or fixed is None:
+        raise FieldError(f"{where} lacks its Parameters or FixedParameters line; it is damaged")
+    fixed_values = _numbers(fixed, f"{where} FixedParameters")
+    if base in GRID_TRANSFORMS:
+        check_grid(base, fixed_values, len(params.split()), where)
+    elif base in LINEAR_COUNTS:
+        check_linear(base, _numbers(params, f"{where} Parameters"), len(fixed_values), where)
+    else:
+        raise FieldError(
+            f"{where}: voxwarp reads these ITK transforms from text files: linear ones"
+            f" ({', '.join(sorted(LINEAR_COUNTS))}), BSplineTransform and"
+            " DisplacementFieldTransform; convert it to an AffineTransform or a"
+            " displacement field"
+        )
+
+
+def check_grid(base: str, fixed: list[float], n_params: int | None, where: str) -> None:
+    """Refuse a grid transform ``base`` whose FixedParameters imply a grid over the
+    memory budget, or whose Parameters count (``n_params``) does not fit the grid."""
+    dim = 3
     size = _grid(fixed, dim, where)
     nodes = math.prod(size)
     over = _limits.over_budget((nodes, dim), COEFFICIENT_BYTES)
@@ -76,22 +140,21 @@ def check_grid(name: str, fixed: list[float], n_params: int | None, where: str) 
 
 def check_transform_text(path: Path) -> None:
     """Check every transform of the ITK text file ``path`` (``#Insight Transform File``)
-    with :func:`check_grid` before SimpleITK reads it; non-text files are left alone."""
+    with :func:`check_block` before SimpleITK reads it; non-text files are left alone."""
     with open(path, "rb") as fh:
         head = fh.read(64)
     if not head.lstrip().startswith(b"#Insight Transform File"):
         return
-    text = path.read_bytes().decode("ascii", "replace")
-    name, params = "", None
-    for raw in text.splitlines():
+    blocks: list[dict[str, str]] = []
+    for raw in path.read_bytes().decode("ascii", "replace").splitlines():
         key, sep, value = raw.partition(":")
         key = key.strip()
-        if not sep:
-            continue
-        if key == "Transform":
-            name, params = value.strip(), None
-        elif key == "Parameters":
-            params = len(value.split())
-        elif key == "FixedParameters" and name:
-            where = f"{path.name} ({name})"
-            check_grid(name, _numbers(value, f"{where} FixedParameters"), params, where)
+        if sep and key == "Transform":
+            blocks.append({"name": value.strip()})
+        elif sep and key in ("Parameters", "FixedParameters") and blocks:
+            blocks[-1][key] = value
+    for block in blocks:
+        name = block["name"]
+        check_block(
+            name, block.get("Parameters"), block.get("FixedParameters"), f"{path.name} ({name})"
+        )

@@ -88,9 +88,9 @@ def test_grid_budget_is_exact() -> None:
     passes, one byte less refuses it."""
     fixed = [10.0, 10.0, 10.0, *map(float, IDENTITY_FIXED.split())]
     with limits.memory_budget(24_000):
-        check_grid("BSplineTransform_double_3_3", fixed, 3000, "t")
+        check_grid("BSplineTransform", fixed, 3000, "t")
     with limits.memory_budget(23_999), pytest.raises(FieldError, match="memory budget"):
-        check_grid("BSplineTransform_double_3_3", fixed, 3000, "t")
+        check_grid("BSplineTransform", fixed, 3000, "t")
 
 
 @pytest.mark.parametrize(
@@ -265,3 +265,38 @@ def test_dicom_rows_not_matching_the_pixel_data_is_refused(tmp_path: Path) -> No
     ds.save_as(p)
     with pytest.raises(VolumeError, match=r"pixel data holds 240 bytes .* need 160"):
         load_volume(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("name", "params", "fixed", "match"),
+    [
+        ("Euler3DTransform_double_3_3", "0 0 0", "0 0 0", "3 Parameters .* has 6"),
+        ("AffineTransform_double_3_3", "1 0 0 0 1 0 0 0 1 0 0 0", "0", "1 FixedParameters"),
+        ("AffineTransform_double_3_3", "1 0 0 0 1 0 0 0 1 0 0 inf", "0 0 0", "NaN or infinity"),
+        ("AffineTransform_double_2_2", "1 0 0 1 0 0", "0 0", "2-D"),
+        ("KernelTransform_double_3_3", "0", "0", "convert it"),
+    ],
+    ids=["short-euler", "short-fixed", "inf", "2d", "unknown"],
+)
+def test_linear_parameter_counts_are_checked_before_itk(
+    name: str, params: str, fixed: str, match: str, tmp_path: Path
+) -> None:
+    """ITK trusts the counts: an Euler3DTransform with 3 Parameters corrupted its heap
+    (found by the fuzz suite)."""
+    path = _tfm(tmp_path / "t.tfm", name, params, fixed)
+    with pytest.raises(FieldError, match=match):
+        load_transform(path)
+
+
+def test_euler_transform_as_sitk_writes_it_loads(tmp_path: Path) -> None:
+    """Oracle: a 90° rotation about z read back equals SimpleITK's own matrix."""
+    t = sitk.Euler3DTransform((0, 0, 0), 0, 0, np.pi / 2, (1, 2, 3))
+    path = tmp_path / "e.tfm"
+    sitk.WriteTransform(t, str(path))
+    (warp,) = load_transform(path)
+    m = warp.affine_matrix()  # fixed -> moving, RAS (as voxwarp info reports it)
+    lps = np.diag([-1.0, -1.0, 1.0, 1.0])
+    expect = np.eye(4)
+    expect[:3, :3] = np.asarray(t.GetMatrix()).reshape(3, 3)
+    expect[:3, 3] = t.GetTranslation()
+    np.testing.assert_allclose(m, lps @ expect @ lps, atol=1e-9)
