@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp import sample_volumes
-from voxwarp.core.json_input import read_json
+from voxwarp.core.json_input import parse_json_text
 from voxwarp.core.volume import Volume
 from voxwarp.errors import VolumeError
 
@@ -123,7 +123,7 @@ def sample_files(root: Traversable | None = None) -> dict[str, str]:
     out = {}
     for item in sorted((root or _root()).iterdir(), key=lambda t: t.name):
         if item.name.endswith(".json") and item.is_file():
-            kind = json_kind(read_json(item))
+            kind = json_kind(parse_json_text(item.read_text(encoding="utf-8")))
             if kind:
                 out[item.name[: -len(".json")]] = kind
     return out
