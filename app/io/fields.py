@@ -54,6 +54,7 @@ from voxwarp.deform.fields.displacement import DisplacementFieldWarp, set_field_
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.errors import FieldError, VolumeError
 from voxwarp.io.inflation import check_inflation
+from voxwarp.io.itk_probe import probe_binary_transform
 from voxwarp.io.loaded import native_stderr, quiet_nibabel
 from voxwarp.io.transform_sizes import check_transform_text
 from voxwarp.io.volumes import (
@@ -464,6 +465,8 @@ def _read_transform_file(path: Path) -> list[Warp]:
     sitk = _sitk(f"reading the ITK transform file {path.name}")
     _check_file_budget(path)
     check_transform_text(path)  # the grid its FixedParameters imply, before ITK allocates it
+    if field_suffix(path) in (".h5", ".hdf5", ".mat"):
+        probe_binary_transform(sitk, path)  # binary: a forked child reads it first
     with native_stderr() as said:
         try:
             transform = sitk.ReadTransform(str(path))

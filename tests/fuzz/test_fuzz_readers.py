@@ -85,6 +85,35 @@ def test_itk_text_transforms(text: str, suffix: str) -> None:
         _load(tmp, f"t{suffix}", text.encode())
 
 
+def _bspline_h5() -> bytes:
+    import SimpleITK as sitk
+
+    t = sitk.BSplineTransformInitializer(sitk.Image([8, 8, 8], sitk.sitkFloat32), [3, 3, 3])
+    with tempfile.TemporaryDirectory() as tmp:
+        sitk.WriteTransform(t, str(Path(tmp) / "b.h5"))
+        return (Path(tmp) / "b.h5").read_bytes()
+
+
+@fuzz_settings(60)
+@given(
+    sizes=st.lists(
+        st.one_of(st.sampled_from([0.0, -6.0, 1e5, 1e12, 2.0**63, 6.5]), st.floats()),
+        min_size=3,
+        max_size=3,
+    )
+)
+def test_itk_h5_bspline_grid_sizes(sizes: list[float]) -> None:
+    """The grid-size doubles of an ITK .h5 B-spline replaced by hostile ones."""
+    pytest.importorskip("SimpleITK")
+    import struct
+
+    raw = _bspline_h5()
+    six = struct.pack("<d", 6.0) * 3
+    blob = raw.replace(six, struct.pack("<3d", *sizes))
+    with tempfile.TemporaryDirectory() as tmp, limits.memory_budget("256M"):
+        _load(tmp, "t.h5", blob)
+
+
 # ---------------------------------------------------------------------------- NRRD fields
 def _nrrd_field() -> bytes:
     u = np.random.default_rng(0).normal(0, 1, (3, 3, 2, 3)).astype(np.float32)

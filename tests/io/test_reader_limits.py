@@ -300,3 +300,29 @@ def test_euler_transform_as_sitk_writes_it_loads(tmp_path: Path) -> None:
     expect[:3, :3] = np.asarray(t.GetMatrix()).reshape(3, 3)
     expect[:3, 3] = t.GetTranslation()
     np.testing.assert_allclose(m, lps @ expect @ lps, atol=1e-9)
+
+
+def _bspline_h5(path: Path, size: float) -> Path:
+    """An ITK .h5 B-spline (6x6x6 control points) whose grid size doubles say ``size``."""
+    import struct
+
+    t = sitk.BSplineTransformInitializer(sitk.Image([8, 8, 8], sitk.sitkFloat32), [3, 3, 3])
+    sitk.WriteTransform(t, str(path))
+    raw = path.read_bytes()
+    six = struct.pack("<d", 6.0) * 3
+    assert raw.count(six) == 1
+    path.write_bytes(raw.replace(six, struct.pack("<d", size) * 3))
+    return path
+
+
+@pytest.mark.timeout(20)
+def test_h5_bspline_grid_that_aborts_itk_is_one_line(tmp_path: Path) -> None:
+    """The .h5 form of the 100000³ grid: ITK aborted voxwarp (rc 134); now a forked
+    child reads it first and the process reports one line."""
+    path = _bspline_h5(tmp_path / "b.h5", 100000.0)
+    line = _one_error_line(run_cli("info", str(path), timeout=20))
+    assert "b.h5" in line
+    assert "SIGABRT" in line
+    assert "memory budget" in line
+    (warp,) = load_transform(_bspline_h5(tmp_path / "ok.h5", 6.0))  # the untouched grid
+    assert isinstance(warp, DisplacementFieldWarp)
