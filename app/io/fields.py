@@ -402,6 +402,22 @@ def _metaimage_data_file(path: Path) -> None:
             return
 
 
+def _check_metaimage_inflation(path: Path, values: int) -> None:
+    """A compressed MetaImage's ``values`` (header size, float32 at least) against
+    :func:`check_inflation` of its stored bytes (the ``.mha``, or the ``.mhd``'s data)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16).decode("ascii", "ignore")
+    tags = {
+        k.strip(): v.strip() for k, sep, v in (x.partition("=") for x in head.splitlines()) if sep
+    }
+    if tags.get("CompressedData", "").lower() != "true":
+        return
+    name = tags.get("ElementDataFile", "LOCAL")
+    stored = path if name.upper() == "LOCAL" else path.parent / name
+    if stored.is_file():  # a missing data file: SimpleITK's read names it
+        check_inflation(values * 4, stored.stat().st_size, path.name)
+
+
 def _sitk_field(image: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
     """Vectors (nx, ny, nz, 3) and LPS affine of a SimpleITK vector image."""
     if image.GetDimension() != 3 or image.GetNumberOfComponentsPerPixel() != 3:
@@ -437,6 +453,7 @@ def _read_metaimage(path: Path) -> tuple[np.ndarray, Any, str, str]:
             size = reader.GetSize()
             comps = reader.GetNumberOfComponents()
             _limits.check_load_bytes((*size, comps), 4, path.name)
+            _check_metaimage_inflation(path, int(np.prod([*size, comps], dtype=np.float64)))
             image, error = reader.Execute(), None
         except RuntimeError as exc:
             image, error = None, exc

@@ -78,7 +78,7 @@ from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
 from voxwarp.core.input_files import check_regular
-from voxwarp.core.json_input import parse_json_text
+from voxwarp.core.json_input import parse_json_text, read_json_text
 from voxwarp.core.orientation import PATIENT_SPACES, affine_to_ras
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
@@ -760,7 +760,7 @@ def _raw_for_sidecar(sidecar: Path) -> Path:
 
 def _read_sidecar(sidecar: Path) -> dict[str, Any]:
     try:
-        text = sidecar.read_text(encoding="utf-8")
+        text = read_json_text(sidecar)
         meta = parse_json_text(text)
     except OSError as exc:
         raise VolumeError(f"cannot read the sidecar {sidecar}: {exc.strerror or exc}.") from exc

@@ -221,12 +221,20 @@ def test_npz_deflate_bomb_is_refused(tmp_path: Path) -> None:
         load_transform(path)
 
 
+@pytest.mark.timeout(20)
+def test_compressed_mha_bomb_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "bomb.mha"
+    sitk.WriteImage(sitk.Image([256, 256, 128], sitk.sitkVectorFloat32, 3), str(path), True)
+    with pytest.raises(FieldError, match="decompression bomb"):
+        load_transform(path)
+
+
 def test_compressed_field_of_a_real_ratio_loads(tmp_path: Path) -> None:
     """A gzip NRRD and an .npz of noisy vectors load (the ratio check passes them)."""
     rng = np.random.default_rng(1)
     u = rng.normal(0, 2, (6, 5, 4, 3)).astype(np.float32)
     w = DisplacementFieldWarp(u, np.eye(4))
-    for name in ("f.nrrd", "f.npz", "f.nii.gz"):
+    for name in ("f.nrrd", "f.npz", "f.nii.gz", "f.mha"):
         (back,) = load_transform(save_displacement_field(w, tmp_path / name))
         np.testing.assert_allclose(back.displacements, u, atol=1e-6)
 
