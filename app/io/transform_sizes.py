@@ -45,8 +45,9 @@ def _grid(fixed: list[float], dim: int, where: str) -> list[int]:
         )
     size = fixed[:dim]
     if not all(v >= 1 and v == int(v) for v in size):
+        shown = ", ".join(f"{v:.6g}" for v in size)
         raise FieldError(
-            f"{where}: grid size {size} must be positive whole numbers; fix FixedParameters"
+            f"{where}: grid size [{shown}] must be positive whole numbers; fix FixedParameters"
         )
     return [int(v) for v in size]
 
@@ -124,17 +125,20 @@ def check_grid(base: str, fixed: list[float], n_params: int | None, where: str) 
     dim = 3
     size = _grid(fixed, dim, where)
     nodes = math.prod(size)
+    shown = "x".join(f"{v:.6g}" for v in size)
+    if nodes.bit_length() > 64:
+        raise FieldError(f"{where}: its {base} grid of {shown} nodes is over 2^64; it is damaged")
     over = _limits.over_budget((nodes, dim), COEFFICIENT_BYTES)
     if over is not None:
         raise FieldError(
-            f"{where}: its {base} grid of {'x'.join(map(str, size))} nodes needs {over[0]}"
+            f"{where}: its {base} grid of {shown} nodes needs {over[0]}"
             f" of coefficients, over the memory budget of {over[1]}; the file is damaged or"
             " not meant for this machine (raise --memory-budget SIZE only if it is genuine)"
         )
     if n_params is not None and n_params != nodes * dim:
         raise FieldError(
             f"{where}: Parameters holds {n_params:,} numbers but its {base} grid of"
-            f" {'x'.join(map(str, size))} nodes needs {nodes * dim:,}; the file is damaged"
+            f" {shown} nodes needs {nodes * dim:,}; the file is damaged"
         )
 
 

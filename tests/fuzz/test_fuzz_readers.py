@@ -262,11 +262,14 @@ def scene_text(draw: st.DrawFn) -> bytes:
 
 
 @fuzz_settings(150)
-@given(raw=scene_text())
-def test_scene_json_text(raw: bytes) -> None:
+@given(raw=scene_text(), via=st.sampled_from(["scene", "napari"]))
+def test_scene_json_text(raw: bytes, via: str) -> None:
+    """Scene JSON text through Scene.load and through the napari reader."""
+    from voxwarp.napari_plugin.reader import read_scene
     from voxwarp.scene import Scene
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "s.json"
         path.write_bytes(raw)
-        outcome("readers: scene text", lambda: Scene.load(path))
+        load = Scene.load if via == "scene" else read_scene
+        outcome(f"readers: scene text ({via})", lambda: load(path))
