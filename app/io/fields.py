@@ -55,7 +55,7 @@ from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.errors import FieldError, VolumeError
 from voxwarp.io.inflation import check_inflation
 from voxwarp.io.itk_probe import probe_binary_transform
-from voxwarp.io.loaded import native_stderr, quiet_nibabel
+from voxwarp.io.loaded import native_stderr, quiet_nibabel, warn
 from voxwarp.io.transform_sizes import check_transform_text
 from voxwarp.io.volumes import (
     _check_nrrd_budget,
@@ -170,8 +170,11 @@ def _convention(convention: str | None, default: str | None, where: str) -> tupl
 
 # ---------------------------------------------------------------------------- NIfTI
 def _read_nifti(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str, str]:
-    with quiet_nibabel():  # its "pixdim ... should be non-zero" lines: one error instead
-        return _read_nifti_quiet(path, convention)
+    with quiet_nibabel() as said:  # nibabel's log lines: one warning each, or the error
+        out = _read_nifti_quiet(path, convention)
+    for line in said:
+        warn(f"{path.name}: {line} (nibabel); fix the header")
+    return out
 
 
 def _read_nifti_quiet(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str, str]:

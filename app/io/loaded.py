@@ -205,16 +205,25 @@ def native_stderr() -> Iterator[list[str]]:
 
 
 @contextmanager
-def quiet_nibabel() -> Iterator[None]:
+def quiet_nibabel() -> Iterator[list[str]]:
     """Keep nibabel's log lines (``pixdim[1,2,3] should be non-zero ...``, printed on
-    its ``nibabel.global`` logger) off stderr during the block: voxwarp reports one
-    line of its own."""
+    its ``nibabel.global`` logger) off stderr during the block; yields a list that holds
+    them (distinct, in order) for the caller to report in its own words."""
     import logging
 
+    said: list[str] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            text = " ".join(record.getMessage().split())
+            if text not in said:
+                said.append(text)
+
     logger = logging.getLogger("nibabel.global")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
+    keep, propagate = _Keep(), logger.propagate
+    saved = logger.handlers[:]
+    logger.handlers, logger.propagate = [keep], False
     try:
-        yield
+        yield said
     finally:
-        logger.setLevel(level)
+        logger.handlers, logger.propagate = saved, propagate

@@ -97,7 +97,7 @@ from voxwarp.io.image_objects import (
     sitk_loaded,
 )
 from voxwarp.io.loaded import Loaded as _Loaded
-from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
+from voxwarp.io.loaded import checked_affine, loaded_geometry, quiet_nibabel, rescale
 from voxwarp.io.loaded import native as _native
 from voxwarp.io.loaded import warn as _warn
 from voxwarp.io.metaimage import METAIMAGE_SUFFIXES, read_metaimage
@@ -1095,14 +1095,18 @@ def _nrrd_space(header: dict[str, Any], where: str) -> str | None:
 def _read_nifti(path: Path, pick: _frames.Pick | None = None) -> _Loaded:
     import nibabel as nib
 
-    try:
-        img = nib.load(str(path))
-    except Exception as exc:
-        raise VolumeError(
-            f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
-            " The file may be corrupt or not a NIfTI/Analyze image."
-        ) from exc
-    return _nibabel_loaded(img, path.name, "NIfTI", pick)
+    with quiet_nibabel() as said:  # nibabel's log lines become one warning each
+        try:
+            img = nib.load(str(path))
+        except Exception as exc:
+            raise VolumeError(
+                f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
+                " The file may be corrupt or not a NIfTI/Analyze image."
+            ) from exc
+        loaded = _nibabel_loaded(img, path.name, "NIfTI", pick)
+    for line in said:
+        _warn(f"{path.name}: {line} (nibabel); fix the header")
+    return loaded
 
 
 def _nibabel_loaded(img: Any, short: str, kind: str, pick: _frames.Pick | None) -> _Loaded:

@@ -240,21 +240,25 @@ def test_compressed_field_of_a_real_ratio_loads(tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------------------- NIfTI, DICOM
-def test_zero_pixdim_field_prints_no_nibabel_lines(tmp_path: Path) -> None:
+def test_zero_pixdim_prints_one_voxwarp_line_not_nibabel_logs(tmp_path: Path) -> None:
+    """nibabel logged ``pixdim[1,2,3] should be non-zero`` straight to stderr (twice for a
+    field); now it is one voxwarp warning line, for a field and for a volume."""
     import nibabel as nib
 
-    img = nib.Nifti1Image(np.zeros((4, 4, 4, 1, 3), np.float32), np.eye(4))
-    img.header.set_intent("vector")
-    img.header.set_sform(None, 0)
-    path = tmp_path / "f.nii"
-    nib.save(img, path)
-    raw = bytearray(path.read_bytes())
-    raw[80:92] = np.zeros(3, "<f4").tobytes()  # pixdim[1:4] = 0
-    path.write_bytes(bytes(raw))
-    proc = run_cli("info", str(path), timeout=20)
-    assert "pixdim" not in proc.stderr, proc.stderr
-    assert "Traceback" not in proc.stderr
-    assert len([x for x in proc.stderr.splitlines() if x.strip()]) <= 1
+    for name, shape in (("f.nii", (4, 4, 4, 1, 3)), ("v.nii", (4, 4, 4))):
+        img = nib.Nifti1Image(np.zeros(shape, np.float32), np.eye(4))
+        img.header.set_intent("vector" if len(shape) == 5 else "none")
+        img.header.set_sform(None, 0)
+        path = tmp_path / name
+        nib.save(img, path)
+        raw = bytearray(path.read_bytes())
+        raw[80:92] = np.zeros(3, "<f4").tobytes()  # pixdim[1:4] = 0
+        path.write_bytes(bytes(raw))
+        proc = run_cli("info", str(path), timeout=20)
+        assert proc.returncode == 0, proc.stderr
+        lines = [x for x in proc.stderr.splitlines() if x.strip()]
+        assert len(lines) == 1, proc.stderr
+        assert lines[0].startswith(f"voxwarp: warning: {name}: pixdim"), proc.stderr
 
 
 def test_dicom_rows_not_matching_the_pixel_data_is_refused(tmp_path: Path) -> None:
