@@ -89,10 +89,10 @@ def read_json_text(path: str | os.PathLike[str]) -> str:
             f"it is {size / 2**20:.1f} MiB; voxwarp reads JSON files of at most"
             f" {MAX_JSON_BYTES >> 20} MiB"
         )
-    with open(path, "rb") as fh:
-        raw = fh.read(MAX_JSON_BYTES + 1)
-    if len(raw) > MAX_JSON_BYTES:  # grew while read
-        raise JsonFileError(f"it is over {MAX_JSON_BYTES >> 20} MiB")
+    with open(path, "rb") as fh:  # read(n) allocates n bytes: the size, not the limit
+        raw = fh.read(size + 1)
+    if len(raw) > size:
+        raise JsonFileError("it grew while being read; read it once it is complete")
     return raw.decode("utf-8-sig")
 
 
