@@ -1,7 +1,8 @@
 """The one rule for files voxwarp reads because a user or another file named them.
 
 A named input must be a regular file (or, where a reader takes folders of slices, a
-folder): never a FIFO, socket or device, whose read could block forever or never end.
+folder): never a FIFO, socket or device, nor a file under /proc or /sys, whose
+read could block forever or never end.
 Checked on the resolved path (symlinks followed) before anything opens it, by every
 reader: volumes, detached NRRD/MetaImage data, fields, JSON inputs (scenes, transfer
 functions, wires, lattices, cameras, animations, tours) and the paths scenes name.
@@ -15,6 +16,8 @@ import os
 import stat
 from pathlib import Path
 
+#: Kernel trees: their "regular" files may block (/proc/kmsg) or never end.
+_KERNEL_DIRS = ("/proc/", "/sys/")
 _KINDS = (
     (stat.S_ISFIFO, "a pipe (FIFO)"),
     (stat.S_ISSOCK, "a socket"),
@@ -30,8 +33,11 @@ def not_regular(path: str | os.PathLike[str], *, folders: bool = False) -> str |
     caller's own "no such file" applies)."""
     try:
         mode = os.stat(path).st_mode
+        real = os.path.realpath(path)
     except (OSError, ValueError):
         return None
+    if real.startswith(_KERNEL_DIRS):  # "regular" files that block or never end
+        return "a file of the kernel's /proc or /sys"
     if stat.S_ISREG(mode) or (folders and stat.S_ISDIR(mode)):
         return None
     return next((what for test, what in _KINDS if test(mode)), "not a regular file")

@@ -87,8 +87,7 @@ def _checked_path(path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     if not p.exists():
         raise FieldError(f"no such displacement field or transform file: {p}")
-    if not p.is_file():
-        raise FieldError(f"{p} is not a regular file; give a field image or transform file")
+    check_regular(p, "the field or transform file", FieldError)
     suffix = field_suffix(p)
     if suffix not in IMAGE_SUFFIXES + TRANSFORM_SUFFIXES:
         raise FieldError(

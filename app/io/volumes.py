@@ -77,7 +77,7 @@ import numpy as np
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
-from voxwarp.core.input_files import check_regular
+from voxwarp.core.input_files import check_regular, not_regular
 from voxwarp.core.json_input import parse_json_text, read_json_text
 from voxwarp.core.orientation import PATIENT_SPACES, affine_to_ras
 from voxwarp.core.volume import Volume, check_finite
@@ -590,10 +590,11 @@ def _load_path(
         raise VolumeError(f"no such file or directory: {path}")
     if path.is_dir():
         return _read_directory(path, series)
-    if not path.is_file():  # a FIFO, socket or device: reading could block forever
+    kind = not_regular(path)  # a FIFO, socket, device or /proc file: could block forever
+    if kind is not None:
         raise VolumeError(
-            f"{path} is not a regular file (a pipe, socket or device); voxwarp reads volume"
-            " files and folders of slices. Save the data to a file first."
+            f"{path} is not a regular file ({kind}); voxwarp reads volume files and folders"
+            " of slices. Save the data to a file first."
         )
     if series is not None:
         raise VolumeError(

@@ -72,3 +72,16 @@ def test_scene_volume_path_fifo_is_refused(tmp_path: Path) -> None:
     scene.write_text(json.dumps({"format": "voxwarp-scene", "volume": {"path": "v.nii"}}))
     with pytest.raises(SceneError, match=r"scene volume path .* pipe \(FIFO\)"):
         Scene.load(scene)
+
+
+@pytest.mark.timeout(20)
+@pytest.mark.parametrize("target", ["/proc/self/environ", "/dev/zero"])
+def test_kernel_and_device_files_are_refused_even_through_a_link(
+    target: str, tmp_path: Path
+) -> None:
+    """/proc files are 'regular' to stat but may block (/proc/kmsg) or leak the
+    environment; /dev/zero never ends. A link named like a volume does not help."""
+    link = tmp_path / "v.nii"
+    link.symlink_to(target)
+    with pytest.raises(VolumeError, match=r"not a regular file \(a (file of the kernel|char)"):
+        load_volume(link)
