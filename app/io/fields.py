@@ -267,13 +267,15 @@ def _check_nrrd_inflation(path: Path) -> None:
         itemsize = int(_determine_datatype(header).itemsize)
     except Exception:
         return  # nrrd.read names what is wrong
-    if str(header.get("encoding", "raw")).lower() not in ("gzip", "gz", "bzip2", "bz2"):
+    encoding = str(header.get("encoding", "raw")).lower()
+    codec = {"gzip": "deflate", "gz": "deflate", "bzip2": "bzip2", "bz2": "bzip2"}.get(encoding)
+    if codec is None:
         return
     name = header.get("data file") or header.get("datafile")
     stored = path.parent / str(name) if name else path
     size = stored.stat().st_size if stored.is_file() else path.stat().st_size
     need = int(np.prod(sizes, dtype=np.float64)) * itemsize
-    check_inflation(need, size, path.name)
+    check_inflation(need, size, path.name, codec)
 
 
 def _nrrd_field_affine(header: dict[str, Any], vec_axis: int, where: str) -> np.ndarray:

@@ -19,6 +19,7 @@ from tests.run_cli import run_cli
 from voxwarp.core import limits
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp
 from voxwarp.errors import FieldError, VolumeError
+from voxwarp.io import inflation
 from voxwarp.io.fields import load_transform, save_displacement_field
 from voxwarp.io.inflation import INFLATION_FLOOR, MAX_INFLATION, check_inflation
 from voxwarp.io.transform_sizes import check_grid
@@ -147,13 +148,45 @@ def test_damaged_nrrd_space_directions_is_one_line(line: bytes, tmp_path: Path) 
 
 
 # ---------------------------------------------------------------------------- inflation
-def test_inflation_limit_is_exact() -> None:
-    need = INFLATION_FLOOR + MAX_INFLATION  # over the floor: the ratio decides
-    stored = need // MAX_INFLATION
-    check_inflation(stored * MAX_INFLATION, stored, "f")
+@pytest.mark.parametrize("codec", ["deflate", "bzip2"])
+def test_inflation_limit_is_exact(codec: str) -> None:
+    limit = MAX_INFLATION[codec]
+    stored = INFLATION_FLOOR // limit + 1  # stored x limit is over the floor: the ratio decides
+    check_inflation(stored * limit, stored, "f", codec)
     with pytest.raises(FieldError, match="decompression bomb"):
-        check_inflation(stored * MAX_INFLATION + 1, stored, "f")
-    check_inflation(INFLATION_FLOOR, 1, "f")  # small data is always read
+        check_inflation(stored * limit + 1, stored, "f", codec)
+    check_inflation(INFLATION_FLOOR, 1, "f", codec)  # small data is always read
+
+
+@pytest.fixture
+def small_floor(monkeypatch):  # type: ignore[no-untyped-def]
+    """The inflation floor at 32 MiB, so that bombs in tests stay small and fast."""
+    monkeypatch.setattr(inflation, "INFLATION_FLOOR", 32 << 20)
+
+
+def test_deflate_limit_lies_between_zeros_and_a_compact_support_field(
+    tmp_path: Path, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    """Oracle for the 900-fold limit, both gzipped at level 9 (the tightest deflate): a
+    field that is zero outside a ball (a local deformation on a large grid) loads; an
+    all-zero field (deflate's ~1030-fold ceiling) is refused. The floor is lowered."""
+    monkeypatch.setattr(inflation, "INFLATION_FLOOR", 1 << 20)
+    n = 128  # 24 MiB of vectors: ball ~470-fold, zeros ~1030-fold
+    x, y, z = np.ogrid[:n, :n, :n]
+    r2 = ((x - 64) ** 2 + (y - 64) ** 2 + (z - 64) ** 2).astype(np.float32)
+    u = np.zeros((n, n, n, 3), np.float32)
+    u[..., 0] = np.where(r2 < 16**2, 3 * np.exp(-r2 / (2 * 12.0**2)), 0)
+    paths = []
+    for name, vectors in (("ball", u), ("zero", 0 * u)):
+        plain = save_displacement_field(
+            DisplacementFieldWarp(vectors, np.eye(4)), tmp_path / f"{name}.nii"
+        )
+        paths.append(tmp_path / f"{name}.nii.gz")
+        paths[-1].write_bytes(gzip.compress(plain.read_bytes(), compresslevel=9))
+    (back,) = load_transform(paths[0])
+    np.testing.assert_allclose(back.displacements, u, atol=1e-6)
+    with pytest.raises(FieldError, match="decompression bomb"):
+        load_transform(paths[1])
 
 
 def _zeros_gz(fh, nbytes: int) -> None:  # type: ignore[no-untyped-def]
@@ -163,7 +196,7 @@ def _zeros_gz(fh, nbytes: int) -> None:  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.timeout(20)
-def test_nii_gz_bomb_is_refused_before_inflating(tmp_path: Path) -> None:
+def test_nii_gz_bomb_is_refused_before_inflating(tmp_path: Path, small_floor: None) -> None:
     """A ~100 KB .nii.gz whose header claims 96 MiB of zeros: refused in well under a
     second (inflating it took minutes at the issue's 1.2 GB)."""
     import nibabel as nib
@@ -174,7 +207,7 @@ def test_nii_gz_bomb_is_refused_before_inflating(tmp_path: Path) -> None:
     hdr.set_intent("vector")
     hdr.set_sform(np.eye(4), 1)
     path = tmp_path / "bomb.nii.gz"
-    with gzip.open(path, "wb", compresslevel=1) as fh:
+    with gzip.open(path, "wb", compresslevel=9) as fh:
         fh.write(hdr.binaryblock + b"\0" * 4)
         _zeros_gz(fh, 256 * 256 * 128 * 3 * 4)
     t0 = time.perf_counter()
@@ -205,10 +238,10 @@ def test_npz_member_header_over_the_budget_is_refused_before_np_load(tmp_path: P
 
 
 @pytest.mark.timeout(20)
-def test_npz_deflate_bomb_is_refused(tmp_path: Path) -> None:
+def test_npz_deflate_bomb_is_refused(tmp_path: Path, small_floor: None) -> None:
     shape = (256, 256, 128, 3)
     path = tmp_path / "bomb.npz"
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zf:
         with zf.open("displacement.npy", "w", force_zip64=True) as fh:
             np.lib.format.write_array_header_1_0(
                 fh, {"descr": "<f4", "fortran_order": False, "shape": shape}
@@ -222,7 +255,7 @@ def test_npz_deflate_bomb_is_refused(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(20)
-def test_compressed_mha_bomb_is_refused(tmp_path: Path) -> None:
+def test_compressed_mha_bomb_is_refused(tmp_path: Path, small_floor: None) -> None:
     path = tmp_path / "bomb.mha"
     sitk.WriteImage(sitk.Image([256, 256, 128], sitk.sitkVectorFloat32, 3), str(path), True)
     with pytest.raises(FieldError, match="decompression bomb"):
