@@ -16,11 +16,11 @@ use them (the lattice warp brings scipy).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from voxwarp.core.json_input import read_json
 from voxwarp.errors import InputError, VolumeError
 
 
@@ -29,7 +29,7 @@ def is_scene_json(path: Path) -> bool:
     if path.suffix.lower() != ".json" or not path.is_file():
         return False
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
+        d = read_json(path)
     except (OSError, ValueError):
         return False
     return isinstance(d, dict) and d.get("format") == "voxwarp-scene"
@@ -105,7 +105,7 @@ def _check_json_input(path: Path) -> None:
     from voxwarp.scene import SCENE_FORMAT, json_error_text
 
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
+        d = read_json(path)
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read {path}: {exc}") from exc
     except ValueError as exc:
@@ -152,7 +152,7 @@ def read_json_option(option: str, path: str | Path) -> Any:
 
     try:
         path = resolve_sample_path(path)
-        return json.loads(Path(path).read_text(encoding="utf-8"))
+        return read_json(path)
     except VolumeError as exc:
         raise InputError(f"{option} {path}: {exc}") from exc
     except FileNotFoundError as exc:

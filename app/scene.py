@@ -30,6 +30,7 @@ from voxwarp.core.field_check import TOLERANCE_MM
 from voxwarp.core.field_grid import FieldExport, chain_field, export_chain, field_grid
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.jacobian import JacobianMap, chain_determinant
+from voxwarp.core.json_input import read_json
 from voxwarp.core.levels import LEVEL_ATTRIBUTES, Level, default_level
 from voxwarp.core.mesh import MeshInstance
 from voxwarp.core.mesh_warp import mesh_instances_bounds
@@ -787,7 +788,7 @@ def read_scene_dict(path: str | os.PathLike) -> dict[str, Any]:
     ``"animation"``); :class:`SceneError` naming the file and the problem."""
     p = Path(path)
     try:
-        d = json.loads(p.read_text(encoding="utf-8"))
+        d = read_json(p)
     except FileNotFoundError as exc:
         raise SceneError(f"no such scene file: {p}") from exc
     except (OSError, UnicodeDecodeError) as exc:

@@ -92,6 +92,7 @@ from voxwarp.core.files import (
     output_error,
     remove_stale_temps,
 )
+from voxwarp.core.json_input import read_json
 from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import VoxwarpError
 from voxwarp.io import images  # images.read_image: tests stand in for it
@@ -227,7 +228,7 @@ def _read_manifest(folder: Path) -> tuple[str | None, dict[int, Entry], bool]:
     manifest of an older layout (no file hashes). A missing or unreadable manifest
     gives no entries."""
     try:
-        d = json.loads((folder / MANIFEST_NAME).read_text(encoding="utf-8"))
+        d = read_json(folder / MANIFEST_NAME)
     except (OSError, ValueError, UnicodeDecodeError):
         return None, {}, False
     if not isinstance(d, dict) or d.get("format") != MANIFEST_FORMAT:

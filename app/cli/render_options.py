@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from voxwarp.core.files import atomic_write_text
+from voxwarp.core.json_input import read_json
 from voxwarp.errors import InputError, SceneError
 
 #: ``--slab`` axis letters: world axis and sign (L, P, I count along -x, -y, -z)
@@ -148,7 +149,7 @@ def camera_arg(text: str) -> Any:
 
     path = Path(text)
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
+        d = read_json(path)
     except FileNotFoundError as exc:
         raise argparse.ArgumentTypeError(f"{text}: no such file") from exc
     except (OSError, UnicodeDecodeError) as exc:

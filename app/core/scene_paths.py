@@ -8,7 +8,7 @@ loads but is reported in one warning line naming what it reads, so a relative na
 makes voxwarp read outside the scene's folder unnoticed. Scenes voxwarp writes name a
 file under their folder relatively and any other absolutely (:func:`path_entry`), so they
 reopen from anywhere without a warning. A missing file is one error line naming the path
-it resolved to.
+it resolved to. A FIFO, socket or device is refused (:mod:`voxwarp.core.input_files`).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from voxwarp.core.input_files import check_regular
 from voxwarp.errors import VoxwarpError
 
 
@@ -56,6 +57,7 @@ def scene_file(
             f"scene {what} path {os.fspath(value)}: no such {noun} {resolved}{where}; fix the path"
             " in the scene JSON or put the file there"
         )
+    check_regular(resolved, f"scene {what} path", error, folders=True)
     if relative and base_dir is not None:
         folder = Path(base_dir).resolve()
         if not resolved.is_relative_to(folder):

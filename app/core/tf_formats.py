@@ -25,7 +25,6 @@ Formats
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
@@ -35,10 +34,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from voxwarp.core import tf_curves
+from voxwarp.core.input_files import not_regular
+from voxwarp.core.json_input import JsonLimitError, parse_json_text
 from voxwarp.errors import SceneError
 
 #: Largest transfer-function file read (bytes); ParaView's full preset list is ~2 MB.
 MAX_FILE_BYTES = 32 * 1024 * 1024
+#: Most control points in one colour or opacity curve of a file (ParaView's largest
+#: preset has 1,024; a TF texture has far fewer texels): counted before any parsing.
+MAX_TF_POINTS = 65_536
 #: How far (per channel) a matplotlib map's control points may let any of its colours
 #: stray: the fewest points that keep every colour within it are kept.
 COLORMAP_TOLERANCE = 1.0 / 255
@@ -74,8 +78,9 @@ class ImportedMap:
 def read_text(path: str) -> str:
     """The UTF-8 text of ``path`` (at most :data:`MAX_FILE_BYTES`), one-line errors."""
     cannot = f"cannot read transfer function file {path}"
-    if os.path.isdir(path):
-        raise SceneError(f"{cannot}: it is a folder")
+    kind = not_regular(path)
+    if kind is not None:
+        raise SceneError(f"{cannot}: it is {kind}, not a regular file; give a TF file")
     try:
         size = os.path.getsize(path)
         if size > MAX_FILE_BYTES:
@@ -128,10 +133,12 @@ def parse_json(text: str, path: str = "") -> object:
     """JSON, also with trailing commas before ``]``/``}`` as ParaView's jsoncpp accepts
     (its own ColorMaps.json ends with one)."""
     try:
-        return json.loads(text)
+        return parse_json_text(text)
+    except JsonLimitError as exc:
+        raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
     except ValueError as exc:
         try:
-            return json.loads(_TRAILING_COMMA.sub(r"\1", text))
+            return parse_json_text(_TRAILING_COMMA.sub(r"\1", text))
         except ValueError:
             raise SceneError(f"cannot read transfer function file {path}: {exc}") from exc
 
@@ -146,6 +153,16 @@ def is_paraview(doc: object) -> bool:
 
 
 # ---------------------------------------------------------------------------- numbers
+def _check_points(count: int, width: int, what: str) -> None:
+    """Refuse a curve of more than :data:`MAX_TF_POINTS` points (``count`` numbers,
+    ``width`` a point) before its numbers are parsed."""
+    if count > MAX_TF_POINTS * width:
+        raise SceneError(
+            f"{what}: {count // width:,} points; a transfer function curve has at most"
+            f" {MAX_TF_POINTS:,}: resample it to fewer points"
+        )
+
+
 def _numbers(values: Sequence[object], what: str) -> np.ndarray:
     """Finite floats from JSON numbers or strings; one-line errors."""
     out = np.empty(len(values))
@@ -184,15 +201,17 @@ def _rows(flat: np.ndarray, width: int, what: str, lo: int = 1) -> np.ndarray:
 
 def vtk_string(text: str, width: int, what: str) -> np.ndarray:
     """Slicer/VTK ``"N v0 v1 ..."`` (N numbers follow) as rows of ``width``."""
-    parts = text.split()
-    if not parts:
+    first = text.split(None, 1)
+    if not first:
         raise SceneError(f"{what} is empty")
-    head = parts[0]
+    head = first[0]
     if not head.isdigit() or not head.isascii():
         raise SceneError(f"{what}: starts with {head[:20]!r}; expected the count N")
     n = int(head) if len(head) < 13 else -1
     if n < 0:
         raise SceneError(f"{what}: count N {head[:20]}... is too large")
+    _check_points(n, width, what)
+    parts = text.split()
     if n != len(parts) - 1:
         raise SceneError(f"{what}: says {n} numbers but has {len(parts) - 1}")
     return _rows(_numbers(parts[1:], what), width, what)
@@ -231,6 +250,7 @@ def _paraview_map(m: object, i: int, path: str) -> ImportedMap:
     rgb = m.get("RGBPoints")
     if not isinstance(rgb, list):
         raise SceneError(f"{where} has no RGBPoints list [x, r, g, b, ...]")
+    _check_points(len(rgb), 4, f"{where} RGBPoints")
     colour = _rows(_numbers(rgb, f"{where} RGBPoints"), 4, f"{where} RGBPoints")
     opacity = None
     notes: list[str] = []
@@ -240,6 +260,7 @@ def _paraview_map(m: object, i: int, path: str) -> ImportedMap:
             raise SceneError(
                 f"{where}: Points must be a list [x, opacity, midpoint, sharpness, ...]"
             )
+        _check_points(len(pts), 4, f"{where} Points")
         rows = _rows(_numbers(pts, f"{where} Points"), 4, f"{where} Points")
         opacity = tf_curves.expand_opacity(rows)
     space = str(m.get("ColorSpace", "RGB"))
@@ -259,8 +280,8 @@ def slicer_presets(text: str, path: str = "") -> list[ImportedMap]:
     """The ``VolumeProperty`` elements of a Slicer ``presets.xml`` (or MRML scene)."""
     import xml.etree.ElementTree as ET
 
-    head = text[:4096].upper()
-    if "<!DOCTYPE" in head or "<!ENTITY" in text.upper():
+    upper = text.upper()  # the whole file: a DTD may follow a long comment
+    if "<!DOCTYPE" in upper or "<!ENTITY" in upper:
         raise SceneError(f"{path}: XML with a DTD or entities is not accepted")
     try:
         root = ET.fromstring(text)
@@ -329,6 +350,7 @@ def _json_points(tf: object, keys: tuple[str, ...], width: int, what: str) -> np
     pts = tf.get("points") if isinstance(tf, dict) else None
     if not isinstance(pts, list) or not pts:
         raise SceneError(f"{what}: expected {{'points': [{{'x': ..., ...}}, ...]}}")
+    _check_points(len(pts), 1, what)
     flat: list[object] = []
     for k, p in enumerate(pts):
         if not isinstance(p, dict):

@@ -232,7 +232,31 @@ def _ras_affine(
     return affine_to_ras(lps, "LPS"), spacing
 
 
+def _check_pixel_length(p: Path, ds: Any) -> None:
+    """Refuse uncompressed pixel data whose length does not fit Rows x Columns (x
+    frames, samples, bytes): shorter, or longer by a whole row or more (a slice whose
+    Rows/Columns were changed); a padding byte or a few trailing bytes are accepted."""
+    syntax = getattr(getattr(ds, "file_meta", None), "TransferSyntaxUID", None)
+    data = ds.get("PixelData")
+    if data is None or syntax is None or getattr(syntax, "is_compressed", True):
+        return  # compressed: the decoder checks the frame size
+    rows, cols = int(_number(ds, "Rows", 0) or 0), int(_number(ds, "Columns", 0) or 0)
+    frames = int(_number(ds, "NumberOfFrames", 1) or 1)
+    bits = int(_number(ds, "BitsAllocated", 16) or 16)
+    samples = int(_number(ds, "SamplesPerPixel", 1) or 1)
+    need = (rows * cols * frames * samples * bits + 7) // 8
+    row = max(1, cols * samples * bits // 8)
+    got = len(data)
+    if got < need or got - need >= row:
+        raise VolumeError(
+            f"{p.name}: its pixel data holds {got:,} bytes but Rows x Columns = {rows} x"
+            f" {cols} ({frames} frame(s), {bits}-bit) need {need:,}; the slice is damaged"
+            " (fix Rows/Columns or remove the file from the series)"
+        )
+
+
 def _pixels(p: Path, full: Any) -> np.ndarray:
+    _check_pixel_length(p, full)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -48,11 +48,15 @@ import numpy as np
 from voxwarp.core import extras
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_output
+from voxwarp.core.input_files import check_regular
 from voxwarp.core.orientation import PATIENT_SPACES
 from voxwarp.deform.fields.displacement import DisplacementFieldWarp, set_field_reader
 from voxwarp.deform.warp import AffineWarp, Warp, WarpError
 from voxwarp.errors import FieldError, VolumeError
-from voxwarp.io.loaded import native_stderr
+from voxwarp.io.inflation import check_inflation
+from voxwarp.io.itk_probe import probe_binary_transform
+from voxwarp.io.loaded import native_stderr, quiet_nibabel, warn
+from voxwarp.io.transform_sizes import check_transform_text
 from voxwarp.io.volumes import (
     _check_nrrd_budget,
     _check_nrrd_data_files,
@@ -83,8 +87,7 @@ def _checked_path(path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     if not p.exists():
         raise FieldError(f"no such displacement field or transform file: {p}")
-    if not p.is_file():
-        raise FieldError(f"{p} is not a regular file; give a field image or transform file")
+    check_regular(p, "the field or transform file", FieldError)
     suffix = field_suffix(p)
     if suffix not in IMAGE_SUFFIXES + TRANSFORM_SUFFIXES:
         raise FieldError(
@@ -166,6 +169,14 @@ def _convention(convention: str | None, default: str | None, where: str) -> tupl
 
 # ---------------------------------------------------------------------------- NIfTI
 def _read_nifti(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str, str]:
+    with quiet_nibabel() as said:  # nibabel's log lines: one warning each, or the error
+        out = _read_nifti_quiet(path, convention)
+    for line in said:
+        warn(f"{path.name}: {line} (nibabel); fix the header")
+    return out
+
+
+def _read_nifti_quiet(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str, str]:
     import nibabel as nib
 
     try:
@@ -198,6 +209,9 @@ def _read_nifti(path: Path, convention: str | None) -> tuple[np.ndarray, Any, st
             " space; write it with a coded sform (nibabel: img.header.set_sform(affine, 1))"
         )
     _limits.check_load_bytes((*grid, 3), 4, path.name)
+    if field_suffix(path) == ".nii.gz":
+        need = int(np.prod(shape, dtype=np.float64)) * int(hdr.get_data_dtype().itemsize)
+        check_inflation(need, path.stat().st_size, path.name)
     try:
         data = np.asarray(img.dataobj, dtype=np.float32).reshape(*grid, 3, order="F")
     except Exception as exc:
@@ -215,6 +229,7 @@ def _read_nrrd(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str
         _check_nrrd_budget(path)
     except VolumeError as exc:
         raise FieldError(str(exc)) from exc
+    _check_nrrd_inflation(path)
     try:
         data, header = nrrd.read(str(path), index_order="F")
     except Exception as exc:
@@ -227,19 +242,78 @@ def _read_nrrd(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str
         )
     vec_axis = _nrrd_vector_axis(data.shape, header, path.name)
     data = np.moveaxis(np.asarray(data, dtype=np.float32), vec_axis, -1)
-    dirs = np.asarray(header.get("space directions"), dtype=np.float64)
-    domain = [a for a in range(dirs.shape[0]) if a != vec_axis]
-    affine = np.eye(4)
-    affine[:3, :3] = dirs[domain].T
-    affine[:3, 3] = np.asarray(header.get("space origin", np.zeros(3)), dtype=np.float64)
+    affine = _nrrd_field_affine(header, vec_axis, path.name)
     frame = header.get("measurement frame")
     if frame is not None:  # vectors in the measurement frame -> the header's space
-        data = data @ np.asarray(frame, dtype=np.float32).T
+        data = data @ _measurement_frame(frame, path.name).T
     fx, fy = PATIENT_SPACES[space]
     flip = np.array([fx, fy, 1.0, 1.0])
     if convention == "voxel":  # vectors along the grid's index axes: no flip
         return data, np.diag(flip) @ affine, "RAS", "voxel"
     return data * flip[:3].astype(np.float32), np.diag(flip) @ affine, "RAS", "mm"
+
+
+def _check_nrrd_inflation(path: Path) -> None:
+    """A gzip/bzip2 NRRD field's header size against :func:`check_inflation` (the
+    stored bytes: the attached file, or its one detached data file)."""
+    import nrrd
+
+    try:
+        with open(path, "rb") as f:
+            header = nrrd.read_header(f)
+        sizes = [int(n) for n in header["sizes"]]
+        from nrrd.reader import _determine_datatype
+
+        itemsize = int(_determine_datatype(header).itemsize)
+    except Exception:
+        return  # nrrd.read names what is wrong
+    encoding = str(header.get("encoding", "raw")).lower()
+    codec = {"gzip": "deflate", "gz": "deflate", "bzip2": "bzip2", "bz2": "bzip2"}.get(encoding)
+    if codec is None:
+        return
+    name = header.get("data file") or header.get("datafile")
+    stored = path.parent / str(name) if name else path
+    size = stored.stat().st_size if stored.is_file() else path.stat().st_size
+    need = int(np.prod(sizes, dtype=np.float64)) * itemsize
+    check_inflation(need, size, path.name, codec)
+
+
+def _nrrd_field_affine(header: dict[str, Any], vec_axis: int, where: str) -> np.ndarray:
+    """The 4x4 grid affine (in the header's space) of an NRRD field: ``space
+    directions`` of its three domain axes and ``space origin``; one line when damaged."""
+    try:
+        dirs = np.asarray(header.get("space directions"), dtype=np.float64)
+        origin = np.asarray(header.get("space origin", np.zeros(3)), dtype=np.float64)
+        domain = [a for a in range(4) if a != vec_axis]
+        rows = dirs[domain] if dirs.shape == (4, 3) else None
+    except (TypeError, ValueError, IndexError):
+        rows = origin = None
+    if rows is None or origin is None or origin.shape != (3,):
+        raise FieldError(
+            f"{where}: damaged 'space directions' or 'space origin'; a field needs 'none' for"
+            " its vector axis and three 3-vectors, e.g. space directions: none (1,0,0)"
+            " (0,1,0) (0,0,1), and space origin: (0,0,0)"
+        )
+    if not (np.all(np.isfinite(rows)) and np.all(np.isfinite(origin))):
+        raise FieldError(f"{where}: 'space directions'/'space origin' must be finite numbers")
+    affine = np.eye(4)
+    affine[:3, :3] = rows.T
+    affine[:3, 3] = origin
+    return affine
+
+
+def _measurement_frame(frame: Any, where: str) -> np.ndarray:
+    """An NRRD ``measurement frame`` as a finite 3x3 matrix; one line otherwise."""
+    try:
+        m = np.asarray(frame, dtype=np.float32)
+    except (TypeError, ValueError):
+        m = np.zeros(0)
+    if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+        raise FieldError(
+            f"{where}: its 'measurement frame' must be three finite 3-vectors, e.g."
+            " measurement frame: (1,0,0) (0,1,0) (0,0,1)"
+        )
+    return m
 
 
 def _nrrd_vector_axis(shape: Sequence[int], header: dict[str, Any], where: str) -> int:
@@ -271,8 +345,7 @@ def _read_npz(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str,
                     f"{path.name} needs arrays 'displacement' (nx, ny, nz, 3) and 'affine'"
                     f" (4x4); it has {sorted(keys)}"
                 )
-            size = npz.zip.getinfo("displacement.npy").file_size
-            _limits.check_load_bytes((size,), 1, path.name)
+            _check_npz_member(npz.zip, "displacement.npy", path.name)
             u = np.asarray(npz["displacement"], dtype=np.float32)
             affine = np.asarray(npz["affine"], dtype=np.float64)
             space = str(npz["space"]) if "space" in keys else "RAS"
@@ -286,6 +359,22 @@ def _read_npz(path: Path, convention: str | None) -> tuple[np.ndarray, Any, str,
     if convention is not None:
         space, units = _convention(convention, None, path.name)
     return u, affine, space, units
+
+
+def _check_npz_member(archive: Any, member: str, where: str) -> None:
+    """The npy header's shape and dtype of ``member`` against the budget, and its
+    deflated size against :func:`check_inflation`, before ``np.load`` inflates it."""
+    info = archive.getinfo(member)
+    _limits.check_load_bytes((info.file_size,), 1, where)
+    with archive.open(member) as fh:
+        fmt = np.lib.format
+        v1 = fmt.read_magic(fh) == (1, 0)
+        shape, _, dtype = (fmt.read_array_header_1_0 if v1 else fmt.read_array_header_2_0)(fh)
+    if dtype.kind not in "iuf":
+        raise FieldError(f"{where}: {member} holds {dtype} values; write real numbers (float32)")
+    _limits.check_load_bytes(tuple(shape), max(int(dtype.itemsize), 4), where)
+    need = int(np.prod(shape, dtype=np.float64)) * int(dtype.itemsize)
+    check_inflation(need, info.compress_size, f"{where} ({member})")
 
 
 # ---------------------------------------------------------------------------- ITK files
@@ -313,7 +402,24 @@ def _metaimage_data_file(path: Path) -> None:
                     f"{path.name} names the data file {name!r} outside its folder; voxwarp"
                     " reads MetaImage data only beside the header: move it there"
                 )
+            check_regular(path.parent / name, f"{path.name}'s data file", FieldError)
             return
+
+
+def _check_metaimage_inflation(path: Path, values: int) -> None:
+    """A compressed MetaImage's ``values`` (header size, float32 at least) against
+    :func:`check_inflation` of its stored bytes (the ``.mha``, or the ``.mhd``'s data)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16).decode("ascii", "ignore")
+    tags = {
+        k.strip(): v.strip() for k, sep, v in (x.partition("=") for x in head.splitlines()) if sep
+    }
+    if tags.get("CompressedData", "").lower() != "true":
+        return
+    name = tags.get("ElementDataFile", "LOCAL")
+    stored = path if name.upper() == "LOCAL" else path.parent / name
+    if stored.is_file():  # a missing data file: SimpleITK's read names it
+        check_inflation(values * 4, stored.stat().st_size, path.name)
 
 
 def _sitk_field(image: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -351,6 +457,7 @@ def _read_metaimage(path: Path) -> tuple[np.ndarray, Any, str, str]:
             size = reader.GetSize()
             comps = reader.GetNumberOfComponents()
             _limits.check_load_bytes((*size, comps), 4, path.name)
+            _check_metaimage_inflation(path, int(np.prod([*size, comps], dtype=np.float64)))
             image, error = reader.Execute(), None
         except RuntimeError as exc:
             image, error = None, exc
@@ -378,6 +485,9 @@ def _first_line(exc: BaseException) -> str:
 def _read_transform_file(path: Path) -> list[Warp]:
     sitk = _sitk(f"reading the ITK transform file {path.name}")
     _check_file_budget(path)
+    check_transform_text(path)  # the grid its FixedParameters imply, before ITK allocates it
+    if field_suffix(path) in (".h5", ".hdf5", ".mat"):
+        probe_binary_transform(sitk, path)  # binary: a forked child reads it first
     with native_stderr() as said:
         try:
             transform = sitk.ReadTransform(str(path))
@@ -419,7 +529,7 @@ def _warp_of(sitk: Any, t: Any, path: Path, index: int) -> Warp:
     elif name == "BSplineTransform":
         u, affine = _sample_bspline(sitk, sitk.BSplineTransform(t))
     elif t.IsLinear():
-        return AffineWarp(np.linalg.inv(_linear_ras(t)))
+        return AffineWarp(_inverse(_linear_ras(t), f"{path.name} ({name})"))
     else:
         raise FieldError(
             f"{path.name} holds a {name}, which voxwarp cannot render; convert it to a"
@@ -429,6 +539,24 @@ def _warp_of(sitk: Any, t: Any, path: Path, index: int) -> Warp:
         return DisplacementFieldWarp(u, affine, space="LPS", path=str(path), part=index)
     except WarpError as exc:
         raise FieldError(f"{path.name}: {exc}") from exc
+
+
+def _inverse(m: np.ndarray, where: str) -> np.ndarray:
+    """The inverse of a linear transform's matrix ``m``; one line when it has none."""
+    inv = None
+    if np.all(np.isfinite(m)) and abs(np.linalg.det(m[:3, :3])) > 1e-12 * max(
+        1.0, float(np.abs(m[:3, :3]).max()) ** 3
+    ):
+        try:
+            inv = np.linalg.inv(m)
+        except np.linalg.LinAlgError:
+            inv = None
+    if inv is None or not np.all(np.isfinite(inv)):
+        raise FieldError(
+            f"{where}: its matrix is singular or not finite (it flattens space), so it"
+            " cannot be rendered; check the transform's Parameters"
+        )
+    return inv
 
 
 def _linear_ras(t: Any) -> np.ndarray:
@@ -625,7 +753,8 @@ def is_field_file(path: str | os.PathLike[str]) -> bool:
         if suffix in (".nii", ".nii.gz"):
             import nibabel as nib
 
-            hdr = nib.load(str(p)).header
+            with quiet_nibabel():
+                hdr = nib.load(str(p)).header
             shape = hdr.get_data_shape()
             vector_intent = int(hdr["intent_code"]) in (1006, 1007)
             itk_layout = len(shape) == 5 and shape[3] == 1  # (x, y, z, 1, c): ITK vectors

@@ -202,3 +202,28 @@ def native_stderr() -> Iterator[list[str]]:
             os.close(saved)
             held.seek(0)
             lines.extend(held.read().decode("utf-8", "replace").splitlines())
+
+
+@contextmanager
+def quiet_nibabel() -> Iterator[list[str]]:
+    """Keep nibabel's log lines (``pixdim[1,2,3] should be non-zero ...``, printed on
+    its ``nibabel.global`` logger) off stderr during the block; yields a list that holds
+    them (distinct, in order) for the caller to report in its own words."""
+    import logging
+
+    said: list[str] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            text = " ".join(record.getMessage().split())
+            if text not in said:
+                said.append(text)
+
+    logger = logging.getLogger("nibabel.global")
+    keep, propagate = _Keep(), logger.propagate
+    saved = logger.handlers[:]
+    logger.handlers, logger.propagate = [keep], False
+    try:
+        yield said
+    finally:
+        logger.handlers, logger.propagate = saved, propagate

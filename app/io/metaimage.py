@@ -11,6 +11,7 @@ from pathlib import Path
 
 from voxwarp.core import extras
 from voxwarp.core import limits as _limits
+from voxwarp.core.input_files import check_regular
 from voxwarp.errors import VolumeError
 from voxwarp.io.image_objects import sitk_loaded
 from voxwarp.io.loaded import Loaded, native_stderr
@@ -34,7 +35,21 @@ def _check_data_file(path: Path) -> None:
                 f"{path.name} names the data file {name!r}; voxwarp reads a MetaImage's data"
                 " only from one file beside the header: move it there and name it plainly"
             )
+        if name.upper() != "LOCAL":
+            _check_beside(path, name)
         return
+
+
+def _check_beside(path: Path, name: str) -> None:
+    """The data file ``name`` of the header ``path``: inside the header's folder once
+    symlinks are resolved, and a regular file (a FIFO would block the read forever)."""
+    target = (path.parent / name).resolve()
+    if not target.is_relative_to(path.parent.resolve()):
+        raise VolumeError(
+            f"{path.name} names the data file {name!r}, a link to {target} outside the"
+            " header's folder; copy the data beside the header"
+        )
+    check_regular(target, f"{path.name}'s data file", VolumeError)
 
 
 def read_metaimage(path: Path) -> Loaded:

@@ -11,13 +11,13 @@ is ``fish_spine_wires.json`` (:func:`sample_file`, :func:`resolve_sample_path`).
 from __future__ import annotations
 
 import importlib.resources
-import json
 from collections.abc import Sequence
 from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
 from voxwarp import sample_volumes
+from voxwarp.core.json_input import parse_json_text
 from voxwarp.core.volume import Volume
 from voxwarp.errors import VolumeError
 
@@ -123,7 +123,7 @@ def sample_files(root: Traversable | None = None) -> dict[str, str]:
     out = {}
     for item in sorted((root or _root()).iterdir(), key=lambda t: t.name):
         if item.name.endswith(".json") and item.is_file():
-            kind = json_kind(json.loads(item.read_text(encoding="utf-8")))
+            kind = json_kind(parse_json_text(item.read_text(encoding="utf-8")))
             if kind:
                 out[item.name[: -len(".json")]] = kind
     return out

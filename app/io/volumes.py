@@ -77,6 +77,8 @@ import numpy as np
 from voxwarp.core import limits as _limits
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
+from voxwarp.core.input_files import check_regular, not_regular
+from voxwarp.core.json_input import parse_json_text, read_json_text
 from voxwarp.core.orientation import PATIENT_SPACES, affine_to_ras
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.core.volume import parse_triple as _triple
@@ -95,7 +97,7 @@ from voxwarp.io.image_objects import (
     sitk_loaded,
 )
 from voxwarp.io.loaded import Loaded as _Loaded
-from voxwarp.io.loaded import checked_affine, loaded_geometry, rescale
+from voxwarp.io.loaded import checked_affine, loaded_geometry, quiet_nibabel, rescale
 from voxwarp.io.loaded import native as _native
 from voxwarp.io.loaded import warn as _warn
 from voxwarp.io.metaimage import METAIMAGE_SUFFIXES, read_metaimage
@@ -588,10 +590,11 @@ def _load_path(
         raise VolumeError(f"no such file or directory: {path}")
     if path.is_dir():
         return _read_directory(path, series)
-    if not path.is_file():  # a FIFO, socket or device: reading could block forever
+    kind = not_regular(path)  # a FIFO, socket, device or /proc file: could block forever
+    if kind is not None:
         raise VolumeError(
-            f"{path} is not a regular file (a pipe, socket or device); voxwarp reads volume"
-            " files and folders of slices. Save the data to a file first."
+            f"{path} is not a regular file ({kind}); voxwarp reads volume files and folders"
+            " of slices. Save the data to a file first."
         )
     if series is not None:
         raise VolumeError(
@@ -758,8 +761,8 @@ def _raw_for_sidecar(sidecar: Path) -> Path:
 
 def _read_sidecar(sidecar: Path) -> dict[str, Any]:
     try:
-        text = sidecar.read_text(encoding="utf-8")
-        meta = json.loads(text)
+        text = read_json_text(sidecar)
+        meta = parse_json_text(text)
     except OSError as exc:
         raise VolumeError(f"cannot read the sidecar {sidecar}: {exc.strerror or exc}.") from exc
     except (ValueError, RecursionError) as exc:
@@ -1058,6 +1061,9 @@ def _check_nrrd_data_files(path: Path) -> None:
                 f" load_volume(..., allow_data_dirs=[{str(target.parent)!r}]) or"
                 f" {NRRD_DATA_DIRS_ENV}={target.parent}"
             )
+        if "%" not in name and not name.startswith("LIST"):
+            home = path.parent.resolve()
+            check_regular(home / os.path.expanduser(name), f"{path.name}'s data file", VolumeError)
     if value.split()[:1] == ["LIST"]:
         raise VolumeError(
             f"the NRRD header {path} spreads its data over several files (data file: LIST),"
@@ -1090,14 +1096,18 @@ def _nrrd_space(header: dict[str, Any], where: str) -> str | None:
 def _read_nifti(path: Path, pick: _frames.Pick | None = None) -> _Loaded:
     import nibabel as nib
 
-    try:
-        img = nib.load(str(path))
-    except Exception as exc:
-        raise VolumeError(
-            f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
-            " The file may be corrupt or not a NIfTI/Analyze image."
-        ) from exc
-    return _nibabel_loaded(img, path.name, "NIfTI", pick)
+    with quiet_nibabel() as said:  # nibabel's log lines become one warning each
+        try:
+            img = nib.load(str(path))
+        except Exception as exc:
+            raise VolumeError(
+                f"cannot read the NIfTI file {path} ({type(exc).__name__}: {exc})."
+                " The file may be corrupt or not a NIfTI/Analyze image."
+            ) from exc
+        loaded = _nibabel_loaded(img, path.name, "NIfTI", pick)
+    for line in said:
+        _warn(f"{path.name}: {line} (nibabel); fix the header")
+    return loaded
 
 
 def _nibabel_loaded(img: Any, short: str, kind: str, pick: _frames.Pick | None) -> _Loaded:

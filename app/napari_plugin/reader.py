@@ -13,13 +13,13 @@ layer per channel, its time points on the leading axis (napari's time slider).
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from voxwarp.core.json_input import read_json
 from voxwarp.errors import VoxwarpError
 from voxwarp.io.frames import FrameChoiceError
 from voxwarp.io.volumes import load_volume
@@ -69,7 +69,7 @@ def is_scene_file(path: str | os.PathLike) -> bool:
             return True
         if os.path.getsize(path) > _PARSE_LIMIT or not head.lstrip().startswith(b"{"):
             return False
-        d = json.loads(Path(path).read_text(encoding="utf-8"))
+        d = read_json(path)
     except (OSError, ValueError):
         return False
     if not isinstance(d, dict) or "volume" not in d:

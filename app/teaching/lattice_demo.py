@@ -9,7 +9,6 @@ of the lab, ``python -m benchmarks lattice`` in a checkout. Run by
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from voxwarp.core.json_input import read_json
 from voxwarp.io.samples import bundled_dir
 from voxwarp.teaching import DEMO_TITLES, sheets
 from voxwarp.teaching.lattice_scenes import torus_tubes
@@ -30,7 +30,7 @@ def demo_lattice(
     from voxwarp.deform.lattice.warp import LatticeWarp
 
     vol = sheets.fish_volume(s)
-    spec = json.loads((bundled_dir() / "fish_lattice_bend.json").read_text(encoding="utf-8"))
+    spec = read_json(bundled_dir() / "fish_lattice_bend.json")
     entry = {k: v for k, v in spec.items() if k not in ("description", "sample", "type")}
     entry.setdefault("box", [list(map(float, b)) for b in vol.bounds])
     warp = LatticeWarp.from_dict(entry)

@@ -13,12 +13,12 @@ Paths are relative to the tour file's folder.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from voxwarp.core.json_input import read_json
 from voxwarp.errors import VoxwarpError
 
 #: ``"format"`` of a tour file
@@ -63,12 +63,12 @@ def read_tour(path: str | os.PathLike) -> Tour:
     """Read and check a tour file; raises :class:`TourError` naming what is wrong."""
     path = Path(path)
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
+        d = read_json(path)
     except FileNotFoundError as exc:
         raise TourError(
             f"no such tour file: {path} (make one with voxwarp demo NAME --gui)"
         ) from exc
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:
         raise TourError(f"cannot read tour file {path}: {exc}") from exc
     if not isinstance(d, dict) or d.get("format") != TOUR_FORMAT:
         raise TourError(f"{path} is not a voxwarp tour (format must be {TOUR_FORMAT!r})")
