@@ -102,6 +102,16 @@ def add_parser(sub: Any) -> None:
         " .nii.gz, .nii or .nrrd; NaN at nodes the chain does not carry) and print min/max"
         " and the folded (det J <= 0), compressed (< 0.5) and expanded (> 2) voxels",
     )
+    p.add_argument(
+        "--sampler",
+        choices=("gpu", "cpu"),
+        default=None,
+        help="where the chain is sampled on the nodes: gpu (the raycaster's GLSL chain, one"
+        " plane of nodes per draw on an offscreen context; float32, half-float wire fields"
+        " within 0.05 mm) or cpu (the exact numpy chain, in blocks); default gpu when an"
+        " OpenGL 4.3 context opens, else cpu. The field check always measures against the"
+        " exact CPU chain",
+    )
     add_memory_budget_arg(p)
     add_deform_args(p)
     add_wire_args(p)
@@ -126,13 +136,18 @@ def cmd_export_field(args: argparse.Namespace) -> int:
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    with _chain_scene(args) as scene:
+    with _chain_scene(args, gl=args.sampler != "cpu") as (scene, ctx):
         _plan(args, scene, out, box, components=3)
         if not scene.warps:
             warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
-        export = scene.export_field(
-            spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
-        )
+        with _sampler(ctx) as sampler:
+            export = scene.export_field(
+                spacing=args.spacing,
+                box=box,
+                tolerance=args.tolerance,
+                grid=args.grid,
+                sampler=sampler,
+            )
     field = export.field
     save_displacement_field(field, out, export.metadata())
     grid = "x".join(str(n) for n in field.shape)
@@ -157,7 +172,7 @@ def _export_jacobian(args: argparse.Namespace, out: Path) -> int:
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    with _chain_scene(args) as scene:
+    with _chain_scene(args) as (scene, _):
         _plan(args, scene, out, box, components=1)
         jac = scene.jacobian_determinant(
             spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
@@ -182,25 +197,66 @@ def _deformation_given(args: argparse.Namespace) -> bool:
 
 
 @contextlib.contextmanager
-def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
+def _chain_scene(args: argparse.Namespace, gl: bool = False) -> Iterator[tuple[Any, Any]]:
     """The scene of SCENE.json with the deformation options of render added to its chain
-    (:func:`voxwarp.cli.deformation.compose_chain`); the element models run on a small
-    offscreen context (their GPU backend too) that stays current in the block."""
+    (:func:`voxwarp.cli.deformation.compose_chain`) and the offscreen context they and
+    the GPU sampler use (current in the block; ``None`` when neither needs one). The
+    element models run on it (their GPU backend too). With ``gl`` (``--sampler`` gpu or
+    default) a context is opened; by default, where none opens, the CPU samples."""
     scene = load_scene_json(args.scene, "export-field")
-    if not _deformation_given(args):
-        yield scene
+    deform = _deformation_given(args)
+    if not deform and not gl:
+        yield scene, None
         return
     from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
+
+    if deform:
+        check_deform_options(args)
+        scene, pending = prepare_deformation(args, scene)
+    with _context(args, deform) as r:
+        if r is None:
+            yield scene, None
+            return
+        with r.current():
+            if not deform:
+                yield scene, r.ctx
+                return
+            with deformed_scene(args, scene, pending, r.ctx) as s:
+                yield s, (r.ctx if gl else None)
+
+
+@contextlib.contextmanager
+def _context(args: argparse.Namespace, needed: bool) -> Iterator[Any]:
+    """A small :class:`~voxwarp.render.offscreen.OffscreenRenderer`; ``None`` when none
+    opens and nothing but the default ``--sampler`` asked for it (the CPU samples)."""
+    from voxwarp.errors import RenderError
     from voxwarp.render.offscreen import OffscreenRenderer
 
-    check_deform_options(args)
-    scene, pending = prepare_deformation(args, scene)
-    with (
-        OffscreenRenderer(16, 16) as r,
-        r.current(),
-        deformed_scene(args, scene, pending, r.ctx) as s,
-    ):
-        yield s
+    try:
+        renderer = OffscreenRenderer(16, 16)
+    except RenderError:
+        if needed or args.sampler == "gpu":
+            raise
+        print("export-field: no OpenGL context: the CPU samples the chain", file=sys.stderr)
+        yield None
+        return
+    with renderer as r:
+        yield r
+
+
+@contextlib.contextmanager
+def _sampler(ctx: Any) -> Iterator[Any]:
+    """The GPU sampler on ``ctx`` (released after the block), or ``None`` (the CPU)."""
+    if ctx is None:
+        yield None
+        return
+    from voxwarp.render.field_sampling import GpuFieldSampler
+
+    sampler = GpuFieldSampler(ctx)
+    try:
+        yield sampler
+    finally:
+        sampler.release()
 
 
 def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components: int) -> None:
