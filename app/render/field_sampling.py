@@ -1,10 +1,11 @@
 """A warp chain's pull-back field sampled on the GPU (``voxwarp export-field --sampler gpu``).
 
-:class:`GpuFieldSampler` draws ``shaders/field_sample.frag.glsl`` once per plane of an
-export grid (first index ``i`` fixed, one fragment per node ``(j, k)``) into an RGBA32F
-target: each fragment maps its node's world point through the same GLSL warp chain as
-the raycaster (``warp_chain``) and writes ``chain(p) - p``; the planes are read back into
-the ``(nx, ny, nz, 3)`` float32 field. Nodes the chain sends to NaN or farther than
+:class:`GpuFieldSampler` draws ``shaders/field_sample.frag.glsl`` over runs of planes of
+an export grid (first index ``i`` fixed in a plane, one fragment per node ``(j, k)``;
+whole planes stacked in the target's rows, about :data:`DRAW_NODES` nodes a draw) into
+an RGBA32F target: each fragment maps its node's world point through the same GLSL
+warp chain as the raycaster (``warp_chain``) and writes ``chain(p) - p``; the planes are
+read back into the ``(nx, ny, nz, 3)`` float32 field. Nodes the chain sends to NaN or farther than
 :data:`~voxwarp.deform.warp.FAR_MM` (a wire's vacated space) are *outside*, as on the CPU
 (:func:`voxwarp.core.field_check.sample_carried`, whose drop-in this is: same arguments,
 same results within the GLSL chain's float32 and half-float textures).
@@ -25,6 +26,8 @@ from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 
 #: Largest plane (nodes a side) one draw samples; the CPU path takes larger grids.
 MAX_PLANE_SIDE = 16384
+#: About how many nodes one draw samples (whole planes, stacked in the target's rows).
+DRAW_NODES = 1 << 18
 
 
 class GpuFieldSampler:
@@ -56,19 +59,21 @@ class GpuFieldSampler:
         textures = warp_textures(self.ctx, chain)  # first: may run GPU passes
         set_uniform(prog, "u_index_to_world", np.asarray(affine, dtype=np.float64))
         bind_warps(prog, chain, textures, 0)
-        fbo = self._framebuffer(nz, ny)
+        per = max(1, min(DRAW_NODES // (ny * nz), MAX_PLANE_SIDE // ny, nx))
+        fbo = self._framebuffer(nz, ny * per)
+        set_uniform(prog, "u_rows", float(ny))
         vao = self.ctx.vertex_array(prog, [])
         u = np.empty((nx, ny, nz, 3), dtype=np.float32)
         outside = np.empty((nx, ny, nz), dtype=bool)
         try:
-            fbo.use()
-            fbo.viewport = (0, 0, nz, ny)
             with self.ctx.scope(fbo, enable_only=0):  # no blending or depth: data
-                for i in range(nx):
-                    set_uniform(prog, "u_plane", float(i))
+                for i0 in range(0, nx, per):
+                    m = min(per, nx - i0)
+                    fbo.viewport = (0, 0, nz, ny * m)
+                    set_uniform(prog, "u_plane", float(i0))
                     vao.render(self.ctx.TRIANGLES, vertices=3)
-                    raw = fbo.read(viewport=(0, 0, nz, ny), components=4, dtype="f4")
-                    u[i], outside[i] = _plane(raw, ny, nz)
+                    raw = fbo.read(viewport=(0, 0, nz, ny * m), components=4, dtype="f4")
+                    u[i0 : i0 + m], outside[i0 : i0 + m] = _planes(raw, m, ny, nz)
         finally:
             vao.release()
         return u, outside
@@ -120,10 +125,10 @@ class GpuFieldSampler:
         self._release_target()
 
 
-def _plane(raw: bytes, ny: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
-    """One read-back plane: its ``(ny, nz, 3)`` vectors (0 where not carried) and its
-    not-carried mask (NaN, or farther than :data:`FAR_MM`, as on the CPU)."""
-    d = np.frombuffer(raw, dtype=np.float32).reshape(ny, nz, 4)[..., :3]
+def _planes(raw: bytes, m: int, ny: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
+    """``m`` read-back planes: their ``(m, ny, nz, 3)`` vectors (0 where not carried) and
+    their not-carried mask (NaN, or farther than :data:`FAR_MM`, as on the CPU)."""
+    d = np.frombuffer(raw, dtype=np.float32).reshape(m, ny, nz, 4)[..., :3]
     with np.errstate(invalid="ignore"):
-        ok = np.all(np.abs(d) < FAR_MM, axis=2)
+        ok = np.all(np.abs(d) < FAR_MM, axis=-1)
     return np.where(ok[..., None], d, np.float32(0.0)), ~ok
