@@ -271,9 +271,26 @@ def _cell_errors(
         q, ok = chain_apply_carried(warps, p)
         vi = q @ to_index[:3, :3].T + to_index[:3, 3]
         keep = ok & _inside(vi, volume_shape)
-        err = np.linalg.norm(field.apply(p[keep]) - q[keep], axis=1)
+        u = _in_cells(field.displacements, base[keep], offset[keep])
+        err = np.linalg.norm(p[keep] + u - q[keep], axis=1)
         out[keep] = np.fmax(out[keep], err)
     return out
+
+
+def _in_cells(u: np.ndarray, base: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Trilinear values (M, 3) of node vectors ``u`` (nx, ny, nz, 3) at ``offset`` (M, 3,
+    in [0, 1]) inside the cells of lower corners ``base`` (M, 3): what
+    :meth:`DisplacementFieldWarp.displacement_at` gives there, with no world -> index
+    round trip; each corner is one flat gather."""
+    n = u.shape[:3]
+    step = np.array([n[1] * n[2], n[2], 1], dtype=np.intp)
+    flat, at = u.reshape(-1, 3), base.astype(np.intp) @ step
+    val = np.zeros((len(base), 3))
+    for corner in range(8):
+        o = [(corner >> k) & 1 for k in range(3)]
+        w = np.prod([offset[:, k] if o[k] else 1.0 - offset[:, k] for k in range(3)], axis=0)
+        val += w[:, None] * flat[at + int(np.dot(o, step))]
+    return val
 
 
 def _draws_per_cell(shape: Sequence[int]) -> int:
