@@ -106,11 +106,12 @@ def add_parser(sub: Any) -> None:
         "--sampler",
         choices=("gpu", "cpu"),
         default=None,
-        help="where the chain is sampled on the nodes: gpu (the raycaster's GLSL chain, one"
-        " plane of nodes per draw on an offscreen context; float32, half-float wire fields"
-        " within 0.05 mm) or cpu (the exact numpy chain, in blocks); default gpu when an"
-        " OpenGL 4.3 context opens, else cpu. The field check always measures against the"
-        " exact CPU chain",
+        help="where the chain is sampled on the nodes: gpu (the raycaster's GLSL chain, planes"
+        " of nodes drawn on an offscreen context; float32 and some half-float textures,"
+        " within 0.05 mm of the CPU) or cpu (the exact numpy chain, in blocks); default: gpu"
+        " for grids of 2^22 nodes or more when an OpenGL 4.3 context opens (smaller grids"
+        " take longer to start a context for), else cpu. The field check always measures"
+        " against the exact CPU chain",
     )
     add_memory_budget_arg(p)
     add_deform_args(p)
@@ -136,11 +137,11 @@ def cmd_export_field(args: argparse.Namespace) -> int:
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    with _chain_scene(args, gl=args.sampler != "cpu") as (scene, ctx):
+    with _chain_scene(args) as (scene, ctx):
         _plan(args, scene, out, box, components=3)
         if not scene.warps:
             warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
-        with _sampler(ctx) as sampler:
+        with _sampler(args, ctx) as sampler:
             export = scene.export_field(
                 spacing=args.spacing,
                 box=box,
@@ -197,62 +198,45 @@ def _deformation_given(args: argparse.Namespace) -> bool:
 
 
 @contextlib.contextmanager
-def _chain_scene(args: argparse.Namespace, gl: bool = False) -> Iterator[tuple[Any, Any]]:
+def _chain_scene(args: argparse.Namespace) -> Iterator[tuple[Any, Any]]:
     """The scene of SCENE.json with the deformation options of render added to its chain
-    (:func:`voxwarp.cli.deformation.compose_chain`) and the offscreen context they and
-    the GPU sampler use (current in the block; ``None`` when neither needs one). The
-    element models run on it (their GPU backend too). With ``gl`` (``--sampler`` gpu or
-    default) a context is opened; by default, where none opens, the CPU samples."""
+    (:func:`voxwarp.cli.deformation.compose_chain`), and the small offscreen context the
+    element models run on (their GPU backend too; current in the block), else ``None``."""
     scene = load_scene_json(args.scene, "export-field")
-    deform = _deformation_given(args)
-    if not deform and not gl:
+    if not _deformation_given(args):
         yield scene, None
         return
     from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
-
-    if deform:
-        check_deform_options(args)
-        scene, pending = prepare_deformation(args, scene)
-    with _context(args, deform) as r:
-        if r is None:
-            yield scene, None
-            return
-        with r.current():
-            if not deform:
-                yield scene, r.ctx
-                return
-            with deformed_scene(args, scene, pending, r.ctx) as s:
-                yield s, (r.ctx if gl else None)
-
-
-@contextlib.contextmanager
-def _context(args: argparse.Namespace, needed: bool) -> Iterator[Any]:
-    """A small :class:`~voxwarp.render.offscreen.OffscreenRenderer`; ``None`` when none
-    opens and nothing but the default ``--sampler`` asked for it (the CPU samples)."""
-    from voxwarp.errors import RenderError
     from voxwarp.render.offscreen import OffscreenRenderer
 
-    try:
-        renderer = OffscreenRenderer(16, 16)
-    except RenderError:
-        if needed or args.sampler == "gpu":
-            raise
-        print("export-field: no OpenGL context: the CPU samples the chain", file=sys.stderr)
-        yield None
-        return
-    with renderer as r:
-        yield r
+    check_deform_options(args)
+    scene, pending = prepare_deformation(args, scene)
+    with (
+        OffscreenRenderer(16, 16) as r,
+        r.current(),
+        deformed_scene(args, scene, pending, r.ctx) as s,
+    ):
+        yield s, r.ctx
 
 
 @contextlib.contextmanager
-def _sampler(ctx: Any) -> Iterator[Any]:
-    """The GPU sampler on ``ctx`` (released after the block), or ``None`` (the CPU)."""
-    if ctx is None:
+def _sampler(args: argparse.Namespace, ctx: Any) -> Iterator[Any]:
+    """``--sampler``'s sampler (released after the block): ``None`` (the CPU) for cpu; for
+    gpu the GPU on every grid (on ``ctx`` where given); by default the GPU on grids of
+    :data:`~voxwarp.render.field_sampling.GPU_MIN_NODES` nodes or more where a context
+    opens, else the CPU."""
+    if args.sampler == "cpu":
         yield None
         return
-    from voxwarp.render.field_sampling import GpuFieldSampler
+    from voxwarp.render.field_sampling import FieldSampler
 
-    sampler = GpuFieldSampler(ctx)
+    def log(text: str) -> None:
+        print(f"export-field: {text}", file=sys.stderr)
+
+    forced = args.sampler == "gpu"
+    sampler = (
+        FieldSampler(ctx, min_nodes=0, required=True) if forced else FieldSampler(ctx, log=log)
+    )
     try:
         yield sampler
     finally:

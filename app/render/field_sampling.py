@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp import shaders
+from voxwarp.core.field_check import sample_carried
 from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import FAR_MM, Warp, compose_glsl
 from voxwarp.errors import RenderError
@@ -28,6 +29,12 @@ from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 MAX_PLANE_SIDE = 16384
 #: About how many nodes one draw samples (whole planes, stacked in the target's rows).
 DRAW_NODES = 1 << 18
+#: :class:`FieldSampler` by default samples grids of fewer nodes on the CPU: there a
+#: context's start and the chain's shader compile (about 1 s on llvmpipe) cost more than
+#: the CPU's sampling (256³ colin27, ``voxwarp bench exports``: a 6³ mass-spring's
+#: grids of under a million nodes took 1 s longer on the GPU; a wire's 16.7M nodes 7 s
+#: less).
+GPU_MIN_NODES = 1 << 22
 
 
 class GpuFieldSampler:
@@ -132,3 +139,72 @@ def _planes(raw: bytes, m: int, ny: int, nz: int) -> tuple[np.ndarray, np.ndarra
     with np.errstate(invalid="ignore"):
         ok = np.all(np.abs(d) < FAR_MM, axis=-1)
     return np.where(ok[..., None], d, np.float32(0.0)), ~ok
+
+
+class FieldSampler:
+    """``export-field``'s sampler: the GPU (:class:`GpuFieldSampler`) for grids of at
+    least ``min_nodes`` nodes, the CPU (:func:`~voxwarp.core.field_check.sample_carried`)
+    below; called as either.
+
+    ``ctx``: a context current while sampling (an element model's), else one is opened
+    on the first large grid and kept until :meth:`release`. With ``required`` a context
+    that does not open raises :class:`RenderError`; without it the CPU samples, with a
+    note from ``log``.
+    """
+
+    def __init__(
+        self,
+        ctx: Any = None,
+        *,
+        min_nodes: int = GPU_MIN_NODES,
+        required: bool = False,
+        log: Any = None,
+    ) -> None:
+        self._ctx, self.min_nodes, self.required, self._log = ctx, int(min_nodes), required, log
+        self._renderer: Any = None
+        self._gpu: GpuFieldSampler | None = None
+        self._failed = False
+
+    def __call__(
+        self, warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(u, outside)`` as :func:`~voxwarp.core.field_check.sample_carried`."""
+        if int(np.prod(shape)) < self.min_nodes or self._failed:
+            return sample_carried(warps, affine, shape)
+        if self._gpu is None and not self._open():
+            return sample_carried(warps, affine, shape)
+        assert self._gpu is not None
+        if self._renderer is None:
+            return self._gpu(warps, affine, shape)
+        with self._renderer.current():
+            return self._gpu(warps, affine, shape)
+
+    def _open(self) -> bool:
+        if self._ctx is None:
+            from voxwarp.render.offscreen import OffscreenRenderer  # deferred: it is large
+
+            try:
+                self._renderer = OffscreenRenderer(16, 16)
+            except RenderError:
+                if self.required:
+                    raise
+                self._failed = True
+                if self._log:
+                    self._log("no OpenGL context: the CPU samples the chain")
+                return False
+            self._ctx = self._renderer.ctx
+        self._gpu = GpuFieldSampler(self._ctx)
+        return True
+
+    def release(self) -> None:
+        """Free the GPU sampler and the context it opened; idempotent."""
+        if self._gpu is not None:
+            if self._renderer is None:
+                self._gpu.release()
+            else:
+                with self._renderer.current():
+                    self._gpu.release()
+            self._gpu = None
+        if self._renderer is not None:
+            self._renderer.release()
+            self._renderer = None

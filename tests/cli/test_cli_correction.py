@@ -114,7 +114,6 @@ def test_the_gpu_backends_export_the_same_correction(
         out = tmp_path / f"{backend}.nii.gz"
         args = ["export-field", str(plain), "--displacement", str(reg), f"--{model}", "6"]
         args += ["--drag-at", "2,0,0:0,5,0", "--backend", backend, "--spacing", "1"]
-        args += ["--sampler", "cpu"]  # the backends alone (GPU sampling: test_field_sampling)
         assert main([*args, "-o", str(out)]) == 0
         fields.append(load_displacement_field(out).displacements)
     capsys.readouterr()

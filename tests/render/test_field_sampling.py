@@ -145,3 +145,30 @@ def test_planes_split_over_draws_give_the_same_field(
         sampler.release()
     np.testing.assert_array_equal(split[0], whole[0])
     np.testing.assert_array_equal(split[1], whole[1])
+
+
+def test_the_default_sampler_takes_the_cpu_below_its_node_count(
+    volume: Volume, gl_ctx: object
+) -> None:
+    """``FieldSampler`` gives the CPU's field bitwise under ``min_nodes`` and the GPU's
+    at or over it, on the caller's context or on one it opens itself."""
+    from voxwarp.render.field_sampling import FieldSampler
+
+    warps = CHAINS["massspring"](volume)
+    affine, shape = _oblique_grid(volume)
+    nodes = int(np.prod(shape))
+    cpu = sample_carried(warps, affine, shape)
+    gpu_sampler = GpuFieldSampler(gl_ctx)
+    try:
+        gpu = gpu_sampler(warps, affine, shape)
+    finally:
+        gpu_sampler.release()
+    assert not np.array_equal(gpu[0], cpu[0])  # half-float offsets: the two differ a little
+    for ctx, at_least, expected in ((gl_ctx, nodes + 1, cpu), (gl_ctx, nodes, gpu), (None, 0, gpu)):
+        sampler = FieldSampler(ctx, min_nodes=at_least, required=True)
+        try:
+            got = sampler(warps, affine, shape)
+        finally:
+            sampler.release()
+        np.testing.assert_array_equal(got[0], expected[0])
+        np.testing.assert_array_equal(got[1], expected[1])
