@@ -8,8 +8,9 @@ user runs them (``voxwarp export-volume SCENE -o v.nii``, ``voxwarp export-field
 f.nii``, their defaults: the field at its default spacing with its field check). Each
 round runs both, so the shared machine's load falls on both alike; the table gives the
 median wall times over ``--rounds`` and their ratio measured in the same run.
-``--sampler cpu`` times export-field with the CPU chain sampler (its default is the GPU
-one where an OpenGL context opens: ``voxwarp export-field --sampler``).
+``--sampler cpu`` times export-field with the CPU chain sampler, ``gpu`` with the GPU's
+on every grid (by default the GPU samples grids of 2^22 nodes or more where an OpenGL
+context opens: ``voxwarp export-field --sampler``).
 """
 
 from __future__ import annotations
@@ -119,7 +120,7 @@ def add_bench_exports_parser(bsub: Any) -> None:
     p.add_argument(
         "--sampler",
         choices=("gpu", "cpu"),
-        help="export-field's --sampler (default: its own default, gpu where a context opens)",
+        help="export-field's --sampler (default: its own: gpu for grids of 2^22 nodes or more)",
     )
     p.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=cmd_bench_exports)

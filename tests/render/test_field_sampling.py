@@ -11,6 +11,10 @@ Oracles:
 * **Outside mask.** The nodes either path leaves out (a rigid wire's vacated space) are
   the same, but for nodes within one node of the vacated border (where the border
   falls between the GPU's float32 and the CPU's float64 is a matter of rounding).
+* **Which sampler.** Planes split over several draws give the same field bitwise;
+  :class:`~voxwarp.render.field_sampling.FieldSampler` (the default ``--sampler``)
+  gives the CPU's field bitwise under its node count and the GPU's at it, on a given
+  context or its own, and the CPU's (with one note) where no context opens.
 * **SimpleITK.** ``voxwarp export-field --sampler gpu`` of the fish's wires and
   mass-spring, read by SimpleITK's ``DisplacementFieldTransform``, stays within the
   0.5 mm tolerance of the chain off the nodes (the interpolation test's oracle), and
@@ -172,3 +176,31 @@ def test_the_default_sampler_takes_the_cpu_below_its_node_count(
             sampler.release()
         np.testing.assert_array_equal(got[0], expected[0])
         np.testing.assert_array_equal(got[1], expected[1])
+
+
+def test_without_a_context_the_default_sampler_takes_the_cpu(
+    volume: Volume, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where no context opens, the default sampler says so once and gives the CPU's
+    field; ``required`` (``--sampler gpu``) raises the context's error instead."""
+    from voxwarp.errors import RenderError
+    from voxwarp.render import offscreen
+    from voxwarp.render.field_sampling import FieldSampler
+
+    def no_context(*_args: object, **_kw: object) -> None:
+        raise RenderError("no EGL display")
+
+    monkeypatch.setattr(offscreen, "OffscreenRenderer", no_context)
+    warps = CHAINS["lattice"](volume)
+    affine, shape = _oblique_grid(volume)
+    notes: list[str] = []
+    sampler = FieldSampler(min_nodes=0, log=notes.append)
+    got = [sampler(warps, affine, shape) for _ in range(2)]
+    sampler.release()
+    cpu = sample_carried(warps, affine, shape)
+    for u, outside in got:
+        np.testing.assert_array_equal(u, cpu[0])
+        np.testing.assert_array_equal(outside, cpu[1])
+    assert notes == ["no OpenGL context: the CPU samples the chain"]
+    with pytest.raises(RenderError, match="no EGL display"):
+        FieldSampler(min_nodes=0, required=True)(warps, affine, shape)
