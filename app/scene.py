@@ -27,7 +27,13 @@ from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rota
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.comparison import Comparison
 from voxwarp.core.field_check import TOLERANCE_MM
-from voxwarp.core.field_grid import FieldExport, chain_field, export_chain, field_grid
+from voxwarp.core.field_grid import (
+    FieldExport,
+    Sampler,
+    chain_field,
+    export_chain,
+    field_grid,
+)
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.jacobian import JacobianMap, chain_determinant
 from voxwarp.core.json_input import read_json
@@ -710,6 +716,7 @@ class Scene:
         box: Any = None,
         tolerance: float = TOLERANCE_MM,
         grid: str = "volume",
+        sampler: Sampler | None = None,
     ) -> FieldExport:
         """:meth:`displacement_field` with its interpolation measured (``voxwarp export-field``).
 
@@ -720,9 +727,11 @@ class Scene:
         border a tear (a discontinuity no spacing interpolates) and the measured error:
         see :func:`voxwarp.core.field_grid.export_chain`. ``grid="input"`` indexes the
         nodes in the input file's axis order (its affine), ``"volume"`` in voxwarp's
-        closest-RAS order (:func:`voxwarp.core.field_grid.field_grid`).
+        closest-RAS order (:func:`voxwarp.core.field_grid.field_grid`). ``sampler``
+        samples the chain on the grid: the CPU by default, or
+        :class:`voxwarp.render.field_sampling.GpuFieldSampler` (the raycaster's GLSL chain).
         """
-        return export_chain(self.volume, self.warps, spacing, box, tolerance, grid)
+        return export_chain(self.volume, self.warps, spacing, box, tolerance, grid, sampler)
 
     def jacobian_determinant(
         self,

@@ -8,6 +8,9 @@ user runs them (``voxwarp export-volume SCENE -o v.nii``, ``voxwarp export-field
 f.nii``, their defaults: the field at its default spacing with its field check). Each
 round runs both, so the shared machine's load falls on both alike; the table gives the
 median wall times over ``--rounds`` and their ratio measured in the same run.
+``--sampler cpu`` times export-field with the CPU chain sampler, ``gpu`` with the GPU's
+on every grid (by default the GPU samples grids of 2^22 nodes or more where an OpenGL
+context opens: ``voxwarp export-field --sampler``).
 """
 
 from __future__ import annotations
@@ -63,8 +66,10 @@ def bench_exports(
     rounds: int = 1,
     deformations: Sequence[str] = tuple(DEFORMATIONS),
     log: Callable[[str], Any] | None = None,
+    sampler: str | None = None,
 ) -> list[tuple[str, float, float]]:
-    """``(deformation, export-volume s, export-field s)`` medians (module docstring)."""
+    """``(deformation, export-volume s, export-field s)`` medians (module docstring);
+    ``sampler`` is export-field's ``--sampler`` (``None``: its default)."""
     rows = []
     with tempfile.TemporaryDirectory(prefix="voxwarp-bench-exports-") as tmp:
         folder = Path(tmp)
@@ -75,7 +80,8 @@ def bench_exports(
             for _ in range(rounds):
                 for kind in times:
                     t = time.perf_counter()
-                    _run([f"export-{kind}", str(scene), "-o", str(folder / f"{kind}.nii")])
+                    extra = ["--sampler", sampler] if kind == "field" and sampler else []
+                    _run([f"export-{kind}", str(scene), "-o", str(folder / f"{kind}.nii"), *extra])
                     times[kind].append(time.perf_counter() - t)
             row = (name, statistics.median(times["volume"]), statistics.median(times["field"]))
             if log:
@@ -98,7 +104,9 @@ def markdown(rows: list[tuple[str, float, float]], size: int, command: str) -> s
 
 def cmd_bench_exports(args: argparse.Namespace) -> int:
     """``voxwarp bench exports``."""
-    rows = bench_exports(args.size, args.rounds, log=lambda s: print(s, file=sys.stderr))
+    rows = bench_exports(
+        args.size, args.rounds, log=lambda s: print(s, file=sys.stderr), sampler=args.sampler
+    )
     argv = sys.argv[3:] if sys.argv[1:3] == ["bench", "exports"] else []
     command = " ".join(["voxwarp bench exports", *argv])
     return emit_report(markdown(rows, args.size, command), args.markdown)
@@ -109,5 +117,10 @@ def add_bench_exports_parser(bsub: Any) -> None:
     p = add_bench_parser(bsub, "exports", "export-field against export-volume", __doc__)
     p.add_argument("--size", type=positive_int, default=256, help="voxels a side (default 256)")
     p.add_argument("--rounds", type=positive_int, default=1, help="timed rounds (default 1)")
+    p.add_argument(
+        "--sampler",
+        choices=("gpu", "cpu"),
+        help="export-field's --sampler (default: its own: gpu for grids of 2^22 nodes or more)",
+    )
     p.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=cmd_bench_exports)

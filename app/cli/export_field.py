@@ -102,6 +102,17 @@ def add_parser(sub: Any) -> None:
         " .nii.gz, .nii or .nrrd; NaN at nodes the chain does not carry) and print min/max"
         " and the folded (det J <= 0), compressed (< 0.5) and expanded (> 2) voxels",
     )
+    p.add_argument(
+        "--sampler",
+        choices=("gpu", "cpu"),
+        default=None,
+        help="where the chain is sampled on the nodes: gpu (the raycaster's GLSL chain, planes"
+        " of nodes drawn on an offscreen context; float32 and some half-float textures,"
+        " within 0.05 mm of the CPU) or cpu (the exact numpy chain, in blocks); default: gpu"
+        " for grids of 2^22 nodes or more when an OpenGL 4.3 context opens (smaller grids"
+        " take longer to start a context for), else cpu. The field check always measures"
+        " against the exact CPU chain",
+    )
     add_memory_budget_arg(p)
     add_deform_args(p)
     add_wire_args(p)
@@ -128,13 +139,18 @@ def cmd_export_field(args: argparse.Namespace) -> int:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     remove_stale_temps(out.parent, for_name=out.name)  # a killed run's, even if this one fails
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    with _chain_scene(args) as scene:
+    with _chain_scene(args) as (scene, ctx):
         _plan(args, scene, out, box, components=3)
         if not scene.warps:
             warnings.warn(f"{args.scene} has no warps: the exported field is zero", stacklevel=1)
-        export = scene.export_field(
-            spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
-        )
+        with _sampler(args, ctx) as sampler:
+            export = scene.export_field(
+                spacing=args.spacing,
+                box=box,
+                tolerance=args.tolerance,
+                grid=args.grid,
+                sampler=sampler,
+            )
     field = export.field
     save_displacement_field(field, out, export.metadata())
     grid = "x".join(str(n) for n in field.shape)
@@ -159,7 +175,7 @@ def _export_jacobian(args: argparse.Namespace, out: Path) -> int:
     if not args.tolerance > 0:
         raise CliOptionError(f"--tolerance {args.tolerance:g}: give a positive distance in mm")
     box = None if args.box is None else (args.box[:3], args.box[3:])
-    with _chain_scene(args) as scene:
+    with _chain_scene(args) as (scene, _):
         _plan(args, scene, out, box, components=1)
         jac = scene.jacobian_determinant(
             spacing=args.spacing, box=box, tolerance=args.tolerance, grid=args.grid
@@ -184,13 +200,13 @@ def _deformation_given(args: argparse.Namespace) -> bool:
 
 
 @contextlib.contextmanager
-def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
+def _chain_scene(args: argparse.Namespace) -> Iterator[tuple[Any, Any]]:
     """The scene of SCENE.json with the deformation options of render added to its chain
-    (:func:`voxwarp.cli.deformation.compose_chain`); the element models run on a small
-    offscreen context (their GPU backend too) that stays current in the block."""
+    (:func:`voxwarp.cli.deformation.compose_chain`), and the small offscreen context the
+    element models run on (their GPU backend too; current in the block), else ``None``."""
     scene = load_scene_json(args.scene, "export-field")
     if not _deformation_given(args):
-        yield scene
+        yield scene, None
         return
     from voxwarp.cli.deformation import check_deform_options, deformed_scene, prepare_deformation
     from voxwarp.render.offscreen import OffscreenRenderer
@@ -202,7 +218,31 @@ def _chain_scene(args: argparse.Namespace) -> Iterator[Any]:
         r.current(),
         deformed_scene(args, scene, pending, r.ctx) as s,
     ):
-        yield s
+        yield s, r.ctx
+
+
+@contextlib.contextmanager
+def _sampler(args: argparse.Namespace, ctx: Any) -> Iterator[Any]:
+    """``--sampler``'s sampler (released after the block): ``None`` (the CPU) for cpu; for
+    gpu the GPU on every grid (on ``ctx`` where given); by default the GPU on grids of
+    :data:`~voxwarp.render.field_sampling.GPU_MIN_NODES` nodes or more where a context
+    opens, else the CPU."""
+    if args.sampler == "cpu":
+        yield None
+        return
+    from voxwarp.render.field_sampling import FieldSampler
+
+    def log(text: str) -> None:
+        print(f"export-field: {text}", file=sys.stderr)
+
+    forced = args.sampler == "gpu"
+    sampler = (
+        FieldSampler(ctx, min_nodes=0, required=True) if forced else FieldSampler(ctx, log=log)
+    )
+    try:
+        yield sampler
+    finally:
+        sampler.release()
 
 
 def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components: int) -> None:

@@ -111,7 +111,11 @@ def sample_carried(
 
 def fill_outside(u: np.ndarray, outside: np.ndarray) -> np.ndarray:
     """``u`` with every outside node given its nearest carried node's vector (in place
-    where possible); all zero when no node is carried."""
+    where possible); all zero when no node is carried.
+
+    The distance transform runs on the outside nodes' bounding box grown by one node
+    (:func:`_around`): that ring is carried, and it holds every outside node's nearest
+    carried node (clamping a farther node to the ring only brings it closer)."""
     if not outside.any():
         return u
     if outside.all():
@@ -119,9 +123,20 @@ def fill_outside(u: np.ndarray, outside: np.ndarray) -> np.ndarray:
         return u
     from scipy import ndimage  # deferred: voxwarp --help stays light
 
-    idx = ndimage.distance_transform_edt(outside, return_distances=False, return_indices=True)
-    u[outside] = u[idx[0][outside], idx[1][outside], idx[2][outside]]
+    box = _around(outside)
+    sub, part = outside[box], u[box]
+    idx = ndimage.distance_transform_edt(sub, return_distances=False, return_indices=True)
+    part[sub] = part[idx[0][sub], idx[1][sub], idx[2][sub]]
     return u
+
+
+def _around(mask: np.ndarray) -> tuple[slice, slice, slice]:
+    """The bounding box of ``mask``'s True nodes grown by one node (within the grid)."""
+    box = []
+    for ax in range(3):
+        hit = np.flatnonzero(mask.any(axis=tuple(a for a in range(3) if a != ax)))
+        box.append(slice(max(int(hit[0]) - 1, 0), min(int(hit[-1]) + 2, mask.shape[ax])))
+    return box[0], box[1], box[2]
 
 
 def _cells(shape: Sequence[int], rng: np.random.Generator) -> np.ndarray:
@@ -256,9 +271,26 @@ def _cell_errors(
         q, ok = chain_apply_carried(warps, p)
         vi = q @ to_index[:3, :3].T + to_index[:3, 3]
         keep = ok & _inside(vi, volume_shape)
-        err = np.linalg.norm(field.apply(p[keep]) - q[keep], axis=1)
+        u = _in_cells(field.displacements, base[keep], offset[keep])
+        err = np.linalg.norm(p[keep] + u - q[keep], axis=1)
         out[keep] = np.fmax(out[keep], err)
     return out
+
+
+def _in_cells(u: np.ndarray, base: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Trilinear values (M, 3) of node vectors ``u`` (nx, ny, nz, 3) at ``offset`` (M, 3,
+    in [0, 1]) inside the cells of lower corners ``base`` (M, 3): what
+    :meth:`DisplacementFieldWarp.displacement_at` gives there, with no world -> index
+    round trip; each corner is one flat gather."""
+    n = u.shape[:3]
+    step = np.array([n[1] * n[2], n[2], 1], dtype=np.intp)
+    flat, at = u.reshape(-1, 3), base.astype(np.intp) @ step
+    val = np.zeros((len(base), 3))
+    for corner in range(8):
+        o = [(corner >> k) & 1 for k in range(3)]
+        w = np.prod([offset[:, k] if o[k] else 1.0 - offset[:, k] for k in range(3)], axis=0)
+        val += w[:, None] * flat[at + int(np.dot(o, step))]
+    return val
 
 
 def _draws_per_cell(shape: Sequence[int]) -> int:

@@ -21,7 +21,7 @@ The field's vectors are float32 (12 bytes a node), checked against the memory bu
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -48,6 +48,11 @@ NODE_BYTES = 12
 MAX_AUTO_NODES = 1 << 25
 #: Most refinements :func:`export_chain` makes.
 MAX_REFINE = 3
+
+#: ``sampler(warps, affine, shape) -> (u, outside)``: samples a chain on a grid as
+#: :func:`~voxwarp.core.field_check.sample_carried` (the CPU) or
+#: :class:`voxwarp.render.field_sampling.GpuFieldSampler` (the GPU) does.
+Sampler = Callable[[Sequence[Warp], np.ndarray, Sequence[int]], tuple[np.ndarray, np.ndarray]]
 
 
 def _spacing(spacing: Any) -> np.ndarray:
@@ -131,7 +136,10 @@ def _check_budget(shape: Sequence[int]) -> None:
 
 
 def chain_field(
-    warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
+    warps: Sequence[Warp],
+    affine: np.ndarray,
+    shape: Sequence[int],
+    sampler: Sampler | None = None,
 ) -> tuple[DisplacementFieldWarp, np.ndarray]:
     """The pull-back field ``chain(p) - p`` of ``warps`` on the grid ``(affine, shape)``
     and the ``(nx, ny, nz)`` bool mask of its *outside* nodes.
@@ -139,9 +147,10 @@ def chain_field(
     A node the chain does not carry (a wire's vacated space, NaN, a point sent farther
     than :data:`~voxwarp.deform.warp.FAR_MM`) is outside; it holds its nearest carried
     node's vector (:func:`~voxwarp.core.field_check.fill_outside`), so ITK's trilinear
-    interpolation next to it keeps the carried side's value.
+    interpolation next to it keeps the carried side's value. ``sampler`` samples the
+    chain (default :func:`~voxwarp.core.field_check.sample_carried`, the CPU).
     """
-    u, outside = sample_carried(list(warps), affine, shape)
+    u, outside = (sample_carried if sampler is None else sampler)(list(warps), affine, shape)
     return DisplacementFieldWarp(fill_outside(u, outside), affine), outside
 
 
@@ -204,6 +213,7 @@ def export_chain(
     box: Any = None,
     tolerance: float = TOLERANCE_MM,
     grid: str = "volume",
+    sampler: Sampler | None = None,
 ) -> FieldExport:
     """Sample ``warps`` as a field on ``field_grid(volume, spacing, box, grid)`` and
     measure it; ``spacing=None`` starts from
@@ -215,14 +225,16 @@ def export_chain(
     :data:`MAX_AUTO_NODES` nodes and the memory budget). With ``spacing=None`` the
     finest one tried is returned (``refined``); a given ``spacing`` is kept, and the
     spacing that met the tolerance (or the last estimate) is its
-    :attr:`FieldExport.needed_spacing`.
+    :attr:`FieldExport.needed_spacing`. ``sampler`` samples the chain on each grid
+    (:func:`chain_field`); the field check always measures against the exact CPU chain.
     """
     chain = list(warps)
     to_index = np.linalg.inv(np.asarray(volume.affine, float))
 
     def measured(step: Any) -> FieldExport:
         affine, shape = field_grid(volume, step, box, grid)
-        return _measured(chain, affine, shape, to_index, volume.shape, tolerance)
+        field, outside = chain_field(chain, affine, shape, sampler)
+        return _measured(chain, field, outside, to_index, volume.shape, tolerance)
 
     start = default_spacing(volume, chain).spacing if spacing is None else spacing
     first = trial = measured(start)
@@ -253,12 +265,11 @@ def _capped(volume: Volume, spacing: np.ndarray, box: Any) -> np.ndarray:
 
 def _measured(
     chain: list[Warp],
-    affine: np.ndarray,
-    shape: Sequence[int],
+    field: DisplacementFieldWarp,
+    outside: np.ndarray,
     to_index: np.ndarray,
     volume_shape: Sequence[int],
     tolerance: float,
 ) -> FieldExport:
-    field, outside = chain_field(chain, affine, shape)
     check = check_field(chain, field, to_index, volume_shape, tolerance=tolerance)
     return FieldExport(field, outside, check, np.asarray(field.spacing) * check.scale)

@@ -663,7 +663,7 @@ def _write_nifti(field: DisplacementFieldWarp, tmp: Path, notes: Mapping[str, st
     import nibabel as nib
 
     u_lps, _ = _lps(field)
-    img = nib.Nifti1Image(u_lps[:, :, :, None, :].astype(np.float32), field.affine)
+    img = nib.Nifti1Image(u_lps[:, :, :, None, :].astype(np.float32, copy=False), field.affine)
     if notes:
         pairs = " ".join(f"{k.removeprefix('voxwarp_')}={v}" for k, v in notes.items())
         img.header["descrip"] = f"voxwarp {pairs}"[:79].encode("ascii", "replace")

@@ -196,8 +196,10 @@ class DisplacementFieldWarp(Warp):
         return np.linalg.norm(self.affine[:3, :3], axis=0)
 
     def max_displacement(self) -> float:
-        """Largest vector length ``max |u|`` in mm."""
-        return float(np.sqrt(np.max(np.sum(self._u.astype(np.float64) ** 2, axis=-1))))
+        """Largest vector length ``max |u|`` in mm (squared lengths summed in float32,
+        without a float64 copy of the field)."""
+        u = self._u.reshape(-1, 3)
+        return float(np.sqrt(np.max(np.einsum("ij,ij->i", u, u), initial=0.0)))
 
     def magnitude(self) -> np.ndarray:
         """``|u|`` per node (mm), shape ``(nx, ny, nz)``: what the field slice view shows."""
@@ -226,12 +228,14 @@ class DisplacementFieldWarp(Warp):
         inside = np.all((c >= -0.5) & (c <= n - 0.5), axis=1)
         x = np.clip(c, 0.0, n - 1.0)
         i0 = np.minimum(np.floor(x).astype(np.intp), n - 2)
-        f, u = x - i0, self._u
+        f, u = x - i0, self._u.reshape(-1, 3)
+        step = np.array([n[1] * n[2], n[2], 1], dtype=np.intp)
+        base = i0 @ step  # each corner is one flat gather (the same values)
         val = np.zeros((len(c), 3))
         grad = np.zeros((len(c), 3, 3)) if gradient else None
         for corner in range(8):
             o = [(corner >> a) & 1 for a in range(3)]
-            node = u[i0[:, 0] + o[0], i0[:, 1] + o[1], i0[:, 2] + o[2]].astype(np.float64)
+            node = u[base + int(np.dot(o, step))].astype(np.float64)
             w = [f[:, a] if o[a] else 1.0 - f[:, a] for a in range(3)]
             val += (w[0] * w[1] * w[2])[:, None] * node
             if grad is not None:

@@ -135,6 +135,45 @@ def test_fill_outside_without_carried_nodes_is_zero() -> None:
     np.testing.assert_array_equal(fill_outside(u, np.ones((3, 3, 3), bool)), 0.0)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fill_outside_takes_the_nearest_carried_node(seed: int) -> None:
+    """Each node's vector is its own index, so a filled node names the node it copied:
+    that node is carried and as near as the whole grid's distance transform says (the
+    fill crops the grid to the outside nodes' box grown by one node)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    shape = (23, 19, 17)
+    outside = np.zeros(shape, bool)
+    outside[4:15, 3:12, 5:16] = rng.random((11, 9, 11)) < 0.8  # a cluster off the edges
+    outside[0:3, 15:19, 0:4] = True  # and one at a corner
+    u = np.indices(shape).transpose(1, 2, 3, 0).astype(np.float32)
+    filled = fill_outside(u.copy(), outside)
+    src = filled[outside].astype(int)
+    assert not outside[src[:, 0], src[:, 1], src[:, 2]].any()
+    dist = np.linalg.norm(src - np.argwhere(outside), axis=1)
+    np.testing.assert_allclose(dist, ndimage.distance_transform_edt(outside)[outside], atol=1e-9)
+    np.testing.assert_array_equal(filled[~outside], u[~outside])
+
+
+def test_in_cell_trilinear_equals_the_field_at_the_points() -> None:
+    """The check's in-cell interpolation is the field's own (ITK's trilinear) at the
+    same world points, on an oblique grid."""
+    from voxwarp.core.field_check import _in_cells
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(7, 5, 6, 3)).astype(np.float32)
+    a = np.eye(4)
+    a[:3, :3] = np.array([[0.9, 0.2, 0.0], [-0.1, 1.1, 0.3], [0.0, -0.2, 1.4]])
+    a[:3, 3] = (4.0, -2.0, 7.0)
+    field = DisplacementFieldWarp(u, a)
+    base = rng.integers(0, [6, 4, 5], size=(500, 3))
+    offset = rng.random((500, 3))
+    p = (base + offset) @ a[:3, :3].T + a[:3, 3]
+    np.testing.assert_allclose(_in_cells(u, base, offset), field.displacement_at(p), atol=1e-9)
+
+
 def test_sample_carried_is_exact_on_the_nodes() -> None:
     a = np.diag([2.0, 2.0, 2.0, 1.0])
     u, outside = sample_carried([_quadratic(0.01)], a, (5, 3, 2))
