@@ -23,6 +23,7 @@ from voxwarp.core.field_check import sample_carried
 from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import FAR_MM, Warp, compose_glsl
 from voxwarp.errors import RenderError
+from voxwarp.render.float_target import FloatTarget
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 
 #: Largest plane (nodes a side) one draw samples; the CPU path takes larger grids.
@@ -48,7 +49,7 @@ class GpuFieldSampler:
     def __init__(self, ctx: Any) -> None:
         self.ctx = ctx
         self._programs: dict[tuple, Any] = {}
-        self._target: tuple[tuple[int, int], Any, Any] | None = None
+        self._target = FloatTarget(ctx, (4,))
 
     def __call__(
         self, warps: Sequence[Warp], affine: np.ndarray, shape: Sequence[int]
@@ -67,7 +68,7 @@ class GpuFieldSampler:
         set_uniform(prog, "u_index_to_world", np.asarray(affine, dtype=np.float64))
         bind_warps(prog, chain, textures, 0)
         per = max(1, min(DRAW_NODES // (ny * nz), MAX_PLANE_SIDE // ny, nx))
-        fbo = self._framebuffer(nz, ny * per)
+        fbo = self._target.framebuffer(nz, ny * per)
         set_uniform(prog, "u_rows", float(ny))
         vao = self.ctx.vertex_array(prog, [])
         u = np.empty((nx, ny, nz, 3), dtype=np.float32)
@@ -101,35 +102,12 @@ class GpuFieldSampler:
             self._programs[key] = hold
         return hold.program
 
-    def _framebuffer(self, w: int, h: int) -> Any:
-        """The RGBA32F target, grown (never shrunk) to hold (w, h)."""
-        if self._target is not None:
-            (tw, th), _, fbo = self._target
-            if tw >= w and th >= h:
-                return fbo
-            w, h = max(w, tw), max(h, th)
-        self._release_target()
-        tex = self.ctx.texture((w, h), 4, dtype="f4")
-        self._target = ((w, h), tex, self.ctx.framebuffer(color_attachments=[tex]))
-        return self._target[2]
-
-    def _release_target(self) -> None:
-        if self._target is not None:
-            _, tex, fbo = self._target
-            try:  # never delete the bound framebuffer (moderngl would re-bind its name)
-                self.ctx.detect_framebuffer(0).use()
-            except Exception:
-                pass
-            fbo.release()
-            tex.release()
-            self._target = None
-
     def release(self) -> None:
         """Free the programs and the target; idempotent."""
         for hold in self._programs.values():
             hold.release()
         self._programs.clear()
-        self._release_target()
+        self._target.release()
 
 
 def _planes(raw: bytes, m: int, ny: int, nz: int) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ from voxwarp import shaders
 from voxwarp.deform import gl_programs
 from voxwarp.deform.warp import compose_glsl
 from voxwarp.errors import RenderError
+from voxwarp.render.float_target import FloatTarget
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.scene import Scene
 
@@ -74,7 +75,7 @@ class SliceRenderer:
         self.ctx = ctx
         self._programs: dict[tuple, Any] = {}
         self._vaos: dict[int, Any] = {}
-        self._target: tuple[tuple[int, int], tuple[Any, Any], Any] | None = None
+        self._target = FloatTarget(ctx, (4, 1))
         self._released = False
 
     def _program(self, scene: Scene, slice_pairs: bool, nearest: bool, detj: bool) -> Any:
@@ -170,7 +171,7 @@ class SliceRenderer:
         w, h = (int(v) for v in size)
         if not (1 <= w <= MAX_SLICE_SIDE and 1 <= h <= MAX_SLICE_SIDE):
             raise RenderError(f"slice size must be 1..{MAX_SLICE_SIDE} pixels a side; got {w}x{h}")
-        fbo = self._framebuffer(w, h)
+        fbo = self._target.framebuffer(w, h)
         self.draw(gpu, scene, pixel_to_world, fbo, (0, 0, w, h), **options)
         raw = fbo.read(viewport=(0, 0, w, h), components=4, dtype="f4", alignment=1)
         data = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)
@@ -179,31 +180,6 @@ class SliceRenderer:
         raw = fbo.read(viewport=(0, 0, w, h), components=1, attachment=1, dtype="f4", alignment=1)
         det = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 1)
         return np.concatenate([data, det], axis=2)[::-1].copy()
-
-    def _framebuffer(self, w: int, h: int) -> Any:
-        """The RGBA32F (+ R32F det J) target of :meth:`values`, grown (never shrunk) to
-        hold (w, h)."""
-        if self._target is not None:
-            (tw, th), _, fbo = self._target
-            if tw >= w and th >= h:
-                return fbo
-            w, h = max(w, tw), max(h, th)
-        self._release_target()
-        tex = (self.ctx.texture((w, h), 4, dtype="f4"), self.ctx.texture((w, h), 1, dtype="f4"))
-        self._target = ((w, h), tex, self.ctx.framebuffer(color_attachments=list(tex)))
-        return self._target[2]
-
-    def _release_target(self) -> None:
-        if self._target is not None:
-            _, tex, fbo = self._target
-            try:  # never delete the bound framebuffer (moderngl would re-bind its name)
-                self.ctx.detect_framebuffer(0).use()
-            except Exception:
-                pass
-            fbo.release()
-            for t in tex:
-                t.release()
-            self._target = None
 
     def release(self) -> None:
         """Free every GPU resource this renderer made; idempotent."""
@@ -215,5 +191,5 @@ class SliceRenderer:
         for hold in self._programs.values():
             hold.release()
         self._programs.clear()
-        self._release_target()
+        self._target.release()
         self._released = True
