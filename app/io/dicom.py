@@ -70,8 +70,19 @@ def _headers(files: list[Path]) -> list[tuple[Path, Any]]:
             warn(f"skipped {p.name}: not a readable DICOM file ({type(exc).__name__}: {exc}).")
             continue
         if "Rows" in ds and "Columns" in ds:
+            if not _whole_sizes(ds):
+                warn(f"skipped {p.name}: its Rows/Columns are not positive whole numbers.")
+                continue
             headers.append((p, ds))
     return headers
+
+
+def _whole_sizes(ds: Any) -> bool:
+    """Whether the header's Rows and Columns are positive whole numbers."""
+    try:
+        return int(ds.Rows) > 0 and int(ds.Columns) > 0
+    except (TypeError, ValueError):
+        return False
 
 
 def _group_series(headers: list[tuple[Path, Any]]) -> list[tuple[SeriesInfo, list]]:

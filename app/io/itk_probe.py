@@ -47,6 +47,10 @@ def _data_segment() -> int:
     return 0
 
 
+#: the probe child's exit status when ITK threw std::bad_alloc
+OUT_OF_MEMORY = 3
+
+
 def _child(sitk: Any, path: Path, limit: int) -> None:
     """In the fork: limit the data segment, silence stderr, read, exit (never returns)."""
     code = 1
@@ -56,6 +60,8 @@ def _child(sitk: Any, path: Path, limit: int) -> None:
         os.dup2(null, 2)
         sitk.ReadTransform(str(path))
         code = 0
+    except RuntimeError as exc:  # ITK's std::bad_alloc: out of the limited memory
+        code = OUT_OF_MEMORY if "bad_alloc" in str(exc) else 1
     finally:
         os._exit(code)
 
@@ -81,10 +87,14 @@ def probe_binary_transform(sitk: Any, path: Path) -> None:
             os.waitpid(pid, 0)
             raise FieldError(f"{path.name}: ITK read it for over {PROBE_SECONDS:.0f} s; damaged?")
         time.sleep(0.005)
-    if os.WIFSIGNALED(status):
-        name = signal.Signals(os.WTERMSIG(status)).name
+    if os.WIFSIGNALED(status) or os.WEXITSTATUS(status) == OUT_OF_MEMORY:
+        what = (
+            f"crashed reading it ({signal.Signals(os.WTERMSIG(status)).name})"
+            if os.WIFSIGNALED(status)
+            else "ran out of memory reading it (std::bad_alloc)"
+        )
         raise FieldError(
-            f"{path.name}: ITK crashed reading it ({name}): the file is damaged or its grid"
-            f" needs more than the memory budget of {_limits.format_bytes(budget)} (raise"
-            " --memory-budget SIZE only if it is genuine)"
+            f"{path.name}: ITK {what}: the file is damaged or its grid needs more than the"
+            f" memory budget of {_limits.format_bytes(budget)} (raise --memory-budget SIZE"
+            " only if it is genuine)"
         )

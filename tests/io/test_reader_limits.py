@@ -367,7 +367,8 @@ def test_h5_bspline_grid_that_aborts_itk_is_one_line(tmp_path: Path) -> None:
     path = _bspline_h5(tmp_path / "b.h5", 100000.0)
     line = _one_error_line(run_cli("info", str(path), timeout=20))
     assert "b.h5" in line
-    assert "SIGABRT" in line
+    # the capped child either aborts or throws std::bad_alloc, as its allocator decides
+    assert "SIGABRT" in line or "bad_alloc" in line
     assert "memory budget" in line
     (warp,) = load_transform(_bspline_h5(tmp_path / "ok.h5", 6.0))  # the untouched grid
     assert isinstance(warp, DisplacementFieldWarp)
