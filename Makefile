@@ -3,6 +3,9 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-dev
+# pytest-xdist: one worker per core, each test file in one worker (its module fixtures and
+# GL context stay together); PYTEST_WORKERS= runs the suite in one process
+PYTEST_WORKERS ?= -n auto --dist loadfile
 BENCH_STAMP := $(VENV)/.installed-bench
 
 .PHONY: setup run test test-fast lint docs format bench clean
@@ -24,11 +27,11 @@ run: $(STAMP)
 ## lint + the documentation site + the whole test suite, headless (GL tests fail, not skip,
 ## without an EGL context; the teaching notebooks are executed, the napari manifest validated)
 test: $(STAMP) lint docs
-	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest
+	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest $(PYTEST_WORKERS)
 
 ## the suite without the tests marked slow or load (a quick check while working; CI runs `make test`)
 test-fast: $(STAMP)
-	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest -m "not slow and not load"
+	VOXWARP_REQUIRE_GL=1 $(PY) -m pytest $(PYTEST_WORKERS) -m "not slow and not load"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

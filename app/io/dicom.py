@@ -81,7 +81,7 @@ def _whole_sizes(ds: Any) -> bool:
     """Whether the header's Rows and Columns are positive whole numbers."""
     try:
         return int(ds.Rows) > 0 and int(ds.Columns) > 0
-    except (TypeError, ValueError):
+    except Exception:  # pydicom's BytesLengthException, int(''), a sequence, ...
         return False
 
 
