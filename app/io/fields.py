@@ -56,6 +56,7 @@ from voxwarp.errors import FieldError, VolumeError
 from voxwarp.io.inflation import check_inflation
 from voxwarp.io.itk_probe import probe_binary_transform
 from voxwarp.io.loaded import native_stderr, quiet_nibabel, warn
+from voxwarp.io.metaimage import mhd_data_file
 from voxwarp.io.transform_sizes import check_transform_text
 from voxwarp.io.volumes import (
     _check_nrrd_budget,
@@ -387,23 +388,17 @@ def _sitk(what: str) -> Any:
 
 def _metaimage_data_file(path: Path) -> None:
     """Refuse a ``.mhd`` whose ``ElementDataFile`` lies outside its folder."""
-    with open(path, "rb") as fh:
-        head = fh.read(1 << 16).decode("ascii", "ignore")
-    for line in head.splitlines():
-        key, sep, value = line.partition("=")
-        if sep and key.strip() == "ElementDataFile":
-            name = value.strip()
-            if name.upper() == "LOCAL":
-                return
-            if name.upper().startswith("LIST"):
-                raise FieldError(f"{path.name}: a list of data files is not supported")
-            if "%" in name or "\x00" in name or data_file_outside(path, name) is not None:
-                raise FieldError(
-                    f"{path.name} names the data file {name!r} outside its folder; voxwarp"
-                    " reads MetaImage data only beside the header: move it there"
-                )
-            check_regular(path.parent / name, f"{path.name}'s data file", FieldError)
-            return
+    name = mhd_data_file(path)
+    if name is None or name.upper() == "LOCAL":
+        return
+    if name.upper().startswith("LIST"):
+        raise FieldError(f"{path.name}: a list of data files is not supported")
+    if "%" in name or "\x00" in name or data_file_outside(path, name) is not None:
+        raise FieldError(
+            f"{path.name} names the data file {name!r} outside its folder; voxwarp"
+            " reads MetaImage data only beside the header: move it there"
+        )
+    check_regular(path.parent / name, f"{path.name}'s data file", FieldError)
 
 
 def _check_metaimage_inflation(path: Path, values: int) -> None:

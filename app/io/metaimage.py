@@ -20,24 +20,30 @@ from voxwarp.io.loaded import Loaded, native_stderr
 METAIMAGE_SUFFIXES = (".mha", ".mhd")
 
 
-def _check_data_file(path: Path) -> None:
-    """Refuse a ``.mhd`` whose ``ElementDataFile`` is not a plain name beside it."""
+def mhd_data_file(path: Path) -> str | None:
+    """The ``ElementDataFile`` a ``.mhd`` header names (``"LOCAL"``: in the header
+    itself), or None when its first 64 KiB name none."""
     with open(path, "rb") as fh:
         head = fh.read(1 << 16).decode("ascii", "ignore")
     for line in head.splitlines():
         key, sep, value = line.partition("=")
-        if not sep or key.strip() != "ElementDataFile":
-            continue
-        name = value.strip()
-        plain = Path(name).name == name and not any(c in name for c in "%\x00")
-        if name.upper() != "LOCAL" and (not plain or name.upper().startswith("LIST")):
-            raise VolumeError(
-                f"{path.name} names the data file {name!r}; voxwarp reads a MetaImage's data"
-                " only from one file beside the header: move it there and name it plainly"
-            )
-        if name.upper() != "LOCAL":
-            _check_beside(path, name)
+        if sep and key.strip() == "ElementDataFile":
+            return value.strip()
+    return None
+
+
+def _check_data_file(path: Path) -> None:
+    """Refuse a ``.mhd`` whose ``ElementDataFile`` is not a plain name beside it."""
+    name = mhd_data_file(path)
+    if name is None or name.upper() == "LOCAL":
         return
+    plain = Path(name).name == name and not any(c in name for c in "%\x00")
+    if not plain or name.upper().startswith("LIST"):
+        raise VolumeError(
+            f"{path.name} names the data file {name!r}; voxwarp reads a MetaImage's data"
+            " only from one file beside the header: move it there and name it plainly"
+        )
+    _check_beside(path, name)
 
 
 def _check_beside(path: Path, name: str) -> None:
