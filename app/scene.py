@@ -23,6 +23,7 @@ import numpy as np
 
 import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed warps
 from voxwarp.core import limits
+from voxwarp.core.allowed_folders import allowed_folders
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
 from voxwarp.core.checks import finite_box, finite_vector
 from voxwarp.core.comparison import Comparison
@@ -52,6 +53,7 @@ from voxwarp.core.modes import MODES as MODES
 from voxwarp.core.modes import Mode as Mode
 from voxwarp.core.orientation import ANATOMICAL_VIEWS
 from voxwarp.core.scene_paths import path_entry, scene_file
+from voxwarp.core.scene_seal import SEAL_KEY, config_dir, seal_paths, trust_sealed
 from voxwarp.core.transfer_function import TransferFunction, file_spec
 from voxwarp.core.volume import Volume, check_finite
 from voxwarp.deform.warp import (
@@ -675,10 +677,17 @@ class Scene:
         return write_scene_json(path, self.to_dict, indent=2)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> Scene:
-        """Read a scene JSON written by :meth:`save`; raises :class:`SceneError`."""
+    def load(
+        cls, path: str | os.PathLike, allow_dirs: Sequence[str | os.PathLike] | None = None
+    ) -> Scene:
+        """Read a scene JSON written by :meth:`save`; raises :class:`SceneError`.
+
+        The files it names must lie in its folder (or subfolders), the bundled samples or
+        an allowed folder: ``allow_dirs`` adds folders for this call
+        (:mod:`voxwarp.core.allowed_folders`)."""
         path = Path(path)
-        return cls.from_dict(read_scene_dict(path), base_dir=path.parent.resolve())
+        with allowed_folders(allow_dirs):
+            return cls.from_dict(read_scene_dict(path), base_dir=path.parent.resolve())
 
     def displacement_field(self, spacing: Any = None, box: Any = None) -> DisplacementFieldWarp:
         """The warp chain sampled as a displacement field, ``u(p) = warps(p) - p``.
@@ -806,6 +815,7 @@ def read_scene_dict(path: str | os.PathLike) -> dict[str, Any]:
         raise SceneError(f"{p} is not valid JSON: {json_error_text(exc)}") from exc
     if not isinstance(d, dict):
         raise SceneError(f"{p}: a scene must be a JSON object")
+    trust_sealed(d)
     return d
 
 
@@ -816,8 +826,9 @@ def json_error_text(exc: ValueError) -> str:
     return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
-#: Entries of scene JSON beside the scene's own: notes and the editor's and animation's.
-SCENE_EXTRA_KEYS = ("description", "editor", "animation")
+#: Entries of scene JSON beside the scene's own: notes, the editor's and animation's, and
+#: the seal of the paths it names (:mod:`voxwarp.core.scene_seal`).
+SCENE_EXTRA_KEYS = ("description", "editor", "animation", SEAL_KEY)
 _NUMBER = "a number (e.g. 1.5)"
 #: Scene JSON entry -> (JSON types it may hold, what the error says it must be).
 SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
@@ -918,8 +929,14 @@ def write_scene_json(
     """Write ``to_dict(base_dir=<path's folder>)`` to ``path`` as JSON, atomically (a
     failed write keeps the old file); volume paths in it are relative to that folder."""
     path = Path(path)
-    text = json.dumps(to_dict(base_dir=path.parent.resolve()), indent=indent)
-    atomic_write_text(path, text)
+    d = to_dict(base_dir=path.parent.resolve())
+    if not seal_paths(d):
+        warnings.warn(
+            f"{path} names files outside its folder and could not be sealed (no writable key"
+            f" in {config_dir()}): reopening it needs their folders allowed (--allow-dir)",
+            stacklevel=3,
+        )
+    atomic_write_text(path, json.dumps(d, indent=indent))
     return path
 
 

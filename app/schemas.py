@@ -51,6 +51,7 @@ from voxwarp.animation.tracks import (
 )
 from voxwarp.core.camera import CAMERA_ARRAYS, PROJECTIONS, VIEW_NAMES, Camera
 from voxwarp.core.modes import MODES
+from voxwarp.core.scene_seal import SEAL_KEY
 from voxwarp.deform.lattice.warp import INVERSE_MODES, LATTICE_KEYS, LATTICE_REQUIRED
 from voxwarp.deform.wires.constants import (
     ENDS,
@@ -271,6 +272,11 @@ def _scene_properties() -> dict[str, Any]:
     }
     props["animation"] = {"$ref": "#/$defs/animation"}
     props["description"] = {"type": "string"}
+    props[SEAL_KEY] = {
+        "type": "string",
+        "description": "HMAC-SHA256 of the absolute paths the scene names, under the saving"
+        " user's key: they reopen without --allow-dir (voxwarp.core.scene_seal)",
+    }
     return props
 
 

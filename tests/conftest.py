@@ -25,6 +25,21 @@ import numpy as np
 import pytest
 
 GOLDEN_DIR = Path(__file__).parent / "golden"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Scene seals (voxwarp.core.scene_seal) use a key in a per-run folder, inherited by
+    the CLI subprocesses, never the user's ~/.config."""
+    import atexit
+    import shutil
+    import tempfile
+
+    if "VOXWARP_CONFIG_DIR" not in os.environ:
+        folder = tempfile.mkdtemp(prefix="voxwarp-test-config-")
+        os.environ["VOXWARP_CONFIG_DIR"] = folder
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
+
+
 #: environment variable that turns "no GL context" from a skip into a failure
 REQUIRE_GL = "VOXWARP_REQUIRE_GL"
 FAILURE_DIR = Path(__file__).parent / "_failures"

@@ -289,8 +289,10 @@ def test_path_volume_in_a_sibling_folder(tmp_path: Path) -> None:
     vol = load_volume(save_volume(small_volume(), tmp_path / "volumes" / "v.nrrd"))
     Scene(vol).save(tmp_path / "scenes" / "s.json")
     d = json.loads((tmp_path / "scenes" / "s.json").read_text())
-    # outside the scene's folder: absolute, so it reopens from anywhere without a warning
+    # outside the scene's folder: absolute and sealed (voxwarp.core.scene_seal), so it
+    # reopens from anywhere without a warning
     assert d["volume"]["path"] == str((tmp_path / "volumes" / "v.nrrd").resolve())
+    assert "path_seal" in d
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         back = Scene.load(tmp_path / "scenes" / "s.json")

@@ -63,6 +63,7 @@ from voxwarp.ui.detj_overlay import install_detj_controls
 from voxwarp.ui.export_dialog import open_export_dialog
 from voxwarp.ui.field_view import SEP
 from voxwarp.ui.fixed_image import install_fixed_image
+from voxwarp.ui.folder_access import ask_allow_folder, outside_folder
 from voxwarp.ui.frame_dialog import ask_frame
 from voxwarp.ui.mpr import SliceLayout, install_slice_controls
 from voxwarp.ui.panels import DeformationPanel, DisplayPanel, ScenePanel, VolumePanel
@@ -732,12 +733,20 @@ class MainWindow(QMainWindow):
                 return load_session_input(spec, **pick)
             except FrameChoiceError as exc:
                 return exc  # asked on the GUI thread, in done
+            except VoxwarpError as exc:
+                if outside_folder(exc) is None:
+                    raise
+                return exc  # may the scene read there? asked on the GUI thread, in done
 
         def done(result: Any) -> None:
             if isinstance(result, FrameChoiceError):
                 choice = ask_frame(self, Path(spec).name, result)
                 if choice is not None:  # after this task has finished emitting
                     QTimer.singleShot(0, lambda: self.open_path(spec, refit=refit, **choice))
+                return
+            if isinstance(result, VoxwarpError):
+                if ask_allow_folder(self, result):
+                    QTimer.singleShot(0, lambda: self.open_path(spec, refit=refit, **pick))
                 return
             self.viewport.with_context(self.session.close)
             if refit:

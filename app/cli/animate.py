@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from voxwarp.animation import FRAME_FORMATS
+from voxwarp.cli.options import add_allow_dir_arg
 from voxwarp.core.checks import image_size, positive_int
 
 
@@ -65,6 +66,7 @@ def add_parser(sub: Any) -> None:
         help="movie file (.mp4, .mov, .mkv); frames go to <stem>_frames/",
     )
     add_frame_args(p)
+    add_allow_dir_arg(p)
     p.add_argument("--fps", type=_fps, help="frames per second (default: the animation's)")
     where = p.add_mutually_exclusive_group()
     where.add_argument(

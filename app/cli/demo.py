@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp.cli.deform_options import MASSSPRING_SETTLE_MAX_STEPS, MASSSPRING_SETTLE_TOL
-from voxwarp.cli.options import TF_HELP, CliOptionError, add_memory_budget_arg
+from voxwarp.cli.options import TF_HELP, CliOptionError, add_allow_dir_arg, add_memory_budget_arg
 from voxwarp.cli.options import tf_arg as _tf_arg
 from voxwarp.cli.options import view_arg as _view
 from voxwarp.core.checks import image_size as _size
@@ -34,6 +34,7 @@ def add_parser(sub: Any) -> None:
         " real CT) renders it in every mode, bent by a mass-spring drag and by a wire.",
     )
     add_memory_budget_arg(pd)
+    add_allow_dir_arg(pd)
     pd.add_argument(
         "input",
         nargs="?",

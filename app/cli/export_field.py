@@ -14,7 +14,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from voxwarp.cli.deform_options import add_deform_args, add_field_args, add_wire_args
-from voxwarp.cli.options import CliOptionError, add_memory_budget_arg, load_scene_json
+from voxwarp.cli.options import (
+    CliOptionError,
+    add_allow_dir_arg,
+    add_memory_budget_arg,
+    load_scene_json,
+)
 from voxwarp.core.field_check import TOLERANCE_MM
 
 if TYPE_CHECKING:
@@ -114,6 +119,7 @@ def add_parser(sub: Any) -> None:
         " against the exact CPU chain",
     )
     add_memory_budget_arg(p)
+    add_allow_dir_arg(p)
     add_deform_args(p)
     add_wire_args(p)
     add_field_args(p)

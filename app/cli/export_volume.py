@@ -39,7 +39,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from voxwarp.cli.options import add_memory_budget_arg, load_scene_json
+from voxwarp.cli.options import add_allow_dir_arg, add_memory_budget_arg, load_scene_json
 from voxwarp.core import limits
 from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import InputError
@@ -133,6 +133,7 @@ def add_parser(sub: Any) -> None:
         help="progress on stderr (default on)",
     )
     add_memory_budget_arg(p)
+    add_allow_dir_arg(p)
     p.set_defaults(func=cmd_export_volume)
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp.cli import demo
-from voxwarp.cli.options import CliOptionError, add_memory_budget_arg
+from voxwarp.cli.options import CliOptionError, add_allow_dir_arg, add_memory_budget_arg
 from voxwarp.cli.render_options import add_series_arg
 from voxwarp.core.checks import image_size
 from voxwarp.core.extras import require
@@ -107,6 +107,7 @@ def add_parser(sub: Any) -> None:
     )
     add_series_arg(pg)
     add_memory_budget_arg(pg)
+    add_allow_dir_arg(pg)
     pg.add_argument("--fallback-out", default="out", help=argparse.SUPPRESS)
     pg.set_defaults(func=cmd_gui)
     sub.choices["demo"].set_defaults(func=cmd_demo_gui)

@@ -27,6 +27,7 @@ from voxwarp.cli import slice as slice_command
 from voxwarp.cli.bench import wants_bench
 from voxwarp.cli.options import OneLineErrorParser, VersionAction, join_negative_views
 from voxwarp.core import limits
+from voxwarp.core.allowed_folders import set_allowed_folders
 from voxwarp.errors import VoxwarpError
 
 #: ``voxwarp --help``'s description (the commands and their help lines follow it)
@@ -95,6 +96,7 @@ def _run(argv: Sequence[str] | None, parser: argparse.ArgumentParser) -> int:
         warnings.formatwarning = lambda msg, cat, *a, **k: f"voxwarp: warning: {msg}\n"
         try:
             limits.set_memory_budget(getattr(args, "memory_budget", None))
+            set_allowed_folders(getattr(args, "allow_dir", None))
             code = int(args.func(args) or 0)
             _flush_stdout()  # a closed pipe shows here, not in the interpreter's last flush
             return code
@@ -111,6 +113,7 @@ def _run(argv: Sequence[str] | None, parser: argparse.ArgumentParser) -> int:
             return 130
         finally:
             limits.set_memory_budget(None)
+            set_allowed_folders(None)
             warnings.formatwarning = old_format
 
 

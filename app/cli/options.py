@@ -20,6 +20,7 @@ from typing import IO, Any, NoReturn
 import voxwarp
 from voxwarp.cli import render_options as ropt
 from voxwarp.core import limits
+from voxwarp.core.allowed_folders import ALLOW_DIRS_ENV
 from voxwarp.errors import InputError as CliOptionError
 from voxwarp.inputs import load_input
 
@@ -62,6 +63,7 @@ __all__ = [
     "CliOptionError",
     "OneLineErrorParser",
     "VersionAction",
+    "add_allow_dir_arg",
     "add_field_convention_arg",
     "add_memory_budget_arg",
     "add_volume_args",
@@ -175,6 +177,19 @@ def add_memory_budget_arg(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_allow_dir_arg(p: argparse.ArgumentParser) -> None:
+    """``--allow-dir DIR`` (repeatable; :func:`main` allows them for every read): folders a
+    scene or a detached header may name files in, besides its own folder."""
+    p.add_argument(
+        "--allow-dir",
+        action="append",
+        metavar="DIR",
+        help="also read files that a scene or a detached NRRD/MetaImage header names in DIR"
+        " (repeatable; by default only the naming file's folder, its subfolders and"
+        f" ${ALLOW_DIRS_ENV})",
+    )
+
+
 def add_volume_args(p: argparse.ArgumentParser) -> None:
     """How a volume file is read: spacing, downsampling, memory budget, NaNs, axis order, series."""
     p.add_argument(
@@ -192,6 +207,7 @@ def add_volume_args(p: argparse.ArgumentParser) -> None:
         help="reduce by N per axis (or by NX, NY, NZ along x, y, z)",
     )
     add_memory_budget_arg(p)
+    add_allow_dir_arg(p)
     p.add_argument(
         "--nan", choices=("raise", "mask"), default="raise", help="NaN/Inf voxels: reject or mask"
     )

@@ -18,7 +18,7 @@ Formats (by suffix):
   the header's ``space`` (RAS, LPS, LAS), through its ``measurement frame`` if any.
   Detached data only beside the header, as for volumes.
 * ``.mha``/``.mhd``: MetaImage vector image (LPS), read by SimpleITK (``registration``
-  extra); a ``.mhd``'s data file must lie beside it.
+  extra); a ``.mhd``'s data file must lie in its folder or an allowed one.
 * ``.h5``/``.hdf5``/``.tfm``/``.txt``/``.mat``: ITK transform files (SimpleITK; ANTs
   writes its affine as ``0GenericAffine.mat``): a
   ``DisplacementFieldTransform``, a ``BSplineTransform`` (sampled to a field over its
@@ -56,14 +56,13 @@ from voxwarp.errors import FieldError, VolumeError
 from voxwarp.io.inflation import check_inflation
 from voxwarp.io.itk_probe import probe_binary_transform
 from voxwarp.io.loaded import native_stderr, quiet_nibabel, warn
-from voxwarp.io.metaimage import mhd_data_file
+from voxwarp.io.metaimage import check_mhd_data_file
 from voxwarp.io.transform_sizes import check_transform_text
 from voxwarp.io.volumes import (
     _check_nrrd_budget,
     _check_nrrd_data_files,
     _nifti_affine,
     _nrrd_space,
-    data_file_outside,
 )
 
 #: Suffixes of displacement field images.
@@ -386,21 +385,6 @@ def _sitk(what: str) -> Any:
     return sitk
 
 
-def _metaimage_data_file(path: Path) -> None:
-    """Refuse a ``.mhd`` whose ``ElementDataFile`` lies outside its folder."""
-    name = mhd_data_file(path)
-    if name is None or name.upper() == "LOCAL":
-        return
-    if name.upper().startswith("LIST"):
-        raise FieldError(f"{path.name}: a list of data files is not supported")
-    if "%" in name or "\x00" in name or data_file_outside(path, name) is not None:
-        raise FieldError(
-            f"{path.name} names the data file {name!r} outside its folder; voxwarp"
-            " reads MetaImage data only beside the header: move it there"
-        )
-    check_regular(path.parent / name, f"{path.name}'s data file", FieldError)
-
-
 def _check_metaimage_inflation(path: Path, values: int) -> None:
     """A compressed MetaImage's ``values`` (header size, float32 at least) against
     :func:`check_inflation` of its stored bytes (the ``.mha``, or the ``.mhd``'s data)."""
@@ -443,7 +427,7 @@ def itk_affine(image: Any) -> np.ndarray:
 def _read_metaimage(path: Path) -> tuple[np.ndarray, Any, str, str]:
     sitk = _sitk(f"reading the MetaImage field {path.name}")
     if field_suffix(path) == ".mhd":
-        _metaimage_data_file(path)
+        check_mhd_data_file(path, FieldError)
     with native_stderr() as said:
         try:
             reader = sitk.ImageFileReader()

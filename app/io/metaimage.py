@@ -2,7 +2,8 @@
 
 The image goes through :func:`voxwarp.io.image_objects.sitk_loaded`, so a 4-D or
 multi-component file offers its time points and channels as a SimpleITK image does. A
-``.mhd`` must keep its data file beside it (a plain name, not a path or a list).
+``.mhd``'s data file must lie in the header's folder or an allowed folder
+(:func:`check_mhd_data_file`, shared with the field reader).
 """
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ from pathlib import Path
 
 from voxwarp.core import extras
 from voxwarp.core import limits as _limits
+from voxwarp.core.allowed_folders import allow_hint, outside_allowed
 from voxwarp.core.input_files import check_regular
-from voxwarp.errors import VolumeError
+from voxwarp.errors import VolumeError, VoxwarpError
 from voxwarp.io.image_objects import sitk_loaded
 from voxwarp.io.loaded import Loaded, native_stderr
 
@@ -32,30 +34,26 @@ def mhd_data_file(path: Path) -> str | None:
     return None
 
 
-def _check_data_file(path: Path) -> None:
-    """Refuse a ``.mhd`` whose ``ElementDataFile`` is not a plain name beside it."""
+def check_mhd_data_file(path: Path, error: type[VoxwarpError]) -> None:
+    """Refuse (``error``, one line) a ``.mhd`` whose ``ElementDataFile`` is a list or a
+    pattern, lies outside the header's folder (and subfolders) and the allowed folders
+    (:mod:`voxwarp.core.allowed_folders`) once links are resolved, or is not a regular
+    file: the rule of NRRD's detached data, for volumes and fields alike."""
     name = mhd_data_file(path)
     if name is None or name.upper() == "LOCAL":
         return
-    plain = Path(name).name == name and not any(c in name for c in "%\x00")
-    if not plain or name.upper().startswith("LIST"):
-        raise VolumeError(
+    if name.upper().startswith("LIST") or any(c in name for c in "%\x00"):
+        raise error(
             f"{path.name} names the data file {name!r}; voxwarp reads a MetaImage's data"
-            " only from one file beside the header: move it there and name it plainly"
+            " only from one file (not a list or a pattern): join the data into one file"
         )
-    _check_beside(path, name)
-
-
-def _check_beside(path: Path, name: str) -> None:
-    """The data file ``name`` of the header ``path``: inside the header's folder once
-    symlinks are resolved, and a regular file (a FIFO would block the read forever)."""
     target = (path.parent / name).resolve()
-    if not target.is_relative_to(path.parent.resolve()):
-        raise VolumeError(
-            f"{path.name} names the data file {name!r}, a link to {target} outside the"
-            " header's folder; copy the data beside the header"
+    if outside_allowed(target, path.parent):
+        raise error(
+            f"{path.name} names the data file {name!r} ({target}), outside the header's"
+            f" folder; move the data beside the header, or allow its folder: {allow_hint(target)}"
         )
-    check_regular(target, f"{path.name}'s data file", VolumeError)
+    check_regular(target, f"{path.name}'s data file", error)
 
 
 def read_metaimage(path: Path) -> Loaded:
@@ -64,7 +62,7 @@ def read_metaimage(path: Path) -> Loaded:
     import SimpleITK as sitk
 
     if path.suffix.lower() == ".mhd":
-        _check_data_file(path)
+        check_mhd_data_file(path, VolumeError)
     with native_stderr() as said:
         try:
             reader = sitk.ImageFileReader()

@@ -66,15 +66,14 @@ import json
 import math
 import os
 import re
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
-from contextvars import ContextVar
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
 from voxwarp.core import limits as _limits
+from voxwarp.core.allowed_folders import ALLOW_DIRS_ENV, allowed_folders, outside_allowed
 from voxwarp.core.files import atomic_open as _atomic_open
 from voxwarp.core.files import atomic_output as _atomic_output
 from voxwarp.core.input_files import check_regular, not_regular
@@ -968,30 +967,13 @@ def _read_nrrd(path: Path) -> _Loaded:
     return _Loaded(data, spacing, origin_t, units, extra=extra, vector_field=field)
 
 
-#: Folders the caller allows detached NRRD data files in, besides the header's own folder
-#: (set by :func:`load_volume` ``allow_data_dirs=``; see :func:`_check_nrrd_data_files`).
-_NRRD_DATA_DIRS: ContextVar[tuple[Path, ...]] = ContextVar("voxwarp_nrrd_data_dirs", default=())
 #: Environment variable with more allowed folders (``os.pathsep``-separated), for the CLI.
-NRRD_DATA_DIRS_ENV = "VOXWARP_ALLOW_DATA_DIRS"
+NRRD_DATA_DIRS_ENV = ALLOW_DIRS_ENV
 #: Most bytes of a detached header read to find its ``data file`` field.
 _NRRD_HEADER_SCAN_BYTES = 1 << 20
-
-
-@contextmanager
-def allowed_data_dirs(dirs: Sequence[str | os.PathLike[str]] | None) -> Iterator[None]:
-    """Allow detached NRRD data files under ``dirs`` (besides the header's folder) while
-    the block runs; ``None`` or empty changes nothing."""
-    if not dirs:
-        yield
-        return
-    if isinstance(dirs, str | os.PathLike):
-        dirs = [dirs]
-    extra = tuple(Path(os.path.expanduser(os.fspath(d))).resolve() for d in dirs)
-    token = _NRRD_DATA_DIRS.set(_NRRD_DATA_DIRS.get() + extra)
-    try:
-        yield
-    finally:
-        _NRRD_DATA_DIRS.reset(token)
+#: Allow detached data files under more folders while a block runs (``load_volume``'s
+#: ``allow_data_dirs=``); the same as :func:`voxwarp.core.allowed_folders.allowed_folders`.
+allowed_data_dirs = allowed_folders
 
 
 def _nrrd_data_names(path: Path) -> tuple[str, list[str]]:
@@ -1028,14 +1010,11 @@ def _nrrd_data_names(path: Path) -> tuple[str, list[str]]:
 
 def data_file_outside(header: Path, name: str) -> Path | None:
     """The data file ``name`` a detached header names, resolved, when it lies outside the
-    header's folder (and subfolders) and the allowed folders (:func:`allowed_data_dirs`,
-    ``$VOXWARP_ALLOW_DATA_DIRS``); ``None`` when reading it is allowed."""
+    header's folder (and subfolders) and the allowed folders
+    (:mod:`voxwarp.core.allowed_folders`); ``None`` when reading it is allowed."""
     home = header.parent.resolve()
-    allowed = [home, *_NRRD_DATA_DIRS.get()]
-    env = os.environ.get(NRRD_DATA_DIRS_ENV, "")
-    allowed += [Path(os.path.expanduser(d)).resolve() for d in env.split(os.pathsep) if d]
     target = (home / os.path.expanduser(name)).resolve()  # absolute names stay as they are
-    return None if any(target.is_relative_to(f) for f in allowed) else target
+    return target if outside_allowed(target, home) else None
 
 
 def _check_nrrd_data_files(path: Path) -> None:
@@ -1057,9 +1036,9 @@ def _check_nrrd_data_files(path: Path) -> None:
             raise VolumeError(
                 f"the NRRD header {path} names the data file {shown}, outside the header's"
                 " folder; voxwarp reads detached data only beside the header or in"
-                " its subfolders: move the data file there, or allow its folder with"
-                f" load_volume(..., allow_data_dirs=[{str(target.parent)!r}]) or"
-                f" {NRRD_DATA_DIRS_ENV}={target.parent}"
+                " its subfolders: move the data file there, or allow its folder (pass"
+                f" --allow-dir {target.parent}, load_volume(..., allow_data_dirs=[...]) or"
+                f" set {NRRD_DATA_DIRS_ENV}={target.parent})"
             )
         if "%" not in name and not name.startswith("LIST"):
             home = path.parent.resolve()

@@ -5,8 +5,8 @@ folder, with a warning for one outside it (issue 17, finding 6)."""
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -113,50 +113,78 @@ def _write_scene(path: Path, volume: dict, **extra: object) -> Path:
     return path
 
 
-def _load_recording(path: Path) -> tuple[Scene, list[str]]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        scene = Scene.load(path)
-    return scene, [str(w.message) for w in caught if "outside the scene's folder" in str(w.message)]
+def _refusal(path: Path, **kw: object) -> str:
+    with pytest.raises(SceneError) as err:
+        Scene.load(path, **kw)
+    msg = str(err.value)
+    assert "\n" not in msg
+    return msg
 
 
-def test_scene_volume_beside_the_scene_loads_silently(tmp_path: Path) -> None:
+def test_scene_volume_beside_the_scene_loads(tmp_path: Path) -> None:
     from voxwarp.core.volume import Volume
 
     save_volume(Volume(DATA), tmp_path / "scn/sub/v.nrrd")
-    scene, outside = _load_recording(_write_scene(tmp_path / "scn/s.json", {"path": "sub/v.nrrd"}))
+    scene = Scene.load(_write_scene(tmp_path / "scn/s.json", {"path": "sub/v.nrrd"}))
     np.testing.assert_array_equal(scene.volume.data, DATA)
-    assert outside == []
 
 
-def test_scene_volume_climbing_out_of_the_folder_loads_with_one_warning(
-    tmp_path: Path,
+@pytest.mark.parametrize("form", ["relative", "absolute", "link"])
+def test_scene_volume_outside_the_folder_is_refused_unless_allowed(
+    tmp_path: Path, form: str
 ) -> None:
+    """``../shared/v.nrrd``, ``/abs/shared/v.nrrd`` or a link inside the folder pointing
+    out: one line naming the file and the folder to allow; then loads once allowed."""
     from voxwarp.core.volume import Volume
 
-    target = save_volume(Volume(DATA), tmp_path / "shared/v.nrrd")
-    named = "../shared/v.nrrd"
-    scene, outside = _load_recording(_write_scene(tmp_path / "scn/s.json", {"path": named}))
+    target = save_volume(Volume(DATA), tmp_path / "shared/v.nrrd").resolve()
+    named = {"relative": "../shared/v.nrrd", "absolute": str(target), "link": "v.nrrd"}[form]
+    scene_path = _write_scene(tmp_path / "scn/s.json", {"path": named})
+    if form == "link":
+        (tmp_path / "scn/v.nrrd").symlink_to(target)
+    msg = _refusal(scene_path)
+    assert str(target) in msg
+    assert f"--allow-dir {target.parent}" in msg
+    assert "outside the scene's folder" in msg
+    scene = Scene.load(scene_path, allow_dirs=[tmp_path / "shared"])
     np.testing.assert_array_equal(scene.volume.data, DATA)
-    assert len(outside) == 1
-    assert named in outside[0]
-    assert str(target) in outside[0]
-    assert "\n" not in outside[0]
 
 
-def test_scene_volume_named_by_an_absolute_path_loads_without_a_warning(
-    tmp_path: Path,
-) -> None:
-    """An absolute path names its file outright (what voxwarp writes for a volume outside
-    the scene's folder): no warning, whatever folder the scene is in."""
+def test_allowed_folder_from_the_environment(tmp_path: Path, monkeypatch: Any) -> None:
     from voxwarp.core.volume import Volume
 
-    target = save_volume(Volume(DATA), tmp_path / "shared/v.nrrd")
-    scene, outside = _load_recording(
-        _write_scene(tmp_path / "scn/s.json", {"path": str(target.resolve())})
-    )
-    np.testing.assert_array_equal(scene.volume.data, DATA)
-    assert outside == []
+    save_volume(Volume(DATA), tmp_path / "shared/v.nrrd")
+    scene_path = _write_scene(tmp_path / "scn/s.json", {"path": "../shared/v.nrrd"})
+    monkeypatch.setenv(NRRD_DATA_DIRS_ENV, str(tmp_path / "shared"))
+    np.testing.assert_array_equal(Scene.load(scene_path).volume.data, DATA)
+
+
+def test_a_saved_scene_naming_a_file_elsewhere_reopens_by_its_seal(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    """Scene.save seals the absolute paths it writes with this user's key: the scene
+    reopens; an edited path, or another user's key, trusts nothing (refused)."""
+    from voxwarp.core.scene_seal import SEAL_KEY
+    from voxwarp.core.volume import Volume
+
+    vol = load_volume(save_volume(Volume(DATA), tmp_path / "shared/v.nrrd"))
+    saved = Scene(vol).save(tmp_path / "scn/s.json")
+    d = json.loads(saved.read_text())
+    assert len(d[SEAL_KEY]) == 64
+    np.testing.assert_array_equal(Scene.load(saved).volume.data, DATA)
+
+    other = save_volume(Volume(DATA + 1), tmp_path / "other/w.nrrd").resolve()
+    d["volume"]["path"] = str(other)  # edited by hand (or by someone else): seal broken
+    saved.write_text(json.dumps(d))
+    assert str(other) in _refusal(saved)
+
+    Scene(vol).save(saved)  # resealed ...
+    monkeypatch.setenv("VOXWARP_CONFIG_DIR", str(tmp_path / "another-user"))
+    twin = tmp_path / "scn2/s.json"  # ... a copy read by another user: not trusted
+    twin.parent.mkdir()
+    twin.write_text(saved.read_text().replace(str(tmp_path / "shared"), str(tmp_path / "sh2")))
+    save_volume(Volume(DATA), tmp_path / "sh2/v.nrrd")
+    assert "outside the scene's folder" in _refusal(twin)
 
 
 def test_scene_missing_volume_is_one_line_naming_the_resolved_path(tmp_path: Path) -> None:
@@ -176,18 +204,18 @@ def test_scene_cannot_reach_system_files_through_an_nrrd_header(tmp_path: Path) 
     assert "\n" not in str(err.value)
 
 
-def test_scene_mesh_paths_resolve_against_the_scene_and_warn_outside(tmp_path: Path) -> None:
+def test_scene_mesh_paths_resolve_against_the_scene_and_refuse_outside(tmp_path: Path) -> None:
     from voxwarp.core.mesh import box_mesh
 
     box_mesh().save(tmp_path / "scn/box.obj")
     box_mesh().save(tmp_path / "elsewhere/box.obj")
     vol = {"sample": "tubes", "shape": [8, 8, 8]}
-    for named, warned in (("box.obj", 0), ("../elsewhere/box.obj", 1)):
-        meshes = [{"mesh": {"path": named}}]
-        path = _write_scene(tmp_path / "scn/s.json", vol, meshes=meshes)
-        scene, outside = _load_recording(path)
-        assert scene.meshes[0].mesh.n_faces == 12
-        assert len(outside) == warned
+    path = _write_scene(tmp_path / "scn/s.json", vol, meshes=[{"mesh": {"path": "box.obj"}}])
+    assert Scene.load(path).meshes[0].mesh.n_faces == 12
+    meshes = [{"mesh": {"path": "../elsewhere/box.obj"}}]
+    path = _write_scene(tmp_path / "scn/s.json", vol, meshes=meshes)
+    assert str(tmp_path / "elsewhere/box.obj") in _refusal(path)
+    assert Scene.load(path, allow_dirs=[tmp_path / "elsewhere"]).meshes[0].mesh.n_faces == 12
     path = _write_scene(tmp_path / "scn/s.json", vol, meshes=[{"mesh": {"path": "gone.obj"}}])
     with pytest.raises(SceneError, match=str(tmp_path / "scn/gone.obj")):
         Scene.load(path)

@@ -230,7 +230,7 @@ def bad_files(tmp: Path) -> list[tuple[Path, str]]:
         "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementNumberOfChannels = 3\n"
         "ElementType = MET_FLOAT\nElementDataFile = ../../etc/passwd\n"
     )
-    cases.append((tmp / "outside.mhd", "outside its folder"))
+    cases.append((tmp / "outside.mhd", "outside the header.s folder"))
     (tmp / "trunc.nrrd").write_bytes((tmp / "nospace.nrrd").read_bytes()[:60])
     cases.append((tmp / "trunc.nrrd", "cannot read|no patient"))
     return cases
