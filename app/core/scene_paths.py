@@ -33,14 +33,16 @@ def scene_file(
     *,
     noun: str = "file",
     must_exist: bool = True,
+    owner: str = "scene",
 ) -> Path:
     """The file a scene entry's ``path`` names (``what``: the entry, e.g. ``"volume"``;
-    ``noun``: what the file is, in the error), resolved against the scene's folder
+    ``noun``: what the file is, in the error; ``owner``: the naming file's kind, e.g.
+    ``"tour"``), resolved against the scene's folder
     ``base_dir`` (made absolute, symlinks kept). Raises ``error`` for a value that is not
     a path string, for a file outside that folder and the allowed folders, or, with
     ``must_exist``, for a file or folder that is not there."""
     if not isinstance(value, str | os.PathLike) or not os.fspath(value):
-        raise error(f"scene {what} path must be a file path (a string); got {value!r:.60}")
+        raise error(f"{owner} {what} path must be a file path (a string); got {value!r:.60}")
     p = Path(os.path.expanduser(os.fspath(value)))
     relative = not p.is_absolute()
     if relative and base_dir is not None:
@@ -48,20 +50,20 @@ def scene_file(
     try:
         resolved = p.resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop
-        raise error(f"scene {what} path {os.fspath(value)}: cannot resolve it ({exc})") from exc
+        raise error(f"{owner} {what} path {os.fspath(value)}: cannot resolve it ({exc})") from exc
     if must_exist and not resolved.exists():
-        where = "" if base_dir is None else " (relative paths start at the scene's folder)"
+        where = "" if base_dir is None else f" (relative paths start at the {owner}'s folder)"
         raise error(
-            f"scene {what} path {os.fspath(value)}: no such {noun} {resolved}{where}; fix the path"
-            " in the scene JSON or put the file there"
+            f"{owner} {what} path {os.fspath(value)}: no such {noun} {resolved}{where}; fix"
+            f" the path in the {owner} JSON or put the file there"
         )
-    check_regular(resolved, f"scene {what} path", error, folders=True)
+    check_regular(resolved, f"{owner} {what} path", error, folders=True)
     if base_dir is not None and outside_allowed(resolved, base_dir):
         folder = Path(base_dir).resolve()
         shown = "" if str(resolved) == os.fspath(value) else f" reads {resolved}"
         exc = error(
-            f"scene {what} path {os.fspath(value)}{shown}, outside the scene's"
-            f" folder {folder}; a scene reads files only in its folder or an allowed folder:"
+            f"{owner} {what} path {os.fspath(value)}{shown}, outside the {owner}'s"
+            f" folder {folder}; a {owner} reads files only in its folder or an allowed folder:"
             f" {allow_hint(resolved)}"
         )
         exc.outside_folder = resolved.parent  # type: ignore[attr-defined]

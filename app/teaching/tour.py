@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from voxwarp.core.json_input import read_json
+from voxwarp.core.scene_paths import scene_file
 from voxwarp.errors import VoxwarpError
 
 #: ``"format"`` of a tour file
@@ -91,20 +92,24 @@ def read_tour(path: str | os.PathLike) -> Tour:
         if scene is not None:
             if not isinstance(scene, str):
                 raise TourError(f"{where}: 'scene' must be a path or null")
-            scene_path = (base / scene).resolve()
-            if not scene_path.is_file():
-                raise TourError(f"{where}: its scene {scene_path} is missing")
+            scene_path = scene_file(
+                scene, base, f"step {i} scene", TourError, noun="scene file", owner="tour"
+            )
         panel = s.get("panel")
         steps.append(
             TourStep(
                 _text(s, "title", where),
                 _text(s, "text", where),
-                None if scene is None else (base / scene).resolve(),
+                None if scene is None else scene_path.resolve(),
                 panel if isinstance(panel, str) else None,
             )
         )
     figure = d.get("figure")
-    figure_path = (base / figure).resolve() if isinstance(figure, str) else None
+    figure_path = None
+    if isinstance(figure, str):
+        figure_path = scene_file(
+            figure, base, "figure", TourError, noun="image", must_exist=False, owner="tour"
+        )
     return Tour(
         path=path,
         demo=str(d.get("demo", "")),

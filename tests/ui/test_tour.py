@@ -58,7 +58,12 @@ def test_read_tour_checks_the_file(tmp_path: Path) -> None:
     bad = json.loads(path.read_text())
     bad["steps"][1]["scene"] = "t/missing.json"
     (tmp_path / "bad.json").write_text(json.dumps(bad))
-    with pytest.raises(TourError, match=r"step 2: its scene .*missing\.json is missing"):
+    with pytest.raises(TourError, match=r"step 2 scene path .*: no such scene file .*missing"):
+        read_tour(tmp_path / "bad.json")
+    bad["steps"][1]["scene"] = "../elsewhere.json"  # a tour reads only in its folder
+    (tmp_path.parent / "elsewhere.json").write_text("{}")
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    with pytest.raises(TourError, match=r"outside the tour's folder.*--allow-dir"):
         read_tour(tmp_path / "bad.json")
     with pytest.raises(TourError, match="voxwarp demo NAME --gui"):
         read_tour(tmp_path / "nope.json")
