@@ -21,11 +21,13 @@ frees that queue), and the context is made not current on this thread (a context
 last lease comes back on another thread leaves the pool: its own thread may still hold
 it current). What stays is
 bounded: the shared programs of :mod:`voxwarp.deform.gl_programs`, kept to compile
-nothing twice. Contexts live until the process ends. The GUI's Qt context is not pooled.
+nothing twice. Contexts live until the process ends (a forked child starts with an
+empty pool). The GUI's Qt context is not pooled.
 """
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import Any
 
@@ -47,6 +49,17 @@ class _Pooled:
 _LEASED: dict[int, _Pooled] = {}  # thread ident -> the context its renderers share
 _FREE: list[_Pooled] = []
 _MADE = [0]
+
+
+def _forget_after_fork() -> None:
+    """A forked child starts with an empty pool: its parent's contexts are not its own."""
+    global _LOCK
+    _LOCK = threading.Lock()
+    _LEASED.clear()
+    _FREE.clear()
+
+
+os.register_at_fork(after_in_child=_forget_after_fork)
 
 
 def acquire() -> Any:
