@@ -148,3 +148,49 @@ def test_the_callers_context_stays_current(gl_ctx: Any) -> None:
         r.render(Scene(_volume(), mode="mip"))
         assert egl_current() == saved
     assert egl_current() == saved
+
+
+def _lattice(volume: Volume) -> Any:
+    from benchmarks.lattice_inverse import bent_grid
+    from voxwarp.deform.lattice.warp import LatticeWarp
+
+    lo, hi = volume.bounds
+    return LatticeWarp(bent_grid(2, lo, hi, bend=0.3), (lo, hi))
+
+
+def _field(volume: Volume) -> Any:
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+
+    u = np.random.default_rng(4).normal(0.0, 1.0, (5, 5, 5, 3))
+    return DisplacementFieldWarp(u, np.diag([3.0, 3.0, 2.0, 1.0]))
+
+
+def _wires(volume: Volume) -> Any:
+    from voxwarp.deform.wires.field import Wire, WireDeformer
+
+    base = np.array([[4, 4, 1], [4, 4, 3], [4, 4, 5], [4, 4, 7]], dtype=float)
+    moved = base.copy()
+    moved[1:, 1] += 1.5
+    wire = Wire(base, moved, radius=3.0, beta=(50.0, 200.0), name="pool")
+    deformer = WireDeformer(volume, [wire], field_scale=1)
+    deformer.build()
+    return deformer.warp()
+
+
+@pytest.mark.parametrize(
+    "make", [_lattice, _field, _wires], ids=["lattice", "displacement_field", "wires"]
+)
+def test_each_family_frees_its_textures_and_uploads_again(make: Any) -> None:
+    vol = _volume()
+    warp = make(vol)
+    ctx, plain = _draw(Scene(vol, mode="mip", transfer_function="grayscale"))
+    before = gl_objects(ctx)["texture"]
+    scene = Scene(vol, warps=[warp], mode="mip", transfer_function="grayscale")
+    with OffscreenRenderer(24, 24) as r:
+        first = np.asarray(r.render(scene))
+        assert gl_holders.holder_count(ctx) == 1
+    assert gl_holders.holder_count(ctx) == 0
+    assert gl_objects(ctx)["texture"] == before
+    _, again = _draw(scene)
+    assert not np.array_equal(first, plain)
+    np.testing.assert_array_equal(again, first)
