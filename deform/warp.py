@@ -256,6 +256,12 @@ class Warp(ABC):
     def release(self) -> None:  # noqa: B027 - optional hook
         """Free GPU resources; idempotent."""
 
+    def release_context(self, ctx: Any) -> None:  # noqa: B027 - optional hook
+        """Free what :meth:`textures` keeps on ``ctx`` alone (``ctx`` current) and forget
+        it, so a later use uploads again; idempotent. A warp that caches GL objects per
+        context overrides it and registers with :func:`voxwarp.deform.gl_holders.hold`,
+        so the pooled context's last renderer frees them when it closes."""
+
     def bind_volume(self, volume: Any) -> None:  # noqa: B027 - optional hook
         """Give the warp the original volume it deforms (called by scene loading).
 

@@ -2,7 +2,7 @@
 
 :func:`deformation_warps` builds the warps of one of :data:`DEFORMATIONS` through
 voxwarp's public models; :func:`render_rgb` draws a scene headless
-(:class:`~voxwarp.render.offscreen.OffscreenRenderer`, its own EGL context) and
+(:class:`~voxwarp.render.offscreen.OffscreenRenderer` on the pooled EGL context) and
 returns ``(height, width, 3)`` uint8 for ``viewer.add_image(image, rgb=True)``.
 """
 

@@ -1,9 +1,10 @@
 """The headless OpenGL context: a standalone EGL context and saving/restoring whichever
 EGL context is current (a thread may hold Qt's or another renderer's).
 
-:func:`create_context` makes one (its caller owns it and releases it);
-:func:`egl_current` and :func:`egl_restore` bracket work on another context so the
-caller's stays current.
+:func:`create_context` makes one (its caller owns it and releases it; renderers lease
+one from :mod:`voxwarp.render.context_pool` instead); :func:`egl_current` and
+:func:`egl_restore` bracket work on another context so the caller's stays current, and
+:func:`egl_uncurrent` lets go of one so that another thread can use it.
 """
 
 from __future__ import annotations
@@ -47,8 +48,17 @@ def egl_current() -> tuple | None:
 
 
 def egl_restore(saved: tuple | None) -> None:
+    """Make ``saved`` (from :func:`egl_current`) current again; nothing for None."""
     if saved is not None:
         _egl_library().eglMakeCurrent(*saved)
+
+
+def egl_uncurrent(context: int | None) -> None:
+    """Leave no EGL context current on this thread if ``context`` (an EGL handle, as
+    :func:`egl_current` gives) is the current one, so another thread may take it."""
+    saved = egl_current()
+    if context and saved is not None and saved[3] == context:
+        _egl_library().eglMakeCurrent(saved[0], None, None, None)
 
 
 def create_context() -> Any:

@@ -1,5 +1,5 @@
 """Headless rendering: :class:`OffscreenRenderer` draws scenes and slices into an
-offscreen framebuffer on its own EGL context (or one it is given) and reads them back
+offscreen framebuffer on the pooled EGL context (or one it is given) and reads them back
 as arrays (row 0 at the top) that Jupyter shows inline."""
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from voxwarp.core.camera import Camera
 from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.warp_grid import MIN_CELL_PX, nice_spacing
 from voxwarp.errors import RenderError
-from voxwarp.render.context import create_context, egl_current, egl_restore
+from voxwarp.render import context_pool
+from voxwarp.render.context import egl_current, egl_restore
 from voxwarp.render.inline_image import RenderedImage, rendered
 from voxwarp.render.jacobian_overlay import (
     DEFAULT_OPACITY,
@@ -39,8 +40,10 @@ class OffscreenRenderer:
     width, height
         Image size in pixels.
     ctx
-        Optional existing context; by default an EGL standalone context is created and
-        owned (released with the renderer).
+        Optional existing context (the caller's: made current by the caller, never
+        released here); by default the renderer leases this thread's pooled EGL
+        context (:mod:`voxwarp.render.context_pool`), shared with the thread's other
+        renderers and given back on :meth:`release`.
     dtype
         ``"u1"`` for (H, W, 4) uint8 images, ``"f4"`` for float32 (tests, HDR/EXR output).
 
@@ -54,16 +57,21 @@ class OffscreenRenderer:
             raise RenderError(f"image size must be 1..16384 pixels per side; got {width}x{height}")
         if dtype not in ("u1", "f4"):
             raise RenderError(f"dtype must be 'u1' or 'f4'; got {dtype!r}")
-        self._owns_ctx = ctx is None
-        self.ctx = create_context() if ctx is None else ctx
+        self._pooled = ctx is None
+        self.ctx = context_pool.acquire() if ctx is None else ctx
         self.size = (int(width), int(height))
         self.dtype = dtype
         self._gl_dtype = "f1" if dtype == "u1" else "f4"
         self._fbo: Any = None
         self._color: Any = None
-        with self.current():
-            self.renderer = Renderer(self.ctx)
-            self._make_fbo()
+        try:
+            with self.current():
+                self.renderer = Renderer(self.ctx)
+                self._make_fbo()
+        except BaseException:
+            if self._pooled:
+                context_pool.give_back(self.ctx)
+            raise
         self._released = False
 
     @contextlib.contextmanager
@@ -76,11 +84,12 @@ class OffscreenRenderer:
                 "this OffscreenRenderer is closed (released, or its with block has ended):"
                 " use it inside the block, or make a new one"
             )
-        if not self._owns_ctx:
+        if not self._pooled:
             yield
             return
         saved = egl_current()
         self.ctx.mglo.__enter__()  # eglMakeCurrent(this context)
+        context_pool.collect(self.ctx)  # what was dropped unreleased since
         try:
             yield
         finally:
@@ -262,19 +271,20 @@ class OffscreenRenderer:
         return times
 
     def release(self) -> None:
-        """Free GPU resources (and the context if this renderer created it); idempotent."""
+        """Free every GL object this renderer made and give the pooled context back (the
+        last renderer of a context also frees what warps cached on it); idempotent."""
         if getattr(self, "_released", True):
             return
-        with self.current():
-            self.renderer.release()
-            self._unbind_fbo()
-            self._fbo.release()
-            self._color.release()
-        if self._owns_ctx:
-            saved = egl_current()  # releasing may clear the current context
-            self.ctx.release()
-            egl_restore(saved)
-        self._released = True
+        try:
+            with self.current():
+                self.renderer.release()
+                self._unbind_fbo()
+                self._fbo.release()
+                self._color.release()
+        finally:
+            self._released = True
+            if self._pooled:
+                context_pool.give_back(self.ctx)
 
     def __enter__(self) -> OffscreenRenderer:
         return self

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform import gl_programs
+from voxwarp.deform import gl_holders, gl_programs
 from voxwarp.deform.elements.folds import fold_summary
 from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import (
@@ -811,6 +811,7 @@ class OffsetFieldWarp(Warp):
         prog.run(*groups)
         ctx.memory_barrier()
         self._baked[id(ctx)] = (ctx, hold, tex, self._version)
+        gl_holders.hold(ctx, self)
         return tex
 
     def _field_texture(self, ctx: Any) -> Any:
@@ -831,6 +832,7 @@ class OffsetFieldWarp(Warp):
             if entry[2] != self._version:
                 self._write_changes(tex, entry[2])
         self._textures[id(ctx)] = (ctx, tex, self._version)
+        gl_holders.hold(ctx, self)
         return tex
 
     def _write_changes(self, tex: Any, since: int) -> None:
@@ -864,6 +866,16 @@ class OffsetFieldWarp(Warp):
             hold.release()  # the shared bake shader stays for other warps
             tex.release()
         self._baked.clear()
+
+    def release_context(self, ctx: Any) -> None:
+        """Free this warp's textures on ``ctx`` alone (``ctx`` current); idempotent."""
+        field = self._textures.pop(id(ctx), None)
+        if field is not None and field[0] is ctx:
+            field[1].release()
+        baked = self._baked.pop(id(ctx), None)
+        if baked is not None and baked[0] is ctx:
+            baked[1].release()
+            baked[2].release()
 
     def signature(self) -> str:
         """``offset_field:<inverse>:<steps>`` (both are compile-time in the GLSL)."""

@@ -39,6 +39,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from voxwarp.deform import gl_holders
 from voxwarp.deform.node_grid import MAX_DISPLACEMENT_MM as MAX_DISPLACEMENT_MM
 from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, box_corners, check_forward, register_warp
@@ -398,6 +399,7 @@ class DisplacementFieldWarp(Warp):
             tex.repeat_x = tex.repeat_y = False
             entry = (ctx, tex)
             self._textures[id(ctx)] = entry
+            gl_holders.hold(ctx, self)
         return {"displacement": entry[1]}
 
     def bind_volume(self, volume: Any) -> None:
@@ -420,6 +422,12 @@ class DisplacementFieldWarp(Warp):
         for _, tex in self._textures.values():
             tex.release()
         self._textures.clear()
+
+    def release_context(self, ctx: Any) -> None:
+        """Free the field's texture on ``ctx`` alone (``ctx`` current); idempotent."""
+        entry = self._textures.pop(id(ctx), None)
+        if entry is not None and entry[0] is ctx:
+            entry[1].release()
 
     # ---------------------------------------------------------------- serialisation
     def to_dict(self) -> dict[str, Any]:

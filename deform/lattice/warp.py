@@ -110,6 +110,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from voxwarp.deform import gl_holders
 from voxwarp.deform.lattice.trilinear import TrilinearGrid
 from voxwarp.deform.node_grid import cell_reduce, window_reduce
 from voxwarp.deform.warp import Warp, WarpError, box_corners, register_warp
@@ -969,6 +970,7 @@ class LatticeWarp(Warp):
         seed_tex.repeat_x = seed_tex.repeat_y = seed_tex.repeat_z = False
         texs = {"nodes": node_tex, "seed": seed_tex}
         self._gpu[id(ctx)] = (ctx, texs)
+        gl_holders.hold(ctx, self)
         return texs
 
     def release(self) -> None:
@@ -977,6 +979,13 @@ class LatticeWarp(Warp):
             for tex in texs.values():
                 tex.release()
         self._gpu.clear()
+
+    def release_context(self, ctx: Any) -> None:
+        """Free the textures on ``ctx`` alone (``ctx`` current); idempotent."""
+        entry = self._gpu.pop(id(ctx), None)
+        if entry is not None and entry[0] is ctx:
+            for tex in entry[1].values():
+                tex.release()
 
     # ---------------------------------------------------------------- serialisation
     def to_dict(self) -> dict[str, Any]:

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from voxwarp.deform import gl_holders
 from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
 from voxwarp.deform.wires.bounds import _box_mapping_range, _grow, _MinMaxPyramid
 from voxwarp.deform.wires.build import WireDeformer
@@ -503,6 +504,7 @@ class WireFieldWarp(Warp):
         lut.repeat_x = lut.repeat_y = False
         texs["lut"] = lut
         self._gpu[id(ctx)] = (ctx, self._revision, texs)
+        gl_holders.hold(ctx, self)
         return texs
 
     def release(self) -> None:
@@ -511,6 +513,13 @@ class WireFieldWarp(Warp):
             for tex in texs.values():
                 tex.release()
         self._gpu.clear()
+
+    def release_context(self, ctx: Any) -> None:
+        """Free the textures on ``ctx`` alone (``ctx`` current); idempotent."""
+        entry = self._gpu.pop(id(ctx), None)
+        if entry is not None and entry[0] is ctx:
+            for tex in entry[2].values():
+                tex.release()
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:

@@ -2,15 +2,11 @@
 file descriptors or threads of voxwarp's own (issue 33).
 
 Measured (llvmpipe, 2 cores): 150 renderers on one shared context, each drawing a
-16³ volume, grow RSS by about 1 KB each; each renderer that makes and releases its own
-EGL context grows it by 100-270 KB, and so does bare
-``moderngl.create_standalone_context(backend="egl").release()`` without voxwarp (890
-Python objects a context stay referenced inside moderngl's ``create_context``, the
-rest is native): that growth is the library's, not a voxwarp object kept alive
-(see docs/reliability.md). The test pins voxwarp's side: on a shared context the
-per-renderer growth stays under 16 KB (a renderer that kept its textures, programs or
-framebuffer alive measures far above it), the descriptors and threads are flat, and
-a released renderer's context object is freed.
+16³ volume, grow RSS by about 1 KB each. The test pins it: the per-renderer growth
+stays under 16 KB (a renderer that kept its textures, programs or framebuffer alive
+measures far above it), the descriptors and threads are flat. Renderers made without
+``ctx=`` lease the pooled context instead of making one each (a standalone EGL context
+costs 100-270 KB that moderngl never gives back): tests/render/test_context_pool.py.
 """
 
 from __future__ import annotations
@@ -18,7 +14,6 @@ from __future__ import annotations
 import gc
 import os
 import threading
-import weakref
 from typing import Any
 
 import numpy as np
@@ -60,12 +55,3 @@ def test_renderer_churn_on_a_shared_context_is_flat(gl_ctx: Any) -> None:
     assert grown < BOUND_KB, f"{grown:.1f} KB per renderer"
     assert _fds() == fds
     assert threading.active_count() == threads
-
-
-def test_a_released_renderer_frees_its_own_context() -> None:
-    r = OffscreenRenderer(16, 16)
-    ref = weakref.ref(r.ctx)
-    r.release()
-    del r
-    gc.collect()
-    assert ref() is None
