@@ -48,11 +48,13 @@ def image_headers(directory: Path, files: list[Path]) -> list[tuple[Path, Any]] 
         except InvalidDicomError:
             continue
         except Exception as exc:
-            skipped.append(f"{p.name} ({type(exc).__name__}: {_short(exc)})")
+            skipped.append(f"{p.name} ({_file_syntax(p)}{type(exc).__name__}: {_short(exc)})")
             continue
         meta = getattr(ds, "file_meta", None)
         if str(getattr(meta, "MediaStorageSOPClassUID", "")) == _DICOMDIR_CLASS:
             dicomdir = p
+        elif "SOPClassUID" not in ds and "Rows" not in ds:
+            skipped.append(f"{p.name} ({_file_syntax(p)}no dataset after its file meta)")
         elif "Rows" not in ds or "Columns" not in ds:
             others[str(ds.get("Modality", "") or "no image")] += 1
         elif not _whole_sizes(ds):
@@ -79,6 +81,19 @@ def image_headers(directory: Path, files: list[Path]) -> list[tuple[Path, Any]] 
             " a structured report or RT structure set); pass the folder of the image series."
         )
     return None
+
+
+def _file_syntax(p: Path) -> str:
+    """``"NAME (UID); "`` of the transfer syntax the file meta of ``p`` states, or ``""``."""
+    try:
+        from pydicom.filereader import read_file_meta_info
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            meta = read_file_meta_info(p)
+        return f"{syntax_name(meta)}; " if "TransferSyntaxUID" in meta else ""
+    except Exception:
+        return ""
 
 
 def _short(exc: BaseException) -> str:
@@ -140,7 +155,8 @@ def syntax_name(ds: Any) -> str:
     """The transfer syntax of ``ds`` by name and UID, e.g. ``RLE Lossless (1.2.840...)``."""
     from pydicom.uid import UID
 
-    uid = getattr(getattr(ds, "file_meta", None), "TransferSyntaxUID", None)
+    meta = ds if "TransferSyntaxUID" in ds else getattr(ds, "file_meta", None)
+    uid = getattr(meta, "TransferSyntaxUID", None)
     if uid is None:
         return "no transfer syntax"
     name = UID(str(uid)).name

@@ -160,7 +160,7 @@ def _drop_copies(
 def _slots(directory: Path, files: list[tuple[Path, Any]], along: np.ndarray) -> list[int]:
     """The grid slot of each sorted slice: gaps of whole spacings leave slots empty."""
     gaps = np.diff(along)
-    unit = float(np.sort(gaps)[(len(gaps) - 1) // 2])  # the lower median: a real gap
+    unit = _unit(gaps)
     steps = np.maximum(1, np.rint(gaps / unit)).astype(np.int64)
     for m, (gap, step) in enumerate(zip(gaps, steps, strict=True)):
         if abs(gap - step * unit) > GRID_TOLERANCE * unit:
@@ -185,6 +185,18 @@ def _slots(directory: Path, files: list[tuple[Path, Any]], along: np.ndarray) ->
             " series' lowest value so the others keep their true positions."
         )
     return slots
+
+
+def _unit(gaps: np.ndarray) -> float:
+    """The slice spacing: the lower median gap, else the smallest gap when every gap is a
+    whole number of it (most slices missing every other position); for the messages,
+    the lower median when neither fits."""
+    median = float(np.sort(gaps)[(len(gaps) - 1) // 2])
+    for unit in (median, float(gaps.min())):
+        steps = np.maximum(1, np.rint(gaps / unit))
+        if np.all(np.abs(gaps - steps * unit) <= GRID_TOLERANCE * unit):
+            return unit
+    return median
 
 
 def _listed(slots: list[int]) -> str:
