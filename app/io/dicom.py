@@ -119,9 +119,35 @@ def _pick_series(
 def read_dicom_dir(
     directory: Path, files: list[Path], series: str | int | None = None
 ) -> Loaded | None:
-    """Load one DICOM series among ``files``; ``None`` if none of them is DICOM."""
+    """Load one DICOM series among ``files``; ``None`` if none of them is DICOM.
+
+    Its warnings (several series, skipped files, missing slices) are given only when
+    the series loads: a refusal is its one error line alone (naming the other series
+    when the largest was taken by default)."""
     if not files:
         return None
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        try:
+            loaded = _read_series(directory, files, series)
+        except VolumeError as exc:
+            others = [w for w in said if "DICOM series; loading the largest" in str(w.message)]
+            if others:
+                raise VolumeError(f"{exc}{_series_note(others)}") from exc
+            raise
+    for w in said:
+        if issubclass(w.category, UserWarning):
+            warn(str(w.message))
+    return loaded
+
+
+def _series_note(said: list) -> str:
+    """' (loading the largest of N DICOM series; ...)' from the several-series warning."""
+    count = str(said[0].message).split(" holds ", 1)[1].split(";", 1)[0]
+    return f" (the largest of {count}; choose another with --series N: voxwarp info lists them)"
+
+
+def _read_series(directory: Path, files: list[Path], series: str | int | None) -> Loaded | None:
     headers = image_headers(directory, files)
     if not headers:
         return None
@@ -287,11 +313,24 @@ def _read_slices(
         elif not rescaled and arr.dtype != out.dtype:
             out = out.astype(np.result_type(out.dtype, arr.dtype))
         if rescaled:
-            out[:, :, slot] = (arr.astype(np.float64) * slopes[k] + inters[k]).T
+            out[:, :, slot] = _rescaled(p, arr, float(slopes[k]), float(inters[k])).T
         else:
             out[:, :, slot] = arr.T
     assert out is not None
     return out, integer_pixels
+
+
+def _rescaled(p: Path, arr: np.ndarray, slope: float, inter: float) -> np.ndarray:
+    """``arr * slope + inter`` as float32; one line when that leaves the float32 range."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        scaled = (arr.astype(np.float64) * slope + inter).astype(np.float32)
+    if not np.all(np.isfinite(scaled)) and np.all(np.isfinite(arr)):
+        raise VolumeError(
+            f"{p.name}: RescaleSlope {slope:g} and RescaleIntercept {inter:g} take its values"
+            " past the float32 range; the header is damaged. Fix them (e.g. dcmodify) or"
+            " remove the file from the series."
+        )
+    return scaled
 
 
 def _fill_missing(out: np.ndarray, stack: Stack, padding: float | None) -> None:

@@ -124,13 +124,17 @@ def test_oblique_stack_lands_on_every_ipp(tmp_path: Path) -> None:
 
 
 def test_gantry_tilt_is_one_line_naming_the_angle(tmp_path: Path) -> None:
-    """Before: rc 0, every slice after the first misplaced (1.34 mm at the sixth)."""
+    """Before: rc 0, every slice after the first misplaced (1.34 mm at the sixth). With a
+    second series beside it, the 'loading the largest' warning does not precede the
+    error: the error line names the other series instead."""
     df.save(tmp_path, df.series(6, tilt_deg=15.0))
+    df.save(tmp_path, df.series(2, rows=4, cols=4, uid=df.UID + ".2"), prefix="B")
     proc = run_cli("info", str(tmp_path), timeout=60)
     line = _one_line_error(proc)
     assert "tilted 15.0 deg" in line
     assert "IM0006.dcm" in line
     assert "dcm2niix" in line
+    assert "the largest of 2 DICOM series" in line
 
 
 def test_tilt_within_the_tolerance_loads_within_it(tmp_path: Path) -> None:
@@ -373,11 +377,13 @@ def test_colour_images_are_one_line(tmp_path: Path, kind: str) -> None:
         ("PixelSpacing", [-0.5, 0.5], "PixelSpacing .* not two positive numbers"),
         ("PixelSpacing", [0, 0], "PixelSpacing .* not two positive numbers"),
         ("ImagePositionPatient", ["nan", 0, 2], "IM0001.dcm: its ImagePositionPatient"),
+        ("RescaleSlope", 1e300, "RescaleSlope 1e.300 .* past the float32 range"),
     ],
 )
 def test_damaged_geometry_is_one_line(tmp_path: Path, field: str, value, match: str) -> None:
-    """Before: a 1 mm spacing was assumed ('no PixelSpacing') and a NaN position
-    dropped every position (rc 0)."""
+    """Before: a 1 mm spacing was assumed ('no PixelSpacing'), a NaN position dropped
+    every position (rc 0) and a slope of 1e300 gave infinite voxels (the fuzz found a
+    missing-slice warning before that error: two lines)."""
     s = df.series(6)
     setattr(s[0], field, value)
     df.save(tmp_path, s)
