@@ -13,11 +13,7 @@ time limit.
 
 from __future__ import annotations
 
-import contextlib
-import io
-import sys
 import tempfile
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -95,28 +91,12 @@ def _geometry(datasets: list[Any], kind: str, k: int, amount: float) -> list[Any
     return datasets
 
 
-def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:  # type: ignore[no-untyped-def]
-    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
-
-
 def _run(argv: list[str]) -> str:
     """``voxwarp ARGV`` in this process: exit 0, or exit 2 with exactly one stderr line."""
-    from voxwarp.cli.main import main
-
     CASES["dicom folders"] += 1
-    out, err = io.StringIO(), io.StringIO()
-    with warnings.catch_warnings():
-        # print warnings on (captured) stderr as the command line does, not into the
-        # list pytest records them in
-        warnings.showwarning = _print_warning
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), time_limit():
-            try:
-                code = main(argv)
-            except SystemExit as exc:
-                code = exc.code if isinstance(exc.code, int) else 1
-    text = err.getvalue()
+    with time_limit():
+        code, lines, text = df.cli_in_process(argv)
     assert "Traceback" not in text, text
-    lines = [line for line in text.splitlines() if line.strip()]
     if code == 0:
         assert not any(ERROR_LINE.match(line) for line in lines), text
         result = "ok"

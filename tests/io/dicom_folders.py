@@ -9,8 +9,11 @@ them into a folder, one file per slice; tests change fields in between.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
+import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -123,3 +126,25 @@ def save(folder: Path, datasets: Sequence[Any], prefix: str = "IM") -> Path:
 def lps_to_ras(p: Sequence[float]) -> np.ndarray:
     """A point in DICOM's LPS+ patient space, in RAS+ (x and y negated)."""
     return np.asarray(p, float) * np.array([-1.0, -1.0, 1.0])
+
+
+def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:  # type: ignore[no-untyped-def]
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
+def cli_in_process(argv: Sequence[str]) -> tuple[int, list[str], str]:
+    """``voxwarp ARGV`` in this process: (exit code, non-empty stderr lines, stderr).
+    Warnings are printed on stderr as the command line prints them (not recorded by
+    pytest), so a warning before an error counts as a second line."""
+    from voxwarp.cli.main import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with warnings.catch_warnings():
+        warnings.showwarning = _print_warning
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(list(argv))
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else 1
+    text = err.getvalue()
+    return code, [line for line in text.splitlines() if line.strip()], text

@@ -194,14 +194,18 @@ def test_mixed_series_largest_by_default_others_by_index(tmp_path: Path, same_ui
 
 
 def test_cli_series_choice_and_unknown_series(tmp_path: Path) -> None:
+    """``--series 2`` picks the other size of one UID (a subprocess, as a user runs it);
+    an unknown ``--series`` is one line listing the series."""
     folder, _ = _mixed(tmp_path, same_uid=True)
-    out = tmp_path / "x.png"
-    proc = run_cli("render", str(folder), "--series", "2", "-o", str(out), "--size", "32x32")
+    proc = run_cli("info", str(folder), "--series", "2", timeout=60)
     assert proc.returncode == 0, proc.stderr
-    assert out.is_file()
-    line = _one_line_error(run_cli("info", str(folder), "--series", "7", timeout=60))
-    assert "no DICOM series '7'" in line
-    assert "1..2" in line
+    assert "= 576 voxels" in proc.stdout  # 12 x 16 x 3
+    assert not proc.stderr.strip()
+    code, lines, text = df.cli_in_process(["info", str(folder), "--series", "7"])
+    assert code == 2, text
+    assert len(lines) == 1, text
+    assert "no DICOM series '7'" in lines[0]
+    assert "pass an index 1..2" in lines[0]
 
 
 # ---------------------------------------------------------------------------- sizes
@@ -397,3 +401,65 @@ def test_zero_slice_thickness_is_unused_when_positions_exist(tmp_path: Path) -> 
         ds.SliceThickness = -1
     df.save(tmp_path, s)
     assert _read(tmp_path).affine[2, 2] == pytest.approx(2.5)
+
+
+# ---------------------------------------------------------------------------- CLI
+def _hostile(kind: str, folder: Path) -> None:
+    """Write the hostile folder ``kind`` (one per refusal above)."""
+    s = df.series(6)
+    if kind == "uneven":
+        s[3].ImagePositionPatient = [-2.0, -3.0, 7.4]
+    elif kind == "two-at-one-position":
+        s.append(copy.deepcopy(s[2]))
+        s[-1].SOPInstanceUID = s[-1].file_meta.MediaStorageSOPInstanceUID = "1.2.3.99"
+    elif kind == "orientations":
+        s[2].ImageOrientationPatient = [0.9, 0.1, 0, 0, 1, 0]
+    elif kind == "huge":
+        for ds in s:
+            ds.Rows = ds.Columns = 65535
+    elif kind == "sparse":
+        s = [*df.series(12)[:2], df.series(12)[11]]
+    elif kind in ("RGB", "PALETTE COLOR"):
+        for ds in s:
+            _colour(ds, kind)
+    elif kind == "spacing":
+        s[0].PixelSpacing = [0, 0]
+    elif kind == "nan-position":
+        s[4].ImagePositionPatient = ["nan", 0, 0]
+    if kind == "jpeg2000":
+        _garbage_compressed(folder, "1.2.840.10008.1.2.4.90")
+    elif kind == "sr":
+        for ds in s:
+            del ds.PixelData, ds.Rows, ds.Columns
+        df.save(folder, s)
+    else:
+        df.save(folder, s)
+
+
+@pytest.mark.parametrize(
+    ("kind", "problem", "fix"),
+    [
+        ("uneven", "uneven slice spacing", "Resample"),
+        ("two-at-one-position", "different images at one position", "one acquisition per"),
+        ("orientations", "must share their ImageOrientationPatient", "--series"),
+        ("huge", "65535x65535x6 voxels need", "--memory-budget"),
+        ("sparse", "more slices are missing than present", "Resample"),
+        ("RGB", "colour image", "convert the images to grayscale"),
+        ("PALETTE COLOR", "colour image", "convert the images to grayscale"),
+        ("spacing", "not two positive numbers", "Fix it"),
+        ("nan-position", "not 3 finite numbers", "remove the file"),
+        ("jpeg2000", "JPEG 2000 Image Compression", "gdcmconv --raw"),
+        ("sr", "holds DICOM files but no image", "pass the folder of the image series"),
+    ],
+)
+def test_every_refusal_is_one_cli_line(tmp_path: Path, kind: str, problem: str, fix: str) -> None:
+    """``voxwarp info`` on each hostile folder: exit 2 and exactly one stderr line (no
+    warning before it) naming the problem and the fix (in process; the subprocess form
+    is checked by the tilt and --series tests)."""
+    _hostile(kind, tmp_path)
+    code, lines, text = df.cli_in_process(["info", str(tmp_path)])
+    assert code == 2, text
+    assert len(lines) == 1, text
+    assert lines[0].startswith("voxwarp: error: "), text
+    assert problem in lines[0]
+    assert fix in lines[0]
