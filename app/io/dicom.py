@@ -4,8 +4,11 @@ Geometry comes from ImageOrientationPatient, ImagePositionPatient and PixelSpaci
 DICOM's patient space (LPS+ mm) and is handed on as a RAS+ affine: column index i runs
 along the row direction (IOP[:3], PixelSpacing[1] apart), row index j along the column
 direction (IOP[3:], PixelSpacing[0]) and k along the slice normal (slices sorted by their
-position on it). Values are rescaled to stored units (HU for CT); the Modality and the
-PixelPaddingValue (rescaled) are kept. pydicom is imported only here.
+position on it and checked against a regular grid: :mod:`voxwarp.io.dicom_geometry`).
+Values are rescaled to stored units (HU for CT); the Modality and the PixelPaddingValue
+(rescaled) are kept. A series is one SeriesInstanceUID and one image size; only
+grayscale images (MONOCHROME1/2, one sample per pixel) are read. pydicom is imported
+only here and in :mod:`voxwarp.io.dicom_files`.
 """
 
 from __future__ import annotations
@@ -20,12 +23,9 @@ import numpy as np
 from voxwarp.core.limits import check_load_bytes
 from voxwarp.core.orientation import affine_to_ras
 from voxwarp.errors import VolumeError
+from voxwarp.io.dicom_files import check_grayscale, decoded_pixels, image_headers
+from voxwarp.io.dicom_geometry import Stack, stack_slices
 from voxwarp.io.loaded import Loaded, floats, rescale, to_float, warn
-
-_DECODER_HINT = (
-    "Compressed DICOM needs a decoder: pip install 'voxwarp[dicom]' (pylibjpeg and its"
-    " JPEG/JPEG 2000/RLE plugins)."
-)
 
 
 @dataclass(frozen=True)
@@ -53,46 +53,16 @@ def _number(ds: Any, keyword: str, default: float | None) -> float | None:
     return to_float(ds.get(keyword), default)
 
 
-def _headers(files: list[Path]) -> list[tuple[Path, Any]]:
-    """(path, header) of every image file in ``files`` that pydicom reads."""
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    headers: list[tuple[Path, Any]] = []
-    for p in files:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ds = pydicom.dcmread(p, stop_before_pixels=True, force=False)
-        except InvalidDicomError:
-            continue
-        except Exception as exc:
-            warn(f"skipped {p.name}: not a readable DICOM file ({type(exc).__name__}: {exc}).")
-            continue
-        if "Rows" in ds and "Columns" in ds:
-            if not _whole_sizes(ds):
-                warn(f"skipped {p.name}: its Rows/Columns are not positive whole numbers.")
-                continue
-            headers.append((p, ds))
-    return headers
-
-
-def _whole_sizes(ds: Any) -> bool:
-    """Whether the header's Rows and Columns are positive whole numbers."""
-    try:
-        return int(ds.Rows) > 0 and int(ds.Columns) > 0
-    except Exception:  # pydicom's BytesLengthException, int(''), a sequence, ...
-        return False
-
-
 def _group_series(headers: list[tuple[Path, Any]]) -> list[tuple[SeriesInfo, list]]:
-    """Series in the folder, largest first (ties in UID order)."""
-    groups: dict[str, list[tuple[Path, Any]]] = {}
+    """Series in the folder, largest first (ties in UID order): one per
+    SeriesInstanceUID and image size (a UID holding two sizes is two series)."""
+    groups: dict[tuple[str, int, int], list[tuple[Path, Any]]] = {}
     for p, ds in headers:
-        groups.setdefault(str(ds.get("SeriesInstanceUID", "")), []).append((p, ds))
+        key = (str(ds.get("SeriesInstanceUID", "")), int(ds.Rows), int(ds.Columns))
+        groups.setdefault(key, []).append((p, ds))
     ordered = sorted(groups.items(), key=lambda item: (-len(item[1]), item[0]))
     out = []
-    for n, (uid, items) in enumerate(ordered, start=1):
+    for n, ((uid, _, _), items) in enumerate(ordered, start=1):
         ds = items[0][1]
         info = SeriesInfo(
             index=n,
@@ -109,7 +79,11 @@ def _group_series(headers: list[tuple[Path, Any]]) -> list[tuple[SeriesInfo, lis
 
 def list_dicom_series(directory: Path, files: list[Path]) -> list[SeriesInfo]:
     """The DICOM series among ``files`` (largest first); empty when none is DICOM."""
-    return [info for info, _ in _group_series(_headers(files))]
+    try:
+        headers = image_headers(directory, files)
+    except VolumeError:
+        return []
+    return [info for info, _ in _group_series(headers or [])]
 
 
 def _pick_series(
@@ -127,9 +101,15 @@ def _pick_series(
             )
         return chosen
     text = str(series).strip()
-    for info, items in groups:
-        if text == info.uid or (text.isdigit() and int(text) == info.index):
-            return info, items
+    found = [g for g in groups if text == g[0].uid or (text.isdigit() and int(text) == g[0].index)]
+    if len(found) > 1:
+        raise VolumeError(
+            f"{directory}: the SeriesInstanceUID {text} holds {len(found)} image sizes"
+            f" (series {', '.join(str(g[0].index) for g in found)}); pass --series with"
+            f" the index of one: {listing}"
+        )
+    if found:
+        return found[0]
     raise VolumeError(
         f"{directory} has no DICOM series {text!r}; pass an index 1..{len(groups)} or a"
         f" SeriesInstanceUID: {listing}"
@@ -139,10 +119,36 @@ def _pick_series(
 def read_dicom_dir(
     directory: Path, files: list[Path], series: str | int | None = None
 ) -> Loaded | None:
-    """Load one DICOM series among ``files``; ``None`` if none of them is DICOM."""
+    """Load one DICOM series among ``files``; ``None`` if none of them is DICOM.
+
+    Its warnings (several series, skipped files, missing slices) are given only when
+    the series loads: a refusal is its one error line alone (naming the other series
+    when the largest was taken by default)."""
     if not files:
         return None
-    headers = _headers(files)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        try:
+            loaded = _read_series(directory, files, series)
+        except VolumeError as exc:
+            others = [w for w in said if "DICOM series; loading the largest" in str(w.message)]
+            if others:
+                raise VolumeError(f"{exc}{_series_note(others)}") from exc
+            raise
+    for w in said:
+        if issubclass(w.category, UserWarning):
+            warn(str(w.message))
+    return loaded
+
+
+def _series_note(said: list) -> str:
+    """' (loading the largest of N DICOM series; ...)' from the several-series warning."""
+    count = str(said[0].message).split(" holds ", 1)[1].split(";", 1)[0]
+    return f" (the largest of {count}; choose another with --series N: voxwarp info lists them)"
+
+
+def _read_series(directory: Path, files: list[Path], series: str | int | None) -> Loaded | None:
+    headers = image_headers(directory, files)
     if not headers:
         return None
     _, chosen = _pick_series(directory, _group_series(headers), series)
@@ -157,26 +163,6 @@ def read_dicom_dir(
     return _assemble_series(directory, chosen)
 
 
-def _slice_order(
-    directory: Path, chosen: list[tuple[Path, Any]], iop: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Order of the slices and their sorted positions along the normal (or ``None``)."""
-    ipps = [floats(ds.get("ImagePositionPatient"), 3) for _, ds in chosen]
-    positions = _positions_on_normal(iop, ipps)
-    if positions is not None:
-        order = np.argsort(positions, kind="stable")
-        return order, positions[order]
-    numbers = [_number(ds, "InstanceNumber", None) for _, ds in chosen]
-    if all(n is not None for n in numbers):
-        return np.argsort(np.asarray(numbers, dtype=np.float64), kind="stable"), None
-    if len(chosen) > 1:
-        warn(
-            f"{directory}: the slices have neither ImagePositionPatient nor"
-            " InstanceNumber; they are stacked in file-name order."
-        )
-    return np.arange(len(chosen)), None
-
-
 def _positions_on_normal(iop: np.ndarray | None, ipps: list) -> np.ndarray | None:
     """Each slice's position along the slice normal (mm), or ``None`` without
     ImageOrientationPatient or an ImagePositionPatient per slice."""
@@ -189,38 +175,18 @@ def _positions_on_normal(iop: np.ndarray | None, ipps: list) -> np.ndarray | Non
     return np.array([float(np.dot(p, normal)) for p in ipps])
 
 
-def _slice_spacing(directory: Path, positions: np.ndarray | None, ds0: Any, n: int) -> float:
-    """Distance between slices: the median gap of their positions, else the header's."""
-    if positions is not None and n > 1:
-        gaps = np.diff(positions)
-        if np.any(gaps < 1e-4):
-            count = int(np.sum(gaps < 1e-4)) + 1
-            raise VolumeError(
-                f"{directory}: {count} slices share a position; the series may hold several"
-                " acquisitions (echoes, phases, time points). Put one acquisition per folder"
-                " or choose the series with --series."
-            )
-        spacing = float(np.median(gaps))
-        if float(np.max(np.abs(gaps - spacing))) > 0.01 * spacing:
-            warn(
-                f"{directory}: uneven slice spacing ({gaps.min():.4g} to {gaps.max():.4g} mm);"
-                f" using the median {spacing:.4g} mm. Missing slices or a variable"
-                " acquisition make the volume geometrically inexact."
-            )
-        return spacing
-    value = _number(ds0, "SpacingBetweenSlices", None) or _number(ds0, "SliceThickness", None)
-    if value is None or value <= 0:
-        if n > 1:
-            warn(f"{directory}: no slice positions or thickness; slice spacing set to 1 mm.")
-        return 1.0
-    return value
-
-
 def _pixel_spacing(where: str, value: Any) -> np.ndarray:
-    pixel = floats(value, 2)
-    if pixel is None or np.any(pixel <= 0):
+    """PixelSpacing (row, column spacing; 1 mm with a warning when absent); one line when
+    it is there but not two positive finite numbers."""
+    if value is None or (hasattr(value, "__len__") and len(value) == 0):
         warn(f"{where}: no PixelSpacing; in-plane spacing set to 1 mm.")
         return np.array([1.0, 1.0])
+    pixel = floats(value, 2)
+    if pixel is None or np.any(pixel <= 0):
+        raise VolumeError(
+            f"{where}: its PixelSpacing ({str(value)[:60]}) is not two positive numbers;"
+            " the header is damaged. Fix it (e.g. dcmodify -m PixelSpacing=0.5\\0.5)."
+        )
     return pixel
 
 
@@ -267,17 +233,9 @@ def _check_pixel_length(p: Path, ds: Any) -> None:
 
 
 def _pixels(p: Path, full: Any) -> np.ndarray:
+    check_grayscale(p, full)
     _check_pixel_length(p, full)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return np.asarray(full.pixel_array)
-    except Exception as exc:
-        syntax = getattr(getattr(full, "file_meta", None), "TransferSyntaxUID", "?")
-        raise VolumeError(
-            f"cannot decode the pixel data of {p} (transfer syntax {syntax};"
-            f" {type(exc).__name__}: {exc}). {_DECODER_HINT}"
-        ) from exc
+    return decoded_pixels(p, full)
 
 
 def _bytes_per_voxel(ds: Any) -> int:
@@ -293,26 +251,47 @@ def _padding(ds: Any, slope: float, inter: float) -> float | None:
 
 
 def _assemble_series(directory: Path, chosen: list[tuple[Path, Any]]) -> Loaded:
+    """One volume from the slices of one series, placed on their grid (headers are
+    checked before any pixels are read; missing slots get the lowest value)."""
+    ds0 = chosen[0][1]
+    for p, ds in chosen:
+        check_grayscale(p, ds)
+    pixel = _pixel_spacing(str(directory), ds0.get("PixelSpacing") or ds0.get("ImagerPixelSpacing"))
+    stack = stack_slices(directory, chosen, pixel)
+    affine, spacing = _ras_affine(stack.iop, stack.first_ipp, pixel, stack.dz)
+    rows, cols = int(ds0.Rows), int(ds0.Columns)
+    check_load_bytes((cols, rows, stack.count), _bytes_per_voxel(ds0), directory.name)
+    slopes = np.array([_number(ds, "RescaleSlope", 1.0) or 1.0 for _, ds in stack.files])
+    inters = np.array([_number(ds, "RescaleIntercept", 0.0) or 0.0 for _, ds in stack.files])
+    rescaled = bool(np.any(slopes != 1.0) or np.any(inters != 0.0))
+    out, integer_pixels = _read_slices(stack, (rows, cols), slopes, inters, rescaled)
+    slope0, inter0 = float(slopes[0]), float(inters[0])
+    _fill_missing(out, stack, _padding(ds0, slope0, inter0))
+    if rescaled:
+        integral = (
+            integer_pixels
+            and all(float(s).is_integer() for s in slopes)
+            and all(float(i).is_integer() for i in inters)
+        )
+        if integral and out.min() >= -32768 and out.max() <= 32767:
+            out = out.astype(np.int16)
+    return _loaded(out, spacing, affine, ds0, slope0, inter0)
+
+
+def _read_slices(
+    stack: Stack,
+    shape: tuple[int, int],
+    slopes: np.ndarray,
+    inters: np.ndarray,
+    rescaled: bool,
+) -> tuple[np.ndarray, bool]:
+    """The (cols, rows, count) array of the slices in their slots (other slots unset)
+    and whether every slice held integers."""
     import pydicom
 
-    ds0 = chosen[0][1]
-    iop = floats(ds0.get("ImageOrientationPatient"), 6)
-    order, positions = _slice_order(directory, chosen, iop)
-    chosen = [chosen[i] for i in order]
-    n = len(chosen)
-    dz = _slice_spacing(directory, positions, ds0, n)
-    pixel = _pixel_spacing(str(directory), ds0.get("PixelSpacing") or ds0.get("ImagerPixelSpacing"))
-    first_ipp = floats(chosen[0][1].get("ImagePositionPatient"), 3)
-    affine, spacing = _ras_affine(iop, first_ipp, pixel, dz)
-
-    rows, cols = int(ds0.Rows), int(ds0.Columns)
-    check_load_bytes((cols, rows, n), _bytes_per_voxel(ds0), directory.name)
-    slopes = np.array([_number(ds, "RescaleSlope", 1.0) or 1.0 for _, ds in chosen])
-    inters = np.array([_number(ds, "RescaleIntercept", 0.0) or 0.0 for _, ds in chosen])
-    rescaled = bool(np.any(slopes != 1.0) or np.any(inters != 0.0))
     out: np.ndarray | None = None
     integer_pixels = True
-    for k, (p, _) in enumerate(chosen):
+    for k, ((p, _), slot) in enumerate(zip(stack.files, stack.slots, strict=True)):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -322,31 +301,49 @@ def _assemble_series(directory: Path, chosen: list[tuple[Path, Any]]) -> Loaded:
                 f"cannot read the DICOM file {p} ({type(exc).__name__}: {exc})."
             ) from exc
         arr = _pixels(p, full)
-        if arr.shape != (rows, cols):
+        if arr.shape != shape:
             raise VolumeError(
-                f"{p.name} has an image of shape {arr.shape}, but the series' first slice is"
-                f" {(rows, cols)}; voxwarp reads grayscale series with equal-sized slices."
+                f"{p.name} has an image of shape {arr.shape}, but its header says {shape};"
+                " the file is damaged: remove it from the series."
             )
         integer_pixels = integer_pixels and arr.dtype.kind in "iub"
         if out is None:
             dtype = np.float32 if rescaled else arr.dtype
-            out = np.empty((cols, rows, n), dtype=dtype, order="F")
+            out = np.zeros((shape[1], shape[0], stack.count), dtype=dtype, order="F")
         elif not rescaled and arr.dtype != out.dtype:
             out = out.astype(np.result_type(out.dtype, arr.dtype))
         if rescaled:
-            out[:, :, k] = (arr.astype(np.float64) * slopes[k] + inters[k]).T
+            out[:, :, slot] = _rescaled(p, arr, float(slopes[k]), float(inters[k])).T
         else:
-            out[:, :, k] = arr.T
+            out[:, :, slot] = arr.T
     assert out is not None
-    if rescaled:
-        integral = (
-            integer_pixels
-            and all(float(s).is_integer() for s in slopes)
-            and all(float(i).is_integer() for i in inters)
+    return out, integer_pixels
+
+
+def _rescaled(p: Path, arr: np.ndarray, slope: float, inter: float) -> np.ndarray:
+    """``arr * slope + inter`` as float32; one line when that leaves the float32 range."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        scaled = (arr.astype(np.float64) * slope + inter).astype(np.float32)
+    if not np.all(np.isfinite(scaled)) and np.all(np.isfinite(arr)):
+        raise VolumeError(
+            f"{p.name}: RescaleSlope {slope:g} and RescaleIntercept {inter:g} take its values"
+            " past the float32 range; the header is damaged. Fix them (e.g. dcmodify) or"
+            " remove the file from the series."
         )
-        if integral and out.min() >= -32768 and out.max() <= 32767:
-            out = out.astype(np.int16)
-    return _loaded(out, spacing, affine, ds0, float(slopes[0]), float(inters[0]))
+    return scaled
+
+
+def _fill_missing(out: np.ndarray, stack: Stack, padding: float | None) -> None:
+    """Set the slots no slice filled to ``padding``, else to the series' lowest value."""
+    missing = sorted(set(range(stack.count)) - set(stack.slots))
+    if not missing:
+        return
+    value = out[:, :, stack.slots].min()
+    if padding is not None:
+        stated = int(padding) if float(padding).is_integer() else padding
+        if np.can_cast(np.min_scalar_type(stated), out.dtype):
+            value = stated
+    out[:, :, missing] = value
 
 
 def _loaded(

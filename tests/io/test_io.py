@@ -469,15 +469,18 @@ def test_dicom_falls_back_to_instance_number(tmp_path: Path) -> None:
     assert vol.spacing[2] == pytest.approx(1.5)
 
 
-def test_dicom_missing_slice_warns_uneven_spacing(tmp_path: Path) -> None:
+def test_dicom_missing_slice_is_a_filled_slot_not_a_stretch(tmp_path: Path) -> None:
+    """A missing slice leaves an empty slot (the series' lowest value), so the others
+    keep their positions (before: 5 slices stacked at the median gap, shape (10, 8, 5))."""
     write_series(tmp_path)
     ds = {p: pydicom.dcmread(p, stop_before_pixels=True) for p in tmp_path.iterdir()}
     middle = next(p for p, d in ds.items() if float(d.ImagePositionPatient[2]) == 33.0)
     middle.unlink()  # z = 30, 31.5, _, 34.5, 36, 37.5
-    with pytest.warns(UserWarning, match="uneven slice spacing"):
+    with pytest.warns(UserWarning, match=r"1 slice\(s\) missing \(positions 3 of 1..6"):
         vol = load_volume(tmp_path)
-    assert vol.shape == (10, 8, 5)
-    assert vol.spacing[2] == pytest.approx(1.5)  # the median gap
+    expected = 2 * dicom_expected() - 1024
+    expected[:, :, 2] = expected[:, :, [0, 1, 3, 4, 5]].min()
+    assert_same_voxels(vol, expected, lps_to_ras(diag_affine((0.5, 0.7, 1.5), (-20, 10, 30))))
 
 
 def test_dicom_several_series_pick_largest(tmp_path: Path) -> None:
