@@ -307,6 +307,8 @@ def _read_slices(
                 " the file is damaged: remove it from the series."
             )
         integer_pixels = integer_pixels and arr.dtype.kind in "iub"
+        if stack.shifts is not None:
+            arr = _untilted(arr, stack.shifts[k])
         if out is None:
             dtype = np.float32 if rescaled else arr.dtype
             out = np.zeros((shape[1], shape[0], stack.count), dtype=dtype, order="F")
@@ -318,6 +320,19 @@ def _read_slices(
             out[:, :, slot] = arr.T
     assert out is not None
     return out, integer_pixels
+
+
+def _untilted(arr: np.ndarray, shift: tuple[float, float]) -> np.ndarray:
+    """A slice moved by ``shift`` (rows, columns; pixels) in its plane onto the grid
+    (linear interpolation; uncovered pixels take the slice's lowest value); integer
+    slices stay integers (rounded)."""
+    from scipy import ndimage
+
+    exact = np.round(np.asarray(shift), 4)  # no round-off drift past the edge (cval)
+    moved = ndimage.shift(
+        arr.astype(np.float32), exact, order=1, mode="constant", cval=float(arr.min())
+    )
+    return np.rint(moved).astype(arr.dtype) if arr.dtype.kind in "iub" else moved
 
 
 def _rescaled(p: Path, arr: np.ndarray, slope: float, inter: float) -> np.ndarray:

@@ -12,10 +12,12 @@ instead of trusting a median spacing (:func:`stack_slices`):
 * Each gap must be a whole number of slice spacings: a missing slice becomes a slot
   that the reader fills (with a warning naming it), so the other slices keep their
   true positions. At most as many slots as real slices are filled.
-* Every slice's IPP must lie within :data:`GRID_TOLERANCE` of a voxel of that grid,
-  along the normal (uneven spacing) and across it (a tilted gantry shears the stack,
-  which an orthogonal grid cannot hold): otherwise one line names the slice, the
-  expected and the found position, and the fix.
+* Every slice's IPP must lie within :data:`GRID_TOLERANCE` of a voxel of that grid
+  along the normal (uneven spacing), else one line names the slice and the fix.
+* Across the normal, a stack whose slices drift sideways in step (a tilted CT gantry
+  shears the stack) is put back on the orthogonal grid: each slice is shifted in its
+  plane by its drift (linear interpolation, as dcm2niix does), with a warning naming
+  the tilt. Sideways offsets that are not a shear are one line.
 """
 
 from __future__ import annotations
@@ -36,6 +38,9 @@ GRID_TOLERANCE = 0.1
 #: Largest difference between two slices' direction cosines (0.001 is 0.06 degrees:
 #: 0.36 mm at the edge of a 360 mm field of view, half a CT pixel).
 IOP_TOLERANCE = 1e-3
+#: Steepest stack tilt (degrees) put back on an orthogonal grid; CT gantries tilt up to
+#: about 30 degrees.
+MAX_TILT_DEG = 45.0
 #: Positions closer than this (mm) along the normal are one position.
 SAME_POSITION_MM = 1e-4
 
@@ -56,6 +61,9 @@ class Stack:
     dz: float
     iop: np.ndarray | None
     first_ipp: np.ndarray | None
+    #: per file, the in-plane shift (rows, columns; pixels) that puts it on the grid
+    #: (a gantry tilt), or ``None`` when every slice is on it already
+    shifts: list[tuple[float, float]] | None = None
 
 
 def _vector(where: str, ds: Any, keyword: str, n: int) -> np.ndarray | None:
@@ -204,34 +212,49 @@ def _listed(slots: list[int]) -> str:
     return text + (", ..." if len(slots) > 8 else "")
 
 
-def _check_grid(
+def _grid_shifts(
     directory: Path,
     files: list[tuple[Path, Any]],
     ipps: list[np.ndarray],
     slots: list[int],
     iop: np.ndarray,
     spacing: tuple[float, float, float],
-) -> None:
-    """Every IPP within :data:`GRID_TOLERANCE` voxels of its slot on the normal through
-    the first slice (a tilted gantry fails across it)."""
-    row, col, normal = iop[:3], iop[3:], _unit_normal(iop)
-    worst, worst_m, worst_off = 0.0, 0, np.zeros(3)
-    for m, (ipp, slot) in enumerate(zip(ipps, slots, strict=True)):
-        off = ipp - (ipps[0] + slot * spacing[2] * normal)
-        across = max(abs(np.dot(off, row)) / spacing[0], abs(np.dot(off, col)) / spacing[1])
-        if across > worst:
-            worst, worst_m, worst_off = float(across), m, off
-    if worst <= GRID_TOLERANCE:
-        return
+) -> list[tuple[float, float]] | None:
+    """The in-plane shift (rows, columns; pixels) of each slice onto the normal through
+    the first one: ``None`` when all are within :data:`GRID_TOLERANCE`; a gantry tilt's
+    shear (offsets growing in step with the slot) is returned with a warning; anything
+    else is one line."""
+    row, col = iop[:3], iop[3:]
+    normal = _unit_normal(iop)
+    offs = np.array(
+        [
+            ipp - (ipps[0] + slot * spacing[2] * normal)
+            for ipp, slot in zip(ipps, slots, strict=True)
+        ]
+    )
+    pix = np.stack([offs @ col / spacing[1], offs @ row / spacing[0]], axis=1)  # rows, cols
+    if np.abs(pix).max() <= GRID_TOLERANCE:
+        return None
+    k = np.asarray(slots, dtype=np.float64)
+    per_slot = (k @ pix) / float(k @ k)  # least squares through the first slice
+    residual = np.abs(pix - np.outer(k, per_slot)).max(axis=1)
     height = float(np.dot(ipps[-1] - ipps[0], normal))
     shift = float(np.linalg.norm((ipps[-1] - ipps[0]) - height * normal))
     tilt = math.degrees(math.atan2(shift, abs(height))) if height else 90.0
-    raise VolumeError(
-        f"{directory}: {files[worst_m][0].name} lies {np.linalg.norm(worst_off):.3g} mm"
-        f" ({worst:.2g} pixels) beside the slice normal through the first slice (the stack"
-        f" is tilted {tilt:.1f} deg from its normal, e.g. a CT gantry tilt); voxwarp reads"
-        f" orthogonal grids only and would misplace it. {_FIX}."
+    if residual.max() > GRID_TOLERANCE or tilt > MAX_TILT_DEG:
+        worst = int(np.argmax(residual))
+        raise VolumeError(
+            f"{directory}: {files[worst][0].name} lies {np.linalg.norm(offs[worst]):.3g} mm"
+            f" beside the slice normal through the first slice, out of step with the other"
+            f" slices (not a gantry tilt of at most {MAX_TILT_DEG:g} deg); voxwarp reads"
+            f" orthogonal grids only and would misplace it. {_FIX}."
+        )
+    warn(
+        f"{directory}: the stack is tilted {tilt:.1f} deg from its slice normal (a CT gantry"
+        f" tilt); each slice is shifted in its plane by up to {np.abs(pix).max():.3g} pixels"
+        " onto an orthogonal grid (linear interpolation, as dcm2niix does)."
     )
+    return [(float(a), float(b)) for a, b in pix]
 
 
 def stack_slices(directory: Path, files: list[tuple[Path, Any]], pixel: np.ndarray) -> Stack:
@@ -249,8 +272,9 @@ def stack_slices(directory: Path, files: list[tuple[Path, Any]], pixel: np.ndarr
     slots = _slots(directory, files, along)
     dz = float(along[-1] - along[0]) / slots[-1]
     ipps = [_vector(p.name, ds, "ImagePositionPatient", 3) for p, ds in files]
-    _check_grid(directory, files, ipps, slots, iop, (float(pixel[1]), float(pixel[0]), dz))
-    return Stack(files, slots, slots[-1] + 1, dz, iop, ipps[0])
+    spacing = (float(pixel[1]), float(pixel[0]), dz)
+    shifts = _grid_shifts(directory, files, ipps, slots, iop, spacing)
+    return Stack(files, slots, slots[-1] + 1, dz, iop, ipps[0], shifts)
 
 
 def _unplaced(

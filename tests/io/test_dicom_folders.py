@@ -123,16 +123,48 @@ def test_oblique_stack_lands_on_every_ipp(tmp_path: Path) -> None:
     _assert_slices_on_their_ipp(_read(tmp_path), s, range(6))
 
 
-def test_gantry_tilt_is_one_line_naming_the_angle(tmp_path: Path) -> None:
-    """Before: rc 0, every slice after the first misplaced (1.34 mm at the sixth). With a
-    second series beside it, the 'loading the largest' warning does not precede the
-    error: the error line names the other series instead."""
-    df.save(tmp_path, df.series(6, tilt_deg=15.0))
+def _world_ramp(datasets, iop, rows: int = 16, cols: int = 16) -> None:  # type: ignore[no-untyped-def]
+    """Give every slice the pixels of one fixed world function, f = 1000 + 40 * (LPS
+    point . column direction): a linear ramp, which linear interpolation keeps exactly."""
+    row, col = np.asarray(iop[:3], float), np.asarray(iop[3:], float)
+    r, c = np.mgrid[0:rows, 0:cols]
+    for ds in datasets:
+        ipp = np.asarray(ds.ImagePositionPatient, float)
+        world = ipp + (c[..., None] * 0.5) * row + (r[..., None] * 0.5) * col
+        ds.PixelData = np.rint(1000 + 40 * (world @ col)).astype("<i2").tobytes()
+
+
+@pytest.mark.parametrize("iop", [(1, 0, 0, 0, 1, 0), OBLIQUE])
+def test_gantry_tilt_is_put_back_on_an_orthogonal_grid(tmp_path: Path, iop) -> None:
+    """Before: rc 0, every slice after the first misplaced (1.34 mm at the sixth); then
+    refused. Now each slice is shifted in its plane by its drift, with a warning naming
+    the tilt. Oracle: a world-fixed linear ramp reads back at every interior voxel's
+    world position (affine), within the int16 rounding."""
+    s = df.series(6, rows=16, cols=16, iop=iop, tilt_deg=15.0)
+    _world_ramp(s, iop)
+    df.save(tmp_path, s)
+    with pytest.warns(UserWarning, match=r"tilted 15\.0 deg .* gantry tilt"):
+        loaded = _read(tmp_path)
+    col = np.asarray(iop[3:], float)
+    i, j, k = np.mgrid[0:16, 3:13, 0:6]  # rows 3..12 stay covered after the 2.7-pixel drift
+    idx = np.stack([i, j, k, np.ones_like(i)], -1).reshape(-1, 4).astype(float)
+    lps = (loaded.affine @ idx.T).T[:, :3] * np.array([-1.0, -1.0, 1.0])
+    expected = 1000 + 40 * (lps @ col)
+    got = loaded.data[i, j, k].reshape(-1).astype(float)
+    assert np.abs(got - expected).max() <= 1.0
+
+
+def test_sideways_offsets_out_of_step_are_one_line(tmp_path: Path) -> None:
+    """One slice knocked sideways (not a shear of the whole stack): refused, naming it."""
+    s = df.series(6)
+    ipp = np.asarray(s[3].ImagePositionPatient, float) + np.array([0.0, 0.4, 0.0])
+    s[3].ImagePositionPatient = [float(v) for v in ipp]
+    df.save(tmp_path, s)
     df.save(tmp_path, df.series(2, rows=4, cols=4, uid=df.UID + ".2"), prefix="B")
     proc = run_cli("info", str(tmp_path), timeout=60)
     line = _one_line_error(proc)
-    assert "tilted 15.0 deg" in line
-    assert "IM0006.dcm" in line
+    assert "IM0004.dcm" in line
+    assert "out of step" in line
     assert "dcm2niix" in line
     assert "the largest of 2 DICOM series" in line
 
