@@ -29,7 +29,11 @@ import contextlib
 import errno
 import os
 import re
+import signal
 import subprocess
+import sys
+import tempfile
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -39,7 +43,8 @@ import pytest
 
 from tests.cli.cli_batch import run_cli_batch
 from tests.core.test_writers_faults import OLD, _check_folder, _file_size_limit, _fill, _tmpfs
-from tests.run_cli import run_cli
+from tests.run_cli import REPO, run_cli
+from voxwarp.core.files import is_temp_name
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import AffineWarp
 from voxwarp.errors import VoxwarpError
@@ -103,9 +108,14 @@ def scene_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _warped(tmp_path_factory.mktemp("in"), (24, 20, 16))
 
 
+#: a pid above Linux's largest (2**22): the process that left such a temporary file is gone
+DEAD_PID = 4999999
+
+
 def _commands(root: Path, scene: Path, fault: str | None, fresh: bool) -> list[Any]:
     """Every CLI writer into its own folder under ``root`` (its destination holding
-    :data:`OLD` unless ``fresh``) under ``fault``: ``[(argv, fault)]``."""
+    :data:`OLD` unless ``fresh``, beside a temporary file a killed writer left) under
+    ``fault``: ``[(argv, fault)]``."""
     commands = []
     aside = root.parent / f"{root.name}-aside"
     aside.mkdir(exist_ok=True)
@@ -114,6 +124,7 @@ def _commands(root: Path, scene: Path, fault: str | None, fresh: bool) -> list[A
         dest.parent.mkdir(parents=True)
         if not fresh:
             dest.write_bytes(OLD)
+        (dest.parent / f".{file}.{DEAD_PID}-0123abcd.vwtmp").write_bytes(b"stale")
         values = {"{scene}": str(scene), "{dest}": str(dest), "{aside}": str(aside / "r.png")}
         commands.append(([values.get(a, a) for a in args], fault))
     return commands
@@ -181,19 +192,17 @@ def test_cli_writers_when_the_rename_is_refused(scene_file: Path, tmp_path: Path
     _check_batch(commands, run_cli_batch(commands), kinds)
 
 
-def test_formats_the_writers_do_not_have_are_refused_first(
-    scene_file: Path, tmp_path: Path
-) -> None:
+def test_formats_the_writers_lack_are_refused_first(scene_file: Path, tmp_path: Path) -> None:
     """export-volume has no .mha, export-field no .tfm: one line before any work."""
-    for cmd, out, words in (
+    cases = [
         ("export-volume", tmp_path / "e.mha", ("-o", ".nii.gz", ".nrrd")),
         ("export-field", tmp_path / "f.tfm", ("-o", ".tfm", ".h5")),
-    ):
-        proc = run_cli(cmd, str(scene_file), "-o", str(out))
-        assert proc.returncode == 2
-        assert "Traceback" not in proc.stderr
-        assert proc.stderr.count("\n") == 1, proc.stderr
-        assert all(w in proc.stderr for w in words), proc.stderr
+    ]
+    argvs = [((cmd, str(scene_file), "-o", str(out)), None) for cmd, out, _ in cases]
+    for (_, _, words), result in zip(cases, run_cli_batch(argvs), strict=True):
+        assert result["rc"] == 2
+        assert result["stderr"].count("\n") == 1, result["stderr"]
+        assert all(w in result["stderr"] for w in words), result["stderr"]
     assert os.listdir(tmp_path) == []
 
 
@@ -225,7 +234,8 @@ def test_cli_writers_in_a_read_only_folder(scene_file: Path, tmp_path: Path) -> 
 @contextlib.contextmanager
 def _fault(kind: str, monkeypatch: pytest.MonkeyPatch, folder: Path) -> Iterator[None]:
     """``kind`` in this process: ``fsize`` (the limit set and restored, SIGXFSZ ignored),
-    ``ENOSPC`` (every fsync fails), ``EROFS``/``EACCES`` (a rename into ``folder`` fails)."""
+    ``ENOSPC`` (every fsync fails), ``EROFS``/``EACCES`` (a rename into ``folder`` or a
+    folder inside it fails)."""
     if kind == "fsize":
         with _file_size_limit(LIMIT):
             yield
@@ -234,7 +244,7 @@ def _fault(kind: str, monkeypatch: pytest.MonkeyPatch, folder: Path) -> Iterator
     real = os.replace
 
     def replace(src: Any, dst: Any, *a: Any, **k: Any) -> None:
-        if Path(dst).parent == folder:
+        if Path(dst).is_relative_to(folder):
             raise OSError(code, os.strerror(code))
         real(src, dst, *a, **k)
 
@@ -288,3 +298,155 @@ def test_api_writers_under_every_fault(
     assert FIX.search(msg), msg
     assert dest.read_bytes() == OLD
     _check_folder(tmp_path, {file})
+
+
+@pytest.mark.parametrize("kind", ["fsize", "ENOSPC", "EROFS"])
+def test_napari_handoff_leaves_nothing(
+    kind: str, scene_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The hand-off into a given folder (an old scene.json there) and into a new
+    temporary folder: a failed write leaves neither the volume nor the folder."""
+    from voxwarp.napari_plugin.handoff import FOLDER_PREFIX, write_handoff
+
+    vol = load_volume(scene_file.parent / "v.npz")
+    given = tmp_path / "given"
+    given.mkdir()
+    (given / "scene.json").write_bytes(OLD)
+    temp_root = tmp_path / "tmp"
+    temp_root.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp_root))
+    for folder in (given, None):
+        where = given if folder is not None else temp_root
+        with _fault(kind, monkeypatch, where), pytest.raises(VoxwarpError) as info:
+            write_handoff(vol, {}, folder)
+        assert "\n" not in str(info.value)
+        assert re.search(CAUSES[kind], str(info.value)), info.value
+    assert (given / "scene.json").read_bytes() == OLD
+    _check_folder(given, {"scene.json"})
+    assert not [p for p in temp_root.iterdir() if p.name.startswith(FOLDER_PREFIX)]
+
+
+def test_napari_handoff_whose_scene_fails_removes_its_volume(
+    scene_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The volume is written, then the scene's rename fails: the new volume goes too."""
+    from voxwarp.napari_plugin.handoff import write_handoff
+
+    real = os.replace
+
+    def replace(src: Any, dst: Any) -> None:
+        if Path(dst).name == "scene.json":
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+        real(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(VoxwarpError, match="read-only file system"):
+        write_handoff(load_volume(scene_file.parent / "v.npz"), {}, tmp_path)
+    assert os.listdir(tmp_path) == []
+
+
+def test_gui_export_whose_rename_fails(scene_file: Path, tmp_path: Path, monkeypatch: Any) -> None:
+    """File › Export's job (the CLI in a child, then the rename over the file): a refused
+    rename is one OutputError line, the old file stays, no temporary file is left."""
+    pytest.importorskip("PySide6")
+    from voxwarp.ui.export_dialog import run_export
+
+    dest = tmp_path / "e.nii.gz"
+    dest.write_bytes(OLD)
+    with _fault("EROFS", monkeypatch, tmp_path), pytest.raises(VoxwarpError) as info:
+        run_export(Scene.load(scene_file), "volume", dest, "volume", [2.0])
+    assert str(info.value).startswith(f"cannot write {dest}: read-only file system")
+    assert dest.read_bytes() == OLD
+    _check_folder(tmp_path, {dest.name})
+
+
+# ---------------------------------------------------------------------------- kill -9
+@pytest.fixture(scope="module")
+def kill_scenes(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """64x48x40 voxels: about half a second of slices to draw (export-volume) and of gzip
+    (export-field .nrrd at 2 mm), the window in which the writer is killed. The scene
+    without warps, and the turned one."""
+    warped = _warped(tmp_path_factory.mktemp("kill"), (64, 48, 40))
+    plain = Scene(load_volume(warped.parent / "v.npz")).save(warped.parent / "plain.json")
+    return plain, warped
+
+
+def _growing(folder: Path) -> bool:
+    """Whether a temporary file with bytes in it is in ``folder``."""
+    with contextlib.suppress(OSError):
+        return any(is_temp_name(e.name) and e.stat().st_size > 0 for e in os.scandir(folder))
+    return False
+
+
+def _kill_while_writing(argv: list[str], folder: Path) -> bool:
+    """Start ``voxwarp ARGV``; SIGKILL it as soon as its temporary file in ``folder``
+    has bytes (mid-write). ``False`` when the command finished first (a busy machine did
+    not look in time)."""
+    cmd = [sys.executable, "-m", "voxwarp.cli.main", *argv]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 40
+        while not _growing(folder):
+            if proc.poll() is not None:
+                assert proc.returncode == 0, "the command failed before it wrote"
+                return False
+            assert time.monotonic() < deadline, "no temporary file in 40 s"
+            time.sleep(0.002)
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            proc.kill()
+        proc.wait(10)
+    assert proc.returncode == -signal.SIGKILL
+    return True
+
+
+def _kill_then_rerun(argv: list[str], out: Path) -> None:
+    """The killed run leaves its temporary file and no output; the rerun of the same
+    command succeeds and leaves only its output."""
+    for _ in range(3):
+        if _kill_while_writing(argv, out.parent):
+            break
+        out.unlink()
+    else:
+        pytest.fail("the command finished three times before it could be killed")
+    left = os.listdir(out.parent)
+    assert len(left) == 1, left
+    assert is_temp_name(left[0])
+    rerun = run_cli(*argv, timeout=60)
+    assert rerun.returncode == 0, rerun.stderr
+    assert os.listdir(out.parent) == [out.name]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_killed_export_volume_then_rerun(kill_scenes: tuple[Path, Path], tmp_path: Path) -> None:
+    """Oracle: the volume's own grid at its voxel size gives back its voxels exactly."""
+    import nibabel as nib
+
+    plain, _ = kill_scenes
+    out = tmp_path / "run" / "e.nii.gz"
+    out.parent.mkdir()
+    _kill_then_rerun(["export-volume", str(plain), "-o", str(out), "--no-progress"], out)
+    source = load_volume(plain.parent / "v.npz").data
+    np.testing.assert_array_equal(np.asarray(nib.load(out).dataobj), source)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_killed_export_field_then_rerun(kill_scenes: tuple[Path, Path], tmp_path: Path) -> None:
+    """Oracle: the chain's field on the same nodes, computed in this process."""
+    from voxwarp.io.fields import load_displacement_field
+
+    _, warped = kill_scenes
+    out = tmp_path / "run" / "f.nrrd"
+    out.parent.mkdir()
+    _kill_then_rerun(["export-field", str(warped), "-o", str(out), "--spacing", "2"], out)
+    expected = Scene.load(warped).export_field(spacing=2.0).field
+    got = load_displacement_field(out)
+    np.testing.assert_allclose(got.affine, expected.affine, atol=1e-9)
+    np.testing.assert_allclose(got.displacements, expected.displacements, atol=1e-5)
+    assert np.abs(expected.displacements).max() > 1.0  # a real field, not zeros
