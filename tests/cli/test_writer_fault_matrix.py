@@ -112,10 +112,13 @@ def scene_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 DEAD_PID = 4999999
 
 
-def _commands(root: Path, scene: Path, fault: str | None, fresh: bool) -> list[Any]:
+def _commands(
+    root: Path, scene: Path, fault: str | None, fresh: bool, stale: bool = True
+) -> list[Any]:
     """Every CLI writer into its own folder under ``root`` (its destination holding
-    :data:`OLD` unless ``fresh``, beside a temporary file a killed writer left) under
-    ``fault``: ``[(argv, fault)]``."""
+    :data:`OLD` unless ``fresh``; beside a temporary file a killed writer left when
+    ``stale``: not on the tmpfs, where removing it frees the space the test took, nor
+    where the folder turns read-only) under ``fault``: ``[(argv, fault)]``."""
     commands = []
     aside = root.parent / f"{root.name}-aside"
     aside.mkdir(exist_ok=True)
@@ -124,7 +127,8 @@ def _commands(root: Path, scene: Path, fault: str | None, fresh: bool) -> list[A
         dest.parent.mkdir(parents=True)
         if not fresh:
             dest.write_bytes(OLD)
-        (dest.parent / f".{file}.{DEAD_PID}-0123abcd.vwtmp").write_bytes(b"stale")
+        if stale:
+            (dest.parent / f".{file}.{DEAD_PID}-0123abcd.vwtmp").write_bytes(b"stale")
         values = {"{scene}": str(scene), "{dest}": str(dest), "{aside}": str(aside / "r.png")}
         commands.append(([values.get(a, a) for a in args], fault))
     return commands
@@ -212,7 +216,7 @@ def test_formats_the_writers_lack_are_refused_first(scene_file: Path, tmp_path: 
 def test_cli_writers_on_a_full_disk(scene_file: Path, tmp_path: Path) -> None:
     """A 1 MiB tmpfs filled to the last byte, every destination holding old bytes."""
     with _tmpfs(tmp_path / "full", "1m") as fs:
-        commands = _commands(fs / "w", scene_file, None, fresh=False)
+        commands = _commands(fs / "w", scene_file, None, fresh=False, stale=False)
         _fill(fs)
         _check_batch(commands, run_cli_batch(commands), ["ENOSPC"] * len(CLI))
 
@@ -223,7 +227,7 @@ def test_cli_writers_in_a_read_only_folder(scene_file: Path, tmp_path: Path) -> 
     """The tmpfs remounted read-only (root ignores chmod), every destination holding old
     bytes: HDF5 printed 23-54 lines here, MetaImage its own line."""
     with _tmpfs(tmp_path / "ro", "1m") as fs:
-        commands = _commands(fs / "w", scene_file, None, fresh=False)
+        commands = _commands(fs / "w", scene_file, None, fresh=False, stale=False)
         remount = ["mount", "-o", "remount,ro", str(fs)]
         if subprocess.run(remount, capture_output=True, check=False).returncode != 0:
             pytest.skip("remounting read-only is not permitted here")
