@@ -32,6 +32,7 @@ import math
 import os
 import re
 import secrets
+import shutil
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -126,6 +127,25 @@ def file_size_limit() -> float:
         return math.inf
     soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
     return math.inf if soft in (resource.RLIM_INFINITY, -1) or soft < 0 else float(soft)
+
+
+def ensure_room(path: str | os.PathLike, nbytes: int) -> None:
+    """Raise :class:`OutputError` before ``nbytes`` are written to ``path`` when they are
+    over the process's file-size limit (``EFBIG``) or the free space of its disk
+    (``ENOSPC``). For native writers that cannot survive running into either (HDF5
+    returns an error, then crashes the process at exit): call it before they start."""
+    need = f"the file needs about {format_bytes(nbytes)}"
+    if nbytes >= file_size_limit():
+        raise output_error(path, OSError(_errno.EFBIG, need))
+    folder = Path(path).resolve().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return  # cannot tell: the write itself reports
+    if nbytes > free:
+        raise output_error(path, OSError(_errno.ENOSPC, f"{need}, {format_bytes(free)} free"))
 
 
 def _reached_limit(tmp: Path) -> bool:

@@ -454,3 +454,55 @@ def test_killed_export_field_then_rerun(kill_scenes: tuple[Path, Path], tmp_path
     np.testing.assert_allclose(got.affine, expected.affine, atol=1e-9)
     np.testing.assert_allclose(got.displacements, expected.displacements, atol=1e-5)
     assert np.abs(expected.displacements).max() > 1.0  # a real field, not zeros
+
+
+# ---------------------------------------------------------------------------- HDF5 from the API
+H5_CHILD = r"""
+import resource, sys
+import numpy as np
+from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+from voxwarp.errors import OutputError
+from voxwarp.io.fields import save_displacement_field
+
+field = DisplacementFieldWarp(np.zeros((24, 20, 16, 3), np.float32), np.eye(4))
+resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[2]), resource.RLIM_INFINITY))
+try:
+    save_displacement_field(field, sys.argv[1])
+except OutputError as exc:
+    print(exc)
+"""
+
+
+@pytest.mark.timeout(60)
+def test_h5_field_from_the_api_under_a_file_size_limit_exits_cleanly(tmp_path: Path) -> None:
+    """``save_displacement_field(.h5)`` under a 146 KiB limit (244 KiB to write): HDF5
+    returned an error, then the process died of SIGSEGV at exit (rc 139); now the limit
+    is checked before HDF5 runs."""
+    out = tmp_path / "f.h5"
+    proc = subprocess.run(
+        [sys.executable, "-c", H5_CHILD, str(out), "150000"],
+        capture_output=True, text=True, cwd=REPO, timeout=60, check=False,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stderr == ""
+    assert proc.stdout.startswith(f"cannot write {out}: file too large for this process's")
+    assert "needs about 244 KiB" in proc.stdout
+    assert os.listdir(tmp_path) == []
+
+
+def test_h5_field_from_the_api_refuses_a_full_disk_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """4 KiB free for 244 KiB: refused before HDF5 runs (it would crash at exit)."""
+    import shutil
+
+    from voxwarp.deform.fields.displacement import DisplacementFieldWarp
+    from voxwarp.io.fields import save_displacement_field
+
+    field = DisplacementFieldWarp(np.zeros((24, 20, 16, 3), np.float32), np.eye(4))
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda _p: usage._replace(free=4096))
+    with pytest.raises(VoxwarpError, match=r"disk full \(the file needs about 244 KiB, 4 KiB"):
+        save_displacement_field(field, tmp_path / "f.h5")
+    assert os.listdir(tmp_path) == []
