@@ -12,7 +12,6 @@ failed or cancelled export leaves no file). Errors arrive as the command's one l
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import tempfile
@@ -34,6 +33,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from voxwarp.core.files import atomic_output, remove_stale_temps
 from voxwarp.errors import VoxwarpError
 from voxwarp.scene import Scene
 
@@ -120,12 +120,18 @@ def run_export(
     progress: Callable[[float, str], None] | None = None,
     cancelled: Callable[[], bool] | None = None,
 ) -> Path:
-    """Write one export of ``scene`` to ``out`` atomically (see the module docstring)."""
+    """Write one export of ``scene`` to ``out`` atomically (see the module docstring):
+    through :func:`voxwarp.core.files.atomic_output`, so a failed, cancelled or killed
+    export leaves no file (the next one removes a killed one's temporary files) and a
+    failed rename is one :class:`~voxwarp.errors.OutputError` line."""
     out = Path(out)
-    tmp_out = out.with_name(f".{out.name}.part{os.getpid()}{''.join(out.suffixes[-2:])}")
     if kind != "volume" and grid == "deformed":
         raise ExportError("the deformed grid is for the volume; use input or volume for a field")
-    with tempfile.TemporaryDirectory(prefix="voxwarp-export-") as tmp:
+    suffix = ".nii.gz" if out.name.lower().endswith(".nii.gz") else out.suffix
+    with (
+        tempfile.TemporaryDirectory(prefix="voxwarp-export-") as tmp,
+        atomic_output(out, suffix) as tmp_out,
+    ):
         scene_json = scene.save(Path(tmp) / "scene.json")
         argv = export_argv(kind, scene_json, tmp_out, grid, spacing)
         if progress:
@@ -147,12 +153,11 @@ def run_export(
                     pass
             _, err = proc.communicate()
         finally:
-            if proc.returncode != 0:
-                tmp_out.unlink(missing_ok=True)
+            if proc.returncode != 0:  # a killed command's temporary file: its pid is gone
+                remove_stale_temps(out.parent, for_name=out.name)
         if proc.returncode != 0:
             lines = [ln for ln in err.splitlines() if "error:" in ln] or err.splitlines()[-1:]
             raise ExportError(lines[-1].split("error:", 1)[-1].strip() if lines else "failed")
-    os.replace(tmp_out, out)
     if progress:
         progress(1.0, f"wrote {out.name}")
     return out

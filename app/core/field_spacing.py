@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from voxwarp.core.files import file_size_limit
 from voxwarp.core.limits import format_bytes
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import Warp
@@ -90,17 +91,6 @@ def estimate_bytes(shape: Sequence[int], components: int = 3, itemsize: int = 4)
     """Estimated file size: the data (:func:`field_file_bytes`) plus
     :data:`HEADER_BYTES`; an upper bound for compressed formats."""
     return field_file_bytes(shape, components, itemsize) + HEADER_BYTES
-
-
-def file_size_limit() -> float:
-    """The process's file-size limit in bytes (``RLIMIT_FSIZE``, ``ulimit -f``); ``inf``
-    when unlimited or unknown (no :mod:`resource` on Windows)."""
-    try:
-        import resource
-    except ImportError:
-        return math.inf
-    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
-    return math.inf if soft in (resource.RLIM_INFINITY, -1) or soft < 0 else float(soft)
 
 
 def check_room(out: Path, nbytes: int) -> None:

@@ -28,15 +28,18 @@ raises :func:`output_error` itself. Temporary names are hidden and recognisable
 from __future__ import annotations
 
 import errno as _errno
+import math
 import os
 import re
 import secrets
+import shutil
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
+from voxwarp.core.limits import format_bytes
 from voxwarp.errors import OutputError
 
 #: Marks every temporary file voxwarp writes (before the format's own suffix).
@@ -89,7 +92,10 @@ def output_error(path: str | os.PathLike, cause: BaseException | str) -> OutputE
         code = _probe_errno(Path(path).parent)
         if code is not None:
             detail = f"{os.strerror(code)}: {detail}"
-    if code in _CAUSES:
+    if code == _errno.EFBIG and math.isfinite(cap := file_size_limit()):
+        what = f"file too large for this process's file-size limit of {format_bytes(int(cap))}"
+        msg = f"cannot write {path}: {what} ({detail}); raise the limit (ulimit -f) or write less"
+    elif code in _CAUSES:
         what, fix = _CAUSES[code]
         msg = f"cannot write {path}: {what} ({detail}); {fix}"
     else:
@@ -110,6 +116,73 @@ def _probe_errno(folder: Path) -> int | None:
         return _errno.ENOSPC if os.statvfs(folder).f_bavail == 0 else None
     except OSError:
         return None
+
+
+def file_size_limit() -> float:
+    """The process's file-size limit in bytes (``RLIMIT_FSIZE``, ``ulimit -f``); ``inf``
+    when unlimited or unknown (no :mod:`resource` on Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return math.inf
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return math.inf if soft in (resource.RLIM_INFINITY, -1) or soft < 0 else float(soft)
+
+
+def ensure_room(path: str | os.PathLike, nbytes: int) -> None:
+    """Raise :class:`OutputError` before ``nbytes`` are written to ``path`` when they are
+    over the process's file-size limit (``EFBIG``) or the free space of its disk
+    (``ENOSPC``). For native writers that cannot survive running into either (HDF5
+    returns an error, then crashes the process at exit): call it before they start."""
+    need = f"the file needs about {format_bytes(nbytes)}"
+    if nbytes >= file_size_limit():
+        raise output_error(path, OSError(_errno.EFBIG, need))
+    folder = Path(path).resolve().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return  # cannot tell: the write itself reports
+    if nbytes > free:
+        raise output_error(path, OSError(_errno.ENOSPC, f"{need}, {format_bytes(free)} free"))
+
+
+def _reached_limit(tmp: Path) -> bool:
+    """Whether ``tmp`` is as large as the process's file-size limit (the write was cut
+    there); ``False`` without a limit or a file."""
+    cap = file_size_limit()
+    try:
+        return math.isfinite(cap) and tmp.stat().st_size >= cap
+    except OSError:
+        return False
+
+
+def _check_not_cut(tmp: Path) -> None:
+    """Raise ``EFBIG`` when the written file reached the file-size limit: the write was
+    cut there (OpenImageIO, among others, reports no error for the part that did not
+    fit and would leave a truncated image)."""
+    if _reached_limit(tmp):
+        raise OSError(_errno.EFBIG, os.strerror(_errno.EFBIG))
+
+
+def _failure(exc: OSError, final: Path, tmp: Path, cut: bool) -> OSError:
+    """The :class:`OutputError` to raise for ``exc``, a failed write of ``final`` through
+    ``tmp``: worded by its errno (``EFBIG`` when ``cut``, the file having reached the
+    file-size limit, and the library gave no errno), naming ``final``, never ``tmp``.
+    Returns ``exc`` itself when it is already that error."""
+    error: OSError = exc
+    if cut and exc.errno is None:  # a library's short write (OpenImageIO's text)
+        prefix = f"cannot write {final}: "
+        text = str(exc).removeprefix(prefix) if isinstance(exc, OutputError) else str(exc)
+        error = output_error(final, OSError(_errno.EFBIG, text or os.strerror(_errno.EFBIG)))
+    elif not isinstance(exc, OutputError):
+        error = output_error(final, exc)
+    text = str(error)
+    if str(tmp) in text or tmp.name in text:  # HDF5 names the file it could not open
+        text = text.replace(str(tmp), str(final)).replace(tmp.name, final.name)
+        error = OutputError(text, path=str(final), errno=error.errno)
+    return error
 
 
 def temp_name(final: Path, suffix: str = "") -> Path:
@@ -257,14 +330,16 @@ def atomic_output(
         yield tmp
         if not tmp.is_file():
             raise OutputError(f"cannot write {final}: the writer produced no file", path=str(final))
+        _check_not_cut(tmp)
         _sync_file(tmp)
         os.replace(tmp, final)
-    except OutputError:
+    except OSError as exc:  # OutputError too
+        cut = _reached_limit(tmp)
         _discard(tmp)
-        raise
-    except OSError as exc:
-        _discard(tmp)
-        raise output_error(final, exc) from exc
+        error = _failure(exc, final, tmp, cut)
+        if error is exc:
+            raise
+        raise error from exc
     except BaseException:
         _discard(tmp)
         raise

@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
+from voxwarp.core.files import output_error
 from voxwarp.core.volume import Volume
 from voxwarp.io.volumes import save_volume
 from voxwarp.scene import Scene
@@ -30,13 +32,32 @@ def write_handoff(
     """Write ``volume`` (``<name>.nrrd``) and ``scene.json`` into ``folder`` (default a new
     temporary folder); returns the scene path. ``scene_options`` are
     :class:`~voxwarp.scene.Scene` arguments (e.g.
-    :func:`voxwarp.napari_plugin.convert.layer_scene_options`)."""
-    out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix=FOLDER_PREFIX))
-    out.mkdir(parents=True, exist_ok=True)
+    :func:`voxwarp.napari_plugin.convert.layer_scene_options`).
+
+    Each file is written atomically; when either fails (a full or read-only disk: a
+    one-line :class:`~voxwarp.errors.OutputError`) nothing of this hand-off is left: the
+    new temporary folder is removed, and in a given ``folder`` a volume file this call
+    created is removed (files that were there keep their content or this call's)."""
+    made = folder is None
+    where = Path(tempfile.gettempdir() if folder is None else folder)
+    try:
+        out = Path(tempfile.mkdtemp(prefix=FOLDER_PREFIX)) if folder is None else where
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(where, exc) from exc
     stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in volume.name) or "volume"
-    written = save_volume(volume, out / f"{stem}.nrrd")
-    saved = dataclasses.replace(volume, source=str(written))
-    return Scene(saved, **scene_options).save(out / "scene.json")
+    target = out / f"{stem}.nrrd"
+    new_volume = not target.exists()
+    try:
+        written = save_volume(volume, target)
+        saved = dataclasses.replace(volume, source=str(written))
+        return Scene(saved, **scene_options).save(out / "scene.json")
+    except BaseException:
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        elif new_volume:
+            target.unlink(missing_ok=True)
+        raise
 
 
 def voxwarp_command(scene_path: str | os.PathLike) -> list[str]:
