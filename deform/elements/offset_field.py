@@ -32,6 +32,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.deform import gl_programs
+from voxwarp.deform.elements.field_support import field_support
 from voxwarp.deform.elements.folds import fold_summary
 from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import (
@@ -488,6 +489,21 @@ class OffsetFieldWarp(Warp):
         for _ in range(self.steps):
             a, b = self._negated_range(u, lo + a, hi + b)
         return a, b
+
+    def support_bricks(self, lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
+        """Boxes where the warp may move a point by more than ``tol`` mm: those within
+        ``max |u|`` of the cells whose nodes moved more than ``tol``, widened by one cell
+        (:func:`voxwarp.deform.elements.field_support.field_support`), and whose
+        :meth:`displacement_range` leaves ``[-tol, tol]`` (both bounds hold; the first
+        is cheap and exact about untouched regions, the second local about how far);
+        every box for a GPU-owned field without a ``field_reader``."""
+        u = self._range_field()
+        if u is None:
+            return np.ones(np.atleast_2d(lo).shape[0], dtype=bool)
+        moved = field_support(u, self.lo, self.spacing, lo, hi, tol)
+        if moved.any():  # both bounds hold: keep what both mark (the intervals are local)
+            moved &= super().support_bricks(lo, hi, tol)
+        return moved
 
     def _negated_range(
         self, field: np.ndarray, lo: np.ndarray, hi: np.ndarray
