@@ -265,9 +265,9 @@ class Renderer:
         #: the last draw's warped rays: 1 evaluated the chain at every sample, 0 used the
         #: warp state's segment map, K > 1 fixed segments of K samples
         self.last_ray_segment = 1
-        #: how the last draw used the warp chain's support: "map" (straight outside it),
-        #: "none" (the chain moved nothing: drawn undeformed) or "all" (the chain at
-        #: every sample)
+        #: how the last draw paid for its warp chain: "none" (straight rays: no chain,
+        #: an affine one, or one that moves nothing, drawn undeformed), "map" (straight
+        #: outside the chain's support) or "all" (the chain at every sample)
         self.last_support = "all"
         if sampling not in ("auto", "texture3d", "slice_pairs"):
             raise RenderError(
@@ -643,7 +643,7 @@ class Renderer:
         self.last_ray_segment = segment
         shade_tex = self.last_gradient_texture = self._use_gradients(scene)
         support = plan == "map" and segment == 1
-        self.last_support = "map" if support else "none" if plan == "none" else "all"
+        self.last_support = "map" if support else "none" if linear else "all"
         prog = self._program(scene, linear, skip_kind, segment, shade_tex, support)
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
