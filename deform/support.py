@@ -28,8 +28,9 @@ import numpy as np
 
 from voxwarp.deform.warp import Warp
 
-#: bricks per axis at most (a 64³ map costs milliseconds to build and 256 KB)
-MAX_BRICKS = 64
+#: bricks per axis at most (a 32³ map is rebuilt for every frame of a drag: tens of
+#: milliseconds of numpy)
+MAX_BRICKS = 32
 
 
 @dataclass(frozen=True)

@@ -500,9 +500,11 @@ class OffsetFieldWarp(Warp):
         u = self._range_field()
         if u is None:
             return np.ones(np.atleast_2d(lo).shape[0], dtype=bool)
+        lo, hi = np.atleast_2d(lo), np.atleast_2d(hi)
         moved = field_support(u, self.lo, self.spacing, lo, hi, tol)
-        if moved.any():  # both bounds hold: keep what both mark (the intervals are local)
-            moved &= super().support_bricks(lo, hi, tol)
+        sel = np.flatnonzero(moved)
+        if len(sel):  # both bounds hold: keep what both mark (the intervals are local)
+            moved[sel] = super().support_bricks(lo[sel], hi[sel], tol)
         return moved
 
     def _negated_range(
@@ -525,7 +527,13 @@ class OffsetFieldWarp(Warp):
         width = 1 << np.ceil(np.log2(ihi - ilo + 1)).astype(np.int64)
         out_lo = np.empty(lo.shape)
         out_hi = np.empty(lo.shape)
-        sizes, which = np.unique(width, axis=0, return_inverse=True)
+        # one integer per window shape (exponents < 64 each): a 1D unique, far cheaper
+        # than np.unique(..., axis=0) on many boxes
+        exps = np.log2(width).astype(np.int64)
+        codes, which = np.unique(
+            (exps[:, 0] * 64 + exps[:, 1]) * 64 + exps[:, 2], return_inverse=True
+        )
+        sizes = 1 << np.stack([codes // 4096, codes // 64 % 64, codes % 64], axis=1)
         cache_lo: dict[tuple, np.ndarray] = {}
         cache_hi: dict[tuple, np.ndarray] = {}
         for s, size in enumerate(sizes):
