@@ -500,7 +500,9 @@ class Renderer:
     def needs_skip_maps(self, scene: Scene) -> bool:
         """With :attr:`warped_skip_maps` (straight rays: :attr:`cell_skip_maps`)
         "background": whether drawing ``scene`` now would march block by block only
-        because its skip maps are not built yet (no side effects)."""
+        because its skip maps are not built yet (no side effects but filling the support
+        cache: a chain that moves nothing draws, and so needs, the undeformed maps)."""
+        scene = self._support_plan(scene)[0]
         entry = self._volumes.get(id(scene.volume))
         return self._skip_maps.needs_maps(scene, None if entry is None else entry[1].skip)
 
