@@ -154,3 +154,23 @@ def test_moved_cells_are_dilated_by_one_cell() -> None:
     # the node touches cells 2..3 per axis; one more either side: 1..4
     assert cells.sum() == 4**3
     assert cells[1:5, 1:5, 1:5].all()
+
+
+@pytest.mark.slow
+def test_a_wire_support_is_local_and_holds_its_moved_points() -> None:
+    """A bent wire on a real head (its influence region): the default interval bound."""
+    from tests.model_scenes import padded_colin, wire_bend
+    from voxwarp.deform.warp import chain_apply_carried
+    from voxwarp.scene import Scene
+
+    vol = padded_colin()
+    warps = wire_bend(vol, 12.0, 20.0)
+    lo, hi = Scene(vol, warps=warps).ray_bounds()
+    tol = 1e-3 * float(np.min(vol.spacing))
+    smap = chain_support(warps, lo, hi, 16.0, tol)
+    assert 0.0 < smap.fraction < 0.6
+    p = lo + np.random.default_rng(3).random((20000, 3)) * (hi - lo)
+    q, _ = chain_apply_carried(warps, p)
+    moved = np.abs(q - p).max(axis=1) > tol
+    assert moved.any()
+    assert smap.contains(p[moved]).all()
