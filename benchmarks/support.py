@@ -143,6 +143,7 @@ def _volume_rows(ctx: Any, name: str, size: tuple, frames: int, report: SupportR
         images, plans = {}, {}
         for c, r in renderers.items():
             r.renderer.warped_skip_maps = "always"
+            r.renderer.support_maps = "always"
             for support in (False, True):
                 r.renderer.support_skipping = support
                 images[c, support] = r.render(scenes[c])[..., :3].astype(int)

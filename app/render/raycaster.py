@@ -422,6 +422,19 @@ class Renderer:
         self._support.enabled = bool(value)
 
     @property
+    def support_maps(self) -> str:
+        """When a warp state's support map is built: "auto" (default) when the state is
+        drawn a second time (a drag's ever-changing states draw with the chain at every
+        sample and cost no map, nor a GPU model's read-back), "always" on first draw."""
+        return self._support.build
+
+    @support_maps.setter
+    def support_maps(self, value: str) -> None:
+        if value not in ("auto", "always"):
+            raise RenderError(f"support_maps must be 'auto' or 'always'; got {value!r}")
+        self._support.build = value
+
+    @property
     def support_tolerance(self) -> float:
         """Largest displacement (voxels of the finest spacing) drawn as no displacement:
         points moved less sample where a straight ray does (default 1e-3)."""
@@ -500,9 +513,9 @@ class Renderer:
     def needs_skip_maps(self, scene: Scene) -> bool:
         """With :attr:`warped_skip_maps` (straight rays: :attr:`cell_skip_maps`)
         "background": whether drawing ``scene`` now would march block by block only
-        because its skip maps are not built yet (no side effects but filling the support
-        cache: a chain that moves nothing draws, and so needs, the undeformed maps)."""
-        scene = self._support_plan(scene)[0]
+        because its skip maps are not built yet (no side effects; a chain whose support
+        map says it moves nothing draws, and so needs, the undeformed maps)."""
+        scene = self._support_plan(scene, draw=False)[0]
         entry = self._volumes.get(id(scene.volume))
         return self._skip_maps.needs_maps(scene, None if entry is None else entry[1].skip)
 
@@ -654,13 +667,13 @@ class Renderer:
             scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment, support
         )
 
-    def _support_plan(self, scene: Scene) -> tuple[Scene, str]:
+    def _support_plan(self, scene: Scene, draw: bool = True) -> tuple[Scene, str]:
         """The scene a draw renders and how it uses the chain's support ("none": the
         chain moves nothing beyond the tolerance, so the scene without its warps; "map";
-        "all")."""
+        "all"); ``draw`` False: asked outside a draw (builds nothing)."""
         if fold_affine(scene.warps) is not None:
             return scene, "all"
-        plan = self._support.plan(scene)
+        plan = self._support.plan(scene, draw=draw)
         if plan == "none":
             return scene.copy(warps=[]), plan
         return scene, plan

@@ -147,3 +147,24 @@ def test_slices_pay_for_the_chain_only_inside_the_support(offscreen: Any, head: 
     still = np.abs(deformed_old - rest) == 0
     assert still.mean() > 0.3
     np.testing.assert_array_equal(deformed_new[still], rest[still])
+
+
+@pytest.mark.gl
+def test_a_warp_state_gets_its_map_when_drawn_a_second_time(offscreen: Any, head: Volume) -> None:
+    """ "auto": a state that changes every frame (a drag) never builds a map, nor reads a
+    GPU model's field back; asking needs_skip_maps is no draw."""
+    r = offscreen(*SIZE)
+    scene = Scene(head, view="anterior", warps=[offset_warp(head, moved=True)])
+    r.renderer.needs_skip_maps(scene)
+    r.render(scene)
+    assert r.renderer.last_support == "all"
+    r.renderer.needs_skip_maps(scene)
+    r.render(scene)
+    assert r.renderer.last_support == "map"
+    r.renderer.support_maps = "always"
+    try:
+        other = scene.copy(warps=[offset_warp(head, moved=False)])
+        r.render(other)
+        assert r.renderer.last_support == "none"
+    finally:
+        r.renderer.support_maps = "auto"

@@ -55,6 +55,12 @@ class SupportCache:
         self.ctx = ctx
         #: march straight outside the chain's support (off: the chain at every sample)
         self.enabled = bool(enabled)
+        #: when a warp state's map is built: "auto" when it is drawn a second time (a
+        #: state that changes every frame, as while dragging, is drawn with the chain
+        #: everywhere and costs no map, nor a GPU model's field read-back), "always" on
+        #: its first draw
+        self.build = "auto"
+        self._seen: Any = None
         #: tolerance in voxels of the finest spacing
         self.tolerance_voxels = TOLERANCE_VOXELS
         self._key: Any = None
@@ -64,22 +70,37 @@ class SupportCache:
     def support(self, scene: Scene, box: Box | None = None) -> SupportMap:
         """The support of ``scene``'s chain over ``box`` (default: its ray box), built
         once per warp state and box."""
-        lo, hi = scene.ray_bounds() if box is None else box
-        voxel = float(np.min(scene.volume.spacing))
-        tol = self.tolerance_voxels * voxel
-        key = (warp_state_key(scene), tuple(lo), tuple(hi), tol)
+        return self._support(scene, box, self._state_key(scene, box))
+
+    def _support(self, scene: Scene, box: Box | None, key: tuple) -> SupportMap:
         if key != self._key or self._map is None:
+            lo, hi = scene.ray_bounds() if box is None else box
+            voxel = float(np.min(scene.volume.spacing))
             self._drop_texture()
-            self._map = chain_support(list(scene.warps), lo, hi, BRICK_VOXELS * voxel, tol)
+            self._map = chain_support(
+                list(scene.warps), lo, hi, BRICK_VOXELS * voxel, self.tolerance_voxels * voxel
+            )
             self._key = key
         return self._map
 
-    def plan(self, scene: Scene, box: Box | None = None) -> str:
+    def _state_key(self, scene: Scene, box: Box | None) -> tuple:
+        lo, hi = scene.ray_bounds() if box is None else box
+        tol = self.tolerance_voxels * float(np.min(scene.volume.spacing))
+        return (warp_state_key(scene), tuple(lo), tuple(hi), tol)
+
+    def plan(self, scene: Scene, box: Box | None = None, *, draw: bool = True) -> str:
         """How a draw of ``scene`` (a non-affine chain) uses the support over ``box``:
-        "none", "map" or "all" (see the module docstring)."""
+        "none", "map" or "all" (see the module docstring). With :attr:`build` "auto",
+        the first draw of a warp state gets "all" (``draw`` False: a question that is
+        no draw, which neither builds the map nor counts as one)."""
         if not self.enabled or not scene.warps:
             return "all"
-        fraction = self.support(scene, box).fraction
+        key = self._state_key(scene, box)
+        if key != self._key and (self.build == "auto" or not draw):
+            if not draw or key != self._seen:
+                self._seen = key if draw else self._seen
+                return "all"
+        fraction = self._support(scene, box, key).fraction
         if fraction == 0.0:
             return "none"
         return "all" if fraction == 1.0 else "map"
