@@ -28,6 +28,7 @@ COMMANDS: tuple[str, ...] = (
     "fields",
     "scale",
     "segments",
+    "support",
     "slices",
     "detj",
     "movie",
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     from benchmarks.scale import add_bench_scale_parser
     from benchmarks.segments import add_bench_segments_parser
     from benchmarks.startup import add_bench_startup_parser
+    from benchmarks.support import add_bench_support_parser
     from benchmarks.wire_ends import add_bench_wire_ends_parser
     from benchmarks.wire_tables import add_bench_wire_tables_parser
     from benchmarks.wires import add_bench_wires_parser
@@ -71,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_fields_parser(bsub)
     add_bench_scale_parser(bsub)
     add_bench_segments_parser(bsub)
+    add_bench_support_parser(bsub)
     add_bench_slices_parser(bsub)
     add_bench_detj_parser(bsub)
     add_bench_movie_parser(bsub)

@@ -44,6 +44,7 @@ BENCHMARKS: tuple[str, ...] = (
     "interactive",
     "fields",
     "segments",
+    "support",
     "slices",
     "detj",
 )
@@ -79,6 +80,12 @@ ISSUE_ROWS: tuple[tuple[str, str, str], ...] = (
         "segments",
         "piecewise-linear warped rays ('auto') / the chain at every sample",
         "< 1.0x, image within the stated tolerance",
+    ),
+    (
+        "support_drag",
+        "local ChainMail drag (16³, one element 15 mm) / undeformed, straight outside its"
+        " support (in brackets: the chain at every sample)",
+        "<= 1.3x",
     ),
 )
 
@@ -393,6 +400,27 @@ def run_segments(quick: bool) -> dict[str, Any]:
     return {"ratios": ratios, "issue": {"segments": text}, "markdown": report.markdown(command)}
 
 
+def run_support(quick: bool) -> dict[str, Any]:
+    """``bench support`` (with ``quick``: 256², 2 frames)."""
+    from benchmarks.support import bench_support
+
+    size, frames = ((256, 256), 2) if quick else ((512, 512), 5)
+    report = bench_support(size=size, frames=frames, log=_log)
+    ratios = {}
+    for r in report.rows:
+        ratios[f"{r.volume} {r.case} / undeformed"] = r.new
+        ratios[f"{r.volume} {r.case} old / undeformed"] = r.old
+    text = ", ".join(
+        f"{r.volume} {r.new:.2f}x ({r.old:.2f}x)" for r in report.rows if r.case == "chainmail drag"
+    )
+    command = f"python -m benchmarks support --size {size[0]}x{size[1]} --frames {frames}"
+    return {
+        "ratios": ratios,
+        "issue": {"support_drag": text},
+        "markdown": report.markdown(command),
+    }
+
+
 def run_slices(quick: bool) -> dict[str, Any]:
     """``bench slices`` (with ``quick``: 256² only, 3 rounds)."""
     from voxwarp.bench.slices import bench_slices
@@ -441,6 +469,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "interactive": run_interactive,
     "fields": run_fields,
     "segments": run_segments,
+    "support": run_support,
     "slices": run_slices,
     "detj": run_detj,
 }

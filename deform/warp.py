@@ -209,6 +209,24 @@ class Warp(ABC):
         """
         return None
 
+    def support_bricks(self, lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
+        """Which of N deformed-space boxes the warp may move a point of by more than
+        ``tol`` mm (per axis): an (N,) bool mask, its *support* in bricks.
+
+        ``lo``, ``hi``: (N, 3) box corners (mm). The default marks a box unless its
+        :meth:`displacement_range` lies within ``[-tol, tol]``, and every box when the
+        warp gives no interval; a family with a tighter answer (an offset field's moved
+        cells) overrides it. Points outside the marked boxes sample the volume where a
+        straight ray does (within ``tol``), so the raycaster marches straight there
+        (:func:`voxwarp.deform.support.chain_support`).
+        """
+        n = np.atleast_2d(lo).shape[0]
+        r = self.displacement_range(lo, hi)
+        if r is None:
+            return np.ones(n, dtype=bool)
+        reach = np.maximum(np.abs(np.asarray(r[0], float)), np.abs(np.asarray(r[1], float)))
+        return np.asarray(reach.max(axis=1) > tol)
+
     def carried(self, points: np.ndarray) -> np.ndarray | None:
         """Which of the (N, 3) deformed points the warp maps to content: an (N,) bool
         mask, or ``None`` when it carries every point (the default).

@@ -23,6 +23,14 @@
 //   the local displacement bound (app/render/skipping/maps.py warped_cell_visibility), so it jumps
 //   wherever no sample could land on visible content, again on the sample lattice.
 //   Without a bound, invisible blocks still save the volume fetch and classification.
+// SUPPORT_MAP (warped rays): the chain's support, the bricks of the ray box where some
+// warp may move a point by more than a tolerance (deform/support.py,
+// app/render/skipping/support.py), here as the box around them. A ray marches in three
+// phases: straight up to that box, through the chain inside it, straight after it.
+// Straight samples use the undeformed ray's own matrix and arithmetic (the same texels,
+// bit for bit). Each phase is its own loop (march_cells / march_blocks, inlined per
+// kind): a CPU rasteriser runs both sides of a branch, but a loop that no lane of a SIMD
+// group needs costs one test, and neighbouring rays enter and leave the box together.
 // Early ray termination: the mode returns true from mode_sample when nothing further
 // can change the pixel (opacity > 0.99, MIP at the window top, iso hit, ...).
 // The renderer clears the viewport to u_background first; rays that miss the volume
@@ -80,6 +88,15 @@ mat3 jacobian_at(float t) { return u_jacobian; }
 #else
 #include "warps.glsl"
 vec3 texel_at(float t) { return world_to_texel(warp_chain(g_ro + t * g_rd)); }
+#ifdef SUPPORT_MAP
+uniform vec3 u_support_lo;            // deformed-space box holding the chain's support
+uniform vec3 u_support_hi;
+uniform mat4 u_straight_to_texel;     // deformed world -> texel of an undeformed ray
+vec3 g_s0;
+vec3 g_sd;
+bool g_straight = false;   // the current sample is straight (its Jacobian is I)
+vec3 straight_texel(float t) { return g_s0 + t * g_sd; }
+#endif
 #ifdef PIECEWISE
 // Piecewise-linear warped rays: the chain is evaluated exactly at the ends of segments
 // of up to u_segment samples (the current one: ray parameters g_ta..g_tb, texel
@@ -138,7 +155,12 @@ mat3 jacobian_at(float t) {   // interpolated along the segment, as the position
     return g_Ja * (1.0 - f) + g_Jb * f;
 }
 #else
-mat3 jacobian_at(float t) { return warp_chain_jacobian(g_ro + t * g_rd); }
+mat3 jacobian_at(float t) {
+#ifdef SUPPORT_MAP
+    if (g_straight) return mat3(1.0);
+#endif
+    return warp_chain_jacobian(g_ro + t * g_rd);
+}
 #endif
 #ifdef CELL_SKIP
 // Warped rays skip through *deformed* space: the skip map's cells are those of the
@@ -222,6 +244,76 @@ int after_cube(ivec3 c, float d, vec3 offset, vec3 widen, vec3 inv_du, float t0,
 }
 #endif
 
+#ifdef SUPPORT_MAP
+// The texel of sample t: straight (as an undeformed ray computes it) or through the chain.
+vec3 span_texel(float t, bool straight) {
+    g_straight = straight;
+    return straight ? straight_texel(t) : texel_at(t);
+}
+#ifdef CELL_SKIP
+// Samples k .. kb - 1 (one phase of the ray), straight or through the chain, with the
+// cell skipping of the main loop below; returns true when the ray is finished. A jump
+// may leave k past kb.
+bool march_cells(inout State s, inout int k, int kb, int n, float t0, float j,
+                 vec3 inv_du, vec3 exit_offset, vec3 exit_widen, bool straight) {
+    while (k < kb) {
+        float t = t0 + (float(k) + j) * u_step;
+        ivec3 c;
+        float d = cell_skip(skip_at(t), c);
+        if (d > 0.5) {
+            k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
+            if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) return true;
+            if (k >= kb) break;
+            t = t0 + (float(k) + j) * u_step;
+        }
+        vec3 u = span_texel(t, straight);
+        if (!inside_texels(u)) {
+            if (mode_skip(s, -1.0)) return true;
+            ++k;
+            continue;
+        }
+        if (mode_sample(s, scene_value(u, t), u, t)) return true;
+        ++k;
+    }
+    return false;
+}
+#else
+// As march_cells, with the per-block checks of warped rays without cell maps.
+bool march_blocks(inout State s, inout int k, int kb, float t0, float j, bool straight) {
+    for (; k < kb; ++k) {
+        float t = t0 + (float(k) + j) * u_step;
+        vec3 u = span_texel(t, straight);
+        if (!inside_texels(u)) {
+            if (mode_skip(s, -1.0)) return true;
+            continue;
+        }
+        g_inside = true;
+        ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
+        vec4 info = block_info(blk);
+        bool visible = info.x < 0.5 && block_visible(info.yz, s);
+#ifdef NO_SKIPPING
+        visible = true;
+#endif
+        if (!visible) {
+            if (mode_skip(s, t)) return true;
+            continue;
+        }
+        if (mode_sample(s, scene_value(u, t), u, t)) return true;
+    }
+    return false;
+}
+#endif
+// The samples [x, y) of the ray that may lie in the support's box (one more on either
+// side against rounding); the others are straight.
+ivec2 support_phases(float t0, float j, int n) {
+    vec2 ts = intersect_box(g_ro, g_rd, u_support_lo, u_support_hi);
+    if (ts.y < ts.x) return ivec2(n);
+    int a = int(floor((ts.x - t0) / u_step - j));
+    int b = int(ceil((ts.y - t0) / u_step - j)) + 1;
+    return clamp(ivec2(a, b), 0, n);
+}
+#endif
+
 void main() {
     vec2 frag = gl_FragCoord.xy - u_viewport.xy;
     vec2 ndc = frag / u_viewport.zw * 2.0 - 1.0;
@@ -252,6 +344,11 @@ void main() {
     float du_max = max(max(abs(g_du.x), abs(g_du.y)), abs(g_du.z));
     vec3 ray_octant = mix(vec3(1.0), vec3(-1.0), lessThan(g_du, vec3(-OCTANT_EPS * du_max)));
     if (any(notEqual(ray_octant, u_octant))) discard;
+#endif
+#ifdef SUPPORT_MAP
+    g_s0 = (u_straight_to_texel * vec4(g_ro, 1.0)).xyz;
+    g_sd = mat3(u_straight_to_texel) * g_rd;
+    g_sd = mix(g_sd, sign(g_sd) * 1e-12 + vec3(1e-30), lessThan(abs(g_sd), vec3(1e-12)));
 #endif
 #if defined(LINEAR_PATH) || defined(CELL_SKIP)
     // keep direction components away from 0 so 1/du stays finite
@@ -368,6 +465,12 @@ void main() {
             ++k;
         }
     }
+#elif defined(SUPPORT_MAP)
+    // straight before the support's box, through the chain in it, straight after it
+    ivec2 kio = support_phases(t0, j, n);
+    finished = march_cells(s, k, kio.x, n, t0, j, inv_du, exit_offset, exit_widen, true)
+        || march_cells(s, k, kio.y, n, t0, j, inv_du, exit_offset, exit_widen, false)
+        || march_cells(s, k, n, n, t0, j, inv_du, exit_offset, exit_widen, true);
 #else
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
@@ -422,6 +525,10 @@ void main() {
         if (mode_sample(s, scene_value(u, t), u, t)) break;
         ++k;
     }
+#elif defined(SUPPORT_MAP)
+    ivec2 kio = support_phases(t0, j, n);
+    bool finished = march_blocks(s, k, kio.x, t0, j, true)
+        || march_blocks(s, k, kio.y, t0, j, false) || march_blocks(s, k, n, t0, j, true);
 #else
     for (; k < n; ++k) {
         float t = t0 + (float(k) + j) * u_step;

@@ -12,6 +12,9 @@
 // layout); otherwise trilinear, as the raycaster samples.
 // Output (RGBA32F): r = deformed value, g = fraction of the slab's samples inside the
 // volume (0: nothing here), b = the rest-state (undeformed) value at p, a = its fraction.
+// SUPPORT_MAP: the chain's support, a brick map (app/render/skipping/support.py); a
+// pixel outside it samples p itself (the chain moves it by less than the tolerance),
+// one inside or beyond the map's box pays for the chain.
 // DETJ (the det J overlay, app/render/jacobian_overlay.py): also f_detj (location 1,
 // R32F) = det of the chain's Jacobian at the plane's own point p0 (no slab); a thin
 // slice then samples the point that same chain evaluation gave.
@@ -24,6 +27,20 @@ uniform vec4 u_viewport;        // x, y, width, height in framebuffer pixels
 uniform vec3 u_slab_step;       // world vector between slab samples (mm)
 uniform int u_slab_samples;     // 1: a thin slice
 uniform int u_slab_mode;        // 0 MIP, 1 MinIP, 2 average
+
+#ifdef SUPPORT_MAP
+uniform sampler3D u_support;          // R8 per brick: 1 = some warp moves points here
+uniform mat4 u_world_to_support;      // deformed world -> brick coordinates
+uniform ivec3 u_support_dims;         // bricks per axis
+bool in_support(vec3 p) {
+    ivec3 c = ivec3(floor((u_world_to_support * vec4(p, 1.0)).xyz));
+    if (any(lessThan(c, ivec3(0))) || any(greaterThanEqual(c, u_support_dims))) return true;
+    return texelFetch(u_support, c, 0).r > 0.5;
+}
+vec3 chain_where_moved(vec3 p) { return in_support(p) ? warp_chain(p) : p; }
+#else
+vec3 chain_where_moved(vec3 p) { return warp_chain(p); }
+#endif
 
 layout(location = 0) out vec4 f_value;
 #ifdef DETJ
@@ -74,7 +91,7 @@ void main() {
     for (int k = 0; k < u_slab_samples; ++k) {
         vec3 p = first + float(k) * u_slab_step;
         bool inside;
-        float v = fetch(warp_chain(p), inside);
+        float v = fetch(chain_where_moved(p), inside);
         if (inside) combine(deformed, v);
         v = fetch(p, inside);
         if (inside) combine(rest, v);

@@ -63,6 +63,7 @@ from voxwarp.render.skipping.maps import (
     ray_direction_coefficients,
 )
 from voxwarp.render.skipping.segments import MAX_SAMPLES
+from voxwarp.render.skipping.support import SupportCache
 from voxwarp.render.slices import SliceRenderer
 from voxwarp.render.volume_texture import upload_volume_texture
 from voxwarp.scene import Scene
@@ -176,6 +177,8 @@ class _Frame:
     #: warped rays: 1 evaluates the chain at every sample, 0 interpolates along
     #: segments from the warp state's segment map, K > 1 along segments of K samples
     segment: int = 1
+    #: warped rays march straight outside the chain's support brick map (SUPPORT_MAP)
+    support: bool = False
 
     @property
     def linear(self) -> bool:
@@ -219,6 +222,13 @@ class Renderer:
         one byte per trilinear cell per octant the camera needs, computed on the CPU
         when first needed after a change of what the mode can see (~1 s per octant
         for 256³ on 2 cores) and kept on the volume (at most 8).
+    support_skipping
+        Warped rays pay for the warp chain only inside its support, the bricks where it
+        moves points by more than :attr:`support_tolerance` voxels, and march straight
+        elsewhere (:mod:`voxwarp.render.skipping.support`); a chain that moves nothing
+        draws as the undeformed scene. Default on; ``False`` (or the environment
+        variable ``VOXWARP_SUPPORT_SKIPPING=0``) evaluates the chain at every sample,
+        the reference the tests and ``python -m benchmarks support`` compare against.
     sampling
         ``"texture3d"``: one hardware-trilinear fetch per sample (best on GPUs);
         ``"slice_pairs"``: a 2D array texture whose layer k holds slices k and k+1,
@@ -234,6 +244,7 @@ class Renderer:
         texture_budget_bytes: int | None = None,
         empty_space_skipping: bool = True,
         sampling: str = "auto",
+        support_skipping: bool | None = None,
     ) -> None:
         if ctx.version_code < 430:
             raise RenderError(
@@ -242,6 +253,10 @@ class Renderer:
         self.ctx = ctx
         #: when skip maps are built, reused and dropped (and the settings that decide it)
         self._skip_maps = SkipMapCache(ctx, empty_space_skipping=bool(empty_space_skipping))
+        if support_skipping is None:
+            support_skipping = os.environ.get("VOXWARP_SUPPORT_SKIPPING", "1") != "0"
+        #: the warp chain's support brick map (where warped rays pay for the chain)
+        self._support = SupportCache(ctx, enabled=support_skipping)
         #: the empty-space skipping the last draw used ("cells", "blocks" or "none")
         self.last_skip_kind = "none"
         self.gradient_texture: bool | str = "auto"
@@ -250,6 +265,10 @@ class Renderer:
         #: the last draw's warped rays: 1 evaluated the chain at every sample, 0 used the
         #: warp state's segment map, K > 1 fixed segments of K samples
         self.last_ray_segment = 1
+        #: how the last draw paid for its warp chain: "none" (straight rays: no chain,
+        #: an affine one, or one that moves nothing, drawn undeformed), "map" (straight
+        #: outside the chain's support) or "all" (the chain at every sample)
+        self.last_support = "all"
         if sampling not in ("auto", "texture3d", "slice_pairs"):
             raise RenderError(
                 f"sampling must be 'auto', 'texture3d' or 'slice_pairs'; got {sampling!r}"
@@ -394,6 +413,40 @@ class Renderer:
         self._skip_maps.cell_skipping = value
 
     @property
+    def support_skipping(self) -> bool:
+        """March straight outside the warp chain's support (see the class docstring)."""
+        return self._support.enabled
+
+    @support_skipping.setter
+    def support_skipping(self, value: bool) -> None:
+        self._support.enabled = bool(value)
+
+    @property
+    def support_maps(self) -> str:
+        """When a warp state's support map is built: "auto" (default) when the state is
+        drawn a second time (a drag's ever-changing states draw with the chain at every
+        sample and cost no map, nor a GPU model's read-back), "always" on first draw."""
+        return self._support.build
+
+    @support_maps.setter
+    def support_maps(self, value: str) -> None:
+        if value not in ("auto", "always"):
+            raise RenderError(f"support_maps must be 'auto' or 'always'; got {value!r}")
+        self._support.build = value
+
+    @property
+    def support_tolerance(self) -> float:
+        """Largest displacement (voxels of the finest spacing) drawn as no displacement:
+        points moved less sample where a straight ray does (default 1e-3)."""
+        return self._support.tolerance_voxels
+
+    @support_tolerance.setter
+    def support_tolerance(self, value: float) -> None:
+        if not (float(value) >= 0.0):
+            raise RenderError(f"support_tolerance must be >= 0 voxels; got {value!r}")
+        self._support.tolerance_voxels = float(value)
+
+    @property
     def gradient_texture(self) -> bool | str:
         """Shading from a precomputed gradient texture (:mod:`voxwarp.render.gradients`):
         ``"auto"`` for volumes of at most ``gradients.MAX_VOXELS`` voxels, True always,
@@ -460,7 +513,9 @@ class Renderer:
     def needs_skip_maps(self, scene: Scene) -> bool:
         """With :attr:`warped_skip_maps` (straight rays: :attr:`cell_skip_maps`)
         "background": whether drawing ``scene`` now would march block by block only
-        because its skip maps are not built yet (no side effects)."""
+        because its skip maps are not built yet (no side effects; a chain whose support
+        map says it moves nothing draws, and so needs, the undeformed maps)."""
+        scene = self._support_plan(scene, draw=False)[0]
         entry = self._volumes.get(id(scene.volume))
         return self._skip_maps.needs_maps(scene, None if entry is None else entry[1].skip)
 
@@ -478,7 +533,13 @@ class Renderer:
         self._skip_maps.install(key, result)
 
     def _program(
-        self, scene: Scene, linear: bool, kind: str, segment: int, gradient_texture: bool
+        self,
+        scene: Scene,
+        linear: bool,
+        kind: str,
+        segment: int,
+        gradient_texture: bool,
+        support: bool = False,
     ) -> Any:
         piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
         warps = [] if linear else scene.warps
@@ -496,6 +557,7 @@ class Renderer:
             scene.comparison is not None,
             uses_gradient_texture(scene),
             self._detj_on(scene),
+            support,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -525,6 +587,8 @@ class Renderer:
             defines.append("#define FIXED_GRADIENT_TEXTURE")
         if self._detj_on(scene):
             defines.append("#define DETJ_OVERLAY")
+        if support:
+            defines.append("#define SUPPORT_MAP")
         frag = shaders.source(
             "raycast.frag.glsl",
             extra={
@@ -581,6 +645,7 @@ class Renderer:
         if w <= 0 or h <= 0:
             raise RenderError(f"viewport must have a positive size; got {viewport}")
         cam = camera or scene.resolved_camera()
+        scene, plan = self._support_plan(scene)
         fold = fold_affine(scene.warps)
         linear = fold is not None
         skip_kind = self._skip_maps.kind(scene, linear, gpu.skip)
@@ -592,11 +657,26 @@ class Renderer:
             segment = self._skip_maps.segments.fixed()
         self.last_ray_segment = segment
         shade_tex = self.last_gradient_texture = self._use_gradients(scene)
-        prog = self._program(scene, linear, skip_kind, segment, shade_tex)
+        support = plan == "map" and segment == 1
+        self.last_support = "map" if support else "none" if linear else "all"
+        prog = self._program(scene, linear, skip_kind, segment, shade_tex, support)
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
         view = (x, y, w, h)
-        return _Frame(scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment)
+        return _Frame(
+            scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment, support
+        )
+
+    def _support_plan(self, scene: Scene, draw: bool = True) -> tuple[Scene, str]:
+        """The scene a draw renders and how it uses the chain's support ("none": the
+        chain moves nothing beyond the tolerance, so the scene without its warps; "map";
+        "all"); ``draw`` False: asked outside a draw (builds nothing)."""
+        if fold_affine(scene.warps) is not None:
+            return scene, "all"
+        plan = self._support.plan(scene, draw=draw)
+        if plan == "none":
+            return scene.copy(warps=[]), plan
+        return scene, plan
 
     def _detj_on(self, scene: Scene) -> bool:
         """Whether this draw tints by det J (an overlay is set and the mode shows it)."""
@@ -749,6 +829,9 @@ class Renderer:
             frame.gpu.gradient_texture(self.ctx, scene.volume).use(unit)
             set_uniform(prog, "u_gradient", unit)
             unit += 1
+        if frame.support:
+            for name, value in self._support.uniforms(scene).items():
+                set_uniform(prog, name, value)
         if frame.segment == 0 and frame.gpu.skip.segment_texture is not None:
             frame.gpu.skip.segment_texture.use(unit)
             set_uniform(prog, "u_segment_map", unit)
@@ -945,6 +1028,7 @@ class Renderer:
             self._slice_renderer.release()
             self._slice_renderer = None
         self._fixed.release()
+        self._support.release()
         self._release_mesh_target()
         self._released = True
 

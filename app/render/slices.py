@@ -24,10 +24,11 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.deform import gl_programs
-from voxwarp.deform.warp import compose_glsl
+from voxwarp.deform.warp import compose_glsl, fold_affine
 from voxwarp.errors import RenderError
 from voxwarp.render.float_target import FloatTarget
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
+from voxwarp.render.skipping.support import SupportCache
 from voxwarp.scene import Scene
 
 SlabMode = Literal["mip", "minip", "average"]
@@ -76,10 +77,15 @@ class SliceRenderer:
         self._programs: dict[tuple, Any] = {}
         self._vaos: dict[int, Any] = {}
         self._target = FloatTarget(ctx, (4, 1))
+        #: the chain's support: pixels outside it sample straight (see
+        #: :attr:`voxwarp.render.raycaster.Renderer.support_skipping`)
+        self.support = SupportCache(ctx)
         self._released = False
 
-    def _program(self, scene: Scene, slice_pairs: bool, nearest: bool, detj: bool) -> Any:
-        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest, detj)
+    def _program(
+        self, scene: Scene, slice_pairs: bool, nearest: bool, detj: bool, support: bool = False
+    ) -> Any:
+        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest, detj, support)
         hold = self._programs.get(key)
         if hold is not None:
             return hold.program
@@ -90,6 +96,7 @@ class SliceRenderer:
             ["#define NEAREST"] if nearest else []
         )
         defines += ["#define DETJ"] if detj else []
+        defines += ["#define SUPPORT_MAP"] if support else []
         frag = shaders.with_defines(frag, defines)
 
         try:
@@ -127,7 +134,8 @@ class SliceRenderer:
             raise RenderError("pixel_to_world must be a finite 4x4 matrix")
         samples, spacing = slab_sampling(slab_mm, scene.sample_distance_mm)
         normal = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-12)
-        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest", detj)
+        scene, support = self._support_plan(scene, detj)
+        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest", detj, support)
         textures = warp_textures(self.ctx, scene.warps)  # first: may run GPU passes
         vol = scene.volume
         values: dict[str, Any] = {
@@ -147,7 +155,13 @@ class SliceRenderer:
         for name, value in values.items():
             set_uniform(prog, name, value)
         gpu.texture.use(0)
-        bind_warps(prog, scene.warps, textures, 1)
+        unit = bind_warps(prog, scene.warps, textures, 1)
+        if support:
+            box = _slice_box(scene)
+            self.support.texture(scene, box).use(unit)
+            values = {"u_support": unit, **self.support.uniforms(scene, box)}
+            for name, value in values.items():
+                set_uniform(prog, name, value)
         vao = self._vaos.get(id(prog))
         if vao is None:
             vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
@@ -155,6 +169,16 @@ class SliceRenderer:
         framebuffer.viewport = viewport
         with self.ctx.scope(framebuffer, enable_only=0):  # no blending or depth: data
             vao.render(self.ctx.TRIANGLES, vertices=3)
+
+    def _support_plan(self, scene: Scene, detj: bool) -> tuple[Scene, bool]:
+        """The scene a slice draws (without its warps when they move nothing beyond
+        the tolerance) and whether its pixels look the support map up."""
+        if detj or fold_affine(scene.warps) is not None:
+            return scene, False
+        plan = self.support.plan(scene, _slice_box(scene))
+        if plan == "none":
+            return scene.copy(warps=[]), False
+        return scene, plan == "map"
 
     def values(
         self,
@@ -192,4 +216,13 @@ class SliceRenderer:
             hold.release()
         self._programs.clear()
         self._target.release()
+        self.support.release()
         self._released = True
+
+
+def _slice_box(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """The box a slice's support map covers: the chain's deformed volume box and the
+    volume's own (beyond it the shader pays for the chain)."""
+    lo, hi = scene.deformed_bounds()
+    vlo, vhi = scene.volume.bounds
+    return np.minimum(lo, vlo), np.maximum(hi, vhi)

@@ -32,6 +32,7 @@ import numpy as np
 
 from voxwarp import shaders
 from voxwarp.deform import gl_holders, gl_programs
+from voxwarp.deform.elements.field_support import field_support
 from voxwarp.deform.elements.folds import fold_summary
 from voxwarp.deform.node_grid import cell_reduce, check_vectors, window_reduce
 from voxwarp.deform.warp import (
@@ -489,6 +490,23 @@ class OffsetFieldWarp(Warp):
             a, b = self._negated_range(u, lo + a, hi + b)
         return a, b
 
+    def support_bricks(self, lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
+        """Boxes where the warp may move a point by more than ``tol`` mm: those within
+        ``max |u|`` of the cells whose nodes moved more than ``tol``, widened by one cell
+        (:func:`voxwarp.deform.elements.field_support.field_support`), and whose
+        :meth:`displacement_range` leaves ``[-tol, tol]`` (both bounds hold; the first
+        is cheap and exact about untouched regions, the second local about how far);
+        every box for a GPU-owned field without a ``field_reader``."""
+        u = self._range_field()
+        if u is None:
+            return np.ones(np.atleast_2d(lo).shape[0], dtype=bool)
+        lo, hi = np.atleast_2d(lo), np.atleast_2d(hi)
+        moved = field_support(u, self.lo, self.spacing, lo, hi, tol)
+        sel = np.flatnonzero(moved)
+        if len(sel):  # both bounds hold: keep what both mark (the intervals are local)
+            moved[sel] = super().support_bricks(lo[sel], hi[sel], tol)
+        return moved
+
     def _negated_range(
         self, field: np.ndarray, lo: np.ndarray, hi: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -509,7 +527,13 @@ class OffsetFieldWarp(Warp):
         width = 1 << np.ceil(np.log2(ihi - ilo + 1)).astype(np.int64)
         out_lo = np.empty(lo.shape)
         out_hi = np.empty(lo.shape)
-        sizes, which = np.unique(width, axis=0, return_inverse=True)
+        # one integer per window shape (exponents < 64 each): a 1D unique, far cheaper
+        # than np.unique(..., axis=0) on many boxes
+        exps = np.log2(width).astype(np.int64)
+        codes, which = np.unique(
+            (exps[:, 0] * 64 + exps[:, 1]) * 64 + exps[:, 2], return_inverse=True
+        )
+        sizes = 1 << np.stack([codes // 4096, codes // 64 % 64, codes % 64], axis=1)
         cache_lo: dict[tuple, np.ndarray] = {}
         cache_hi: dict[tuple, np.ndarray] = {}
         for s, size in enumerate(sizes):

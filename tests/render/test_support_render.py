@@ -1,0 +1,170 @@
+"""Warped rays and slices pay for the chain only inside its support.
+
+Oracles, in one process with the old path (``Renderer.support_skipping = False``, the
+chain at every sample) as the reference:
+
+* a warp that moves nothing draws exactly the undeformed image (and slice);
+* a local drag (an offset field over the volume's box, one node moved): pixels whose rays
+  miss the box around the support (computed on the CPU from the camera) equal the
+  undeformed image exactly, every pixel is within 1/255 of the old path, and the drag
+  changes the image by more than that somewhere (so the test can fail);
+* the same for a shaded mode (straight samples keep the identity Jacobian) and for the
+  per-block loop of warped rays (mip), and for slices.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from voxwarp.core.volume import Volume
+from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+from voxwarp.deform.support import chain_support
+from voxwarp.io.samples import load_sample
+from voxwarp.render.skipping.support import BRICK_VOXELS, TOLERANCE_VOXELS
+from voxwarp.scene import Scene
+
+SIZE = (96, 80)
+
+
+@pytest.fixture(scope="module")
+def head() -> Volume:
+    return load_sample("colin27").downsample(2)
+
+
+def offset_warp(vol: Volume, moved: bool) -> OffsetFieldWarp:
+    """A 9³ offset field over the volume's box (so the ray box is the volume's): zero, or
+    a node near the face dragged 10 mm sideways and its neighbours 5 mm."""
+    lo, hi = vol.bounds
+    u = np.zeros((9, 9, 9, 3))
+    if moved:
+        u[4, 7, 5] = (10.0, 0.0, -3.0)
+        for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
+            u[4 + d[0], 7 + d[1], 5 + d[2]] = (5.0, 0.0, -1.5)
+    return OffsetFieldWarp(lo, hi, u, inverse="baked")
+
+
+def draw(offscreen: Any, scene: Scene, support: bool) -> np.ndarray:
+    r = offscreen(*SIZE)
+    r.renderer.support_skipping = support
+    try:
+        img = np.asarray(r.render(scene)).astype(int)
+        r.render(scene)  # the second draw of a warp state uses its deformed-space maps
+        img2 = np.asarray(r.render(scene)).astype(int)
+        assert np.array_equal(img, img2) or np.abs(img - img2).max() <= 1
+        return img2
+    finally:
+        r.renderer.support_skipping = True
+
+
+def rays_missing(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels whose ray misses the box [lo, hi] (row 0 at the top)."""
+    w, h = SIZE
+    inv = np.linalg.inv(scene.resolved_camera().view_projection(w / h))
+    x, y = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    ndc = np.stack([x / w * 2 - 1, y / h * 2 - 1], axis=-1).reshape(-1, 2)
+    ends = []
+    for z in (-1.0, 1.0):
+        c = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], axis=1)
+        p = c @ inv.T
+        ends.append(p[:, :3] / p[:, 3:])
+    ro, rd = ends[0], ends[1] - ends[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo - ro) / rd, (hi - ro) / rd
+    t_in = np.nanmax(np.minimum(ta, tb), axis=1)
+    t_out = np.nanmin(np.maximum(ta, tb), axis=1)
+    miss = (t_out < t_in) | (t_out < 0)
+    return miss.reshape(h, w)[::-1]
+
+
+def support_box(scene: Scene, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    voxel = float(np.min(scene.volume.spacing))
+    lo, hi = scene.ray_bounds()
+    smap = chain_support(scene.warps, lo, hi, BRICK_VOXELS * voxel, TOLERANCE_VOXELS * voxel)
+    box = smap.moved_box()
+    assert box is not None
+    return box[0] - margin, box[1] + margin
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("mode", ["dvr", "mip"])
+def test_a_warp_that_moves_nothing_draws_the_undeformed_image(
+    offscreen: Any, head: Volume, mode: str
+) -> None:
+    plain = Scene(head, mode=mode, view="left")
+    still = plain.copy(warps=[offset_warp(head, moved=False)])
+    image = draw(offscreen, still, True)
+    assert offscreen(*SIZE).renderer.last_support == "none"
+    assert np.array_equal(image, draw(offscreen, plain, True))
+    draw(offscreen, still, False)
+    assert offscreen(*SIZE).renderer.last_support == "all"
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize(("mode", "shading"), [("dvr", False), ("dvr", True), ("mip", None)])
+def test_a_local_drag_changes_only_the_rays_through_its_support(
+    offscreen: Any, head: Volume, mode: str, shading: bool | None
+) -> None:
+    plain = Scene(head, mode=mode, view="anterior", shading=shading)
+    scene = plain.copy(warps=[offset_warp(head, moved=True)])
+    new = draw(offscreen, scene, True)
+    assert offscreen(*SIZE).renderer.last_support == "map"
+    old = draw(offscreen, scene, False)
+    undeformed = draw(offscreen, plain, True)
+    assert np.abs(new - old).max() <= 1, "within 1/255 of the chain at every sample"
+    moved = np.abs(old - undeformed).max(axis=-1) > 1
+    assert moved.mean() > 0.003, "the drag must show (else the test is empty)"
+    miss = rays_missing(scene, *support_box(scene, margin=0.5))
+    assert 0.2 < miss.mean() < 0.98
+    assert np.array_equal(new[miss], undeformed[miss]), "straight outside: the same texels"
+
+
+@pytest.mark.gl
+def test_slices_pay_for_the_chain_only_inside_the_support(offscreen: Any, head: Volume) -> None:
+    r = offscreen(*SIZE).renderer
+    lo, hi = head.bounds
+    node = lo + np.array([4, 7, 5]) / 8.0 * (hi - lo)  # the dragged node
+    size, step = (90, 110), 0.7 * float(np.min(head.spacing))
+    m = np.eye(4)  # an axial plane through the node, row 0 anterior
+    m[:3, :3] = np.diag([step, -step, 1.0])
+    m[:3, 3] = node - (45 * step, -55 * step, 0.0)
+    out = {}
+    for moved in (False, True):
+        scene = Scene(head, warps=[offset_warp(head, moved)])
+        for support in (True, False):
+            r.slice_values(scene, m, (2, 2))  # makes the slice renderer
+            r._slice_renderer.support.enabled = support
+            out[moved, support] = r.slice_values(scene, m, size)
+            r._slice_renderer.support.enabled = True
+    rest = out[False, False][..., 2]
+    np.testing.assert_array_equal(out[False, True][..., 0], rest)  # drawn without the warp
+    deformed_new, deformed_old = out[True, True][..., 0], out[True, False][..., 0]
+    value_range = float(np.ptp(np.asarray(head.data)))
+    assert (np.abs(deformed_old - rest) > 0.01 * value_range).mean() > 0.01, "the drag shows"
+    assert np.abs(deformed_new - deformed_old).max() <= 1e-3 * value_range
+    still = np.abs(deformed_old - rest) == 0
+    assert still.mean() > 0.3
+    np.testing.assert_array_equal(deformed_new[still], rest[still])
+
+
+@pytest.mark.gl
+def test_a_warp_state_gets_its_map_when_drawn_a_second_time(offscreen: Any, head: Volume) -> None:
+    """ "auto": a state that changes every frame (a drag) never builds a map, nor reads a
+    GPU model's field back; asking needs_skip_maps is no draw."""
+    r = offscreen(*SIZE)
+    scene = Scene(head, view="anterior", warps=[offset_warp(head, moved=True)])
+    r.renderer.needs_skip_maps(scene)
+    r.render(scene)
+    assert r.renderer.last_support == "all"
+    r.renderer.needs_skip_maps(scene)
+    r.render(scene)
+    assert r.renderer.last_support == "map"
+    r.renderer.support_maps = "always"
+    try:
+        other = scene.copy(warps=[offset_warp(head, moved=False)])
+        r.render(other)
+        assert r.renderer.last_support == "none"
+    finally:
+        r.renderer.support_maps = "auto"
