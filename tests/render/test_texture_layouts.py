@@ -111,6 +111,34 @@ def test_auto_keeps_big_volumes_in_one_copy(gl_ctx: Any, monkeypatch: pytest.Mon
 
 
 # ---------------------------------------------------------------------- memory
+def test_block_info_written_in_slabs_holds_the_grids(
+    gl_ctx: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The block info texture, written a few z layers at a time (its host copy one
+    slab), holds the block (distance, min, max, 0) grids, and draws the same image."""
+    from voxwarp.core.transfer_function import TransferFunction
+    from voxwarp.render.skipping import cache as skip_cache
+
+    vol = Volume(_blobs((30, 26, 41), np.int16), (1.0, 1.1, 0.9))
+    tf = TransferFunction([(-1000, 0, 0, 0, 0), (1200, 0, 0, 0, 0), (1600, 1, 0.9, 0.8, 0.8)])
+    scene = Scene(vol, mode="dvr", view=(30.0, 20.0), transfer_function=tf)
+    images = []
+    for slab_bytes in (1 << 30, 1):  # one slab; one z layer per write
+        monkeypatch.setattr(skip_cache, "INFO_SLAB_BYTES", slab_bytes)
+        with _renderer(gl_ctx, "slice_pairs") as r:
+            r.renderer.cell_skipping = False  # block skipping reads the info texture
+            images.append(r.render(scene))
+            maps = r.renderer._volume_gpu(vol).skip
+            info = np.frombuffer(maps.info.read(), np.float32)
+            info = info.reshape(*maps.block_min.shape[::-1], 4).transpose(2, 1, 0, 3)
+            np.testing.assert_array_equal(info[..., 1], maps.block_min)
+            np.testing.assert_array_equal(info[..., 2], maps.block_max)
+            assert np.all(info[..., 3] == 0)
+            assert np.ptp(info[..., 0]) > 0  # some blocks are further from visible ones
+    np.testing.assert_array_equal(images[0], images[1])
+    assert np.ptp(images[0][..., :3]) > 0.05  # the bright blobs were drawn
+
+
 _MEMORY_SCRIPT = r"""
 import gc, json, sys
 from benchmarks.scale import PeakRSS, _status_kib, scale_transfer_function, synthetic_cube

@@ -348,11 +348,7 @@ class SkipMapCache:
             dist = block_skip_distances(
                 static_block_visibility(scene, maps.block_min, maps.block_max)
             )
-            # written straight in the texture's (z, y, x, channel) layout: one array
-            info = np.zeros((*maps.block_min.shape[::-1], 4), dtype=np.float32)
-            for c, part in enumerate((dist, maps.block_min, maps.block_max)):
-                info[..., c] = part.T
-            maps.info.write(info)
+            _write_block_info(maps.info, (dist, maps.block_min, maps.block_max))
             maps.info_key = key
         return maps.info
 
@@ -445,6 +441,23 @@ class SkipMapCache:
         if tex is None:
             tex = maps.warped_skip[octant] = self._octant_texture(visible, octant)
         return tex
+
+
+#: bytes of the block info texture written at a time (its host copy is one slab)
+INFO_SLAB_BYTES = 4 * 1024**2
+
+
+def _write_block_info(texture: Any, parts: tuple[np.ndarray, ...]) -> None:
+    """Write (x, y, z)-indexed block grids as the RGBA32F texture's channels (the fourth
+    0), in slabs of z layers in the texture's (z, y, x, channel) layout."""
+    nx, ny, nz = parts[0].shape
+    step = max(1, INFO_SLAB_BYTES // (nx * ny * 16))
+    for z0 in range(0, nz, step):
+        z1 = min(z0 + step, nz)
+        slab = np.zeros((z1 - z0, ny, nx, 4), dtype=np.float32)
+        for c, part in enumerate(parts):
+            slab[..., c] = part[:, :, z0:z1].T
+        texture.write(slab, viewport=(0, 0, z0, nx, ny, z1 - z0))
 
 
 def _bounded(warps: Any) -> bool:
