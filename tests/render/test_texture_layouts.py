@@ -139,6 +139,27 @@ def test_block_info_written_in_slabs_holds_the_grids(
     assert np.ptp(images[0][..., :3]) > 0.05  # the bright blobs were drawn
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.int16])
+def test_block_visibility_in_slabs_equals_the_whole_grid(
+    monkeypatch: pytest.MonkeyPatch, dtype: Any
+) -> None:
+    """dvr block visibility classified a few z layers at a time (bounded temporaries)
+    equals the transfer function's classification of the whole grid."""
+    from voxwarp.core.transfer_function import TransferFunction
+    from voxwarp.render.skipping import maps as skip_maps
+
+    rng = np.random.default_rng(5)
+    lo = np.asfortranarray(rng.integers(-1000, 2000, (9, 7, 13)).astype(dtype))
+    hi = lo + np.asarray(rng.integers(0, 400, lo.shape), dtype=dtype)
+    tf = TransferFunction([(-1000, 0, 0, 0, 0), (300, 0, 0, 0, 0), (600, 1, 1, 1, 0.5)])
+    scene = Scene(Volume(np.zeros((4, 4, 4), np.int16)), mode="dvr", transfer_function=tf)
+    want = tf.visible_ranges(lo, hi)
+    monkeypatch.setattr(skip_maps, "_SLAB_BLOCKS", 2 * 9 * 7)  # two z layers a slab
+    got = skip_maps.static_block_visibility(scene, lo, hi)
+    np.testing.assert_array_equal(got, want)
+    assert 0 < want.sum() < want.size
+
+
 _MEMORY_SCRIPT = r"""
 import gc, json, sys
 from benchmarks.scale import PeakRSS, _status_kib, scale_transfer_function, synthetic_cube
