@@ -175,6 +175,10 @@ def run_scale(quick: bool) -> dict[str, Any]:
     big = report.rows[-1]
     times = big.peak_rss_mib / (big.nbytes / 2**20)
     mem = f"{big.label}: +{big.peak_rss_mib:.0f} MiB peak RSS ({times:.1f}x the array)"
+    if big.kept_mib >= 0:
+        mem += f", {big.kept_mib / (big.nbytes / 2**20):.1f}x kept after its cell maps"
+    if big.steady_ms > 0:
+        first += f" (first / steady of {big.label}: {big.first_ms / big.steady_ms:.1f}x)"
     data = report.to_dict()
     ratios = {r["label"]: r["growth"] for r in data["rows"]}
     command = "python -m benchmarks scale" + (" --quick" if quick else "")

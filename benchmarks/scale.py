@@ -23,7 +23,12 @@ For synthetic uint8 volumes of N³ voxels (default 128³, 256³, 512³; ``--long
 * **memory beyond the array** during the first frame: the process' peak resident set
   (``VmHWM`` of ``/proc/self/status``, reset through ``/proc/self/clear_refs`` just before,
   minus ``VmRSS`` then; on llvmpipe textures live in process memory, so it includes them)
-  and, in a third first frame, the peak of Python/numpy allocations (``tracemalloc``).
+  and, in a third first frame, the peak of Python/numpy allocations (``tracemalloc``);
+  **kept**: the resident set after the second frame (cell maps built) beyond that before
+  the Volume was made;
+* ``--sampling auto,slice_pairs`` measures every volume once per renderer ``sampling``
+  (texture layout, :mod:`voxwarp.render.volume_texture`), interleaved in one process:
+  the layout before (slice pairs, each voxel twice) beside the default.
 
 Growth is each number over that of the smallest volume, beside the voxel ratio.
 """
@@ -79,6 +84,10 @@ class ScaleRow:
     peak_rss_mib: float = -1.0
     traced_mib: float = -1.0
     skip_kind: str = ""
+    #: the texture layout the volume got (the renderer's sampling setting resolved)
+    layout: str = ""
+    #: resident set after the second frame beyond that before the Volume, MiB
+    kept_mib: float = -1.0
 
     @property
     def voxels(self) -> int:
@@ -138,10 +147,11 @@ class ScaleReport:
             f" 1-minute load average {self.load[0]:.2f} before, {self.load[1]:.2f} after."
             f" Growth = value / value of {first.label}.",
             "",
-            "| volume | MiB | first frame ms | second frame ms | steady frame ms | skipping"
-            " (first, then) | peak RSS beyond array MiB (x volume) | tracemalloc peak MiB |"
+            "| volume | layout | MiB | first frame ms | second frame ms | steady frame ms |"
+            " first / steady | skipping (first, then) | peak RSS beyond array MiB (x volume)"
+            " | kept after cell maps MiB (x) | tracemalloc peak MiB |"
             " growth: voxels | first | steady | RSS |",
-            "|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
+            "|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for r in self.rows:
             mib = r.nbytes / 2**20
@@ -149,6 +159,8 @@ class ScaleReport:
                 "—" if r.peak_rss_mib < 0 else f"{r.peak_rss_mib:.0f} ({r.peak_rss_mib / mib:.1f}x)"
             )
             traced = "—" if r.traced_mib < 0 else f"{r.traced_mib:.0f}"
+            kept = "—" if r.kept_mib < 0 else f"{r.kept_mib:.0f} ({r.kept_mib / mib:.1f}x)"
+            ratio = r.first_ms / r.steady_ms if r.steady_ms > 0 else float("nan")
             mib_text = f"{mib:.0f}" if mib >= 10 else f"{mib:.2g}"
             g = [
                 r.voxels / first.voxels,
@@ -158,19 +170,19 @@ class ScaleReport:
             ]
             gs = " | ".join("—" if v is None else f"{v:.1f}x" for v in g)
             lines.append(
-                f"| {r.label} | {mib_text} | {r.first_ms:.0f} | {r.second_ms:.0f} |"
-                f" {r.steady_ms:.1f} | {r.skip_kind} | {rss} |"
+                f"| {r.label} | {r.layout} | {mib_text} | {r.first_ms:.0f} | {r.second_ms:.0f} |"
+                f" {r.steady_ms:.1f} | {ratio:.1f}x | {r.skip_kind} | {rss} | {kept} |"
                 f" {traced} | {gs} |"
             )
         names = [*PHASES, BLOCK_MIN_MAX]
         lines += [
             "",
-            "| volume | " + " | ".join(f"{n} ms" for n in names) + " | steady draw ms |",
-            "|---|" + "---:|" * (len(names) + 1),
+            "| volume | layout | " + " | ".join(f"{n} ms" for n in names) + " | steady draw ms |",
+            "|---|---|" + "---:|" * (len(names) + 1),
         ]
         for r in self.rows:
             cells = [f"{r.phases[n]:.0f}" if n in r.phases else "—" for n in names]
-            lines.append(f"| {r.label} | {' | '.join(cells)} | {r.steady_ms:.1f} |")
+            lines.append(f"| {r.label} | {r.layout} | {' | '.join(cells)} | {r.steady_ms:.1f} |")
         return "\n".join(lines) + "\n"
 
 
@@ -299,22 +311,39 @@ class _Bench:
             self.r.render(scene)
         return (time.perf_counter() - t) * 1000
 
+    def use_sampling(self, sampling: str) -> None:
+        """Draw with new renderers of this ``sampling`` (texture layout) setting."""
+        from voxwarp.render.raycaster import Renderer
+
+        with self.r.current():
+            for off in (self.r, self.small):
+                off.renderer.release()
+                off.renderer = Renderer(self.r.ctx, sampling=sampling)
+        self.settings(True, True)
+
     def settings(self, skipping: bool, cells: bool, cell_maps: str = "auto") -> None:
         for r in (self.r.renderer, self.small.renderer):
             r.empty_space_skipping = skipping
             r.cell_skipping = cells
             r.cell_skip_maps = cell_maps
 
-    def warm(self) -> None:
-        """Compile every program variant the run draws with on a tiny volume, and drop
-        the textures of volumes no longer alive."""
+    def warm(self, layout: str | None = None) -> None:
+        """Compile every program variant the run draws with on a tiny volume (in the
+        texture ``layout`` the measured volume gets), and drop the textures of volumes
+        no longer alive."""
         from voxwarp.core.volume import Volume
 
         tiny = self.scene(Volume(synthetic_cube(16), (1.0, 1.0, 1.0)))
+        renderers = (self.r.renderer, self.small.renderer)
+        settings = [r.sampling for r in renderers]
+        for r in renderers:
+            r.sampling = layout or r.sampling
         for skipping, cells in ((False, False), (True, False), (True, True)):
             self.settings(skipping, cells)
             self.draw_ms(tiny)
             self.draw_ms(tiny, small=True)
+        for r, setting in zip(renderers, settings, strict=True):
+            r.sampling = setting
         gc.collect()
         self.draw_ms(tiny)  # evicts the textures of dead volumes
         self.draw_ms(tiny, small=True)
@@ -328,7 +357,9 @@ def _new_volume(data: np.ndarray, label: str) -> Any:
 
 def measure(bench: _Bench, data: np.ndarray, label: str, memory: bool = True) -> ScaleRow:
     """First frame, its phases, steady frames and memory of one array (see module doc)."""
-    bench.warm()
+    layout = bench.r.renderer.layout_for(data.shape, data.dtype)
+    bench.warm(layout)
+    base = _status_kib("VmRSS")
     with PeakRSS() as peak:
         t = time.perf_counter()
         scene = bench.scene(_new_volume(data, label))
@@ -336,16 +367,19 @@ def measure(bench: _Bench, data: np.ndarray, label: str, memory: bool = True) ->
         first = (time.perf_counter() - t) * 1000
     first_kind = bench.r.renderer.last_skip_kind
     second = bench.draw_ms(scene)
+    kept = (_status_kib("VmRSS") - base) / 1024
     steady = statistics.median(bench.draw_ms(scene) for _ in range(bench.frames))
     row = ScaleRow(label, tuple(data.shape), str(data.dtype), int(data.nbytes), first, steady)
     row.second_ms = second
+    row.layout = layout
+    row.kept_mib = kept if memory and base >= 0 else -1.0
     row.skip_kind = f"{first_kind}, then {bench.r.renderer.last_skip_kind}"
     row.peak_rss_mib = peak.mib if memory else -1.0
     del scene
-    bench.warm()
+    bench.warm(layout)
     row.phases = _phases(bench, data, label)
     if memory:
-        bench.warm()
+        bench.warm(layout)
         tracemalloc.start()
         try:
             bench.r.render(bench.scene(_new_volume(data, label)))
@@ -353,7 +387,7 @@ def measure(bench: _Bench, data: np.ndarray, label: str, memory: bool = True) ->
         finally:
             tracemalloc.stop()
     bench.settings(True, True)
-    bench.warm()
+    bench.warm(layout)
     return row
 
 
@@ -386,9 +420,11 @@ def bench_scale(
     size: tuple[int, int] = IMAGE_SIZE,
     ctx: Any = None,
     log: Callable[[str], Any] = print,
+    samplings: Sequence[str] = ("auto",),
 ) -> ScaleReport:
     """Measure every size (ascending) and, with ``long``, the long CT-like volume, at
-    ``size`` pixels on ``ctx`` (default: a new headless context)."""
+    ``size`` pixels on ``ctx`` (default: a new headless context), once per renderer
+    ``samplings`` setting (interleaved: each volume in every setting before the next)."""
     from voxwarp.bench.render import body_phantom
     from voxwarp.core.timing import load_average
     from voxwarp.render.offscreen import OffscreenRenderer
@@ -404,16 +440,22 @@ def bench_scale(
         bench = _Bench(r, int(frames))
         try:
             for n in sorted(set(int(s) for s in sizes)):
-                row = measure(bench, synthetic_cube(n), f"{n}³ uint8", memory)
-                report.rows.append(row)
-                log(_row_line(row))
+                data = synthetic_cube(n)
+                for sampling in samplings:
+                    bench.use_sampling(sampling)
+                    row = measure(bench, data, f"{n}³ uint8", memory)
+                    report.rows.append(row)
+                    log(_row_line(row))
+                del data
             if long:
                 nx, ny, nz = LONG_SHAPE
                 vol = body_phantom(LONG_SHAPE, (0.7, 0.7, 0.8), noise=0.0)
                 bench.tf = _long_tf()
-                row = measure(bench, vol.data, f"{nx}x{ny}x{nz} int16 CT-like", memory)
-                report.rows.append(row)
-                log(_row_line(row))
+                for sampling in samplings:
+                    bench.use_sampling(sampling)
+                    row = measure(bench, vol.data, f"{nx}x{ny}x{nz} int16 CT-like", memory)
+                    report.rows.append(row)
+                    log(_row_line(row))
         finally:
             bench.release()
     report.load = (load0, load_average())
@@ -422,8 +464,8 @@ def bench_scale(
 
 def _row_line(row: ScaleRow) -> str:
     return (
-        f"{row.label}: first frame {row.first_ms:.0f} ms, second {row.second_ms:.0f} ms,"
-        f" steady {row.steady_ms:.1f} ms ({row.skip_kind})"
+        f"{row.label} ({row.layout}): first frame {row.first_ms:.0f} ms,"
+        f" second {row.second_ms:.0f} ms, steady {row.steady_ms:.1f} ms ({row.skip_kind})"
     )
 
 
@@ -446,6 +488,19 @@ def _sizes_arg(text: str) -> tuple[int, ...]:
     return sizes
 
 
+def _samplings_arg(text: str) -> tuple[str, ...]:
+    from voxwarp.render.volume_texture import LAYOUTS
+
+    names = tuple(v.strip() for v in text.split(","))
+    bad = [n for n in names if n not in ("auto", *LAYOUTS)]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"sampling must be auto or one of {', '.join(LAYOUTS)}, separated by commas;"
+            f" got {text!r}"
+        )
+    return names
+
+
 def add_bench_scale_parser(bsub: Any) -> None:
     """Add ``scale`` to the ``bench`` sub-commands."""
     from voxwarp.core.checks import positive_int
@@ -466,6 +521,13 @@ def add_bench_scale_parser(bsub: Any) -> None:
     p.add_argument("--long", action="store_true", help="also a 512x512x1100 int16 CT-like volume")
     p.add_argument("--frames", type=positive_int, help="steady frames (default 5, --quick 3)")
     p.add_argument("--no-memory", action="store_true", help="skip the memory measurements")
+    p.add_argument(
+        "--sampling",
+        type=_samplings_arg,
+        metavar="S,S,...",
+        help="renderer sampling settings to measure each volume with, interleaved"
+        " (auto, slice_pairs, slice_layers, texture3d; default auto)",
+    )
     p.add_argument("--json", metavar="FILE", help="also write the report as JSON")
     p.add_argument("--markdown", metavar="FILE", help="also write the tables to FILE")
     p.set_defaults(func=cmd_bench_scale)
@@ -475,7 +537,14 @@ def run_args(args: argparse.Namespace, log: Callable[[str], Any]) -> ScaleReport
     """Run ``bench scale`` as its parsed arguments ask."""
     sizes = args.sizes or (QUICK_SIZES if args.quick else DEFAULT_SIZES)
     frames = args.frames or (3 if args.quick else 5)
-    return bench_scale(sizes, long=args.long, frames=frames, memory=not args.no_memory, log=log)
+    return bench_scale(
+        sizes,
+        long=args.long,
+        frames=frames,
+        memory=not args.no_memory,
+        log=log,
+        samplings=args.sampling or ("auto",),
+    )
 
 
 def cmd_bench_scale(args: argparse.Namespace) -> int:

@@ -6,8 +6,8 @@
 // voxel values), so one fetch replaces six.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 layout(rgba16f, binding = 0) writeonly uniform image3D u_gradient;
-#ifdef SLICE_PAIRS
-uniform sampler2DArray u_volume;   // layer k holds slices (k, k + 1) in (r, g)
+#if defined(SLICE_PAIRS) || defined(SLICE_LAYERS)
+uniform sampler2DArray u_volume;   // layer k holds slice k in r (SLICE_PAIRS: k + 1 in g)
 #else
 uniform sampler3D u_volume;
 #endif

@@ -1,9 +1,11 @@
 // The volume texture and its sampling in texel coordinates u (voxel i spans [i, i+1],
 // its centre is at i + 0.5), returning values in data units.
-#ifdef SLICE_PAIRS
-// Layer k of a 2D array texture holds the slice pair (v[., ., k], v[., ., k+1]) in two
-// channels: one hardware-bilinear fetch plus one lerp across z gives the trilinear value
-// with half the texel reads of a 3D texture (software rasterisers pay per texel).
+#if defined(SLICE_PAIRS) || defined(SLICE_LAYERS)
+// SLICE_PAIRS: layer k of a 2D array texture holds the slice pair (v[., ., k],
+// v[., ., k+1]) in two channels: one hardware-bilinear fetch plus one lerp across z gives
+// the trilinear value with half the texel reads of a 3D texture (software rasterisers
+// pay per texel), at twice the memory. SLICE_LAYERS: layer k holds slice k only (each
+// voxel once): two bilinear fetches (layers k and k + 1) and the same lerp.
 uniform sampler2DArray u_volume;
 #else
 uniform sampler3D u_volume;
@@ -21,6 +23,13 @@ float sample_value(vec3 u) {
     float layer = floor(cz);
     vec2 pair = textureLod(u_volume, vec3(u.xy * u_inv_dims.xy, layer), 0.0).rg;
     return mix(pair.x, pair.y, cz - layer) * u_value_map.x + u_value_map.y;
+#elif defined(SLICE_LAYERS)
+    float cz = clamp(u.z - 0.5, 0.0, u_dims.z - 1.0);   // clamp to edge along z
+    float layer = floor(cz);
+    vec2 xy = u.xy * u_inv_dims.xy;
+    float v0 = textureLod(u_volume, vec3(xy, layer), 0.0).r;
+    float v1 = textureLod(u_volume, vec3(xy, min(layer + 1.0, u_dims.z - 1.0)), 0.0).r;
+    return mix(v0, v1, cz - layer) * u_value_map.x + u_value_map.y;
 #else
     return textureLod(u_volume, u * u_inv_dims, 0.0).r * u_value_map.x + u_value_map.y;
 #endif

@@ -23,17 +23,21 @@ from typing import Any
 
 from voxwarp import shaders
 from voxwarp.deform import gl_programs
+from voxwarp.render.volume_texture import layout_defines
 
 #: volumes up to this many voxels get a gradient texture by default (128 MiB of RGBA16F)
 MAX_VOXELS = 1 << 24
 _GROUP = (8, 8, 1)
 
 
-def gradient_texture(ctx: Any, volume_texture: Any, shape: tuple, scale: float, pairs: bool) -> Any:
+def gradient_texture(
+    ctx: Any, volume_texture: Any, shape: tuple, scale: float, layout: str | bool
+) -> Any:
     """An RGBA16F 3D texture (linear filtering, clamped) of the gradient of the volume in
-    ``volume_texture`` (``shape`` voxels, ``scale`` data units per texel value; ``pairs``:
-    the slice-pairs 2D array layout). ``ctx`` must be current."""
-    defines = ["#define SLICE_PAIRS"] if pairs else []
+    ``volume_texture`` (``shape`` voxels, ``scale`` data units per texel value; ``layout``:
+    its :data:`voxwarp.render.volume_texture.LAYOUTS` name, True/False for slice pairs /
+    a 3D texture). ``ctx`` must be current."""
+    defines = layout_defines(layout)
     src = shaders.with_defines(shaders.read("gradient.comp.glsl"), defines)
     hold = gl_programs.compute_shader(ctx, src)
     try:

@@ -65,11 +65,14 @@ from voxwarp.render.skipping.maps import (
 from voxwarp.render.skipping.segments import MAX_SAMPLES
 from voxwarp.render.skipping.support import SupportCache
 from voxwarp.render.slices import SliceRenderer
-from voxwarp.render.volume_texture import upload_volume_texture
+from voxwarp.render.volume_texture import LAYOUTS, layout_defines, upload_volume_texture
 from voxwarp.scene import Scene
 
 #: Default GPU memory budget for one volume texture (override: VOXWARP_TEXTURE_BUDGET_MB).
 DEFAULT_TEXTURE_BUDGET = 2 * 1024**3
+#: ``sampling="auto"`` on a software rasteriser: volumes whose slice-pair texture (twice
+#: their bytes) is at most this big get slice pairs, larger ones slice layers (once)
+PAIRS_MAX_BYTES = 64 * 1024**2
 #: Blinn-Phong ambient, diffuse, specular, shininess.
 LIGHT = (0.25, 0.7, 0.3, 32.0)
 #: Corners of the NDC polygons a draw is made of (u_polygon in polygon.vert.glsl).
@@ -85,15 +88,17 @@ _TEX_FORMAT = {
 
 
 class _VolumeGPU:
-    """GPU copy of one volume: texture (3D or slice pairs) + its skip maps (VolumeSkipMaps)."""
+    """GPU copy of one volume: texture (a volume_texture layout) + its skip maps
+    (VolumeSkipMaps); the raycaster and the slice views read the same texture."""
 
-    def __init__(self, ctx: Any, volume: Volume, slice_pairs: bool) -> None:
+    def __init__(self, ctx: Any, volume: Volume, layout: str) -> None:
         fmt, scale, offset = _TEX_FORMAT[volume.dtype]
-        self.slice_pairs = slice_pairs
+        #: the texture's layout (one of volume_texture.LAYOUTS)
+        self.layout = layout
         # slab by slab: no full-volume copy (int16 -> uint16 + 32768, layer pairs)
-        self.texture = upload_volume_texture(ctx, volume.data, fmt, slice_pairs)
+        self.texture = upload_volume_texture(ctx, volume.data, fmt, layout)
         self.texture.repeat_x = self.texture.repeat_y = False
-        if not slice_pairs:
+        if layout == "texture3d":
             self.texture.repeat_z = False
         self.texture.filter = (ctx.LINEAR, ctx.LINEAR)
         self.value_map = (scale, offset)
@@ -101,7 +106,7 @@ class _VolumeGPU:
         self.blocks = bmin.shape
         #: block info, cell and warped skip maps, filled by the renderer's SkipMapCache
         self.skip = VolumeSkipMaps(ctx, volume.data, bmin, bmax)
-        self.nbytes = volume.data.nbytes * (2 if slice_pairs else 1)
+        self.nbytes = volume.data.nbytes * LAYOUTS[layout]
         #: RGBA16F data gradients for shading (app/render/gradients.py), made on demand
         self.gradient: Any = None
 
@@ -109,7 +114,7 @@ class _VolumeGPU:
         """The volume's gradient texture, built on the GPU on first use."""
         if self.gradient is None:
             self.gradient = gradients.gradient_texture(
-                ctx, self.texture, volume.shape, self.value_map[0], self.slice_pairs
+                ctx, self.texture, volume.shape, self.value_map[0], self.layout
             )
         return self.gradient
 
@@ -187,20 +192,26 @@ class _Frame:
 
 
 def _downsample_advice(
-    shape: tuple[int, ...], limits: tuple[int, ...], need: int, budget: int
+    shape: tuple[int, ...],
+    limits: tuple[int, ...],
+    need: int | Callable[[tuple[int, ...]], int],
+    budget: int,
 ) -> tuple[int, int, int]:
     """Per-axis downsample factors (each >= 1, at least one >= 2) that make a volume of
-    ``shape`` (``need`` texture bytes) fit ``limits`` voxels per axis and ``budget``
+    ``shape`` (``need`` texture bytes, or ``need(shape)`` where the bytes per voxel depend
+    on the shape, as the texture layout does) fit ``limits`` voxels per axis and ``budget``
     bytes. Axes over their limit get the factor that fits them; for the budget, the
     smallest common factor ``g`` is applied on top (voxels stay isotropic where they
     were), capped per axis so every axis keeps >= 1 voxel (a uniform factor would empty
     the short axes of a (200000, 2, 2) volume)."""
     n = [max(int(v), 1) for v in shape]
     base = [max(1, math.ceil(v / lim)) for v, lim in zip(n, limits, strict=True)]
-    per_voxel = need / math.prod(n)
+    if not callable(need):
+        per_voxel = need / math.prod(n)
+        need = lambda s: per_voxel * math.prod(s)  # noqa: E731
     for g in range(1, max(n) + 1):
         f = [max(b, min(g, v)) for b, v in zip(base, n, strict=True)]
-        fits = per_voxel * math.prod(v // k for v, k in zip(n, f, strict=True)) <= budget
+        fits = need(tuple(v // k for v, k in zip(n, f, strict=True))) <= budget
         if fits and max(f) >= 2:
             return (f[0], f[1], f[2])
     return (n[0], n[1], n[2])
@@ -233,8 +244,11 @@ class Renderer:
         ``"texture3d"``: one hardware-trilinear fetch per sample (best on GPUs);
         ``"slice_pairs"``: a 2D array texture whose layer k holds slices k and k+1,
         one bilinear fetch + one lerp (half the texel reads; ~1.6x faster per sample
-        on llvmpipe, twice the texture memory). ``"auto"`` picks slice pairs on
-        software rasterisers.
+        on llvmpipe, twice the texture memory); ``"slice_layers"``: a 2D array texture
+        of one slice per layer, two bilinear fetches + one lerp, each voxel stored once
+        (:mod:`voxwarp.render.volume_texture`). ``"auto"`` picks, on software
+        rasterisers, slice pairs for volumes of at most :data:`PAIRS_MAX_BYTES` and
+        slice layers above (see :meth:`layout_for`); on GPUs ``texture3d``.
     """
 
     def __init__(
@@ -269,15 +283,17 @@ class Renderer:
         #: an affine one, or one that moves nothing, drawn undeformed), "map" (straight
         #: outside the chain's support) or "all" (the chain at every sample)
         self.last_support = "all"
-        if sampling not in ("auto", "texture3d", "slice_pairs"):
+        if sampling not in ("auto", *LAYOUTS):
             raise RenderError(
-                f"sampling must be 'auto', 'texture3d' or 'slice_pairs'; got {sampling!r}"
+                f"sampling must be 'auto' or one of {', '.join(map(repr, LAYOUTS))};"
+                f" got {sampling!r}"
             )
         renderer_name = str(ctx.info.get("GL_RENDERER", "")).lower()
         software = any(w in renderer_name for w in ("llvmpipe", "softpipe", "swr", "swiftshader"))
         if sampling == "auto":
-            sampling = "slice_pairs" if software else "texture3d"
-        #: "texture3d" (hardware trilinear) or "slice_pairs" (faster on CPU rasterisers)
+            sampling = "auto-software" if software else "texture3d"
+        #: "texture3d" (hardware trilinear), "slice_pairs" or "slice_layers" (faster on
+        #: CPU rasterisers), or "auto-software" (by volume size, :meth:`layout_for`)
         self.sampling = sampling
         env = os.environ.get("VOXWARP_TEXTURE_BUDGET_MB")
         if texture_budget_bytes is None:
@@ -308,19 +324,23 @@ class Renderer:
     # ------------------------------------------------------------------ resources
     def check_volume(self, volume: Volume) -> None:
         """Raise :class:`VolumeTooLargeError` if ``volume`` cannot become a texture here."""
-        fmt_bytes = {"f1": 1, "nu2": 2, "f4": 4}[_TEX_FORMAT[volume.dtype][0]]
-        need = int(np.prod(volume.shape)) * fmt_bytes * (2 if self.sampling == "slice_pairs" else 1)
-        limits = self._axis_limits()
+        need = self.texture_bytes(volume.shape, volume.dtype)
+        limits = self._axis_limits(volume)
         ratios = [n / lim for n, lim in zip(volume.shape, limits, strict=True)]
         axis = int(np.argmax(ratios))
         too_big_dim = ratios[axis] > 1
         if too_big_dim or need > self.texture_budget_bytes:
-            factor = _downsample_advice(volume.shape, limits, need, self.texture_budget_bytes)
+            factor = _downsample_advice(
+                volume.shape,
+                limits,
+                lambda s: self.texture_bytes(s, volume.dtype),
+                self.texture_budget_bytes,
+            )
             if too_big_dim:
                 limit = (
                     f"maximum 3D texture size {limits[axis]} per axis"
                     if limits[axis] == self.max_texture_size
-                    else f"limit of {limits[axis]} for this axis of a slice-pair texture"
+                    else f"limit of {limits[axis]} for this axis of a 2D array texture"
                 )
                 what = (
                     f"volume {volume.shape} has {volume.shape[axis]} voxels along axis"
@@ -339,11 +359,28 @@ class Renderer:
                 f" or `voxwarp render ... --downsample {arg}`."
             )
 
-    def _axis_limits(self) -> tuple[int, int, int]:
-        """Most voxels per axis of a volume texture here: the 3D texture size, and with
-        slice pairs also the 2D texture size (x, y) and the array layers (z)."""
+    def texture_bytes(self, shape: tuple[int, ...], dtype: Any) -> int:
+        """Bytes of the texture a volume of ``shape`` and ``dtype`` gets here."""
+        fmt_bytes = {"f1": 1, "nu2": 2, "f4": 4}[_TEX_FORMAT[np.dtype(dtype)][0]]
+        return int(np.prod(shape)) * fmt_bytes * LAYOUTS[self.layout_for(shape, dtype)]
+
+    def layout_for(self, shape: tuple[int, ...], dtype: Any) -> str:
+        """The texture layout a volume of ``shape`` and ``dtype`` gets here (one of
+        :data:`volume_texture.LAYOUTS`): the ``sampling`` setting, or with "auto" on a
+        software rasteriser slice pairs where their texture takes at most
+        :data:`PAIRS_MAX_BYTES`, else slice layers (each voxel once: a big volume's
+        texture costs its bytes, not twice; ~1.05-1.5x the time per sample)."""
+        if self.sampling != "auto-software":
+            return self.sampling
+        fmt_bytes = {"f1": 1, "nu2": 2, "f4": 4}[_TEX_FORMAT[np.dtype(dtype)][0]]
+        pairs = 2 * int(np.prod(shape)) * fmt_bytes
+        return "slice_pairs" if pairs <= PAIRS_MAX_BYTES else "slice_layers"
+
+    def _axis_limits(self, volume: Volume) -> tuple[int, int, int]:
+        """Most voxels per axis of ``volume``'s texture here: the 3D texture size, and
+        with an array layout also the 2D texture size (x, y) and the array layers (z)."""
         m = self.max_texture_size
-        if self.sampling != "slice_pairs":
+        if self.layout_for(volume.shape, volume.dtype) == "texture3d":
             return (m, m, m)
         info = self.ctx.info
         m2 = min(m, int(info.get("GL_MAX_TEXTURE_SIZE", m)))
@@ -354,7 +391,7 @@ class Renderer:
         key = id(volume)
         hit = self._volumes.get(key)
         if hit is not None and hit[0]() is volume:
-            if hit[1].slice_pairs == (self.sampling == "slice_pairs"):
+            if hit[1].layout == self.layout_for(volume.shape, volume.dtype):
                 return hit[1]
             hit[1].release()
         if hit is not None:  # a dead volume reused the id
@@ -362,7 +399,7 @@ class Renderer:
         self.check_volume(volume)
         self.ctx.error  # noqa: B018 - clear any stale error flag
         try:
-            gpu = _VolumeGPU(self.ctx, volume, self.sampling == "slice_pairs")
+            gpu = _VolumeGPU(self.ctx, volume, self.layout_for(volume.shape, volume.dtype))
         except Exception as exc:  # worded by upload_error, the cause kept
             raise upload_error(volume, exc) from exc
         err = self.ctx.error
@@ -539,6 +576,7 @@ class Renderer:
         kind: str,
         segment: int,
         gradient_texture: bool,
+        layout: str,
         support: bool = False,
     ) -> Any:
         piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
@@ -549,7 +587,7 @@ class Renderer:
             linear,
             scene.use_shading(),
             kind,
-            self.sampling,
+            layout,
             tuple(w.signature() for w in warps),
             meshes,
             piecewise,
@@ -569,8 +607,7 @@ class Renderer:
             defines.append("#define SHADING")
         if kind == "none":
             defines.append("#define NO_SKIPPING")
-        if self.sampling == "slice_pairs":
-            defines.append("#define SLICE_PAIRS")
+        defines += layout_defines(layout)
         if kind == "cells":
             defines.append("#define CELL_SKIP")
         if meshes:
@@ -659,7 +696,9 @@ class Renderer:
         shade_tex = self.last_gradient_texture = self._use_gradients(scene)
         support = plan == "map" and segment == 1
         self.last_support = "map" if support else "none" if linear else "all"
-        prog = self._program(scene, linear, skip_kind, segment, shade_tex, support)
+        prog = self._program(
+            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support
+        )
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
         view = (x, y, w, h)

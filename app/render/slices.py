@@ -29,6 +29,7 @@ from voxwarp.errors import RenderError
 from voxwarp.render.float_target import FloatTarget
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.skipping.support import SupportCache
+from voxwarp.render.volume_texture import layout_defines
 from voxwarp.scene import Scene
 
 SlabMode = Literal["mip", "minip", "average"]
@@ -83,18 +84,16 @@ class SliceRenderer:
         self._released = False
 
     def _program(
-        self, scene: Scene, slice_pairs: bool, nearest: bool, detj: bool, support: bool = False
+        self, scene: Scene, layout: str, nearest: bool, detj: bool, support: bool = False
     ) -> Any:
-        key = (tuple(w.signature() for w in scene.warps), slice_pairs, nearest, detj, support)
+        key = (tuple(w.signature() for w in scene.warps), layout, nearest, detj, support)
         hold = self._programs.get(key)
         if hold is not None:
             return hold.program
         frag = shaders.source(
             "slice.frag.glsl", extra={"warps.glsl": compose_glsl(list(scene.warps))}
         )
-        defines = (["#define SLICE_PAIRS"] if slice_pairs else []) + (
-            ["#define NEAREST"] if nearest else []
-        )
+        defines = layout_defines(layout) + (["#define NEAREST"] if nearest else [])
         defines += ["#define DETJ"] if detj else []
         defines += ["#define SUPPORT_MAP"] if support else []
         frag = shaders.with_defines(frag, defines)
@@ -135,7 +134,7 @@ class SliceRenderer:
         samples, spacing = slab_sampling(slab_mm, scene.sample_distance_mm)
         normal = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-12)
         scene, support = self._support_plan(scene, detj)
-        prog = self._program(scene, gpu.slice_pairs, interpolation == "nearest", detj, support)
+        prog = self._program(scene, gpu.layout, interpolation == "nearest", detj, support)
         textures = warp_textures(self.ctx, scene.warps)  # first: may run GPU passes
         vol = scene.volume
         values: dict[str, Any] = {

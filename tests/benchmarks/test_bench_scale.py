@@ -80,3 +80,29 @@ def test_scale_scene_is_visible(offscreen: Any) -> None:
     scene = bench.scene(Volume(scale.synthetic_cube(32), (1.0, 1.0, 1.0)))
     image = r.render(scene.copy(background=(0.0, 0.0, 0.0, 0.0)))
     assert 0.2 < covered_fraction(image) < 1.0
+
+
+def test_samplings_arg() -> None:
+    assert scale._samplings_arg("auto,slice_pairs") == ("auto", "slice_pairs")
+    for bad in ("", "pairs", "auto,texture2d"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            scale._samplings_arg(bad)
+
+
+@pytest.mark.slow
+def test_bench_scale_measures_each_sampling(gl_ctx: Any) -> None:
+    """One row per sampling setting, in the layout asked for, with the memory kept
+    after its cell maps measured."""
+    report = scale.bench_scale(
+        (96,),
+        frames=1,
+        size=(64, 64),
+        ctx=gl_ctx,
+        log=lambda s: None,
+        samplings=("slice_pairs", "slice_layers"),
+    )
+    pairs, layers = report.rows
+    assert (pairs.layout, layers.layout) == ("slice_pairs", "slice_layers")
+    assert pairs.kept_mib >= 0
+    assert layers.kept_mib >= 0
+    assert "| slice_layers |" in report.markdown("python -m benchmarks scale")

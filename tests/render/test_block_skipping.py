@@ -106,7 +106,7 @@ GPU_BYTES[np.dtype(np.float32)] = 4
 
 def texture_bytes(r: Renderer, shape: tuple[int, ...], dtype: Any) -> int:
     """Texture memory of a volume; slice-pair sampling stores every slice twice."""
-    copies = 2 if getattr(r, "sampling", "texture3d") == "slice_pairs" else 1
+    copies = 2 if r.layout_for(shape, dtype) == "slice_pairs" else 1
     return int(np.prod(shape)) * GPU_BYTES[np.dtype(dtype)] * copies
 
 

@@ -32,7 +32,7 @@ def central_differences(data: np.ndarray) -> np.ndarray:
     return np.stack(out, -1)
 
 
-@pytest.mark.parametrize("sampling", ["slice_pairs", "texture3d"])
+@pytest.mark.parametrize("sampling", ["slice_pairs", "slice_layers", "texture3d"])
 @pytest.mark.parametrize(
     ("dtype", "top"), [(np.uint8, 255), (np.int16, 3000), (np.uint16, 60000), (np.float32, 1.0)]
 )

@@ -170,10 +170,11 @@ def test_octant_map_memory_is_its_output() -> None:
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.float32])
-@pytest.mark.parametrize("pairs", [False, True])
+@pytest.mark.parametrize("layout", ["texture3d", "slice_layers", "slice_pairs"])
 def test_slab_upload_equals_the_one_shot_upload(
-    gl_ctx: Any, dtype: Any, pairs: bool, monkeypatch: pytest.MonkeyPatch
+    gl_ctx: Any, dtype: Any, layout: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    pairs = layout == "slice_pairs"
     data = _blobs((13, 7, 11), dtype, seed=4)
     fmt = {np.uint8: "f1", np.int16: "nu2", np.float32: "f4"}[dtype]
     arr = np.ascontiguousarray(data.T)
@@ -182,7 +183,7 @@ def test_slab_upload_equals_the_one_shot_upload(
     if pairs:
         arr = np.stack([arr, np.concatenate([arr[1:], arr[-1:]])], axis=-1)
     monkeypatch.setattr(volume_texture, "SLAB_BYTES", 200)  # several slabs, one odd one
-    tex = volume_texture.upload_volume_texture(gl_ctx, data, fmt, pairs)
+    tex = volume_texture.upload_volume_texture(gl_ctx, data, fmt, layout)
     try:
         got = np.frombuffer(tex.read(alignment=1), dtype=arr.dtype)
     finally:

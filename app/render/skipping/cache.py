@@ -21,6 +21,7 @@ import numpy as np
 
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
+from voxwarp.render.skipping.bitmask import BitMask
 from voxwarp.render.skipping.maps import (
     Octant,
     block_skip_distances,
@@ -62,7 +63,8 @@ class VolumeSkipMaps:
         self.info.filter = (ctx.NEAREST, ctx.NEAREST)
         self.info_key: Any = None
         self.volume_data = data
-        self.cell_visible: np.ndarray | None = None
+        #: the cell visibility the octant maps are built from, one bit per cell (BitMask)
+        self.cell_visible: BitMask | None = None
         #: octant -> R8 texture of octant skip distances, for the scene key cell_key
         self.cell_skip: dict[Octant, Any] = {}
         self.cell_key: Any = None
@@ -219,7 +221,8 @@ class SkipMapCache:
         for tex in maps.cell_skip.values():
             tex.release()
         maps.cell_skip.clear()
-        maps.cell_visible, maps.cell_key = visible, key
+        maps.cell_visible = None if visible is None else BitMask(visible)
+        maps.cell_key = key
 
     def _background_kind(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> str:
         """ "background" mode: cells when this warp state's maps are built or ready,
@@ -345,26 +348,27 @@ class SkipMapCache:
             dist = block_skip_distances(
                 static_block_visibility(scene, maps.block_min, maps.block_max)
             )
-            # written straight in the texture's (z, y, x, channel) layout: one array
-            info = np.zeros((*maps.block_min.shape[::-1], 4), dtype=np.float32)
-            for c, part in enumerate((dist, maps.block_min, maps.block_max)):
-                info[..., c] = part.T
-            maps.info.write(info)
+            _write_block_info(maps.info, (dist, maps.block_min, maps.block_max))
             maps.info_key = key
         return maps.info
 
     def _cell_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
-        """Which trilinear cells ``scene``'s mode can see (cached on the volume)."""
+        """Which trilinear cells ``scene``'s mode can see (kept on the volume at one bit
+        per cell; the bool array returned is the caller's, to drop after use)."""
         key = skip_map_key(scene)
         if maps.cell_key != key:
             self._install_cells(maps, None, None)  # the old one goes before the new is built
             visible = cell_visibility(scene, maps.volume_data, maps.block_min, maps.block_max)
             self._install_cells(maps, key, visible)
+            return visible
         assert maps.cell_visible is not None
-        return maps.cell_visible
+        return maps.cell_visible.unpack()
 
     def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
-        dist = octant_skip_distances(visible, octant)
+        return self._distance_texture(octant_skip_distances(visible, octant))
+
+    def _distance_texture(self, dist: np.ndarray) -> Any:
+        """An R8 3D texture of octant skip distances (nearest filtering)."""
         data = np.ascontiguousarray(dist.transpose(2, 1, 0))  # no copy: built in this layout
         tex = self.ctx.texture3d(dist.shape, 1, data, dtype="f1", alignment=1)
         tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
@@ -376,10 +380,16 @@ class SkipMapCache:
         Computed on first use per (mode visibility, octant) and cached on the volume;
         a change of what the mode can see (transfer function, isovalue, ...) drops all.
         """
-        visible = self._cell_visibility(maps, scene)
+        visible = None
+        if maps.cell_key != skip_map_key(scene):  # what the mode sees changed: rebuild
+            visible = self._cell_visibility(maps, scene)
         tex = maps.cell_skip.get(octant)
-        if tex is None:
-            tex = maps.cell_skip[octant] = self._octant_texture(visible, octant)
+        if tex is None:  # unpacked only to build a map
+            if visible is None:
+                visible = self._cell_visibility(maps, scene)
+            dist = octant_skip_distances(visible, octant)
+            del visible  # before the upload: the map's bytes, not the visibility's too
+            tex = maps.cell_skip[octant] = self._distance_texture(dist)
         return tex
 
     def _warped_key(self, scene: Scene) -> tuple:
@@ -431,6 +441,23 @@ class SkipMapCache:
         if tex is None:
             tex = maps.warped_skip[octant] = self._octant_texture(visible, octant)
         return tex
+
+
+#: bytes of the block info texture written at a time (its host copy is one slab)
+INFO_SLAB_BYTES = 4 * 1024**2
+
+
+def _write_block_info(texture: Any, parts: tuple[np.ndarray, ...]) -> None:
+    """Write (x, y, z)-indexed block grids as the RGBA32F texture's channels (the fourth
+    0), in slabs of z layers in the texture's (z, y, x, channel) layout."""
+    nx, ny, nz = parts[0].shape
+    step = max(1, INFO_SLAB_BYTES // (nx * ny * 16))
+    for z0 in range(0, nz, step):
+        z1 = min(z0 + step, nz)
+        slab = np.zeros((z1 - z0, ny, nx, 4), dtype=np.float32)
+        for c, part in enumerate(parts):
+            slab[..., c] = part[:, :, z0:z1].T
+        texture.write(slab, viewport=(0, 0, z0, nx, ny, z1 - z0))
 
 
 def _bounded(warps: Any) -> bool:

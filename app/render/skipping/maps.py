@@ -186,7 +186,7 @@ def static_block_visibility(
     mode = scene.mode
     level, width = scene.window
     if mode == "dvr":
-        return scene.transfer_function.visible_ranges(block_min, block_max)
+        return _in_slabs(scene.transfer_function.visible_ranges, block_min, block_max)
     if mode in ("mip", "xray"):
         return block_max > level - width / 2
     if mode == "minip":
@@ -196,6 +196,26 @@ def static_block_visibility(
     if mode == "flm":
         return block_max >= scene.resolved_flm_threshold()
     return np.ones(block_min.shape, dtype=bool)
+
+
+#: blocks classified at a time by :func:`_in_slabs` (its int64 temporaries: 2 MiB each)
+_SLAB_BLOCKS = 1 << 18
+
+
+def _in_slabs(classify: Any, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``classify(lo, hi)`` (elementwise, bool) over slabs of z layers, so its temporaries
+    are a slab's, not the grid's (a 512³ volume's 2M blocks: 64 MiB of int64 at once).
+    Arrays other than 3D grids are classified at once."""
+    if lo.ndim != 3:
+        return classify(lo, hi)
+    nx, ny, nz = lo.shape
+    step = max(1, _SLAB_BLOCKS // max(1, nx * ny))
+    if step >= nz:
+        return classify(lo, hi)
+    out = np.empty(lo.shape, dtype=bool, order="F")
+    for z0 in range(0, nz, step):
+        out[:, :, z0 : z0 + step] = classify(lo[:, :, z0 : z0 + step], hi[:, :, z0 : z0 + step])
+    return out
 
 
 def block_skip_distances(visible: np.ndarray) -> np.ndarray:
