@@ -696,9 +696,7 @@ class Renderer:
         shade_tex = self.last_gradient_texture = self._use_gradients(scene)
         support = plan == "map" and segment == 1
         self.last_support = "map" if support else "none" if linear else "all"
-        prog = self._program(
-            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support
-        )
+        prog = self._program(scene, linear, skip_kind, segment, shade_tex, gpu.layout, support)
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
         view = (x, y, w, h)
