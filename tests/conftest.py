@@ -85,8 +85,24 @@ def gl_ctx() -> Iterator[Any]:
                 pytrace=False,
             )
         pytest.skip(f"no headless OpenGL 4.3 context through EGL: {exc}")
+    ctx.mglo.__enter__()  # current now, even if a pooled renderer's context was
+    _SESSION_GL.append(ctx)
     yield ctx
+    _SESSION_GL.clear()
     ctx.release()
+
+
+#: the session context once made (module fixtures must find it current, see below)
+_SESSION_GL: list[Any] = []
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _gl_current_for_module_fixtures() -> None:
+    """Make the session context current before a module's own fixtures run: they run
+    before the per-test check below, after another module's renderers may have left
+    their pooled context current or none (voxwarp.render.context_pool)."""
+    if _SESSION_GL:
+        _SESSION_GL[0].mglo.__enter__()
 
 
 @pytest.fixture(autouse=True)

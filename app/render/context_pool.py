@@ -83,12 +83,15 @@ def acquire() -> Any:
 
 
 def _make() -> _Pooled:
+    saved = egl_current()  # before: creating a context makes it current
     ctx = create_context()
     ctx.gc_mode = "context_gc"  # wrappers dropped unreleased are queued for collect()
-    saved = egl_current()
     ctx.mglo.__enter__()
     mine = egl_current()
-    egl_restore(saved)
+    if saved is not None:
+        egl_restore(saved)
+    elif mine is not None:
+        egl_uncurrent(mine[3])
     return _Pooled(ctx, None if mine is None else mine[3])
 
 

@@ -120,6 +120,8 @@ def test_a_thousand_operations_hold_no_memory_descriptors_or_gl_objects(
     slope = float(np.polyfit(ops, rss, 1)[0])
     print(f"soak: {OPS} ops, RSS {rss[0]:.0f} -> {rss[-1]:.0f} KB, slope {slope:.2f} KB/op")
     assert slope < RSS_SLOPE_KB, f"RSS grows {slope:.1f} KB per operation"
-    assert len({s[2] for s in samples}) == 1, f"descriptors {[s[2] for s in samples]}"
+    # held means growing: no sample above the first. (In a shared test worker the count
+    # can also drop, when an earlier test's file or pipe is closed by the collector.)
+    assert max(s[2] for s in samples) <= samples[0][2], f"descriptors {[s[2] for s in samples]}"
     assert all(s[3] == samples[0][3] for s in samples), f"GL objects {[s[3] for s in samples]}"
     assert out.stat().st_size > 0
