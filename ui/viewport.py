@@ -176,6 +176,7 @@ class Viewport(QOpenGLWidget):
         w, h = self.size_px()
         fbo = self.ctx.detect_framebuffer(self.defaultFramebufferObject())
         try:
+            self.session.poll_model()  # the newest state the model worker finished
             for warp in self.session.take_released_warps():
                 warp.release()
             scene = self.session.scene
@@ -329,6 +330,8 @@ class Viewport(QOpenGLWidget):
         """Whether the next frame is the final one: no interaction and no skip maps
         being built for it (tests and scripts wait for this before reading frames)."""
         if self.interacting() or (self._skip_task is not None and self._skip_task.running):
+            return False
+        if self.session.model_busy:
             return False
         return not self._waiting_for_skip_maps()
 
