@@ -591,7 +591,13 @@ class MainWindow(QMainWindow):
         if self.viewport.ctx is None or self.session.model is None:
             return
         # shows what the model worker finished, then posts the next steps when running
-        if self.viewport.with_context(self.session.advance):
+        try:
+            changed = self.viewport.with_context(self.session.advance)
+        except VoxwarpError as exc:  # a step failed (on the worker or here)
+            self.set_running(False)
+            self.show_error(str(exc))
+            return
+        if changed:
             self.viewport.update()
 
     # ------------------------------------------------------------------ selection
