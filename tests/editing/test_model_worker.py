@@ -135,7 +135,8 @@ def test_the_worker_reaches_the_positions_of_the_synchronous_path(kind: str) -> 
 
 
 class _Gate:
-    """Wraps a model's ``move`` so that its first call blocks until :meth:`open`."""
+    """Wraps a model's ``move`` so that its first call, once the move is done, blocks
+    until :meth:`open` (the model has changed; the step has not returned)."""
 
     def __init__(self, model: Any) -> None:
         self.model, self.inner = model, model.move
@@ -143,10 +144,10 @@ class _Gate:
         model.move = self.move
 
     def move(self, *args: Any) -> Any:
+        out = self.inner(*args)
         if not self.started.is_set():
             self.started.set()
             assert self.gate.wait(WAIT)
-        out = self.inner(*args)
         self.done.append(args)
         return out
 
@@ -160,9 +161,9 @@ def test_a_long_step_blocks_neither_the_drag_nor_the_drawing_and_the_newest_targ
     try:
         warp = s.scene.warps[0]
         xy = _start_drag(s)
-        s.drag_to(xy + np.array([0.0, -5.0]))
-        assert gate.started.wait(WAIT)  # the worker is inside the first move
         revision = warp.revision
+        s.drag_to(xy + np.array([0.0, -5.0]))
+        assert gate.started.wait(WAIT)  # the worker moved the model; the step goes on
         for dy in (10.0, 15.0, 20.0, 25.0):  # the GUI thread goes on: nothing waits
             s.drag_to(xy + np.array([0.0, -dy]))
             assert not s.poll_model()
