@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.bench.command import add_bench_parser, emit_report
-from voxwarp.bench.drag import DRAG_SIZE, DragLoop, bench_drag, drag_markdown
+from voxwarp.bench.drag import DRAG_FAMILIES, DRAG_SIZE, DragLoop, bench_drag, drag_markdown
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.families.wires import WiresFamily
@@ -244,6 +244,7 @@ def bench_scripted_drag(
     rounds: int = 5,
     resolution: int = 8,
     log: Any = None,
+    families: tuple[str, ...] = DRAG_FAMILIES,
 ) -> str:
     """The scripted drag's table (:mod:`voxwarp.bench.drag`) on the bundled CT."""
     vol = load_sample(DEFAULT_SAMPLE)
@@ -261,7 +262,7 @@ def bench_scripted_drag(
             loop = DragLoop(rr, draw, size)
             draw(base, 1.0)
             reference = _median_ms(lambda: draw(base, 1.0), 5)
-            rows = bench_drag(loop, base, rounds, resolution, log=log)
+            rows = bench_drag(loop, base, rounds, resolution, families, log=log)
     return drag_markdown(rows, size, reference)
 
 
