@@ -14,7 +14,8 @@ state and posts the next steps), the handles' overlay is computed, the 3D view i
 at the level :class:`~voxwarp.render.adaptive_quality.AdaptiveQuality` chose from the
 frame before (deformed-space skip maps off, as while the warp changes) and the three
 slice views at :data:`LIVE_SCALE` of their resolution, as the GUI's slices follow a
-drag. Then the button is released: ``end_drag``, the undo snapshot (which waits for the
+drag; the controller is fed the time of the 3D view and the slices, as the GUI's is.
+Then the button is released: ``end_drag``, the undo snapshot (which waits for the
 worker's last steps), the deformed-space skip maps of the final state (the GUI builds
 them on a worker thread before its full-quality frame), the full-quality 3D frame and
 the three slices in full: *release to full quality* is that time (the GUI adds its
@@ -148,9 +149,9 @@ class DragLoop:
         rr.warped_skip_maps = "never"
         t0 = time.perf_counter()
         for k in range(1, DRAG_FRAMES + 1):
-            t = time.perf_counter()
             session.drag_to(start + np.array([0.0, -0.25 * self.size[1] * k / DRAG_FRAMES]))
             session.advance()
+            t = time.perf_counter()  # the GUI's frame time: the 3D view and the slices
             session.overlay_layers()
             q = aq.quality
             self.draw(scene_at(scene, q), q.scale, camera)
