@@ -194,6 +194,7 @@ class MainWindow(QMainWindow):
     def __init__(self, session: EditSession, path: str | Path | None = None) -> None:
         super().__init__()
         session.sync_builds = False  # wire fields build off the GUI thread here
+        session.set_model_thread(model_thread())
         self.session = session
         self.path: Path | None = (
             Path(path) if path is not None and str(path).endswith(".json") else None
@@ -590,10 +591,15 @@ class MainWindow(QMainWindow):
     def _tick(self) -> None:
         if self.viewport.ctx is None or self.session.model is None:
             return
-        if self.session.running:
-            ran = self.viewport.with_context(self.session.advance)
-            if ran:
-                self.viewport.update()
+        # shows what the model worker finished, then posts the next steps when running
+        try:
+            changed = self.viewport.with_context(self.session.advance)
+        except VoxwarpError as exc:  # a step failed (on the worker or here)
+            self.set_running(False)
+            self.show_error(str(exc))
+            return
+        if changed:
+            self.viewport.update()
 
     # ------------------------------------------------------------------ selection
     def select_all(self) -> None:
@@ -771,6 +777,8 @@ class MainWindow(QMainWindow):
         self._cancel_field_build()
         session.running = self.session.running  # run/pause is the window's, not the file's
         session.sync_builds = False
+        self.session.set_model_thread(False)
+        session.set_model_thread(model_thread())
         self.session = session
         self.viewport.set_session(session, keep_camera=session.scene.camera is not None)
         self.mpr.set_session(session)
@@ -1051,11 +1059,18 @@ class MainWindow(QMainWindow):
         """Stop the timer and release GL resources."""
         self.sim_timer.stop()
         self._cancel_field_build()
+        self.session.set_model_thread(False)
         self.viewport.release_gl()
         super().closeEvent(event)
 
 
 # ---------------------------------------------------------------------------- helpers
+def model_thread() -> bool:
+    """Whether the window steps CPU element models on a worker thread: yes, unless the
+    environment sets ``VOXWARP_MODEL_THREAD=0`` (the old synchronous path, to compare)."""
+    return os.environ.get("VOXWARP_MODEL_THREAD", "1").strip() != "0"
+
+
 def load_session_input(spec: str, series: int | str | None = None, **pick: int) -> EditSession:
     """A session for INPUT: a scene JSON (resuming its deformation), a volume file or
     ``sample:NAME`` (shown with the sample's suggested transfer function); ``series``

@@ -10,7 +10,8 @@ outlines (:meth:`SliceViews.outline_layers`, ``Display -> Slice planes``).
 
 The slices follow the 3D view: after every frame the viewport draws (a drag, a running
 simulation, an undo) one single-shot timer redraws the visible slices once (at half
-resolution while the deformation changes, in full once it rests); their own
+resolution while the deformation changes, in full once it rests; the 3D view's adaptive
+level counts their time in its frame budget, ``Viewport.companion_s``); their own
 changes (crosshair, scrolling) redraw them at once and the 3D view (at its interactive
 quality) for the outlines. :func:`install_slice_controls` adds the View menu's layout
 actions and the "Slices" toolbar (layout, look, shown state, slab, interpolation).
@@ -18,6 +19,7 @@ actions and the "Slices" toolbar (layout, look, shown state, slab, interpolation
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from PySide6.QtCore import Qt, QTimer
@@ -155,8 +157,11 @@ class SliceLayout(QWidget):
         :data:`LIVE_SCALE` of their resolution while a handle is dragged or the
         simulation moves, in full once that stops."""
         live = self.live()
+        t = time.perf_counter()
         for view in self.views:
             view.render(LIVE_SCALE if live else 1.0)
+        # the 3D view's adaptive level budgets the live slices with its own frame
+        self.viewport.companion_s = time.perf_counter() - t if live else 0.0
         if live:
             self._refine.start()
 

@@ -131,6 +131,10 @@ class Viewport(QOpenGLWidget):
         self.adaptive = AdaptiveQuality()
         #: the level the last frame was drawn at
         self.last_quality = FULL
+        #: seconds the views redrawn after each interactive frame took last time (the
+        #: live slice views): the adaptive level budgets them with the 3D frame, so that
+        #: the window, not only this view, holds the frame rate
+        self.companion_s = 0.0
         self._last_input = 0.0
         self._refine = QTimer(self)
         self._refine.setSingleShot(True)
@@ -176,6 +180,7 @@ class Viewport(QOpenGLWidget):
         w, h = self.size_px()
         fbo = self.ctx.detect_framebuffer(self.defaultFramebufferObject())
         try:
+            self.session.poll_model()  # the newest state the model worker finished
             for warp in self.session.take_released_warps():
                 warp.release()
             scene = self.session.scene
@@ -207,7 +212,7 @@ class Viewport(QOpenGLWidget):
             self.failed.emit(str(exc))
         self.last_frame_ms = (time.perf_counter() - t0) * 1000
         if interactive:
-            self.adaptive.frame_drawn(self.last_frame_ms / 1000)
+            self.adaptive.frame_drawn(self.last_frame_ms / 1000 + self.companion_s)
         self.frames_drawn += 1
         self._start_skip_map_job(start_now)
         self.frameDrawn.emit(self.last_frame_ms)
@@ -329,6 +334,8 @@ class Viewport(QOpenGLWidget):
         """Whether the next frame is the final one: no interaction and no skip maps
         being built for it (tests and scripts wait for this before reading frames)."""
         if self.interacting() or (self._skip_task is not None and self._skip_task.running):
+            return False
+        if self.session.model_busy:
             return False
         return not self._waiting_for_skip_maps()
 

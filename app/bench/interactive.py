@@ -21,6 +21,12 @@ moved), then the frame is timed the ways the GUI draws it:
 
 Every time is also given as a ratio to the undeformed full-resolution frame measured
 in the same run (these machines are shared; ratios hold better than times).
+
+A second table (``--parts drag``, :mod:`voxwarp.bench.drag`) drags an element of the
+mass-spring and ChainMail grids as the desktop window does at its default size (the 3D
+view and three live slice views), with the model stepped on the drawing thread (the old
+path) and on the model worker (the GUI's default) in alternating rounds: frames per
+second while dragging and the seconds from the release to the full-quality frame.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from voxwarp.bench.command import add_bench_parser, emit_report
+from voxwarp.bench.drag import DRAG_FAMILIES, DRAG_SIZE, DragLoop, bench_drag, drag_markdown
 from voxwarp.core.checks import image_size, positive_int
 from voxwarp.editing.families.lattice import LatticeFamily
 from voxwarp.editing.families.wires import WiresFamily
@@ -232,18 +239,58 @@ def bench_interactive(
     return report
 
 
+def bench_scripted_drag(
+    size: tuple[int, int] = DRAG_SIZE,
+    rounds: int = 5,
+    resolution: int = 8,
+    log: Any = None,
+    families: tuple[str, ...] = DRAG_FAMILIES,
+) -> str:
+    """The scripted drag's table (:mod:`voxwarp.bench.drag`) on the bundled CT."""
+    vol = load_sample(DEFAULT_SAMPLE)
+    tf = suggested_transfer_function(DEFAULT_SAMPLE)
+    base = Scene(vol, transfer_function=tf, view=(-60, 20), zoom=1.2, jitter=False)
+    with OffscreenRenderer(*size) as r:
+        rr = r.renderer
+
+        def draw(scene: Scene, scale: float, camera: Any = None) -> None:
+            with r.current():
+                rr.draw_scaled(scene, r.framebuffer, None, camera, scale)
+                r.ctx.finish()
+
+        with r.current():
+            loop = DragLoop(rr, draw, size)
+            draw(base, 1.0)
+            reference = _median_ms(lambda: draw(base, 1.0), 5)
+            rows = bench_drag(loop, base, rounds, resolution, families, log=log)
+    return drag_markdown(rows, size, reference)
+
+
 def cmd_bench_interactive(args: argparse.Namespace) -> int:
     """``voxwarp bench interactive``."""
-    report = bench_interactive(
-        size=args.size, frames=args.frames, log=lambda s: print(s, file=sys.stderr)
+    log = lambda s: print(s, file=sys.stderr)  # noqa: E731
+    command = "voxwarp bench interactive" + "".join(
+        f" {a}" for a in (sys.argv[3:] if sys.argv[1:3] == ["bench", "interactive"] else [])
     )
-    text = report.markdown(
-        "voxwarp bench interactive"
-        + "".join(
-            f" {a}" for a in (sys.argv[3:] if sys.argv[1:3] == ["bench", "interactive"] else [])
+    parts = []
+    if "frames" in args.parts:
+        parts.append(
+            bench_interactive(size=args.size, frames=args.frames, log=log).markdown(command)
         )
-    )
-    return emit_report(text, args.markdown)
+    if "drag" in args.parts:
+        table = bench_scripted_drag(args.drag_size, args.rounds, args.resolution, log=log)
+        parts.append(table if parts else f"`{command}`\n\n{table}")
+    return emit_report("\n".join(parts), args.markdown)
+
+
+def _parts(text: str) -> tuple[str, ...]:
+    """``--parts``: a comma-separated subset of ``frames,drag``."""
+    names = tuple(p.strip() for p in text.split(",") if p.strip())
+    if not names or any(p not in ("frames", "drag") for p in names):
+        raise argparse.ArgumentTypeError(
+            f"parts are frames and/or drag (e.g. frames,drag); got {text!r}"
+        )
+    return names
 
 
 def add_bench_interactive_parser(bsub: Any) -> None:
@@ -253,5 +300,28 @@ def add_bench_interactive_parser(bsub: Any) -> None:
     )
     p.add_argument("--size", type=image_size, default=(750, 830), help="viewport WxH")
     p.add_argument("--frames", type=positive_int, default=5, help="timed frames per case")
+    p.add_argument(
+        "--parts",
+        type=_parts,
+        default=("frames", "drag"),
+        help="what to run: frames (the frame costs per family), drag (the scripted drag,"
+        " model on the drawing thread vs the model worker); default frames,drag",
+    )
+    p.add_argument(
+        "--drag-size",
+        type=image_size,
+        default=DRAG_SIZE,
+        help="WxH of the 3D view and of each slice view in the scripted drag (default"
+        f" {DRAG_SIZE[0]}x{DRAG_SIZE[1]}: the default window's four-up layout)",
+    )
+    p.add_argument(
+        "--rounds", type=positive_int, default=5, help="scripted drags per family and path"
+    )
+    p.add_argument(
+        "--resolution",
+        type=positive_int,
+        default=8,
+        help="elements per axis of the dragged grid (default 8, the GUI's)",
+    )
     p.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=cmd_bench_interactive)

@@ -35,6 +35,12 @@ translation, rotation about the box centre, scale); the warp chain is then
 
 Every edit is bracketed by :meth:`EditSession.snapshot` (an in-memory copy of the
 whole state, velocities included) so that undo restores it exactly.
+
+The element models can step on a worker thread (:meth:`EditSession.set_model_thread`,
+the GUI's choice; :mod:`voxwarp.editing.model_worker`): drags and frames then post
+steps, :meth:`EditSession.poll_model` shows the newest finished state, and snapshots,
+saves and family switches first wait for the worker (:meth:`EditSession.wait_for_model`).
+Without it (scripts, the notebook) every call steps the model before it returns.
 """
 
 from __future__ import annotations
@@ -75,6 +81,7 @@ from voxwarp.editing.common import (
 )
 from voxwarp.editing.families import FAMILIES, Family
 from voxwarp.editing.model_settings import FamilyOptions
+from voxwarp.editing.model_worker import ModelWorker
 from voxwarp.editing.state import DragState, Placement, Snapshot
 from voxwarp.render.overlay import OverlayLayer, box_edges
 from voxwarp.scene import Scene, read_scene_dict, write_scene_json
@@ -163,6 +170,9 @@ class EditSession:
         #: ``() -> context manager`` making the GL context of GPU models current (the
         #: GUI's viewport sets it; a headless caller's context is current already)
         self.gl_scope: Callable[[], Any] = contextlib.nullcontext
+        #: the worker thread stepping a CPU element model (:meth:`set_model_thread`),
+        #: or None: the model steps on the caller's thread
+        self.model_worker: ModelWorker | None = None
         self._recover_from_scene(editor if isinstance(editor, dict) else {})
 
     # ------------------------------------------------------------------ properties
@@ -228,6 +238,39 @@ class EditSession:
         if not throttle or (self._drag is None and late):
             self._handle_cache = None
             self._last_readback = now
+
+    # ------------------------------------------------------------------ model thread
+    def set_model_thread(self, on: bool, on_result: Callable[[], Any] | None = None) -> None:
+        """Step CPU element models on a worker thread (``on``; the GUI does) or on the
+        caller's thread (the default). ``on_result``: ``() -> None`` called on the worker
+        thread when a step finished (to wake the GUI thread, which then calls
+        :meth:`poll_model`; it must not block). GPU models always step on the thread
+        whose GL context they use."""
+        if self.model_worker is not None:
+            self.wait_for_model()
+            self.model_worker.close()
+            self.model_worker = None
+        if on:
+            self.model_worker = ModelWorker(on_result=on_result)
+
+    def wait_for_model(self) -> None:
+        """Wait for the worker's steps and show their result: the model is then in one
+        consistent state (snapshots, saves and scripts call this; nothing to wait for
+        without a worker)."""
+        if self.model_worker is not None:
+            self.model_worker.wait_idle()
+            self.family.poll()
+
+    @property
+    def model_busy(self) -> bool:
+        """Whether the model worker has steps running, pending or not shown yet."""
+        w = self.model_worker
+        return w is not None and (not w.idle or w.has_result)
+
+    def poll_model(self) -> bool:
+        """Show the newest state the model worker finished (the field goes to the warp
+        the renderer uploads, on this thread); whether anything changed."""
+        return self.model_worker is not None and self.family.poll()
 
     # ------------------------------------------------------------------ models
     def set_deformation(self, kind: str, **settings: Any) -> None:
@@ -524,9 +567,10 @@ class EditSession:
     def advance(self) -> bool:
         """One frame of the running model: ``steps_per_frame`` mass-spring steps or
         ``relax_steps`` ChainMail relaxation steps. Returns whether anything ran."""
+        shown = self.poll_model()
         if not self.running or (self.settled and self._drag is None):
-            return False
-        return self.family.advance()
+            return shown
+        return self.family.advance() or shown
 
     def single_step(self) -> None:
         """One step of the model even when paused."""
@@ -694,8 +738,12 @@ class EditSession:
         )
 
     def close(self) -> None:
-        """Release the model (GPU resources: call with the context current)."""
+        """Release the model (GPU resources: call with the context current) and stop
+        the model worker."""
         self._close_family()
+        if self.model_worker is not None:
+            self.model_worker.close()
+            self.model_worker = None
         self.scene.warps = []
 
 

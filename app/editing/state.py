@@ -158,6 +158,7 @@ class SessionHost(Protocol):
     selection: list[int]
     timings: dict[str, float]
     gl_scope: Callable[[], Any]
+    model_worker: Any
 
     @property
     def volume(self) -> Any: ...
@@ -180,6 +181,8 @@ class SessionHost(Protocol):
     def release_warp(self, warp: Warp) -> None: ...
 
     def sync_warps(self) -> None: ...
+
+    def wait_for_model(self) -> None: ...
 
     def set_deformation(self, kind: str, **settings: Any) -> None: ...
 

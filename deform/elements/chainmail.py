@@ -1050,7 +1050,7 @@ class ChainMail(ElementWarpMixin):
         """Keep a CPU warp current: only the box of displaced elements (every element
         that changed since the last reset lies in it) is rewritten, so a local drag on
         a large grid does not re-upload the whole field."""
-        if self._warp is None or self.backend != "cpu":
+        if self._warp is None or self.backend != "cpu" or self.defer_warp_updates:
             return
         box = self._box
         n = self.grid.count

@@ -613,7 +613,7 @@ class MassSpring(ElementWarpMixin):
         return spring_energy(self._model, self.positions(), self._solver.velocities())
 
     def _update_warp(self) -> None:
-        if self._warp is not None and self.backend == "cpu":
+        if self._warp is not None and self.backend == "cpu" and not self.defer_warp_updates:
             self._warp.update(self.displacements())
 
     # ------------------------------------------------------------------ serialisation

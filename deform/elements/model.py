@@ -80,6 +80,18 @@ class ElementWarpMixin:
     backend: str
     _warp: Any
     _solver: Any
+    #: while True, changes of a CPU model's field are not written into its warp: a
+    #: worker thread steps the model while the GUI thread draws the warp
+    #: (:mod:`voxwarp.editing.model_worker`); the GUI thread then writes the field the
+    #: worker hands it with :meth:`show_field`
+    defer_warp_updates: bool = False
+
+    def show_field(self, displacements: np.ndarray) -> None:
+        """Write ``(nx, ny, nz, 3)`` displacements (a copy of :meth:`displacements` taken
+        after a step) into this CPU model's warp, if it has one; the texture follows on
+        the next draw. Call it on the thread that draws the warp."""
+        if self._warp is not None and self.backend == "cpu":
+            self._warp.update(displacements)
 
     def displacements(self) -> np.ndarray:  # pragma: no cover - the models define it
         raise NotImplementedError

@@ -26,3 +26,33 @@ def test_bench_interactive_times_each_family_three_ways() -> None:
     assert "`voxwarp bench interactive --size 64x48`" in text
     assert "| lattice | node (1, 1, 2) of 3³ cells moved" in text
     assert text.count("\n| ") == 3  # the header and the 2 rows
+
+
+@pytest.mark.slow
+def test_the_scripted_drag_runs_both_paths_and_reports_them() -> None:
+    from voxwarp.bench.drag import DRAG_FRAMES, MODES, DragLoop, bench_drag, drag_markdown
+    from voxwarp.io.samples import load_sample
+    from voxwarp.render.offscreen import OffscreenRenderer
+    from voxwarp.scene import Scene
+
+    base = Scene(load_sample("fish", shape=(32, 32, 32)), jitter=False)
+    size = (64, 48)
+    with OffscreenRenderer(*size) as r:
+        rr = r.renderer
+
+        def draw(scene: Scene, scale: float, camera: object = None) -> None:
+            rr.draw_scaled(scene, r.framebuffer, None, camera, scale)
+
+        with r.current():
+            rows = bench_drag(DragLoop(rr, draw, size), base, 1, 4, ("chainmail",))
+    (row,) = rows
+    assert set(row.results) == set(MODES)
+    sync, thread = row.results["sync"][0], row.results["thread"][0]
+    assert sync.fresh_frames == DRAG_FRAMES  # on the drawing thread every frame moves it
+    assert 1 <= thread.fresh_frames <= DRAG_FRAMES
+    for result in (sync, thread):
+        assert result.fps > 0
+        assert result.release_s >= result.maps_s >= 0
+    text = drag_markdown(rows, size, 10.0)
+    assert "| chainmail | 4³ |" in text
+    assert text.count("\n| ") == 2  # the header and the row

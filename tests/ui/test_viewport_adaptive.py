@@ -65,3 +65,22 @@ def test_orbit_draws_coarse_frames_and_the_rest_frame_equals_the_uninteracted_on
     after = frame(window)
     assert vp.last_quality == FULL
     assert np.array_equal(after, rest)
+
+
+def test_the_live_slices_count_in_the_frame_budget(window: Any, qtbot: Any) -> None:
+    """The slice views redrawn after each interactive frame take part of the budget:
+    with their time over it, the next level is coarser however fast the 3D frame was."""
+    vp = window.viewport
+    start = QPoint(30, 30)
+    qtbot.mousePress(vp, Qt.MouseButton.LeftButton, pos=start)
+    qtbot.mouseMove(vp, pos=start + QPoint(40, 10))
+    try:
+        assert vp.interacting()  # the button is held and the mouse moved
+        vp.adaptive.level = 3  # a middle level: room both ways
+        vp.companion_s = 10.0  # the slices took 10 s (the budget is 1/15 s)
+        _next_frame(qtbot, vp)
+        assert vp.last_quality == LEVELS[3]
+        assert vp.adaptive.level == 4
+    finally:
+        vp.companion_s = 0.0
+        qtbot.mouseRelease(vp, Qt.MouseButton.LeftButton, pos=start + QPoint(40, 10))

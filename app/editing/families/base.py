@@ -172,6 +172,11 @@ class Family:
         """One frame of a running model; whether anything ran."""
         return False
 
+    def poll(self) -> bool:
+        """Show the newest state the session's model worker finished (GUI thread);
+        whether anything changed (nothing here: no model steps on a worker)."""
+        return False
+
     def reset(self) -> None:
         """Back to rest."""
 

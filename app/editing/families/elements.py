@@ -1,10 +1,19 @@
 """The offset-field families: a grid of elements run by a mass-spring model or by 3D
 ChainMail (Knoche 2008). The handles are the elements; dragging one holds it at its
-offset, the model moves the rest."""
+offset, the model moves the rest.
+
+With the session's model worker (:meth:`EditSession.set_model_thread
+<voxwarp.editing.session.EditSession.set_model_thread>`) a CPU model's moves and steps
+run as worker jobs (:func:`stepped`): the worker never writes the warp the renderer
+draws, it hands back copies of the positions and the field (:class:`SteppedState`),
+which :meth:`ElementFamily.poll` writes into the warp on the GUI thread.
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -37,6 +46,40 @@ from voxwarp.render.overlay import OverlayLayer, grid_edges
 
 if TYPE_CHECKING:
     from voxwarp.animation.tracks import Animation
+    from voxwarp.editing.model_worker import ModelWorker
+
+
+@dataclass(frozen=True)
+class SteppedState:
+    """A model's state after a worker job: copies of its ``(nx, ny, nz, 3)`` positions
+    and displacements (mm), whether it came to rest (None: not checked) and the ms per
+    model step (None: the job was a move)."""
+
+    positions: np.ndarray
+    displacements: np.ndarray
+    settled: bool | None = None
+    step_ms: float | None = None
+
+
+def stepped(
+    model: MassSpring | ChainMail,
+    run: Callable[[], Any],
+    steps: int = 0,
+    at_rest: Callable[[np.ndarray], bool | None] | None = None,
+) -> SteppedState:
+    """Run ``run()`` (a move or ``steps`` steps of ``model``) with the model's warp left
+    alone (another thread draws it), then ``at_rest(positions before)``; the state it
+    left."""
+    before = model.positions() if at_rest is not None else None
+    model.defer_warp_updates = True
+    try:
+        t = time.perf_counter()
+        run()
+        ms = (time.perf_counter() - t) * 1000 / steps if steps else None
+    finally:
+        model.defer_warp_updates = False
+    settled = at_rest(before) if at_rest is not None and before is not None else None
+    return SteppedState(model.positions(), model.displacements(), settled, ms)
 
 
 class ElementFamily(Family):
@@ -52,6 +95,8 @@ class ElementFamily(Family):
         super().__init__(session)
         self.model: MassSpring | ChainMail | None = None
         self._advances = 0
+        #: the newest state a model worker handed back (None: read the model)
+        self._shown: SteppedState | None = None
 
     # ---------------------------------------------------------------- life cycle
     def start(self) -> None:
@@ -130,9 +175,55 @@ class ElementFamily(Family):
         return self.model_class.from_dict(model, backend=self.session.backend, ctx=self._ctx())
 
     def close(self) -> None:
+        self._wait()
         if self.model is not None:
             self.model.close()
         self.model = None
+
+    # ---------------------------------------------------------------- the model worker
+    def _worker(self) -> ModelWorker | None:
+        """The session's model worker when it steps this model (a CPU one), else None."""
+        w = self.session.model_worker
+        return (
+            w if w is not None and self.model is not None and self.model.backend == "cpu" else None
+        )
+
+    def _wait(self) -> None:
+        """Before the GUI thread reads or changes the model itself: the worker's jobs
+        done and shown."""
+        if self._worker() is not None:
+            self.session.wait_for_model()
+        self._shown = None
+
+    def _state(self) -> SteppedState:
+        """The state shown: the worker's newest, or the model's (no job runs then)."""
+        if self._shown is None:
+            assert self.model is not None
+            self._shown = SteppedState(self.model.positions(), self.model.displacements())
+        return self._shown
+
+    def _post(self, key: str, run: Callable[[], Any], steps: int = 0, check: bool = False) -> None:
+        worker, model = self._worker(), self.model
+        assert worker is not None
+        assert model is not None
+        self._state()  # what handles() shows until the job is done
+        at_rest = (lambda before: self._at_rest_of(model, before)) if check else None
+        worker.post(key, lambda: stepped(model, run, steps, at_rest))
+
+    def poll(self) -> bool:
+        worker = self._worker()
+        state = worker.take() if worker is not None else None
+        if state is None or self.model is None:
+            return False
+        self._shown = state
+        self.model.show_field(state.displacements)
+        s = self.session
+        if state.step_ms is not None:
+            s.timings["step"] = state.step_ms
+        if state.settled is not None and s.drag_state is None:
+            s.settled = state.settled
+        s.handles_moved()
+        return True
 
     @classmethod
     def resume(cls, session: SessionHost, warp: Warp) -> Family | None:
@@ -158,6 +249,13 @@ class ElementFamily(Family):
         if self.model.backend == "gpu" and drag is not None:
             # never read the GPU back while dragging: targets of the held elements
             return drag.positions.copy()
+        if self._worker() is not None:
+            pts = self._state().positions.reshape(-1, 3).copy()
+            if drag is not None:  # the dragged elements follow the cursor at once
+                sel = np.asarray(drag.selection, dtype=int)
+                sel = sel[~self.model.grid.fixed.reshape(-1)[sel]]
+                pts[sel] = drag.positions[sel]
+            return pts
         with self.session.gl_scope():
             return self.model.positions().reshape(-1, 3)
 
@@ -178,6 +276,7 @@ class ElementFamily(Family):
             return
         if not indices:
             raise EditorError("select elements first (click them, or Shift+drag a rectangle)")
+        self._wait()
         ijk = np.array(np.unravel_index(np.asarray(indices, int), self.model.grid.shape)).T
         if fixed:
             self.model.fix(ijk)
@@ -197,7 +296,11 @@ class ElementFamily(Family):
         grid = self.model.grid
         ijk = np.array(np.unravel_index(selection, grid.shape)).T
         offsets = drag.start_offsets + delta
-        self.model.move(ijk, offsets)
+        if self._worker() is not None:  # the newest target wins
+            model = self.model
+            self._post("move", lambda: model.move(ijk, offsets))
+        else:
+            self.model.move(ijk, offsets)
         rest = grid.rest_positions.reshape(-1, 3)
         movable = ~grid.fixed.reshape(-1)[selection]
         drag.positions[selection[movable]] = rest[selection[movable]] + offsets[movable]
@@ -223,6 +326,11 @@ class ElementFamily(Family):
         n = self._steps()
         if model is None or n <= 0 or not self._may_run_now():
             return False
+        worker = self._worker()
+        if worker is not None:  # shown by poll() when done
+            if not worker.pending("advance"):
+                self._post("advance", lambda: self._run(n), n, check=s.drag_state is None)
+            return False
         self._advances += 1
         check = self._check_rest_now()
         before = self._positions_before(check)
@@ -244,7 +352,12 @@ class ElementFamily(Family):
     def _positions_before(self, check: bool) -> np.ndarray | None:
         return None
 
+    def _at_rest_of(self, model: Any, before: np.ndarray | None) -> bool | None:
+        """:meth:`_at_rest` of ``model`` (a worker job's check)."""
+        return self._at_rest(before) if model is self.model else None
+
     def reset(self) -> None:
+        self._wait()
         if self.model is not None:
             self.model.reset()
 
@@ -284,7 +397,11 @@ class ElementFamily(Family):
         return f"{grid.describe_anchors()}{anchored}; {margin_phrase(grid.margin)}"
 
     # ---------------------------------------------------------------- undo and animation
+    def before_save(self) -> None:
+        self._wait()
+
     def snapshot(self) -> dict[str, Any]:
+        self._wait()
         if self.model is None:
             return {}
         return {"model": self.model.to_dict(), "positions": self.model.positions()}
@@ -295,6 +412,7 @@ class ElementFamily(Family):
 
     def set_keys(self, animation: Animation, frame: int, interpolation: str) -> None:
         """The ``elements.drag`` key: held elements and offsets; others where they are."""
+        self._wait()
         if self.model is None:
             return
         held = {tuple(h["index"]): h["offset"] for h in self.model.to_dict().get("held", [])}
