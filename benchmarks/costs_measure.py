@@ -193,7 +193,7 @@ def _warp_row(kind: str) -> Callable[[Lab, str], dict[str, float]]:
 def vtk_per_pixel(lab: Lab, spec: str) -> dict[str, float]:
     """Undeformed unshaded dvr against VTK's fixed-point raycaster on the same array,
     transfer function, sample distance and camera: VTK ms per covered pixel over ours
-    (``per_pixel``) and VTK ms over ours (``raw``)."""
+    (``per_pixel``), VTK ms over ours (``raw``) and the shares of the image covered."""
     from benchmarks import vtk as bench_vtk
     from voxwarp.bench.render import covered_fraction
 
@@ -221,7 +221,14 @@ def vtk_per_pixel(lab: Lab, spec: str) -> dict[str, float]:
     ms = statistics.median(ours)
     raw = res.median_ms / ms
     per_pixel = raw * covered / vtk_covered if covered > 0 and vtk_covered > 0 else raw
-    return {"per_pixel": per_pixel, "raw": raw, "ms": ms, "vtk_ms": res.median_ms}
+    return {
+        "per_pixel": per_pixel,
+        "raw": raw,
+        "ms": ms,
+        "vtk_ms": res.median_ms,
+        "covered": covered,
+        "vtk_covered": vtk_covered,
+    }
 
 
 def _vtk_camera(scene: Any) -> Any:
