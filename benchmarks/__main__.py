@@ -32,6 +32,7 @@ COMMANDS: tuple[str, ...] = (
     "detj",
     "movie",
     "costs",
+    "readme",
     "all",
 )
 
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     from benchmarks.all import add_bench_all_parser
     from benchmarks.chainmail import add_bench_chainmail_parser
     from benchmarks.costs import add_bench_costs_parser
+    from benchmarks.costs_readme import add_bench_readme_parser
     from benchmarks.fields import add_bench_fields_parser
     from benchmarks.lattice import add_bench_lattice_parser
     from benchmarks.massspring import add_bench_massspring_parser
@@ -77,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_detj_parser(bsub)
     add_bench_movie_parser(bsub)
     add_bench_costs_parser(bsub)
+    add_bench_readme_parser(bsub)
     add_bench_all_parser(bsub)
     return p
 

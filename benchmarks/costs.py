@@ -206,14 +206,14 @@ def run_costs(
     from benchmarks.costs_tree import export_revision, resolve_revision
     from voxwarp.core.timing import load_average
 
+    commit = None if before is None else resolve_revision(ROOT, before)
     check_volumes(volumes)
     t0, load0 = time.perf_counter(), load_average()
     hw, machine = _machine()
     log(f"machine: {machine}; load average {load0:.1f}")
     with tempfile.TemporaryDirectory(prefix="voxwarp-costs-") as tmp:
         trees = []
-        if before is not None:
-            commit = resolve_revision(ROOT, before)
+        if before is not None and commit is not None:
             log(f"before: {before} ({commit[:10]}), exported to {tmp}")
             trees.append(("before", before, commit, export_revision(ROOT, commit, Path(tmp))))
         trees.append(("after", "the checkout", _checkout_commit(), ROOT))
