@@ -68,12 +68,16 @@ class Lab:
 
     def close(self) -> None:
         """Release the context and everything cached."""
+        big = self._cache.pop("big renderer", None)
+        if big is not None:
+            big.release()
         self._cache.clear()
         if self._r is not None:
             self._r.release()
             self._r = None
 
-    def _cached(self, key: Any, make: Callable[[], Any]) -> Any:
+    def cached(self, key: Any, make: Callable[[], Any]) -> Any:
+        """``make()``, made once per ``key`` for the worker's life."""
         if key not in self._cache:
             self._cache[key] = make()
         return self._cache[key]
@@ -102,7 +106,7 @@ class Lab:
             name = spec.split(":", 1)[1] if spec.startswith("sample:") else None
             return vol, (None if name is None else suggested_transfer_function(name))
 
-        return self._cached(("volume", spec), load)
+        return self.cached(("volume", spec), load)
 
     def scene(self, spec: str, **kwargs: Any) -> Any:
         """The 512² dvr scene of ``spec`` (perspective, the volume filling the image)."""
@@ -138,7 +142,7 @@ class Lab:
                 self.r.time_frames(scene, frames=1, warmup=2)
             return base, test
 
-        return self._cached(("warped", spec, kind), make)
+        return self.cached(("warped", spec, kind), make)
 
 
 # ---------------------------------------------------------------------- models
@@ -263,7 +267,7 @@ def wire_build(lab: Lab, spec: str) -> dict[str, float]:
             wd.build()  # untimed: kernels, buffers
         return builds
 
-    builds = lab._cached("wires", make)
+    builds = lab.cached("wires", make)
     out = {}
     for scale, key in ((2, "s_1_8"), (1, "s_1_1")):
         t = time.perf_counter()
@@ -287,8 +291,8 @@ def big_volume(lab: Lab, spec: str) -> dict[str, float]:
 
     edge = BIG_EDGE[lab.quick]
     vol, tf = lab.volume(spec)
-    big = lab._cached(("big", spec), lambda: resample(vol, edge))
-    r = lab._cached("big renderer", lambda: OffscreenRenderer(*lab.size, ctx=lab.r.ctx))
+    big = lab.cached(("big", spec), lambda: resample(vol, edge))
+    r = lab.cached("big renderer", lambda: OffscreenRenderer(*lab.size, ctx=lab.r.ctx))
     tiny = Scene(resample(vol, 8), mode="dvr", transfer_function=tf)
     gc.collect()
     r.render(tiny)  # compiles; evicts the textures of dead volumes

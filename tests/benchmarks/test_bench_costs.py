@@ -63,7 +63,7 @@ def test_quick_run_measures_every_line_before_and_after(tmp_path: Path) -> None:
                 assert math.isfinite(value), (line.key, key)
                 assert value > 0 or (key in MAY_BE_ZERO and value == 0), (line.key, key, value)
     table = md.read_text()
-    assert table == proc.stdout
+    assert table.strip() == proc.stdout.strip()
     assert f"before (`{before['commit'][:10]}`)" in table
     assert table.count("\n| ") == 1 + len(run["rows"])  # the header and one line a row
 
