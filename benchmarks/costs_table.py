@@ -19,7 +19,7 @@ from typing import Any
 class Line:
     """One line of the table: the measurement it shows, whether it is measured per
     volume, what it is, its target and the format of its numbers (``str.format``
-    fields are the measurement's keys)."""
+    fields are the measurement's keys; ``extra`` is left out when its keys are not)."""
 
     key: str
     measure: str
@@ -27,6 +27,8 @@ class Line:
     what: str
     target: str
     template: str
+    #: more numbers, shown after the template's when the run has them
+    extra: str = ""
 
 
 #: the table's lines, in order
@@ -71,6 +73,7 @@ LINES: tuple[Line, ...] = (
         "wire field on the MRI head upsampled to 256³, radius 40 mm: build at 1:8 / 1:1",
         "0.15 / 1.0 s",
         "{s_1_8:.2f} / {s_1_1:.2f} s",
+        " (CPU {cpu_1_8:.2f} / {cpu_1_1:.2f} s)",
     ),
     Line(
         "first_steady",
@@ -121,7 +124,10 @@ def cell(line: Line, result: dict[str, Any] | None) -> str:
     except (KeyError, ValueError):
         text = ""
     if text and all(math.isfinite(v) for v in values.values()):
-        return text
+        try:
+            return text + line.extra.format(**values)
+        except (KeyError, ValueError):
+            return text
     return f"failed: {result.get('error') or 'no numbers'}"
 
 

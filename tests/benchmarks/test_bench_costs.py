@@ -58,7 +58,7 @@ def test_quick_run_measures_every_line_before_and_after(tmp_path: Path) -> None:
                 continue
             assert not result["error"], (line.key, label, result["error"])
             median = result["median"]
-            assert _fields(line.template) <= median.keys(), line.key
+            assert _fields(line.template + line.extra) <= median.keys(), line.key
             for key, value in median.items():
                 assert math.isfinite(value), (line.key, key)
                 assert value > 0 or (key in MAY_BE_ZERO and value == 0), (line.key, key, value)
@@ -228,6 +228,8 @@ def _fake_run(quick: bool = False) -> dict[str, Any]:
         "covered": 0.25,
         "s_1_8": 0.2,
         "s_1_1": 1.5,
+        "cpu_1_8": 0.1,
+        "cpu_1_1": 0.7,
         "first_steady": 20.0,
         "memory": 4.8,
         "chainmail_fps": 3.0,
@@ -266,10 +268,17 @@ def test_markdown_table() -> None:
     assert "| 2.40x (1.60x raw) | 2.40x (1.60x raw) | ≥ 2.0x | 2.0–3.0 |" in text
     assert "| failed: AttributeError: old API | 3.0 / 2.0 fps |" in text
     assert "+4.8x its bytes" in text
-    assert "0.20 / 1.50 s" in text
+    assert "| 0.20 / 1.50 s (CPU 0.10 / 0.70 s) | 0.20 / 1.50 s (CPU 0.10 / 0.70 s) |" in text
     assert "″" in text  # the second volume's line does not repeat the what
     assert costs_table.QUICK_NOTE not in text
     assert costs_table.QUICK_NOTE in costs_table.markdown(_fake_run(quick=True))
+
+
+def test_cell_leaves_out_extra_numbers_the_run_lacks() -> None:
+    line = next(ln for ln in costs_table.LINES if ln.extra)
+    fields = _fields(line.template)
+    result = {"median": dict.fromkeys(fields, 1.0), "error": ""}
+    assert costs_table.cell(line, result) == line.template.format(**result["median"])
 
 
 def test_cell_without_numbers() -> None:
