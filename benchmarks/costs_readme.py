@@ -44,7 +44,8 @@ def volume_words(spec: str) -> str:
     return f"`{Path(spec).name}`"
 
 
-def _vtk_rows(run: dict[str, Any]) -> list[tuple[str, dict[str, float]]]:
+def _vtk_rows(run: dict[str, Any]) -> list[tuple[str, dict[str, float], list[float]]]:
+    """(volume, medians of the checkout's column, load averages) of each VTK line."""
     label = run["revisions"][-1]["label"]
     out = []
     for row in run["rows"]:
@@ -52,7 +53,7 @@ def _vtk_rows(run: dict[str, Any]) -> list[tuple[str, dict[str, float]]]:
             continue
         median = row["results"].get(label, {}).get("median", {})
         if {"per_pixel", "raw", "covered"} <= median.keys():
-            out.append((row["volume"], median))
+            out.append((row["volume"], median, list(row.get("load", []))))
     if not out:
         raise ReadmeError(
             "the run has no VTK numbers (VTK not installed?); run `python -m benchmarks costs`"
@@ -64,17 +65,20 @@ def _vtk_rows(run: dict[str, Any]) -> list[tuple[str, dict[str, float]]]:
 def paragraph(run: dict[str, Any]) -> str:
     """The paragraph of ``run`` (the JSON of ``python -m benchmarks costs``), without the
     markers."""
+    rows = _vtk_rows(run)
     quotes = [
         f"{m['per_pixel']:.1f}x on {volume_words(spec)} ({100 * m['covered']:.0f} % of the"
         f" image covered; {m['raw']:.1f}x per frame)"
-        for spec, m in _vtk_rows(run)
+        for spec, m, _ in rows
     ]
     listed = quotes[0] if len(quotes) == 1 else ", ".join(quotes[:-1]) + " and " + quotes[-1]
+    loads = [x for _, _, load in rows for x in load]
+    load = f", load average {min(loads):.0f}–{max(loads):.0f}" if loads else ""
     w, h = run["size"]
     return (
-        f"Against VTK's fixed-point CPU raycaster on the same array, transfer function, sample"
-        f" distance and camera ({run['machine']}; {w}x{h}, both unshaded, median of"
-        f" {run['repeats']} runs), undeformed `dvr` draws a covered pixel {listed} as fast."
+        f"Undeformed `dvr` at {w}x{h} is {listed} as fast per covered pixel as VTK's"
+        " fixed-point CPU raycaster on the same array, transfer function, sample distance and"
+        f" camera (both unshaded; {run['machine']}{load}; median of {run['repeats']} runs)."
         " The more of a volume is empty or transparent, the more empty-space skipping saves:"
         " a sparse scan gains more than a dense one. `python -m benchmarks costs --volume FILE`"
         " measures a scan of yours, with the cost of deforming it, before and after a change"
