@@ -32,6 +32,8 @@ COMMANDS: tuple[str, ...] = (
     "slices",
     "detj",
     "movie",
+    "costs",
+    "readme",
     "all",
 )
 
@@ -40,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m benchmarks`` (one sub-parser per benchmark)."""
     from benchmarks.all import add_bench_all_parser
     from benchmarks.chainmail import add_bench_chainmail_parser
+    from benchmarks.costs import add_bench_costs_parser
+    from benchmarks.costs_readme import add_bench_readme_parser
     from benchmarks.fields import add_bench_fields_parser
     from benchmarks.lattice import add_bench_lattice_parser
     from benchmarks.massspring import add_bench_massspring_parser
@@ -77,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_slices_parser(bsub)
     add_bench_detj_parser(bsub)
     add_bench_movie_parser(bsub)
+    add_bench_costs_parser(bsub)
+    add_bench_readme_parser(bsub)
     add_bench_all_parser(bsub)
     return p
 

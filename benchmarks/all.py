@@ -47,6 +47,7 @@ BENCHMARKS: tuple[str, ...] = (
     "support",
     "slices",
     "detj",
+    "costs",
 )
 #: seconds one benchmark may run before it is stopped (quick, full)
 TIMEOUT_S: tuple[float, float] = (240.0, 3600.0)
@@ -459,6 +460,21 @@ def run_detj(quick: bool) -> dict[str, Any]:
     return {"ratios": ratios, "issue": {}, "markdown": report.markdown(command)}
 
 
+def run_costs_table(quick: bool) -> dict[str, Any]:
+    """``costs`` on its default volumes, the checkout alone (``--before none``; 3 repeats,
+    with ``quick`` its own quick mode): the medians of every line."""
+    from benchmarks.costs import DEFAULT_VOLUMES, run_costs
+    from benchmarks.costs_table import markdown
+
+    command = "python -m benchmarks costs --before none " + ("--quick" if quick else "--repeats 3")
+    run = run_costs(DEFAULT_VOLUMES, repeats=1 if quick else 3, quick=quick, command=command)
+    ratios = {
+        f"{row['line']} {row['volume'] or ''}".strip(): row["results"]["after"]["median"]
+        for row in run["rows"]
+    }
+    return {"ratios": ratios, "issue": {}, "markdown": markdown(run)}
+
+
 #: benchmark name -> runner(quick) -> {"ratios", "issue", "markdown"}
 RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "startup": run_startup,
@@ -476,6 +492,7 @@ RUNNERS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "support": run_support,
     "slices": run_slices,
     "detj": run_detj,
+    "costs": run_costs_table,
 }
 
 
