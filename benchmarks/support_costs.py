@@ -70,7 +70,8 @@ _state: dict[str, Any] = {"variant": "current", "far": False}
 
 def _with_defines(original: Any) -> Any:
     def edit(src: str, defines: Sequence[str]) -> str:
-        if not any("LINEAR_PATH" in d for d in defines):  # every warped program
+        warped = "vec3 warp_chain(vec3 p)" in src and not any("LINEAR_PATH" in d for d in defines)
+        if warped:  # every raycast program with a warp chain
             for old, new in VARIANTS[_state["variant"]]:
                 if old not in src:
                     raise RuntimeError(f"variant {_state['variant']}: shader text changed")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.support_costs import VARIANTS, _with_defines
+from benchmarks.support_costs import VARIANTS, _state, _with_defines
 from voxwarp import shaders
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import compose_glsl
@@ -44,3 +44,10 @@ def test_variants_leave_straight_programs_alone() -> None:
     edit = _with_defines(lambda s, d: s)
     assert edit(src, ["#define LINEAR_PATH"]) == src
     assert edit(src, ["#define SUPPORT_MAP"]) == src  # "current": no edits
+    gradient = shaders.read("gradient.comp.glsl")  # no warp chain: never edited
+    _state["variant"] = "seed"
+    try:
+        assert edit(gradient, []) == gradient
+        assert edit(src, []) != src
+    finally:
+        _state["variant"] = "current"
