@@ -16,7 +16,9 @@ edits of the generated shader (throw-away programs, not what the app draws):
 * ``jacobian-v``: the offset field's Jacobian as ``I - grad v(p)``, v its baked
   inverse, by central differences (6 lookups; no second inverse, no matrix inverse);
 * ``no-chain``: the middle loop straight too (no chain code at all);
-* ``one-loop``: one straight loop for the whole ray (no chain, no phases).
+* ``one-loop``: one straight loop for the whole ray (no chain, no phases);
+* ``control``: ``current`` again, last in each round (how far identical programs
+  differ: the noise of the machine).
 
 The max difference (/255) to ``current`` says which variants change the image.
 """
@@ -65,6 +67,8 @@ _V = (
     + "    return mat3(1.0) - g;\n}\nmat3 w0_warp_jacobian_old(vec3 p) {"
 )
 VARIANTS["jacobian-v"] = [("mat3 w0_warp_jacobian(vec3 p) {", _V)]
+#: the shipped program again, timed last in each round: the noise of the interleaving
+VARIANTS["control"] = []
 _state: dict[str, Any] = {"variant": "current", "far": False}
 
 
