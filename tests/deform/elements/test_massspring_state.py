@@ -234,7 +234,8 @@ def test_bad_warp_settings() -> None:
     with pytest.raises(MassSpringError, match="inverse must be one of"):
         ms.warp(inverse="newton")
     with pytest.raises(MassSpringError, match="iterations"):
-        ms.warp(iterations=0)
+        ms.warp(iterations=-1)
+    assert ms.warp(inverse="baked", iterations=0).steps == 0  # the baked seed alone
     assert ms.warp(iterations=3).iterations == 3
     assert ms.warp().iterations == 3
 
