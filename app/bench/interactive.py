@@ -36,6 +36,7 @@ import copy
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -189,11 +190,7 @@ def bench_interactive(
     tf = suggested_transfer_function(DEFAULT_SAMPLE)
     with OffscreenRenderer(*size) as r:
         rr = r.renderer
-
-        def draw(scene: Scene, scale: float, camera: Any = None) -> None:
-            with r.current():
-                rr.draw_scaled(scene, r.framebuffer, None, camera, scale)
-                r.ctx.finish()
+        draw = _finished_draw(r)
 
         base = Scene(vol, transfer_function=tf, view=(-60, 20), zoom=1.2, jitter=False)
         draw(base, 1.0)
@@ -252,11 +249,7 @@ def bench_scripted_drag(
     base = Scene(vol, transfer_function=tf, view=(-60, 20), zoom=1.2, jitter=False)
     with OffscreenRenderer(*size) as r:
         rr = r.renderer
-
-        def draw(scene: Scene, scale: float, camera: Any = None) -> None:
-            with r.current():
-                rr.draw_scaled(scene, r.framebuffer, None, camera, scale)
-                r.ctx.finish()
+        draw = _finished_draw(r)
 
         with r.current():
             loop = DragLoop(rr, draw, size)
@@ -325,3 +318,15 @@ def add_bench_interactive_parser(bsub: Any) -> None:
     )
     p.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=cmd_bench_interactive)
+
+
+def _finished_draw(r: OffscreenRenderer) -> Callable[..., None]:
+    """``draw(scene, scale, camera=None)``: one frame of ``r`` at ``scale`` of its size,
+    waited for (``ctx.finish``), as the GUI's viewport draws it."""
+
+    def draw(scene: Scene, scale: float, camera: Any = None) -> None:
+        with r.current():
+            r.renderer.draw_scaled(scene, r.framebuffer, None, camera, scale)
+            r.ctx.finish()
+
+    return draw
