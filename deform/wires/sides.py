@@ -30,8 +30,9 @@ from voxwarp.deform.wires.geometry import (
     _CORNERS,
     _box_slices,
     _fade,
+    _frame_coords,
+    _refine_u,
     _region_centres,
-    _wire_local,
     side_tables,
 )
 from voxwarp.deform.wires.masks import PlaneMasks
@@ -72,6 +73,36 @@ class _SideJob:
             self.side,
             self.timings,
         )
+
+
+@dataclass
+class _Trim:
+    """The smooth-ends trim of one wire on one side (see :meth:`SidePasses._smooth_trim`):
+    a voxel beyond an end plane farther than ``cap`` mm along the wire is dropped, and
+    with ``core`` (the base side of a smooth wire) one farther than ``core`` mm from it."""
+
+    tab: WireTables
+    side: str
+    cap: float
+    core: float | None
+
+    def drop(self, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Which points ``p`` (world mm; ``u`` their nearest seed's) are dropped: the
+        arithmetic of :func:`_wire_local`, its x and y only where ``core`` needs them
+        and z only at the ends."""
+        points, frames, length = side_tables(self.tab, self.side)
+        u = _refine_u(points, frames[:, :, 2], length, u, p)
+        i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
+        ends = (u <= 0.0) | (u >= 1.0)
+        if self.core is not None:
+            x, y, z = _frame_coords(points, frames, i, p)
+            return (ends & (np.abs(z) > self.cap)) | (np.hypot(x, y) > self.core)
+        drop = np.zeros(len(u), dtype=bool)
+        at = np.flatnonzero(ends)
+        if len(at):
+            z = _frame_coords(points, frames, i[at], p[at], axes=(2,))[0]
+            drop[at] = np.abs(z) > self.cap
+        return drop
 
 
 class SidePasses(PlaneMasks):
@@ -277,17 +308,22 @@ class SidePasses(PlaneMasks):
             return out
         flat = np.flatnonzero(bits)
         wire_of = r_wire.ravel()[flat]
+        flat_u = r_u.reshape(-1)
         for wi, w in enumerate(self.wires):
             sel = flat[wire_of == wi]
             if len(sel) == 0:
                 continue
-            p = _region_centres(lo, h, region_lo, rshape, sel)
-            x, y, z, u = _wire_local(tables[wi], side, r_u.ravel()[sel], p)
-            ends = (u <= 0.0) | (u >= 1.0)
-            drop = ends & (np.abs(z) > self._end_cap() + w.end_reach(side))
-            if side == "base" and w.smooth:
-                core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
-                drop |= np.hypot(x, y) > core
+            cap = self._end_cap() + w.end_reach(side)
+            core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
+            trim = _Trim(tables[wi], side, cap, core if side == "base" and w.smooth else None)
+
+            def drops(chunk: np.ndarray, trim: _Trim = trim) -> np.ndarray:
+                return trim.drop(flat_u[chunk], _region_centres(lo, h, region_lo, rshape, chunk))
+
+            # chunks of voxels (small temporaries), a few threads (numpy releases the GIL)
+            chunks = [sel[a : a + FLAG_CHUNK] for a in range(0, len(sel), FLAG_CHUNK)]
+            with ThreadPoolExecutor(MASK_THREADS) as pool:
+                drop = np.concatenate(list(pool.map(drops, chunks)))
             bits.reshape(-1)[sel[drop]] = False
         return region_lo, rshape, r_wire, r_u, bits, count
 
@@ -317,16 +353,23 @@ class SidePasses(PlaneMasks):
         flat_wire = r_wire.ravel()
         known = ndimage.maximum_filter(swept, size=3, mode="constant")
         need = np.flatnonzero(known)
-        for wi, w in enumerate(self.wires):
-            if not w.fades:
-                continue
-            for start in range(0, len(need), FLAG_CHUNK):
-                chunk = need[start : start + FLAG_CHUNK]
-                sel = chunk[flat_wire[chunk] == wi]
-                if len(sel) == 0:
-                    continue
+        flat_u, flat_inner = r_u.reshape(-1), inner.reshape(-1)
+
+        def run(wi: int, chunk: np.ndarray) -> None:
+            sel = chunk[flat_wire[chunk] == wi]
+            if len(sel):
                 p = _region_centres(lo, h, region_lo, rshape, sel)
-                inner.reshape(-1)[sel] = _fade(w, tables[wi], r_u.ravel()[sel], p)
+                flat_inner[sel] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
+
+        # chunks of voxels, a few threads (numpy releases the GIL)
+        jobs = [
+            (wi, need[start : start + FLAG_CHUNK])
+            for wi, w in enumerate(self.wires)
+            if w.fades
+            for start in range(0, len(need), FLAG_CHUNK)
+        ]
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            list(pool.map(lambda job: run(*job), jobs))
         grid = (lo + (region_lo + 0.5) * h, h)
         faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
         weight[_box_slices(region_lo, rshape)] = inner

@@ -1,0 +1,125 @@
+"""The wire field build of another commit against this checkout's, in one process.
+
+``python scripts/wire_build_ab.py --before REV [--scales 2 1] [--repeats 5]``
+
+Loads ``deform/wires/{geometry,classify,masks,sides,build}.py`` as they were at ``REV``
+(``git show``) beside the current modules, builds the head case of ``python -m
+benchmarks wires --head`` (:data:`benchmarks.wires.HEAD_WIRE` on
+:func:`benchmarks.wires.head_volume`) with both, checks that the two fields are
+bit-identical (state, t, code, weight), then times the builds interleaved: medians of
+wall and CPU seconds (all threads of the process) per stage, with the 1-minute load
+average. For the before/after tables of ``docs/benchmarks.md`` on a shared machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import time
+import types
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+#: the modules loaded at the old commit, in import order
+OLD_MODULES = ("geometry", "classify", "masks", "sides", "build")
+
+
+def load_before(rev: str) -> Any:
+    """The ``WireDeformer`` class of commit ``rev`` (its build modules loaded from git,
+    the rest of the package shared with this checkout)."""
+    names = [f"voxwarp.deform.wires.{m}" for m in OLD_MODULES]
+    saved = {n: sys.modules.get(n) for n in names}
+    try:
+        for name, short in zip(names, OLD_MODULES, strict=True):
+            path = f"deform/wires/{short}.py"
+            src = subprocess.run(
+                ["git", "-C", str(ROOT), "show", f"{rev}:{path}"],
+                check=True,
+                capture_output=True,
+                text=True,
+            ).stdout
+            mod = types.ModuleType(name)
+            mod.__file__ = f"{rev}:{path}"
+            sys.modules[name] = mod
+            exec(compile(src, mod.__file__, "exec"), mod.__dict__)  # noqa: S102
+        return sys.modules[names[-1]].WireDeformer
+    finally:
+        for n, m in saved.items():
+            if m is not None:
+                sys.modules[n] = m
+
+
+def same_field(a: Any, b: Any) -> bool:
+    """Whether two built fields hold the same bits."""
+    for key in ("state", "t", "code", "weight"):
+        x, y = getattr(a, key), getattr(b, key)
+        if (x is None) != (y is None):
+            return False
+        if x is not None and not (x.dtype == y.dtype and np.array_equal(x, y)):
+            return False
+    return True
+
+
+def timed(wd: Any) -> dict[str, float]:
+    """One build's stage seconds, its wall ``total`` and ``cpu`` seconds."""
+    c0 = time.process_time()
+    t = dict(wd.build().timings)
+    t["cpu"] = time.process_time() - c0
+    t["load"] = float(Path("/proc/loadavg").read_text().split()[0])
+    return t
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--before", required=True, help="git revision of the old build")
+    p.add_argument("--scales", type=int, nargs="+", default=[2, 1])
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args(argv)
+
+    from benchmarks.wires import HEAD_WIRE, head_volume
+    from voxwarp.deform.wires.build import WireDeformer
+    from voxwarp.deform.wires.wire import Wire
+
+    before = load_before(args.before)
+    volume = head_volume()
+    keys = ("total", "cpu", "masks", "propagate", "flags", "store")
+    for scale in args.scales:
+        builds = {
+            "before": before(volume, [Wire(**HEAD_WIRE)], field_scale=scale),
+            "after": WireDeformer(volume, [Wire(**HEAD_WIRE)], field_scale=scale),
+        }
+        for wd in builds.values():
+            wd.build()  # untimed: kernels, buffers
+        ok = same_field(builds["before"].field, builds["after"].field)
+        print(f"1:{scale**3} field {builds['after'].stats.field_shape}: bit-identical={ok}")
+        runs: dict[str, list[dict[str, float]]] = {k: [] for k in builds}
+        for _ in range(args.repeats):
+            for name, wd in builds.items():
+                runs[name].append(timed(wd))
+        for name, rs in runs.items():
+            med = {k: statistics.median(r.get(k, 0.0) for r in rs) for k in keys}
+            loads = [r["load"] for r in rs]
+            print(
+                f"1:{scale**3} {name:6s} "
+                + " ".join(f"{k} {v:.3f}" for k, v in med.items())
+                + f" load {min(loads):.1f}-{max(loads):.1f}"
+            )
+        ratio = statistics.median(r["total"] for r in runs["after"]) / statistics.median(
+            r["total"] for r in runs["before"]
+        )
+        cpu = statistics.median(r["cpu"] for r in runs["after"]) / statistics.median(
+            r["cpu"] for r in runs["before"]
+        )
+        print(f"1:{scale**3} after/before: wall {ratio:.2f}x, cpu {cpu:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
