@@ -75,6 +75,22 @@ class _SideJob:
         )
 
 
+def _grow_one(bits: np.ndarray) -> np.ndarray:
+    """``bits`` grown by one voxel (a 3x3x3 maximum, nothing beyond the array), run over
+    the box of the set bits only (what ``ndimage.maximum_filter(bits, size=3,
+    mode="constant")`` gives, without filtering the empty rest)."""
+    out = np.zeros_like(bits)
+    box = []
+    for axis in range(3):
+        hit = np.flatnonzero(bits.any(axis=tuple(a for a in range(3) if a != axis)))
+        if len(hit) == 0:
+            return out
+        box.append(slice(max(int(hit[0]) - 1, 0), int(hit[-1]) + 2))
+    sub = tuple(box)
+    out[sub] = ndimage.maximum_filter(bits[sub], size=3, mode="constant")
+    return out
+
+
 @dataclass
 class _Trim:
     """The smooth-ends trim of one wire on one side (see :meth:`SidePasses._smooth_trim`):
@@ -351,7 +367,7 @@ class SidePasses(PlaneMasks):
         weight = np.ones(shape, dtype=np.float32, order="F")
         inner = np.ones(rshape, dtype=np.float32)
         flat_wire = r_wire.ravel()
-        known = ndimage.maximum_filter(swept, size=3, mode="constant")
+        known = _grow_one(swept)
         need = np.flatnonzero(known)
         flat_u, flat_inner = r_u.reshape(-1), inner.reshape(-1)
 
