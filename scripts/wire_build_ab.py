@@ -51,8 +51,10 @@ def load_before(rev: str) -> Any:
             exec(compile(src, mod.__file__, "exec"), mod.__dict__)
         return sys.modules[names[-1]].WireDeformer
     finally:
-        for n, m in saved.items():
-            if m is not None:
+        for n, m in saved.items():  # this checkout's modules again (or none yet)
+            if m is None:
+                sys.modules.pop(n, None)
+            else:
                 sys.modules[n] = m
 
 

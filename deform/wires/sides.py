@@ -364,7 +364,6 @@ class SidePasses(PlaneMasks):
         voxels the seams faded."""
         if not any(w.fades for w in self.wires):
             return None, 0
-        weight = np.ones(shape, dtype=np.float32, order="F")
         inner = np.ones(rshape, dtype=np.float32)
         flat_wire = r_wire.ravel()
         known = _grow_one(swept)
@@ -388,6 +387,9 @@ class SidePasses(PlaneMasks):
             list(pool.map(lambda job: run(*job), jobs))
         grid = (lo + (region_lo + 0.5) * h, h)
         faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
+        if tuple(rshape) == tuple(shape):  # the region is the field (no ones to fill first)
+            return np.asfortranarray(inner), faded
+        weight = np.ones(shape, dtype=np.float32, order="F")
         weight[_box_slices(region_lo, rshape)] = inner
         return weight, faded
 
