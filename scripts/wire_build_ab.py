@@ -1,6 +1,6 @@
 """The wire field build of another commit against this checkout's, in one process.
 
-``python scripts/wire_build_ab.py --before REV [--scales 2 1] [--repeats 5]``
+``python scripts/wire_build_ab.py --before REV [--scales 2 1] [--repeats 5] [--edit]``
 
 Loads ``deform/wires/{geometry,classify,masks,sides,build}.py`` as they were at ``REV``
 (``git show``) beside the current modules, builds the head case of ``python -m
@@ -8,7 +8,9 @@ benchmarks wires --head`` (:data:`benchmarks.wires.HEAD_WIRE` on
 :func:`benchmarks.wires.head_volume`) with both, checks that the two fields are
 bit-identical (state, t, code, weight), then times the builds interleaved: medians of
 wall and CPU seconds (all threads of the process) per stage, with the 1-minute load
-average. For the before/after tables of ``docs/benchmarks.md`` on a shared machine.
+average. ``--edit`` also times this checkout's rebuild after a drag of the deformed wire
+against a plain rebuild. For the before/after tables of ``docs/benchmarks.md`` on a
+shared machine.
 """
 
 from __future__ import annotations
@@ -82,11 +84,39 @@ def timed(wd: Any) -> dict[str, float]:
     return t
 
 
+def bench_edit(volume: Any, scale: int, repeats: int) -> None:
+    """Time a rebuild against a rebuild after a drag of the deformed wire (its last
+    control point moved 2 or 4 mm sideways), interleaved, this checkout's build."""
+    from benchmarks.wires import HEAD_WIRE
+    from voxwarp.deform.wires.build import WireDeformer
+    from voxwarp.deform.wires.curves import Curve
+    from voxwarp.deform.wires.wire import Wire
+
+    wd = WireDeformer(volume, [Wire(**HEAD_WIRE)], field_scale=scale)
+    wd.build()
+    tip = np.asarray(HEAD_WIRE["modified"], dtype=np.float64)
+    runs: dict[str, list[dict[str, float]]] = {"rebuild": [], "edit": []}
+    for r in range(repeats):
+        for name, rs in runs.items():
+            if name == "edit":
+                moved = tip.copy()
+                moved[-1, 0] += 2.0 * (1 + r % 2)
+                wd.wires[0].modified = Curve(moved, HEAD_WIRE["kind"])
+            rs.append(timed(wd))
+    for name, rs in runs.items():
+        print(
+            f"1:{scale**3} {name:8s} total {statistics.median(r['total'] for r in rs):.3f}"
+            f" cpu {statistics.median(r['cpu'] for r in rs):.3f}"
+            f" load {min(r['load'] for r in rs):.1f}-{max(r['load'] for r in rs):.1f}"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--before", required=True, help="git revision of the old build")
     p.add_argument("--scales", type=int, nargs="+", default=[2, 1])
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--edit", action="store_true", help="also time rebuilds after a wire drag")
     args = p.parse_args(argv)
 
     from benchmarks.wires import HEAD_WIRE, head_volume
@@ -124,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
             r["cpu"] for r in runs["before"]
         )
         print(f"1:{scale**3} after/before: wall {ratio:.2f}x, cpu {cpu:.2f}x")
+        if args.edit:
+            bench_edit(volume, scale, args.repeats)
     return 0
 
 
