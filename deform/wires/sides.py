@@ -325,22 +325,23 @@ class SidePasses(PlaneMasks):
         flat = np.flatnonzero(bits)
         wire_of = r_wire.ravel()[flat]
         flat_u = r_u.reshape(-1)
+        jobs = []  # (the wire's trim, a chunk of its voxels): small temporaries
         for wi, w in enumerate(self.wires):
             sel = flat[wire_of == wi]
-            if len(sel) == 0:
-                continue
             cap = self._end_cap() + w.end_reach(side)
             core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
             trim = _Trim(tables[wi], side, cap, core if side == "base" and w.smooth else None)
+            jobs += [(trim, sel[a : a + FLAG_CHUNK]) for a in range(0, len(sel), FLAG_CHUNK)]
 
-            def drops(chunk: np.ndarray, trim: _Trim = trim) -> np.ndarray:
-                return trim.drop(flat_u[chunk], _region_centres(lo, h, region_lo, rshape, chunk))
+        def dropped(job: tuple[_Trim, np.ndarray]) -> np.ndarray:
+            trim, chunk = job
+            p = _region_centres(lo, h, region_lo, rshape, chunk)
+            return chunk[trim.drop(flat_u[chunk], p)]
 
-            # chunks of voxels (small temporaries), a few threads (numpy releases the GIL)
-            chunks = [sel[a : a + FLAG_CHUNK] for a in range(0, len(sel), FLAG_CHUNK)]
-            with ThreadPoolExecutor(MASK_THREADS) as pool:
-                drop = np.concatenate(list(pool.map(drops, chunks)))
-            bits.reshape(-1)[sel[drop]] = False
+        # a few threads (numpy releases the GIL); no chunk reads the bits it clears
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            for gone in pool.map(dropped, jobs):
+                bits.reshape(-1)[gone] = False
         return region_lo, rshape, r_wire, r_u, bits, count
 
     def _weights(
