@@ -138,14 +138,16 @@ static void classify_one(
     out_flag[v] = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
 }
 
-/* One work-item per line along the contiguous axis (few work-groups: PoCL pays per
-   work-group). */
+/* One work-item per line along the middle axis (few work-groups: PoCL pays per
+   work-group); neighbouring work-items take neighbouring voxels of the contiguous
+   axis, so their loads and stores are contiguous (vector lanes on a CPU, coalesced on
+   a GPU). */
 __kernel void classify(
 @PARAMS@)
 {
-    const int j = get_global_id(0), i = get_global_id(1);
-    if (j >= n1 || i >= n0) return;
-    for (int k = 0; k < n2; k++)
+    const int k = get_global_id(0), i = get_global_id(1);
+    if (k >= n2 || i >= n0) return;
+    for (int j = 0; j < n1; j++)
         classify_one(@ARGS@, k, j, i);
 }
 """
@@ -337,9 +339,9 @@ def classify(
         i32(inp.refine_steps),
         *bufs,
     ]
-    n0, n1, _ = inp.rshape
+    n0, _, n2 = inp.rshape
     lx = 16  # PoCL picks huge work-groups by itself (see voxwarp.deform.wires.propagation)
-    kernel(queue, ((n1 + lx - 1) // lx * lx, n0), (lx, 1), *args)  # type: ignore[operator]
+    kernel(queue, ((n2 + lx - 1) // lx * lx, n0), (lx, 1), *args)  # type: ignore[operator]
     for host, dev in zip((out_wire, out_u, out_flag), bufs, strict=True):
         cl.enqueue_copy(queue, host, dev, is_blocking=False)
     queue.finish()

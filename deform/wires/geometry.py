@@ -58,14 +58,22 @@ def _wire_local(
     points, frames, length = side_tables(tab, side)
     u = _refine_u(points, frames[:, :, 2], length, u, p)
     i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
+    x, y, z = _frame_coords(points, frames, i, p)
+    return x, y, z, u
+
+
+def _frame_coords(
+    points: np.ndarray,
+    frames: np.ndarray,
+    i: np.ndarray,
+    p: np.ndarray,
+    axes: tuple[int, ...] = (0, 1, 2),
+) -> tuple[np.ndarray, ...]:
+    """Coordinates of points p along ``axes`` of the frames at table entries ``i``
+    (x, y, z for the default axes)."""
     d = p - points[i]
     f = frames[i]
-    return (
-        np.einsum("ni,ni->n", d, f[:, :, 0]),
-        np.einsum("ni,ni->n", d, f[:, :, 1]),
-        np.einsum("ni,ni->n", d, f[:, :, 2]),
-        u,
-    )
+    return tuple(np.einsum("ni,ni->n", d, f[:, :, a]) for a in axes)
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:

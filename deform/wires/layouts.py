@@ -309,9 +309,11 @@ def store_field(
     if layout == "float":
         state = np.zeros(shape, dtype=np.uint8, order="F")
         state[b_region] = vacated
-        np.copyto(state[region], (2 + r_wire).astype(np.uint8), where=swept)
+        # into the field's (Fortran) boxes without full-size temporaries of the region
+        ids = np.add(r_wire, 2, out=np.empty(rshape, dtype=np.uint8), casting="unsafe")
+        np.copyto(state[region], ids, where=swept)
         tf = np.zeros(shape, dtype=np.float32, order="F")
-        tf[region] = r_u * tscale
+        np.multiply(r_u, tscale, out=tf[region])
         return WireField(lo, h, shape, "float", state, tf, None, tables, region_lo, rshape)
     code = np.zeros(shape, dtype=np.uint16, order="F")
     if layout == "packed":

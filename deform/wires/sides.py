@@ -30,8 +30,9 @@ from voxwarp.deform.wires.geometry import (
     _CORNERS,
     _box_slices,
     _fade,
+    _frame_coords,
+    _refine_u,
     _region_centres,
-    _wire_local,
     side_tables,
 )
 from voxwarp.deform.wires.masks import PlaneMasks
@@ -72,6 +73,52 @@ class _SideJob:
             self.side,
             self.timings,
         )
+
+
+def _grow_one(bits: np.ndarray) -> np.ndarray:
+    """``bits`` grown by one voxel (a 3x3x3 maximum, nothing beyond the array), run over
+    the box of the set bits only (what ``ndimage.maximum_filter(bits, size=3,
+    mode="constant")`` gives, without filtering the empty rest)."""
+    out = np.zeros_like(bits)
+    box = []
+    for axis in range(3):
+        hit = np.flatnonzero(bits.any(axis=tuple(a for a in range(3) if a != axis)))
+        if len(hit) == 0:
+            return out
+        box.append(slice(max(int(hit[0]) - 1, 0), int(hit[-1]) + 2))
+    sub = tuple(box)
+    out[sub] = ndimage.maximum_filter(bits[sub], size=3, mode="constant")
+    return out
+
+
+@dataclass
+class _Trim:
+    """The smooth-ends trim of one wire on one side (see :meth:`SidePasses._smooth_trim`):
+    a voxel beyond an end plane farther than ``cap`` mm along the wire is dropped, and
+    with ``core`` (the base side of a smooth wire) one farther than ``core`` mm from it."""
+
+    tab: WireTables
+    side: str
+    cap: float
+    core: float | None
+
+    def drop(self, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Which points ``p`` (world mm; ``u`` their nearest seed's) are dropped: the
+        arithmetic of :func:`_wire_local`, its x and y only where ``core`` needs them
+        and z only at the ends."""
+        points, frames, length = side_tables(self.tab, self.side)
+        u = _refine_u(points, frames[:, :, 2], length, u, p)
+        i = np.rint(u * (LUT_SIZE - 1)).astype(np.int64)
+        ends = (u <= 0.0) | (u >= 1.0)
+        if self.core is not None:
+            x, y, z = _frame_coords(points, frames, i, p)
+            return (ends & (np.abs(z) > self.cap)) | (np.hypot(x, y) > self.core)
+        drop = np.zeros(len(u), dtype=bool)
+        at = np.flatnonzero(ends)
+        if len(at):
+            z = _frame_coords(points, frames, i[at], p[at], axes=(2,))[0]
+            drop[at] = np.abs(z) > self.cap
+        return drop
 
 
 class SidePasses(PlaneMasks):
@@ -277,18 +324,24 @@ class SidePasses(PlaneMasks):
             return out
         flat = np.flatnonzero(bits)
         wire_of = r_wire.ravel()[flat]
+        flat_u = r_u.reshape(-1)
+        jobs = []  # (the wire's trim, a chunk of its voxels): small temporaries
         for wi, w in enumerate(self.wires):
             sel = flat[wire_of == wi]
-            if len(sel) == 0:
-                continue
-            p = _region_centres(lo, h, region_lo, rshape, sel)
-            x, y, z, u = _wire_local(tables[wi], side, r_u.ravel()[sel], p)
-            ends = (u <= 0.0) | (u >= 1.0)
-            drop = ends & (np.abs(z) > self._end_cap() + w.end_reach(side))
-            if side == "base" and w.smooth:
-                core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
-                drop |= np.hypot(x, y) > core
-            bits.reshape(-1)[sel[drop]] = False
+            cap = self._end_cap() + w.end_reach(side)
+            core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
+            trim = _Trim(tables[wi], side, cap, core if side == "base" and w.smooth else None)
+            jobs += [(trim, sel[a : a + FLAG_CHUNK]) for a in range(0, len(sel), FLAG_CHUNK)]
+
+        def dropped(job: tuple[_Trim, np.ndarray]) -> np.ndarray:
+            trim, chunk = job
+            p = _region_centres(lo, h, region_lo, rshape, chunk)
+            return chunk[trim.drop(flat_u[chunk], p)]
+
+        # a few threads (numpy releases the GIL); no chunk reads the bits it clears
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            for gone in pool.map(dropped, jobs):
+                bits.reshape(-1)[gone] = False
         return region_lo, rshape, r_wire, r_u, bits, count
 
     def _weights(
@@ -312,23 +365,32 @@ class SidePasses(PlaneMasks):
         voxels the seams faded."""
         if not any(w.fades for w in self.wires):
             return None, 0
-        weight = np.ones(shape, dtype=np.float32, order="F")
         inner = np.ones(rshape, dtype=np.float32)
         flat_wire = r_wire.ravel()
-        known = ndimage.maximum_filter(swept, size=3, mode="constant")
+        known = _grow_one(swept)
         need = np.flatnonzero(known)
-        for wi, w in enumerate(self.wires):
-            if not w.fades:
-                continue
-            for start in range(0, len(need), FLAG_CHUNK):
-                chunk = need[start : start + FLAG_CHUNK]
-                sel = chunk[flat_wire[chunk] == wi]
-                if len(sel) == 0:
-                    continue
+        flat_u, flat_inner = r_u.reshape(-1), inner.reshape(-1)
+
+        def run(wi: int, chunk: np.ndarray) -> None:
+            sel = chunk[flat_wire[chunk] == wi]
+            if len(sel):
                 p = _region_centres(lo, h, region_lo, rshape, sel)
-                inner.reshape(-1)[sel] = _fade(w, tables[wi], r_u.ravel()[sel], p)
+                flat_inner[sel] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
+
+        # chunks of voxels, a few threads (numpy releases the GIL)
+        jobs = [
+            (wi, need[start : start + FLAG_CHUNK])
+            for wi, w in enumerate(self.wires)
+            if w.fades
+            for start in range(0, len(need), FLAG_CHUNK)
+        ]
+        with ThreadPoolExecutor(MASK_THREADS) as pool:
+            list(pool.map(lambda job: run(*job), jobs))
         grid = (lo + (region_lo + 0.5) * h, h)
         faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
+        if tuple(rshape) == tuple(shape):  # the region is the field (no ones to fill first)
+            return np.asfortranarray(inner), faded
+        weight = np.ones(shape, dtype=np.float32, order="F")
         weight[_box_slices(region_lo, rshape)] = inner
         return weight, faded
 

@@ -14,6 +14,8 @@ device the one-pass classification must equal the numpy one after the same propa
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.wires.build import WireDeformer
 from voxwarp.deform.wires.masks import _fill_holes_in_planes
 from voxwarp.deform.wires.propagation import opencl_available
+from voxwarp.deform.wires.sides import _grow_one
 from voxwarp.deform.wires.wire import Wire
 
 REFERENCE = Path(__file__).parent / "data" / "wire_field_reference.npz"
@@ -146,3 +149,63 @@ def test_plane_hole_fill_equals_scipy_fill_holes() -> None:
         got = _fill_holes_in_planes(mask)
         assert (got != mask).any() or density < 0.5  # something was filled
         np.testing.assert_array_equal(got, want)
+
+
+SMOOTH_DIGESTS = Path(__file__).parent / "data" / "wire_field_smooth_digests.json"
+
+
+def smooth_variant(kind: str) -> list[Wire]:
+    """The two wires of :func:`wires` with smooth ends (``"smoothends"``), smooth ends
+    and sides (``"smoothsides"``), the first with smooth ends only (``"mixed"``), or
+    the second alone with smooth ends (``"single"``: its region is smaller than the
+    field)."""
+    if kind == "single":
+        return smooth_variant("smoothends")[1:]
+    out = []
+    for w in wires():
+        d = w.to_dict()
+        if kind in ("smoothends", "smoothsides") or (kind == "mixed" and not out):
+            d["ends"] = "smooth"
+        if kind == "smoothsides":
+            d["sides"] = "smooth"
+        out.append(Wire.from_dict(d))
+    return out
+
+
+def digest(a: np.ndarray) -> str:
+    shape = "x".join(map(str, a.shape))
+    return f"{a.dtype.str}:{shape}:" + hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["scipy", "opencl"])
+def test_smooth_trim_and_weights_give_the_reference_bits(backend: str) -> None:
+    # oracle: SHA-256 of the float fields (state, t, weight) built by commit 6030720,
+    # before the smooth-ends trim and the fade weights ran in chunks on threads
+    # (regenerate with scripts/wire_build_ab.py's load_before, never with new code)
+    if backend == "opencl":
+        if not opencl_available():
+            pytest.skip("no OpenCL platform")
+        if "Portable Computing Language" not in _device().platform.name:
+            pytest.skip("reference propagated on PoCL; this OpenCL device may break ties otherwise")
+    want = json.loads(SMOOTH_DIGESTS.read_text())["digests"]
+    checked = 0
+    for kind in ("smoothends", "smoothsides", "mixed", "single"):
+        for scale in (1, 2):
+            wd = WireDeformer(volume(), smooth_variant(kind), field_scale=scale, backend=backend)
+            wd.build()
+            key = f"{kind}_{backend}_s{scale}_float"
+            for name in ("state", "t", "weight"):
+                assert digest(getattr(wd.field, name)) == want[f"{key}_{name}"], (key, name)
+                checked += 1
+    assert checked == 24
+
+
+def test_grow_one_equals_the_maximum_filter() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(100):
+        bits = np.zeros(tuple(rng.integers(1, 12, 3)), dtype=bool)
+        for _ in range(int(rng.integers(0, 6))):
+            bits[tuple(rng.integers(0, n) for n in bits.shape)] = True
+        want = ndimage.maximum_filter(bits, size=3, mode="constant")
+        np.testing.assert_array_equal(_grow_one(bits), want)
