@@ -30,6 +30,12 @@ from voxwarp.scene import Scene
 CYCLES = 100
 
 
+@pytest.fixture(autouse=True)
+def _pool_on(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests are about the context pool, opt-in (voxwarp.render.context_pool)."""
+    monkeypatch.setenv("VOXWARP_CONTEXT_POOL", "1")
+
+
 def _volume() -> Volume:
     rng = np.random.default_rng(3)
     return Volume((rng.random((12, 10, 8)) * 100).astype(np.float32), spacing=(1.0, 1.0, 1.0))
