@@ -62,18 +62,6 @@ def _forget_after_fork() -> None:
 os.register_at_fork(after_in_child=_forget_after_fork)
 
 
-#: Environment variable that turns the pool on for renderers made without ``ctx=``.
-POOL_ENV = "VOXWARP_CONTEXT_POOL"
-
-
-def enabled() -> bool:
-    """Whether ``OffscreenRenderer()`` leases a pooled context (``VOXWARP_CONTEXT_POOL=1``)
-    instead of making its own. Off by default: a renderer on a reused context drew black
-    frames after some sequences of earlier renderers (GL state left on the context, not
-    yet found), so the pool is opt-in until that is fixed."""
-    return os.environ.get(POOL_ENV, "0").strip() == "1"
-
-
 def acquire() -> Any:
     """This thread's pooled context, with one more lease: the one its open renderers
     share, else a free one, else a new one (:func:`create_context`'s error if none can

@@ -16,7 +16,7 @@ from voxwarp.core.slice_plane import SlicePlane
 from voxwarp.core.warp_grid import MIN_CELL_PX, nice_spacing
 from voxwarp.errors import RenderError
 from voxwarp.render import context_pool
-from voxwarp.render.context import create_context, egl_current, egl_restore
+from voxwarp.render.context import egl_current, egl_restore
 from voxwarp.render.inline_image import RenderedImage, rendered
 from voxwarp.render.jacobian_overlay import (
     DEFAULT_OPACITY,
@@ -57,12 +57,8 @@ class OffscreenRenderer:
             raise RenderError(f"image size must be 1..16384 pixels per side; got {width}x{height}")
         if dtype not in ("u1", "f4"):
             raise RenderError(f"dtype must be 'u1' or 'f4'; got {dtype!r}")
-        self._pooled = ctx is None and context_pool.enabled()
-        self._owned = ctx is None and not self._pooled
-        if self._pooled:
-            self.ctx = context_pool.acquire()
-        else:
-            self.ctx = create_context() if ctx is None else ctx
+        self._pooled = ctx is None
+        self.ctx = context_pool.acquire() if ctx is None else ctx
         self.size = (int(width), int(height))
         self.dtype = dtype
         self._gl_dtype = "f1" if dtype == "u1" else "f4"
@@ -75,27 +71,24 @@ class OffscreenRenderer:
         except BaseException:
             if self._pooled:
                 context_pool.give_back(self.ctx)
-            elif self._owned:
-                self.ctx.release()
             raise
         self._released = False
 
     @contextlib.contextmanager
     def current(self) -> Iterator[None]:
         """A block with this renderer's context current and the previous one restored
-        after (a context passed in is the caller's to make current): for GPU work beside
-        :meth:`render`, such as an edit session's ``gl_scope``."""
+        after (a context passed in too: several renderers may share one, and another
+        context may be current when they draw): for GPU work beside :meth:`render`, such
+        as an edit session's ``gl_scope``."""
         if getattr(self, "_released", False):
             raise RenderError(
                 "this OffscreenRenderer is closed (released, or its with block has ended):"
                 " use it inside the block, or make a new one"
             )
-        if not (self._pooled or self._owned):
-            yield
-            return
         saved = egl_current()
         self.ctx.mglo.__enter__()  # eglMakeCurrent(this context)
-        context_pool.collect(self.ctx)  # what was dropped unreleased since
+        if self._pooled:
+            context_pool.collect(self.ctx)  # what was dropped unreleased since
         try:
             yield
         finally:
@@ -291,8 +284,6 @@ class OffscreenRenderer:
             self._released = True
             if self._pooled:
                 context_pool.give_back(self.ctx)
-            elif self._owned:
-                self.ctx.release()
 
     def __enter__(self) -> OffscreenRenderer:
         return self

@@ -30,12 +30,6 @@ from voxwarp.scene import Scene
 CYCLES = 100
 
 
-@pytest.fixture(autouse=True)
-def _pool_on(monkeypatch: pytest.MonkeyPatch) -> None:
-    """These tests are about the context pool, opt-in (voxwarp.render.context_pool)."""
-    monkeypatch.setenv("VOXWARP_CONTEXT_POOL", "1")
-
-
 def _volume() -> Volume:
     rng = np.random.default_rng(3)
     return Volume((rng.random((12, 10, 8)) * 100).astype(np.float32), spacing=(1.0, 1.0, 1.0))
@@ -154,6 +148,29 @@ def test_the_callers_context_stays_current(gl_ctx: Any) -> None:
         r.render(Scene(_volume(), mode="mip"))
         assert egl_current() == saved
     assert egl_current() == saved
+
+
+@pytest.mark.timeout(60)
+def test_a_renderer_given_a_context_draws_on_it_whatever_is_current(gl_ctx: Any) -> None:
+    """Renderers sharing one context (``ctx=``) make it current to draw, so another
+    context being current (here the session's) changes nothing. Before: the sharing
+    renderer drew on whatever context was current, black frames and GL errors there."""
+    vol = _volume()
+    scene = Scene(vol, mode="mip", warps=[_warp(vol)])
+    with OffscreenRenderer(24, 24) as owner:
+        expected = np.asarray(owner.render(scene))
+        sharing = OffscreenRenderer(24, 24, ctx=owner.ctx)
+        try:
+            gl_ctx.mglo.__enter__()  # another context current between the draws
+            first = np.asarray(sharing.render(scene))
+            gl_ctx.mglo.__enter__()
+            second = np.asarray(sharing.render(scene))
+        finally:
+            sharing.release()
+    assert expected[..., :3].max() > 0
+    np.testing.assert_array_equal(first, expected)
+    np.testing.assert_array_equal(second, expected)
+    assert gl_ctx.error == "GL_NO_ERROR"
 
 
 def _lattice(volume: Volume) -> Any:

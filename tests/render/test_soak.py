@@ -47,12 +47,6 @@ RSS_SLOPE_KB = 20.0
 SIZE = 24
 
 
-@pytest.fixture(autouse=True)
-def _pool_on(monkeypatch: pytest.MonkeyPatch) -> None:
-    """These tests are about the context pool, opt-in (voxwarp.render.context_pool)."""
-    monkeypatch.setenv("VOXWARP_CONTEXT_POOL", "1")
-
-
 def _warp(volume: Volume, seed: int) -> OffsetFieldWarp:
     lo, hi = volume.bounds
     u = np.random.default_rng(seed).normal(0.0, 0.8, (3, 3, 3, 3))
