@@ -238,18 +238,7 @@ def vtk_per_pixel(lab: Lab, spec: str) -> dict[str, float]:
 def _vtk_camera(scene: Any) -> Any:
     from benchmarks import vtk as bench_vtk
 
-    cam = scene.resolved_camera()
-    near, far = cam.near_far()
-    return bench_vtk.CameraSpec(
-        position=tuple(cam.eye),
-        focal_point=tuple(cam.center),
-        view_up=tuple(cam.rotation[:, 1]),
-        view_angle_deg=cam.fov,
-        parallel=False,
-        parallel_scale=cam.ortho_height / 2,
-        near=near,
-        far=far,
-    )
+    return bench_vtk.camera_spec(scene.resolved_camera())
 
 
 # ---------------------------------------------------------------------- wire field

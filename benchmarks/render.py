@@ -51,17 +51,7 @@ def vtk_rows(
             )
         log("VTK not installed: VTK rows skipped (pip install '.[bench]')")
         return
-    near, far = cam.near_far()
-    spec = bench_vtk.CameraSpec(
-        position=tuple(cam.eye),
-        focal_point=tuple(cam.center),
-        view_up=tuple(cam.rotation[:, 1]),
-        view_angle_deg=cam.fov,
-        parallel=False,
-        parallel_scale=cam.ortho_height / 2,
-        near=near,
-        far=far,
-    )
+    spec = bench_vtk.camera_spec(cam)
     for mapper, name in names.items():
         for m, scene in scenes.items():
             try:

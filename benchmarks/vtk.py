@@ -87,6 +87,22 @@ class CameraSpec:
     far: float
 
 
+def camera_spec(cam: Any) -> CameraSpec:
+    """A voxwarp perspective :class:`~voxwarp.core.camera.Camera` in VTK's terms (its
+    near and far planes included), so both raycasters see the same view."""
+    near, far = cam.near_far()
+    return CameraSpec(
+        position=tuple(cam.eye),
+        focal_point=tuple(cam.center),
+        view_up=tuple(cam.rotation[:, 1]),
+        view_angle_deg=cam.fov,
+        parallel=False,
+        parallel_scale=cam.ortho_height / 2,
+        near=near,
+        far=far,
+    )
+
+
 @dataclass
 class VtkResult:
     """Timings and final image of one :func:`render_vtk` run.

@@ -26,7 +26,7 @@ from __future__ import annotations
 import threading
 import weakref
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 #: idle programs (held by nobody) kept per context for their next user
@@ -133,6 +133,34 @@ def program(
         return ctx.program(**kwargs)
 
     return _acquire(ctx, key, make)
+
+
+class KeyedPrograms:
+    """A renderer's holds on shared full-screen programs, one per key of its own (the
+    warp chain's signatures, defines...): :meth:`get` compiles a key's program on first
+    use, :meth:`release` gives every hold back."""
+
+    def __init__(self, ctx: Any, vertex_shader: str) -> None:
+        self.ctx = ctx
+        self.vertex_shader = vertex_shader
+        self._holds: dict[Any, SharedProgram] = {}
+
+    def get(self, key: Any, fragment_shader: Callable[[], str]) -> Any:
+        """The program of ``key``; ``fragment_shader()`` builds its source the first
+        time (``ctx.program``'s errors propagate, nothing is kept)."""
+        hold = self._holds.get(key)
+        if hold is None:
+            hold = program(
+                self.ctx, vertex_shader=self.vertex_shader, fragment_shader=fragment_shader()
+            )
+            self._holds[key] = hold
+        return hold.program
+
+    def release(self) -> None:
+        """Give up every hold (idempotent)."""
+        for hold in self._holds.values():
+            hold.release()
+        self._holds.clear()
 
 
 def compute_shader(ctx: Any, source: str) -> SharedProgram:

@@ -48,7 +48,7 @@ class GpuFieldSampler:
 
     def __init__(self, ctx: Any) -> None:
         self.ctx = ctx
-        self._programs: dict[tuple, Any] = {}
+        self._programs = gl_programs.KeyedPrograms(ctx, shaders.read("upscale.vert.glsl"))
         self._target = FloatTarget(ctx, (4,))
 
     def __call__(
@@ -87,26 +87,19 @@ class GpuFieldSampler:
         return u, outside
 
     def _program(self, chain: list[Warp]) -> Any:
-        key = tuple(w.signature() for w in chain)
-        hold = self._programs.get(key)
-        if hold is None:
-            frag = shaders.source(
+        def fragment() -> str:
+            return shaders.source(
                 "field_sample.frag.glsl", extra={"warps.glsl": compose_glsl(chain)}
             )
-            try:
-                hold = gl_programs.program(
-                    self.ctx, vertex_shader=shaders.read("upscale.vert.glsl"), fragment_shader=frag
-                )
-            except Exception as exc:
-                raise RenderError(f"field sampling shader failed to compile/link: {exc}") from exc
-            self._programs[key] = hold
-        return hold.program
+
+        try:
+            return self._programs.get(tuple(w.signature() for w in chain), fragment)
+        except Exception as exc:
+            raise RenderError(f"field sampling shader failed to compile/link: {exc}") from exc
 
     def release(self) -> None:
         """Free the programs and the target; idempotent."""
-        for hold in self._programs.values():
-            hold.release()
-        self._programs.clear()
+        self._programs.release()
         self._target.release()
 
 

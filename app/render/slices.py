@@ -75,7 +75,7 @@ class SliceRenderer:
 
     def __init__(self, ctx: Any) -> None:
         self.ctx = ctx
-        self._programs: dict[tuple, Any] = {}
+        self._programs = gl_programs.KeyedPrograms(ctx, shaders.read("upscale.vert.glsl"))
         self._vaos: dict[int, Any] = {}
         self._target = FloatTarget(ctx, (4, 1))
         #: the chain's support: pixels outside it sample straight (see
@@ -87,25 +87,20 @@ class SliceRenderer:
         self, scene: Scene, layout: str, nearest: bool, detj: bool, support: bool = False
     ) -> Any:
         key = (tuple(w.signature() for w in scene.warps), layout, nearest, detj, support)
-        hold = self._programs.get(key)
-        if hold is not None:
-            return hold.program
-        frag = shaders.source(
-            "slice.frag.glsl", extra={"warps.glsl": compose_glsl(list(scene.warps))}
-        )
-        defines = layout_defines(layout) + (["#define NEAREST"] if nearest else [])
-        defines += ["#define DETJ"] if detj else []
-        defines += ["#define SUPPORT_MAP"] if support else []
-        frag = shaders.with_defines(frag, defines)
+
+        def fragment() -> str:
+            frag = shaders.source(
+                "slice.frag.glsl", extra={"warps.glsl": compose_glsl(list(scene.warps))}
+            )
+            defines = layout_defines(layout) + (["#define NEAREST"] if nearest else [])
+            defines += ["#define DETJ"] if detj else []
+            defines += ["#define SUPPORT_MAP"] if support else []
+            return shaders.with_defines(frag, defines)
 
         try:
-            hold = gl_programs.program(
-                self.ctx, vertex_shader=shaders.read("upscale.vert.glsl"), fragment_shader=frag
-            )
+            return self._programs.get(key, fragment)
         except Exception as exc:
             raise RenderError(f"slice shader failed to compile/link for {key}: {exc}") from exc
-        self._programs[key] = hold
-        return hold.program
 
     def draw(
         self,
@@ -211,9 +206,7 @@ class SliceRenderer:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
-        for hold in self._programs.values():
-            hold.release()
-        self._programs.clear()
+        self._programs.release()
         self._target.release()
         self.support.release()
         self._released = True
