@@ -23,6 +23,7 @@ from collections.abc import Hashable, Sequence
 import numpy as np
 
 from voxwarp.core.mesh import MeshInstance
+from voxwarp.deform.identity import token
 from voxwarp.deform.warp import Warp, chain_forward_lenient, chain_jacobian, fold_affine
 from voxwarp.errors import MeshError
 
@@ -60,8 +61,8 @@ def geometry_key(instance: MeshInstance, warps: Sequence[Warp]) -> Hashable:
         tkey: Hashable = instance.matrix().tobytes()
     else:
         lo, hi = instance.box
-        tkey = (id(t), lo.tobytes(), hi.tobytes())
-    return (id(instance.mesh), tkey, tuple((id(w), w.revision) for w in warps))
+        tkey = (token(t), lo.tobytes(), hi.tobytes())
+    return (token(instance.mesh), tkey, tuple((token(w), w.revision) for w in warps))
 
 
 def warped_geometry(

@@ -22,6 +22,7 @@ import numpy as np
 
 from voxwarp.core.mesh import Mesh, MeshInstance
 from voxwarp.core.warp_grid import PLANE_AXIS, lattice_lines, nice_spacing, pull_back
+from voxwarp.deform.identity import token
 from voxwarp.deform.warp import Warp, chain_forward_lenient
 from voxwarp.errors import InputError
 from voxwarp.render.overlay import OverlayLayer
@@ -216,8 +217,8 @@ class WarpLines:
             return []
         plane = facing_plane(camera)
         spacing = self.spacing(scene.volume)
-        warps = tuple((id(w), w.revision) for w in scene.warps)
-        key = (warps, self.grid, self.glyphs, spacing, plane, id(scene.volume))
+        warps = tuple((token(w), w.revision) for w in scene.warps)
+        key = (warps, self.grid, self.glyphs, spacing, plane, token(scene.volume))
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
         layers = []

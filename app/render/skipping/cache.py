@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.deform.identity import token
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
 from voxwarp.render.skipping.bitmask import BitMask
@@ -398,7 +399,7 @@ class SkipMapCache:
         return (
             skip_map_key(scene),
             tuple(
-                (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
+                (token(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
                 for w in scene.warps
             ),
             tuple(np.round(np.asarray(lo, float), 9)),

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.deform.identity import token
 from voxwarp.deform.support import SupportMap, chain_support
 
 if TYPE_CHECKING:
@@ -39,7 +40,8 @@ def warp_state_key(scene: Scene) -> tuple:
     """What a chain's derived maps depend on: each warp's identity, GLSL variant,
     revision and uniform values."""
     return tuple(
-        (id(w), w.signature(), w.revision, repr(sorted(w.uniforms().items()))) for w in scene.warps
+        (token(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
+        for w in scene.warps
     )
 
 
