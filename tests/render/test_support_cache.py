@@ -13,7 +13,7 @@ import numpy as np
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.identity import token
-from voxwarp.render.skipping.support import SupportCache
+from voxwarp.render.skipping.support import SupportCache, uniforms_key
 from voxwarp.scene import Scene
 
 
@@ -65,3 +65,13 @@ def test_tokens_are_never_reused_and_stay_with_their_object() -> None:
         seen[id(thing)] = t
         del thing
     assert len(seen) < 50, "no address was reused: the case this test is for did not occur"
+
+
+def test_uniform_keys_tell_long_arrays_apart_in_the_middle() -> None:
+    a = np.zeros(5000, np.float32)
+    b = a.copy()
+    b[2500] = 1.0  # repr() prints both as "array([0., 0., 0., ..., 0., 0., 0.])"
+    assert repr(a) == repr(b)
+    assert uniforms_key({"u": a}) != uniforms_key({"u": b})
+    assert uniforms_key({"u": a, "v": 1.0}) == uniforms_key({"v": 1.0, "u": a.copy()})
+    assert uniforms_key({"u": (1.0, 2.0)}) != uniforms_key({"u": (1.0, 2.5)})

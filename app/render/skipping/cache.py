@@ -19,7 +19,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from voxwarp.deform.identity import token
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
 from voxwarp.render.skipping.bitmask import BitMask
@@ -35,6 +34,7 @@ from voxwarp.render.skipping.maps import (
     warped_cell_visibility,
 )
 from voxwarp.render.skipping.segments import RaySegments, SegmentMap, segment_lengths
+from voxwarp.render.skipping.support import warp_state_key
 
 if TYPE_CHECKING:
     from voxwarp.scene import Scene
@@ -398,10 +398,7 @@ class SkipMapCache:
         lo, hi = scene.ray_bounds()
         return (
             skip_map_key(scene),
-            tuple(
-                (token(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
-                for w in scene.warps
-            ),
+            warp_state_key(scene),
             tuple(np.round(np.asarray(lo, float), 9)),
             tuple(np.round(np.asarray(hi, float), 9)),
         )

@@ -38,11 +38,23 @@ BRICK_VOXELS = 4
 
 def warp_state_key(scene: Scene) -> tuple:
     """What a chain's derived maps depend on: each warp's identity, GLSL variant,
-    revision and uniform values."""
+    revision and uniform values (exact bytes: ``repr`` of a numpy array elides the
+    middle of a long one and took ~1 ms per array per draw)."""
     return tuple(
-        (token(w), w.signature(), w.revision, repr(sorted(w.uniforms().items())))
-        for w in scene.warps
+        (token(w), w.signature(), w.revision, uniforms_key(w.uniforms())) for w in scene.warps
     )
+
+
+def uniforms_key(uniforms: dict[str, Any]) -> tuple:
+    """A hashable, exact key of a warp's uniform values (name, dtype, shape, bytes)."""
+    out = []
+    for name in sorted(uniforms):
+        a = np.asarray(uniforms[name])
+        if a.dtype == object:
+            out.append((name, repr(uniforms[name])))
+        else:
+            out.append((name, a.dtype.str, a.shape, a.tobytes()))
+    return tuple(out)
 
 
 class SupportCache:
