@@ -2,8 +2,8 @@
 // Bakes the inverse of an offset field (deform/elements/offset_field.py,
 // OffsetFieldWarp.baked_inverse is the CPU reference) on a node grid over the same box,
 // bake_factor times finer than the field: for each baked node X, solve q + u(q) = X by
-// u_iterations fixed-point steps q <- X - u(q) from q = X, and store v = X - q (mm) in
-// the RGBA16F image u_inverse. The warp then starts its own iteration at p - v(p), v
+// u_iterations fixed-point steps q <- X - u(q) from q = X (fewer where q stops changing),
+// and store v = X - q (mm) in the RGBA16F image u_inverse. The warp then starts its own iteration at p - v(p), v
 // trilinear: one or two steps reach the accuracy that many steps from q = p need.
 // Positions are in field grid units (one field node spacing per unit along each axis),
 // so the box corner and spacing drop out.
@@ -34,7 +34,12 @@ void main() {
         vec3 ua = textureLod(u_field, vec3(tc, layer), 0.0).xyz;
         vec3 ub = textureLod(u_field, vec3(tc, layer + 1.0), 0.0).xyz;
         vec3 u = mix(ua, ub, g.z - layer) * (in3.x * in3.y * in3.z);
-        q = x - u * to_grid;
+        vec3 next = x - u * to_grid;
+        // a fixed point in float arithmetic: every later step would give this q again,
+        // so stopping here is bit-identical to all u_iterations steps (nodes the field
+        // does not move stop after two; a SIMD group loops while one of its nodes does)
+        if (next == q) break;
+        q = next;
     }
     imageStore(u_inverse, node, vec4((x - q) / to_grid, 0.0));
 }

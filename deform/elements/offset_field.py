@@ -71,6 +71,23 @@ MAX_BAKE_NODES = 128
 ModelSource = Callable[[], tuple[Mapping[str, Any], Any]]
 
 
+def _fixed_point(x: np.ndarray, offset: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``BAKE_ITERATIONS`` steps ``q <- x - offset(q)`` from ``q = x`` per row, each row
+    stopped once a step leaves it unchanged (every later step would give it again:
+    bit-identical to all steps, as the GPU bake; rows the field does not move stop
+    after two)."""
+    q = x.copy()
+    active = np.arange(len(x))
+    for _ in range(BAKE_ITERATIONS):
+        nxt = x[active] - offset(q[active])
+        moving = np.any(nxt != q[active], axis=1)
+        q[active] = nxt
+        active = active[moving]
+        if not active.size:
+            break
+    return q
+
+
 def _vec3(x: Any, what: str) -> np.ndarray:
     try:
         a = np.asarray(x, dtype=np.float64).reshape(-1)
@@ -706,9 +723,7 @@ class OffsetFieldWarp(Warp):
         shape = self.bake_shape
         axes = [np.linspace(a, b, n) for a, b, n in zip(self.lo, self.hi, shape, strict=True)]
         x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        q = x.copy()
-        for _ in range(BAKE_ITERATIONS):
-            q = x - self._interpolate(q, field=u)
+        q = _fixed_point(x, lambda q: self._interpolate(q, field=u))
         v = (x - q).reshape(*shape, 3)
         self._baked_cpu = (self.revision, v)
         return v
