@@ -124,7 +124,7 @@ def measure_scenes(
 ) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, np.ndarray]]]]:
     """:func:`measure_scene` for each built scene: the rows and (name, images) per scene,
     each with the paper's row beside it (``paper_linear_fps``, ``paper_trilinear_fps``,
-    ``paper_ratio``, ``paper_triangles`` as printed)."""
+    ``paper_ratio``, ``paper_triangles`` as printed) and our scene's ``layout``."""
     rows, shots = [], []
     for build in builders:
         scene = build()
@@ -136,6 +136,7 @@ def measure_scenes(
             paper_ratio=p.ratio,
             paper_triangles=p.triangles,
             measures=p.measures,
+            layout=scene.layout,
         )
         rows.append(row)
         shots.append((scene.name, images))

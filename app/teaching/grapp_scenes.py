@@ -66,12 +66,15 @@ class GrappScene:
         ``{"trilinear": root, "linear": root}``: the two scene graphs.
     view
         Camera (azimuth, elevation) in degrees that shows the scene.
+    layout
+        One line: how this scene is laid out (where it differs from the paper's).
     """
 
     name: str
     row: LatticeFpsRow
     graphs: dict[str, SceneNode]
     view: tuple[float, float]
+    layout: str = ""
 
     def leaves(self, variant: str = "trilinear") -> list[SceneNode]:
         """The graph's nodes with geometry (the objects)."""
@@ -217,7 +220,11 @@ def spheres_scene(
             tri.add(_placed(f"sphere {c}.{i}", _translate(local), mesh))
             centre = grid(local[None] / box[1])[0]
             lin.add(_placed(f"sphere {c}.{i}", _rigid(frames[i] + frames[i + 1], centre), mesh))
-    return GrappScene("spheres", row or LATTICE_FPS[0], graphs, (-60.0, 20.0))
+    layout = (
+        f"a bent tube body (baked pose) and {n} spheres in {CHAINS} chains anchored to it;"
+        " the paper's: spheres attached to an animated figurine"
+    )
+    return GrappScene("spheres", row or LATTICE_FPS[0], graphs, (-60.0, 20.0), layout)
 
 
 # ---------------------------------------------------------------------- helix
@@ -293,7 +300,12 @@ def helix_scene(
             mesh = next(spheres)
             tri.add(_placed(f"sphere {g}.{k}", slot, mesh))
             lin.add(_placed(f"sphere {g}.{k}", slot, mesh))
-    return GrappScene(f"helix_{objects}", row or LATTICE_FPS[1], graphs, (30.0, 25.0))
+    layout = (
+        f"a rope of {ROPE_SIDE}x{ROPE_SIDE} spheres in {len(graphs['linear'].children)}"
+        f" segments, {TURNS} turns; per object a sway and a segment lattice composed"
+    )
+    row = row or LATTICE_FPS[1]
+    return GrappScene(f"helix_{objects}", row, graphs, (30.0, 25.0), layout)
 
 
 def paper_scenes() -> dict[str, Callable[[], GrappScene]]:

@@ -673,7 +673,7 @@ def _lattice_section(n: dict[str, Any], quick: bool = False) -> list[str]:
         " spheres anchored to it; a rope of spheres wound into a helix under a swaying"
         " root) and times them here, each row beside the paper's:",
         "",
-        *_grapp_table(n.get("grapp_scenes", []), quick),
+        *_grapp_table(n.get("grapp_scenes", []), quick, n.get("gl_renderer", "?")),
         "Further studies, with a torus of 1.5 M triangles and 2,000 composed objects, are"
         f" the lab's: `{LATTICE_COMMAND}` in a checkout (docs/benchmarks.md).",
         "",
@@ -685,7 +685,7 @@ def _lattice_section(n: dict[str, Any], quick: bool = False) -> list[str]:
     ]
 
 
-def _grapp_table(rows: Sequence[dict[str, Any]], quick: bool) -> list[str]:
+def _grapp_table(rows: Sequence[dict[str, Any]], quick: bool, renderer: str) -> list[str]:
     """The paper's scenes: its FPS beside ours (:mod:`voxwarp.teaching.grapp_measure`)."""
     if not rows:
         return ["(not measured in this run)", ""]
@@ -693,11 +693,11 @@ def _grapp_table(rows: Sequence[dict[str, Any]], quick: bool) -> list[str]:
     table = []
     for r in rows:
         if quick:
-            ours = ratio = differs = QUICK_SKIP
+            ours = ratio = spent = QUICK_SKIP
         else:
             ours = f"{r['linear_fps']:.2f} / {r['trilinear_fps']:.2f}"
             ratio = f"{r['ratio']:.1%}"
-            differs = (
+            spent = (
                 f"compose + wrap {r['trilinear_compose_ms']:.0f} of {r['trilinear_ms']:.0f} ms"
                 f" trilinear, {r['linear_compose_ms']:.0f} of {r['linear_ms']:.0f} ms linear"
             )
@@ -710,7 +710,8 @@ def _grapp_table(rows: Sequence[dict[str, Any]], quick: bool) -> list[str]:
                 f"{r['paper_ratio']:.1%}",
                 ours,
                 ratio,
-                differs,
+                spent,
+                r.get("layout", ""),
             ]
         )
     return [
@@ -724,14 +725,15 @@ def _grapp_table(rows: Sequence[dict[str, Any]], quick: bool) -> list[str]:
                 "here FPS linear / trilinear",
                 "here trilinear / linear",
                 "where a frame's time goes here",
+                "our scene (the paper's differs)",
             ],
             table,
-            "lrrrrrrl",
+            "lrrrrrrll",
         ),
-        f"Here: {w}x{h} images on the GL renderer of the hardware section (the paper's image"
-        f" size is not given), {rows[0]['frames']} timed frame(s) per variant after a"
-        " warm-up, linear and trilinear frames alternated, medians. A frame is what an"
-        " animated scene graph pays: `compose_scene` (per object from scratch, numpy),"
+        f"Here: {w}x{h} images on GL {renderer} (the paper: a GeForce 8800 and a Core 2 Quad"
+        f" 6600; its image size is not given), {rows[0]['frames']} timed frame(s) per"
+        " variant after a warm-up, linear and trilinear frames alternated, medians. A frame"
+        " is what an animated scene graph pays: `compose_scene` (per object from scratch, numpy),"
         " one mesh instance per object, one draw call per object and, for a lattice, a new"
         " node texture. The linear graphs are the same graphs with a rigid 4x4 in place of"
         " each lattice (the paper's scenes and its linear variant are its own; the meshes"
