@@ -24,7 +24,7 @@ from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.teaching.grapp_scenes import VARIANTS, GrappScene
 
 #: image size and timed frames per variant: the reproduction's and ``--quick``'s
-FULL_SIZE, FULL_FRAMES = (320, 240), 3
+FULL_SIZE, FULL_FRAMES = (320, 240), 5
 QUICK_SIZE, QUICK_FRAMES = (64, 48), 1
 
 
