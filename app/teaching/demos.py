@@ -28,10 +28,12 @@ command line lists them without loading the demos).
   field voxels and of ray samples that need no mapping ("ignored")
   (:mod:`voxwarp.teaching.wire_measure`); the paper's Tables 1-3 measured its way are
   ``python -m benchmarks wire-tables`` in a checkout.
-* ``lattice`` (GRAPP 2010, Figures 1 and 5): renders of a bent volume, of the
+* ``lattice`` (GRAPP 2010, Figures 1 and 5, section 6): renders of a bent volume, of the
   lattice-wrapped torus of the paper's Figure 1 and of both normal methods; the frame
-  rates against 4x4 matrices (the paper's table) are a full study of the lab, ``python -m
-  benchmarks lattice`` in a checkout.
+  rates of the paper's own scenes (its table), linear against trilinear
+  (:mod:`voxwarp.teaching.grapp_measure`), with their frames on a second sheet; the
+  fuller study against 4x4 matrices is the lab's, ``python -m benchmarks lattice`` in a
+  checkout.
 * ``registration`` (no paper; :mod:`voxwarp.teaching.registration_demo`): colin27 deformed
   by known Gaussian bumps, registered back with SimpleITK demons, the moving image
   rendered through the recovered field beside the fixed one (``registration`` extra).

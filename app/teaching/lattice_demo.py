@@ -1,8 +1,10 @@
-"""``voxwarp demo lattice`` (GRAPP 2010, Figures 1 and 5).
+"""``voxwarp demo lattice`` (GRAPP 2010, Figures 1 and 5, section 6).
 
 Renders of a bent volume, of the lattice-wrapped torus of the paper's Figure 1 and of both
-normal methods; the frame rates against 4x4 matrices (the paper's table) are a full study
-of the lab, ``python -m benchmarks lattice`` in a checkout. Run by
+normal methods (``lattice.png``); the frame rates of the paper's own scenes, linear
+against trilinear (its section 6 table; :mod:`voxwarp.teaching.grapp_measure`), with
+their frames on a second sheet (``lattice_grapp.png``). The fuller study against 4x4
+matrices is the lab's, ``python -m benchmarks lattice`` in a checkout. Run by
 :func:`voxwarp.teaching.demos.run_demo`; the helpers it shares with the other demos are in
 :mod:`voxwarp.teaching.sheets`.
 """
@@ -18,7 +20,8 @@ import numpy as np
 
 from voxwarp.core.json_input import read_json
 from voxwarp.io.samples import bundled_dir
-from voxwarp.teaching import DEMO_TITLES, sheets
+from voxwarp.teaching import DEMO_TITLES, grapp_measure, sheets
+from voxwarp.teaching.grapp_scenes import VARIANTS, paper_scenes
 from voxwarp.teaching.lattice_scenes import torus_tubes
 from voxwarp.teaching.papers import lattice_ratio_range
 
@@ -54,12 +57,16 @@ def demo_lattice(
         )
         normal_scenes = _normal_scenes(size)
         normal_renders = [(title, sheets.render_rgb(r, sc, size)) for title, sc in normal_scenes]
-    # the frame rates against 4x4 matrices and the normals' angles are full studies of the
-    # lab (a torus of 1.5 M triangles, thousands of composed objects): not run here
+        # the paper's own scenes (section 6 table), linear and trilinear frames alternated
+        grapp_rows, grapp_shots = _grapp_frames(s, r, log)
+    # the vertex stage alone, the static redraw and the normals' angles are full studies
+    # of the lab: not run here
     numbers: dict[str, Any] = {
         "paper_fps_ratio": lattice_ratio_range(),
         "lab_command": LATTICE_LAB_COMMAND,
         "gl_renderer": gl,
+        "grapp_scenes": grapp_rows,
+        "extra_figures": [{"file": GRAPP_SHEET, "title": GRAPP_SHEET_TITLE}],
     }
     fig = sheets.new_figure(16.0, 10.0, DEMO_TITLES["lattice"])
     grid = fig.add_gridspec(2, 1)
@@ -70,6 +77,7 @@ def demo_lattice(
     for i, (title, img) in enumerate(normal_renders):
         sheets.show_image(fig.add_subplot(bottom[0, i]), img, title)
     path = sheets.save_figure(fig, out / "lattice.png")
+    grapp_path = _grapp_sheet(grapp_rows, grapp_shots, out / GRAPP_SHEET, s.quick)
 
     tour = [
         sheets.TourStep(
@@ -105,9 +113,11 @@ def demo_lattice(
         sheets.TourStep(
             "What it costs",
             "Frames per second with lattices relative to plain 4x4 matrices (the paper's"
-            " table: 76.4-80.6 %), and animating many objects, where every composed lattice is"
-            f" recomputed on the CPU each frame: measured by `{LATTICE_LAB_COMMAND}` in a"
-            " checkout of voxwarp (docs/benchmarks.md).",
+            " table: 76.4-80.6 %) on the paper's own scenes: 1.5 M triangles of spheres"
+            " anchored to a bent body, and helices of thousands of small spheres, where every"
+            " composed lattice is recomputed on the CPU each frame. This demo times them"
+            " (its second sheet, `voxwarp reproduce`'s table); the fuller study is"
+            f" `{LATTICE_LAB_COMMAND}` in a checkout of voxwarp (docs/benchmarks.md).",
             None,
             None,
         ),
@@ -122,7 +132,7 @@ def demo_lattice(
             "e",
         ),
     ]
-    return [path], numbers, tour
+    return [path, grapp_path], numbers, tour
 
 
 #: the lab's command that measures the lattice's costs (frame rates against 4x4 matrices,
@@ -156,3 +166,39 @@ def _normal_scenes(size: tuple[int, int]) -> list[tuple[str, Any]]:
         scene.camera = sheets.framing_camera(*quarter, NORMALS_VIEW, size)
         out.append((title, scene))
     return out
+
+
+#: the sheet of the paper's own scenes (section 6), beside ``lattice.png``
+GRAPP_SHEET = "lattice_grapp.png"
+GRAPP_SHEET_TITLE = "GRAPP 2010 section 6: the paper's scenes, trilinear (top) and linear (bottom)"
+
+
+def _grapp_frames(
+    s: sheets.DemoSettings, r: Any, log: Callable[[str], None]
+) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, np.ndarray]]]]:
+    """The paper's three scenes timed on ``r``'s context (:mod:`voxwarp.teaching.
+    grapp_measure`; ``--quick``: its quick size and frame count)."""
+    if s.quick:
+        size, frames = grapp_measure.QUICK_SIZE, grapp_measure.QUICK_FRAMES
+    else:
+        size, frames = grapp_measure.FULL_SIZE, grapp_measure.FULL_FRAMES
+    return grapp_measure.measure_scenes(paper_scenes().values(), r.ctx, size, frames, log)
+
+
+def _grapp_sheet(
+    rows: list[dict[str, Any]],
+    shots: list[tuple[str, dict[str, np.ndarray]]],
+    path: Path,
+    quick: bool,
+) -> Path:
+    """The warm-up frame of each scene, trilinear over linear, titled with its counts
+    (and its frame rate, except in a quick run)."""
+    fig = sheets.new_figure(15.0, 8.0, GRAPP_SHEET_TITLE)
+    axes = fig.subplots(len(VARIANTS), len(shots), squeeze=False)
+    for col, (row, (name, images)) in enumerate(zip(rows, shots, strict=True)):
+        for k, v in enumerate(VARIANTS):
+            title = f"{name}: {row['objects']:,} objects, {row['triangles']:,} triangles, {v}"
+            if not quick:
+                title += f" {row[f'{v}_fps']:.2f} FPS"
+            sheets.show_image(axes[k, col], images[v], title)
+    return sheets.save_figure(fig, path)

@@ -101,6 +101,12 @@ class LatticeFpsRow:
         """Trilinear / linear frame rate."""
         return self.trilinear_fps / self.linear_fps
 
+    @property
+    def triangle_count(self) -> int:
+        """The printed triangle count as a number ("1.5M" -> 1,500,000)."""
+        scale = {"k": 1_000, "M": 1_000_000}[self.triangles[-1]]
+        return round(float(self.triangles[:-1]) * scale)
+
 
 LATTICE_FPS: tuple[LatticeFpsRow, ...] = (
     LatticeFpsRow("spheres", "GPU vertex throughput", 185, "1.5M", 19.5, 14.9),

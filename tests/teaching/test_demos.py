@@ -201,6 +201,32 @@ def test_lattice_quotes_the_paper_and_names_the_lab_study(
     assert "throughput" not in n
 
 
+def test_lattice_times_the_papers_own_scenes(demos: dict[str, DemoResult]) -> None:
+    """GRAPP 2010 section 6's three scenes, with its counts, timed in both variants; their
+    frames are the demo's second sheet."""
+    res = demos["lattice"]
+    rows = res.numbers["grapp_scenes"]
+    counts = [(r["scene"], r["objects"], r["triangles"]) for r in rows]
+    assert counts == [
+        ("spheres", 185, 1_500_000),
+        ("helix_4617", 4617, 164_000),
+        ("helix_2566", 2566, 656_000),
+    ]
+    for r in rows:
+        assert r["linear_fps"] > 0
+        assert r["trilinear_fps"] > 0
+    assert [(r["paper_linear_fps"], r["paper_trilinear_fps"]) for r in rows] == [
+        (19.5, 14.9),
+        (16.5, 13.3),
+        (10.8, 8.4),
+    ]
+    assert [f.name for f in res.figures] == ["lattice.png", "lattice_grapp.png"]
+    img = read_image(res.figures[1])[..., :3]
+    assert img.shape[1] >= 900
+    assert np.mean(img.max(axis=-1) < 20) > 0.1  # the six renders' black backgrounds
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 64  # coloured spheres drawn
+
+
 # ---------------------------------------------------------------------- tours
 @pytest.mark.parametrize("name", DEMOS)
 def test_every_tour_lists_steps_with_scenes(demos: dict[str, DemoResult], name: str) -> None:

@@ -61,6 +61,17 @@ def test_quick_reproduction_writes_the_report_and_its_figures(gl_ctx: Any, tmp_p
     assert "| paper | 2 (flag 1 bit, wire 4, segment 4, t 7) | 2 |" in wires  # section 7.2
     assert "| float | at least 5 (float t, 7-bit wire, flag) | 5 |" in wires
     assert "Figure 5: images, no numbers" in lattice
+    # GRAPP's own scenes, each row beside the paper's (timings skipped in a quick run)
+    for scene, counts, paper in (
+        ("spheres", "| 185 | 1,500,000 (paper 1.5M) |", "| 19.5 / 14.9 | 76.4% |"),
+        ("helix_4617", "| 4,617 | 164,000 (paper 164k) |", "| 16.5 / 13.3 | 80.6% |"),
+        ("helix_2566", "| 2,566 | 656,000 (paper 656k) |", "| 10.8 / 8.4 | 77.8% |"),
+    ):
+        line = next(x for x in lattice.splitlines() if x.startswith(f"| {scene} ("))
+        assert counts + paper.removeprefix("|") in line, line
+        assert QUICK_SKIP in line
+    assert "(reproduction/lattice_grapp.png)" in lattice
+    assert (tmp_path / "docs" / "reproduction" / "lattice_grapp.png").is_file()
     assert "lattice_accessories_anim.json" in lattice  # Figure 8
     assert "not in the repo" not in text
     massspring = next(s for s in sections if s.startswith(f"{DEMOS.index('massspring') + 1}."))
