@@ -104,23 +104,31 @@ class ChainMailModel:
             self.links[lo_t][..., axis],
         )
 
+    def link_excess(self, positions: np.ndarray, axis: int) -> np.ndarray:
+        """How far (mm) each link along ``axis`` would be beyond its limits at
+        ``positions`` (<= 0: within them), present or removed.
+
+        Shape ``shape`` with ``axis`` shortened by one, as :meth:`link_limits`.
+        """
+        x = np.asarray(positions, dtype=np.float64)
+        mn, mx, sh, _ = self.link_limits(axis)
+        d = np.diff(x, axis=axis)
+        v = np.maximum(mn - d[..., axis], d[..., axis] - mx)
+        for j in range(3):
+            if j != axis:
+                v = np.maximum(v, np.abs(d[..., j]) - sh)
+        return v
+
     def violation(self, positions: np.ndarray) -> float:
         """Largest constraint violation (mm) of any present link at ``positions``.
 
         0 when every link satisfies its limits. ``positions``: (nx, ny, nz, 3).
         """
-        x = np.asarray(positions, dtype=np.float64)
         worst = 0.0
         for axis in range(3):
             if self.shape[axis] < 2:
                 continue
-            mn, mx, sh, linked = self.link_limits(axis)
-            d = np.diff(x, axis=axis)
-            v = np.maximum(mn - d[..., axis], d[..., axis] - mx)
-            for j in range(3):
-                if j != axis:
-                    v = np.maximum(v, np.abs(d[..., j]) - sh)
-            v = np.where(linked, v, 0.0)
+            v = np.where(self.link_limits(axis)[3], self.link_excess(positions, axis), 0.0)
             if v.size:
                 worst = max(worst, float(v.max()))
         return max(worst, 0.0)

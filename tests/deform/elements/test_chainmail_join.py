@@ -1,0 +1,244 @@
+"""Joining ChainMail elements (:meth:`ChainMail.link_pairs`, :meth:`ChainMail.link`), the
+inverse of cutting (Knoche 2008, 2.4.2.2: links are removed to cut and added to connect
+tissues).
+
+Oracles: a model cut and linked again moves bit for bit as one never cut (the same
+random drags, relaxation included, on heterogeneous limits; both CPU variants, and the
+GPU backend against its own uncut run); which links count as stretched, computed here
+from the positions and the mean link limits independently of the model's code;  a
+skipping join leaves every link within its limits and moves nothing; refused joins
+change nothing.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+
+from voxwarp.deform import ChainMail, ChainMailError
+from voxwarp.deform.elements.chainmail import neighbour_pairs
+from voxwarp.deform.elements.grid import ElementGrid
+
+TOL = 1e-6
+#: GPU positions are float32 (see test_chainmail_backends.py)
+GPU_TOL = 5e-4
+#: the drag that pulls the two sides of a cut apart
+PULL = (6.0, 0.0, 0.0)
+
+
+def _grid(shape: tuple[int, int, int], spacing: float = 10.0) -> ElementGrid:
+    hi = tuple(spacing * (n - 1) for n in shape)
+    return ElementGrid(((0.0, 0.0, 0.0), hi), shape=shape, anchor="corners")
+
+
+def _pairs(cuts: np.ndarray) -> np.ndarray:
+    """(m, 2, 3) element pairs of ``[i, j, k, axis]`` links."""
+    hi = cuts[:, :3].copy()
+    hi[np.arange(len(cuts)), cuts[:, 3]] += 1
+    return np.stack([cuts[:, :3], hi], axis=1)
+
+
+def _heterogeneous(cm: ChainMail, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    shape = (*cm.grid.shape, 3)
+    s = cm.grid.spacing
+    cm.set_limits(
+        s * rng.uniform(0.6, 0.95, shape),
+        s * rng.uniform(1.05, 1.5, shape),
+        s * rng.uniform(0.1, 0.5, shape),
+    )
+
+
+def _excess(x: np.ndarray, cm: ChainMail, pair: np.ndarray) -> float:
+    """How far the link of ``pair`` is beyond its limits (mean of both ends'), by hand."""
+    a, b = (tuple(int(v) for v in p) for p in pair)
+    axis = int(np.argmax(np.abs(np.subtract(b, a))))
+    m = cm.model
+    d = x[b] - x[a]
+    mn = 0.5 * (m.min_dist[a][axis] + m.min_dist[b][axis])
+    mx = 0.5 * (m.max_dist[a][axis] + m.max_dist[b][axis])
+    sh = 0.5 * (m.max_shear[a][axis] + m.max_shear[b][axis])
+    return max(mn - d[axis], d[axis] - mx, *(abs(d[j]) - sh for j in range(3) if j != axis))
+
+
+def _drags(seed: int, shape: tuple[int, int, int], n: int) -> list[tuple[Any, Any]]:
+    rng = np.random.default_rng(seed)
+    return [
+        (tuple(int(v) for v in rng.integers(1, np.asarray(shape) - 1)), rng.uniform(-12, 12, 3))
+        for _ in range(n)
+    ]
+
+
+# ---------------------------------------------------------------------- the inverse
+@pytest.mark.parametrize("variant", ["gibson", "enhanced"])
+def test_cut_then_linked_moves_exactly_as_the_uncut_model(variant: str) -> None:
+    shape = (8, 6, 5)
+    uncut = ChainMail(_grid(shape), variant=variant, relax_steps=1)
+    joined = ChainMail(_grid(shape), variant=variant, relax_steps=1)
+    for cm in (uncut, joined):
+        _heterogeneous(cm, seed=7)
+    for step, (idx, off) in enumerate(_drags(1, shape, 8)):
+        if step % 3 == 1:  # cut through the deformed state and join it again
+            assert joined.cut((35.0, 0.0, 0.0), (1.0, 0.2, 0.1)) > 0
+            cut = joined.cuts
+            assert not joined.model.links.all()
+            assert joined.link_pairs(_pairs(cut)) == len(cut)
+            assert len(joined.cuts) == 0
+        for cm in (uncut, joined):
+            cm.move(idx, off)
+            if step % 4 == 3:
+                cm.release()
+        np.testing.assert_array_equal(joined.positions(), uncut.positions())
+    assert joined.to_dict(include_positions=True) == uncut.to_dict(include_positions=True)
+    assert joined.violation() <= TOL
+
+
+def test_link_plane_is_the_inverse_of_cut_plane_and_a_disk_leaves_a_bridge() -> None:
+    cm = ChainMail(_grid((8, 4, 4)))
+    assert cm.cut((35.0, 0.0, 0.0), (1.0, 0.0, 0.0)) == 16
+    # a disk of radius 8 mm around (35, 15, 15) meets the x links at y, z in {10, 20}
+    assert cm.link((35.0, 15.0, 15.0), (1.0, 0.0, 0.0), extent=8.0) == 4
+    assert len(cm.cuts) == 12
+    assert [3, 1, 1, 0] not in cm.cuts.tolist()
+    # the 4 joined links carry a drag across the cut: the other side follows
+    cm.move((4, 2, 2), (25.0, 0.0, 0.0))
+    assert cm.positions()[3, 2, 2, 0] > 30.0 + 1.0
+    assert cm.violation() <= TOL
+    cm.reset()
+    assert cm.link_pairs(_pairs(cm.cuts)) == 12
+    assert len(cm.cuts) == 0
+
+
+def test_link_pairs_counts_and_checks_its_input() -> None:
+    cm = ChainMail(_grid((5, 4, 4)))
+    pairs = [[(0, 0, 1), (0, 0, 2)], [(2, 3, 3), (2, 2, 3)]]
+    assert cm.link_pairs(pairs) == 0  # linked already: ignored
+    assert cm.cut_pairs(pairs) == 2
+    assert cm.link_pairs(pairs[:1]) == 1
+    assert cm.cuts.tolist() == [[2, 2, 3, 1]]
+    assert cm.link_pairs(pairs) == 1
+    assert cm.link_pairs([]) == 0
+    with pytest.raises(ChainMailError, match="not neighbours"):
+        cm.link_pairs([[(0, 0, 0), (1, 1, 0)]])
+    with pytest.raises(ChainMailError, match=r"\(m, 2, 3\)"):
+        cm.link_pairs([[0, 1, 2]])
+    with pytest.raises(ChainMailError, match="stretched must be one of"):
+        cm.link_pairs(pairs, stretched="force")
+    with pytest.raises(ChainMailError, match="zero vector"):
+        cm.link((0, 0, 0), (0, 0, 0))
+
+
+def test_neighbour_pairs_around_and_inside_a_selection() -> None:
+    mask = np.zeros((5, 5, 5), dtype=bool)
+    mask[1:3, 1:3, 1:3] = True  # a 2x2x2 block: 24 faces outside, 12 links inside
+    around = neighbour_pairs(mask)
+    assert around.shape == (24, 2, 3)
+    assert np.all(mask[tuple(around[:, 0].T)] != mask[tuple(around[:, 1].T)])
+    assert np.all(np.abs(around[:, 1] - around[:, 0]).sum(axis=1) == 1)
+    assert neighbour_pairs(mask, boundary=False).shape == (36, 2, 3)
+    cm = ChainMail(_grid((5, 5, 5)))
+    assert cm.cut_pairs(around) == 24
+    cm.move((1, 1, 1), (20.0, 0.0, 0.0))  # the block comes loose: its outside stays
+    assert not np.any(cm.displacements()[~mask])
+    assert np.all(cm.displacements()[mask][:, 0] >= 20.0 - 3 * 2.5)  # within the slack
+    with pytest.raises(ChainMailError, match="bool array"):
+        neighbour_pairs(np.zeros(5, dtype=bool))
+
+
+# ---------------------------------------------------------------------- stretched links
+def _pulled_apart() -> tuple[ChainMail, np.ndarray]:
+    """A block cut across x between i = 3 and 4, its right part dragged by ``PULL`` near
+    the middle: the middle links of the cut gape (stretch limit 12.5 mm, shear 2.5 mm
+    per link), those further out touch."""
+    cm = ChainMail(_grid((8, 5, 5)))
+    assert cm.cut((35.0, 0.0, 0.0), (1.0, 0.0, 0.0)) == 25
+    cm.move((4, 2, 2), PULL)
+    return cm, _pairs(cm.cuts)
+
+
+def test_a_stretched_join_is_refused_and_changes_nothing() -> None:
+    cm, pairs = _pulled_apart()
+    x, before = cm.positions(), cm.to_dict(include_positions=True)
+    far = [p for p in pairs if _excess(x, cm, p) > TOL]
+    assert 0 < len(far) < len(pairs)
+    with pytest.raises(ChainMailError, match=rf"{len(far)} of the links .* beyond their limits"):
+        cm.link_pairs(pairs)
+    assert cm.to_dict(include_positions=True) == before
+    with pytest.raises(ChainMailError, match=r"\(3, 2, 2\)-\(4, 2, 2\), 3.5 mm too far"):
+        cm.link_pairs([[(3, 2, 2), (4, 2, 2)]])  # 16 mm apart, at most 12.5 mm
+
+
+def test_skip_joins_only_the_touching_links() -> None:
+    cm, pairs = _pulled_apart()
+    x = cm.positions()
+    touching = {tuple(map(tuple, p)) for p in pairs if _excess(x, cm, p) <= TOL}
+    assert cm.link_pairs(pairs, stretched="skip") == len(touching)
+    left = {tuple(map(tuple, p)) for p in _pairs(cm.cuts)}
+    assert left == {tuple(map(tuple, p)) for p in pairs} - touching
+    np.testing.assert_array_equal(cm.positions(), x)  # nothing moved
+    assert cm.violation() <= TOL
+
+
+# ---------------------------------------------------------------------- never linked
+def test_regions_never_linked_join_where_they_touch() -> None:
+    """A model loaded with cuts (two tissues side by side): joined, it is the model
+    that was never cut, and the saved entry says so."""
+    d = ChainMail(_grid((6, 4, 4))).to_dict()
+    d["cuts"] = [[2, j, k, 0] for j in range(4) for k in range(4)]
+    separate = ChainMail.from_dict(json.loads(json.dumps(d)))
+    separate.move((4, 2, 2), (6.0, 0.0, 0.0))
+    assert not np.any(separate.displacements()[:3])  # never linked: the left stays
+    separate.reset()
+    assert separate.link_pairs(_pairs(separate.cuts)) == 16
+    assert separate.to_dict()["cuts"] == []
+    whole = ChainMail(_grid((6, 4, 4)))
+    for cm in (separate, whole):
+        cm.move((4, 2, 2), (6.0, 0.0, 0.0))
+    np.testing.assert_array_equal(separate.positions(), whole.positions())
+    again = ChainMail.from_dict(json.loads(json.dumps(separate.to_dict(include_positions=True))))
+    np.testing.assert_array_equal(again.cuts, np.zeros((0, 4)))
+    np.testing.assert_array_equal(again.positions(), whole.positions())
+
+
+# ---------------------------------------------------------------------- GPU (GLSL)
+@pytest.mark.gl
+def test_gpu_cut_then_linked_moves_as_the_uncut_gpu_model(gl_ctx: Any) -> None:
+    shape = (7, 5, 5)
+    uncut = ChainMail(_grid(shape), backend="gpu", ctx=gl_ctx)
+    joined = ChainMail(_grid(shape), backend="gpu", ctx=gl_ctx)
+    cpu = ChainMail(_grid(shape))
+    try:
+        for step, (idx, off) in enumerate(_drags(4, shape, 5)):
+            if step in (1, 3):
+                joined.cut((30.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+                assert len(joined.cuts) > 0
+                joined.link_pairs(_pairs(joined.cuts))
+                assert len(joined.cuts) == 0
+            for cm in (uncut, joined, cpu):
+                cm.move(idx, off)
+            np.testing.assert_allclose(joined.positions(), uncut.positions(), atol=1e-12)
+            np.testing.assert_allclose(joined.positions(), cpu.positions(), atol=1e-4)
+            assert joined.violation() <= GPU_TOL
+    finally:
+        for cm in (uncut, joined):
+            cm.close()
+
+
+@pytest.mark.gl
+def test_gpu_joins_stretched_links_as_the_cpu(gl_ctx: Any) -> None:
+    cpu, pairs = _pulled_apart()
+    gpu = ChainMail(_grid((8, 5, 5)), backend="gpu", ctx=gl_ctx)
+    try:
+        gpu.cut((35.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+        gpu.move((4, 2, 2), PULL)
+        with pytest.raises(ChainMailError, match="beyond their limits"):
+            gpu.link_pairs(pairs)
+        assert gpu.link_pairs(pairs, stretched="skip") == cpu.link_pairs(pairs, stretched="skip")
+        np.testing.assert_array_equal(gpu.cuts, cpu.cuts)
+        assert gpu.violation() <= GPU_TOL
+        np.testing.assert_allclose(gpu.positions(), cpu.positions(), atol=1e-4)
+    finally:
+        gpu.close()
