@@ -529,11 +529,13 @@ class EditSession:
         self._touch()
         return n
 
-    def join_links(self, indices: Sequence[int]) -> tuple[int, int]:
+    def join_links(self, indices: Sequence[int], pull: bool = False) -> tuple[int, int]:
         """Join the cut links with an end among elements ``indices`` (ChainMail) where
         the two elements touch; ``(joined, left cut)``: links whose elements a drag
-        pulled too far apart stay cut (drag them together first)."""
-        joined = self.family.join_links(list(indices))
+        pulled too far apart stay cut (drag them together first) unless ``pull``, which
+        drags free elements until the sides meet and joins them all (a suture; held
+        and fixed elements stay, and when they are in the way nothing changes)."""
+        joined = self.family.join_links(list(indices), pull)
         self._touch()
         return joined
 

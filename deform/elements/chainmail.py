@@ -105,12 +105,21 @@ uncut model (same links, same moves). Regions that were never linked (a model lo
 with ``cuts``) are joined the same way. A removed link whose elements have drifted
 beyond its limits (a drag pulled the sides apart) is *stretched*; joining it as it is
 would leave a violated constraint, so ``stretched`` (:data:`STRETCHED`) decides:
-``"refuse"`` (the default of ``link_pairs``: an error naming the worst link, nothing
-changes) or ``"skip"`` (the default of ``link`` and of the GUI's join: only the links
-whose elements touch are joined, the others stay cut). Joining never moves an element:
-to join tissue that gapes, drag its sides together first. (Pulling the sides together
-automatically would need a projection onto the limits; the propagation's repair, made
-for round-off, gives up on feasible gaps of a few spacings.)
+
+* ``"refuse"`` (the default of ``link_pairs``): an error naming how many links, the
+  worst and by how many mm; nothing changes.
+* ``"skip"`` (the default of ``link`` and of the GUI's join): only the links whose
+  elements touch are joined, the others stay cut; nothing moves.
+* ``"pull"``: a suture. The worst stretched link first, one of its ends is dragged to
+  the nearest position the link allows (the upper-index end, or the lower one when
+  that is held, fixed or blocked), its tissue following by the usual propagation
+  (held and fixed elements stay), and every link that then touches is joined; repeated
+  until all are joined. If neither end of a link can get there, nothing changes and
+  an error says so. (A repair of the whole state, as :meth:`ChainMail.set_limits`
+  does, is meant for round-off and gives up on gaps of a few millimetres.) On the GPU
+  backend this runs on the CPU, on read-back positions, as :meth:`ChainMail.relax`.
+
+Only ``"pull"`` moves elements; a join never violates a link.
 
 Why numba
 ---------
@@ -184,7 +193,7 @@ DEFAULT_STRETCH = 0.5
 #: default largest shear, in spacings, of a stiffness-0 element's links
 DEFAULT_SHEAR = 0.5
 #: what :meth:`ChainMail.link_pairs` does with a link its elements violate where they are
-STRETCHED: tuple[str, ...] = ("refuse", "skip")
+STRETCHED: tuple[str, ...] = ("refuse", "skip", "pull")
 #: a link to join whose elements are within its limits to this many mm touches (CPU:
 #: float64 round-off, :data:`VIOLATION_TOL_MM`; GPU: float32 positions, the tolerance of
 #: its feasibility check, ``chainmail_gpu.CHECK_TOL_MM``)
@@ -1020,10 +1029,10 @@ class ChainMail(ElementWarpMixin):
         stretched
             What to do with a link its two elements violate where they are now
             (pulled apart, pushed together or sheared beyond its limits; see
-            :data:`STRETCHED`): ``"refuse"`` (default) raises and changes nothing;
-            ``"skip"`` restores only the links whose elements touch (within the
-            limits) and leaves the others cut. Drag the elements together first to
-            join such a link.
+            :data:`STRETCHED`, the module doc): ``"refuse"`` (default) raises and
+            changes nothing; ``"skip"`` restores only the links whose elements touch
+            (within the limits) and leaves the others cut; ``"pull"`` drags free
+            elements, the worst link first, until every link touches, and joins all.
 
         Returns
         -------
@@ -1035,7 +1044,8 @@ class ChainMail(ElementWarpMixin):
         ChainMailError
             On malformed pairs or pairs that are not neighbours; with ``"refuse"``, on
             a stretched link (naming how many, the worst, by how many mm, and the
-            fixes). Nothing changes then.
+            fixes); with ``"pull"``, when held or fixed elements keep a link's ends
+            apart. Nothing changes then.
         """
         return self._restore_links(self._pair_links(pairs), _stretched(stretched))
 
@@ -1062,34 +1072,87 @@ class ChainMail(ElementWarpMixin):
             self._crossing(plane_point, plane_normal, extent), _stretched(stretched)
         )
 
-    def _excess(self, mask: np.ndarray) -> np.ndarray:
-        """(nx, ny, nz, 3): link excess (mm, :meth:`ChainMailModel.link_excess`) where
-        ``mask``, -inf elsewhere."""
-        x = self.positions()
-        out = np.full(mask.shape, -np.inf)
-        for axis in range(3):
-            lo_t, _ = _link_ends(axis)
-            if self.grid.shape[axis] > 1 and mask[(*lo_t, axis)].any():
-                out[(*lo_t, axis)] = self._model.link_excess(x, axis)
-        return np.where(mask, out, -np.inf)
-
     def _restore_links(self, add: np.ndarray, stretched: str) -> int:
         m = self._model
-        new = add & ~m.links & _possible(self.grid.shape)
-        if not new.any():
+        new = np.argwhere(add & ~m.links & _possible(self.grid.shape))
+        if len(new) == 0:
             return 0
-        excess = self._excess(new)
+        x = self.positions()
+        excess = m.link_excess(x, new)
         far = excess > _JOIN_TOL_MM[self.backend]
+        if stretched == "refuse" and far.any():
+            raise ChainMailError(_stretched_message(new, far, excess))
         if stretched == "skip":
-            new &= ~far
-        elif stretched == "refuse" and far.any():
-            raise ChainMailError(_stretched_message(far, excess))
-        if not new.any():
-            return 0
-        m.links |= new
-        if self.backend == "gpu":
-            self._rebuild_gpu()
-        return int(new.sum())
+            new = new[~far]
+        if stretched == "pull" and far.any():
+            self._pull(new, x)
+        elif len(new):
+            m.links[tuple(new.T)] = True
+            if self.backend == "gpu":
+                self._rebuild_gpu()
+        return len(new)
+
+    def _pull(self, new: np.ndarray, x: np.ndarray) -> None:
+        """Join links ``new`` (``[i, j, k, axis]``), some stretched, at positions ``x``:
+        the worst first, an end of it is dragged to the nearest place its link allows
+        (the upper end, or the lower if that is held or fixed or blocked), its tissue
+        following by propagation; links that then touch are joined. On the GPU backend
+        this runs on the CPU, on read-back positions. Nothing changes on failure."""
+        m = self._model
+        gpu = self.backend == "gpu"
+        if gpu:
+            self._x[:] = x.reshape(-1, 3)
+        saved = (self._x.copy(), m.links.copy(), self._box)
+        try:
+            todo = new
+            while len(todo):
+                excess = m.link_excess(self._x.reshape(x.shape), todo)
+                touch = excess <= _JOIN_TOL_MM[self.backend]
+                m.links[tuple(todo[touch].T)] = True
+                todo = todo[~touch]
+                if len(todo) and not self._close_gap(todo[int(np.argmax(excess[~touch]))]):
+                    raise ChainMailError(
+                        "cannot pull the elements of the links to join within their limits:"
+                        " held or fixed elements are in the way; release() the held ones"
+                        ' (or drag them closer) first, or join with stretched="skip"'
+                    )
+        except ChainMailError:
+            self._x[:], m.links[:], self._box = saved
+            if gpu:
+                self._x[:] = self._rest
+            raise
+        if gpu:
+            self._rebuild_gpu(self._x.reshape(x.shape).copy())
+            self._x[:] = self._rest
+        else:
+            self._update_warp()
+
+    def _close_gap(self, link: np.ndarray) -> bool:
+        """Drag an end of ``link`` (``[i, j, k, axis]``) to the nearest position within
+        its limits, the other end staying (a propagation of the CPU kernels on
+        :attr:`_x`); False when neither end can go there."""
+        m, axis = self._model, int(link[3])
+        a = tuple(int(v) for v in link[:3])
+        b = tuple(v + (c == axis) for c, v in enumerate(a))
+        lo = np.full(3, -0.5 * (m.max_shear[a][axis] + m.max_shear[b][axis]))
+        hi = -lo
+        lo[axis] = 0.5 * (m.min_dist[a][axis] + m.min_dist[b][axis])
+        hi[axis] = 0.5 * (m.max_dist[a][axis] + m.max_dist[b][axis])
+        ea, eb = (int(np.ravel_multi_index(e, self.grid.shape)) for e in (a, b))
+        d = self._x[eb] - self._x[ea]
+        for end, target in (
+            (eb, self._x[ea] + np.clip(d, lo, hi)),
+            (ea, self._x[eb] - np.clip(d, lo, hi)),
+        ):
+            if self._pinned[end]:
+                continue
+            self._pinned[end] = True
+            ok, *_ = self._attempt(np.array([end]), target[None], commit=True)
+            self._pinned[end] = False
+            if ok:
+                self._grow_box()
+                return True
+        return False
 
     # ------------------------------------------------------------------ results
     def positions(self) -> np.ndarray:
@@ -1190,9 +1253,10 @@ class ChainMail(ElementWarpMixin):
             ) from exc
         return GpuChainMailSolver(self._model, self._ctx)
 
-    def _rebuild_gpu(self) -> None:
-        """Make a new GPU solver for the changed model, keeping the positions."""
-        x = self.positions()
+    def _rebuild_gpu(self, positions: np.ndarray | None = None) -> None:
+        """Make a new GPU solver for the changed model, keeping the positions (or
+        starting from ``positions``, (nx, ny, nz, 3) mm)."""
+        x = self.positions() if positions is None else positions
         fixed = self._model.fixed
         x[fixed] = self._model.rest[fixed]
         self._solver.release()
@@ -1392,16 +1456,17 @@ def _stretched(value: Any) -> str:
     return str(value)
 
 
-def _stretched_message(far: np.ndarray, excess: np.ndarray) -> str:
-    """The error of a refused join: the worst stretched link and the fixes."""
-    worst = np.unravel_index(int(np.argmax(np.where(far, excess, -np.inf))), far.shape)
-    a = [int(v) for v in worst[:3]]
+def _stretched_message(links: np.ndarray, far: np.ndarray, excess: np.ndarray) -> str:
+    """The error of a refused join: how many links, the worst and the fixes."""
+    worst = int(np.argmax(np.where(far, excess, -np.inf)))
+    a = [int(v) for v in links[worst, :3]]
     b = list(a)
-    b[int(worst[3])] += 1
+    b[int(links[worst, 3])] += 1
     return (
         f"{int(far.sum())} of the links to join are beyond their limits where the elements"
         f" are now (worst: {tuple(a)}-{tuple(b)}, {float(excess[worst]):.3g} mm too far);"
-        ' drag them closer first, or join with stretched="skip" to leave those cut'
+        ' drag them closer first, or join with stretched="skip" to leave those cut or'
+        ' stretched="pull" to pull them together'
     )
 
 

@@ -104,34 +104,47 @@ class ChainMailModel:
             self.links[lo_t][..., axis],
         )
 
-    def link_excess(self, positions: np.ndarray, axis: int) -> np.ndarray:
-        """How far (mm) each link along ``axis`` would be beyond its limits at
-        ``positions`` (<= 0: within them), present or removed.
-
-        Shape ``shape`` with ``axis`` shortened by one, as :meth:`link_limits`.
-        """
-        x = np.asarray(positions, dtype=np.float64)
-        mn, mx, sh, _ = self.link_limits(axis)
-        d = np.diff(x, axis=axis)
-        v = np.maximum(mn - d[..., axis], d[..., axis] - mx)
-        for j in range(3):
-            if j != axis:
-                v = np.maximum(v, np.abs(d[..., j]) - sh)
-        return v
-
     def violation(self, positions: np.ndarray) -> float:
         """Largest constraint violation (mm) of any present link at ``positions``.
 
         0 when every link satisfies its limits. ``positions``: (nx, ny, nz, 3).
         """
+        x = np.asarray(positions, dtype=np.float64)
         worst = 0.0
         for axis in range(3):
             if self.shape[axis] < 2:
                 continue
-            v = np.where(self.link_limits(axis)[3], self.link_excess(positions, axis), 0.0)
+            mn, mx, sh, linked = self.link_limits(axis)
+            d = np.diff(x, axis=axis)
+            v = np.maximum(mn - d[..., axis], d[..., axis] - mx)
+            for j in range(3):
+                if j != axis:
+                    v = np.maximum(v, np.abs(d[..., j]) - sh)
+            v = np.where(linked, v, 0.0)
             if v.size:
                 worst = max(worst, float(v.max()))
         return max(worst, 0.0)
+
+    def link_excess(self, positions: np.ndarray, links: np.ndarray) -> np.ndarray:
+        """(m,) how far (mm) links ``[i, j, k, axis]`` (present or removed, e.g. ones to
+        join) are beyond their limits at ``positions`` (<= 0: within them)."""
+        x = np.asarray(positions, dtype=np.float64)
+        idx = np.asarray(links, dtype=np.int64).reshape(-1, 4)
+        r, axis = np.arange(len(idx)), idx[:, 3]
+        a = tuple(idx[:, :3].T)
+        hi = idx[:, :3].copy()
+        hi[r, axis] += 1
+        b = tuple(hi.T)
+
+        def mean(lim: np.ndarray) -> np.ndarray:
+            return 0.5 * (lim[a][r, axis] + lim[b][r, axis])
+
+        d = x[b] - x[a]
+        along = d[r, axis]
+        v = np.maximum(mean(self.min_dist) - along, along - mean(self.max_dist))
+        across = np.abs(d)
+        across[r, axis] = -np.inf
+        return np.maximum(v, across.max(axis=1, initial=-np.inf) - mean(self.max_shear))
 
     def satisfied(self, positions: np.ndarray, tol: float = VIOLATION_TOL_MM) -> bool:
         """True when no link is violated by more than ``tol`` mm."""

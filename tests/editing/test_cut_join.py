@@ -5,7 +5,8 @@ Pure CPU: the ``fish`` sample at 32³ and a 5³ element grid. Oracles: the links
 the selection counted by hand (a block of 2³ elements inside the grid has 24), the
 elements outside a cut-loose block exactly at rest after a drag, links left cut exactly
 those whose elements are beyond the limits (computed from the positions here), and the
-saved file read back (cuts and positions equal).
+saved file read back (cuts and positions equal); after pulling, every link within its
+limits and the held and fixed elements in place.
 """
 
 from __future__ import annotations
@@ -73,9 +74,14 @@ def test_cut_sets_the_selection_loose_and_join_restores_where_it_touches(
     assert s.model.violation() <= 1e-6
     with pytest.raises(EditorError, match="stretched beyond their"):
         s.join_links(sel)
-    s.model.reset()
-    assert s.join_links(sel) == (far, 0)
+    held = x[2, 2, 2].copy()
+    assert s.join_links(sel, pull=True) == (far, 0)  # a suture: the sides meet
     assert len(s.model.cuts) == 0
+    assert s.model.violation() <= 1e-6
+    x = s.model.positions()
+    np.testing.assert_array_equal(x[2, 2, 2], held)
+    g = s.model.grid
+    np.testing.assert_array_equal(x[g.fixed], g.rest_positions[g.fixed])
 
 
 def test_cut_and_join_errors(session: EditSession) -> None:

@@ -1,5 +1,5 @@
-"""The window's *Cut selected* / *Join selected* (ChainMail): buttons clicked in a real
-window (Xvfb, see conftest), each an undoable edit; undo and redo restore the links
+"""The window's *Cut selected* / *Join selected* / *Pull and join* (ChainMail): buttons
+clicked in a real window (Xvfb, see conftest), each an undoable edit; undo and redo restore the links
 and the positions exactly.
 
 Oracles: 24 links around a 2³ block of a 5³ grid; elements outside the cut-loose block
@@ -77,11 +77,21 @@ def test_cut_join_undo_redo(window: Any, qtbot: Any) -> None:
         getattr(w.undo_stack, step)()
         assert _state(w)[0] == expected[0]
         np.testing.assert_array_equal(_state(w)[1], expected[1])
-    for _ in range(3):  # join, drag, cut
+    _click(qtbot, panel.pull_button)  # the stretched ones too, pulling the sides together
+    assert w.undo_stack.undoText() == "Pull and join"
+    assert w.statusBar().currentMessage() == f"Joined {far} link(s)"
+    pulled = _state(w)
+    assert pulled[0] == 0
+    assert w.session.model.violation() <= 1e-6
+    assert np.any(pulled[1] != joined[1])
+    for _ in range(4):  # pull, join, drag, cut
         w.undo_stack.undo()
     assert _state(w)[0] == 0
     np.testing.assert_array_equal(_state(w)[1], rest[1])
-    for _ in range(3):
+    for _ in range(4):
         w.undo_stack.redo()
+    assert _state(w)[0] == 0
+    np.testing.assert_array_equal(_state(w)[1], pulled[1])
+    w.undo_stack.undo()
     assert _state(w)[0] == far
     np.testing.assert_array_equal(_state(w)[1], joined[1])

@@ -1,6 +1,7 @@
 """The panel of the element families, mass-spring and ChainMail: the simulation group
 (run or pause, single step, steps per frame or relaxation steps, fix or free elements;
-ChainMail: cut the links around the selection, or join cut links where they touch).
+ChainMail: cut the links around the selection, join cut links where they touch, or
+pull the sides together and join them all).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ class ElementsPanel(FamilyPanel):
         "free_button",
         "cut_button",
         "join_button",
+        "pull_button",
         "boundary_label",
     )
 
@@ -128,9 +130,15 @@ class ElementsPanel(FamilyPanel):
             " (within the link limits); links a drag pulled apart stay cut: drag the"
             " sides together first"
         )
-        self.join_button.clicked.connect(self._join)
-        layout.addWidget(self.cut_button)
-        layout.addWidget(self.join_button)
+        self.join_button.clicked.connect(lambda: self._join(False))
+        self.pull_button = QPushButton("Pull and join")
+        self.pull_button.setToolTip(
+            "Join every cut link at the selected elements, dragging free elements until"
+            " the two sides meet (a suture; held and fixed elements stay)"
+        )
+        self.pull_button.clicked.connect(lambda: self._join(True))
+        for button in (self.cut_button, self.join_button, self.pull_button):
+            layout.addWidget(button)
         return row
 
     # ---------------------------------------------------------------- per family
@@ -194,8 +202,10 @@ class ElementsPanel(FamilyPanel):
         if n is not None:
             self._window.statusBar().showMessage(f"Cut {n} link(s)", 6000)
 
-    def _join(self) -> None:
-        done = self._edit("Join selected", lambda: self.session.join_links(self.session.selection))
+    def _join(self, pull: bool) -> None:
+        s = self.session
+        text = "Pull and join" if pull else "Join selected"
+        done = self._edit(text, lambda: s.join_links(s.selection, pull))
         if done is not None:
             joined, left = done
             more = f"; {left} stay cut (stretched apart: drag them together)" if left else ""

@@ -142,9 +142,9 @@ class Family:
         """Cut the links around the handles ``indices``; how many were cut."""
         raise EditorError(f"only ChainMail's links can be cut; the model is {self.kind!r}")
 
-    def join_links(self, indices: list[int]) -> tuple[int, int]:
-        """Join the cut links at the handles ``indices`` where they touch; how many were
-        joined and how many stay cut (their elements too far apart)."""
+    def join_links(self, indices: list[int], pull: bool = False) -> tuple[int, int]:
+        """Join the cut links at the handles ``indices`` where they touch (``pull``: all,
+        pulling the sides together); how many were joined and how many stay cut."""
         raise EditorError(f"only ChainMail's links can be joined; the model is {self.kind!r}")
 
     def begin_drag(self, drag: DragState) -> None:

@@ -625,21 +625,22 @@ class ChainMailFamily(ElementFamily):
             )
         return n
 
-    def join_links(self, indices: list[int]) -> tuple[int, int]:
+    def join_links(self, indices: list[int], pull: bool = False) -> tuple[int, int]:
         """Join the cut links with a selected end whose elements touch (within the
-        link's limits, :meth:`ChainMail.link_pairs` with ``stretched="skip"``); returns
-        (joined, left cut because their elements are too far apart)."""
+        link's limits, :meth:`ChainMail.link_pairs` with ``stretched="skip"``), or with
+        ``pull`` all of them, dragging free elements until the sides meet
+        (``stretched="pull"``); returns (joined, left cut: elements too far apart)."""
         cm = self._chainmail(indices)
         pairs = neighbour_pairs(self._mask(indices), boundary=False)
         low, axis = pairs[:, 0], np.argmax(pairs[:, 1] - pairs[:, 0], axis=1)
         cut = int(np.count_nonzero(~cm.model.links[low[:, 0], low[:, 1], low[:, 2], axis]))
         if cut == 0:
             raise EditorError("no cut links at the selected elements: nothing to join")
-        n = cm.link_pairs(pairs, stretched="skip")
+        n = cm.link_pairs(pairs, stretched="pull" if pull else "skip")
         if n == 0:
             raise EditorError(
                 f"the {cut} cut link(s) at the selected elements are stretched beyond their"
-                " limits: drag the two sides together first, then join"
+                " limits: drag the two sides together first, or join pulling them"
             )
         return n, cut - n
 

@@ -6,8 +6,10 @@ Oracles: a model cut and linked again moves bit for bit as one never cut (the sa
 random drags, relaxation included, on heterogeneous limits; both CPU variants, and the
 GPU backend against its own uncut run); which links count as stretched, computed here
 from the positions and the mean link limits independently of the model's code;  a
-skipping join leaves every link within its limits and moves nothing; refused joins
-change nothing.
+skipping join leaves every link within its limits and moves nothing; a pull (suture)
+leaves every link within its limits, held and fixed elements in place, and for one gap
+equals dragging the end back to touch; refused joins change nothing; the GPU's joins
+equal the CPU's to 1e-4 mm.
 """
 
 from __future__ import annotations
@@ -182,6 +184,57 @@ def test_skip_joins_only_the_touching_links() -> None:
     assert cm.violation() <= TOL
 
 
+def test_pull_joins_all_within_the_limits_held_and_fixed_staying() -> None:
+    cm, pairs = _pulled_apart()
+    held = cm.positions()[4, 2, 2]
+    assert cm.link_pairs(pairs, stretched="pull") == len(pairs)
+    assert len(cm.cuts) == 0
+    assert cm.violation() <= TOL
+    x = cm.positions()
+    np.testing.assert_array_equal(x[4, 2, 2], held)
+    g = cm.grid
+    np.testing.assert_array_equal(x[g.fixed], g.rest_positions[g.fixed])
+    # the held element's link was closed from the left: (3, 2, 2) moved up to 12.5 mm
+    assert x[4, 2, 2, 0] - x[3, 2, 2, 0] == pytest.approx(12.5, abs=TOL)
+    # and the pull moved nothing it did not have to: the far left face stays at rest
+    np.testing.assert_array_equal(x[0], g.rest_positions[0])
+
+
+def test_a_pull_is_the_least_motion_for_a_single_gap() -> None:
+    """One stretched link, both ends free: the upper end moves to the nearest position
+    within the limits and its tissue follows as a drag there would move it."""
+    cm = ChainMail(_grid((6, 3, 3)))
+    cm.cut_pairs([[(2, 1, 1), (3, 1, 1)]])
+    cm.move((3, 1, 1), (2.5 + 2.0, 0.0, 0.0))  # its link to (2, 1, 1): 2 mm too long
+    cm.release()
+    reference = ChainMail(_grid((6, 3, 3)))
+    reference.cut_pairs([[(2, 1, 1), (3, 1, 1)]])
+    reference.move((3, 1, 1), (2.5 + 2.0, 0.0, 0.0))
+    reference.move((3, 1, 1), (2.5, 0.0, 0.0))  # dragged back to touch
+    reference.release()
+    assert cm.link_pairs([[(3, 1, 1), (2, 1, 1)]], stretched="pull") == 1
+    np.testing.assert_allclose(cm.positions(), reference.positions(), atol=1e-12)
+    assert cm.violation() <= TOL
+
+
+def test_a_pull_against_fixed_elements_is_refused_and_changes_nothing() -> None:
+    g = _grid((8, 3, 3))
+    left = np.zeros(g.shape, dtype=bool)
+    left[:4] = True
+    g.fix(left)  # the whole left part is fixed
+    cm = ChainMail(g)
+    cm.cut((35.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    cm.move((4, 1, 1), (10.0, 0.0, 0.0))  # the right part follows, 7.5 mm too far
+    before = cm.to_dict(include_positions=True)
+    with pytest.raises(ChainMailError, match="held or fixed elements are in the way"):
+        cm.link_pairs(_pairs(cm.cuts), stretched="pull")
+    assert cm.to_dict(include_positions=True) == before
+    cm.release()  # now the right part can be pulled back
+    assert cm.link_pairs(_pairs(cm.cuts), stretched="pull") == 9
+    assert cm.violation() <= TOL
+    np.testing.assert_array_equal(cm.positions()[:4], g.rest_positions[:4])
+
+
 # ---------------------------------------------------------------------- never linked
 def test_regions_never_linked_join_where_they_touch() -> None:
     """A model loaded with cuts (two tissues side by side): joined, it is the model
@@ -239,6 +292,15 @@ def test_gpu_joins_stretched_links_as_the_cpu(gl_ctx: Any) -> None:
         assert gpu.link_pairs(pairs, stretched="skip") == cpu.link_pairs(pairs, stretched="skip")
         np.testing.assert_array_equal(gpu.cuts, cpu.cuts)
         assert gpu.violation() <= GPU_TOL
+        np.testing.assert_allclose(gpu.positions(), cpu.positions(), atol=1e-4)
+        rest = _pairs(gpu.cuts)
+        assert gpu.link_pairs(rest, stretched="pull") == cpu.link_pairs(rest, stretched="pull")
+        assert len(gpu.cuts) == 0
+        assert gpu.violation() <= GPU_TOL
+        np.testing.assert_allclose(gpu.positions(), cpu.positions(), atol=1e-4)
+        for cm in (gpu, cpu):  # the GPU solver drags the joined model as the CPU
+            cm.release()
+            assert cm.move((2, 2, 2), (-4.0, 6.0, 0.0)).fraction == 1.0
         np.testing.assert_allclose(gpu.positions(), cpu.positions(), atol=1e-4)
     finally:
         gpu.close()
