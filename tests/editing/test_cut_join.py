@@ -17,6 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from voxwarp.cli.deformation import _deform_grid, _run_chainmail
+from voxwarp.cli.main import build_parser
+from voxwarp.deform.elements.grid import ElementGrid
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.io.samples import load_sample
 from voxwarp.scene import Scene
@@ -129,3 +132,23 @@ def test_the_overlay_does_not_draw_cut_links(session: EditSession) -> None:
     assert whole == 3 * 4 * 25
     s.cut_links(block()[0])
     assert links() == whole - 24
+
+
+def test_cli_join_leaves_a_bridge_in_a_cut() -> None:
+    """``render --cut PLANE --join DISK`` (no GL): the disk's links are linked again,
+    the rest of the plane stays cut; the builder runs it for the CLI."""
+    volume = load_sample("fish", shape=(32, 32, 32))
+    rest = ElementGrid(volume, shape=6, margin=0.0, anchor="corners").rest_positions
+    x = 0.5 * (rest[2, 0, 0, 0] + rest[3, 0, 0, 0])  # between element layers 2 and 3
+    y, z = rest[2:4, 2:4, 2:4, 1].mean(), rest[2:4, 2:4, 2:4, 2].mean()
+    # the disk reaches the 4 links around the axis through (x, y, z), half a cell's
+    # diagonal away, and no others (the next are over twice as far)
+    radius = 0.5 * float(np.hypot(*(rest[3, 3, 3, 1:] - rest[2, 2, 2, 1:]))) + 0.5
+    argv = ["render", "in.npy", "-o", "x.png", "--chainmail", "6", "--grid-margin", "0"]
+    argv += [f"--cut={x},0,0:1,0,0", f"--join={x},{y},{z}:1,0,0:{radius}"]
+    args = build_parser(bench=False).parse_args(argv)
+    cm, summary = _run_chainmail(args, _deform_grid(args, volume), None)
+    assert ", 36 links cut, 4 joined again;" in summary
+    assert len(cm.cuts) == 32
+    joined = {(2, j, k, 0) for j in (2, 3) for k in (2, 3)}
+    assert not joined & set(map(tuple, cm.cuts.tolist()))

@@ -1,6 +1,6 @@
 """The window's *Cut selected* / *Join selected* / *Pull and join* (ChainMail): buttons
-clicked in a real window (Xvfb, see conftest), each an undoable edit; undo and redo restore the links
-and the positions exactly.
+clicked in a real window (Xvfb, see conftest), each an undoable edit; undo and redo
+restore the links and the positions exactly.
 
 Oracles: 24 links around a 2³ block of a 5³ grid; elements outside the cut-loose block
 at rest after a drag; the links left cut by a join exactly the stretched ones, counted

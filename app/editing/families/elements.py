@@ -548,8 +548,8 @@ class ChainMailFamily(ElementFamily):
 
     @classmethod
     def build_on(cls, settings: ChainMailSettings, grid: ElementGrid, ctx: Any = None) -> Built:
-        """Cuts first (through the rest state), then every drag at once (one move),
-        then ``settings.relax`` relaxation steps."""
+        """Cuts first (through the rest state), then the joins (cut links linked again),
+        then every drag at once (one move), then ``settings.relax`` relaxation steps."""
         try:
             cm = ChainMail(
                 grid,
@@ -562,6 +562,7 @@ class ChainMailFamily(ElementFamily):
         report = BuildReport()
         try:
             report.cut = sum(cm.cut(c.point, c.normal, c.radius) for c in settings.cuts)
+            report.joined = sum(cm.link(c.point, c.normal, c.radius) for c in settings.joins)
             if settings.warm_up and settings.backend == "cpu":  # no element: loads kernels
                 cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
             if settings.drags:
