@@ -972,11 +972,12 @@ class ChainMail(ElementWarpMixin):
         int
             Links removed (not counting ones cut before).
         """
-        return self._remove_links(self._pair_links(pairs))
+        mask = np.zeros_like(self._model.links)
+        mask[tuple(self._pair_links(pairs).T)] = True
+        return self._remove_links(mask)
 
     def _pair_links(self, pairs: Any) -> np.ndarray:
-        """(nx, ny, nz, 3) bool mask of the links between ``pairs`` (validated)."""
-        mask = np.zeros_like(self._model.links)
+        """(m, 4) int64 links ``[i, j, k, axis]`` between ``pairs`` (validated, each once)."""
         try:
             p = np.asarray(pairs, dtype=np.float64)
         except (TypeError, ValueError) as exc:
@@ -984,7 +985,7 @@ class ChainMail(ElementWarpMixin):
                 "pairs must be (m, 2, 3) element indices [[(i, j, k), (i2, j2, k2)], ...]"
             ) from exc
         if p.size == 0:
-            return mask
+            return np.zeros((0, 4), dtype=np.int64)
         if p.ndim != 3 or p.shape[1:] != (2, 3) or np.any(p != np.round(p)):
             raise ChainMailError(
                 "pairs must be (m, 2, 3) integer element indices"
@@ -1002,8 +1003,8 @@ class ChainMail(ElementWarpMixin):
             )
         low = np.minimum(a, b)
         axis = np.argmax(np.abs(diff), axis=1)
-        mask[low[:, 0], low[:, 1], low[:, 2], axis] = True
-        return mask
+        flat = np.unique(np.ravel_multi_index((*low.T, axis), self._model.links.shape))
+        return np.column_stack(np.unravel_index(flat, self._model.links.shape)).astype(np.int64)
 
     def _remove_links(self, cut: np.ndarray) -> int:
         newly = cut & self._model.links
@@ -1068,16 +1069,17 @@ class ChainMail(ElementWarpMixin):
         int
             Links restored.
         """
-        return self._restore_links(
-            self._crossing(plane_point, plane_normal, extent), _stretched(stretched)
-        )
+        crossing = self._crossing(plane_point, plane_normal, extent)
+        return self._restore_links(np.argwhere(crossing), _stretched(stretched))
 
     def _restore_links(self, add: np.ndarray, stretched: str) -> int:
+        """Restore the links ``add`` (``[i, j, k, axis]``, each once) that are cut."""
         m = self._model
-        new = np.argwhere(add & ~m.links & _possible(self.grid.shape))
+        new = add[~m.links[tuple(add.T)]]
         if len(new) == 0:
             return 0
-        x = self.positions()
+        # the CPU's own positions (no copy): a join changes none
+        x = self._x.reshape(m.rest.shape) if self.backend == "cpu" else self.positions()
         excess = m.link_excess(x, new)
         far = excess > _JOIN_TOL_MM[self.backend]
         if stretched == "refuse" and far.any():
