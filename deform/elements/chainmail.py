@@ -1105,6 +1105,9 @@ class ChainMail(ElementWarpMixin):
         if gpu:
             self._x[:] = x.reshape(-1, 3)
         saved = (self._x.copy(), m.links.copy(), self._box)
+        # a closed gap's link touches at the next check unless the propagation moved its
+        # other end too (the two ends also linked around the cut): a bound on retries
+        closes = 2 * len(new) + 8
         try:
             todo = new
             while len(todo):
@@ -1112,7 +1115,10 @@ class ChainMail(ElementWarpMixin):
                 touch = excess <= _JOIN_TOL_MM[self.backend]
                 m.links[tuple(todo[touch].T)] = True
                 todo = todo[~touch]
-                if len(todo) and not self._close_gap(todo[int(np.argmax(excess[~touch]))]):
+                if not len(todo):
+                    break
+                closes -= 1
+                if closes < 0 or not self._close_gap(todo[int(np.argmax(excess[~touch]))]):
                     raise ChainMailError(
                         "cannot pull the elements of the links to join within their limits:"
                         " held or fixed elements are in the way; release() the held ones"

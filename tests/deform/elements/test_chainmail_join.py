@@ -235,6 +235,34 @@ def test_a_pull_against_fixed_elements_is_refused_and_changes_nothing() -> None:
     np.testing.assert_array_equal(cm.positions()[:4], g.rest_positions[:4])
 
 
+@pytest.mark.parametrize("seed", range(12))
+def test_a_pull_joins_all_within_the_limits_or_changes_nothing(seed: int) -> None:
+    """Random pieces cut loose and random drags: a pull ends with every link present and
+    within its limits, held and fixed elements in place, or refuses leaving the model
+    as it was; with nothing held (only the corners fixed) it always joins."""
+    rng = np.random.default_rng(seed)
+    shape = (6, 5, 5)
+    cm = ChainMail(_grid(shape), variant=("gibson", "enhanced")[seed % 2])
+    pairs = neighbour_pairs(rng.random(shape) < 0.3)
+    cm.cut_pairs(pairs)
+    for idx, off in _drags(seed, shape, 3):
+        cm.move(idx, off)
+    if seed % 3 == 0:
+        cm.release()
+    before = cm.to_dict(include_positions=True)
+    try:
+        cm.link_pairs(pairs, stretched="pull")
+    except ChainMailError:
+        assert seed % 3 != 0
+        assert cm.to_dict(include_positions=True) == before
+        return
+    assert len(cm.cuts) == 0
+    assert cm.violation() <= TOL
+    x, g, held = cm.positions(), cm.grid, cm.held
+    np.testing.assert_array_equal(x[held], g.rest_positions[held] + cm.held_offsets[held])
+    np.testing.assert_array_equal(x[g.fixed], g.rest_positions[g.fixed])
+
+
 # ---------------------------------------------------------------------- never linked
 def test_regions_never_linked_join_where_they_touch() -> None:
     """A model loaded with cuts (two tissues side by side): joined, it is the model
