@@ -129,8 +129,8 @@ class Cut(tuple):
 
 def _cut(text: str) -> Cut:
     form = (
-        "PX,PY,PZ:NX,NY,NZ[:RADIUS] (a point on the cutting plane in world mm, its normal,"
-        " optionally the radius in mm of the disk on it that cuts), e.g. 48,24,20:1,0,0"
+        "PX,PY,PZ:NX,NY,NZ[:RADIUS] (a point on the plane in world mm, its normal,"
+        " optionally the radius in mm of the disk on it), e.g. 48,24,20:1,0,0"
     )
     parts = text.split(":")
     try:
@@ -527,4 +527,13 @@ def add_deform_args(p: argparse.ArgumentParser) -> None:
         help="before the drags, remove the links crossing the plane through point P (world"
         " mm) with normal N, or only a disk of radius R mm on it; the two sides then move"
         " independently; repeatable, e.g. --cut 48,24,20:1,0,0",
+    )
+    c.add_argument(
+        "--join",
+        type=_cut,
+        action="append",
+        metavar="PX,PY,PZ:NX,NY,NZ[:R]",
+        help="after the cuts, link again the cut links crossing this plane or disk (the"
+        " inverse of --cut): --cut 48,24,20:1,0,0 --join 48,24,20:1,0,0:10 leaves the"
+        " sides joined by a bridge of radius 10 mm; repeatable",
     )

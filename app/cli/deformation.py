@@ -53,6 +53,7 @@ _DEFORM_OPTIONS: tuple[tuple[str, str, str], ...] = (
     ("--relax", "relax", "chainmail"),
     ("--variant", "variant", "chainmail"),
     ("--cut", "cut", "chainmail"),
+    ("--join", "join", "chainmail"),
 )
 #: why a mass-spring option does not apply to ChainMail
 _NOT_FOR_CHAINMAIL: dict[str, str] = {
@@ -292,6 +293,7 @@ def _element_settings(args: argparse.Namespace) -> Any:
         shape=tuple(args.chainmail),
         variant=args.variant or "enhanced",
         cuts=tuple(ms.Cut(c.point, c.normal, c.radius) for c in args.cut or []),
+        joins=tuple(ms.Cut(c.point, c.normal, c.radius) for c in args.join or []),
         relax=relax,
         relax_steps=relax,  # saved with the model: a resumed one relaxes alike
         warm_up=True,  # the reported move time is the move's alone
@@ -302,8 +304,8 @@ def _element_settings(args: argparse.Namespace) -> Any:
 def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
     """The element grid of ``render --massspring`` / ``--chainmail`` over ``volume``
     (None without either): fixed elements and materials set, drags checked against
-    rigid elements (mass-spring) and cutting planes against the grid (ChainMail), all
-    before any GL work."""
+    rigid elements (mass-spring) and cutting and joining planes against the grid
+    (ChainMail), all before any GL work."""
     model = _deform_model(args)
     if model is None:
         return None
@@ -357,16 +359,7 @@ def _deform_grid(args: argparse.Namespace, volume: Any) -> Any:
                     " --stiffness-from-volume) and cannot move; drag another element or"
                     " map its value to a stiffness below 1"
                 )
-    for c in args.cut or []:
-        if not _cut_crosses(grid, c):
-            lo, hi = grid.lo, grid.hi
-            box = ", ".join(f"{a} {lo[i]:g}..{hi[i]:g}" for i, a in enumerate("xyz"))
-            where = "plane" if c.radius is None else f"disk of radius {c.radius:g} mm"
-            raise CliOptionError(
-                f"--cut {c.text}: the {where} crosses no link of the"
-                f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
-                " point inside that box (world mm, as --drag offsets)"
-            )
+    _check_cuts(args, grid)
     _say_margin(args)
     return grid
 
@@ -393,8 +386,38 @@ def _say_margin(args: argparse.Namespace) -> None:
         )
 
 
-def _cut_crosses(grid: Any, cut: _Cut) -> bool:
-    """Whether ``cut`` removes a link of ``grid`` at rest (the test of ChainMail.cut)."""
+def _check_cuts(args: argparse.Namespace, grid: Any) -> None:
+    """Every ``--cut`` must cross a link of ``grid`` at rest and every ``--join`` a link
+    that a ``--cut`` removed (one-line errors naming the option and the fix)."""
+    cut: list[np.ndarray] | None = None
+    for c in args.cut or []:
+        crossed = _crossings(grid, c)
+        if not any(np.any(m) for m in crossed):
+            lo, hi = grid.lo, grid.hi
+            box = ", ".join(f"{a} {lo[i]:g}..{hi[i]:g}" for i, a in enumerate("xyz"))
+            raise CliOptionError(
+                f"--cut {c.text}: the {_where(c)} crosses no link of the"
+                f" {_grid_text(grid.shape)} grid, whose elements span {box} mm; give a"
+                " point inside that box (world mm, as --drag offsets)"
+            )
+        cut = crossed if cut is None else [m | k for m, k in zip(crossed, cut, strict=True)]
+    for c in args.join or []:
+        crossed = _crossings(grid, c)
+        if cut is None or not any(np.any(m & k) for m, k in zip(crossed, cut, strict=True)):
+            raise CliOptionError(
+                f"--join {c.text}: the {_where(c)} crosses no link that a --cut removed;"
+                " --join links again what --cut cut: give a plane or disk across a --cut"
+            )
+
+
+def _where(cut: _Cut) -> str:
+    return "plane" if cut.radius is None else f"disk of radius {cut.radius:g} mm"
+
+
+def _crossings(grid: Any, cut: _Cut) -> list[np.ndarray]:
+    """Per axis, the links of ``grid`` at rest that ``cut`` (a --cut or --join plane or
+    disk) crosses (the test of ChainMail.cut), each with that axis first."""
+    out = []
     p0 = np.asarray(cut.point, dtype=np.float64)
     normal = np.asarray(cut.normal, dtype=np.float64)
     x = grid.rest_positions
@@ -410,9 +433,8 @@ def _cut_crosses(grid: Any, cut: _Cut) -> bool:
                 t = np.where(cross, sa / (sa - sb), 0.0)
             hit = xa + t[..., None] * (xb - xa)
             cross &= np.linalg.norm(hit - p0, axis=-1) <= cut.radius
-        if np.any(cross):
-            return True
-    return False
+        out.append(cross)
+    return out
 
 
 def _run_massspring(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, str]:
@@ -451,7 +473,8 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
     """Build, cut, drag and relax the ChainMail model of ``render --chainmail`` (the
     model builder: ``ChainMailFamily.build_on``).
 
-    Cuts come first (through the rest state), then all ``--drag`` elements move at once
+    Cuts come first (through the rest state), then the joins (``--join``: cut links
+    linked again), then all ``--drag`` elements move at once
     (one :meth:`~voxwarp.deform.elements.chainmail.ChainMail.move`), then ``--relax`` steps
     (also saved as the model's ``relax_steps``). Returns the
     :class:`~voxwarp.deform.elements.chainmail.ChainMail` and a one-line summary.
@@ -488,6 +511,8 @@ def _run_chainmail(args: argparse.Namespace, grid: Any, ctx: Any) -> tuple[Any, 
         summary += f", relax {relax} step{'s' * (relax != 1)} in {report.relax_ms:.1f} ms"
     if args.cut:
         summary += f", {report.cut} links cut"
+    if args.join:
+        summary += f", {report.joined} joined again"
     summary += f"; {report.displaced} elements displaced"
     return cm, summary
 

@@ -287,6 +287,7 @@ NEGATIVE_VALUE_OPTIONS = (
     "--view",
     "--stiffness-from-volume",
     "--cut",
+    "--join",
     "--clip",
     "--drag-at",
     "--plane",

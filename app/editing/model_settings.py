@@ -163,6 +163,8 @@ class ChainMailSettings(ElementSettings):
 
     variant: str = "enhanced"
     cuts: tuple[Cut, ...] = ()
+    #: after the cuts: cut links crossing these planes or disks are linked again
+    joins: tuple[Cut, ...] = ()
     #: relaxation steps run once after the drags
     relax: int = 0
     #: relaxation steps after every later move, saved with the model (None: ``relax``)
@@ -354,9 +356,11 @@ class BuildReport:
     steps: int = 0
     settling: bool = False
     hit_limit: bool = False
-    #: ChainMail: links cut, elements touched by the drags, the drags' time, the fraction
-    #: of the way a limited drag went (None: all of it), relaxation time, elements moved
+    #: ChainMail: links cut and joined again, elements touched by the drags, the drags'
+    #: time, the fraction of the way a limited drag went (None: all of it), relaxation
+    #: time, elements moved
     cut: int = 0
+    joined: int = 0
     touched: int = 0
     solve_ms: float = 0.0
     limited_fraction: float | None = None

@@ -522,6 +522,23 @@ class EditSession:
         self.family.set_fixed(list(indices), fixed)
         self._touch()
 
+    def cut_links(self, indices: Sequence[int]) -> int:
+        """Cut the links around elements ``indices`` (ChainMail): every link from one of
+        them to an element not among them; how many were cut."""
+        n = self.family.cut_links(list(indices))
+        self._touch()
+        return n
+
+    def join_links(self, indices: Sequence[int], pull: bool = False) -> tuple[int, int]:
+        """Join the cut links with an end among elements ``indices`` (ChainMail) where
+        the two elements touch; ``(joined, left cut)``: links whose elements a drag
+        pulled too far apart stay cut (drag them together first) unless ``pull``, which
+        drags free elements until the sides meet and joins them all (a suture; held
+        and fixed elements stay, and when they are in the way nothing changes)."""
+        joined = self.family.join_links(list(indices), pull)
+        self._touch()
+        return joined
+
     # ------------------------------------------------------------------ dragging
     def begin_drag(self, camera: Camera, size: tuple[int, int], pixel: Sequence[float]) -> bool:
         """Start dragging the selection (the reference under the cursor defines the plane).

@@ -89,13 +89,37 @@ the exact minimiser, within the constraints, of the smoothness energy
 element, so ``E`` never grows and the constraints stay satisfied. A red-black
 colouring makes one step two parallel half-sweeps. The thesis shows 0, 1 and 4 steps.
 
-Cutting
--------
+Cutting and joining
+-------------------
 :meth:`ChainMail.cut` removes the links whose segment between the two elements'
 *current* positions crosses a plane (or a disk of radius ``extent`` on it);
 :meth:`ChainMail.cut_pairs` removes links between given neighbour pairs. The parts on
 either side then move independently. Removing a link never violates anything, so the
 state stays valid. Scene JSON stores the removed links (:attr:`ChainMail.cuts`).
+
+Links "can be removed to cut, and conversely added to connect different tissues"
+(Knoche 2008, 2.4.2.2): :meth:`ChainMail.link_pairs` and :meth:`ChainMail.link` are the
+inverses of ``cut_pairs`` and ``cut``. A link exists only between grid neighbours, so
+joining restores a link of the grid's structure: a model cut and linked again is the
+uncut model (same links, same moves). Regions that were never linked (a model loaded
+with ``cuts``) are joined the same way. A removed link whose elements have drifted
+beyond its limits (a drag pulled the sides apart) is *stretched*; joining it as it is
+would leave a violated constraint, so ``stretched`` (:data:`STRETCHED`) decides:
+
+* ``"refuse"`` (the default of ``link_pairs``): an error naming how many links, the
+  worst and by how many mm; nothing changes.
+* ``"skip"`` (the default of ``link`` and of the GUI's join): only the links whose
+  elements touch are joined, the others stay cut; nothing moves.
+* ``"pull"``: a suture. The worst stretched link first, one of its ends is dragged to
+  the nearest position the link allows (the upper-index end, or the lower one when
+  that is held, fixed or blocked), its tissue following by the usual propagation
+  (held and fixed elements stay), and every link that then touches is joined; repeated
+  until all are joined. If neither end of a link can get there, nothing changes and
+  an error says so. (A repair of the whole state, as :meth:`ChainMail.set_limits`
+  does, is meant for round-off and gives up on gaps of a few millimetres.) On the GPU
+  backend this runs on the CPU, on read-back positions, as :meth:`ChainMail.relax`.
+
+Only ``"pull"`` moves elements; a join never violates a link.
 
 Why numba
 ---------
@@ -129,7 +153,12 @@ from typing import Any
 
 import numpy as np
 
-from voxwarp.deform.elements.chainmail_model import ChainMailError, ChainMailModel, check_limits
+from voxwarp.deform.elements.chainmail_model import (
+    VIOLATION_TOL_MM,
+    ChainMailError,
+    ChainMailModel,
+    check_limits,
+)
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
 from voxwarp.deform.elements.model import (
     BACKENDS,
@@ -145,11 +174,13 @@ from voxwarp.deform.elements.model import (
 __all__ = [
     "BACKENDS",
     "MODEL_TYPE",
+    "STRETCHED",
     "VARIANTS",
     "ChainMail",
     "ChainMailError",
     "MoveStats",
     "limits_from_stiffness",
+    "neighbour_pairs",
 ]
 
 #: propagation variants of :class:`ChainMail`
@@ -161,6 +192,12 @@ MODEL_TYPE = "chainmail"
 DEFAULT_STRETCH = 0.5
 #: default largest shear, in spacings, of a stiffness-0 element's links
 DEFAULT_SHEAR = 0.5
+#: what :meth:`ChainMail.link_pairs` does with a link its elements violate where they are
+STRETCHED: tuple[str, ...] = ("refuse", "skip", "pull")
+#: a link to join whose elements are within its limits to this many mm touches (CPU:
+#: float64 round-off, :data:`VIOLATION_TOL_MM`; GPU: float32 positions, the tolerance of
+#: its feasibility check, ``chainmail_gpu.CHECK_TOL_MM``)
+_JOIN_TOL_MM = {"cpu": VIOLATION_TOL_MM, "gpu": 1e-4}
 #: bisection steps of a limited move (the fraction is found to within 2**-14)
 LIMIT_BISECTIONS = 14
 #: the priority queue gives up (the move counts as infeasible) after this many pops
@@ -337,7 +374,8 @@ class ChainMail(ElementWarpMixin):
     def model(self) -> ChainMailModel:
         """The :class:`~voxwarp.deform.elements.chainmail_model.ChainMailModel` the solver runs
         (live;
-        change it through :meth:`set_limits`, :meth:`cut`, :meth:`fix`, :meth:`free`)."""
+        change it through :meth:`set_limits`, :meth:`cut`, :meth:`link`, :meth:`fix`,
+        :meth:`free`)."""
         return self._model
 
     @property
@@ -372,12 +410,7 @@ class ChainMail(ElementWarpMixin):
     def cuts(self) -> np.ndarray:
         """(m, 4) int64 ``[i, j, k, axis]``: removed links from ``(i, j, k)`` to the next
         element along ``axis``."""
-        possible = np.ones((*self.grid.shape, 3), dtype=bool)
-        for a in range(3):
-            idx: list[Any] = [slice(None)] * 3
-            idx[a] = -1
-            possible[(*idx, a)] = False
-        return np.argwhere(possible & ~self._model.links).astype(np.int64)
+        return np.argwhere(_possible(self.grid.shape) & ~self._model.links).astype(np.int64)
 
     def _check_rest(self, model: ChainMailModel | None = None) -> None:
         """Raise when the rest state violates the limits (naming a link and the fix)."""
@@ -896,6 +929,11 @@ class ChainMail(ElementWarpMixin):
         int
             Links removed (not counting ones cut before).
         """
+        return self._remove_links(self._crossing(plane_point, plane_normal, extent))
+
+    def _crossing(self, plane_point: Any, plane_normal: Any, extent: float | None) -> np.ndarray:
+        """(nx, ny, nz, 3) bool: the grid's links (present or not) that cross the plane
+        or disk at the current positions (the test of :meth:`cut`)."""
         p0 = _vec3(plane_point, "plane_point")
         normal = _vec3(plane_normal, "plane_normal")
         length = float(np.linalg.norm(normal))
@@ -906,13 +944,9 @@ class ChainMail(ElementWarpMixin):
             extent = _number(extent, "extent (None: the whole plane)", lo=0.0, hi=math.inf)
         x = self.positions()
         s = (x - p0) @ normal
-        cut = np.zeros_like(self._model.links)
+        cross_all = np.zeros_like(self._model.links)
         for axis in range(3):
-            lo: list[Any] = [slice(None)] * 3
-            hi: list[Any] = [slice(None)] * 3
-            lo[axis] = slice(0, -1)
-            hi[axis] = slice(1, None)
-            lo_t, hi_t = tuple(lo), tuple(hi)
+            lo_t, hi_t = _link_ends(axis)
             sa, sb = s[lo_t], s[hi_t]
             cross = ((sa < 0) & (sb >= 0)) | ((sb < 0) & (sa >= 0))
             if extent is not None and np.any(cross):
@@ -921,8 +955,8 @@ class ChainMail(ElementWarpMixin):
                 xa, xb = x[lo_t], x[hi_t]
                 hit = xa + t[..., None] * (xb - xa)
                 cross &= np.linalg.norm(hit - p0, axis=-1) <= extent
-            cut[(*lo_t, axis)] = cross
-        return self._remove_links(cut)
+            cross_all[(*lo_t, axis)] = cross
+        return cross_all
 
     def cut_pairs(self, pairs: Any) -> int:
         """Remove the links between given pairs of neighbouring elements.
@@ -930,7 +964,7 @@ class ChainMail(ElementWarpMixin):
         Parameters
         ----------
         pairs
-            (m, 2, 3) integer indices: ``[[(i, j, k), (i2, j2, k2)], ...]``, each pair
+            (m, 2, 3) element indices: ``[[(i, j, k), (i2, j2, k2)], ...]``, each pair
             6-neighbours (one index differing by 1).
 
         Returns
@@ -938,6 +972,12 @@ class ChainMail(ElementWarpMixin):
         int
             Links removed (not counting ones cut before).
         """
+        mask = np.zeros_like(self._model.links)
+        mask[tuple(self._pair_links(pairs).T)] = True
+        return self._remove_links(mask)
+
+    def _pair_links(self, pairs: Any) -> np.ndarray:
+        """(m, 4) int64 links ``[i, j, k, axis]`` between ``pairs`` (validated, each once)."""
         try:
             p = np.asarray(pairs, dtype=np.float64)
         except (TypeError, ValueError) as exc:
@@ -945,7 +985,7 @@ class ChainMail(ElementWarpMixin):
                 "pairs must be (m, 2, 3) element indices [[(i, j, k), (i2, j2, k2)], ...]"
             ) from exc
         if p.size == 0:
-            return 0
+            return np.zeros((0, 4), dtype=np.int64)
         if p.ndim != 3 or p.shape[1:] != (2, 3) or np.any(p != np.round(p)):
             raise ChainMailError(
                 "pairs must be (m, 2, 3) integer element indices"
@@ -963,9 +1003,8 @@ class ChainMail(ElementWarpMixin):
             )
         low = np.minimum(a, b)
         axis = np.argmax(np.abs(diff), axis=1)
-        cut = np.zeros_like(self._model.links)
-        cut[low[:, 0], low[:, 1], low[:, 2], axis] = True
-        return self._remove_links(cut)
+        flat = np.unique(np.ravel_multi_index((*low.T, axis), self._model.links.shape))
+        return np.column_stack(np.unravel_index(flat, self._model.links.shape)).astype(np.int64)
 
     def _remove_links(self, cut: np.ndarray) -> int:
         newly = cut & self._model.links
@@ -973,6 +1012,155 @@ class ChainMail(ElementWarpMixin):
         if self.backend == "gpu" and np.any(newly):
             self._rebuild_gpu()
         return int(newly.sum())
+
+    # ------------------------------------------------------------------ joining
+    def link_pairs(self, pairs: Any, stretched: str = "refuse") -> int:
+        """Restore the links between given pairs of neighbouring elements: the inverse
+        of :meth:`cut_pairs` (a cut then linked model moves exactly as the uncut one).
+
+        Links exist only between 6-neighbours of the grid, so this also joins regions
+        that were never linked (a model loaded with ``cuts``) where they are neighbours.
+        Pairs already linked are ignored, as :meth:`cut_pairs` ignores pairs already cut.
+
+        Parameters
+        ----------
+        pairs
+            (m, 2, 3) element indices ``[[(i, j, k), (i2, j2, k2)], ...]``, each pair
+            6-neighbours (one index differing by 1).
+        stretched
+            What to do with a link its two elements violate where they are now
+            (pulled apart, pushed together or sheared beyond its limits; see
+            :data:`STRETCHED`, the module doc): ``"refuse"`` (default) raises and
+            changes nothing; ``"skip"`` restores only the links whose elements touch
+            (within the limits) and leaves the others cut; ``"pull"`` drags free
+            elements, the worst link first, until every link touches, and joins all.
+
+        Returns
+        -------
+        int
+            Links restored (not counting ones present before).
+
+        Raises
+        ------
+        ChainMailError
+            On malformed pairs or pairs that are not neighbours; with ``"refuse"``, on
+            a stretched link (naming how many, the worst, by how many mm, and the
+            fixes); with ``"pull"``, when held or fixed elements keep a link's ends
+            apart. Nothing changes then.
+        """
+        return self._restore_links(self._pair_links(pairs), _stretched(stretched))
+
+    def link(
+        self,
+        plane_point: Any,
+        plane_normal: Any,
+        extent: float | None = None,
+        stretched: str = "skip",
+    ) -> int:
+        """Restore the removed links that cross a plane (or a disk on it): the
+        counterpart of :meth:`cut`, joining the regions on either side where they touch.
+
+        A link crosses as in :meth:`cut` (at the elements' current positions).
+        ``stretched`` is as in :meth:`link_pairs` but defaults to ``"skip"``: a plane
+        also crosses links whose ends a drag pulled apart, and those stay cut.
+
+        Returns
+        -------
+        int
+            Links restored.
+        """
+        crossing = self._crossing(plane_point, plane_normal, extent)
+        return self._restore_links(np.argwhere(crossing), _stretched(stretched))
+
+    def _restore_links(self, add: np.ndarray, stretched: str) -> int:
+        """Restore the links ``add`` (``[i, j, k, axis]``, each once) that are cut."""
+        m = self._model
+        new = add[~m.links[tuple(add.T)]]
+        if len(new) == 0:
+            return 0
+        # the CPU's own positions (no copy): a join changes none
+        x = self._x.reshape(m.rest.shape) if self.backend == "cpu" else self.positions()
+        excess = m.link_excess(x, new)
+        far = excess > _JOIN_TOL_MM[self.backend]
+        if stretched == "refuse" and far.any():
+            raise ChainMailError(_stretched_message(new, far, excess))
+        if stretched == "skip":
+            new = new[~far]
+        if stretched == "pull" and far.any():
+            self._pull(new, x)
+        elif len(new):
+            m.links[tuple(new.T)] = True
+            if self.backend == "gpu":
+                self._rebuild_gpu()
+        return len(new)
+
+    def _pull(self, new: np.ndarray, x: np.ndarray) -> None:
+        """Join links ``new`` (``[i, j, k, axis]``), some stretched, at positions ``x``:
+        the worst first, an end of it is dragged to the nearest place its link allows
+        (the upper end, or the lower if that is held or fixed or blocked), its tissue
+        following by propagation; links that then touch are joined. On the GPU backend
+        this runs on the CPU, on read-back positions. Nothing changes on failure."""
+        m = self._model
+        gpu = self.backend == "gpu"
+        if gpu:
+            self._x[:] = x.reshape(-1, 3)
+        saved = (self._x.copy(), m.links.copy(), self._box)
+        # a closed gap's link touches at the next check unless the propagation moved its
+        # other end too (the two ends also linked around the cut): a bound on retries
+        closes = 2 * len(new) + 8
+        try:
+            todo = new
+            while len(todo):
+                excess = m.link_excess(self._x.reshape(x.shape), todo)
+                touch = excess <= _JOIN_TOL_MM[self.backend]
+                m.links[tuple(todo[touch].T)] = True
+                todo = todo[~touch]
+                if not len(todo):
+                    break
+                closes -= 1
+                if closes < 0 or not self._close_gap(todo[int(np.argmax(excess[~touch]))]):
+                    raise ChainMailError(
+                        "cannot pull the elements of the links to join within their limits:"
+                        " held or fixed elements are in the way; release() the held ones"
+                        ' (or drag them closer) first, or join with stretched="skip"'
+                    )
+        except ChainMailError:
+            self._x[:], m.links[:], self._box = saved
+            if gpu:
+                self._x[:] = self._rest
+            raise
+        if gpu:
+            self._rebuild_gpu(self._x.reshape(x.shape).copy())
+            self._x[:] = self._rest
+        else:
+            self._update_warp()
+
+    def _close_gap(self, link: np.ndarray) -> bool:
+        """Drag an end of ``link`` (``[i, j, k, axis]``) to the nearest position within
+        its limits, the other end staying (a propagation of the CPU kernels on
+        :attr:`_x`); False when neither end can go there."""
+        m, axis = self._model, int(link[3])
+        a = tuple(int(v) for v in link[:3])
+        b = tuple(v + (c == axis) for c, v in enumerate(a))
+        lo = np.full(3, -0.5 * (m.max_shear[a][axis] + m.max_shear[b][axis]))
+        hi = -lo
+        lo[axis] = 0.5 * (m.min_dist[a][axis] + m.min_dist[b][axis])
+        hi[axis] = 0.5 * (m.max_dist[a][axis] + m.max_dist[b][axis])
+        ea, eb = (int(np.ravel_multi_index(e, self.grid.shape)) for e in (a, b))
+        d = self._x[eb] - self._x[ea]
+        for end, target in (
+            (eb, self._x[ea] + np.clip(d, lo, hi)),
+            (ea, self._x[eb] - np.clip(d, lo, hi)),
+        ):
+            if self._pinned[end]:
+                continue
+            self._pinned[end] = True
+            ok, *_ = self._attempt(np.array([end]), target[None], commit=True)
+            self._pinned[end] = False
+            if ok:
+                self._grow_box()
+                return True
+        return False
 
     # ------------------------------------------------------------------ results
     def positions(self) -> np.ndarray:
@@ -1073,9 +1261,10 @@ class ChainMail(ElementWarpMixin):
             ) from exc
         return GpuChainMailSolver(self._model, self._ctx)
 
-    def _rebuild_gpu(self) -> None:
-        """Make a new GPU solver for the changed model, keeping the positions."""
-        x = self.positions()
+    def _rebuild_gpu(self, positions: np.ndarray | None = None) -> None:
+        """Make a new GPU solver for the changed model, keeping the positions (or
+        starting from ``positions``, (nx, ny, nz, 3) mm)."""
+        x = self.positions() if positions is None else positions
         fixed = self._model.fixed
         x[fixed] = self._model.rest[fixed]
         self._solver.release()
@@ -1218,6 +1407,77 @@ class ChainMail(ElementWarpMixin):
 
 
 # ---------------------------------------------------------------------- helpers
+def neighbour_pairs(mask: Any, boundary: bool = True) -> np.ndarray:
+    """(m, 2, 3) int64 pairs of 6-neighbour elements with one end in ``mask``.
+
+    Parameters
+    ----------
+    mask
+        (nx, ny, nz) bool: selected elements.
+    boundary
+        True: exactly one end selected (the links around the selection: cutting them
+        sets it loose); False: at least one (also the links inside it).
+
+    Returns
+    -------
+    numpy.ndarray
+        Pairs for :meth:`ChainMail.cut_pairs` / :meth:`ChainMail.link_pairs`, the lower
+        index first.
+    """
+    m = np.asarray(mask, dtype=bool)
+    if m.ndim != 3:
+        raise ChainMailError(f"mask must be an (nx, ny, nz) bool array; got shape {m.shape}")
+    out = []
+    for axis in range(3):
+        lo_t, hi_t = _link_ends(axis)
+        a, b = m[lo_t], m[hi_t]
+        low = np.argwhere(a ^ b if boundary else a | b)
+        high = low.copy()
+        high[:, axis] += 1
+        out.append(np.stack([low, high], axis=1))
+    return np.concatenate(out).astype(np.int64)
+
+
+def _link_ends(axis: int) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+    """Index tuples of the lower and upper ends of the links along ``axis``."""
+    lo: list[Any] = [slice(None)] * 3
+    hi: list[Any] = [slice(None)] * 3
+    lo[axis] = slice(0, -1)
+    hi[axis] = slice(1, None)
+    return tuple(lo), tuple(hi)
+
+
+def _possible(shape: tuple[int, int, int]) -> np.ndarray:
+    """(nx, ny, nz, 3) bool: the links a grid of ``shape`` can have (none past the last
+    layer along each axis)."""
+    possible = np.ones((*shape, 3), dtype=bool)
+    for a in range(3):
+        idx: list[Any] = [slice(None)] * 3
+        idx[a] = -1
+        possible[(*idx, a)] = False
+    return possible
+
+
+def _stretched(value: Any) -> str:
+    if value not in STRETCHED:
+        raise ChainMailError(f"stretched must be one of {STRETCHED}; got {value!r}")
+    return str(value)
+
+
+def _stretched_message(links: np.ndarray, far: np.ndarray, excess: np.ndarray) -> str:
+    """The error of a refused join: how many links, the worst and the fixes."""
+    worst = int(np.argmax(np.where(far, excess, -np.inf)))
+    a = [int(v) for v in links[worst, :3]]
+    b = list(a)
+    b[int(links[worst, 3])] += 1
+    return (
+        f"{int(far.sum())} of the links to join are beyond their limits where the elements"
+        f" are now (worst: {tuple(a)}-{tuple(b)}, {float(excess[worst]):.3g} mm too far);"
+        ' drag them closer first, or join with stretched="skip" to leave those cut or'
+        ' stretched="pull" to pull them together'
+    )
+
+
 def _variant(value: Any) -> str:
     if value not in VARIANTS:
         raise ChainMailError(f"unknown variant {value!r}; valid variants: {VARIANTS}")

@@ -125,6 +125,27 @@ class ChainMailModel:
                 worst = max(worst, float(v.max()))
         return max(worst, 0.0)
 
+    def link_excess(self, positions: np.ndarray, links: np.ndarray) -> np.ndarray:
+        """(m,) how far (mm) links ``[i, j, k, axis]`` (present or removed, e.g. ones to
+        join) are beyond their limits at ``positions`` (<= 0: within them)."""
+        x = np.asarray(positions, dtype=np.float64)
+        idx = np.asarray(links, dtype=np.int64).reshape(-1, 4)
+        r, axis = np.arange(len(idx)), idx[:, 3]
+        a = tuple(idx[:, :3].T)
+        hi = idx[:, :3].copy()
+        hi[r, axis] += 1
+        b = tuple(hi.T)
+
+        def mean(lim: np.ndarray) -> np.ndarray:
+            return 0.5 * (lim[a][r, axis] + lim[b][r, axis])
+
+        d = x[b] - x[a]
+        along = d[r, axis]
+        v = np.maximum(mean(self.min_dist) - along, along - mean(self.max_dist))
+        across = np.abs(d)
+        across[r, axis] = -np.inf
+        return np.maximum(v, across.max(axis=1, initial=-np.inf) - mean(self.max_shear))
+
     def satisfied(self, positions: np.ndarray, tol: float = VIOLATION_TOL_MM) -> bool:
         """True when no link is violated by more than ``tol`` mm."""
         return self.violation(positions) <= tol

@@ -51,6 +51,7 @@ DRAG = ["--chainmail", "7", "--anchor", "corners", "--drag", "3,3,3:3,0,0"]
         (["--chainmail", "8", "--cut", "1,2,3:1,0,0:0"], "the radius must be > 0 mm"),
         (["--chainmail", "8", "--cut", "1,2,3:1,0,0:nan"], "numbers must be finite"),
         (["--chainmail", "8", "--cut", "-1,2,3:1,0,0:1:2"], "expected PX,PY,PZ"),
+        (["--chainmail", "8", "--join", "1,2,3"], "expected PX,PY,PZ:NX,NY,NZ[:RADIUS]"),
     ],
 )
 def test_bad_syntax_is_an_argparse_error(
@@ -73,6 +74,7 @@ def test_bad_syntax_is_an_argparse_error(
     [
         (["--relax", "2"], "--relax needs --chainmail: add --chainmail N"),
         (["--cut", "8,8,8:1,0,0"], "--cut needs --chainmail"),
+        (["--join", "8,8,8:1,0,0"], "--join needs --chainmail"),
         (["--variant", "gibson"], "--variant needs --chainmail"),
         (["--drag", "1,1,1:0,0,5"], "--drag needs --massspring: add --massspring N"),
         (["--drag", "1,1,1:0,0,5"], "or --chainmail N"),
@@ -88,6 +90,7 @@ def test_bad_syntax_is_an_argparse_error(
         (["--massspring", "8", "--relax", "1"], "--relax is a ChainMail option (--chainmail)"),
         (["--massspring", "8", "--variant", "gibson"], "--variant is a ChainMail option"),
         (["--massspring", "8", "--cut", "8,8,8:1,0,0"], "--cut is a ChainMail option"),
+        (["--massspring", "8", "--join", "8,8,8:1,0,0"], "--join is a ChainMail option"),
         (
             ["--chainmail", "8", "--drag", "8,3,3:1,0,0"],
             "--drag 8,3,3:1,0,0: element (8, 3, 3) is outside the 8x8x8 grid; indices run 0..7",
@@ -114,6 +117,14 @@ def test_bad_syntax_is_an_argparse_error(
             ["--chainmail", "8", "--cut", "7.5,7.5,7.5:1,0,0:0.1"],
             "the disk of radius 0.1 mm crosses no link",
         ),
+        (
+            ["--chainmail", "8", "--join", "7.5,7.5,7.5:1,0,0"],
+            "--join 7.5,7.5,7.5:1,0,0: the plane crosses no link that a --cut removed",
+        ),
+        (  # the cut removes links along x, the join's plane crosses links along y
+            ["--chainmail", "8", "--cut", "7.5,7.5,7.5:1,0,0", "--join", "7.5,7.5,7.5:0,1,0"],
+            "--join 7.5,7.5,7.5:0,1,0: the plane crosses no link that a --cut removed",
+        ),
     ],
 )
 def test_bad_options_are_one_line_errors(
@@ -130,7 +141,7 @@ def test_help_documents_chainmail(capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(SystemExit):
         main(["render", "--help"])
     out = capsys.readouterr().out
-    for opt in ("--chainmail", "--relax", "--variant", "--cut", "3D ChainMail options"):
+    for opt in ("--chainmail", "--relax", "--variant", "--cut", "--join", "3D ChainMail options"):
         assert opt in out
 
 

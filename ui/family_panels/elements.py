@@ -1,12 +1,22 @@
 """The panel of the element families, mass-spring and ChainMail: the simulation group
-(run or pause, single step, steps per frame or relaxation steps, fix or free elements).
+(run or pause, single step, steps per frame or relaxation steps, fix or free elements;
+ChainMail: cut the links around the selection, join cut links where they touch, or
+pull the sides together and join them all).
 """
 
 from __future__ import annotations
 
 from typing import ClassVar
 
-from PySide6.QtWidgets import QFormLayout, QGroupBox, QHBoxLayout, QLabel, QPushButton, QSpinBox
+from PySide6.QtWidgets import (
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QSpinBox,
+    QWidget,
+)
 
 from voxwarp.editing.session import EditorError, EditSession
 from voxwarp.ui.family_panels.base import FamilyPanel
@@ -41,6 +51,9 @@ class ElementsPanel(FamilyPanel):
         "relax_spin",
         "fix_button",
         "free_button",
+        "cut_button",
+        "join_button",
+        "pull_button",
         "boundary_label",
     )
 
@@ -59,6 +72,8 @@ class ElementsPanel(FamilyPanel):
         )
         form.addRow("Relax steps", self.relax_spin)
         form.addRow(self._fix_row())
+        self.cut_row = self._cut_row()
+        form.addRow(self.cut_row)
         self.boundary_label = QLabel()
         self.boundary_label.setWordWrap(True)
         self.boundary_label.setToolTip(
@@ -99,6 +114,33 @@ class ElementsPanel(FamilyPanel):
         row.addWidget(self.free_button)
         return row
 
+    def _cut_row(self) -> QWidget:
+        row = QWidget()
+        layout = QHBoxLayout(row)
+        layout.setContentsMargins(0, 0, 0, 0)
+        self.cut_button = QPushButton("Cut selected")
+        self.cut_button.setToolTip(
+            "Cut the links between the selected elements and the others: the selection"
+            " comes loose and moves independently (links drawn no more)"
+        )
+        self.cut_button.clicked.connect(self._cut)
+        self.join_button = QPushButton("Join selected")
+        self.join_button.setToolTip(
+            "Join the cut links at the selected elements where the two sides touch"
+            " (within the link limits); links a drag pulled apart stay cut: drag the"
+            " sides together first"
+        )
+        self.join_button.clicked.connect(lambda: self._join(False))
+        self.pull_button = QPushButton("Pull and join")
+        self.pull_button.setToolTip(
+            "Join every cut link at the selected elements, dragging free elements until"
+            " the two sides meet (a suture; held and fixed elements stay)"
+        )
+        self.pull_button.clicked.connect(lambda: self._join(True))
+        for button in (self.cut_button, self.join_button, self.pull_button):
+            layout.addWidget(button)
+        return row
+
     # ---------------------------------------------------------------- per family
     @classmethod
     def summary(cls, s: EditSession) -> str:
@@ -120,6 +162,7 @@ class ElementsPanel(FamilyPanel):
             self.relax_spin.setValue(s.options.relax_steps)
             for button in (self.fix_button, self.free_button, self.step_button):
                 button.setEnabled(s.model is not None)
+            self.simulation_form.setRowVisible(self.cut_row, s.family.can_cut)
             text = getattr(s.family, "boundary_text", None)
             self.boundary_label.setText(text() if callable(text) else "")
 
@@ -153,6 +196,20 @@ class ElementsPanel(FamilyPanel):
             s.set_fixed(s.selection, fixed)
 
         self._edit("Fix selected" if fixed else "Free selected", fn)
+
+    def _cut(self) -> None:
+        n = self._edit("Cut selected", lambda: self.session.cut_links(self.session.selection))
+        if n is not None:
+            self._window.statusBar().showMessage(f"Cut {n} link(s)", 6000)
+
+    def _join(self, pull: bool) -> None:
+        s = self.session
+        text = "Pull and join" if pull else "Join selected"
+        done = self._edit(text, lambda: s.join_links(s.selection, pull))
+        if done is not None:
+            joined, left = done
+            more = f"; {left} stay cut (stretched apart: drag them together)" if left else ""
+            self._window.statusBar().showMessage(f"Joined {joined} link(s){more}", 8000)
 
 
 #: run-time option -> (undo text, merge key) of its edits

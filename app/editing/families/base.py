@@ -53,6 +53,8 @@ class Family:
     handle_name: ClassVar[str] = ""
     #: whether handles can be fixed (:meth:`set_fixed`)
     can_fix: ClassVar[bool] = False
+    #: whether the links between handles can be cut and joined (:meth:`cut_links`)
+    can_cut: ClassVar[bool] = False
     #: the element model (mass-spring or ChainMail families), else None
     model: Any = None
 
@@ -135,6 +137,15 @@ class Family:
     def set_fixed(self, indices: list[int], fixed: bool) -> None:
         """Fix or free handles."""
         raise EditorError("only the elements of mass-spring and ChainMail can be fixed")
+
+    def cut_links(self, indices: list[int]) -> int:
+        """Cut the links around the handles ``indices``; how many were cut."""
+        raise EditorError(f"only ChainMail's links can be cut; the model is {self.kind!r}")
+
+    def join_links(self, indices: list[int], pull: bool = False) -> tuple[int, int]:
+        """Join the cut links at the handles ``indices`` where they touch (``pull``: all,
+        pulling the sides together); how many were joined and how many stay cut."""
+        raise EditorError(f"only ChainMail's links can be joined; the model is {self.kind!r}")
 
     def begin_drag(self, drag: DragState) -> None:
         """Remember what the drag starting with ``drag`` needs (``drag.positions`` are

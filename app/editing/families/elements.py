@@ -20,7 +20,7 @@ import numpy as np
 
 from voxwarp.core.modality_detection import detect_modality
 from voxwarp.deform.elements.anchors import AnchorError
-from voxwarp.deform.elements.chainmail import ChainMail
+from voxwarp.deform.elements.chainmail import ChainMail, neighbour_pairs
 from voxwarp.deform.elements.chainmail_model import ChainMailError
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
 from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
@@ -370,6 +370,9 @@ class ElementFamily(Family):
         layers = []
         if display.links:
             edges = grid_edges(handles.reshape(*self.model.grid.shape, 3))
+            present = self._present_links()
+            if present is not None:  # cut links are not drawn
+                edges = edges.reshape(-1, 2, 3)[present].reshape(-1, 3)
             layers.append(OverlayLayer("lines", edges, COLORS["link"], name="links"))
         fixed = self.fixed_handles(len(handles))
         anchored = self.anchored_handles(len(handles))
@@ -385,6 +388,10 @@ class ElementFamily(Family):
                 OverlayLayer("points", handles[anchored], COLORS["anchored"], 6.0, "anchored")
             )
         return layers
+
+    def _present_links(self) -> np.ndarray | None:
+        """(E,) bool in :func:`grid_edges`' order: which links exist (None: all)."""
+        return None
 
     def boundary_text(self) -> str:
         """The boundary conditions of the model and its grid margin in one line (the
@@ -522,6 +529,7 @@ class ChainMailFamily(ElementFamily):
 
     kind = "chainmail"
     model_class = ChainMail
+    can_cut = True
 
     def settings(self) -> ChainMailSettings:
         s = self.session
@@ -540,8 +548,8 @@ class ChainMailFamily(ElementFamily):
 
     @classmethod
     def build_on(cls, settings: ChainMailSettings, grid: ElementGrid, ctx: Any = None) -> Built:
-        """Cuts first (through the rest state), then every drag at once (one move),
-        then ``settings.relax`` relaxation steps."""
+        """Cuts first (through the rest state), then the joins (cut links linked again),
+        then every drag at once (one move), then ``settings.relax`` relaxation steps."""
         try:
             cm = ChainMail(
                 grid,
@@ -554,6 +562,7 @@ class ChainMailFamily(ElementFamily):
         report = BuildReport()
         try:
             report.cut = sum(cm.cut(c.point, c.normal, c.radius) for c in settings.cuts)
+            report.joined = sum(cm.link(c.point, c.normal, c.radius) for c in settings.joins)
             if settings.warm_up and settings.backend == "cpu":  # no element: loads kernels
                 cm.move(np.zeros(grid.shape, dtype=bool), (0.0, 0.0, 0.0))
             if settings.drags:
@@ -603,6 +612,62 @@ class ChainMailFamily(ElementFamily):
         if before is None or self.model is None:
             return None
         return chainmail_at_rest(before, self.model.positions())
+
+    # ---------------------------------------------------------------- cutting and joining
+    def cut_links(self, indices: list[int]) -> int:
+        """Cut the links around the selected elements (one end selected, the other not):
+        the selection comes loose from its surroundings."""
+        cm = self._chainmail(indices)
+        n = cm.cut_pairs(neighbour_pairs(self._mask(indices)))
+        if n == 0:
+            raise EditorError(
+                "the selected elements have no links left to unselected ones: nothing to"
+                " cut (select the region to set loose, not the whole grid)"
+            )
+        return n
+
+    def join_links(self, indices: list[int], pull: bool = False) -> tuple[int, int]:
+        """Join the cut links with a selected end whose elements touch (within the
+        link's limits, :meth:`ChainMail.link_pairs` with ``stretched="skip"``), or with
+        ``pull`` all of them, dragging free elements until the sides meet
+        (``stretched="pull"``); returns (joined, left cut: elements too far apart)."""
+        cm = self._chainmail(indices)
+        pairs = neighbour_pairs(self._mask(indices), boundary=False)
+        low, axis = pairs[:, 0], np.argmax(pairs[:, 1] - pairs[:, 0], axis=1)
+        cut = int(np.count_nonzero(~cm.model.links[low[:, 0], low[:, 1], low[:, 2], axis]))
+        if cut == 0:
+            raise EditorError("no cut links at the selected elements: nothing to join")
+        n = cm.link_pairs(pairs, stretched="pull" if pull else "skip")
+        if n == 0:
+            raise EditorError(
+                f"the {cut} cut link(s) at the selected elements are stretched beyond their"
+                " limits: drag the two sides together first, or join pulling them"
+            )
+        return n, cut - n
+
+    def _chainmail(self, indices: list[int]) -> ChainMail:
+        if not indices:
+            raise EditorError("select elements first (click them, or Shift+drag a rectangle)")
+        self._wait()
+        assert isinstance(self.model, ChainMail)
+        return self.model
+
+    def _mask(self, indices: list[int]) -> np.ndarray:
+        assert self.model is not None
+        mask = np.zeros(self.model.grid.count, dtype=bool)
+        mask[np.asarray(indices, dtype=np.int64)] = True
+        return mask.reshape(self.model.grid.shape)
+
+    def _present_links(self) -> np.ndarray | None:
+        if not isinstance(self.model, ChainMail):
+            return None
+        links = self.model.model.links
+        parts = []
+        for axis in range(3):
+            idx: list[Any] = [slice(None)] * 3
+            idx[axis] = slice(0, -1)
+            parts.append(links[(*idx, axis)].reshape(-1))
+        return np.concatenate(parts)
 
     def option_changed(self, name: str, value: Any) -> None:
         if name == "relax_steps" and isinstance(self.model, ChainMail):
