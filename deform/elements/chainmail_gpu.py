@@ -142,7 +142,10 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform.elements.chainmail_model import ChainMailModel
+from voxwarp.deform import gl_programs
+from voxwarp.deform.elements.chainmail_model import Box, ChainMailModel, relax_boxes
+from voxwarp.deform.elements.chainmail_model import grow_box as _grow
+from voxwarp.deform.elements.chainmail_model import union_box as _union
 from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
@@ -163,28 +166,6 @@ _ABS_TOL = 1e-6
 #: The pass record's reset value: empty box of changes (lo > hi), no coordinate
 #: changed, empty box of violations.
 _RESET = np.array(([2**30] * 3 + [-1] * 3 + [0, 0]) * 2, np.int32).tobytes()
-
-Box = tuple[tuple[int, int, int], tuple[int, int, int]]
-
-
-def _union(a: Box | None, b: Box | None) -> Box | None:
-    if a is None:
-        return b
-    if b is None:
-        return a
-    return (
-        tuple(min(p, q) for p, q in zip(a[0], b[0], strict=True)),  # type: ignore[return-value]
-        tuple(max(p, q) for p, q in zip(a[1], b[1], strict=True)),
-    )
-
-
-def _grow(box: Box | None, shape: tuple[int, int, int]) -> Box | None:
-    """The box grown by one element on every face, clipped to the grid."""
-    if box is None:
-        return None
-    lo = tuple(max(v - 1, 0) for v in box[0])
-    hi = tuple(min(v + 1, n) for v, n in zip(box[1], shape, strict=True))
-    return (lo, hi)  # type: ignore[return-value]
 
 
 def _volume(box: Box | None) -> int:
@@ -259,6 +240,8 @@ class GpuChainMailSolver(GpuGridSolver):
         self.converged = True
         #: elements shaded by the constraint passes of the last :meth:`enforce`
         self.last_elements = 0
+        #: box of the elements the last :meth:`enforce` moved or pinned (None: none)
+        self.last_changed: Box | None = None
         self._create_or_release(model)
 
     # ------------------------------------------------------------------ setup
@@ -283,6 +266,14 @@ class GpuChainMailSolver(GpuGridSolver):
         )
         self._vao = self._keep(ctx.vertex_array(self._prog, []))
         self._pin_vao = self._keep(ctx.vertex_array(self._pin_prog, []))
+        self._relax_prog = self._keep(
+            gl_programs.program(
+                ctx,
+                vertex_shader=shaders.source("chainmail_box.vert.glsl", cfg),
+                fragment_shader=shaders.source("chainmail_relax.frag.glsl", cfg),
+            )
+        ).program
+        self._relax_vao = self._keep(ctx.vertex_array(self._relax_prog, []))
         self._pos = [self._atlas_texture() for _ in range(2)]
         self._fbo = [self._keep(ctx.framebuffer(color_attachments=[t])) for t in self._pos]
         self._cur = 0
@@ -414,8 +405,7 @@ class GpuChainMailSolver(GpuGridSolver):
                 tuple(int(i.max()) + 1 for i in idx),
             )
             self._magnitude = max(self._magnitude, float(np.abs(rel).max()))
-        # 8-16 ulp of the largest coordinate expected (module doc: Float32)
-        tol = max(_ABS_TOL, 2.0 * self._magnitude * _REL_TOL)
+        tol = self._round_off()
         self._prog["u_tol"].value = tol
 
         bound = self.ctx.fbo
@@ -444,8 +434,52 @@ class GpuChainMailSolver(GpuGridSolver):
         self._check_box = (
             ((0, 0, 0), self.shape) if was_dirty else _grow(_union(pin_box, touched), self.shape)
         )
-        self._update_displacement(_union(pin_box, touched))
+        self.last_changed = _union(pin_box, touched)
+        self._update_displacement(self.last_changed)
         return passes
+
+    def _round_off(self) -> float:
+        """Moves below this (mm) are float32 round-off: 8-16 ulp of the largest
+        coordinate expected (module doc: Float32)."""
+        return max(_ABS_TOL, 2.0 * self._magnitude * _REL_TOL)
+
+    def relax(self, box: Box | None, steps: int) -> Box | None:
+        """Relax on the GPU: ``steps`` red-black steps of the CPU's rule (module doc,
+        "Relaxation"), nothing read back.
+
+        Parameters
+        ----------
+        box
+            ``((i0, j0, k0), (i1, j1, k1))`` (half-open) holding every element that
+            may be off the rule's fixed point; ``None``: none is, nothing runs.
+        steps
+            Red-black steps (>= 0); each half-sweep covers the previous one's box
+            grown by one element
+            (:func:`~voxwarp.deform.elements.chainmail_model.relax_boxes`).
+
+        Returns
+        -------
+        tuple or None
+            The last half-sweep's box: every element the relaxation changed lies in it.
+        """
+        self._check_alive()
+        boxes = relax_boxes(box, steps, self.shape)
+        if not boxes:
+            return box
+        prog = self._relax_prog
+        bound = self.ctx.fbo
+        with self._scope:
+            for i, tex in enumerate(self._links):
+                tex.bind_to_image(1 + i, read=True, write=False)
+            self._rest.bind_to_image(6, read=True, write=False)
+            for n, b in enumerate(boxes):
+                prog["u_colour"].value = n % 2
+                self._draw(self._relax_vao, prog, b)
+            prog["u_colour"].value = -1  # copy: both buffers agree again
+            self._draw(self._relax_vao, prog, boxes[-1])
+        self.ctx.fbo = bound
+        self._update_displacement(boxes[-1])
+        return boxes[-1]
 
     def _pin(self, box: Box, idx: tuple[np.ndarray, ...], rel: np.ndarray) -> None:
         """Upload the targets of ``box`` and run the pin pass into both buffers.
