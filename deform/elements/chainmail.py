@@ -87,7 +87,35 @@ clamped into the interval its links allow with the neighbours where they are. Th
 the exact minimiser, within the constraints, of the smoothness energy
 ``E = sum_links |u_b - u_a|^2`` (:meth:`ChainMail.smoothness_energy`) over that
 element, so ``E`` never grows and the constraints stay satisfied. A red-black
-colouring makes one step two parallel half-sweeps. The thesis shows 0, 1 and 4 steps.
+colouring makes one step two parallel half-sweeps (colour ``(i + j + k) % 2`` 0, then
+1). The thesis shows 0, 1 and 4 steps (Knoche 2008, 2.4.2.2.1: every element is
+adjusted once per step, e.g. to the centre of its neighbours; a few steps suffice).
+
+An element whose neighbours and itself are unchanged since it was last at the rule's
+fixed point stays there, so a half-sweep can change only elements in the previous
+half-sweep's box grown by one element
+(:func:`~voxwarp.deform.elements.chainmail_model.relax_boxes`). *Full* relaxation (the
+default) starts from the box of every element displaced since the last
+:meth:`~ChainMail.reset` (at rest, everything else is at the fixed point), which gives
+exactly the result of half-sweeps over the whole grid. Both backends sweep the same
+boxes: the CPU with the numba kernel (float64), the GPU with one fragment-shader draw
+per half-sweep (``shaders/chainmail_relax.frag.glsl``, float32, ping-pong, nothing read
+back); they agree to float32 round-off (``tests/deform/elements/test_chainmail_relax.py``
+asks for 1e-4 mm).
+
+Local relaxation
+----------------
+The thesis' outlook (Knoche 2008, 5) proposes relaxing only the elements the ChainMail
+propagation moved, for speed. ``relax(steps, local=True)`` (or ``relax_local=True``)
+starts the half-sweeps from the box of the elements changed since the first move after
+the last relaxation (moved, released, freed, re-anchored or next to a cut; a change of
+limits counts as the whole grid) instead of every displaced element. It equals full
+relaxation when the elements outside that box were at the rule's fixed point: after a
+drag from rest (then the boxes are the same), or after a relaxation run to convergence
+(to the convergence's own tolerance). It differs when an earlier deformation was left
+unconverged, e.g. by ``relax_steps = 4`` after every drag: full relaxation goes on
+smoothing the earlier drags, local relaxation leaves them as they are. So it is an
+option, not the default; it is saved in scene JSON (``"relax_local": true``).
 
 Cutting
 -------
@@ -110,9 +138,11 @@ Backends
 ``backend="cpu"`` runs the kernels above (float64). ``backend="gpu"`` drives
 ``voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver`` (created lazily) through
 ``set_positions``,
-``enforce(held_mask, held_targets, max_passes) -> passes``, ``feasible`` (a check pass
-over the region the enforce changed), ``snapshot()``/``restore()`` (GPU copies of the
-state), ``positions()``, ``displacement_texture()``, ``revision`` and ``release()``;
+``enforce(held_mask, held_targets, max_passes) -> passes``, ``last_changed`` (the box
+that enforce changed), ``feasible`` (a check pass over the region the enforce
+changed), ``relax(box, steps) -> box`` (the relaxation's half-sweeps),
+``snapshot()``/``restore()`` (GPU copies of the state), ``positions()``,
+``displacement_texture()``, ``revision`` and ``release()``;
 limits, cuts and fixed elements reach it by rebuilding the solver from the model. A
 drag the GPU cannot satisfy is limited as on the CPU: the state is restored and the
 largest feasible fraction found by bisection (feasibility depends only on where the
@@ -884,8 +914,7 @@ class ChainMail(ElementWarpMixin):
         steps = _count(steps, "steps")
         if steps == 0:
             return
-        local = self._relax_local if local is None else bool(local)
-        start = self._active if local else self._box
+        start = self.relax_region(local)
         if self.backend == "gpu":
             end = self._solver.relax(start, steps)
         else:
@@ -894,6 +923,19 @@ class ChainMail(ElementWarpMixin):
         self._active = end
         self._relaxed = True
         self._update_warp()
+
+    def relax_region(self, local: bool | None = None) -> Box | None:
+        """The box ``((i0, j0, k0), (i1, j1, k1))`` (half-open) the next :meth:`relax`
+        starts from (each half-sweep covers it grown by one more element); ``None``
+        when every element is at the rule's fixed point (nothing would move).
+
+        Parameters
+        ----------
+        local
+            As in :meth:`relax`; ``None``: :attr:`relax_local`.
+        """
+        local = self._relax_local if local is None else bool(local)
+        return self._active if local else self._box
 
     def _relax_cpu(self, start: Box | None, steps: int) -> Box | None:
         """The red-black half-sweeps of the numba kernel over :func:`relax_boxes` from

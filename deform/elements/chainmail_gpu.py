@@ -128,9 +128,25 @@ agree. ``local=False`` draws every pass over the whole grid (the thesis' scheme,
 same passes and result) for comparison; :func:`benchmarks.chainmail.gpu_enforce_table`
 times both.
 
+Relaxation
+----------
+:meth:`~GpuChainMailSolver.relax` runs the CPU's relaxation rule
+(:func:`voxwarp.deform.elements.chainmail_cpu.relax_sweep`, red-black Gauss-Seidel of
+constrained Laplacian smoothing) as one draw per half-sweep of
+``chainmail_relax.frag.glsl``: elements of the half-sweep's colour move to ``rest +``
+the mean displacement of their linked neighbours, clamped into their links' interval
+(no move where it is empty), the others are copied; held and fixed elements never
+move. Each draw covers the previous one's box grown by one element
+(:func:`~voxwarp.deform.elements.chainmail_model.relax_boxes`), and a last copy draw
+over the last box makes both ping-pong buffers agree again, so the constraint passes
+of the next :meth:`~GpuChainMailSolver.enforce` (which write only their box) find the
+same state in both. Nothing is read back; the displacement texture is updated over the
+last box. Positions are float32 (relative to the rest box centre, like the constraint
+passes), so the result agrees with the CPU's float64 to a few ulp of the coordinates.
+
 The solver draws on the context it is given and does not make it current. GL state it
 changes (enable flags, bound framebuffer) is restored after each call; image units 0
-to 5 and SSBO binding 0 are left bound to its objects.
+to 6 and SSBO binding 0 are left bound to its objects.
 """
 
 from __future__ import annotations
@@ -419,9 +435,11 @@ class GpuChainMailSolver(GpuGridSolver):
             if self._dirty:
                 start: Box | None = ((0, 0, 0), self.shape)
                 phase, then = [0, 0, 0], [1, 1, 1]
+                moved_held = pin_box
             else:
                 start = _union(_grow(held_box, self.shape), self._violated)
                 phase, then = self._start_phases(flat, rel32)
+                moved_held = self._moved_held(flat, rel32)
             self._held_flat, self._held_rel = flat, rel32
             solved = self._solve(start, phase, then, max_passes)
             passes, elements, converged, touched, violated = solved
@@ -434,8 +452,8 @@ class GpuChainMailSolver(GpuGridSolver):
         self._check_box = (
             ((0, 0, 0), self.shape) if was_dirty else _grow(_union(pin_box, touched), self.shape)
         )
-        self.last_changed = _union(pin_box, touched)
-        self._update_displacement(self.last_changed)
+        self.last_changed = _union(moved_held, touched)
+        self._update_displacement(_union(pin_box, touched))
         return passes
 
     def _round_off(self) -> float:
@@ -511,6 +529,20 @@ class GpuChainMailSolver(GpuGridSolver):
         self._fbo[dst].use()
         vao.render(moderngl.TRIANGLES, vertices=6, instances=hi[2] - lo[2])
         self._cur = dst
+
+    def _moved_held(self, flat: np.ndarray, rel32: np.ndarray) -> Box | None:
+        """Box of the held elements that are newly held or have a new target (held
+        elements whose target stayed do not move; released ones do not either)."""
+        _, new, old = np.intersect1d(flat, self._held_flat, return_indices=True)
+        same = np.zeros(len(flat), bool)
+        same[new] = np.all(rel32[new] == self._held_rel[old], axis=1)
+        idx = np.unravel_index(flat[~same], self.shape)
+        if idx[0].size == 0:
+            return None
+        return (
+            tuple(int(i.min()) for i in idx),  # type: ignore[return-value]
+            tuple(int(i.max()) + 1 for i in idx),
+        )
 
     def _start_phases(self, flat: np.ndarray, rel32: np.ndarray) -> tuple[list[int], list[int]]:
         """Phases per coordinate after a converged enforce (see the module doc).
