@@ -166,6 +166,28 @@ def test_gpu_relaxation_agrees_with_the_cpu_and_keeps_the_limits(models: Any, sc
             np.testing.assert_array_equal(x[:6], grid.rest_positions[:6])
 
 
+@pytest.mark.parametrize("shape", [(20, 18, 12), (9, 5, 2)], ids=["tiled-atlas", "slab"])
+def test_gpu_relaxation_on_other_grid_shapes(models: Any, shape: tuple[int, int, int]) -> None:
+    """Non-cubic grids: an atlas of several rows of z-slices, a two-slice slab."""
+    hi = tuple(7.0 * max(n - 1, 1) for n in shape)
+    grid = ElementGrid(((0.0, 0.0, 0.0), hi), shape=shape, anchor="corners", fix_outside=None)
+    cpu, gpu = models(grid, "cpu"), models(grid, "gpu")
+    assert gpu._solver.tiles[1] > 1 or shape[2] == 2  # rows of z-slices
+    e = (shape[0] // 2, shape[1] // 2, shape[2] // 2)
+    for cm in (cpu, gpu):
+        assert cm.move(e, (4.0, -3.0, 2.0)).fraction == 1.0
+    gpu.set_state(cpu.positions())
+    x0 = cpu.positions()
+    for cm in (cpu, gpu):
+        cm.relax(3)
+    np.testing.assert_allclose(gpu.positions(), cpu.positions(), rtol=0, atol=GPU_TOL)
+    np.testing.assert_allclose(
+        cpu.positions(), _oracle(cpu.model, x0, _pinned(cpu), 3), rtol=0, atol=1e-9
+    )
+    assert np.abs(cpu.positions() - x0).max() > 0.3
+    assert gpu.violation() <= GPU_TOL
+
+
 def test_gpu_relaxation_reads_nothing_back_and_keeps_both_buffers(
     models: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
