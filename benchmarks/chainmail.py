@@ -500,26 +500,39 @@ def add_bench_chainmail_parser(bsub: Any) -> None:
     pbc.add_argument(
         "--sizes",
         type=SIZES_ARG,
-        default=(16, 32, 64, 128),
+        default=None,
         metavar="N,N,...",
-        help="grids of N³ elements (default 16,32,64,128)",
+        help="grids of N³ elements (default 16,32,64,128; with --relax 16,32)",
     )
     pbc.add_argument(
         "--repeats", type=positive_int, default=5, help="timed moves per solver (default 5)"
     )
     pbc.add_argument("--no-gpu", action="store_true", help="skip the GPU backend")
+    pbc.add_argument(
+        "--relax",
+        type=positive_int,
+        metavar="STEPS",
+        help="time STEPS relaxation steps after a local drag instead (CPU vs GPU, full vs"
+        " local; benchmarks.chainmail_relax; sizes default 16,32)",
+    )
     pbc.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
     pbc.set_defaults(func=cmd_bench_chainmail)
 
 
 def cmd_bench_chainmail(args: argparse.Namespace) -> int:
-    """``python -m benchmarks chainmail``: time to settle one drag (see the module docstring)."""
+    """``python -m benchmarks chainmail``: time to settle one drag (see the module docstring);
+    with ``--relax``, time the relaxation (:mod:`benchmarks.chainmail_relax`)."""
+    command = "python -m benchmarks " + " ".join(sys.argv[1:])
+    if args.relax:
+        from benchmarks.chainmail_relax import bench_relax, relax_markdown
+
+        sizes = args.sizes or (16, 32)
+        rel = bench_relax(sizes, steps=args.relax, repeats=args.repeats, use_gpu=not args.no_gpu)
+        return emit_report(relax_markdown(rel, command), args.markdown)
     report = bench_chainmail(
-        args.sizes,
+        args.sizes or DEFAULT_SIZES,
         repeats=args.repeats,
         use_gpu=not args.no_gpu,
         log=lambda s: print(s, file=sys.stderr),
     )
-    return emit_report(
-        report.markdown("python -m benchmarks " + " ".join(sys.argv[1:])), args.markdown
-    )
+    return emit_report(report.markdown(command), args.markdown)

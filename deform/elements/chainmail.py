@@ -87,7 +87,35 @@ clamped into the interval its links allow with the neighbours where they are. Th
 the exact minimiser, within the constraints, of the smoothness energy
 ``E = sum_links |u_b - u_a|^2`` (:meth:`ChainMail.smoothness_energy`) over that
 element, so ``E`` never grows and the constraints stay satisfied. A red-black
-colouring makes one step two parallel half-sweeps. The thesis shows 0, 1 and 4 steps.
+colouring makes one step two parallel half-sweeps (colour ``(i + j + k) % 2`` 0, then
+1). The thesis shows 0, 1 and 4 steps (Knoche 2008, 2.4.2.2.1: every element is
+adjusted once per step, e.g. to the centre of its neighbours; a few steps suffice).
+
+An element whose neighbours and itself are unchanged since it was last at the rule's
+fixed point stays there, so a half-sweep can change only elements in the previous
+half-sweep's box grown by one element
+(:func:`~voxwarp.deform.elements.chainmail_model.relax_boxes`). *Full* relaxation (the
+default) starts from the box of every element displaced since the last
+:meth:`~ChainMail.reset` (at rest, everything else is at the fixed point), which gives
+exactly the result of half-sweeps over the whole grid. Both backends sweep the same
+boxes: the CPU with the numba kernel (float64), the GPU with one fragment-shader draw
+per half-sweep (``shaders/chainmail_relax.frag.glsl``, float32, ping-pong, nothing read
+back); they agree to float32 round-off (``tests/deform/elements/test_chainmail_relax.py``
+asks for 1e-4 mm).
+
+Local relaxation
+----------------
+The thesis' outlook (Knoche 2008, 5) proposes relaxing only the elements the ChainMail
+propagation moved, for speed. ``relax(steps, local=True)`` (or ``relax_local=True``)
+starts the half-sweeps from the box of the elements changed since the first move after
+the last relaxation (moved, released, freed, re-anchored or next to a cut; a change of
+limits counts as the whole grid) instead of every displaced element. It equals full
+relaxation when the elements outside that box were at the rule's fixed point: after a
+drag from rest (then the boxes are the same), or after a relaxation run to convergence
+(to the convergence's own tolerance). It differs when an earlier deformation was left
+unconverged, e.g. by ``relax_steps = 4`` after every drag: full relaxation goes on
+smoothing the earlier drags, local relaxation leaves them as they are. So it is an
+option, not the default; it is saved in scene JSON (``"relax_local": true``).
 
 Cutting and joining
 -------------------
@@ -134,9 +162,11 @@ Backends
 ``backend="cpu"`` runs the kernels above (float64). ``backend="gpu"`` drives
 ``voxwarp.deform.elements.chainmail_gpu.GpuChainMailSolver`` (created lazily) through
 ``set_positions``,
-``enforce(held_mask, held_targets, max_passes) -> passes``, ``feasible`` (a check pass
-over the region the enforce changed), ``snapshot()``/``restore()`` (GPU copies of the
-state), ``positions()``, ``displacement_texture()``, ``revision`` and ``release()``;
+``enforce(held_mask, held_targets, max_passes) -> passes``, ``last_changed`` (the box
+that enforce changed), ``feasible`` (a check pass over the region the enforce
+changed), ``relax(box, steps) -> box`` (the relaxation's half-sweeps),
+``snapshot()``/``restore()`` (GPU copies of the state), ``positions()``,
+``displacement_texture()``, ``revision`` and ``release()``;
 limits, cuts and fixed elements reach it by rebuilding the solver from the model. A
 drag the GPU cannot satisfy is limited as on the CPU: the state is restored and the
 largest feasible fraction found by bisection (feasibility depends only on where the
@@ -155,9 +185,12 @@ import numpy as np
 
 from voxwarp.deform.elements.chainmail_model import (
     VIOLATION_TOL_MM,
+    Box,
     ChainMailError,
     ChainMailModel,
     check_limits,
+    relax_boxes,
+    union_box,
 )
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
 from voxwarp.deform.elements.model import (
@@ -304,6 +337,9 @@ class ChainMail(ElementWarpMixin):
         Default limits from the grid's stiffness (:func:`limits_from_stiffness`).
     relax_steps
         Relaxation steps (:meth:`relax`) run after every :meth:`move`.
+    relax_local
+        Default of :meth:`relax`'s ``local``: relax only around the elements moved
+        since the last relaxation (see the module doc, "Local relaxation").
 
     Examples
     --------
@@ -327,6 +363,7 @@ class ChainMail(ElementWarpMixin):
         stretch: float = DEFAULT_STRETCH,
         shear: float = DEFAULT_SHEAR,
         relax_steps: int = 0,
+        relax_local: bool = False,
     ) -> None:
         check_grid_and_backend(grid, ElementGrid, backend, ChainMailError)
         check_gpu_context(backend, ctx, ChainMailError)
@@ -335,6 +372,7 @@ class ChainMail(ElementWarpMixin):
         self._ctx = ctx
         self._variant = _variant(variant)
         self.relax_steps = relax_steps
+        self.relax_local = relax_local
         mn, mx, sh = limits_from_stiffness(grid.spacing, grid.stiffness, stretch, shear)
         self._model = ChainMailModel(
             rest=grid.rest_positions.copy(),
@@ -361,8 +399,12 @@ class ChainMail(ElementWarpMixin):
         self._t_old = np.empty((n, 3), dtype=np.float64)
         self._epoch = 0
         self._recorded = 0
-        # [i0, i1, j0, j1, k0, k1) holding every displaced element; None: none is
-        self._box: np.ndarray | None = None
+        # box holding every element displaced since the last reset (None: none is) ...
+        self._box: Box | None = None
+        # ... and every element changed since the first move after the last relaxation:
+        # where a local relaxation starts (see the module doc)
+        self._active: Box | None = None
+        self._relaxed = False  # a relaxation ran since the last move
         self._warp: Any = None
         self._solver: Any = None
         if backend == "gpu":
@@ -395,6 +437,18 @@ class ChainMail(ElementWarpMixin):
     @relax_steps.setter
     def relax_steps(self, value: int) -> None:
         self._relax_steps = _count(value, "relax_steps")
+
+    @property
+    def relax_local(self) -> bool:
+        """Whether :meth:`relax` (and ``relax_steps``) relaxes only around the elements
+        moved since the last relaxation (module doc, "Local relaxation")."""
+        return self._relax_local
+
+    @relax_local.setter
+    def relax_local(self, value: bool) -> None:
+        if not isinstance(value, bool | np.bool_):
+            raise ChainMailError(f"relax_local must be true or false; got {value!r:.40}")
+        self._relax_local = bool(value)
 
     @property
     def held(self) -> np.ndarray:
@@ -484,6 +538,7 @@ class ChainMail(ElementWarpMixin):
         self._check_rest(trial)
         old = (m.min_dist, m.max_dist, m.max_shear)
         m.min_dist, m.max_dist, m.max_shear = trial.min_dist, trial.max_dist, trial.max_shear
+        self._note_moved(self._full_box())  # the relaxation's fixed point moved
         if self.backend == "gpu":
             self._rebuild_gpu()
             return
@@ -562,6 +617,7 @@ class ChainMail(ElementWarpMixin):
     def free(self, sel: Selection) -> None:
         """Unfix elements (see :meth:`ElementGrid.free`; anchored ones too); they stay
         where they are."""
+        self._note_mask(self.grid.mask(sel) & self.grid.constrained())
         self.grid.free(sel)
         self._model.fixed = self.grid.constrained()
         self._pinned = self._model.fixed.reshape(-1) | self._held
@@ -577,6 +633,7 @@ class ChainMail(ElementWarpMixin):
             Elements to release (see :meth:`ElementGrid.mask`); ``None`` releases all.
         """
         mask = self.grid.mask(sel).reshape(-1)
+        self._note_mask(self._held & mask)  # free now: maybe off the relaxed state
         self._update_anchors(self._held & ~mask, self._offsets)
         self._held &= ~mask
         self._offsets[mask] = 0.0
@@ -588,7 +645,8 @@ class ChainMail(ElementWarpMixin):
         self._offsets[:] = 0.0
         self._update_anchors(self._held, self._offsets)
         self._pinned = self._model.fixed.reshape(-1).copy()
-        self._box = None
+        self._box = self._active = None
+        self._relaxed = False
         if self.backend == "gpu":
             # the rest state satisfies every link (set_limits checks it)
             self._solver.set_positions(self._model.rest.copy(), valid=True)
@@ -646,7 +704,9 @@ class ChainMail(ElementWarpMixin):
 
     def _enforce_gpu(self) -> int:
         shape = (*self.grid.shape, 3)
-        return int(self._solver.enforce(self.held, self._targets().reshape(shape), self.max_passes))
+        passes = self._solver.enforce(self.held, self._targets().reshape(shape), self.max_passes)
+        self._note_moved(self._solver.last_changed)
+        return int(passes)
 
     def _move_gpu(self, flat: np.ndarray, goal: np.ndarray, t0: float) -> MoveStats:
         """The GPU enforces the constraints; a drag it cannot satisfy (fixed or held
@@ -771,23 +831,36 @@ class ChainMail(ElementWarpMixin):
         """Restore the constraints from the current state (held and fixed stay)."""
         empty = np.zeros(0, dtype=np.int64)
         ok, *_ = self._attempt(empty, np.zeros((0, 3)), commit=True, repair=True)
-        self._box = self._full_box()
+        self._note_moved(self._full_box())
         return ok and self._model.satisfied(self.positions())
 
-    def _full_box(self) -> np.ndarray:
-        nx, ny, nz = self.grid.shape
-        return np.array([0, nx, 0, ny, 0, nz], dtype=np.int64)
+    def _full_box(self) -> Box:
+        return ((0, 0, 0), self.grid.shape)
 
     def _grow_box(self) -> None:
-        """Add the elements the last committed propagation moved to :attr:`_box`."""
+        """Note the elements the last committed propagation moved (:meth:`_note_moved`)."""
         if self._recorded == 0:
             return
         idx = np.unravel_index(self._t_idx[: self._recorded], self.grid.shape)
-        box = np.array([v for a in idx for v in (int(a.min()), int(a.max()) + 1)], dtype=np.int64)
-        if self._box is not None:
-            box[0::2] = np.minimum(box[0::2], self._box[0::2])
-            box[1::2] = np.maximum(box[1::2], self._box[1::2])
-        self._box = box
+        lo = tuple(int(a.min()) for a in idx)
+        hi = tuple(int(a.max()) + 1 for a in idx)
+        self._note_moved((lo, hi))  # type: ignore[arg-type]
+
+    def _note_mask(self, mask: np.ndarray) -> None:
+        """:meth:`_note_moved` with the bounding box of a (grid-shaped or flat) mask."""
+        idx = np.nonzero(np.asarray(mask).reshape(self.grid.shape))
+        if idx[0].size:
+            box = (tuple(int(a.min()) for a in idx), tuple(int(a.max()) + 1 for a in idx))
+            self._note_moved(box)  # type: ignore[arg-type]
+
+    def _note_moved(self, box: Box | None) -> None:
+        """Add the box of elements a move (or repair) changed to the displaced box and
+        the region a local relaxation starts from (anew after a relaxation)."""
+        if box is None:
+            return
+        self._box = union_box(self._box, box)
+        self._active = box if self._relaxed else union_box(self._active, box)
+        self._relaxed = False
 
     def _selection(self, sel: Selection, offsets: Any) -> tuple[np.ndarray, np.ndarray]:
         """Flat indices (fixed ones dropped, duplicates: last wins) and (m, 3) offsets."""
@@ -837,6 +910,7 @@ class ChainMail(ElementWarpMixin):
             self.grid.anchor_around(held, offsets, at_rest & ~self._held)
         if np.array_equal(before, self.grid.anchored):
             return
+        self._note_mask(before != self.grid.anchored)
         self._model.fixed = self.grid.constrained()
         self._pinned = self._model.fixed.reshape(-1) | self._held
         if self.backend == "gpu":
@@ -849,47 +923,62 @@ class ChainMail(ElementWarpMixin):
         return t
 
     # ------------------------------------------------------------------ relaxation
-    def relax(self, steps: int = 1) -> None:
+    def relax(self, steps: int = 1, local: bool | None = None) -> None:
         """Run ``steps`` relaxation steps (constrained Laplacian smoothing, module doc).
 
         Fixed and held elements do not move; the constraints stay satisfied and the
         smoothness energy (:meth:`smoothness_energy`) does not grow. On the GPU
-        backend the positions are read back, relaxed on the CPU and written back.
+        backend the sweeps run as fragment-shader passes, nothing read back.
 
         Parameters
         ----------
         steps
             Number of steps (>= 0); each is one red-black Gauss-Seidel sweep.
+        local
+            Relax only around the elements moved since the last relaxation (module
+            doc, "Local relaxation"); ``None``: :attr:`relax_local`. The default
+            relaxes every element (over the box of those displaced since the last
+            :meth:`reset`, which gives the same result).
         """
         steps = _count(steps, "steps")
         if steps == 0:
             return
+        start = self.relax_region(local)
         if self.backend == "gpu":
-            x = np.ascontiguousarray(self.positions().reshape(-1, 3))
-            self._box = self._full_box()
+            end = self._solver.relax(start, steps)
         else:
-            x = self._x
-        self._relax_into(x, steps)
-        if self.backend == "gpu":
-            self._solver.set_positions(x.reshape((*self.grid.shape, 3)).copy())
+            end = self._relax_cpu(start, steps)
+        self._box = union_box(self._box, end)
+        self._active = end
+        self._relaxed = True
         self._update_warp()
 
-    def _relax_into(self, x: np.ndarray, steps: int) -> None:
-        """Relax ``x`` in place; only around the displaced elements (:attr:`_box`): an
-        element whose neighbours all rest stays at rest, so each step grows the box by
-        one element."""
-        if self._box is None:
-            return
+    def relax_region(self, local: bool | None = None) -> Box | None:
+        """The box ``((i0, j0, k0), (i1, j1, k1))`` (half-open) the next :meth:`relax`
+        starts from (each half-sweep covers it grown by one more element); ``None``
+        when every element is at the rule's fixed point (nothing would move).
+
+        Parameters
+        ----------
+        local
+            As in :meth:`relax`; ``None``: :attr:`relax_local`.
+        """
+        local = self._relax_local if local is None else bool(local)
+        return self._active if local else self._box
+
+    def _relax_cpu(self, start: Box | None, steps: int) -> Box | None:
+        """The red-black half-sweeps of the numba kernel over :func:`relax_boxes` from
+        ``start``; returns the last box (everything changed lies in it)."""
+        boxes = relax_boxes(start, steps, self.grid.shape)
+        if not boxes:
+            return start
         k = _kernels()
         mn, mx, sh, links = self._flat_limits()
         shape = np.asarray(self.grid.shape, dtype=np.int64)
-        for _ in range(steps):
-            box = self._box.copy()
-            box[0::2] = np.maximum(box[0::2] - 1, 0)
-            box[1::2] = np.minimum(box[1::2] + 1, shape)
-            self._box = box
-            for colour in (0, 1):
-                k.relax_sweep(x, self._rest, mn, mx, sh, links, self._pinned, shape, box, colour)
+        for n, (lo, hi) in enumerate(boxes):
+            box = np.array([v for a in range(3) for v in (lo[a], hi[a])], dtype=np.int64)
+            k.relax_sweep(self._x, self._rest, mn, mx, sh, links, self._pinned, shape, box, n % 2)
+        return boxes[-1]
 
     def smoothness_energy(self) -> float:
         """``sum over present links of |u_b - u_a|^2`` (mm²), ``u`` the displacements."""
@@ -1008,6 +1097,12 @@ class ChainMail(ElementWarpMixin):
 
     def _remove_links(self, cut: np.ndarray) -> int:
         newly = cut & self._model.links
+        ends = np.any(newly, axis=-1)
+        for axis in range(3):  # both ends of a removed link: their rule changed
+            lo = (slice(None),) * axis + (slice(0, -1),)
+            hi = (slice(None),) * axis + (slice(1, None),)
+            ends[hi] |= newly[..., axis][lo]
+        self._note_mask(ends)
         self._model.links &= ~cut
         if self.backend == "gpu" and np.any(newly):
             self._rebuild_gpu()
@@ -1092,7 +1187,17 @@ class ChainMail(ElementWarpMixin):
             m.links[tuple(new.T)] = True
             if self.backend == "gpu":
                 self._rebuild_gpu()
+        self._note_link_ends(new)  # both ends' rule changed: a local relaxation's region
         return len(new)
+
+    def _note_link_ends(self, links: np.ndarray) -> None:
+        """Note both elements of each link ``[i, j, k, axis]`` as changed."""
+        if len(links):
+            low = links[:, :3]
+            high = low + np.eye(3, dtype=np.int64)[links[:, 3]]
+            mask = np.zeros(self.grid.shape, dtype=bool)
+            mask[tuple(np.concatenate([low, high]).T)] = True
+            self._note_mask(mask)
 
     def _pull(self, new: np.ndarray, x: np.ndarray) -> None:
         """Join links ``new`` (``[i, j, k, axis]``), some stretched, at positions ``x``:
@@ -1104,7 +1209,7 @@ class ChainMail(ElementWarpMixin):
         gpu = self.backend == "gpu"
         if gpu:
             self._x[:] = x.reshape(-1, 3)
-        saved = (self._x.copy(), m.links.copy(), self._box)
+        saved = (self._x.copy(), m.links.copy(), self._box, self._active, self._relaxed)
         # a closed gap's link touches at the next check unless the propagation moved its
         # other end too (the two ends also linked around the cut): a bound on retries
         closes = 2 * len(new) + 8
@@ -1125,7 +1230,7 @@ class ChainMail(ElementWarpMixin):
                         ' (or drag them closer) first, or join with stretched="skip"'
                     )
         except ChainMailError:
-            self._x[:], m.links[:], self._box = saved
+            self._x[:], m.links[:], self._box, self._active, self._relaxed = saved
             if gpu:
                 self._x[:] = self._rest
             raise
@@ -1220,13 +1325,14 @@ class ChainMail(ElementWarpMixin):
         if self.backend == "gpu":
             self._solver.set_positions(x.reshape(shape))
             self._solver.enforce(self.held, self._targets().reshape(shape), self.max_passes)
+            self._note_moved(self._full_box())
             return
-        old, old_box = self._x.copy(), self._box
+        old, old_boxes = self._x.copy(), (self._box, self._active, self._relaxed)
         self._x[:] = x
-        self._box = self._full_box()
+        self._note_moved(self._full_box())
         if not self._model.satisfied(self.positions()) and not self._repair():
             self._x[:] = old
-            self._box = old_box
+            self._box, self._active, self._relaxed = old_boxes
             raise ChainMailError(
                 "these positions violate the ChainMail limits and cannot be brought within"
                 " them with the fixed and held elements where they are"
@@ -1242,12 +1348,12 @@ class ChainMail(ElementWarpMixin):
             return
         box = self._box
         n = self.grid.count
-        if box is None or int(np.prod(box[1::2] - box[0::2])) > n // 2:
+        if box is None or math.prod(h - lo for lo, h in zip(*box, strict=True)) > n // 2:
             self._warp.update(self.displacements())
             return
-        sl = tuple(slice(int(box[2 * a]), int(box[2 * a + 1])) for a in range(3))
+        sl = tuple(slice(lo, h) for lo, h in zip(*box, strict=True))
         x = self._x.reshape((*self.grid.shape, 3))[sl]
-        self._warp.update_region(box[0::2], x - self._model.rest[sl])
+        self._warp.update_region(np.array(box[0]), x - self._model.rest[sl])
 
     # ------------------------------------------------------------------ GPU backend
     def _make_gpu_solver(self) -> Any:
@@ -1273,6 +1379,7 @@ class ChainMail(ElementWarpMixin):
         self._solver.enforce(
             self.held, self._targets().reshape((*self.grid.shape, 3)), self.max_passes
         )
+        self._note_moved(self._solver.last_changed)
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self, include_positions: bool = False) -> dict[str, Any]:
@@ -1288,12 +1395,13 @@ class ChainMail(ElementWarpMixin):
         -------
         dict
             ``grid`` (:meth:`ElementGrid.to_dict`), ``variant``, ``relax_steps``,
-            ``limits`` (``min_dist``, ``max_dist``, ``max_shear``: each a number when
-            uniform, 3 numbers when uniform per axis, else an (nx, ny, nz, 3) nested
-            list), ``cuts`` (removed links ``[i, j, k, axis]``, :attr:`cuts`), ``held``
-            (``{"index": [i, j, k], "offset": [dx, dy, dz]}``: where held elements are
-            held, mm from rest) and, with ``include_positions``, ``positions``.
-            The backend is not part of the model.
+            ``relax_local`` (only when true), ``limits`` (``min_dist``, ``max_dist``,
+            ``max_shear``: each a number when uniform, 3 numbers when uniform per
+            axis, else an (nx, ny, nz, 3) nested list), ``cuts`` (removed links
+            ``[i, j, k, axis]``, :attr:`cuts`), ``held`` (``{"index": [i, j, k],
+            "offset": [dx, dy, dz]}``: where held elements are held, mm from rest)
+            and, with ``include_positions``, ``positions``. The backend is not part
+            of the model.
         """
         m = self._model
         flat = np.flatnonzero(self._held)
@@ -1310,6 +1418,8 @@ class ChainMail(ElementWarpMixin):
             "cuts": self.cuts.tolist(),
             "held": held,
         }
+        if self._relax_local:  # written only when set: older readers load the rest
+            d["relax_local"] = True
         if include_positions:
             d["positions"] = self.positions().tolist()
         return d
@@ -1328,7 +1438,7 @@ class ChainMail(ElementWarpMixin):
         ----------
         d
             Mapping with ``grid`` (required) and optionally ``variant``,
-            ``relax_steps``, ``limits`` (default: from the stiffness), ``cuts``,
+            ``relax_steps``, ``relax_local``, ``limits`` (default: from the stiffness), ``cuts``,
             ``held`` and ``positions``. A ``"type"`` key (``"chainmail"``) is accepted.
         backend, ctx
             Solver backend and, for ``"gpu"``, its moderngl context.
@@ -1349,7 +1459,7 @@ class ChainMail(ElementWarpMixin):
     def _entry_parts(cls, d: Mapping[str, Any]) -> tuple[ElementGrid, dict[str, Any], Any]:
         grid = _grid_from(d)
         kwargs: dict[str, Any] = {}
-        for key in ("variant", "relax_steps"):
+        for key in ("variant", "relax_steps", "relax_local"):
             if key in d:
                 kwargs[key] = d[key]
         limits = d.get("limits", {})

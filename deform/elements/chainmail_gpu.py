@@ -128,9 +128,25 @@ agree. ``local=False`` draws every pass over the whole grid (the thesis' scheme,
 same passes and result) for comparison; :func:`benchmarks.chainmail.gpu_enforce_table`
 times both.
 
+Relaxation
+----------
+:meth:`~GpuChainMailSolver.relax` runs the CPU's relaxation rule
+(:func:`voxwarp.deform.elements.chainmail_cpu.relax_sweep`, red-black Gauss-Seidel of
+constrained Laplacian smoothing) as one draw per half-sweep of
+``chainmail_relax.frag.glsl``: elements of the half-sweep's colour move to ``rest +``
+the mean displacement of their linked neighbours, clamped into their links' interval
+(no move where it is empty), the others are copied; held and fixed elements never
+move. Each draw covers the previous one's box grown by one element
+(:func:`~voxwarp.deform.elements.chainmail_model.relax_boxes`), and a last copy draw
+over the last box makes both ping-pong buffers agree again, so the constraint passes
+of the next :meth:`~GpuChainMailSolver.enforce` (which write only their box) find the
+same state in both. Nothing is read back; the displacement texture is updated over the
+last box. Positions are float32 (relative to the rest box centre, like the constraint
+passes), so the result agrees with the CPU's float64 to a few ulp of the coordinates.
+
 The solver draws on the context it is given and does not make it current. GL state it
 changes (enable flags, bound framebuffer) is restored after each call; image units 0
-to 5 and SSBO binding 0 are left bound to its objects.
+to 6 and SSBO binding 0 are left bound to its objects.
 """
 
 from __future__ import annotations
@@ -142,7 +158,10 @@ import moderngl
 import numpy as np
 
 from voxwarp import shaders
-from voxwarp.deform.elements.chainmail_model import ChainMailModel
+from voxwarp.deform import gl_programs
+from voxwarp.deform.elements.chainmail_model import Box, ChainMailModel, relax_boxes
+from voxwarp.deform.elements.chainmail_model import grow_box as _grow
+from voxwarp.deform.elements.chainmail_model import union_box as _union
 from voxwarp.deform.elements.gpu_grid import GpuGridSolver, GpuSolverError
 
 #: Violations below this many mm count as float32 round-off in :attr:`GpuChainMailSolver.feasible`.
@@ -163,28 +182,6 @@ _ABS_TOL = 1e-6
 #: The pass record's reset value: empty box of changes (lo > hi), no coordinate
 #: changed, empty box of violations.
 _RESET = np.array(([2**30] * 3 + [-1] * 3 + [0, 0]) * 2, np.int32).tobytes()
-
-Box = tuple[tuple[int, int, int], tuple[int, int, int]]
-
-
-def _union(a: Box | None, b: Box | None) -> Box | None:
-    if a is None:
-        return b
-    if b is None:
-        return a
-    return (
-        tuple(min(p, q) for p, q in zip(a[0], b[0], strict=True)),  # type: ignore[return-value]
-        tuple(max(p, q) for p, q in zip(a[1], b[1], strict=True)),
-    )
-
-
-def _grow(box: Box | None, shape: tuple[int, int, int]) -> Box | None:
-    """The box grown by one element on every face, clipped to the grid."""
-    if box is None:
-        return None
-    lo = tuple(max(v - 1, 0) for v in box[0])
-    hi = tuple(min(v + 1, n) for v, n in zip(box[1], shape, strict=True))
-    return (lo, hi)  # type: ignore[return-value]
 
 
 def _volume(box: Box | None) -> int:
@@ -259,6 +256,8 @@ class GpuChainMailSolver(GpuGridSolver):
         self.converged = True
         #: elements shaded by the constraint passes of the last :meth:`enforce`
         self.last_elements = 0
+        #: box of the elements the last :meth:`enforce` moved or pinned (None: none)
+        self.last_changed: Box | None = None
         self._create_or_release(model)
 
     # ------------------------------------------------------------------ setup
@@ -283,6 +282,14 @@ class GpuChainMailSolver(GpuGridSolver):
         )
         self._vao = self._keep(ctx.vertex_array(self._prog, []))
         self._pin_vao = self._keep(ctx.vertex_array(self._pin_prog, []))
+        self._relax_prog = self._keep(
+            gl_programs.program(
+                ctx,
+                vertex_shader=shaders.source("chainmail_box.vert.glsl", cfg),
+                fragment_shader=shaders.source("chainmail_relax.frag.glsl", cfg),
+            )
+        ).program
+        self._relax_vao = self._keep(ctx.vertex_array(self._relax_prog, []))
         self._pos = [self._atlas_texture() for _ in range(2)]
         self._fbo = [self._keep(ctx.framebuffer(color_attachments=[t])) for t in self._pos]
         self._cur = 0
@@ -414,8 +421,7 @@ class GpuChainMailSolver(GpuGridSolver):
                 tuple(int(i.max()) + 1 for i in idx),
             )
             self._magnitude = max(self._magnitude, float(np.abs(rel).max()))
-        # 8-16 ulp of the largest coordinate expected (module doc: Float32)
-        tol = max(_ABS_TOL, 2.0 * self._magnitude * _REL_TOL)
+        tol = self._round_off()
         self._prog["u_tol"].value = tol
 
         bound = self.ctx.fbo
@@ -429,9 +435,11 @@ class GpuChainMailSolver(GpuGridSolver):
             if self._dirty:
                 start: Box | None = ((0, 0, 0), self.shape)
                 phase, then = [0, 0, 0], [1, 1, 1]
+                moved_held = pin_box
             else:
                 start = _union(_grow(held_box, self.shape), self._violated)
                 phase, then = self._start_phases(flat, rel32)
+                moved_held = self._moved_held(flat, rel32)
             self._held_flat, self._held_rel = flat, rel32
             solved = self._solve(start, phase, then, max_passes)
             passes, elements, converged, touched, violated = solved
@@ -444,8 +452,52 @@ class GpuChainMailSolver(GpuGridSolver):
         self._check_box = (
             ((0, 0, 0), self.shape) if was_dirty else _grow(_union(pin_box, touched), self.shape)
         )
+        self.last_changed = _union(moved_held, touched)
         self._update_displacement(_union(pin_box, touched))
         return passes
+
+    def _round_off(self) -> float:
+        """Moves below this (mm) are float32 round-off: 8-16 ulp of the largest
+        coordinate expected (module doc: Float32)."""
+        return max(_ABS_TOL, 2.0 * self._magnitude * _REL_TOL)
+
+    def relax(self, box: Box | None, steps: int) -> Box | None:
+        """Relax on the GPU: ``steps`` red-black steps of the CPU's rule (module doc,
+        "Relaxation"), nothing read back.
+
+        Parameters
+        ----------
+        box
+            ``((i0, j0, k0), (i1, j1, k1))`` (half-open) holding every element that
+            may be off the rule's fixed point; ``None``: none is, nothing runs.
+        steps
+            Red-black steps (>= 0); each half-sweep covers the previous one's box
+            grown by one element
+            (:func:`~voxwarp.deform.elements.chainmail_model.relax_boxes`).
+
+        Returns
+        -------
+        tuple or None
+            The last half-sweep's box: every element the relaxation changed lies in it.
+        """
+        self._check_alive()
+        boxes = relax_boxes(box, steps, self.shape)
+        if not boxes:
+            return box
+        prog = self._relax_prog
+        bound = self.ctx.fbo
+        with self._scope:
+            for i, tex in enumerate(self._links):
+                tex.bind_to_image(1 + i, read=True, write=False)
+            self._rest.bind_to_image(6, read=True, write=False)
+            for n, b in enumerate(boxes):
+                prog["u_colour"].value = n % 2
+                self._draw(self._relax_vao, prog, b)
+            prog["u_colour"].value = -1  # copy: both buffers agree again
+            self._draw(self._relax_vao, prog, boxes[-1])
+        self.ctx.fbo = bound
+        self._update_displacement(boxes[-1])
+        return boxes[-1]
 
     def _pin(self, box: Box, idx: tuple[np.ndarray, ...], rel: np.ndarray) -> None:
         """Upload the targets of ``box`` and run the pin pass into both buffers.
@@ -477,6 +529,20 @@ class GpuChainMailSolver(GpuGridSolver):
         self._fbo[dst].use()
         vao.render(moderngl.TRIANGLES, vertices=6, instances=hi[2] - lo[2])
         self._cur = dst
+
+    def _moved_held(self, flat: np.ndarray, rel32: np.ndarray) -> Box | None:
+        """Box of the held elements that are newly held or have a new target (held
+        elements whose target stayed do not move; released ones do not either)."""
+        _, new, old = np.intersect1d(flat, self._held_flat, return_indices=True)
+        same = np.zeros(len(flat), bool)
+        same[new] = np.all(rel32[new] == self._held_rel[old], axis=1)
+        idx = np.unravel_index(flat[~same], self.shape)
+        if idx[0].size == 0:
+            return None
+        return (
+            tuple(int(i.min()) for i in idx),  # type: ignore[return-value]
+            tuple(int(i.max()) + 1 for i in idx),
+        )
 
     def _start_phases(self, flat: np.ndarray, rel32: np.ndarray) -> tuple[list[int], list[int]]:
         """Phases per coordinate after a converged enforce (see the module doc).

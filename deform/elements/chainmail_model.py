@@ -32,6 +32,9 @@ from voxwarp.errors import VoxwarpError
 #: Constraint violations below this many mm (float round-off) do not count.
 VIOLATION_TOL_MM = 1e-6
 
+#: A box of elements ``((i0, j0, k0), (i1, j1, k1))``, half-open.
+Box = tuple[tuple[int, int, int], tuple[int, int, int]]
+
 
 class ChainMailError(VoxwarpError, ValueError):
     """Invalid ChainMail parameters (limits, indices, cuts)."""
@@ -168,3 +171,43 @@ def check_limits(min_dist: np.ndarray, max_dist: np.ndarray, max_shear: np.ndarr
             f" {int(bad[3])} ({float(min_dist[tuple(bad)]):g} > {float(max_dist[tuple(bad)]):g}"
             " mm): the link could never be satisfied; use min_dist <= max_dist"
         )
+
+
+def union_box(a: Box | None, b: Box | None) -> Box | None:
+    """The smallest box holding both (None: no box)."""
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return (
+        tuple(min(p, q) for p, q in zip(a[0], b[0], strict=True)),  # type: ignore[return-value]
+        tuple(max(p, q) for p, q in zip(a[1], b[1], strict=True)),
+    )
+
+
+def grow_box(box: Box | None, shape: tuple[int, int, int]) -> Box | None:
+    """The box grown by one element on every face, clipped to the grid (None stays)."""
+    if box is None:
+        return None
+    lo = tuple(max(v - 1, 0) for v in box[0])
+    hi = tuple(min(v + 1, n) for v, n in zip(box[1], shape, strict=True))
+    return (lo, hi)  # type: ignore[return-value]
+
+
+def relax_boxes(box: Box | None, steps: int, shape: tuple[int, int, int]) -> list[Box]:
+    """The boxes of the ``2 * steps`` half-sweeps (colour 0, 1, 0, ...) of a relaxation
+    that starts with every element off the rule's fixed point inside ``box``.
+
+    An element can change in a half-sweep only if it or a linked neighbour changed
+    before (else its update gives its position again), so each half-sweep covers the
+    previous one's box grown by one element, the first ``box`` grown by one: the
+    result is that of half-sweeps over the whole grid. Empty for ``box`` None.
+    Both backends relax over these boxes.
+    """
+    out: list[Box] = []
+    for _ in range(2 * steps):
+        box = grow_box(box, shape)
+        if box is None:
+            break
+        out.append(box)
+    return out

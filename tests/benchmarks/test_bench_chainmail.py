@@ -92,3 +92,37 @@ def test_gpu_rows_are_timed_or_skipped_with_a_reason(gl_ctx: Any) -> None:
         else:
             assert row.repeats == 1
             assert row.median_ms > 0
+
+
+# ---------------------------------------------------------------------- --relax
+def test_relax_rows_cover_less_and_agree(gl_ctx: Any) -> None:
+    """Oracles: the full relaxation (box of displaced elements) equals the whole-grid
+    one; the GPU agrees with the CPU to float32 round-off; local covers fewer elements
+    than full, full no more than the whole grid; local differs from full here because
+    the earlier drag was relaxed only a few steps."""
+    from benchmarks.chainmail_relax import bench_relax, relax_markdown
+
+    report = bench_relax((12,), steps=2, repeats=1, ctx=gl_ctx)
+    rows = {(r["backend"], r["mode"]): r for r in report["rows"]}
+    assert len(rows) == 6
+    for backend in ("cpu", "gpu"):
+        grid, full, local = (rows[backend, m] for m in ("grid", "full", "local"))
+        assert grid["covered"] == 2 * 2 * 12**3
+        assert local["covered"] < full["covered"] <= grid["covered"]
+        assert all(r["median_ms"] > 0 for r in (grid, full, local))
+    r = rows["cpu", "full"]
+    assert r["grid_vs_full_mm"] <= 1e-9
+    assert r["gpu_vs_cpu_mm"] <= 1e-4
+    assert r["local_vs_full_mm"] > 1e-3
+    text = relax_markdown(report, "python -m benchmarks chainmail --relax 2")
+    assert "| 12³ | GPU | local |" in text
+    assert "Command: `python -m benchmarks chainmail --relax 2`" in text
+
+
+def test_cli_relax_writes_the_markdown(tmp_path: Path) -> None:
+    out = tmp_path / "relax.md"
+    args = ["chainmail", "--relax", "1", "--sizes", "6", "--repeats", "1", "--no-gpu"]
+    assert main([*args, "--markdown", str(out)]) == 0
+    text = out.read_text()
+    assert "| 6³ | CPU | whole grid |" in text
+    assert "| 6³ | GPU" not in text

@@ -532,7 +532,13 @@ class _FakeGpuSolver:
         self.calls.append(f"enforce {int(held_mask.sum())} {max_passes}")
         self.x[held_mask] = held_targets[held_mask]
         self.revision += 1
+        self.last_changed = ((0, 0, 0), self.x.shape[:3])
         return 3
+
+    def relax(self, box: Any, steps: int) -> Any:
+        self.calls.append(f"relax {box} {steps}")
+        self.revision += 1
+        return box
 
     def positions(self) -> np.ndarray:
         self.calls.append("positions")
@@ -575,8 +581,8 @@ def test_gpu_backend_drives_the_solver_interface(monkeypatch: pytest.MonkeyPatch
     new = _FakeGpuSolver.instances[-1]
     assert not new.model.links[1, :, :, 0].any()
     np.testing.assert_array_equal(cm.displacements()[1, 2, 1], (2.0, 0.0, 0.0))
-    cm.relax(1)  # read back, relaxed on the CPU, written back
-    assert new.calls[-1] == "set_positions"
+    cm.relax(1)  # relaxed on the GPU, over the box of displaced elements
+    assert new.calls[-1] == "relax ((0, 0, 0), (4, 4, 4)) 1"
     cm.close()
     assert new.released
 
