@@ -14,7 +14,6 @@ from tests.ui.test_main_window import _session, central_free_element, drag, hand
 from tests.ui.windows import shown_window
 from voxwarp.deform.elements.chainmail import ChainMail
 from voxwarp.deform.elements.massspring import MassSpring
-from voxwarp.editing.session import EditSession
 
 SIZE = (1280, 820)
 
@@ -76,17 +75,3 @@ def test_switching_models_keeps_the_drag_and_undo_brings_the_old_model_back(
     assert isinstance(w.session.model, MassSpring)
     assert w.session.snapshot().same_as(dragged)
     np.testing.assert_array_equal(_positions(w), ms_x)
-
-
-def test_session_switch_keeps_positions_and_a_new_grid_starts_at_rest() -> None:
-    s = EditSession(_session().scene)
-    s.set_deformation("chainmail", resolution=5)
-    s.model.move((2, 2, 2), (4.0, -3.0, 2.0))
-    x = s.model.positions()
-    s.set_deformation("massspring")
-    assert isinstance(s.model, MassSpring)
-    np.testing.assert_array_equal(s.model.positions(), x)
-    assert "no element moved" in s.family.switch_note
-    s.set_deformation("chainmail", resolution=4)  # another grid: at rest
-    np.testing.assert_array_equal(s.model.displacements(), 0.0)
-    assert "grid changed" in s.family.switch_note
