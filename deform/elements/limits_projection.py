@@ -14,7 +14,8 @@ and projecting that link alone (both free ends move half the excess apart or tog
 a free end of a pinned one the whole excess), and converges to that projection. Links
 are visited in six groups (axis x parity of the lower end) whose links share no
 element, so a group is one vectorised step. A link that never was violated keeps a
-zero correction, so elements that nothing pushes do not move at all.
+zero correction, so elements that nothing pushes do not move at all, and the sweeps run
+on a box around the violated links only (grown while its border has to give way).
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ import numpy as np
 
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 
+#: elements the first box reaches beyond the violated links
+PAD = 2
 #: default cap of sweeps over all links (each sweep visits every link once)
 MAX_SWEEPS = 4000
 #: a sweep whose largest correction is below this fraction of the smallest spacing, with
@@ -40,6 +43,12 @@ def project_onto_limits(
 ) -> tuple[np.ndarray, float, int]:
     """``positions`` moved as little as possible (least squares) onto ``model``'s limits.
 
+    Only a box of elements is iterated on: the violated links' elements padded by
+    :data:`PAD`, the layer around it held where it is. When a link into that layer
+    ends up corrected (the layer would have to move), the box doubles and the
+    projection starts again; otherwise the layer's links need no force, and the box's
+    projection is the whole grid's.
+
     Parameters
     ----------
     model
@@ -49,32 +58,103 @@ def project_onto_limits(
     pinned
         (nx, ny, nz) bool: elements that must not move (default ``model.fixed``).
     max_sweeps
-        Cap on the sweeps over the links; a state not converged by then is left
-        slightly outside the limits (the caller's propagation finishes it).
+        Cap on the sweeps over the links per box; a state not converged by then is
+        left slightly outside the limits (the caller's propagation finishes it).
 
     Returns
     -------
     tuple
         ``(x, violation, sweeps)``: the (nx, ny, nz, 3) float64 projected positions,
-        the largest violation (mm) of ``positions`` and the sweeps taken (0: nothing
-        was violated).
+        the largest violation (mm) of ``positions`` and the sweeps taken over all boxes
+        (0: nothing was violated).
     """
     y = np.asarray(positions, dtype=np.float64)
-    x = y.copy()
     fixed = model.fixed if pinned is None else np.asarray(pinned, dtype=bool)
-    free = (~fixed).astype(np.float64)
     before = model.violation(y)
     tol = TOL_FRACTION * float(np.min(model.spacing))
+    x = y.copy()
+    if before <= tol:
+        return x, before, 0
+    shape = np.asarray(model.shape)
+    where = np.argwhere(_violated(model, y, tol))
+    lo = np.maximum(where.min(axis=0) - PAD, 0)
+    hi = np.minimum(where.max(axis=0) + 1 + PAD, shape)
+    total = 0
+    while True:
+        ext = tuple(
+            slice(int(a), int(b))
+            for a, b in zip(np.maximum(lo - 1, 0), np.minimum(hi + 1, shape), strict=True)
+        )
+        ring = np.ones(y[ext].shape[:3], dtype=bool)
+        ring[
+            tuple(
+                slice(int(a - e.start), int(b - e.start))
+                for a, b, e in zip(lo, hi, ext, strict=True)
+            )
+        ] = False
+        sub = _sub_model(model, ext, fixed[ext] | ring)
+        xs, engaged, sweeps = _hildreth(sub, y[ext], tol, max_sweeps)
+        total += sweeps
+        if not np.any(engaged & ring):
+            x[ext] = xs
+            return x, before, total
+        size = hi - lo
+        lo, hi = np.maximum(lo - size, 0), np.minimum(hi + size, shape)
+
+
+def _violated(model: ChainMailModel, x: np.ndarray, tol: float) -> np.ndarray:
+    """(nx, ny, nz) bool: elements with a link violated by more than ``tol`` mm."""
+    out = np.zeros(model.shape, dtype=bool)
+    for axis in range(3):
+        if model.shape[axis] < 2:
+            continue
+        mn, mx, sh, linked = model.link_limits(axis)
+        d = np.diff(x, axis=axis)
+        v = np.maximum(mn - d[..., axis], d[..., axis] - mx)
+        for j in range(3):
+            if j != axis:
+                v = np.maximum(v, np.abs(d[..., j]) - sh)
+        bad = linked & (v > tol)
+        lo: list[Any] = [slice(None)] * 3
+        hi: list[Any] = [slice(None)] * 3
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        out[tuple(lo)] |= bad
+        out[tuple(hi)] |= bad
+    return out
+
+
+def _sub_model(model: ChainMailModel, box: tuple[slice, ...], fixed: np.ndarray) -> ChainMailModel:
+    """``model`` on the elements of ``box`` (its links out of the box dropped)."""
+    return ChainMailModel(
+        rest=model.rest[box],
+        spacing=model.spacing,
+        min_dist=model.min_dist[box],
+        max_dist=model.max_dist[box],
+        max_shear=model.max_shear[box],
+        links=model.links[box],
+        fixed=fixed,
+    )
+
+
+def _hildreth(
+    model: ChainMailModel, y: np.ndarray, tol: float, max_sweeps: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Hildreth's sweeps from ``y`` with ``model.fixed`` pinned: the positions, the
+    elements of links left with a correction, and the sweeps taken."""
+    x = y.copy()
+    free = (~model.fixed).astype(np.float64)
     groups = [_Group(model, free, axis, parity) for axis in range(3) for parity in (0, 1)]
     groups = [g for g in groups if g.size]
     sweeps = 0
-    if before > tol:
-        while sweeps < max_sweeps:
-            sweeps += 1
-            change = max(g.visit(x) for g in groups)
-            if change <= tol and model.violation(x) <= tol:
-                break
-    return x, before, sweeps
+    while groups and sweeps < max_sweeps:
+        sweeps += 1
+        change = max(g.visit(x) for g in groups)
+        if change <= tol and model.violation(x) <= tol:
+            break
+    engaged = np.zeros(model.shape, dtype=bool)
+    for g in groups:
+        g.mark_engaged(engaged)
+    return x, engaged, sweeps
 
 
 class _Group:
@@ -105,6 +185,12 @@ class _Group:
         # a link between two pinned elements cannot be corrected here
         self.inv_w = np.divide(1.0, w, out=np.zeros_like(w), where=w > 0)
         self.t = np.zeros(shape)
+
+    def mark_engaged(self, engaged: np.ndarray) -> None:
+        """Set ``engaged`` at both ends of every link left with a correction."""
+        active = np.any(self.t != 0.0, axis=-1)
+        engaged[self.a] |= active
+        engaged[self.b] |= active
 
     def visit(self, x: np.ndarray) -> float:
         """Undo this group's last corrections, project each link alone; the largest

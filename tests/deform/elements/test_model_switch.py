@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from voxwarp.deform.elements import limits_projection
 from voxwarp.deform.elements.chainmail import ChainMail, ChainMailError
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 from voxwarp.deform.elements.grid import ElementGrid
@@ -115,6 +116,23 @@ def test_a_chain_of_overstretched_links_keeps_its_centre() -> None:
     x, before, _ = project_onto_limits(m, y)
     assert before == pytest.approx(1.0)
     np.testing.assert_allclose(x[:, 0, 0, 0] - y[:, 0, 0, 0], -(np.arange(5) - 2.0), atol=1e-5)
+
+
+def test_the_box_around_the_violations_gives_the_whole_grids_projection() -> None:
+    """A row of 16 elements folded over in the middle: the correction
+    reaches elements far beyond the first box (violated links + 2), which must grow;
+    the result is the projection iterated on the whole grid."""
+    links = np.zeros((16, 2, 2, 3), bool)
+    links[:15, 0, 0, 0] = True
+    m = _model((16, 2, 2), links)
+    y = m.rest.copy()
+    y[8:, 0, 0, 0] -= 20.0  # element 8 10 mm left of element 7 (gap at least 8 mm)
+    x, _, _ = project_onto_limits(m, y)
+    full, _, _ = limits_projection._hildreth(m, y, 1e-9, 100000)
+    np.testing.assert_allclose(x, full, atol=1e-5)
+    moved = np.flatnonzero(np.abs(x[:, 0, 0, 0] - y[:, 0, 0, 0]) > 1e-6)
+    assert moved.min() <= 3  # beyond the first box (elements 5..10) and its ring
+    assert _link_excess(m, x) <= 1e-5
 
 
 def test_projection_is_the_nearest_feasible_state() -> None:
