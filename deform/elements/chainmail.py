@@ -374,7 +374,8 @@ class ChainMail(ElementWarpMixin):
 
         The positions are projected onto the limits with the least movement (sum of
         squared distances; :func:`~voxwarp.deform.elements.limits_projection.project_onto_limits`),
-        fixed, anchored and held elements staying put; held elements stay held. If the
+        fixed, anchored and held elements staying put; held elements stay held, and
+        the cut links of a ChainMail ``other`` stay cut. If the
         held elements themselves break the limits (dragged apart further than the
         links allow), they are released and the projection runs again without them.
         A propagation then removes what round-off the projection left.
@@ -391,6 +392,7 @@ class ChainMail(ElementWarpMixin):
         positions = np.asarray(other.positions(), dtype=np.float64)
         cm = cls(grid, backend=backend or other.backend, ctx=ctx, **settings)
         with closed_on_error(cm):
+            cm._cut_links(np.asarray(getattr(other, "cuts", ()), dtype=np.int64).tolist())
             held &= ~cm._model.fixed
             released = 0
             try:

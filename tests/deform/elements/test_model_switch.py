@@ -199,7 +199,7 @@ def test_chainmail_to_massspring_keeps_positions_held_and_fixed() -> None:
     np.testing.assert_array_equal(ms.velocities(), 0.0)
 
 
-def test_chainmail_cuts_are_counted_as_joined() -> None:
+def test_chainmail_cuts_are_counted_as_joined_and_kept_by_a_chainmail() -> None:
     cm = ChainMail(_grid())
     cut = cm.cut((45.0, 45.0, 45.0), (1.0, 0.0, 0.0), extent=15.0)
     assert cut > 0
@@ -207,6 +207,8 @@ def test_chainmail_cuts_are_counted_as_joined() -> None:
     assert report is not None
     assert report.cuts_joined == cut
     assert f"{cut} cut link(s)" in report.describe()
+    again = ChainMail.from_model(cm, variant="gibson")
+    np.testing.assert_array_equal(again.cuts, cm.cuts)
 
 
 # ---------------------------------------------------------------------- mass-spring -> ChainMail
