@@ -366,8 +366,9 @@ class ChainMail(ElementWarpMixin):
             moderngl context.
         grid
             The elements (same shape and rest positions as ``other``'s; its stiffness
-            gives the limits); default a copy of ``other.grid``. Fixed, anchored and
-            user-freed elements come from ``other``'s grid either way.
+            gives the limits); default a copy of ``other.grid``. The boundary
+            conditions (anchor mode, region of influence, fixed, anchored and
+            user-freed elements) come from ``other``'s grid either way.
         **settings
             The constructor's keywords (``variant``, ``stretch``, ``shear``,
             ``relax_steps``).

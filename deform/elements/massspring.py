@@ -455,8 +455,9 @@ class MassSpring(ElementWarpMixin):
             moderngl context.
         grid
             The elements (same shape and rest positions as ``other``'s; its materials
-            are used); default a copy of ``other.grid``. Fixed, anchored and
-            user-freed elements come from ``other``'s grid either way.
+            are used); default a copy of ``other.grid``. The boundary conditions
+            (anchor mode, region of influence, fixed, anchored and user-freed
+            elements) come from ``other``'s grid either way.
         **settings
             The constructor's keywords (``integrator``, ``spring_constant``, ...).
 

@@ -2,10 +2,11 @@
 (``MassSpring.from_model`` / ``ChainMail.from_model``; Knoche 2008, §5: ChainMail to
 mass-spring is always possible, mass-spring to ChainMail must restore the limits).
 
-Carried over: the element grid (a copy: rest positions, materials, fixed, anchored and
-user-freed elements), the current positions, and the held elements with their
-offsets. Not carried: velocities (the new model starts still) and the other model's own
-settings. :class:`SwitchReport` says how far the switch moved elements.
+Carried over: the element grid (a copy: rest positions, materials, boundary conditions:
+anchor mode, region of influence, fixed, anchored and user-freed elements), the current
+positions, and the held elements with their offsets. Not carried: velocities (the new
+model starts still) and the other model's own settings. :class:`SwitchReport` says how
+far the switch moved elements.
 """
 
 from __future__ import annotations
@@ -88,7 +89,8 @@ def movement_report(before: Any, after: Any, **fields: Any) -> SwitchReport:
 def switched_grid(other: Any, grid: ElementGrid | None, error: type[Exception]) -> ElementGrid:
     """The grid of a model switched from ``other``: a copy of ``other.grid``, or
     ``grid`` (its materials, e.g. rebuilt from the session's settings) with ``other``'s
-    fixed, anchored and user-freed elements. ``error`` when ``grid``'s elements are
+    boundary conditions (anchor mode, region of influence, fixed, anchored and
+    user-freed elements). ``error`` when ``grid``'s elements are
     not ``other``'s (another shape or box)."""
     old = other.grid
     if grid is None:
@@ -102,6 +104,7 @@ def switched_grid(other: Any, grid: ElementGrid | None, error: type[Exception]) 
             f" model's {old.shape} over {old.lo.tolist()}..{old.hi.tolist()} mm; switch on the"
             " same grid (grid=None copies it)"
         )
+    grid.anchor, grid.fix_outside = old.anchor, old.fix_outside
     grid.fixed = old.fixed.copy()
     grid.anchored = old.anchored.copy()
     grid.unanchored = old.unanchored.copy()

@@ -270,9 +270,12 @@ def test_given_grid_takes_materials_and_the_old_constraints() -> None:
     ms.fix((3, 3, 3))
     grid = _grid()
     grid.set_material(stiffness=0.9)  # stiffer: tighter limits
+    grid.anchor, grid.fix_outside = "corners", None  # replaced by the model's
     cm = ChainMail.from_model(ms, grid=grid)
     assert cm.grid is grid
     assert grid.fixed[3, 3, 3]
+    assert (grid.anchor, grid.fix_outside) == (ms.grid.anchor, ms.grid.fix_outside)
+    np.testing.assert_array_equal(grid.fixed, ms.grid.fixed)
     np.testing.assert_allclose(cm.model.max_dist, 10.0 * (1 + 0.5 * 0.1))
 
 
