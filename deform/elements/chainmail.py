@@ -376,9 +376,11 @@ class ChainMail(ElementWarpMixin):
         The positions are projected onto the limits with the least movement (sum of
         squared distances; :func:`~voxwarp.deform.elements.limits_projection.project_onto_limits`),
         fixed, anchored and held elements staying put; held elements stay held, and
-        the cut links of a ChainMail ``other`` stay cut. If the
-        held elements themselves break the limits (dragged apart further than the
-        links allow), they are released and the projection runs again without them.
+        the cut links of a ChainMail ``other`` stay cut. If that cannot meet the
+        limits (the held elements dragged further from the anchored or fixed ones, or
+        from each other, than the links allow), the region of influence's anchors are
+        freed (the next drag anchors again) and, if that is not enough either, the held
+        elements are released; the projection then runs again.
         A propagation then removes what round-off the projection left.
         :attr:`switch_report` says how far elements moved.
 
@@ -395,20 +397,50 @@ class ChainMail(ElementWarpMixin):
         with closed_on_error(cm):
             cm._cut_links(np.asarray(getattr(other, "cuts", ()), dtype=np.int64).tolist())
             held &= ~cm._model.fixed
-            released = 0
+            freed = released = 0
+            if not cm._reachable(held, offsets):
+                freed = cm._drop_anchors()
+            if not cm._reachable(held, offsets):
+                released, held = int(held.sum()), np.zeros_like(held)
             try:
                 sweeps, before = cm._project_from(positions, held, offsets)
-            except ChainMailError:
-                released = int(held.sum())
-                sweeps, before = cm._project_from(positions, np.zeros_like(held), offsets)
+            except ChainMailError:  # not expected: the held elements were reachable
+                released, held = released + int(held.sum()), np.zeros_like(held)
+                sweeps, before = cm._project_from(positions, held, offsets)
             cm.switch_report = movement_report(
                 positions,
                 cm.positions(),
                 violation_before=before,
                 sweeps=sweeps,
+                anchors_freed=freed,
                 released=released,
             )
         return cm
+
+    def _reachable(self, held: np.ndarray, offsets: np.ndarray) -> bool:
+        """Whether a drag of ``held`` to ``offsets`` from rest meets the limits with the
+        fixed elements at rest (a trial propagation; this model must be at rest)."""
+        flat = np.flatnonzero(held)
+        if flat.size == 0:
+            return True
+        pinned = self._pinned
+        self._pinned = self._model.fixed.reshape(-1) | held.reshape(-1)
+        try:
+            target = self._rest[flat] + offsets.reshape(-1, 3)[flat]
+            ok, *_ = self._attempt(flat, target, commit=False)
+        finally:
+            self._pinned = pinned
+        return ok
+
+    def _drop_anchors(self) -> int:
+        """Free the elements anchored by the region of influence (the next drag anchors
+        again); how many were anchored."""
+        count = int(self.grid.anchored.sum())
+        self.grid.anchored[:] = False
+        self._model.fixed = self.grid.constrained()
+        if self.backend == "gpu":
+            self._rebuild_gpu()
+        return count
 
     def _project_from(
         self, positions: np.ndarray, held: np.ndarray, offsets: np.ndarray

@@ -26,13 +26,16 @@ import numpy as np
 
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 
+EPS = float(np.finfo(np.float64).eps)
 #: elements the first box reaches beyond the violated links
 PAD = 2
 #: default cap of sweeps over all links (each sweep visits every link once)
 MAX_SWEEPS = 4000
 #: a sweep whose largest correction is below this fraction of the smallest spacing, with
-#: every link satisfied to it, ends the iteration
-TOL_FRACTION = 1e-7
+#: every link satisfied to it, ends the iteration: far below the propagation's round-off
+#: tolerance (1e-9 mm), so the result needs no repair, which could fail where many links
+#: sit at their limits (the sweeps converge linearly: about 20 more per factor of 10)
+TOL_FRACTION = 1e-12
 
 
 def project_onto_limits(
@@ -71,7 +74,8 @@ def project_onto_limits(
     y = np.asarray(positions, dtype=np.float64)
     fixed = model.fixed if pinned is None else np.asarray(pinned, dtype=bool)
     before = model.violation(y)
-    tol = TOL_FRACTION * float(np.min(model.spacing))
+    # (and above the round-off of differences of positions this far from the origin)
+    tol = max(TOL_FRACTION * float(np.min(model.spacing)), 64 * EPS * float(np.max(np.abs(y))))
     x = y.copy()
     if before <= tol:
         return x, before, 0

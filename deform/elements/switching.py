@@ -42,6 +42,9 @@ class SwitchReport:
     cuts_joined
         Links a ChainMail had cut, which the mass-spring model (it has no cut springs)
         joins again with springs.
+    anchors_freed
+        Elements anchored by the region of influence that were freed because the
+        limits could not be restored with them at rest.
     released
         Held elements let go because the limits could not be restored with them held.
     """
@@ -52,6 +55,7 @@ class SwitchReport:
     violation_before: float = 0.0
     sweeps: int = 0
     cuts_joined: int = 0
+    anchors_freed: int = 0
     released: int = 0
 
     def describe(self) -> str:
@@ -65,6 +69,8 @@ class SwitchReport:
             )
             if self.violation_before > 0.0:
                 text += f" to restore the ChainMail limits (worst {self.violation_before:.3g} mm)"
+        if self.anchors_freed:
+            text += f"; {self.anchors_freed} anchored element(s) freed"
         if self.released:
             text += f"; {self.released} held element(s) released"
         if self.cuts_joined:
