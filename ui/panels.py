@@ -491,7 +491,10 @@ class DeformationPanel(Panel):
         self.model_combo = QComboBox()
         for kind in DEFORMATIONS:
             self.model_combo.addItem(family_label(kind), kind)
-        self.model_combo.setToolTip("Deformation family (choosing one builds it at rest)")
+        self.model_combo.setToolTip(
+            "Deformation family (choosing one builds it at rest; mass-spring and ChainMail"
+            " switch into each other keeping the deformation)"
+        )
         self.model_combo.currentIndexChanged.connect(self._model_changed)
         form.addRow("Model", self.model_combo)
         self.options = ModelOptions(form)
@@ -639,7 +642,16 @@ class DeformationPanel(Panel):
         kind = str(self.model_combo.currentData())
         settings = self.options.settings()
         panel = self._family_panels[kind]
-        self._edit(panel.edit_name(kind), lambda: self.session.set_deformation(kind, **settings))
+
+        def switch() -> bool:
+            self.session.set_deformation(kind, **settings)
+            return True
+
+        if self._edit(panel.edit_name(kind), switch):
+            # mass-spring <-> ChainMail keeps the deformation: how far that moved elements
+            note = self.session.family.switch_note
+            if note:
+                self._window.statusBar().showMessage(note, 15000)
         panel.model_edited()
         # also after a failed edit: the widgets must show the session again
         self.refresh()

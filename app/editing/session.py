@@ -280,7 +280,10 @@ class EditSession:
         largest side, resolved when the model is built; 0: the volume's box), and the
         element grid's boundary conditions
         ``anchor`` and ``fix_outside``, see
-        :class:`~voxwarp.deform.elements.grid.ElementGrid`); builds a fresh model at rest.
+        :class:`~voxwarp.deform.elements.grid.ElementGrid`); builds a fresh model at rest,
+        except from mass-spring to ChainMail or back on the same element grid: the new
+        model continues the deformation (``from_model``; ``family.switch_note`` says how
+        far ChainMail's limits moved elements).
 
         ``"wires"`` starts with one straight wire along the volume's longest axis
         through its centre (bend it by dragging its control points, or lay new ones);
@@ -298,7 +301,8 @@ class EditSession:
         self.backend, self.resolution, self.options = backend, res, options
         if family.uses_backend:
             try:
-                family.start()
+                if not family.continue_from(self.family):
+                    family.start()
             except EditorError:
                 self.backend, self.resolution, self.options = now
                 raise

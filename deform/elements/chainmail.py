@@ -193,15 +193,23 @@ from voxwarp.deform.elements.chainmail_model import (
     union_box,
 )
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError, Selection, grid_from_entry
+from voxwarp.deform.elements.limits_projection import project_onto_limits
 from voxwarp.deform.elements.model import (
     BACKENDS,
     HELD_FORM,
     ElementWarpMixin,
     check_gpu_context,
     check_grid_and_backend,
+    closed_on_error,
     held_entries,
     held_index,
     held_items,
+)
+from voxwarp.deform.elements.switching import (
+    SwitchReport,
+    held_state,
+    movement_report,
+    switched_grid,
 )
 
 __all__ = [
@@ -353,6 +361,8 @@ class ChainMail(ElementWarpMixin):
     model_type = MODEL_TYPE
     label = "ChainMail"
     error = ChainMailError
+    #: how far :meth:`from_model` moved elements (None: not made by it)
+    switch_report: SwitchReport | None = None
 
     def __init__(
         self,
@@ -410,6 +420,126 @@ class ChainMail(ElementWarpMixin):
         if backend == "gpu":
             self._solver = self._make_gpu_solver()
             self._solver.set_positions(self._model.rest.copy())
+
+    @classmethod
+    def from_model(
+        cls,
+        other: Any,
+        backend: str | None = None,
+        ctx: Any = None,
+        grid: ElementGrid | None = None,
+        **settings: Any,
+    ) -> ChainMail:
+        """A ChainMail that continues ``other``'s deformation (e.g. a
+        :class:`~voxwarp.deform.elements.massspring.MassSpring`), moved as little as
+        possible onto the ChainMail limits (Knoche 2008, §5: a mass-spring state in
+        general breaks them).
+
+        Parameters
+        ----------
+        other
+            An element model (:class:`~voxwarp.deform.elements.model.ElementModel` with
+            ``held`` and ``held_offsets``).
+        backend, ctx
+            The new model's backend (default ``other``'s) and, for ``"gpu"``, its
+            moderngl context.
+        grid
+            The elements (same shape and rest positions as ``other``'s; its stiffness
+            gives the limits); default a copy of ``other.grid``. The boundary
+            conditions (anchor mode, region of influence, fixed, anchored and
+            user-freed elements) come from ``other``'s grid either way.
+        **settings
+            The constructor's keywords (``variant``, ``stretch``, ``shear``,
+            ``relax_steps``).
+
+        The positions are projected onto the limits with the least movement (sum of
+        squared distances; :func:`~voxwarp.deform.elements.limits_projection.project_onto_limits`),
+        fixed, anchored and held elements staying put; held elements stay held, and
+        the cut links of a ChainMail ``other`` stay cut. If that cannot meet the
+        limits (the held elements dragged further from the anchored or fixed ones, or
+        from each other, than the links allow), the region of influence's anchors are
+        freed (the next drag anchors again) and, if that is not enough either, the held
+        elements are released; the projection then runs again.
+        A propagation then removes what round-off the projection left.
+        :attr:`switch_report` says how far elements moved.
+
+        Raises
+        ------
+        ChainMailError
+            On a grid that is not ``other``'s, bad settings, or limits that cannot be
+            met with the fixed and anchored elements at rest.
+        """
+        grid = switched_grid(other, grid, ChainMailError)
+        held, offsets = held_state(other)
+        positions = np.asarray(other.positions(), dtype=np.float64)
+        cm = cls(grid, backend=backend or other.backend, ctx=ctx, **settings)
+        with closed_on_error(cm):
+            cm._cut_links(np.asarray(getattr(other, "cuts", ()), dtype=np.int64).tolist())
+            held &= ~cm._model.fixed
+            freed = released = 0
+            if not cm._reachable(held, offsets):
+                freed = cm._drop_anchors()
+            if not cm._reachable(held, offsets):
+                released, held = int(held.sum()), np.zeros_like(held)
+            try:
+                sweeps, before = cm._project_from(positions, held, offsets)
+            except ChainMailError:  # not expected: the held elements were reachable
+                released, held = released + int(held.sum()), np.zeros_like(held)
+                sweeps, before = cm._project_from(positions, held, offsets)
+            cm.switch_report = movement_report(
+                positions,
+                cm.positions(),
+                violation_before=before,
+                sweeps=sweeps,
+                anchors_freed=freed,
+                released=released,
+            )
+        return cm
+
+    def _reachable(self, held: np.ndarray, offsets: np.ndarray) -> bool:
+        """Whether a drag of ``held`` to ``offsets`` from rest meets the limits with the
+        fixed elements at rest (a trial propagation; this model must be at rest)."""
+        flat = np.flatnonzero(held)
+        if flat.size == 0:
+            return True
+        pinned = self._pinned
+        self._pinned = self._model.fixed.reshape(-1) | held.reshape(-1)
+        try:
+            target = self._rest[flat] + offsets.reshape(-1, 3)[flat]
+            ok, *_ = self._attempt(flat, target, commit=False)
+        finally:
+            self._pinned = pinned
+        return ok
+
+    def _drop_anchors(self) -> int:
+        """Free the elements anchored by the region of influence (the next drag anchors
+        again); how many were anchored."""
+        count = int(self.grid.anchored.sum())
+        self.grid.anchored[:] = False
+        self._model.fixed = self.grid.constrained()
+        if self.backend == "gpu":
+            self._rebuild_gpu()
+        return count
+
+    def _project_from(
+        self, positions: np.ndarray, held: np.ndarray, offsets: np.ndarray
+    ) -> tuple[int, float]:
+        """Hold ``held`` at ``offsets`` and take ``positions`` projected onto the limits
+        (:meth:`from_model`); the projection's sweeps and the violation before it."""
+        flat = held.reshape(-1)
+        self._held = flat.copy()
+        self._offsets = np.where(flat[:, None], offsets.reshape(-1, 3), 0.0)
+        self._pinned = self._model.fixed.reshape(-1) | self._held
+        x, before, sweeps = project_onto_limits(
+            self._model, positions, self._pinned.reshape(self.grid.shape)
+        )
+        self.set_state(x)  # the CPU raises when the limits cannot be met
+        if self.backend == "gpu" and not self._solver.feasible:
+            raise ChainMailError(
+                "the positions cannot be brought within the ChainMail limits with the"
+                " fixed, anchored and held elements where they are"
+            )
+        return sweeps, before
 
     # ------------------------------------------------------------------ parameters
     @property

@@ -57,11 +57,18 @@ from voxwarp.deform.elements.model import (
     ElementWarpMixin,
     check_gpu_context,
     check_grid_and_backend,
+    closed_on_error,
     held_entries,
     held_index,
     held_items,
 )
 from voxwarp.deform.elements.spring_model import INTEGRATORS, SpringModel
+from voxwarp.deform.elements.switching import (
+    SwitchReport,
+    held_state,
+    movement_report,
+    switched_grid,
+)
 from voxwarp.errors import VoxwarpError
 
 #: solver backends of :class:`MassSpring`
@@ -325,6 +332,8 @@ class MassSpring(ElementWarpMixin):
     model_type = MODEL_TYPE
     label = "mass-spring"
     error = MassSpringError
+    #: how far :meth:`from_model` moved elements (None: not made by it)
+    switch_report: SwitchReport | None = None
 
     def __init__(
         self,
@@ -417,6 +426,58 @@ class MassSpring(ElementWarpMixin):
     def held(self) -> np.ndarray:
         """(n_x, n_y, n_z) bool copy: elements held by a drag (:meth:`move`)."""
         return self._held.copy()
+
+    @property
+    def held_offsets(self) -> np.ndarray:
+        """(n_x, n_y, n_z, 3) copy: where held elements are held, as offsets from rest."""
+        return self._offsets.copy()
+
+    @classmethod
+    def from_model(
+        cls,
+        other: Any,
+        backend: str | None = None,
+        ctx: Any = None,
+        grid: ElementGrid | None = None,
+        **settings: Any,
+    ) -> MassSpring:
+        """A mass-spring model that continues ``other``'s deformation (e.g. a
+        :class:`~voxwarp.deform.elements.chainmail.ChainMail`; Knoche 2008, §5: always
+        possible, springs have no geometric limits).
+
+        Parameters
+        ----------
+        other
+            An element model (:class:`~voxwarp.deform.elements.model.ElementModel` with
+            ``held`` and ``held_offsets``).
+        backend, ctx
+            The new model's backend (default ``other``'s) and, for ``"gpu"``, its
+            moderngl context.
+        grid
+            The elements (same shape and rest positions as ``other``'s; its materials
+            are used); default a copy of ``other.grid``. The boundary conditions
+            (anchor mode, region of influence, fixed, anchored and user-freed
+            elements) come from ``other``'s grid either way.
+        **settings
+            The constructor's keywords (``integrator``, ``spring_constant``, ...).
+
+        The positions are taken over exactly and the velocities start at 0; held
+        elements stay held at their offsets. Not carried: cut links (springs join
+        them again; :attr:`switch_report` counts them), and rigid (stiffness 1)
+        elements go back to rest, where mass-spring pins them. :attr:`switch_report`
+        says how far elements moved.
+        """
+        grid = switched_grid(other, grid, MassSpringError)
+        held, offsets = held_state(other)
+        positions = np.asarray(other.positions(), dtype=np.float64)
+        ms = cls(grid, backend=backend or other.backend, ctx=ctx, **settings)
+        with closed_on_error(ms):
+            ms._held = held & ~ms._rest_pinned()
+            ms._offsets = np.where(ms._held[..., None], offsets, 0.0)
+            ms.set_state(positions)
+            cuts = len(getattr(other, "cuts", ()))
+            ms.switch_report = movement_report(positions, ms.positions(), cuts_joined=cuts)
+        return ms
 
     def stable_time_step(self) -> float:
         """A conservative stable time step (s) for the current integrator.

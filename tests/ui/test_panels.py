@@ -60,6 +60,19 @@ class FakeViewport:
         self.updates += 1
 
 
+class FakeStatusBar:
+    """What the panels use of the window's status bar: the messages shown."""
+
+    def __init__(self) -> None:
+        self.messages: list[str] = []
+
+    def showMessage(self, text: str, timeout: int = 0) -> None:
+        self.messages.append(text)
+
+    def currentMessage(self) -> str:
+        return self.messages[-1] if self.messages else ""
+
+
 class FakeWindow:
     """The main-window contract of voxwarp.ui.panels, recording what the panels ask for."""
 
@@ -74,6 +87,10 @@ class FakeWindow:
         self.wire_builds = 0
         self.running: list[bool] = []
         self.opens = 0
+        self.status = FakeStatusBar()
+
+    def statusBar(self) -> FakeStatusBar:
+        return self.status
 
     def add(self, panel: Any) -> Any:
         self.panels.append(panel)
@@ -279,6 +296,32 @@ def test_model_combo_builds_a_mass_spring_model(qtbot: Any, window: FakeWindow) 
     assert s.options.integrator == "explicit"
     assert window.edits == [("New mass-spring model", None)]
     assert window.errors == []
+
+
+def test_model_combo_switch_keeps_the_deformation_and_says_so(
+    qtbot: Any, window: FakeWindow
+) -> None:
+    """mass-spring -> ChainMail on the same grid: the held drag stays, the limits hold,
+    the status bar names how far they moved elements; another kind starts at rest."""
+    panel = make_panel(qtbot, window, DeformationPanel)
+    panel.resolution_spin.setValue(5)
+    panel.model_combo.setCurrentIndex(panel.model_combo.findData("massspring"))
+    s = window.session
+    s.model.move((2, 2, 2), (1.5, 0.0, 0.0))  # beyond ChainMail's slack, nothing followed
+    held = s.model.positions()[2, 2, 2]
+    panel.model_combo.setCurrentIndex(panel.model_combo.findData("chainmail"))
+    assert window.errors == []
+    assert window.edits[-1] == ("New ChainMail model", None)
+    np.testing.assert_array_equal(s.model.positions()[2, 2, 2], held)
+    assert s.model.violation() <= 1e-6
+    report = s.model.switch_report
+    assert report is not None
+    assert report.moved > 1
+    assert window.status.currentMessage() == s.family.switch_note
+    assert f"ChainMail: deformation kept; {report.moved} element(s)" in s.family.switch_note
+    shown = len(window.status.messages)
+    panel.model_combo.setCurrentIndex(panel.model_combo.findData("lattice"))
+    assert len(window.status.messages) == shown  # nothing kept, nothing to say
 
 
 def test_apply_rebuilds_with_the_settings(qtbot: Any, window: FakeWindow) -> None:

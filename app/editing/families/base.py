@@ -76,8 +76,18 @@ class Family:
         return Built(None, None, BuildReport())
 
     # ---------------------------------------------------------------- life cycle
+    #: one line on how :meth:`continue_from` went (empty: nothing to say); the GUI
+    #: shows it in the status bar after a switch
+    switch_note: str = ""
+
     def start(self) -> None:
         """Build the family's state at rest from the session's settings."""
+
+    def continue_from(self, previous: Family) -> bool:
+        """Build the family's state continuing ``previous``'s deformation instead of
+        :meth:`start`'s rest state; whether it did (nothing here: False, start at
+        rest). Called while ``previous`` is still open."""
+        return False
 
     def close(self) -> None:
         """Give up the state; warps still drawn go to :meth:`release`."""

@@ -25,6 +25,7 @@ from voxwarp.deform.elements.chainmail_model import ChainMailError
 from voxwarp.deform.elements.grid import ElementGrid, ElementGridError
 from voxwarp.deform.elements.massspring import MassSpring, MassSpringError
 from voxwarp.deform.elements.materials import MaterialPresetError
+from voxwarp.deform.elements.model import closed_on_error
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.warp import Warp, WarpError
 from voxwarp.editing.common import COLORS, DisplayOptions, EditorError
@@ -106,6 +107,40 @@ class ElementFamily(Family):
             if isinstance(exc, EditorError):
                 raise
             raise EditorError(str(exc)) from exc
+
+    def continue_from(self, previous: Family) -> bool:
+        """From the other element model on the same grid (mass-spring to ChainMail or
+        back; Knoche 2008, §5): continue its deformation with ``from_model`` and say in
+        :attr:`switch_note` how far that moved elements. False (a new model at rest)
+        from any other family, the same model kind, or when the grid changed too."""
+        old = previous.model if isinstance(previous, ElementFamily) else None
+        if old is None or type(previous) is type(self):
+            return False
+        settings = self.settings()
+        try:
+            grid = self.grid(settings, self.session.volume)
+            if not same_elements(grid, old.grid):
+                self.switch_note = "the element grid changed: the new model starts at rest"
+                return False
+            previous._wait()
+            kwargs = self.switch_settings(settings)
+            model = self.model_class.from_model(
+                old, backend=settings.backend, ctx=self._ctx(), grid=grid, **kwargs
+            )
+        except (ValueError, WarpError) as exc:
+            self.switch_note = f"the deformation could not be kept ({exc}); starting at rest"
+            return False
+        with closed_on_error(model):
+            model.warp(inverse=settings.inverse)
+        self.model = model
+        report = model.switch_report
+        self.switch_note = f"{model.label}: {report.describe()}" if report is not None else ""
+        return True
+
+    def switch_settings(self, settings: Any) -> dict[str, Any]:
+        """The model's constructor keywords in ``settings`` (:meth:`settings`), for
+        :meth:`continue_from`."""
+        raise NotImplementedError
 
     def _ctx(self) -> Any:
         return self.session.ctx if self.session.backend == "gpu" else None
@@ -439,6 +474,12 @@ class ElementFamily(Family):
         put_key(t, frame, [json_values(held[e] if e in held else disp[e]) for e in elements])
 
 
+def same_elements(a: ElementGrid, b: ElementGrid) -> bool:
+    """Whether two grids have the same elements (shape and rest positions)."""
+    tol = 1e-9 * float(np.max(b.spacing))
+    return a.shape == b.shape and np.allclose(a.rest_positions, b.rest_positions, rtol=0, atol=tol)
+
+
 def _per_element(value: Any, count: int) -> list[list[float]]:
     """A drag key value (one offset or one per element) as ``count`` offsets."""
     return np.broadcast_to(np.asarray(value, dtype=np.float64), (count, 3)).tolist()
@@ -499,6 +540,10 @@ class MassSpringFamily(ElementFamily):
             ms.close()
             raise
         return Built(ms, warp, report)
+
+    def switch_settings(self, settings: MassSpringSettings) -> dict[str, Any]:
+        s = settings
+        return {"integrator": s.integrator, "shear": s.shear, "bend": s.bend}
 
     def _steps(self) -> int:
         return self.session.options.steps_per_frame
@@ -592,6 +637,9 @@ class ChainMailFamily(ElementFamily):
         if self.session.backend == "gpu":
             restored.relax_steps = 0  # see settings()
         return restored
+
+    def switch_settings(self, settings: ChainMailSettings) -> dict[str, Any]:
+        return {"variant": settings.variant, "relax_steps": settings.relax_steps or 0}
 
     def _steps(self) -> int:
         return self.session.options.relax_steps
