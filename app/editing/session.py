@@ -760,6 +760,7 @@ LOOK_KEYS = (
     "flm_threshold",
     "background",
     "projection",
+    "interactive_downsample",
 )
 
 
