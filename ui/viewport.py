@@ -40,7 +40,7 @@ from voxwarp.core.camera import Camera
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, scene_at
-from voxwarp.render.interaction_volume import InteractionVolumes
+from voxwarp.render.interaction_volume import InteractionVolumes, reduced_volume
 from voxwarp.render.orientation_marker import draw_orientation_marker
 from voxwarp.render.overlay import OverlayRenderer
 from voxwarp.render.raycaster import Renderer
@@ -139,6 +139,9 @@ class Viewport(QOpenGLWidget):
         self.last_volume: Any = None
         #: a still is being taken (:meth:`drawing_still`): full quality, full volume
         self._still = False
+        #: the worker making the reduced volume, and the (volume id, level) that failed
+        self._reduce_task: Task | None = None
+        self._reduce_failed: tuple[int, int] | None = None
         #: seconds the views redrawn after each interactive frame took last time (the
         #: live slice views): the adaptive level budgets them with the 3D frame, so that
         #: the window, not only this view, holds the frame rate
@@ -205,7 +208,7 @@ class Viewport(QOpenGLWidget):
                 self.last_quality = quality
                 drawn = scene_at(scene, quality)
                 if interactive:
-                    drawn = self.interaction_volumes.scene(drawn)
+                    drawn = self._interaction_scene(drawn)
                 self.last_volume = drawn.volume
                 self.renderer.draw_scaled(drawn, fbo, (0, 0, w, h), self.camera, quality.scale)
                 if quality != FULL:
@@ -226,6 +229,37 @@ class Viewport(QOpenGLWidget):
         self.frames_drawn += 1
         self._start_skip_map_job(start_now)
         self.frameDrawn.emit(self.last_frame_ms)
+
+    def _interaction_scene(self, scene: Any) -> Any:
+        """``scene`` at its ``interactive_downsample``: with the reduced volume once a
+        worker thread has made it (seconds for a large CT), the full volume until then."""
+        f = scene.interactive_downsample
+        if f == 1:
+            return scene
+        if self.interaction_volumes.cached(scene.volume, f) is None:
+            self._start_reduction(scene.volume, f)
+            return scene
+        return self.interaction_volumes.scene(scene)
+
+    def _start_reduction(self, volume: Any, factor: int) -> None:
+        """Make the reduced copy of ``volume`` on a worker thread (one at a time)."""
+        running = self._reduce_task is not None and self._reduce_task.running
+        if running or self._reduce_failed == (id(volume), factor):
+            return  # a failed copy is not tried again for this volume and level
+        cache = self.interaction_volumes
+
+        def done(small: Any) -> None:
+            cache.put(volume, factor, small)
+            self.update()
+
+        def failed(message: str) -> None:
+            self._reduce_failed = (id(volume), factor)
+            self.failed.emit(f"could not reduce the volume for interaction: {message}")
+
+        task = Task(lambda _progress, _cancelled: reduced_volume(volume, factor), self)
+        task.succeeded.connect(done)
+        task.failed.connect(failed)
+        self._reduce_task = task.start()
 
     def oriented(self) -> bool:
         """Whether the volume's world is patient RAS (the marker shows R/L A/P S/I)."""

@@ -34,7 +34,11 @@ def _axis_weights(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _reduce_axis(data: np.ndarray, axis: int, m: int) -> np.ndarray:
-    idx, w = _axis_weights(data.shape[axis], m)
+    n = data.shape[axis]
+    if n % m == 0:  # whole blocks: their plain mean (the same weights, faster)
+        blocks = (*data.shape[:axis], m, n // m, *data.shape[axis + 1 :])
+        return data.reshape(blocks).mean(axis=axis + 1, dtype=np.float32)
+    idx, w = _axis_weights(n, m)
     out = np.zeros((*data.shape[:axis], m, *data.shape[axis + 1 :]), dtype=np.float32)
     shape = [1] * data.ndim
     shape[axis] = m
@@ -54,7 +58,8 @@ def reduced_volume(volume: Volume, factor: int) -> Volume:
     n = np.asarray(volume.shape)
     m = np.maximum(np.ceil(n / f).astype(np.int64), 1)
     data: np.ndarray = volume.data
-    for axis in range(3):
+    # whole-block axes first (cheap), so the overlap-weighted ones see less data
+    for axis in sorted(range(3), key=lambda a: n[a] % m[a] != 0):
         if m[axis] != n[axis]:
             data = _reduce_axis(data, axis, int(m[axis]))
     if volume.dtype.kind in "iu":
@@ -82,13 +87,28 @@ class InteractionVolumes:
             return volume
         for key in [k for k, (ref, _) in self._copies.items() if ref() is None]:
             del self._copies[key]
-        key = (id(volume), f)
-        hit = self._copies.get(key)
-        if hit is not None and hit[0]() is volume:
-            return hit[1]
-        small = reduced_volume(volume, f)
-        self._copies[key] = (weakref.ref(volume), small)
+        small = self.cached(volume, f)
+        if small is None:
+            small = reduced_volume(volume, f)
+            self.put(volume, f, small)
         return small
+
+    def cached(self, volume: Volume, factor: int) -> Volume | None:
+        """The reduced copy of ``volume`` if made already (``volume`` at factor 1), else
+        None: a caller that must not wait makes it elsewhere (:func:`reduced_volume`,
+        e.g. on a worker thread) and hands it to :meth:`put`."""
+        f = check_interactive_downsample(factor)
+        if f == 1:
+            return volume
+        hit = self._copies.get((id(volume), f))
+        return hit[1] if hit is not None and hit[0]() is volume else None
+
+    def put(self, volume: Volume, factor: int, small: Volume) -> None:
+        """Keep ``small`` as the reduced copy of ``volume`` at ``factor``."""
+        self._copies[(id(volume), check_interactive_downsample(factor))] = (
+            weakref.ref(volume),
+            small,
+        )
 
     def scene(self, scene: Scene) -> Scene:
         """``scene`` with its volume reduced by ``scene.interactive_downsample`` (the

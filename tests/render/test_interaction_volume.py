@@ -70,10 +70,16 @@ def test_reduced_volume_keeps_the_total_and_integer_types() -> None:
 def test_interaction_volumes_cache_one_copy_per_volume_and_level() -> None:
     vol = _ramp((20, 20, 20))
     cache = InteractionVolumes()
+    assert cache.cached(vol, 2) is None  # not made yet: a GUI makes it on a worker
+    assert cache.cached(vol, 1) is vol
     a = cache.volume(vol, 2)
+    assert cache.cached(vol, 2) is a
     assert cache.volume(vol, 2) is a
     assert cache.volume(vol, 4) is not a
     assert cache.volume(vol, 1) is vol
+    other = _ramp((20, 20, 20))
+    cache.put(other, 2, a)  # a copy made elsewhere
+    assert cache.volume(other, 2) is a
 
 
 def test_scene_json_keeps_the_setting_and_old_files_load() -> None:

@@ -69,6 +69,10 @@ def test_interactive_frames_draw_the_reduced_volume_stills_the_full_one(
             qtbot.mouseMove(vp, pos=start + QPoint(20 * k, 8 * k))
         assert vp.interacting()
         _next_frame(qtbot, vp)
+        # the reduced copy is made on a worker: the full volume draws until it is in
+        qtbot.waitUntil(lambda: vp.interaction_volumes.cached(full, 2) is not None)
+        _next_frame(qtbot, vp)
+        assert vp.interacting()
         assert vp.last_volume is not full
         assert vp.last_volume.shape == (32, 32, 32)
         np.testing.assert_allclose(vp.last_volume.bounds, full.bounds)
