@@ -158,3 +158,15 @@ def test_a_slice_through_the_ball_is_in_the_same_place(offscreen: Any) -> None:
     np.testing.assert_allclose(centres[1], centres[0], atol=0.5)
     assert areas[1] == pytest.approx(areas[0], rel=0.1)
     assert areas[0] == pytest.approx(np.pi * 9.5**2, rel=0.1)
+
+
+def test_stills_ignore_the_interactive_resolution(offscreen: Any) -> None:
+    """``voxwarp render``, exports and screenshots draw ``scene.volume``: a scene set to
+    1/4 while interacting renders the very picture of the same scene at 1."""
+    scene = Scene(_ball(), mode="mip", view="+z", jitter=False)
+    scene.window = (50.0, 100.0)
+    full = np.asarray(offscreen(*SIZE).render(scene))
+    scene.interactive_downsample = 4
+    assert np.array_equal(np.asarray(offscreen(*SIZE).render(scene)), full)
+    coarse = np.asarray(offscreen(*SIZE).render(InteractionVolumes().scene(scene)))
+    assert not np.array_equal(coarse, full)  # the interactive picture is another one
