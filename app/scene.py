@@ -25,7 +25,12 @@ import voxwarp.io.fields  # noqa: F401 - installs the readers of file-backed war
 from voxwarp.core import limits
 from voxwarp.core.allowed_folders import allowed_folders
 from voxwarp.core.camera import PROJECTIONS, Camera, Projection, View, view_rotation
-from voxwarp.core.checks import finite_box, finite_vector
+from voxwarp.core.checks import (
+    MAX_INTERACTIVE_DOWNSAMPLE,
+    finite_box,
+    finite_vector,
+    interactive_downsample,
+)
 from voxwarp.core.comparison import Comparison
 from voxwarp.core.field_check import TOLERANCE_MM
 from voxwarp.core.field_grid import (
@@ -89,6 +94,12 @@ def _finite(x: Any, what: str, positive: bool = False) -> float:
     if not math.isfinite(v) or (positive and v <= 0):
         raise SceneError(f"{what} must be {'positive and ' if positive else ''}finite; got {x!r}")
     return v
+
+
+def check_interactive_downsample(value: Any) -> int:
+    """``value`` as an interactive downsampling factor (1..16, 1: full resolution);
+    :class:`SceneError` otherwise."""
+    return interactive_downsample(value, SceneError)
 
 
 def _vec(x: Any, n: int, what: str) -> tuple[float, ...]:
@@ -194,6 +205,13 @@ class Scene:
         The fixed image's weight for ``compare="blend"`` (0 = moving, 1 = fixed).
     checker_mm
         Checker cell size in mm; None: about 1/8 of the fixed image's longest side.
+    interactive_downsample
+        The volume resolution of interactive frames (the thesis's setting, section 3.2):
+        the GUI and the notebook viewer draw frames taken while the user drags or orbits
+        from the volume reduced by this factor per axis (over the same box:
+        :mod:`voxwarp.render.interaction_volume`); 1 (default) keeps full resolution.
+        Stills (the view at rest, screenshots, ``voxwarp render``, exports) always draw
+        the full volume.
     """
 
     def __init__(
@@ -223,6 +241,7 @@ class Scene:
         compare: str = "checkerboard",
         blend: float = 0.5,
         checker_mm: float | None = None,
+        interactive_downsample: int = 1,
     ) -> None:
         if not isinstance(volume, Volume):
             raise SceneError(
@@ -250,6 +269,7 @@ class Scene:
         self.fov = fov
         self.meshes = meshes
         self.frame = frame
+        self.interactive_downsample = interactive_downsample
         self.comparison: Comparison | None = None
         if fixed is not None:
             self.comparison = Comparison(as_fixed_volume(fixed), compare, blend, checker_mm)
@@ -270,6 +290,16 @@ class Scene:
         if value not in MODES:
             raise SceneError(f"mode must be one of {', '.join(MODES)}; got {value!r}")
         self._mode = value
+
+    @property
+    def interactive_downsample(self) -> int:
+        """Per-axis reduction of the volume in interactive frames (1: full resolution);
+        see ``Scene(interactive_downsample=)``."""
+        return self._interactive_downsample
+
+    @interactive_downsample.setter
+    def interactive_downsample(self, value: int) -> None:
+        self._interactive_downsample = check_interactive_downsample(value)
 
     @property
     def frame(self) -> str:
@@ -548,6 +578,7 @@ class Scene:
             "fov": self.fov,
             "meshes": list(self._meshes),
             "frame": self.frame,
+            "interactive_downsample": self.interactive_downsample,
             **_comparison_kwargs(self.comparison),
         }
 
@@ -577,6 +608,8 @@ class Scene:
             "fov": self.fov,
             "frame": self.frame,
         }
+        if self.interactive_downsample != 1:  # absent at full resolution (older files)
+            d["interactive_downsample"] = self.interactive_downsample
         if self.comparison is not None:  # absent without a fixed image
             d["fixed"] = _volume_to_dict(self.comparison.fixed, base_dir)
             d["compare"] = self.comparison.settings_dict()
@@ -656,6 +689,7 @@ class Scene:
             "fov": d.get("fov", 30.0),
             "meshes": meshes,
             "frame": d.get("frame", "undeformed"),  # scenes written before it: undeformed
+            "interactive_downsample": d.get("interactive_downsample", 1),
             **_comparison_from_dict(d, base_dir),
         }
         for key in ("jitter",):
@@ -853,6 +887,10 @@ SCENE_TYPES: dict[str, tuple[tuple[str, ...], str]] = {
     "zoom": (("number",), _NUMBER),
     "fov": (("number",), _NUMBER),
     "frame": (("str",), f"one of the strings {', '.join(FRAMES)}"),
+    "interactive_downsample": (
+        ("int",),
+        f"an integer from 1 (full resolution) to {MAX_INTERACTIVE_DOWNSAMPLE}",
+    ),
     "meshes": (("list", "null"), "a list of mesh instance objects"),
     "fixed": (("object", "null"), "an object with 'path', 'sample' or 'embedded', or null"),
     "compare": (("object", "null"), "an object with 'show', 'blend', 'checker_mm', or null"),

@@ -73,12 +73,14 @@ def open_window(
     size: tuple[int, int] = (1280, 820),
     series: int | str | None = None,
     fallback: bool = True,
+    interactive_downsample: int | None = None,
     **pick: int,
 ) -> Any:
     """Show the main window on ``input_spec``. With ``fallback``, an INPUT that cannot be
     opened (a :class:`~voxwarp.errors.VoxwarpError`) still opens the window, on the
     bundled sample, and shows the one-line error in a dialog (and on stderr), as File >
-    Open does; without, the error is raised."""
+    Open does; without, the error is raised. ``interactive_downsample`` (when given)
+    replaces the scene's volume resolution of interactive frames."""
     # the window loads moderngl and scipy: Qt set-up (configure_qt) stays light without it
     from voxwarp.ui.main_window import MainWindow, load_session_input
 
@@ -92,6 +94,8 @@ def open_window(
         print(f"voxwarp: error: {error}", file=sys.stderr)
         input_spec = f"sample:{DEFAULT_SAMPLE}"
         session = load_session_input(input_spec)
+    if interactive_downsample is not None:
+        session.scene.interactive_downsample = interactive_downsample
     window = MainWindow(session, input_spec)
     window.resize(*size)
     window.show()
@@ -122,16 +126,25 @@ def run_gui(
     size: tuple[int, int] = (1280, 820),
     tour: str | None = None,
     series: int | str | None = None,
+    interactive_downsample: int | None = None,
     **pick: int,
 ) -> int:
     """Open the window on ``input_spec``; with ``tour``, step through a teaching demo's
     tour (its first scene replaces ``input_spec``); with ``screenshot``, save a PNG of
-    the whole window once the first frame is drawn and quit. A bad INPUT opens the window
+    the whole window once the first frame is drawn and quit; ``interactive_downsample``:
+    the volume resolution of interactive frames (:func:`open_window`). A bad INPUT opens the window
     on the sample with the error in a dialog (:func:`open_window`), or with
     ``screenshot`` returns 2 without a window. Returns the exit code."""
     app = application()
     try:  # with --screenshot (a script) a bad INPUT ends it: no window to wait on
-        window = open_window(input_spec, size=size, series=series, fallback=not screenshot, **pick)
+        window = open_window(
+            input_spec,
+            size=size,
+            series=series,
+            fallback=not screenshot,
+            interactive_downsample=interactive_downsample,
+            **pick,
+        )
     except VoxwarpError as exc:
         print(f"voxwarp: error: {exc}", file=sys.stderr)
         return 2

@@ -842,16 +842,18 @@ class MainWindow(QMainWindow):
             self.export_screenshot(path)
 
     def export_screenshot(self, path: str | Path, whole_window: bool = False) -> Path | None:
-        """Write the viewport's frame (or the whole window) to PNG/EXR, atomically."""
+        """Write the viewport's frame (or the whole window) to PNG/EXR, atomically: a
+        still (full quality and volume resolution), even while the user interacts."""
         path = Path(path)
         if path.suffix.lower() not in (".png", ".exr"):
             self.show_error(f"screenshots are PNG or EXR; {path.name} has neither ending")
             return None
         try:
-            if whole_window:
-                img = qimage_to_array(self.grab().toImage())
-            else:
-                img = self.viewport.screenshot()
+            with self.viewport.drawing_still():  # full quality and volume while dragging
+                if whole_window:
+                    img = qimage_to_array(self.grab().toImage())
+                else:
+                    img = self.viewport.screenshot()
             if path.suffix.lower() == ".exr":
                 img = img.astype("float32") / 255.0
             return write_image(path, img)

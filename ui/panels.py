@@ -50,6 +50,7 @@ from PySide6.QtWidgets import (
     QHBoxLayout,
     QLabel,
     QPushButton,
+    QSpinBox,
     QTreeWidget,
     QTreeWidgetItem,
     QVBoxLayout,
@@ -60,7 +61,7 @@ from voxwarp import shaders
 from voxwarp.core.camera import PROJECTIONS
 from voxwarp.core.levels import LEVEL_ATTRIBUTES
 from voxwarp.editing.session import DEFORMATIONS, DisplayOptions, EditSession, Placement
-from voxwarp.scene import MODES
+from voxwarp.scene import MAX_INTERACTIVE_DOWNSAMPLE, MODES
 from voxwarp.ui.family_panels import (
     FAMILY_PANELS,
     FamilyPanel,
@@ -76,6 +77,7 @@ from voxwarp.ui.panel_base import (
     axis_spin,
     combo,
     double_spin,
+    int_spin,
     set_combo_data,
     value_decimals,
 )
@@ -239,6 +241,7 @@ class VolumePanel(Panel):
         shading_row.addWidget(self.shading_combo, 1)
         shading_row.addWidget(self.jitter_check)
         form.addRow("Shading", shading_row)
+        form.addRow("Interaction", self._build_resolution_spin())
         layout.addWidget(render_box)
 
         # clipping box: the group's own check box turns it on
@@ -291,6 +294,22 @@ class VolumePanel(Panel):
         self.threshold_label = QLabel("Level")
         return self.threshold_label, row
 
+    def _build_resolution_spin(self) -> QSpinBox:
+        """The volume resolution of interactive frames (the scene's
+        ``interactive_downsample``): 1/N per axis while dragging or orbiting."""
+        spin = int_spin(
+            1,
+            MAX_INTERACTIVE_DOWNSAMPLE,
+            "Volume resolution while you drag or orbit: the volume reduced to 1/N per axis"
+            " (over the same box) for faster interactive frames; the view at rest,"
+            " screenshots, exports and voxwarp render use the full volume",
+        )
+        spin.setPrefix("volume 1/")
+        spin.setSpecialValueText("full volume")
+        spin.valueChanged.connect(self._resolution_changed)
+        self.resolution_spin = spin
+        return spin
+
     # ------------------------------------------------------------------ refresh
     def refresh(self) -> None:
         """Show the current session's volume and scene look (makes no edit)."""
@@ -323,6 +342,7 @@ class VolumePanel(Panel):
             self._show_threshold(scene, decimals, step)
             set_combo_data(self.shading_combo, scene.shading)
             self.jitter_check.setChecked(scene.jitter)
+            self.resolution_spin.setValue(scene.interactive_downsample)
             lo, hi = (np.asarray(b, dtype=np.float64) for b in vol.bounds)
             box = scene.clip_box
             self.clip_check.setChecked(box is not None)
@@ -411,6 +431,9 @@ class VolumePanel(Panel):
     def _shading_changed(self, _index: int) -> None:
         value = self.shading_combo.currentData()
         self._edit_look(f"Shading {self.shading_combo.currentText()}", "shading", value)
+
+    def _resolution_changed(self, value: int) -> None:
+        self._edit_look("Interaction resolution", "interactive_downsample", int(value))
 
     def _jitter_changed(self, on: bool) -> None:
         self._edit_look("Jitter on" if on else "Jitter off", "jitter", bool(on))

@@ -40,6 +40,7 @@ from voxwarp.core.camera import Camera
 from voxwarp.editing.session import DisplayOptions, EditSession
 from voxwarp.errors import VoxwarpError
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, scene_at
+from voxwarp.render.interaction_volume import InteractionVolumes, reduced_volume
 from voxwarp.render.orientation_marker import draw_orientation_marker
 from voxwarp.render.overlay import OverlayRenderer
 from voxwarp.render.raycaster import Renderer
@@ -131,6 +132,16 @@ class Viewport(QOpenGLWidget):
         self.adaptive = AdaptiveQuality()
         #: the level the last frame was drawn at
         self.last_quality = FULL
+        #: the volume at the scene's interactive resolution (``interactive_downsample``),
+        #: drawn while interacting; frames at rest draw the full volume
+        self.interaction_volumes = InteractionVolumes()
+        #: the volume the last frame drew (the scene's, or its reduced copy)
+        self.last_volume: Any = None
+        #: a still is being taken (:meth:`drawing_still`): full quality, full volume
+        self._still = False
+        #: the worker making the reduced volume, and the (volume id, level) that failed
+        self._reduce_task: Task | None = None
+        self._reduce_failed: tuple[int, int] | None = None
         #: seconds the views redrawn after each interactive frame took last time (the
         #: live slice views): the adaptive level budgets them with the 3D frame, so that
         #: the window, not only this view, holds the frame rate
@@ -190,14 +201,16 @@ class Viewport(QOpenGLWidget):
             else:
                 # a new warp state waits for its skip maps at the interactive scale
                 # (built on a worker: _start_skip_map_job) instead of marching every block
-                waiting = self._waiting_for_skip_maps()
-                interactive = self.interacting()
+                waiting = self._waiting_for_skip_maps() and not self._still
+                interactive = self.interacting() and not self._still
                 start_now = waiting and not interactive
                 quality = self.adaptive.quality if interactive or waiting else FULL
                 self.last_quality = quality
-                self.renderer.draw_scaled(
-                    scene_at(scene, quality), fbo, (0, 0, w, h), self.camera, quality.scale
-                )
+                drawn = scene_at(scene, quality)
+                if interactive:
+                    drawn = self._interaction_scene(drawn)
+                self.last_volume = drawn.volume
+                self.renderer.draw_scaled(drawn, fbo, (0, 0, w, h), self.camera, quality.scale)
                 if quality != FULL:
                     self._refine.start()  # full quality once the interaction stops
             layers = self.session.overlay_layers(self.display)
@@ -216,6 +229,37 @@ class Viewport(QOpenGLWidget):
         self.frames_drawn += 1
         self._start_skip_map_job(start_now)
         self.frameDrawn.emit(self.last_frame_ms)
+
+    def _interaction_scene(self, scene: Any) -> Any:
+        """``scene`` at its ``interactive_downsample``: with the reduced volume once a
+        worker thread has made it (seconds for a large CT), the full volume until then."""
+        f = scene.interactive_downsample
+        if f == 1:
+            return scene
+        if self.interaction_volumes.cached(scene.volume, f) is None:
+            self._start_reduction(scene.volume, f)
+            return scene
+        return self.interaction_volumes.scene(scene)
+
+    def _start_reduction(self, volume: Any, factor: int) -> None:
+        """Make the reduced copy of ``volume`` on a worker thread (one at a time)."""
+        running = self._reduce_task is not None and self._reduce_task.running
+        if running or self._reduce_failed == (id(volume), factor):
+            return  # a failed copy is not tried again for this volume and level
+        cache = self.interaction_volumes
+
+        def done(small: Any) -> None:
+            cache.put(volume, factor, small)
+            self.update()
+
+        def failed(message: str) -> None:
+            self._reduce_failed = (id(volume), factor)
+            self.failed.emit(f"could not reduce the volume for interaction: {message}")
+
+        task = Task(lambda _progress, _cancelled: reduced_volume(volume, factor), self)
+        task.succeeded.connect(done)
+        task.failed.connect(failed)
+        self._reduce_task = task.start()
 
     def oriented(self) -> bool:
         """Whether the volume's world is patient RAS (the marker shows R/L A/P S/I)."""
@@ -382,6 +426,7 @@ class Viewport(QOpenGLWidget):
         self.session = session
         session.ctx = self.ctx
         session.gl_scope = self.gl_scope
+        self.interaction_volumes.clear()
         self.camera_moved = keep_camera
         if not keep_camera:
             self.reset_camera()
@@ -591,6 +636,17 @@ class Viewport(QOpenGLWidget):
         self.update()
 
     # ------------------------------------------------------------------ pictures
+    @contextlib.contextmanager
+    def drawing_still(self) -> Iterator[None]:
+        """Frames drawn inside are stills: full quality and the full volume, even while
+        the user interacts (screenshots: ``with viewport.drawing_still(): grab``)."""
+        self._still = True
+        try:
+            yield
+        finally:
+            self._still = False
+            self.update()  # the next frame is the interactive one again
+
     def screenshot(self) -> np.ndarray:
         """The current frame, (H, W, 4) uint8, row 0 at the top."""
         img = self.grabFramebuffer().convertToFormat(QImage.Format.Format_RGBA8888)

@@ -3,7 +3,9 @@
 ``voxwarp gui [INPUT] [--screenshot PATH]`` opens the desktop window on INPUT (a volume
 file, a scene JSON or ``sample:NAME``; default the bundled sample). With
 ``--screenshot`` it waits for the first frame, saves a picture of the whole window and
-quits (for scripts and checks). Without a display it renders headless instead
+quits (for scripts and checks). ``--interactive-downsample N`` draws the frames taken
+while the user interacts from the volume reduced to 1/N per axis (the scene's
+``interactive_downsample``). Without a display it renders headless instead
 (``voxwarp demo``) and says so, unless ``--screenshot`` asked for the window.
 
 This is the one door from the command line up to ``voxwarp.ui``: :mod:`voxwarp.ui.app`
@@ -22,7 +24,11 @@ from typing import Any
 from voxwarp.cli import demo
 from voxwarp.cli.options import CliOptionError, add_allow_dir_arg, add_memory_budget_arg
 from voxwarp.cli.render_options import add_series_arg
-from voxwarp.core.checks import image_size
+from voxwarp.core.checks import (
+    MAX_INTERACTIVE_DOWNSAMPLE,
+    image_size,
+    interactive_downsample_arg,
+)
 from voxwarp.core.extras import require
 from voxwarp.io.samples import DEFAULT_SAMPLE
 from voxwarp.teaching import DEMOS
@@ -66,6 +72,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
         size=args.size,
         tour=args.tour,
         series=args.series,
+        interactive_downsample=args.interactive_downsample,
         **pick,
     )
 
@@ -104,6 +111,15 @@ def add_parser(sub: Any) -> None:
     pg.add_argument("--size", type=image_size, default=(1280, 820), help="window WxH")
     pg.add_argument(
         "--tour", metavar="FILE", help="step through a teaching demo's tour (NAME_tour.json)"
+    )
+    pg.add_argument(
+        "--interactive-downsample",
+        type=interactive_downsample_arg,
+        metavar="N",
+        help="draw the frames taken while you drag or orbit from the volume reduced to 1/N"
+        f" per axis (1-{MAX_INTERACTIVE_DOWNSAMPLE}, over the same box; default: the"
+        " scene's setting, else 1 = full); the view at rest, screenshots and exports stay at"
+        " full resolution. The Volume panel's Interaction box changes it",
     )
     add_series_arg(pg)
     add_memory_budget_arg(pg)

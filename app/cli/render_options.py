@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from voxwarp.core.checks import interactive_downsample_arg
 from voxwarp.core.files import atomic_write_text
 from voxwarp.core.json_input import read_json
 from voxwarp.errors import InputError, SceneError
@@ -290,6 +291,14 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
         " before and after images share the framing and a translation shows as a shift)"
         " or deformed (the warped volume's box)",
     )
+    g.add_argument(
+        "--interactive-downsample",
+        type=interactive_downsample_arg,
+        metavar="N",
+        help="the volume resolution the GUI interacts at with the scene --save-scene writes"
+        " (1/N per axis, 1-16; its 'interactive_downsample'); the image itself is a still,"
+        " rendered from the full volume",
+    )
 
 
 def check_render_options(args: argparse.Namespace) -> None:
@@ -351,9 +360,12 @@ def clip_box_for(scene: Any, args: argparse.Namespace) -> Any:
 
 
 def apply_render_options(scene: Any, args: argparse.Namespace) -> Any:
-    """``scene`` with ``--frame``, ``--camera``, ``--clip`` and ``--slab`` applied; call it
-    once every warp is in the scene (``--slab`` spans the deformed box)."""
+    """``scene`` with ``--frame``, ``--camera``, ``--clip``, ``--slab`` and
+    ``--interactive-downsample`` applied; call it once every warp is in the scene
+    (``--slab`` spans the deformed box)."""
     changes: dict[str, Any] = {}
+    if getattr(args, "interactive_downsample", None) is not None:
+        changes["interactive_downsample"] = args.interactive_downsample
     if getattr(args, "frame", None) is not None:
         changes["frame"] = args.frame
         changes["camera"] = None  # refit with this framing

@@ -5,6 +5,7 @@ sub-commands too) and :func:`finite_vector` for vectors given in Python or scene
 from __future__ import annotations
 
 import argparse
+import numbers
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -20,6 +21,35 @@ def image_size(text: str) -> tuple[int, int]:
     if not (1 <= w <= 16384 and 1 <= h <= 16384):
         raise argparse.ArgumentTypeError(f"size must be 1..16384 per side; got {text!r}")
     return w, h
+
+
+#: the coarsest interactive volume resolution (1/16 per axis: the wire paper's 1:4096)
+MAX_INTERACTIVE_DOWNSAMPLE = 16
+
+
+def interactive_downsample(value: Any, error: type[Exception]) -> int:
+    """``value`` as the per-axis reduction of the volume in interactive frames, an
+    integer in 1..:data:`MAX_INTERACTIVE_DOWNSAMPLE` (1: full resolution); raises
+    ``error`` otherwise (``Scene.interactive_downsample``)."""
+    ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    if not ok or not 1 <= int(value) <= MAX_INTERACTIVE_DOWNSAMPLE:
+        raise error(
+            "interactive downsample must be an integer from 1 (full resolution) to"
+            f" {MAX_INTERACTIVE_DOWNSAMPLE} (the volume reduced per axis while you"
+            f" interact); got {value!r}"
+        )
+    return int(value)
+
+
+def interactive_downsample_arg(text: str) -> int:
+    """argparse type of ``--interactive-downsample N``."""
+    try:
+        return interactive_downsample(int(text), ValueError)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected an integer from 1 (full resolution) to"
+            f" {MAX_INTERACTIVE_DOWNSAMPLE}"
+        ) from exc
 
 
 def positive_int(text: str) -> int:

@@ -781,6 +781,7 @@ LOOK_KEYS = (
     "flm_threshold",
     "background",
     "projection",
+    "interactive_downsample",
 )
 
 

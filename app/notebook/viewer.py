@@ -43,6 +43,7 @@ from voxwarp.notebook.gl_thread import GLThread, SameThread
 from voxwarp.notebook.interaction import SETTLE_S, Interaction, view_size
 from voxwarp.render.adaptive_quality import FULL, AdaptiveQuality, Quality, scene_at
 from voxwarp.render.inline_image import RenderedImage, png_bytes
+from voxwarp.render.interaction_volume import InteractionVolumes
 from voxwarp.render.jacobian_overlay import (
     DEFAULT_OPACITY,
     DETJ_MODES,
@@ -195,6 +196,8 @@ class Viewer(RemoteFrameBuffer):
         self.display_options = DisplayOptions()
         self.adaptive = AdaptiveQuality()
         self.last_quality: Quality = FULL
+        #: the volume at the scene's ``interactive_downsample``, for interactive frames
+        self.interaction_volumes = InteractionVolumes()
         self.frames_drawn = 0
         self.last_frame_ms = 0.0
         self._refine: Any = None
@@ -399,7 +402,8 @@ class Viewer(RemoteFrameBuffer):
         interacting = self.interaction.interacting()
         if self.interaction.simulating():
             self.session.advance()
-        frame = self._draw(self.adaptive.quality if interacting else FULL, self.pixel_ratio)
+        quality = self.adaptive.quality if interacting else FULL
+        frame = self._draw(quality, self.pixel_ratio, interacting)
         if interacting:
             self.adaptive.frame_drawn(self.last_frame_ms / 1000)
         return frame, interacting
@@ -418,9 +422,10 @@ class Viewer(RemoteFrameBuffer):
         return result
 
     # ------------------------------------------------------------------ drawing
-    def _draw(self, quality: Quality, ratio: float) -> RenderedImage:
+    def _draw(self, quality: Quality, ratio: float, interacting: bool = False) -> RenderedImage:
         """Render the scene and the handles at ``quality`` (device pixels: CSS size x
-        ``ratio`` x the quality's scale, at most :data:`MAX_RENDER_PX` a side)."""
+        ``ratio`` x the quality's scale, at most :data:`MAX_RENDER_PX` a side); an
+        ``interacting`` frame draws the volume at the scene's ``interactive_downsample``."""
         t0 = time.perf_counter()
         w, h = self.size
         scale = ratio * quality.scale * min(1.0, MAX_RENDER_PX / (max(w, h) * ratio))
@@ -431,9 +436,10 @@ class Viewer(RemoteFrameBuffer):
                 warp.release()
             if r.size != size:
                 r.resize(*size)
-            r.renderer.draw(
-                scene_at(self.session.scene, quality), r.framebuffer, camera=self.camera
-            )
+            scene = scene_at(self.session.scene, quality)
+            if interacting:
+                scene = self.interaction_volumes.scene(scene)
+            r.renderer.draw(scene, r.framebuffer, camera=self.camera)
             if self._overlay is None:
                 self._overlay = OverlayRenderer(r.ctx)
             layers = self.session.overlay_layers(self.display_options)

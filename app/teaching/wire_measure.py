@@ -236,3 +236,72 @@ def time_field_builds(
         "backend": st.backend,
     }
     return row, wd
+
+
+def field_points(volume: Volume, stride: int) -> np.ndarray:
+    """World points (N, 3) mm at every ``stride``-th voxel centre of ``volume`` along
+    each axis: where :func:`field_error` compares the fields."""
+    idx = [np.arange(0, n, max(1, int(stride))) for n in volume.shape]
+    ijk = np.stack(np.meshgrid(*idx, indexing="ij"), axis=-1).reshape(-1, 3)
+    return np.asarray(volume.index_to_world(ijk), dtype=np.float64)
+
+
+def object_threshold(volume: Volume) -> float:
+    """The value above which a voxel is the object, not air: -500 HU for CT volumes,
+    else a tenth of the way up the value range (as :func:`content_box`)."""
+    if volume.units == "HU":
+        return -500.0
+    lo, hi = float(volume.data.min()), float(volume.data.max())
+    return lo + 0.1 * (hi - lo)
+
+
+def _values(volume: Volume, points: np.ndarray) -> np.ndarray:
+    """The volume trilinear at world ``points`` (its minimum outside, and at FAR)."""
+    from scipy import ndimage
+
+    ijk = np.asarray(volume.world_to_index(points), dtype=np.float64)
+    data = np.asarray(volume.data, dtype=np.float32)
+    return ndimage.map_coordinates(data, ijk.T, order=1, cval=float(data.min()))
+
+
+def _stats_mm(err: np.ndarray) -> dict[str, float]:
+    if not err.size:
+        return {"max": 0.0, "rms": 0.0, "p99": 0.0}
+    return {
+        "max": float(err.max()),
+        "rms": float(np.sqrt(np.mean(err**2))),
+        "p99": float(np.percentile(err, 99)),
+    }
+
+
+def field_error(volume: Volume, reference: Any, warp: Any, points: np.ndarray) -> dict[str, Any]:
+    """How far the wire warp ``warp`` (a coarse attribute field) maps ``points`` of the
+    deformed ``volume`` from where ``reference`` (the 1:1 field) maps them, in mm.
+
+    Compared are the points either field moves (swept or vacated) whose value through
+    either mapping is the object's (above :func:`object_threshold`): ``object_points``;
+    the share of them the fields classify differently (identity, vacated, swept:
+    ``percent_reclassified``) or whose value differs by more than 5 % of the value range
+    (``percent_value_off``); the distance between the two mapped points over those
+    neither vacates (``object_mm``: max, rms, p99) and over those both sweep
+    (``swept_mm``: the error of the coarse field's interpolated wire parameter t).
+    """
+    s_ref, _, _ = reference._lookup(points)
+    s_new, _, _ = warp._lookup(points)
+    moved = (s_ref != 0) | (s_new != 0)
+    p, a, b = points[moved], s_ref[moved], s_new[moved]
+    qa, qb = reference.apply(p), warp.apply(p)
+    va, vb = _values(volume, qa), _values(volume, qb)
+    obj = (va > object_threshold(volume)) | (vb > object_threshold(volume))
+    err = np.linalg.norm(qa - qb, axis=1)
+    span = float(volume.data.max()) - float(volume.data.min())
+    n = int(obj.sum())
+    return {
+        "object_points": n,
+        "percent_reclassified": 100.0 * float(np.count_nonzero(obj & (a != b))) / max(n, 1),
+        "percent_value_off": 100.0
+        * float(np.count_nonzero(obj & (np.abs(va - vb) > 0.05 * span)))
+        / max(n, 1),
+        "object_mm": _stats_mm(err[obj & (a != 1) & (b != 1)]),
+        "swept_mm": _stats_mm(err[obj & (a == 2) & (b == 2)]),
+    }

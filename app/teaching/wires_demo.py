@@ -19,18 +19,24 @@ import numpy as np
 from voxwarp.deform.wires.propagation import opencl_device_name
 from voxwarp.io.samples import load_sample
 from voxwarp.scene import Scene
-from voxwarp.teaching import DEMO_TITLES, sheets
+from voxwarp.teaching import DEMO_TITLES, sheets, wires_fig12
 from voxwarp.teaching.wire_measure import (
     DEFAULT_SCALES,
     FISH_WIRES,
     FRAMED_VIEW,
     RENDER_SCALE,
     classify_samples,
+    field_error,
+    field_points,
     framed_camera,
     load_wires,
     padded_fish,
     time_field_builds,
 )
+
+#: every ERROR_STRIDE-th voxel per axis is a point where the coarse fields' mappings are
+#: compared with the 1:1 field's (:func:`~voxwarp.teaching.wire_measure.field_error`)
+ERROR_STRIDE = 2
 
 
 # ====================================================================== wires
@@ -57,9 +63,14 @@ def demo_wires(
         stats_base = base.copy(camera=stats_cam)
         renders.append(("undeformed", sheets.render_rgb(r, base, size)))
         first: np.ndarray | None = None
+        reference: Any = None  # the 1:1 field's warp, the oracle of the coarse ones
+        points = field_points(vol, ERROR_STRIDE)
+        warps: list[Any] = []
         for scale in DEFAULT_SCALES:
             row, wd = time_field_builds(vol, wires, scale, s.wire_repeats)
             warp = wd.warp()
+            reference = warp if reference is None else reference
+            warps.append(warp)
             scene = base.copy(warps=[warp])
             stats_scene = stats_base.copy(warps=[warp])
             stats = classify_samples(stats_scene, stats_cam, size, warp, s.wire_subsample)
@@ -79,6 +90,7 @@ def demo_wires(
                     "samples_swept": stats["swept"],
                     "percent_ignored_samples": 100.0 * stats["identity"] / max(stats["samples"], 1),
                     "pixels_differing_from_1to1": 100.0 * float(differ.mean()),
+                    "error_vs_1to1": field_error(vol, reference, warp, points),
                 }
             )
             log(
@@ -97,6 +109,12 @@ def demo_wires(
                     "frames": s.wire_frames,
                 }
                 render_cost["ratio"] = render_cost["deformed_ms"] / render_cost["undeformed_ms"]
+        # Figure 12 close up: the bent tail through each field (after the timings: same size)
+        zcam = wires_fig12.tail_camera(wires, size, sheets.FISH_VIEW)
+        zooms = [
+            (row["ratio"], sheets.render_rgb(r, base.copy(camera=zcam, warps=[w]), size))
+            for row, w in zip(rows, warps, strict=True)
+        ]
     numbers: dict[str, Any] = {
         "storage": _wire_storage(vol, wires),
         "volume": vol.name,
@@ -105,6 +123,8 @@ def demo_wires(
         "image": size,
         "transfer_function": tf,
         "ray_subsample": s.wire_subsample,
+        "error_stride": ERROR_STRIDE,
+        "spacing": tuple(float(v) for v in vol.spacing),
         "view": sheets.FISH_VIEW,
         "stats_view": FRAMED_VIEW,
         "rows": rows,
@@ -127,12 +147,17 @@ def demo_wires(
                 label = f"({'abcdef'[idx]}) field {title} ({fs}), built in {rw['build_s']:.3f} s"
                 if idx > 1:
                     diff = rw["pixels_differing_from_1to1"]
-                    label += f"\n{diff:.2f} % of the pixels differ from the 1:1 image"
+                    mm = rw["error_vs_1to1"]["object_mm"]
+                    label += (
+                        f"\n{diff:.2f} % of the pixels differ from the 1:1 image;"
+                        f" map vs 1:1 RMS {mm['rms']:.2f}, max {mm['max']:.2f} mm"
+                    )
             sheets.show_image(fig.add_subplot(sub[0, j]), img, label)
     bottom = grid[2].subgridspec(1, 2, width_ratios=[1.0, 1.35])
     _plot_ignored(fig.add_subplot(bottom[0, 0]), numbers)
     _table_wires(fig.add_subplot(bottom[0, 1]), numbers)
     path = sheets.save_figure(fig, out / "wires.png")
+    zoom_path = wires_fig12.zoom_sheet(zooms, rows, out / "wires_fig12.png")
 
     # the tour's scenes: the bundled fish (its default shape), the wire file at each scale
     fish = load_sample("fish")
@@ -177,7 +202,7 @@ def demo_wires(
             "g",
         )
     )
-    return [path], numbers, tour
+    return [path, zoom_path], numbers, tour
 
 
 def _wire_storage(vol: Any, wires: Sequence[Any]) -> list[dict[str, Any]]:

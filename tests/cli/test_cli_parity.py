@@ -583,3 +583,32 @@ def test_a_bad_output_format_fails_before_rendering_or_saving_the_scene(tmp_path
         " .exr or .tif"
     ]
     assert list(tmp_path.iterdir()) == []  # no scene, no temporary file
+
+
+def test_interactive_downsample_goes_to_the_gui_and_the_saved_scene(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``gui --interactive-downsample N`` hands N to the window; ``render ...
+    --interactive-downsample N --save-scene`` stores it, and the image is the same still
+    as without it (full resolution); a bad N is one argparse line."""
+    pytest.importorskip("PySide6")
+    import voxwarp.ui.app as ui_app
+    from voxwarp.cli import main as ui_cli
+
+    seen: dict[str, Any] = {}
+    monkeypatch.setattr(ui_app, "run_gui", lambda spec, **kw: seen.update(spec=spec, **kw) or 0)
+    monkeypatch.setenv("DISPLAY", ":99")
+    assert ui_cli.main(["gui", "sample:fish", "--interactive-downsample", "3"]) == 0
+    assert seen["interactive_downsample"] == 3
+    images = []
+    for extra in ([], ["--interactive-downsample", "4", "--save-scene", str(tmp_path / "s.json")]):
+        out = tmp_path / f"image{len(images)}.png"
+        run = run_cli("render", "sample:colin27", "--size", "32x32", "-o", str(out), *extra)
+        assert run.returncode == 0, run.stderr
+        images.append(read_image(out))
+    assert np.array_equal(images[0], images[1])
+    assert json.loads((tmp_path / "s.json").read_text())["interactive_downsample"] == 4
+    assert Scene.load(tmp_path / "s.json").interactive_downsample == 4
+    bad = run_cli("render", "sample:colin27", "--interactive-downsample", "0")
+    assert bad.returncode == 2
+    assert "--interactive-downsample: '0': expected an integer from 1" in bad.stderr

@@ -386,3 +386,17 @@ def test_jacobian_overlay_switch(viewer: Any) -> None:
     assert not viewer.warp_lines.grid
     with pytest.raises(RenderError, match="choose from jacobian"):
         viewer.overlays = "bogus"
+
+
+def test_interactive_frames_use_the_scenes_interaction_resolution(viewer: Any) -> None:
+    """``interactive_downsample``: frames drawn while interacting sample the reduced
+    volume (another picture), frames at rest the full one (the same as at level 1)."""
+    from voxwarp.render.adaptive_quality import FULL
+
+    viewer.display_options = NO_OVERLAY
+    rest = np.asarray(viewer._draw(FULL, 1.0)).astype(np.int16)
+    assert np.array_equal(np.asarray(viewer._draw(FULL, 1.0, interacting=True)), rest)
+    viewer.session.scene.interactive_downsample = 4
+    coarse = np.asarray(viewer._draw(FULL, 1.0, interacting=True)).astype(np.int16)
+    assert _changed_pixels(coarse, rest) > 50
+    assert np.array_equal(np.asarray(viewer._draw(FULL, 1.0)), rest)

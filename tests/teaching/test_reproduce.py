@@ -60,6 +60,10 @@ def test_quick_reproduction_writes_the_report_and_its_figures(gl_ctx: Any, tmp_p
         assert number in wires, number
     assert "| paper | 2 (flag 1 bit, wire 4, segment 4, t 7) | 2 |" in wires  # section 7.2
     assert "| float | at least 5 (float t, 7-bit wire, flag) | 5 |" in wires
+    # Figure 12's artefacts measured against the 1:1 field, and its close-up sheet
+    assert "Figure 12's artefacts, measured" in wires
+    assert "| 1:4096 |" in wires.split("Figure 12's artefacts, measured", 1)[1]
+    assert "(reproduction/wires_fig12.png)" in wires
     assert "Figure 5: images, no numbers" in lattice
     # GRAPP's own scenes, each row beside the paper's (timings skipped in a quick run)
     for scene, counts, paper in (
