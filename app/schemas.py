@@ -352,10 +352,39 @@ def write_schemas(folder: str | os.PathLike) -> list[Path]:
     return paths
 
 
+def stale_schemas(folder: str | os.PathLike) -> list[Path]:
+    """The ``KIND.schema.json`` files in ``folder`` that are missing or differ from
+    what :func:`schemas` gives now."""
+    out = []
+    for kind, schema in schemas().items():
+        path = Path(folder) / f"{kind}.schema.json"
+        try:
+            same = path.read_text(encoding="utf-8") == schema_text(schema)
+        except OSError:
+            same = False
+        if not same:
+            out.append(path)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m voxwarp.schemas [FOLDER]``: write the schemas (default docs/schemas)."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    for path in write_schemas(args[0] if args else "docs/schemas"):
+    """``python -m voxwarp.schemas [FOLDER] [--check]``: write the schemas (default
+    docs/schemas), or with ``--check`` only say which are stale (exit status 1)."""
+    import argparse
+
+    p = argparse.ArgumentParser(
+        prog="python -m voxwarp.schemas",
+        description="Write the JSON Schemas of voxwarp's file formats.",
+    )
+    p.add_argument("folder", nargs="?", default="docs/schemas", help="default: docs/schemas")
+    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if any is stale")
+    args = p.parse_args(sys.argv[1:] if argv is None else argv)
+    if args.check:
+        stale = stale_schemas(args.folder)
+        for path in stale:
+            print(f"{path}: stale; run python -m voxwarp.schemas {args.folder}", file=sys.stderr)
+        return 1 if stale else 0
+    for path in write_schemas(args.folder):
         print(path)
     return 0
 

@@ -254,3 +254,20 @@ def test_invalid_documents_are_refused_by_loader_and_schema(
     with pytest.raises(VoxwarpError):
         _load(kind, copy.deepcopy(d), tmp_path)
     assert not _validator(kind).is_valid(d), case
+
+
+def test_check_says_which_schemas_are_stale_and_writes_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    from voxwarp.schemas import main
+
+    assert main(["--check", str(tmp_path)]) == 1
+    assert list(tmp_path.iterdir()) == []
+    assert "stale; run python -m voxwarp.schemas" in capsys.readouterr().err
+    main([str(tmp_path)])
+    assert main(["--check", str(tmp_path)]) == 0
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_info:  # --help is help, not a folder
+        main(["--help"])
+    assert exit_info.value.code == 0
+    assert not (tmp_path / "--help").exists()
