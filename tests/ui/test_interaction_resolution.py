@@ -70,7 +70,7 @@ def test_interactive_frames_draw_the_reduced_volume_stills_the_full_one(
         assert vp.interacting()
         _next_frame(qtbot, vp)
         # the reduced copy is made on a worker: the full volume draws until it is in
-        qtbot.waitUntil(lambda: vp.interaction_volumes.cached(full, 2) is not None)
+        qtbot.waitUntil(lambda: vp.interaction_volumes.cached(full, 2) is not None, timeout=30000)
         _next_frame(qtbot, vp)
         assert vp.interacting()
         assert vp.last_volume is not full
