@@ -210,6 +210,9 @@ class Viewport(QOpenGLWidget):
                 if interactive:
                     drawn = self._interaction_scene(drawn)
                 self.last_volume = drawn.volume
+                # no support maps of states that change every frame (the slice views
+                # draw each three times); the state at rest gets its map
+                self.renderer.support_maps = "never" if interactive else "auto"
                 self.renderer.draw_scaled(drawn, fbo, (0, 0, w, h), self.camera, quality.scale)
                 if quality != FULL:
                     self._refine.start()  # full quality once the interaction stops

@@ -147,6 +147,7 @@ class DragLoop:
         session.begin_drag(camera, self.size, start)
         aq, fresh, shown = AdaptiveQuality(), 0, None
         rr.warped_skip_maps = "never"
+        rr.support_maps = "never"  # as the window while the user interacts
         t0 = time.perf_counter()
         for k in range(1, DRAG_FRAMES + 1):
             session.drag_to(start + np.array([0.0, -0.25 * self.size[1] * k / DRAG_FRAMES]))
@@ -165,6 +166,7 @@ class DragLoop:
         session.end_drag()
         session.snapshot()  # the window's undo entry: waits for the worker's last steps
         rr.warped_skip_maps = "background"
+        rr.support_maps = "auto"
         maps = 0.0
         if rr.needs_skip_maps(scene):
             self.draw(scene_at(scene, aq.quality), aq.quality.scale, camera)

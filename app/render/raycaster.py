@@ -460,16 +460,20 @@ class Renderer:
 
     @property
     def support_maps(self) -> str:
-        """When a warp state's support map is built: "auto" (default) when the state is
-        drawn a second time (a drag's ever-changing states draw with the chain at every
-        sample and cost no map, nor a GPU model's read-back), "always" on first draw."""
+        """When a warp state's support map is built, for the 3D view and the slices:
+        "auto" (default) when the state is drawn a second time (a drag's ever-changing
+        states draw with the chain at every sample and cost no map, nor a GPU model's
+        read-back), "always" on first draw, "never" not at all (the window sets it while
+        the user interacts, as three slice views draw each state of a drag)."""
         return self._support.build
 
     @support_maps.setter
     def support_maps(self, value: str) -> None:
-        if value not in ("auto", "always"):
-            raise RenderError(f"support_maps must be 'auto' or 'always'; got {value!r}")
+        if value not in ("auto", "always", "never"):
+            raise RenderError(f"support_maps must be 'auto', 'always' or 'never'; got {value!r}")
         self._support.build = value
+        if self._slice_renderer is not None:
+            self._slice_renderer.support.build = value
 
     @property
     def support_tolerance(self) -> float:
@@ -958,9 +962,7 @@ class Renderer:
         if self._released:
             raise RenderError("this Renderer was released")
         gpu = self._volume_gpu(scene.volume)
-        if self._slice_renderer is None:
-            self._slice_renderer = SliceRenderer(self.ctx)
-        return self._slice_renderer.values(
+        return self._slices().values(
             gpu,
             scene,
             pixel_to_world,
@@ -970,6 +972,13 @@ class Renderer:
             interpolation=interpolation,
             detj=detj,
         )
+
+    def _slices(self) -> SliceRenderer:
+        """The slice renderer (made on first use, with this renderer's support_maps)."""
+        if self._slice_renderer is None:
+            self._slice_renderer = SliceRenderer(self.ctx)
+            self._slice_renderer.support.build = self._support.build
+        return self._slice_renderer
 
     def slice_detj(
         self, scene: Scene, pixel_to_world: np.ndarray, size: tuple[int, int]
@@ -981,9 +990,7 @@ class Renderer:
         if self._released:
             raise RenderError("this Renderer was released")
         gpu = self._volume_gpu(scene.volume)
-        if self._slice_renderer is None:
-            self._slice_renderer = SliceRenderer(self.ctx)
-        data = self._slice_renderer.values(gpu, scene, pixel_to_world, size, detj=True)
+        data = self._slices().values(gpu, scene, pixel_to_world, size, detj=True)
         return data[..., 4].copy()
 
     def draw_scaled(

@@ -8,11 +8,15 @@ image, found by ``test_support_render`` on CI).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import pytest
 
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.identity import token
+from voxwarp.errors import RenderError
 from voxwarp.render.skipping.support import SupportCache, uniforms_key
 from voxwarp.scene import Scene
 
@@ -75,3 +79,35 @@ def test_uniform_keys_tell_long_arrays_apart_in_the_middle() -> None:
     assert uniforms_key({"u": a}) != uniforms_key({"u": b})
     assert uniforms_key({"u": a, "v": 1.0}) == uniforms_key({"v": 1.0, "u": a.copy()})
     assert uniforms_key({"u": (1.0, 2.0)}) != uniforms_key({"u": (1.0, 2.5)})
+
+
+def test_never_builds_no_map_and_a_state_seen_then_gets_one_at_rest() -> None:
+    vol, cache = volume(), SupportCache(None)
+    lo, hi = vol.bounds
+    scene = Scene(vol, warps=[OffsetFieldWarp(lo, hi, displacements(True), inverse="approx")])
+    cache.build = "never"  # the window while the user drags: three slices per state
+    assert [cache.plan(scene) for _ in range(3)] == ["all"] * 3
+    assert cache._map is None
+    cache.build = "auto"  # at rest: the state was drawn before, so its map is built now
+    assert cache.plan(scene) == "map"
+
+
+@pytest.mark.gl
+def test_the_renderer_gives_its_support_maps_setting_to_the_slices(offscreen: Any) -> None:
+    r = offscreen(16, 16).renderer
+    vol = volume()
+    lo, hi = vol.bounds
+    scene = Scene(vol, warps=[OffsetFieldWarp(lo, hi, displacements(True), inverse="approx")])
+    m = np.eye(4)
+    try:
+        r.support_maps = "never"
+        for _ in range(3):
+            r.slice_values(scene, m, (8, 8))
+        assert r._slice_renderer.support._map is None
+        r.support_maps = "auto"
+        r.slice_values(scene, m, (8, 8))
+        assert r._slice_renderer.support._map is not None
+        with pytest.raises(RenderError, match="support_maps must be"):
+            r.support_maps = "sometimes"
+    finally:
+        r.support_maps = "auto"

@@ -72,7 +72,8 @@ class SupportCache:
         #: when a warp state's map is built: "auto" when it is drawn a second time (a
         #: state that changes every frame, as while dragging, is drawn with the chain
         #: everywhere and costs no map, nor a GPU model's field read-back), "always" on
-        #: its first draw
+        #: its first draw, "never" not at all (while the user interacts: the slice views
+        #: draw each state three times; a state drawn then counts as seen for "auto")
         self.build = "auto"
         self._seen: Any = None
         #: tolerance in voxels of the finest spacing
@@ -105,11 +106,15 @@ class SupportCache:
     def plan(self, scene: Scene, box: Box | None = None, *, draw: bool = True) -> str:
         """How a draw of ``scene`` (a non-affine chain) uses the support over ``box``:
         "none", "map" or "all" (see the module docstring). With :attr:`build` "auto",
-        the first draw of a warp state gets "all" (``draw`` False: a question that is
-        no draw, which neither builds the map nor counts as one)."""
+        the first draw of a warp state gets "all", with "never" every draw of a state
+        without a map (``draw`` False: a question that is no draw, which neither builds
+        the map nor counts as one)."""
         if not self.enabled or not scene.warps:
             return "all"
         key = self._state_key(scene, box)
+        if key != self._key and self.build == "never":
+            self._seen = key if draw else self._seen
+            return "all"
         if key != self._key and (self.build == "auto" or not draw):
             if not draw or key != self._seen:
                 self._seen = key if draw else self._seen
