@@ -13,6 +13,11 @@ edits of the generated shader (throw-away programs, not what the app draws):
 * ``seed``: the offset field's inverse from its baked seed alone (no correction; what
   ``OffsetFieldWarp(..., inverse="baked", iterations=0)`` draws);
 * ``no-jacobian``: identity Jacobian (shading normals not rotated): the Jacobian's share;
+* ``old``: the Jacobian as before issue 34's item 2: the chain warps the sample's point
+  again (``warp_chain_jacobian(p)``) and the offset field's grad u by central
+  differences at +-0.5 node spacing (6 trilinear lookups);
+* ``kept-cd``: the kept points (no second warp), central differences;
+* ``anew-analytic``: warped again, grad u from the 8 nodes of q's cell (as shipped);
 * ``jacobian-v``: the offset field's Jacobian as ``I - grad v(p)``, v its baked
   inverse, by central differences (6 lookups; no second inverse, no matrix inverse);
 * ``no-chain``: the middle loop straight too (no chain code at all);
@@ -20,7 +25,8 @@ edits of the generated shader (throw-away programs, not what the app draws):
 * ``control``: ``current`` again, last in each round (how far identical programs
   differ: the noise of the machine).
 
-The max difference (/255) to ``current`` says which variants change the image.
+The max difference (/255) to the first variant listed (``current`` by default) says
+which variants change the image.
 """
 
 from __future__ import annotations
@@ -49,14 +55,15 @@ _THREE = "finished = " + "\n        ".join(
 VARIANTS: dict[str, list[tuple[str, str]]] = {
     "current": [],
     "seed": [("    w0_ITERATE   //", "    //")],
-    "no-jacobian": [("    return warp_chain_jacobian(g_ro + t * g_rd);", "    return mat3(1.0);")],
+    "no-jacobian": [("    return warp_chain_kept_jacobian();", "    return mat3(1.0);")],
     "no-chain": [(_MIDDLE, _MIDDLE.replace("false)", "true)"))],
     "one-loop": [(_THREE, "finished = " + _CELLS.format("n", "true") + ";")],
 }
 _V = (
     "vec3 w0_v(vec3 p) {\n    vec3 s = (p - w0_lo) / w0_size;\n    vec3 v;\n"
     "    w0_TRILINEAR(w0_inverse, w0_inverse_shape, s, v)\n    return v * w0_inside(s);\n}\n"
-    "mat3 w0_warp_jacobian(vec3 p) {\n    vec3 h = 0.5 * w0_size / (w0_inverse_shape - 1.0);\n"
+    "mat3 w0_warp_jacobian_at(vec3 p, vec3 q) {\n"
+    "    vec3 h = 0.5 * w0_size / (w0_inverse_shape - 1.0);\n"
     "    mat3 g;\n"
     + "".join(
         f"    g[{i}] = (w0_v(p + e{i}) - w0_v(p - e{i})) / (2.0 * h.{c});\n".replace(
@@ -64,9 +71,29 @@ _V = (
         )
         for i, c in enumerate("xyz")
     )
-    + "    return mat3(1.0) - g;\n}\nmat3 w0_warp_jacobian_old(vec3 p) {"
+    + "    return mat3(1.0) - g;\n}\nmat3 w0_warp_jacobian_at_old(vec3 p, vec3 q) {"
 )
-VARIANTS["jacobian-v"] = [("mat3 w0_warp_jacobian(vec3 p) {", _V)]
+VARIANTS["jacobian-v"] = [("mat3 w0_warp_jacobian_at(vec3 p, vec3 q) {", _V)]
+#: the offset field's grad u by central differences at +-0.5 node spacing (6 lookups)
+_CD = [
+    (
+        "    mat3 a = mat3(1.0) + w0_grad_u(q);",
+        "    vec3 h = 0.5 * w0_size / (w0_shape - 1.0);\n    mat3 a = mat3(1.0);\n"
+        + "".join(
+            f"    a[{i}] += (w0_offset(q + E) - w0_offset(q - E)) / (2.0 * h.{c});\n".replace(
+                "E", f"vec3({', '.join('h.' + c if j == i else '0.0' for j in range(3))})"
+            )
+            for i, c in enumerate("xyz")
+        ),
+    )
+]
+#: the Jacobian warps the sample's point again instead of using the kept one
+_ANEW = [
+    ("    return warp_chain_kept_jacobian();", "    return warp_chain_jacobian(g_ro + t * g_rd);")
+]
+VARIANTS["kept-cd"] = _CD
+VARIANTS["anew-analytic"] = _ANEW
+VARIANTS["old"] = _ANEW + _CD
 #: the shipped program again, timed last in each round: the noise of the interleaving
 VARIANTS["control"] = []
 _state: dict[str, Any] = {"variant": "current", "far": False}

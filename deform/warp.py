@@ -11,6 +11,7 @@ is never resampled. On the GPU a warp is a GLSL file defining
 
     vec3 warp(vec3 p);            // deformed world (mm) -> original world (mm)
     mat3 warp_jacobian(vec3 p);   // d warp / d p
+    mat3 warp_jacobian_at(vec3 p, vec3 q);   // optional: d warp / d p given q = warp(p)
 
 plus its uniforms and textures. Shading normals are carried into deformed space by
 the Jacobian: for ``f_def(p) = f(warp(p))``, ``grad f_def = J^T grad f``.
@@ -18,8 +19,9 @@ the Jacobian: for ``f_def(p) = f(warp(p))``, ``grad f_def = J^T grad f``.
 A scene holds a *chain* of warps ``[w0, w1, ...]`` applied in order,
 ``q = ... w1(w0(p))`` — nested deformations compose like scene-graph transforms.
 Uniform names in a warp's GLSL file carry the prefix ``WARP_``; :func:`compose_glsl`
-renames ``WARP_`` to ``w{i}_`` and ``warp``/``warp_jacobian`` to ``w{i}_warp``/
-``w{i}_warp_jacobian`` for the i-th warp, so two warps of one kind never clash.
+renames ``WARP_`` to ``w{i}_`` and ``warp``/``warp_jacobian``/``warp_jacobian_at`` to
+``w{i}_warp``/``w{i}_warp_jacobian``/``w{i}_warp_jacobian_at`` for the i-th warp, so two
+warps of one kind never clash.
 
 Each warp also has a CPU reference (:meth:`Warp.apply`, :meth:`Warp.jacobian`) used by
 tests, picking and bounds computation.
@@ -676,7 +678,9 @@ def fold_affine(warps: Sequence[Warp]) -> np.ndarray | None:
 
 
 _PREFIX = re.compile(r"\bWARP_")
-_FN = re.compile(r"\bwarp(_jacobian)?\b(?=\s*\()")
+#: a warp file without ``warp_jacobian_at(p, q)``: its Jacobian at p (q unused)
+_DEFAULT_AT = "mat3 w{0}_warp_jacobian_at(vec3 p, vec3 q) {{ return w{0}_warp_jacobian(p); }}\n"
+_FN = re.compile(r"\bwarp(_jacobian(?:_at)?)?\b(?=\s*\()")
 
 
 def _constants_glsl(constants: Mapping[str, Any]) -> str:
@@ -696,24 +700,40 @@ def _constants_glsl(constants: Mapping[str, Any]) -> str:
 
 
 def compose_glsl(warps: Sequence[Warp], loader: Callable[[str], str] = shaders.read) -> str:
-    """GLSL text defining ``warp_chain(p)``, ``warp_chain_jacobian(p)`` and both at once,
-    ``warp_chain_and_jacobian(p, out J)``, for ``warps``.
+    """GLSL text defining ``warp_chain(p)``, ``warp_chain_jacobian(p)``, both at once
+    (``warp_chain_and_jacobian(p, out J)``) and ``warp_chain_kept_jacobian()``.
 
     Each warp's file is inserted with its names prefixed ``w{i}_``; the chain's
-    Jacobian is the product ``J_{n-1}(q_{n-1}) ... J_0(p)`` (chain rule).
+    Jacobian is the product ``J_{n-1}(q_{n-1}) ... J_0(p)`` (chain rule), each factor
+    from ``w{i}_warp_jacobian_at(p_i, q_i)`` at the warp's input ``p_i`` and output
+    ``q_i`` (a file may define ``warp_jacobian_at(p, q)``, the Jacobian given the
+    warped point, to save warping again; otherwise it is ``warp_jacobian(p)``).
+    ``warp_chain`` keeps each warp's input in ``warp_chain_p{i}``, so
+    ``warp_chain_kept_jacobian()`` is the Jacobian at the point it last warped
+    without a second walk through the chain (the raycaster's shading).
     """
     parts: list[str] = []
     for i, w in enumerate(warps):
         src = _constants_glsl(w.glsl_constants()) + loader(w.glsl_file)
         src = _PREFIX.sub(f"w{i}_", src)
         src = _FN.sub(lambda m, i=i: f"w{i}_warp{m.group(1) or ''}", src)
+        if not re.search(rf"mat3\s+w{i}_warp_jacobian_at\s*\(", src):
+            src += _DEFAULT_AT.format(i)
         parts.append(f"// ---- warp {i}: {w.kind}\n{src}")
-    body = ["vec3 warp_chain(vec3 p) {"]
-    body += [f"    p = w{i}_warp(p);" for i in range(len(warps))]
+    n = len(warps)
+    body = [f"vec3 warp_chain_p{i};" for i in range(n + 1)] if n else []
+    body += ["vec3 warp_chain(vec3 p) {"]
+    for i in range(n):
+        body += [f"    warp_chain_p{i} = p;", f"    p = w{i}_warp(p);"]
+    body += [f"    warp_chain_p{n} = p;"] if n else []
     body += ["    return p;", "}", "vec3 warp_chain_and_jacobian(vec3 p, out mat3 J) {"]
     body += ["    J = mat3(1.0);"]
-    for i in range(len(warps)):
-        body += [f"    J = w{i}_warp_jacobian(p) * J;", f"    p = w{i}_warp(p);"]
+    for i in range(n):
+        body += [f"    {{ vec3 q = w{i}_warp(p); J = w{i}_warp_jacobian_at(p, q) * J; p = q; }}"]
     body += ["    return p;", "}", "mat3 warp_chain_jacobian(vec3 p) {", "    mat3 J;"]
     body += ["    warp_chain_and_jacobian(p, J);", "    return J;", "}"]
+    body += ["mat3 warp_chain_kept_jacobian() {", "    mat3 J = mat3(1.0);"]
+    for i in range(n):
+        body += [f"    J = w{i}_warp_jacobian_at(warp_chain_p{i}, warp_chain_p{i + 1}) * J;"]
+    body += ["    return J;", "}"]
     return "\n".join([*parts, *body]) + "\n"

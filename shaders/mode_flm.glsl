@@ -12,7 +12,7 @@ void mode_init(inout State s) { s.prev = -3.0e38; s.hit = false; s.color = vec4(
 bool flm_emit(inout State s) {
     vec3 rgb = transfer_straight(s.prev).rgb;
 #ifdef SHADING
-    rgb = shade(rgb, 1.0, gradient_deformed(s.cross_u, s.cross_t), g_rd);
+    rgb = shade(rgb, 1.0, gradient_deformed_anew(s.cross_u, s.cross_t), g_rd);
 #endif
     s.color = vec4(rgb, 1.0);
     s.hit = true;

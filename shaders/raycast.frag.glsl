@@ -161,6 +161,17 @@ mat3 jacobian_at(float t) {
 #endif
     return warp_chain_jacobian(g_ro + t * g_rd);
 }
+#ifndef PIECEWISE
+// jacobian_at(t) for the sample texel_at(t) computed last: from the points its chain
+// kept (warp_chain_kept_jacobian), without warping again.
+mat3 jacobian_last(float t) {
+#ifdef SUPPORT_MAP
+    if (g_straight) return mat3(1.0);
+#endif
+    return warp_chain_kept_jacobian();
+}
+#define HAS_JACOBIAN_LAST
+#endif
 #endif
 #ifdef CELL_SKIP
 // Warped rays skip through *deformed* space: the skip map's cells are those of the
@@ -179,9 +190,18 @@ vec3 skip_at(float t) { return g_u0 + t * g_du; }
 
 #include "compare.glsl"
 
-// Gradient of the deformed field at the sample (texel u, ray parameter t); with
-// COMPARE, combined with the fixed image's as the sample's value is (compare.glsl).
+#ifndef HAS_JACOBIAN_LAST
+mat3 jacobian_last(float t) { return jacobian_at(t); }
+#endif
+
+// Gradient of the deformed field at the sample (texel u, ray parameter t) that
+// texel_at(t) computed last; with COMPARE, combined with the fixed image's as the
+// sample's value is (compare.glsl).
 vec3 gradient_deformed(vec3 u, float t) {
+    return compare_gradient(transpose(jacobian_last(t)) * gradient_original(u), t);
+}
+// gradient_deformed at any earlier sample (the chain warps its point again).
+vec3 gradient_deformed_anew(vec3 u, float t) {
     return compare_gradient(transpose(jacobian_at(t)) * gradient_original(u), t);
 }
 

@@ -55,17 +55,37 @@ vec3 warp(vec3 p) {
     return q;
 }
 
-// d warp / d p = (I + grad u(q))^-1 at q = warp(p); grad u by central differences of
-// the interpolated field at +-0.5 node spacing (exact inside one trilinear cell, the
-// mean slope of the two cells across a cell face). For shading normals only; a folded
+// grad u at q (columns d u / d x, y, z): the analytic gradient of the trilinear
+// interpolant from the 8 nodes of q's cell, fetched unfiltered (8 texel reads instead
+// of the 12 bilinear ones of central differences); the cell of the lower node on cell
+// faces and 0 outside the grid box, as the CPU reference (OffsetFieldWarp.jacobian).
+mat3 WARP_grad_u(vec3 q) {
+    vec3 s = (q - WARP_lo) / WARP_size;
+    vec3 x = clamp(s, 0.0, 1.0) * (WARP_shape - 1.0);
+    vec3 i0 = min(floor(x), WARP_shape - 2.0);
+    vec3 f = x - i0;
+    ivec3 i = ivec3(i0);   // (x, y, layer = z)
+    vec3 u000 = texelFetch(WARP_displacement, i, 0).xyz;
+    vec3 u100 = texelFetch(WARP_displacement, i + ivec3(1, 0, 0), 0).xyz;
+    vec3 u010 = texelFetch(WARP_displacement, i + ivec3(0, 1, 0), 0).xyz;
+    vec3 u110 = texelFetch(WARP_displacement, i + ivec3(1, 1, 0), 0).xyz;
+    vec3 u001 = texelFetch(WARP_displacement, i + ivec3(0, 0, 1), 0).xyz;
+    vec3 u101 = texelFetch(WARP_displacement, i + ivec3(1, 0, 1), 0).xyz;
+    vec3 u011 = texelFetch(WARP_displacement, i + ivec3(0, 1, 1), 0).xyz;
+    vec3 u111 = texelFetch(WARP_displacement, i + ivec3(1, 1, 1), 0).xyz;
+    vec3 dx = mix(mix(u100 - u000, u110 - u010, f.y), mix(u101 - u001, u111 - u011, f.y), f.z);
+    vec3 dy = mix(mix(u010 - u000, u110 - u100, f.x), mix(u011 - u001, u111 - u101, f.x), f.z);
+    vec3 dz = mix(mix(u001 - u000, u101 - u100, f.x), mix(u011 - u010, u111 - u110, f.x), f.y);
+    vec3 k = WARP_inside(s) * (WARP_shape - 1.0) / WARP_size;   // grid units -> mm
+    return mat3(dx * k.x, dy * k.y, dz * k.z);
+}
+
+// d warp / d p = (I + grad u(q))^-1 at q = warp(p), given q (the raycaster keeps it
+// from the sample's own warp: no second inverse). For shading normals only; a folded
 // field (singular I + grad u) gives the identity.
-mat3 warp_jacobian(vec3 p) {
-    vec3 q = warp(p);
-    vec3 h = 0.5 * WARP_size / (WARP_shape - 1.0);
-    mat3 g;
-    g[0] = (WARP_offset(q + vec3(h.x, 0.0, 0.0)) - WARP_offset(q - vec3(h.x, 0.0, 0.0))) / (2.0 * h.x);
-    g[1] = (WARP_offset(q + vec3(0.0, h.y, 0.0)) - WARP_offset(q - vec3(0.0, h.y, 0.0))) / (2.0 * h.y);
-    g[2] = (WARP_offset(q + vec3(0.0, 0.0, h.z)) - WARP_offset(q - vec3(0.0, 0.0, h.z))) / (2.0 * h.z);
-    mat3 a = mat3(1.0) + g;
+mat3 warp_jacobian_at(vec3 p, vec3 q) {
+    mat3 a = mat3(1.0) + WARP_grad_u(q);
     return abs(determinant(a)) > 1e-6 ? inverse(a) : mat3(1.0);
 }
+
+mat3 warp_jacobian(vec3 p) { return warp_jacobian_at(p, warp(p)); }

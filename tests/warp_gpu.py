@@ -31,6 +31,11 @@ void main() {{
     frag = vec4(px.y == 0 ? warp_chain(p) : warp_chain_jacobian(p)[px.y - 1], 1.0);
 }}
 """
+#: the raycaster's form: the chain's Jacobian from the points warp_chain kept
+KEPT = (
+    "    frag = vec4(warp_chain(p), 1.0);\n"
+    "    if (px.y > 0) frag.xyz = warp_chain_kept_jacobian()[px.y - 1];\n"
+)
 
 
 def _set(prog: Any, name: str, value: Any) -> None:
@@ -46,15 +51,18 @@ def _set(prog: Any, name: str, value: Any) -> None:
 
 
 def gpu_warp(
-    ctx: Any, warps: Warp | Sequence[Warp], points: np.ndarray
+    ctx: Any, warps: Warp | Sequence[Warp], points: np.ndarray, kept: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """``warp(p)`` (N, 3) and ``warp_jacobian(p)`` (N, 3, 3) of the GLSL of a warp or a
-    chain at (N, 3) points, one pixel column a point."""
+    chain at (N, 3) points, one pixel column a point; ``kept``: the Jacobian by
+    ``warp_chain_kept_jacobian()`` after ``warp_chain(p)`` (as the raycaster shades)."""
     chain = [warps] if isinstance(warps, Warp) else list(warps)
     n = len(points)
-    prog = ctx.program(
-        vertex_shader=VERTEX, fragment_shader=FRAGMENT.format(warps=compose_glsl(chain))
-    )
+    frag = FRAGMENT.format(warps=compose_glsl(chain))
+    if kept:
+        line = frag[frag.index("    frag = vec4(px.y") :]
+        frag = frag.replace(line[: line.index("\n") + 1], KEPT)
+    prog = ctx.program(vertex_shader=VERTEX, fragment_shader=frag)
     ctx.detect_framebuffer(0).use()
     fbo = ctx.simple_framebuffer((n, 4), components=4, dtype="f4")
     pts = ctx.texture((n, 1), 4, np.c_[points, np.ones(n)].astype("f4").tobytes(), dtype="f4")

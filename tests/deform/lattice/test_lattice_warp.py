@@ -358,9 +358,12 @@ def test_two_lattices_chain_on_the_gpu(gl_ctx: Any) -> None:
     _, inner = inside_points(chain[0].grid, 400, 14)
     try:
         q, jac = gpu_warp(gl_ctx, chain, inner)
+        # the raycaster's form (the points warp_chain kept, the memo) is the same
+        _, jac_kept = gpu_warp(gl_ctx, chain, inner, kept=True)
     finally:
         for w in chain:
             w.release()
+    np.testing.assert_array_equal(jac_kept, jac)
     cpu = chain_apply(chain, inner)
     ok = (q[:, 0] < FAR / 2) & (cpu[:, 0] < FAR / 2)
     assert ok.sum() > 390

@@ -208,8 +208,10 @@ def test_gpu_warp_and_jacobian_equal_the_cpu_in_the_fade(gl_ctx: Any, layout: st
         p = in_fade(warp, n=8000)
         assert len(p) > 500
         q_gpu, j_gpu = gpu_warp(gl_ctx, warp, p)
+        _, j_kept = gpu_warp(gl_ctx, warp, p, kept=True)  # the raycaster's form
     finally:
         warp.release()
+    np.testing.assert_array_equal(j_kept, j_gpu)
     # float32 on the GPU, the lookup table through the texture unit (see
     # test_wire_gpu_sampling.py): a few 1e-3 mm
     np.testing.assert_allclose(q_gpu, warp.apply(p), atol=5e-3)
