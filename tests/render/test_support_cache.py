@@ -101,12 +101,15 @@ def test_the_renderer_gives_its_support_maps_setting_to_the_slices(offscreen: An
     m = np.eye(4)
     try:
         r.support_maps = "never"
+        r.slice_values(scene, m, (8, 8))
+        cache = r._slice_renderer.support
+        before = cache._map  # a map of an earlier test's state, or None
         for _ in range(3):
             r.slice_values(scene, m, (8, 8))
-        assert r._slice_renderer.support._map is None
+        assert cache._map is before, "no map built while 'never'"
         r.support_maps = "auto"
         r.slice_values(scene, m, (8, 8))
-        assert r._slice_renderer.support._map is not None
+        assert cache._map is not before and cache._map is not None
         with pytest.raises(RenderError, match="support_maps must be"):
             r.support_maps = "sometimes"
     finally:
