@@ -783,7 +783,11 @@ class Renderer:
         skipping, warped rays' into the deformed-space skip map, and its size."""
         to_texel = frame.scene.volume.world_to_texel_matrix()
         if frame.fold is not None:
-            return {"u_world_to_texel": to_texel @ frame.fold, "u_jacobian": frame.fold[:3, :3]}
+            return {
+                "u_world_to_texel": to_texel @ frame.fold,
+                "u_jacobian": frame.fold[:3, :3],
+                "u_cell_factor": self._skip_maps.cell_factor(frame.scene),
+            }
         if frame.skip_kind != "cells":
             return {}
         # warped rays look up deformed-space cells: the volume's texel grid shifted by
@@ -794,6 +798,7 @@ class Renderer:
         values = {
             "u_skip_world_to_texel": to_texel,
             "u_cell_dims": tuple(int(c) for c in visible.shape),
+            "u_cell_factor": 1,
         }
         values["u_segment"] = max(frame.segment, 1)
         if frame.segment == 0:

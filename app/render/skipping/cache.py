@@ -27,6 +27,7 @@ from voxwarp.render.skipping.maps import (
     block_skip_distances,
     cell_grid_shape,
     cell_visibility,
+    coarsen_visibility,
     octant_skip_distances,
     skip_map_key,
     static_block_visibility,
@@ -44,6 +45,9 @@ SPARSE_MODES = ("dvr", "iso", "flm")
 #: with ``cell_skip_maps`` "auto", the straight-ray cell maps of a volume of more trilinear
 #: cells than this are built when it is drawn a second time (see SkipMapCache.kind)
 EAGER_CELLS = 1 << 22
+#: with ``coarse_cell_maps`` "auto", the straight-ray octant maps of a volume of more
+#: cells than EAGER_CELLS are kept per COARSE_FACTOR³ cells (see SkipMapCache.cell_factor)
+COARSE_FACTOR = 2
 
 
 class VolumeSkipMaps:
@@ -69,6 +73,8 @@ class VolumeSkipMaps:
         #: octant -> R8 texture of octant skip distances, for the scene key cell_key
         self.cell_skip: dict[Octant, Any] = {}
         self.cell_key: Any = None
+        #: cells per edge of a cell_skip map's cells (1, or COARSE_FACTOR for big volumes)
+        self.cell_factor = 1
         # deformed-space skip maps of warped rays (one warp state at a time)
         self.warped_skip: dict[Octant, Any] = {}
         self.warped_key: Any = None
@@ -119,6 +125,9 @@ class SkipMapCache:
         #: visibility (its first frame skips per block, the same image), "always" at
         #: once, "background" offers their CPU work as :meth:`take_job` (the GUI)
         self.cell_skip_maps = "auto"
+        #: straight-ray octant maps per COARSE_FACTOR³ cells (see :meth:`cell_factor`):
+        #: "auto" for volumes of more than EAGER_CELLS cells, "always", or "never"
+        self.coarse_cell_maps = "auto"
         self._cells_seen: dict[int, Any] = {}
         #: "background" mode: the job the last draw wanted, and finished results
         self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
@@ -375,8 +384,24 @@ class SkipMapCache:
         tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
         return tex
 
+    def cell_factor(self, scene: Scene) -> int:
+        """Trilinear cells per edge of a cell of ``scene``'s straight-ray octant maps:
+        COARSE_FACTOR for a volume of more than EAGER_CELLS cells with
+        :attr:`coarse_cell_maps` "auto" (or any volume with "always"), else 1.
+
+        A coarse map is an eighth of the bytes (a 512³ uint8 volume's map was the
+        volume's own size, and a view needs one to four): the raycaster reads it as a
+        conservative fine map, so images do not change; rays near visible cells jump a
+        little less far.
+        """
+        setting = self.coarse_cell_maps
+        if setting == "always" or (setting == "auto" and self._big(scene)):
+            return COARSE_FACTOR
+        return 1
+
     def cell_skip(self, maps: VolumeSkipMaps, scene: Scene, octant: Octant) -> Any:
-        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
+        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``
+        (per :meth:`cell_factor`³ cells: ``maps.cell_factor`` says which).
 
         Computed on first use per (mode visibility, octant) and cached on the volume;
         a change of what the mode can see (transfer function, isovalue, ...) drops all.
@@ -384,10 +409,16 @@ class SkipMapCache:
         visible = None
         if maps.cell_key != skip_map_key(scene):  # what the mode sees changed: rebuild
             visible = self._cell_visibility(maps, scene)
+        factor = self.cell_factor(scene)
+        if maps.cell_factor != factor:
+            _release_all(maps.cell_skip)
+            maps.cell_factor = factor
         tex = maps.cell_skip.get(octant)
         if tex is None:  # unpacked only to build a map
             if visible is None:
                 visible = self._cell_visibility(maps, scene)
+            if factor > 1:
+                visible = coarsen_visibility(visible, factor)
             dist = octant_skip_distances(visible, octant)
             del visible  # before the upload: the map's bytes, not the visibility's too
             tex = maps.cell_skip[octant] = self._distance_texture(dist)
@@ -456,6 +487,13 @@ def _write_block_info(texture: Any, parts: tuple[np.ndarray, ...]) -> None:
         for c, part in enumerate(parts):
             slab[..., c] = part[:, :, z0:z1].T
         texture.write(slab, viewport=(0, 0, z0, nx, ny, z1 - z0))
+
+
+def _release_all(textures: dict[Any, Any]) -> None:
+    """Release and forget every texture of ``textures``."""
+    for tex in textures.values():
+        tex.release()
+    textures.clear()
 
 
 def _bounded(warps: Any) -> bool:
