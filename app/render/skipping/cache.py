@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.core.heap import return_freed_memory
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
 from voxwarp.render.skipping.bitmask import BitMask
@@ -422,6 +423,8 @@ class SkipMapCache:
             dist = octant_skip_distances(visible, octant)
             del visible  # before the upload: the map's bytes, not the visibility's too
             tex = maps.cell_skip[octant] = self._distance_texture(dist)
+            del dist
+            return_freed_memory()  # the build's temporaries, kept resident by the heap
         return tex
 
     def _warped_key(self, scene: Scene) -> tuple:
