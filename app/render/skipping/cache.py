@@ -63,9 +63,12 @@ class VolumeSkipMaps:
     def __init__(
         self, ctx: Any, data: np.ndarray, block_min: np.ndarray, block_max: np.ndarray
     ) -> None:
+        block_min, block_max = _compact_ranges(data, block_min, block_max)
         self.block_min, self.block_max = block_min, block_max
-        # block info texture (skip distance, min, max, 0), written once a mode is known
-        self.info = ctx.texture3d(block_min.shape, 4, dtype="f4")
+        # block info texture (skip distance, min, max, 0), written once a mode is known;
+        # half floats where they hold every value exactly (uint8 data: half the bytes)
+        info_dtype = "f2" if _half_exact(block_min, block_max) else "f4"
+        self.info = ctx.texture3d(block_min.shape, 4, dtype=info_dtype)
         self.info.filter = (ctx.NEAREST, ctx.NEAREST)
         self.info_key: Any = None
         self.volume_data = data
@@ -479,14 +482,42 @@ class SkipMapCache:
 INFO_SLAB_BYTES = 4 * 1024**2
 
 
+#: largest magnitude up to which every integer is a half float
+HALF_EXACT = 2048
+
+
+def _compact_ranges(
+    data: np.ndarray, block_min: np.ndarray, block_max: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The block (min, max) grids in the data's own dtype when it is an integer type
+    narrower than their float32 (the same values: a uint8 volume's grids in a quarter
+    of the bytes), else as they are."""
+    dtype = np.asarray(data).dtype
+    if dtype.kind in "ui" and dtype.itemsize < block_min.dtype.itemsize:
+        return block_min.astype(dtype), block_max.astype(dtype)
+    return block_min, block_max
+
+
+def _half_exact(*grids: np.ndarray) -> bool:
+    """Whether every value of ``grids`` is an integer a half float holds exactly (the
+    block info's skip distances are integers up to 255 too)."""
+    for g in grids:
+        if g.size and g.dtype.kind not in "ui":
+            return False
+        if g.size and (int(g.min()) < -HALF_EXACT or int(g.max()) > HALF_EXACT):
+            return False
+    return True
+
+
 def _write_block_info(texture: Any, parts: tuple[np.ndarray, ...]) -> None:
-    """Write (x, y, z)-indexed block grids as the RGBA32F texture's channels (the fourth
-    0), in slabs of z layers in the texture's (z, y, x, channel) layout."""
+    """Write (x, y, z)-indexed block grids as the RGBA32F (or RGBA16F) texture's
+    channels (the fourth 0), in slabs of z layers in its (z, y, x, channel) layout."""
     nx, ny, nz = parts[0].shape
-    step = max(1, INFO_SLAB_BYTES // (nx * ny * 16))
+    dtype = np.float16 if texture.dtype == "f2" else np.float32
+    step = max(1, INFO_SLAB_BYTES // (nx * ny * 4 * dtype().itemsize))
     for z0 in range(0, nz, step):
         z1 = min(z0 + step, nz)
-        slab = np.zeros((z1 - z0, ny, nx, 4), dtype=np.float32)
+        slab = np.zeros((z1 - z0, ny, nx, 4), dtype=dtype)
         for c, part in enumerate(parts):
             slab[..., c] = part[:, :, z0:z1].T
         texture.write(slab, viewport=(0, 0, z0, nx, ny, z1 - z0))
