@@ -128,3 +128,42 @@ def test_auto_coarsens_only_big_volumes(gl_ctx: Any, monkeypatch: pytest.MonkeyP
         assert r.renderer._volume_gpu(scene.volume).skip.cell_factor == 2
         with pytest.raises(RenderError, match="coarse_cell_maps"):
             r.renderer.coarse_cell_maps = "sometimes"
+
+
+@pytest.mark.gl
+def test_a_big_volume_keeps_coarse_bits_and_its_warped_rays_get_fine_ones(
+    gl_ctx: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Coarse maps keep the visibility per 2³ cells; warped rays (deformed-space maps,
+    built from fine cells) classify the fine cells again, draw what block checks draw,
+    and leave the straight rays' coarse maps as they were."""
+    from benchmarks.offset_inverse import gaussian_drag_field
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+    from voxwarp.render.skipping import cache as skip_cache
+    from voxwarp.scene import Scene
+
+    monkeypatch.setattr(skip_cache, "EAGER_CELLS", 1000)  # 41³ cells count as big
+    vol = _shells()
+    lo, hi = vol.bounds
+    field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (4.0, -2.0, 1.0), 1.0)
+    warp = OffsetFieldWarp(lo, hi, field, shape=(7, 6, 5))
+    straight = Scene(vol, transfer_function=TF, view=(30, 20))
+    warped = straight.copy(warps=[warp])
+    with OffscreenRenderer(48, 40, ctx=gl_ctx, dtype="f4") as r:
+        r.renderer.cell_skip_maps = "always"
+        r.renderer.warped_skip_maps = "always"
+        before = r.render(straight)
+        maps = r.renderer._volume_gpu(vol).skip
+        assert (maps.visible_factor, maps.cell_visible.shape) == (2, (21, 21, 21))
+        textures = dict(maps.cell_skip)
+        cells = r.render(warped)
+        assert r.renderer.last_skip_kind == "cells"
+        assert (maps.visible_factor, maps.cell_visible.shape) == (1, (41, 41, 41))
+        r.renderer.cell_skipping = False
+        blocks = r.render(warped)
+        r.renderer.cell_skipping = True
+        after = r.render(straight)
+        assert maps.cell_skip == textures  # not rebuilt
+    assert np.abs(cells - blocks).max() <= 1 / 255
+    assert np.abs(cells - before).max() > 0.05  # the drag shows
+    np.testing.assert_array_equal(after, before)

@@ -72,8 +72,10 @@ class VolumeSkipMaps:
         self.info.filter = (ctx.NEAREST, ctx.NEAREST)
         self.info_key: Any = None
         self.volume_data = data
-        #: the cell visibility the octant maps are built from, one bit per cell (BitMask)
+        #: the cell visibility the octant maps are built from, one bit per cell (BitMask),
+        #: per visible_factor³ cells (coarsen_visibility: kept coarse for coarse maps)
         self.cell_visible: BitMask | None = None
+        self.visible_factor = 1
         #: octant -> R8 texture of octant skip distances, for the scene key cell_key
         self.cell_skip: dict[Octant, Any] = {}
         self.cell_key: Any = None
@@ -222,20 +224,27 @@ class SkipMapCache:
         job_key = ("cells", id(maps), key)
         ready = self._skip_ready.pop(job_key, None)
         if ready is not None:
-            self._install_cells(maps, key, ready)
+            self._install_cells(maps, key, *ready)
             return True
         data, bmin, bmax = maps.volume_data, maps.block_min, maps.block_max
-        self._skip_wanted = (job_key, lambda: cell_visibility(scene, data, bmin, bmax))
+        factor = self.cell_factor(scene)
+
+        def job() -> tuple[np.ndarray, int]:
+            return _coarsened(cell_visibility(scene, data, bmin, bmax), factor), factor
+
+        self._skip_wanted = (job_key, job)
         return False
 
     @staticmethod
-    def _install_cells(maps: VolumeSkipMaps, key: Any, visible: np.ndarray | None) -> None:
-        """Keep a cell visibility for the visibility ``key``; the octant maps of the old
-        one go (those a view needs follow on first use, a fraction of its cost each)."""
-        for tex in maps.cell_skip.values():
-            tex.release()
-        maps.cell_skip.clear()
+    def _install_cells(
+        maps: VolumeSkipMaps, key: Any, visible: np.ndarray | None, factor: int = 1
+    ) -> None:
+        """Keep a cell visibility (per ``factor``³ cells) for the visibility ``key``; the
+        octant maps of the old one go (those a view needs follow on first use, a
+        fraction of its cost each)."""
+        _release_all(maps.cell_skip)
         maps.cell_visible = None if visible is None else BitMask(visible)
+        maps.visible_factor = factor
         maps.cell_key = key
 
     def _background_kind(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> str:
@@ -366,17 +375,26 @@ class SkipMapCache:
             maps.info_key = key
         return maps.info
 
-    def _cell_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
-        """Which trilinear cells ``scene``'s mode can see (kept on the volume at one bit
-        per cell; the bool array returned is the caller's, to drop after use)."""
+    def _cell_visibility(self, maps: VolumeSkipMaps, scene: Scene, factor: int = 1) -> np.ndarray:
+        """Which cells of ``factor``³ trilinear cells ``scene``'s mode can see (kept on
+        the volume at one bit per cell, at the factor first asked for; the bool array
+        returned is the caller's, to drop after use). Fine cells of a volume that kept
+        coarse ones (warped rays of a big volume) are classified again, and kept."""
         key = skip_map_key(scene)
+        data, bmin, bmax = maps.volume_data, maps.block_min, maps.block_max
         if maps.cell_key != key:
             self._install_cells(maps, None, None)  # the old one goes before the new is built
-            visible = cell_visibility(scene, maps.volume_data, maps.block_min, maps.block_max)
-            self._install_cells(maps, key, visible)
+            visible = _coarsened(cell_visibility(scene, data, bmin, bmax), factor)
+            self._install_cells(maps, key, visible, factor)
             return visible
         assert maps.cell_visible is not None
-        return maps.cell_visible.unpack()
+        if maps.visible_factor == factor:
+            return maps.cell_visible.unpack()
+        if maps.visible_factor == 1:
+            return coarsen_visibility(maps.cell_visible.unpack(), factor)
+        visible = cell_visibility(scene, data, bmin, bmax)  # fine, from coarse kept bits
+        maps.cell_visible, maps.visible_factor = BitMask(visible), 1  # the maps stay
+        return _coarsened(visible, factor)
 
     def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
         return self._distance_texture(octant_skip_distances(visible, octant))
@@ -411,18 +429,16 @@ class SkipMapCache:
         a change of what the mode can see (transfer function, isovalue, ...) drops all.
         """
         visible = None
-        if maps.cell_key != skip_map_key(scene):  # what the mode sees changed: rebuild
-            visible = self._cell_visibility(maps, scene)
         factor = self.cell_factor(scene)
+        if maps.cell_key != skip_map_key(scene):  # what the mode sees changed: rebuild
+            visible = self._cell_visibility(maps, scene, factor)
         if maps.cell_factor != factor:
             _release_all(maps.cell_skip)
             maps.cell_factor = factor
         tex = maps.cell_skip.get(octant)
         if tex is None:  # unpacked only to build a map
             if visible is None:
-                visible = self._cell_visibility(maps, scene)
-            if factor > 1:
-                visible = coarsen_visibility(visible, factor)
+                visible = self._cell_visibility(maps, scene, factor)
             dist = octant_skip_distances(visible, octant)
             del visible  # before the upload: the map's bytes, not the visibility's too
             tex = maps.cell_skip[octant] = self._distance_texture(dist)
@@ -521,6 +537,11 @@ def _write_block_info(texture: Any, parts: tuple[np.ndarray, ...]) -> None:
         for c, part in enumerate(parts):
             slab[..., c] = part[:, :, z0:z1].T
         texture.write(slab, viewport=(0, 0, z0, nx, ny, z1 - z0))
+
+
+def _coarsened(visible: np.ndarray, factor: int) -> np.ndarray:
+    """``visible`` per ``factor``³ cells (itself for 1; see coarsen_visibility)."""
+    return visible if factor == 1 else coarsen_visibility(visible, factor)
 
 
 def _release_all(textures: dict[Any, Any]) -> None:
