@@ -279,7 +279,7 @@ class _Bench:
     """The renderers, scene settings and helpers of one run: ``r`` draws the timed frames,
     ``small`` (16x16 on the same context) the phases, where the drawing costs little."""
 
-    def __init__(self, r: Any, frames: int) -> None:
+    def __init__(self, r: Any, frames: int, coarse_cell_maps: str = "auto") -> None:
         from voxwarp.render.offscreen import OffscreenRenderer
         from voxwarp.scene import Scene
 
@@ -287,6 +287,7 @@ class _Bench:
         with r.current():
             self.small = OffscreenRenderer(*PHASE_IMAGE, ctx=r.ctx)
         self.frames = frames
+        self.coarse_cell_maps = coarse_cell_maps
         self.tf = scale_transfer_function()
         self._scene_type = Scene
 
@@ -326,6 +327,7 @@ class _Bench:
             r.empty_space_skipping = skipping
             r.cell_skipping = cells
             r.cell_skip_maps = cell_maps
+            r.coarse_cell_maps = self.coarse_cell_maps
 
     def warm(self, layout: str | None = None) -> None:
         """Compile every program variant the run draws with on a tiny volume (in the
@@ -421,10 +423,12 @@ def bench_scale(
     ctx: Any = None,
     log: Callable[[str], Any] = print,
     samplings: Sequence[str] = ("auto",),
+    coarse_cell_maps: str = "auto",
 ) -> ScaleReport:
     """Measure every size (ascending) and, with ``long``, the long CT-like volume, at
     ``size`` pixels on ``ctx`` (default: a new headless context), once per renderer
-    ``samplings`` setting (interleaved: each volume in every setting before the next)."""
+    ``samplings`` setting (interleaved: each volume in every setting before the next),
+    with the renderers' ``coarse_cell_maps`` setting."""
     from voxwarp.bench.render import body_phantom
     from voxwarp.core.timing import load_average
     from voxwarp.render.offscreen import OffscreenRenderer
@@ -437,7 +441,7 @@ def bench_scale(
             str(r.ctx.info.get("GL_RENDERER", "?")),
             rss_method(),
         )
-        bench = _Bench(r, int(frames))
+        bench = _Bench(r, int(frames), coarse_cell_maps)
         try:
             for n in sorted(set(int(s) for s in sizes)):
                 data = synthetic_cube(n)
@@ -528,6 +532,13 @@ def add_bench_scale_parser(bsub: Any) -> None:
         help="renderer sampling settings to measure each volume with, interleaved"
         " (auto, slice_pairs, slice_layers, texture3d; default auto)",
     )
+    p.add_argument(
+        "--coarse-cell-maps",
+        choices=("auto", "always", "never"),
+        default="auto",
+        help="the renderers' octant skip maps per 2³ cells: auto (volumes over 2^22 cells,"
+        " the default), always, never (per cell, as before)",
+    )
     p.add_argument("--json", metavar="FILE", help="also write the report as JSON")
     p.add_argument("--markdown", metavar="FILE", help="also write the tables to FILE")
     p.set_defaults(func=cmd_bench_scale)
@@ -544,6 +555,7 @@ def run_args(args: argparse.Namespace, log: Callable[[str], Any]) -> ScaleReport
         memory=not args.no_memory,
         log=log,
         samplings=args.sampling or ("auto",),
+        coarse_cell_maps=args.coarse_cell_maps,
     )
 
 

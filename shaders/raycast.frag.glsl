@@ -217,6 +217,9 @@ vec4 block_info(ivec3 b) { return texelFetch(u_block_info, b, 0); }
 // octant present; pixels of other octants are discarded.
 uniform sampler3D u_cell_skip;
 uniform vec3 u_octant;
+// Straight rays of a big volume: the map's cells are u_cell_factor³ trilinear cells
+// (app/render/skipping/maps.py coarsen_visibility); 0 or 1: one cell each.
+uniform int u_cell_factor;
 
 // DETJ_OVERLAY: the modes tint their colour by det J (app/render/jacobian_overlay.py)
 #ifdef DETJ_OVERLAY
@@ -250,7 +253,18 @@ float cell_skip(vec3 u, out ivec3 c) {
     // the deformed-space map covers the ray box; guard against rounding at its faces
     if (any(lessThan(c, ivec3(0))) || any(greaterThanEqual(c, u_cell_dims))) return 0.0;
 #endif
-    return texelFetch(u_cell_skip, c, 0).r * 255.0;
+    if (u_cell_factor <= 1) return texelFetch(u_cell_skip, c, 0).r * 255.0;
+    // a coarse cell's invisible cube of edge D (coarse cells) holds the fine cube of
+    // edge D * f - o starting at c, o the largest offset of c in its coarse cell counted
+    // from the corner the ray starts at (u_octant's sign per axis)
+    ivec3 cc = c / u_cell_factor;
+    float d = texelFetch(u_cell_skip, cc, 0).r * 255.0;
+    if (d < 0.5) return 0.0;
+    ivec3 o = c - cc * u_cell_factor;
+    ivec3 back = ivec3(lessThan(u_octant, vec3(0.0)));  // 1 where the ray runs to -
+    o += back * (ivec3(u_cell_factor - 1) - 2 * o);
+    o = clamp(o, ivec3(0), ivec3(u_cell_factor - 1));
+    return d * float(u_cell_factor) - float(max(o.x, max(o.y, o.z)));
 }
 
 // First lattice sample after the ray (at sample k) leaves the invisible cube of edge d

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.core.heap import return_freed_memory
 from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
 from voxwarp.render.skipping.bitmask import BitMask
@@ -27,6 +28,7 @@ from voxwarp.render.skipping.maps import (
     block_skip_distances,
     cell_grid_shape,
     cell_visibility,
+    coarsen_visibility,
     octant_skip_distances,
     skip_map_key,
     static_block_visibility,
@@ -44,6 +46,9 @@ SPARSE_MODES = ("dvr", "iso", "flm")
 #: with ``cell_skip_maps`` "auto", the straight-ray cell maps of a volume of more trilinear
 #: cells than this are built when it is drawn a second time (see SkipMapCache.kind)
 EAGER_CELLS = 1 << 22
+#: with ``coarse_cell_maps`` "auto", the straight-ray octant maps of a volume of more
+#: cells than EAGER_CELLS are kept per COARSE_FACTOR³ cells (see SkipMapCache.cell_factor)
+COARSE_FACTOR = 2
 
 
 class VolumeSkipMaps:
@@ -58,17 +63,24 @@ class VolumeSkipMaps:
     def __init__(
         self, ctx: Any, data: np.ndarray, block_min: np.ndarray, block_max: np.ndarray
     ) -> None:
+        block_min, block_max = _compact_ranges(data, block_min, block_max)
         self.block_min, self.block_max = block_min, block_max
-        # block info texture (skip distance, min, max, 0), written once a mode is known
-        self.info = ctx.texture3d(block_min.shape, 4, dtype="f4")
+        # block info texture (skip distance, min, max, 0), written once a mode is known;
+        # half floats where they hold every value exactly (uint8 data: half the bytes)
+        info_dtype = "f2" if _half_exact(block_min, block_max) else "f4"
+        self.info = ctx.texture3d(block_min.shape, 4, dtype=info_dtype)
         self.info.filter = (ctx.NEAREST, ctx.NEAREST)
         self.info_key: Any = None
         self.volume_data = data
-        #: the cell visibility the octant maps are built from, one bit per cell (BitMask)
+        #: the cell visibility the octant maps are built from, one bit per cell (BitMask),
+        #: per visible_factor³ cells (coarsen_visibility: kept coarse for coarse maps)
         self.cell_visible: BitMask | None = None
+        self.visible_factor = 1
         #: octant -> R8 texture of octant skip distances, for the scene key cell_key
         self.cell_skip: dict[Octant, Any] = {}
         self.cell_key: Any = None
+        #: cells per edge of a cell_skip map's cells (1, or COARSE_FACTOR for big volumes)
+        self.cell_factor = 1
         # deformed-space skip maps of warped rays (one warp state at a time)
         self.warped_skip: dict[Octant, Any] = {}
         self.warped_key: Any = None
@@ -119,6 +131,9 @@ class SkipMapCache:
         #: visibility (its first frame skips per block, the same image), "always" at
         #: once, "background" offers their CPU work as :meth:`take_job` (the GUI)
         self.cell_skip_maps = "auto"
+        #: straight-ray octant maps per COARSE_FACTOR³ cells (see :meth:`cell_factor`):
+        #: "auto" for volumes of more than EAGER_CELLS cells, "always", or "never"
+        self.coarse_cell_maps = "auto"
         self._cells_seen: dict[int, Any] = {}
         #: "background" mode: the job the last draw wanted, and finished results
         self._skip_wanted: tuple[Any, Callable[[], Any]] | None = None
@@ -209,20 +224,27 @@ class SkipMapCache:
         job_key = ("cells", id(maps), key)
         ready = self._skip_ready.pop(job_key, None)
         if ready is not None:
-            self._install_cells(maps, key, ready)
+            self._install_cells(maps, key, *ready)
             return True
         data, bmin, bmax = maps.volume_data, maps.block_min, maps.block_max
-        self._skip_wanted = (job_key, lambda: cell_visibility(scene, data, bmin, bmax))
+        factor = self.cell_factor(scene)
+
+        def job() -> tuple[np.ndarray, int]:
+            return _coarsened(cell_visibility(scene, data, bmin, bmax), factor), factor
+
+        self._skip_wanted = (job_key, job)
         return False
 
     @staticmethod
-    def _install_cells(maps: VolumeSkipMaps, key: Any, visible: np.ndarray | None) -> None:
-        """Keep a cell visibility for the visibility ``key``; the octant maps of the old
-        one go (those a view needs follow on first use, a fraction of its cost each)."""
-        for tex in maps.cell_skip.values():
-            tex.release()
-        maps.cell_skip.clear()
+    def _install_cells(
+        maps: VolumeSkipMaps, key: Any, visible: np.ndarray | None, factor: int = 1
+    ) -> None:
+        """Keep a cell visibility (per ``factor``³ cells) for the visibility ``key``; the
+        octant maps of the old one go (those a view needs follow on first use, a
+        fraction of its cost each)."""
+        _release_all(maps.cell_skip)
         maps.cell_visible = None if visible is None else BitMask(visible)
+        maps.visible_factor = factor
         maps.cell_key = key
 
     def _background_kind(self, maps: VolumeSkipMaps, scene: Scene, key: Any) -> str:
@@ -353,17 +375,26 @@ class SkipMapCache:
             maps.info_key = key
         return maps.info
 
-    def _cell_visibility(self, maps: VolumeSkipMaps, scene: Scene) -> np.ndarray:
-        """Which trilinear cells ``scene``'s mode can see (kept on the volume at one bit
-        per cell; the bool array returned is the caller's, to drop after use)."""
+    def _cell_visibility(self, maps: VolumeSkipMaps, scene: Scene, factor: int = 1) -> np.ndarray:
+        """Which cells of ``factor``³ trilinear cells ``scene``'s mode can see (kept on
+        the volume at one bit per cell, at the factor first asked for; the bool array
+        returned is the caller's, to drop after use). Fine cells of a volume that kept
+        coarse ones (warped rays of a big volume) are classified again, and kept."""
         key = skip_map_key(scene)
+        data, bmin, bmax = maps.volume_data, maps.block_min, maps.block_max
         if maps.cell_key != key:
             self._install_cells(maps, None, None)  # the old one goes before the new is built
-            visible = cell_visibility(scene, maps.volume_data, maps.block_min, maps.block_max)
-            self._install_cells(maps, key, visible)
+            visible = _coarsened(cell_visibility(scene, data, bmin, bmax), factor)
+            self._install_cells(maps, key, visible, factor)
             return visible
         assert maps.cell_visible is not None
-        return maps.cell_visible.unpack()
+        if maps.visible_factor == factor:
+            return maps.cell_visible.unpack()
+        if maps.visible_factor == 1:
+            return coarsen_visibility(maps.cell_visible.unpack(), factor)
+        visible = cell_visibility(scene, data, bmin, bmax)  # fine, from coarse kept bits
+        maps.cell_visible, maps.visible_factor = BitMask(visible), 1  # the maps stay
+        return _coarsened(visible, factor)
 
     def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
         return self._distance_texture(octant_skip_distances(visible, octant))
@@ -375,22 +406,44 @@ class SkipMapCache:
         tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
         return tex
 
+    def cell_factor(self, scene: Scene) -> int:
+        """Trilinear cells per edge of a cell of ``scene``'s straight-ray octant maps:
+        COARSE_FACTOR for a volume of more than EAGER_CELLS cells with
+        :attr:`coarse_cell_maps` "auto" (or any volume with "always"), else 1.
+
+        A coarse map is an eighth of the bytes (a 512³ uint8 volume's map was the
+        volume's own size, and a view needs one to four): the raycaster reads it as a
+        conservative fine map, so images do not change; rays near visible cells jump a
+        little less far.
+        """
+        setting = self.coarse_cell_maps
+        if setting == "always" or (setting == "auto" and self._big(scene)):
+            return COARSE_FACTOR
+        return 1
+
     def cell_skip(self, maps: VolumeSkipMaps, scene: Scene, octant: Octant) -> Any:
-        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``.
+        """R8 texture of ``octant``'s skip distances per trilinear cell for ``scene``
+        (per :meth:`cell_factor`³ cells: ``maps.cell_factor`` says which).
 
         Computed on first use per (mode visibility, octant) and cached on the volume;
         a change of what the mode can see (transfer function, isovalue, ...) drops all.
         """
         visible = None
+        factor = self.cell_factor(scene)
         if maps.cell_key != skip_map_key(scene):  # what the mode sees changed: rebuild
-            visible = self._cell_visibility(maps, scene)
+            visible = self._cell_visibility(maps, scene, factor)
+        if maps.cell_factor != factor:
+            _release_all(maps.cell_skip)
+            maps.cell_factor = factor
         tex = maps.cell_skip.get(octant)
         if tex is None:  # unpacked only to build a map
             if visible is None:
-                visible = self._cell_visibility(maps, scene)
+                visible = self._cell_visibility(maps, scene, factor)
             dist = octant_skip_distances(visible, octant)
             del visible  # before the upload: the map's bytes, not the visibility's too
             tex = maps.cell_skip[octant] = self._distance_texture(dist)
+            del dist
+            return_freed_memory()  # the build's temporaries, kept resident by the heap
         return tex
 
     def _warped_key(self, scene: Scene) -> tuple:
@@ -445,17 +498,57 @@ class SkipMapCache:
 INFO_SLAB_BYTES = 4 * 1024**2
 
 
+#: largest magnitude up to which every integer is a half float
+HALF_EXACT = 2048
+
+
+def _compact_ranges(
+    data: np.ndarray, block_min: np.ndarray, block_max: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The block (min, max) grids in the data's own dtype when it is an integer type
+    narrower than their float32 (the same values: a uint8 volume's grids in a quarter
+    of the bytes), else as they are."""
+    dtype = np.asarray(data).dtype
+    if dtype.kind in "ui" and dtype.itemsize < block_min.dtype.itemsize:
+        return block_min.astype(dtype), block_max.astype(dtype)
+    return block_min, block_max
+
+
+def _half_exact(*grids: np.ndarray) -> bool:
+    """Whether every value of ``grids`` is an integer a half float holds exactly (the
+    block info's skip distances are integers up to 255 too)."""
+    for g in grids:
+        if g.size and g.dtype.kind not in "ui":
+            return False
+        if g.size and (int(g.min()) < -HALF_EXACT or int(g.max()) > HALF_EXACT):
+            return False
+    return True
+
+
 def _write_block_info(texture: Any, parts: tuple[np.ndarray, ...]) -> None:
-    """Write (x, y, z)-indexed block grids as the RGBA32F texture's channels (the fourth
-    0), in slabs of z layers in the texture's (z, y, x, channel) layout."""
+    """Write (x, y, z)-indexed block grids as the RGBA32F (or RGBA16F) texture's
+    channels (the fourth 0), in slabs of z layers in its (z, y, x, channel) layout."""
     nx, ny, nz = parts[0].shape
-    step = max(1, INFO_SLAB_BYTES // (nx * ny * 16))
+    dtype = np.float16 if texture.dtype == "f2" else np.float32
+    step = max(1, INFO_SLAB_BYTES // (nx * ny * 4 * dtype().itemsize))
     for z0 in range(0, nz, step):
         z1 = min(z0 + step, nz)
-        slab = np.zeros((z1 - z0, ny, nx, 4), dtype=np.float32)
+        slab = np.zeros((z1 - z0, ny, nx, 4), dtype=dtype)
         for c, part in enumerate(parts):
             slab[..., c] = part[:, :, z0:z1].T
         texture.write(slab, viewport=(0, 0, z0, nx, ny, z1 - z0))
+
+
+def _coarsened(visible: np.ndarray, factor: int) -> np.ndarray:
+    """``visible`` per ``factor``³ cells (itself for 1; see coarsen_visibility)."""
+    return visible if factor == 1 else coarsen_visibility(visible, factor)
+
+
+def _release_all(textures: dict[Any, Any]) -> None:
+    """Release and forget every texture of ``textures``."""
+    for tex in textures.values():
+        tex.release()
+    textures.clear()
 
 
 def _bounded(warps: Any) -> bool:

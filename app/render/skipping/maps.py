@@ -396,6 +396,31 @@ def cell_grid_shape(volume_shape: Any) -> tuple[int, int, int]:
     return tuple(int(n) + 1 for n in volume_shape)  # type: ignore[return-value]
 
 
+def coarsen_visibility(visible: np.ndarray, factor: int = 2) -> np.ndarray:
+    """Visibility of coarse cells of ``factor``³ trilinear cells: coarse cell ``C`` is
+    visible when any of the cells ``C * factor + [0, factor - 1]`` per axis is (cells past
+    the grid's end count as invisible, as beyond the volume). Shape ``ceil(n / factor)``
+    per axis, a transposed view of a C-contiguous (z, y, x) array like ``visible``.
+
+    An octant skip map of the coarse visibility (:func:`octant_skip_distances`) is a
+    conservative map of the fine cells: the raycaster turns a coarse edge ``D`` at fine
+    cell ``c`` into the fine edge ``D * factor - (offset of c in its coarse cell, from the
+    corner the ray starts at)``, a cube inside the invisible coarse one.
+    """
+    visible = np.asarray(visible, dtype=bool)
+    f = int(factor)
+    if visible.ndim != 3 or f < 1:
+        raise ValueError(f"need a 3D visibility and a factor >= 1; got {visible.shape}, {f}")
+    v = visible.T  # texture order (z, y, x), no copy for the maps' own views
+    out = np.zeros(tuple(-(-n // f) for n in v.shape), dtype=bool)
+    for i in range(f):
+        for j in range(f):
+            for k in range(f):
+                part = v[i::f, j::f, k::f]
+                out[: part.shape[0], : part.shape[1], : part.shape[2]] |= part
+    return out.T
+
+
 def warped_cell_grid(
     cells: Any, spacing: Any, origin: Any, ray_lo: Any, ray_hi: Any
 ) -> tuple[np.ndarray, np.ndarray]:
