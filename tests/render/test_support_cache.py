@@ -109,7 +109,8 @@ def test_the_renderer_gives_its_support_maps_setting_to_the_slices(offscreen: An
         assert cache._map is before, "no map built while 'never'"
         r.support_maps = "auto"
         r.slice_values(scene, m, (8, 8))
-        assert cache._map is not before and cache._map is not None
+        assert cache._map is not before
+        assert cache._map is not None
         with pytest.raises(RenderError, match="support_maps must be"):
             r.support_maps = "sometimes"
     finally:
