@@ -12,6 +12,8 @@ import pytest
 from voxwarp.core.heap import return_freed_memory
 
 _SCRIPT = r"""
+import ctypes
+import ctypes.util
 import json
 import numpy as np
 from voxwarp.core.heap import return_freed_memory
@@ -21,8 +23,12 @@ def rss():
         if line.startswith("VmRSS"):
             return int(line.split()[1]) * 1024
 
-big = np.ones(16 << 20, np.uint8)
-del big  # a freed mmap chunk raises glibc's mmap threshold: 1 MiB arrays come from the heap
+# fixed thresholds (not glibc's dynamic ones, which depend on what ran before): 1 MiB
+# arrays come from the heap, and free() never trims the heap's top by itself
+libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+assert libc.mallopt(M_MMAP_THRESHOLD, 32 << 20) == 1
+assert libc.mallopt(M_TRIM_THRESHOLD, 1 << 30) == 1
 parts, pins = [], []
 for _ in range(64):  # each followed by a live allocation, so none merges into the heap's top
     parts.append(np.ones(1 << 20, np.uint8))
