@@ -217,9 +217,10 @@ vec4 block_info(ivec3 b) { return texelFetch(u_block_info, b, 0); }
 // octant present; pixels of other octants are discarded.
 uniform sampler3D u_cell_skip;
 uniform vec3 u_octant;
-// Straight rays of a big volume: the map's cells are u_cell_factor³ trilinear cells
-// (app/render/skipping/maps.py coarsen_visibility); 0 or 1: one cell each.
-uniform int u_cell_factor;
+// COARSE_CELLS (straight rays of a big volume): the map's cells are CELL_FACTOR³
+// trilinear cells (app/render/skipping/maps.py coarsen_visibility). A compile-time
+// variant: a uniform branch runs both sides on llvmpipe, and a division by a uniform
+// is scalarised (the per-cell program paid ~40 % of a frame for it).
 
 // DETJ_OVERLAY: the modes tint their colour by det J (app/render/jacobian_overlay.py)
 #ifdef DETJ_OVERLAY
@@ -253,18 +254,21 @@ float cell_skip(vec3 u, out ivec3 c) {
     // the deformed-space map covers the ray box; guard against rounding at its faces
     if (any(lessThan(c, ivec3(0))) || any(greaterThanEqual(c, u_cell_dims))) return 0.0;
 #endif
-    if (u_cell_factor <= 1) return texelFetch(u_cell_skip, c, 0).r * 255.0;
+#ifndef COARSE_CELLS
+    return texelFetch(u_cell_skip, c, 0).r * 255.0;
+#else
     // a coarse cell's invisible cube of edge D (coarse cells) holds the fine cube of
     // edge D * f - o starting at c, o the largest offset of c in its coarse cell counted
-    // from the corner the ray starts at (u_octant's sign per axis)
-    ivec3 cc = c / u_cell_factor;
+    // from the corner the ray starts at (u_octant's sign per axis); branch-free: a
+    // visible coarse cell (D = 0) gives at most 0
+    ivec3 cc = c / CELL_FACTOR;
     float d = texelFetch(u_cell_skip, cc, 0).r * 255.0;
-    if (d < 0.5) return 0.0;
-    ivec3 o = c - cc * u_cell_factor;
+    ivec3 o = c - cc * CELL_FACTOR;
     ivec3 back = ivec3(lessThan(u_octant, vec3(0.0)));  // 1 where the ray runs to -
-    o += back * (ivec3(u_cell_factor - 1) - 2 * o);
-    o = clamp(o, ivec3(0), ivec3(u_cell_factor - 1));
-    return d * float(u_cell_factor) - float(max(o.x, max(o.y, o.z)));
+    o += back * (ivec3(CELL_FACTOR - 1) - 2 * o);
+    o = clamp(o, ivec3(0), ivec3(CELL_FACTOR - 1));
+    return max(d * float(CELL_FACTOR) - float(max(o.x, max(o.y, o.z))), 0.0);
+#endif
 }
 
 // First lattice sample after the ray (at sample k) leaves the invisible cube of edge d

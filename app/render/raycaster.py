@@ -53,7 +53,7 @@ from voxwarp.render.fixed_texture import FixedTexture, compare_uniforms, uses_gr
 from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay
 from voxwarp.render.mesh_pass import MeshRenderer
-from voxwarp.render.skipping.cache import SkipMapCache, VolumeSkipMaps
+from voxwarp.render.skipping.cache import COARSE_FACTOR, SkipMapCache, VolumeSkipMaps
 from voxwarp.render.skipping.maps import (
     BLOCK,
     OCTANT_EPS,
@@ -555,7 +555,7 @@ class Renderer:
     def coarse_cell_maps(self) -> str:
         """Straight-ray octant skip maps per 2³ trilinear cells (an eighth of the bytes;
         the same images, rays near visible cells jump a little less far): "auto" for a
-        volume of more than :data:`voxwarp.render.skipping.cache.EAGER_CELLS` cells,
+        volume of more than :data:`voxwarp.render.skipping.cache.COARSE_MIN_CELLS` cells,
         "always", or "never" (one map cell per trilinear cell, as before)."""
         return self._skip_maps.coarse_cell_maps
 
@@ -598,6 +598,7 @@ class Renderer:
         gradient_texture: bool,
         layout: str,
         support: bool = False,
+        coarse: bool = False,
     ) -> Any:
         piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
         warps = [] if linear else scene.warps
@@ -616,6 +617,7 @@ class Renderer:
             uses_gradient_texture(scene),
             self._detj_on(scene),
             support,
+            coarse,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -630,6 +632,8 @@ class Renderer:
         defines += layout_defines(layout)
         if kind == "cells":
             defines.append("#define CELL_SKIP")
+        if coarse:  # straight-ray octant maps per COARSE_FACTOR³ cells
+            defines += ["#define COARSE_CELLS", f"#define CELL_FACTOR {COARSE_FACTOR}"]
         if meshes:
             defines.append("#define MESH_DEPTH")
         if piecewise:
@@ -716,7 +720,10 @@ class Renderer:
         shade_tex = self.last_gradient_texture = self._use_gradients(scene)
         support = plan == "map" and segment == 1
         self.last_support = "map" if support else "none" if linear else "all"
-        prog = self._program(scene, linear, skip_kind, segment, shade_tex, gpu.layout, support)
+        coarse = skip_kind == "cells" and linear and self._skip_maps.cell_factor(scene) > 1
+        prog = self._program(
+            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support, coarse
+        )
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
         view = (x, y, w, h)
@@ -803,11 +810,7 @@ class Renderer:
         skipping, warped rays' into the deformed-space skip map, and its size."""
         to_texel = frame.scene.volume.world_to_texel_matrix()
         if frame.fold is not None:
-            return {
-                "u_world_to_texel": to_texel @ frame.fold,
-                "u_jacobian": frame.fold[:3, :3],
-                "u_cell_factor": self._skip_maps.cell_factor(frame.scene),
-            }
+            return {"u_world_to_texel": to_texel @ frame.fold, "u_jacobian": frame.fold[:3, :3]}
         if frame.skip_kind != "cells":
             return {}
         # warped rays look up deformed-space cells: the volume's texel grid shifted by
@@ -818,7 +821,6 @@ class Renderer:
         values = {
             "u_skip_world_to_texel": to_texel,
             "u_cell_dims": tuple(int(c) for c in visible.shape),
-            "u_cell_factor": 1,
         }
         values["u_segment"] = max(frame.segment, 1)
         if frame.segment == 0:

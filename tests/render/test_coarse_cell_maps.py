@@ -123,7 +123,7 @@ def test_auto_coarsens_only_big_volumes(gl_ctx: Any, monkeypatch: pytest.MonkeyP
         r.renderer.cell_skip_maps = "always"
         r.render(scene)
         assert r.renderer._volume_gpu(scene.volume).skip.cell_factor == 1
-        monkeypatch.setattr(skip_cache, "EAGER_CELLS", 1000)  # 41³ cells count as big
+        monkeypatch.setattr(skip_cache, "COARSE_MIN_CELLS", 1000)  # 41³ cells count as big
         r.render(scene)
         assert r.renderer._volume_gpu(scene.volume).skip.cell_factor == 2
         with pytest.raises(RenderError, match="coarse_cell_maps"):
@@ -143,6 +143,7 @@ def test_a_big_volume_keeps_coarse_bits_and_its_warped_rays_get_fine_ones(
     from voxwarp.scene import Scene
 
     monkeypatch.setattr(skip_cache, "EAGER_CELLS", 1000)  # 41³ cells count as big
+    monkeypatch.setattr(skip_cache, "COARSE_MIN_CELLS", 1000)
     vol = _shells()
     lo, hi = vol.bounds
     field = gaussian_drag_field((7, 6, 5), (3, 3, 2), (4.0, -2.0, 1.0), 1.0)

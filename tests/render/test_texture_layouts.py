@@ -167,10 +167,12 @@ from voxwarp.bench.render import bench_camera
 from voxwarp.core.volume import Volume
 from voxwarp.render import raycaster
 from voxwarp.render.offscreen import OffscreenRenderer
+from voxwarp.render.skipping import cache as skip_cache
 from voxwarp.scene import Scene
 
 n = int(sys.argv[1])
 raycaster.PAIRS_MAX_BYTES = int(sys.argv[2])
+skip_cache.COARSE_MIN_CELLS = int(sys.argv[3])
 tf = scale_transfer_function()
 
 
@@ -210,7 +212,7 @@ def test_memory_beyond_the_array_of_a_256_cube(gl_ctx: Any) -> None:
     if not os.path.exists("/proc/self/clear_refs"):
         pytest.skip("needs Linux /proc to measure the resident set")
     run = subprocess.run(
-        [sys.executable, "-c", _MEMORY_SCRIPT, "256", "0"],
+        [sys.executable, "-c", _MEMORY_SCRIPT, "256", "0", "0"],
         capture_output=True,
         text=True,
         timeout=600,

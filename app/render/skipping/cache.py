@@ -47,7 +47,11 @@ SPARSE_MODES = ("dvr", "iso", "flm")
 #: cells than this are built when it is drawn a second time (see SkipMapCache.kind)
 EAGER_CELLS = 1 << 22
 #: with ``coarse_cell_maps`` "auto", the straight-ray octant maps of a volume of more
-#: cells than EAGER_CELLS are kept per COARSE_FACTOR³ cells (see SkipMapCache.cell_factor)
+#: trilinear cells than COARSE_MIN_CELLS are kept per COARSE_FACTOR³ cells (see
+#: SkipMapCache.cell_factor): from about 322³ voxels, where one map of uint8 would take
+#: 32 MiB, as the slice layers take over from slice pairs; below it the per-cell maps
+#: skip more (the coarse ones cost the bundled 128x128x256 stent ~12 % of a frame)
+COARSE_MIN_CELLS = 1 << 25
 COARSE_FACTOR = 2
 
 
@@ -408,7 +412,7 @@ class SkipMapCache:
 
     def cell_factor(self, scene: Scene) -> int:
         """Trilinear cells per edge of a cell of ``scene``'s straight-ray octant maps:
-        COARSE_FACTOR for a volume of more than EAGER_CELLS cells with
+        COARSE_FACTOR for a volume of more than COARSE_MIN_CELLS cells with
         :attr:`coarse_cell_maps` "auto" (or any volume with "always"), else 1.
 
         A coarse map is an eighth of the bytes (a 512³ uint8 volume's map was the
@@ -417,7 +421,8 @@ class SkipMapCache:
         little less far.
         """
         setting = self.coarse_cell_maps
-        if setting == "always" or (setting == "auto" and self._big(scene)):
+        cells = int(np.prod(cell_grid_shape(scene.volume.shape)))
+        if setting == "always" or (setting == "auto" and cells > COARSE_MIN_CELLS):
             return COARSE_FACTOR
         return 1
 
