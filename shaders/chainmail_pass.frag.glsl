@@ -45,6 +45,10 @@ uniform float u_tol;    // move only when off by more than this (mm): float roun
 uniform int u_report_pinned;  // 1: report held and fixed elements too (the check pass)
 #endif
 
+#ifndef CM_PIN_PASS
+#include "chainmail_links.glsl"
+#endif
+
 layout(location = 0) out vec4 cm_out;
 
 void main() {
@@ -56,27 +60,13 @@ void main() {
 #else
     ivec3 e = ms_block(t);
     vec3 x = p.xyz;
-    // neighbours, clamped into the grid (their links are absent there)
-    // (x and y neighbours are the next texels of the same tile)
-    vec3 xpx = imageLoad(u_pos, t + ivec2(int(e.x < NX - 1), 0)).xyz;
-    vec3 xmx = imageLoad(u_pos, t - ivec2(int(e.x > 0), 0)).xyz;
-    vec3 xpy = imageLoad(u_pos, t + ivec2(0, int(e.y < NY - 1))).xyz;
-    vec3 xmy = imageLoad(u_pos, t - ivec2(0, int(e.y > 0))).xyz;
-    vec3 xpz = imageLoad(u_pos, ms_texel(ivec3(e.xy, min(e.z + 1, NZ - 1)))).xyz;
-    vec3 xmz = imageLoad(u_pos, ms_texel(ivec3(e.xy, max(e.z - 1, 0)))).xyz;
-    vec4 l0 = imageLoad(u_link[0], t);
-    vec4 l1 = imageLoad(u_link[1], t);
-    vec4 l2 = imageLoad(u_link[2], t);
-    vec4 l3 = imageLoad(u_link[3], t);
-    vec4 l4 = imageLoad(u_link[4], t);
-    // forward link along i to n = e + e_i: n_i - x_i in [min, max], |n_j - x_j| <= shear
-    // backward link along i from n = e - e_i: x_i - n_i in [min, max], |x_j - n_j| <= shear
-    vec3 lo = max(xpx - vec3(l0.y, l0.z, l0.z), xmx + vec3(l0.w, -l1.y, -l1.y));
-    vec3 hi = min(xpx + vec3(-l0.x, l0.z, l0.z), xmx + vec3(l1.x, l1.y, l1.y));
-    lo = max(lo, max(xpy - vec3(l2.x, l1.w, l2.x), xmy + vec3(-l2.w, l2.y, -l2.w)));
-    hi = min(hi, min(xpy + vec3(l2.x, -l1.z, l2.x), xmy + vec3(l2.w, l2.z, l2.w)));
-    lo = max(lo, max(xpz - vec3(l3.z, l3.z, l3.y), xmz + vec3(-l4.y, -l4.y, l3.w)));
-    hi = min(hi, min(xpz + vec3(l3.z, l3.z, -l3.x), xmz + vec3(l4.y, l4.y, l4.x)));
+    ivec2 n[6];
+    vec4 l[5];
+    vec3 xn[6];
+    vec3 lo, hi;
+    cm_neighbours(t, e, n);
+    cm_load(t, n, l, xn);
+    cm_interval(l, xn, lo, hi);
     ivec3 free_ = ivec3(p.w == 0.0);
     ivec3 above = ivec3(greaterThan(x, hi + u_tol)) * free_;
     ivec3 below = ivec3(lessThan(x, lo - u_tol)) * free_;

@@ -21,6 +21,8 @@ layout(rgba32f, binding = 1) readonly uniform image2D u_link[5];
 layout(rgba32f, binding = 6) readonly uniform image2D u_rest;
 uniform int u_colour;
 
+#include "chainmail_links.glsl"
+
 layout(location = 0) out vec4 cm_out;
 
 // 1 when the link with this min distance is present (absent links store -1e30)
@@ -37,40 +39,26 @@ void main() {
         return;
     }
     vec3 x = p.xyz;
-    ivec2 tpx = t + ivec2(int(e.x < NX - 1), 0);
-    ivec2 tmx = t - ivec2(int(e.x > 0), 0);
-    ivec2 tpy = t + ivec2(0, int(e.y < NY - 1));
-    ivec2 tmy = t - ivec2(0, int(e.y > 0));
-    ivec2 tpz = ms_texel(ivec3(e.xy, min(e.z + 1, NZ - 1)));
-    ivec2 tmz = ms_texel(ivec3(e.xy, max(e.z - 1, 0)));
-    vec3 xpx = imageLoad(u_pos, tpx).xyz;
-    vec3 xmx = imageLoad(u_pos, tmx).xyz;
-    vec3 xpy = imageLoad(u_pos, tpy).xyz;
-    vec3 xmy = imageLoad(u_pos, tmy).xyz;
-    vec3 xpz = imageLoad(u_pos, tpz).xyz;
-    vec3 xmz = imageLoad(u_pos, tmz).xyz;
-    vec4 l0 = imageLoad(u_link[0], t);
-    vec4 l1 = imageLoad(u_link[1], t);
-    vec4 l2 = imageLoad(u_link[2], t);
-    vec4 l3 = imageLoad(u_link[3], t);
-    vec4 l4 = imageLoad(u_link[4], t);
-    // the constraint interval, as in chainmail_pass.frag.glsl
-    vec3 lo = max(xpx - vec3(l0.y, l0.z, l0.z), xmx + vec3(l0.w, -l1.y, -l1.y));
-    vec3 hi = min(xpx + vec3(-l0.x, l0.z, l0.z), xmx + vec3(l1.x, l1.y, l1.y));
-    lo = max(lo, max(xpy - vec3(l2.x, l1.w, l2.x), xmy + vec3(-l2.w, l2.y, -l2.w)));
-    hi = min(hi, min(xpy + vec3(l2.x, -l1.z, l2.x), xmy + vec3(l2.w, l2.z, l2.w)));
-    lo = max(lo, max(xpz - vec3(l3.z, l3.z, l3.y), xmz + vec3(-l4.y, -l4.y, l3.w)));
-    hi = min(hi, min(xpz + vec3(l3.z, l3.z, -l3.x), xmz + vec3(l4.y, l4.y, l4.x)));
-    // the mean displacement of the linked neighbours (fx, bx, fy, by, fz, bz mins)
-    float wpx = present(l0.x), wmx = present(l0.w), wpy = present(l1.z);
-    float wmy = present(l2.y), wpz = present(l3.x), wmz = present(l3.w);
-    float cnt = wpx + wmx + wpy + wmy + wpz + wmz;
+    ivec2 n[6];
+    vec4 l[5];
+    vec3 xn[6];
+    vec3 lo, hi;
+    cm_neighbours(t, e, n);
+    cm_load(t, n, l, xn);
+    cm_interval(l, xn, lo, hi);
+    // the mean displacement of the linked neighbours (their links' mins: fx, bx, fy,
+    // by, fz, bz)
+    float w[6] = float[6](present(l[0].x), present(l[0].w), present(l[1].z),
+                          present(l[2].y), present(l[3].x), present(l[3].w));
+    float cnt = w[0] + w[1] + w[2] + w[3] + w[4] + w[5];
     if (cnt == 0.0) {
         return;
     }
-    vec3 su = wpx * (xpx - imageLoad(u_rest, tpx).xyz) + wmx * (xmx - imageLoad(u_rest, tmx).xyz);
-    su += wpy * (xpy - imageLoad(u_rest, tpy).xyz) + wmy * (xmy - imageLoad(u_rest, tmy).xyz);
-    su += wpz * (xpz - imageLoad(u_rest, tpz).xyz) + wmz * (xmz - imageLoad(u_rest, tmz).xyz);
+    vec3 u[6];  // the neighbours' displacements
+    for (int k = 0; k < 6; ++k) u[k] = xn[k] - imageLoad(u_rest, n[k]).xyz;
+    vec3 su = w[0] * u[0] + w[1] * u[1];  // summed per axis, as before the shared include
+    su += w[2] * u[2] + w[3] * u[3];
+    su += w[4] * u[4] + w[5] * u[5];
     vec3 target = imageLoad(u_rest, t).xyz + su / cnt;
     vec3 y = min(max(target, lo), hi);
     // an empty interval (conflicting neighbours): stay
