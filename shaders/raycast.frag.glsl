@@ -282,11 +282,16 @@ int after_cube(ivec3 c, float d, vec3 offset, vec3 widen, vec3 inv_du, float t0,
 }
 #endif
 
-#ifdef SUPPORT_MAP
-// The texel of sample t: straight (as an undeformed ray computes it) or through the chain.
+#ifndef LINEAR_PATH
+// The texel of sample t: straight (as an undeformed ray computes it) or through the
+// chain (without SUPPORT_MAP always through the chain).
 vec3 span_texel(float t, bool straight) {
+#ifdef SUPPORT_MAP
     g_straight = straight;
     return straight ? straight_texel(t) : texel_at(t);
+#else
+    return texel_at(t);
+#endif
 }
 #ifdef CELL_SKIP
 // Samples k .. kb - 1 (one phase of the ray), straight or through the chain, with the
@@ -316,7 +321,8 @@ bool march_cells(inout State s, inout int k, int kb, int n, float t0, float j,
     return false;
 }
 #else
-// As march_cells, with the per-block checks of warped rays without cell maps.
+// Samples k .. kb - 1 of a warped ray without cell maps (a phase with SUPPORT_MAP, the
+// whole ray without), each checked against its block; true when the ray is finished.
 bool march_blocks(inout State s, inout int k, int kb, float t0, float j, bool straight) {
     for (; k < kb; ++k) {
         float t = t0 + (float(k) + j) * u_step;
@@ -341,6 +347,8 @@ bool march_blocks(inout State s, inout int k, int kb, float t0, float j, bool st
     return false;
 }
 #endif
+#endif
+#ifdef SUPPORT_MAP
 // The samples [x, y) of the ray that may lie in the support's box (one more on either
 // side against rounding); the others are straight.
 ivec2 support_phases(float t0, float j, int n) {
@@ -568,26 +576,7 @@ void main() {
     bool finished = march_blocks(s, k, kio.x, t0, j, true)
         || march_blocks(s, k, kio.y, t0, j, false) || march_blocks(s, k, n, t0, j, true);
 #else
-    for (; k < n; ++k) {
-        float t = t0 + (float(k) + j) * u_step;
-        vec3 u = texel_at(t);
-        if (!inside_texels(u)) {
-            if (mode_skip(s, -1.0)) break;
-            continue;
-        }
-        g_inside = true;
-        ivec3 blk = min(ivec3(u * (1.0 / float(BLOCK))), u_blocks - 1);
-        vec4 info = block_info(blk);
-        bool visible = info.x < 0.5 && block_visible(info.yz, s);
-#ifdef NO_SKIPPING
-        visible = true;
-#endif
-        if (!visible) {
-            if (mode_skip(s, t)) break;
-            continue;
-        }
-        if (mode_sample(s, scene_value(u, t), u, t)) break;
-    }
+    march_blocks(s, k, n, t0, j, false);   // warped rays, block checks per sample
 #endif
     vec4 c = mode_finish(s);
 #ifdef MESH_DEPTH
