@@ -6,7 +6,10 @@ are drawn with the warp chain at every sample (the old path,
 ``Renderer.support_skipping = False``) and with support skipping (the default): a
 local ChainMail drag (16³ grid, the centre element moved 15 mm along x, relaxed), the
 same ChainMail with nothing moved (an identity warp), and a settled 16³ mass-spring
-drag with the grid's corners fixed (everything moves). Frames of every setting and of
+drag with the grid's corners fixed (everything moves). With support skipping, the chain
+runs either within the box around the support bricks (``Renderer.support_ranges =
+False``, "support box") or between each ray's first and last crossing of the support's
+surface (the default, "per-ray ranges"). Frames of every setting and of
 the undeformed scene are interleaved per round and medians taken; each is given as a
 ratio to the undeformed frame of the same run, with the image difference between the
 two paths (max, /255), the share of the ray box's bricks in the support, and the load
@@ -40,6 +43,8 @@ from voxwarp.scene import Scene
 VOLUMES = ("colin27", "stent")
 CASES = ("chainmail drag", "chainmail identity", "massspring settled")
 DRAG_MM = 15.0
+#: the chain at every sample; within the support's box; between each ray's crossings
+SETTINGS = ("old", "box", "ranges")
 
 
 def _chainmail(vol: Any, drag: bool) -> Warp:
@@ -71,6 +76,7 @@ class SupportRow:
     volume: str
     case: str
     old: float
+    box: float
     new: float
     max_diff: float
     bricks: float
@@ -97,13 +103,14 @@ class SupportReport:
             f" frames; cost = frame / undeformed frame of the same run ({refs}); load"
             f" average before / after: {' / '.join(self.load)}",
             "",
-            "| scan | deformation | chain at every sample | support skipping | new / old"
-            " | max diff (/255) | bricks in support | path |",
-            "|---|---|---|---|---|---|---|---|",
+            "| scan | deformation | chain at every sample | support box | per-ray ranges"
+            " | ranges / old | max diff (/255) | bricks in support | path |",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in self.rows:
             lines.append(
-                f"| {r.volume} | {r.case} | {r.old:.2f}x | {r.new:.2f}x | {r.new / r.old:.2f}"
+                f"| {r.volume} | {r.case} | {r.old:.2f}x | {r.box:.2f}x | {r.new:.2f}x"
+                f" | {r.new / r.old:.2f}"
                 f" | {r.max_diff:.0f} | {r.bricks:.0%} | {r.plan} |"
             )
         return "\n".join(lines) + "\n"
@@ -130,9 +137,10 @@ def _volume_rows(ctx: Any, name: str, size: tuple, frames: int, report: SupportR
     scenes = {"undeformed": base, **{c: base.copy(warps=[WARPS[c](vol)]) for c in CASES}}
     renderers = {c: OffscreenRenderer(*size, ctx=ctx) for c in scenes}
 
-    def frame(case: str, support: bool) -> float:
+    def frame(case: str, setting: str) -> float:
         r = renderers[case]
-        r.renderer.support_skipping = support
+        r.renderer.support_skipping = setting != "old"
+        r.renderer.support_ranges = setting == "ranges"
         with r.current():
             t = time.perf_counter()
             r.renderer.draw(scenes[case], r.framebuffer)
@@ -144,26 +152,27 @@ def _volume_rows(ctx: Any, name: str, size: tuple, frames: int, report: SupportR
         for c, r in renderers.items():
             r.renderer.warped_skip_maps = "always"
             r.renderer.support_maps = "always"
-            for support in (False, True):
-                r.renderer.support_skipping = support
-                images[c, support] = r.render(scenes[c])[..., :3].astype(int)
-                plans[c, support] = r.renderer.last_support
+            for setting in SETTINGS:
+                r.renderer.support_skipping = setting != "old"
+                r.renderer.support_ranges = setting == "ranges"
+                images[c, setting] = r.render(scenes[c])[..., :3].astype(int)
+                plans[c, setting] = r.renderer.last_support
         times: dict[Any, list[float]] = {}
         for _ in range(frames):
-            times.setdefault("ref", []).append(frame("undeformed", True))
+            times.setdefault("ref", []).append(frame("undeformed", "ranges"))
             for c in CASES:
-                for support in (False, True):
-                    times.setdefault((c, support), []).append(frame(c, support))
+                for setting in SETTINGS:
+                    times.setdefault((c, setting), []).append(frame(c, setting))
     finally:
         for r in renderers.values():
             r.release()
     ref = statistics.median(times["ref"])
     report.reference_ms[name] = ref
     for c in CASES:
-        old = statistics.median(times[c, False]) / ref
-        new = statistics.median(times[c, True]) / ref
-        diff = float(np.abs(images[c, True] - images[c, False]).max())
-        report.rows.append(SupportRow(name, c, old, new, diff, _bricks(scenes[c]), plans[c, True]))
+        old, box, new = (statistics.median(times[c, s]) / ref for s in SETTINGS)
+        diff = float(np.abs(images[c, "ranges"] - images[c, "old"]).max())
+        bricks = _bricks(scenes[c])
+        report.rows.append(SupportRow(name, c, old, box, new, diff, bricks, plans[c, "ranges"]))
 
 
 def bench_support(

@@ -25,8 +25,9 @@
 //   Without a bound, invisible blocks still save the volume fetch and classification.
 // SUPPORT_MAP (warped rays): the chain's support, the bricks of the ray box where some
 // warp may move a point by more than a tolerance (deform/support.py,
-// app/render/skipping/support.py), here as the box around them. A ray marches in three
-// phases: straight up to that box, through the chain inside it, straight after it.
+// app/render/skipping/support.py). A ray marches in three phases: straight up to its
+// first crossing of the support's surface (rasterised per pixel, u_support_ranges,
+// within the box around the bricks), through the chain up to its last, straight after.
 // Straight samples use the undeformed ray's own matrix and arithmetic (the same texels,
 // bit for bit). Each phase is its own loop (march_cells / march_blocks, inlined per
 // kind): a CPU rasteriser runs both sides of a branch, but a loop that no lane of a SIMD
@@ -92,6 +93,9 @@ vec3 texel_at(float t) { return world_to_texel(warp_chain(g_ro + t * g_rd)); }
 uniform vec3 u_support_lo;            // deformed-space box holding the chain's support
 uniform vec3 u_support_hi;
 uniform mat4 u_straight_to_texel;     // deformed world -> texel of an undeformed ray
+// per pixel (at its offset in the viewport): r = the first, a = the last ray parameter
+// at which the ray crosses the support's surface (app/render/support_ranges.py)
+uniform sampler2D u_support_ranges;
 vec3 g_s0;
 vec3 g_sd;
 bool g_straight = false;   // the current sample is straight (its Jacobian is I)
@@ -349,10 +353,13 @@ bool march_blocks(inout State s, inout int k, int kb, float t0, float j, bool st
 #endif
 #endif
 #ifdef SUPPORT_MAP
-// The samples [x, y) of the ray that may lie in the support's box (one more on either
-// side against rounding); the others are straight.
+// The samples [x, y) of the ray that may lie in a support brick: between its first and
+// last crossing of the support's surface, within the box around the bricks (one more
+// sample on either side against rounding); the others are straight.
 ivec2 support_phases(float t0, float j, int n) {
     vec2 ts = intersect_box(g_ro, g_rd, u_support_lo, u_support_hi);
+    vec4 range = texelFetch(u_support_ranges, ivec2(gl_FragCoord.xy - u_viewport.xy), 0);
+    ts = vec2(max(ts.x, range.r), min(ts.y, range.a));
     if (ts.y < ts.x) return ivec2(n);
     int a = int(floor((ts.x - t0) / u_step - j));
     int b = int(ceil((ts.y - t0) / u_step - j)) + 1;

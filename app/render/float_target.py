@@ -31,6 +31,11 @@ class FloatTarget:
         self.size = (w, h)
         return self._fbo
 
+    @property
+    def textures(self) -> list[Any]:
+        """The colour attachments (empty before the first :meth:`framebuffer`)."""
+        return list(self._textures)
+
     def release(self) -> None:
         """Free the framebuffer and its textures."""
         if self._fbo is None:

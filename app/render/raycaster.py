@@ -65,6 +65,7 @@ from voxwarp.render.skipping.maps import (
 from voxwarp.render.skipping.segments import MAX_SAMPLES
 from voxwarp.render.skipping.support import SupportCache
 from voxwarp.render.slices import SliceRenderer
+from voxwarp.render.support_ranges import SupportRanges
 from voxwarp.render.volume_texture import LAYOUTS, layout_defines, upload_volume_texture
 from voxwarp.scene import Scene
 
@@ -316,6 +317,11 @@ class Renderer:
         self._upscale: tuple[Any, Any] | None = None
         #: the fixed image of a comparison scene (Scene(fixed=...)), uploaded on use
         self._fixed = FixedTexture(ctx)
+        #: per-pixel ray ranges through the chain's support (the map path)
+        self._support_ranges = SupportRanges(ctx)
+        #: chain a warped ray only between its first and last crossing of the support's
+        #: surface (off: within the box around the support; ``VOXWARP_SUPPORT_RANGES=0``)
+        self.support_ranges = os.environ.get("VOXWARP_SUPPORT_RANGES", "1") != "0"
         #: the det J overlay of the 3D image (:mod:`voxwarp.render.jacobian_overlay`),
         #: None for none; drawn in the modes of its ``DETJ_MODES`` (others draw without)
         self.jacobian_overlay: JacobianOverlay | None = None
@@ -894,8 +900,12 @@ class Renderer:
             set_uniform(prog, "u_gradient", unit)
             unit += 1
         if frame.support:
-            for name, value in self._support.uniforms(scene).items():
+            support = self._support.uniforms(scene)
+            for name, value in support.items():
                 set_uniform(prog, name, value)
+            self._support_ranges_texture(frame, support).use(unit)
+            set_uniform(prog, "u_support_ranges", unit)
+            unit += 1
         if frame.segment == 0 and frame.gpu.skip.segment_texture is not None:
             frame.gpu.skip.segment_texture.use(unit)
             set_uniform(prog, "u_segment_map", unit)
@@ -914,6 +924,17 @@ class Renderer:
                 set_uniform(prog, "u_fixed_gradient", unit)
                 unit += 1
         return unit
+
+    def _support_ranges_texture(self, frame: _Frame, support: dict[str, Any]) -> Any:
+        """Each pixel's first and last crossing of the support's surface
+        (:mod:`voxwarp.render.support_ranges`), drawn for this frame's camera."""
+        _, _, w, h = frame.viewport
+        inv_view_proj = np.linalg.inv(frame.camera.view_projection(w / h))
+        box = (support["u_support_lo"], support["u_support_hi"])
+        smap = self._support.support(frame.scene)
+        return self._support_ranges.texture(
+            smap, inv_view_proj, (w, h), box, bound=self.support_ranges
+        )
 
     def _bind_mesh_target(
         self, frame: _Frame, unit: int, mesh_inv_view_proj: np.ndarray | None
@@ -1096,6 +1117,7 @@ class Renderer:
             self._slice_renderer = None
         self._fixed.release()
         self._support.release()
+        self._support_ranges.release()
         self._release_mesh_target()
         self._released = True
 

@@ -174,3 +174,24 @@ def test_a_wire_support_is_local_and_holds_its_moved_points() -> None:
     moved = np.abs(q - p).max(axis=1) > tol
     assert moved.any()
     assert smap.contains(p[moved]).all()
+
+
+def test_the_support_surface_is_the_faces_between_support_and_the_rest() -> None:
+    """One brick: its 6 faces; two neighbours: 10 (the shared face is inside); a full
+    map: its outer faces only. Each face is two triangles of the brick face's area."""
+    from voxwarp.deform.support import SupportMap
+
+    def surface(moved: np.ndarray) -> tuple[int, float]:
+        smap = SupportMap(np.zeros(3), np.asarray(moved.shape, float) * 2.0, moved)
+        tris = smap.boundary_triangles().astype(float)
+        cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        return len(tris), float(np.linalg.norm(cross, axis=1).sum() / 2.0)
+
+    one = np.zeros((3, 3, 3), dtype=bool)
+    one[1, 1, 1] = True
+    assert surface(one) == (12, 6 * 4.0)
+    two = one.copy()
+    two[2, 1, 1] = True
+    assert surface(two) == (20, 10 * 4.0)
+    assert surface(np.ones((2, 3, 4), dtype=bool)) == (2 * 2 * (6 + 8 + 12), 4.0 * 2 * 26)
+    assert surface(np.zeros((2, 2, 2), dtype=bool)) == (0, 0.0)

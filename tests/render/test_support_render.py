@@ -5,9 +5,10 @@ chain at every sample) as the reference:
 
 * a warp that moves nothing draws exactly the undeformed image (and slice);
 * a local drag (an offset field over the volume's box, one node moved): pixels whose rays
-  miss the box around the support (computed on the CPU from the camera) equal the
-  undeformed image exactly, every pixel is within 1/255 of the old path, and the drag
-  changes the image by more than that somewhere (so the test can fail);
+  miss every support brick (computed on the CPU from the camera), even where they cross
+  the box around the bricks, equal the undeformed image exactly, every pixel is within
+  1/255 of the old path, and the drag changes the image by more than that somewhere (so
+  the test can fail);
 * the same for a shaded mode (straight samples keep the identity Jacobian) and for the
   per-block loop of warped rays (mip), and for slices.
 """
@@ -21,7 +22,7 @@ import pytest
 
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
-from voxwarp.deform.support import chain_support
+from voxwarp.deform.support import SupportMap, chain_support
 from voxwarp.io.samples import load_sample
 from voxwarp.render.skipping.support import BRICK_VOXELS, TOLERANCE_VOXELS
 from voxwarp.scene import Scene
@@ -79,13 +80,20 @@ def rays_missing(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return miss.reshape(h, w)[::-1]
 
 
-def support_box(scene: Scene, margin: float) -> tuple[np.ndarray, np.ndarray]:
+def support_map(scene: Scene) -> SupportMap:
     voxel = float(np.min(scene.volume.spacing))
     lo, hi = scene.ray_bounds()
-    smap = chain_support(scene.warps, lo, hi, BRICK_VOXELS * voxel, TOLERANCE_VOXELS * voxel)
-    box = smap.moved_box()
-    assert box is not None
-    return box[0] - margin, box[1] + margin
+    return chain_support(scene.warps, lo, hi, BRICK_VOXELS * voxel, TOLERANCE_VOXELS * voxel)
+
+
+def rays_missing_bricks(scene: Scene, margin: float) -> np.ndarray:
+    """(H, W) bool: pixels whose ray misses every support brick grown by ``margin``."""
+    smap = support_map(scene)
+    miss = np.ones(SIZE[::-1], dtype=bool)
+    for idx in np.argwhere(smap.moved):
+        lo = smap.lo + idx * smap.size
+        miss &= rays_missing(scene, lo - margin, lo + smap.size + margin)
+    return miss
 
 
 @pytest.mark.gl
@@ -116,8 +124,12 @@ def test_a_local_drag_changes_only_the_rays_through_its_support(
     assert np.abs(new - old).max() <= 1, "within 1/255 of the chain at every sample"
     moved = np.abs(old - undeformed).max(axis=-1) > 1
     assert moved.mean() > 0.003, "the drag must show (else the test is empty)"
-    miss = rays_missing(scene, *support_box(scene, margin=0.5))
+    miss = rays_missing_bricks(scene, margin=0.5)
+    box = support_map(scene).moved_box()
+    assert box is not None
+    in_box = ~rays_missing(scene, box[0] - 0.5, box[1] + 0.5)
     assert 0.2 < miss.mean() < 0.98
+    assert (miss & in_box).mean() > 0.01, "some rays cross the box but no brick"
     assert np.array_equal(new[miss], undeformed[miss]), "straight outside: the same texels"
 
 
