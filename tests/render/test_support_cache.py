@@ -17,7 +17,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.identity import token
 from voxwarp.errors import RenderError
-from voxwarp.render.skipping.support import SupportCache, uniforms_key
+from voxwarp.render.skipping.support import MAP_MAX_FRACTION, SupportCache, uniforms_key
 from voxwarp.scene import Scene
 
 
@@ -26,9 +26,11 @@ def volume() -> Volume:
 
 
 def displacements(moved: bool) -> np.ndarray:
-    u = np.zeros((5, 5, 5, 3))
+    """A 9³ grid over the volume, still or with one node off-centre moved 1 mm: a local
+    support (well under MAP_MAX_FRACTION of the bricks)."""
+    u = np.zeros((9, 9, 9, 3))
     if moved:
-        u[2, 2, 2] = (3.0, 0.0, 0.0)
+        u[2, 2, 2] = (1.0, 0.0, 0.0)
     return u
 
 
@@ -115,3 +117,20 @@ def test_the_renderer_gives_its_support_maps_setting_to_the_slices(offscreen: An
             r.support_maps = "sometimes"
     finally:
         r.support_maps = "auto"
+
+
+def test_a_support_over_most_of_the_bricks_draws_the_chain_everywhere() -> None:
+    """The map path's loops cost more than they save when most rays chain most samples:
+    above ``map_max_fraction`` of the bricks the plan is "all", at or below it "map"."""
+    vol = volume()
+    lo, hi = vol.bounds
+    u = np.zeros((5, 5, 5, 3))
+    u[2, 2, 2] = (3.0, 0.0, 0.0)  # the middle node of a coarse grid: a wide support
+    cache = SupportCache(None)
+    cache.build = "always"
+    scene = Scene(vol, warps=[OffsetFieldWarp(lo, hi, u, inverse="approx")])
+    fraction = cache.support(scene).fraction
+    assert MAP_MAX_FRACTION < fraction < 1.0
+    assert cache.plan(scene) == "all"
+    cache.map_max_fraction = fraction
+    assert cache.plan(scene) == "map"

@@ -12,7 +12,9 @@ to use it (:meth:`SupportCache.plan`):
   inside (``SUPPORT_MAP``): shaders/raycast.frag.glsl by the box around the support
   bricks (three loops per ray: straight, chained, straight), shaders/slice.frag.glsl by
   the brick texture per pixel;
-* ``"all"``: the chain may move every brick (or cannot bound itself): the old path.
+* ``"all"``: the chain may move every brick (or cannot bound itself), or more than
+  :data:`MAP_MAX_FRACTION` of them (the map's loops would cost more than they save):
+  the chain at every sample.
 """
 
 from __future__ import annotations
@@ -34,6 +36,12 @@ TOLERANCE_VOXELS = 1e-3
 Box = tuple[np.ndarray, np.ndarray]
 #: brick edge in voxels (of the finest spacing), before the MAX_BRICKS cap
 BRICK_VOXELS = 4
+#: the map path's three loops per ray cost more than they save once most rays chain
+#: most of their samples anyway: a support of more than this share of the bricks is
+#: drawn with the chain at every sample ("all"). On llvmpipe, 512² dvr: a drag whose
+#: support holds 24 % of the bricks (the MRI head) costs 0.86x of "all" on the map path,
+#: one holding 46 % (the stent CT) 1.13x (docs/benchmarks.md, "Per-ray ranges")
+MAP_MAX_FRACTION = 0.35
 
 
 def warp_state_key(scene: Scene) -> tuple:
@@ -78,6 +86,9 @@ class SupportCache:
         self._seen: Any = None
         #: tolerance in voxels of the finest spacing
         self.tolerance_voxels = TOLERANCE_VOXELS
+        #: the largest share of bricks in the support drawn by the map path; above it
+        #: "all" (see MAP_MAX_FRACTION)
+        self.map_max_fraction = MAP_MAX_FRACTION
         self._key: Any = None
         self._map: SupportMap | None = None
         self._texture: Any = None
@@ -122,7 +133,7 @@ class SupportCache:
         fraction = self._support(scene, box, key).fraction
         if fraction == 0.0:
             return "none"
-        return "all" if fraction == 1.0 else "map"
+        return "map" if fraction <= self.map_max_fraction else "all"
 
     def texture(self, scene: Scene, box: Box | None = None) -> Any:
         """The R8 texture of the support (1 = brick in the support), nearest filtering."""
