@@ -90,9 +90,15 @@ def read_ranges(ranges: SupportRanges, smap: SupportMap, inv: np.ndarray) -> np.
 
 
 @pytest.mark.gl
-def test_each_ray_gets_its_first_and_last_crossing_of_the_support(gl_ctx: Any) -> None:
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_each_ray_gets_its_first_and_last_crossing_of_the_support(
+    gl_ctx: Any, projection: str
+) -> None:
     smap = blob_map()
-    inv = np.linalg.inv(camera().view_projection(SIZE[0] / SIZE[1]))
+    cam = camera()
+    cam.projection = projection  # type: ignore[assignment]
+    cam.ortho_height = 70.0
+    inv = np.linalg.inv(cam.view_projection(SIZE[0] / SIZE[1]))
     ranges = SupportRanges(gl_ctx)
     try:
         got = read_ranges(ranges, smap, inv)

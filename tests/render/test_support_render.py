@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from voxwarp.core.camera import Camera
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.support import SupportMap, chain_support
@@ -180,3 +181,24 @@ def test_a_warp_state_gets_its_map_when_drawn_a_second_time(offscreen: Any, head
         assert r.renderer.last_support == "none"
     finally:
         r.renderer.support_maps = "auto"
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_a_camera_inside_the_support_draws_what_the_chain_draws(
+    offscreen: Any, head: Volume, projection: str
+) -> None:
+    """An eye inside the support's box (rays start inside a support brick, where the
+    per-pixel ranges cannot see an entry face): the box bounds those rays, and the image
+    stays within 1/255 of the chain at every sample."""
+    lo, hi = head.bounds
+    node = lo + np.array([4, 7, 5]) / 8.0 * (hi - lo)  # the dragged node
+    cam = Camera(center=tuple(node), distance=2.0, fov=60.0, projection=projection)
+    cam.ortho_height = 60.0
+    scene = Scene(head, mode="dvr", camera=cam, warps=[offset_warp(head, moved=True)])
+    new = draw(offscreen, scene, True)
+    assert offscreen(*SIZE).renderer.last_support == "map"
+    old = draw(offscreen, scene, False)
+    undeformed = draw(offscreen, scene.copy(warps=[]), True)
+    assert np.abs(old - undeformed).max() > 1, "the drag must show"
+    assert np.abs(new - old).max() <= 1
