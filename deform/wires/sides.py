@@ -365,17 +365,21 @@ class SidePasses(PlaneMasks):
         voxels the seams faded."""
         if not any(w.fades for w in self.wires):
             return None, 0
-        inner = np.ones(rshape, dtype=np.float32)
+        # written straight into the field's (Fortran) weight: no C-order region of ones
+        # filled first and copied over
+        weight = np.ones(shape, dtype=np.float32, order="F")
+        inner = weight[_box_slices(region_lo, rshape)]
         flat_wire = r_wire.ravel()
         known = _grow_one(swept)
         need = np.flatnonzero(known)
-        flat_u, flat_inner = r_u.reshape(-1), inner.reshape(-1)
+        flat_u = r_u.reshape(-1)
 
         def run(wi: int, chunk: np.ndarray) -> None:
             sel = chunk[flat_wire[chunk] == wi]
             if len(sel):
-                p = _region_centres(lo, h, region_lo, rshape, sel)
-                flat_inner[sel] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
+                idx = np.unravel_index(sel, rshape)
+                p = lo + (np.stack(idx, -1) + region_lo + 0.5) * h  # _region_centres
+                inner[idx] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
 
         # chunks of voxels, a few threads (numpy releases the GIL)
         jobs = [
@@ -388,10 +392,6 @@ class SidePasses(PlaneMasks):
             list(pool.map(lambda job: run(*job), jobs))
         grid = (lo + (region_lo + 0.5) * h, h)
         faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
-        if tuple(rshape) == tuple(shape):  # the region is the field (no ones to fill first)
-            return np.asfortranarray(inner), faded
-        weight = np.ones(shape, dtype=np.float32, order="F")
-        weight[_box_slices(region_lo, rshape)] = inner
         return weight, faded
 
     def _propagate(
