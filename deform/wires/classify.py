@@ -67,6 +67,27 @@ static double interp_keys(double x, __global const double *xp, __global const do
     return r;
 }
 
+/* The smooth ends' trim without a core test (sides._Trim.drop): Newton steps from the
+   stored float u, then drop a voxel at an end (u 0 or 1) farther than cap along the
+   tangent there; numpy's arithmetic, as in classify_one. */
+static int end_trimmed(const double p0, const double p1, const double p2,
+                       __global const double *P, __global const double *T, const double len,
+                       double u, const int refine_steps, const double cap) {
+    for (int step = 0; step < refine_steps; step++) {
+        long q = (long)rint_d(u * 255.0);
+        q = q < 0 ? 0 : (q > 255 ? 255 : q);
+        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
+                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
+        u = (double)q / 255.0 + z / len;
+        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
+    }
+    if (!(u <= 0.0 || u >= 1.0)) return 0;
+    const long q = (long)rint_d(u * 255.0);
+    const double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
+                     + (p2 - P[3 * q + 2]) * T[3 * q + 2];
+    return fabs(z) > cap;
+}
+
 static void classify_one(
 @PARAMS@,
     const int k, const int j, const int i)
@@ -135,7 +156,11 @@ static void classify_one(
     if (ia < 0 || ia >= ks || ib < 0 || ib >= ks) return;
     const int ends = (u <= 0.0) || (u >= 1.0);
     if (ends && !(fabs(z32) <= cap32)) return;
-    out_flag[v] = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
+    const uchar flag = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
+    out_flag[v] = flag;
+    if (flag && trim_cap[w] >= 0.0)
+        out_flag[v] = !end_trimmed(p0, p1, p2, P, T, len, (double)(float)u, refine_steps,
+                                   trim_cap[w]);
 }
 
 /* One work-item per line along the middle axis (few work-groups: PoCL pays per
@@ -181,6 +206,7 @@ _PARAMS = r"""
     const float cap32,
     const int base_side,
     const int refine_steps,
+    __global const double *trim_cap,   /* per wire: the end trim's cap (mm), < 0: none */
     __global short *out_wire,
     __global float *out_u,
     __global uchar *out_flag
@@ -227,6 +253,9 @@ class ClassifyInput:
     cap: float
     base_side: bool
     refine_steps: int
+    #: per wire, the smooth ends' trim cap (mm) of :class:`~voxwarp.deform.wires.sides._Trim`
+    #: without a core test, run in the pass on the flagged voxels; < 0 (or None): not here
+    trim: np.ndarray | None = None
 
 
 #: compiled kernel per OpenCL context, keyed by id() but kept with its context: a
@@ -294,6 +323,13 @@ def _wire_buffers(st: dict, wires: Sequence[WireGeometry]) -> list[object]:
     return [_device(st, a) for a in arrays]
 
 
+def _trim_caps(inp: ClassifyInput) -> np.ndarray:
+    """Per wire the end trim's cap in the pass (-1: none there)."""
+    if inp.trim is None:
+        return np.full(len(inp.wires), -1.0)
+    return np.asarray(inp.trim, dtype=np.float64).reshape(len(inp.wires))
+
+
 def classify(
     st: dict, nearest_buf: object, inp: ClassifyInput
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -337,6 +373,7 @@ def classify(
         np.float32(inp.cap),
         i32(1 if inp.base_side else 0),
         i32(inp.refine_steps),
+        _device(st, _trim_caps(inp)),
         *bufs,
     ]
     n0, _, n2 = inp.rshape

@@ -171,8 +171,8 @@ class SidePasses(PlaneMasks):
             flagged = self._flagged_side(job)
             return self._smooth_trim(tables, lo, h, flagged, side)
         fast = self._fast_side(job)
-        if fast is not None:
-            return self._smooth_trim(tables, lo, h, fast, side)
+        if fast is not None:  # the trims without a core test ran in the pass
+            return self._smooth_trim(tables, lo, h, fast, side, skip_device=True)
         t0 = time.perf_counter()
         region_lo, rshape, r_wire, r_u, r_near, count = self._propagate(
             seeds, tables, lo, h, shape, side
@@ -211,6 +211,7 @@ class SidePasses(PlaneMasks):
             cap=self._end_cap() + max(w.end_reach(side) for w in self.wires),
             base_side=not modified,
             refine_steps=REFINE_STEPS,
+            trim=self._device_trim_caps(side),
         )
         sampling = tuple(float(v) for v in h)
         if modified:
@@ -303,8 +304,11 @@ class SidePasses(PlaneMasks):
         h: np.ndarray,
         out: _SideResult,
         side: str,
+        skip_device: bool = False,
     ) -> _SideResult:
-        """One side's result with the bits of ``ends="smooth"`` wires as they need them.
+        """One side's result with the bits of ``ends="smooth"`` wires as they need them
+        (``skip_device``: less the trims that the OpenCL pass ran, see
+        :meth:`_device_trim_caps`).
 
         A wire that vacates nothing (:attr:`Wire.vacates` false: smooth sides, or
         ``vacated="rest"``) keeps no bit on the base side.
@@ -326,11 +330,11 @@ class SidePasses(PlaneMasks):
         wire_of = r_wire.ravel()[flat]
         flat_u = r_u.reshape(-1)
         jobs = []  # (the wire's trim, a chunk of its voxels): small temporaries
-        for wi, w in enumerate(self.wires):
+        for wi, (cap, core) in enumerate(self._trim_limits(side)):
+            if skip_device and core is None:
+                continue
             sel = flat[wire_of == wi]
-            cap = self._end_cap() + w.end_reach(side)
-            core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
-            trim = _Trim(tables[wi], side, cap, core if side == "base" and w.smooth else None)
+            trim = _Trim(tables[wi], side, cap, core)
             jobs += [(trim, sel[a : a + FLAG_CHUNK]) for a in range(0, len(sel), FLAG_CHUNK)]
 
         def dropped(job: tuple[_Trim, np.ndarray]) -> np.ndarray:
@@ -343,6 +347,26 @@ class SidePasses(PlaneMasks):
             for gone in pool.map(dropped, jobs):
                 bits.reshape(-1)[gone] = False
         return region_lo, rshape, r_wire, r_u, bits, count
+
+    def _trim_limits(self, side: str) -> list[tuple[float, float | None]]:
+        """Per wire the smooth ends' trim on ``side`` as (cap, core) of :class:`_Trim`
+        (core None: no core test, only the base side of a smooth wire has one)."""
+        out: list[tuple[float, float | None]] = []
+        for w in self.wires:
+            cap = self._end_cap() + w.end_reach(side)
+            core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
+            out.append((cap, core if side == "base" and w.smooth else None))
+        return out
+
+    def _device_trim_caps(self, side: str) -> np.ndarray | None:
+        """The trims the OpenCL pass runs on its flagged voxels (those without a core
+        test; their arithmetic is the pass's own): per wire the cap, -1 for the others;
+        None where no wire is smooth (no trim at all)."""
+        if not any(w.smooth for w in self.wires):
+            return None
+        return np.array(
+            [-1.0 if core is not None else cap for cap, core in self._trim_limits(side)]
+        )
 
     def _weights(
         self,
