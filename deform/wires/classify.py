@@ -67,12 +67,16 @@ static double interp_keys(double x, __global const double *xp, __global const do
     return r;
 }
 
-/* The smooth ends' trim without a core test (sides._Trim.drop): Newton steps from the
-   stored float u, then drop a voxel at an end (u 0 or 1) farther than cap along the
-   tangent there; numpy's arithmetic, as in classify_one. */
-static int end_trimmed(const double p0, const double p1, const double p2,
-                       __global const double *P, __global const double *T, const double len,
-                       double u, const int refine_steps, const double cap) {
+/* The smooth ends' trim (sides._Trim.drop): Newton steps from the stored float u, then
+   drop a voxel at an end (u 0 or 1) farther than cap along the tangent there, and with
+   core >= 0 (the base side of a smooth wire) one farther than core from the wire;
+   numpy's arithmetic, as in classify_one. Returns 0 (kept), 1 (dropped) or 2: the core
+   test is too close to call without numpy's hypot (x^2 + y^2 within 1e-9 of core^2,
+   relative), numpy decides. */
+static uchar end_trim(const double p0, const double p1, const double p2,
+                      __global const double *P, __global const double *T,
+                      __global const double *X, __global const double *Y, const double len,
+                      double u, const int refine_steps, const double cap, const double core) {
     for (int step = 0; step < refine_steps; step++) {
         long q = (long)rint_d(u * 255.0);
         q = q < 0 ? 0 : (q > 255 ? 255 : q);
@@ -81,11 +85,19 @@ static int end_trimmed(const double p0, const double p1, const double p2,
         u = (double)q / 255.0 + z / len;
         u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
     }
-    if (!(u <= 0.0 || u >= 1.0)) return 0;
     const long q = (long)rint_d(u * 255.0);
-    const double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
-                     + (p2 - P[3 * q + 2]) * T[3 * q + 2];
-    return fabs(z) > cap;
+    const double d0 = p0 - P[3 * q], d1 = p1 - P[3 * q + 1], d2 = p2 - P[3 * q + 2];
+    if (u <= 0.0 || u >= 1.0) {
+        const double z = (d0 * T[3 * q] + d1 * T[3 * q + 1]) + d2 * T[3 * q + 2];
+        if (fabs(z) > cap) return 1;
+    }
+    if (!(core >= 0.0)) return 0;
+    const double x = (d0 * X[3 * q] + d1 * X[3 * q + 1]) + d2 * X[3 * q + 2];
+    const double y = (d0 * Y[3 * q] + d1 * Y[3 * q + 1]) + d2 * Y[3 * q + 2];
+    const double r2 = x * x + y * y, c2 = core * core;
+    if (r2 > c2 * (1.0 + 1e-9)) return 1;
+    if (r2 < c2 * (1.0 - 1e-9)) return 0;
+    return 2;
 }
 
 static void classify_one(
@@ -158,9 +170,12 @@ static void classify_one(
     if (ends && !(fabs(z32) <= cap32)) return;
     const uchar flag = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
     out_flag[v] = flag;
-    if (flag && trim_cap[w] >= 0.0)
-        out_flag[v] = !end_trimmed(p0, p1, p2, P, T, len, (double)(float)u, refine_steps,
-                                   trim_cap[w]);
+    if (flag && trim_cap[w] >= 0.0) {
+        const uchar t = end_trim(p0, p1, p2, P, T, axis_x + (long)w * 256 * 3,
+                                 axis_y + (long)w * 256 * 3, len, (double)(float)u,
+                                 refine_steps, trim_cap[w], trim_core[w]);
+        out_flag[v] = t == 2 ? 2 : !t;
+    }
 }
 
 /* One work-item per line along the middle axis (few work-groups: PoCL pays per
@@ -207,6 +222,9 @@ _PARAMS = r"""
     const int base_side,
     const int refine_steps,
     __global const double *trim_cap,   /* per wire: the end trim's cap (mm), < 0: none */
+    __global const double *trim_core,  /* per wire: its core radius (mm), < 0: none */
+    __global const double *axis_x,     /* per wire 256 x 3: the frames' x, y axes */
+    __global const double *axis_y,
     __global short *out_wire,
     __global float *out_u,
     __global uchar *out_flag
@@ -253,8 +271,9 @@ class ClassifyInput:
     cap: float
     base_side: bool
     refine_steps: int
-    #: per wire, the smooth ends' trim cap (mm) of :class:`~voxwarp.deform.wires.sides._Trim`
-    #: without a core test, run in the pass on the flagged voxels; < 0 (or None): not here
+    #: per wire, the smooth ends' trim of :class:`~voxwarp.deform.wires.sides._Trim` run
+    #: in the pass on the flagged voxels: (cap, core) in mm, core < 0 for no core test,
+    #: cap < 0 (or None) for no trim there
     trim: np.ndarray | None = None
 
 
@@ -323,16 +342,17 @@ def _wire_buffers(st: dict, wires: Sequence[WireGeometry]) -> list[object]:
     return [_device(st, a) for a in arrays]
 
 
-def _trim_caps(inp: ClassifyInput) -> np.ndarray:
-    """Per wire the end trim's cap in the pass (-1: none there)."""
-    if inp.trim is None:
-        return np.full(len(inp.wires), -1.0)
-    return np.asarray(inp.trim, dtype=np.float64).reshape(len(inp.wires))
+def _trim_buffers(st: dict, inp: ClassifyInput) -> list[object]:
+    """The trim's per-wire caps and cores (-1: none) and the frames' x and y axes."""
+    n = len(inp.wires)
+    trim = np.full((n, 2), -1.0) if inp.trim is None else np.asarray(inp.trim, np.float64)
+    axes = [np.stack([g.frames[:, :, a] for g in inp.wires]).astype(np.float64) for a in (0, 1)]
+    return [_device(st, a) for a in (trim[:, 0].copy(), trim[:, 1].copy(), *axes)]
 
 
 def classify(
     st: dict, nearest_buf: object, inp: ClassifyInput
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Run the pass over a region whose nearest-seed indices are in ``nearest_buf``.
 
     Parameters
@@ -347,7 +367,9 @@ def classify(
     Returns
     -------
     tuple of np.ndarray
-        (wire int16, u float32, flag bool), each of shape ``inp.rshape`` (C order).
+        (wire int16, u float32, flag bool), each of shape ``inp.rshape`` (C order), and
+        the flat indices of the flagged voxels whose trim's core test the pass left to
+        numpy (set in the flags; see :attr:`ClassifyInput.trim`).
     """
     cl, queue = st["cl"], st["queue"]
     kernel = _program(st)
@@ -373,7 +395,7 @@ def classify(
         np.float32(inp.cap),
         i32(1 if inp.base_side else 0),
         i32(inp.refine_steps),
-        _device(st, _trim_caps(inp)),
+        *_trim_buffers(st, inp),
         *bufs,
     ]
     n0, _, n2 = inp.rshape
@@ -382,4 +404,9 @@ def classify(
     for host, dev in zip((out_wire, out_u, out_flag), bufs, strict=True):
         cl.enqueue_copy(queue, host, dev, is_blocking=False)
     queue.finish()
-    return out_wire, out_u, out_flag.view(bool)
+    undecided = np.zeros(0, dtype=np.int64)
+    if inp.trim is not None and np.any(np.asarray(inp.trim)[:, 1] >= 0):
+        flat = out_flag.reshape(-1)
+        undecided = np.flatnonzero(flat == 2)
+        flat[undecided] = 1
+    return out_wire, out_u, out_flag.view(bool), undecided

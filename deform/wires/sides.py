@@ -171,8 +171,9 @@ class SidePasses(PlaneMasks):
             flagged = self._flagged_side(job)
             return self._smooth_trim(tables, lo, h, flagged, side)
         fast = self._fast_side(job)
-        if fast is not None:  # the trims without a core test ran in the pass
-            return self._smooth_trim(tables, lo, h, fast, side, skip_device=True)
+        if fast is not None:  # the trims ran in the pass, but for the voxels it left over
+            *out, undecided = fast
+            return self._smooth_trim(tables, lo, h, tuple(out), side, undecided)
         t0 = time.perf_counter()
         region_lo, rshape, r_wire, r_u, r_near, count = self._propagate(
             seeds, tables, lo, h, shape, side
@@ -184,9 +185,11 @@ class SidePasses(PlaneMasks):
         out = (region_lo, rshape, r_wire, r_u, bits, count)
         return self._smooth_trim(tables, lo, h, out, side)
 
-    def _fast_side(self, job: _SideJob) -> _SideResult | None:
-        """:meth:`_side` in one OpenCL pass; None where OpenCL (with double precision)
-        is unavailable, not asked for, or fails (the numpy path then runs)."""
+    def _fast_side(self, job: _SideJob) -> tuple[Any, ...] | None:
+        """:meth:`_side` in one OpenCL pass, with the smooth ends' trim, and the flat
+        indices of the voxels whose trim the pass left to numpy; None where OpenCL (with
+        double precision) is unavailable, not asked for, or fails (the numpy path then
+        runs)."""
         seeds, tables, grown, lo, h, shape, side, timings = job.parts()
         if self.backend not in ("auto", "opencl") or not self.classify_on_device():
             return None
@@ -197,6 +200,7 @@ class SidePasses(PlaneMasks):
         order = np.argsort(flat, kind="stable")
         modified = side == "modified"
         geoms = self._device_geometries(tables, grown, h, side)
+        trims = self._device_trims(side)
         inp = ClassifyInput(
             seed_idx=flat[order],
             seed_wire=s_wire[order],
@@ -211,20 +215,20 @@ class SidePasses(PlaneMasks):
             cap=self._end_cap() + max(w.end_reach(side) for w in self.wires),
             base_side=not modified,
             refine_steps=REFINE_STEPS,
-            trim=self._device_trim_caps(side),
+            trim=trims,
         )
         sampling = tuple(float(v) for v in h)
         if modified:
             self.propagation_input = (grid, sampling)
         split: list[float] = []
 
-        def use(st: dict[str, Any], buf: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        def use(st: dict[str, Any], buf: Any) -> tuple[np.ndarray, ...]:
             st["queue"].finish()
             split.append(time.perf_counter())
             return classify(st, buf, inp)
 
         try:
-            r_wire, r_u, bits = prop.on_device_nearest(grid, sampling, use)
+            r_wire, r_u, bits, undecided = prop.on_device_nearest(grid, sampling, use)
         except (prop._opencl_state()["cl"].Error, MemoryError) as exc:  # e.g. out of memory
             if self.backend == "opencl":
                 raise WarpError(
@@ -234,7 +238,8 @@ class SidePasses(PlaneMasks):
             return None
         timings["propagate"] += split[0] - t0
         timings["flags"] += time.perf_counter() - split[0]
-        return c_lo, rshape, r_wire, r_u, bits, len(flat)
+        # no trims in the pass: numpy trims all flagged voxels (if any wire is smooth)
+        return c_lo, rshape, r_wire, r_u, bits, len(flat), None if trims is None else undecided
 
     def _region(
         self,
@@ -304,11 +309,11 @@ class SidePasses(PlaneMasks):
         h: np.ndarray,
         out: _SideResult,
         side: str,
-        skip_device: bool = False,
+        undecided: np.ndarray | None = None,
     ) -> _SideResult:
         """One side's result with the bits of ``ends="smooth"`` wires as they need them
-        (``skip_device``: less the trims that the OpenCL pass ran, see
-        :meth:`_device_trim_caps`).
+        (``undecided``: the OpenCL pass trimmed all but these flat indices, see
+        :meth:`_device_trims`).
 
         A wire that vacates nothing (:attr:`Wire.vacates` false: smooth sides, or
         ``vacated="rest"``) keeps no bit on the base side.
@@ -326,13 +331,11 @@ class SidePasses(PlaneMasks):
                     bits &= r_wire != wi
         if not any(w.smooth for w in self.wires):
             return out
-        flat = np.flatnonzero(bits)
+        flat = np.flatnonzero(bits) if undecided is None else undecided[bits.ravel()[undecided]]
         wire_of = r_wire.ravel()[flat]
         flat_u = r_u.reshape(-1)
         jobs = []  # (the wire's trim, a chunk of its voxels): small temporaries
         for wi, (cap, core) in enumerate(self._trim_limits(side)):
-            if skip_device and core is None:
-                continue
             sel = flat[wire_of == wi]
             trim = _Trim(tables[wi], side, cap, core)
             jobs += [(trim, sel[a : a + FLAG_CHUNK]) for a in range(0, len(sel), FLAG_CHUNK)]
@@ -358,15 +361,14 @@ class SidePasses(PlaneMasks):
             out.append((cap, core if side == "base" and w.smooth else None))
         return out
 
-    def _device_trim_caps(self, side: str) -> np.ndarray | None:
-        """The trims the OpenCL pass runs on its flagged voxels (those without a core
-        test; their arithmetic is the pass's own): per wire the cap, -1 for the others;
-        None where no wire is smooth (no trim at all)."""
+    def _device_trims(self, side: str) -> np.ndarray | None:
+        """The smooth ends' trims for the OpenCL pass (:attr:`ClassifyInput.trim`):
+        per wire (cap, core), core -1 where there is no core test; None where no wire
+        is smooth (no trim at all)."""
         if not any(w.smooth for w in self.wires):
             return None
-        return np.array(
-            [-1.0 if core is not None else cap for cap, core in self._trim_limits(side)]
-        )
+        limits = self._trim_limits(side)
+        return np.array([(cap, -1.0 if core is None else core) for cap, core in limits])
 
     def _weights(
         self,
