@@ -12,7 +12,12 @@ full-region float64 temporary per operation; here one OpenCL work-item per regio
 reads the nearest-seed index straight from the propagation's device buffer (never
 copied to the host), finds that seed's (wire, u) by a binary search of the sorted seed
 list, and writes the three results the field needs: wire id (int16), u (float32) and
-the mask bit (uint8).
+the mask bit (uint8). Where a wire has smooth ends, the pass also runs the ends' trim
+(:class:`voxwarp.deform.wires.sides._Trim`) on the voxels it flags, instead of a second
+numpy pass over them: the Newton steps again from the stored float u, the end test along
+the tangent and, on the base side, the core test ``hypot(x, y) > core``, decided only
+where ``x^2 + y^2`` is clearly off ``core^2`` (the voxels too close to call go back to
+numpy's trim, whose hypot decides them).
 
 Exactness: the kernel repeats the reference's arithmetic operation by operation, in
 the same precision (float64 where numpy computes in float64, float32 where it computes
