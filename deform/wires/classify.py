@@ -12,7 +12,12 @@ full-region float64 temporary per operation; here one OpenCL work-item per regio
 reads the nearest-seed index straight from the propagation's device buffer (never
 copied to the host), finds that seed's (wire, u) by a binary search of the sorted seed
 list, and writes the three results the field needs: wire id (int16), u (float32) and
-the mask bit (uint8).
+the mask bit (uint8). Where a wire has smooth ends, the pass also runs the ends' trim
+(:class:`voxwarp.deform.wires.sides._Trim`) on the voxels it flags, instead of a second
+numpy pass over them: the Newton steps again from the stored float u, the end test along
+the tangent and, on the base side, the core test ``hypot(x, y) > core``, decided only
+where ``x^2 + y^2`` is clearly off ``core^2`` (the voxels too close to call go back to
+numpy's trim, whose hypot decides them).
 
 Exactness: the kernel repeats the reference's arithmetic operation by operation, in
 the same precision (float64 where numpy computes in float64, float32 where it computes
@@ -65,6 +70,39 @@ static double interp_keys(double x, __global const double *xp, __global const do
         if (isnan(r) && fp[j] == fp[j + 1]) r = fp[j];
     }
     return r;
+}
+
+/* The smooth ends' trim (sides._Trim.drop): Newton steps from the stored float u, then
+   drop a voxel at an end (u 0 or 1) farther than cap along the tangent there, and with
+   core >= 0 (the base side of a smooth wire) one farther than core from the wire;
+   numpy's arithmetic, as in classify_one. Returns 0 (kept), 1 (dropped) or 2: the core
+   test is too close to call without numpy's hypot (x^2 + y^2 within 1e-9 of core^2,
+   relative), numpy decides. */
+static uchar end_trim(const double p0, const double p1, const double p2,
+                      __global const double *P, __global const double *T,
+                      __global const double *X, __global const double *Y, const double len,
+                      double u, const int refine_steps, const double cap, const double core) {
+    for (int step = 0; step < refine_steps; step++) {
+        long q = (long)rint_d(u * 255.0);
+        q = q < 0 ? 0 : (q > 255 ? 255 : q);
+        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
+                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
+        u = (double)q / 255.0 + z / len;
+        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
+    }
+    const long q = (long)rint_d(u * 255.0);
+    const double d0 = p0 - P[3 * q], d1 = p1 - P[3 * q + 1], d2 = p2 - P[3 * q + 2];
+    if (u <= 0.0 || u >= 1.0) {
+        const double z = (d0 * T[3 * q] + d1 * T[3 * q + 1]) + d2 * T[3 * q + 2];
+        if (fabs(z) > cap) return 1;
+    }
+    if (!(core >= 0.0)) return 0;
+    const double x = (d0 * X[3 * q] + d1 * X[3 * q + 1]) + d2 * X[3 * q + 2];
+    const double y = (d0 * Y[3 * q] + d1 * Y[3 * q + 1]) + d2 * Y[3 * q + 2];
+    const double r2 = x * x + y * y, c2 = core * core;
+    if (r2 > c2 * (1.0 + 1e-9)) return 1;
+    if (r2 < c2 * (1.0 - 1e-9)) return 0;
+    return 2;
 }
 
 static void classify_one(
@@ -135,7 +173,14 @@ static void classify_one(
     if (ia < 0 || ia >= ks || ib < 0 || ib >= ks) return;
     const int ends = (u <= 0.0) || (u >= 1.0);
     if (ends && !(fabs(z32) <= cap32)) return;
-    out_flag[v] = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
+    const uchar flag = masks[mask_off[w] + (plane * ks + ia) * ks + ib];
+    out_flag[v] = flag;
+    if (flag && trim_cap[w] >= 0.0) {
+        const uchar t = end_trim(p0, p1, p2, P, T, axis_x + (long)w * 256 * 3,
+                                 axis_y + (long)w * 256 * 3, len, (double)(float)u,
+                                 refine_steps, trim_cap[w], trim_core[w]);
+        out_flag[v] = t == 2 ? 2 : !t;
+    }
 }
 
 /* One work-item per line along the middle axis (few work-groups: PoCL pays per
@@ -181,6 +226,10 @@ _PARAMS = r"""
     const float cap32,
     const int base_side,
     const int refine_steps,
+    __global const double *trim_cap,   /* per wire: the end trim's cap (mm), < 0: none */
+    __global const double *trim_core,  /* per wire: its core radius (mm), < 0: none */
+    __global const double *axis_x,     /* per wire 256 x 3: the frames' x, y axes */
+    __global const double *axis_y,
     __global short *out_wire,
     __global float *out_u,
     __global uchar *out_flag
@@ -227,6 +276,10 @@ class ClassifyInput:
     cap: float
     base_side: bool
     refine_steps: int
+    #: per wire, the smooth ends' trim of :class:`~voxwarp.deform.wires.sides._Trim` run
+    #: in the pass on the flagged voxels: (cap, core) in mm, core < 0 for no core test,
+    #: cap < 0 (or None) for no trim there
+    trim: np.ndarray | None = None
 
 
 #: compiled kernel per OpenCL context, keyed by id() but kept with its context: a
@@ -294,9 +347,17 @@ def _wire_buffers(st: dict, wires: Sequence[WireGeometry]) -> list[object]:
     return [_device(st, a) for a in arrays]
 
 
+def _trim_buffers(st: dict, inp: ClassifyInput) -> list[object]:
+    """The trim's per-wire caps and cores (-1: none) and the frames' x and y axes."""
+    n = len(inp.wires)
+    trim = np.full((n, 2), -1.0) if inp.trim is None else np.asarray(inp.trim, np.float64)
+    axes = [np.stack([g.frames[:, :, a] for g in inp.wires]).astype(np.float64) for a in (0, 1)]
+    return [_device(st, a) for a in (trim[:, 0].copy(), trim[:, 1].copy(), *axes)]
+
+
 def classify(
     st: dict, nearest_buf: object, inp: ClassifyInput
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Run the pass over a region whose nearest-seed indices are in ``nearest_buf``.
 
     Parameters
@@ -311,7 +372,9 @@ def classify(
     Returns
     -------
     tuple of np.ndarray
-        (wire int16, u float32, flag bool), each of shape ``inp.rshape`` (C order).
+        (wire int16, u float32, flag bool), each of shape ``inp.rshape`` (C order), and
+        the flat indices of the flagged voxels whose trim's core test the pass left to
+        numpy (set in the flags; see :attr:`ClassifyInput.trim`).
     """
     cl, queue = st["cl"], st["queue"]
     kernel = _program(st)
@@ -337,6 +400,7 @@ def classify(
         np.float32(inp.cap),
         i32(1 if inp.base_side else 0),
         i32(inp.refine_steps),
+        *_trim_buffers(st, inp),
         *bufs,
     ]
     n0, _, n2 = inp.rshape
@@ -345,4 +409,9 @@ def classify(
     for host, dev in zip((out_wire, out_u, out_flag), bufs, strict=True):
         cl.enqueue_copy(queue, host, dev, is_blocking=False)
     queue.finish()
-    return out_wire, out_u, out_flag.view(bool)
+    undecided = np.zeros(0, dtype=np.int64)
+    if inp.trim is not None and np.any(np.asarray(inp.trim)[:, 1] >= 0):
+        flat = out_flag.reshape(-1)
+        undecided = np.flatnonzero(flat == 2)
+        flat[undecided] = 1
+    return out_wire, out_u, out_flag.view(bool), undecided

@@ -171,8 +171,9 @@ class SidePasses(PlaneMasks):
             flagged = self._flagged_side(job)
             return self._smooth_trim(tables, lo, h, flagged, side)
         fast = self._fast_side(job)
-        if fast is not None:
-            return self._smooth_trim(tables, lo, h, fast, side)
+        if fast is not None:  # the trims ran in the pass, but for the voxels it left over
+            *out, undecided = fast
+            return self._smooth_trim(tables, lo, h, tuple(out), side, undecided)
         t0 = time.perf_counter()
         region_lo, rshape, r_wire, r_u, r_near, count = self._propagate(
             seeds, tables, lo, h, shape, side
@@ -184,9 +185,11 @@ class SidePasses(PlaneMasks):
         out = (region_lo, rshape, r_wire, r_u, bits, count)
         return self._smooth_trim(tables, lo, h, out, side)
 
-    def _fast_side(self, job: _SideJob) -> _SideResult | None:
-        """:meth:`_side` in one OpenCL pass; None where OpenCL (with double precision)
-        is unavailable, not asked for, or fails (the numpy path then runs)."""
+    def _fast_side(self, job: _SideJob) -> tuple[Any, ...] | None:
+        """:meth:`_side` in one OpenCL pass, with the smooth ends' trim, and the flat
+        indices of the voxels whose trim the pass left to numpy; None where OpenCL (with
+        double precision) is unavailable, not asked for, or fails (the numpy path then
+        runs)."""
         seeds, tables, grown, lo, h, shape, side, timings = job.parts()
         if self.backend not in ("auto", "opencl") or not self.classify_on_device():
             return None
@@ -197,6 +200,7 @@ class SidePasses(PlaneMasks):
         order = np.argsort(flat, kind="stable")
         modified = side == "modified"
         geoms = self._device_geometries(tables, grown, h, side)
+        trims = self._device_trims(side)
         inp = ClassifyInput(
             seed_idx=flat[order],
             seed_wire=s_wire[order],
@@ -211,19 +215,20 @@ class SidePasses(PlaneMasks):
             cap=self._end_cap() + max(w.end_reach(side) for w in self.wires),
             base_side=not modified,
             refine_steps=REFINE_STEPS,
+            trim=trims,
         )
         sampling = tuple(float(v) for v in h)
         if modified:
             self.propagation_input = (grid, sampling)
         split: list[float] = []
 
-        def use(st: dict[str, Any], buf: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        def use(st: dict[str, Any], buf: Any) -> tuple[np.ndarray, ...]:
             st["queue"].finish()
             split.append(time.perf_counter())
             return classify(st, buf, inp)
 
         try:
-            r_wire, r_u, bits = prop.on_device_nearest(grid, sampling, use)
+            r_wire, r_u, bits, undecided = prop.on_device_nearest(grid, sampling, use)
         except (prop._opencl_state()["cl"].Error, MemoryError) as exc:  # e.g. out of memory
             if self.backend == "opencl":
                 raise WarpError(
@@ -233,7 +238,8 @@ class SidePasses(PlaneMasks):
             return None
         timings["propagate"] += split[0] - t0
         timings["flags"] += time.perf_counter() - split[0]
-        return c_lo, rshape, r_wire, r_u, bits, len(flat)
+        # no trims in the pass: numpy trims all flagged voxels (if any wire is smooth)
+        return c_lo, rshape, r_wire, r_u, bits, len(flat), None if trims is None else undecided
 
     def _region(
         self,
@@ -303,8 +309,11 @@ class SidePasses(PlaneMasks):
         h: np.ndarray,
         out: _SideResult,
         side: str,
+        undecided: np.ndarray | None = None,
     ) -> _SideResult:
-        """One side's result with the bits of ``ends="smooth"`` wires as they need them.
+        """One side's result with the bits of ``ends="smooth"`` wires as they need them
+        (``undecided``: the OpenCL pass trimmed all but these flat indices, see
+        :meth:`_device_trims`).
 
         A wire that vacates nothing (:attr:`Wire.vacates` false: smooth sides, or
         ``vacated="rest"``) keeps no bit on the base side.
@@ -322,15 +331,13 @@ class SidePasses(PlaneMasks):
                     bits &= r_wire != wi
         if not any(w.smooth for w in self.wires):
             return out
-        flat = np.flatnonzero(bits)
+        flat = np.flatnonzero(bits) if undecided is None else undecided[bits.ravel()[undecided]]
         wire_of = r_wire.ravel()[flat]
         flat_u = r_u.reshape(-1)
         jobs = []  # (the wire's trim, a chunk of its voxels): small temporaries
-        for wi, w in enumerate(self.wires):
+        for wi, (cap, core) in enumerate(self._trim_limits(side)):
             sel = flat[wire_of == wi]
-            cap = self._end_cap() + w.end_reach(side)
-            core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
-            trim = _Trim(tables[wi], side, cap, core if side == "base" and w.smooth else None)
+            trim = _Trim(tables[wi], side, cap, core)
             jobs += [(trim, sel[a : a + FLAG_CHUNK]) for a in range(0, len(sel), FLAG_CHUNK)]
 
         def dropped(job: tuple[_Trim, np.ndarray]) -> np.ndarray:
@@ -343,6 +350,25 @@ class SidePasses(PlaneMasks):
             for gone in pool.map(dropped, jobs):
                 bits.reshape(-1)[gone] = False
         return region_lo, rshape, r_wire, r_u, bits, count
+
+    def _trim_limits(self, side: str) -> list[tuple[float, float | None]]:
+        """Per wire the smooth ends' trim on ``side`` as (cap, core) of :class:`_Trim`
+        (core None: no core test, only the base side of a smooth wire has one)."""
+        out: list[tuple[float, float | None]] = []
+        for w in self.wires:
+            cap = self._end_cap() + w.end_reach(side)
+            core = (1.0 + 0.5 * RADIAL_FADE) * w.radius + self._end_cap()
+            out.append((cap, core if side == "base" and w.smooth else None))
+        return out
+
+    def _device_trims(self, side: str) -> np.ndarray | None:
+        """The smooth ends' trims for the OpenCL pass (:attr:`ClassifyInput.trim`):
+        per wire (cap, core), core -1 where there is no core test; None where no wire
+        is smooth (no trim at all)."""
+        if not any(w.smooth for w in self.wires):
+            return None
+        limits = self._trim_limits(side)
+        return np.array([(cap, -1.0 if core is None else core) for cap, core in limits])
 
     def _weights(
         self,
@@ -365,17 +391,21 @@ class SidePasses(PlaneMasks):
         voxels the seams faded."""
         if not any(w.fades for w in self.wires):
             return None, 0
-        inner = np.ones(rshape, dtype=np.float32)
+        # written straight into the field's (Fortran) weight: no C-order region of ones
+        # filled first and copied over
+        weight = np.ones(shape, dtype=np.float32, order="F")
+        inner = weight[_box_slices(region_lo, rshape)]
         flat_wire = r_wire.ravel()
         known = _grow_one(swept)
         need = np.flatnonzero(known)
-        flat_u, flat_inner = r_u.reshape(-1), inner.reshape(-1)
+        flat_u = r_u.reshape(-1)
 
         def run(wi: int, chunk: np.ndarray) -> None:
             sel = chunk[flat_wire[chunk] == wi]
             if len(sel):
-                p = _region_centres(lo, h, region_lo, rshape, sel)
-                flat_inner[sel] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
+                idx = np.unravel_index(sel, rshape)
+                p = lo + (np.stack(idx, -1) + region_lo + 0.5) * h  # _region_centres
+                inner[idx] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
 
         # chunks of voxels, a few threads (numpy releases the GIL)
         jobs = [
@@ -388,10 +418,6 @@ class SidePasses(PlaneMasks):
             list(pool.map(lambda job: run(*job), jobs))
         grid = (lo + (region_lo + 0.5) * h, h)
         faded = fade_seams(inner, known.reshape(rshape), r_wire, r_u, grid, tables, self.wires)
-        if tuple(rshape) == tuple(shape):  # the region is the field (no ones to fill first)
-            return np.asfortranarray(inner), faded
-        weight = np.ones(shape, dtype=np.float32, order="F")
-        weight[_box_slices(region_lo, rshape)] = inner
         return weight, faded
 
     def _propagate(

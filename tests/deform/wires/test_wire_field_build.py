@@ -209,3 +209,33 @@ def test_grow_one_equals_the_maximum_filter() -> None:
             bits[tuple(rng.integers(0, n) for n in bits.shape)] = True
         want = ndimage.maximum_filter(bits, size=3, mode="constant")
         np.testing.assert_array_equal(_grow_one(bits), want)
+
+
+def test_trim_in_the_opencl_pass_equals_numpys(monkeypatch: Any) -> None:
+    # oracle: the same build with the smooth ends' trim left to numpy (sides._Trim) on
+    # the pass's flags; the first wire's radius (4 mm) is below its rod's (5 mm), so the
+    # base side's core test drops voxels (without the trim more are vacated)
+    if not opencl_available():
+        pytest.skip("no OpenCL platform")
+    from voxwarp.deform.wires import sides
+
+    first, second = smooth_variant("smoothends")
+    thin = [Wire.from_dict({**first.to_dict(), "radius": 4.0}), second]
+
+    def build(trims_on_device: bool, trim: bool = True) -> WireDeformer:
+        with monkeypatch.context() as m:
+            if not trims_on_device:
+                m.setattr(sides.SidePasses, "_device_trims", lambda self, side: None)
+            if not trim:
+                m.setattr(sides.SidePasses, "_device_trims", lambda self, side: None)
+                m.setattr(sides.SidePasses, "_smooth_trim", lambda self, *a, **k: a[3][:6])
+            wd = WireDeformer(volume(), thin, field_scale=1, backend="opencl")
+            if not wd.classify_on_device():
+                pytest.skip("no OpenCL device with double precision")
+            wd.build()
+        return wd
+
+    fast, slow, untrimmed = build(True), build(False), build(False, trim=False)
+    for name in ("state", "t", "weight"):
+        np.testing.assert_array_equal(getattr(fast.field, name), getattr(slow.field, name))
+    assert untrimmed.stats.vacated > fast.stats.vacated == slow.stats.vacated
