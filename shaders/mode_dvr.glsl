@@ -1,6 +1,6 @@
 // Direct volume rendering: emission-absorption, composited front to back with
 // premultiplied, sample-distance-corrected colours from the transfer function table.
-#ifndef SHADING
+#if !defined(SHADING) && !defined(SAMPLES_PER_CHECK)
 // straight rays check the skip map every second sample (raycast.frag.glsl): a sample
 // in an invisible cell adds exactly nothing, and an unshaded one costs about two checks
 #define SAMPLES_PER_CHECK 2

@@ -231,11 +231,13 @@ vec3 detj_tint(vec3 rgb, float a, float t) { return rgb; }
 
 #include "mode.glsl"
 
-// SAMPLES_PER_CHECK (the mode may set it; 1 by default): lattice samples a straight ray
-// with cell maps takes per skip-map check (the main loop below). On a CPU rasteriser
-// every iteration pays for the check and its jump, taken or not: where a sample is
-// cheap (unshaded dvr), checking every second one saves more than the extra samples
-// in empty space cost; where it is dear (shading, iso's bisection), it does not.
+// SAMPLES_PER_CHECK (1 to 4; the mode may set it, default 1): lattice samples a
+// straight ray with cell maps takes per skip-map check (the main loop below). On a CPU
+// rasteriser every iteration pays for the check and its jump, taken or not, and for
+// every sample in it, needed or not: where a sample is cheap (unshaded dvr), checking
+// every second one saves more than the samples it adds in empty space and at the
+// ray's end cost; where it is dear (shading, iso's bisection), it does not
+// (docs/benchmarks.md, "Fewer skip-map fetches per straight sample").
 #ifndef SAMPLES_PER_CHECK
 #define SAMPLES_PER_CHECK 1
 #endif
@@ -554,6 +556,14 @@ void main() {
         if (straight_sample(s, k, t0, j)) break;
         ++k;
 #if SAMPLES_PER_CHECK > 1
+        if (k >= n || straight_sample(s, k, t0, j)) break;
+        ++k;
+#endif
+#if SAMPLES_PER_CHECK > 2
+        if (k >= n || straight_sample(s, k, t0, j)) break;
+        ++k;
+#endif
+#if SAMPLES_PER_CHECK > 3
         if (k >= n || straight_sample(s, k, t0, j)) break;
         ++k;
 #endif
