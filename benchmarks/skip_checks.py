@@ -2,43 +2,28 @@
 
 A lab study behind docs/benchmarks.md, section 'Fewer skip-map fetches per straight
 sample'. The undeformed 512² frame of each scan (``--volumes``; the bench camera, the
-scan's suggested transfer function) is drawn by programs that differ only in
-``SAMPLES_PER_CHECK`` (``--per-check``, 1 to 4: lattice samples a straight ray with cell
-maps takes per skip-map check; 1 is the schedule before, one check per sample),
-interleaved frame by frame in one process; the table gives their medians and ratios
-to the first value listed. Every program must draw the same image byte for byte (a
-sample in an invisible cell adds exactly nothing): a difference raises.
+scan's suggested transfer function) is drawn by renderers that differ only in
+``samples_per_check`` (``--per-check``, 1 to 4: lattice samples a straight ray with cell
+maps takes per skip-map check, :mod:`voxwarp.render.skipping.checks`; 1 is the schedule
+before, one check per sample), interleaved frame by frame in one process; the table
+gives their medians and ratios to the first value listed. Every schedule must draw the
+same image byte for byte (a sample in an invisible cell adds exactly nothing): a
+difference raises.
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from voxwarp import shaders
 from voxwarp.bench.render import bench_camera
 from voxwarp.io.samples import load_sample, suggested_transfer_function
 from voxwarp.render.offscreen import OffscreenRenderer
 from voxwarp.scene import Scene
-
-#: SAMPLES_PER_CHECK of the programs being built (None: the mode's own choice)
-_state: dict[str, int | None] = {"per_check": None}
-
-
-def _with_defines(original: Callable[[str, list[str]], str]) -> Callable[[str, list[str]], str]:
-    """``shaders.with_defines`` that adds ``#define SAMPLES_PER_CHECK n`` to raycast programs."""
-
-    def edit(src: str, defines: list[str]) -> str:
-        n = _state["per_check"]
-        if n is not None and "SAMPLES_PER_CHECK" in src:
-            defines = [*defines, f"#define SAMPLES_PER_CHECK {n}"]
-        return original(src, defines)
-
-    return edit
 
 
 def _load() -> str:
@@ -64,7 +49,7 @@ def measure(
         try:
             images: dict[int, Any] = {}
             for n, r in rs.items():
-                _state["per_check"] = n
+                r.renderer.samples_per_check = n
                 r.render(scene)  # compiles; cell maps from the second draw on
                 images[n] = np.asarray(r.render(scene))
                 if r.renderer.last_skip_kind != "cells":
@@ -72,10 +57,8 @@ def measure(
             times: dict[int, list[float]] = {n: [] for n in rs}
             for _ in range(frames):
                 for n, r in rs.items():
-                    _state["per_check"] = n
                     times[n] += r.time_frames(scene, frames=1, warmup=0)
         finally:
-            _state["per_check"] = None
             for r in rs.values():
                 r.release()
     first = per_check[0]
@@ -100,7 +83,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     per_check = [int(v) for v in args.per_check.split(",")]
     if not per_check or any(not 1 <= n <= 4 for n in per_check):
         p.error(f"--per-check takes values 1 to 4; got {args.per_check}")
-    shaders.with_defines = _with_defines(shaders.with_defines)
     print(f"load average before: {_load()}")
     cols = " | ".join(f"{n}/check ms" for n in per_check)
     ratios = " | ".join(f"{n} vs {per_check[0]}" for n in per_check[1:])

@@ -1,10 +1,5 @@
 // Direct volume rendering: emission-absorption, composited front to back with
 // premultiplied, sample-distance-corrected colours from the transfer function table.
-#if !defined(SHADING) && !defined(SAMPLES_PER_CHECK)
-// straight rays check the skip map every second sample (raycast.frag.glsl): a sample
-// in an invisible cell adds exactly nothing, and an unshaded one costs about two checks
-#define SAMPLES_PER_CHECK 2
-#endif
 struct State { vec4 acc; };
 void mode_init(inout State s) { s.acc = vec4(0.0); }
 // the transfer function's visibility is in the static skip map

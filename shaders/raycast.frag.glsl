@@ -231,13 +231,14 @@ vec3 detj_tint(vec3 rgb, float a, float t) { return rgb; }
 
 #include "mode.glsl"
 
-// SAMPLES_PER_CHECK (1 to 4; the mode may set it, default 1): lattice samples a
-// straight ray with cell maps takes per skip-map check (the main loop below). On a CPU
-// rasteriser every iteration pays for the check and its jump, taken or not, and for
-// every sample in it, needed or not: where a sample is cheap (unshaded dvr), checking
-// every second one saves more than the samples it adds in empty space and at the
-// ray's end cost; where it is dear (shading, iso's bisection), it does not
-// (docs/benchmarks.md, "Fewer skip-map fetches per straight sample").
+// SAMPLES_PER_CHECK (1 to 4, default 1; the renderer's choice,
+// app/render/skipping/checks.py): lattice samples a straight ray with cell maps takes
+// per skip-map check (the main loop below). On a CPU rasteriser every iteration pays
+// for the check and its jump, taken or not, and for every sample in it, needed or not:
+// where a sample is cheap (unshaded dvr), checking every second one saves more than
+// the samples it adds in empty space cost; where it is dear (shading, iso's
+// bisection), it does not (docs/benchmarks.md, "Fewer skip-map fetches per straight
+// sample").
 #ifndef SAMPLES_PER_CHECK
 #define SAMPLES_PER_CHECK 1
 #endif
