@@ -80,7 +80,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--per-check", default="1,2", help="SAMPLES_PER_CHECK values, 1 to 4")
     p.add_argument("--frames", type=int, default=7, help="timed frames per program")
     args = p.parse_args(argv)
-    per_check = [int(v) for v in args.per_check.split(",")]
+    try:
+        per_check = [int(v) for v in args.per_check.split(",")]
+    except ValueError:
+        per_check = []
     if not per_check or any(not 1 <= n <= 4 for n in per_check):
         p.error(f"--per-check takes values 1 to 4; got {args.per_check}")
     print(f"load average before: {_load()}")
