@@ -55,9 +55,12 @@ def defines(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     return seen
 
 
-def _render(ctx: Any, scene: Scene, n: int | str, skipping: bool = True) -> np.ndarray:
+def _render(
+    ctx: Any, scene: Scene, n: int | str, skipping: bool = True, coarse: str = "auto"
+) -> np.ndarray:
     with OffscreenRenderer(56, 48, ctx=ctx, dtype="f4") as r:
         r.renderer.empty_space_skipping = skipping
+        r.renderer.coarse_cell_maps = coarse
         r.renderer.samples_per_check = n
         r.render(scene)  # small volumes get cell maps on the first draw; to be sure
         image = np.asarray(r.render(scene))
@@ -131,4 +134,13 @@ def test_fewer_checks_match_no_skipping(gl_ctx: Any, defines: list[str]) -> None
     plain = _render(gl_ctx, scene, "auto", skipping=False)
     assert not any("SAMPLES_PER_CHECK" in d for d in defines)  # no cell maps: no checks
     assert np.abs(_render(gl_ctx, scene, 2) - plain).max() <= 1 / 255
+    assert _drawn_with(defines, 2)
+
+
+def test_fewer_checks_on_coarse_maps_draw_the_same_image(gl_ctx: Any, defines: list[str]) -> None:
+    # big volumes' maps of 2³ cells (COARSE_CELLS): another cell_skip, the same loop
+    scene = _scene(SOFT, (30.0, 20.0), True)
+    one = _render(gl_ctx, scene, 1, coarse="always")
+    assert np.array_equal(_render(gl_ctx, scene, 2, coarse="always"), one)
+    assert any(d.startswith("#define COARSE_CELLS") for d in defines)
     assert _drawn_with(defines, 2)
