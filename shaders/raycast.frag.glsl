@@ -16,7 +16,8 @@
 //   the same sample lattice, so skipping never changes the image. With CELL_SKIP
 //   (dvr, iso, flm) the map is kept per trilinear cell instead of per block, and per
 //   ray-direction octant: the cube a ray may jump through starts at its cell and
-//   extends ahead of it (app/render/skipping/maps.py). One nearest fetch per sample.
+//   extends ahead of it (app/render/skipping/maps.py). One nearest fetch per sample
+//   (or per SAMPLES_PER_CHECK samples, app/render/skipping/checks.py).
 // * otherwise: each sample goes through warp_chain(p). When every warp bounds its
 //   displacement (and the mode is dvr, iso or flm), CELL_SKIP applies in *deformed*
 //   space: the ray walks octant skip maps of the original cell visibility dilated by
