@@ -16,7 +16,8 @@
 //   the same sample lattice, so skipping never changes the image. With CELL_SKIP
 //   (dvr, iso, flm) the map is kept per trilinear cell instead of per block, and per
 //   ray-direction octant: the cube a ray may jump through starts at its cell and
-//   extends ahead of it (app/render/skipping/maps.py). One nearest fetch per sample.
+//   extends ahead of it (app/render/skipping/maps.py). One nearest fetch per sample
+//   (or per SAMPLES_PER_CHECK samples, app/render/skipping/checks.py).
 // * otherwise: each sample goes through warp_chain(p). When every warp bounds its
 //   displacement (and the mode is dvr, iso or flm), CELL_SKIP applies in *deformed*
 //   space: the ray walks octant skip maps of the original cell visibility dilated by
@@ -235,6 +236,18 @@ vec3 detj_tint(vec3 rgb, float a, float t) { return rgb; }
 
 #include "mode.glsl"
 
+// SAMPLES_PER_CHECK (1 to 4, default 1; the renderer's choice,
+// app/render/skipping/checks.py): lattice samples a straight ray with cell maps takes
+// per skip-map check (the main loop below). On a CPU rasteriser every iteration pays
+// for the check and its jump, taken or not, and for every sample in it, needed or not:
+// where a sample is cheap (unshaded dvr), checking every second one saves more than
+// the samples it adds in empty space cost; where it is dear (shading, iso's
+// bisection), it does not (docs/benchmarks.md, "Fewer skip-map fetches per straight
+// sample").
+#ifndef SAMPLES_PER_CHECK
+#define SAMPLES_PER_CHECK 1
+#endif
+
 #ifdef LINEAR_PATH
 // Ray parameter where the ray leaves the cube of (2r+1)³ grid units centred on `unit`
 // (grid units of `size` texels, the grid shifted by `offset` texels).
@@ -242,6 +255,15 @@ float cube_exit(vec3 unit, float r, float size, float offset, vec3 face, vec3 in
     vec3 bound = (unit + face + (2.0 * face - 1.0) * r) * size + offset;
     vec3 te = (bound - g_u0) * inv_du;
     return min(min(te.x, te.y), te.z);
+}
+#endif
+
+#ifdef LINEAR_PATH
+// Lattice sample k of a straight ray, without a skip check; true when the ray is done.
+bool straight_sample(inout State s, int k, float t0, float j) {
+    float t = t0 + (float(k) + j) * u_step;
+    vec3 u = texel_at(t);
+    return mode_sample(s, scene_value(u, t), u, t);
 }
 #endif
 
@@ -524,7 +546,39 @@ void main() {
     finished = march_cells(s, k, kio.x, n, t0, j, inv_du, exit_offset, exit_widen, true)
         || march_cells(s, k, kio.y, n, t0, j, inv_du, exit_offset, exit_widen, false)
         || march_cells(s, k, n, n, t0, j, inv_du, exit_offset, exit_widen, true);
+#elif defined(LINEAR_PATH)
+    // Straight rays: one skip-map check per SAMPLES_PER_CHECK lattice samples. The
+    // unchecked samples keep the lattice; one that lies in an invisible cell adds
+    // exactly nothing (zero opacity, below the isovalue/threshold), so the image stays
+    // the same bit for bit; early termination is still tested after every sample.
+    while (k < n) {
+        ivec3 c;
+        float d = cell_skip(skip_at(t0 + (float(k) + j) * u_step), c);
+        if (d > 0.5) {
+            k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
+            if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) break;
+            if (k >= n) break;
+            // Sample the landing position in the same iteration (a CPU rasteriser
+            // runs both sides of a branch anyway): if its cell is invisible too, the
+            // sample cannot contribute.
+        }
+        if (straight_sample(s, k, t0, j)) break;
+        ++k;
+#if SAMPLES_PER_CHECK > 1
+        if (k >= n || straight_sample(s, k, t0, j)) break;
+        ++k;
+#endif
+#if SAMPLES_PER_CHECK > 2
+        if (k >= n || straight_sample(s, k, t0, j)) break;
+        ++k;
+#endif
+#if SAMPLES_PER_CHECK > 3
+        if (k >= n || straight_sample(s, k, t0, j)) break;
+        ++k;
+#endif
+    }
 #else
+    // warped rays with cell skipping through deformed space
     while (k < n) {
         float t = t0 + (float(k) + j) * u_step;
         ivec3 c;
@@ -533,20 +587,15 @@ void main() {
             k = after_cube(c, d, exit_offset, exit_widen, inv_du, t0, j, k, n);
             if (mode_skip(s, t0 + (float(k - 1) + j) * u_step)) break;
             if (k >= n) break;
-            // Sample the landing position in the same iteration (a CPU rasteriser
-            // runs both sides of a branch anyway): if its cell is invisible too, the
-            // sample cannot contribute (zero opacity, below the isovalue/threshold).
-            t = t0 + (float(k) + j) * u_step;
+            t = t0 + (float(k) + j) * u_step;   // the landing sample, as above
         }
         vec3 u = texel_at(t);
-#ifndef LINEAR_PATH
         // a warped sample may land outside the volume: it shows nothing
         if (!inside_texels(u)) {
             if (mode_skip(s, -1.0)) break;
             ++k;
             continue;
         }
-#endif
         if (mode_sample(s, scene_value(u, t), u, t)) break;
         ++k;
     }

@@ -54,6 +54,7 @@ from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import COARSE_FACTOR, SkipMapCache, VolumeSkipMaps
+from voxwarp.render.skipping.checks import checked_setting, samples_per_check
 from voxwarp.render.skipping.maps import (
     BLOCK,
     OCTANT_EPS,
@@ -291,6 +292,8 @@ class Renderer:
             )
         renderer_name = str(ctx.info.get("GL_RENDERER", "")).lower()
         software = any(w in renderer_name for w in ("llvmpipe", "softpipe", "swr", "swiftshader"))
+        self._software = software
+        self._samples_per_check: int | str = "auto"
         if sampling == "auto":
             sampling = "auto-software" if software else "texture3d"
         #: "texture3d" (hardware trilinear), "slice_pairs" or "slice_layers" (faster on
@@ -558,6 +561,17 @@ class Renderer:
         self._skip_maps.cell_skip_maps = value
 
     @property
+    def samples_per_check(self) -> int | str:
+        """Lattice samples a straight ray with cell maps takes per skip-map check, 1 to
+        4, or "auto" (default): 2 for unshaded dvr on a CPU rasteriser, else 1. Never
+        changes the image, only the time (:mod:`voxwarp.render.skipping.checks`)."""
+        return self._samples_per_check
+
+    @samples_per_check.setter
+    def samples_per_check(self, value: int | str) -> None:
+        self._samples_per_check = checked_setting(value)
+
+    @property
     def coarse_cell_maps(self) -> str:
         """Straight-ray octant skip maps per 2³ trilinear cells (an eighth of the bytes;
         the same images, rays near visible cells jump a little less far): "auto" for a
@@ -605,6 +619,7 @@ class Renderer:
         layout: str,
         support: bool = False,
         coarse: bool = False,
+        per_check: int = 1,
     ) -> Any:
         piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
         warps = [] if linear else scene.warps
@@ -624,6 +639,7 @@ class Renderer:
             self._detj_on(scene),
             support,
             coarse,
+            per_check,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -640,6 +656,8 @@ class Renderer:
             defines.append("#define CELL_SKIP")
         if coarse:  # straight-ray octant maps per COARSE_FACTOR³ cells
             defines += ["#define COARSE_CELLS", f"#define CELL_FACTOR {COARSE_FACTOR}"]
+        if per_check > 1:  # straight rays: skip-map checks per lattice sample
+            defines.append(f"#define SAMPLES_PER_CHECK {per_check}")
         if meshes:
             defines.append("#define MESH_DEPTH")
         if piecewise:
@@ -727,8 +745,11 @@ class Renderer:
         support = plan == "map" and segment == 1
         self.last_support = "map" if support else "none" if linear else "all"
         coarse = skip_kind == "cells" and linear and self._skip_maps.cell_factor(scene) > 1
+        per_check = 1
+        if skip_kind == "cells" and linear:
+            per_check = samples_per_check(self._samples_per_check, scene, self._software)
         prog = self._program(
-            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support, coarse
+            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support, coarse, per_check
         )
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
