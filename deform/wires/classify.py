@@ -72,6 +72,22 @@ static double interp_keys(double x, __global const double *xp, __global const do
     return r;
 }
 
+/* Newton steps of the wire parameter u of point p along the wire's 256 samples P and
+   tangents T (numpy's arithmetic, as geometry._wire_local): u <- q / 255 + (p - P_q).T_q / len. */
+static double refine_u(const double p0, const double p1, const double p2,
+                       __global const double *P, __global const double *T, const double len,
+                       double u, const int refine_steps) {
+    for (int step = 0; step < refine_steps; step++) {
+        long q = (long)rint_d(u * 255.0);
+        q = q < 0 ? 0 : (q > 255 ? 255 : q);
+        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
+                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
+        u = (double)q / 255.0 + z / len;
+        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
+    }
+    return u;
+}
+
 /* The smooth ends' trim (sides._Trim.drop): Newton steps from the stored float u, then
    drop a voxel at an end (u 0 or 1) farther than cap along the tangent there, and with
    core >= 0 (the base side of a smooth wire) one farther than core from the wire;
@@ -82,14 +98,7 @@ static uchar end_trim(const double p0, const double p1, const double p2,
                       __global const double *P, __global const double *T,
                       __global const double *X, __global const double *Y, const double len,
                       double u, const int refine_steps, const double cap, const double core) {
-    for (int step = 0; step < refine_steps; step++) {
-        long q = (long)rint_d(u * 255.0);
-        q = q < 0 ? 0 : (q > 255 ? 255 : q);
-        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
-                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
-        u = (double)q / 255.0 + z / len;
-        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
-    }
+    u = refine_u(p0, p1, p2, P, T, len, u, refine_steps);
     const long q = (long)rint_d(u * 255.0);
     const double d0 = p0 - P[3 * q], d1 = p1 - P[3 * q + 1], d2 = p2 - P[3 * q + 2];
     if (u <= 0.0 || u >= 1.0) {
@@ -135,14 +144,7 @@ static void classify_one(
     __global const double *T = tangents + (long)w * 256 * 3;
     const double len = length[w];
     double u = (double)u0;
-    for (int step = 0; step < refine_steps; step++) {
-        long q = (long)rint_d(u * 255.0);
-        q = q < 0 ? 0 : (q > 255 ? 255 : q);
-        double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
-                   + (p2 - P[3 * q + 2]) * T[3 * q + 2];
-        u = (double)q / 255.0 + z / len;
-        u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
-    }
+    u = refine_u(p0, p1, p2, P, T, len, u, refine_steps);
     out_u[v] = (float)u;
 
     const long q = (long)rint_d(u * 255.0);

@@ -80,12 +80,17 @@ def brick_range(smap: SupportMap, ro: np.ndarray, rd: np.ndarray, grow: float) -
     return np.stack([first, last], axis=-1)
 
 
-def read_ranges(ranges: SupportRanges, smap: SupportMap, inv: np.ndarray) -> np.ndarray:
+def read_ranges(ctx: Any, smap: SupportMap, inv: np.ndarray) -> np.ndarray:
+    """(H, W, 2) first and last crossing per pixel from a fresh pass (row 0 at the bottom)."""
     box = smap.moved_box()
     assert box is not None
-    tex = ranges.texture(smap, inv, SIZE, box)
-    tw, th = tex.size
-    data = np.frombuffer(tex.read(), dtype=np.float32).reshape(th, tw, 4)
+    ranges = SupportRanges(ctx)
+    try:
+        tex = ranges.texture(smap, inv, SIZE, box)
+        tw, th = tex.size
+        data = np.frombuffer(tex.read(), dtype=np.float32).reshape(th, tw, 4)
+    finally:
+        ranges.release()
     return data[: SIZE[1], : SIZE[0]][..., [0, 3]]
 
 
@@ -99,11 +104,7 @@ def test_each_ray_gets_its_first_and_last_crossing_of_the_support(
     cam.projection = projection  # type: ignore[assignment]
     cam.ortho_height = 70.0
     inv = np.linalg.inv(cam.view_projection(SIZE[0] / SIZE[1]))
-    ranges = SupportRanges(gl_ctx)
-    try:
-        got = read_ranges(ranges, smap, inv)
-    finally:
-        ranges.release()
+    got = read_ranges(gl_ctx, smap, inv)
     ro, rd = rays(inv)
     inner = brick_range(smap, ro, rd, -0.05)
     outer = brick_range(smap, ro, rd, 0.05)
@@ -132,11 +133,6 @@ def test_a_camera_whose_near_plane_reaches_the_support_falls_back_to_the_box(
     smap = blob_map()
     cam = camera()
     cam.distance = 1.0  # the eye at the box's centre, inside the blob's box
-    inv = np.linalg.inv(cam.view_projection(SIZE[0] / SIZE[1]))
-    ranges = SupportRanges(gl_ctx)
-    try:
-        got = read_ranges(ranges, smap, inv)
-    finally:
-        ranges.release()
+    got = read_ranges(gl_ctx, smap, np.linalg.inv(cam.view_projection(SIZE[0] / SIZE[1])))
     assert np.all(got[..., 0] <= -FAR * 0.5)
     assert np.all(got[..., 1] >= FAR * 0.5)
