@@ -73,7 +73,8 @@ def paragraph(run: dict[str, Any]) -> str:
     ]
     listed = quotes[0] if len(quotes) == 1 else ", ".join(quotes[:-1]) + " and " + quotes[-1]
     loads = [x for _, _, load in rows for x in load]
-    load = f", load average {min(loads):.0f}–{max(loads):.0f}" if loads else ""
+    lo, hi = (f"{v:.0f}" for v in (min(loads), max(loads))) if loads else ("", "")
+    load = f", load average {lo}" + (f"–{hi}" if hi != lo else "") if loads else ""
     w, h = run["size"]
     return (
         f"Undeformed `dvr` at {w}x{h} is {listed} as fast per covered pixel as VTK's"
