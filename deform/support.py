@@ -75,29 +75,29 @@ class SupportMap:
 
     def boundary_triangles(self) -> np.ndarray:
         """(T, 3, 3) float32 triangles (deformed world, mm) of the support's surface: the
-        brick faces between a support brick and one outside it (or the map's edge), two
-        triangles each. A straight ray meets a support brick only between the first and
-        last of these it crosses (the renderer rasterises them for each ray's range)."""
-        quads = [self._faces(axis) for axis in range(3)]
-        q = np.concatenate(quads) if quads else np.zeros((0, 4, 3))
+        brick faces between a support brick and one outside it (or the map's edge), runs
+        of them along a row merged into one rectangle, two triangles each. A straight ray
+        meets a support brick only between the first and last of these it crosses (the
+        renderer rasterises them for each ray's range)."""
+        q = np.concatenate([self._faces(axis) for axis in range(3)])
         return np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.float32)
 
     def _faces(self, axis: int) -> np.ndarray:
-        """(F, 4, 3) corners of the surface faces normal to ``axis``."""
+        """(F, 4, 3) corners of the surface's rectangles normal to ``axis``: in each
+        brick plane, runs of faces along the last of the other two axes."""
         pad = [(0, 0)] * 3
         pad[axis] = (1, 1)
-        m = np.pad(self.moved, pad)
-        lo_side = np.moveaxis(m, axis, 0)
-        change = lo_side[1:] != lo_side[:-1]  # face f lies at brick plane f along axis
-        idx = np.argwhere(change)  # (f, i, j) with i, j the other two axes in order
-        if len(idx) == 0:
-            return np.zeros((0, 4, 3))
+        m = np.moveaxis(np.pad(self.moved, pad), axis, 0)
+        change = m[1:] != m[:-1]  # face (f, i, j) lies at brick plane f along axis
+        c = np.pad(change, ((0, 0), (0, 0), (1, 1)))
+        starts = np.argwhere(c[..., 1:-1] & ~c[..., :-2])  # same order as their ends
+        ends = np.argwhere(c[..., 1:-1] & ~c[..., 2:])
         others = [a for a in range(3) if a != axis]
-        corners = np.zeros((len(idx), 4, 3))
-        for c, (di, dj) in enumerate(((0, 0), (1, 0), (1, 1), (0, 1))):
-            corners[:, c, axis] = idx[:, 0]
-            corners[:, c, others[0]] = idx[:, 1] + di
-            corners[:, c, others[1]] = idx[:, 2] + dj
+        corners = np.zeros((len(starts), 4, 3))
+        for k, (di, end) in enumerate(((0, False), (1, False), (1, True), (0, True))):
+            corners[:, k, axis] = starts[:, 0]
+            corners[:, k, others[0]] = starts[:, 1] + di
+            corners[:, k, others[1]] = ends[:, 2] + 1 if end else starts[:, 2]
         return self.lo + corners * self.size
 
     def contains(self, points: np.ndarray) -> np.ndarray:

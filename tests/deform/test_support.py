@@ -178,7 +178,9 @@ def test_a_wire_support_is_local_and_holds_its_moved_points() -> None:
 
 def test_the_support_surface_is_the_faces_between_support_and_the_rest() -> None:
     """One brick: its 6 faces; two neighbours: 10 (the shared face is inside); a full
-    map: its outer faces only. Each face is two triangles of the brick face's area."""
+    map: its outer faces only, each row of faces one rectangle. A random map: the
+    rectangles' area is that of its brick faces between support and the rest, counted
+    one by one, per axis."""
     from voxwarp.deform.support import SupportMap
 
     def surface(moved: np.ndarray) -> tuple[int, float]:
@@ -193,5 +195,15 @@ def test_the_support_surface_is_the_faces_between_support_and_the_rest() -> None
     two = one.copy()
     two[2, 1, 1] = True
     assert surface(two) == (20, 10 * 4.0)
-    assert surface(np.ones((2, 3, 4), dtype=bool)) == (2 * 2 * (6 + 8 + 12), 4.0 * 2 * 26)
+    # rows: x faces 2 planes x 3 rows, y faces 2 x 2, z faces 2 x 2: 14 rectangles
+    assert surface(np.ones((2, 3, 4), dtype=bool)) == (28, 4.0 * 2 * 26)
     assert surface(np.zeros((2, 2, 2), dtype=bool)) == (0, 0.0)
+    moved = np.random.default_rng(3).random((7, 5, 6)) < 0.4
+    faces = 0
+    for axis in range(3):
+        pad = [(0, 0)] * 3
+        pad[axis] = (1, 1)
+        faces += int(np.count_nonzero(np.diff(np.pad(moved, pad).astype(int), axis=axis)))
+    count, area = surface(moved)
+    assert area == pytest.approx(4.0 * faces)
+    assert count < 2 * faces  # rows merged

@@ -15,7 +15,7 @@ import pytest
 
 from voxwarp.core.camera import Camera
 from voxwarp.deform.support import SupportMap
-from voxwarp.render.support_ranges import FAR, SupportRanges
+from voxwarp.render.support_ranges import FAR, MAX_TRIANGLES, SupportRanges
 
 SIZE = (64, 48)
 
@@ -134,5 +134,17 @@ def test_a_camera_whose_near_plane_reaches_the_support_falls_back_to_the_box(
     cam = camera()
     cam.distance = 1.0  # the eye at the box's centre, inside the blob's box
     got = read_ranges(gl_ctx, smap, np.linalg.inv(cam.view_projection(SIZE[0] / SIZE[1])))
+    assert np.all(got[..., 0] <= -FAR * 0.5)
+    assert np.all(got[..., 1] >= FAR * 0.5)
+
+
+@pytest.mark.gl
+def test_a_scattered_support_leaves_the_ranges_open(gl_ctx: Any) -> None:
+    """A surface of more than MAX_TRIANGLES triangles would cost more to rasterise than it
+    saves: the box bounds the rays instead (every range open)."""
+    moved = np.random.default_rng(5).random((32, 32, 32)) < 0.3
+    smap = SupportMap(np.zeros(3), np.full(3, 60.0), moved)
+    assert len(smap.boundary_triangles()) > MAX_TRIANGLES
+    got = read_ranges(gl_ctx, smap, np.linalg.inv(camera().view_projection(SIZE[0] / SIZE[1])))
     assert np.all(got[..., 0] <= -FAR * 0.5)
     assert np.all(got[..., 1] >= FAR * 0.5)
