@@ -37,7 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-_KERNEL_TEMPLATE = r"""
+#: the pragmas and helpers shared with :mod:`voxwarp.deform.wires.fade_cl`: rint, np.interp,
+#: the Newton steps of u (numpy's float64 arithmetic, no contractions)
+KERNEL_HELPERS = r"""
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -87,7 +89,11 @@ static double refine_u(const double p0, const double p1, const double p2,
     }
     return u;
 }
+"""
 
+_KERNEL_TEMPLATE = (
+    KERNEL_HELPERS
+    + r"""
 /* The smooth ends' trim (sides._Trim.drop): Newton steps from the stored float u, then
    drop a voxel at an end (u 0 or 1) farther than cap along the tangent there, and with
    core >= 0 (the base side of a smooth wire) one farther than core from the wire;
@@ -198,6 +204,7 @@ __kernel void classify(
         classify_one(@ARGS@, k, j, i);
 }
 """
+)
 
 #: the arguments of the kernel (and of its per-voxel body)
 _PARAMS = r"""

@@ -239,3 +239,45 @@ def test_trim_in_the_opencl_pass_equals_numpys(monkeypatch: Any) -> None:
     for name in ("state", "t", "weight"):
         np.testing.assert_array_equal(getattr(fast.field, name), getattr(slow.field, name))
     assert untrimmed.stats.vacated > fast.stats.vacated == slow.stats.vacated
+
+
+@pytest.mark.parametrize("kind", ["smoothends", "smoothsides", "mixed"])
+def test_fade_weights_of_the_opencl_pass_equal_numpys(monkeypatch: Any, kind: str) -> None:
+    # oracle: the same build with the fade weights left to numpy (geometry._fade);
+    # with the default margins the pass decides almost every voxel, with a margin of
+    # 1e-3 on the radius it hands back to numpy every voxel whose weight that margin
+    # can move (those in the radial fade): both paths, one field, bit for bit
+    if not opencl_available():
+        pytest.skip("no OpenCL platform")
+    from voxwarp.deform.wires import fade_cl, sides
+
+    calls: list[np.ndarray] = []
+
+    def spy(st: Any, inp: Any) -> np.ndarray:
+        out = fades(st, inp)
+        calls.append(out)
+        return out
+
+    fades = fade_cl.fades
+    monkeypatch.setattr(sides, "fades", spy)
+
+    def build(on_device: bool, margin: float = fade_cl.RADIUS_MARGIN) -> WireDeformer:
+        with monkeypatch.context() as m:
+            m.setenv(sides.FADE_ENV_VAR, "1" if on_device else "0")
+            m.setattr(fade_cl, "RADIUS_MARGIN", margin)
+            wd = WireDeformer(volume(), smooth_variant(kind), field_scale=2, backend="opencl")
+            if not wd.classify_on_device():
+                pytest.skip("no OpenCL device with double precision")
+            wd.build()
+        return wd
+
+    slow = build(False)
+    assert not calls
+    for margin, share in ((fade_cl.RADIUS_MARGIN, (0.0, 0.01)), (1e-3, (0.01, 0.99))):
+        fast = build(True, margin)
+        values = calls.pop()
+        left = float(np.isnan(values).mean())  # the voxels numpy computed
+        assert share[0] <= left <= share[1], (margin, left)
+        for name in ("state", "t", "weight"):
+            np.testing.assert_array_equal(getattr(fast.field, name), getattr(slow.field, name))
+        assert ((slow.field.weight > 0) & (slow.field.weight < 1)).any()  # faded voxels
