@@ -300,24 +300,31 @@ _programs: dict[int, tuple[object, object | None]] = {}
 def classify_available(st: dict) -> bool:
     """Whether the OpenCL state ``st`` (of :mod:`voxwarp.deform.wires.propagation`) can run the
     pass: a device with double precision whose program builds."""
-    if "error" in st:
-        return False
-    if "cl_khr_fp64" not in st["device"].extensions:
-        return False
-    return _program(st) is not None
+    return fp64_kernel(st, _programs, _KERNEL, "classify") is not None
 
 
 def _program(st: dict) -> object | None:
+    return fp64_kernel(st, _programs, _KERNEL, "classify")
+
+
+def fp64_kernel(
+    st: dict, programs: dict[int, tuple[object, object | None]], source: str, name: str
+) -> object | None:
+    """Kernel ``name`` of ``source`` built on the OpenCL state ``st``'s context, kept in
+    ``programs`` with its context; None without a double-precision device or when the
+    program does not build (the caller keeps numpy)."""
+    if "error" in st or "cl_khr_fp64" not in st["device"].extensions:
+        return None
     ctx = st["ctx"]
-    entry = _programs.get(id(ctx))
+    entry = programs.get(id(ctx))
     if entry is None or entry[0] is not ctx:
         try:
-            prg = st["cl"].Program(ctx, _KERNEL).build(options=["-w"])
-            kernel: object | None = st["cl"].Kernel(prg, "classify")
+            prg = st["cl"].Program(ctx, source).build(options=["-w"])
+            kernel: object | None = st["cl"].Kernel(prg, name)
         except Exception:  # any build failure: the caller keeps the numpy path
             kernel = None
         entry = (ctx, kernel)
-        _programs[id(ctx)] = entry
+        programs[id(ctx)] = entry
     return entry[1]
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from voxwarp.deform.wires.classify import KERNEL_HELPERS
+from voxwarp.deform.wires.classify import KERNEL_HELPERS, fp64_kernel
 from voxwarp.deform.wires.constants import RADIAL_FADE
 from voxwarp.deform.wires.tables import WireTables
 from voxwarp.deform.wires.wire import Wire
@@ -151,23 +151,11 @@ _programs: dict[int, tuple[object, object | None]] = {}
 
 def fade_available(st: dict) -> bool:
     """Whether the OpenCL state ``st`` can run the pass (double precision, it builds)."""
-    if "error" in st or "cl_khr_fp64" not in st["device"].extensions:
-        return False
     return _program(st) is not None
 
 
 def _program(st: dict) -> object | None:
-    ctx = st["ctx"]
-    entry = _programs.get(id(ctx))
-    if entry is None or entry[0] is not ctx:
-        try:
-            prg = st["cl"].Program(ctx, _KERNEL).build(options=["-w"])
-            kernel: object | None = st["cl"].Kernel(prg, "fade")
-        except Exception:  # any build failure: the caller keeps numpy
-            kernel = None
-        entry = (ctx, kernel)
-        _programs[id(ctx)] = entry
-    return entry[1]
+    return fp64_kernel(st, _programs, _KERNEL, "fade")
 
 
 def _wire_arrays(inp: FadeInput) -> list[np.ndarray]:
