@@ -15,6 +15,7 @@ import moderngl
 import numpy as np
 import pytest
 
+from tests.deform.elements.chainmail_oracle import link_bounds
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 
 chainmail_gpu = pytest.importorskip("voxwarp.deform.elements.chainmail_gpu")
@@ -60,30 +61,6 @@ def _model(
 
 
 # ---------------------------------------------------------------------- oracle
-def _bounds(model: ChainMailModel, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per element and coordinate, the intersection of its links' intervals."""
-    lo = np.full(x.shape, -np.inf)
-    hi = np.full(x.shape, np.inf)
-    for axis in range(3):
-        if model.shape[axis] < 2:
-            continue
-        mn, mx, sh, linked = model.link_limits(axis)
-        low = np.stack([mn if c == axis else -sh for c in range(3)], axis=-1)
-        high = np.stack([mx if c == axis else sh for c in range(3)], axis=-1)
-        a = [slice(None)] * 3
-        b = [slice(None)] * 3
-        a[axis] = slice(0, -1)
-        b[axis] = slice(1, None)
-        a_t, b_t = tuple(a), tuple(b)
-        on = linked[..., None]
-        xa, xb = x[a_t], x[b_t]
-        lo[b_t] = np.where(on, np.maximum(lo[b_t], xa + low), lo[b_t])
-        hi[b_t] = np.where(on, np.minimum(hi[b_t], xa + high), hi[b_t])
-        lo[a_t] = np.where(on, np.maximum(lo[a_t], xb - high), lo[a_t])
-        hi[a_t] = np.where(on, np.minimum(hi[a_t], xb - low), hi[a_t])
-    return lo, hi
-
-
 def _oracle(
     model: ChainMailModel, x0: np.ndarray, held: np.ndarray, targets: np.ndarray
 ) -> np.ndarray:
@@ -95,7 +72,7 @@ def _oracle(
     free = ~(hold | model.fixed)[..., None]
     for lower in (True, False):
         for _ in range(10_000):
-            lo, hi = _bounds(model, x)
+            lo, hi = link_bounds(model, x)
             move = free & ((x > hi + 1e-9) if lower else (x < lo - 1e-9))
             if not move.any():
                 break

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from tests.deform.elements.chainmail_oracle import link_bounds
 from voxwarp.deform import ChainMail, ChainMailError
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 from voxwarp.deform.elements.grid import ElementGrid
@@ -51,30 +52,22 @@ def _neighbour_terms(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per element: interval ``(lo, hi)`` its links allow, the sum of its linked
     neighbours' displacements and their count."""
-    lo = np.full(x.shape, -np.inf)
-    hi = np.full(x.shape, np.inf)
     su = np.zeros(x.shape)
     cnt = np.zeros(x.shape[:3])
     u = x - model.rest
     for axis in range(3):
-        mn, mx, sh, linked = model.link_limits(axis)
-        low = np.stack([mn if c == axis else -sh for c in range(3)], axis=-1)
-        high = np.stack([mx if c == axis else sh for c in range(3)], axis=-1)
+        linked = model.link_limits(axis)[3]
         a = [slice(None)] * 3
         b = [slice(None)] * 3
         a[axis] = slice(0, -1)
         b[axis] = slice(1, None)
         a_t, b_t = tuple(a), tuple(b)
         on = linked[..., None]
-        lo[b_t] = np.where(on, np.maximum(lo[b_t], x[a_t] + low), lo[b_t])
-        hi[b_t] = np.where(on, np.minimum(hi[b_t], x[a_t] + high), hi[b_t])
-        lo[a_t] = np.where(on, np.maximum(lo[a_t], x[b_t] - high), lo[a_t])
-        hi[a_t] = np.where(on, np.minimum(hi[a_t], x[b_t] - low), hi[a_t])
         su[b_t] += np.where(on, u[a_t], 0.0)
         su[a_t] += np.where(on, u[b_t], 0.0)
         cnt[b_t] += linked
         cnt[a_t] += linked
-    return lo, hi, su, cnt
+    return (*link_bounds(model, x), su, cnt)
 
 
 def _oracle(
