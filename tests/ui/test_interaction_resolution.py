@@ -13,11 +13,8 @@ import pytest
 from PySide6.QtCore import QPoint, Qt
 
 from tests.ui.test_main_window import frame
-from tests.ui.windows import shown_window
-from voxwarp.editing.session import EditSession
+from tests.ui.windows import fish_window, next_frame
 from voxwarp.io.images import read_image
-from voxwarp.io.samples import load_sample, suggested_transfer_function
-from voxwarp.scene import Scene
 
 SIZE = (900, 700)
 
@@ -25,18 +22,9 @@ SIZE = (900, 700)
 @pytest.fixture
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A shown main window on the fish phantom (64³, DVR)."""
-    vol = load_sample("fish", shape=(64, 64, 64))
-    tf = suggested_transfer_function("fish")
-    scene = Scene(vol, mode="dvr", transfer_function=tf, view=(-70, 25), zoom=1.2, jitter=False)
-    w = shown_window(qtbot, monkeypatch, EditSession(scene), SIZE)
+    w = fish_window(qtbot, monkeypatch, SIZE)
     yield w
     w.close()
-
-
-def _next_frame(qtbot: Any, vp: Any) -> None:
-    n = vp.frames_drawn
-    vp.update()
-    qtbot.waitUntil(lambda: vp.frames_drawn > n, timeout=30000)
 
 
 def test_interaction_box_is_an_undoable_scene_setting(window: Any) -> None:
@@ -68,10 +56,10 @@ def test_interactive_frames_draw_the_reduced_volume_stills_the_full_one(
         for k in range(1, 4):
             qtbot.mouseMove(vp, pos=start + QPoint(20 * k, 8 * k))
         assert vp.interacting()
-        _next_frame(qtbot, vp)
+        next_frame(qtbot, vp)
         # the reduced copy is made on a worker: the full volume draws until it is in
         qtbot.waitUntil(lambda: vp.interaction_volumes.cached(full, 2) is not None, timeout=30000)
-        _next_frame(qtbot, vp)
+        next_frame(qtbot, vp)
         assert vp.interacting()
         assert vp.last_volume is not full
         assert vp.last_volume.shape == (32, 32, 32)

@@ -12,11 +12,8 @@ import pytest
 from PySide6.QtCore import QPoint, Qt
 
 from tests.ui.test_main_window import frame
-from tests.ui.windows import shown_window
-from voxwarp.editing.session import EditSession
-from voxwarp.io.samples import load_sample, suggested_transfer_function
+from tests.ui.windows import fish_window, next_frame
 from voxwarp.render.adaptive_quality import FULL, LEVELS
-from voxwarp.scene import Scene
 
 SIZE = (900, 700)
 
@@ -24,18 +21,9 @@ SIZE = (900, 700)
 @pytest.fixture
 def window(qtbot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     """A shown main window on the fish phantom (64³, DVR: the sample distance shows)."""
-    vol = load_sample("fish", shape=(64, 64, 64))
-    tf = suggested_transfer_function("fish")
-    scene = Scene(vol, mode="dvr", transfer_function=tf, view=(-70, 25), zoom=1.2, jitter=False)
-    w = shown_window(qtbot, monkeypatch, EditSession(scene), SIZE)
+    w = fish_window(qtbot, monkeypatch, SIZE)
     yield w
     w.close()
-
-
-def _next_frame(qtbot: Any, vp: Any) -> None:
-    n = vp.frames_drawn
-    vp.update()
-    qtbot.waitUntil(lambda: vp.frames_drawn > n, timeout=30000)
 
 
 def test_orbit_draws_coarse_frames_and_the_rest_frame_equals_the_uninteracted_one(
@@ -51,7 +39,7 @@ def test_orbit_draws_coarse_frames_and_the_rest_frame_equals_the_uninteracted_on
         qtbot.mouseMove(vp, pos=start + QPoint(25 * k, 10 * k))
     assert vp.interacting()
     assert not np.allclose(vp.camera.rotation, camera.rotation)  # it orbited
-    _next_frame(qtbot, vp)
+    next_frame(qtbot, vp)
     assert vp.last_quality != FULL
     assert vp.last_quality in LEVELS
     # back to the first view while still dragging: the coarse frame is not the rest frame
@@ -78,7 +66,7 @@ def test_the_live_slices_count_in_the_frame_budget(window: Any, qtbot: Any) -> N
         assert vp.interacting()  # the button is held and the mouse moved
         vp.adaptive.level = 3  # a middle level: room both ways
         vp.companion_s = 10.0  # the slices took 10 s (the budget is 1/15 s)
-        _next_frame(qtbot, vp)
+        next_frame(qtbot, vp)
         assert vp.last_quality == LEVELS[3]
         assert vp.adaptive.level == 4
     finally:

@@ -51,3 +51,23 @@ def press_shortcut(qtbot: Any, w: Any, key: Any, modifiers: Any = None) -> None:
     qtbot.waitActive(w)
     w.viewport.setFocus()
     qtbot.keyClick(w.viewport, key, modifiers or Qt.KeyboardModifier.NoModifier)
+
+
+def fish_window(qtbot: Any, monkeypatch: pytest.MonkeyPatch, size: tuple[int, int]) -> Any:
+    """A shown main window of ``size`` on the fish phantom (64³, DVR, no jitter: the
+    sample distance shows)."""
+    from voxwarp.editing.session import EditSession
+    from voxwarp.io.samples import load_sample, suggested_transfer_function
+    from voxwarp.scene import Scene
+
+    vol = load_sample("fish", shape=(64, 64, 64))
+    tf = suggested_transfer_function("fish")
+    scene = Scene(vol, mode="dvr", transfer_function=tf, view=(-70, 25), zoom=1.2, jitter=False)
+    return shown_window(qtbot, monkeypatch, EditSession(scene), size)
+
+
+def next_frame(qtbot: Any, vp: Any, timeout_ms: int = 30000) -> None:
+    """Ask the viewport ``vp`` for a frame and wait until it has drawn one more."""
+    n = vp.frames_drawn
+    vp.update()
+    qtbot.waitUntil(lambda: vp.frames_drawn > n, timeout=timeout_ms)
