@@ -29,15 +29,9 @@ EARLY_EXIT = "if (next == q) break;"
 
 def _bake(ctx: Any, prog: Any, warp: OffsetFieldWarp, tex: Any) -> float:
     """Run one bake of ``warp`` into ``tex``; seconds, GL finished."""
-    prog["u_field"].value = 0
-    prog["u_shape"].value = tuple(int(n) for n in warp.bake_shape)
-    prog["u_field_shape"].value = tuple(int(n) for n in warp.shape)
-    prog["u_size"].value = tuple(float(v) for v in warp.hi - warp.lo)
-    prog["u_iterations"].value = BAKE_ITERATIONS
-    tex.bind_to_image(0, read=False, write=True)
+    ctx.finish()
     t = time.perf_counter()
-    prog.run(*[-(-int(n) // 4) for n in warp.bake_shape])
-    ctx.memory_barrier()
+    warp.run_bake(ctx, prog, tex)
     ctx.finish()
     return time.perf_counter() - t
 

@@ -843,20 +843,24 @@ class OffsetFieldWarp(Warp):
             _, hold, tex, version = entry
             if self._source is None and version == self._version:
                 return tex
-        prog = hold.program
         field.use(0)
-        prog["u_field"].value = 0
-        prog["u_shape"].value = tuple(int(n) for n in self.bake_shape)
-        prog["u_field_shape"].value = tuple(int(n) for n in self.shape)
-        prog["u_size"].value = tuple(float(v) for v in self.hi - self.lo)
-        prog["u_iterations"].value = BAKE_ITERATIONS
-        tex.bind_to_image(0, read=False, write=True)
-        groups = [-(-int(n) // 4) for n in self.bake_shape]
-        prog.run(*groups)
-        ctx.memory_barrier()
+        self.run_bake(ctx, hold.program, tex)
         self._baked[id(ctx)] = (ctx, hold, tex, self._version)
         gl_holders.hold(ctx, self)
         return tex
+
+    def run_bake(self, ctx: Any, program: Any, target: Any) -> None:
+        """Run the bake compute ``program`` (shaders/offset_field_bake.comp.glsl, or a
+        variant of it) over the field texture bound to unit 0, into the RGBA16F 2D
+        array ``target`` of :attr:`bake_shape`; returns after its memory barrier."""
+        program["u_field"].value = 0
+        program["u_shape"].value = tuple(int(n) for n in self.bake_shape)
+        program["u_field_shape"].value = tuple(int(n) for n in self.shape)
+        program["u_size"].value = tuple(float(v) for v in self.hi - self.lo)
+        program["u_iterations"].value = BAKE_ITERATIONS
+        target.bind_to_image(0, read=False, write=True)
+        program.run(*[-(-int(n) // 4) for n in self.bake_shape])
+        ctx.memory_barrier()
 
     def _field_texture(self, ctx: Any) -> Any:
         if self._source is not None:

@@ -35,14 +35,7 @@ def bake_all_steps(ctx: Any, warp: OffsetFieldWarp) -> bytes:
     tex = ctx.texture_array(warp.bake_shape, 4, dtype="f2")
     try:
         warp.textures(ctx)["displacement"].use(0)
-        prog["u_field"].value = 0
-        prog["u_shape"].value = tuple(int(n) for n in warp.bake_shape)
-        prog["u_field_shape"].value = tuple(int(n) for n in warp.shape)
-        prog["u_size"].value = tuple(float(v) for v in warp.hi - warp.lo)
-        prog["u_iterations"].value = BAKE_ITERATIONS
-        tex.bind_to_image(0, read=False, write=True)
-        prog.run(*[-(-int(n) // 4) for n in warp.bake_shape])
-        ctx.memory_barrier()
+        warp.run_bake(ctx, prog, tex)
         return tex.read()
     finally:
         tex.release()
