@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.deform.elements.chainmail_oracle import link_bounds
+from tests.deform.elements.chainmail_oracle import link_bounds, link_ends
 from voxwarp.deform import ChainMail, ChainMailError
 from voxwarp.deform.elements.chainmail_model import ChainMailModel
 from voxwarp.deform.elements.grid import ElementGrid
@@ -57,11 +57,7 @@ def _neighbour_terms(
     u = x - model.rest
     for axis in range(3):
         linked = model.link_limits(axis)[3]
-        a = [slice(None)] * 3
-        b = [slice(None)] * 3
-        a[axis] = slice(0, -1)
-        b[axis] = slice(1, None)
-        a_t, b_t = tuple(a), tuple(b)
+        a_t, b_t = link_ends(axis)
         on = linked[..., None]
         su[b_t] += np.where(on, u[a_t], 0.0)
         su[a_t] += np.where(on, u[b_t], 0.0)
