@@ -43,24 +43,11 @@ vec3 WARP_offset(vec3 q) {
     return u * WARP_inside(s);
 }
 
-vec3 warp(vec3 p) {
-    vec3 q = p;
-    if (WARP_SEEDED) {  // a constant: the compiler keeps one branch
-        vec3 s = (p - WARP_lo) / WARP_size;
-        vec3 v;
-        WARP_TRILINEAR(WARP_inverse, WARP_inverse_shape, s, v)
-        q = p - v * WARP_inside(s);
-    }
-    WARP_ITERATE   // WARP_ITERATIONS times q = p - WARP_offset(q), unrolled
-    return q;
-}
-
-// grad u at q (columns d u / d x, y, z): the analytic gradient of the trilinear
-// interpolant from the 8 nodes of q's cell, fetched unfiltered (8 texel reads instead
-// of the 12 bilinear ones of central differences); the cell of the lower node on cell
-// faces and 0 outside the grid box, as the CPU reference (OffsetFieldWarp.jacobian).
-mat3 WARP_grad_u(vec3 q) {
-    vec3 s = (q - WARP_lo) / WARP_size;
+// u and grad u (columns d u / d x, y, z) at s in [0, 1]³ of the grid box (clamped) from
+// the 8 nodes of its cell, fetched unfiltered: the trilinear value and the analytic
+// gradient of the trilinear interpolant (the cell of the lower node on cell faces), as
+// the CPU reference (OffsetFieldWarp.jacobian); both 0 outside the grid box.
+void WARP_cell(vec3 s, out vec3 u, out mat3 grad) {
     vec3 x = clamp(s, 0.0, 1.0) * (WARP_shape - 1.0);
     vec3 i0 = min(floor(x), WARP_shape - 2.0);
     vec3 f = x - i0;
@@ -76,15 +63,61 @@ mat3 WARP_grad_u(vec3 q) {
     vec3 dx = mix(mix(u100 - u000, u110 - u010, f.y), mix(u101 - u001, u111 - u011, f.y), f.z);
     vec3 dy = mix(mix(u010 - u000, u110 - u100, f.x), mix(u011 - u001, u111 - u101, f.x), f.z);
     vec3 dz = mix(mix(u001 - u000, u101 - u100, f.x), mix(u011 - u010, u111 - u110, f.x), f.y);
-    vec3 k = WARP_inside(s) * (WARP_shape - 1.0) / WARP_size;   // grid units -> mm
-    return mat3(dx * k.x, dy * k.y, dz * k.z);
+    float inside = WARP_inside(s);
+    vec3 k = inside * (WARP_shape - 1.0) / WARP_size;   // grid units -> mm
+    grad = mat3(dx * k.x, dy * k.y, dz * k.z);
+    vec3 lo = mix(mix(u000, u100, f.x), mix(u010, u110, f.x), f.y);
+    vec3 hi = mix(mix(u001, u101, f.x), mix(u011, u111, f.x), f.y);
+    u = mix(lo, hi, f.z) * inside;
+}
+
+// grad u at q (8 texel reads instead of the 12 bilinear ones of central differences).
+mat3 WARP_grad_u(vec3 q) {
+    vec3 u;
+    mat3 grad;
+    WARP_cell((q - WARP_lo) / WARP_size, u, grad);
+    return grad;
+}
+
+// WARP_KEEP_GRADIENT (shaded rays without the det J overlay): the last fixed-point step
+// (WARP_offset_last in WARP_ITERATE) reads u from its cell's 8 nodes and keeps grad u
+// there; the shading's Jacobian uses it instead of reading the 8 nodes of the final q's
+// cell again (the step moves q by the last correction only, hundredths of a voxel).
+#if defined(SHADING) && !defined(DETJ_OVERLAY)
+#define WARP_KEEP_GRADIENT
+mat3 WARP_kept_grad = mat3(0.0);
+vec3 WARP_offset_last(vec3 q) {
+    vec3 u;
+    WARP_cell((q - WARP_lo) / WARP_size, u, WARP_kept_grad);
+    return u;
+}
+#else
+#define WARP_offset_last WARP_offset
+#endif
+
+vec3 warp(vec3 p) {
+    vec3 q = p;
+    if (WARP_SEEDED) {  // a constant: the compiler keeps one branch
+        vec3 s = (p - WARP_lo) / WARP_size;
+        vec3 v;
+        WARP_TRILINEAR(WARP_inverse, WARP_inverse_shape, s, v)
+        q = p - v * WARP_inside(s);
+    }
+    WARP_ITERATE   // WARP_ITERATIONS times q = p - WARP_offset(q), unrolled, the last
+                   // one WARP_offset_last
+    return q;
 }
 
 // d warp / d p = (I + grad u(q))^-1 at q = warp(p), given q (the raycaster keeps it
 // from the sample's own warp: no second inverse). For shading normals only; a folded
 // field (singular I + grad u) gives the identity.
 mat3 warp_jacobian_at(vec3 p, vec3 q) {
+#ifdef WARP_KEEP_GRADIENT
+    // a constant condition: the seed alone (0 steps) keeps no gradient
+    mat3 a = mat3(1.0) + (WARP_ITERATIONS >= 1 ? WARP_kept_grad : WARP_grad_u(q));
+#else
     mat3 a = mat3(1.0) + WARP_grad_u(q);
+#endif
     return abs(determinant(a)) > 1e-6 ? inverse(a) : mat3(1.0);
 }
 

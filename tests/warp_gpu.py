@@ -51,14 +51,22 @@ def _set(prog: Any, name: str, value: Any) -> None:
 
 
 def gpu_warp(
-    ctx: Any, warps: Warp | Sequence[Warp], points: np.ndarray, kept: bool = False
+    ctx: Any,
+    warps: Warp | Sequence[Warp],
+    points: np.ndarray,
+    kept: bool = False,
+    shading: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``warp(p)`` (N, 3) and ``warp_jacobian(p)`` (N, 3, 3) of the GLSL of a warp or a
     chain at (N, 3) points, one pixel column a point; ``kept``: the Jacobian by
-    ``warp_chain_kept_jacobian()`` after ``warp_chain(p)`` (as the raycaster shades)."""
+    ``warp_chain_kept_jacobian()`` after ``warp_chain(p)`` (as the raycaster shades);
+    ``shading``: compiled as a shaded raycaster compiles it (``SHADING`` defined: warps
+    may keep the Jacobian from their own fetches)."""
     chain = [warps] if isinstance(warps, Warp) else list(warps)
     n = len(points)
     frag = FRAGMENT.format(warps=compose_glsl(chain))
+    if shading:
+        frag = frag.replace("#version 430\n", "#version 430\n#define SHADING\n", 1)
     if kept:
         line = frag[frag.index("    frag = vec4(px.y") :]
         frag = frag.replace(line[: line.index("\n") + 1], KEPT)

@@ -787,7 +787,8 @@ class OffsetFieldWarp(Warp):
 
     def glsl_constants(self) -> dict[str, Any]:
         """``ITERATIONS`` (fixed-point steps), ``SEEDED`` (start from the baked inverse)
-        and ``ITERATE``, the steps unrolled as a macro.
+        and ``ITERATE``, the steps unrolled as a macro (the last one ``WARP_offset_last``,
+        which keeps grad u for shading: shaders/warp_offset_field.glsl).
 
         Unrolled in the text because llvmpipe (Mesa 22) keeps even a loop with a
         constant trip count of 1 as a loop, which is slower than straight-line code
@@ -797,7 +798,10 @@ class OffsetFieldWarp(Warp):
         return {
             "ITERATIONS": int(self.steps),
             "SEEDED": self.inverse == "baked",
-            "ITERATE": " ".join(["q = p - WARP_offset(q);"] * int(self.steps)),
+            "ITERATE": " ".join(
+                ["q = p - WARP_offset(q);"] * (int(self.steps) - 1)
+                + ["q = p - WARP_offset_last(q);"] * min(int(self.steps), 1)
+            ),
         }
 
     def texture_data(self) -> np.ndarray:

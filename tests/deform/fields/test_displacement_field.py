@@ -131,6 +131,28 @@ def test_glsl_matches_the_cpu_reference(gl_ctx: Any) -> None:
         w.release()  # idempotent
 
 
+def test_glsl_shaded_warp_keeps_its_jacobian(gl_ctx: Any) -> None:
+    """Compiled for shading, warp(p) reads u from its cell's 8 nodes and keeps the
+    Jacobian at p: the same points and the same Jacobian as the plain program, with one
+    read of the nodes (the half-node border and the outside included)."""
+    u = smooth_vectors(SHAPE, 6.0, 9)
+    w = DisplacementFieldWarp(u, grid_affine())
+    half = DisplacementFieldWarp(u.astype(np.float16), grid_affine())
+    try:
+        p = points_around(w, 400, 10, margin=1.0)
+        q, jac = gpu_warp(gl_ctx, w, p)
+        q_kept, jac_kept = gpu_warp(gl_ctx, w, p, kept=True, shading=True)
+        # the 8 nodes' trilinear value against the filtered fetch: float rounding on
+        # llvmpipe; GPUs with 8-bit filter weights: up to |du| / 256 per fetch
+        llvmpipe = "llvmpipe" in gl_ctx.info.get("GL_RENDERER", "")
+        np.testing.assert_allclose(q_kept, q, atol=1e-4 if llvmpipe else 5e-2)
+        np.testing.assert_allclose(q_kept, half.apply(p), atol=1e-4)
+        np.testing.assert_allclose(jac_kept, jac, atol=1e-6)
+        assert np.abs(jac - np.eye(3)).max() > 0.05  # the field's gradient is in it
+    finally:
+        w.release()
+
+
 def test_forward_inverts_apply_on_a_smooth_field() -> None:
     w = DisplacementFieldWarp(tapered(smooth_vectors(SHAPE, 6.0, 7)), grid_affine())
     p = points_around(w, 2000, 8, margin=0.5)
