@@ -50,7 +50,7 @@ def run(volume: str = "colin27", frames: int = 7) -> list[tuple[str, str, float,
         warp = make(vol)
         assert isinstance(warp, OffsetFieldWarp)
         warp.textures(ctx)["displacement"].use(0)
-        texs = {k: ctx.texture_array(warp.bake_shape, 4, dtype="f2") for k in progs}
+        texs = {k: ctx.texture3d(warp.bake_shape, 4, dtype="f2") for k in progs}
         times: dict[str, list[float]] = {k: [] for k in progs}
         for _ in range(frames):
             for k, prog in progs.items():

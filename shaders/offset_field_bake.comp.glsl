@@ -3,8 +3,9 @@
 // OffsetFieldWarp.baked_inverse is the CPU reference) on a node grid over the same box,
 // bake_factor times finer than the field: for each baked node X, solve q + u(q) = X by
 // u_iterations fixed-point steps q <- X - u(q) from q = X (fewer where q stops changing),
-// and store v = X - q (mm) in the RGBA16F image u_inverse. The warp then starts its own iteration at p - v(p), v
-// trilinear: one or two steps reach the accuracy that many steps from q = p need.
+// and store v = X - q (mm) in the RGBA16F 3D image u_inverse. The warp then starts its
+// own iteration at p - v(p), v trilinear: one or two steps reach the accuracy that many
+// steps from q = p need.
 // Positions are in field grid units (one field node spacing per unit along each axis),
 // so the box corner and spacing drop out.
 layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
@@ -14,7 +15,7 @@ uniform ivec3 u_field_shape;   // field nodes per axis
 uniform ivec3 u_shape;         // baked nodes per axis
 uniform vec3 u_size;           // grid box size (mm)
 uniform int u_iterations;
-layout(rgba16f, binding = 0) writeonly uniform image2DArray u_inverse;  // layer = z
+layout(rgba16f, binding = 0) writeonly uniform image3D u_inverse;
 
 void main() {
     ivec3 node = ivec3(gl_GlobalInvocationID);

@@ -5,15 +5,15 @@
 // point X is seen at X + u(X), so the warp solves q + u(q) = p by the fixed point
 // q <- p - u(q), WARP_ITERATIONS times, starting from q = p (1 step = the thesis'
 // approximation q = p - u(p)) or, when WARP_SEEDED, from q = p - v(p), v the inverse
-// offsets baked on a finer node grid over the same box (WARP_inverse, same layout;
-// shaders/offset_field_bake.comp.glsl).
+// offsets baked on a finer node grid over the same box (WARP_inverse, an RGBA16F 3D
+// texture: one hardware-trilinear fetch; shaders/offset_field_bake.comp.glsl).
 // WARP_ITERATIONS, WARP_SEEDED and the macro WARP_ITERATE (the steps written out) are
 // prepended by the warp (Warp.glsl_constants): llvmpipe does not unroll the loop itself.
 uniform vec3 WARP_lo;          // grid box corner (node 0, 0, 0), mm
 uniform vec3 WARP_size;        // hi - lo, mm
 uniform vec3 WARP_shape;       // nodes per axis (n_x, n_y, n_z)
 uniform sampler2DArray WARP_displacement;
-uniform sampler2DArray WARP_inverse;   // baked inverse offsets (WARP_SEEDED only)
+uniform sampler3D WARP_inverse;   // baked inverse offsets (WARP_SEEDED only)
 uniform vec3 WARP_inverse_shape;       // its nodes per axis (finer than WARP_shape)
 
 // Trilinear value of a node grid stored as z-slice layers, at s in [0, 1]³ of the grid
@@ -99,9 +99,8 @@ vec3 warp(vec3 p) {
     vec3 q = p;
     if (WARP_SEEDED) {  // a constant: the compiler keeps one branch
         vec3 s = (p - WARP_lo) / WARP_size;
-        vec3 v;
-        WARP_TRILINEAR(WARP_inverse, WARP_inverse_shape, s, v)
-        q = p - v * WARP_inside(s);
+        vec3 tc = (clamp(s, 0.0, 1.0) * (WARP_inverse_shape - 1.0) + 0.5) / WARP_inverse_shape;
+        q = p - textureLod(WARP_inverse, tc, 0.0).xyz * WARP_inside(s);
     }
     WARP_ITERATE   // WARP_ITERATIONS times q = p - WARP_offset(q), unrolled, the last
                    // one WARP_offset_last

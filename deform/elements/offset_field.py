@@ -16,8 +16,10 @@ contraction (``|grad u| < 1``: no folding), with error shrinking roughly like
 On the GPU the field is an RGBA16F 2D array texture whose layers are the z-slices of
 the node grid (xyz = u in mm, a = material), sampled at node-centred texture
 coordinates by two hardware-bilinear fetches (layers k and k + 1) and a lerp: the
-trilinear value, cheaper than one 3D trilinear fetch on llvmpipe. The field can be owned
-by this warp (uploaded from numpy) or by a GPU simulation (``texture_source``).
+trilinear value. The field can be owned by this warp (uploaded from numpy) or by a GPU
+simulation (``texture_source``), whose passes write its layers. The baked inverse
+(``inverse="baked"``) is written by this warp's own compute pass into an RGBA16F 3D
+texture and sampled by one hardware-trilinear fetch.
 
 Measurements (inverse error per mode and iteration count, GPU costs): docs/benchmarks.md,
 section 'voxwarp.deform.elements.offset_field: inverse accuracy and cost'.
@@ -840,9 +842,9 @@ class OffsetFieldWarp(Warp):
         if entry is None:
             # one compiled bake shader per context, shared by every warp (gl_programs)
             hold = gl_programs.compute_shader(ctx, shaders.source("offset_field_bake.comp.glsl"))
-            tex = ctx.texture_array(self.bake_shape, 4, dtype="f2")
+            tex = ctx.texture3d(self.bake_shape, 4, dtype="f2")
             tex.filter = (ctx.LINEAR, ctx.LINEAR)
-            tex.repeat_x = tex.repeat_y = False
+            tex.repeat_x = tex.repeat_y = tex.repeat_z = False
         else:
             _, hold, tex, version = entry
             if self._source is None and version == self._version:
@@ -855,8 +857,8 @@ class OffsetFieldWarp(Warp):
 
     def run_bake(self, ctx: Any, program: Any, target: Any) -> None:
         """Run the bake compute ``program`` (shaders/offset_field_bake.comp.glsl, or a
-        variant of it) over the field texture bound to unit 0, into the RGBA16F 2D
-        array ``target`` of :attr:`bake_shape`; returns after its memory barrier."""
+        variant of it) over the field texture bound to unit 0, into the RGBA16F 3D
+        texture ``target`` of :attr:`bake_shape`; returns after its memory barrier."""
         program["u_field"].value = 0
         program["u_shape"].value = tuple(int(n) for n in self.bake_shape)
         program["u_field_shape"].value = tuple(int(n) for n in self.shape)
@@ -1009,8 +1011,8 @@ class OffsetFieldWarp(Warp):
 
 
 def texture_field(tex: Any, shape: Sequence[int]) -> np.ndarray | None:
-    """The ``(nx, ny, nz, 3)`` float64 field an RGBA16F 2D array texture of ``shape``
-    (layers = z) holds -- what the warp renders, read back -- or ``None`` when ``tex``
+    """The ``(nx, ny, nz, 3)`` float64 field an RGBA16F 2D array texture (layers = z)
+    or 3D texture of ``shape`` holds -- what the warp renders, read back -- or ``None`` when ``tex``
     is not such a texture (e.g. a stand-in solver in tests)."""
     nx, ny, nz = (int(n) for n in shape)
     try:

@@ -32,7 +32,7 @@ def bake_all_steps(ctx: Any, warp: OffsetFieldWarp) -> bytes:
     src = shaders.source("offset_field_bake.comp.glsl")
     assert EARLY_EXIT in src
     prog = ctx.compute_shader(src.replace(EARLY_EXIT, ""))
-    tex = ctx.texture_array(warp.bake_shape, 4, dtype="f2")
+    tex = ctx.texture3d(warp.bake_shape, 4, dtype="f2")
     try:
         warp.textures(ctx)["displacement"].use(0)
         warp.run_bake(ctx, prog, tex)
