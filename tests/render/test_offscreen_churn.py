@@ -53,5 +53,8 @@ def test_renderer_churn_on_a_shared_context_is_flat(gl_ctx: Any) -> None:
     gc.collect()
     grown = (_rss_kb() - rss) / N
     assert grown < BOUND_KB, f"{grown:.1f} KB per renderer"
-    assert _fds() == fds
-    assert threading.active_count() == threads
+    # no growth: a leak adds descriptors or threads per renderer; the count may drop
+    # meanwhile, when something an earlier test of this worker left (a pipe, a
+    # finishing thread) is closed during the cycle (seen once: 28 -> 26 descriptors)
+    assert _fds() <= fds
+    assert threading.active_count() <= threads
