@@ -17,6 +17,8 @@ edits of the generated shader (throw-away programs, not what the app draws):
   again (``warp_chain_jacobian(p)``) and the offset field's grad u by central
   differences at +-0.5 node spacing (6 trilinear lookups);
 * ``kept-cd``: the kept points (no second warp), central differences;
+* ``q-nodes``: grad u from the 8 nodes of the final q's cell, read again (the shipped
+  program keeps grad u from the last fixed-point step's own 8 nodes);
 * ``anew-analytic``: warped again, grad u from the 8 nodes of q's cell (as shipped);
 * ``jacobian-v``: the offset field's Jacobian as ``I - grad v(p)``, v its baked
   inverse, by central differences (6 lookups; no second inverse, no matrix inverse);
@@ -61,7 +63,8 @@ VARIANTS: dict[str, list[tuple[str, str]]] = {
 }
 _V = (
     "vec3 w0_v(vec3 p) {\n    vec3 s = (p - w0_lo) / w0_size;\n    vec3 v;\n"
-    "    w0_TRILINEAR(w0_inverse, w0_inverse_shape, s, v)\n    return v * w0_inside(s);\n}\n"
+    "    vec3 tc = (clamp(s, 0.0, 1.0) * (w0_inverse_shape - 1.0) + 0.5) / w0_inverse_shape;\n"
+    "    v = textureLod(w0_inverse, tc, 0.0).xyz;\n    return v * w0_inside(s);\n}\n"
     "mat3 w0_warp_jacobian_at(vec3 p, vec3 q) {\n"
     "    vec3 h = 0.5 * w0_size / (w0_inverse_shape - 1.0);\n"
     "    mat3 g;\n"
@@ -74,10 +77,12 @@ _V = (
     + "    return mat3(1.0) - g;\n}\nmat3 w0_warp_jacobian_at_old(vec3 p, vec3 q) {"
 )
 VARIANTS["jacobian-v"] = [("mat3 w0_warp_jacobian_at(vec3 p, vec3 q) {", _V)]
+#: the shaded program's Jacobian line (grad u kept by the last fixed-point step)
+_KEPT = "    mat3 a = mat3(1.0) + (w0_ITERATIONS >= 1 ? w0_kept_grad : w0_grad_u(q));"
 #: the offset field's grad u by central differences at +-0.5 node spacing (6 lookups)
 _CD = [
     (
-        "    mat3 a = mat3(1.0) + w0_grad_u(q);",
+        _KEPT,
         "    vec3 h = 0.5 * w0_size / (w0_shape - 1.0);\n    mat3 a = mat3(1.0);\n"
         + "".join(
             f"    a[{i}] += (w0_offset(q + E) - w0_offset(q - E)) / (2.0 * h.{c});\n".replace(
@@ -92,6 +97,9 @@ _ANEW = [
     ("    return warp_chain_kept_jacobian();", "    return warp_chain_jacobian(g_ro + t * g_rd);")
 ]
 VARIANTS["kept-cd"] = _CD
+#: grad u from the 8 nodes of the final q's cell (read again, as before the last step
+#: kept it)
+VARIANTS["q-nodes"] = [(_KEPT, "    mat3 a = mat3(1.0) + w0_grad_u(q);")]
 VARIANTS["anew-analytic"] = _ANEW
 VARIANTS["old"] = _ANEW + _CD
 #: the shipped program again, timed last in each round: the noise of the interleaving
