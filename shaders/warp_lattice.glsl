@@ -62,12 +62,21 @@ uniform float WARP_tolerance;   // WARP_ADAPTIVE: stop once a step moves q by <=
     J = mat3(dx_ * WARP_cells.x, dy_ * WARP_cells.y, (y1_ - y0_) * WARP_cells.z);  \
 }
 
+// WARP_KEEP_JACOBIAN (shaded rays without the det J overlay): each Newton step keeps
+// the J it evaluated (at the step's start; the last step moves u by at most the
+// tolerance), and the shading's Jacobian uses it instead of reading u's 8 nodes again.
+#if defined(SHADING) && !defined(DETJ_OVERLAY)
+#define WARP_KEEP_JACOBIAN
+#endif
+mat3 WARP_step_J = mat3(1.0);
+
 // The Newton step D = J(U)^-1 (grid(U) - P) on grid(U) = P, solved by cross products
 // (Cramer's rule); 0 where J is (nearly) singular (a folded lattice).
 #define WARP_NEWTON_DELTA(U, P, D) {                                               \
     vec3 fn_;                                                                      \
     mat3 jn_;                                                                      \
     WARP_EVAL(U, fn_, jn_)                                                         \
+    WARP_step_J = jn_;                                                             \
     vec3 r_ = fn_ - (P);                                                           \
     vec3 a_ = cross(jn_[1], jn_[2]);                                               \
     float det_ = dot(jn_[0], a_);                                                  \
@@ -140,7 +149,13 @@ mat3 warp_jacobian(vec3 p) {
     if (!inside) return mat3(1.0);
     vec3 f;
     mat3 j;
+#ifdef WARP_KEEP_JACOBIAN
+    // from p's last Newton step (an inside point takes one when there are steps; a
+    // constant condition)
+    if (WARP_ITERATIONS >= 1) j = WARP_step_J; else WARP_EVAL(u, f, j)
+#else
     WARP_EVAL(u, f, j)
+#endif
     vec3 a = cross(j[1], j[2]);
     float det = dot(j[0], a);
     if (abs(det) <= 1.0e-6 * length(j[0]) * length(j[1]) * length(j[2])) return mat3(1.0);

@@ -352,6 +352,34 @@ def test_glsl_warp_matches_the_cpu_reference(gl_ctx: Any, kind: str, inverse: st
     assert np.all(np.isfinite(q))
 
 
+@pytest.mark.parametrize(("inverse", "k"), [("newton", None), ("newton", 2), ("baked", 0)])
+def test_glsl_shaded_jacobian_from_the_last_newton_step(
+    gl_ctx: Any, inverse: str, k: int | None
+) -> None:
+    """Compiled for shading, the Jacobian is the J the last Newton step evaluated (at
+    the step's start: the step moves u by at most the tolerance), not u's 8 nodes read
+    again; the seed alone (no steps) still reads them. Against the CPU's Jacobian at the
+    converged point."""
+    w = bent(inverse=inverse, iterations=k)
+    _, inner = inside_points(w.grid, 500, 15)
+    try:
+        q, jac = gpu_warp(gl_ctx, w, inner)
+        q_shaded, jac_kept = gpu_warp(gl_ctx, w, inner, kept=True, shading=True)
+    finally:
+        w.release()
+    np.testing.assert_array_equal(q_shaded, q)  # the same Newton steps
+    ok = q[:, 0] < FAR / 2
+    assert ok.sum() > 450
+    err = np.abs(jac_kept[ok] - w.jacobian(inner)[ok]).max(axis=(1, 2))
+    # measured (llvmpipe): default tolerance max 7e-6, 2 fixed steps 1e-6, the seed
+    # alone 6e-7 (median 2e-7 each; reading the final u's nodes: max 8e-7)
+    assert err.max() < 1e-3
+    assert np.median(err) < 1e-5
+    assert np.abs(jac_kept[ok] - np.eye(3)).max() > 0.1  # the lattice's stretch is in it
+    if k == 0:  # no Newton step: the nodes are read as before
+        np.testing.assert_array_equal(jac_kept, jac)
+
+
 def test_two_lattices_chain_on_the_gpu(gl_ctx: Any) -> None:
     # two warps of one kind in a chain: names (macros included) must not clash
     chain = [bent(), LatticeWarp(bulged_grid(*BOX), BOX, iterations=3)]
