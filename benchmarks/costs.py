@@ -15,8 +15,10 @@ measured by a second worker. Both workers stay up for the whole run and their re
 alternate (before, after, after, before, ...), so that load drift on a shared machine
 hits both columns alike. Every number is the median of ``--repeats`` repeats, each a
 ratio against its reference measured in the same repeat (or seconds for the wire field);
-the load average is printed beside each line. ``--quick`` (64x64 images, 32³ volumes,
-one repeat) checks that the harness runs; its numbers mean nothing.
+the load average is printed beside each line. ``--only`` measures some of the lines
+(e.g. ``--only chainmail_local,massspring_settled``: the deformed frames, minutes instead
+of the whole table's quarter hour). ``--quick`` (64x64 images, 32³ volumes, one repeat)
+checks that the harness runs; its numbers mean nothing.
 """
 
 from __future__ import annotations
@@ -130,13 +132,27 @@ def _machine() -> tuple[dict[str, Any], str]:
     return hw, text
 
 
-def _tasks(volumes: Sequence[str]) -> list[tuple[str, str | None]]:
+def _tasks(
+    volumes: Sequence[str], measures: Sequence[str] = MEASUREMENTS
+) -> list[tuple[str, str | None]]:
     """(measurement, volume; None for one made once) in running order."""
     return [
         task
         for m in MEASUREMENTS
+        if m in measures
         for task in ([(m, None)] if m in GLOBAL else [(m, v) for v in volumes])
     ]
+
+
+def check_measures(measures: Sequence[str]) -> None:
+    """Raise InputError naming the unknown ones among ``measures``."""
+    from voxwarp.errors import InputError
+
+    unknown = [m for m in measures if m not in MEASUREMENTS]
+    if unknown:
+        raise InputError(
+            f"unknown measurement {', '.join(unknown)}; pick from {', '.join(MEASUREMENTS)}"
+        )
 
 
 def measure_all(
@@ -144,13 +160,14 @@ def measure_all(
     volumes: Sequence[str],
     repeats: int,
     log: Callable[[str], Any] = _log,
+    measures: Sequence[str] = MEASUREMENTS,
 ) -> dict[tuple[str, str | None], dict[str, Any]]:
-    """Every measurement on every volume: per task, per worker label, the repeats'
-    numbers and the first error; the repeats of the workers alternate."""
+    """Each of ``measures`` (default: all) on every volume: per task, per worker label,
+    the repeats' numbers and the first error; the repeats of the workers alternate."""
     from voxwarp.core.timing import load_average
 
     out: dict[tuple[str, str | None], dict[str, Any]] = {}
-    for measure, volume in _tasks(volumes):
+    for measure, volume in _tasks(volumes, measures):
         res: dict[str, Any] = {w.label: {"repeats": [], "error": ""} for w in workers}
         loads: list[float] = []
         for i in range(repeats):
@@ -200,12 +217,15 @@ def run_costs(
     quick: bool = False,
     command: str = "python -m benchmarks costs",
     log: Callable[[str], Any] = _log,
+    measures: Sequence[str] = MEASUREMENTS,
 ) -> dict[str, Any]:
-    """Measure the table (see the module docstring) with the code of ``before`` (a git
-    revision; None: the checkout alone) and of the checkout; the run as JSON-ready dict."""
+    """Measure the table (see the module docstring; ``measures``: some of its
+    measurements) with the code of ``before`` (a git revision; None: the checkout alone)
+    and of the checkout; the run as JSON-ready dict."""
     from benchmarks.costs_tree import export_revision, resolve_revision
     from voxwarp.core.timing import load_average
 
+    check_measures(measures)
     commit = None if before is None else resolve_revision(ROOT, before)
     check_volumes(volumes)
     t0, load0 = time.perf_counter(), load_average()
@@ -219,7 +239,7 @@ def run_costs(
         trees.append(("after", "the checkout", _checkout_commit(), ROOT))
         workers = [Worker(label, commit, tree, quick) for label, _, commit, tree in trees]
         try:
-            measured = measure_all(workers, volumes, repeats, log)
+            measured = measure_all(workers, volumes, repeats, log, measures)
         finally:
             for w in workers:
                 w.close()
@@ -271,6 +291,12 @@ def add_bench_costs_parser(bsub: Any) -> None:
         help=f"repeats per line and revision, medians reported (default {DEFAULT_REPEATS},"
         " 1 with --quick)",
     )
+    p.add_argument(
+        "--only",
+        metavar="MEASURES",
+        default="",
+        help=f"comma-separated measurements to run (default all: {', '.join(MEASUREMENTS)})",
+    )
     p.add_argument("--quick", action="store_true", help="64x64, 32³ volumes: checks the harness")
     p.add_argument("--json", metavar="FILE", help="write the run (every repeat) as JSON")
     p.add_argument("--markdown-out", metavar="FILE", help="write the table to FILE")
@@ -303,6 +329,7 @@ def cmd_bench_costs(args: argparse.Namespace) -> int:
             repeats=repeats,
             quick=args.quick,
             command=command,
+            measures=tuple(m for m in args.only.split(",") if m) or MEASUREMENTS,
         )
     except TreeError as exc:
         raise InputError(str(exc)) from None

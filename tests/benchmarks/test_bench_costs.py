@@ -192,7 +192,7 @@ class _FakeWorker:
 def test_repeats_alternate_and_a_failed_first_try_is_not_repeated(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(bench_costs, "_tasks", lambda volumes: [("m", "v")])
+    monkeypatch.setattr(bench_costs, "_tasks", lambda volumes, measures: [("m", "v")])
     calls: list[str] = []
     workers = [_FakeWorker("before", calls), _FakeWorker("after", calls)]
     got = bench_costs.measure_all(workers, ["v"], 4, log=lambda s: None)
@@ -217,6 +217,23 @@ def test_tasks_run_global_measurements_once() -> None:
     for m in costs_table.MEASUREMENTS:
         volumes = [v for mm, v in tasks if mm == m]
         assert volumes == ([None] if m in costs_table.GLOBAL else ["a", "b"])
+
+
+def test_only_some_measurements() -> None:
+    tasks = bench_costs._tasks(["a", "b"], ["massspring_settled", "wire_build"])
+    assert tasks == [("massspring_settled", "a"), ("massspring_settled", "b"), ("wire_build", None)]
+    args = build_parser().parse_args(["costs", "--only", "chainmail_local,gui_drag"])
+    assert args.only == "chainmail_local,gui_drag"
+
+
+def test_unknown_measurement_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks.__main__ import main
+
+    assert main(["costs", "--before", "none", "--only", "chainmail_local,warp_speed"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("benchmarks: error: unknown measurement warp_speed; pick from")
+    assert "chainmail_local" in err.split("pick from", 1)[1]
+    assert "\n" not in err
 
 
 # ---------------------------------------------------------------------- the table
