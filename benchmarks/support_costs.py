@@ -19,7 +19,7 @@ edits of the generated shader (throw-away programs, not what the app draws):
 * ``kept-cd``: the kept points (no second warp), central differences;
 * ``q-nodes``: grad u from the 8 nodes of the final q's cell, read again (the shipped
   program keeps grad u from the last fixed-point step's own 8 nodes);
-* ``anew-analytic``: warped again, grad u from the 8 nodes of q's cell (as shipped);
+* ``anew-analytic``: warped again (``warp_chain_jacobian(p)``), grad u as shipped;
 * ``jacobian-v``: the offset field's Jacobian as ``I - grad v(p)``, v its baked
   inverse, by central differences (6 lookups; no second inverse, no matrix inverse);
 * ``no-chain``: the middle loop straight too (no chain code at all);
