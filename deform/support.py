@@ -73,18 +73,26 @@ class SupportMap:
         size = self.size
         return self.lo + idx.min(axis=0) * size, self.lo + (idx.max(axis=0) + 1) * size
 
-    def boundary_triangles(self) -> np.ndarray:
+    def boundary_triangles(self, grow: float = 0.0) -> np.ndarray:
         """(T, 3, 3) float32 triangles (deformed world, mm) of the support's surface: the
         brick faces between a support brick and one outside it (or the map's edge), runs
         of them along a row merged into one rectangle, two triangles each. A straight ray
         meets a support brick only between the first and last of these it crosses (the
-        renderer rasterises them for each ray's range)."""
-        q = np.concatenate([self._faces(axis) for axis in range(3)])
+        renderer rasterises them for each ray's range).
+
+        ``grow``: each rectangle widened in its plane by this fraction of a brick on
+        every side. Merged rows meet their neighbours in T-junctions (an edge of one
+        rectangle ends in the middle of another's), where a rasteriser, snapping each
+        edge's ends on its own, can leave pixels that neither rectangle covers; widened
+        rectangles overlap there (a ray then counts a face it passes near: a range a
+        little longer, never a shorter one)."""
+        q = np.concatenate([self._faces(axis, grow) for axis in range(3)])
         return np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.float32)
 
-    def _faces(self, axis: int) -> np.ndarray:
+    def _faces(self, axis: int, grow: float = 0.0) -> np.ndarray:
         """(F, 4, 3) corners of the surface's rectangles normal to ``axis``: in each
-        brick plane, runs of faces along the last of the other two axes."""
+        brick plane, runs of faces along the last of the other two axes, widened in
+        their plane by ``grow`` bricks."""
         pad = [(0, 0)] * 3
         pad[axis] = (1, 1)
         m = np.moveaxis(np.pad(self.moved, pad), axis, 0)
@@ -96,8 +104,8 @@ class SupportMap:
         corners = np.zeros((len(starts), 4, 3))
         for k, (di, end) in enumerate(((0, False), (1, False), (1, True), (0, True))):
             corners[:, k, axis] = starts[:, 0]
-            corners[:, k, others[0]] = starts[:, 1] + di
-            corners[:, k, others[1]] = ends[:, 2] + 1 if end else starts[:, 2]
+            corners[:, k, others[0]] = starts[:, 1] + di + (2 * di - 1) * grow
+            corners[:, k, others[1]] = ends[:, 2] + 1 + grow if end else starts[:, 2] - grow
         return self.lo + corners * self.size
 
     def contains(self, points: np.ndarray) -> np.ndarray:

@@ -36,6 +36,12 @@ FAR = 1e30
 #: costs about a microsecond per triangle on llvmpipe (a scattered support of 30 % of a
 #: 32³ map has ~84k triangles, 63 ms at 512²; a drag's blob has 3-9k)
 MAX_TRIANGLES = 1 << 14
+#: the surface's rectangles are widened in their plane by this fraction of a brick (see
+#: SupportMap.boundary_triangles): merged rows meet in T-junctions, where rasterisation
+#: left pixels uncovered (a ray through a support brick drawn straight: 1-2 pixels off
+#: by up to 44/255 per frame on the bundled scans); a twentieth of a brick is at least a
+#: few pixels' 1/256 snapping steps wherever a brick covers a pixel or more
+GROW = 0.05
 #: the "too many triangles" mark of a map's cached surface
 _OPEN = object()
 
@@ -97,7 +103,7 @@ class SupportRanges:
         if self._mesh is not None and self._mesh[0] == key:
             return self._mesh[2]
         self._drop_mesh()
-        tris = smap.boundary_triangles()
+        tris = smap.boundary_triangles(GROW)
         if len(tris) == 0 or len(tris) > MAX_TRIANGLES:
             self._mesh = (key, None, None if len(tris) == 0 else _OPEN)
             return self._mesh[2]

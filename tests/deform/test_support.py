@@ -207,3 +207,24 @@ def test_the_support_surface_is_the_faces_between_support_and_the_rest() -> None
     count, area = surface(moved)
     assert area == pytest.approx(4.0 * faces)
     assert count < 2 * faces  # rows merged
+
+
+def test_grown_surface_rectangles_widen_in_their_plane() -> None:
+    """``grow`` widens each rectangle by that fraction of a brick on every side, in
+    its own plane (the face planes stay where they are)."""
+    from voxwarp.deform.support import SupportMap
+
+    moved = np.zeros((3, 3, 3), dtype=bool)
+    moved[1, 1, 1] = True
+    smap = SupportMap(np.zeros(3), np.full(3, 6.0), moved)  # 2 mm bricks
+    plain = smap.boundary_triangles().astype(float)
+    grown = smap.boundary_triangles(0.1).astype(float)
+    assert grown.shape == plain.shape == (12, 3, 3)
+    for tris in (plain, grown):
+        # each corner lies on one of the brick's face planes (2 or 4 mm along an axis)
+        on_plane = np.isclose(tris, 2.0) | np.isclose(tris, 4.0)
+        assert np.all(on_plane.any(axis=-1))
+    area = np.linalg.norm(np.cross(grown[:, 1] - grown[:, 0], grown[:, 2] - grown[:, 0]), axis=1)
+    assert area.sum() / 2.0 == pytest.approx(6 * (2.0 * 1.2) ** 2, rel=1e-6)
+    assert grown.min() == pytest.approx(2.0 - 0.2)
+    assert grown.max() == pytest.approx(4.0 + 0.2)

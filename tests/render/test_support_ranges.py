@@ -2,8 +2,9 @@
 
 Oracle: the first and last ray parameter at which each pixel's ray lies in a support
 brick, by slab tests against every brick on the CPU (the ray built as the raycaster
-builds it). Pixels whose ray passes within a hair of a brick's edge are left out (either
-answer is right there).
+builds it). The pass widens the surface's rectangles by GROW of a brick (against
+rasterisation cracks at T-junctions), so a range must hold every brick the ray crosses
+and may reach as far as the bricks grown by that much, no farther.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import pytest
 
 from voxwarp.core.camera import Camera
 from voxwarp.deform.support import SupportMap
-from voxwarp.render.support_ranges import FAR, MAX_TRIANGLES, SupportRanges
+from voxwarp.render.support_ranges import FAR, GROW, MAX_TRIANGLES, SupportRanges
 
 SIZE = (64, 48)
 
@@ -48,9 +49,9 @@ def camera(distance: float = 160.0) -> Camera:
     return Camera(center=(30.0, 30.0, 30.0), rotation=rot, distance=distance, fov=30.0)
 
 
-def rays(inv_view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rays(inv_view_proj: np.ndarray, size: tuple[int, int] = SIZE) -> tuple[np.ndarray, np.ndarray]:
     """Origins and unit directions (H, W, 3) of the pixels' rays, row 0 at the bottom."""
-    w, h = SIZE
+    w, h = size
     x, y = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
     ndc = np.stack([x / w * 2 - 1, y / h * 2 - 1], axis=-1)
     ends = []
@@ -80,18 +81,38 @@ def brick_range(smap: SupportMap, ro: np.ndarray, rd: np.ndarray, grow: float) -
     return np.stack([first, last], axis=-1)
 
 
-def read_ranges(ctx: Any, smap: SupportMap, inv: np.ndarray) -> np.ndarray:
+def read_ranges(
+    ctx: Any, smap: SupportMap, inv: np.ndarray, size: tuple[int, int] = SIZE
+) -> np.ndarray:
     """(H, W, 2) first and last crossing per pixel from a fresh pass (row 0 at the bottom)."""
     box = smap.moved_box()
     assert box is not None
     ranges = SupportRanges(ctx)
     try:
-        tex = ranges.texture(smap, inv, SIZE, box)
+        tex = ranges.texture(smap, inv, size, box)
         tw, th = tex.size
         data = np.frombuffer(tex.read(), dtype=np.float32).reshape(th, tw, 4)
     finally:
         ranges.release()
-    return data[: SIZE[1], : SIZE[0]][..., [0, 3]]
+    return data[: size[1], : size[0]][..., [0, 3]]
+
+
+def check_ranges(got: np.ndarray, smap: SupportMap, ro: np.ndarray, rd: np.ndarray) -> None:
+    """Every ray's range holds the bricks it crosses (shrunk by 0.05 mm: a ray grazing
+    an edge may count the brick or not) and lies within the bricks grown by GROW of a
+    brick (and 0.05 mm), to float32 rounding of the interpolated face point; a ray that
+    misses the grown bricks has none."""
+    inner = brick_range(smap, ro, rd, -0.05)
+    outer = brick_range(smap, ro, rd, GROW * float(smap.size.max()) + 0.05)
+    hit = np.isfinite(inner[..., 0])
+    miss = ~np.isfinite(outer[..., 0])
+    tol = 0.02
+    g, a, b = got[hit], inner[hit], outer[hit]
+    missed = ~((g[:, 0] <= a[:, 0] + tol) & (g[:, 1] >= a[:, 1] - tol))
+    assert not missed.any(), f"{missed.sum()} rays through the support without its range"
+    assert np.all((g[:, 0] >= b[:, 0] - tol) & (g[:, 1] <= b[:, 1] + tol))
+    assert np.all(got[miss][:, 0] >= FAR * 0.5)
+    assert np.all(got[miss][:, 1] <= -FAR * 0.5)
 
 
 @pytest.mark.gl
@@ -107,21 +128,39 @@ def test_each_ray_gets_its_first_and_last_crossing_of_the_support(
     got = read_ranges(gl_ctx, smap, inv)
     ro, rd = rays(inv)
     inner = brick_range(smap, ro, rd, -0.05)
-    outer = brick_range(smap, ro, rd, 0.05)
     hit = np.isfinite(inner[..., 0])
-    miss = ~np.isfinite(outer[..., 0])
     assert hit.mean() > 0.05, "the view must show the blob"
-    assert miss.mean() > 0.3, "and rays beside it"
-    # between the ranges of the bricks shrunk and grown by 0.05 mm (a ray grazing a
-    # brick may count it or not), to float32 rounding of the interpolated face point
-    tol = 0.02
-    g, a, b = got[hit], inner[hit], outer[hit]
-    assert np.all((g[:, 0] >= b[:, 0] - tol) & (g[:, 0] <= a[:, 0] + tol))
-    assert np.all((g[:, 1] >= a[:, 1] - tol) & (g[:, 1] <= b[:, 1] + tol))
-    assert np.all(got[miss][:, 0] >= FAR * 0.5)
-    assert np.all(got[miss][:, 1] <= -FAR * 0.5)
+    assert (~np.isfinite(brick_range(smap, ro, rd, 1.0)[..., 0])).mean() > 0.3, "and beside it"
+    check_ranges(got, smap, ro, rd)
     # rays through both of the blob's parts: the range spans the gap between them
+    a = inner[hit]
     assert np.any(a[:, 1] - a[:, 0] > 2.5 * smap.size[0])
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_merged_rows_leave_no_ray_without_its_range(gl_ctx: Any, seed: int) -> None:
+    """A ragged blob (rows of every length: T-junctions everywhere between merged
+    rectangles) seen from oblique angles at 256x192: every ray through a support brick
+    gets its range. Without the widening, rasterisation left such rays uncovered (seen
+    on the bundled scans: 1-2 pixels a frame drawn straight through the support)."""
+    rng = np.random.default_rng(seed)
+    moved = np.zeros((12, 12, 12), dtype=bool)
+    centre = rng.uniform(4.0, 8.0, 3)
+    idx = np.indices(moved.shape).transpose(1, 2, 3, 0) + 0.5
+    moved[np.linalg.norm((idx - centre) / rng.uniform(2.5, 4.5, 3), axis=-1) < 1.0] = True
+    moved &= rng.random(moved.shape) < 0.85  # a ragged surface
+    smap = SupportMap(np.zeros(3), np.full(3, 60.0), moved)
+    size = (256, 192)
+    for yaw in (23.0, 67.0, 141.0):
+        cam = camera()
+        c, s_ = np.cos(np.radians(yaw)), np.sin(np.radians(yaw))
+        cam.rotation = cam.rotation @ np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+        inv = np.linalg.inv(cam.view_projection(size[0] / size[1]))
+        got = read_ranges(gl_ctx, smap, inv, size)
+        ro, rd = rays(inv, size)
+        assert np.isfinite(brick_range(smap, ro, rd, -0.05)[..., 0]).mean() > 0.05
+        check_ranges(got, smap, ro, rd)
 
 
 @pytest.mark.gl
