@@ -64,7 +64,7 @@ from voxwarp.render.skipping.maps import (
     ray_direction_coefficients,
 )
 from voxwarp.render.skipping.segments import MAX_SAMPLES
-from voxwarp.render.skipping.support import SupportCache
+from voxwarp.render.skipping.support import MAP_MIN_VISIBLE, SupportCache
 from voxwarp.render.slices import SliceRenderer
 from voxwarp.render.support_ranges import SupportRanges
 from voxwarp.render.volume_texture import LAYOUTS, layout_defines, upload_volume_texture
@@ -742,7 +742,7 @@ class Renderer:
             segment = self._skip_maps.segments.fixed()
         self.last_ray_segment = segment
         shade_tex = self.last_gradient_texture = self._use_gradients(scene)
-        support = plan == "map" and segment == 1
+        support = plan == "map" and segment == 1 and not self._nearly_empty(scene, gpu, skip_kind)
         self.last_support = "map" if support else "none" if linear else "all"
         coarse = skip_kind == "cells" and linear and self._skip_maps.cell_factor(scene) > 1
         per_check = 1
@@ -768,6 +768,13 @@ class Renderer:
         if plan == "none":
             return scene.copy(warps=[]), plan
         return scene, plan
+
+    def _nearly_empty(self, scene: Scene, gpu: _VolumeGPU, skip_kind: str) -> bool:
+        """Whether warped rays with deformed-space cell maps see fewer than
+        MAP_MIN_VISIBLE of the cells: the map path costs more than it saves there."""
+        if skip_kind != "cells":
+            return False
+        return self._skip_maps.warped_fraction(gpu.skip, scene) < MAP_MIN_VISIBLE
 
     def _detj_on(self, scene: Scene) -> bool:
         """Whether this draw tints by det J (an overlay is set and the mode shows it)."""

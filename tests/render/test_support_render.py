@@ -135,6 +135,32 @@ def test_a_local_drag_changes_only_the_rays_through_its_support(
 
 
 @pytest.mark.gl
+def test_a_nearly_empty_view_draws_the_chain_everywhere(offscreen: Any, head: Volume) -> None:
+    """Where the transfer function shows fewer than MAP_MIN_VISIBLE of the deformed-space
+    cells, the same local drag is drawn with the chain at every sample (the map path's
+    loops would cost more than the few chained samples they save): the old path's image
+    exactly; a view that shows more keeps the map path."""
+    from voxwarp.core.transfer_function import TransferFunction
+    from voxwarp.render.skipping.support import MAP_MIN_VISIBLE
+
+    top = float(np.percentile(np.asarray(head.data), 99.95))  # the brightest voxels only
+    tf = TransferFunction([(0, 0, 0, 0, 0), (top, 1, 1, 1, 0), (top + 1, 1, 1, 1, 0.8)])
+    sparse = Scene(head, view="anterior", transfer_function=tf)
+    scene = sparse.copy(warps=[offset_warp(head, moved=True)])
+    new = draw(offscreen, scene, True)
+    r = offscreen(*SIZE).renderer
+    gpu = r._volume_gpu(head)
+    assert r._skip_maps.warped_fraction(gpu.skip, scene) < MAP_MIN_VISIBLE
+    assert r.last_support == "all"
+    assert np.array_equal(new, draw(offscreen, scene, False))
+    assert new.any(), "the view shows something"
+    dense = Scene(head, view="anterior").copy(warps=scene.warps)
+    draw(offscreen, dense, True)
+    assert r._skip_maps.warped_fraction(gpu.skip, dense) >= MAP_MIN_VISIBLE
+    assert r.last_support == "map"
+
+
+@pytest.mark.gl
 def test_slices_pay_for_the_chain_only_inside_the_support(offscreen: Any, head: Volume) -> None:
     r = offscreen(*SIZE).renderer
     lo, hi = head.bounds

@@ -89,6 +89,8 @@ class VolumeSkipMaps:
         self.warped_skip: dict[Octant, Any] = {}
         self.warped_key: Any = None
         self.warped_visible: np.ndarray | None = None
+        #: the share of warped_visible's cells the mode can see (0..1)
+        self.warped_fraction = 1.0
         self.warped_offset = np.zeros(3, dtype=int)
         #: the warp state's piecewise-linear segment lengths (ray_segments.py) and texture
         self.warped_segments: SegmentMap | None = None
@@ -363,6 +365,9 @@ class SkipMapCache:
             tex.release()
         maps.warped_skip.clear()
         maps.warped_visible, maps.warped_offset, segments = result
+        maps.warped_fraction = float(np.count_nonzero(maps.warped_visible)) / max(
+            maps.warped_visible.size, 1
+        )
         self._install_segments(maps, segments)
         maps.warped_key = key
 
@@ -473,6 +478,12 @@ class SkipMapCache:
             self._install_warped(maps, key, result)
         assert maps.warped_visible is not None
         return maps.warped_visible
+
+    def warped_fraction(self, maps: VolumeSkipMaps, scene: Scene) -> float:
+        """The share of deformed-space cells ``scene``'s warped rays can see (its
+        :meth:`warped_visibility`, built now if needed)."""
+        self.warped_visibility(maps, scene)
+        return maps.warped_fraction
 
     def warped_segments(self, maps: VolumeSkipMaps, scene: Scene) -> Any:
         """The R32F texture of the warp state's segment map (:mod:`ray_segments`) at the

@@ -14,7 +14,9 @@ to use it (:meth:`SupportCache.plan`):
   the brick texture per pixel;
 * ``"all"``: the chain may move every brick (or cannot bound itself), or more than
   :data:`MAP_MAX_FRACTION` of them (the map's loops would cost more than they save):
-  the chain at every sample.
+  the chain at every sample. The renderer also draws "all" where its warped skip maps
+  say the mode sees less than :data:`MAP_MIN_VISIBLE` of the cells (a nearly empty
+  view, where the map's loops cost more than the few chained samples they save).
 """
 
 from __future__ import annotations
@@ -42,6 +44,14 @@ BRICK_VOXELS = 4
 #: support holds 24 % of the bricks (the MRI head) costs 0.86x of "all" on the map path,
 #: one holding 46 % (the stent CT) 1.13x (docs/benchmarks.md, "Per-ray ranges")
 MAP_MAX_FRACTION = 0.35
+#: ... and a view in which the mode can see fewer than this share of the deformed-space
+#: cells is drawn with the chain everywhere too: its rays visit so few samples that the
+#: chain costs little, while each of the map path's three loops costs every ray a pass
+#: of its body on a CPU rasteriser (llvmpipe, 512² dvr, a ChainMail drag on two scans
+#: and six transfer functions: "all" was faster at 0.1 % and 0.7 % visible cells, by
+#: 1.4-1.6x; the map path at 1.5 % and above, or even at 4.9 %; docs/benchmarks.md,
+#: "Nearly empty views draw the chain everywhere")
+MAP_MIN_VISIBLE = 0.01
 
 
 def warp_state_key(scene: Scene) -> tuple:
