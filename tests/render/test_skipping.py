@@ -411,6 +411,55 @@ def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_trut
     np.testing.assert_array_equal(same, visible)
 
 
+def test_warped_visibility_windows_counted_one_by_one() -> None:
+    """Each deformed cell of a moved block is visible iff a visible original cell lies in
+    its displacement window (the block's interval, in cells), counted here by slicing
+    the padded visibility cell by cell; the summed-area table only spans the box the
+    moved blocks' windows reach (a local drag's part of the grid), so windows at that
+    box's edges are the ones to check. Blocks that do not move keep their cells."""
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+    from voxwarp.deform.warp import chain_displacement_range
+    from voxwarp.render.skipping.maps import (
+        BLOCK,
+        cell_min_max,
+        static_block_visibility,
+        warped_cell_grid,
+        warped_cell_visibility,
+    )
+
+    vol = _volume()
+    u = np.zeros((9, 9, 9, 3))
+    u[4, 3, 5] = (3.0, -2.0, 1.5)  # one node dragged: its 2³ cells move, nothing else
+    scene = Scene(vol, mode="dvr", transfer_function=TF, warps=[OffsetFieldWarp(*vol.bounds, u)])
+    visible = static_block_visibility(scene, *cell_min_max(vol.data))
+    ray_lo, ray_hi = scene.ray_bounds()
+    out, offset = warped_cell_visibility(
+        visible, vol.spacing, vol.origin, scene.warps, ray_lo, ray_hi
+    )
+    shape, offset2 = warped_cell_grid(visible.shape, vol.spacing, vol.origin, ray_lo, ray_hi)
+    np.testing.assert_array_equal(offset, offset2)
+    padded = np.zeros(tuple(shape), dtype=bool)
+    padded[tuple(slice(-o, -o + n) for o, n in zip(offset, visible.shape, strict=True))] = visible
+    sp, org = np.asarray(vol.spacing), np.asarray(vol.origin)
+    moved_blocks = 0
+    for b in np.argwhere(np.ones(-(-np.asarray(shape) // BLOCK), dtype=bool)):
+        first = b * BLOCK + offset
+        box_lo, box_hi = org + (first - 1.0) * sp, org + (first + BLOCK - 1.0) * sp
+        a, z = chain_displacement_range(scene.warps, box_lo[None], box_hi[None])
+        d_lo, d_hi = np.floor(a[0] / sp).astype(int), np.ceil(z[0] / sp).astype(int)
+        cells = b * BLOCK + np.indices((BLOCK,) * 3).reshape(3, -1).T
+        cells = cells[np.all(cells < shape, axis=1)]
+        if not (d_lo.any() or d_hi.any()):
+            np.testing.assert_array_equal(out[tuple(cells.T)], padded[tuple(cells.T)])
+            continue
+        moved_blocks += 1
+        for c in cells:
+            lo_c, hi_c = np.clip(c + d_lo, 0, shape), np.clip(c + d_hi + 1, 0, shape)
+            window = padded[lo_c[0] : hi_c[0], lo_c[1] : hi_c[1], lo_c[2] : hi_c[2]]
+            assert out[tuple(c)] == window.any(), (c, d_lo, d_hi)
+    assert 0 < moved_blocks < np.prod(-(-np.asarray(shape) // BLOCK)), "a local drag"
+
+
 @pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])
 @pytest.mark.parametrize("chain", ["offset", "baked", "offset+rotation", "field"])
 @pytest.mark.slow

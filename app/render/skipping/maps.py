@@ -514,13 +514,22 @@ def warped_cell_visibility(
     moved = np.argwhere(np.any((d_lo != 0) | (d_hi != 0), axis=-1))
     if len(moved) == 0 or not visible.any():
         return out, offset
-    # summed-area table of the padded visibility: sat[i, j, k] = count below (i, j, k)
-    sat = np.zeros(tuple(shape + 1), dtype=np.int32)
-    sat[1:, 1:, 1:] = out.cumsum(0, dtype=np.int32).cumsum(1).cumsum(2)
+    # the box [q0, q1) of cells every window of a moved block lies in (a local drag's
+    # is a part of the grid), and the summed-area table of the padded visibility over
+    # it: sat[i, j, k] = visible cells of [q0, q0 + (i, j, k)), summed in place
+    blo = d_lo[moved[:, 0], moved[:, 1], moved[:, 2]]
+    bhi = d_hi[moved[:, 0], moved[:, 1], moved[:, 2]]
+    q0 = np.clip((moved * block + blo).min(axis=0), 0, shape)
+    q1 = np.maximum(np.clip((moved * block + block + bhi).max(axis=0), 0, shape), q0)
+    sat = np.zeros(tuple(q1 - q0 + 1), dtype=np.int32)
+    core = sat[1:, 1:, 1:]
+    core[...] = out[q0[0] : q1[0], q0[1] : q1[1], q0[2] : q1[2]]
+    for axis in range(3):
+        np.cumsum(core, axis=axis, out=core)
 
     def count_visible(lo_cell: np.ndarray, hi_cell: np.ndarray) -> np.ndarray:
         """Visible cells in the boxes [lo_cell, hi_cell) (clipped to the grid)."""
-        a, b = np.clip(lo_cell, 0, shape), np.clip(hi_cell, 0, shape)
+        a, b = np.clip(lo_cell, q0, q1) - q0, np.clip(hi_cell, q0, q1) - q0
         b = np.maximum(a, b)
         count = np.zeros(len(a), dtype=np.int64)
         for corner in range(8):
@@ -530,8 +539,6 @@ def warped_cell_visibility(
         return count
 
     # moved blocks whose whole window holds no visible cell are invisible
-    blo = d_lo[moved[:, 0], moved[:, 1], moved[:, 2]]
-    bhi = d_hi[moved[:, 0], moved[:, 1], moved[:, 2]]
     near = count_visible(moved * block + blo, moved * block + block + bhi) > 0
     cleared = np.zeros(tuple(nb), dtype=bool)
     cleared[tuple(moved[~near].T)] = True
