@@ -67,8 +67,11 @@ uniform float WARP_tolerance;   // WARP_ADAPTIVE: stop once a step moves q by <=
 // tolerance), and the shading's Jacobian uses it instead of reading u's 8 nodes again.
 #if defined(SHADING) && !defined(DETJ_OVERLAY)
 #define WARP_KEEP_JACOBIAN
-#endif
 mat3 WARP_step_J = mat3(1.0);
+#define WARP_KEEP_STEP_J(J) WARP_step_J = (J);
+#else
+#define WARP_KEEP_STEP_J(J)
+#endif
 
 // The Newton step D = J(U)^-1 (grid(U) - P) on grid(U) = P, solved by cross products
 // (Cramer's rule); 0 where J is (nearly) singular (a folded lattice).
@@ -76,7 +79,7 @@ mat3 WARP_step_J = mat3(1.0);
     vec3 fn_;                                                                      \
     mat3 jn_;                                                                      \
     WARP_EVAL(U, fn_, jn_)                                                         \
-    WARP_step_J = jn_;                                                             \
+    WARP_KEEP_STEP_J(jn_)                                                          \
     vec3 r_ = fn_ - (P);                                                           \
     vec3 a_ = cross(jn_[1], jn_[2]);                                               \
     float det_ = dot(jn_[0], a_);                                                  \

@@ -1012,8 +1012,8 @@ class OffsetFieldWarp(Warp):
 
 def texture_field(tex: Any, shape: Sequence[int]) -> np.ndarray | None:
     """The ``(nx, ny, nz, 3)`` float64 field an RGBA16F 2D array texture (layers = z)
-    or 3D texture of ``shape`` holds -- what the warp renders, read back -- or ``None`` when ``tex``
-    is not such a texture (e.g. a stand-in solver in tests)."""
+    or 3D texture of ``shape`` holds -- what the warp renders, read back -- or ``None``
+    when ``tex`` is not such a texture (e.g. a stand-in solver in tests)."""
     nx, ny, nz = (int(n) for n in shape)
     try:
         if tuple(tex.size) != (nx, ny, nz) or tex.components != 4 or tex.dtype != "f2":
