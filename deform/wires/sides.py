@@ -416,9 +416,9 @@ class SidePasses(PlaneMasks):
         def run(wi: int, chunk: np.ndarray) -> None:
             sel = chunk[flat_wire[chunk] == wi]
             if len(sel):
-                idx = np.unravel_index(sel, rshape)
-                p = lo + (np.stack(idx, -1) + region_lo + 0.5) * h  # _region_centres
-                inner[idx] = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
+                p = _region_centres(lo, h, region_lo, rshape, sel)
+                fade = _fade(self.wires[wi], tables[wi], flat_u[sel], p)
+                inner[np.unravel_index(sel, rshape)] = fade
 
         def put(start: int) -> None:
             chunk = slice(start, start + FLAG_CHUNK)
