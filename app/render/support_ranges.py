@@ -55,6 +55,10 @@ class SupportRanges:
         self._program: Any = None
         #: (map token, buffer, vertex array); buffer None: no surface or _OPEN
         self._mesh: tuple[int, Any, Any] | None = None
+        #: what the target holds now (map, camera, size, box, bound): a draw that asks
+        #: for the same again reads it without drawing the pass
+        self._drawn: tuple | None = None
+        self._drawn_fbo: Any = None
 
     def texture(
         self,
@@ -70,7 +74,17 @@ class SupportRanges:
         ``box`` (lo, hi). ``bound`` False: every range open (the box alone bounds the
         chained phase, for comparisons)."""
         w, h = size
+        key = (
+            token(smap),
+            np.asarray(inv_view_proj, float).tobytes(),
+            (int(w), int(h)),
+            np.asarray(box, float).tobytes(),
+            bool(bound),
+        )
         fbo = self._target.framebuffer(w, h)
+        if key == self._drawn and fbo is self._drawn_fbo:
+            return self._target.textures[0]
+        self._drawn, self._drawn_fbo = key, fbo
         fbo.use()
         fbo.viewport = (0, 0, w, h)
         vao = self._vao(smap) if bound else None
@@ -125,6 +139,7 @@ class SupportRanges:
 
     def release(self) -> None:
         """Free the target, the triangles and the program (idempotent)."""
+        self._drawn = self._drawn_fbo = None
         self._drop_mesh()
         self._target.release()
         if self._program is not None:

@@ -187,3 +187,35 @@ def test_a_scattered_support_leaves_the_ranges_open(gl_ctx: Any) -> None:
     got = read_ranges(gl_ctx, smap, np.linalg.inv(camera().view_projection(SIZE[0] / SIZE[1])))
     assert np.all(got[..., 0] <= -FAR * 0.5)
     assert np.all(got[..., 1] >= FAR * 0.5)
+
+
+@pytest.mark.gl
+def test_the_same_camera_reads_the_ranges_drawn_last_a_new_one_draws_them(gl_ctx: Any) -> None:
+    """A draw that asks again for the map, camera and size the target holds skips the
+    pass; any change (camera, map) draws it anew, with that view's ranges."""
+    smap = blob_map()
+    box = smap.moved_box()
+    assert box is not None
+    views = []
+    for distance in (160.0, 120.0):
+        views.append(np.linalg.inv(camera(distance).view_projection(SIZE[0] / SIZE[1])))
+    ranges = SupportRanges(gl_ctx)
+    drawn: list[int] = []
+    vao_of = ranges._vao
+    ranges._vao = lambda m: drawn.append(1) or vao_of(m)  # type: ignore[method-assign]
+
+    def read(inv: np.ndarray, m: SupportMap = smap) -> np.ndarray:
+        tex = ranges.texture(m, inv, SIZE, box)
+        tw, th = tex.size
+        data = np.frombuffer(tex.read(), dtype=np.float32).reshape(th, tw, 4)
+        return data[: SIZE[1], : SIZE[0]][..., [0, 3]]
+
+    try:
+        for inv in (views[0], views[0], views[1], views[0]):
+            check_ranges(read(inv), smap, *rays(inv))
+        assert len(drawn) == 3  # the repeated first view read what was there
+        other = SupportMap(smap.lo, smap.hi, smap.moved.copy())  # the same bricks, anew
+        check_ranges(read(views[0], other), other, *rays(views[0]))
+        assert len(drawn) == 4
+    finally:
+        ranges.release()
