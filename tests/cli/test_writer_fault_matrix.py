@@ -367,9 +367,11 @@ def test_gui_export_whose_rename_fails(scene_file: Path, tmp_path: Path, monkeyp
 # ---------------------------------------------------------------------------- kill -9
 @pytest.fixture(scope="module")
 def kill_scenes(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """64x48x40 voxels: about half a second of slices to draw (export-volume) and of gzip
-    (export-field .nrrd at 2 mm), the window in which the writer is killed. The scene
-    without warps, and the turned one."""
+    """64x48x40 voxels: the scene without warps, and the turned one. The writer is
+    killed while its temporary file has bytes: export-volume draws slices for about half
+    a second; export-field at 1 mm writes 0.9 MB of .nrrd for about a quarter of a second
+    (at 2 mm its 8 KB took a few milliseconds, and the command often finished three times
+    before the poll saw them: 3 of 6 runs of the test failed on an idle machine)."""
     warped = _warped(tmp_path_factory.mktemp("kill"), (64, 48, 40))
     plain = Scene(load_volume(warped.parent / "v.npz")).save(warped.parent / "plain.json")
     return plain, warped
@@ -448,8 +450,8 @@ def test_killed_export_field_then_rerun(kill_scenes: tuple[Path, Path], tmp_path
     _, warped = kill_scenes
     out = tmp_path / "run" / "f.nrrd"
     out.parent.mkdir()
-    _kill_then_rerun(["export-field", str(warped), "-o", str(out), "--spacing", "2"], out)
-    expected = Scene.load(warped).export_field(spacing=2.0).field
+    _kill_then_rerun(["export-field", str(warped), "-o", str(out), "--spacing", "1"], out)
+    expected = Scene.load(warped).export_field(spacing=1.0).field
     got = load_displacement_field(out)
     np.testing.assert_allclose(got.affine, expected.affine, atol=1e-9)
     np.testing.assert_allclose(got.displacements, expected.displacements, atol=1e-5)
