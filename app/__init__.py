@@ -16,7 +16,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from voxwarp.huge_pages import small_pages
 from voxwarp.lazy import exports
+
+small_pages()
 
 #: public name -> module that defines it (imported on first access)
 _PUBLIC: dict[str, str] = {

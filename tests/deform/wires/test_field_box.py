@@ -1,0 +1,130 @@
+"""The attribute field's content box (:mod:`voxwarp.deform.wires.field_box`).
+
+Oracle: the same build on the wires' whole reach (``box="reach"``, the box every
+field had before). The content box's field must be a block of it with the same
+bits, and every voxel of the reach field that the content box leaves out must map
+outside the volume (so it rendered nothing): checked at every such voxel centre
+with the reach field's own mapping (:meth:`WireFieldWarp.apply`, the shader's).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.deform.wires.test_wire_field_build import smooth_variant, volume, wires
+from voxwarp.core.volume import Volume
+from voxwarp.deform.warp import WarpError
+from voxwarp.deform.wires import build as build_module
+from voxwarp.deform.wires.build import WireDeformer
+from voxwarp.deform.wires.sides import _grow_one
+from voxwarp.deform.wires.wire import Wire
+
+
+def built(vol: Volume, ws: list[Wire], scale: int, box: str) -> WireDeformer:
+    wd = WireDeformer(vol, ws, field_scale=scale, box=box)
+    wd.build()
+    return wd
+
+
+def block_offset(small: Any, big: Any) -> np.ndarray:
+    """Index of the small field's first voxel in the big field (same grid)."""
+    off = (small.lo - big.lo) / big.spacing
+    np.testing.assert_allclose(off, np.rint(off), atol=1e-6)
+    np.testing.assert_array_equal(small.spacing, big.spacing)
+    return np.rint(off).astype(int)
+
+
+def assert_block_of_reach(vol: Volume, ws: list[Wire], scale: int) -> tuple[int, int]:
+    """The content field against the reach field (see the module docstring); returns
+    both fields' voxel counts."""
+    content, reach = built(vol, ws, scale, "content"), built(vol, ws, scale, "reach")
+    assert content.box_used == "content" and reach.box_used == "reach"
+    small, big = content.field, reach.field
+    off = block_offset(small, big)
+    assert np.all(off >= 0) and np.all(off + small.shape <= big.shape)
+    block = tuple(slice(int(o), int(o) + n) for o, n in zip(off, small.shape, strict=True))
+    for name in ("state", "t"):
+        np.testing.assert_array_equal(getattr(small, name), getattr(big, name)[block], name)
+    assert (small.weight is None) == (big.weight is None)
+    if small.weight is not None:
+        # the weights samples read: of the swept voxels and their neighbours (the rest
+        # hold 1, unused: WireField.weight)
+        known = _grow_one(small.state >= 2)
+        np.testing.assert_array_equal(small.weight[known], big.weight[block][known])
+    # the voxels left out render nothing: their originals lie outside the volume
+    outside = np.ones(big.shape, dtype=bool)
+    outside[block] = False
+    idx = np.argwhere(outside & (big.state >= 2))
+    p = big.lo + (idx + 0.5) * big.spacing
+    q = reach.warp().apply(p)
+    lo, hi = reach.volume_bounds
+    half = 0.5 * np.asarray(vol.spacing)
+    inside = np.all((q > lo - half) & (q < hi + half), axis=1)
+    assert not inside.any(), f"{int(inside.sum())} left-out voxels map into the volume"
+    return int(np.prod(small.shape)), int(np.prod(big.shape))
+
+
+@pytest.mark.parametrize("kind", ["rigid", "smoothends", "smoothsides"])
+@pytest.mark.parametrize("scale", [1, 2])
+def test_content_box_is_a_block_of_the_reach_box(kind: str, scale: int) -> None:
+    # bent, twisted (1.2 rad) and scaled (1.3x) wires on two rods
+    ws = wires() if kind == "rigid" else smooth_variant(kind)
+    small, big = assert_block_of_reach(volume(), ws, scale)
+    assert small <= big
+    if kind != "rigid":  # the smooth ends' fade reaches far beyond the volume
+        assert small < big
+
+
+def test_content_dragged_out_of_the_volume_stays_in_the_box() -> None:
+    # the second rod's end pulled 12 mm beyond the volume's face: its content moves
+    # out there, and the box must hold it
+    vol = volume()
+    w = wires()[1].to_dict()
+    w["modified"] = [list(p) for p in w["base"]]
+    w["modified"][-1] = [w["base"][-1][0] + 12.0, w["base"][-1][1], w["base"][-1][2]]
+    w["twist"] = 0.0
+    dragged = Wire.from_dict(w)
+    small, big = assert_block_of_reach(vol, [dragged], 1)
+    wd = built(vol, [dragged], 1, "content")
+    q = wd.warp().apply(wd.field.lo + (np.argwhere(wd.field.state >= 2) + 0.5) * wd.field.spacing)
+    lo, hi = wd.volume_bounds
+    # content really lies beyond the volume's face, inside the field
+    assert wd.field.hi[0] > hi[0] + 6.0
+    assert np.any(np.all((q > lo) & (q < hi), axis=1))
+
+
+def test_head_wire_field_is_smaller_and_the_same() -> None:
+    # the cost table's MRI head wire (smooth ends, twisted and bent top), at 64³
+    from benchmarks.wires import HEAD_WIRE, head_volume
+
+    small, big = assert_block_of_reach(head_volume(64), [Wire(**HEAD_WIRE)], 2)
+    assert small < 0.7 * big
+
+
+def test_a_box_that_cuts_content_falls_back_to_the_whole_reach(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # a content box forced down to the volume's box cuts the rod moved 10 mm sideways,
+    # out through the volume's face: the swept voxels on the cut face map into the
+    # volume, so the build runs again
+    vol = volume()
+    w = wires()[1].to_dict()
+    w["modified"] = [[p[0], p[1] + 10.0, p[2]] for p in w["base"]]
+    dragged = [Wire.from_dict(w)]
+    reach = built(vol, dragged, 1, "reach")
+    monkeypatch.setattr(build_module, "content_box", lambda probes, volume_box, loose: loose)
+    whole = built(vol, dragged, 1, "content")
+    assert whole.box_used == "content"  # the loose box cuts nothing
+    monkeypatch.setattr(build_module, "content_box", lambda probes, volume_box, loose: volume_box)
+    cut = built(vol, dragged, 1, "content")
+    assert cut.box_used == "reach"
+    for name in ("state", "t"):
+        np.testing.assert_array_equal(getattr(cut.field, name), getattr(reach.field, name))
+
+
+def test_unknown_box_is_a_one_line_error() -> None:
+    with pytest.raises(WarpError, match="box must be one of"):
+        WireDeformer(volume(), wires(), box="tight")
