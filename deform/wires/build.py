@@ -16,6 +16,7 @@ from voxwarp.deform.warp import WarpError, warp_class
 from voxwarp.deform.wires import propagation as prop
 from voxwarp.deform.wires.classify import classify_available
 from voxwarp.deform.wires.constants import (
+    FIELD_BOXES,
     FIELD_SCALES,
     LAYOUTS,
     LUT_SIZE,
@@ -26,6 +27,7 @@ from voxwarp.deform.wires.constants import (
     PAPER_MAX_WIRES,
     PROPAGATE_MODES,
 )
+from voxwarp.deform.wires.field_box import Probes, content_box, escapes, wire_probes
 from voxwarp.deform.wires.geometry import _box_overlap, _curve_box
 from voxwarp.deform.wires.layouts import WireField, WireFieldStats, store_field
 from voxwarp.deform.wires.propagation import last_backend
@@ -105,6 +107,14 @@ class WireDeformer(SidePasses):
         then the mask test; ``"flagged"``: the paper's order (sections 5.1, 7.1): the
         voxels the plane masks touch are flagged first and only they (and their
         neighbours, which swept samples interpolate) get a nearest seed.
+    box
+        The field's box: ``"content"`` (default) grows the volume box only where the
+        wires can bring the volume's content
+        (:func:`~voxwarp.deform.wires.field_box.content_box`: every other sample is
+        empty anyway); ``"reach"`` by the wires' whole reach, as before. A content
+        box is a block of the reach box's field with the same bits; where a swept
+        voxel on its faces could still show content it is dropped for the reach box
+        (:attr:`box_used` says which box the last build used).
     """
 
     def __init__(
@@ -121,6 +131,7 @@ class WireDeformer(SidePasses):
         backend: str = "auto",
         precision: float = 1e-4,
         propagate: str = "region",
+        box: str = "content",
     ) -> None:
         self.data, self.spacing, self.origin = _volume_parts(volume)
         # oblique scans: world <-> index through the volume's rotation
@@ -140,6 +151,9 @@ class WireDeformer(SidePasses):
         if propagate not in PROPAGATE_MODES:
             raise WarpError(f"propagate must be one of {PROPAGATE_MODES}; got {propagate!r}")
         self.propagate = propagate
+        if box not in FIELD_BOXES:
+            raise WarpError(f"box must be one of {FIELD_BOXES}; got {box!r}")
+        self.box = box
         self.masks = bool(masks)
         if mask_resolution is None:
             # the volume's voxel for a 1:1 field; two of them for coarser fields, whose
@@ -160,6 +174,8 @@ class WireDeformer(SidePasses):
         self.stats: WireFieldStats | None = None
         self.propagation_input: tuple[np.ndarray, tuple[float, ...]] | None = None
         self._warp: WireFieldWarp | None = None
+        #: the box of the last build's field: "content" or "reach" (see ``box``)
+        self.box_used: str | None = None
         vlo = self.origin - 0.5 * self.spacing
         vhi = self.origin + (np.asarray(self.data.shape) - 0.5) * self.spacing
         if hasattr(volume, "bounds"):  # the axis-aligned box of a (possibly oblique) volume
@@ -207,17 +223,33 @@ class WireDeformer(SidePasses):
                 )
 
     # ------------------------------------------------------------------ geometry
-    def _field_geometry(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
+    def _field_geometry(
+        self, tables: Sequence[WireTables], masks: Sequence[tuple[np.ndarray, int, float]] | None
+    ) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int], np.ndarray]:
         """Field box lo, voxel spacing and shape: the volume box grown (in whole field
-        voxels) to hold each modified wire's region of influence."""
+        voxels) to hold the wires' curves and the places their masks can bring the
+        volume's content (:func:`~voxwarp.deform.wires.field_box.content_box`; beyond
+        them every sample is empty); with ``masks`` None, grown by the wires' whole
+        reach. Also which faces (2, 3: lower, upper) lie inside the whole reach."""
         h = self.spacing * self.field_scale
         vlo, vhi = self.volume_bounds
-        lo, hi = vlo.copy(), vhi.copy()
+        loose_lo, loose_hi = vlo.copy(), vhi.copy()
         for w in self.wires:
             clo, chi = _curve_box(w.modified)
             grow = max(w.reach_at(float(w.scale[:, 1].max())), w.end_reach())
-            lo = np.minimum(lo, clo - grow)
-            hi = np.maximum(hi, chi + grow)
+            loose_lo = np.minimum(loose_lo, clo - grow)
+            loose_hi = np.maximum(loose_hi, chi + grow)
+        lo, hi = loose_lo, loose_hi
+        if masks is not None:
+            probes = [
+                pr for wi in range(len(self.wires)) for pr in self._probes(tables, masks, wi, h)
+            ]
+            c_lo, c_hi = content_box(probes, self._content_bounds(), (loose_lo, loose_hi))
+            k_lo, k_hi = self._curves_box(2.0 * h)
+            # a field voxel more: a sample that can show content then interpolates
+            # between the same voxels as in the whole reach's field; never beyond it
+            lo = np.maximum(np.minimum(k_lo, c_lo - h), loose_lo)
+            hi = np.minimum(np.maximum(k_hi, c_hi + h), loose_hi)
         grow_lo = np.ceil((vlo - lo) / h - 1e-9)
         lo = vlo - grow_lo * h
         count = np.maximum(np.ceil((hi - lo) / h - 1e-9), 1)
@@ -229,7 +261,76 @@ class WireDeformer(SidePasses):
                 " keep them near the object or use a larger field_scale"
             )
         shape = count.astype(int)
-        return lo, h, (int(shape[0]), int(shape[1]), int(shape[2]))
+        inner = np.stack([lo > loose_lo + 1e-9, lo + count * h < loose_hi - 1e-9])
+        return lo, h, (int(shape[0]), int(shape[1]), int(shape[2])), inner
+
+    def _content_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The volume box grown by a volume voxel: trilinear sampling reaches half a
+        voxel beyond its faces."""
+        vlo, vhi = self.volume_bounds
+        return vlo - self.spacing, vhi + self.spacing
+
+    def _probes(
+        self,
+        tables: Sequence[WireTables],
+        masks: Sequence[tuple[np.ndarray, int, float]],
+        wi: int,
+        h: np.ndarray,
+    ) -> list[Probes]:
+        """Wire ``wi``'s probes (:func:`~voxwarp.deform.wires.field_box.wire_probes`):
+        each plane's widest mask pixel, grown as the build grows the masks (half a field
+        voxel) and by a pixel's rounding; along the wire, a swept voxel stays within a
+        field voxel and a mask pixel (twice over) and two table steps of its entry."""
+        mask, _, half = masks[wi]
+        px = self.mask_resolution
+        ax = (np.arange(mask.shape[1]) - half) * px
+        r2 = ax[:, None] ** 2 + ax[None, :] ** 2
+        widest = np.sqrt(np.where(mask, r2[None], -1.0).max(axis=(1, 2)).clip(0.0))
+        grow = math.ceil(0.5 * float(h.max()) / px) + 0.5
+        radii = widest + grow * px * math.sqrt(2.0)
+        tab = tables[wi]
+        slack = 2.0 * (float(np.linalg.norm(h)) + px) + 2.0 * tab.length_modified / (tab.size - 1)
+        caps = self._end_cap() + self.wires[wi].end_reach("modified")
+        return wire_probes(tab, radii, slack, caps)
+
+    def _cuts_content(
+        self,
+        tables: Sequence[WireTables],
+        swept_side: _SideResult,
+        lo: np.ndarray,
+        h: np.ndarray,
+        shape: tuple[int, int, int],
+        inner: np.ndarray,
+    ) -> bool:
+        """Whether a swept voxel on a face of the field inside the wires' whole reach
+        can be mapped into the volume (:func:`~voxwarp.deform.wires.field_box.escapes`):
+        the box then cut content, and the build runs again on the whole reach."""
+        region_lo, rshape, r_wire, r_u, swept, _ = swept_side
+        for end, d in zip(*np.nonzero(inner), strict=True):
+            k = (0 if end == 0 else shape[d] - 1) - int(region_lo[d])
+            if not 0 <= k < rshape[d]:
+                continue
+            face = [slice(None)] * 3
+            face[d] = slice(k, k + 1)
+            at = np.nonzero(swept[tuple(face)])
+            if len(at[0]) == 0:
+                continue
+            idx = np.stack(at, -1) + np.eye(3, dtype=int)[d] * k
+            pts = lo + (region_lo + idx + 0.5) * h
+            flat = tuple(idx.T)
+            if escapes(tables, pts, r_wire[flat], r_u[flat], self._content_bounds()):
+                return True
+        return False
+
+    def _curves_box(self, pad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The volume box and every wire's base and modified curve (grown by ``pad``,
+        so that each seed voxel around a curve lies in the field)."""
+        lo, hi = self.volume_bounds
+        for w in self.wires:
+            for curve in (w.base, w.modified):
+                clo, chi = _curve_box(curve)
+                lo, hi = np.minimum(lo, clo - pad), np.maximum(hi, chi + pad)
+        return lo, hi
 
     # ------------------------------------------------------------------ build
     def build(self) -> WireFieldStats:
@@ -244,8 +345,6 @@ class WireDeformer(SidePasses):
         t_all = time.perf_counter()
         timings: dict[str, float] = {}
         self._check_layout_limits()  # the wires may have been edited since __init__
-        lo, h, shape = self._field_geometry()
-
         t0 = time.perf_counter()
         tables = [w.tables(LUT_SIZE, self.precision) for w in self.wires]
         timings["tables"] = time.perf_counter() - t0
@@ -260,17 +359,17 @@ class WireDeformer(SidePasses):
             if fold is not None:
                 warnings.warn(fold, stacklevel=2)
 
-        # 3. seeds: the 8 voxels of every field cell a wire enters; the modified wires
-        # for the swept voxels, the base wires for the place the object leaves
+        # the field's box: where the masks can bring the volume's content
         t0 = time.perf_counter()
-        seeds_m = self._seeds(tables, lo, h, shape, "modified")
-        seeds_b = self._seeds(tables, lo, h, shape, "base")
-        timings["seeds"] = time.perf_counter() - t0
-
-        # 4-5. propagation and flags of both sides
-        swept_side, vacated_side = self._both_sides(
-            seeds_m, seeds_b, tables, masks, lo, h, shape, timings
-        )
+        content = self.box == "content"
+        lo, h, shape, inner = self._field_geometry(tables, masks if content else None)
+        timings["box"] = time.perf_counter() - t0
+        swept_side, vacated_side = self._sides_in(tables, masks, (lo, h, shape), timings)
+        self.box_used = self.box
+        if inner.any() and self._cuts_content(tables, swept_side, lo, h, shape, inner):
+            self.box_used = "reach"
+            lo, h, shape, _ = self._field_geometry(tables, None)
+            swept_side, vacated_side = self._sides_in(tables, masks, (lo, h, shape), timings)
         region_lo, rshape, r_wire, r_u, swept, seed_count = swept_side
         b_lo, b_shape, vacated = vacated_side
 
@@ -308,6 +407,24 @@ class WireDeformer(SidePasses):
         if self._warp is not None:
             self._warp._set_field(fld)
         return self.stats
+
+    def _sides_in(
+        self,
+        tables: list[WireTables],
+        masks: list[tuple[np.ndarray, int, float]],
+        box: tuple[np.ndarray, np.ndarray, tuple[int, int, int]],
+        timings: dict[str, float],
+    ) -> tuple[_SideResult, tuple[np.ndarray, tuple[int, int, int], np.ndarray]]:
+        """Steps 3-5 in the field box ``box`` (lo, spacing, shape): seeds (the 8 voxels
+        of every field cell a wire enters; the modified wires for the swept voxels, the
+        base wires for the place the object leaves), then propagation and flags of both
+        sides (:meth:`_both_sides`)."""
+        lo, h, shape = box
+        t0 = time.perf_counter()
+        seeds_m = self._seeds(tables, lo, h, shape, "modified")
+        seeds_b = self._seeds(tables, lo, h, shape, "base")
+        timings["seeds"] = timings.get("seeds", 0.0) + time.perf_counter() - t0
+        return self._both_sides(seeds_m, seeds_b, tables, masks, lo, h, shape, timings)
 
     def _all_masks(
         self, tables: list[WireTables]

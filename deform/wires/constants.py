@@ -11,6 +11,8 @@ MAX_WIRES = 128
 LUT_SIZE = 256
 #: allowed field scales (per-axis reduction; 1:1, 1:8, 1:64, 1:512, 1:4096 in voxels)
 FIELD_SCALES = (1, 2, 4, 8, 16)
+#: attribute field boxes (:class:`WireDeformer`'s ``box``)
+FIELD_BOXES = ("content", "reach")
 #: attribute field layouts
 LAYOUTS = ("float", "packed", "paper")
 #: packed code of a vacated voxel (flag 0, wire 127, t 255)

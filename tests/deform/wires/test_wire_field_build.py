@@ -82,7 +82,11 @@ def reference_fields(backend: str, **kw: Any) -> dict[str, np.ndarray]:
     vol = volume()
     for scale in (1, 2):
         for layout in ("float", "packed"):
-            wd = WireDeformer(vol, wires(), field_scale=scale, layout=layout, backend=backend)
+            # the reference's box: the wires' whole reach (test_field_box checks that
+            # the default content box is a block of it with the same bits)
+            wd = WireDeformer(
+                vol, wires(), field_scale=scale, layout=layout, backend=backend, box="reach"
+            )
             for name, value in kw.items():
                 setattr(wd, name, value)
             wd.build()
@@ -192,7 +196,9 @@ def test_smooth_trim_and_weights_give_the_reference_bits(backend: str) -> None:
     checked = 0
     for kind in ("smoothends", "smoothsides", "mixed", "single"):
         for scale in (1, 2):
-            wd = WireDeformer(volume(), smooth_variant(kind), field_scale=scale, backend=backend)
+            wd = WireDeformer(
+                volume(), smooth_variant(kind), field_scale=scale, backend=backend, box="reach"
+            )
             wd.build()
             key = f"{kind}_{backend}_s{scale}_float"
             for name in ("state", "t", "weight"):
