@@ -41,10 +41,12 @@ def assert_block_of_reach(vol: Volume, ws: list[Wire], scale: int) -> tuple[int,
     """The content field against the reach field (see the module docstring); returns
     both fields' voxel counts."""
     content, reach = built(vol, ws, scale, "content"), built(vol, ws, scale, "reach")
-    assert content.box_used == "content" and reach.box_used == "reach"
+    assert content.box_used == "content"
+    assert reach.box_used == "reach"
     small, big = content.field, reach.field
     off = block_offset(small, big)
-    assert np.all(off >= 0) and np.all(off + small.shape <= big.shape)
+    assert np.all(off >= 0)
+    assert np.all(off + small.shape <= big.shape)
     block = tuple(slice(int(o), int(o) + n) for o, n in zip(off, small.shape, strict=True))
     for name in ("state", "t"):
         np.testing.assert_array_equal(getattr(small, name), getattr(big, name)[block], name)
@@ -87,7 +89,7 @@ def test_content_dragged_out_of_the_volume_stays_in_the_box() -> None:
     w["modified"][-1] = [w["base"][-1][0] + 12.0, w["base"][-1][1], w["base"][-1][2]]
     w["twist"] = 0.0
     dragged = Wire.from_dict(w)
-    small, big = assert_block_of_reach(vol, [dragged], 1)
+    _small, _big = assert_block_of_reach(vol, [dragged], 1)
     wd = built(vol, [dragged], 1, "content")
     q = wd.warp().apply(wd.field.lo + (np.argwhere(wd.field.state >= 2) + 0.5) * wd.field.spacing)
     lo, hi = wd.volume_bounds
