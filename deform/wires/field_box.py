@@ -100,7 +100,7 @@ def content_box(
     """
     vlo, vhi = (np.asarray(v, dtype=np.float64) for v in volume_box)
     lo, hi = (np.asarray(v, dtype=np.float64) for v in loose_box)
-    grid = _Cells(lo, hi)
+    grid = _Cells(lo, hi, (vlo, vhi))
     keep = np.zeros(grid.n, dtype=bool)
     for pr in probes:
         for ks in _runs(len(pr.radii), pr.chain):
@@ -152,12 +152,19 @@ def segments_meet_box(
 class _Cells:
     """A grid of at most :data:`BOX_CELLS` equal cells over [lo, hi]."""
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+    def __init__(
+        self, lo: np.ndarray, hi: np.ndarray, volume: tuple[np.ndarray, np.ndarray]
+    ) -> None:
         size = np.maximum(hi - lo, 1e-9)
         side = float(np.prod(size) / BOX_CELLS) ** (1.0 / 3.0)
         self.n = tuple(int(v) for v in np.clip(np.ceil(size / side), 1, None))
         self.lo = lo
         self.edge = size / np.asarray(self.n)
+        # cells not wholly inside the volume box (only they can widen the field's box)
+        c = self.centres(tuple(slice(0, n) for n in self.n))
+        half = 0.5 * self.edge
+        within = np.all((c - half >= volume[0]) & (c + half <= volume[1]), axis=1)
+        self.beyond = ~within.reshape(self.n)
 
     def window(self, centre: np.ndarray, radius: float) -> tuple[slice, ...]:
         """Index slices of the cells that a ball can meet."""
@@ -204,7 +211,9 @@ def _mark_run(
     spread = np.linalg.norm(a[ks] - a[j], axis=(1, 2)) * radius
     margin = float((np.linalg.norm(moved, axis=1) + spread).max())
     window = grid.window(centre, radius)
-    c = grid.centres(window)
+    # only the cells that could still widen the box: not yet kept, not in the volume
+    todo = (~keep[window] & grid.beyond[window]).reshape(-1)
+    c = grid.centres(window)[todo]
     if len(c) == 0:
         return
     half = 0.5 * grid.edge
@@ -221,4 +230,6 @@ def _mark_run(
         m = np.eye(3) + w * move
         image, image_half = c @ m.T + w * b[j], np.abs(m) @ half + grow
         hit |= np.all(image - image_half <= vhi, axis=1) & np.all(image + image_half >= vlo, axis=1)
-    keep[window] |= (near & hit).reshape(keep[window].shape)
+    marks = np.zeros(len(todo), dtype=bool)
+    marks[todo] = near & hit
+    keep[window] |= marks.reshape(keep[window].shape)
