@@ -234,16 +234,17 @@ class WireDeformer(SidePasses):
         h = self.spacing * self.field_scale
         vlo, vhi = self.volume_bounds
         loose_lo, loose_hi = vlo.copy(), vhi.copy()
-        for w in self.wires:
+        out = []  # the wires whose reach leaves the volume box
+        for wi, w in enumerate(self.wires):
             clo, chi = _curve_box(w.modified)
             grow = max(w.reach_at(float(w.scale[:, 1].max())), w.end_reach())
             loose_lo = np.minimum(loose_lo, clo - grow)
             loose_hi = np.maximum(loose_hi, chi + grow)
+            if np.any(clo - grow < vlo) or np.any(chi + grow > vhi):
+                out.append(wi)
         lo, hi = loose_lo, loose_hi
         if masks is not None:
-            probes = [
-                pr for wi in range(len(self.wires)) for pr in self._probes(tables, masks, wi, h)
-            ]
+            probes = [pr for wi in out for pr in self._probes(tables, masks, wi, h)]
             c_lo, c_hi = content_box(probes, self._content_bounds(), (loose_lo, loose_hi))
             k_lo, k_hi = self._curves_box(2.0 * h)
             # a field voxel more: a sample that can show content then interpolates

@@ -206,30 +206,33 @@ def _mark_run(
     j = int(ks[len(ks) // 2])
     centre = pts[j]
     radius = float((np.linalg.norm(pts[ks] - centre, axis=1) + pr.radii[ks]).max())
+    window = grid.window(centre, radius)
+    # only the cells that could still widen the box: not yet kept, not in the volume
+    todo = (~keep[window] & grid.beyond[window]).reshape(-1)
+    if not todo.any():
+        return
     # how far another probe of the run maps a point within `radius` from probe j's image
     moved = a[ks] @ centre + b[ks] - (a[j] @ centre + b[j])
     spread = np.linalg.norm(a[ks] - a[j], axis=(1, 2)) * radius
     margin = float((np.linalg.norm(moved, axis=1) + spread).max())
-    window = grid.window(centre, radius)
-    # only the cells that could still widen the box: not yet kept, not in the volume
-    todo = (~keep[window] & grid.beyond[window]).reshape(-1)
     c = grid.centres(window)[todo]
-    if len(c) == 0:
-        return
     half = 0.5 * grid.edge
     gap = np.maximum(np.abs(c - centre) - half, 0.0)
     near = np.einsum("ni,ni->n", gap, gap) <= radius * radius
+    todo[todo] = near
+    c = c[near]
     # the segment from p to its image, at WEIGHTS steps of the fade w, each step's
     # box grown by half the way to the next
     move = a[j] - np.eye(3)
     reach = float(np.linalg.norm(move @ centre + b[j]) + np.linalg.norm(move, 2) * radius)
     grow = margin + 0.5 * reach / WEIGHTS
     vlo, vhi = volume
-    hit = np.zeros(len(c), dtype=bool)
-    for w in np.linspace(0.0, 1.0, WEIGHTS + 1):
-        m = np.eye(3) + w * move
-        image, image_half = c @ m.T + w * b[j], np.abs(m) @ half + grow
-        hit |= np.all(image - image_half <= vhi, axis=1) & np.all(image + image_half >= vlo, axis=1)
+    w = np.linspace(0.0, 1.0, WEIGHTS + 1)[:, None, None]
+    m = np.eye(3) + w * move  # (steps, 3, 3)
+    image = np.einsum("wij,nj->wni", m, c) + w * b[j]
+    image_half = (np.abs(m) @ half + grow)[:, None, :]
+    meets = np.all(image - image_half <= vhi, axis=2) & np.all(image + image_half >= vlo, axis=2)
+    hit = meets.any(axis=0)
     marks = np.zeros(len(todo), dtype=bool)
-    marks[todo] = near & hit
+    marks[todo] = hit
     keep[window] |= marks.reshape(keep[window].shape)
