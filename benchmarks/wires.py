@@ -119,7 +119,7 @@ DEFAULT_PHANTOMS: tuple[tuple[str, Path, dict[str, Any]], ...] = (("tubes", TUBE
 OPENCL_WARMUP = 2
 
 
-STAGES: tuple[str, ...] = ("tables", "masks", "seeds", "propagate", "flags", "store")
+STAGES: tuple[str, ...] = ("tables", "masks", "box", "seeds", "propagate", "flags", "store")
 
 
 # ---------------------------------------------------------------------- rows

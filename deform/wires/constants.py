@@ -32,7 +32,8 @@ MAX_WIRE_POINTS = 1024
 #: most a wire's reach (radius times its largest scale) may be, in volume diagonals:
 #: a larger region of influence covers nothing more
 MAX_REACH_DIAGONALS = 1.0
-#: most voxels of an attribute field (the volume box grown by the wires' reach)
+#: most voxels of an attribute field (the volume box grown where the wires can bring
+#: content, see :mod:`voxwarp.deform.wires.field_box`)
 MAX_FIELD_VOXELS = 1 << 27
 #: most mask pixels (planes x K x K) of one wire; each costs ~100 bytes while built
 MAX_MASK_PIXELS = 1 << 25

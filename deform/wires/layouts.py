@@ -39,8 +39,9 @@ class WireFieldStats:
     vacated: int
     #: field voxels that render as the identity (not swept, not vacated)
     ignored: int
-    #: seconds per stage: tables, masks, seeds, propagate, flags, store, total (seeds,
-    #: propagation and flags of both sides: the swept voxels and the vacated place)
+    #: seconds per stage: tables, masks, box (the field's box), seeds, propagate, flags,
+    #: store, total (seeds, propagation and flags of both sides: the swept voxels and
+    #: the vacated place)
     timings: dict[str, float] = field(default_factory=dict)
     #: plane-mask memory per wire, bytes: kept planes x K^2 / 8 (section 7.1's
     #: sum_p a(p) s / 8, see :mod:`voxwarp.deform.wires`)
