@@ -350,6 +350,10 @@ class WireDeformer(SidePasses):
         tables = [w.tables(LUT_SIZE, self.precision) for w in self.wires]
         timings["tables"] = time.perf_counter() - t0
 
+        # the whole reach within the field limit (a one-line WarpError naming the wires,
+        # before masks as wide as that reach are allocated)
+        self._field_geometry(tables, None)
+
         # 1-2. planes and their masks (per wire)
         t0 = time.perf_counter()
         masks, dropped, planes_total, mask_bytes = self._all_masks(tables)
