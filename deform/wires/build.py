@@ -245,7 +245,12 @@ class WireDeformer(SidePasses):
         lo, hi = loose_lo, loose_hi
         if masks is not None:
             probes = [pr for wi in out for pr in self._probes(tables, masks, wi, h)]
-            c_lo, c_hi = content_box(probes, self._content_bounds(), (loose_lo, loose_hi))
+            c_lo, c_hi = content_box(
+                probes,
+                self._content_bounds(),
+                (loose_lo, loose_hi),
+                int(np.prod(np.ceil((loose_hi - loose_lo) / h))),
+            )
             k_lo, k_hi = self._curves_box(2.0 * h)
             # a field voxel more: a sample that can show content then interpolates
             # between the same voxels as in the whole reach's field; never beyond it
@@ -284,9 +289,12 @@ class WireDeformer(SidePasses):
         field voxel and a mask pixel (twice over) and two table steps of its entry."""
         mask, _, half = masks[wi]
         px = self.mask_resolution
-        ax = (np.arange(mask.shape[1]) - half) * px
-        r2 = ax[:, None] ** 2 + ax[None, :] ** 2
-        widest = np.sqrt(np.where(mask, r2[None], -1.0).max(axis=(1, 2)).clip(0.0))
+        # per plane and row, the farther of the row's first and last pixel
+        k = mask.shape[2]
+        first, last = mask.argmax(axis=2), k - 1 - mask[:, :, ::-1].argmax(axis=2)
+        across = np.maximum(np.abs(first - half), np.abs(last - half)) * px
+        along = np.abs(np.arange(mask.shape[1]) - half) * px
+        widest = np.where(mask.any(axis=2), np.hypot(along, across), 0.0).max(axis=1)
         grow = math.ceil(0.5 * float(h.max()) / px) + 0.5
         radii = widest + grow * px * math.sqrt(2.0)
         tab = tables[wi]

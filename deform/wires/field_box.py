@@ -92,15 +92,17 @@ def content_box(
     probes: Sequence[Probes],
     volume_box: tuple[np.ndarray, np.ndarray],
     loose_box: tuple[np.ndarray, np.ndarray],
+    most_cells: int = BOX_CELLS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The bounding box of the volume box and of the points of ``loose_box`` that the
     probes can map into the volume box (see the module docstring), within ``loose_box``.
 
-    ``volume_box``: where the volume has content, grown by the sampling's border.
+    ``volume_box``: where the volume has content, grown by the sampling's border;
+    ``most_cells``: at most this many search cells (no finer than the field's voxels).
     """
     vlo, vhi = (np.asarray(v, dtype=np.float64) for v in volume_box)
     lo, hi = (np.asarray(v, dtype=np.float64) for v in loose_box)
-    grid = _Cells(lo, hi, (vlo, vhi))
+    grid = _Cells(lo, hi, (vlo, vhi), most_cells)
     keep = np.zeros(grid.n, dtype=bool)
     for pr in probes:
         for ks in _runs(len(pr.radii), pr.chain):
@@ -153,18 +155,22 @@ class _Cells:
     """A grid of at most :data:`BOX_CELLS` equal cells over [lo, hi]."""
 
     def __init__(
-        self, lo: np.ndarray, hi: np.ndarray, volume: tuple[np.ndarray, np.ndarray]
+        self, lo: np.ndarray, hi: np.ndarray, volume: tuple[np.ndarray, np.ndarray], most: int
     ) -> None:
         size = np.maximum(hi - lo, 1e-9)
-        side = float(np.prod(size) / BOX_CELLS) ** (1.0 / 3.0)
+        side = float(np.prod(size) / max(1, min(most, BOX_CELLS))) ** (1.0 / 3.0)
         self.n = tuple(int(v) for v in np.clip(np.ceil(size / side), 1, None))
         self.lo = lo
         self.edge = size / np.asarray(self.n)
         # cells not wholly inside the volume box (only they can widen the field's box)
-        c = self.centres(tuple(slice(0, n) for n in self.n))
-        half = 0.5 * self.edge
-        within = np.all((c - half >= volume[0]) & (c + half <= volume[1]), axis=1)
-        self.beyond = ~within.reshape(self.n)
+        within = [
+            (lo[d] + np.arange(n) * self.edge[d] >= volume[0][d])
+            & (lo[d] + (np.arange(n) + 1) * self.edge[d] <= volume[1][d])
+            for d, n in enumerate(self.n)
+        ]
+        self.beyond = ~(
+            within[0][:, None, None] & within[1][None, :, None] & within[2][None, None, :]
+        )
 
     def window(self, centre: np.ndarray, radius: float) -> tuple[slice, ...]:
         """Index slices of the cells that a ball can meet."""

@@ -117,10 +117,12 @@ def test_a_box_that_cuts_content_falls_back_to_the_whole_reach(
     w["modified"] = [[p[0], p[1] + 10.0, p[2]] for p in w["base"]]
     dragged = [Wire.from_dict(w)]
     reach = built(vol, dragged, 1, "reach")
-    monkeypatch.setattr(build_module, "content_box", lambda probes, volume_box, loose: loose)
+    monkeypatch.setattr(build_module, "content_box", lambda probes, volume_box, loose, cells: loose)
     whole = built(vol, dragged, 1, "content")
     assert whole.box_used == "content"  # the loose box cuts nothing
-    monkeypatch.setattr(build_module, "content_box", lambda probes, volume_box, loose: volume_box)
+    monkeypatch.setattr(
+        build_module, "content_box", lambda probes, volume_box, loose, cells: volume_box
+    )
     cut = built(vol, dragged, 1, "content")
     assert cut.box_used == "reach"
     for name in ("state", "t"):
