@@ -110,3 +110,33 @@ def _halve(a: np.ndarray, op: Any, fill: float) -> np.ndarray:
         sl1[axis] = slice(1, None, 2)
         a = op(a[tuple(sl0)], a[tuple(sl1)])
     return a
+
+
+class _AnyPyramid:
+    """Whether any voxel of a 3D bool array is set within index boxes, by an OR pyramid
+    (as :class:`_MinMaxPyramid`: a box spanning e voxels is covered by at most 2 cells
+    per axis at level ceil(log2 e); conservative by those cells)."""
+
+    def __init__(self, bits: np.ndarray) -> None:
+        self.levels = [bits]
+        while max(bits.shape) > 1:
+            bits = _halve(bits, np.logical_or, False)
+            self.levels.append(bits)
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Per box (first and last voxel index, (n, 3) each, within the array): any set."""
+        ext = np.max(b - a + 1, axis=1)
+        lev = np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64)
+        lev = np.minimum(lev, len(self.levels) - 1)
+        out = np.zeros(len(a), dtype=bool)
+        for level in np.unique(lev):
+            sel = lev == level
+            bits = self.levels[level]
+            top = np.asarray(bits.shape) - 1
+            ia, ib = np.minimum(a[sel] >> level, top), np.minimum(b[sel] >> level, top)
+            hit = np.zeros(int(sel.sum()), dtype=bool)
+            for c in _CORNERS:
+                ix = np.where(c == 1, ib, ia)
+                hit |= bits[ix[:, 0], ix[:, 1], ix[:, 2]]
+            out[sel] = hit
+        return out

@@ -11,7 +11,12 @@ from scipy import ndimage
 
 from voxwarp.deform import gl_holders
 from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
-from voxwarp.deform.wires.bounds import _box_mapping_range, _grow, _MinMaxPyramid
+from voxwarp.deform.wires.bounds import (
+    _AnyPyramid,
+    _box_mapping_range,
+    _grow,
+    _MinMaxPyramid,
+)
 from voxwarp.deform.wires.build import WireDeformer
 from voxwarp.deform.wires.constants import (
     FAR,
@@ -76,6 +81,7 @@ class WireFieldWarp(Warp):
         self._revision = 0
         self._gpu: dict[int, tuple[Any, int, dict[str, Any]]] = {}
         self._pyramids: tuple[int, tuple[Any, Any]] | None = None
+        self._vacated: tuple[int, _AnyPyramid | None] | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -106,6 +112,7 @@ class WireFieldWarp(Warp):
         self._field = fld
         self._revision += 1
         self._pyramids = None
+        self._vacated = None
 
     def rebuild(self) -> WireFieldStats:
         """Rebuild the field after editing :attr:`wires` (the revision changes)."""
@@ -376,6 +383,34 @@ class WireFieldWarp(Warp):
         rlo[none] = 0.0
         rhi[none] = 0.0
         return rlo, rhi
+
+    def support_bricks(self, lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
+        """:meth:`Warp.support_bricks`, and every box holding a vacated voxel: the
+        object has left it, so a straight sample there would show it again (a ghost
+        of the moved part); the chain sends such samples far away."""
+        moved = super().support_bricks(lo, hi, tol)
+        query = self._vacated_query()
+        if query is None:
+            return moved
+        fld = self.field
+        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+        a = np.floor((lo - fld.lo) / fld.spacing).astype(np.int64)
+        b = np.floor((hi - fld.lo) / fld.spacing).astype(np.int64)
+        top = np.asarray(fld.shape) - 1
+        meets = np.all((b >= 0) & (a <= top), axis=1)
+        out = np.array(moved, dtype=bool, copy=True)
+        a, b = np.clip(a[meets], 0, top), np.clip(b[meets], 0, top)
+        out[meets] |= query(a, b)
+        return out
+
+    def _vacated_query(self) -> _AnyPyramid | None:
+        """Any-vacated pyramid over the field (per revision); None without vacated voxels."""
+        if self._vacated is None or self._vacated[0] != self._revision:
+            state = self.field.decode()[0]
+            vacated = state == 1
+            self._vacated = (self._revision, _AnyPyramid(vacated) if vacated.any() else None)
+        return self._vacated[1]
 
     def _range_query(self) -> Any:
         """Pyramid of per-voxel displacement intervals over the propagated region."""

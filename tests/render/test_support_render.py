@@ -25,7 +25,7 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.support import SupportMap, chain_support
 from voxwarp.io.samples import load_sample
-from voxwarp.render.skipping.support import BRICK_VOXELS, TOLERANCE_VOXELS
+from voxwarp.render.skipping.support import BRICK_VOXELS, MAP_MAX_FRACTION, TOLERANCE_VOXELS
 from voxwarp.scene import Scene
 
 SIZE = (96, 80)
@@ -228,3 +228,60 @@ def test_a_camera_inside_the_support_draws_what_the_chain_draws(
     undeformed = draw(offscreen, scene.copy(warps=[]), True)
     assert np.abs(old - undeformed).max() > 1, "the drag must show"
     assert np.abs(new - old).max() <= 1
+
+
+@pytest.fixture(scope="module")
+def head_wire() -> tuple[Volume, Any]:
+    """Colin27 and the cost table's head wire (rigid sides, bent and twisted top) at
+    1:8: the swept part leaves vacated places behind, where nothing shows."""
+    from benchmarks.wires import HEAD_WIRE
+    from voxwarp.deform.wires.build import WireDeformer
+    from voxwarp.deform.wires.wire import Wire
+
+    vol = load_sample("colin27")
+    deformer = WireDeformer(vol, [Wire(**HEAD_WIRE)], field_scale=2)
+    deformer.build()
+    return vol, deformer.warp()
+
+
+@pytest.mark.gl
+def test_a_wires_vacated_place_stays_empty_where_the_map_is_read(
+    offscreen: Any, head_wire: tuple[Volume, Any]
+) -> None:
+    # oracle: the CPU's mapping (a vacated point shows nothing: NaN in a slice) and the
+    # chain at every pixel / sample (a state's first draw, and the old path); before
+    # vacated voxels counted as moved, the map path showed the moved part's old place
+    vol, warp = head_wire
+    scene = Scene(vol, view="anterior", warps=[warp])
+    r = offscreen(*SIZE)
+    first = r.render_slice(scene, "axial", at=60.0)
+    support = r.renderer._slice_renderer.support
+    support.map_max_fraction = 1.0  # read the map however much of the box it covers
+    try:
+        second = r.render_slice(scene, "axial", at=60.0)
+        lo, hi = scene.deformed_bounds()
+        box = (np.minimum(lo, vol.bounds[0]), np.maximum(hi, vol.bounds[1]))
+        assert support.plan(scene, box, draw=False) == "map"  # the second draw read it
+    finally:
+        support.map_max_fraction = MAP_MAX_FRACTION
+    h, w = first.values.shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    pix = np.stack([cols.ravel(), rows.ravel(), 0 * rows.ravel(), 1 + 0 * rows.ravel()])
+    far = warp.apply((first.pixel_to_world @ pix.astype(float))[:3].T)[:, 0] >= 1e19
+    far = far.reshape(h, w)
+    assert far.sum() >= 100  # the wire vacates part of this plane
+    for img in (first, second):
+        assert not np.isfinite(img.values[far]).any(), "content shows where the object left"
+    np.testing.assert_array_equal(np.isfinite(second.values), np.isfinite(first.values))
+    ok = np.isfinite(first.values)
+    value_range = float(np.ptp(np.asarray(vol.data)))
+    assert np.abs(second.values[ok] - first.values[ok]).max() <= 1e-3 * value_range
+    # 3D: the map path against the chain at every sample
+    r.renderer._support.map_max_fraction = 1.0
+    try:
+        with_map = draw(offscreen, scene, True)
+        assert r.renderer.last_support == "map"
+    finally:
+        r.renderer._support.map_max_fraction = MAP_MAX_FRACTION
+    everywhere = draw(offscreen, scene, False)
+    assert np.abs(with_map - everywhere).max() <= 1
