@@ -11,6 +11,9 @@ from voxwarp.deform.wires.constants import FLOAT32_MARGIN, LUT_SIZE, MAX_T_STEPS
 from voxwarp.deform.wires.geometry import _CORNERS
 from voxwarp.deform.wires.tables import WireTables
 
+#: boxes per chunk of :func:`_box_mapping_range`
+MAPPING_CHUNK = 1 << 16
+
 
 def _grow(bound: np.ndarray, sign: float) -> np.ndarray:
     """A displacement bound moved outwards (``sign``) by :data:`FLOAT32_MARGIN`, except
@@ -49,17 +52,24 @@ def _box_mapping_range(
     first, last = np.where(wide, 0.0, first), np.where(wide, top, last)
     for wi in np.unique(wire):
         tab = tables[int(wi)]
+        # the table at whole entries (what its lookup gives there, bit for bit)
+        mats, offs = tab.matrices, tab.offsets
+        spread = np.abs(mats - np.eye(3))
         for narrow in (True, False):
             sel = np.nonzero((wire == wi) & (wide != narrow))[0]
-            if len(sel) == 0:
-                continue
-            c, h = centre[sel], half[sel]
-            for k in range(int((last[sel] - first[sel]).max()) + 1):
-                a_k, b_k = tab.lookup(np.minimum(first[sel] + k, last[sel]))
-                d = np.einsum("nij,nj->ni", a_k, c) + b_k - c
-                e = np.einsum("nij,nj->ni", np.abs(a_k - np.eye(3)), h)
-                out_lo[sel] = np.minimum(out_lo[sel], d - e)
-                out_hi[sel] = np.maximum(out_hi[sel], d + e)
+            # in chunks: a few MB of temporaries per step, not the whole box list's
+            for at in range(0, len(sel), MAPPING_CHUNK):
+                part = sel[at : at + MAPPING_CHUNK]
+                c, h = centre[part], half[part]
+                f, g = first[part].astype(np.int64), last[part].astype(np.int64)
+                p_lo, p_hi = out_lo[part], out_hi[part]
+                for k in range(int((g - f).max()) + 1):
+                    i = np.minimum(f + k, g)
+                    d = np.einsum("nij,nj->ni", mats[i], c) + offs[i] - c
+                    e = np.einsum("nij,nj->ni", spread[i], h)
+                    np.minimum(p_lo, d - e, out=p_lo)
+                    np.maximum(p_hi, d + e, out=p_hi)
+                out_lo[part], out_hi[part] = p_lo, p_hi
     return out_lo, out_hi
 
 
