@@ -448,16 +448,25 @@ class WireFieldWarp(Warp):
             centres - half,
             centres + half,
         )
-        dlo = np.repeat(np.where(st == 0, 0.0, np.inf)[..., None], 3, axis=-1)
-        dhi = np.repeat(np.where(st == 0, 0.0, -np.inf)[..., None], 3, axis=-1)
+        # float32 pyramids (half the memory of float64: 12 values per region voxel),
+        # the displacement bounds rounded outwards, the rest held exactly
+        dlo = np.empty((*rs, 3), dtype=np.float32)
+        dhi = np.empty((*rs, 3), dtype=np.float32)
+        dlo[...] = np.where(st == 0, 0.0, np.inf)[..., None]
+        dhi[...] = np.where(st == 0, 0.0, -np.inf)[..., None]
         if fld.weight is not None:  # weights in [0, 1] scale each displacement towards 0
             d_lo, d_hi = np.minimum(d_lo, 0.0), np.maximum(d_hi, 0.0)
-        dlo.reshape(-1, 3)[idx] = _grow(d_lo, -1.0)
-        dhi.reshape(-1, 3)[idx] = _grow(d_hi, 1.0)
-        ident = (st == 0).astype(np.float64)
-        wf = wr.astype(np.float64)
-        info_lo = np.stack([t_lo, np.where(st == 2, wf, np.inf), -ident], axis=-1)
-        info_hi = np.stack([t_hi, np.where(st == 2, wf, -np.inf), ident], axis=-1)
+        dlo.reshape(-1, 3)[idx] = _outward32(_grow(d_lo, -1.0), -1.0)
+        dhi.reshape(-1, 3)[idx] = _outward32(_grow(d_hi, 1.0), 1.0)
+        exact = np.array_equal(tt.astype(np.float32), tt)
+        kind = np.float32 if exact else np.float64
+        info_lo = np.empty((*rs, 3), dtype=kind)
+        info_hi = np.empty((*rs, 3), dtype=kind)
+        ident = st == 0
+        info_lo[..., 0], info_hi[..., 0] = t_lo, t_hi
+        info_lo[..., 1] = np.where(st == 2, wr, np.inf)
+        info_hi[..., 1] = np.where(st == 2, wr, -np.inf)
+        info_lo[..., 2], info_hi[..., 2] = -1.0 * ident, ident
         pyramids = (_MinMaxPyramid(dlo, dhi), _MinMaxPyramid(info_lo, info_hi))
         self._pyramids = (self._revision, pyramids)
         return pyramids
@@ -619,3 +628,12 @@ def _deformer_spec(deformer: WireDeformer) -> dict[str, Any]:
     if deformer.propagate != "region":  # written only when not the default
         spec["propagate"] = deformer.propagate
     return spec
+
+
+def _outward32(x: np.ndarray, sign: float) -> np.ndarray:
+    """``x`` as float32, each value rounded away from it towards ``sign`` (-1: down,
+    +1: up) where float32 cannot hold it: a bound stays a bound."""
+    y = x.astype(np.float32)
+    off = y < x if sign > 0 else y > x
+    y[off] = np.nextafter(y[off], np.float32(np.inf * sign))
+    return y
