@@ -132,3 +132,22 @@ def test_a_box_that_cuts_content_falls_back_to_the_whole_reach(
 def test_unknown_box_is_a_one_line_error() -> None:
     with pytest.raises(WarpError, match="box must be one of"):
         WireDeformer(volume(), wires(), box="tight")
+
+
+@pytest.mark.parametrize(
+    "options", [{"layout": "packed"}, {"layout": "paper"}, {"propagate": "flagged"}]
+)
+def test_other_layouts_and_the_flagged_propagation_keep_the_block(options: dict) -> None:
+    for ws in (wires(), smooth_variant("smoothends")):
+        fields = {}
+        for box in ("content", "reach"):
+            wd = WireDeformer(volume(), ws, field_scale=1, box=box, **options)
+            wd.build()
+            assert wd.box_used == box
+            fields[box] = wd.field
+        small, big = fields["content"], fields["reach"]
+        off = block_offset(small, big)
+        block = tuple(slice(int(o), int(o) + n) for o, n in zip(off, small.shape, strict=True))
+        names = ("code",) if "layout" in options else ("state", "t")
+        for name in names:
+            np.testing.assert_array_equal(getattr(small, name), getattr(big, name)[block], name)
