@@ -272,9 +272,11 @@ class WireDeformer(SidePasses):
 
     def _content_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The volume box grown by a volume voxel: trilinear sampling reaches half a
-        voxel beyond its faces."""
+        voxel beyond its faces (the longest voxel side on every axis: an oblique
+        volume's voxels may lie across the world axes)."""
         vlo, vhi = self.volume_bounds
-        return vlo - self.spacing, vhi + self.spacing
+        border = float(np.max(self.spacing))
+        return vlo - border, vhi + border
 
     def _probes(
         self,
