@@ -17,7 +17,7 @@ import pytest
 from tests.deform.wires.test_wire_field_build import smooth_variant, volume, wires
 from voxwarp.core.volume import Volume
 from voxwarp.deform.warp import WarpError
-from voxwarp.deform.wires import build as build_module
+from voxwarp.deform.wires import field_geometry
 from voxwarp.deform.wires.build import WireDeformer
 from voxwarp.deform.wires.sides import _grow_one
 from voxwarp.deform.wires.wire import Wire
@@ -117,11 +117,13 @@ def test_a_box_that_cuts_content_falls_back_to_the_whole_reach(
     w["modified"] = [[p[0], p[1] + 10.0, p[2]] for p in w["base"]]
     dragged = [Wire.from_dict(w)]
     reach = built(vol, dragged, 1, "reach")
-    monkeypatch.setattr(build_module, "content_box", lambda probes, volume_box, loose, cells: loose)
+    monkeypatch.setattr(
+        field_geometry, "content_box", lambda probes, volume_box, loose, cells: loose
+    )
     whole = built(vol, dragged, 1, "content")
     assert whole.box_used == "content"  # the loose box cuts nothing
     monkeypatch.setattr(
-        build_module, "content_box", lambda probes, volume_box, loose, cells: volume_box
+        field_geometry, "content_box", lambda probes, volume_box, loose, cells: volume_box
     )
     cut = built(vol, dragged, 1, "content")
     assert cut.box_used == "reach"
