@@ -73,36 +73,65 @@ def _box_mapping_range(
     return out_lo, out_hi
 
 
-class _MinMaxPyramid:
-    """Min/max of per-voxel (n, 3) intervals over index boxes, by a mip pyramid: a box
-    spanning e voxels is covered by at most 2 cells per axis at level ceil(log2 e)."""
+class _ReducePyramid:
+    """Reductions of 3D arrays (a trailing channel axis allowed) over index boxes, by a
+    mip pyramid per array: a box spanning e voxels is covered by at most 2 cells per axis
+    at level ceil(log2 e), so an answer is conservative by those cells. ``channels``:
+    (array, reduction, its identity), e.g. (lo, np.minimum, np.inf)."""
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        self.levels = [(lo, hi)]
-        while max(lo.shape[:3]) > 1:
-            lo = _halve(lo, np.minimum, np.inf)
-            hi = _halve(hi, np.maximum, -np.inf)
-            self.levels.append((lo, hi))
+    def __init__(self, *channels: tuple[np.ndarray, Any, Any]) -> None:
+        self.ops = [(op, fill) for _, op, fill in channels]
+        arrays = [x for x, _, _ in channels]
+        self.levels = [arrays]
+        while max(arrays[0].shape[:3]) > 1:
+            arrays = [_halve(x, op, fill) for x, (op, fill) in zip(arrays, self.ops, strict=True)]
+            self.levels.append(arrays)
 
-    def __call__(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
+        """Per channel, the reduction over each box (first and last voxel index, (n, 3)
+        each, within the arrays); float channels come back as float64."""
         ext = np.max(b - a + 1, axis=1)
         lev = np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64)
         lev = np.minimum(lev, len(self.levels) - 1)
-        out_lo = np.full((len(a), 3), np.inf)
-        out_hi = np.full((len(a), 3), -np.inf)
+        outs = [
+            np.full((len(a), *x.shape[3:]), fill, dtype=bool if x.dtype == bool else np.float64)
+            for x, (_, fill) in zip(self.levels[0], self.ops, strict=True)
+        ]
         for level in np.unique(lev):
             sel = lev == level
-            lo_l, hi_l = self.levels[level]
-            top = np.asarray(lo_l.shape[:3]) - 1
+            arrays = self.levels[level]
+            top = np.asarray(arrays[0].shape[:3]) - 1
             ia, ib = np.minimum(a[sel] >> level, top), np.minimum(b[sel] >> level, top)
-            r_lo = np.full((int(sel.sum()), 3), np.inf)
-            r_hi = np.full((int(sel.sum()), 3), -np.inf)
-            for c in _CORNERS:
-                ix = np.where(c == 1, ib, ia)
-                r_lo = np.minimum(r_lo, lo_l[ix[:, 0], ix[:, 1], ix[:, 2]])
-                r_hi = np.maximum(r_hi, hi_l[ix[:, 0], ix[:, 1], ix[:, 2]])
-            out_lo[sel], out_hi[sel] = r_lo, r_hi
-        return out_lo, out_hi
+            corners = [tuple(np.where(c == 1, ib, ia).T) for c in _CORNERS]
+            for out, x, (op, _) in zip(outs, arrays, self.ops, strict=True):
+                r = out[sel]
+                for ix in corners:
+                    r = op(r, x[ix])
+                out[sel] = r
+        return outs
+
+
+class _MinMaxPyramid:
+    """Min/max of per-voxel (n, 3) intervals over index boxes (:class:`_ReducePyramid`)."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        self._pyramid = _ReducePyramid((lo, np.minimum, np.inf), (hi, np.maximum, -np.inf))
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self._pyramid(a, b)
+        return lo, hi
+
+
+class _AnyPyramid:
+    """Whether any voxel of a 3D bool array is set within index boxes
+    (:class:`_ReducePyramid` of logical or)."""
+
+    def __init__(self, bits: np.ndarray) -> None:
+        self._pyramid = _ReducePyramid((bits, np.logical_or, False))
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Per box (first and last voxel index, (n, 3) each, within the array): any set."""
+        return self._pyramid(a, b)[0]
 
 
 def _halve(a: np.ndarray, op: Any, fill: float) -> np.ndarray:
@@ -120,33 +149,3 @@ def _halve(a: np.ndarray, op: Any, fill: float) -> np.ndarray:
         sl1[axis] = slice(1, None, 2)
         a = op(a[tuple(sl0)], a[tuple(sl1)])
     return a
-
-
-class _AnyPyramid:
-    """Whether any voxel of a 3D bool array is set within index boxes, by an OR pyramid
-    (as :class:`_MinMaxPyramid`: a box spanning e voxels is covered by at most 2 cells
-    per axis at level ceil(log2 e); conservative by those cells)."""
-
-    def __init__(self, bits: np.ndarray) -> None:
-        self.levels = [bits]
-        while max(bits.shape) > 1:
-            bits = _halve(bits, np.logical_or, False)
-            self.levels.append(bits)
-
-    def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Per box (first and last voxel index, (n, 3) each, within the array): any set."""
-        ext = np.max(b - a + 1, axis=1)
-        lev = np.ceil(np.log2(np.maximum(ext, 1))).astype(np.int64)
-        lev = np.minimum(lev, len(self.levels) - 1)
-        out = np.zeros(len(a), dtype=bool)
-        for level in np.unique(lev):
-            sel = lev == level
-            bits = self.levels[level]
-            top = np.asarray(bits.shape) - 1
-            ia, ib = np.minimum(a[sel] >> level, top), np.minimum(b[sel] >> level, top)
-            hit = np.zeros(int(sel.sum()), dtype=bool)
-            for c in _CORNERS:
-                ix = np.where(c == 1, ib, ia)
-                hit |= bits[ix[:, 0], ix[:, 1], ix[:, 2]]
-            out[sel] = hit
-        return out
