@@ -13,7 +13,7 @@ import numpy as np
 from voxwarp.deform.warp import WarpError
 from voxwarp.deform.wires.constants import MAX_FIELD_VOXELS
 from voxwarp.deform.wires.field_box import Probes, content_box, escapes, wire_probes
-from voxwarp.deform.wires.geometry import _curve_box
+from voxwarp.deform.wires.geometry import _curve_box, _region_centres
 from voxwarp.deform.wires.sides import SidePasses, _SideResult
 from voxwarp.deform.wires.tables import WireTables
 
@@ -128,9 +128,10 @@ class FieldGeometry(SidePasses):
             if len(at[0]) == 0:
                 continue
             idx = np.stack(at, -1) + np.eye(3, dtype=int)[d] * k
-            pts = lo + (region_lo + idx + 0.5) * h
-            flat = tuple(idx.T)
-            if escapes(tables, pts, r_wire[flat], r_u[flat], self._content_bounds()):
+            flat = np.ravel_multi_index(tuple(idx.T), rshape)
+            pts = _region_centres(lo, h, region_lo, rshape, flat)
+            wire, u = r_wire.ravel()[flat], r_u.ravel()[flat]
+            if escapes(tables, pts, wire, u, self._content_bounds()):
                 return True
         return False
 

@@ -352,8 +352,7 @@ class WireFieldWarp(Warp):
         hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
         query = self._range_query()
         fld = self.field
-        a = np.floor((lo - fld.lo) / fld.spacing).astype(np.int64) - fld.region_lo
-        b = np.floor((hi - fld.lo) / fld.spacing).astype(np.int64) - fld.region_lo
+        a, b = (v - fld.region_lo for v in self._voxel_boxes(lo, hi))
         rs = np.asarray(fld.region_shape)
         empty = np.any((b < 0) | (a > rs - 1), axis=1)  # no voxel of the region
         outside = np.any((a < 0) | (b > rs - 1), axis=1)  # some place outside it
@@ -384,6 +383,16 @@ class WireFieldWarp(Warp):
         rhi[none] = 0.0
         return rlo, rhi
 
+    def _voxel_boxes(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The field voxel indices (first, last; (n, 3) each, unclipped) holding the
+        corners of the world boxes [lo, hi] (the voxel a sample looks up)."""
+        fld = self.field
+        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+        a = np.floor((lo - fld.lo) / fld.spacing).astype(np.int64)
+        b = np.floor((hi - fld.lo) / fld.spacing).astype(np.int64)
+        return a, b
+
     def support_bricks(self, lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
         """:meth:`Warp.support_bricks`, and every box holding a vacated voxel: the
         object has left it, so a straight sample there would show it again (a ghost
@@ -393,10 +402,7 @@ class WireFieldWarp(Warp):
         if query is None:
             return moved
         fld = self.field
-        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
-        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
-        a = np.floor((lo - fld.lo) / fld.spacing).astype(np.int64)
-        b = np.floor((hi - fld.lo) / fld.spacing).astype(np.int64)
+        a, b = self._voxel_boxes(lo, hi)
         top = np.asarray(fld.shape) - 1
         meets = np.all((b >= 0) & (a <= top), axis=1)
         out = np.array(moved, dtype=bool, copy=True)
