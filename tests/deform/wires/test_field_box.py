@@ -29,12 +29,15 @@ def built(vol: Volume, ws: list[Wire], scale: int, box: str) -> WireDeformer:
     return wd
 
 
-def block_offset(small: Any, big: Any) -> np.ndarray:
-    """Index of the small field's first voxel in the big field (same grid)."""
+def block_of(small: Any, big: Any) -> tuple[slice, ...]:
+    """The small field's voxels within the big field (same grid, wholly inside it)."""
     off = (small.lo - big.lo) / big.spacing
     np.testing.assert_allclose(off, np.rint(off), atol=1e-6)
     np.testing.assert_array_equal(small.spacing, big.spacing)
-    return np.rint(off).astype(int)
+    first = np.rint(off).astype(int)
+    assert np.all(first >= 0)
+    assert np.all(first + small.shape <= big.shape)
+    return tuple(slice(int(o), int(o) + n) for o, n in zip(first, small.shape, strict=True))
 
 
 def assert_block_of_reach(vol: Volume, ws: list[Wire], scale: int) -> tuple[int, int]:
@@ -44,10 +47,7 @@ def assert_block_of_reach(vol: Volume, ws: list[Wire], scale: int) -> tuple[int,
     assert content.box_used == "content"
     assert reach.box_used == "reach"
     small, big = content.field, reach.field
-    off = block_offset(small, big)
-    assert np.all(off >= 0)
-    assert np.all(off + small.shape <= big.shape)
-    block = tuple(slice(int(o), int(o) + n) for o, n in zip(off, small.shape, strict=True))
+    block = block_of(small, big)
     for name in ("state", "t"):
         np.testing.assert_array_equal(getattr(small, name), getattr(big, name)[block], name)
     assert (small.weight is None) == (big.weight is None)
@@ -148,8 +148,7 @@ def test_other_layouts_and_the_flagged_propagation_keep_the_block(options: dict)
             assert wd.box_used == box
             fields[box] = wd.field
         small, big = fields["content"], fields["reach"]
-        off = block_offset(small, big)
-        block = tuple(slice(int(o), int(o) + n) for o, n in zip(off, small.shape, strict=True))
+        block = block_of(small, big)
         names = ("code",) if "layout" in options else ("state", "t")
         for name in names:
             np.testing.assert_array_equal(getattr(small, name), getattr(big, name)[block], name)
