@@ -12,7 +12,8 @@ After a warm-up (every program variant of the run compiled once) the test checks
   wrappers still alive, plus wrappers collected without ``release()``, which the
   context's ``context_gc`` mode queues in ``ctx.objects``);
 * the resident set size grows by less than ``RSS_BOUND_MIB``. Native memory of the GL
-  driver does not show in Python's heap, so RSS is the measure. The bound is several
+  driver does not show in Python's heap, so RSS is the measure, read after the heap has
+  returned its freed pages (live memory, not the allocator's retention). The bound is several
   times the growth measured over this run, and far below what one leaked program per
   frame costs (the figures are in docs/reliability.md).
 
@@ -30,6 +31,7 @@ import numpy as np
 import pytest
 
 from benchmarks.lattice_inverse import bent_grid
+from voxwarp.core.heap import return_freed_memory
 from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.deform.lattice.warp import LatticeWarp
@@ -82,6 +84,11 @@ def live_gl_objects(ctx: Any) -> int:
 
 
 def rss_mib() -> float:
+    """Resident memory (MiB) once the allocator has handed back the pages it keeps
+    after frees: what is live, not what glibc's per-thread heaps last held (in a test
+    worker that ran hundreds of other tests, those moved this reading by tens of MiB
+    either way)."""
+    return_freed_memory()
     with open("/proc/self/status", encoding="ascii") as fh:
         for line in fh:
             if line.startswith("VmRSS:"):
