@@ -7,16 +7,9 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from voxwarp.deform import gl_holders
 from voxwarp.deform.warp import Warp, WarpError, check_forward, register_warp
-from voxwarp.deform.wires.bounds import (
-    _AnyPyramid,
-    _box_mapping_range,
-    _grow,
-    _MinMaxPyramid,
-)
 from voxwarp.deform.wires.build import WireDeformer
 from voxwarp.deform.wires.constants import (
     FAR,
@@ -30,7 +23,7 @@ from voxwarp.deform.wires.constants import (
     PAPER_VACATED,
     PROPAGATE_MODES,
 )
-from voxwarp.deform.wires.geometry import _box_slices
+from voxwarp.deform.wires.field_bounds import FieldBounds
 from voxwarp.deform.wires.layouts import (
     WireField,
     WireFieldStats,
@@ -80,8 +73,7 @@ class WireFieldWarp(Warp):
         self._field: WireField | None = deformer.field if deformer is not None else None
         self._revision = 0
         self._gpu: dict[int, tuple[Any, int, dict[str, Any]]] = {}
-        self._pyramids: tuple[int, tuple[Any, Any]] | None = None
-        self._vacated: tuple[int, _AnyPyramid | None] | None = None
+        self._bounds: FieldBounds | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -111,8 +103,7 @@ class WireFieldWarp(Warp):
     def _set_field(self, fld: WireField) -> None:
         self._field = fld
         self._revision += 1
-        self._pyramids = None
-        self._vacated = None
+        self._bounds = None
 
     def rebuild(self) -> WireFieldStats:
         """Rebuild the field after editing :attr:`wires` (the revision changes)."""
@@ -342,140 +333,28 @@ class WireFieldWarp(Warp):
         """Per box, an interval holding ``apply(p) - p`` over the samples that can show
         something (vacated samples show nothing and are left out).
 
-        A swept voxel contributes the displacement of every point of its box for every t
-        its samples can interpolate (the range of t over its 3³ neighbourhood): the
-        mapping is linear in p, and linear in t between table entries, so the extremes
-        lie at the box's corners and at the entries in that range. Identity voxels and
-        boxes reaching outside the propagated region contribute 0.
+        A box whose swept voxels belong to one wire gets that wire's mapping bounded
+        over the box itself for every t its samples can interpolate (the range of t
+        over its voxels' 3³ neighbourhoods): the mapping is linear in p, and linear in t
+        between table entries, so the extremes lie at the box's corners and at the
+        entries in that range. Boxes without swept voxels move nothing; boxes reaching
+        outside the propagated region also hold 0 (:class:`FieldBounds`).
         """
-        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
-        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
-        query = self._range_query()
-        fld = self.field
-        a, b = (v - fld.region_lo for v in self._voxel_boxes(lo, hi))
-        rs = np.asarray(fld.region_shape)
-        empty = np.any((b < 0) | (a > rs - 1), axis=1)  # no voxel of the region
-        outside = np.any((a < 0) | (b > rs - 1), axis=1)  # some place outside it
-        a, b = np.clip(a, 0, rs - 1), np.clip(b, 0, rs - 1)
-        rlo, rhi = query(a, b)
-        rlo = np.where(empty[:, None], 0.0, rlo)
-        rhi = np.where(empty[:, None], 0.0, rhi)
-        rlo = np.where(outside[:, None], np.minimum(rlo, 0.0), rlo)
-        rhi = np.where(outside[:, None], np.maximum(rhi, 0.0), rhi)
-        # boxes holding swept voxels of one wire: bound the mapping over the box itself
-        # (tighter than the union of its voxels' boxes, by the box's own size)
-        info_lo, info_hi = self._info_query()(a, b)
-        one = (~empty) & np.isfinite(info_lo[:, 1]) & (info_lo[:, 1] == info_hi[:, 1])
-        if one.any():
-            sel = np.nonzero(one)[0]
-            t_lo = np.maximum(info_lo[sel, 0], 0.0)
-            t_hi = np.minimum(info_hi[sel, 0], LUT_SIZE - 1.0)
-            tight_lo, tight_hi = _box_mapping_range(
-                fld.tables, info_lo[sel, 1].astype(np.int64), t_lo, t_hi, lo[sel], hi[sel]
-            )
-            # (a smooth wire's weight scales the displacement towards 0)
-            smooth = fld.weight is not None
-            keep0 = (outside[sel] | (info_hi[sel, 2] > 0) | smooth)[:, None]
-            rlo[sel] = _grow(np.where(keep0, np.minimum(tight_lo, 0.0), tight_lo), -1.0)
-            rhi[sel] = _grow(np.where(keep0, np.maximum(tight_hi, 0.0), tight_hi), 1.0)
-        none = rlo > rhi  # only vacated voxels: nothing shows; any interval is sound
-        rlo[none] = 0.0
-        rhi[none] = 0.0
-        return rlo, rhi
-
-    def _voxel_boxes(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The field voxel indices (first, last; (n, 3) each, unclipped) holding the
-        corners of the world boxes [lo, hi] (the voxel a sample looks up)."""
-        fld = self.field
-        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
-        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
-        a = np.floor((lo - fld.lo) / fld.spacing).astype(np.int64)
-        b = np.floor((hi - fld.lo) / fld.spacing).astype(np.int64)
-        return a, b
+        return self._field_bounds().displacement_range(lo, hi)
 
     def support_bricks(self, lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
         """:meth:`Warp.support_bricks`, and every box holding a vacated voxel: the
         object has left it, so a straight sample there would show it again (a ghost
         of the moved part); the chain sends such samples far away."""
         moved = super().support_bricks(lo, hi, tol)
-        query = self._vacated_query()
-        if query is None:
-            return moved
-        fld = self.field
-        a, b = self._voxel_boxes(lo, hi)
-        top = np.asarray(fld.shape) - 1
-        meets = np.all((b >= 0) & (a <= top), axis=1)
-        out = np.array(moved, dtype=bool, copy=True)
-        a, b = np.clip(a[meets], 0, top), np.clip(b[meets], 0, top)
-        out[meets] |= query(a, b)
-        return out
+        vacated = self._field_bounds().any_vacated(lo, hi)
+        return moved if vacated is None else np.asarray(moved, dtype=bool) | vacated
 
-    def _vacated_query(self) -> _AnyPyramid | None:
-        """Any-vacated pyramid over the field (per revision); None without vacated voxels."""
-        if self._vacated is None or self._vacated[0] != self._revision:
-            state = self.field.decode()[0]
-            vacated = state == 1
-            self._vacated = (self._revision, _AnyPyramid(vacated) if vacated.any() else None)
-        return self._vacated[1]
-
-    def _range_query(self) -> Any:
-        """Pyramid of per-voxel displacement intervals over the propagated region."""
-        return self._bound_pyramids()[0]
-
-    def _info_query(self) -> Any:
-        """Pyramid of (t range over each voxel's 3³ neighbourhood, wire id of swept
-        voxels, whether a voxel is the identity) over the propagated region."""
-        return self._bound_pyramids()[1]
-
-    def _bound_pyramids(self) -> tuple[Any, Any]:
-        """Both pyramids of :meth:`displacement_range`, from one pass over the field (per
-        revision). A swept voxel's interval is that of its box for every t its samples
-        can interpolate (from its 3³ neighbourhood); identity voxels give [0, 0], vacated
-        ones nothing (they show nothing)."""
-        if self._pyramids is not None and self._pyramids[0] == self._revision:
-            return self._pyramids[1]
-        fld = self.field
-        rs = fld.region_shape
-        region = _box_slices(fld.region_lo, rs)
-        state, wire, t_all = fld.decode()
-        st, wr = state[region], wire[region]
-        tt = np.asarray(t_all[region], dtype=np.float64)
-        t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
-        t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
-        idx = np.nonzero(st.ravel() == 2)[0]
-        ii = np.stack(np.unravel_index(idx, rs), -1)
-        centres = fld.lo + (ii + fld.region_lo + 0.5) * fld.spacing
-        half = 0.5 * fld.spacing
-        d_lo, d_hi = _box_mapping_range(
-            fld.tables,
-            wr.ravel()[idx],
-            t_lo.ravel()[idx],
-            t_hi.ravel()[idx],
-            centres - half,
-            centres + half,
-        )
-        # float32 pyramids (half the memory of float64: 12 values per region voxel),
-        # the displacement bounds rounded outwards, the rest held exactly
-        dlo = np.empty((*rs, 3), dtype=np.float32)
-        dhi = np.empty((*rs, 3), dtype=np.float32)
-        dlo[...] = np.where(st == 0, 0.0, np.inf)[..., None]
-        dhi[...] = np.where(st == 0, 0.0, -np.inf)[..., None]
-        if fld.weight is not None:  # weights in [0, 1] scale each displacement towards 0
-            d_lo, d_hi = np.minimum(d_lo, 0.0), np.maximum(d_hi, 0.0)
-        dlo.reshape(-1, 3)[idx] = _outward32(_grow(d_lo, -1.0), -1.0)
-        dhi.reshape(-1, 3)[idx] = _outward32(_grow(d_hi, 1.0), 1.0)
-        exact = np.array_equal(tt.astype(np.float32), tt)
-        kind = np.float32 if exact else np.float64
-        info_lo = np.empty((*rs, 3), dtype=kind)
-        info_hi = np.empty((*rs, 3), dtype=kind)
-        ident = st == 0
-        info_lo[..., 0], info_hi[..., 0] = t_lo, t_hi
-        info_lo[..., 1] = np.where(st == 2, wr, np.inf)
-        info_hi[..., 1] = np.where(st == 2, wr, -np.inf)
-        info_lo[..., 2], info_hi[..., 2] = -1.0 * ident, ident
-        pyramids = (_MinMaxPyramid(dlo, dhi), _MinMaxPyramid(info_lo, info_hi))
-        self._pyramids = (self._revision, pyramids)
-        return pyramids
+    def _field_bounds(self) -> FieldBounds:
+        """The bounds of the current field (made once per revision)."""
+        if self._bounds is None or self._bounds.field is not self.field:
+            self._bounds = FieldBounds(self.field)
+        return self._bounds
 
     # ------------------------------------------------------------------ GPU side
     def glsl_constants(self) -> dict[str, Any]:
@@ -634,12 +513,3 @@ def _deformer_spec(deformer: WireDeformer) -> dict[str, Any]:
     if deformer.propagate != "region":  # written only when not the default
         spec["propagate"] = deformer.propagate
     return spec
-
-
-def _outward32(x: np.ndarray, sign: float) -> np.ndarray:
-    """``x`` as float32, each value rounded away from it towards ``sign`` (-1: down,
-    +1: up) where float32 cannot hold it: a bound stays a bound."""
-    y = x.astype(np.float32)
-    off = y < x if sign > 0 else y > x
-    y[off] = np.nextafter(y[off], np.float32(np.inf * sign))
-    return y
