@@ -55,7 +55,7 @@ def worker(tree: str, scales: list[int]) -> None:
             wd.build()
             scene = base.copy(warps=[wd.warp()])
             tip = np.asarray(HEAD_WIRE["modified"], dtype=np.float64)
-            for k in range(2):  # the first edit compiles and warms up
+            for _ in range(2):  # the first edit compiles and warms up
                 tip[-1, 0] += 2.0
                 wd.wires[0].modified = Curve(tip.copy(), HEAD_WIRE["kind"])
                 t0 = time.perf_counter()

@@ -11,6 +11,7 @@ that cannot contribute, on the same sample lattice).
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -411,12 +412,23 @@ def test_warped_visibility_is_exact_for_a_translation_and_a_superset_of_the_trut
     np.testing.assert_array_equal(same, visible)
 
 
-def test_warped_visibility_windows_counted_one_by_one() -> None:
+def _dense_volume() -> Volume:
+    """:func:`_volume` with a solid slab through its middle: moved blocks whose whole
+    window is visible (counted as a block, not cell by cell) beside ragged ones."""
+    vol = _volume()
+    data = np.asarray(vol.data).copy()
+    data[6:18, 4:16, 5:11] = 200
+    return Volume(data, spacing=vol.spacing)
+
+
+@pytest.mark.parametrize("make", [_volume, _dense_volume], ids=["blobs", "dense-slab"])
+def test_warped_visibility_windows_counted_one_by_one(make: Callable[[], Volume]) -> None:
     """Each deformed cell of a moved block is visible iff a visible original cell lies in
     its displacement window (the block's interval, in cells), counted here by slicing
     the padded visibility cell by cell; the summed-area table only spans the box the
     moved blocks' windows reach (a local drag's part of the grid), so windows at that
-    box's edges are the ones to check. Blocks that do not move keep their cells."""
+    box's edges are the ones to check. Blocks that do not move keep their cells; on the
+    dense slab some moved blocks' whole windows are visible (the block shortcut)."""
     from voxwarp.deform.elements.offset_field import OffsetFieldWarp
     from voxwarp.deform.warp import chain_displacement_range
     from voxwarp.render.skipping.maps import (
@@ -427,7 +439,7 @@ def test_warped_visibility_windows_counted_one_by_one() -> None:
         warped_cell_visibility,
     )
 
-    vol = _volume()
+    vol = make()
     u = np.zeros((9, 9, 9, 3))
     u[4, 3, 5] = (3.0, -2.0, 1.5)  # one node dragged: its 2³ cells move, nothing else
     scene = Scene(vol, mode="dvr", transfer_function=TF, warps=[OffsetFieldWarp(*vol.bounds, u)])
@@ -441,7 +453,7 @@ def test_warped_visibility_windows_counted_one_by_one() -> None:
     padded = np.zeros(tuple(shape), dtype=bool)
     padded[tuple(slice(-o, -o + n) for o, n in zip(offset, visible.shape, strict=True))] = visible
     sp, org = np.asarray(vol.spacing), np.asarray(vol.origin)
-    moved_blocks = 0
+    moved_blocks = full_blocks = 0
     for b in np.argwhere(np.ones(-(-np.asarray(shape) // BLOCK), dtype=bool)):
         first = b * BLOCK + offset
         box_lo, box_hi = org + (first - 1.0) * sp, org + (first + BLOCK - 1.0) * sp
@@ -453,11 +465,16 @@ def test_warped_visibility_windows_counted_one_by_one() -> None:
             np.testing.assert_array_equal(out[tuple(cells.T)], padded[tuple(cells.T)])
             continue
         moved_blocks += 1
+        w_lo, w_hi = b * BLOCK + d_lo, b * BLOCK + BLOCK + d_hi
+        if np.all(w_lo >= 0) and np.all(w_hi <= shape):
+            window = tuple(slice(x, y) for x, y in zip(w_lo, w_hi, strict=True))
+            full_blocks += bool(padded[window].all())
         for c in cells:
             lo_c, hi_c = np.clip(c + d_lo, 0, shape), np.clip(c + d_hi + 1, 0, shape)
             window = padded[lo_c[0] : hi_c[0], lo_c[1] : hi_c[1], lo_c[2] : hi_c[2]]
             assert out[tuple(c)] == window.any(), (c, d_lo, d_hi)
     assert 0 < moved_blocks < np.prod(-(-np.asarray(shape) // BLOCK)), "a local drag"
+    assert (full_blocks > 0) == (make is _dense_volume)
 
 
 @pytest.mark.parametrize("mode", ["dvr", "iso", "flm"])

@@ -538,14 +538,18 @@ def warped_cell_visibility(
             count += (-1 if (3 - sum(pick)) % 2 else 1) * sat[ix[0], ix[1], ix[2]]
         return count
 
-    # moved blocks whose whole window holds no visible cell are invisible
-    near = count_visible(moved * block + blo, moved * block + block + bhi) > 0
-    cleared = np.zeros(tuple(nb), dtype=bool)
-    cleared[tuple(moved[~near].T)] = True
-    for axis in range(3):  # blocks -> cells
-        cleared = np.repeat(cleared, block, axis=axis)
-    out &= ~cleared[: shape[0], : shape[1], : shape[2]]
-    moved = moved[near]
+    # a moved block's window (the union of its cells' windows): where it holds no
+    # visible cell, the block's cells see nothing; where every one of its cells is
+    # visible and it lies within the grid, each cell's window (a non-empty part of it)
+    # sees something. Only the blocks in between are counted cell by cell.
+    w_lo, w_hi = moved * block + blo, moved * block + block + bhi
+    seen = count_visible(w_lo, w_hi)
+    inside = np.all((w_lo >= 0) & (w_hi <= shape), axis=1)
+    ordered = np.all(bhi >= blo, axis=1)  # (every cell's window holds a cell)
+    full = inside & ordered & (seen == np.prod(w_hi - w_lo, axis=1))
+    _set_blocks(out, moved[seen == 0], block, False)
+    _set_blocks(out, moved[full], block, True)
+    moved = moved[(seen > 0) & ~full]
     local = np.stack(np.meshgrid(*(np.arange(block),) * 3, indexing="ij"), -1).reshape(-1, 3)
     for chunk in np.array_split(moved, max(1, len(moved) // 4096)) if len(moved) else []:
         cells = (chunk[:, None, :] * block + local[None]).reshape(-1, 3)
@@ -556,3 +560,16 @@ def warped_cell_visibility(
         count = count_visible(cells + lo_off, cells + hi_off + 1)
         out[cells[:, 0], cells[:, 1], cells[:, 2]] = count > 0
     return out, offset
+
+
+def _set_blocks(out: np.ndarray, blocks: np.ndarray, block: int, value: bool) -> None:
+    """Set every cell of the ``block``³ blocks (block indices, (n, 3)) of ``out``."""
+    if len(blocks) == 0:
+        return
+    nb = -(-np.asarray(out.shape) // block)
+    mask = np.zeros(tuple(nb), dtype=bool)
+    mask[tuple(blocks.T)] = True
+    for axis in range(3):  # blocks -> cells
+        mask = np.repeat(mask, block, axis=axis)
+    mask = mask[: out.shape[0], : out.shape[1], : out.shape[2]]
+    out[mask] = value
