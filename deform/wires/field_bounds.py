@@ -65,7 +65,7 @@ class FieldBounds:
         a, b = np.clip(a, 0, rs - 1), np.clip(b, 0, rs - 1)
         rlo = np.zeros((len(lo), 3))
         rhi = np.zeros((len(lo), 3))
-        t_lo, t_hi, w_lo, w_hi, ident = self._info_pyramid()(a, b)
+        t_lo, t_hi, ident, w_lo, w_hi = self._info_query(a, b)
         swept = (~empty) & np.isfinite(w_lo)
         one = swept & (w_lo == w_hi)
         mixed = np.nonzero(swept & ~one)[0]
@@ -107,8 +107,9 @@ class FieldBounds:
         return out
 
     def _info_pyramid(self) -> _ReducePyramid:
-        """The info pyramid over the propagated region (t min, t max, swept wire min,
-        max, any identity), and the vacated pyramid over the field, from one decode."""
+        """The info pyramid over the propagated region (t min, t max, any identity, and
+        the swept voxels' wire ids: their min and max, or with one wire whether there
+        are any), and the vacated pyramid over the field, from one decode."""
         if self._info is not None:
             return self._info
         fld = self.field
@@ -124,18 +125,29 @@ class FieldBounds:
         # min and max are exact in the field's own float type
         t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
         t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
-        kind = np.float32 if wr.size == 0 or int(wr.max()) < 1 << 24 else np.float64
         swept = st == 2
-        w_lo = np.where(swept, wr, np.inf).astype(kind)
-        w_hi = np.where(swept, wr, -np.inf).astype(kind)
+        if len(fld.tables) == 1:  # one wire: whether a box holds swept voxels says it all
+            wires = [(swept, np.logical_or, False)]
+        else:  # wire ids (< 128) are exact in float32
+            w_lo, w_hi = wr.astype(np.float32), wr.astype(np.float32)
+            w_lo[~swept], w_hi[~swept] = np.inf, -np.inf
+            wires = [(w_lo, np.minimum, np.inf), (w_hi, np.maximum, -np.inf)]
         self._info = _ReducePyramid(
             (t_lo, np.minimum, np.inf),
             (t_hi, np.maximum, -np.inf),
-            (w_lo, np.minimum, np.inf),
-            (w_hi, np.maximum, -np.inf),
             (st == 0, np.logical_or, False),
+            *wires,
         )
         return self._info
+
+    def _info_query(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Per index box of the region: t min, t max, any identity voxel, and the least
+        and greatest wire id of its swept voxels (inf and -inf: none)."""
+        t_lo, t_hi, ident, *wires = self._info_pyramid()(a, b)
+        if len(wires) == 2:
+            return t_lo, t_hi, ident, wires[0], wires[1]
+        zero = np.where(wires[0], 0.0, np.inf)
+        return t_lo, t_hi, ident, zero, np.where(wires[0], 0.0, -np.inf)
 
     def _displacement_pyramid(self) -> _MinMaxPyramid:
         """Per-voxel displacement intervals over the propagated region: a swept voxel's
