@@ -370,6 +370,7 @@ class SkipMapCache:
         )
         self._install_segments(maps, segments)
         maps.warped_key = key
+        return_freed_memory()  # the build's temporaries (and the warp's bounds')
 
     # ------------------------------------------------------------------ maps
     def block_info(self, maps: VolumeSkipMaps, scene: Scene) -> Any:

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from voxwarp.core.heap import return_freed_memory
 from voxwarp.deform.identity import token
 from voxwarp.deform.support import SupportMap, chain_support
 
@@ -117,6 +118,7 @@ class SupportCache:
                 list(scene.warps), lo, hi, BRICK_VOXELS * voxel, self.tolerance_voxels * voxel
             )
             self._key = key
+            return_freed_memory()  # the warps' bound pyramids' temporaries
         return self._map
 
     def _state_key(self, scene: Scene, box: Box | None) -> tuple:
