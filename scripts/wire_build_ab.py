@@ -25,14 +25,26 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 #: the build's timed stages (WireFieldStats.timings keys)
 STAGES = ("tables", "masks", "seeds", "propagate", "flags", "store")
-#: the modules loaded at the old commit, in import order
-OLD_MODULES = ("geometry", "classify", "masks", "sides", "build")
+#: the modules loaded at the old commit, in import order (every module the build's
+#: classes come from: one left out would be shared with this checkout); those the old
+#: commit does not have yet are skipped
+OLD_MODULES = (
+    "geometry",
+    "classify",
+    "fade_cl",
+    "masks",
+    "sides",
+    "field_box",
+    "field_geometry",
+    "build",
+)
 
 
 def load_before(rev: str) -> Any:
@@ -43,12 +55,15 @@ def load_before(rev: str) -> Any:
     try:
         for name, short in zip(names, OLD_MODULES, strict=True):
             path = f"deform/wires/{short}.py"
-            src = subprocess.run(
+            res = subprocess.run(
                 ["git", "-C", str(ROOT), "show", f"{rev}:{path}"],
-                check=True,
+                check=False,
                 capture_output=True,
                 text=True,
-            ).stdout
+            )
+            if res.returncode != 0:  # not there yet at rev
+                continue
+            src = res.stdout
             mod = types.ModuleType(name)
             mod.__file__ = f"{rev}:{path}"
             sys.modules[name] = mod
@@ -63,14 +78,21 @@ def load_before(rev: str) -> Any:
 
 
 def same_field(a: Any, b: Any) -> bool:
-    """Whether two built fields hold the same bits."""
-    for key in ("state", "t", "code", "weight"):
+    """Whether two built fields hold the same bits (state, code, weight), and t where a
+    swept sample's trilinear lookup reads it (swept voxels and their 26 neighbours: a
+    smaller propagated region leaves other voxels' t unset)."""
+    for key in ("state", "code", "weight"):
         x, y = getattr(a, key), getattr(b, key)
         if (x is None) != (y is None):
             return False
         if x is not None and not (x.dtype == y.dtype and np.array_equal(x, y)):
             return False
-    return True
+    if (a.t is None) != (b.t is None):
+        return False
+    if a.t is None:
+        return True
+    read = ndimage.maximum_filter(a.decode()[0] == 2, size=3, mode="constant")
+    return a.t.dtype == b.t.dtype and np.array_equal(a.t[read], b.t[read])
 
 
 def timed(wd: Any) -> dict[str, float]:

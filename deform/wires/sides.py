@@ -41,6 +41,7 @@ from voxwarp.deform.wires.masks import PlaneMasks
 from voxwarp.deform.wires.propagation import nearest_seed
 from voxwarp.deform.wires.seams import fade_seams
 from voxwarp.deform.wires.tables import WireTables, _lerp_table
+from voxwarp.deform.wires.wire import Wire
 
 #: set to 0 to compute the fade weights with numpy even where the OpenCL pass could
 #: (the same bits; for benchmarks of the two paths in one process)
@@ -269,12 +270,9 @@ class SidePasses(PlaneMasks):
         c_lo = np.full(3, np.iinfo(np.int64).max)
         c_hi = np.full(3, -1)
         for w, tab in zip(self.wires, tables, strict=True):
-            pts = tab.modified_points if side == "modified" else tab.base_points
-            smax = float(w.scale[:, 1].max()) if side == "modified" else 1.0
-            ends = w.end_reach(side)
-            r = max(w.reach_at(smax), ends) + 2 * self.mask_resolution
-            a = np.floor((pts.min(0) - r - lo) / h - 0.5).astype(int) - 1
-            b = np.ceil((pts.max(0) + r - lo) / h - 0.5).astype(int) + 1
+            w_lo, w_hi = self._wire_box(w, tab, side)
+            a = np.floor((w_lo - lo) / h - 0.5).astype(int) - 1
+            b = np.ceil((w_hi - lo) / h - 0.5).astype(int) + 1
             c_lo, c_hi = np.minimum(c_lo, a), np.maximum(c_hi, b)
         c_lo = np.clip(c_lo, 0, np.asarray(shape) - 1)
         c_hi = np.clip(c_hi, 0, np.asarray(shape) - 1)
@@ -294,6 +292,27 @@ class SidePasses(PlaneMasks):
         grid[sidx[:, 0], sidx[:, 1], sidx[:, 2]] = True
         flat = np.ravel_multi_index(sidx.T, rshape)
         return c_lo, rshape, grid, flat, s_wire, s_u
+
+    def _wire_box(self, w: Wire, tab: WireTables, side: str) -> tuple[np.ndarray, np.ndarray]:
+        """World box (mm) of what one wire can flag on ``side``: its points grown by
+        the reach across it, and, for smooth ends, the box beyond each end over which
+        the sweep fades (the reach across the end tangent, the fade along it), within
+        the points grown by the fade in every direction."""
+        points, frames, _ = side_tables(tab, side)
+        smax = float(w.scale[:, 1].max()) if side == "modified" else 1.0
+        margin = 2 * self.mask_resolution
+        across = w.reach_at(smax) + margin
+        lo, hi = points.min(0) - across, points.max(0) + across
+        ends = w.end_reach(side)
+        if ends <= 0.0:
+            return lo, hi
+        along = ends + self._end_cap() + margin
+        for i in (0, LUT_SIZE - 1):  # the frame's x, y across, z along the end tangent
+            f = frames[i]
+            half = (np.abs(f[:, 0]) + np.abs(f[:, 1])) * across + np.abs(f[:, 2]) * along
+            lo, hi = np.minimum(lo, points[i] - half), np.maximum(hi, points[i] + half)
+        grown = max(w.reach_at(smax), ends) + margin  # never more than every direction
+        return np.maximum(lo, points.min(0) - grown), np.minimum(hi, points.max(0) + grown)
 
     def _reach(self, h: np.ndarray, side: str) -> np.ndarray:
         """Per wire: how far (mm) from its nearest seed a voxel can still be flagged."""

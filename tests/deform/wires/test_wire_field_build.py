@@ -184,7 +184,7 @@ def digest(a: np.ndarray) -> str:
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["scipy", "opencl"])
 def test_smooth_trim_and_weights_give_the_reference_bits(backend: str) -> None:
-    # oracle: SHA-256 of the float fields (state, t, weight) built by commit 6030720,
+    # oracle: SHA-256 of the float fields (state, weight, t where read) built by commit 6030720,
     # before the smooth-ends trim and the fade weights ran in chunks on threads
     # (regenerate with scripts/wire_build_ab.py's load_before, never with new code)
     if backend == "opencl":
@@ -201,9 +201,17 @@ def test_smooth_trim_and_weights_give_the_reference_bits(backend: str) -> None:
             )
             wd.build()
             key = f"{kind}_{backend}_s{scale}_float"
-            for name in ("state", "t", "weight"):
+            for name in ("state", "weight"):
                 assert digest(getattr(wd.field, name)) == want[f"{key}_{name}"], (key, name)
                 checked += 1
+            # t where a swept sample's trilinear lookup reads it: the propagated region
+            # may end sooner beyond a smooth end than the old build's (what lies beyond
+            # it holds no t anyone reads)
+            fld = wd.field
+            read = ndimage.maximum_filter(fld.state >= 2, size=3, mode="constant")
+            t_read = np.where(read, fld.t, np.float32(0))
+            assert digest(t_read) == want[f"{key}_t_read"], (key, "t")
+            checked += 1
     assert checked == 24
 
 
