@@ -45,14 +45,20 @@ def volume_words(spec: str) -> str:
 
 
 def _vtk_rows(run: dict[str, Any]) -> list[tuple[str, dict[str, float], list[float]]]:
-    """(volume, medians of the checkout's column, load averages) of each VTK line."""
+    """(volume, medians of the checkout's column, load averages) of each VTK line; the
+    medians also hold ``low`` and ``high``, the least and greatest per-pixel ratio of
+    the repeats (the median itself where the run kept no repeats)."""
     label = run["revisions"][-1]["label"]
     out = []
     for row in run["rows"]:
         if row["line"] != "vtk_per_pixel":
             continue
-        median = row["results"].get(label, {}).get("median", {})
+        result = row["results"].get(label, {})
+        median = dict(result.get("median", {}))
         if {"per_pixel", "raw", "covered"} <= median.keys():
+            each = [r["per_pixel"] for r in result.get("repeats", []) if "per_pixel" in r]
+            each = each or [median["per_pixel"]]
+            median["low"], median["high"] = min(each), max(each)
             out.append((row["volume"], median, list(row.get("load", []))))
     if not out:
         raise ReadmeError(
@@ -68,7 +74,7 @@ def paragraph(run: dict[str, Any]) -> str:
     rows = _vtk_rows(run)
     quotes = [
         f"{m['per_pixel']:.1f}x on {volume_words(spec)} ({100 * m['covered']:.0f} % of the"
-        f" image covered; {m['raw']:.1f}x per frame)"
+        f" image covered; {m['raw']:.1f}x per frame; {_spread(m)})"
         for spec, m, _ in rows
     ]
     listed = quotes[0] if len(quotes) == 1 else ", ".join(quotes[:-1]) + " and " + quotes[-1]
@@ -79,12 +85,19 @@ def paragraph(run: dict[str, Any]) -> str:
     return (
         f"Undeformed `dvr` at {w}x{h} is {listed} as fast per covered pixel as VTK's"
         " fixed-point CPU raycaster on the same array, transfer function, sample distance and"
-        f" camera (both unshaded; {run['machine']}{load}; median of {run['repeats']} runs)."
+        f" camera (both unshaded; {run['machine']}{load}; medians of {run['repeats']} runs,"
+        " with each scan's range of runs)."
         " The more of a volume is empty or transparent, the more empty-space skipping saves:"
         " a sparse scan gains more than a dense one. `python -m benchmarks costs --volume FILE`"
         " measures a scan of yours, with the cost of deforming it, before and after a change"
         " (`docs/benchmarks.md`)."
     )
+
+
+def _spread(m: dict[str, float]) -> str:
+    """``runs 1.9-2.5x``, or ``every run 2.4x`` where they agree to the digit."""
+    low, high = f"{m['low']:.1f}", f"{m['high']:.1f}"
+    return f"every run {low}x" if low == high else f"runs {low}–{high}x"
 
 
 def replace_block(readme: str, text: str) -> str:
