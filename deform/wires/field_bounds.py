@@ -17,6 +17,8 @@ pyramids built once per field (:class:`~voxwarp.deform.wires.bounds._ReducePyram
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 from scipy import ndimage
 
@@ -41,6 +43,9 @@ class FieldBounds:
         self._info: _ReducePyramid | None = None
         self._vacated: _AnyPyramid | None = None
         self._displacement: _MinMaxPyramid | None = None
+        # the GUI asks from two threads at once (the skip maps' worker, the support on
+        # the GUI thread): one builds each pyramid, the other waits for it
+        self._lock = threading.Lock()
 
     def voxel_boxes(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The field voxel indices (first, last; (n, 3) each, unclipped) holding the
@@ -110,8 +115,13 @@ class FieldBounds:
         """The info pyramid over the propagated region (t min, t max, any identity, and
         the swept voxels' wire ids: their min and max, or with one wire whether there
         are any), and the vacated pyramid over the field, from one decode."""
-        if self._info is not None:
+        with self._lock:
+            if self._info is None:
+                self._info = self._build_info()
             return self._info
+
+    def _build_info(self) -> _ReducePyramid:
+        """:meth:`_info_pyramid`'s build (sets the vacated pyramid too)."""
         fld = self.field
         state, wire, t_all = fld.decode()
         vacated = state == 1
@@ -132,13 +142,12 @@ class FieldBounds:
             w_lo, w_hi = wr.astype(np.float32), wr.astype(np.float32)
             w_lo[~swept], w_hi[~swept] = np.inf, -np.inf
             wires = [(w_lo, np.minimum, np.inf), (w_hi, np.maximum, -np.inf)]
-        self._info = _ReducePyramid(
+        return _ReducePyramid(
             (t_lo, np.minimum, np.inf),
             (t_hi, np.maximum, -np.inf),
             (st == 0, np.logical_or, False),
             *wires,
         )
-        return self._info
 
     def _info_query(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per index box of the region: t min, t max, any identity voxel, and the least
@@ -153,9 +162,10 @@ class FieldBounds:
         """Per-voxel displacement intervals over the propagated region: a swept voxel's
         is that of its box for every t its samples can interpolate (from its 3³
         neighbourhood); identity voxels give [0, 0], vacated ones nothing."""
-        if self._displacement is None:
-            self._displacement = _voxel_intervals(self.field)
-        return self._displacement
+        with self._lock:
+            if self._displacement is None:
+                self._displacement = _voxel_intervals(self.field)
+            return self._displacement
 
 
 def _voxel_intervals(fld: WireField) -> _MinMaxPyramid:

@@ -3,6 +3,7 @@ constants, uniforms and textures, bounds, and its scene-JSON form."""
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -51,6 +52,11 @@ def _newton_forward(warp: Warp, p: np.ndarray, x: np.ndarray) -> np.ndarray:
         step[ok] = np.linalg.solve(j[ok], r[bad][ok][..., None])[..., 0]
         p[bad] -= step
     return p
+
+
+#: makes one FieldBounds per field when two threads ask at once (the GUI's skip-map
+#: worker and its support)
+_BOUNDS_LOCK = threading.Lock()
 
 
 @register_warp
@@ -351,10 +357,12 @@ class WireFieldWarp(Warp):
         return moved if vacated is None else np.asarray(moved, dtype=bool) | vacated
 
     def _field_bounds(self) -> FieldBounds:
-        """The bounds of the current field (made once per revision)."""
-        if self._bounds is None or self._bounds.field is not self.field:
-            self._bounds = FieldBounds(self.field)
-        return self._bounds
+        """The bounds of the current field (made once per revision, by one thread)."""
+        fld = self.field
+        with _BOUNDS_LOCK:
+            if self._bounds is None or self._bounds.field is not fld:
+                self._bounds = FieldBounds(fld)
+            return self._bounds
 
     # ------------------------------------------------------------------ GPU side
     def glsl_constants(self) -> dict[str, Any]:

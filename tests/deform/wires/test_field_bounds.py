@@ -73,3 +73,37 @@ def test_a_box_of_both_wires_is_their_voxels_union() -> None:
     assert np.all(a <= pa.min(axis=0))
     assert np.all(b >= pb.max(axis=0))
     assert np.any(b - a > 1.0)  # the wires move it: not the empty interval
+
+
+def test_two_threads_build_the_bounds_once(monkeypatch: object) -> None:
+    """The GUI asks for a new field's bounds from its skip-map worker and, for the
+    support, from the GUI thread at once: one of them builds the pyramids, the other
+    waits and reads the same answers."""
+    import threading
+    import time
+
+    w = build(cylinder(), [wire(modified=axis_points(dy=3.0), twist=1.0)])
+    builds = []
+    real = FieldBounds._build_info
+
+    def slow_build(self: FieldBounds) -> object:
+        builds.append(threading.get_ident())
+        time.sleep(0.2)  # long enough for the other thread to arrive meanwhile
+        return real(self)
+
+    monkeypatch.setattr(FieldBounds, "_build_info", slow_build)  # type: ignore[attr-defined]
+    lo = np.array([[10.0, 10.0, 10.0], [0.0, 0.0, 0.0]])
+    hi = lo + 12.0
+    out: dict[str, object] = {}
+
+    def ask(name: str) -> None:
+        out[name] = w.displacement_range(lo, hi)
+
+    threads = [threading.Thread(target=ask, args=(n,)) for n in ("worker", "gui")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(builds) == 1
+    for a, b in zip(out["worker"], out["gui"], strict=True):  # type: ignore[call-overload]
+        np.testing.assert_array_equal(a, b)
