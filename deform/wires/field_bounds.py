@@ -9,9 +9,9 @@ pyramids built once per field (:class:`~voxwarp.deform.wires.bounds._ReducePyram
   is the identity. A box whose swept voxels belong to one wire gets that wire's mapping
   bounded over the box itself and that t range (:func:`_box_mapping_range`); a box
   without swept voxels moves nothing.
-* the per-voxel *displacement* pyramid, only for boxes holding swept voxels of several
-  wires (built the first time such a box is asked about: a single-wire field never
-  pays for it, the bulk of the old cost: every swept voxel's own interval).
+* the per-voxel *displacement* pyramid (every swept voxel's own interval: the costly
+  one), only for boxes holding swept voxels of several wires; built the first time such
+  a box is asked about, so a single-wire field never pays for it.
 * the *vacated* pyramid: whether a box holds a voxel the swept object left.
 """
 
