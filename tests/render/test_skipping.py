@@ -532,3 +532,38 @@ def test_warped_skip_maps_are_built_when_a_warp_state_is_drawn_again(gl_ctx: Any
         owned = OffsetFieldWarp(warp.lo, warp.hi, shape=warp.shape, texture_source=lambda c: tex)
         r.render(scene.copy(warps=[owned]))
         assert r.renderer.last_skip_kind == "blocks"
+
+
+def test_warped_octant_maps_use_the_compiled_kernels(gl_ctx: Any, monkeypatch: Any) -> None:
+    """Deformed-space octant maps are rebuilt for every warp state that rests: from
+    WARPED_COMPILED_MIN_SIZE cells on they use the compiled kernels (straight maps keep
+    COMPILED_MIN_SIZE), and the image is the one the numpy maps give."""
+    from voxwarp.deform.elements.offset_field import OffsetFieldWarp
+    from voxwarp.render.skipping import cache
+
+    vol = _volume()
+    u = np.zeros((9, 9, 9, 3))
+    u[4, 3, 5] = (3.0, -2.0, 1.5)
+    scene = Scene(vol, mode="dvr", transfer_function=TF, view="+z", warps=[])
+    warped = scene.copy(warps=[OffsetFieldWarp(*vol.bounds, u)])
+    calls: dict[int, list[bool | None]] = {}
+    real = cache.octant_skip_distances
+    images = {}
+    for threshold in (1 << 40, 1):  # numpy maps, then compiled ones
+        made = calls.setdefault(threshold, [])
+
+        def spy(visible: np.ndarray, signs: Any, made: list = made, **kw: Any) -> np.ndarray:
+            made.append(kw.get("compiled"))
+            return real(visible, signs, **kw)
+
+        monkeypatch.setattr(cache, "octant_skip_distances", spy)
+        monkeypatch.setattr(cache, "WARPED_COMPILED_MIN_SIZE", threshold)
+        with OffscreenRenderer(48, 40, ctx=gl_ctx, dtype="f4") as r:
+            r.renderer.warped_skip_maps = "always"
+            r.render(scene)
+            images[threshold] = r.render(warped)
+    assert calls[1 << 40]
+    assert all(c is None for c in calls[1 << 40])
+    assert True in calls[1], "the warped maps compiled"
+    assert None in calls[1], "the straight ones by their own rule"
+    np.testing.assert_array_equal(images[1 << 40], images[1])

@@ -24,6 +24,7 @@ from voxwarp.deform.warp import fold_affine
 from voxwarp.errors import RenderError
 from voxwarp.render.skipping.bitmask import BitMask
 from voxwarp.render.skipping.maps import (
+    WARPED_COMPILED_MIN_SIZE,
     Octant,
     block_skip_distances,
     cell_grid_shape,
@@ -406,8 +407,11 @@ class SkipMapCache:
         maps.cell_visible, maps.visible_factor = BitMask(visible), 1  # the maps stay
         return _coarsened(visible, factor)
 
-    def _octant_texture(self, visible: np.ndarray, octant: Octant) -> Any:
-        return self._distance_texture(octant_skip_distances(visible, octant))
+    def _octant_texture(self, visible: np.ndarray, octant: Octant, warped: bool = False) -> Any:
+        """The octant map of ``visible`` as a texture; ``warped``: a deformed-space map
+        (compiled kernels from WARPED_COMPILED_MIN_SIZE cells)."""
+        compiled = True if warped and visible.size >= WARPED_COMPILED_MIN_SIZE else None
+        return self._distance_texture(octant_skip_distances(visible, octant, compiled=compiled))
 
     def _distance_texture(self, dist: np.ndarray) -> Any:
         """An R8 3D texture of octant skip distances (nearest filtering)."""
@@ -507,7 +511,7 @@ class SkipMapCache:
         visible = self.warped_visibility(maps, scene)
         tex = maps.warped_skip.get(octant)
         if tex is None:
-            tex = maps.warped_skip[octant] = self._octant_texture(visible, octant)
+            tex = maps.warped_skip[octant] = self._octant_texture(visible, octant, warped=True)
         return tex
 
 
