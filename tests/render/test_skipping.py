@@ -421,14 +421,21 @@ def _dense_volume() -> Volume:
     return Volume(data, spacing=vol.spacing)
 
 
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
 @pytest.mark.parametrize("make", [_volume, _dense_volume], ids=["blobs", "dense-slab"])
-def test_warped_visibility_windows_counted_one_by_one(make: Callable[[], Volume]) -> None:
+def test_warped_visibility_windows_counted_one_by_one(
+    make: Callable[[], Volume], compiled: bool, monkeypatch: Any
+) -> None:
     """Each deformed cell of a moved block is visible iff a visible original cell lies in
     its displacement window (the block's interval, in cells), counted here by slicing
     the padded visibility cell by cell; the summed-area table only spans the box the
     moved blocks' windows reach (a local drag's part of the grid), so windows at that
     box's edges are the ones to check. Blocks that do not move keep their cells; on the
-    dense slab some moved blocks' whole windows are visible (the block shortcut)."""
+    dense slab some moved blocks' whole windows are visible (the block shortcut). The
+    cells are counted by numpy or by the compiled kernel (big grids)."""
+    from voxwarp.render.skipping import maps
+
+    monkeypatch.setattr(maps, "WARPED_COMPILED_MIN_SIZE", 0 if compiled else 1 << 40)
     from voxwarp.deform.elements.offset_field import OffsetFieldWarp
     from voxwarp.deform.warp import chain_displacement_range
     from voxwarp.render.skipping.maps import (

@@ -281,3 +281,51 @@ def chessboard_distance(vis: np.ndarray, out: np.ndarray) -> None:  # pragma: no
                             if zz < nz and 0 <= yy < ny and 0 <= xx < nx:
                                 d = min(d, out[zz, yy, xx] + 1)
                 out[z, y, x] = d
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def window_cells(
+    out: np.ndarray,
+    sat: np.ndarray,
+    q0: np.ndarray,
+    q1: np.ndarray,
+    blocks: np.ndarray,
+    lo_off: np.ndarray,
+    hi_off: np.ndarray,
+    block: int,
+) -> None:  # pragma: no cover
+    """Each cell c of the ``block``³ blocks (block indices (n, 3), in ``out``'s index
+    order) is set to whether the window [c + lo_off, c + hi_off + 1) of its block holds
+    a visible cell, from the summed-area table ``sat`` over [q0, q1] (windows clipped to
+    it, as :func:`voxwarp.render.skipping.maps.warped_cell_visibility`'s numpy count)."""
+    nx, ny, nz = out.shape
+    for n in prange(blocks.shape[0]):
+        for i in range(block):
+            cx = blocks[n, 0] * block + i
+            if cx >= nx:
+                continue
+            ax = min(max(cx + lo_off[n, 0], q0[0]), q1[0]) - q0[0]
+            bx = max(min(max(cx + hi_off[n, 0] + 1, q0[0]), q1[0]) - q0[0], ax)
+            for j in range(block):
+                cy = blocks[n, 1] * block + j
+                if cy >= ny:
+                    continue
+                ay = min(max(cy + lo_off[n, 1], q0[1]), q1[1]) - q0[1]
+                by = max(min(max(cy + hi_off[n, 1] + 1, q0[1]), q1[1]) - q0[1], ay)
+                for k in range(block):
+                    cz = blocks[n, 2] * block + k
+                    if cz >= nz:
+                        continue
+                    az = min(max(cz + lo_off[n, 2], q0[2]), q1[2]) - q0[2]
+                    bz = max(min(max(cz + hi_off[n, 2] + 1, q0[2]), q1[2]) - q0[2], az)
+                    count = (
+                        sat[bx, by, bz]
+                        - sat[ax, by, bz]
+                        - sat[bx, ay, bz]
+                        - sat[bx, by, az]
+                        + sat[ax, ay, bz]
+                        + sat[ax, by, az]
+                        + sat[bx, ay, az]
+                        - sat[ax, ay, az]
+                    )
+                    out[cx, cy, cz] = count > 0

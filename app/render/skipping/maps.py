@@ -560,6 +560,13 @@ def warped_cell_visibility(
     _set_blocks(out, moved[seen == 0], block, False)
     _set_blocks(out, moved[full], block, True)
     moved = moved[(seen > 0) & ~full]
+    if len(moved) and out.size >= WARPED_COMPILED_MIN_SIZE:  # numba: the same counts
+        from voxwarp.render.skipping import kernels as kern
+
+        lo_off = d_lo[moved[:, 0], moved[:, 1], moved[:, 2]]
+        hi_off = d_hi[moved[:, 0], moved[:, 1], moved[:, 2]]
+        kern.window_cells(out, sat, q0, q1, moved, lo_off, hi_off, block)
+        return out, offset
     local = np.stack(np.meshgrid(*(np.arange(block),) * 3, indexing="ij"), -1).reshape(-1, 3)
     for chunk in np.array_split(moved, max(1, len(moved) // 4096)) if len(moved) else []:
         cells = (chunk[:, None, :] * block + local[None]).reshape(-1, 3)
