@@ -283,7 +283,7 @@ def chessboard_distance(vis: np.ndarray, out: np.ndarray) -> None:  # pragma: no
                 out[z, y, x] = d
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def window_cells(
     out: np.ndarray,
     sat: np.ndarray,
@@ -297,9 +297,13 @@ def window_cells(
     """Each cell c of the ``block``³ blocks (block indices (n, 3), in ``out``'s index
     order) is set to whether the window [c + lo_off, c + hi_off + 1) of its block holds
     a visible cell, from the summed-area table ``sat`` over [q0, q1] (windows clipped to
-    it, as :func:`voxwarp.render.skipping.maps.warped_cell_visibility`'s numpy count)."""
+    it, as :func:`voxwarp.render.skipping.maps.warped_cell_visibility`'s numpy count).
+
+    Serial on purpose: it runs on the GUI's skip-map worker thread, and numba's
+    ``workqueue`` threading layer (the one left where neither TBB nor OpenMP loads)
+    aborts the process when parallel kernels start from two threads at once."""
     nx, ny, nz = out.shape
-    for n in prange(blocks.shape[0]):
+    for n in range(blocks.shape[0]):
         for i in range(block):
             cx = blocks[n, 0] * block + i
             if cx >= nx:
