@@ -283,6 +283,14 @@ def chessboard_distance(vis: np.ndarray, out: np.ndarray) -> None:  # pragma: no
                 out[z, y, x] = d
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _clipped_window(c: int, lo: int, hi: int, q0: int, q1: int) -> tuple:  # pragma: no cover
+    """One axis of cell c's window [c + lo, c + hi + 1), clipped to [q0, q1] and made
+    relative to q0 (never ending before it starts)."""
+    a = min(max(c + lo, q0), q1) - q0
+    return a, max(min(max(c + hi + 1, q0), q1) - q0, a)
+
+
 @njit(cache=True, nogil=True)
 def window_cells(
     out: np.ndarray,
@@ -308,20 +316,17 @@ def window_cells(
             cx = blocks[n, 0] * block + i
             if cx >= nx:
                 continue
-            ax = min(max(cx + lo_off[n, 0], q0[0]), q1[0]) - q0[0]
-            bx = max(min(max(cx + hi_off[n, 0] + 1, q0[0]), q1[0]) - q0[0], ax)
+            ax, bx = _clipped_window(cx, lo_off[n, 0], hi_off[n, 0], q0[0], q1[0])
             for j in range(block):
                 cy = blocks[n, 1] * block + j
                 if cy >= ny:
                     continue
-                ay = min(max(cy + lo_off[n, 1], q0[1]), q1[1]) - q0[1]
-                by = max(min(max(cy + hi_off[n, 1] + 1, q0[1]), q1[1]) - q0[1], ay)
+                ay, by = _clipped_window(cy, lo_off[n, 1], hi_off[n, 1], q0[1], q1[1])
                 for k in range(block):
                     cz = blocks[n, 2] * block + k
                     if cz >= nz:
                         continue
-                    az = min(max(cz + lo_off[n, 2], q0[2]), q1[2]) - q0[2]
-                    bz = max(min(max(cz + hi_off[n, 2] + 1, q0[2]), q1[2]) - q0[2], az)
+                    az, bz = _clipped_window(cz, lo_off[n, 2], hi_off[n, 2], q0[2], q1[2])
                     count = (
                         sat[bx, by, bz]
                         - sat[ax, by, bz]
