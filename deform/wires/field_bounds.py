@@ -127,14 +127,7 @@ class FieldBounds:
         vacated = state == 1
         self._vacated = _AnyPyramid(vacated) if vacated.any() else None
         del vacated
-        region = _box_slices(fld.region_lo, fld.region_shape)
-        st, wr = state[region], wire[region]
-        tt = np.asarray(t_all[region])
-        if tt.dtype != np.float32:
-            tt = tt.astype(np.float64)
-        # min and max are exact in the field's own float type
-        t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
-        t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
+        st, wr, t_lo, t_hi = _region_t_ranges(fld, state, wire, t_all)
         swept = st == 2
         if len(fld.tables) == 1:  # one wire: whether a box holds swept voxels says it all
             wires = [(swept, np.logical_or, False)]
@@ -168,15 +161,25 @@ class FieldBounds:
             return self._displacement
 
 
+def _region_t_ranges(
+    fld: WireField, state: np.ndarray, wire: np.ndarray, t_all: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """State and wire id over the propagated region of the decoded field, and per
+    voxel the range of t over its 3³ neighbourhood (what the GPU's filtered lookups of
+    t can return there), in the field's float type (min and max are exact in it)."""
+    region = _box_slices(fld.region_lo, fld.region_shape)
+    tt = np.asarray(t_all[region])
+    if tt.dtype != np.float32:
+        tt = tt.astype(np.float64)
+    t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
+    t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
+    return state[region], wire[region], t_lo, t_hi
+
+
 def _voxel_intervals(fld: WireField) -> _MinMaxPyramid:
     """:meth:`FieldBounds._displacement_pyramid`'s pyramid (float32, rounded outwards)."""
     rs = fld.region_shape
-    region = _box_slices(fld.region_lo, rs)
-    state, wire, t_all = fld.decode()
-    st, wr = state[region], wire[region]
-    tt = np.asarray(t_all[region], dtype=np.float64)
-    t_lo = ndimage.minimum_filter(tt, size=3, mode="nearest")
-    t_hi = ndimage.maximum_filter(tt, size=3, mode="nearest")
+    st, wr, t_lo, t_hi = _region_t_ranges(fld, *fld.decode())
     idx = np.nonzero(st.ravel() == 2)[0]
     ii = np.stack(np.unravel_index(idx, rs), -1)
     centres = fld.lo + (ii + fld.region_lo + 0.5) * fld.spacing
