@@ -541,7 +541,7 @@ class MainWindow(QMainWindow):
         task.progressed.connect(lambda f, _t: self.progress.setValue(int(1000 * f)))
         task.succeeded.connect(lambda _w: self._field_built(job))
         task.failed.connect(self.show_error)
-        task.finished.connect(self._build_task_done)
+        task.finished.connect(lambda: self._build_task_done(task))
         task.start()
 
     def _field_built(self, job: BuildJob) -> None:
@@ -551,7 +551,12 @@ class MainWindow(QMainWindow):
         self.refresh_panels()
         self.viewport.update()
 
-    def _build_task_done(self) -> None:
+    def _build_task_done(self, task: Task) -> None:
+        # A task counts as done (``running`` false) before its queued ``finished``
+        # arrives, so the next build may have started meanwhile: an older task's end
+        # must not clear it (that restarted the build each time, over and over).
+        if task is not self._build_task:
+            return
         self.progress.hide()
         self._build_task = None
         if self.session.family.field_stale and not self.session.dragging:

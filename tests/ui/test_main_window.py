@@ -394,6 +394,40 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
 
 
 @pytest.mark.slow
+def test_a_build_ending_as_the_next_starts_leaves_the_next_alone(
+    window: Any, qtbot: Any, monkeypatch: Any
+) -> None:
+    """A wire field build counts as done before its queued ``finished`` reaches the GUI
+    thread, so the next build can start in between (an undo that cancels a build, as
+    in the test below). The late ``finished`` must not clear the running build: that
+    restarted it, and every restart's own late signal restarted the next (CI saw it
+    rebuild for over a minute)."""
+    w = window
+    press_shortcut(qtbot, w, Qt.Key.Key_W)
+    assert w.wait_for_field_build(60)
+    family = w.session.family
+    jobs: list[Any] = []
+    real = family.build_job
+
+    def counted() -> Any:
+        jobs.append(real())
+        return jobs[-1]
+
+    monkeypatch.setattr(family, "build_job", counted)
+    family.changed()  # the wires changed: the field is stale
+    w.request_field_build()
+    first = w._build_task
+    assert first is not None
+    assert first.wait(60)  # done, its finished signal not delivered yet
+    family.changed()
+    w.request_field_build()  # the next build starts meanwhile
+    assert w._build_task is not first
+    assert w.wait_for_field_build(60)
+    assert len(jobs) == 2
+    assert not family.field_stale
+
+
+@pytest.mark.slow
 def test_wire_actions_come_from_the_wire_panel_and_esc_cancels(window: Any, qtbot: Any) -> None:
     """The wire panel gives the Deformation menu its Lay a New Wire (W) and Finish Wire
     (Return); a click while laying places a point through the adapter, undo keeps
