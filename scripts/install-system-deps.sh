@@ -7,6 +7,11 @@
 #     xvfb xauth libglib2.0-0 libxkbcommon0 libxkbcommon-x11-0 libfontconfig1 libfreetype6
 #     libdbus-1-3 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1
 #     libxcb-render-util0 libxcb-shape0 libxcb-xkb1 libxcb-randr0 libxcb-xfixes0 libx11-xcb1
+#   An OpenCL driver for the CPU when none is registered (the wire field's build):
+#     pocl-opencl-icd. The PoCL that pyopencl's wheels bundle builds no kernel on CPUs
+#     its LLVM does not know (AMD Zen 5 with its LLVM 14: "unknown target CPU
+#     'generic'"); the distribution's PoCL does, and voxwarp takes the first device
+#     whose kernels build.
 set -euo pipefail
 
 missing=()
@@ -25,6 +30,7 @@ have_lib 'libfontconfig.so.1' || missing+=(libfontconfig1)
 have_lib 'libfreetype.so.6' || missing+=(libfreetype6)
 have_lib 'libdbus-1.so.3' || missing+=(libdbus-1-3)
 have_lib 'libX11-xcb.so.1' || missing+=(libx11-xcb1)
+ls /etc/OpenCL/vendors/*.icd >/dev/null 2>&1 || missing+=(pocl-opencl-icd)
 for pair in cursor:0 icccm:4 image:0 keysyms:1 render-util:0 shape:0 xkb:1 randr:0 xfixes:0; do
   have_lib "libxcb-${pair%%:*}.so" || missing+=("libxcb-${pair%%:*}${pair##*:}")
 done

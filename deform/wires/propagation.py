@@ -74,7 +74,10 @@ MAX_SAMPLING_RATIO = 1e6
 #: Backends accepted by :func:`nearest_seed`.
 BACKENDS: tuple[str, ...] = ("auto", "opencl", "scipy")
 #: How to get an OpenCL platform (quoted in warnings and errors).
-OPENCL_FIX = "pip install pocl-binary-distribution, or install your GPU's OpenCL ICD"
+OPENCL_FIX = (
+    "install an OpenCL ICD: your GPU's, or PoCL for the CPU (Debian/Ubuntu: "
+    "apt-get install pocl-opencl-icd; elsewhere pip install pocl-binary-distribution)"
+)
 #: Environment variable; ``0`` / ``false`` / ``off`` / ``no`` disables the OpenCL backend.
 ENV_VAR = "VOXWARP_OPENCL"
 
@@ -216,8 +219,9 @@ def _env_disabled() -> bool:
     return os.environ.get(ENV_VAR, "").strip().lower() in ("0", "false", "off", "no")
 
 
-def _pick_device(cl: Any) -> Any:
-    """A GPU when one exists (most compute units first), else the first CPU/other device."""
+def _ranked_devices(cl: Any) -> list[Any]:
+    """Every OpenCL device, GPUs first, then those with double precision (the
+    classification pass needs it), most compute units first; platform order breaks ties."""
     devices = []
     for platform in cl.get_platforms():
         try:
@@ -227,11 +231,12 @@ def _pick_device(cl: Any) -> Any:
     if not devices:
         raise RuntimeError("no OpenCL device found")
 
-    def rank(d: Any) -> tuple[int, int]:
+    def rank(d: Any) -> tuple[int, int, int]:
         is_gpu = bool(d.type & cl.device_type.GPU)
-        return (0 if is_gpu else 1, -int(d.max_compute_units))
+        fp64 = "cl_khr_fp64" in d.extensions
+        return (0 if is_gpu else 1, 0 if fp64 else 1, -int(d.max_compute_units))
 
-    return sorted(devices, key=rank)[0]
+    return sorted(devices, key=rank)
 
 
 def _opencl_state() -> dict[str, Any]:
@@ -244,16 +249,34 @@ def _opencl_state() -> dict[str, Any]:
 
 
 def _build_state() -> dict[str, Any]:
+    """The first device, in :func:`_ranked_devices` order, whose kernels build: a driver
+    can list a device and still fail to compile for it (the PoCL that pyopencl's wheels
+    bundle does on CPUs its LLVM does not know, e.g. AMD Zen 5: "unknown target CPU
+    'generic'"), and another platform's device may work."""
     try:
         import pyopencl as cl
 
-        device = _pick_device(cl)
-        ctx = cl.Context([device])
-        queue = cl.CommandQueue(ctx)
-        prg = cl.Program(ctx, _KERNELS % {"maxlen": MAX_LINE}).build(options=["-w"])
-        kernels = {name: cl.Kernel(prg, name) for name in ("pass_contig", "pass_mid", "pass_slow")}
-    except Exception as exc:  # any import/driver/build failure means "unavailable"
-        return {"error": f"{type(exc).__name__}: {exc}".splitlines()[0][:200]}
+        devices = _ranked_devices(cl)
+    except Exception as exc:  # no pyopencl, no ICD loader, no platform
+        return {"error": _one_line(exc)}
+    failures = []
+    for device in devices:
+        try:
+            return _device_state(cl, device)
+        except Exception as exc:  # this device cannot build or run: try the next one
+            failures.append(f"{device.name.strip()}: {_one_line(exc)}")
+    return {"error": "; ".join(failures)[:400]}
+
+
+def _one_line(exc: Exception) -> str:
+    return f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
+
+
+def _device_state(cl: Any, device: Any) -> dict[str, Any]:
+    ctx = cl.Context([device])
+    queue = cl.CommandQueue(ctx)
+    prg = cl.Program(ctx, _KERNELS % {"maxlen": MAX_LINE}).build(options=["-w"])
+    kernels = {name: cl.Kernel(prg, name) for name in ("pass_contig", "pass_mid", "pass_slow")}
     return {
         "cl": cl,
         "ctx": ctx,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -273,6 +274,32 @@ def test_missing_platform_falls_back_and_opencl_raises(monkeypatch, fresh_state)
     with pytest.raises(WarpError, match=r"PLATFORM_NOT_FOUND.*pip install pocl"):
         nearest_seed(seeds, backend="opencl")
     assert issubclass(OpenCLUnavailableWarning, RuntimeWarning)
+
+
+def test_a_device_that_cannot_build_gives_way_to_the_next(monkeypatch, fresh_state) -> None:
+    """A listed device whose compiler fails (pyopencl's bundled PoCL on a CPU its LLVM does
+    not know) is passed over for the next one; with none left, every reason is named."""
+    bad, good = SimpleNamespace(name="pthread-AMD EPYC "), SimpleNamespace(name="other CPU")
+
+    def state(cl, device):
+        if device is bad:
+            raise RuntimeError("clBuildProgram failed: BUILD_PROGRAM_FAILURE\nunknown target CPU")
+        return {"device": device}
+
+    monkeypatch.setattr(prop, "_device_state", state)
+    monkeypatch.setattr(prop, "_ranked_devices", lambda cl: [bad, good])
+    assert prop._build_state()["device"] is good
+    monkeypatch.setattr(prop, "_ranked_devices", lambda cl: [bad])
+    err = prop._build_state()["error"]
+    assert err == "pthread-AMD EPYC: RuntimeError: clBuildProgram failed: BUILD_PROGRAM_FAILURE"
+
+
+@requires_opencl
+def test_the_device_in_use_builds_the_kernels() -> None:
+    """Whatever device was picked, it is one whose kernels were built."""
+    st = prop._opencl_state()
+    assert set(st["kernels"]) == {"pass_contig", "pass_mid", "pass_slow"}
+    assert st["device"] in prop._ranked_devices(st["cl"])
 
 
 @requires_opencl
