@@ -37,6 +37,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from voxwarp.deform.parallel import threadsafe
+
 #: violations (mm) below this are float round-off and are not corrected
 TOL = 1e-9
 
@@ -404,6 +406,7 @@ def propagate(  # type: ignore[no-untyped-def]
     return ok, moved, checks, fixes, capped, n_t
 
 
+@threadsafe
 @njit(cache=True, nogil=True, parallel=True)
 def relax_sweep(x, rest, mn, mx, sh, links, frozen, shape, box, colour):  # type: ignore[no-untyped-def]
     """One colour of a red-black Gauss-Seidel sweep of constrained Laplacian smoothing.

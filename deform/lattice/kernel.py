@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from voxwarp.deform.parallel import threadsafe
+
 #: points from which the threaded kernel runs
 PARALLEL_MIN_POINTS = 16384
 
@@ -44,6 +46,7 @@ def _eval_point(
         out[p, c] = (c00 * (1.0 - y) + c10 * y) * (1.0 - z) + (c01 * (1.0 - y) + c11 * y) * z
 
 
+@threadsafe
 @njit(parallel=True, cache=True)
 def eval_grid_kernel(nodes: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
     """Trilinear evaluation of a node grid (nx+1, ny+1, nz+1, 3) at unit points t (N, 3)

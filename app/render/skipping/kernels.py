@@ -13,7 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from voxwarp.deform.parallel import threadsafe
 
+
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def block_range(
     t: np.ndarray, block: int, lo: np.ndarray, hi: np.ndarray
@@ -86,6 +89,7 @@ def _cell_rows(
         hi[nx] = max(zhi[ya, nx - 1], zhi[yb, nx - 1])
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def cell_range(t: np.ndarray, z0: int, lo: np.ndarray, hi: np.ndarray) -> None:  # pragma: no cover
     """(min, max) of the 8 voxels of trilinear cells ``z0 .. z0 + len(lo)`` (z) and every
@@ -98,6 +102,7 @@ def cell_range(t: np.ndarray, z0: int, lo: np.ndarray, hi: np.ndarray) -> None: 
         _cell_rows(t, z0 + np.int64(i), zlo, zhi, lo[i], hi[i])
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def cell_visibility_table(
     t: np.ndarray, vmin: int, first_hi: np.ndarray, out: np.ndarray
@@ -118,6 +123,7 @@ def cell_visibility_table(
                 plane[cy, cx] = np.int64(rhi[cy, cx]) >= first_hi[np.int64(rlo[cy, cx]) - vmin]
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def flipped_blocks(
     vis: np.ndarray, bz: np.ndarray, by: np.ndarray, bx: np.ndarray, out: np.ndarray
@@ -144,6 +150,7 @@ def flipped_blocks(
                 out[j, b, bx[x]] |= rows[b, x]
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def scan_z(vis: np.ndarray, sign: int, cap: int, out: np.ndarray) -> None:  # pragma: no cover
     """First 1D pass (z): ``out = min(cap, steps to the nearest visible cell at
@@ -176,6 +183,7 @@ def _min_max_row(dst: np.ndarray, src: np.ndarray, k: np.uint8) -> None:  # prag
         dst[x] = w if w < v else v
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def pass_y(a: np.ndarray, sign: int, cap: int) -> None:  # pragma: no cover
     """1D pass along y in place: ``a[c] = min over 0 <= k < cap of max(k, a[c + sign k e_y])``
@@ -195,6 +203,7 @@ def pass_y(a: np.ndarray, sign: int, cap: int) -> None:  # pragma: no cover
             a[z, y] = tmp
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def pass_x(a: np.ndarray, sign: int, cap: int) -> None:  # pragma: no cover
     """1D pass along x in place (as :func:`pass_y`), each row from a copy of itself."""
@@ -211,6 +220,7 @@ def pass_x(a: np.ndarray, sign: int, cap: int) -> None:  # pragma: no cover
                     _min_max_row(dst[k:], src[: nx - k], np.uint8(k))
 
 
+@threadsafe
 @njit(parallel=True, cache=True, nogil=True)
 def raise_to_block_bound(
     a: np.ndarray,
