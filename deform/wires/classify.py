@@ -22,11 +22,11 @@ numpy's trim, whose hypot decides them).
 Exactness: the kernel repeats the reference's arithmetic operation by operation, in
 the same precision (float64 where numpy computes in float64, float32 where it computes
 in float32, no fused multiply-adds: ``FP_CONTRACT OFF``), so both give the same bits;
-the one exception is the twist's cos/sin on the base side (the device's libm against
-the host's, within a few ulp), which can flip a mask pixel only where a voxel projects
-onto a pixel edge to within ~1e-15 mm. The pass needs double precision
-(``cl_khr_fp64``); :func:`classify_available` says whether the device has it, and the
-caller keeps the numpy path otherwise.
+the one exception is the twist's cos and sin on the base side (one ``sincos`` of the
+device's library against the host's cos and sin, within a few ulp), which can flip a
+mask pixel only where a voxel projects onto a pixel edge to within ~1e-15 mm. The pass
+needs double precision (``cl_khr_fp64``); :func:`classify_available` says whether the
+device has it, and the caller keeps the numpy path otherwise.
 """
 
 from __future__ import annotations
@@ -75,26 +75,47 @@ static double interp_keys(double x, __global const double *xp, __global const do
 }
 
 /* Newton steps of the wire parameter u of point p along the wire's 256 samples P and
-   tangents T (numpy's arithmetic, as geometry._wire_local): u <- q / 255 + (p - P_q).T_q / len. */
-static double refine_u(const double p0, const double p1, const double p2,
-                       __global const double *P, __global const double *T, const double len,
-                       double u, const int refine_steps) {
+   tangents T (numpy's arithmetic, as geometry._wire_local): u <- q / 255 + (p - P_q).T_q / len.
+   A step depends on u only through its table entry q = rint(255 u): from the entry of a
+   known step (*q_prev, whose step gave *u_prev) it gives *u_prev again without computing,
+   and when u is that result, every later step would too, so the loop ends: the same bits
+   as refine_steps full steps. *q_prev < 0: no step known. */
+static double refine_u_known(const double p0, const double p1, const double p2,
+                             __global const double *P, __global const double *T,
+                             const double len, double u, const int refine_steps,
+                             long *q_prev, double *u_prev) {
     for (int step = 0; step < refine_steps; step++) {
         long q = (long)rint_d(u * 255.0);
         q = q < 0 ? 0 : (q > 255 ? 255 : q);
+        if (q == *q_prev) {
+            if (u == *u_prev) break;  /* a fixed point */
+            u = *u_prev;
+            continue;
+        }
         double z = ((p0 - P[3 * q]) * T[3 * q] + (p1 - P[3 * q + 1]) * T[3 * q + 1])
                    + (p2 - P[3 * q + 2]) * T[3 * q + 2];
         u = (double)q / 255.0 + z / len;
         u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);
+        *q_prev = q;
+        *u_prev = u;
     }
     return u;
+}
+
+static double refine_u(const double p0, const double p1, const double p2,
+                       __global const double *P, __global const double *T, const double len,
+                       double u, const int refine_steps) {
+    long q_prev = -1;
+    double u_prev = 0.0;
+    return refine_u_known(p0, p1, p2, P, T, len, u, refine_steps, &q_prev, &u_prev);
 }
 """
 
 _KERNEL_TEMPLATE = (
     KERNEL_HELPERS
     + r"""
-/* The smooth ends' trim (sides._Trim.drop): Newton steps from the stored float u, then
+/* The smooth ends' trim (sides._Trim.drop): Newton steps from the stored float u (the
+   first pass's last step, q_prev and u_prev, spares most of them), then
    drop a voxel at an end (u 0 or 1) farther than cap along the tangent there, and with
    core >= 0 (the base side of a smooth wire) one farther than core from the wire;
    numpy's arithmetic, as in classify_one. Returns 0 (kept), 1 (dropped) or 2: the core
@@ -103,8 +124,9 @@ _KERNEL_TEMPLATE = (
 static uchar end_trim(const double p0, const double p1, const double p2,
                       __global const double *P, __global const double *T,
                       __global const double *X, __global const double *Y, const double len,
-                      double u, const int refine_steps, const double cap, const double core) {
-    u = refine_u(p0, p1, p2, P, T, len, u, refine_steps);
+                      double u, const int refine_steps, const double cap, const double core,
+                      long q_prev, double u_prev) {
+    u = refine_u_known(p0, p1, p2, P, T, len, u, refine_steps, &q_prev, &u_prev);
     const long q = (long)rint_d(u * 255.0);
     const double d0 = p0 - P[3 * q], d1 = p1 - P[3 * q + 1], d2 = p2 - P[3 * q + 2];
     if (u <= 0.0 || u >= 1.0) {
@@ -120,17 +142,29 @@ static uchar end_trim(const double p0, const double p1, const double p2,
     return 2;
 }
 
-static void classify_one(
-@PARAMS@,
-    const int k, const int j, const int i)
-{
-    const long v = ((long)i * n1 + j) * n2 + k;
-    const int s = nearest[v];
+/* The position of seed s in the sorted seed list; a line's next voxel mostly has the
+   same nearest seed as the last, so the last answer is kept (*last_s, *last_a) and the
+   binary search, whose branches a CPU mispredicts half the time, runs only on a change. */
+static int seed_position(__global const int *seed_idx, const int n_seeds, const int s,
+                         int *last_s, int *last_a) {
+    if (s == *last_s) return *last_a;
     int a = 0, b = n_seeds - 1;
     while (a < b) {
         int m = (a + b) >> 1;
         if (seed_idx[m] < s) a = m + 1; else b = m;
     }
+    *last_s = s;
+    *last_a = a;
+    return a;
+}
+
+static void classify_one(
+@PARAMS@,
+    const int k, const int j, const int i, int *last_s, int *last_a)
+{
+    const long v = ((long)i * n1 + j) * n2 + k;
+    const int s = nearest[v];
+    const int a = seed_position(seed_idx, n_seeds, s, last_s, last_a);
     const int w = seed_wire[a];
     const float u0 = seed_u[a];
     out_wire[v] = (short)w;
@@ -150,7 +184,9 @@ static void classify_one(
     __global const double *T = tangents + (long)w * 256 * 3;
     const double len = length[w];
     double u = (double)u0;
-    u = refine_u(p0, p1, p2, P, T, len, u, refine_steps);
+    long q_last = -1;  /* the last step's entry and result: the trim starts from them */
+    double u_last = 0.0;
+    u = refine_u_known(p0, p1, p2, P, T, len, u, refine_steps, &q_last, &u_last);
     out_u[v] = (float)u;
 
     const long q = (long)rint_d(u * 255.0);
@@ -169,7 +205,8 @@ static void classify_one(
         const double th = interp_keys(u, key_t + o, key_v + o, key_n[2 * w]);
         const int o2 = o + key_n[2 * w];
         const double sc = interp_keys(u, key_t + o2, key_v + o2, key_n[2 * w + 1]);
-        const double c = cos(th), sn = sin(th);
+        double c;
+        const double sn = sincos(th, &c);
         const double x = sc * (c * (double)x32 - sn * (double)y32);
         const double y = sc * (sn * (double)x32 + c * (double)y32);
         ia = (long)rint_d(x / px + mask_half[w]);
@@ -186,7 +223,7 @@ static void classify_one(
     if (flag && trim_cap[w] >= 0.0) {
         const uchar t = end_trim(p0, p1, p2, P, T, axis_x + (long)w * 256 * 3,
                                  axis_y + (long)w * 256 * 3, len, (double)(float)u,
-                                 refine_steps, trim_cap[w], trim_core[w]);
+                                 refine_steps, trim_cap[w], trim_core[w], q_last, u_last);
         out_flag[v] = t == 2 ? 2 : !t;
     }
 }
@@ -200,8 +237,9 @@ __kernel void classify(
 {
     const int k = get_global_id(0), i = get_global_id(1);
     if (k >= n2 || i >= n0) return;
+    int last_s = -1, last_a = 0;  /* seed indices are >= 0: no voxel reuses this */
     for (int j = 0; j < n1; j++)
-        classify_one(@ARGS@, k, j, i);
+        classify_one(@ARGS@, k, j, i, &last_s, &last_a);
 }
 """
 )
