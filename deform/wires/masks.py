@@ -155,10 +155,7 @@ class PlaneMasks:
             ijk = ((q - self.origin) @ self._direction) if rotated else q - self.origin
             ijk /= self.spacing
             use = np.all((ijk >= vlo) & (ijk <= vhi), axis=-1) & in_disc[sl]
-            vals = ndimage.map_coordinates(
-                self.data, ijk[use].T, order=1, mode="nearest", prefilter=False
-            )
-            return sl, use, vals
+            return sl, use, _sample(self.data, ijk[use].T)
 
         out = np.zeros((len(tt), len(x)), dtype=bool)
         step = max(1, MASK_BLOCK_PIXELS // max(len(x), 1))
@@ -260,11 +257,19 @@ class PlaneMasks:
         use = np.all((ijk >= -0.5) & (ijk <= np.asarray(self.data.shape) - 0.5), axis=1)
         out = np.zeros(len(q), dtype=bool)
         if use.any():
-            vals = ndimage.map_coordinates(
-                self.data, ijk[use].T, order=1, mode="nearest", prefilter=False
-            )
-            out[use] = wire.classify(vals)
+            out[use] = wire.classify(_sample(self.data, ijk[use].T))
         return out
+
+
+def _sample(data: np.ndarray, coords: np.ndarray) -> np.ndarray:
+    """The volume's trilinear samples at index coordinates (3, n), as scipy's
+    ``map_coordinates(order=1, mode="nearest", prefilter=False)`` gives them: compiled
+    (:mod:`voxwarp.deform.wires.linear_sample`, the same bits) where the dtype allows."""
+    from voxwarp.deform.wires import linear_sample  # numba: on the first build
+
+    if linear_sample.supported(data):
+        return linear_sample.sample_linear(data, coords)
+    return ndimage.map_coordinates(data, coords, order=1, mode="nearest", prefilter=False)
 
 
 def _fill_holes_in_planes(mask: np.ndarray) -> np.ndarray:
