@@ -317,9 +317,9 @@ def window_cells(
     a visible cell, from the summed-area table ``sat`` over [q0, q1] (windows clipped to
     it, as :func:`voxwarp.render.skipping.maps.warped_cell_visibility`'s numpy count).
 
-    Serial on purpose: it runs on the GUI's skip-map worker thread, and numba's
-    ``workqueue`` threading layer (the one left where neither TBB nor OpenMP loads)
-    aborts the process when parallel kernels start from two threads at once."""
+    Serial: a version threaded over the blocks made the second frame after a wire edit
+    no faster (``docs/benchmarks.md``, "A new CPU, its OpenCL driver and the wire
+    build")."""
     nx, ny, nz = out.shape
     for n in range(blocks.shape[0]):
         for i in range(block):
