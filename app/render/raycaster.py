@@ -285,6 +285,9 @@ class Renderer:
         #: an affine one, or one that moves nothing, drawn undeformed), "map" (straight
         #: outside the chain's support) or "all" (the chain at every sample)
         self.last_support = "all"
+        #: the last draw's lattice samples per skip-map check of straight rays
+        #: (:mod:`voxwarp.render.skipping.checks`)
+        self.last_samples_per_check = 1
         if sampling not in ("auto", *LAYOUTS):
             raise RenderError(
                 f"sampling must be 'auto' or one of {', '.join(map(repr, LAYOUTS))};"
@@ -747,7 +750,9 @@ class Renderer:
         coarse = skip_kind == "cells" and linear and self._skip_maps.cell_factor(scene) > 1
         per_check = 1
         if skip_kind == "cells" and linear:
-            per_check = samples_per_check(self._samples_per_check, scene, self._software)
+            visible = self._skip_maps.visible_fraction(gpu.skip, scene)
+            per_check = samples_per_check(self._samples_per_check, scene, self._software, visible)
+        self.last_samples_per_check = per_check
         prog = self._program(
             scene, linear, skip_kind, segment, shade_tex, gpu.layout, support, coarse, per_check
         )

@@ -23,7 +23,7 @@ from voxwarp.core.transfer_function import TransferFunction
 from voxwarp.core.volume import Volume
 from voxwarp.errors import RenderError
 from voxwarp.render.offscreen import OffscreenRenderer
-from voxwarp.render.skipping.checks import samples_per_check
+from voxwarp.render.skipping.checks import DENSE_VISIBLE, SPARSE_VISIBLE, samples_per_check
 from voxwarp.scene import Scene
 
 
@@ -86,7 +86,8 @@ def _scene(tf: TransferFunction, view: Any, clip: bool, mode: str = "dvr") -> Sc
 def test_auto_checks_every_second_sample_of_unshaded_dvr_on_a_cpu_rasteriser() -> None:
     vol = _volume()
     dvr, shaded = Scene(vol, shading=False), Scene(vol, shading=True)
-    assert samples_per_check("auto", dvr, software=True) == 2
+    assert samples_per_check("auto", dvr, software=True) == 2  # visibility not known yet
+    assert samples_per_check("auto", dvr, software=True, visible=0.1) == 2
     assert samples_per_check("auto", dvr, software=False) == 1  # a GPU skips the branch
     assert samples_per_check("auto", shaded, software=True) == 1
     assert samples_per_check("auto", Scene(vol, mode="iso"), software=True) == 1
@@ -144,3 +145,43 @@ def test_fewer_checks_on_coarse_maps_draw_the_same_image(gl_ctx: Any, defines: l
     assert np.array_equal(_render(gl_ctx, scene, 2, coarse="always"), one)
     assert any(d.startswith("#define COARSE_CELLS") for d in defines)
     assert _drawn_with(defines, 2)
+
+
+def test_auto_follows_the_share_of_visible_cells() -> None:
+    """Sparse views check every sample, dense ones every fourth (unshaded dvr, CPU
+    rasteriser); the shares are the module's thresholds, on either side."""
+    dvr = Scene(_volume(), shading=False)
+    assert samples_per_check("auto", dvr, True, visible=0.0) == 1
+    assert samples_per_check("auto", dvr, True, visible=SPARSE_VISIBLE - 1e-9) == 1
+    assert samples_per_check("auto", dvr, True, visible=SPARSE_VISIBLE) == 2
+    assert samples_per_check("auto", dvr, True, visible=DENSE_VISIBLE - 1e-9) == 2
+    assert samples_per_check("auto", dvr, True, visible=DENSE_VISIBLE) == 4
+    assert samples_per_check("auto", dvr, True, visible=1.0) == 4
+    assert samples_per_check("auto", dvr, False, visible=1.0) == 1  # a GPU: every sample
+    assert samples_per_check("auto", Scene(_volume(), shading=True), True, visible=1.0) == 1
+
+
+@pytest.mark.parametrize(("opaque", "expected"), [(True, 4), (False, 1)])
+def test_a_draw_takes_the_share_of_its_transfer_function(
+    gl_ctx: Any, opaque: bool, expected: int
+) -> None:
+    """The raycaster reads the share from the volume's kept cell visibility: a transfer
+    function that shows everything gives dense checks, one that shows a sliver sparse
+    ones, and both draw what one check per sample draws."""
+    vol = _volume()
+    lo, hi = vol.value_range
+    if opaque:
+        tf = [(lo - 1.0, 0.5, 0.5, 0.5, 0.2), (hi + 1.0, 1.0, 1.0, 1.0, 0.4)]
+    else:  # only the brightest values show
+        top = hi - 0.02 * (hi - lo)
+        tf = [(lo, 0.0, 0.0, 0.0, 0.0), (top, 1.0, 1.0, 1.0, 0.0), (hi, 1.0, 1.0, 1.0, 0.9)]
+    scene = Scene(vol, transfer_function=tf, shading=False, seed=5)
+    with OffscreenRenderer(48, 40, ctx=gl_ctx) as r:
+        for _ in range(2):  # the cell visibility is kept by the first draw
+            image = np.asarray(r.render(scene))
+        if not r.renderer._software:
+            pytest.skip("a GPU keeps one check per sample")
+        assert r.renderer.last_skip_kind == "cells"
+        assert r.renderer.last_samples_per_check == expected
+        r.renderer.samples_per_check = 1
+        assert np.array_equal(np.asarray(r.render(scene)), image)

@@ -20,6 +20,13 @@ class BitMask:
         self.fortran = bool(mask.flags.f_contiguous and not mask.flags.c_contiguous)
         order = "F" if self.fortran else "C"
         self.bits = np.packbits(mask.ravel(order=order).view(np.uint8))
+        #: how many elements are set
+        self.count = int(np.count_nonzero(mask))
+
+    @property
+    def fraction(self) -> float:
+        """The share of the elements that are set (0..1; 0 for an empty mask)."""
+        return self.count / max(int(np.prod(self.shape)), 1)
 
     @property
     def nbytes(self) -> int:

@@ -484,6 +484,14 @@ class SkipMapCache:
         assert maps.warped_visible is not None
         return maps.warped_visible
 
+    @staticmethod
+    def visible_fraction(maps: VolumeSkipMaps, scene: Scene) -> float | None:
+        """The share of the straight cells (per ``maps.visible_factor``³ cells) ``scene``'s
+        mode can see, when the volume keeps that visibility; else None (nothing built)."""
+        if maps.cell_visible is None or maps.cell_key != skip_map_key(scene):
+            return None
+        return maps.cell_visible.fraction
+
     def warped_fraction(self, maps: VolumeSkipMaps, scene: Scene) -> float:
         """The share of deformed-space cells ``scene``'s warped rays can see (its
         :meth:`warped_visibility`, built now if needed)."""

@@ -6,13 +6,18 @@ its cell up in the octant skip map, jumps if the cell is invisible, and then tak
 unchecked keep the lattice, and one in an invisible cell adds exactly nothing (zero
 opacity; below the isovalue or threshold), so ``n`` changes the work, never the image.
 
-Which ``n`` pays depends on the rasteriser: a CPU rasteriser (llvmpipe) runs both
-sides of every branch for all lanes of a SIMD group, so every loop iteration pays for
-the check and its jump; checking every second sample saves half of that where rays
-sample visible runs, and costs one extra sample per jump in empty space. On unshaded
-dvr a sample costs about two checks and the trade pays on dense scans (docs/benchmarks.md,
-"Fewer skip-map fetches per straight sample"); with shading, or iso's bisection, a
-sample is dearer and it does not. A GPU skips a branch no lane takes, so it keeps one
+Which ``n`` pays depends on the rasteriser and on how much of the volume the mode
+can see. A CPU rasteriser (llvmpipe) runs both sides of every branch for all lanes of a
+SIMD group, so every loop iteration pays for the check and its jump; checking every
+``n``-th sample saves that where rays sample visible runs, and costs up to ``n - 1``
+extra samples per jump in empty space. On unshaded dvr a sample costs about two checks:
+the fewer checks, the faster a dense view (most cells visible: rays sample long runs),
+and the slower a sparse one (rays mostly jump). ``"auto"`` therefore takes the share of
+visible cells: below :data:`SPARSE_VISIBLE` one check per sample, from
+:data:`DENSE_VISIBLE` on one per :data:`DENSE_SAMPLES_PER_CHECK`, two in between
+(docs/benchmarks.md, "Fewer skip-map fetches per straight sample" and "Samples per
+check by the share of visible cells"). With shading, or iso's bisection, a sample is
+dearer and fewer checks do not pay. A GPU skips a branch no lane takes, so it keeps one
 check per sample.
 """
 
@@ -27,8 +32,14 @@ if TYPE_CHECKING:
 
 #: the most samples per check the raycaster's program is written for
 MAX_SAMPLES_PER_CHECK = 4
-#: what "auto" takes for unshaded dvr on a CPU rasteriser
+#: what "auto" takes for unshaded dvr on a CPU rasteriser (between the shares below, or
+#: before the share of visible cells is known)
 SOFTWARE_DVR_SAMPLES_PER_CHECK = 2
+#: below this share of visible cells, "auto" checks every sample (sparse views)
+SPARSE_VISIBLE = 0.06
+#: from this share of visible cells on, "auto" takes DENSE_SAMPLES_PER_CHECK (dense views)
+DENSE_VISIBLE = 0.3
+DENSE_SAMPLES_PER_CHECK = 4
 
 
 def checked_setting(value: int | str) -> int | str:
@@ -45,12 +56,21 @@ def checked_setting(value: int | str) -> int | str:
     return value
 
 
-def samples_per_check(setting: int | str, scene: Scene, software: bool) -> int:
+def samples_per_check(
+    setting: int | str, scene: Scene, software: bool, visible: float | None = None
+) -> int:
     """Samples per skip-map check for straight rays drawing ``scene``: ``setting`` if it
-    is a number, else (``"auto"``) :data:`SOFTWARE_DVR_SAMPLES_PER_CHECK` for unshaded
-    dvr on a CPU rasteriser (``software``) and 1 otherwise (see the module docstring)."""
+    is a number, else (``"auto"``) 1 except for unshaded dvr on a CPU rasteriser
+    (``software``), where it follows ``visible``, the share of cells the mode can see
+    (None: not known yet): see the module docstring."""
     if setting != "auto":
         return int(setting)
-    if software and scene.mode == "dvr" and not scene.use_shading():
+    if not (software and scene.mode == "dvr" and not scene.use_shading()):
+        return 1
+    if visible is None:
         return SOFTWARE_DVR_SAMPLES_PER_CHECK
-    return 1
+    if visible < SPARSE_VISIBLE:
+        return 1
+    if visible >= DENSE_VISIBLE:
+        return DENSE_SAMPLES_PER_CHECK
+    return SOFTWARE_DVR_SAMPLES_PER_CHECK
