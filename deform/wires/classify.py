@@ -32,6 +32,7 @@ device has it, and the caller keeps the numpy path otherwise.
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -359,11 +360,25 @@ def fp64_kernel(
         try:
             prg = st["cl"].Program(ctx, source).build(options=["-w"])
             kernel: object | None = st["cl"].Kernel(prg, name)
-        except Exception:  # any build failure: the caller keeps the numpy path
+        except Exception as exc:  # any build failure: the caller keeps the numpy path
             kernel = None
+            warnings.warn(_build_failure(name, st["device"], exc), RuntimeWarning, stacklevel=3)
         entry = (ctx, kernel)
         programs[id(ctx)] = entry
     return entry[1]
+
+
+def _build_failure(name: str, device: object, exc: Exception) -> str:
+    """One line: which kernel did not build on which device, the compiler's first
+    error, and that numpy takes over (same field, slower)."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    first = next((ln for ln in lines if ln.lower().startswith("error")), None)
+    first = first or (lines[0] if lines else type(exc).__name__)
+    where = getattr(device, "name", "the OpenCL device").strip()
+    return (
+        f"the wire field's OpenCL {name!r} kernel did not build on {where} ({first[:160]});"
+        " numpy computes the same field, more slowly"
+    )
 
 
 def _device(st: dict, a: np.ndarray) -> object:

@@ -319,3 +319,24 @@ def test_benchmark_without_opencl_reports_scipy_only(monkeypatch) -> None:
     assert r["scipy_s"] > 0
     assert r["opencl_s"] is None
     assert r["speedup"] is None
+
+
+@requires_opencl
+def test_a_wire_kernel_that_does_not_build_warns_and_numpy_takes_over() -> None:
+    """A compile error in the classification kernel (e.g. a name that is an OpenCL type)
+    is reported once, in one line naming the kernel, the device and the compiler's
+    error, and the caller gets no kernel (it keeps the numpy path)."""
+    from voxwarp.deform.wires import classify
+
+    st = prop._opencl_state()
+    broken = classify._KERNEL.replace(
+        "static inline double rint_d(double x) {", "static inline double rint_d(double half) {", 1
+    )
+    programs: dict = {}
+    with pytest.warns(RuntimeWarning, match=r"'classify' kernel did not build on .*error") as rec:
+        assert classify.fp64_kernel(st, programs, broken, "classify") is None
+    assert len(rec) == 1
+    assert "\n" not in str(rec[0].message)
+    with warnings.catch_warnings():  # kept per context: not built (nor reported) again
+        warnings.simplefilter("error")
+        assert classify.fp64_kernel(st, programs, broken, "classify") is None
