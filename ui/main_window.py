@@ -75,6 +75,8 @@ from voxwarp.ui.warp_overlays import install_warp_overlays
 
 #: frames per second of the simulation timer
 SIM_FPS = 30
+#: seconds a closing window waits for each running task (a build, a load) to end
+CLOSE_WAIT_S = 30.0
 MAX_RECENT = 8
 SCENE_FILTER = "voxwarp scene (*.json)"
 OPEN_FILTER = (
@@ -209,6 +211,7 @@ class MainWindow(QMainWindow):
         self.resize(1280, 820)
         self._pending_before: Snapshot | None = None
         self._build_task: Task | None = None
+        self._closed = False  # closeEvent ran: no new background work
         self._build_job: BuildJob | None = None
         self._open_task: Task | None = None
         self._fps_times: list[float] = []
@@ -527,6 +530,8 @@ class MainWindow(QMainWindow):
         """Rebuild the active family's stale field (the wire field) off the GUI thread (one
         at a time; a newer edit starts the next build when this one is done)."""
         if self._build_task and self._build_task.running:
+            return
+        if self._closed:  # a build queued before the window closed: Qt deletes its task
             return
         if not self.session.family.field_stale:  # (never for the other families)
             return
@@ -1063,9 +1068,15 @@ class MainWindow(QMainWindow):
         self.setWindowTitle(f"{name}{star} — voxwarp")
 
     def closeEvent(self, event: Any) -> None:
-        """Stop the timer and release GL resources."""
+        """Stop the timer, let running tasks end (Qt deletes them with the window: a
+        signal from a worker thread would then leave a deleted object) and release GL
+        resources."""
+        self._closed = True
         self.sim_timer.stop()
         self._cancel_field_build()
+        for task in self.findChildren(Task):
+            task.cancel()
+            task.wait(CLOSE_WAIT_S)
         self.session.set_model_thread(False)
         self.viewport.release_gl()
         super().closeEvent(event)

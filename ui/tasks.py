@@ -70,7 +70,8 @@ class Task(QObject):
         return not self._done
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Block until the thread ends (tests, shutdown); True if it ended."""
+        """Block until the thread ends (tests, shutdown: a window waits for its tasks
+        before Qt deletes them with it); True if it ended."""
         if self._thread is not None:
             self._thread.join(timeout)
         return self._done
@@ -89,12 +90,14 @@ class Task(QObject):
             traceback.print_exc()
         else:
             self.result = result
-        self._done = True
         if self.error is not None:
             self.failed.emit(self.error)
         elif not self.cancelled:
             self.succeeded.emit(self.result)
         self.finished.emit()
+        # done only once the thread is past its emits: whoever waits for the task (a
+        # window closing) may then delete it without a signal leaving a deleted object
+        self._done = True
 
 
 def run_with_progress(

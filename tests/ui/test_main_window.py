@@ -404,6 +404,7 @@ def test_a_build_ending_as_the_next_starts_leaves_the_next_alone(
     rebuild for over a minute)."""
     w = window
     press_shortcut(qtbot, w, Qt.Key.Key_W)
+    assert w.session.kind == "wires"
     assert w.wait_for_field_build(60)
     family = w.session.family
     jobs: list[Any] = []
@@ -425,6 +426,34 @@ def test_a_build_ending_as_the_next_starts_leaves_the_next_alone(
     assert w.wait_for_field_build(60)
     assert len(jobs) == 2
     assert not family.field_stale
+
+
+def test_a_closed_window_starts_no_build_and_waits_for_its_tasks(
+    window: Any, qtbot: Any, monkeypatch: Any
+) -> None:
+    """A build queued before the window closes (a late finished signal queues the next
+    one) starts nothing once it has closed: Qt deletes a closed window's tasks with it,
+    and a worker thread's signal then left a deleted object ("Signal source has been
+    deleted", or a crash). Closing also waits for the tasks that run."""
+    from PySide6.QtCore import QTimer
+    from PySide6.QtWidgets import QApplication
+
+    from voxwarp.ui.tasks import Task
+
+    w = window
+    press_shortcut(qtbot, w, Qt.Key.Key_W)
+    assert w.session.kind == "wires"
+    assert w.wait_for_field_build(60)
+    family = w.session.family
+    jobs: list[Any] = []
+    monkeypatch.setattr(family, "build_job", lambda: jobs.append(1))
+    family.changed()  # stale: a queued request would build
+    QTimer.singleShot(0, w.request_field_build)
+    w.close()
+    assert not any(t.running for t in w.findChildren(Task))  # close waited for them
+    for _ in range(5):
+        QApplication.processEvents()
+    assert jobs == []
 
 
 @pytest.mark.slow

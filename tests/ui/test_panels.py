@@ -173,8 +173,8 @@ def test_sample_distance_spin_edits_with_a_merge_key(qtbot: Any, window: FakeWin
     panel.step_spin.setValue(2.5)
     assert window.session.scene.step == pytest.approx(2.5)
     # typed values count once typing is finished (Enter), not per keystroke
-    panel.show()
-    qtbot.waitExposed(panel)
+    with qtbot.waitExposed(panel):
+        panel.show()
     panel.step_spin.setFocus()
     panel.step_spin.selectAll()
     qtbot.keyClicks(panel.step_spin, "0.5")

@@ -89,8 +89,8 @@ def test_clip_controls_show_patient_letters_in_world_mm(qtbot: Any) -> None:
     assert panel.clip_spins[2][1].text() == "S 4.50 mm"
     # the value stays the signed world coordinate: clipping to x >= -3 ("L 3")
     panel.clip_check.setChecked(True)
-    panel.show()
-    qtbot.waitExposed(panel)
+    with qtbot.waitExposed(panel):
+        panel.show()
     for typed, expected in (("L 3", -3.0), ("r 2.5", 2.5), ("-4", -4.0)):
         x_lo.setFocus()
         x_lo.selectAll()

@@ -45,8 +45,8 @@ def editor(qtbot: Any) -> TransferFunctionEditor:
     ed = TransferFunctionEditor(make_tf())
     qtbot.addWidget(ed)
     ed.resize(640, 320)
-    ed.show()
-    qtbot.waitExposed(ed)
+    with qtbot.waitExposed(ed):
+        ed.show()
     return ed
 
 
@@ -409,8 +409,8 @@ def test_render_with_histogram(qtbot: Any, tmp_path: Path) -> None:
     ed = TransferFunctionEditor(make_tf(), vol)
     qtbot.addWidget(ed)
     ed.resize(640, 320)
-    ed.show()
-    qtbot.waitExposed(ed)
+    with qtbot.waitExposed(ed):
+        ed.show()
     ed.canvas._set_selected(2)
     out = tmp_path / "tf_editor.png"
     assert ed.grab().save(str(out))

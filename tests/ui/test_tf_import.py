@@ -36,8 +36,8 @@ def editor(qtbot: Any) -> TransferFunctionEditor:
     ed = TransferFunctionEditor(TransferFunction.preset("ct-bone"), hu_volume(1.0))
     qtbot.addWidget(ed)
     ed.resize(640, 320)
-    ed.show()
-    qtbot.waitExposed(ed)
+    with qtbot.waitExposed(ed):
+        ed.show()
     return ed
 
 

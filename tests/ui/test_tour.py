@@ -80,8 +80,8 @@ def test_tour_steps_open_their_scenes(qtbot: Any, tmp_path: Path, monkeypatch: A
     vol = load_sample("fish", shape=(32, 32, 32))
     w = MainWindow(EditSession(Scene(vol, jitter=False)))
     qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
+    with qtbot.waitExposed(w):
+        w.show()
     w.start_tour(_tour(tmp_path))
     panel = w.tour_panel
     assert "Tour" in w.docks

@@ -31,24 +31,25 @@ def shown_window(
     w.mpr.set_layout(layout)
     w.resize(*size)
     qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
+    with qtbot.waitExposed(w):  # pytest-qt's waits are context managers: a bare call waits not
+        w.show()
     qtbot.waitUntil(lambda: w.viewport.frames_drawn > 0, timeout=30000)
     w.set_running(False)
     if active:
-        w.activateWindow()
-        qtbot.waitActive(w)
+        with qtbot.waitActive(w):
+            w.activateWindow()
     return w
 
 
 def press_shortcut(qtbot: Any, w: Any, key: Any, modifiers: Any = None) -> None:
     """Press a window shortcut on the viewport. Qt routes a shortcut only to the active
     window, and Xvfb without a window manager can drop activation between events, so the
-    window is activated again (and waited for) right before the key."""
+    window is activated again (and waited for: ``waitActive`` is a context manager, a bare
+    call returns at once) right before the key."""
     from PySide6.QtCore import Qt
 
-    w.activateWindow()
-    qtbot.waitActive(w)
+    with qtbot.waitActive(w):
+        w.activateWindow()
     w.viewport.setFocus()
     qtbot.keyClick(w.viewport, key, modifiers or Qt.KeyboardModifier.NoModifier)
 
