@@ -394,15 +394,9 @@ def test_lay_a_new_wire_by_clicking_points(window: Any, qtbot: Any) -> None:
 
 
 @pytest.mark.slow
-def test_a_build_ending_as_the_next_starts_leaves_the_next_alone(
-    window: Any, qtbot: Any, monkeypatch: Any
-) -> None:
-    """A wire field build counts as done before its queued ``finished`` reaches the GUI
-    thread, so the next build can start in between (an undo that cancels a build, as
-    in the test below). The late ``finished`` must not clear the running build: that
-    restarted it, and every restart's own late signal restarted the next (CI saw it
-    rebuild for over a minute)."""
-    w = window
+def _wires_with_counted_builds(w: Any, qtbot: Any, monkeypatch: Any) -> tuple[Any, list[Any]]:
+    """Switch ``w`` to the wire family (W), its first field built; then every build job
+    the family hands out is also appended to the list returned with the family."""
     press_shortcut(qtbot, w, Qt.Key.Key_W)
     assert w.session.kind == "wires"
     assert w.wait_for_field_build(60)
@@ -415,6 +409,19 @@ def test_a_build_ending_as_the_next_starts_leaves_the_next_alone(
         return jobs[-1]
 
     monkeypatch.setattr(family, "build_job", counted)
+    return family, jobs
+
+
+def test_a_build_ending_as_the_next_starts_leaves_the_next_alone(
+    window: Any, qtbot: Any, monkeypatch: Any
+) -> None:
+    """A wire field build counts as done before its queued ``finished`` reaches the GUI
+    thread, so the next build can start in between (an undo that cancels a build, as
+    in the test below). The late ``finished`` must not clear the running build: that
+    restarted it, and every restart's own late signal restarted the next (CI saw it
+    rebuild for over a minute)."""
+    w = window
+    family, jobs = _wires_with_counted_builds(w, qtbot, monkeypatch)
     family.changed()  # the wires changed: the field is stale
     w.request_field_build()
     first = w._build_task
@@ -441,12 +448,7 @@ def test_a_closed_window_starts_no_build_and_waits_for_its_tasks(
     from voxwarp.ui.tasks import Task
 
     w = window
-    press_shortcut(qtbot, w, Qt.Key.Key_W)
-    assert w.session.kind == "wires"
-    assert w.wait_for_field_build(60)
-    family = w.session.family
-    jobs: list[Any] = []
-    monkeypatch.setattr(family, "build_job", lambda: jobs.append(1))
+    family, jobs = _wires_with_counted_builds(w, qtbot, monkeypatch)
     family.changed()  # stale: a queued request would build
     QTimer.singleShot(0, w.request_field_build)
     w.close()
