@@ -320,6 +320,21 @@ vec3 span_texel(float t, bool straight) {
 #endif
 }
 #ifdef CELL_SKIP
+// Lattice sample k of a phase, without a skip check; true when the ray is finished.
+bool phase_sample(inout State s, int k, float t0, float j, bool straight) {
+    float t = t0 + (float(k) + j) * u_step;
+    vec3 u = span_texel(t, straight);
+    if (!inside_texels(u)) return mode_skip(s, -1.0);
+    return mode_sample(s, scene_value(u, t), u, t);
+}
+// One more sample of a straight phase after a check (SAMPLES_PER_CHECK, as the
+// straight rays of the main loop below: an unchecked sample in an invisible cell adds
+// exactly nothing); a chained phase checks every sample (its samples are dear).
+#define PHASE_UNCHECKED_SAMPLE                                              \
+    if (straight && k < kb) {                                               \
+        if (phase_sample(s, k, t0, j, true)) return true;                   \
+        ++k;                                                                \
+    }
 // Samples k .. kb - 1 (one phase of the ray), straight or through the chain, with the
 // cell skipping of the main loop below; returns true when the ray is finished. A jump
 // may leave k past kb.
@@ -343,6 +358,15 @@ bool march_cells(inout State s, inout int k, int kb, int n, float t0, float j,
         }
         if (mode_sample(s, scene_value(u, t), u, t)) return true;
         ++k;
+#if SAMPLES_PER_CHECK > 1
+        PHASE_UNCHECKED_SAMPLE
+#endif
+#if SAMPLES_PER_CHECK > 2
+        PHASE_UNCHECKED_SAMPLE
+#endif
+#if SAMPLES_PER_CHECK > 3
+        PHASE_UNCHECKED_SAMPLE
+#endif
     }
     return false;
 }

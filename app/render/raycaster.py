@@ -659,7 +659,7 @@ class Renderer:
             defines.append("#define CELL_SKIP")
         if coarse:  # straight-ray octant maps per COARSE_FACTOR³ cells
             defines += ["#define COARSE_CELLS", f"#define CELL_FACTOR {COARSE_FACTOR}"]
-        if per_check > 1:  # straight rays: skip-map checks per lattice sample
+        if per_check > 1:  # straight rays and phases: lattice samples per skip-map check
             defines.append(f"#define SAMPLES_PER_CHECK {per_check}")
         if meshes:
             defines.append("#define MESH_DEPTH")
@@ -749,8 +749,13 @@ class Renderer:
         self.last_support = "map" if support else "none" if linear else "all"
         coarse = skip_kind == "cells" and linear and self._skip_maps.cell_factor(scene) > 1
         per_check = 1
-        if skip_kind == "cells" and linear:
-            visible = self._skip_maps.visible_fraction(gpu.skip, scene)
+        if skip_kind == "cells" and (linear or support):  # straight rays or phases
+            maps = self._skip_maps
+            visible = (
+                maps.visible_fraction(gpu.skip, scene)
+                if linear
+                else maps.warped_fraction(gpu.skip, scene)
+            )
             per_check = samples_per_check(self._samples_per_check, scene, self._software, visible)
         self.last_samples_per_check = per_check
         prog = self._program(

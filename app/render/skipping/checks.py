@@ -2,7 +2,9 @@
 
 A straight ray with cell maps (``SAMPLES_PER_CHECK`` in shaders/raycast.frag.glsl) looks
 its cell up in the octant skip map, jumps if the cell is invisible, and then takes
-``n`` consecutive lattice samples before it looks again. The samples it takes
+``n`` consecutive lattice samples before it looks again. A warped ray on the support's
+map path does the same in its straight phases (before and after the moved region); its
+chained phase checks every sample. The samples it takes
 unchecked keep the lattice, and one in an invisible cell adds exactly nothing (zero
 opacity; below the isovalue or threshold), so ``n`` changes the work, never the image.
 
