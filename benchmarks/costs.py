@@ -50,11 +50,15 @@ def _log(text: str) -> None:
 class Worker:
     """A :mod:`benchmarks.costs_worker` process measuring the tree ``tree``."""
 
-    def __init__(self, label: str, commit: str, tree: Path, quick: bool) -> None:
+    def __init__(
+        self, label: str, commit: str, tree: Path, quick: bool, tf: str | None = None
+    ) -> None:
         self.label, self.commit, self.tree = label, commit, tree
         cmd = [sys.executable, "-m", "benchmarks.costs_worker", "--tree", str(tree)]
+        cmd += ["--quick"] if quick else []
+        cmd += ["--tf", tf] if tf else []
         self.proc = subprocess.Popen(
-            [*cmd, *(["--quick"] if quick else [])],
+            cmd,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
@@ -112,12 +116,16 @@ def _checkout_commit() -> str:
     return commit + (" + working tree changes" if _git("status", "--porcelain") else "")
 
 
-def check_volumes(volumes: Sequence[str]) -> None:
-    """Load each volume spec once here, so a bad one is one line before any worker."""
+def check_volumes(volumes: Sequence[str], tf: str | None = None) -> None:
+    """Load each volume spec once here (and resolve ``tf`` on it), so a bad one is one
+    line before any worker."""
     from voxwarp.inputs import load_input
+    from voxwarp.scene import Scene
 
     for spec in volumes:
-        load_input(spec)
+        volume = load_input(spec)
+        if tf:
+            Scene(volume, transfer_function=tf)
 
 
 def _machine() -> tuple[dict[str, Any], str]:
@@ -218,16 +226,18 @@ def run_costs(
     command: str = "python -m benchmarks costs",
     log: Callable[[str], Any] = _log,
     measures: Sequence[str] = MEASUREMENTS,
+    tf: str | None = None,
 ) -> dict[str, Any]:
     """Measure the table (see the module docstring; ``measures``: some of its
     measurements) with the code of ``before`` (a git revision; None: the checkout alone)
-    and of the checkout; the run as JSON-ready dict."""
+    and of the checkout; the run as JSON-ready dict. ``tf``: the transfer function
+    (preset name or file) of every volume's frames instead of its default."""
     from benchmarks.costs_tree import export_revision, resolve_revision
     from voxwarp.core.timing import load_average
 
     check_measures(measures)
     commit = None if before is None else resolve_revision(ROOT, before)
-    check_volumes(volumes)
+    check_volumes(volumes, tf)
     t0, load0 = time.perf_counter(), load_average()
     hw, machine = _machine()
     log(f"machine: {machine}; load average {load0:.1f}")
@@ -237,7 +247,7 @@ def run_costs(
             log(f"before: {before} ({commit[:10]}), exported to {tmp}")
             trees.append(("before", before, commit, export_revision(ROOT, commit, Path(tmp))))
         trees.append(("after", "the checkout", _checkout_commit(), ROOT))
-        workers = [Worker(label, commit, tree, quick) for label, _, commit, tree in trees]
+        workers = [Worker(label, c, tree, quick, tf) for label, _, c, tree in trees]
         try:
             measured = measure_all(workers, volumes, repeats, log, measures)
         finally:
@@ -251,6 +261,7 @@ def run_costs(
         "repeats": repeats,
         "size": [64, 64] if quick else [512, 512],
         "volumes": list(volumes),
+        "transfer_function": tf,
         "revisions": [
             {"label": w.label, "rev": rev, "commit": w.commit, "voxwarp": w.imported}
             for w, (_, rev, _, _) in zip(workers, trees, strict=True)
@@ -297,6 +308,13 @@ def add_bench_costs_parser(bsub: Any) -> None:
         default="",
         help=f"comma-separated measurements to run (default all: {', '.join(MEASUREMENTS)})",
     )
+    p.add_argument(
+        "--tf",
+        metavar="NAME",
+        help="transfer function of every volume's frames (a preset such as ct-soft, or a"
+        " file) instead of its default (a bundled sample's suggested one, a file's"
+        " modality default: ct-bone for a CT)",
+    )
     p.add_argument("--quick", action="store_true", help="64x64, 32³ volumes: checks the harness")
     p.add_argument("--json", metavar="FILE", help="write the run (every repeat) as JSON")
     p.add_argument("--markdown-out", metavar="FILE", help="write the table to FILE")
@@ -330,6 +348,7 @@ def cmd_bench_costs(args: argparse.Namespace) -> int:
             quick=args.quick,
             command=command,
             measures=tuple(m for m in args.only.split(",") if m) or MEASUREMENTS,
+            tf=args.tf,
         )
     except TreeError as exc:
         raise InputError(str(exc)) from None

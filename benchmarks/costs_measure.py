@@ -57,10 +57,12 @@ def _set(renderer: Any, **settings: Any) -> None:
 
 
 class Lab:
-    """What the repeats of one worker share; ``quick`` gives the tiny sizes."""
+    """What the repeats of one worker share; ``quick`` gives the tiny sizes;
+    ``transfer_function`` (a preset name or file) replaces every volume's default."""
 
-    def __init__(self, quick: bool) -> None:
+    def __init__(self, quick: bool, transfer_function: str | None = None) -> None:
         self.quick = bool(quick)
+        self.transfer_function = transfer_function
         self.size = IMAGE[self.quick]
         self.frames = FRAMES[self.quick]
         self._cache: dict[Any, Any] = {}
@@ -94,7 +96,8 @@ class Lab:
 
     def volume(self, spec: str) -> tuple[Any, Any]:
         """The volume of ``spec`` (``sample:NAME`` or a file; quick: resampled to
-        :data:`QUICK_EDGE`³) and its transfer function."""
+        :data:`QUICK_EDGE`³) and its transfer function (the lab's, else a sample's
+        suggested one, else None: the modality's default)."""
 
         def load() -> tuple[Any, Any]:
             from voxwarp.inputs import load_input
@@ -103,6 +106,8 @@ class Lab:
             vol = load_input(spec)
             if self.quick:
                 vol = resample(vol, QUICK_EDGE)
+            if self.transfer_function:
+                return vol, self.transfer_function
             name = spec.split(":", 1)[1] if spec.startswith("sample:") else None
             return vol, (None if name is None else suggested_transfer_function(name))
 

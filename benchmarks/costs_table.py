@@ -142,6 +142,12 @@ def _load(loads: Sequence[float]) -> str:
 QUICK_NOTE = " (quick: tiny sizes, not a measurement)"
 
 
+def _tf_note(run: dict[str, Any]) -> str:
+    """`` with transfer function NAME`` when the run set one for every volume."""
+    tf = run.get("transfer_function")
+    return f" with transfer function {tf}" if tf else ""
+
+
 def markdown(run: dict[str, Any]) -> str:
     """The table of one run (the JSON of :func:`benchmarks.costs.run_costs`)."""
     revs = run["revisions"]
@@ -149,7 +155,7 @@ def markdown(run: dict[str, Any]) -> str:
     lines = [
         f"Command: `{run['command']}`",
         "",
-        f"* {run['machine']}; {run['size'][0]}x{run['size'][1]} dvr;"
+        f"* {run['machine']}; {run['size'][0]}x{run['size'][1]} dvr{_tf_note(run)};"
         f" median of {run['repeats']} repeat(s), each ratio against its reference measured in"
         " the same repeat, the revisions' repeats interleaved; wall time"
         f" {run['wall_s']:.0f} s{QUICK_NOTE if run['quick'] else ''}",

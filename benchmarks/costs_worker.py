@@ -1,4 +1,4 @@
-"""``python -m benchmarks.costs_worker --tree DIR [--quick]``: the measuring side of
+"""``python -m benchmarks.costs_worker --tree DIR [--quick] [--tf NAME]``: the measuring side of
 ``python -m benchmarks costs``.
 
 Imports ``voxwarp`` from the source tree ``DIR`` (:func:`benchmarks.costs_tree.use_tree`),
@@ -57,6 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="benchmarks.costs_worker")
     p.add_argument("--tree", required=True, help="the source tree imported as voxwarp")
     p.add_argument("--quick", action="store_true")
+    p.add_argument("--tf", default=None, help="every volume's transfer function")
     args = p.parse_args(argv)
     from benchmarks.costs_tree import use_tree
 
@@ -67,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     # the handshake: where this worker's voxwarp comes from
     sys.stdout.write(MARK + json.dumps({"voxwarp": str(Path(voxwarp.__file__).parent)}) + "\n")
     sys.stdout.flush()
-    lab = Lab(args.quick)
+    lab = Lab(args.quick, transfer_function=args.tf)
     try:
         serve(lab, sys.stdin, sys.stdout)
     finally:

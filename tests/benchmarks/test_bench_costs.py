@@ -103,6 +103,28 @@ def test_bad_volume_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     assert "\n" not in err
 
 
+def test_bad_transfer_function_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks.__main__ import main
+
+    assert main(["costs", "--before", "none", "--volume", "sample:fish", "--tf", "ct-sofft"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("benchmarks: error:")
+    assert "ct-sofft" in err
+    assert "\n" not in err
+
+
+def test_the_labs_transfer_function_replaces_every_default() -> None:
+    from benchmarks.costs_measure import Lab
+
+    assert Lab(True, transfer_function="ct-soft").volume("sample:stent")[1] == "ct-soft"
+    own = Lab(True).volume("sample:stent")[1]
+    assert own is not None  # the sample's suggested one
+    assert own != "ct-soft"
+    note = costs_table.markdown({**_fake_run(), "transfer_function": "ct-soft"})
+    assert "512x512 dvr with transfer function ct-soft;" in note
+    assert "transfer function" not in costs_table.markdown(_fake_run()).split("\n")[2]
+
+
 # ---------------------------------------------------------------------- the tree shim
 def _fake_tree(root: Path, package_dir: str) -> Path:
     (root / "src").mkdir(parents=True)
