@@ -1012,10 +1012,12 @@ def _volume_to_dict(volume: Volume, base_dir: str | os.PathLike | None) -> dict[
     return d
 
 
-def _with_stated_shape(volume: Volume, shape: Any, what: str) -> Volume:
+def _with_stated_shape(volume: Volume, shape: Any, what: str, spacing: Any = None) -> Volume:
     """``volume`` reduced to the scene's ``shape`` when the scene was saved from a
     downsampled copy (``--downsample``: an integer factor per axis); a shape that no
-    factor explains means the file changed since the scene was saved."""
+    factor explains, or a factor while the scene states the file's own voxel size
+    (``spacing``: a downsampled copy's voxels are larger), means the file changed since
+    the scene was saved."""
     if shape is None:
         return volume
     try:
@@ -1028,7 +1030,9 @@ def _with_stated_shape(volume: Volume, shape: Any, what: str) -> Volume:
     if np.array_equal(want, have):
         return volume
     factor = have // want
-    if np.any(factor < 1) or not np.array_equal(have // factor, want):
+    stated = np.asarray(spacing if spacing is not None else [], dtype=float).reshape(-1)
+    own_size = stated.shape == (3,) and bool(np.allclose(stated, volume.spacing))
+    if np.any(factor < 1) or not np.array_equal(have // factor, want) or own_size:
         raise SceneError(
             f"{what} has {tuple(have.tolist())} voxels but the scene was saved with"
             f" {tuple(want.tolist())}; the file changed since: save the scene again"
@@ -1117,12 +1121,12 @@ def _volume_from_dict(d: Any, base_dir: str | os.PathLike | None) -> Volume:
                 kwargs["shape"] = tuple(int(v) for v in d["shape"])
             if kwargs:
                 return load_sample(name, spacing=spacing, origin=origin, **kwargs)
-            vol = _with_stated_shape(load_sample(name), d.get("shape"), f"sample:{name}")
+            vol = _with_stated_shape(load_sample(name), d.get("shape"), f"sample:{name}", spacing)
             return _with_stated_geometry(vol, spacing, origin)
         if "path" in d:
             p = scene_file(d["path"], base_dir, "volume", SceneError)
             pick = {k: d[k] for k in ("frame_index", "channel") if d.get(k) is not None}
-            vol = _with_stated_shape(load_volume(p, **pick), d.get("shape"), str(p))
+            vol = _with_stated_shape(load_volume(p, **pick), d.get("shape"), str(p), spacing)
             return _with_stated_geometry(vol, spacing, origin)
     except SceneError:
         raise  # names the scene volume already

@@ -698,6 +698,25 @@ def test_a_scene_of_a_downsampled_volume_reloads_downsampled(tmp_path: Path, sou
             Scene.load(tmp_path / "s.json")
 
 
+@pytest.mark.parametrize("shape", [(64, 32, 32), (96, 96, 96)])
+def test_a_larger_file_of_the_same_voxel_size_is_a_changed_file(
+    tmp_path: Path, shape: tuple[int, int, int]
+) -> None:
+    """A scene saved from a whole 32³ file whose file now holds a larger field of view at
+    the same voxel size (2x along one axis, 3x along all) is refused, not read as a
+    downsampled copy squeezed into the saved box."""
+    from voxwarp.core.volume import Volume
+    from voxwarp.io.volumes import load_volume, save_volume
+
+    rng = np.random.default_rng(3)
+    path = tmp_path / "vol.nrrd"
+    vol = load_volume(save_volume(Volume(rng.random((32, 32, 32), np.float32)), path))
+    Scene(vol).save(tmp_path / "s.json")
+    save_volume(Volume(rng.random(shape, np.float32)), path)
+    with pytest.raises(SceneError, match="changed since"):
+        Scene.load(tmp_path / "s.json")
+
+
 def test_transfer_function_file_in_python_but_not_in_scene_json(tmp_path: Path) -> None:
     """``Scene(..., transfer_function="FILE:NAME")`` reads the file as ``--tf`` does; a
     scene JSON naming a file is refused in one line (it would read outside the scene)."""
