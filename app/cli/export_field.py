@@ -19,6 +19,7 @@ from voxwarp.cli.options import (
     add_allow_dir_arg,
     add_memory_budget_arg,
     load_scene_json,
+    refuse_overwriting_inputs,
 )
 from voxwarp.core.field_check import TOLERANCE_MM
 
@@ -252,13 +253,14 @@ def _sampler(args: argparse.Namespace, ctx: Any) -> Iterator[Any]:
 
 
 def _plan(args: argparse.Namespace, scene: Any, out: Path, box: Any, components: int) -> None:
-    """Print the starting spacing (and why, when it is the default) and the size
-    estimate; refuse one over the free disk space or the file-size limit (the memory
-    budget is checked by the grid itself)."""
+    """Refuse an output that is one of the scene's inputs; print the starting spacing
+    (and why, when it is the default) and the size estimate; refuse one over the free
+    disk space or the file-size limit (the memory budget is checked by the grid itself)."""
     from voxwarp.core.field_grid import field_grid
     from voxwarp.core.field_spacing import check_room, default_spacing, estimate_bytes
     from voxwarp.core.limits import format_bytes
 
+    refuse_overwriting_inputs(out, scene, args.scene)
     if args.spacing is None:
         choice = default_spacing(scene.volume, scene.warps)
         start, why = choice.spacing, f"default: {choice.reason}"

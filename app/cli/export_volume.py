@@ -39,7 +39,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from voxwarp.cli.options import add_allow_dir_arg, add_memory_budget_arg, load_scene_json
+from voxwarp.cli.options import (
+    add_allow_dir_arg,
+    add_memory_budget_arg,
+    load_scene_json,
+    refuse_overwriting_inputs,
+)
 from voxwarp.core import limits
 from voxwarp.core.progress import ProgressBar
 from voxwarp.errors import InputError
@@ -318,6 +323,7 @@ def cmd_export_volume(args: argparse.Namespace) -> int:
     stream_format(out)  # a bad -o fails before any work
     remove_stale_temps(out.parent, for_name=out.name)  # a killed run's, even if this one fails
     scene = load_scene_json(args.scene, "export-volume")
+    refuse_overwriting_inputs(out, scene, args.scene)
     affine, shape, grid = drawable_grid(scene, args.spacing, args.grid, MAX_SLICE_SIDE)
     vol = scene.volume
     dtype = vol.dtype if args.dtype == "same" else np.dtype(np.float32)

@@ -247,6 +247,31 @@ def load_scene_json(path: str, command: str) -> Any:
     return scene
 
 
+def scene_files(scene: Any, scene_path: str) -> list[Path]:
+    """The files ``scene`` (read from ``scene_path``) was made from: the scene JSON, its
+    volume's, a comparison's fixed volume's and the warps' (e.g. a displacement field)."""
+    files = [Path(scene_path)]
+    volumes = [scene.volume] + ([scene.comparison.fixed] if scene.comparison is not None else [])
+    files += [Path(v.source) for v in volumes if v.source and not v.source.startswith("sample:")]
+    for warp in scene.warps:
+        d = warp.to_dict() if warp.file_keys else {}
+        files += [Path(d[k]) for k in warp.file_keys if isinstance(d.get(k), str)]
+    return files
+
+
+def refuse_overwriting_inputs(out: Path, scene: Any, scene_path: str, option: str = "-o") -> None:
+    """Raise a one-line error when ``out`` is one of :func:`scene_files` (writing it would
+    destroy what the scene reads, and the scene would then read the result)."""
+    target = out.resolve()
+    for f in scene_files(scene, scene_path):
+        same = f.exists() and out.exists() and out.samefile(f)
+        if same or f.resolve() == target:
+            raise CliOptionError(
+                f"{option} {out} is a file {scene_path} reads ({f}): writing it would destroy"
+                " the scene's own input; write to another file"
+            )
+
+
 class OneLineErrorParser(argparse.ArgumentParser):
     """An argument parser whose errors are one line: ``PROG: error: MESSAGE (see PROG
     --help)``, exit code 2, instead of argparse's usage block followed by the error.

@@ -302,3 +302,34 @@ def test_cli_refuses_before_any_work(
     assert err.count("\n") == 1, err
     assert text in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["export-volume", "export-field"])
+@pytest.mark.parametrize("which", ["volume", "scene", "linked volume"])
+def test_cli_refuses_to_overwrite_the_scenes_own_input(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+    scene_json: Path,
+    tmp_path: Path,
+    command: str,
+    which: str,
+) -> None:
+    """-o naming the scene's volume (or the scene, or a link to the volume) is refused in
+    one line before any work, and the file is left as it was."""
+    monkeypatch.setattr("voxwarp.render.offscreen.OffscreenRenderer", _NoRendering)
+    volume = scene_json.parent / "colin.nii.gz"
+    out = {"volume": volume, "scene": scene_json, "linked volume": tmp_path / "link.nii.gz"}[which]
+    if which == "linked volume":
+        out.symlink_to(volume)
+    if which == "scene":  # refused by its ending first: no JSON volumes or fields
+        assert main([command, str(scene_json), "-o", str(out)]) == 2
+        assert "cannot write" in capsys.readouterr().err
+        return
+    before = volume.read_bytes(), scene_json.read_bytes()
+    assert main([command, str(scene_json), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "is a file" in err
+    assert "reads" in err
+    assert "write to another file" in err
+    assert (volume.read_bytes(), scene_json.read_bytes()) == before
