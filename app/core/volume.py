@@ -25,6 +25,7 @@ an orientation have ``space == ""`` and their index axes run along +x, +y, +z.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ from typing import Literal
 
 import numpy as np
 
+from voxwarp.core import limits
 from voxwarp.core.orientation import axis_code, compose_affine, obliquity_degrees
 from voxwarp.errors import VolumeError
 
@@ -120,6 +122,16 @@ def coerce_dtype(data: np.ndarray) -> np.ndarray:
         )
         return data.astype(np.float32)
     if dt.kind == "f":
+        if dt.itemsize > 4 and data.size:  # finite values float32 cannot hold
+            limit = float(np.finfo(np.float32).max)
+            ends = [float(np.fmax.reduce(data, axis=None)), float(np.fmin.reduce(data, axis=None))]
+            big = [abs(v) for v in ends if math.isfinite(v) and abs(v) > limit]
+            if big:
+                raise VolumeError(
+                    f"volume values reach {max(big):.3g}, beyond float32's range"
+                    f" (+-{limit:.3g}) that voxwarp draws in; rescale the data (e.g."
+                    " array / 1e30) or convert it to float32 yourself"
+                )
         return data.astype(np.float32)
     raise VolumeError(
         f"unsupported volume dtype {dt}; voxwarp reads uint8, uint16, int16 and float32"
@@ -201,6 +213,13 @@ class Volume:
         self.spacing = parse_triple(
             1.0 if self.spacing is None else self.spacing, "spacing", positive=True
         )
+        if not all(limits.MIN_SPACING_MM <= v <= limits.MAX_SPACING_MM for v in self.spacing):
+            given = ", ".join(f"{v:g}" for v in self.spacing)
+            raise VolumeError(
+                f"spacing ({given}) mm is outside {limits.MIN_SPACING_MM:g} to"
+                f" {limits.MAX_SPACING_MM:g} mm per axis (a unit or header error?); give the"
+                " voxel size (the CLI's --spacing SX SY SZ)"
+            )
         self.origin = parse_triple(0.0 if self.origin is None else self.origin, "origin")
         self.direction = _rotation(self.direction)
         if self.space not in ("", "RAS"):

@@ -76,4 +76,11 @@ def read_metaimage(path: Path) -> Loaded:
     if error is not None:
         reason = " ".join(said).strip() or str(error).strip().splitlines()[-1]
         raise VolumeError(f"cannot read the MetaImage {path}: {reason}") from error
+    failed = [line for line in said if "fail" in line.lower()]
+    if failed:  # MetaIO says so on stderr and returns the undecoded bytes as voxels
+        raise VolumeError(
+            f"cannot read the MetaImage {path}: {' '.join(failed).strip()} (a header that"
+            " says CompressedData = True over data that is not zlib-compressed, or damaged"
+            " data): fix the header or the data file"
+        )
     return sitk_loaded(image)

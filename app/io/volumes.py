@@ -586,6 +586,8 @@ def _load_path(
 ) -> _Loaded:
     """Dispatch on the path: folder content or file extension."""
     if not path.exists():
+        if path.is_symlink():
+            raise VolumeError(f"{path} is a link to nothing (a dangling link or a loop)")
         raise VolumeError(f"no such file or directory: {path}")
     if path.is_dir():
         return _read_directory(path, series)
@@ -595,6 +597,8 @@ def _load_path(
             f"{path} is not a regular file ({kind}); voxwarp reads volume files and folders"
             " of slices. Save the data to a file first."
         )
+    if path.stat().st_size == 0:
+        raise VolumeError(f"{path} is empty (0 bytes); give the volume file itself")
     if series is not None:
         raise VolumeError(
             f"series= chooses among the DICOM series of a folder; {path.name} is a file."
@@ -889,6 +893,21 @@ def _check_nrrd_budget(path: Path) -> None:
     _limits.check_load_bytes(sizes, itemsize, path.name)
 
 
+def _check_nrrd_directions(dirs: np.ndarray, path: Path) -> None:
+    """Refuse ``space directions`` rows that are partly not finite (a whole row of NaN is
+    pynrrd's ``none``: a non-spatial axis; a NaN or inf inside a vector is damage that
+    would otherwise drop the orientation without a word)."""
+    finite = np.isfinite(dirs)
+    bad = np.any(finite, axis=1) & ~np.all(finite, axis=1)
+    if np.any(bad):
+        row = int(np.argmax(bad))
+        raise VolumeError(
+            f"{path}: 'space directions' vector {row + 1} is {tuple(dirs[row].tolist())};"
+            " each must be three finite numbers (or 'none' for a non-spatial axis): fix the"
+            " header"
+        )
+
+
 def _read_nrrd(path: Path) -> _Loaded:
     import nrrd
 
@@ -914,6 +933,8 @@ def _read_nrrd(path: Path) -> _Loaded:
         raise VolumeError(f"invalid geometry in the NRRD header of {path}: {exc}.") from exc
     if dirs is not None and (dirs.ndim != 2 or dirs.shape[0] != data.ndim):
         dirs = None
+    if dirs is not None:
+        _check_nrrd_directions(dirs, path)
 
     spatial = nrrd_spatial_axes(header, dirs, data.ndim)
     extra: tuple[_frames.ExtraAxis, ...] = ()
@@ -1182,12 +1203,40 @@ def _nifti_affine(hdr: Any, where: str) -> np.ndarray | None:
             continue
         a = np.asarray(affine, dtype=np.float64)
         if np.all(np.isfinite(a)) and abs(np.linalg.det(a[:3, :3])) > 1e-12:
+            if name == "sform":
+                _warn_if_qform_differs(hdr, a, where)
             return a
         _warn(
             f"{where}: the {name} (code {int(code)}) is not a finite, invertible matrix;"
             " ignored. Fix the header (e.g. nibabel's set_sform) for a patient orientation."
         )
     return None
+
+
+#: corner distance (mm) from which a coded qform that differs from the sform is reported
+FORMS_DISAGREE_MM = 0.01
+
+
+def _warn_if_qform_differs(hdr: Any, sform: np.ndarray, where: str) -> None:
+    """Warn when a NIfTI also codes a qform that puts the volume's corners elsewhere
+    than its sform does: voxwarp (as nibabel) takes the sform, ITK-based tools may take
+    the qform, so the two would show the patient differently."""
+    try:
+        qform, code = hdr.get_qform(coded=True)
+    except ValueError:
+        return
+    if not code or qform is None or not np.all(np.isfinite(qform)):
+        return
+    shape = np.asarray(hdr.get_data_shape()[:3], dtype=np.float64) - 1.0
+    corners = np.array([[i, j, k, 1.0] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    corners[:, :3] *= shape
+    far = float(np.max(np.linalg.norm((corners @ (sform - qform).T)[:, :3], axis=1)))
+    if far > FORMS_DISAGREE_MM:
+        _warn(
+            f"{where}: the sform and the qform (both coded) place the volume up to"
+            f" {far:.3g} mm apart; voxwarp uses the sform, as nibabel does (ITK-based tools"
+            " may use the qform): check the patient orientation, or fix the header"
+        )
 
 
 # ---------------------------------------------------------------------------- folders

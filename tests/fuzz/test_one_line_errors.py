@@ -32,3 +32,35 @@ def test_wrapped_library_messages_are_one_line() -> None:
     assert str(exc) == "cannot read v.nrrd (NRRDError: Invalid NRRD magic line: NRRD ). Fix it."
     assert str(VoxwarpError("a\r\n  b\tc")) == "a b c"
     assert exc.args[0].count("\n") == 1  # the original message is kept in args
+
+
+@pytest.mark.parametrize("value", [1e300, -1e300])
+def test_float64_values_beyond_float32_are_named_not_called_nan(value: float) -> None:
+    """float64 data beyond float32's range became Inf on conversion and was then reported
+    as "N NaN/Inf voxel(s)", which the file did not have; now the range is named."""
+    from voxwarp.core.volume import Volume
+
+    data = np.zeros((4, 4, 4))
+    data[1, 2, 3] = value
+    with pytest.raises(VolumeError, match=r"values reach 1e\+300, beyond float32's range") as info:
+        Volume(data)
+    assert_one_line(str(info.value), "VolumeError")
+    data[1, 2, 3] = 3e38  # within float32: converted as before
+    assert Volume(data).data.dtype == np.float32
+
+
+@pytest.mark.parametrize("name", ["v.nrrd", "v.nii", "v.mha", "v.npy", "v.tif"])
+def test_an_empty_file_and_a_link_to_nothing_are_named(tmp_path, name: str) -> None:
+    """An empty .nrrd reached the user as "(StopIteration: )" and a link loop as "no
+    such file"; every reader now gets the same plain line first."""
+    from voxwarp.io.volumes import load_volume
+
+    empty = tmp_path / name
+    empty.write_bytes(b"")
+    with pytest.raises(VolumeError, match=r"is empty \(0 bytes\)"):
+        load_volume(empty)
+    loop_a, loop_b = tmp_path / f"a_{name}", tmp_path / f"b_{name}"
+    loop_a.symlink_to(loop_b)
+    loop_b.symlink_to(loop_a)
+    with pytest.raises(VolumeError, match="a link to nothing"):
+        load_volume(loop_a)
