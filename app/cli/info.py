@@ -35,7 +35,9 @@ def cmd_info(args: argparse.Namespace) -> int:
     from voxwarp.io.volumes import dicom_series, volume_info, volume_summary
     from voxwarp.scene import Scene
 
-    if is_field_file(args.input):  # a registration result, not a volume
+    # a registration result, not a volume (unless a time point or channel is picked)
+    picked = any(getattr(args, k, None) is not None for k in ("frame_index", "channel"))
+    if is_field_file(args.input) and not picked:
         warps = load_transform(args.input, convention=args.field_convention)
         stats = [_field_jacobian(w) for w in warps]
         if args.json:

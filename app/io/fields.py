@@ -161,8 +161,10 @@ def _convention(convention: str | None, default: str | None, where: str) -> tupl
     chosen = convention or default
     if chosen is None:
         raise FieldError(
-            f"{where} does not say what its vectors mean; pass convention='itk' (LPS mm, as"
-            " ITK/ANTs write), 'ras' (RAS mm) or 'voxel' (voxelmorph), or --field-convention"
+            f"{where} does not say what its vectors mean; for a displacement field pass"
+            " --field-convention (convention= in Python) itk (LPS mm, as ITK/ANTs write), ras"
+            " (RAS mm) or voxel (voxelmorph); for a volume of 3 time points or channels pick"
+            " one with --frame-index or --channel"
         )
     return {"itk": ("LPS", "mm"), "ras": ("RAS", "mm"), "voxel": ("RAS", "voxel")}[chosen]
 

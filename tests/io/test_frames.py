@@ -261,3 +261,20 @@ def test_cli_error_lines_without_traceback(tmp_path: Path) -> None:
         assert len(proc.stderr.strip().splitlines()) == 1
     proc = run_cli("info", str(path), "--frame-index", "4")
     assert proc.returncode == 0, proc.stderr
+
+
+def test_info_of_three_time_points_names_both_readings(tmp_path: Path) -> None:
+    """A 4-D NIfTI of 3 frames (no vector intent) may be a displacement field or a time
+    series: ``info`` without options says how to ask for either; with --frame-index it
+    describes that frame's volume (it used to ask for a field convention even then)."""
+    path, data = _bold(tmp_path, frames=3)
+    proc = run_cli("info", str(path))
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "--field-convention" in proc.stderr
+    assert "--frame-index" in proc.stderr
+    proc = run_cli("info", str(path), "--frame-index", "2")
+    assert proc.returncode == 0, proc.stderr
+    low, high = int(data[..., 2].min()), int(data[..., 2].max())
+    assert f"range:       [{low}, {high}]" in proc.stdout  # that frame's values
+    assert low != int(data[..., 0].min())
