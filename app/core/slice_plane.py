@@ -385,9 +385,10 @@ def fit_pixels(
     corners = box_corners(np.asarray(lo, float), np.asarray(hi, float)) - plane.center
     w = float(np.ptp(corners @ plane.right)) * 1.05
     h = float(np.ptp(corners @ plane.up)) * 1.05
-    px = max(px, max(w, h) / MAX_SLICE_PIXELS)
-    if anchor is not None:
+    if anchor is not None:  # whole pixels from the anchor add up to two a side
+        px = max(px, max(w, h) / (MAX_SLICE_PIXELS - 2))
         return _anchored_grid(plane, corners + plane.center, px, anchor)
+    px = max(px, max(w, h) / MAX_SLICE_PIXELS)
     size = (max(1, math.ceil(w / px)), max(1, math.ceil(h / px)))
     framed = plane.framing(np.asarray(lo, float), np.asarray(hi, float), size[0] / size[1])
     return dataclasses.replace(framed, height_mm=size[1] * px), size

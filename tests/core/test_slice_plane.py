@@ -218,6 +218,11 @@ def test_fit_pixels() -> None:
     coarse, size = fit_pixels(plane, *BOUNDS, 1e-3)  # capped at MAX_SLICE_PIXELS a side
     assert max(size) <= 4096
     assert coarse.pixel_mm(size) > 1e-3
+    for anchor in ((0.3, 0.7, 0.1), (0.0, 0.0, 0.0), (1.234, -5.5, 7.77)):
+        # a pixel grid laid out from a voxel centre grows by whole pixels: still capped
+        _, size = fit_pixels(plane, *BOUNDS, 1e-3, anchor=anchor)
+        assert max(size) <= 4096, (anchor, size)
+        assert max(size) >= 4090
     with pytest.raises(SceneError, match="pixel size"):
         fit_pixels(plane, *BOUNDS, 0.0)
 
