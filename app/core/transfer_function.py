@@ -184,7 +184,14 @@ class TransferFunction:
             return cls.from_dict(tf, volume)
         if tf is None:
             raise SceneError("transfer_function must be a preset name or control points, not None")
-        return cls(list(tf))
+        try:
+            points = list(tf)
+        except TypeError:
+            raise SceneError(
+                f"transfer_function must be a preset name, a file, control points"
+                f" [(value, r, g, b, a), ...] or a TransferFunction; got {type(tf).__name__}"
+            ) from None
+        return cls(points)
 
     # ------------------------------------------------------------------ evaluation
     @property

@@ -388,3 +388,11 @@ def test_load_missing_file_and_folder(tmp_path: Path) -> None:
     assert "missing.json" in str(info.value)
     with pytest.raises(SceneError, match="cannot read"):
         TransferFunction.load(str(tmp_path))
+
+
+@pytest.mark.parametrize("bad", [123, 1.5, object()])
+def test_a_transfer_function_of_the_wrong_type_is_a_scene_error(bad: object) -> None:
+    """A number or an object used to surface as Python's "'int' object is not iterable";
+    now it is a SceneError naming what a transfer function may be."""
+    with pytest.raises(SceneError, match="must be a preset name, a file, control points"):
+        TransferFunction.coerce(bad)
