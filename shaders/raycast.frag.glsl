@@ -247,6 +247,12 @@ vec3 detj_tint(vec3 rgb, float a, float t) { return rgb; }
 #ifndef SAMPLES_PER_CHECK
 #define SAMPLES_PER_CHECK 1
 #endif
+// CHAINED_PER_CHECK (1 or 2): the same for samples through the warp chain (the warped
+// loop, a support's chained phase). A chained sample costs the chain even in an
+// invisible cell, so only dense views take two (app/render/skipping/checks.py).
+#ifndef CHAINED_PER_CHECK
+#define CHAINED_PER_CHECK 1
+#endif
 
 #ifdef LINEAR_PATH
 // Ray parameter where the ray leaves the cube of (2r+1)³ grid units centred on `unit`
@@ -319,6 +325,15 @@ vec3 span_texel(float t, bool straight) {
     return texel_at(t);
 #endif
 }
+// Lattice sample k through the chain without a skip check (CHAINED_PER_CHECK): a
+// warped sample may land outside the volume, where it shows nothing. True when the ray
+// is finished.
+bool chained_sample(inout State s, int k, float t0, float j) {
+    float t = t0 + (float(k) + j) * u_step;
+    vec3 u = span_texel(t, false);
+    if (!inside_texels(u)) return mode_skip(s, -1.0);
+    return mode_sample(s, scene_value(u, t), u, t);
+}
 #ifdef CELL_SKIP
 // Lattice sample k of a phase, without a skip check; true when the ray is finished.
 bool phase_sample(inout State s, int k, float t0, float j, bool straight) {
@@ -358,6 +373,12 @@ bool march_cells(inout State s, inout int k, int kb, int n, float t0, float j,
         }
         if (mode_sample(s, scene_value(u, t), u, t)) return true;
         ++k;
+#if CHAINED_PER_CHECK > 1
+        if (!straight && k < kb) {
+            if (chained_sample(s, k, t0, j)) return true;
+            ++k;
+        }
+#endif
 #if SAMPLES_PER_CHECK > 1
         PHASE_UNCHECKED_SAMPLE
 #endif
@@ -622,6 +643,12 @@ void main() {
         }
         if (mode_sample(s, scene_value(u, t), u, t)) break;
         ++k;
+#if CHAINED_PER_CHECK > 1
+        if (k < n) {
+            if (chained_sample(s, k, t0, j)) break;
+            ++k;
+        }
+#endif
     }
 #endif
 #elif defined(LINEAR_PATH)

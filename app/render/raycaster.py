@@ -54,7 +54,11 @@ from voxwarp.render.gl_uniforms import bind_warps, set_uniform, warp_textures
 from voxwarp.render.jacobian_overlay import DETJ_MODES, JacobianOverlay
 from voxwarp.render.mesh_pass import MeshRenderer
 from voxwarp.render.skipping.cache import COARSE_FACTOR, SkipMapCache, VolumeSkipMaps
-from voxwarp.render.skipping.checks import checked_setting, samples_per_check
+from voxwarp.render.skipping.checks import (
+    chained_samples_per_check,
+    checked_setting,
+    samples_per_check,
+)
 from voxwarp.render.skipping.maps import (
     BLOCK,
     OCTANT_EPS,
@@ -285,9 +289,11 @@ class Renderer:
         #: an affine one, or one that moves nothing, drawn undeformed), "map" (straight
         #: outside the chain's support) or "all" (the chain at every sample)
         self.last_support = "all"
-        #: the last draw's lattice samples per skip-map check of straight rays
+        #: the last draw's lattice samples per skip-map check of straight rays (and of a
+        #: warped ray's straight phases), and of samples through the warp chain
         #: (:mod:`voxwarp.render.skipping.checks`)
         self.last_samples_per_check = 1
+        self.last_chained_per_check = 1
         if sampling not in ("auto", *LAYOUTS):
             raise RenderError(
                 f"sampling must be 'auto' or one of {', '.join(map(repr, LAYOUTS))};"
@@ -566,7 +572,8 @@ class Renderer:
     @property
     def samples_per_check(self) -> int | str:
         """Lattice samples a straight ray with cell maps takes per skip-map check, 1 to
-        4, or "auto" (default): 2 for unshaded dvr on a CPU rasteriser, else 1. Never
+        4, or "auto" (default: by the share of visible cells for unshaded dvr on a CPU
+        rasteriser, else 1); samples through the warp chain take at most 2. Never
         changes the image, only the time (:mod:`voxwarp.render.skipping.checks`)."""
         return self._samples_per_check
 
@@ -622,7 +629,7 @@ class Renderer:
         layout: str,
         support: bool = False,
         coarse: bool = False,
-        per_check: int = 1,
+        checks: tuple[int, int] = (1, 1),
     ) -> Any:
         piecewise = "map" if segment == 0 else "fixed" if segment > 1 else ""
         warps = [] if linear else scene.warps
@@ -642,7 +649,7 @@ class Renderer:
             self._detj_on(scene),
             support,
             coarse,
-            per_check,
+            checks,
         )
         hold = self._programs.get(key)
         if hold is not None:
@@ -659,8 +666,11 @@ class Renderer:
             defines.append("#define CELL_SKIP")
         if coarse:  # straight-ray octant maps per COARSE_FACTOR³ cells
             defines += ["#define COARSE_CELLS", f"#define CELL_FACTOR {COARSE_FACTOR}"]
-        if per_check > 1:  # straight rays and phases: lattice samples per skip-map check
+        per_check, chained = checks  # lattice samples per skip-map check
+        if per_check > 1:  # straight rays and phases
             defines.append(f"#define SAMPLES_PER_CHECK {per_check}")
+        if chained > 1:  # samples through the chain
+            defines.append(f"#define CHAINED_PER_CHECK {chained}")
         if meshes:
             defines.append("#define MESH_DEPTH")
         if piecewise:
@@ -748,25 +758,36 @@ class Renderer:
         support = plan == "map" and segment == 1 and not self._nearly_empty(scene, gpu, skip_kind)
         self.last_support = "map" if support else "none" if linear else "all"
         coarse = skip_kind == "cells" and linear and self._skip_maps.cell_factor(scene) > 1
-        per_check = 1
-        if skip_kind == "cells" and (linear or support):  # straight rays or phases
-            maps = self._skip_maps
-            visible = (
-                maps.visible_fraction(gpu.skip, scene)
-                if linear
-                else maps.warped_fraction(gpu.skip, scene)
-            )
-            per_check = samples_per_check(self._samples_per_check, scene, self._software, visible)
-        self.last_samples_per_check = per_check
+        per_check, chained = self._checks(scene, gpu, skip_kind, linear, support, segment)
+        self.last_samples_per_check, self.last_chained_per_check = per_check, chained
         prog = self._program(
-            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support, coarse, per_check
-        )
+            scene, linear, skip_kind, segment, shade_tex, gpu.layout, support, coarse,
+            (per_check, chained),
+        )  # fmt: skip
         bg = np.asarray(scene.background, float)
         bg_premul = (*(bg[:3] * bg[3]), bg[3])
         view = (x, y, w, h)
         return _Frame(
             scene, gpu, cam, view, fold, skip_kind, prog, bg_premul, shade_tex, segment, support
         )
+
+    def _checks(
+        self, scene: Scene, gpu: _VolumeGPU, skip_kind: str, linear: bool, support: bool,
+        segment: int,
+    ) -> tuple[int, int]:  # fmt: skip
+        """Lattice samples per skip-map check (:mod:`voxwarp.render.skipping.checks`) of
+        straight rays or a warped ray's straight phases, and of samples through the
+        chain (the warped loop, a chained phase; not piecewise-linear rays)."""
+        if skip_kind != "cells":
+            return 1, 1
+        maps, setting = self._skip_maps, self._samples_per_check
+        if linear:
+            visible = maps.visible_fraction(gpu.skip, scene)
+            return samples_per_check(setting, scene, self._software, visible), 1
+        visible = maps.warped_fraction(gpu.skip, scene)
+        straight = samples_per_check(setting, scene, self._software, visible) if support else 1
+        chained = chained_samples_per_check(setting, scene, self._software, visible)
+        return straight, chained if segment == 1 else 1
 
     def _support_plan(self, scene: Scene, draw: bool = True) -> tuple[Scene, str]:
         """The scene a draw renders and how it uses the chain's support ("none": the

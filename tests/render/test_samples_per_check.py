@@ -9,7 +9,8 @@ transfer function (early termination must stop at the same sample) and jittered 
 (every residue of the sample count per ray); and renders without skipping, which
 must agree to 1/255 (skipping only leaves out samples that cannot contribute). Warped
 rays on the support's map path take the same schedule in their straight phases (a local
-drag: straight before and after the moved region, through the chain inside it).
+drag: straight before and after the moved region, through the chain inside it), and
+samples through the chain take up to two per check (the warped loop, a chained phase).
 """
 
 from __future__ import annotations
@@ -26,7 +27,13 @@ from voxwarp.core.volume import Volume
 from voxwarp.deform.elements.offset_field import OffsetFieldWarp
 from voxwarp.errors import RenderError
 from voxwarp.render.offscreen import OffscreenRenderer
-from voxwarp.render.skipping.checks import DENSE_VISIBLE, SPARSE_VISIBLE, samples_per_check
+from voxwarp.render.skipping.checks import (
+    CHAINED_DENSE_VISIBLE,
+    DENSE_VISIBLE,
+    SPARSE_VISIBLE,
+    chained_samples_per_check,
+    samples_per_check,
+)
 from voxwarp.scene import Scene
 
 
@@ -223,3 +230,43 @@ def test_fewer_checks_in_the_straight_phases_of_warped_rays(
             assert np.array_equal(np.asarray(r.render(scene)), one), f"{n} samples per check"
             assert r.renderer.last_support == "map"
             assert r.renderer.last_samples_per_check == n
+
+
+def test_chained_samples_take_two_per_check_only_on_dense_unshaded_views() -> None:
+    dvr = Scene(_volume(), shading=False)
+    shaded = Scene(_volume(), shading=True)
+    assert chained_samples_per_check("auto", dvr, True, CHAINED_DENSE_VISIBLE) == 2
+    assert chained_samples_per_check("auto", dvr, True, CHAINED_DENSE_VISIBLE - 1e-9) == 1
+    assert chained_samples_per_check("auto", dvr, True, None) == 1  # not known yet
+    assert chained_samples_per_check("auto", dvr, False, 1.0) == 1  # a GPU
+    assert chained_samples_per_check("auto", shaded, True, 1.0) == 1
+    assert chained_samples_per_check("auto", Scene(_volume(), mode="mip"), True, 1.0) == 1
+    assert chained_samples_per_check(4, shaded, False, 0.0) == 2  # a number: at most 2
+    assert chained_samples_per_check(1, dvr, True, 1.0) == 1
+
+
+@pytest.mark.parametrize("tf", [SOFT, OPAQUE], ids=["translucent", "opaque"])
+@pytest.mark.parametrize(("path", "clip"), [("all", False), ("all", True), ("map", False)])
+def test_two_chained_samples_per_check_draw_the_same_image(
+    gl_ctx: Any, defines: list[str], tf: TransferFunction, path: str, clip: bool
+) -> None:
+    """Warped rays with the chain at every sample ("all", also with a clip box through
+    visible content: a sample past the ray's last would add what lies beyond it) and a
+    local drag's chained phase ("map") draw the same image with two samples through the
+    chain per check as with one."""
+    plain = _scene(tf, (30.0, 20.0), clip)
+    scene = plain.copy(warps=[_local_drag(plain.volume)])
+    with OffscreenRenderer(56, 48, ctx=gl_ctx, dtype="f4") as r:
+        r.renderer.support_maps = "always"
+        r.renderer.support_skipping = path == "map"
+        r.renderer.samples_per_check = 1
+        for _ in range(2):
+            one = np.asarray(r.render(scene))
+        assert r.renderer.last_support == path
+        assert r.renderer.last_chained_per_check == 1
+        assert np.abs(one - np.asarray(r.render(plain))).max() > 0.02  # the drag shows
+        r.renderer.samples_per_check = 2
+        assert np.array_equal(np.asarray(r.render(scene)), one)
+        assert r.renderer.last_support == path
+        assert r.renderer.last_chained_per_check == 2
+        assert "#define CHAINED_PER_CHECK 2" in defines
