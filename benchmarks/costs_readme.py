@@ -87,9 +87,9 @@ def paragraph(run: dict[str, Any]) -> str:
         " fixed-point CPU raycaster on the same array, transfer function, sample distance and"
         f" camera (both unshaded; {run['machine']}{load}; medians of {run['repeats']} runs,"
         " with each scan's range of runs)."
-        " The more of a volume is empty or transparent, the more empty-space skipping saves:"
-        " a sparse scan gains more than a dense one. `python -m benchmarks costs --volume FILE`"
-        " measures a scan of yours, with the cost of deforming it, before and after a change"
+        " Both raycasters skip empty space, so the ratio varies with the scan and its"
+        " transfer function: `python -m benchmarks costs --volume FILE [--tf NAME]` measures"
+        " a scan of yours, with the cost of deforming it, before and after a change"
         " (`docs/benchmarks.md`)."
     )
 
