@@ -168,7 +168,12 @@ def test_auto_follows_the_share_of_visible_cells() -> None:
     assert samples_per_check("auto", dvr, True, visible=DENSE_VISIBLE) == 4
     assert samples_per_check("auto", dvr, True, visible=1.0) == 4
     assert samples_per_check("auto", dvr, False, visible=1.0) == 1  # a GPU: every sample
-    assert samples_per_check("auto", Scene(_volume(), shading=True), True, visible=1.0) == 1
+    shaded = Scene(_volume(), shading=True)  # dearer samples: 2 on dense views only
+    assert samples_per_check("auto", shaded, True, visible=DENSE_VISIBLE) == 2
+    assert samples_per_check("auto", shaded, True, visible=DENSE_VISIBLE - 1e-9) == 1
+    assert samples_per_check("auto", shaded, True, visible=None) == 1
+    assert samples_per_check("auto", shaded, False, visible=1.0) == 1
+    assert samples_per_check("auto", Scene(_volume(), mode="iso"), True, visible=1.0) == 1
 
 
 @pytest.mark.parametrize(("opaque", "expected"), [(True, 4), (False, 1)])
@@ -232,14 +237,15 @@ def test_fewer_checks_in_the_straight_phases_of_warped_rays(
             assert r.renderer.last_samples_per_check == n
 
 
-def test_chained_samples_take_two_per_check_only_on_dense_unshaded_views() -> None:
+def test_chained_samples_take_two_per_check_only_on_dense_views() -> None:
     dvr = Scene(_volume(), shading=False)
     shaded = Scene(_volume(), shading=True)
     assert chained_samples_per_check("auto", dvr, True, CHAINED_DENSE_VISIBLE) == 2
     assert chained_samples_per_check("auto", dvr, True, CHAINED_DENSE_VISIBLE - 1e-9) == 1
     assert chained_samples_per_check("auto", dvr, True, None) == 1  # not known yet
     assert chained_samples_per_check("auto", dvr, False, 1.0) == 1  # a GPU
-    assert chained_samples_per_check("auto", shaded, True, 1.0) == 1
+    assert chained_samples_per_check("auto", shaded, True, DENSE_VISIBLE) == 2
+    assert chained_samples_per_check("auto", shaded, True, DENSE_VISIBLE - 1e-9) == 1
     assert chained_samples_per_check("auto", Scene(_volume(), mode="mip"), True, 1.0) == 1
     assert chained_samples_per_check(4, shaded, False, 0.0) == 2  # a number: at most 2
     assert chained_samples_per_check(1, dvr, True, 1.0) == 1
@@ -270,3 +276,24 @@ def test_two_chained_samples_per_check_draw_the_same_image(
         assert r.renderer.last_support == path
         assert r.renderer.last_chained_per_check == 2
         assert "#define CHAINED_PER_CHECK 2" in defines
+
+
+@pytest.mark.parametrize("warped", [False, True], ids=["straight", "warped"])
+def test_fewer_checks_with_shading_draw_the_same_image(gl_ctx: Any, warped: bool) -> None:
+    """Shaded dvr (dense views take two samples per check) draws what one check per
+    sample draws, straight rays and rays through the chain alike: an unchecked sample in
+    an invisible cell is neither coloured nor shaded."""
+    scene = _scene(OPAQUE, (30.0, 20.0), False).copy(shading=True)
+    if warped:
+        scene = scene.copy(warps=[_local_drag(scene.volume)])
+    with OffscreenRenderer(56, 48, ctx=gl_ctx, dtype="f4") as r:
+        r.renderer.support_skipping = False  # warped: the chain at every sample
+        r.renderer.samples_per_check = 1
+        for _ in range(2):
+            one = np.asarray(r.render(scene))
+        r.renderer.samples_per_check = 2
+        assert np.array_equal(np.asarray(r.render(scene)), one)
+        if warped:
+            assert r.renderer.last_chained_per_check == 2
+        else:
+            assert r.renderer.last_samples_per_check == 2

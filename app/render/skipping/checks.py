@@ -3,9 +3,8 @@
 A straight ray with cell maps (``SAMPLES_PER_CHECK`` in shaders/raycast.frag.glsl) looks
 its cell up in the octant skip map, jumps if the cell is invisible, and then takes
 ``n`` consecutive lattice samples before it looks again. A warped ray on the support's
-map path does the same in its straight phases (before and after the moved region); its
-chained phase checks every sample. The samples it takes
-unchecked keep the lattice, and one in an invisible cell adds exactly nothing (zero
+map path does the same in its straight phases (before and after the moved region). The
+samples it takes unchecked keep the lattice, and one in an invisible cell adds exactly nothing (zero
 opacity; below the isovalue or threshold), so ``n`` changes the work, never the image.
 
 Which ``n`` pays depends on the rasteriser and on how much of the volume the mode
@@ -18,14 +17,17 @@ and the slower a sparse one (rays mostly jump). ``"auto"`` therefore takes the s
 visible cells: below :data:`SPARSE_VISIBLE` one check per sample, from
 :data:`DENSE_VISIBLE` on one per :data:`DENSE_SAMPLES_PER_CHECK`, two in between
 (docs/benchmarks.md, "Fewer skip-map fetches per straight sample" and "Samples per
-check by the share of visible cells"). With shading, or iso's bisection, a sample is
-dearer and fewer checks do not pay. A GPU skips a branch no lane takes, so it keeps one
-check per sample.
+check by the share of visible cells"). With shading a sample is dearer: shaded dvr
+takes :data:`SHADED_SAMPLES_PER_CHECK` from :data:`DENSE_VISIBLE` of the cells visible
+(colin27's MRI: 0.93x the frame of one check per sample), 1 below (a chest CT's bones:
+1.14x with 2); iso's bisection and the other modes keep 1. A GPU skips a branch no lane
+takes, so it keeps one check per sample.
 
 Samples through the warp chain (warped rays, a support's chained phase) pay the chain
 even in an invisible cell, so an unchecked one is dearer than a straight ray's:
 :func:`chained_samples_per_check` takes two only from :data:`CHAINED_DENSE_VISIBLE` of
-the deformed-space cells visible (docs/benchmarks.md, "Chained samples per check").
+the deformed-space cells visible (shaded: :data:`DENSE_VISIBLE`; docs/benchmarks.md,
+"Chained samples per check").
 """
 
 from __future__ import annotations
@@ -47,6 +49,9 @@ SPARSE_VISIBLE = 0.06
 #: from this share of visible cells on, "auto" takes DENSE_SAMPLES_PER_CHECK (dense views)
 DENSE_VISIBLE = 0.3
 DENSE_SAMPLES_PER_CHECK = 4
+#: what "auto" takes for shaded dvr on a CPU rasteriser from DENSE_VISIBLE on (a shaded
+#: sample is dearer: sparse views lost 10-14 % with 2, dense ones gained 5-11 %)
+SHADED_SAMPLES_PER_CHECK = 2
 #: from this share of visible deformed-space cells on, chained samples take two per
 #: check on a CPU rasteriser (measured: 14 % visible lost 4-9 %, 26 % and 60 % gained
 #: 3-9 %; unshaded dvr, llvmpipe)
@@ -73,13 +78,17 @@ def samples_per_check(
     setting: int | str, scene: Scene, software: bool, visible: float | None = None
 ) -> int:
     """Samples per skip-map check for straight rays drawing ``scene``: ``setting`` if it
-    is a number, else (``"auto"``) 1 except for unshaded dvr on a CPU rasteriser
-    (``software``), where it follows ``visible``, the share of cells the mode can see
-    (None: not known yet): see the module docstring."""
+    is a number, else (``"auto"``) 1 except for dvr on a CPU rasteriser (``software``),
+    where it follows ``visible``, the share of cells the mode can see (None: not known
+    yet): unshaded, see the module docstring; shaded, :data:`SHADED_SAMPLES_PER_CHECK`
+    from :data:`DENSE_VISIBLE` on, else 1."""
     if setting != "auto":
         return int(setting)
-    if not (software and scene.mode == "dvr" and not scene.use_shading()):
+    if not (software and scene.mode == "dvr"):
         return 1
+    if scene.use_shading():
+        dense = visible is not None and visible >= DENSE_VISIBLE
+        return SHADED_SAMPLES_PER_CHECK if dense else 1
     if visible is None:
         return SOFTWARE_DVR_SAMPLES_PER_CHECK
     if visible < SPARSE_VISIBLE:
@@ -99,7 +108,7 @@ def chained_samples_per_check(
     docstring)."""
     if setting != "auto":
         return min(int(setting), MAX_CHAINED_PER_CHECK)
-    dense = visible is not None and visible >= CHAINED_DENSE_VISIBLE
-    if software and scene.mode == "dvr" and not scene.use_shading() and dense:
-        return MAX_CHAINED_PER_CHECK
-    return 1
+    if not (software and scene.mode == "dvr") or visible is None:
+        return 1
+    least = DENSE_VISIBLE if scene.use_shading() else CHAINED_DENSE_VISIBLE
+    return MAX_CHAINED_PER_CHECK if visible >= least else 1
