@@ -325,29 +325,22 @@ vec3 span_texel(float t, bool straight) {
     return texel_at(t);
 #endif
 }
-// Lattice sample k through the chain without a skip check (CHAINED_PER_CHECK): a
-// warped sample may land outside the volume, where it shows nothing. True when the ray
-// is finished.
-bool chained_sample(inout State s, int k, float t0, float j) {
-    float t = t0 + (float(k) + j) * u_step;
-    vec3 u = span_texel(t, false);
-    if (!inside_texels(u)) return mode_skip(s, -1.0);
-    return mode_sample(s, scene_value(u, t), u, t);
-}
 #ifdef CELL_SKIP
-// Lattice sample k of a phase, without a skip check; true when the ray is finished.
-bool phase_sample(inout State s, int k, float t0, float j, bool straight) {
+// Lattice sample k without a skip check (SAMPLES_PER_CHECK, CHAINED_PER_CHECK: an
+// unchecked sample in an invisible cell adds exactly nothing), straight or through the
+// chain (a warped sample may land outside the volume, where it shows nothing); true
+// when the ray is finished.
+bool unchecked_sample(inout State s, int k, float t0, float j, bool straight) {
     float t = t0 + (float(k) + j) * u_step;
     vec3 u = span_texel(t, straight);
     if (!inside_texels(u)) return mode_skip(s, -1.0);
     return mode_sample(s, scene_value(u, t), u, t);
 }
-// One more sample of a straight phase after a check (SAMPLES_PER_CHECK, as the
-// straight rays of the main loop below: an unchecked sample in an invisible cell adds
-// exactly nothing); a chained phase checks every sample (its samples are dear).
+// One more sample of a straight phase after a check (as the straight rays of the main
+// loop below).
 #define PHASE_UNCHECKED_SAMPLE                                              \
     if (straight && k < kb) {                                               \
-        if (phase_sample(s, k, t0, j, true)) return true;                   \
+        if (unchecked_sample(s, k, t0, j, true)) return true;               \
         ++k;                                                                \
     }
 // Samples k .. kb - 1 (one phase of the ray), straight or through the chain, with the
@@ -375,7 +368,7 @@ bool march_cells(inout State s, inout int k, int kb, int n, float t0, float j,
         ++k;
 #if CHAINED_PER_CHECK > 1
         if (!straight && k < kb) {
-            if (chained_sample(s, k, t0, j)) return true;
+            if (unchecked_sample(s, k, t0, j, false)) return true;
             ++k;
         }
 #endif
@@ -645,7 +638,7 @@ void main() {
         ++k;
 #if CHAINED_PER_CHECK > 1
         if (k < n) {
-            if (chained_sample(s, k, t0, j)) break;
+            if (unchecked_sample(s, k, t0, j, false)) break;
             ++k;
         }
 #endif
