@@ -68,7 +68,7 @@ def spacing_arg(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(f"{text!r}: expected {form}") from exc
     if len(vals) == 1:
         vals *= 3
-    ok = all(math.isfinite(v) and limits.MIN_SPACING_MM <= v <= limits.MAX_SPACING_MM for v in vals)
+    ok = all(limits.spacing_in_range(v) for v in vals)
     if len(vals) != 3 or not ok:
         raise argparse.ArgumentTypeError(f"{text!r}: expected {form}")
     return vals[0], vals[1], vals[2]

@@ -262,10 +262,10 @@ def scene_files(scene: Any, scene_path: str) -> list[Path]:
 def refuse_overwriting_inputs(out: Path, scene: Any, scene_path: str, option: str = "-o") -> None:
     """Raise a one-line error when ``out`` is one of :func:`scene_files` (writing it would
     destroy what the scene reads, and the scene would then read the result)."""
-    target = out.resolve()
+    if not out.exists():
+        return  # a new file: nothing of the scene's there
     for f in scene_files(scene, scene_path):
-        same = f.exists() and out.exists() and out.samefile(f)
-        if same or f.resolve() == target:
+        if f.exists() and out.samefile(f):  # links and the same file by another name
             raise CliOptionError(
                 f"{option} {out} is a file {scene_path} reads ({f}): writing it would destroy"
                 " the scene's own input; write to another file"

@@ -122,6 +122,12 @@ def size_arg(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc).rstrip(".")) from exc
 
 
+def spacing_in_range(mm: float) -> bool:
+    """Whether ``mm`` is a voxel size voxwarp takes: finite, in
+    :data:`MIN_SPACING_MM`..:data:`MAX_SPACING_MM`."""
+    return math.isfinite(mm) and MIN_SPACING_MM <= mm <= MAX_SPACING_MM
+
+
 def spacing_mm(text: str, what: str = "--spacing") -> float:
     """argparse type of a voxel size in mm: finite, in
     :data:`MIN_SPACING_MM`..:data:`MAX_SPACING_MM`."""
@@ -131,7 +137,7 @@ def spacing_mm(text: str, what: str = "--spacing") -> float:
         v = float(text)
     except ValueError:
         v = math.nan
-    if not (math.isfinite(v) and MIN_SPACING_MM <= v <= MAX_SPACING_MM):
+    if not spacing_in_range(v):
         raise argparse.ArgumentTypeError(
             f"{what} {text!r}: a voxel size must be a number of mm from {MIN_SPACING_MM:g}"
             f" to {MAX_SPACING_MM:g}"

@@ -213,7 +213,7 @@ class Volume:
         self.spacing = parse_triple(
             1.0 if self.spacing is None else self.spacing, "spacing", positive=True
         )
-        if not all(limits.MIN_SPACING_MM <= v <= limits.MAX_SPACING_MM for v in self.spacing):
+        if not all(limits.spacing_in_range(v) for v in self.spacing):
             given = ", ".join(f"{v:g}" for v in self.spacing)
             raise VolumeError(
                 f"spacing ({given}) mm is outside {limits.MIN_SPACING_MM:g} to"

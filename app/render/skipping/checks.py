@@ -102,10 +102,10 @@ def chained_samples_per_check(
     setting: int | str, scene: Scene, software: bool, visible: float | None
 ) -> int:
     """Samples through the warp chain per skip-map check: ``setting`` if it is a number
-    (at most :data:`MAX_CHAINED_PER_CHECK`), else (``"auto"``) 2 for unshaded dvr on a
-    CPU rasteriser where ``visible`` (the share of deformed-space cells the mode can
-    see) is at least :data:`CHAINED_DENSE_VISIBLE`, 1 otherwise (see the module
-    docstring)."""
+    (at most :data:`MAX_CHAINED_PER_CHECK`), else (``"auto"``) 2 for dvr on a CPU
+    rasteriser where ``visible`` (the share of deformed-space cells the mode can see)
+    is at least :data:`CHAINED_DENSE_VISIBLE` (shaded: :data:`DENSE_VISIBLE`), 1
+    otherwise (see the module docstring)."""
     if setting != "auto":
         return min(int(setting), MAX_CHAINED_PER_CHECK)
     if not (software and scene.mode == "dvr") or visible is None:
